@@ -1,0 +1,89 @@
+"""The ``trackingbox`` command line: one entry point with subcommands.
+
+Each subcommand lives in ``trackingbox.commands.<name>`` and provides
+``register(subparsers)`` (adds its parser and sets ``func``) and
+``run(args) -> int``. Errors that a user caused (:class:`TrackingError`) are
+printed as one line on stderr with a non-zero exit and no traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from . import __version__
+from .errors import TrackingError
+
+#: Subcommand modules, in the order ``--help`` lists them.
+COMMANDS = (
+    "compile",
+    "inspect",
+    "simulate",
+    "bench",
+    "pair",
+    "estimate",
+    "track",
+    "generate",
+    "validate",
+)
+
+EPILOG = """\
+examples:
+  trackingbox compile modelica/TrackingBox --model TrackingBox.Benches.HeatExchanger.Twin -o twin.fmu
+  trackingbox inspect twin.fmu --json
+  trackingbox simulate twin.fmu --inputs inputs.csv --stop 3600 -o result.csv
+  trackingbox bench heat-exchanger --out case1 --seed 3
+  trackingbox estimate case1/spec.toml --report case1/estimate
+  trackingbox pair case1/spec.toml --method rga --report case1/pair
+  trackingbox track case1/spec.toml --report case1/track
+  gen-trackingbox case1/spec.toml -o case1/generated --compile
+  trackingbox validate case1/spec.toml --fmu case1/generated/TwinTracked.fmu
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="trackingbox",
+        description="Turn a Modelica process model (FMU) into a tracking simulator.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"trackingbox {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more log output on stderr (-vv for debug)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in COMMANDS:
+        module = importlib.import_module(f"trackingbox.commands.{name}")
+        module.register(sub)
+    return parser
+
+
+def _setup_logging(verbosity: int) -> None:
+    level = logging.WARNING if verbosity <= 0 else logging.INFO if verbosity == 1 else logging.DEBUG
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _setup_logging(args.verbose)
+    try:
+        return int(args.func(args) or 0)
+    except TrackingError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def gen_trackingbox_main(argv: list[str] | None = None) -> int:
+    """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    return main(["generate", *argv])
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

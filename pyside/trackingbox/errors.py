@@ -1,0 +1,63 @@
+"""The exception tree of trackingbox.
+
+Every error a user can cause by bad input is a :class:`TrackingError`; the CLI
+prints its message (no traceback) and exits non-zero. Messages name the thing
+and where it is ("tag 'TI-301' in measurements.csv ...").
+"""
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class TrackingError(Exception):
+    """Base class of every error trackingbox raises on purpose."""
+
+
+class SpecError(TrackingError, ValueError):
+    """A tracking specification (spec.toml) is malformed or inconsistent."""
+
+
+class DataError(TrackingError, ValueError):
+    """Measurement or input data is malformed (missing columns, NaN, time order)."""
+
+
+class CompileError(TrackingError, RuntimeError):
+    """Modelica source could not be turned into an FMU."""
+
+
+class UnsupportedConstructError(CompileError):
+    """The Modelica source uses a construct the selected backend cannot compile."""
+
+
+class FMUError(TrackingError, ValueError):
+    """An FMU is missing, corrupt, or does not have the variables asked for."""
+
+
+class SimulationError(TrackingError, RuntimeError):
+    """A simulation failed (solver failure, non-finite values)."""
+
+
+class EstimationError(TrackingError, RuntimeError):
+    """Parameter estimation could not run or failed."""
+
+
+class AnalysisError(TrackingError, RuntimeError):
+    """Step tests, RGA or sensitivity analysis could not produce a result."""
+
+
+def did_you_mean(name: str, candidates: Iterable[str], n: int = 3) -> str:
+    """Return ``" (did you mean 'a', 'b'?)"`` for close matches of *name*, or ``""``.
+
+    >>> did_you_mean("khtt", ["kht", "A", "n"])
+    " (did you mean 'kht'?)"
+    """
+    matches = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.6)
+    if not matches:
+        return ""
+    return " (did you mean " + ", ".join(repr(m) for m in matches) + "?)"
+
+
+def unknown_name(kind: str, name: str, candidates: Iterable[str], where: str) -> str:
+    """Message for an unknown name: ``unknown parameter 'khtt' in spec.toml (did you mean 'kht'?)``."""
+    return f"unknown {kind} {name!r} in {where}{did_you_mean(name, candidates)}"
