@@ -1,0 +1,789 @@
+"""The tracking specification, ``spec.toml``: loading, validation and writing back.
+
+A spec names the twin FMU, the measurement file, which measurement tag drives
+which FMU input and which FMU output simulates which tag, the candidate tracking
+parameters with their bounds, the training/validation windows and (once
+``trackingbox pair`` has run) the pairs of tracking variable and tracking
+parameter. The format is described in ``docs/architecture.md``.
+
+:func:`load_spec` collects *every* problem it finds and raises one
+:class:`~trackingbox.errors.SpecError` listing them all, each naming the key,
+the table and the file.
+"""
+from __future__ import annotations
+
+import csv
+import logging
+import math
+import os
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+import tomli_w
+
+from .errors import SpecError, did_you_mean
+from .io import write_text_atomic
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .fmu import FMUInfo
+
+log = logging.getLogger(__name__)
+
+ControllerKind = Literal["pi", "sliding"]
+#: Parameter-controller kinds a pair may name.
+CONTROLLERS: tuple[str, ...] = ("pi", "sliding")
+#: Names a ``[windows]`` table may hold.
+WINDOW_NAMES: tuple[str, ...] = ("training", "validation")
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """The twin's Modelica source (for ``gen-trackingbox``).
+
+    Attributes
+    ----------
+    path : Path
+        Absolute path of the package directory or ``.mo`` file.
+    model : str
+        Full class name of the twin, e.g. ``TrackingBox.Benches.HeatExchanger.Twin``.
+    """
+
+    path: Path
+    model: str
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """A candidate tracking parameter with its start value and bounds."""
+
+    name: str
+    start: float
+    min: float
+    max: float
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    """One parameter controller: tracking variable (a tag) and tracking parameter.
+
+    Attributes
+    ----------
+    variable : str
+        Measurement tag the controller makes the twin follow (a key of ``[outputs]``).
+    parameter : str
+        FMU parameter it adjusts (one of ``[[parameters]]``).
+    gain : float
+        Steady-state gain d(variable)/d(parameter) in engineering units.
+    time_constant : float
+        Time constant of the response in s (from the step test).
+    lambda_ : float
+        Closed-loop tuning factor (TOML key ``lambda``).
+    kp, ti : float or None
+        Explicit PI gains; ``None`` means "tune from gain and time constant".
+    controller : {"pi", "sliding"}
+        Kind of parameter controller.
+    """
+
+    variable: str
+    parameter: str
+    gain: float
+    time_constant: float
+    lambda_: float
+    kp: float | None = None
+    ti: float | None = None
+    controller: ControllerKind = "pi"
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    """State compensation of one measured state (a tank level).
+
+    ``correction`` (a twin input, kg/s) is driven by ``gain * (measured - simulated)``.
+    """
+
+    tag: str
+    variable: str
+    correction: str
+    gain: float
+
+
+@dataclass(frozen=True)
+class StoppageRule:
+    """Rows where ``tag < below`` are excluded, plus ``settle`` seconds after each stoppage."""
+
+    tag: str
+    below: float
+    settle: float = 0.0
+
+
+@dataclass(frozen=True)
+class DataRules:
+    """Optional rules applied to the measurements."""
+
+    stoppage: StoppageRule | None = None
+    max_gap: float | None = None
+
+
+@dataclass(frozen=True)
+class TrackingSettings:
+    """Optional tracking overrides."""
+
+    hold_until: float = 0.0
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A loaded and validated tracking specification.
+
+    Paths are absolute, resolved relative to the spec file.
+    """
+
+    path: Path
+    twin: Path
+    measurements: Path
+    sample_time: float
+    source: SourceSpec | None = None
+    inputs: dict[str, str] = field(default_factory=dict)
+    outputs: dict[str, str] = field(default_factory=dict)
+    parameters: tuple[ParameterSpec, ...] = ()
+    fixed: dict[str, float] = field(default_factory=dict)
+    windows: dict[str, tuple[float, float]] = field(default_factory=dict)
+    data: DataRules = field(default_factory=DataRules)
+    pairs: tuple[PairSpec, ...] = ()
+    states: tuple[StateSpec, ...] = ()
+    tracking: TrackingSettings = field(default_factory=TrackingSettings)
+
+    def parameter(self, name: str) -> ParameterSpec:
+        """Return the candidate parameter *name*; :class:`SpecError` with did-you-mean if absent."""
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        names = [p.name for p in self.parameters]
+        raise SpecError(f"unknown parameter {name!r} in [[parameters]] of {self.path}"
+                        f"{did_you_mean(name, names)}")
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the candidate parameters, in file order."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def tags(self) -> tuple[str, ...]:
+        """Every measurement tag the spec uses (inputs, outputs, states), first occurrence order."""
+        seen: dict[str, None] = {}
+        for tag in [*self.inputs, *self.outputs, *(s.tag for s in self.states)]:
+            seen.setdefault(tag, None)
+        return tuple(seen)
+
+
+# --------------------------------------------------------------------------- parsing
+
+_TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
+             "fixed", "windows", "data", "pairs", "states", "tracking")
+_REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
+
+
+class _Problems:
+    """Collects problems while a spec is checked; raises them together."""
+
+    def __init__(self, where: str) -> None:
+        self.where = where
+        self.items: list[str] = []
+
+    def add(self, message: str) -> None:
+        self.items.append(message)
+
+    def raise_if_any(self) -> None:
+        if self.items:
+            if len(self.items) == 1:
+                raise SpecError(f"{self.where}: {self.items[0]}")
+            lines = "\n".join(f"  - {m}" for m in self.items)
+            raise SpecError(f"{self.where}: {len(self.items)} problems:\n{lines}")
+
+
+def _table_label(table: str) -> str:
+    return "the top level" if not table else f"[{table}]"
+
+
+def _check_keys(table: Mapping[str, Any], allowed: Sequence[str], required: Sequence[str],
+                label: str, problems: _Problems) -> None:
+    for key in table:
+        if key not in allowed:
+            problems.add(f"unknown key {key!r} in {label}{did_you_mean(key, allowed)}")
+    for key in required:
+        if key not in table:
+            problems.add(f"missing required key {key!r} in {label}")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _number(table: Mapping[str, Any], key: str, label: str, problems: _Problems, *,
+            default: float | None = None, positive: bool = False,
+            nonnegative: bool = False) -> float | None:
+    if key not in table:
+        return default
+    value = table[key]
+    if not _is_number(value):
+        problems.add(f"{key!r} in {label} must be a number, got {_type_name(value)} {value!r}")
+        return default
+    value = float(value)
+    if not math.isfinite(value):
+        problems.add(f"{key!r} in {label} must be finite, got {value!r}")
+        return default
+    if positive and value <= 0:
+        problems.add(f"{key!r} in {label} must be > 0, got {value!r}")
+    if nonnegative and value < 0:
+        problems.add(f"{key!r} in {label} must be >= 0, got {value!r}")
+    return value
+
+
+def _string(table: Mapping[str, Any], key: str, label: str, problems: _Problems) -> str | None:
+    if key not in table:
+        return None
+    value = table[key]
+    if not isinstance(value, str) or not value:
+        problems.add(f"{key!r} in {label} must be a non-empty string, got {_type_name(value)} {value!r}")
+        return None
+    return value
+
+
+def _type_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return "boolean"
+    if isinstance(value, (int, float)):
+        return "number"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, dict):
+        return "table"
+    if isinstance(value, list):
+        return "array"
+    return type(value).__name__
+
+
+def _table(raw: Mapping[str, Any], key: str, problems: _Problems) -> dict[str, Any] | None:
+    if key not in raw:
+        return None
+    value = raw[key]
+    if not isinstance(value, dict):
+        problems.add(f"{key!r} must be a table ([{key}]), got {_type_name(value)}")
+        return None
+    return value
+
+
+def _array_of_tables(raw: Mapping[str, Any], key: str, problems: _Problems) -> list[dict[str, Any]]:
+    if key not in raw:
+        return []
+    value = raw[key]
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        problems.add(f"{key!r} must be an array of tables ([[{key}]]), got {_type_name(value)}")
+        return []
+    return value
+
+
+def _string_map(raw: Mapping[str, Any], key: str, problems: _Problems) -> dict[str, str]:
+    table = _table(raw, key, problems)
+    out: dict[str, str] = {}
+    for tag, name in (table or {}).items():
+        if not isinstance(name, str) or not name:
+            problems.add(f"{tag!r} in [{key}] must name an FMU variable (a string), "
+                         f"got {_type_name(name)} {name!r}")
+        else:
+            out[tag] = name
+    return out
+
+
+def _resolve(base: Path, value: str) -> Path:
+    p = Path(value).expanduser()
+    return p if p.is_absolute() else (base / p).resolve()
+
+
+def _csv_header(path: Path) -> list[str] | None:
+    """Column names of a CSV file (first line), or ``None`` if it cannot be read as CSV."""
+    if path.suffix.lower() != ".csv":
+        return None
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            row = next(csv.reader(fh), None)
+    except (OSError, UnicodeDecodeError):
+        return None
+    return [c.strip() for c in row] if row else None
+
+
+def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
+    problems = _Problems(str(path))
+    base = path.parent
+    _check_keys(raw, _TOP_KEYS, _REQUIRED_TOP, "the top level", problems)
+
+    # files -----------------------------------------------------------------
+    files: dict[str, Path] = {}
+    for key in ("twin", "measurements"):
+        value = _string(raw, key, "the top level", problems)
+        if value is None:
+            continue
+        resolved = _resolve(base, value)
+        files[key] = resolved
+        if check_files and not resolved.is_file():
+            problems.add(f"{key} file {value!r} does not exist (looked for {resolved})")
+    sample_time = _number(raw, "sample_time", "the top level", problems, positive=True)
+
+    source = None
+    src = _table(raw, "source", problems)
+    if src is not None:
+        _check_keys(src, ("path", "model"), ("path", "model"), "[source]", problems)
+        spath = _string(src, "path", "[source]", problems)
+        smodel = _string(src, "model", "[source]", problems)
+        if spath is not None and smodel is not None:
+            resolved = _resolve(base, spath)
+            if check_files and not resolved.exists():
+                problems.add(f"path {spath!r} in [source] does not exist (looked for {resolved})")
+            source = SourceSpec(path=resolved, model=smodel)
+
+    inputs = _string_map(raw, "inputs", problems)
+    outputs = _string_map(raw, "outputs", problems)
+    for tag in set(inputs) & set(outputs):
+        problems.add(f"tag {tag!r} is both in [inputs] and [outputs]")
+
+    # parameters ------------------------------------------------------------
+    parameters: list[ParameterSpec] = []
+    pkeys = ("name", "start", "min", "max")
+    for i, table in enumerate(_array_of_tables(raw, "parameters", problems)):
+        label = f"[[parameters]] #{i + 1}" + (f" ({table['name']!r})" if isinstance(table.get("name"), str) else "")
+        _check_keys(table, pkeys, pkeys, label, problems)
+        name = _string(table, "name", label, problems)
+        start = _number(table, "start", label, problems)
+        lo = _number(table, "min", label, problems)
+        hi = _number(table, "max", label, problems)
+        if None in (name, start, lo, hi):
+            continue
+        assert name is not None and start is not None and lo is not None and hi is not None
+        if lo >= hi:
+            problems.add(f"lower bound min = {lo!r} is not below upper bound max = {hi!r} in {label}")
+        elif not lo <= start <= hi:
+            problems.add(f"start = {start!r} is outside its bounds [{lo!r}, {hi!r}] in {label}")
+        if any(p.name == name for p in parameters):
+            problems.add(f"parameter {name!r} is listed twice in [[parameters]]")
+        parameters.append(ParameterSpec(name=name, start=start, min=lo, max=hi))
+    pnames = [p.name for p in parameters]
+
+    fixed: dict[str, float] = {}
+    for name, value in (_table(raw, "fixed", problems) or {}).items():
+        if not _is_number(value):
+            problems.add(f"{name!r} in [fixed] must be a number, got {_type_name(value)} {value!r}")
+            continue
+        if name in pnames:
+            problems.add(f"{name!r} is both a candidate in [[parameters]] and fixed in [fixed]")
+        fixed[name] = float(value)
+
+    # windows ---------------------------------------------------------------
+    windows: dict[str, tuple[float, float]] = {}
+    wtable = _table(raw, "windows", problems)
+    if wtable is not None:
+        _check_keys(wtable, WINDOW_NAMES, (), "[windows]", problems)
+        for name in WINDOW_NAMES:
+            if name not in wtable:
+                continue
+            value = wtable[name]
+            if (not isinstance(value, list) or len(value) != 2
+                    or not all(_is_number(v) for v in value)):
+                problems.add(f"{name!r} in [windows] must be [start, stop] in seconds, got {value!r}")
+                continue
+            lo, hi = float(value[0]), float(value[1])
+            if lo >= hi:
+                problems.add(f"window {name!r} in [windows] has start {lo!r} >= stop {hi!r}")
+                continue
+            if lo < 0:
+                problems.add(f"window {name!r} in [windows] starts before the first sample ({lo!r} < 0)")
+            windows[name] = (lo, hi)
+
+    known_tags = [*inputs, *outputs]
+
+    # data rules ------------------------------------------------------------
+    data = DataRules()
+    dtable = _table(raw, "data", problems)
+    if dtable is not None:
+        _check_keys(dtable, ("stoppage", "max_gap"), (), "[data]", problems)
+        stoppage = None
+        stable = _table(dtable, "stoppage", problems)
+        if stable is not None:
+            label = "[data.stoppage]"
+            _check_keys(stable, ("tag", "below", "settle"), ("tag", "below"), label, problems)
+            tag = _string(stable, "tag", label, problems)
+            below = _number(stable, "below", label, problems)
+            settle = _number(stable, "settle", label, problems, default=0.0, nonnegative=True)
+            if tag is not None and known_tags and tag not in known_tags:
+                problems.add(f"unknown tag {tag!r} in {label}{did_you_mean(tag, known_tags)}")
+            if tag is not None and below is not None:
+                stoppage = StoppageRule(tag=tag, below=below, settle=settle or 0.0)
+        max_gap = _number(dtable, "max_gap", "[data]", problems, positive=True)
+        data = DataRules(stoppage=stoppage, max_gap=max_gap)
+
+    # pairs -----------------------------------------------------------------
+    pairs: list[PairSpec] = []
+    pair_keys = ("variable", "parameter", "gain", "time_constant", "lambda", "kp", "ti", "controller")
+    for i, table in enumerate(_array_of_tables(raw, "pairs", problems)):
+        label = f"[[pairs]] #{i + 1}"
+        _check_keys(table, pair_keys, ("variable", "parameter", "gain", "time_constant"), label, problems)
+        variable = _string(table, "variable", label, problems)
+        parameter = _string(table, "parameter", label, problems)
+        gain = _number(table, "gain", label, problems)
+        tau = _number(table, "time_constant", label, problems, positive=True)
+        lam = _number(table, "lambda", label, problems, default=1.0, positive=True)
+        kp = _number(table, "kp", label, problems)
+        ti = _number(table, "ti", label, problems, positive=True)
+        controller = _string(table, "controller", label, problems) or "pi"
+        if controller not in CONTROLLERS:
+            problems.add(f"unknown controller {controller!r} in {label}{did_you_mean(controller, CONTROLLERS)}"
+                         f"; choose one of {', '.join(CONTROLLERS)}")
+        if variable is not None and variable not in outputs:
+            problems.add(f"unknown tag {variable!r} as variable in {label}: a pair's variable must be "
+                         f"a tag of [outputs]{did_you_mean(variable, list(outputs))}")
+        if parameter is not None and parameter not in pnames:
+            problems.add(f"unknown parameter {parameter!r} in {label}: a pair's parameter must be "
+                         f"one of [[parameters]]{did_you_mean(parameter, pnames)}")
+        if gain is not None and gain == 0.0:
+            problems.add(f"gain in {label} is 0: the parameter has no effect on the variable")
+        if None in (variable, parameter, gain, tau, lam):
+            continue
+        assert variable is not None and parameter is not None
+        assert gain is not None and tau is not None and lam is not None
+        pairs.append(PairSpec(variable=variable, parameter=parameter, gain=gain, time_constant=tau,
+                              lambda_=lam, kp=kp, ti=ti,
+                              controller=controller if controller in CONTROLLERS else "pi"))  # type: ignore[arg-type]
+    for attr, what in (("variable", "tag"), ("parameter", "parameter")):
+        values = [getattr(p, attr) for p in pairs]
+        for v in sorted({v for v in values if values.count(v) > 1}):
+            problems.add(f"{what} {v!r} appears in more than one [[pairs]] entry")
+
+    # states ----------------------------------------------------------------
+    states: list[StateSpec] = []
+    skeys = ("tag", "variable", "correction", "gain")
+    for i, table in enumerate(_array_of_tables(raw, "states", problems)):
+        label = f"[[states]] #{i + 1}"
+        _check_keys(table, skeys, skeys, label, problems)
+        tag = _string(table, "tag", label, problems)
+        variable = _string(table, "variable", label, problems)
+        correction = _string(table, "correction", label, problems)
+        gain = _number(table, "gain", label, problems, positive=True)
+        if None in (tag, variable, correction, gain):
+            continue
+        assert tag is not None and variable is not None and correction is not None and gain is not None
+        states.append(StateSpec(tag=tag, variable=variable, correction=correction, gain=gain))
+
+    tracking = TrackingSettings()
+    ttable = _table(raw, "tracking", problems)
+    if ttable is not None:
+        _check_keys(ttable, ("hold_until",), (), "[tracking]", problems)
+        hold = _number(ttable, "hold_until", "[tracking]", problems, default=0.0, nonnegative=True)
+        tracking = TrackingSettings(hold_until=hold or 0.0)
+
+    # tags against the measurement file header --------------------------------
+    meas = files.get("measurements")
+    if check_files and meas is not None and meas.is_file():
+        header = _csv_header(meas)
+        if header is not None:
+            tags = [*inputs, *outputs, *(s.tag for s in states)]
+            columns = [c for c in header if c != "time"]
+            if "time" not in header:
+                problems.add(f"measurements file {meas.name} has no 'time' column")
+            for tag in dict.fromkeys(tags):
+                if tag not in header:
+                    problems.add(f"tag {tag!r} is not a column of {meas.name}{did_you_mean(tag, columns)}")
+
+    problems.raise_if_any()
+    assert sample_time is not None
+    return Spec(path=path, twin=files["twin"], measurements=files["measurements"],
+                sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
+                parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
+                pairs=tuple(pairs), states=tuple(states), tracking=tracking)
+
+
+def load_spec(path: str | os.PathLike[str], *, check_files: bool = True) -> Spec:
+    """Load and validate a ``spec.toml``.
+
+    Parameters
+    ----------
+    path : path-like
+        The spec file.
+    check_files : bool
+        Also check that the twin, measurement and source files exist and that
+        every tag is a column of the measurement file.
+
+    Returns
+    -------
+    Spec
+
+    Raises
+    ------
+    SpecError
+        Listing every problem found (unknown/missing keys, wrong types, bad bounds
+        and windows, missing files, pairs naming unknown tags or parameters).
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SpecError(f"spec file {path} does not exist") from None
+    except OSError as exc:
+        raise SpecError(f"cannot read spec file {path}: {exc}") from None
+    return loads_spec(text, path, check_files=check_files)
+
+
+def loads_spec(text: str, path: str | os.PathLike[str], *, check_files: bool = True) -> Spec:
+    """Parse spec text as if it were the file *path* (relative paths resolve against it)."""
+    path = Path(path).expanduser().resolve()
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path}: not valid TOML: {exc}") from None
+    spec = _parse(raw, path, check_files=check_files)
+    log.debug("loaded spec %s: %d inputs, %d outputs, %d parameters, %d pairs",
+              path, len(spec.inputs), len(spec.outputs), len(spec.parameters), len(spec.pairs))
+    return spec
+
+
+# --------------------------------------------------------------------------- FMU check
+
+def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
+    """Check that the spec's FMU names exist in the twin FMU (with did-you-mean).
+
+    Parameters
+    ----------
+    spec : Spec
+    info : FMUInfo, optional
+        The twin's model description; read from ``spec.twin`` if not given.
+
+    Raises
+    ------
+    SpecError
+        Listing every input, output, parameter, fixed value or state variable the
+        FMU does not have (or has with the wrong causality), and candidate bounds
+        outside the bounds the FMU declares.
+    """
+    if info is None:
+        from .fmu import read_info  # lazy: fmu pulls in fmpy
+
+        info = read_info(spec.twin)
+    variables = {v.name: v for v in info.variables}
+    names = list(variables)
+    by_causality: dict[str, list[str]] = {}
+    for v in info.variables:
+        by_causality.setdefault(v.causality, []).append(v.name)
+    twin = Path(spec.twin).name
+    problems = _Problems(str(spec.path))
+
+    def need(name: str, causalities: Iterable[str] | None, what: str, where: str) -> None:
+        allowed = tuple(causalities) if causalities is not None else None
+        pool = names if allowed is None else [n for c in allowed for n in by_causality.get(c, [])]
+        v = variables.get(name)
+        if v is None:
+            problems.add(f"{where} names {what} {name!r}, which {twin} does not have{did_you_mean(name, pool)}")
+        elif allowed is not None and v.causality not in allowed:
+            problems.add(f"{where} names {what} {name!r}, but in {twin} it has causality "
+                         f"{v.causality!r}, not {' or '.join(repr(c) for c in allowed)}"
+                         f"{did_you_mean(name, pool)}")
+
+    for tag, name in spec.inputs.items():
+        need(name, ("input",), "input", f"[inputs] {tag!r}")
+    for tag, name in spec.outputs.items():
+        need(name, None, "variable", f"[outputs] {tag!r}")
+    for p in spec.parameters:
+        need(p.name, ("parameter",), "parameter", "[[parameters]]")
+        v = variables.get(p.name)
+        if v is not None and v.causality == "parameter":
+            if v.min is not None and p.min < float(v.min):
+                problems.add(f"min = {p.min!r} of parameter {p.name!r} is below the min = {v.min!r} "
+                             f"{twin} declares")
+            if v.max is not None and p.max > float(v.max):
+                problems.add(f"max = {p.max!r} of parameter {p.name!r} is above the max = {v.max!r} "
+                             f"{twin} declares")
+    for name in spec.fixed:
+        need(name, ("parameter",), "parameter", "[fixed]")
+    for s in spec.states:
+        need(s.variable, None, "variable", f"[[states]] {s.tag!r}")
+        need(s.correction, ("input",), "input", f"[[states]] {s.tag!r} correction")
+    problems.raise_if_any()
+
+
+# --------------------------------------------------------------------------- writing
+
+def _rel(path: Path, base: Path) -> str:
+    try:
+        return Path(os.path.relpath(path, base)).as_posix()
+    except ValueError:  # different drive on Windows
+        return path.as_posix()
+
+
+def _pair_dict(p: PairSpec) -> dict[str, Any]:
+    d: dict[str, Any] = {"variable": p.variable, "parameter": p.parameter, "gain": float(p.gain),
+                         "time_constant": float(p.time_constant), "lambda": float(p.lambda_)}
+    if p.kp is not None:
+        d["kp"] = float(p.kp)
+    if p.ti is not None:
+        d["ti"] = float(p.ti)
+    if p.controller != "pi":
+        d["controller"] = p.controller
+    return d
+
+
+def spec_to_dict(spec: Spec) -> dict[str, Any]:
+    """The TOML document of *spec* as a dict (paths relative to the spec file)."""
+    base = spec.path.parent
+    doc: dict[str, Any] = {
+        "twin": _rel(spec.twin, base),
+        "measurements": _rel(spec.measurements, base),
+        "sample_time": float(spec.sample_time),
+    }
+    if spec.source is not None:
+        doc["source"] = {"path": _rel(spec.source.path, base), "model": spec.source.model}
+    doc["inputs"] = dict(spec.inputs)
+    doc["outputs"] = dict(spec.outputs)
+    if spec.parameters:
+        doc["parameters"] = [{"name": p.name, "start": float(p.start), "min": float(p.min),
+                              "max": float(p.max)} for p in spec.parameters]
+    if spec.fixed:
+        doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
+    if spec.windows:
+        doc["windows"] = {k: [float(a), float(b)] for k, (a, b) in spec.windows.items()}
+    if spec.data.stoppage is not None or spec.data.max_gap is not None:
+        data: dict[str, Any] = {}
+        if spec.data.stoppage is not None:
+            st = spec.data.stoppage
+            data["stoppage"] = {"tag": st.tag, "below": float(st.below)}
+            if st.settle:
+                data["stoppage"]["settle"] = float(st.settle)
+        if spec.data.max_gap is not None:
+            data["max_gap"] = float(spec.data.max_gap)
+        doc["data"] = data
+    if spec.pairs:
+        doc["pairs"] = [_pair_dict(p) for p in spec.pairs]
+    if spec.states:
+        doc["states"] = [{"tag": s.tag, "variable": s.variable, "correction": s.correction,
+                          "gain": float(s.gain)} for s in spec.states]
+    if spec.tracking != TrackingSettings():
+        doc["tracking"] = {"hold_until": float(spec.tracking.hold_until)}
+    return doc
+
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _toml_key(key: str) -> str:
+    return key if _BARE_KEY.match(key) else _toml_value(key)
+
+
+def _toml_value(value: Any) -> str:
+    """One TOML value on one line (strings, finite numbers, booleans, flat arrays, inline tables)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return tomli_w.dumps({"v": value})[len("v = "):].rstrip("\n")
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {value!r} to TOML")
+
+
+def _emit(doc: Mapping[str, Any], header: str = "") -> str:
+    """TOML text in the layout of docs/architecture.md: scalars, then tables, then arrays of tables."""
+    lines: list[str] = [f"# {h}" if h else "#" for h in header.splitlines()] if header else []
+    for key, value in doc.items():
+        if not isinstance(value, (dict, list)) or (isinstance(value, list) and not
+                                                   any(isinstance(v, dict) for v in value)):
+            lines.append(f"{_toml_key(key)} = {_toml_value(value)}")
+    for key, value in doc.items():
+        if isinstance(value, dict):
+            lines += ["", f"[{_toml_key(key)}]"]
+            lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()]
+        elif isinstance(value, list) and any(isinstance(v, dict) for v in value):
+            for item in value:
+                lines += ["", f"[[{_toml_key(key)}]]"]
+                lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def dump_spec(spec: Spec, *, header: str = "") -> str:
+    """Return the TOML text of *spec* (paths relative to ``spec.path``); it loads back equal.
+
+    Parameters
+    ----------
+    spec : Spec
+    header : str
+        Optional comment lines put at the top of the file.
+    """
+    return _emit(spec_to_dict(spec), header)
+
+
+def write_spec(spec: Spec, path: str | os.PathLike[str] | None = None, *, header: str = "") -> Path:
+    """Write *spec* atomically to *path* (default ``spec.path``); relative paths follow the new file."""
+    target = Path(path).expanduser().resolve() if path is not None else spec.path
+    spec = replace(spec, path=target)
+    write_text_atomic(target, dump_spec(spec, header=header))
+    return target
+
+
+_PAIRS_HEADER = re.compile(r"^\s*\[\[\s*pairs\s*\]\]")
+_ANY_HEADER = re.compile(r"^\s*\[")
+
+
+def _strip_pairs(text: str) -> str:
+    """Remove every ``[[pairs]]`` table (header to the next table header) from TOML text."""
+    out: list[str] = []
+    in_pairs = False
+    for line in text.splitlines(keepends=True):
+        if _PAIRS_HEADER.match(line):
+            in_pairs = True
+            continue
+        if in_pairs and _ANY_HEADER.match(line):
+            in_pairs = False
+        if not in_pairs:
+            out.append(line)
+    return "".join(out)
+
+
+def write_pairs(path: str | os.PathLike[str], pairs: Iterable[PairSpec]) -> Spec:
+    """Replace the ``[[pairs]]`` of the spec file *path* by *pairs*, atomically.
+
+    Everything else in the file, comments included, is kept. The new file is
+    validated before it replaces the old one.
+
+    Returns
+    -------
+    Spec
+        The spec as written.
+    """
+    path = Path(path).expanduser().resolve()
+    old = load_spec(path, check_files=False)
+    text = path.read_text(encoding="utf-8")
+    pairs = tuple(pairs)
+    body = _strip_pairs(text).rstrip("\n")
+    if pairs:
+        body += "\n" + _emit({"pairs": [_pair_dict(p) for p in pairs]}).rstrip("\n")
+    new_text = body + "\n"
+    try:
+        new = loads_spec(new_text, path, check_files=False)
+        ok = new.pairs == pairs and replace(new, pairs=()) == replace(old, pairs=())
+    except SpecError:
+        ok = False
+    if not ok:  # unusual layout (e.g. inline `pairs = [...]`): rewrite the whole document
+        log.debug("rewriting %s from scratch: text-level pair replacement did not round-trip", path)
+        new_text = dump_spec(replace(old, pairs=pairs))
+        new = loads_spec(new_text, path, check_files=False)
+    write_text_atomic(path, new_text)
+    log.info("wrote %d pairs to %s", len(pairs), path)
+    return new
