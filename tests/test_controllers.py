@@ -1,0 +1,200 @@
+"""Parameter controllers, state compensation and SIMC tuning against hand-computed numbers."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trackingbox.tracking.controllers import (
+    Scaling,
+    ScaledPI,
+    SlidingMode,
+    StateCompensator,
+    direction_from_gain,
+)
+from trackingbox.tracking.tuning import scaled_process_gain, simc_pi, tune_scaled_pi
+
+# Scaling(0, 10, span=2): 1 parameter unit = 10 %, 0.1 variable units = 5 % error
+
+
+def _pi(direction: int = 1, p0: float = 5.0, span: float = 2.0) -> ScaledPI:
+    return ScaledPI(Scaling(0.0, 10.0, span=span), kp=2.0, ti=40.0, ts=10.0, direction=direction, p0=p0)
+
+
+def test_scaling_maps_bounds_and_normalises_error() -> None:
+    s = Scaling(800.0, 1200.0, span=4.0)
+    assert s.to_parameter(0.0) == 800.0
+    assert s.to_parameter(100.0) == 1200.0
+    assert s.to_percent(910.0) == pytest.approx(27.5)
+    assert s.error_percent(51.0, 50.0) == pytest.approx(25.0)
+
+
+def test_scaling_rejects_bad_bounds() -> None:
+    with pytest.raises(ValueError):
+        Scaling(1.0, 1.0, span=1.0)
+    with pytest.raises(ValueError):
+        Scaling(0.0, 1.0, span=0.0)
+
+
+def test_pi_velocity_form_sequence_by_hand() -> None:
+    # kp=2, Ts/Ti=1/4; errors 10 %, 5 %, 0 %:
+    # du1 = 2*0 + 0.5*10 = 5 -> 55 %; du2 = 2*(-5) + 0.5*5 = -7.5 -> 47.5 %; du3 = 2*(-5) + 0 = -10 -> 37.5 %
+    pi = _pi()
+    assert pi.update(1.0, 0.8) == pytest.approx(5.5)
+    assert pi.update(1.0, 0.9) == pytest.approx(4.75)
+    assert pi.update(1.0, 1.0) == pytest.approx(3.75)
+    assert pi.mode == "auto"
+
+
+def test_pi_reverse_acting_mirrors_increments() -> None:
+    # negative pair gain: same increments with the opposite sign -> 45 %, 52.5 %, 62.5 %
+    pi = _pi(direction=direction_from_gain(-0.004))
+    assert [pi.update(1.0, pv) for pv in (0.8, 0.9, 1.0)] == pytest.approx([4.5, 5.25, 6.25])
+
+
+def test_direction_from_gain() -> None:
+    assert direction_from_gain(3.0) == 1
+    assert direction_from_gain(-1e-6) == -1
+    with pytest.raises(ValueError):
+        direction_from_gain(0.0)
+
+
+def test_pi_clamps_and_leaves_bound_at_once() -> None:
+    pi = _pi(p0=9.8)  # 98 %
+    assert pi.update(1.0, 0.8) == 10.0  # 98 + 5 -> clamped at 100 %
+    assert pi.update(1.0, 0.8) == 10.0  # still pushing: stays at 100 %, nothing stored
+    # error flips to -10 %: du = 2*(-20) + 0.5*(-10) = -45 -> 55 % on this very step
+    assert pi.update(1.0, 1.2) == pytest.approx(5.5)
+
+
+def test_pi_clamps_at_lower_bound() -> None:
+    pi = _pi(p0=0.1)  # 1 %
+    assert pi.update(1.0, 1.2) == 0.0  # du = -5 -> -4 % clamped to 0 %
+    assert 0.0 <= pi.value <= 10.0
+
+
+def test_pi_initial_value_outside_bounds_is_clamped() -> None:
+    assert _pi(p0=12.0).value == 10.0
+
+
+def test_pi_hold_on_nan_and_bumpless_resume() -> None:
+    pi = _pi()
+    assert pi.update(1.0, 0.8) == pytest.approx(5.5)  # e = 10 %
+    assert pi.update(math.nan, 0.8) == pytest.approx(5.5)  # missing measurement: frozen
+    assert pi.mode == "hold"
+    assert pi.update(1.0, 0.5, hold=True) == pytest.approx(5.5)  # flagged: frozen, no integration
+    assert pi.update(None, None) == pytest.approx(5.5)
+    # resume with e = 20 %: history reset, so only the integral acts: du = 0.5*20 = 10 -> 65 %
+    # (without the reset the kick would be 2*(20-10) + 10 = 30 -> 85 %)
+    assert pi.update(1.0, 0.6) == pytest.approx(6.5)
+    assert pi.mode == "auto"
+
+
+def test_pi_state_round_trip() -> None:
+    a, b = _pi(), _pi()
+    a.update(1.0, 0.8)
+    b.restore(a.state())
+    assert a.update(1.0, 0.9) == b.update(1.0, 0.9)
+
+
+def test_pi_closes_loop_on_first_order_process() -> None:
+    # discrete first-order process y(k+1) = a*y(k) + (1-a)*(8 + g*p(k)), g = -0.004, tau = 300 s,
+    # Ts = 10 s; the "plant" has p* = 910, so the setpoint is 8 + g*910 and p must settle at 910.
+    g, tau, ts = -0.004, 300.0, 10.0
+    scaling = Scaling(800.0, 1200.0, span=abs(g) * 400.0)
+    gains = tune_scaled_pi(g, tau, scaling, ts=ts)
+    pi = ScaledPI(scaling, kp=gains.kp, ti=gains.ti, ts=ts, direction=direction_from_gain(g), p0=1000.0)
+    a = math.exp(-ts / tau)
+    y, p = 8.0 + g * 1000.0, 1000.0
+    sp = 8.0 + g * 910.0
+    for _ in range(800):
+        p = pi.update(sp, y)
+        y = a * y + (1.0 - a) * (8.0 + g * p)
+    assert p == pytest.approx(910.0, rel=1e-4)
+    assert y == pytest.approx(sp, abs=1e-5)
+
+
+def test_sliding_mode_sequence_by_hand() -> None:
+    sm = SlidingMode(Scaling(0.0, 10.0, span=2.0), eta=0.5, phi=5.0, lam=20.0, ts=10.0, direction=1, p0=5.0)
+    # e=10: s = 10 -> sat = 1 -> du = 10*0.5 = 5 -> 55 %
+    assert sm.update(1.0, 0.8) == pytest.approx(5.5)
+    # e=2: s = 2 + 20*(2-10)/10 = -14 -> sat = -1 -> du = -5 -> 50 %
+    assert sm.update(1.0, 0.96) == pytest.approx(5.0)
+    # e=2: s = 2 -> sat = 0.4 -> du = 2 -> 52 %
+    assert sm.update(1.0, 0.96) == pytest.approx(5.2)
+    # a huge error moves the parameter by at most eta*Ts = 5 % per step
+    assert sm.update(1000.0, 0.0) == pytest.approx(5.7)
+
+
+def test_sliding_mode_equals_pi_inside_boundary_layer() -> None:
+    scaling = Scaling(0.0, 10.0, span=20.0)  # errors 1 %, 0.5 %, 0 %
+    sm = SlidingMode.from_pi(scaling, kp=2.0, ti=40.0, ts=10.0, direction=1, p0=5.0, phi=5.0)
+    # PI by hand: du = 0.5, -0.75, -1.0 (% of 10) -> 5.05, 4.975, 4.875
+    assert [sm.update(1.0, pv) for pv in (0.8, 0.9, 1.0)] == pytest.approx([5.05, 4.975, 4.875])
+
+
+def test_sliding_mode_hold_reverse_and_clamp() -> None:
+    sm = SlidingMode(Scaling(0.0, 10.0, span=2.0), eta=0.5, phi=5.0, lam=0.0, ts=10.0, direction=-1, p0=0.2)
+    assert sm.update(1.0, 0.8) == 0.0  # reverse: 2 % - 5 % -> clamped at 0 %
+    assert sm.update(math.nan, 0.8) == 0.0
+    assert sm.mode == "hold"
+    assert sm.update(1.0, 1.2) == pytest.approx(0.5)  # e = -10 %: +5 %
+
+
+def test_state_compensator_proportional_by_hand() -> None:
+    sc = StateCompensator(5.0, ts=10.0)
+    assert sc.update(2.0, 1.8) == pytest.approx(1.0)  # 5 kg/s/m * 0.2 m
+    assert sc.update(2.0, 1.9) == pytest.approx(0.5)  # follows K*e
+    assert sc.update(2.0, 2.1) == pytest.approx(-0.5)
+
+
+def test_state_compensator_with_integral_hold_and_resume() -> None:
+    sc = StateCompensator(5.0, ts=10.0, ti=100.0)
+    assert sc.update(2.0, 1.8) == pytest.approx(1.1)  # 5*0.2 + 5*0.1*0.2
+    assert sc.update(2.0, 1.9) == pytest.approx(0.65)  # + 5*(-0.1) + 0.5*0.1
+    assert sc.update(math.nan, 1.9) == pytest.approx(0.65)  # held
+    assert sc.mode == "hold"
+    assert sc.update(2.0, 1.7) == pytest.approx(0.8)  # bumpless: + 0.5*0.3 only
+
+
+def test_state_compensator_keeps_integrating_level_on_plant() -> None:
+    # twin tank: level integrates (inflow - outflow + correction)/(rho*A), with a 0.2 kg/s
+    # outflow the plant does not have; the correction must hold the level near the plant's
+    rho_a, ts = 1000.0, 10.0
+    sc = StateCompensator(50.0, ts=ts, ti=400.0)
+    level, plant = 1.0, 1.0
+    for _ in range(600):
+        m = sc.update(plant, level)
+        level += ts * (m - 0.2) / rho_a
+    assert level == pytest.approx(plant, abs=1e-4)
+    assert sc.m == pytest.approx(0.2, rel=1e-3)
+
+
+def test_simc_by_hand() -> None:
+    # Kc = tau/(K(tc+theta)), Ti = min(tau, 4(tc+theta))
+    assert simc_pi(0.5, 100.0, 5.0, tau_c=20.0) == pytest.approx((8.0, 100.0))
+    assert simc_pi(-0.5, 1000.0, 0.0, tau_c=10.0) == pytest.approx((200.0, 40.0))
+    kc, ti = simc_pi(0.5, 100.0, 5.0)  # tau_c defaults to tau
+    assert (kc, ti) == pytest.approx((100.0 / (0.5 * 105.0), 100.0))
+
+
+def test_scaled_tuning_by_hand() -> None:
+    # kht in [800, 1200], variable span 1.6 K: Ks = -0.004*400/1.6 = -1
+    scaling = Scaling(800.0, 1200.0, span=1.6)
+    assert scaled_process_gain(-0.004, scaling) == pytest.approx(-1.0)
+    g = tune_scaled_pi(-0.004, 300.0, scaling, ts=10.0, lam=1.0)
+    # theta = Ts/2 = 5, tau_c = 300: Kp = 300/(1*305), Ti = min(300, 1220)
+    assert g.kp == pytest.approx(300.0 / 305.0)
+    assert g.ti == pytest.approx(300.0)
+    # engineering units: Kc = tau/(|K|(tc+theta)) = 300/(0.004*305)
+    assert g.kc == pytest.approx(300.0 / (0.004 * 305.0))
+    g2 = tune_scaled_pi(-0.004, 300.0, scaling, ts=10.0, lam=0.1)
+    # tau_c = 30: Kp = 300/35, Ti = min(300, 140) = 140
+    assert (g2.kp, g2.ti) == pytest.approx((300.0 / 35.0, 140.0))
+
+
+def test_tuning_rejects_zero_gain() -> None:
+    with pytest.raises(ValueError):
+        simc_pi(0.0, 100.0)
+    assert np.isfinite(simc_pi(1e-9, 1.0)[0])
