@@ -1,0 +1,97 @@
+"""Automatic pairing by relative gain: hand-solved cases."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trackingbox.analysis.pairing import Pair, choose_pairs
+from trackingbox.errors import AnalysisError
+
+
+def _pairs(p):
+    return {x.variable: x.parameter for x in p.pairs}
+
+
+def _reason(p, name):
+    return dict(p.left_out)[name]
+
+
+def test_wood_berry_pairs_diagonal_and_flags_negative_elements():
+    # lambda_11 = lambda_22 = 2.01, off-diagonal = 1 - 2.01 < 0
+    G = [[12.8, -18.9], [6.6, -19.4]]
+    p = choose_pairs(G, ["XD", "XB"], ["R", "S"], time_constants=[[16.7, 21.0], [10.9, 14.4]])
+    assert p.pairs == (Pair("XD", "R", pytest.approx(2.0094, abs=1e-4), 12.8, 16.7),
+                       Pair("XB", "S", pytest.approx(2.0094, abs=1e-4), -19.4, 14.4))
+    assert p.left_out == ()
+    assert any("negative" in w and "XD/S" in w and "XB/R" in w for w in p.warnings)
+
+
+def test_off_diagonal_pairing_when_diagonal_is_negative():
+    # G = [[1, 2], [3, 4]]: Lambda = [[-2, 3], [3, -2]]
+    p = choose_pairs([[1.0, 2.0], [3.0, 4.0]], ["y1", "y2"], ["p1", "p2"])
+    assert _pairs(p) == {"y1": "p2", "y2": "p1"}
+    assert all(math.isclose(x.lambda_, 3.0) for x in p.pairs)
+
+
+def test_large_relative_gain_is_flagged():
+    # lambda_11 = 1 / (1 - 0.95) = 20
+    p = choose_pairs([[1.0, 0.95], [1.0, 1.0]], ["y1", "y2"], ["p1", "p2"])
+    assert _pairs(p) == {"y1": "p1", "y2": "p2"}
+    assert math.isclose(p.pairs[0].lambda_, 20.0)
+    assert any("large" in w and "y1/p1" in w for w in p.warnings)
+
+
+def test_negligible_parameter_and_unmoved_variable_get_reasons():
+    G = np.array([[2.0, 0.1, 1e-7, 0.0],
+                  [0.2, 1.0, 0.0, 0.0],
+                  [1e-8, 1e-8, 1e-9, 0.0]])
+    p = choose_pairs(G, ["T1", "T2", "T3"], ["a", "b", "c", "d"])
+    assert _pairs(p) == {"T1": "a", "T2": "b"}
+    assert "negligible" in _reason(p, "c")
+    assert "negligible" in _reason(p, "d")
+    assert "moves it" in _reason(p, "T3")
+    assert set(dict(p.left_out)) == {"c", "d", "T3"}
+
+
+def test_scaling_decides_what_is_negligible():
+    # raw gain 1e-5 K per Pa looks tiny, but the pump head range is 8000 Pa:
+    # 1e-5 * 8000 / 2 K = 0.04 of the variable's range is not negligible.
+    p = choose_pairs([[1e-5]], ["TI"], ["uRise"], variable_ranges=[2.0], parameter_ranges=[8000.0])
+    assert _pairs(p) == {"TI": "uRise"}
+    assert math.isclose(p.scaled_gains[0, 0], 0.04)
+
+
+def test_tall_more_variables_than_parameters():
+    # Lambda of [[1,0],[0,1],[1,1]] = [[2/3,0],[0,2/3],[1/3,1/3]] (solved by hand in test_rga)
+    p = choose_pairs([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]], ["y1", "y2", "y3"], ["a", "b"])
+    assert _pairs(p) == {"y1": "a", "y2": "b"}
+    assert "taken by" in _reason(p, "y3")
+
+
+def test_wide_single_variable_takes_strongest_parameter():
+    # one row: lambda_j = g_j^2 / sum(g^2) = [1, 4, 16] / 21; closest to 1 is the largest gain
+    p = choose_pairs([[1.0, -2.0, 4.0]], ["y"], ["a", "b", "c"])
+    assert _pairs(p) == {"y": "c"}
+    assert math.isclose(p.pairs[0].lambda_, 16 / 21)
+    assert "not needed" in _reason(p, "a") and "not needed" in _reason(p, "b")
+
+
+def test_dependent_parameter_is_left_out_not_crashing():
+    # column b = 2 * column a: the two cannot be told apart
+    p = choose_pairs([[1.0, 2.0, 0.0], [1.0, 2.0, 1.0]], ["y1", "y2"], ["a", "b", "c"])
+    assert "linear combination" in _reason(p, "a")
+    assert set(_pairs(p).values()) == {"b", "c"}
+    assert math.isfinite(p.condition_number)
+
+
+def test_all_zero_gains():
+    p = choose_pairs(np.zeros((2, 2)), ["y1", "y2"], ["a", "b"])
+    assert p.pairs == ()
+    assert len(p.left_out) == 4
+
+
+def test_shape_mismatch_is_an_analysis_error():
+    with pytest.raises(AnalysisError, match="shape"):
+        choose_pairs([[1.0, 2.0]], ["y1", "y2"], ["a", "b"])
