@@ -1,0 +1,3 @@
+within TrackingBox.Blocks;
+package Validation "Validation models for the blocks"
+end Validation;

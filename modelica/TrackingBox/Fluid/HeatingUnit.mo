@@ -1,0 +1,36 @@
+within TrackingBox.Fluid;
+model HeatingUnit "Liquid-full (pressurised) heating vessel, heated through a surface by a heating medium"
+  extends TrackingBox.Interfaces.PartialTwoPort;
+  parameter TrackingBox.Units.CoefficientOfHeatTransfer kht = 1050 "Heat-transfer coefficient heating medium to water";
+  parameter TrackingBox.Units.Area A = 0.15 "Heat-transfer area";
+  parameter TrackingBox.Units.Volume V = 0.02 "Water volume";
+  parameter TrackingBox.Units.Temperature T_start = 353.15 "Initial water temperature";
+  parameter TrackingBox.Units.Temperature THeatFixed = 413.15 "Heating-medium temperature used when use_THeat_in = false";
+  parameter Boolean use_kht_in = false "= true to take kht from the input kht_in";
+  parameter Boolean use_THeat_in = true "= true to take the heating-medium temperature from the input THeat";
+  TrackingBox.Interfaces.RealInput kht_in(unit="W/(m2.K)") if use_kht_in "Heat-transfer coefficient from outside";
+  TrackingBox.Interfaces.RealInput THeat(unit="K") if use_THeat_in "Heating-medium temperature (e.g. saturated steam)";
+  TrackingBox.Units.Temperature T(start=T_start, fixed=true) "Water temperature (well mixed)";
+  TrackingBox.Units.HeatFlowRate Q_flow "Heat flow into the water";
+protected
+  TrackingBox.Interfaces.RealInput kht_internal(unit="W/(m2.K)") "Used heat-transfer coefficient";
+  TrackingBox.Interfaces.RealInput THeat_internal(unit="K") "Used heating-medium temperature";
+equation
+  connect(kht_in, kht_internal);
+  connect(THeat, THeat_internal);
+  if not use_kht_in then
+    kht_internal = kht;
+  end if;
+  if not use_THeat_in then
+    THeat_internal = THeatFixed;
+  end if;
+  dp = 0;
+  Q_flow = kht_internal*A*(THeat_internal - T);
+  TrackingBox.Media.Water.rho(T)*V*der(T) = noEvent(max(m_flow, 0))*(port_a.T - T) + Q_flow/TrackingBox.Media.Water.cp(T);
+  port_b.T = T;
+  annotation (Documentation(info="<html>
+<p>Well-mixed water volume <code>V</code> without pressure loss, heated with
+<code>Q = kht&middot;A&middot;(THeat - T)</code> from a heating medium at
+<code>THeat</code>. Being liquid-full, the pressure is set by the network.</p>
+</html>"));
+end HeatingUnit;

@@ -1,0 +1,3 @@
+within TrackingBox.Fluid;
+package Validation "Validation models for the fluid components"
+end Validation;

@@ -1,0 +1,2 @@
+within TrackingBox.Interfaces;
+connector RealInput = input Real "Connector with one input signal of type Real";
