@@ -617,11 +617,15 @@ def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
 
 # --------------------------------------------------------------------------- writing
 
-def _rel(path: Path, base: Path) -> str:
+def _rel(path: Path, base: Path, *, outside: bool = True) -> str:
+    """*path* relative to *base*; if *outside* is false, absolute unless it lies under *base*."""
     try:
-        return Path(os.path.relpath(path, base)).as_posix()
+        rel = Path(os.path.relpath(path, base))
     except ValueError:  # different drive on Windows
         return path.as_posix()
+    if not outside and rel.parts[:1] == ("..",):
+        return path.as_posix()
+    return rel.as_posix()
 
 
 def _pair_dict(p: PairSpec) -> dict[str, Any]:
@@ -645,7 +649,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
         "sample_time": float(spec.sample_time),
     }
     if spec.source is not None:
-        doc["source"] = {"path": _rel(spec.source.path, base), "model": spec.source.model}
+        # a library outside the case directory is named absolutely: it does not move with the case
+        doc["source"] = {"path": _rel(spec.source.path, base, outside=False), "model": spec.source.model}
     doc["inputs"] = dict(spec.inputs)
     doc["outputs"] = dict(spec.outputs)
     if spec.parameters:

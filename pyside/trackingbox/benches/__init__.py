@@ -1,1 +1,66 @@
-"""benches."""
+"""Bench cases: a "physical" plant and a digital twin, a scenario, noisy measurements, a spec.
+
+Two benches follow the source thesis: ``heat-exchanger`` (counter-flow heat
+exchanger, plant ``kht`` differs from the twin's) and ``heat-production``
+(preheating tank, storage tank, heating unit, heat exchanger to a district-heating
+stream; quadratic pressure losses in the plant, linear in the twin).
+
+>>> from trackingbox.benches import BENCHES
+>>> sorted(BENCHES)
+['heat-exchanger', 'heat-production']
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+
+from ..errors import TrackingError, did_you_mean
+from .base import BenchCase, BenchDefinition, Sensor, build_case
+
+__all__ = ["BENCHES", "BenchCase", "BenchDefinition", "Sensor", "bench_definition", "make_bench"]
+
+#: Bench names the ``bench`` command accepts, with the module that defines each.
+BENCHES: dict[str, str] = {
+    "heat-exchanger": "heat_exchanger",
+    "heat-production": "heat_production",
+}
+
+
+def bench_definition(name: str) -> BenchDefinition:
+    """The :class:`BenchDefinition` of bench *name* (did-you-mean on unknown names)."""
+    if name not in BENCHES:
+        raise TrackingError(f"unknown bench {name!r}{did_you_mean(name, BENCHES)}; "
+                                f"choose one of {', '.join(BENCHES)}")
+    import importlib
+
+    module = importlib.import_module(f"{__name__}.{BENCHES[name]}")
+    return module.DEFINITION
+
+
+def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
+               overrides: Mapping[str, float] | None = None, hours: float | None = None, *,
+               plant_fmu: str | os.PathLike[str] | None = None,
+               twin_fmu: str | os.PathLike[str] | None = None) -> BenchCase:
+    """Generate bench case *name* into directory *out*.
+
+    Parameters
+    ----------
+    name : {"heat-exchanger", "heat-production"}
+    out : path-like
+        Output directory.
+    seed : int
+        Seeds the scenario and the sensor noise.
+    overrides : mapping, optional
+        Plant parameter values (the truth) replacing the plant model's defaults.
+    hours : float, optional
+        Measured period in hours (default: 8 for the heat exchanger, 24 for heat production).
+    plant_fmu, twin_fmu : path-like, optional
+        Already-compiled FMUs of the bench's plant and twin, reused instead of compiling.
+
+    Returns
+    -------
+    BenchCase
+        Paths of the written files and the true parameter values.
+    """
+    return build_case(bench_definition(name), out, seed=seed, overrides=overrides, hours=hours,
+                      plant_fmu=plant_fmu, twin_fmu=twin_fmu)

@@ -1,0 +1,397 @@
+"""Generic bench-case machinery: compile, simulate the plant, add sensor noise, write the case.
+
+A bench is described by a :class:`BenchDefinition` (which Modelica classes, which
+sensors with which noise, which candidate parameters, and a scenario function);
+:func:`build_case` turns it into a directory::
+
+    plant.fmu          the "physical" plant (the truth)
+    twin.fmu           the digital twin to be tracked
+    measurements.csv   time (s) + measured tags (inputs and outputs, with sensor noise)
+    plant_inputs.csv   time (s) + the plant's true (noise-free) inputs, FMU names
+    spec.toml          the tracking specification (loads with trackingbox.spec.load_spec)
+    truth.json         true plant parameter values, seed, overrides (not read by the spec)
+
+Nothing is written into the output directory until every step has succeeded.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import shutil
+import tempfile
+import time as _time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from ..errors import FMUError, SimulationError, did_you_mean
+from ..io import atomic_path, write_text_atomic
+from ..spec import (
+    DataRules,
+    ParameterSpec,
+    SourceSpec,
+    Spec,
+    StateSpec,
+    TrackingSettings,
+    dump_spec,
+    load_spec,
+)
+
+log = logging.getLogger(__name__)
+
+SensorKind = Literal["temperature", "flow", "level", "pressure", "power", "other"]
+
+#: Default sensor noise: (standard deviation, relative?) per kind. Temperatures
+#: 0.1 K, flows 1 % of reading, levels 5 mm, pressures 0.5 % of reading.
+NOISE: dict[str, tuple[float, bool]] = {
+    "temperature": (0.1, False),
+    "flow": (0.01, True),
+    "level": (0.005, False),
+    "pressure": (0.005, True),
+    "power": (0.01, True),
+    "other": (0.0, False),
+}
+
+Scenario = Callable[[np.ndarray, np.random.Generator, float], dict[str, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A measured tag: which FMU variable it reads and how noisy it is.
+
+    Attributes
+    ----------
+    tag : str
+        DCS-style tag, e.g. ``TI-102``.
+    plant : str
+        Plant FMU variable it measures.
+    twin : str
+        Twin FMU variable that simulates it (or the twin input it drives).
+    kind : SensorKind
+        Sets the default noise (:data:`NOISE`).
+    sigma : float or None
+        Override of the noise standard deviation (absolute, or relative when
+        ``relative``).
+    relative : bool or None
+        Override: *sigma* is a fraction of the reading.
+    """
+
+    tag: str
+    plant: str
+    twin: str
+    kind: SensorKind
+    sigma: float | None = None
+    relative: bool | None = None
+
+    @property
+    def noise(self) -> tuple[float, bool]:
+        """(standard deviation, relative?) of this sensor."""
+        sigma, relative = NOISE[self.kind]
+        return (self.sigma if self.sigma is not None else sigma,
+                self.relative if self.relative is not None else relative)
+
+
+@dataclass(frozen=True)
+class BenchDefinition:
+    """Everything that makes one bench case.
+
+    The scenario function takes the sample times (s, starting at 0, *including*
+    the warm-up), a seeded generator and the warm-up length, and returns the plant
+    input trajectories by plant FMU input name (held constant through the warm-up).
+    """
+
+    name: str
+    title: str
+    plant_model: str
+    twin_model: str
+    sample_time: float
+    hours: float
+    warmup: float
+    inputs: tuple[Sensor, ...]
+    outputs: tuple[Sensor, ...]
+    parameters: tuple[ParameterSpec, ...]
+    scenario: Scenario
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    states: tuple[StateSpec, ...] = ()
+    data: DataRules = field(default_factory=DataRules)
+    tracking: TrackingSettings = field(default_factory=TrackingSettings)
+    truth_map: Mapping[str, str] = field(default_factory=dict)
+    """Twin candidate parameter -> plant parameter holding its true value, where names differ."""
+
+
+@dataclass(frozen=True)
+class BenchCase:
+    """A written bench case: its files and the truth behind it."""
+
+    name: str
+    directory: Path
+    spec: Path
+    twin_fmu: Path
+    plant_fmu: Path
+    measurements: Path
+    plant_inputs: Path
+    truth_file: Path
+    truth: dict[str, float]
+    """True plant values of the candidate parameters (twin names)."""
+    plant_parameters: dict[str, float]
+    """Every tunable plant parameter as simulated (declared start or override)."""
+    seed: int
+    hours: float
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready summary (paths as strings)."""
+        return {
+            "bench": self.name, "directory": str(self.directory), "spec": str(self.spec),
+            "twin_fmu": str(self.twin_fmu), "plant_fmu": str(self.plant_fmu),
+            "measurements": str(self.measurements), "plant_inputs": str(self.plant_inputs),
+            "truth_file": str(self.truth_file), "truth": self.truth, "seed": self.seed,
+            "hours": self.hours,
+        }
+
+
+# --------------------------------------------------------------------------- helpers
+
+def _compile(model: str, output: Path) -> Path:
+    from ..compiler import compile_model, library_path  # lazy: the compiler pulls in rumoca/casadi
+
+    t0 = _time.perf_counter()
+    result = compile_model(library_path(), model, output=output)
+    log.info("compiled %s -> %s in %.1f s", model, result.fmu, _time.perf_counter() - t0)
+    return Path(result.fmu)
+
+
+def _library_path() -> Path | None:
+    try:
+        from ..compiler import library_path
+
+        return Path(library_path())
+    except (ImportError, AttributeError):  # pragma: no cover - compiler not installed
+        return None
+
+
+def _tunable_parameters(info: Any) -> dict[str, Any]:
+    """name -> Variable for the FMU's settable Real parameters."""
+    return {v.name: v for v in info.variables
+            if v.causality == "parameter" and v.variability in ("tunable", "fixed")
+            and str(v.type).lower() in ("real", "float64", "float32")}
+
+
+def check_overrides(overrides: Mapping[str, float], info: Any, where: str) -> dict[str, float]:
+    """Check plant parameter overrides against the plant FMU: known names, declared bounds.
+
+    Raises
+    ------
+    FMUError
+        Listing every unknown name (with did-you-mean) and every value outside the
+        parameter's declared ``min``/``max``.
+    """
+    params = _tunable_parameters(info)
+    problems = []
+    out: dict[str, float] = {}
+    for name, value in overrides.items():
+        value = float(value)
+        var = params.get(name)
+        if var is None:
+            problems.append(f"unknown plant parameter {name!r} in {where}{did_you_mean(name, params)}")
+            continue
+        if not math.isfinite(value):
+            problems.append(f"value {value!r} for plant parameter {name!r} is not finite")
+            continue
+        lo = var.min if var.min is not None else -math.inf
+        hi = var.max if var.max is not None else math.inf
+        if not float(lo) <= value <= float(hi):
+            problems.append(f"value {value!r} for plant parameter {name!r} is outside its declared "
+                            f"range [{lo}, {hi}] in {where}")
+            continue
+        out[name] = value
+    if problems:
+        raise FMUError("; ".join(problems))
+    return out
+
+
+def add_noise(values: np.ndarray, sigma: float, relative: bool, rng: np.random.Generator) -> np.ndarray:
+    """*values* plus Gaussian noise of standard deviation *sigma* (× ``|values|`` when *relative*)."""
+    scale = sigma * np.abs(values) if relative else np.full_like(values, sigma, dtype=float)
+    return values + scale * rng.standard_normal(values.shape)
+
+
+def _write_csv(frame: pd.DataFrame, target: Path) -> None:
+    with atomic_path(target) as tmp:
+        frame.to_csv(tmp, index=False, float_format="%.9g")
+
+
+# --------------------------------------------------------------------------- main
+
+def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed: int = 0,
+               overrides: Mapping[str, float] | None = None, hours: float | None = None,
+               plant_fmu: str | os.PathLike[str] | None = None,
+               twin_fmu: str | os.PathLike[str] | None = None) -> BenchCase:
+    """Generate one bench case into directory *out* (see the module docstring for the files).
+
+    Parameters
+    ----------
+    definition : BenchDefinition
+    out : path-like
+        Output directory (created; existing case files are replaced).
+    seed : int
+        Seeds the scenario and the sensor noise.
+    overrides : mapping, optional
+        Plant parameter values replacing the plant's declared starts (the truth).
+    hours : float, optional
+        Length of the measured period (default: the bench's).
+    plant_fmu, twin_fmu : path-like, optional
+        Already-compiled FMUs of the bench's plant and twin classes, copied instead
+        of compiling.
+
+    Returns
+    -------
+    BenchCase
+
+    Raises
+    ------
+    FMUError
+        An override names an unknown plant parameter or is outside its declared range.
+    CompileError, SimulationError
+        Compiling or simulating the plant failed.
+    """
+    from ..fmu import FMUModel, read_info  # lazy: fmpy
+
+    out = Path(out).expanduser().resolve()
+    hours = float(definition.hours if hours is None else hours)
+    if not hours > 0:
+        raise SimulationError(f"bench {definition.name!r}: --hours must be > 0, got {hours}")
+    overrides = dict(overrides or {})
+    seeds = np.random.SeedSequence(int(seed)).spawn(2)
+    scenario_rng, noise_rng = (np.random.default_rng(s) for s in seeds)
+
+    with tempfile.TemporaryDirectory(prefix=f"bench-{definition.name}-") as tmpdir:
+        stage = Path(tmpdir)
+        # 1. FMUs (compile once, or copy the given ones) -----------------------
+        staged_plant = stage / "plant.fmu"
+        staged_twin = stage / "twin.fmu"
+        if plant_fmu is not None:
+            shutil.copyfile(plant_fmu, staged_plant)
+        else:
+            built = _compile(definition.plant_model, stage / "build" / "plant.fmu")
+            shutil.copyfile(built, staged_plant)
+        plant_info = read_info(staged_plant)
+        overrides = check_overrides(overrides, plant_info, f"the {definition.name} plant "
+                                    f"({definition.plant_model})")
+        if twin_fmu is not None:
+            shutil.copyfile(twin_fmu, staged_twin)
+        else:
+            built = _compile(definition.twin_model, stage / "build" / "twin.fmu")
+            shutil.copyfile(built, staged_twin)
+
+        # 2. scenario over warm-up + measured period ----------------------------
+        dt = definition.sample_time
+        warmup = definition.warmup
+        n_meas = int(round(hours * 3600.0 / dt))
+        n_warm = int(round(warmup / dt))
+        t_all = np.arange(n_warm + n_meas + 1) * dt
+        true_inputs = definition.scenario(t_all, scenario_rng, warmup)
+        frame = pd.DataFrame({"time": t_all, **true_inputs})
+
+        # 3. plant simulation -------------------------------------------------
+        plant_vars = [s.plant for s in definition.outputs]
+        log.info("simulating the %s plant for %.1f h (+%.1f h warm-up)", definition.name, hours, warmup / 3600)
+        t0 = _time.perf_counter()
+        model = FMUModel(staged_plant)
+        try:
+            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
+                                    parameters=overrides, outputs=plant_vars)
+        finally:
+            model.close()
+        log.info("plant simulation took %.1f s", _time.perf_counter() - t0)
+        result = _on_grid(result, t_all, plant_vars, definition.name)
+
+        # 4. measurements = true signals on the measured period + sensor noise ------
+        keep = slice(n_warm, None)
+        t_meas = t_all[keep] - warmup
+        columns: dict[str, np.ndarray] = {"time": t_meas}
+        for s in definition.inputs:
+            sigma, rel = s.noise
+            columns[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
+        for s in definition.outputs:
+            sigma, rel = s.noise
+            columns[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
+        measurements = pd.DataFrame(columns)
+        plant_inputs = frame.iloc[keep].copy()
+        plant_inputs["time"] = t_meas
+
+        # 5. truth ------------------------------------------------------------
+        plant_params = {name: float(v.start) for name, v in _tunable_parameters(plant_info).items()
+                        if v.start is not None}
+        plant_params.update(overrides)
+        truth: dict[str, float] = {}
+        for p in definition.parameters:
+            source = definition.truth_map.get(p.name, p.name)
+            if source in plant_params:
+                truth[p.name] = plant_params[source]
+
+        # 6. spec ---------------------------------------------------------------
+        lib = _library_path()
+        half = hours * 3600.0 / 2.0
+        spec = Spec(
+            path=out / "spec.toml", twin=out / "twin.fmu", measurements=out / "measurements.csv",
+            sample_time=dt,
+            source=SourceSpec(path=lib, model=definition.twin_model) if lib is not None else None,
+            inputs={s.tag: s.twin for s in definition.inputs},
+            # measured states (tank levels) are followed by state compensation, not pairs
+            outputs={s.tag: s.twin for s in definition.outputs
+                     if s.tag not in {st.tag for st in definition.states}},
+            parameters=definition.parameters, fixed=dict(definition.fixed),
+            windows={"training": (0.0, half), "validation": (half, 2.0 * half)},
+            data=definition.data, states=definition.states, tracking=definition.tracking,
+        )
+        header = (f"{definition.title}: generated by `trackingbox bench {definition.name}`\n"
+                  f"seed = {seed}, hours = {hours:g}, plant overrides = "
+                  f"{json.dumps(overrides) if overrides else 'none'}\n"
+                  f"true plant values are in truth.json (not read by the spec)")
+        spec_text = dump_spec(spec, header=header)
+        truth_doc = {"bench": definition.name, "seed": int(seed), "hours": hours,
+                     "plant_model": definition.plant_model, "twin_model": definition.twin_model,
+                     "overrides": overrides, "parameters": truth, "plant_parameters": plant_params}
+
+        # 7. publish: every file atomically, FMUs first, spec last ----------------
+        out.mkdir(parents=True, exist_ok=True)
+        for src, name in ((staged_plant, "plant.fmu"), (staged_twin, "twin.fmu")):
+            with atomic_path(out / name) as tmp:
+                shutil.copyfile(src, tmp)
+        _write_csv(measurements, out / "measurements.csv")
+        _write_csv(plant_inputs, out / "plant_inputs.csv")
+        write_text_atomic(out / "truth.json", json.dumps(truth_doc, indent=2, sort_keys=True) + "\n")
+        write_text_atomic(out / "spec.toml", spec_text)
+
+    load_spec(out / "spec.toml")  # the case we wrote must load cleanly
+    log.info("wrote bench case %s to %s", definition.name, out)
+    return BenchCase(name=definition.name, directory=out, spec=out / "spec.toml",
+                     twin_fmu=out / "twin.fmu", plant_fmu=out / "plant.fmu",
+                     measurements=out / "measurements.csv", plant_inputs=out / "plant_inputs.csv",
+                     truth_file=out / "truth.json", truth=truth, plant_parameters=plant_params,
+                     seed=int(seed), hours=hours)
+
+
+def _on_grid(result: pd.DataFrame, t: np.ndarray, names: list[str], bench: str) -> pd.DataFrame:
+    """The simulation result at exactly the times *t* (interpolated if the grid differs)."""
+    missing = [n for n in names if n not in result.columns]
+    if missing:
+        raise SimulationError(f"bench {bench!r}: the plant result lacks {missing}")
+    rt = result["time"].to_numpy(float)
+    if len(rt) == len(t) and np.allclose(rt, t, atol=1e-6 * max(1.0, t[-1])):
+        out = result.reset_index(drop=True)
+    else:
+        # drop duplicate time points (events) keeping the last value, then interpolate
+        dedup = result.drop_duplicates(subset="time", keep="last")
+        out = pd.DataFrame({"time": t, **{n: np.interp(t, dedup["time"].to_numpy(float),
+                                                        dedup[n].to_numpy(float)) for n in names}})
+    bad = [n for n in names if not np.all(np.isfinite(out[n].to_numpy(float)))]
+    if bad:
+        raise SimulationError(f"bench {bench!r}: the plant simulation gave non-finite values for {bad}")
+    return out

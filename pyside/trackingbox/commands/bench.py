@@ -1,0 +1,96 @@
+"""``trackingbox bench``: generate a bench case (plant, twin, noisy measurements, spec)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..errors import TrackingError
+
+EPILOG = """\
+examples:
+  trackingbox bench heat-exchanger --out case1
+  trackingbox bench heat-exchanger --out case2 --seed 3 --set hx.kht=850 --hours 4
+  trackingbox bench heat-production --out hp --json
+
+writes into --out:
+  plant.fmu, twin.fmu     the "physical" plant and the digital twin (FMUs)
+  measurements.csv        time (s) + measured tags, with sensor noise
+                          (0.1 K temperatures, 1 % flows, 5 mm levels)
+  plant_inputs.csv        the plant's true (noise-free) inputs
+  spec.toml               the tracking specification (training = first half,
+                          validation = second half)
+  truth.json              the true plant parameter values (the spec does not read it)
+
+--set NAME=VALUE changes a plant parameter (the truth); unknown names and values
+outside the parameter's declared min/max are errors. Nothing is written unless
+the whole case could be generated.
+"""
+
+
+def _assignment(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"value of {name!r} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f"value of {name!r} must be finite, got {value!r}")
+    return name, number
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``bench`` subcommand."""
+    from ..benches import BENCHES
+
+    p = subparsers.add_parser(
+        "bench",
+        help="generate a bench case: plant and twin FMUs, noisy measurements, spec.toml",
+        description="Compile a bench's plant and twin from the shipped library, simulate the plant "
+                    "through a seeded scenario, add sensor noise and write a ready-to-use case.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("bench", choices=sorted(BENCHES), help="which bench")
+    p.add_argument("--out", "-o", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument("--seed", type=int, default=0, help="seed of the scenario and the noise (default 0)")
+    p.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[],
+                   metavar="NAME=VALUE", help="plant parameter value (repeatable)")
+    p.add_argument("--hours", type=float, default=None,
+                   help="measured period in hours (default 8 heat-exchanger, 24 heat-production)")
+    p.add_argument("--plant-fmu", type=Path, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--twin-fmu", type=Path, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Generate the case; print a summary (or JSON)."""
+    from ..benches import make_bench
+
+    overrides: dict[str, float] = {}
+    for name, value in args.overrides:
+        if name in overrides:
+            raise TrackingError(f"--set {name} given twice")
+        overrides[name] = value
+    if args.hours is not None and not args.hours > 0:
+        raise TrackingError(f"--hours must be > 0, got {args.hours:g}")
+    case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=args.hours,
+                      plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu)
+    if args.json:
+        json.dump(case.to_json(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        truth = ", ".join(f"{k} = {v:g}" for k, v in case.truth.items())
+        print(f"wrote {case.name} case to {case.directory} ({case.hours:g} h, seed {case.seed})")
+        print(f"  spec:         {case.spec}")
+        print(f"  measurements: {case.measurements}")
+        print(f"  truth:        {truth or '(none of the candidates exists in the plant)'}")
+        print(f"next: trackingbox estimate {case.spec}")
+    return 0
