@@ -1,0 +1,243 @@
+"""Export an :class:`ExplicitModel` as an FMI 3.0 model-exchange FMU.
+
+CasADi's ``DaeBuilder.export_fmu`` writes the C sources and the model
+description; we compile them with the machine's C compiler against the FMI 3
+headers that fmpy ships, then tidy the model description:
+
+* variables that CasADi must treat as outputs to compute them (every algebraic
+  variable is listed in its output category so that the FMU can report it)
+  get back their Modelica causality, ``local``;
+* CasADi's internal ``__assign__*`` helper variables are dropped;
+* units used by variables are declared in ``UnitDefinitions``;
+* the model's ``experiment`` annotation becomes ``DefaultExperiment``.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import casadi as ca
+
+from ..errors import CompileError
+from .flatten import ExplicitModel, ScalarVar
+
+log = logging.getLogger(__name__)
+
+
+def model_identifier(model: str) -> str:
+    """A C identifier for the FMU's binaries: ``Pkg.Sub.Model`` → ``Pkg_Sub_Model``."""
+    ident = re.sub(r"[^A-Za-z0-9_]", "_", model)
+    if not re.match(r"[A-Za-z_]", ident):
+        ident = "m_" + ident
+    return ident
+
+
+def _fmi_headers() -> Path:
+    import fmpy
+
+    path = Path(fmpy.__file__).parent / "c-code"
+    if not (path / "fmi3Functions.h").exists():
+        raise CompileError(f"FMI 3 headers not found in {path} (is fmpy installed?)")
+    return path
+
+
+def _opts(sv: ScalarVar, translate_attr, extra: dict | None = None) -> dict:
+    opts: dict = {}
+    for key in ("min", "max", "nominal"):
+        node = sv.attrs.get(key)
+        if node is not None:
+            val = translate_attr(sv, node, key)
+            if val is not None:
+                opts[key] = val
+    unit = _string_attr(sv.attrs.get("unit"))
+    if unit:
+        opts["unit"] = unit
+    if sv.description:
+        opts["description"] = sv.description
+    if extra:
+        opts.update(extra)
+    return opts
+
+
+def _string_attr(node) -> str | None:
+    if node is None:
+        return None
+    if isinstance(node, str):
+        return node
+    if isinstance(node, dict):
+        lit = node.get("Literal")
+        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
+            return str(lit["value"]["String"])
+    return None
+
+
+def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], dict[str, str]]:
+    """Build the DaeBuilder; returns it, the names of exposed locals, and causalities."""
+    ident = model_identifier(em.name)
+    dae = ca.DaeBuilder(ident)
+    dae.add("time", "independent", "continuous", em.time, {})
+
+    def attr(sv: ScalarVar, node, key: str):
+        try:
+            return translator.numeric(translator._element(sv, node), f"{key} of {sv.name}")
+        except CompileError:
+            return None
+
+    for sv in em.parameters:
+        dae.add(sv.name, "parameter", "tunable", sv.sym, _opts(sv, attr, {"start": float(sv.value)}))
+    for sv in em.inputs:
+        start = 0.0
+        if sv.start_node is not None:
+            start = attr(sv, sv.start_node, "start") or 0.0
+        dae.add(sv.name, "input", "continuous", sv.sym, _opts(sv, attr, {"start": float(start)}))
+    for sv in em.states:
+        start = 0.0
+        if sv.start_node is not None:
+            start = translator.numeric(translator._element(sv, sv.start_node), f"start value of state {sv.name}")
+        causality = "output" if sv.output else "local"
+        dae.add(sv.name, causality, "continuous", sv.sym, _opts(sv, attr, {"start": float(start), "initial": "exact"}))
+    exposed: list[str] = []
+    causality: dict[str, str] = {}
+    for sv in em.algebraics + em.calculated:
+        c = "output" if sv.output else "local"
+        causality[sv.name] = c
+        dae.add(sv.name, c, "continuous", sv.sym, _opts(sv, attr))
+        exposed.append(sv.name)
+    # state derivative placeholders -> DaeBuilder's der(x)
+    placeholders = [em.derivative[s.name] for s in em.states]
+    ders = [dae.der(s.sym) for s in em.states]
+    lhs = [a for a, _ in em.assignments]
+    rhs = [b for _, b in em.assignments]
+    if placeholders:
+        rhs = ca.substitute(rhs, placeholders, ders)
+    is_der = {p.name(): d for p, d in zip(placeholders, ders)}
+    for target, expr in zip(lhs, rhs):
+        if target.name() in is_der:
+            dae.eq(is_der[target.name()], expr)
+        else:
+            dae.eq(target, expr)
+    if exposed:
+        dae.set_all("y", exposed)
+    return dae, exposed, causality
+
+
+def export_fmu(
+    em: ExplicitModel,
+    translator,
+    output: Path,
+    *,
+    experiment: dict[str, float] | None = None,
+    description: str | None = None,
+    optimize: str = "-O1",
+) -> str:
+    """Write the FMU to *output* atomically; return the build log."""
+    logs: list[str] = []
+    dae, exposed, causality = build_dae(em, translator)
+    ident = model_identifier(em.name)
+    with tempfile.TemporaryDirectory(prefix="tbx-fmu-") as tmp:
+        cwd = os.getcwd()
+        os.chdir(tmp)
+        try:
+            files = dae.export_fmu({"no_warning": True, "with_serialization": False})
+        except RuntimeError as exc:
+            raise CompileError(f"CasADi could not export {em.name}: {exc}") from None
+        finally:
+            os.chdir(cwd)
+        tmpdir = Path(tmp)
+        sources = [name for name in files if name.endswith(".c")]
+        unity = tmpdir / f"{ident}_unity.c"
+        unity.write_text("".join(f'#include "{name}"\n' for name in sorted(sources)))
+        libdir = tmpdir / "binaries" / "x86_64-linux"
+        libdir.mkdir(parents=True)
+        lib = libdir / f"{ident}.so"
+        cc = os.environ.get("CC", "gcc")
+        if shutil.which(cc) is None:
+            raise CompileError(f"no C compiler: {cc!r} not found on PATH (set CC or install gcc)")
+        cmd = [cc, optimize, "-shared", "-fPIC", "-I", str(_fmi_headers()), "-I", str(tmpdir),
+               "-o", str(lib), str(unity), "-lm"]
+        log.debug("compiling FMU binary: %s", shlex.join(cmd))
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        logs.append("$ " + shlex.join(cmd) + "\n" + proc.stdout + proc.stderr)
+        if proc.returncode != 0:
+            raise CompileError(f"C compilation of {em.name} failed:\n{proc.stderr[-4000:]}")
+        md_path = tmpdir / "modelDescription.xml"
+        md_path.write_text(
+            _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description)
+        )
+        output.parent.mkdir(parents=True, exist_ok=True)
+        fd, part = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part", dir=output.parent)
+        os.close(fd)
+        try:
+            with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
+                zf.write(md_path, "modelDescription.xml")
+                zf.write(lib, f"binaries/x86_64-linux/{ident}.so")
+                for local, arc in sorted(files.items()):
+                    if arc.startswith("sources/"):
+                        zf.write(tmpdir / local, arc)
+            os.replace(part, output)
+        finally:
+            if os.path.exists(part):
+                os.unlink(part)
+    return "\n".join(logs)
+
+
+def _tidy_model_description(
+    xml: str,
+    exposed: set[str],
+    causality: dict[str, str],
+    model: str,
+    experiment: dict[str, float] | None,
+    description: str | None,
+) -> str:
+    root = ET.fromstring(xml)
+    root.set("modelName", model)
+    if description:
+        root.set("description", description)
+    root.set("generationTool", "trackingbox (embedded: rumoca + CasADi)")
+    variables = root.find("ModelVariables")
+    structure = root.find("ModelStructure")
+    if variables is None or structure is None:
+        raise CompileError("CasADi wrote a model description without ModelVariables/ModelStructure")
+    demoted: set[str] = set()
+    units: set[str] = set()
+    for var in list(variables):
+        name = var.get("name", "")
+        if name.startswith("__assign__"):
+            variables.remove(var)
+            continue
+        if name in exposed and causality.get(name) == "local" and var.get("causality") == "output":
+            del var.attrib["causality"]
+            demoted.add(var.get("valueReference", ""))
+        if var.get("unit"):
+            units.add(var.get("unit", ""))
+    for elem in list(structure):
+        if elem.tag in ("Output", "InitialUnknown") and elem.get("valueReference") in demoted:
+            structure.remove(elem)
+    children = list(root)
+    insert_at = next((i for i, c in enumerate(children) if c.tag == "ModelVariables"), len(children))
+    if experiment:
+        exp = ET.Element("DefaultExperiment")
+        for key in ("StartTime", "StopTime", "Tolerance", "StepSize"):
+            src_key = "Interval" if key == "StepSize" else key
+            if src_key in experiment:
+                exp.set(
+                    {"StartTime": "startTime", "StopTime": "stopTime", "Tolerance": "tolerance", "StepSize": "stepSize"}[key],
+                    repr(float(experiment[src_key])),
+                )
+        root.insert(insert_at, exp)
+    if units:
+        unit_defs = ET.Element("UnitDefinitions")
+        for unit in sorted(units):
+            ET.SubElement(unit_defs, "Unit", {"name": unit})
+        me_index = next((i for i, c in enumerate(list(root)) if c.tag in ("ModelExchange", "CoSimulation")), -1)
+        root.insert(me_index + 1, unit_defs)
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
