@@ -1,0 +1,441 @@
+"""Inspect (and, on request, patch) the twin's Modelica source for code generation.
+
+The tracked model flips a flag on the component that owns each tracked
+parameter and connects the component's conditional input, the pattern of the
+Modelica Standard Library (``use_kht_in``/``kht_in``)::
+
+    parameter Real kht = 1000 "Heat-transfer coefficient";
+    parameter Boolean use_kht_in = false "Take kht from input kht_in";
+    RealInput kht_in if use_kht_in "kht from outside";
+  protected
+    RealInput kht_internal "kht actually used";
+  equation
+    connect(kht_in, kht_internal);
+    if not use_kht_in then
+      kht_internal = kht;
+    end if;
+
+This module loads the twin with rumoca, checks that every tracked parameter's
+component offers that pattern, finds where a parameter is declared (file,
+line, class) so that a refusal can say exactly what to add, and can write a
+patched copy of the source that adds the pattern (``--rewrite``).
+"""
+from __future__ import annotations
+
+import difflib
+import logging
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..errors import CompileError, SpecError, unknown_name
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "TwinSource", "ParameterSite", "Declaration", "load_twin", "parameter_site",
+    "find_declaration", "pattern_lines", "rewrite_source", "stage_packages", "check_loads",
+]
+
+
+@dataclass(frozen=True)
+class TwinSource:
+    """The twin's Modelica source as loaded by rumoca.
+
+    Attributes
+    ----------
+    path : Path
+        Package directory or ``.mo`` file, as the spec names it (absolute).
+    model : str
+        Full class name of the twin.
+    root : Path
+        Directory that holds the top-level package (rumoca's source root).
+    top : Path
+        The top-level package directory or the single ``.mo`` file inside *root*.
+    files : tuple[Path, ...]
+        Every ``.mo`` file of the source, sorted.
+    variables : dict
+        rumoca's flat variables (name -> attribute dict).
+    top_inputs, top_outputs : tuple[str, ...]
+        The twin's own top-level inputs and outputs (sorted).
+    """
+
+    path: Path
+    model: str
+    root: Path
+    top: Path
+    files: tuple[Path, ...]
+    variables: dict[str, Any]
+    top_inputs: tuple[str, ...]
+    top_outputs: tuple[str, ...]
+
+    def is_boolean_parameter(self, name: str) -> bool:
+        v = self.variables.get(name)
+        return bool(v) and _is_parameter(v) and _type_name(self, name) == "Boolean"
+
+    def parameters(self) -> list[str]:
+        return sorted(n for n, v in self.variables.items() if _is_parameter(v))
+
+
+_TYPE_NAMES: dict[int, dict[str, str]] = {}
+
+
+def _type_name(src: TwinSource, name: str) -> str:
+    return _TYPE_NAMES.get(id(src.variables), {}).get(name, "")
+
+
+def _is_parameter(v: dict[str, Any]) -> bool:
+    var = v.get("variability")
+    return isinstance(var, dict) and ("Parameter" in var or "Constant" in var)
+
+
+def _causality(v: dict[str, Any]) -> str:
+    c = v.get("causality")
+    if isinstance(c, dict):
+        return next(iter(c), "")
+    return str(c or "")
+
+
+def _locate(path: Path) -> tuple[Path, Path, tuple[Path, ...], Path]:
+    """(entry file, root, files, top) for a package directory or ``.mo`` file."""
+    path = path.resolve()
+    if path.is_dir():
+        entry = path / "package.mo"
+        if not entry.is_file():
+            raise SpecError(f"[source] path {path} is a directory without package.mo")
+        return entry, path.parent, tuple(sorted(path.rglob("*.mo"))), path
+    if path.suffix != ".mo" or not path.is_file():
+        raise SpecError(f"[source] path {path} is not a .mo file or a Modelica package directory")
+    if path.name == "package.mo":
+        return path, path.parent.parent, tuple(sorted(path.parent.rglob("*.mo"))), path.parent
+    return path, path.parent, (path,), path
+
+
+def _rumoca_load(entry: Path, model: str, roots: list[Path]) -> Any:
+    import rumoca
+
+    session = rumoca.Session(roots=[str(r) for r in roots])
+    logger.debug("rumoca load %s model=%s roots=%s", entry, model, roots)
+    return session.load(str(entry), model=model)
+
+
+def load_twin(path: str | Path, model: str) -> TwinSource:
+    """Load the twin *model* from *path* with rumoca and collect its flat variables.
+
+    Raises
+    ------
+    SpecError
+        If the source does not exist.
+    CompileError
+        If rumoca cannot load the model (the message carries rumoca's).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SpecError(f"[source] path {path} does not exist")
+    entry, root, files, top = _locate(path)
+    try:
+        loaded = _rumoca_load(entry, model, [root])
+    except Exception as exc:  # rumoca raises its own CompileError/ParseError types
+        raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
+    flat = loaded.to_dict("flat")
+    variables = dict(flat["variables"])
+    _TYPE_NAMES[id(variables)] = dict(flat.get("variable_type_names", {}))
+    top_inputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Input"))
+    top_outputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Output"))
+    return TwinSource(path=path.resolve(), model=model, root=root, top=top, files=files,
+                      variables=variables, top_inputs=top_inputs, top_outputs=top_outputs)
+
+
+@dataclass(frozen=True)
+class ParameterSite:
+    """Where a tracked parameter lives and how it is switched to an input.
+
+    ``hx.kht`` gives component ``hx``, leaf ``kht``, flag ``hx.use_kht_in``,
+    input ``hx.kht_in``.
+    """
+
+    name: str
+    component: str
+    leaf: str
+    flag: str
+    input: str
+    has_pattern: bool
+
+
+def parameter_site(src: TwinSource, name: str, where: str) -> ParameterSite:
+    """Check that *name* is a Real parameter of a component of the twin.
+
+    Raises
+    ------
+    SpecError
+        For an unknown parameter (with "did you mean") or a parameter of the
+        twin itself (no component to switch).
+    """
+    v = src.variables.get(name)
+    if v is None or not _is_parameter(v):
+        raise SpecError(unknown_name("parameter", name, src.parameters(), f"{where} (model {src.model})"))
+    if "." not in name:
+        raise SpecError(
+            f"parameter {name!r} in {where} belongs to the twin {src.model} itself: only parameters of its "
+            f"components (e.g. 'hx.kht') can be switched to a conditional input; move it into a component"
+        )
+    component, leaf = name.rsplit(".", 1)
+    flag = f"{component}.use_{leaf}_in"
+    return ParameterSite(name=name, component=component, leaf=leaf, flag=flag,
+                         input=f"{component}.{leaf}_in", has_pattern=src.is_boolean_parameter(flag))
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """The source text that declares a parameter."""
+
+    file: Path
+    line: int
+    class_name: str
+    class_kind: str
+    start: int          # offset of the declaration statement in the file
+    end: int            # offset just past its ``;``
+
+
+_CLASS_START = re.compile(
+    r"\b(?:(?:partial|encapsulated|final|replaceable|expandable|pure|impure|operator)\s+)*"
+    r"(model|block|class|connector|record|package|function|type)\s+([A-Za-z_]\w*)\b(?!\s*=)"
+)
+
+
+def _blank_comments_strings(text: str) -> str:
+    """*text* with comments and string literals replaced by spaces (offsets kept)."""
+    def blank(m: re.Match[str]) -> str:
+        return re.sub(r"[^\n]", " ", m.group(0))
+    return re.sub(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\])*"', blank, text, flags=re.S)
+
+
+def _enclosing_class(code: str, offset: int) -> tuple[str, str, int, int] | None:
+    """(kind, name, start, end) of the innermost class around *offset* in *code*."""
+    best: tuple[str, str, int, int] | None = None
+    for m in _CLASS_START.finditer(code):
+        if m.start() > offset:
+            break
+        name = m.group(2)
+        end = re.search(rf"\bend\s+{re.escape(name)}\s*;", code[m.end():])
+        if end is None:
+            continue
+        stop = m.end() + end.end()
+        if stop > offset:
+            best = (m.group(1), name, m.start(), stop)
+    return best
+
+
+def find_declaration(src: TwinSource, name: str) -> Declaration | None:
+    """Find the declaration of parameter *name* via rumoca's source location."""
+    v = src.variables.get(name, {})
+    var = v.get("variability") if isinstance(v, dict) else None
+    loc = var.get("Parameter", {}).get("location") if isinstance(var, dict) else None
+    if not loc:
+        return None
+    leaf = name.rsplit(".", 1)[-1]
+    start, line = int(loc["start"]), int(loc["start_line"])
+    for file in src.files:
+        text = file.read_text(encoding="utf-8")
+        if text[start:start + 9] != "parameter":
+            continue
+        code = _blank_comments_strings(text)
+        semi = code.find(";", start)
+        if semi < 0 or not re.search(rf"\b{re.escape(leaf)}\b", code[start:semi]):
+            continue
+        cls = _enclosing_class(code, start)
+        if cls is None:
+            continue
+        return Declaration(file=file, line=line, class_name=cls[1], class_kind=cls[0],
+                           start=start, end=semi + 1)
+    return None
+
+
+def _connector_type(src: TwinSource) -> str:
+    """The connector type the library already uses for conditional inputs."""
+    pattern = re.compile(r"([A-Za-z_][\w.]*)\s+\w+_in\s+if\s+use_\w+_in\b")
+    for file in src.files:
+        m = pattern.search(_blank_comments_strings(file.read_text(encoding="utf-8")))
+        if m:
+            return m.group(1)
+    return "Modelica.Blocks.Interfaces.RealInput"
+
+
+def pattern_lines(leaf: str, connector: str) -> dict[str, list[str]]:
+    """The declaration and equation lines of the conditional-input pattern for *leaf*."""
+    return {
+        "declarations": [
+            f'parameter Boolean use_{leaf}_in = false "= true to take {leaf} from input {leaf}_in";',
+            f'{connector} {leaf}_in if use_{leaf}_in "{leaf} from outside (e.g. a tracking box)";',
+        ],
+        "protected": [f'{connector} {leaf}_internal "{leaf} actually used";'],
+        "equations": [
+            f"connect({leaf}_in, {leaf}_internal);",
+            f"if not use_{leaf}_in then",
+            f"  {leaf}_internal = {leaf};",
+            "end if;",
+        ],
+    }
+
+
+def refusal_message(src: TwinSource, site: ParameterSite) -> str:
+    """Say exactly what to add to the twin's source for *site* to be trackable."""
+    decl = find_declaration(src, site.name)
+    lines = pattern_lines(site.leaf, _connector_type(src))
+    where = (f"class {decl.class_name} ({_rel(decl.file, src.root)}:{decl.line})" if decl
+             else f"the class of component {site.component!r}")
+    ind = "      "
+    return (
+        f"parameter {site.name!r} cannot be tracked: {where} has no conditional input "
+        f"{site.flag.rsplit('.', 1)[1]!r}. Add beside the declaration of {site.leaf}:\n"
+        + "\n".join(ind + s for s in lines["declarations"])
+        + f"\n  in its protected section:\n" + "\n".join(ind + s for s in lines["protected"])
+        + f"\n  in its equation section (and use {site.leaf}_internal instead of {site.leaf} in its equations):\n"
+        + "\n".join(ind + s for s in lines["equations"])
+        + "\n  or run again with --rewrite to write a patched copy of the source"
+    )
+
+
+def _rel(path: Path, base: Path) -> str:
+    try:
+        return str(path.relative_to(base))
+    except ValueError:
+        return str(path)
+
+
+def _patch_class_text(text: str, decl: Declaration, leaf: str, connector: str) -> str:
+    """Return *text* with the conditional-input pattern added to the declaring class."""
+    code = _blank_comments_strings(text)
+    cls = _enclosing_class(code, decl.start)
+    assert cls is not None
+    _, cname, cstart, cend = cls
+    body_code = code[cstart:cend]
+    # The class body after the class header; we only rename uses in equation/algorithm sections.
+    sec = re.search(r"\b(equation|algorithm)\b", body_code)
+    end_kw = re.search(rf"\bend\s+{re.escape(cname)}\s*;\s*$", body_code)
+    assert end_kw is not None
+    eq_start = cstart + (sec.start() if sec else end_kw.start())
+    # Other declarations whose bindings use the parameter would have to become variables.
+    decl_code = code[cstart:eq_start]
+    uses = [m.start() + cstart for m in re.finditer(rf"(?<![.\w]){re.escape(leaf)}\b", decl_code)]
+    other = [u for u in uses if not (decl.start <= u < decl.end)]
+    if other:
+        line = text.count("\n", 0, other[0]) + 1
+        raise SpecError(
+            f"cannot rewrite {leaf!r} in class {cname} ({decl.file}:{line}): another declaration uses it in a "
+            f"binding or modifier, which would have to become a time-varying variable; edit the source by hand"
+        )
+    lines = pattern_lines(leaf, connector)
+    indent = re.match(r"[ \t]*", text[text.rfind("\n", 0, decl.start) + 1:]).group(0)  # type: ignore[union-attr]
+    end_indent = indent[:-2] if len(indent) >= 2 else ""
+    # 1) rename uses in the equation/algorithm sections (not in comments/strings, not after a
+    #    dot); 2) add the pattern's equations; 3) add the declarations.
+    tail_start, tail_end = eq_start, cstart + end_kw.start()
+    rename_end = tail_end  # comments and strings are blanked in `code`, so only real uses match
+    out = []
+    pos = tail_start
+    seg_code = code[tail_start:rename_end]
+    for m in re.finditer(rf"(?<![.\w]){re.escape(leaf)}\b", seg_code):
+        a = tail_start + m.start()
+        out.append(text[pos:a])
+        out.append(f"{leaf}_internal")
+        pos = a + len(leaf)
+    renamed_tail = "".join(out) + text[pos:tail_end]
+    eq_lines = "".join(f"{indent}{s}\n" for s in lines["equations"])
+    if sec and sec.group(1) == "equation":
+        hdr_end = text.find("\n", eq_start) + 1
+        renamed_tail = renamed_tail[: hdr_end - eq_start] + eq_lines + renamed_tail[hdr_end - eq_start:]
+    else:
+        renamed_tail = f"{end_indent}equation\n" + eq_lines + renamed_tail
+    decl_lines = "".join(f"\n{indent}{s}" for s in lines["declarations"])
+    prot = f"\n{end_indent}protected" + "".join(f"\n{indent}{s}" for s in lines["protected"]) + f"\n{end_indent}public"
+    return (text[:decl.end] + decl_lines + prot + text[decl.end:tail_start] + renamed_tail + text[tail_end:])
+
+
+@dataclass(frozen=True)
+class Rewrite:
+    """A patched copy of the twin's source."""
+
+    path: Path          # the patched package directory or .mo file (same layout as the original)
+    diff: str           # unified diff, original -> patched
+
+
+def rewrite_source(src: TwinSource, sites: list[ParameterSite], out_root: Path) -> Rewrite:
+    """Copy the twin's source under *out_root* and add the pattern for every site without it.
+
+    Raises
+    ------
+    SpecError
+        If a declaration cannot be found or cannot be rewritten safely.
+    """
+    connector = _connector_type(src)
+    patched: dict[Path, str] = {}
+    # Patch each declaring class once per leaf (components of the same class share it).
+    done: set[tuple[Path, str, str]] = set()
+    for site in sites:
+        if site.has_pattern:
+            continue
+        decl = find_declaration(src, site.name)
+        if decl is None:
+            raise SpecError(f"cannot find the declaration of parameter {site.name!r} in {src.path}")
+        key = (decl.file, decl.class_name, site.leaf)
+        if key in done:
+            continue
+        done.add(key)
+        text = patched.get(decl.file, decl.file.read_text(encoding="utf-8"))
+        if decl.file in patched:  # offsets moved: find the declaration again in the patched text
+            m = re.search(rf"\bparameter\b[^;]*?\b{re.escape(site.leaf)}\b", _blank_comments_strings(text))
+            if m is None:
+                raise SpecError(f"cannot find the declaration of {site.leaf!r} again in {decl.file}")
+            semi = _blank_comments_strings(text).find(";", m.start())
+            decl = Declaration(decl.file, decl.line, decl.class_name, decl.class_kind, m.start(), semi + 1)
+        patched[decl.file] = _patch_class_text(text, decl, site.leaf, connector)
+    out_root = out_root.resolve()
+    dest_top = out_root / src.top.name
+    if dest_top.exists():
+        shutil.rmtree(dest_top) if dest_top.is_dir() else dest_top.unlink()
+    out_root.mkdir(parents=True, exist_ok=True)
+    if src.top.is_dir():
+        shutil.copytree(src.top, dest_top)
+    else:
+        shutil.copy2(src.top, dest_top)
+    diffs = []
+    for file in sorted(patched):
+        rel = file.relative_to(src.root)
+        new = patched[file]
+        (out_root / rel).write_text(new, encoding="utf-8")
+        old = file.read_text(encoding="utf-8")
+        diffs.append("".join(difflib.unified_diff(
+            old.splitlines(keepends=True), new.splitlines(keepends=True),
+            fromfile=f"a/{rel.as_posix()}", tofile=f"b/{rel.as_posix()}")))
+    new_path = out_root / src.path.relative_to(src.root)
+    return Rewrite(path=new_path, diff="".join(diffs))
+
+
+def stage_packages(dest: Path, library: Path, generated: Path) -> Path:
+    """Copy the twin's top-level package and the generated package side by side into *dest*.
+
+    Returns the staged generated package directory (load it with ``roots=[dest]``).
+    """
+    dest.mkdir(parents=True, exist_ok=True)
+    target = dest / library.name
+    if library.is_dir():
+        shutil.copytree(library, target, dirs_exist_ok=True)
+    else:
+        shutil.copy2(library, target)
+    shutil.copytree(generated, dest / generated.name, dirs_exist_ok=True)
+    return dest / generated.name
+
+
+def check_loads(package_dir: Path, model: str, root: Path) -> None:
+    """Load *model* from the generated package with rumoca; CompileError if it does not.
+
+    This is the guard that keeps generated Modelica from ever being written
+    when it would not even flatten.
+    """
+    try:
+        _rumoca_load(package_dir / "package.mo", model, [root])
+    except Exception as exc:
+        raise CompileError(f"generated model {model} does not load with rumoca: {exc}") from exc
