@@ -1,0 +1,30 @@
+within TrackingBox.Benches.HeatExchanger.BaseClasses;
+partial model PartialBench "Heat-exchanger bench: boundaries, exchanger, inputs and outputs"
+  TrackingBox.Interfaces.RealInput ThIn(unit="K", start=363.15) "Hot inlet temperature";
+  TrackingBox.Interfaces.RealInput TcIn(unit="K", start=283.15) "Cold inlet temperature";
+  TrackingBox.Interfaces.RealInput mHot_flow(unit="kg/s", start=1.0) "Hot mass flow rate";
+  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=2.0) "Cold mass flow rate";
+  TrackingBox.Interfaces.RealOutput ThOut(unit="K") "Hot outlet temperature";
+  TrackingBox.Interfaces.RealOutput TcOut(unit="K") "Cold outlet temperature";
+  TrackingBox.Fluid.HeatExchanger hx(n=10, kht(min=500, max=1500) = 1000, A=4.2, V1=0.12, V2=0.12,
+    T1_start=333.15, T2_start=308.15) "Counter-flow heat exchanger (side 1 hot, side 2 cold)";
+  TrackingBox.Fluid.Sources.MassFlowSource hotIn(use_m_flow_in=true, use_T_in=true) "Hot stream source";
+  TrackingBox.Fluid.Sources.MassFlowSource coldIn(use_m_flow_in=true, use_T_in=true) "Cold stream source";
+  TrackingBox.Fluid.Sources.PressureSink hotOut "Hot stream sink";
+  TrackingBox.Fluid.Sources.PressureSink coldOut "Cold stream sink";
+equation
+  connect(mHot_flow, hotIn.m_flow_in);
+  connect(ThIn, hotIn.T_in);
+  connect(mCold_flow, coldIn.m_flow_in);
+  connect(TcIn, coldIn.T_in);
+  connect(hotIn.port, hx.port_a1);
+  connect(hx.port_b1, hotOut.port);
+  connect(coldIn.port, hx.port_a2);
+  connect(hx.port_b2, coldOut.port);
+  ThOut = hx.port_b1.T;
+  TcOut = hx.port_b2.T;
+  annotation (Documentation(info="<html>
+<p>Structure shared by <code>Plant</code> and <code>Twin</code>; they differ
+only in parameter values.</p>
+</html>"));
+end PartialBench;
