@@ -1,0 +1,875 @@
+"""Bounded gray-box estimation of a twin's parameters from measurements.
+
+The spec's ``[[parameters]]`` (start, min, max) are estimated on the training
+window and judged on the validation window. Two stages:
+
+1. **Global search**: :func:`scipy.optimize.differential_evolution`, seeded,
+   bounded, with the start values in the first population; its population can
+   be evaluated in parallel over ``workers`` processes (each worker process
+   opens the FMU once and keeps it for every later evaluation).
+2. **Local refinement**: :func:`scipy.optimize.least_squares` (trust-region
+   reflective, bounded, ``x_scale`` = the bound ranges) on the residual vector,
+   started from the best global point. The refined point is kept only if it does
+   not raise the cost.
+
+Cost
+----
+For each output tag of the spec's ``[outputs]`` the normalised root-mean-square
+error over the window,
+
+``NRMSE_tag = sqrt(mean((y_sim - y_meas)**2)) / (max(y_meas) - min(y_meas))``,
+
+where the mean, max and min are taken over the tag's *valid* samples in the
+window only (not NaN, not in a gap longer than ``data.max_gap``, not in a
+stoppage period nor its settle time). The global stage minimises the mean of
+``NRMSE_tag`` over the tags. The refinement minimises the sum of squares of the
+residual vector ``(y_sim - y_meas) / (range_tag * sqrt(n_tag * n_tags))``, i.e.
+the mean of ``NRMSE_tag**2`` -- the smooth form of the same cost; both have the
+same minimiser for a single tag.
+
+Initial states
+--------------
+The twin FMU starts from its own start values, not from the plant's state. Each
+simulation therefore begins with a *steady-state pre-run*: the window's inputs
+are held at their first values for ``warmup`` seconds (default
+:data:`DEFAULT_WARMUP`, rounded up to a whole number of sample times, with the
+candidate parameters applied), and only then does the window start; the pre-run
+is discarded. States that integrate (tank levels whose in- and outflows do not
+balance at the first input values) drift during the pre-run; give such twins a
+short ``warmup`` or a level controller.
+
+Grid
+----
+Every window is simulated on the spec's ``sample_time`` grid starting at the
+window's start. Each tag is resampled onto that grid separately by
+:func:`trackingbox.data.resample`: linear interpolation between that tag's
+valid samples, never across a gap longer than ``data.max_gap`` (grid points in
+such a gap are NaN). Without ``max_gap`` in the spec, a tag's gap limit is 1.5
+times its median sampling interval, so irregular per-tag sampling is
+interpolated but a stretch of missing (NaN) samples is not. Output samples that
+are NaN, in a long gap, or in a stoppage (``data.stoppage``: the tag below the
+threshold, plus ``settle`` seconds after) are left out of the cost. Inputs must
+be valid over the whole window, otherwise the twin cannot be simulated
+(:class:`~trackingbox.errors.DataError` naming the tag and the span).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import multiprocessing
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from .errors import DataError, EstimationError, SimulationError, SpecError, TrackingError, unknown_name
+from .io import write_text_atomic
+
+log = logging.getLogger(__name__)
+
+#: Default length of the steady-state pre-run before each window (s).
+DEFAULT_WARMUP = 3600.0
+#: Default number of differential-evolution generations.
+DEFAULT_MAXITER = 30
+#: Default population size multiplier of differential evolution (population = popsize * n_parameters,
+#: at least 5).
+DEFAULT_POPSIZE = 10
+#: Each output tag needs at least this many valid samples in each window.
+MIN_VALID_SAMPLES = 20
+#: Cost returned for a parameter set whose simulation fails (NRMSE units; a fit is << 1).
+FAILED_COST = 1.0e3
+#: Relative finite-difference step of the refinement's Jacobian. Larger than the
+#: solver's relative tolerance so that the difference quotient is not solver noise.
+DIFF_STEP = 1.0e-4
+
+#: ``progress(stage, iteration, total, best_cost)``; stage is ``"global"`` or ``"local"``.
+ProgressCallback = Callable[[str, int, int, float], None]
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class EstimationResult:
+    """What :func:`estimate` found.
+
+    Attributes
+    ----------
+    parameters
+        Estimated value of each estimated parameter (spec order).
+    training_nrmse, validation_nrmse
+        NRMSE per output tag at the estimate on the training / validation window.
+    validation_nrmse_initial
+        NRMSE per output tag on the validation window at the spec's start values.
+    evaluations
+        Number of twin simulations run on the training window (both stages,
+        including the refinement's finite differences).
+    seconds
+        Wall time of the whole estimation.
+    history
+        Best cost (mean NRMSE) after each generation of the global search, then
+        after the refinement.
+    initial
+        The start values the estimation began from.
+    bounds
+        ``(min, max)`` of each parameter.
+    warmup
+        Length of the steady-state pre-run used before each window (s).
+    """
+
+    parameters: dict[str, float]
+    training_nrmse: dict[str, float]
+    validation_nrmse: dict[str, float]
+    validation_nrmse_initial: dict[str, float]
+    evaluations: int
+    seconds: float
+    history: tuple[float, ...]
+    initial: dict[str, float] = field(default_factory=dict)
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    warmup: float = DEFAULT_WARMUP
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``trackingbox estimate --json`` document."""
+        return {
+            "parameters": dict(self.parameters),
+            "training": {"nrmse": dict(self.training_nrmse)},
+            "validation": {
+                "nrmse": dict(self.validation_nrmse),
+                "nrmse_initial": dict(self.validation_nrmse_initial),
+            },
+            "evaluations": int(self.evaluations),
+            "seconds": float(self.seconds),
+        }
+
+
+def nrmse(simulated: npt.ArrayLike, measured: npt.ArrayLike) -> float:
+    """Root-mean-square error divided by the measured range, over valid samples.
+
+    Samples where *measured* is NaN are ignored. A constant measurement (zero
+    range) is normalised by ``max(|mean|, 1)`` instead.
+
+    >>> round(nrmse([1.0, 2.0, 4.0], [1.0, 3.0, 5.0]), 4)
+    0.2041
+    """
+    sim = np.asarray(simulated, dtype=float)
+    meas = np.asarray(measured, dtype=float)
+    ok = np.isfinite(meas)
+    if not ok.any():
+        return math.nan
+    err = sim[ok] - meas[ok]
+    return float(np.sqrt(np.mean(err * err)) / _scale(meas[ok]))
+
+
+def _scale(values: np.ndarray) -> float:
+    span = float(np.max(values) - np.min(values))
+    if span > 0.0:
+        return span
+    return max(abs(float(np.mean(values))), 1.0)
+
+
+# --------------------------------------------------------------------------- problem
+
+
+@dataclass(frozen=True)
+class WindowData:
+    """One window of measurements on the simulation grid.
+
+    Attributes
+    ----------
+    name
+        ``"training"`` or ``"validation"``.
+    start, stop
+        Window bounds in seconds from the first sample, ``[start, stop)``.
+    time
+        Grid times (s from the first sample), step ``sample_time``.
+    inputs
+        FMU input name -> values on the grid (no NaN).
+    measured
+        Output tag -> measured values on the grid; NaN where a sample is excluded
+        from the cost (missing, long gap, stoppage).
+    """
+
+    name: str
+    start: float
+    stop: float
+    time: np.ndarray
+    inputs: dict[str, np.ndarray]
+    measured: dict[str, np.ndarray]
+
+    def valid_counts(self) -> dict[str, int]:
+        """Number of samples of each output tag that enter the cost."""
+        return {tag: int(np.isfinite(v).sum()) for tag, v in self.measured.items()}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a worker needs to evaluate the cost: picklable, no open FMU.
+
+    Attributes
+    ----------
+    twin
+        Path of the twin FMU.
+    names, start, lower, upper
+        Estimated parameters, start values and bounds (spec order).
+    fixed
+        Known parameters held at these values.
+    outputs
+        Output tag -> FMU output name.
+    sample_time
+        Grid step (s).
+    warmup
+        Steady-state pre-run before each window (s), a multiple of ``sample_time``.
+    """
+
+    twin: Path
+    names: tuple[str, ...]
+    start: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    fixed: dict[str, float]
+    outputs: dict[str, str]
+    sample_time: float
+    warmup: float
+
+
+# One open twin per process and FMU path: worker processes keep theirs across evaluations.
+_MODELS: dict[str, Any] = {}
+
+
+def _model(path: Path) -> Any:
+    key = str(path)
+    model = _MODELS.get(key)
+    if model is None:
+        from .fmu import FMUModel
+
+        model = FMUModel(path)
+        _MODELS[key] = model
+    return model
+
+
+def _forget_models() -> None:
+    """Pool initializer: a fresh worker owns no FMU yet."""
+    _MODELS.clear()
+
+
+def close_models() -> None:
+    """Close the twins this process has opened for estimation."""
+    for model in _MODELS.values():
+        try:
+            model.close()
+        except Exception:  # noqa: BLE001 - closing is best effort
+            log.debug("closing %s failed", model, exc_info=True)
+    _MODELS.clear()
+
+
+def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
+    """Simulate the twin over *window* with parameter vector *x*.
+
+    Runs the steady-state pre-run first (inputs held at their first values), then
+    the window; returns output tag -> simulated values on the window grid.
+    """
+    values = np.asarray(x, dtype=float)
+    parameters = dict(problem.fixed)
+    parameters.update({name: float(v) for name, v in zip(problem.names, values)})
+    offset = problem.warmup
+    grid = window.time - window.start
+    frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
+    for name, series in window.inputs.items():
+        frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
+    inputs = pd.DataFrame(frame) if window.inputs else None
+    stop = offset + float(grid[-1])
+    model = _model(problem.twin)
+    result = model.simulate(
+        start_time=0.0,
+        stop_time=stop,
+        output_interval=problem.sample_time,
+        inputs=inputs,
+        parameters=parameters,
+        outputs=list(problem.outputs.values()),
+    )
+    t = np.asarray(result["time"], dtype=float)
+    out: dict[str, np.ndarray] = {}
+    for tag, name in problem.outputs.items():
+        y = np.asarray(result[name], dtype=float)
+        if not np.all(np.isfinite(y)):
+            raise SimulationError(f"twin {problem.twin.name} gave non-finite values of {name!r}")
+        out[tag] = np.interp(offset + grid, t, y)
+    return out
+
+
+class Objective:
+    """The cost on one window: callable on a parameter vector, picklable.
+
+    Parameters
+    ----------
+    problem
+        The estimation problem.
+    window
+        The window whose measurements the simulation is compared with.
+    """
+
+    def __init__(self, problem: Problem, window: WindowData) -> None:
+        self.problem = problem
+        self.window = window
+        tags = list(problem.outputs)
+        self._valid = {tag: np.isfinite(window.measured[tag]) for tag in tags}
+        self._scale = {tag: _scale(window.measured[tag][self._valid[tag]]) for tag in tags}
+        n_tags = len(tags)
+        self._weight = {
+            tag: 1.0 / (self._scale[tag] * math.sqrt(self._valid[tag].sum() * n_tags)) for tag in tags
+        }
+        self._size = int(sum(v.sum() for v in self._valid.values()))
+
+    def nrmse(self, x: npt.ArrayLike) -> dict[str, float]:
+        """NRMSE per output tag at *x* (raises SimulationError if the twin fails)."""
+        sim = simulate_window(self.problem, self.window, x)
+        out = {}
+        for tag, y in sim.items():
+            ok = self._valid[tag]
+            err = y[ok] - self.window.measured[tag][ok]
+            out[tag] = float(np.sqrt(np.mean(err * err)) / self._scale[tag])
+        return out
+
+    def __call__(self, x: npt.ArrayLike) -> float:
+        """Mean NRMSE over the output tags; :data:`FAILED_COST` if the simulation fails."""
+        try:
+            return float(np.mean(list(self.nrmse(x).values())))
+        except (TrackingError, ArithmeticError) as exc:
+            log.warning("simulation failed at %s: %s", _fmt(self.problem.names, x), exc)
+            return FAILED_COST
+
+    def residuals(self, x: npt.ArrayLike) -> np.ndarray:
+        """Weighted residual vector; its sum of squares is the mean of NRMSE**2."""
+        try:
+            sim = simulate_window(self.problem, self.window, x)
+        except (TrackingError, ArithmeticError) as exc:
+            log.warning("simulation failed at %s: %s", _fmt(self.problem.names, x), exc)
+            return np.full(self._size, FAILED_COST / math.sqrt(max(self._size, 1)))
+        parts = []
+        for tag, y in sim.items():
+            ok = self._valid[tag]
+            parts.append((y[ok] - self.window.measured[tag][ok]) * self._weight[tag])
+        return np.concatenate(parts)
+
+
+def _fmt(names: Sequence[str], x: npt.ArrayLike) -> str:
+    return ", ".join(f"{n}={v:.6g}" for n, v in zip(names, np.atleast_1d(np.asarray(x, dtype=float))))
+
+
+# --------------------------------------------------------------------------- from a spec
+
+
+def _get(obj: Any, name: str, default: Any = None) -> Any:
+    if obj is None:
+        return default
+    if isinstance(obj, Mapping):
+        return obj.get(name, default)
+    return getattr(obj, name, default)
+
+
+def _stoppage_mask(time_s: np.ndarray, values: np.ndarray, below: float, settle: float) -> np.ndarray:
+    """True where the grid is inside a stoppage (value < below) or within *settle* s after one."""
+    stopped = np.isfinite(values) & (values < below)
+    if not stopped.any():
+        return stopped
+    stop_times = time_s[stopped]
+    idx = np.searchsorted(stop_times, time_s, side="right") - 1
+    last = np.where(idx >= 0, stop_times[np.clip(idx, 0, None)], -np.inf)
+    return (time_s - last) <= settle + 1e-9
+
+
+def _default_max_gap(column: pd.DataFrame) -> float:
+    """Gap bridged when the spec sets no ``max_gap``: 1.5 x the tag's median sampling interval.
+
+    So a tag sampled irregularly (empty cells between its samples in a wide CSV)
+    is interpolated between its own samples, while a stretch of missing samples
+    longer than its usual spacing is masked, not bridged.
+    """
+    t = column["time"].to_numpy(dtype=float)[np.isfinite(column.iloc[:, 1].to_numpy(dtype=float))]
+    if t.size < 2:
+        return math.inf
+    return 1.5 * float(np.median(np.diff(t)))
+
+
+def _spans(time_s: np.ndarray, bad: np.ndarray) -> list[tuple[float, float]]:
+    spans: list[tuple[float, float]] = []
+    i = 0
+    n = len(bad)
+    while i < n:
+        if bad[i]:
+            j = i
+            while j + 1 < n and bad[j + 1]:
+                j += 1
+            spans.append((float(time_s[i]), float(time_s[j])))
+            i = j + 1
+        else:
+            i += 1
+    return spans
+
+
+def load_windows(spec: Any) -> tuple[WindowData, WindowData]:
+    """Read the spec's measurements and cut the training and validation windows.
+
+    Raises
+    ------
+    DataError
+        A tag is missing from the measurements, an input has no valid data over
+        part of a window, or an output tag has too few valid samples.
+    """
+    from . import data
+
+    rules = _get(spec, "data")
+    stoppage = _get(rules, "stoppage")
+    max_gap = _get(rules, "max_gap")
+    tags = list(dict.fromkeys([*spec.inputs, *spec.outputs, *([_get(stoppage, "tag")] if stoppage else [])]))
+    table = data.read_table(spec.measurements, required=tags, allow_nan=True)
+    t0 = float(table["time"].iloc[0])
+    where = Path(spec.measurements).name
+
+    windows = _get(spec, "windows")
+    out = []
+    for name in ("training", "validation"):
+        span = _get(windows, name)
+        if span is None:
+            raise SpecError(f"spec {getattr(spec, 'path', '')} has no [windows] {name} = [start, stop]")
+        start, stop = float(span[0]), float(span[1])
+        grid = np.arange(start, stop - 1e-9, float(spec.sample_time))
+        if len(grid) < 2:
+            raise DataError(
+                f"{name} window [{start:g}, {stop:g}) s holds {len(grid)} sample(s) of "
+                f"{spec.sample_time:g} s; estimation needs at least {MIN_VALID_SAMPLES}"
+            )
+        sampled = {}
+        for tag in tags:
+            column = table[["time", tag]]
+            gap = float(max_gap) if max_gap is not None else _default_max_gap(column)
+            sampled[tag] = data.resample(column, t0 + grid, max_gap=gap)[tag]
+        problems = []
+        inputs = {}
+        for tag, fmu_name in spec.inputs.items():
+            v = np.asarray(sampled[tag], dtype=float)
+            bad = ~np.isfinite(v)
+            if bad.any():
+                spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, bad)[:5])
+                problems.append(
+                    f"input tag {tag!r} in {where} has no valid data in the {name} window at {spans} "
+                    f"({int(bad.sum())} of {len(grid)} samples); the twin cannot be simulated across it"
+                )
+            inputs[fmu_name] = v
+        excluded = np.zeros(len(grid), dtype=bool)
+        if stoppage is not None:
+            excluded = _stoppage_mask(
+                grid,
+                np.asarray(sampled[_get(stoppage, "tag")], dtype=float),
+                float(_get(stoppage, "below")),
+                float(_get(stoppage, "settle", 0.0) or 0.0),
+            )
+        measured = {}
+        for tag in spec.outputs:
+            v = np.asarray(sampled[tag], dtype=float).copy()
+            v[excluded] = np.nan
+            n_ok = int(np.isfinite(v).sum())
+            if n_ok < MIN_VALID_SAMPLES:
+                problems.append(
+                    f"output tag {tag!r} has {n_ok} valid samples in the {name} window "
+                    f"[{start:g}, {stop:g}) s after removing NaN, long gaps and stoppages "
+                    f"({int(excluded.sum())} stoppage samples); estimation needs at least {MIN_VALID_SAMPLES}"
+                )
+            measured[tag] = v
+        if problems:
+            raise DataError("; ".join(problems))
+        out.append(WindowData(name, start, stop, grid, inputs, measured))
+    return out[0], out[1]
+
+
+def problem_from_spec(spec: Any, *, warmup: float | None = None) -> Problem:
+    """Build the picklable :class:`Problem` of a loaded spec.
+
+    Checks that every estimated and fixed parameter and every input/output name
+    exists in the twin (did-you-mean on a miss) and that ``min <= start <= max``.
+    """
+    from .fmu import read_info
+
+    info = read_info(spec.twin)
+    variables = {v.name: v for v in info.variables}
+    where = f"twin {Path(spec.twin).name}"
+    problems = []
+    params = list(spec.parameters)
+    if not params:
+        raise EstimationError(f"spec {getattr(spec, 'path', '')} has no [[parameters]] to estimate")
+    tunable = [v.name for v in info.variables if v.causality == "parameter"]
+    names, start, lower, upper = [], [], [], []
+    for p in params:
+        name = _get(p, "name")
+        if name not in variables:
+            problems.append(unknown_name("parameter", name, tunable, where))
+        lo, hi, s = float(_get(p, "min")), float(_get(p, "max")), float(_get(p, "start"))
+        if not (lo < hi):
+            problems.append(f"parameter {name!r}: min {lo:g} must be below max {hi:g}")
+        elif not (lo <= s <= hi):
+            problems.append(f"parameter {name!r}: start {s:g} is outside [{lo:g}, {hi:g}]")
+        names.append(name)
+        start.append(s)
+        lower.append(lo)
+        upper.append(hi)
+    fixed = {str(k): float(v) for k, v in dict(_get(spec, "fixed", {}) or {}).items()}
+    for name in fixed:
+        if name not in variables:
+            problems.append(unknown_name("fixed parameter", name, tunable, where))
+    fmu_inputs = [v.name for v in info.variables if v.causality == "input"]
+    for tag, name in spec.inputs.items():
+        if name not in variables or variables[name].causality != "input":
+            problems.append(unknown_name(f"input (for tag {tag!r})", name, fmu_inputs, where))
+    for tag, name in spec.outputs.items():
+        if name not in variables:
+            problems.append(unknown_name(f"output (for tag {tag!r})", name, list(variables), where))
+    if problems:
+        raise SpecError("; ".join(problems))
+    dt = float(spec.sample_time)
+    w = DEFAULT_WARMUP if warmup is None else float(warmup)
+    if w < 0:
+        raise EstimationError(f"warm-up must be >= 0 s, got {w:g}")
+    w = math.ceil(w / dt - 1e-9) * dt
+    return Problem(
+        twin=Path(spec.twin),
+        names=tuple(names),
+        start=np.array(start),
+        lower=np.array(lower),
+        upper=np.array(upper),
+        fixed=fixed,
+        outputs=dict(spec.outputs),
+        sample_time=dt,
+        warmup=w,
+    )
+
+
+# --------------------------------------------------------------------------- the estimation
+
+
+def _write_checkpoint(path: Path | None, payload: dict[str, Any]) -> None:
+    if path is not None:
+        write_text_atomic(path, json.dumps(payload, indent=2) + "\n")
+
+
+def estimate(
+    spec: Any,
+    *,
+    seed: int = 0,
+    workers: int | None = None,
+    maxiter: int = DEFAULT_MAXITER,
+    popsize: int = DEFAULT_POPSIZE,
+    warmup: float | None = None,
+    refine: bool = True,
+    progress: ProgressCallback | None = None,
+    checkpoint: str | Path | None = None,
+) -> EstimationResult:
+    """Estimate the spec's ``[[parameters]]`` on its training window.
+
+    Parameters
+    ----------
+    spec
+        A loaded spec (:func:`trackingbox.spec.load_spec`).
+    seed
+        Seed of the global search: the same seed gives the same result.
+    workers
+        Processes evaluating the population in parallel (``None`` or 1: in this
+        process). Each worker opens the twin once.
+    maxiter
+        Generations of differential evolution (0: only the start values and the
+        refinement).
+    popsize
+        Population size multiplier (population = ``popsize * n_parameters``, at least 5).
+    warmup
+        Steady-state pre-run before each window (s); default :data:`DEFAULT_WARMUP`.
+    refine
+        Run the least-squares refinement after the global search.
+    progress
+        Called as ``progress(stage, iteration, total, best_cost)``.
+    checkpoint
+        If given, the best point so far is written there as JSON after every
+        generation (atomically), so an interrupted run keeps what it found.
+
+    Returns
+    -------
+    EstimationResult
+
+    Raises
+    ------
+    SpecError, DataError, FMUError, EstimationError
+    """
+    from scipy.optimize import differential_evolution, least_squares
+
+    t_start = time.perf_counter()
+    ckpt = Path(checkpoint) if checkpoint is not None else None
+    problem = problem_from_spec(spec, warmup=warmup)
+    training, validation = load_windows(spec)
+    train = Objective(problem, training)
+    valid = Objective(problem, validation)
+    n = len(problem.names)
+    bounds = list(zip(problem.lower, problem.upper))
+    history: list[float] = []
+    evaluations = 0
+
+    start_cost = train(problem.start)
+    evaluations += 1
+    if start_cost >= FAILED_COST:
+        log.warning("the twin fails at the start values; the global search starts without them")
+    best_x, best_cost = problem.start.copy(), start_cost
+    log.info("start values: cost %.6g (%s)", start_cost, _fmt(problem.names, best_x))
+
+    def checkpoint_now(stage: str, iteration: int) -> None:
+        _write_checkpoint(ckpt, {
+            "stage": stage,
+            "iteration": iteration,
+            "best_cost": best_cost,
+            "parameters": dict(zip(problem.names, map(float, best_x))),
+            "evaluations": evaluations,
+            "seconds": time.perf_counter() - t_start,
+            "history": history,
+        })
+
+    if maxiter > 0:
+        pool = None
+        map_like: Any = 1
+        n_workers = int(workers or 1)
+        if n_workers > 1:
+            pool = multiprocessing.get_context("spawn").Pool(n_workers, initializer=_forget_models)
+            map_like = pool.map
+        generation = 0
+
+        def on_generation(intermediate_result: Any) -> None:
+            nonlocal generation, best_x, best_cost
+            generation += 1
+            history.append(float(intermediate_result.fun))
+            if intermediate_result.fun < best_cost:
+                best_x, best_cost = np.array(intermediate_result.x, dtype=float), float(intermediate_result.fun)
+            checkpoint_now("global", generation)
+            if progress is not None:
+                progress("global", generation, maxiter, best_cost)
+
+        try:
+            de = differential_evolution(
+                train,
+                bounds,
+                maxiter=maxiter,
+                popsize=max(popsize, math.ceil(5 / n)),
+                rng=seed,
+                polish=False,
+                init="latinhypercube" if n > 1 else "random",
+                x0=problem.start if start_cost < FAILED_COST else None,
+                updating="deferred" if pool is not None else "immediate",
+                workers=map_like,
+                callback=on_generation,
+                tol=1e-3,
+            )
+        finally:
+            if pool is not None:
+                pool.close()
+                pool.join()
+        evaluations += int(de.nfev)
+        if de.fun < best_cost:
+            best_x, best_cost = np.array(de.x, dtype=float), float(de.fun)
+        log.info("global search: %d generations, %d evaluations, cost %.6g (%s)",
+                 de.nit, de.nfev, best_cost, _fmt(problem.names, best_x))
+
+    if refine:
+        counted = 0
+
+        def residuals(x: np.ndarray) -> np.ndarray:
+            nonlocal counted
+            counted += 1
+            return train.residuals(x)
+
+        span = problem.upper - problem.lower
+        x0 = np.clip(best_x, problem.lower, problem.upper)
+        try:
+            ls = least_squares(
+                residuals,
+                x0,
+                bounds=(problem.lower, problem.upper),
+                x_scale=span,
+                diff_step=DIFF_STEP,
+                method="trf",
+                max_nfev=50 * max(n, 1),
+            )
+            refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
+            evaluations += counted
+            refined_cost = train(refined)
+            evaluations += 1
+            log.info("refinement: %d evaluations, cost %.6g -> %.6g", counted, best_cost, refined_cost)
+            if refined_cost <= best_cost:
+                best_x, best_cost = refined, refined_cost
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            evaluations += counted
+            log.warning("refinement failed (%s); keeping the global estimate", exc)
+        history.append(best_cost)
+        checkpoint_now("local", 1)
+        if progress is not None:
+            progress("local", 1, 1, best_cost)
+
+    if best_cost >= FAILED_COST:
+        raise EstimationError(
+            f"the twin {problem.twin.name} could not be simulated on the training window for any "
+            f"parameter set tried ({evaluations} evaluations)"
+        )
+    try:
+        training_nrmse = train.nrmse(best_x)
+        validation_nrmse = valid.nrmse(best_x)
+        validation_initial = valid.nrmse(problem.start)
+    except SimulationError as exc:
+        raise EstimationError(f"validation simulation failed: {exc}") from exc
+    seconds = time.perf_counter() - t_start
+    result = EstimationResult(
+        parameters={name: float(v) for name, v in zip(problem.names, best_x)},
+        training_nrmse=training_nrmse,
+        validation_nrmse=validation_nrmse,
+        validation_nrmse_initial=validation_initial,
+        evaluations=evaluations,
+        seconds=seconds,
+        history=tuple(history),
+        initial={name: float(v) for name, v in zip(problem.names, problem.start)},
+        bounds={name: (float(lo), float(hi)) for name, lo, hi in zip(problem.names, problem.lower, problem.upper)},
+        warmup=problem.warmup,
+    )
+    _write_checkpoint(ckpt, {"stage": "done", **result.to_json(), "history": list(result.history)})
+    return result
+
+
+def fit_series(spec: Any, parameter_sets: Mapping[str, Mapping[str, float]], *,
+               warmup: float | None = None) -> dict[str, pd.DataFrame]:
+    """Measured and simulated series per window for fit plots.
+
+    Parameters
+    ----------
+    spec
+        A loaded spec.
+    parameter_sets
+        Label -> parameter values (missing names take their start values).
+    warmup
+        As in :func:`estimate`.
+
+    Returns
+    -------
+    dict
+        ``"training"`` / ``"validation"`` -> DataFrame with ``time`` and, per output
+        tag, ``<tag>`` (measured, NaN where excluded) and ``<tag>:<label>`` (simulated).
+    """
+    problem = problem_from_spec(spec, warmup=warmup)
+    out = {}
+    for window in load_windows(spec):
+        frame: dict[str, np.ndarray] = {"time": window.time}
+        for tag in problem.outputs:
+            frame[tag] = window.measured[tag]
+        for label, values in parameter_sets.items():
+            x = np.array([float(values.get(n, s)) for n, s in zip(problem.names, problem.start)])
+            sim = simulate_window(problem, window, x)
+            for tag, y in sim.items():
+                frame[f"{tag}:{label}"] = y
+        out[window.name] = pd.DataFrame(frame)
+    return out
+
+
+# --------------------------------------------------------------------------- writing back
+
+_HEADER = re.compile(r"^\s*\[")
+_PARAMS_HEADER = re.compile(r"^\s*\[\[\s*parameters\s*\]\]")
+_KEY_LINE = re.compile(r"^(\s*)(name|start)(\s*=\s*)(.*?)(\s*(#.*)?)$")
+
+
+def write_starts(path: str | Path, values: Mapping[str, float]) -> Any:
+    """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
+
+    Only the ``start = ...`` lines of the named parameters change; comments and
+    layout are kept. The new text is validated (it must load back with exactly
+    these starts and nothing else changed) before it replaces the file; if the
+    file's layout defeats the line edit (e.g. inline tables), the whole spec is
+    rewritten by :func:`trackingbox.spec.write_spec` instead (comments are lost then).
+
+    Returns
+    -------
+    Spec
+        The spec as written.
+
+    Raises
+    ------
+    SpecError
+        A name in *values* is not one of the spec's parameters, or a value is
+        outside its bounds.
+    """
+    from dataclasses import replace
+
+    from .spec import load_spec, loads_spec, write_spec
+
+    path = Path(path).expanduser().resolve()
+    old = load_spec(path, check_files=False)
+    names = [p.name for p in old.parameters]
+    problems = []
+    for name, value in values.items():
+        if name not in names:
+            problems.append(unknown_name("parameter", name, names, f"[[parameters]] of {path}"))
+            continue
+        p = old.parameter(name)
+        if not p.min <= float(value) <= p.max:
+            problems.append(f"estimate {float(value)!r} of {name!r} is outside [{p.min!r}, {p.max!r}] in {path}")
+    if problems:
+        raise SpecError("; ".join(problems))
+    wanted = replace(old, parameters=tuple(
+        replace(p, start=float(values[p.name])) if p.name in values else p for p in old.parameters))
+
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    in_params = False
+    block: list[int] = []
+    blocks: list[list[int]] = []
+    for i, line in enumerate(lines):
+        if _HEADER.match(line):
+            if in_params:
+                blocks.append(block)
+            in_params = bool(_PARAMS_HEADER.match(line))
+            block = []
+        elif in_params:
+            block.append(i)
+    if in_params:
+        blocks.append(block)
+    for block in blocks:
+        name = None
+        start_line = None
+        for i in block:
+            m = _KEY_LINE.match(lines[i].rstrip("\n"))
+            if not m:
+                continue
+            if m.group(2) == "name":
+                try:
+                    name = tomllib.loads(f"v = {m.group(4)}")["v"]
+                except (tomllib.TOMLDecodeError, KeyError):
+                    name = None
+            else:
+                start_line = i
+        if name in values and start_line is not None:
+            m = _KEY_LINE.match(lines[start_line].rstrip("\n"))
+            assert m is not None
+            newline = "\n" if lines[start_line].endswith("\n") else ""
+            lines[start_line] = f"{m.group(1)}start{m.group(3)}{float(values[name])!r}{m.group(5)}{newline}"
+    text = "".join(lines)
+    try:
+        ok = loads_spec(text, path, check_files=False) == wanted
+    except SpecError:
+        ok = False
+    if ok:
+        write_text_atomic(path, text)
+        return wanted
+    log.warning("could not edit the start values of %s in place; rewriting the whole spec "
+                "(comments are not kept)", path)
+    write_spec(wanted, path)
+    return wanted
