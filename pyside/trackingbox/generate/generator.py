@@ -370,12 +370,15 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
 def compile_generated(result: GenerateResult, *, backend: str = "auto", output: Path | None = None) -> Any:
     """Compile the tracked model with :func:`trackingbox.compiler.compile_model`.
 
-    ``compile_model`` takes one source, so the twin's library and the generated
-    package are staged side by side in a temporary directory first.
+    The twin's library (the patched copy after ``--rewrite``) is passed as a
+    further library, the generated package as the source.
+
+    Returns
+    -------
+    trackingbox.compiler.CompileResult
     """
     from ..compiler import compile_model
 
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
-    with tempfile.TemporaryDirectory(prefix="trackingbox-compile-") as tmp:
-        pkg = stage_packages(Path(tmp), result.library, result.package_dir)
-        return compile_model(pkg, result.tracked_model, backend=backend, output=output)
+    return compile_model(result.package_dir, result.tracked_model, backend=backend, output=output,
+                         libraries=[result.library])

@@ -116,7 +116,9 @@ def _locate(path: Path) -> tuple[Path, Path, tuple[Path, ...], Path]:
 def _rumoca_load(entry: Path, model: str, roots: list[Path]) -> Any:
     import rumoca
 
-    session = rumoca.Session(roots=[str(r) for r in roots])
+    # Without roots a session scans the entry's own directory; a root is scanned
+    # recursively, so only clean (staged) trees are given as roots.
+    session = rumoca.Session(roots=[str(r) for r in roots]) if roots else rumoca.Session()
     logger.debug("rumoca load %s model=%s roots=%s", entry, model, roots)
     return session.load(str(entry), model=model)
 
@@ -136,7 +138,7 @@ def load_twin(path: str | Path, model: str) -> TwinSource:
         raise SpecError(f"[source] path {path} does not exist")
     entry, root, files, top = _locate(path)
     try:
-        loaded = _rumoca_load(entry, model, [root])
+        loaded = _rumoca_load(entry, model, [])
     except Exception as exc:  # rumoca raises its own CompileError/ParseError types
         raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
     flat = loaded.to_dict("flat")
@@ -253,11 +255,38 @@ def find_declaration(src: TwinSource, name: str) -> Declaration | None:
     return None
 
 
+def _class_chain(code: str, offset: int) -> list[str]:
+    """Names of the classes enclosing *offset*, outermost first."""
+    chain: list[tuple[int, str]] = []
+    for m in _CLASS_START.finditer(code):
+        if m.start() > offset:
+            break
+        end = re.search(rf"\bend\s+{re.escape(m.group(2))}\s*;", code[m.end():])
+        if end is not None and m.end() + end.end() > offset:
+            chain.append((m.start(), m.group(2)))
+    return [name for _, name in sorted(chain)]
+
+
 def _connector_type(src: TwinSource) -> str:
-    """The connector type the library already uses for conditional inputs."""
-    pattern = re.compile(r"([A-Za-z_][\w.]*)\s+\w+_in\s+if\s+use_\w+_in\b")
+    """Full name of a ``connector X = input Real`` the library defines.
+
+    Falls back to a fully qualified type an existing conditional input uses,
+    then to ``Modelica.Blocks.Interfaces.RealInput``.
+    """
+    short = re.compile(r"\bconnector\s+([A-Za-z_]\w*)\s*=\s*input\s+Real\b")
+    found: list[str] = []
     for file in src.files:
-        m = pattern.search(_blank_comments_strings(file.read_text(encoding="utf-8")))
+        text = file.read_text(encoding="utf-8")
+        code = _blank_comments_strings(text)
+        within = re.match(r"\s*within\s*([\w.]*)\s*;", code)
+        prefix = [p for p in (within.group(1).split(".") if within and within.group(1) else [])]
+        for m in short.finditer(code):
+            found.append(".".join(prefix + _class_chain(code, m.start()) + [m.group(1)]))
+    if found:
+        return sorted(found, key=lambda n: (n.count("."), n))[0]
+    used = re.compile(r"([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)\s+\w+_in\s+if\s+use_\w+_in\b")
+    for file in src.files:
+        m = used.search(_blank_comments_strings(file.read_text(encoding="utf-8")))
         if m:
             return m.group(1)
     return "Modelica.Blocks.Interfaces.RealInput"
