@@ -1,0 +1,612 @@
+"""Steady-state step tests on the twin FMU: the gain matrix ``G(0)`` for pairing.
+
+Procedure (one run per parameter and direction, run in parallel):
+
+1. Hold the FMU inputs at an operating point (from the measurements), start
+   from the parameters' start values, controllers active, and run until the
+   outputs settle.
+2. Freeze the controllers (set the freeze inputs/parameters, e.g.
+   ``holdControllers = 1``) and let the outputs settle again.
+3. Step one parameter by ``+step`` (and, in a separate run, ``-step``) of its
+   bound range and run until the outputs settle once more.
+
+*Settled* means: over the last ``window`` seconds, every output moved by at
+most ``tolerance`` times its range (its measured span, by default). A phase
+that has not settled after ``max_time`` seconds is an :class:`AnalysisError`
+naming the phase (and parameter) and the outputs still moving.
+
+The first phases are computed once (the baseline run) and replayed
+deterministically by each step run on the same communication grid.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time as _time
+from collections import deque
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from ..errors import AnalysisError, FMUError, TrackingError, unknown_name
+from .executor import cached_model
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """How step tests run.
+
+    Attributes
+    ----------
+    step : float
+        Step size as a fraction of each parameter's bound range (``max - min``).
+    two_sided : bool
+        Also step by ``-step`` (linearity check); the gain is then the secant
+        between the two.
+    freeze : tuple of (str, float)
+        FMU inputs or tunable parameters set after the first settle to freeze
+        the twin's controllers (e.g. ``(("holdControllers", 1.0),)``); empty for
+        models without controllers.
+    interval : float
+        Communication step (s): sampling of the responses.
+    window : float
+        Settle window (s).
+    tolerance : float
+        Allowed change over the window, as a fraction of each output's range.
+    max_time : float
+        Longest time (s) any phase may take to settle.
+    solver_tolerance : float
+        FMU solver relative tolerance.
+    """
+
+    step: float = 0.05
+    two_sided: bool = True
+    freeze: tuple[tuple[str, float], ...] = ()
+    interval: float = 10.0
+    window: float = 600.0
+    tolerance: float = 1e-4
+    max_time: float = 36000.0
+    solver_tolerance: float = 1e-8
+
+    def __post_init__(self) -> None:
+        for name in ("step", "interval", "window", "tolerance", "max_time", "solver_tolerance"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise AnalysisError(f"step-test setting {name} must be a positive number, got {value!r}")
+        if self.window < self.interval:
+            raise AnalysisError(f"step-test window ({self.window:g} s) is shorter than the interval "
+                                f"({self.interval:g} s)")
+
+
+@dataclass(frozen=True)
+class StepTestResult:
+    """Gain matrix and step-response figures.
+
+    Rows are tracking variables (``variables``: measurement tags, simulated by
+    ``outputs``), columns are parameters.
+
+    Attributes
+    ----------
+    gains : ndarray, shape (m, n)
+        Steady-state gains ``dy_i/dp_j`` (secant over the +/- steps when two-sided).
+    gains_up, gains_down : ndarray, shape (m, n)
+        One-sided gains (``gains_down`` is NaN when not two-sided).
+    asymmetry : ndarray, shape (m, n)
+        ``|g_up - g_down| / max(|g_up|, |g_down|)``; NaN where one-sided or where
+        neither response exceeds the settle tolerance.
+    time_constants : ndarray, shape (m, n)
+        Time (s) to 63.2 % of the final change, mean of both directions; NaN
+        where the response is below the settle tolerance.
+    deltas : ndarray, shape (n,)
+        Size of the +step of each parameter.
+    baseline : ndarray, shape (m,)
+        Outputs at the step time, controllers frozen.
+    ranges : ndarray, shape (m,)
+        Output ranges used by the settle rule.
+    freeze_time, step_time : float
+        When the controllers were frozen and when parameters were stepped (s).
+    operating_point : dict
+        Values set before initialisation besides the parameter starts: the
+        held FMU inputs and the fixed parameters.
+    runs : int
+        Simulations made.
+    seconds : float
+        Wall-clock time.
+    """
+
+    variables: tuple[str, ...]
+    outputs: tuple[str, ...]
+    parameters: tuple[str, ...]
+    gains: np.ndarray = field(repr=False, compare=False)
+    gains_up: np.ndarray = field(repr=False, compare=False)
+    gains_down: np.ndarray = field(repr=False, compare=False)
+    asymmetry: np.ndarray = field(repr=False, compare=False)
+    time_constants: np.ndarray = field(repr=False, compare=False)
+    deltas: np.ndarray = field(repr=False, compare=False)
+    baseline: np.ndarray = field(repr=False, compare=False)
+    ranges: np.ndarray = field(repr=False, compare=False)
+    freeze_time: float = math.nan
+    step_time: float = math.nan
+    operating_point: dict[str, float] = field(default_factory=dict)
+    runs: int = 0
+    seconds: float = 0.0
+
+    def nonlinear(self, threshold: float = 0.2) -> list[tuple[str, str, float]]:
+        """``(variable, parameter, asymmetry)`` where the +/- gains differ by more than *threshold*."""
+        out = []
+        for i, j in np.argwhere(np.nan_to_num(self.asymmetry, nan=0.0) > threshold):
+            out.append((self.variables[i], self.parameters[j], float(self.asymmetry[i, j])))
+        return out
+
+
+# --------------------------------------------------------------------------- runs
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """One simulation: baseline phases, then (optionally) a parameter change.
+
+    Picklable, so it travels to worker processes. ``freeze_time`` and
+    ``step_time`` are NaN in the baseline run (detected) and fixed in step runs.
+    """
+
+    fmu: str
+    start_values: tuple[tuple[str, float], ...]
+    outputs: tuple[str, ...]
+    ranges: tuple[float, ...]
+    settings: StepSettings
+    freeze_time: float = math.nan
+    step_time: float = math.nan
+    change: tuple[tuple[str, float], ...] = ()
+    label: str = "baseline"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a :class:`RunPlan` produced."""
+
+    label: str
+    freeze_time: float
+    step_time: float
+    before: np.ndarray
+    after: np.ndarray
+    end_time: float
+    times: np.ndarray
+    trajectory: np.ndarray
+
+
+class _Settle:
+    """Settle detector: span over a sliding window below tolerance x range."""
+
+    def __init__(self, start: float, window: float, limits: np.ndarray) -> None:
+        self.start = start
+        self.window = window
+        self.limits = limits
+        self.buf: deque[tuple[float, np.ndarray]] = deque()
+
+    def push(self, t: float, y: np.ndarray) -> bool:
+        self.buf.append((t, y))
+        while self.buf and self.buf[0][0] < t - self.window - 1e-9 * max(1.0, abs(t)):
+            self.buf.popleft()
+        if t - self.start < self.window - 1e-9 * max(1.0, abs(t)):
+            return False
+        return bool(np.all(self.spans() <= self.limits))
+
+    def spans(self) -> np.ndarray:
+        arr = np.array([y for _, y in self.buf])
+        return arr.max(axis=0) - arr.min(axis=0)
+
+
+def _still_moving(outputs: Sequence[str], spans: np.ndarray, limits: np.ndarray, window: float) -> str:
+    parts = [f"{outputs[i]} moved {spans[i]:.3g} in the last {window:g} s (limit {limits[i]:.3g})"
+             for i in np.flatnonzero(spans > limits)]
+    return "; ".join(parts[:6]) + (" ..." if len(parts) > 6 else "")
+
+
+def run_plan(plan: RunPlan) -> RunResult:
+    """Execute one :class:`RunPlan` (in a worker; the FMU is opened once per process).
+
+    Raises
+    ------
+    AnalysisError
+        If a phase does not settle within ``max_time``.
+    """
+    s = plan.settings
+    model = cached_model(plan.fmu, s.solver_tolerance)
+    limits = np.asarray(plan.ranges, dtype=float) * s.tolerance
+    try:
+        stepper = model.stepper(start_time=0.0, parameters=dict(plan.start_values), max_step=s.interval)
+    except TrackingError as exc:
+        raise AnalysisError(f"step test {plan.label}: the twin could not be initialised: {exc}") from None
+    outs = list(plan.outputs)
+    k = 0
+
+    def advance(kk: int) -> np.ndarray:
+        try:
+            stepper.step(kk * s.interval)
+        except TrackingError as exc:
+            raise AnalysisError(f"step test {plan.label}: simulation failed at t = {kk * s.interval:g} s: "
+                                f"{exc}") from None
+        return stepper.get(outs)
+
+    def settle(phase: str, k0: int) -> int:
+        det = _Settle(k0 * s.interval, s.window, limits)
+        det.push(k0 * s.interval, stepper.get(outs))
+        kk = k0
+        k_max = k0 + int(math.ceil(s.max_time / s.interval))
+        while kk < k_max:
+            kk += 1
+            if det.push(kk * s.interval, advance(kk)):
+                return kk
+        raise AnalysisError(
+            f"step test {plan.label}: {phase} did not settle within {s.max_time:g} s "
+            f"(from t = {k0 * s.interval:g} s to {kk * s.interval:g} s): "
+            f"{_still_moving(outs, det.spans(), limits, s.window)}; raise --max-time or check the "
+            "twin is stable at this operating point")
+
+    def run_to(k_target: int) -> None:
+        nonlocal k
+        while k < k_target:
+            k += 1
+            advance(k)
+
+    # phase 1: controllers active
+    if math.isnan(plan.freeze_time):
+        k = settle("the twin with its controllers active", 0)
+    else:
+        run_to(int(round(plan.freeze_time / s.interval)))
+    freeze_time = k * s.interval
+    # phase 2: controllers frozen
+    if s.freeze:
+        stepper.set(dict(s.freeze))
+        if math.isnan(plan.step_time):
+            k = settle("the twin after freezing its controllers (" +
+                       ", ".join(f"{n} = {v:g}" for n, v in s.freeze) + ")", k)
+        else:
+            run_to(int(round(plan.step_time / s.interval)))
+    step_time = k * s.interval
+    before = stepper.get(outs)
+    if not plan.change:
+        return RunResult(plan.label, freeze_time, step_time, before, before, step_time,
+                         np.array([step_time]), before[None, :])
+    # phase 3: the step
+    stepper.set(dict(plan.change))
+    det = _Settle(step_time, s.window, limits)
+    det.push(step_time, before)
+    times = [step_time]
+    traj = [before]
+    k_max = k + int(math.ceil(s.max_time / s.interval))
+    while True:
+        if k >= k_max:
+            raise AnalysisError(
+                f"step test {plan.label}: the response did not settle within {s.max_time:g} s of the step "
+                f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}")
+        k += 1
+        y = advance(k)
+        times.append(k * s.interval)
+        traj.append(y)
+        if det.push(k * s.interval, y):
+            break
+    return RunResult(plan.label, freeze_time, step_time, before, traj[-1], k * s.interval,
+                     np.array(times), np.array(traj))
+
+
+def time_to_63(times: npt.ArrayLike, y: npt.ArrayLike, y0: float, y_end: float) -> float:
+    """Time from ``times[0]`` until ``y`` first covers 63.2 % of ``y_end - y0`` (linear interpolation).
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 60.0, 1.0)
+    >>> round(time_to_63(t, 1 - np.exp(-t / 10.0), 0.0, 1.0), 1)
+    10.0
+    """
+    t = np.asarray(times, dtype=float)
+    frac = (np.asarray(y, dtype=float) - y0) / (y_end - y0)
+    target = 1.0 - math.exp(-1.0)
+    hit = np.flatnonzero(frac >= target)
+    if hit.size == 0:
+        return math.nan
+    i = int(hit[0])
+    if i == 0:
+        return 0.0
+    f0, f1 = frac[i - 1], frac[i]
+    return float(t[i - 1] + (target - f0) / (f1 - f0) * (t[i] - t[i - 1]) - t[0])
+
+
+# ------------------------------------------------------------------ operating point
+
+
+def operating_point(measurements: pd.DataFrame, inputs: Mapping[str, str], *, start: float = 0.0,
+                    duration: float = 3600.0, at: float | None = None) -> dict[str, float]:
+    """FMU input values for the step tests, from measurements.
+
+    Parameters
+    ----------
+    measurements : DataFrame
+        ``time`` (s) and one column per tag.
+    inputs : mapping
+        Tag -> FMU input (the spec's ``[inputs]``).
+    start, duration : float
+        Mean over ``[start, start + duration)`` (the first hour of the training
+        window by default).
+    at : float, optional
+        Instead, the values interpolated at this time.
+
+    Returns
+    -------
+    dict
+        FMU input name -> value.
+
+    Raises
+    ------
+    AnalysisError
+        If a tag is missing or has no valid sample in the window.
+    """
+    if "time" not in measurements.columns:
+        raise AnalysisError("measurements have no 'time' column")
+    t = measurements["time"].to_numpy(dtype=float)
+    out: dict[str, float] = {}
+    problems = []
+    for tag, name in inputs.items():
+        if tag not in measurements.columns:
+            problems.append(unknown_name("tag", tag, [c for c in measurements.columns if c != "time"],
+                                         "the measurements"))
+            continue
+        col = measurements[tag].to_numpy(dtype=float)
+        ok = np.isfinite(col)
+        if at is not None:
+            if not ok.any():
+                problems.append(f"tag {tag!r} has no valid samples")
+                continue
+            value = float(np.interp(at, t[ok], col[ok]))
+        else:
+            sel = ok & (t >= start) & (t < start + duration)
+            if not sel.any():
+                problems.append(f"tag {tag!r} has no valid samples between {start:g} s and {start + duration:g} s")
+                continue
+            value = float(col[sel].mean())
+        out[name] = value
+    if problems:
+        raise AnalysisError("cannot take the operating point: " + "; ".join(problems))
+    return out
+
+
+# ------------------------------------------------------------------ the step tests
+
+
+@dataclass(frozen=True)
+class StepProblem:
+    """What to step and what to watch: the picklable core shared with Sobol.
+
+    Attributes
+    ----------
+    fmu : str
+        Twin FMU path.
+    variables : tuple of str
+        Tracking-variable names (tags).
+    outputs : tuple of str
+        FMU outputs simulating them (same order).
+    parameters : tuple of str
+        Candidate parameters.
+    starts, lower, upper : tuple of float
+        Start value and bounds of each parameter.
+    fixed : tuple of (str, float)
+        Other values set before initialisation (known parameters, operating point).
+    ranges : tuple of float
+        Output ranges for the settle rule and the scaling.
+    """
+
+    fmu: str
+    variables: tuple[str, ...]
+    outputs: tuple[str, ...]
+    parameters: tuple[str, ...]
+    starts: tuple[float, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    fixed: tuple[tuple[str, float], ...] = ()
+    ranges: tuple[float, ...] = ()
+
+    def start_values(self) -> tuple[tuple[str, float], ...]:
+        """Values set before initialisation: fixed values, then parameter starts."""
+        return tuple(self.fixed) + tuple(zip(self.parameters, self.starts))
+
+
+def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Sequence[tuple[str, float, float, float]],
+                 fixed: Mapping[str, float] | None = None, operating: Mapping[str, float] | None = None,
+                 ranges: Mapping[str, float] | None = None, freeze: Mapping[str, float] | None = None
+                 ) -> StepProblem:
+    """Check names against the FMU and build a :class:`StepProblem`.
+
+    Parameters
+    ----------
+    fmu : path
+        Twin FMU.
+    outputs : mapping
+        Tag -> FMU output (the spec's ``[outputs]``).
+    parameters : sequence of (name, start, min, max)
+        Candidate parameters.
+    fixed : mapping, optional
+        Known parameter values.
+    operating : mapping, optional
+        FMU input values to hold.
+    ranges : mapping, optional
+        Tag -> range (measured span) for the settle rule and scaling; missing
+        tags are filled by :func:`default_ranges`.
+    freeze : mapping, optional
+        Freeze names, checked to exist as inputs or tunable parameters.
+
+    Raises
+    ------
+    AnalysisError
+        Naming every unknown name, with "did you mean".
+    """
+    from ..fmu import read_info
+
+    try:
+        info = read_info(fmu)
+    except FMUError as exc:
+        raise AnalysisError(str(exc)) from None
+    names = {v.name: v for v in info.variables}
+    tunable = set(info.tunable_parameters)
+    settable = tunable | set(info.inputs)
+    problems: list[str] = []
+    where = f"FMU {Path(fmu).name}"
+    for tag, out in outputs.items():
+        if out not in names:
+            problems.append(unknown_name("output", out, info.outputs or list(names), where) + f" (for tag {tag!r})")
+    for name, start, lo, hi in parameters:
+        if name not in tunable:
+            if name in names:
+                problems.append(f"parameter {name!r} of {where} is not a tunable parameter "
+                                f"(causality {names[name].causality}, variability {names[name].variability})")
+            else:
+                problems.append(unknown_name("parameter", name, sorted(tunable), where))
+        if not (lo < hi):
+            problems.append(f"parameter {name!r} has bounds [{lo:g}, {hi:g}]: min must be below max")
+    for name in (freeze or {}):
+        if name not in settable:
+            problems.append(unknown_name("freeze input/parameter", name, sorted(settable), where))
+    for name in (operating or {}):
+        if name not in names:
+            problems.append(unknown_name("input", name, info.inputs, where))
+    if not outputs:
+        problems.append("no tracking variables: the spec's [outputs] table is empty")
+    if not parameters:
+        problems.append("no candidate parameters: the spec has no [[parameters]]")
+    if problems:
+        raise AnalysisError("; ".join(problems))
+    tags = tuple(outputs)
+    fixed_items = tuple((k, float(v)) for k, v in (fixed or {}).items())
+    fixed_items += tuple((k, float(v)) for k, v in (operating or {}).items())
+    rng = tuple(float((ranges or {}).get(tag, math.nan)) for tag in tags)
+    return StepProblem(
+        fmu=str(Path(fmu).resolve()), variables=tags, outputs=tuple(outputs[t] for t in tags),
+        parameters=tuple(p[0] for p in parameters), starts=tuple(float(p[1]) for p in parameters),
+        lower=tuple(float(p[2]) for p in parameters), upper=tuple(float(p[3]) for p in parameters),
+        fixed=fixed_items, ranges=rng)
+
+
+def default_ranges(problem: StepProblem, settings: StepSettings) -> tuple[float, ...]:
+    """Fill missing/non-positive ranges with ``max(|y(0)|, 1e-3)`` from the initialised twin."""
+    rng = np.asarray(problem.ranges if problem.ranges else [math.nan] * len(problem.outputs), dtype=float)
+    missing = ~(np.isfinite(rng) & (rng > 0))
+    if not missing.any():
+        return tuple(float(x) for x in rng)
+    model = cached_model(problem.fmu, settings.solver_tolerance)
+    st = model.stepper(start_time=0.0, parameters=dict(problem.start_values()), max_step=settings.interval)
+    y0 = st.get(list(problem.outputs))
+    rng[missing] = np.maximum(np.abs(y0[missing]), 1e-3)
+    for i in np.flatnonzero(missing):
+        logger.info("no range for %s: settle rule uses |y(0)| = %.4g", problem.variables[i], rng[i])
+    return tuple(float(x) for x in rng)
+
+
+def baseline(problem: StepProblem, settings: StepSettings, executor: Executor | None = None) -> RunResult:
+    """Run phases 1-2 once (controllers active, then frozen) and return when they settled."""
+    plan = RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings)
+    if executor is None:
+        return run_plan(plan)
+    return executor.submit(run_plan, plan).result()
+
+
+def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
+               executor: Executor | None = None) -> StepTestResult:
+    """Steady-state gain matrix of the twin by parameter step tests.
+
+    Parameters
+    ----------
+    problem : StepProblem
+        From :func:`make_problem`.
+    settings : StepSettings
+    executor : concurrent.futures.Executor, optional
+        Runs the step tests in parallel (see :func:`~trackingbox.analysis.executor.make_executor`);
+        serial in this process when omitted.
+
+    Returns
+    -------
+    StepTestResult
+
+    Raises
+    ------
+    AnalysisError
+        A phase or a step that does not settle, a simulation failure.
+    """
+    t_wall = _time.perf_counter()
+    if not all(math.isfinite(r) and r > 0 for r in problem.ranges) or len(problem.ranges) != len(problem.outputs):
+        problem = replace(problem, ranges=default_ranges(problem, settings))
+    base = baseline(problem, settings, executor)
+    logger.info("baseline settled: controllers frozen at t = %g s, steady at t = %g s",
+                base.freeze_time, base.step_time)
+    plans: list[tuple[int, int, RunPlan]] = []
+    n = len(problem.parameters)
+    deltas = np.zeros(n)
+    for j, (name, p0, lo, hi) in enumerate(zip(problem.parameters, problem.starts, problem.lower, problem.upper)):
+        d = settings.step * (hi - lo)
+        deltas[j] = d
+        signs = (1, -1) if settings.two_sided else (1,)
+        for sgn in signs:
+            value = p0 + sgn * d
+            if value > hi or value < lo:
+                logger.warning("step of %s to %g leaves its bounds [%g, %g]", name, value, lo, hi)
+            plans.append((j, sgn, RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges,
+                                          settings, base.freeze_time, base.step_time, ((name, value),),
+                                          label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}")))
+    if executor is None:
+        results = [run_plan(p) for _, _, p in plans]
+    else:
+        futures = [executor.submit(run_plan, p) for _, _, p in plans]
+        results = []
+        for f, (_, _, p) in zip(futures, plans):
+            results.append(f.result())
+            logger.info("done: %s", p.label)
+    m = len(problem.outputs)
+    g_up = np.full((m, n), math.nan)
+    g_dn = np.full((m, n), math.nan)
+    tau_up = np.full((m, n), math.nan)
+    tau_dn = np.full((m, n), math.nan)
+    dy_up = np.full((m, n), math.nan)
+    dy_dn = np.full((m, n), math.nan)
+    limits = np.asarray(problem.ranges) * settings.tolerance
+    for (j, sgn, _), r in zip(plans, results):
+        dy = r.after - r.before
+        g = dy / (sgn * deltas[j])
+        taus = np.array([time_to_63(r.times, r.trajectory[:, i], r.before[i], r.after[i])
+                         if abs(dy[i]) > limits[i] else math.nan for i in range(m)])
+        if sgn > 0:
+            g_up[:, j], tau_up[:, j], dy_up[:, j] = g, taus, dy
+        else:
+            g_dn[:, j], tau_dn[:, j], dy_dn[:, j] = g, taus, dy
+    if settings.two_sided:
+        gains = (dy_up - dy_dn) / (2.0 * deltas[None, :])
+        with np.errstate(all="ignore"):
+            asym = np.abs(g_up - g_dn) / np.maximum(np.abs(g_up), np.abs(g_dn))
+        small = (np.abs(dy_up) <= limits[:, None]) & (np.abs(dy_dn) <= limits[:, None])
+        asym[small] = math.nan
+        tau = _nanmean2(tau_up, tau_dn)
+    else:
+        gains = g_up.copy()
+        asym = np.full((m, n), math.nan)
+        tau = tau_up
+    result = StepTestResult(
+        variables=problem.variables, outputs=problem.outputs, parameters=problem.parameters,
+        gains=gains, gains_up=g_up, gains_down=g_dn, asymmetry=asym, time_constants=tau, deltas=deltas,
+        baseline=base.before, ranges=np.asarray(problem.ranges, dtype=float), freeze_time=base.freeze_time,
+        step_time=base.step_time, operating_point=dict(problem.fixed),
+        runs=1 + len(plans), seconds=_time.perf_counter() - t_wall)
+    for v, p, a in result.nonlinear():
+        logger.warning("response of %s to %s is asymmetric (+/- step gains differ by %.0f %%)", v, p, 100 * a)
+    return result
+
+
+def _nanmean2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Element-wise mean of two arrays ignoring NaN (NaN where both are NaN)."""
+    both = np.isfinite(a) & np.isfinite(b)
+    return np.where(both, (a + b) / 2.0, np.where(np.isfinite(a), a, b))

@@ -1,0 +1,160 @@
+"""Step tests on a small CasADi-built FMU whose steady-state gains are solved by hand.
+
+The model (time in s)::
+
+    dx1/dt = (a*u + z - x1 + 0.5*x2) / 5       y1 = x1
+    dx2/dt = (b - x2 + 0.2*x1) / 10            y2 = x2
+    dx3/dt = (c - x3) / 20                     y3 = x1**2,  y4 = x3
+    dz/dt  = (1 - hold) * ki * (r - x1)        (PI-like integrator: holds when hold = 1)
+    dw/dt  = d - 1                             y5 = w (never settles once d != 1)
+
+With z held constant the steady state is x1 = (a*u + z + 0.5*b) / 0.9,
+x2 = b + 0.2*x1, so dy1/da = u/0.9, dy1/db = 0.5/0.9, dy2/da = 0.2*u/0.9,
+dy2/db = 1 + 0.1/0.9 = 10/9, dy4/dc = 1 with a first-order time constant of 20 s.
+Before freezing, the integrator drives x1 to r = 2, so y3 = x1**2 has the
+secant gain 2*x1*dx1/da and the +/- step asymmetry 2*delta/(2*x1 + delta),
+delta = (u/0.9) * (0.05 * (1.5 - 0.5)).
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trackingbox.analysis.executor import make_executor
+from trackingbox.analysis.steptest import StepSettings, make_problem, operating_point, step_tests, time_to_63
+from trackingbox.errors import AnalysisError
+
+U = 1.5
+
+
+def build_step_fmu(directory) -> str:
+    """The FMU described in the module docstring (FMI 3.0 model exchange, via CasADi)."""
+    casadi = pytest.importorskip("casadi", reason="CasADi builds the test FMU")
+    import fmpy
+
+    dae = casadi.DaeBuilder("steptwin")
+    a = dae.add("a", "parameter", "tunable", {"start": 1.0, "min": 0.5, "max": 1.5})
+    b = dae.add("b", "parameter", "tunable", {"start": 2.0, "min": 1.0, "max": 3.0})
+    c = dae.add("c", "parameter", "tunable", {"start": 1.0, "min": 0.0, "max": 2.0})
+    d = dae.add("d", "parameter", "tunable", {"start": 1.0, "min": 0.5, "max": 1.5})
+    ki = dae.add("ki", "parameter", "tunable", {"start": 0.2})
+    r = dae.add("r", "parameter", "tunable", {"start": 2.0})
+    u = dae.add("u", "input", {"start": 1.0})
+    hold = dae.add("hold", "input", {"start": 0.0})
+    x1 = dae.add("x1", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    x2 = dae.add("x2", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    x3 = dae.add("x3", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    z = dae.add("z", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    w = dae.add("w", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    ys = [dae.add(n, "output", {}) for n in ("y1", "y2", "y3", "y4", "y5")]
+    dae.eq(dae.der(x1), (a * u + z - x1 + 0.5 * x2) / 5.0)
+    dae.eq(dae.der(x2), (b - x2 + 0.2 * x1) / 10.0)
+    dae.eq(dae.der(x3), (c - x3) / 20.0)
+    dae.eq(dae.der(z), (1 - hold) * ki * (r - x1))
+    dae.eq(dae.der(w), d - 1.0)
+    for y, expr in zip(ys, (x1, x2, x1 * x1, x3, w)):
+        dae.eq(y, expr)
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        files = dae.export_fmu({"no_warning": True})
+        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
+        path = dae.pack_fmu(files, {})
+    finally:
+        os.chdir(cwd)
+    return str(directory / path)
+
+
+@pytest.fixture(scope="module")
+def step_fmu(tmp_path_factory):
+    return build_step_fmu(tmp_path_factory.mktemp("steptwin"))
+
+
+OUTPUTS = {"Y1": "y1", "Y2": "y2", "Y3": "y3", "Y4": "y4"}
+PARAMS = [("a", 1.0, 0.5, 1.5), ("b", 2.0, 1.0, 3.0), ("c", 1.0, 0.0, 2.0)]
+FAST = dict(interval=1.0, window=50.0, tolerance=1e-6, max_time=2000.0)
+
+
+def _problem(fmu, **kw):
+    return make_problem(fmu, outputs=OUTPUTS, parameters=PARAMS, operating={"u": U},
+                        ranges={t: 1.0 for t in OUTPUTS}, **kw)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_gains_with_frozen_controller_match_hand_solution(step_fmu, workers):
+    prob = _problem(step_fmu, freeze={"hold": 1.0})
+    settings = StepSettings(freeze=(("hold", 1.0),), **FAST)
+    with make_executor(workers=workers) as ex:
+        res = step_tests(prob, settings, ex)
+    delta = 0.05 * 1.0
+    expected = np.array([[U / 0.9, 0.5 / 0.9, 0.0],
+                         [0.2 * U / 0.9, 10 / 9, 0.0],
+                         [2 * 2.0 * U / 0.9, 2 * 2.0 * 0.5 / 0.9, 0.0],
+                         [0.0, 0.0, 1.0]])
+    assert np.allclose(res.gains, expected, atol=1e-4)
+    assert np.allclose(res.deltas, [delta, 0.1, 0.1])
+    # the integrator had brought x1 to its setpoint r = 2 before the freeze
+    assert res.baseline[0] == pytest.approx(2.0, abs=1e-4)
+    assert res.freeze_time < res.step_time
+    # linear outputs: symmetric; y3 = x1**2: asymmetry 2*dl/(2*x1 + dl)
+    dl = U / 0.9 * delta
+    assert res.asymmetry[0, 0] < 1e-3
+    assert res.asymmetry[2, 0] == pytest.approx(2 * dl / (2 * 2.0 + dl), rel=1e-3)
+    assert math.isnan(res.asymmetry[0, 2])  # y1 does not respond to c at all
+    assert res.time_constants[3, 2] == pytest.approx(20.0, abs=0.2)
+    assert res.runs == 1 + 2 * 3
+
+
+def test_without_freeze_the_active_controller_hides_the_gain(step_fmu):
+    # no freeze: the integrator restores y1 = r after any step, so dy1/da -> 0
+    res = step_tests(_problem(step_fmu), StepSettings(two_sided=False, **FAST))
+    assert abs(res.gains[0, 0]) < 1e-3
+    assert res.gains[3, 2] == pytest.approx(1.0, abs=1e-4)
+    assert np.all(np.isnan(res.gains_down))
+
+
+def test_step_that_never_settles_names_parameter(step_fmu):
+    prob = make_problem(step_fmu, outputs={"Y5": "y5"}, parameters=[("d", 1.0, 0.5, 1.5)],
+                        ranges={"Y5": 1.0})
+    with pytest.raises(AnalysisError) as info:
+        step_tests(prob, StepSettings(interval=1.0, window=20.0, tolerance=1e-6, max_time=100.0))
+    msg = str(info.value)
+    assert "step of d" in msg and "did not settle" in msg and "y5 moved" in msg
+
+
+def test_unknown_names_get_did_you_mean(step_fmu):
+    with pytest.raises(AnalysisError) as info:
+        make_problem(step_fmu, outputs={"Y1": "y11"}, parameters=[("aa", 1.0, 0.5, 1.5)],
+                     freeze={"hodl": 1.0})
+    msg = str(info.value)
+    assert "'aa'" in msg and "did you mean 'a'" in msg
+    assert "'y11'" in msg and "'hodl'" in msg and "'hold'" in msg
+
+
+def test_operating_point_is_mean_of_first_hour():
+    frame = pd.DataFrame({"time": [0.0, 1800.0, 3599.0, 3600.0, 7200.0],
+                          "FI": [1.0, 2.0, 3.0, 100.0, 100.0]})
+    assert operating_point(frame, {"FI": "u"}) == {"u": pytest.approx(2.0)}
+    assert operating_point(frame, {"FI": "u"}, at=900.0) == {"u": pytest.approx(1.5)}
+    with pytest.raises(AnalysisError, match="did you mean 'FI'"):
+        operating_point(frame, {"FII": "u"})
+
+
+def test_time_to_63_of_first_order_response():
+    t = np.arange(100.0, 200.0, 0.5)
+    y = 3.0 - 2.0 * np.exp(-(t - 100.0) / 12.0)  # from 1 to 3 with tau = 12 s
+    assert time_to_63(t, y, 1.0, 3.0) == pytest.approx(12.0, abs=0.01)
+
+
+def test_scheduler_without_dask_is_a_clear_error():
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        with pytest.raises(AnalysisError, match="dask"):
+            make_executor(address="tcp://127.0.0.1:1")
+    else:
+        pytest.skip("dask.distributed is installed; the missing-dask message cannot be checked")
