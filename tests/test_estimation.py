@@ -1,0 +1,175 @@
+"""Gray-box parameter estimation on a small first-order heat-exchanger FMU with synthetic data.
+
+Independent expectations: the true parameter the data were made with, the
+statistical precision a least-squares fit can reach with the added noise, the
+noise floor of the NRMSE, hand-counted masked samples, and the bounds.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from _fixtures_estimation import build_fmu, plant_data, steady_state, write_case
+from trackingbox.errors import DataError, SpecError
+from trackingbox.estimation import EstimationResult, estimate, load_windows, nrmse, write_starts
+from trackingbox.spec import load_spec
+
+TRUE_KHT = 900.0
+NOISE = 0.1  # K, standard deviation of the measurement noise
+
+pytestmark = pytest.mark.compile
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_fmu(tmp_path_factory.mktemp("hx1fmu"))
+
+
+@pytest.fixture(scope="module")
+def clean_case(fmu: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, EstimationResult]:
+    table = plant_data(fmu, TRUE_KHT, noise=NOISE, seed=1)
+    spec = write_case(tmp_path_factory.mktemp("clean"), fmu, table)
+    return spec, estimate(load_spec(spec), seed=0, maxiter=5, popsize=10)
+
+
+def _kht_standard_error(fmu: Path, spec_path: Path) -> float:
+    """Standard error of a least-squares kht estimate: sigma / ||dy/dkht|| over the training samples."""
+    from trackingbox.fmu import FMUModel
+
+    table = load_windows(load_spec(spec_path))[0]
+    u = {name: values for name, values in table.inputs.items()}
+    import pandas as pd
+
+    pre = 20000.0
+    frame = pd.DataFrame({"time": np.concatenate(([0.0], pre + table.time)),
+                          **{k: np.concatenate(([v[0]], v)) for k, v in u.items()}})
+    model = FMUModel(fmu)
+    try:
+        ys = [np.interp(pre + table.time, *model.simulate(stop_time=pre + table.time[-1], output_interval=10.0,
+                                                          inputs=frame, parameters={"kht": k, "A": 2.0},
+                                                          outputs=["T_out"]).to_numpy().T)
+              for k in (TRUE_KHT - 5.0, TRUE_KHT + 5.0)]
+    finally:
+        model.close()
+    sensitivity = (ys[1] - ys[0]) / 10.0
+    return NOISE / float(np.sqrt(np.sum(sensitivity ** 2)))
+
+
+def test_nrmse_hand_computed() -> None:
+    # errors 0, -1, -1 -> RMSE sqrt(2/3); measured range 5 - 1 = 4
+    assert nrmse([1.0, 2.0, 4.0], [1.0, 3.0, 5.0]) == pytest.approx(math.sqrt(2.0 / 3.0) / 4.0)
+    # NaN measurements are ignored, also for the range
+    assert nrmse([1.0, 99.0, 4.0], [1.0, np.nan, 5.0]) == pytest.approx(math.sqrt(0.5) / 4.0)
+
+
+def test_plant_data_start_settled(fmu: Path) -> None:
+    # the fixture's plant starts at the hand-solved steady state of the first inputs
+    table = plant_data(fmu, TRUE_KHT, noise=0.0)
+    expected = steady_state(table["FI-1"][0], table["TI-0"][0], TRUE_KHT)
+    assert table["TI-1"][0] == pytest.approx(expected, abs=0.05)
+
+
+def test_recovers_true_parameter_within_noise(fmu: Path, clean_case: tuple[Path, EstimationResult]) -> None:
+    spec_path, result = clean_case
+    se = _kht_standard_error(fmu, spec_path)
+    # 4 standard errors of the noise-limited estimate, and in any case within 1 %
+    assert abs(result.parameters["kht"] - TRUE_KHT) <= max(4.0 * se, 1e-3 * TRUE_KHT)
+    assert abs(result.parameters["kht"] - TRUE_KHT) <= 0.01 * TRUE_KHT
+    # at the estimate only the noise is left: NRMSE ~ sigma / range of the measured tag
+    table = load_windows(load_spec(spec_path))[0].measured["TI-1"]
+    floor = NOISE / (np.nanmax(table) - np.nanmin(table))
+    assert 0.8 * floor <= result.training_nrmse["TI-1"] <= 1.2 * floor
+    # the start value kht = 1000 fits clearly worse on the validation window
+    assert result.validation_nrmse["TI-1"] < 0.2 * result.validation_nrmse_initial["TI-1"]
+    assert result.evaluations > 0 and result.seconds > 0
+    assert list(result.history) == sorted(result.history, reverse=True)  # best-so-far never rises
+
+
+def test_masked_samples_do_not_change_the_estimate(fmu: Path, tmp_path: Path) -> None:
+    # the plant stops (flow 0) from 2400 s to 3300 s; the stoppage rule masks flow < 0.05 plus 300 s
+    stop = (2400.0, 3300.0)
+    table = plant_data(fmu, TRUE_KHT, noise=NOISE, seed=2, stoppage=stop)
+    # and the outlet sensor is missing from 5000 s to 5590 s (60 rows)
+    missing = (table["time"] >= 5000.0) & (table["time"] < 5600.0)
+    table.loc[missing, "TI-1"] = np.nan
+    rules = '\n[data]\nstoppage = { tag = "FI-1", below = 0.05, settle = 300.0 }\nmax_gap = 30.0\n'
+    spec_a = write_case(tmp_path / "a", fmu, table, data=rules)
+
+    # hand count: training grid 0..7190 s (720 points); stoppage 2400..3290 (90) + settle to 3590 (30);
+    # missing outlet 5000..5590 (60): 720 - 90 - 30 - 60 = 540 samples in the cost
+    training = load_windows(load_spec(spec_a))[0]
+    assert training.valid_counts() == {"TI-1": 540}
+    assert np.isnan(training.measured["TI-1"][training.time == 3580.0]).all()
+    assert np.isfinite(training.measured["TI-1"][training.time == 3600.0]).all()
+
+    # corrupt the outlet temperature inside the stoppage and its settle time: +30 K
+    corrupt = table.copy()
+    inside = (corrupt["time"] >= stop[0]) & (corrupt["time"] < stop[1] + 300.0)
+    corrupt.loc[inside, "TI-1"] += 30.0
+    spec_b = write_case(tmp_path / "b", fmu, corrupt, data=rules)
+    a = estimate(load_spec(spec_a), seed=0, maxiter=3, popsize=10)
+    b = estimate(load_spec(spec_b), seed=0, maxiter=3, popsize=10)
+    assert b.parameters["kht"] == pytest.approx(a.parameters["kht"], rel=1e-9)
+    assert abs(a.parameters["kht"] - TRUE_KHT) <= 0.01 * TRUE_KHT
+    # without the stoppage rule the same corruption does move the estimate (so the check above can fail)
+    spec_c = write_case(tmp_path / "c", fmu, corrupt, data="\n[data]\nmax_gap = 30.0\n")
+    c = estimate(load_spec(spec_c), seed=0, maxiter=3, popsize=10)
+    assert abs(c.parameters["kht"] - a.parameters["kht"]) > 0.01 * TRUE_KHT
+
+
+def test_bounds_respected_and_checkpoint(fmu: Path, tmp_path: Path) -> None:
+    # true value 900 lies below the bounds [950, 1200]: the estimate must stop at the lower bound
+    table = plant_data(fmu, TRUE_KHT, noise=NOISE, seed=3)
+    spec = write_case(tmp_path, fmu, table, start=1100.0, lo=950.0, hi=1200.0)
+    seen: list[tuple[str, int]] = []
+    result = estimate(load_spec(spec), seed=1, maxiter=3, popsize=10, checkpoint=tmp_path / "ckpt.json",
+                      progress=lambda stage, i, n, best: seen.append((stage, i)))
+    assert 950.0 <= result.parameters["kht"] <= 950.0 * (1 + 1e-6)
+    assert seen[0] == ("global", 1) and seen[-1] == ("local", 1)
+    saved = json.loads((tmp_path / "ckpt.json").read_text())
+    assert saved["stage"] == "done"
+    assert saved["parameters"]["kht"] == pytest.approx(result.parameters["kht"])
+
+
+def test_too_little_data(fmu: Path, tmp_path: Path) -> None:
+    table = plant_data(fmu, TRUE_KHT, hours=1.0)
+    # 100 s of training window = 10 samples on the 10 s grid
+    spec = write_case(tmp_path, fmu, table, training=(0.0, 100.0), validation=(100.0, 3600.0))
+    with pytest.raises(DataError, match=r"'TI-1' has 10 valid samples in the training window.*at least 20"):
+        estimate(load_spec(spec), maxiter=1)
+
+
+def test_input_gap_names_tag_and_span(fmu: Path, tmp_path: Path) -> None:
+    table = plant_data(fmu, TRUE_KHT, hours=1.0)
+    table.loc[(table["time"] >= 1000.0) & (table["time"] <= 1500.0), "FI-1"] = np.nan
+    spec = write_case(tmp_path, fmu, table, training=(0.0, 1800.0), validation=(1800.0, 3600.0),
+                      data="\n[data]\nmax_gap = 60.0\n")
+    with pytest.raises(DataError, match=r"input tag 'FI-1'.*training window at 1000-1500 s"):
+        estimate(load_spec(spec), maxiter=1)
+
+
+def test_unknown_parameter_did_you_mean(fmu: Path, tmp_path: Path) -> None:
+    table = plant_data(fmu, TRUE_KHT, hours=1.0)
+    spec = write_case(tmp_path, fmu, table, name="khtt", training=(0.0, 1800.0), validation=(1800.0, 3600.0))
+    with pytest.raises(SpecError, match=r"unknown parameter 'khtt'.*did you mean 'kht'"):
+        estimate(load_spec(spec), maxiter=1)
+
+
+def test_write_starts_keeps_comments(fmu: Path, tmp_path: Path) -> None:
+    table = plant_data(fmu, TRUE_KHT, hours=1.0)
+    spec_path = write_case(tmp_path, fmu, table, training=(0.0, 1800.0), validation=(1800.0, 3600.0))
+    before = spec_path.read_text()
+    spec = write_starts(spec_path, {"kht": 912.5})
+    after = spec_path.read_text()
+    assert spec.parameter("kht").start == 912.5
+    assert load_spec(spec_path).parameter("kht").start == 912.5
+    assert "# heat-transfer coefficient" in after and after.startswith("# test spec")
+    # only the start line changed
+    changed = [(a, b) for a, b in zip(before.splitlines(), after.splitlines()) if a != b]
+    assert changed == [("start = 1000.0", "start = 912.5")]
+    with pytest.raises(SpecError, match="outside"):
+        write_starts(spec_path, {"kht": 5000.0})
