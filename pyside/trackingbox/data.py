@@ -34,6 +34,11 @@ def _fmt(t: float) -> str:
     return f"{t:g} s"
 
 
+def _n(count: int, noun: str) -> str:
+    """``"1 NaN value"``, ``"412 NaN values"``."""
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
+
+
 def _line(i: int) -> int:
     """CSV line number of data row *i* (0-based; line 1 is the header)."""
     return i + 2
@@ -75,7 +80,7 @@ def _parse_time(raw: pd.Series, where: str, problems: list[str]) -> tuple[npt.ND
         numeric = seconds
     if missing.any():
         rows = np.flatnonzero(missing)
-        problems.append(f"column 'time' in {where} has {rows.size} empty value(s), first on line {_line(int(rows[0]))}")
+        problems.append(f"column 'time' in {where} has {_n(rows.size, 'empty value')}, first on line {_line(int(rows[0]))}")
     return numeric, t0
 
 
@@ -90,12 +95,12 @@ def _check_time_order(t: npt.NDArray[np.float64], where: str, problems: list[str
     if dup.size:
         i = int(valid[dup[0] + 1])
         problems.append(f"column 'time' in {where} has duplicate times: line {_line(i)} repeats {_fmt(t[i])} "
-                        f"({dup.size} duplicate(s) in all)")
+                        f"({_n(dup.size, 'duplicate')} in all)")
     if back.size:
         i = int(valid[back[0] + 1])
         j = int(valid[back[0]])
         problems.append(f"column 'time' in {where} goes backwards: line {_line(i)} has {_fmt(t[i])} after "
-                        f"{_fmt(t[j])} on line {_line(j)} ({back.size} decrease(s) in all)")
+                        f"{_fmt(t[j])} on line {_line(j)} ({_n(back.size, 'decrease')} in all)")
 
 
 def _header(path: Path) -> list[str] | None:
@@ -210,7 +215,7 @@ def read_table(
                 span = f" at {_fmt(lo)}" if lo == hi else f" between {_fmt(lo)} and {_fmt(hi)}"
             else:
                 span = f" between lines {_line(int(rows[0]))} and {_line(int(rows[-1]))}"
-            problems.append(f"{kind} {c!r} in {where} has {rows.size} NaN value(s){span}")
+            problems.append(f"{kind} {c!r} in {where} has {_n(rows.size, 'NaN value')}{span}")
         out[c] = values
 
     if problems:

@@ -830,7 +830,10 @@ class Stepper:
             try:
                 state_event, _, t_ret = solver.step(self.time, target)
             except Exception as exc:
-                cause = solver.callback_error or exc
+                cause: object = solver.callback_error or exc
+                info = getattr(solver, "error_info", None)
+                if solver.callback_error is None and info and len(info) > 3:
+                    cause = str(info[3]).strip()
                 raise SimulationError(f"solver failed in {self.model.path.name} between t = {self.time:g} s "
                                       f"and t = {target:g} s: {cause}") from None
             self.time = float(t_ret)
