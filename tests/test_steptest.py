@@ -84,10 +84,10 @@ def _problem(fmu, **kw):
                         ranges={t: 1.0 for t in OUTPUTS}, **kw)
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_gains_with_frozen_controller_match_hand_solution(step_fmu, workers):
+@pytest.mark.parametrize(("workers", "warm"), [(1, True), (2, False)])
+def test_gains_with_frozen_controller_match_hand_solution(step_fmu, workers, warm):
     prob = _problem(step_fmu, freeze={"hold": 1.0})
-    settings = StepSettings(freeze=(("hold", 1.0),), **FAST)
+    settings = StepSettings(freeze=(("hold", 1.0),), warm_start=warm, **FAST)
     with make_executor(workers=workers) as ex:
         res = step_tests(prob, settings, ex)
     delta = 0.05 * 1.0

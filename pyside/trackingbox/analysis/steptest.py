@@ -65,6 +65,9 @@ class StepSettings:
         Longest time (s) any phase may take to settle.
     solver_tolerance : float
         FMU solver relative tolerance.
+    warm_start : bool
+        Start each step run from the baseline's continuous states at the step
+        time (model-exchange FMUs) instead of replaying the settle phases.
     """
 
     step: float = 0.05
@@ -75,6 +78,7 @@ class StepSettings:
     tolerance: float = 1e-4
     max_time: float = 36000.0
     solver_tolerance: float = 1e-8
+    warm_start: bool = True
 
     def __post_init__(self) -> None:
         for name in ("step", "interval", "window", "tolerance", "max_time", "solver_tolerance"):
@@ -167,6 +171,7 @@ class RunPlan:
     step_time: float = math.nan
     change: tuple[tuple[str, float], ...] = ()
     label: str = "baseline"
+    states: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -181,6 +186,7 @@ class RunResult:
     end_time: float
     times: np.ndarray
     trajectory: np.ndarray
+    states: tuple[float, ...] | None = None
 
 
 class _Settle:
@@ -222,12 +228,19 @@ def run_plan(plan: RunPlan) -> RunResult:
     s = plan.settings
     model = cached_model(plan.fmu, s.solver_tolerance)
     limits = np.asarray(plan.ranges, dtype=float) * s.tolerance
+    warm = plan.states is not None and not math.isnan(plan.step_time)
+    t_start = plan.step_time if warm else 0.0
+    start = dict(plan.start_values)
+    if warm:
+        start.update(dict(s.freeze))
     try:
-        stepper = model.stepper(start_time=0.0, parameters=dict(plan.start_values), max_step=s.interval)
+        stepper = model.stepper(start_time=t_start, parameters=start, max_step=s.interval)
+        if warm:
+            stepper.set_continuous_states(np.asarray(plan.states, dtype=float))
     except TrackingError as exc:
         raise AnalysisError(f"step test {plan.label}: the twin could not be initialised: {exc}") from None
     outs = list(plan.outputs)
-    k = 0
+    k = int(round(t_start / s.interval))
 
     def advance(kk: int) -> np.ndarray:
         try:
@@ -259,13 +272,15 @@ def run_plan(plan: RunPlan) -> RunResult:
             advance(k)
 
     # phase 1: controllers active
-    if math.isnan(plan.freeze_time):
+    if warm:
+        pass
+    elif math.isnan(plan.freeze_time):
         k = settle("the twin with its controllers active", 0)
     else:
         run_to(int(round(plan.freeze_time / s.interval)))
-    freeze_time = k * s.interval
+    freeze_time = plan.freeze_time if warm else k * s.interval
     # phase 2: controllers frozen
-    if s.freeze:
+    if s.freeze and not warm:
         stepper.set(dict(s.freeze))
         if math.isnan(plan.step_time):
             k = settle("the twin after freezing its controllers (" +
@@ -275,8 +290,14 @@ def run_plan(plan: RunPlan) -> RunResult:
     step_time = k * s.interval
     before = stepper.get(outs)
     if not plan.change:
+        states = None
+        if s.warm_start:
+            try:
+                states = tuple(float(x) for x in stepper.get_continuous_states())
+            except TrackingError:
+                logger.info("no access to continuous states (co-simulation FMU): step runs replay the settle")
         return RunResult(plan.label, freeze_time, step_time, before, before, step_time,
-                         np.array([step_time]), before[None, :])
+                         np.array([step_time]), before[None, :], states)
     # phase 3: the step
     stepper.set(dict(plan.change))
     det = _Settle(step_time, s.window, limits)
@@ -558,7 +579,8 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
                 logger.warning("step of %s to %g leaves its bounds [%g, %g]", name, value, lo, hi)
             plans.append((j, sgn, RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges,
                                           settings, base.freeze_time, base.step_time, ((name, value),),
-                                          label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}")))
+                                          label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}",
+                                          states=base.states)))
     if executor is None:
         results = [run_plan(p) for _, _, p in plans]
     else:
