@@ -6,15 +6,16 @@ FMI 3.0 model-exchange FMUs. See :mod:`.flatten` for what Modelica it accepts.
 from __future__ import annotations
 
 import logging
+import re
 import time
 from pathlib import Path
 
 import rumoca
 
-from ..errors import CompileError
+from ..errors import CompileError, UnsupportedConstructError
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
-from .source import ModelicaSource, experiment_settings
+from .source import ModelicaSource, experiment_settings, find_construct
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +34,6 @@ def _diagnostics(source: ModelicaSource, limit: int = 5) -> list[str]:
             text = str(getattr(d, "message", d))
             line = getattr(d, "line", None)
             # rumoca's message carries the exact position as ╭─[file:line:col]
-            import re
-
             pos = re.search(r"\[([^\]\[]+?):(\d+):(\d+)\]", text)
             if pos:
                 where = f"{pos.group(1)}:{pos.group(2)}:{pos.group(3)}"
@@ -45,6 +44,33 @@ def _diagnostics(source: ModelicaSource, limit: int = 5) -> list[str]:
             if len(found) >= limit:
                 return found
     return found
+
+
+_MENTIONED = (
+    ("when", "when-clause", r"\bwhen\b"),
+    ("pre(", "pre()", r"\bpre\s*\("),
+    ("pre expression", "pre()", r"\bpre\s*\("),
+    ("edge(", "edge()", r"\bedge\s*\("),
+    ("sample(", "sample()", r"\bsample\s*\("),
+    ("reinit", "reinit()", r"\breinit\s*\("),
+    ("external", "external function", r"\bexternal\b"),
+    ("clock", "clocked equations", r"\bClock\b"),
+)
+
+
+def _mentioned_construct(message: str, source: ModelicaSource) -> UnsupportedConstructError | None:
+    """rumoca refused a construct the embedded path does not support either: say where it is."""
+    low = message.lower()
+    for needle, construct, pattern in _MENTIONED:
+        if needle in low:
+            locs = find_construct(source.files, pattern)
+            if locs:
+                where = ", ".join(str(loc) for loc in locs)
+                return UnsupportedConstructError(
+                    f"unsupported Modelica construct: {construct} at {where} "
+                    f"(rumoca: {message.splitlines()[0][:300]})"
+                )
+    return None
 
 
 def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> dict:
@@ -61,6 +87,9 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                 raise CompileError(f"cannot compile {model!r} from {source.entry}: {first} "
                                    f"(is the class name right? classes are named with their package, "
                                    f"e.g. Pkg.Sub.Model)") from None
+        construct = _mentioned_construct(str(exc), source)
+        if construct is not None:
+            raise construct from None
         detail = ("\n  " + "\n  ".join(diags)) if diags else ""
         raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}") from None
     except Exception as exc:  # rumoca raises plain errors for some internal failures

@@ -779,7 +779,7 @@ def _binary(op: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
             if _num(x) and _num(y):
                 return float(x) ** float(y)
             if _num(y) and float(y) == 2.0:
-                return ca.sq(x)
+                return x * x
             if _num(y) and float(y).is_integer() and 0 < abs(float(y)) <= 8:
                 return ca.constpow(x, float(y))
             return ca.power(x, y)

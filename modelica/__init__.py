@@ -1,0 +1,1 @@
+"""Package data: the TrackingBox Modelica library (shipped with the Python package)."""

@@ -1,0 +1,45 @@
+"""``trackingbox compile``: Modelica source → FMU."""
+from __future__ import annotations
+
+import argparse
+import json
+
+from ..compiler import BACKENDS, compile_model
+
+EPILOG = """\
+examples:
+  trackingbox compile modelica/TrackingBox --model TrackingBox.Benches.HeatExchanger.Twin -o twin.fmu
+  trackingbox compile plant.mo --model Plant --backend embedded --json
+
+backends:
+  auto          openmodelica where omc is on PATH, else embedded
+  embedded      rumoca + CasADi + gcc, FMI 3.0 model exchange; PyPI packages only
+  openmodelica  OMPython + omc, FMI 2.0 (model exchange and co-simulation)
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "compile", help="compile a Modelica class into an FMU",
+        description="Compile a Modelica class into an FMU.", epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("source", help=".mo file or Modelica package directory")
+    p.add_argument("--model", required=True, help="full class name, e.g. Pkg.Sub.Model")
+    p.add_argument("--backend", choices=BACKENDS, default="auto")
+    p.add_argument("-o", "--output", help="FMU to write (default: <Model>.fmu here)")
+    p.add_argument("--library", action="append", default=[], metavar="DIR",
+                   help="further Modelica package directory the source uses (repeatable)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    result = compile_model(args.source, args.model, backend=args.backend, output=args.output,
+                           libraries=args.library)
+    if args.json:
+        print(json.dumps(result.to_json()))
+    else:
+        print(f"{result.fmu}  (FMI {result.fmi_version}, {result.backend}, {result.states} states, "
+              f"{result.parameters} tunable parameters, {result.seconds:.2f} s)")
+    return 0
