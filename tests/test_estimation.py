@@ -173,3 +173,30 @@ def test_write_starts_keeps_comments(fmu: Path, tmp_path: Path) -> None:
     assert changed == [("start = 1000.0", "start = 912.5")]
     with pytest.raises(SpecError, match="outside"):
         write_starts(spec_path, {"kht": 5000.0})
+
+
+def test_estimate_command_json_report_write(fmu: Path, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    import argparse
+
+    from trackingbox.commands import estimate as command
+
+    table = plant_data(fmu, TRUE_KHT, noise=NOISE, seed=4, hours=2.0)
+    spec_path = write_case(tmp_path / "case", fmu, table, training=(0.0, 3600.0), validation=(3600.0, 7200.0))
+    parser = argparse.ArgumentParser()
+    command.register(parser.add_subparsers())
+    report = tmp_path / "report"
+    args = parser.parse_args(["estimate", str(spec_path), "--json", "--report", str(report), "--maxiter", "3",
+                              "--write"])
+    assert args.func(args) == 0
+    doc = json.loads(capsys.readouterr().out)  # exactly one JSON document on stdout
+    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds"}
+    assert set(doc["validation"]) == {"nrmse", "nrmse_initial"}
+    assert abs(doc["parameters"]["kht"] - TRUE_KHT) <= 0.01 * TRUE_KHT
+    assert doc["validation"]["nrmse"]["TI-1"] < doc["validation"]["nrmse_initial"]["TI-1"]
+    for name in ("fit_TI-1.png", "convergence.png", "parameters.md", "checkpoint.json", "result.json"):
+        assert (report / name).stat().st_size > 0, name
+    assert (report / "fit_TI-1.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| `kht` | 1000 |" in (report / "parameters.md").read_text()
+    # --write: the estimate is now the start value
+    assert load_spec(spec_path).parameter("kht").start == pytest.approx(doc["parameters"]["kht"])
