@@ -1,0 +1,140 @@
+"""Data layer: CSV reading/validation, resampling without bridging gaps, windows, NaN spans."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trackingbox.data import nan_spans, read_table, resample, window
+from trackingbox.errors import DataError
+
+
+def write(tmp_path, text, name="measurements.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_numeric_time(tmp_path):
+    df = read_table(write(tmp_path, "time,TI-301,FI-101\n0,20.5,1\n10,21.0,1.5\n20,21.5,2\n"),
+                    required=["TI-301"])
+    assert list(df.columns) == ["time", "TI-301", "FI-101"]
+    assert df["time"].tolist() == [0.0, 10.0, 20.0]
+    assert df["TI-301"].tolist() == [20.5, 21.0, 21.5]
+    assert df.attrs["t0"] is None
+
+
+def test_iso_time_becomes_seconds_from_first_row(tmp_path):
+    df = read_table(write(tmp_path, "time,T\n2026-03-01T10:00:00,1\n2026-03-01T10:00:10,2\n"
+                                    "2026-03-01T11:00:00,3\n"))
+    assert df["time"].tolist() == [0.0, 10.0, 3600.0]
+    assert df.attrs["t0"] == pd.Timestamp("2026-03-01T10:00:00")
+
+
+def test_iso_time_with_offset(tmp_path):
+    df = read_table(write(tmp_path, "time,T\n2026-03-01T10:00:00+01:00,1\n2026-03-01T09:01:00Z,2\n"))
+    assert df["time"].tolist() == [0.0, 60.0]
+
+
+def test_missing_required_columns_suggest(tmp_path):
+    with pytest.raises(DataError) as exc:
+        read_table(write(tmp_path, "time,TI-301\n0,1\n"), required=["TI-310", "FI-101"])
+    msg = str(exc.value)
+    assert "tag 'TI-310' is missing from measurements.csv (did you mean 'TI-301'?)" in msg
+    assert "tag 'FI-101' is missing" in msg
+
+
+def test_no_time_column(tmp_path):
+    with pytest.raises(DataError, match=r"no 'time' column \(did you mean 'Time'\?\)"):
+        read_table(write(tmp_path, "Time,T\n0,1\n"))
+
+
+def test_non_numeric_cell_names_line_and_column(tmp_path):
+    with pytest.raises(DataError, match=r"tag 'T' in measurements.csv has non-numeric values: 'abc' on line 3"):
+        read_table(write(tmp_path, "time,T\n0,1\n10,abc\n20,3\n"))
+
+
+def test_non_monotonic_time_names_first_row_and_time(tmp_path):
+    with pytest.raises(DataError, match=r"goes backwards: line 4 has 15 s after 20 s on line 3"):
+        read_table(write(tmp_path, "time,T\n0,1\n20,2\n15,3\n30,4\n"))
+
+
+def test_duplicate_time(tmp_path):
+    with pytest.raises(DataError, match=r"duplicate times: line 4 repeats 10 s"):
+        read_table(write(tmp_path, "time,T\n0,1\n10,2\n10,3\n"))
+
+
+def test_nan_values_count_and_span(tmp_path):
+    # 412 empty cells of TI-301 from t = 600 s to t = 1011 s (1 s sampling, one row per second)
+    t = np.arange(0, 1200)
+    vals = np.where((t >= 600) & (t < 1012), np.nan, 20.0)
+    df = pd.DataFrame({"time": t, "TI-301": vals})
+    path = tmp_path / "measurements.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(DataError) as exc:
+        read_table(path)
+    assert str(exc.value) == "tag 'TI-301' in measurements.csv has 412 NaN values between 600 s and 1011 s"
+    ok = read_table(path, allow_nan=True)
+    assert int(ok["TI-301"].isna().sum()) == 412
+
+
+def test_all_problems_reported_together(tmp_path):
+    path = write(tmp_path, "time,A,B\n0,1,x\n10,,2\n5,3,4\n", name="inputs.csv")
+    with pytest.raises(DataError) as exc:
+        read_table(path, required=["C"], what="inputs")
+    msg = str(exc.value)
+    assert msg.startswith("inputs file inputs.csv has 4 problems:")
+    for part in ("column 'C' is missing", "goes backwards: line 4 has 5 s",
+                 "column 'B' in inputs.csv has non-numeric values: 'x' on line 2",
+                 "column 'A' in inputs.csv has 1 NaN value at 10 s"):
+        assert part in msg
+
+
+@pytest.mark.parametrize("content, problem", [
+    (None, "does not exist"),
+    (b"PK\x03\x04\x14\x00\x00\x00\x08\x00\xff\xfe\xfd", "not a CSV text file"),
+    (b"", "cannot be read as CSV"),
+    (b"time,T\n", "no data rows"),
+])
+def test_unreadable_files(tmp_path, content, problem):
+    path = tmp_path / "data.csv"
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(DataError) as exc:
+        read_table(path)
+    assert problem in str(exc.value) and "data.csv" in str(exc.value)
+
+
+def test_resample_interpolates_per_column_and_never_across_long_gaps():
+    df = pd.DataFrame({
+        "time": [0.0, 10.0, 20.0, 30.0, 100.0, 110.0],
+        "A": [0.0, 1.0, 2.0, 3.0, 10.0, 11.0],        # 70 s gap between 30 and 100
+        "B": [0.0, np.nan, 4.0, 6.0, np.nan, np.nan],  # short NaN gap, valid only up to t = 30
+    })
+    out = resample(df, [5.0, 15.0, 30.0, 50.0, 100.0, 105.0, 120.0], max_gap=40.0)
+    assert out["time"].tolist() == [5.0, 15.0, 30.0, 50.0, 100.0, 105.0, 120.0]
+    a, b = out["A"].to_numpy(), out["B"].to_numpy()
+    # A: linear inside short spans, NaN inside the 70 s gap (but kept at the sample at 100 s),
+    # NaN after the last sample
+    assert np.allclose(a[[0, 1, 2, 4, 5]], [0.5, 1.5, 3.0, 10.0, 10.5])
+    assert np.isnan(a[3]) and np.isnan(a[6])
+    # B: bridges its own 20 s NaN gap (0 -> 4 between 0 and 20 s), NaN beyond its last valid sample
+    assert np.allclose(b[[0, 1, 2]], [1.0, 3.0, 6.0])
+    assert np.all(np.isnan(b[3:]))
+    # without max_gap the long gap of A is bridged linearly: 3 + 7 * 20/70 at 50 s
+    assert resample(df, [50.0])["A"].iloc[0] == pytest.approx(3.0 + 7.0 * 20.0 / 70.0)
+
+
+def test_window_is_half_open():
+    df = pd.DataFrame({"time": [0.0, 10.0, 20.0, 30.0], "T": [1.0, 2.0, 3.0, 4.0]})
+    w = window(df, 10.0, 30.0)
+    assert w["time"].tolist() == [10.0, 20.0] and w.index.tolist() == [0, 1]
+    with pytest.raises(DataError, match="ends before it starts"):
+        window(df, 30.0, 10.0)
+
+
+def test_nan_spans():
+    s = pd.Series([np.nan, 1.0, np.nan, np.nan, 2.0, np.nan])
+    t = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0]
+    assert nan_spans(s, t) == [(0.0, 0.0), (20.0, 30.0), (50.0, 50.0)]
+    assert nan_spans(pd.Series([1.0, 2.0])) == []
