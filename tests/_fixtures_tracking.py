@@ -1,0 +1,113 @@
+"""A first-order "heat exchanger" twin made with CasADi, and plant cases for tracking tests.
+
+Model: ``dx/dt = (u - x)/tau - k·x``, ``y = x``, ``tau = 100 s``, tunable ``k``.
+Steady state ``x = u/(1 + k·tau)``: with ``u = 50`` the plant (``k = 0.004``)
+sits at ``50/1.4 = 35.714`` and the untracked twin (``k = 0.003``) at
+``50/1.3 = 38.462``. ``dx/dk = -u·tau/(1 + k·tau)^2 = -2551`` at the plant's
+operating point; the response time constant is ``1/(1/tau + k) = 71 s``.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+TAU = 100.0
+K_PLANT = 0.004
+K_TWIN = 0.003
+
+
+def make_first_order_fmu(directory: Path) -> Path:
+    """Export, compile and pack the model as an FMI 3.0 model-exchange FMU in *directory*."""
+    import casadi
+    import fmpy
+
+    directory.mkdir(parents=True, exist_ok=True)
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        dae = casadi.DaeBuilder("hx1")
+        k = dae.add("k", "parameter", "tunable", {"start": K_TWIN, "min": 0.0, "max": 0.1})
+        u = dae.add("u", "input", {"start": 50.0})
+        x = dae.add("x", "local", "continuous", {"start": 38.0, "initial": "exact"})
+        y = dae.add("y", "output", {})
+        dae.eq(dae.der(x), (u - x) / TAU - k * x)
+        dae.eq(y, x)
+        files = dae.export_fmu({"no_warning": True})
+        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
+        return directory / dae.pack_fmu(files, {})
+    finally:
+        os.chdir(cwd)
+
+
+def plant_input(t: np.ndarray) -> np.ndarray:
+    """The scenario's input: 50, a step to 60 at 2000 s, to 55 at 4000 s."""
+    return 50.0 + 10.0 * (t > 2000.0) - 5.0 * (t > 4000.0)
+
+
+SPEC = '''twin = "twin.fmu"
+measurements = "measurements.csv"
+sample_time = 10.0
+
+[inputs]
+"FI" = "u"
+
+[outputs]
+"TI" = "y"
+
+[[parameters]]
+name = "k"
+start = {k_twin}
+min = 0.001
+max = 0.01
+
+[windows]
+training = [0.0, 3000.0]
+validation = [3000.0, 6000.0]
+{data}
+[[pairs]]
+variable = "TI"
+parameter = "k"
+gain = -2551.0
+time_constant = 71.0
+lambda = 1.0
+controller = "{controller}"
+
+[tracking]
+hold_until = 200.0
+'''
+
+
+def make_case(fmu: Path, out: Path, *, k_plant: float = K_PLANT, noise: float = 0.02, seed: int = 1,
+              stop: float = 6000.0, nan_span: tuple[float, float] | None = None,
+              stoppage: tuple[float, float] | None = None, settle: float = 100.0,
+              controller: str = "pi", max_gap: float | None = None) -> Path:
+    """Simulate the plant (``k = k_plant``), add noise, write measurements + spec; return the spec path."""
+    from trackingbox.fmu import FMUModel
+
+    out.mkdir(parents=True, exist_ok=True)
+    t = np.arange(0.0, stop + 1.0, 10.0)
+    u = plant_input(t)
+    if stoppage is not None:
+        u = np.where((t >= stoppage[0]) & (t < stoppage[1]), 0.0, u)
+    with FMUModel(fmu) as m:
+        sim = m.simulate(stop_time=stop, output_interval=10.0, inputs=pd.DataFrame({"time": t, "u": u}),
+                         parameters={"k": k_plant, "x": 50.0 / (1.0 + k_plant * TAU)}, outputs=["y"])
+    rng = np.random.default_rng(seed)
+    y = sim["y"].to_numpy() + rng.normal(0.0, noise, t.size)
+    if nan_span is not None:
+        y[(t >= nan_span[0]) & (t < nan_span[1])] = np.nan
+    pd.DataFrame({"time": t, "FI": u, "TI": y, "TI_true": sim["y"].to_numpy()}).to_csv(
+        out / "measurements.csv", index=False, na_rep="")
+    (out / "twin.fmu").write_bytes(Path(fmu).read_bytes())
+    rules = []
+    if stoppage is not None:
+        rules.append(f'stoppage = {{ tag = "FI", below = 1.0, settle = {settle} }}')
+    if max_gap is not None:
+        rules.append(f"max_gap = {max_gap}")
+    data = "\n[data]\n" + "\n".join(rules) + "\n" if rules else ""
+    spec = out / "spec.toml"
+    spec.write_text(SPEC.format(k_twin=K_TWIN, data=data, controller=controller), encoding="utf-8")
+    return spec

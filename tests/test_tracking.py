@@ -1,0 +1,213 @@
+"""The tracking runtime on a CasADi-made first-order twin (see ``_fixtures_tracking``).
+
+Independent expectations: the plant's k (0.004, set by the test) and the
+steady states ``u/(1 + k·tau)`` solved by hand.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from _fixtures_tracking import K_PLANT, K_TWIN, TAU, make_case, make_first_order_fmu
+from trackingbox.errors import SimulationError, SpecError
+from trackingbox.spec import load_spec
+from trackingbox.tracking.runtime import track
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_first_order_fmu(tmp_path_factory.mktemp("hx1"))
+
+
+@pytest.fixture(scope="module")
+def case(fmu: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_case(fmu, tmp_path_factory.mktemp("case"))
+
+
+@pytest.fixture(scope="module")
+def baseline(case: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[object, pd.DataFrame]:
+    """One uninterrupted run, shared by the comparisons."""
+    out = tmp_path_factory.mktemp("baseline")
+    result = track(load_spec(case), out_dir=out, checkpoint_every=50)
+    return result, pd.read_csv(result.csv)
+
+
+def _k_end(df: pd.DataFrame, seconds: float = 1000.0) -> float:
+    return float(df.loc[df["time"] >= df["time"].iloc[-1] - seconds, "parameter:k"].mean())
+
+
+def test_tracked_parameter_converges_to_plant_value(baseline: tuple[object, pd.DataFrame]) -> None:
+    result, df = baseline
+    assert result.complete
+    assert len(df) == 601  # 0 .. 6000 s every 10 s
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+    # untracked twin keeps its offset: steady state 55/(1 + 0.3) against the plant's 55/(1 + 0.4)
+    last = df.iloc[-1]
+    assert last["untracked:TI"] == pytest.approx(55.0 / (1.0 + K_TWIN * TAU), abs=1e-3)
+    assert last["measured:TI"] == pytest.approx(55.0 / (1.0 + K_PLANT * TAU), abs=0.1)
+    # tracked error vanishes (up to the 0.02 measurement noise)
+    assert last["tracked:TI"] == pytest.approx(55.0 / (1.0 + K_PLANT * TAU), abs=0.05)
+    v = result.variables["TI"]
+    assert v.nrmse_tracked < 0.2 * v.nrmse_untracked
+    p = result.parameters["k"]
+    assert 0.001 <= p.min <= p.max <= 0.01
+    assert p.final == pytest.approx(df["parameter:k"].iloc[-1])
+
+
+def test_start_up_hold_freezes_parameter(baseline: tuple[object, pd.DataFrame]) -> None:
+    _, df = baseline
+    early = df[df["time"] < 200.0]
+    assert (early["parameter:k"] == K_TWIN).all()
+    assert (early["mode:TI"] == "hold").all()
+    assert (df.loc[df["time"] >= 200.0, "mode:TI"] == "auto").all()
+
+
+@pytest.mark.parametrize("stop_after, rtol", [(250, 0.0), (237, 1e-5)])
+def test_resume_gives_the_uninterrupted_result(case: Path, baseline: tuple[object, pd.DataFrame],
+                                               tmp_path: Path, stop_after: int, rtol: float) -> None:
+    # every checkpoint is a restart point in both runs, so stopping on a checkpoint boundary
+    # (250 = 5 x 50) gives a bit-identical result; stopping elsewhere restarts the solver at a
+    # point the uninterrupted run integrated through: equal within the solver tolerance (1e-6)
+    _, full = baseline
+    spec = load_spec(case)
+    first = track(spec, out_dir=tmp_path, max_steps=stop_after, checkpoint_every=50)
+    assert not first.complete
+    assert len(pd.read_csv(first.csv)) == stop_after
+    # a crash after the checkpoint leaves extra rows: resume must drop and redo them
+    with open(first.csv, "a", encoding="utf-8") as fh:
+        fh.write("9999,garbage\n")
+    second = track(spec, out_dir=tmp_path, resume=True, checkpoint_every=50)
+    assert second.complete
+    df = pd.read_csv(second.csv)
+    assert len(df) == len(full)
+    num = [c for c in full.columns if not c.startswith("mode:")]
+    np.testing.assert_allclose(df[num].to_numpy(), full[num].to_numpy(), rtol=rtol, atol=0.0)
+    assert (df["mode:TI"] == full["mode:TI"]).all()
+    assert second.variables["TI"].nrmse_tracked == pytest.approx(baseline[0].variables["TI"].nrmse_tracked,
+                                                                 rel=max(rtol, 1e-12))
+
+
+def test_resume_without_fmu_states_replays_trajectory(case: Path, baseline: tuple[object, pd.DataFrame],
+                                                      tmp_path: Path) -> None:
+    # a co-simulation twin has no accessible states: the checkpoint then has none and the
+    # runtime replays the recorded parameter trajectory
+    _, full = baseline
+    spec = load_spec(case)
+    track(spec, out_dir=tmp_path, max_steps=300, checkpoint_every=50)
+    ck = tmp_path / "checkpoint.json"
+    data = json.loads(ck.read_text())
+    data["x"] = None
+    data["x_untracked"] = None
+    ck.write_text(json.dumps(data))
+    df = pd.read_csv(track(spec, out_dir=tmp_path, resume=True).csv)
+    num = [c for c in full.columns if not c.startswith("mode:")]
+    np.testing.assert_allclose(df[num].to_numpy(), full[num].to_numpy(), rtol=1e-5, atol=1e-8)
+
+
+class _FailOnce:
+    """Stepper wrapper that raises a SimulationError once, in the step crossing ``at``."""
+
+    fired = False
+
+    def __init__(self, inner: object, at: float) -> None:
+        self._inner = inner
+        self._at = at
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._inner, name)
+
+    def step(self, t_next: float) -> None:
+        if not _FailOnce.fired and self._inner.time < self._at <= t_next:
+            _FailOnce.fired = True
+            raise SimulationError(f"forced failure at t = {t_next}")
+        self._inner.step(t_next)
+
+
+def test_solver_failure_recovers_and_keeps_rows(case: Path, baseline: tuple[object, pd.DataFrame],
+                                                tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                caplog: pytest.LogCaptureFixture) -> None:
+    from trackingbox import fmu as fmu_module
+
+    _, full = baseline
+    original = fmu_module.FMUModel.stepper
+    _FailOnce.fired = False
+
+    def stepper(self, **kw):  # type: ignore[no-untyped-def]
+        return _FailOnce(original(self, **kw), at=3000.0)
+
+    monkeypatch.setattr(fmu_module.FMUModel, "stepper", stepper)
+    with caplog.at_level(logging.WARNING, logger="trackingbox.tracking.runtime"):
+        result = track(load_spec(case), out_dir=tmp_path, recovery_hold=300.0, checkpoint_every=50)
+    assert _FailOnce.fired
+    assert "forced failure" in caplog.text
+    kinds = [e.kind for e in result.events]
+    assert "solver-failure" in kinds and "recovered" in kinds
+    df = pd.read_csv(result.csv)
+    assert len(df) == len(full)  # no row lost
+    before = df["time"] <= 2990.0
+    num = [c for c in full.columns if not c.startswith("mode:")]
+    np.testing.assert_allclose(df.loc[before, num].to_numpy(), full.loc[before, num].to_numpy(), rtol=1e-9)
+    held = (df["time"] >= 3000.0) & (df["time"] < 3300.0)
+    assert (df.loc[held, "mode:TI"] == "hold").all()
+    assert df.loc[held, "parameter:k"].nunique() == 1
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+
+
+def test_nan_stretch_holds_and_recovers(fmu: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    spec = load_spec(make_case(fmu, tmp_path / "case", nan_span=(2500.0, 3100.0),  # 10 minutes
+                                     max_gap=120.0))  # longer gaps are masked, not interpolated
+    with caplog.at_level(logging.INFO, logger="trackingbox.tracking.runtime"):
+        result = track(spec, out_dir=tmp_path / "out")
+    df = pd.read_csv(result.csv)
+    gap = (df["time"] >= 2500.0) & (df["time"] < 3100.0)
+    assert df.loc[gap, "measured:TI"].isna().all()
+    assert (df.loc[gap, "mode:TI"] == "hold").all()
+    assert df.loc[gap, "parameter:k"].nunique() == 1
+    assert (df.loc[df["time"] >= 3100.0, "mode:TI"] == "auto").all()
+    assert "'TI' missing" in caplog.text and "back at t = 3100" in caplog.text
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+    assert result.variables["TI"].samples == 601 - 20 - 60  # hold 0..190 s and the NaN stretch excluded
+
+
+def test_flow_stoppage_holds_controllers(fmu: Path, tmp_path: Path) -> None:
+    spec = load_spec(make_case(fmu, tmp_path / "case", stoppage=(1000.0, 1500.0), settle=200.0))
+    result = track(spec, out_dir=tmp_path / "out")
+    df = pd.read_csv(result.csv)
+    # stopped 1000..1490 s, then settle 200 s after the last stopped sample -> hold until 1690 s
+    held = (df["time"] >= 1000.0) & (df["time"] <= 1690.0)
+    assert (df.loc[held, "mode:TI"] == "hold").all()
+    assert df.loc[held, "parameter:k"].nunique() == 1
+    assert (df.loc[df["time"] >= 1700.0, "mode:TI"] == "auto").all()
+    assert result.variables["TI"].samples == 601 - 20 - 70
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+
+
+def test_sliding_mode_pair_converges(fmu: Path, tmp_path: Path) -> None:
+    spec = load_spec(make_case(fmu, tmp_path / "case", controller="sliding"))
+    df = pd.read_csv(track(spec, out_dir=tmp_path / "out").csv)
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+
+
+def test_other_plant_value_and_validation_window(fmu: Path, tmp_path: Path) -> None:
+    k_plant = 0.0025  # below the twin's start: the parameter has to move the other way
+    spec = load_spec(make_case(fmu, tmp_path / "case", k_plant=k_plant, seed=7))
+    result = track(spec, out_dir=tmp_path / "out", window="validation")
+    df = pd.read_csv(result.csv)
+    assert df["time"].iloc[-1] == 5990.0  # runs up to the end of [3000, 6000)
+    assert result.window == (3000.0, 6000.0)
+    assert result.variables["TI"].samples == 300
+    assert _k_end(df) == pytest.approx(k_plant, rel=0.01)
+    assert result.variables["TI"].nrmse_tracked < 0.3 * result.variables["TI"].nrmse_untracked
+
+
+def test_spec_without_pairs_is_refused(fmu: Path, tmp_path: Path) -> None:
+    path = make_case(fmu, tmp_path / "case")
+    text = path.read_text()
+    path.write_text(text[: text.index("[[pairs]]")] + text[text.index("[tracking]"):])
+    with pytest.raises(SpecError, match="no \\[\\[pairs\\]\\]"):
+        track(load_spec(path), out_dir=tmp_path / "out")
