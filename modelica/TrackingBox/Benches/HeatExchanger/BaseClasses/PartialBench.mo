@@ -24,7 +24,10 @@ equation
   ThOut = hx.port_b1.T;
   TcOut = hx.port_b2.T;
   annotation (Documentation(info="<html>
-<p>Structure shared by <code>Plant</code> and <code>Twin</code>; they differ
-only in parameter values.</p>
+<p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
+twin's parameter values and the tracking bounds. <code>Twin</code> extends it
+unmodified; <code>Plant</code> overrides values with plain modifiers
+(rumoca 0.10.2 drops attribute modifiers such as <code>kht(min=...)</code>
+given in an <code>extends</code> clause, so bounds live here only).</p>
 </html>"));
 end PartialBench;

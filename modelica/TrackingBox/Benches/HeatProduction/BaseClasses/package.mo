@@ -1,0 +1,3 @@
+within TrackingBox.Benches.HeatProduction;
+package BaseClasses "Shared structure of plant and twin"
+end BaseClasses;
