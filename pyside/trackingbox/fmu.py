@@ -528,6 +528,7 @@ class Stepper:
         self._in_times: npt.NDArray[np.float64] | None = None
         self._in_table: npt.NDArray[np.float64] | None = None
         self._in_set: Any = None
+        self._last_set: dict[str, Any] = {}
         self._prepare_inputs(inputs)
         self._nx = int(self._md.numberOfContinuousStates or 0)
         self._nz = int(self._md.numberOfEventIndicators or 0)
@@ -870,6 +871,8 @@ class Stepper:
             Unknown names, or variables that cannot change during a run.
         """
         self._check_open()
+        # values equal to what this method set last time change nothing: no event, no solver restart
+        values = {n: v for n, v in values.items() if self._last_set.get(n) != v}
         if not values:
             return
         params = False
@@ -900,6 +903,7 @@ class Stepper:
             raise SimulationError(f"setting {', '.join(values)} in {self.model.path.name} at "
                                   f"t = {self.time:g} s failed: {exc}") from None
         self.model._dirty.update(n for n in values if self.model._vars[n].causality == "parameter")
+        self._last_set.update(values)
 
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
         """Current values of *names* as a float array (same order)."""
