@@ -211,3 +211,29 @@ def test_spec_without_pairs_is_refused(fmu: Path, tmp_path: Path) -> None:
     path.write_text(text[: text.index("[[pairs]]")] + text[text.index("[tracking]"):])
     with pytest.raises(SpecError, match="no \\[\\[pairs\\]\\]"):
         track(load_spec(path), out_dir=tmp_path / "out")
+
+
+def _run_cli(argv: list[str]) -> int:
+    import argparse
+
+    from trackingbox.commands import track as track_command
+
+    parser = argparse.ArgumentParser(prog="trackingbox")
+    track_command.register(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    return track_command.run(args)
+
+
+def test_track_command_json_and_report(case: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = tmp_path / "report"
+    assert _run_cli(["track", str(case), "--json", "--report", str(report), "--window", "validation"]) == 0
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)  # exactly one JSON document on stdout
+    assert set(doc) == {"variables", "parameters", "seconds"}
+    assert set(doc["variables"]["TI"]) == {"nrmse_untracked", "nrmse_tracked"}
+    assert doc["variables"]["TI"]["nrmse_tracked"] < 0.3 * doc["variables"]["TI"]["nrmse_untracked"]
+    assert doc["parameters"]["k"]["final"] == pytest.approx(K_PLANT, rel=0.02)
+    assert "tracking: row" in captured.err  # progress on stderr
+    for name in ("summary.md", "tag_TI.png", "parameter_k.png", "tracking.csv", "checkpoint.json", "result.json"):
+        assert (report / name).is_file(), name
+    assert "| TI |" in (report / "summary.md").read_text()
