@@ -293,3 +293,23 @@ def test_extraction_is_removed_on_close_and_on_gc():
 def test_interface_not_offered():
     with pytest.raises(FMUError, match="does not provide the CoSimulation interface"):
         FMUModel(me3_fmu(), interface="CoSimulation")
+
+
+def test_forked_child_dropping_a_model_keeps_the_parents_files():
+    import os
+
+    m = FMUModel(me3_fmu())
+    tempdir = Path(m._tempdir)
+    pid = os.fork()
+    if pid == 0:  # child: drop the inherited model, as a pool initializer does
+        try:
+            del m
+            gc.collect()
+        finally:
+            os._exit(0)
+    os.waitpid(pid, 0)
+    assert (tempdir / "modelDescription.xml").is_file()
+    assert m.simulate(stop_time=1.0, output_interval=1.0)["y"].iloc[-1] == pytest.approx(
+        lag(1.0, 0.5, 1.0, 2.0), rel=RTOL)
+    m.close()
+    assert not tempdir.exists()

@@ -22,6 +22,7 @@ import contextlib
 import ctypes
 import logging
 import math
+import os
 import shutil
 import weakref
 import zipfile
@@ -243,8 +244,15 @@ def read_info(path: str | Path) -> FMUInfo:
 # FMUModel
 # ---------------------------------------------------------------------------
 
-def _cleanup(holder: dict[str, Any], tempdir: str | None) -> None:
-    """Free the FMU instance and delete the extraction directory (also run at GC)."""
+def _cleanup(holder: dict[str, Any], tempdir: str | None, pid: int) -> None:
+    """Free the FMU instance and delete the extraction directory (also run at GC).
+
+    Only in the process that opened the FMU: a forked worker that drops an
+    inherited :class:`FMUModel` must not delete its parent's files.
+    """
+    if os.getpid() != pid:
+        holder.pop("fmu", None)
+        return
     fmu = holder.pop("fmu", None)
     if fmu is not None:
         with contextlib.suppress(Exception):
@@ -309,7 +317,7 @@ class FMUModel:
             self._tempdir = str(fmpy.extract(str(self.path)))
         except Exception as exc:
             raise FMUError(f"FMU {self.path} could not be extracted: {exc}") from None
-        self._finalizer = weakref.finalize(self, _cleanup, self._holder, self._tempdir)
+        self._finalizer = weakref.finalize(self, _cleanup, self._holder, self._tempdir, os.getpid())
         try:
             from fmpy.simulation import instantiate_fmu
 
@@ -603,7 +611,7 @@ class Stepper:
         getter = self._getters.get(names)
         if getter is not None:
             return getter
-        fmu, md_vars = self._fmu, self.model._vars
+        fmu = self._fmu
         variables = [self.model._variable(n) for n in names]
         if all(v.type in ("Real", "Float64") for v in variables):
             n = len(variables)
@@ -634,7 +642,6 @@ class Stepper:
 
             def getter() -> npt.NDArray[np.float64]:
                 return np.array([float(g([vr])[0]) for g, vr in calls])
-        del md_vars
         self._getters[names] = getter
         return getter
 
