@@ -1,0 +1,107 @@
+"""trackingbox validate: the generated tracked FMU against the plant truth and the Python runtime.
+
+The "plant" is the fixture twin with ``hx.kht = 900`` (the twin uses 1000);
+the measurements are its noise-free output. The tracked FMU must drive its
+``hx.kht`` to the plant's 900 and agree with the Python runtime's trajectory.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trackingbox.validate import agreement, time_to_converge
+
+from _fixtures_generate import write_case
+
+# ---------------------------------------------------------------- metric helpers (hand-computed)
+
+
+def test_time_to_converge():
+    t = np.arange(6.0) * 10.0
+    # |e| > 1 at t = 0, 10 and again at 30; within the band from t = 40 on
+    assert time_to_converge(t, [3.0, 2.0, 0.5, -1.5, 0.2, 0.1], 1.0) == 40.0
+    assert time_to_converge(t, [0.1, 0.2, 0.1, 0.0, 0.2, 0.1], 1.0) == 0.0
+    assert time_to_converge(t, [0.1, 0.2, 0.1, 0.0, 0.2, 5.0], 1.0) is None
+    # moving mean over 2 samples: |means| = 3, 2.5, 1.5, 0, 0.5, 0.5 (first padded with itself)
+    assert time_to_converge(t, [3.0, 2.0, 1.0, -1.0, 2.0, -1.0], 1.0, smooth=2) == 30.0
+    assert time_to_converge(t, [np.nan] * 6, 1.0) is None
+
+
+def test_agreement():
+    assert agreement([900.0, 950.0, 1000.0], [900.0, 930.0, 1000.0], 800.0, 1200.0) == pytest.approx(20.0 / 400.0)
+    assert agreement([1.0, np.nan], [1.0, 5.0], 0.0, 10.0) == 0.0
+
+
+# ---------------------------------------------------------------- end to end (compile marker)
+
+
+@pytest.fixture(scope="module")
+def mini_case(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    from trackingbox.compiler import compile_model
+    from trackingbox.fmu import FMUModel
+    from trackingbox.generate.generator import compile_generated, generate
+    from trackingbox.spec import load_spec
+
+    root = tmp_path_factory.mktemp("validate")
+    spec_path = write_case(root / "case", gains="")
+    case = spec_path.parent
+    compile_model(case / "Mini", "Mini.Twin", backend="embedded", output=case / "twin.fmu")
+    grid = np.arange(0.0, 7200.0 + 1e-9, 10.0)
+    qin = np.where(grid < 2400.0, 50000.0, np.where(grid < 4800.0, 40000.0, 55000.0))
+    with FMUModel(case / "twin.fmu") as plant:
+        sim = plant.simulate(stop_time=7200.0, output_interval=10.0, parameters={"hx.kht": 900.0},
+                             inputs=pd.DataFrame({"time": grid, "Qin": qin}), outputs=["ThOut"])
+    pd.DataFrame({"time": grid, "QI-100": qin, "TI-102": sim["ThOut"].to_numpy()}).to_csv(
+        case / "measurements.csv", index=False)
+    spec = load_spec(spec_path)
+    gen = generate(spec, case / "generated")
+    cr = compile_generated(gen, backend="embedded")
+    return {"spec": spec, "fmu": cr.fmu, "root": root}
+
+
+@pytest.mark.compile
+def test_tracked_fmu_finds_plant_kht_and_agrees_with_python(mini_case):
+    from trackingbox.validate import validate
+
+    res = validate(mini_case["spec"], mini_case["fmu"], work_dir=mini_case["root"] / "work")
+    kht = res.parameters["hx.kht"]
+    assert kht.final == pytest.approx(900.0, rel=0.005)          # the plant's truth
+    assert kht.within_bounds and 800.0 <= kht.min and kht.max <= 1200.0
+    v = res.variables["TI-102"]
+    assert v.nrmse_tracked < 0.2 * v.nrmse_untracked
+    assert v.converged_at is not None and v.converged_at < 3600.0
+    assert res.agreement < 0.05                                     # within 5 % of the parameter range
+    assert res.window == (3600.0, 7200.0)
+
+
+@pytest.mark.compile
+def test_validate_cli_json_and_report(mini_case, tmp_path: Path, capsys):
+    import argparse
+
+    from trackingbox.commands import validate as cmd
+
+    parser = argparse.ArgumentParser()
+    cmd.register(parser.add_subparsers())
+    args = parser.parse_args(["validate", str(mini_case["spec"].path), "--fmu", str(mini_case["fmu"]),
+                              "--json", "--report", str(tmp_path / "rep")])
+    assert args.func(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc) >= {"variables", "parameters", "agreement", "seconds"}
+    assert doc["parameters"]["hx.kht"]["final"] == pytest.approx(900.0, rel=0.005)
+    md = (tmp_path / "rep" / "validation.md").read_text()
+    assert "![" in md and (tmp_path / "rep" / "parameter_hx_kht.png").stat().st_size > 1000
+    assert (tmp_path / "rep" / "variable_TI_102.png").is_file()
+
+
+def test_validate_refuses_missing_fmu(tmp_path: Path):
+    from trackingbox.errors import FMUError
+    from trackingbox.spec import load_spec
+    from trackingbox.validate import validate
+
+    spec = load_spec(write_case(tmp_path / "c"), check_files=False)
+    with pytest.raises(FMUError, match="does not exist"):
+        validate(spec, tmp_path / "nope.fmu")
