@@ -8,7 +8,7 @@ block PI "PI controller with output limits, anti-windup, hold input and manual m
   parameter Real yMin = 0 "Lower limit of the output";
   parameter Real y_start = 0 "Initial value of the integral part (initial output for zero error)";
   parameter Real manual = 0 "Manual mode: > 0.5 sets the output to yMan";
-  parameter Real yMan = y_start "Output in manual mode";
+  parameter Real yMan = 0 "Output in manual mode (set it before switching to manual)";
   parameter Boolean use_hold_in = true "= true to enable the input hold";
   TrackingBox.Interfaces.RealInput u_s "Setpoint";
   TrackingBox.Interfaces.RealInput u_m "Measurement";
