@@ -13,6 +13,8 @@ All three implement the same first-order lag, hand-solvable:
 * :func:`cs2_fmu`: FMI 2.0 co-simulation, built with pythonfmu; exact update per
   communication step (inputs held over a step). Extra output ``z = sqrt(y)``,
   NaN when y < 0 (for non-finite-value tests).
+* :func:`cs3_fmu`: FMI 3.0 co-simulation, FMPy's FMI 3 C template (``fmpy.template``)
+  with the exact per-step update filled in, compiled with gcc.
 """
 from __future__ import annotations
 
@@ -271,4 +273,73 @@ def me2_fmu() -> Path:
     with zipfile.ZipFile(fmu, "w") as zf:
         zf.writestr("modelDescription.xml", _ME2_XML)
         zf.write(so, "binaries/linux64/FirstOrderME2.so")
+    return fmu
+
+
+def _replace_c_function(src: str, name: str, body: str) -> str:
+    """Replace the body of C function *name* (``fmi3Status name(...) { ... }``) in *src*."""
+    start = src.index(f"fmi3Status {name}(")
+    brace = src.index("{", start)
+    end = src.index("\n}\n", brace) + 3
+    return src[:brace] + "{\n" + body + "\n}\n" + src[end:]
+
+
+@functools.lru_cache(maxsize=None)
+def cs3_fmu() -> Path:
+    """FMI 3.0 CS FMU 'FirstOrderCS3': FMPy's FMI 3 C template with the lag's exact step filled in.
+
+    Variables: k (tunable, 2), x0 (fixed, 0.5), u (input, 1), y (output); default
+    experiment 0..1 s, step 0.1 s.
+    """
+    import uuid
+
+    from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, ModelVariable, Unknown
+    from fmpy.template import create_fmu
+
+    d = _dir("cs3")
+    md = ModelDescription(fmiVersion="3.0", modelName="FirstOrderCS3", instantiationToken=str(uuid.uuid4()),
+                          description="first-order lag", generationTool="trackingbox tests",
+                          generationDateAndTime="2026-01-01T00:00:00Z")
+    md.coSimulation = CoSimulation(modelIdentifier="FirstOrderCS3")
+    md.defaultExperiment = DefaultExperiment(startTime="0", stopTime="1", stepSize="0.1")
+    # the template numbers value references in declaration order, starting at 0
+    for vr, (name, causality, variability, start) in enumerate([
+        ("time", "independent", "continuous", None),
+        ("k", "parameter", "tunable", "2"),
+        ("x0", "parameter", "fixed", "0.5"),
+        ("u", "input", "continuous", "1"),
+        ("y", "output", "continuous", None),
+    ]):
+        v = ModelVariable(name=name, valueReference=vr, type="Float64", causality=causality,
+                          variability=variability, start=start)
+        md.modelVariables.append(v)
+    y = md.modelVariables[-1]
+    md.outputs.append(Unknown(variable=y))
+    md.initialUnknowns.append(Unknown(variable=y))
+    template = d / "template.fmu"
+    create_fmu(md, template)
+    with zipfile.ZipFile(template) as zf:
+        xml = zf.read("modelDescription.xml")
+        src = zf.read("sources/model.c").decode()
+    src = _replace_c_function(src, "fmi3ExitInitializationMode",
+                              "    Model* model = (Model*)instance;\n    model->y = model->x0;\n    return fmi3OK;")
+    src = _replace_c_function(src, "fmi3DoStep", """    Model* model = (Model*)instance;
+    UNUSED(noSetFMUStatePriorToCurrentPoint);
+    model->y = model->u + (model->y - model->u) * exp(-model->k * communicationStepSize);
+    model->time = currentCommunicationPoint + communicationStepSize;
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    *lastSuccessfulTime = model->time;
+    return fmi3OK;""")
+    c_file = d / "model.c"
+    c_file.write_text("#include <math.h>\n" + src)
+    so = d / "FirstOrderCS3.so"
+    include = os.path.join(os.path.dirname(fmpy.__file__), "c-code")
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-I", include, str(c_file), "-o", str(so), "-lm"],
+                   check=True, capture_output=True, text=True)
+    fmu = d / "FirstOrderCS3.fmu"
+    with zipfile.ZipFile(fmu, "w") as zf:
+        zf.writestr("modelDescription.xml", xml)
+        zf.write(so, "binaries/x86_64-linux/FirstOrderCS3.so")
     return fmu

@@ -1,8 +1,9 @@
 """FMU layer: read_info, FMUModel, Stepper against the hand-solved first-order lag.
 
 dx/dt = k (u - x)  =>  x(t) = u + (x(t0) - u) exp(-k (t - t0)) for constant u, k.
-Three FMUs implement it (see _fixtures_fmu): FMI 3.0 ME (CasADi), FMI 2.0 ME
-(hand-written C), FMI 2.0 CS (pythonfmu, exact per-step update).
+Four FMUs implement it (see _fixtures_fmu): FMI 3.0 ME (CasADi), FMI 2.0 ME
+(hand-written C), FMI 2.0 CS (pythonfmu) and FMI 3.0 CS (FMPy's C template), the
+co-simulation ones with an exact per-step update.
 """
 from __future__ import annotations
 
@@ -16,12 +17,12 @@ import fmpy.simulation
 import numpy as np
 import pandas as pd
 import pytest
-from _fixtures_fmu import cs2_fmu, me2_fmu, me3_fmu
+from _fixtures_fmu import cs2_fmu, cs3_fmu, me2_fmu, me3_fmu
 
 from trackingbox.errors import DataError, FMUError, SimulationError
 from trackingbox.fmu import FMUModel, read_info
 
-FMUS = {"fmi3-me": me3_fmu, "fmi2-me": me2_fmu, "fmi2-cs": cs2_fmu}
+FMUS = {"fmi3-me": me3_fmu, "fmi2-me": me2_fmu, "fmi2-cs": cs2_fmu, "fmi3-cs": cs3_fmu}
 RTOL = 1e-4  # solver tolerance 1e-6; global error of CVODE stays well below this
 
 
