@@ -111,3 +111,37 @@ def make_case(fmu: Path, out: Path, *, k_plant: float = K_PLANT, noise: float = 
     spec = out / "spec.toml"
     spec.write_text(SPEC.format(k_twin=K_TWIN, data=data, controller=controller), encoding="utf-8")
     return spec
+
+
+def make_tank_fmu(directory: Path, *, leak: float) -> Path:
+    """The first-order model plus an open tank with a correction-flow input.
+
+    ``d(level)/dt = (q - leak·level + m_corr)/200`` (200 kg per m of level), ``q``
+    an input (kg/s), ``m_corr`` the state-compensation input, ``leak`` fixed
+    (the plant's differs from the twin's).
+    """
+    import casadi
+    import fmpy
+
+    directory.mkdir(parents=True, exist_ok=True)
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        dae = casadi.DaeBuilder("tank1")
+        k = dae.add("k", "parameter", "tunable", {"start": K_TWIN, "min": 0.0, "max": 0.1})
+        u = dae.add("u", "input", {"start": 50.0})
+        q = dae.add("q", "input", {"start": 1.0})
+        m_corr = dae.add("m_corr", "input", {"start": 0.0})
+        x = dae.add("x", "local", "continuous", {"start": 38.0, "initial": "exact"})
+        h = dae.add("h", "local", "continuous", {"start": 1.0, "initial": "exact"})
+        y = dae.add("y", "output", {})
+        level = dae.add("level", "output", {})
+        dae.eq(dae.der(x), (u - x) / TAU - k * x)
+        dae.eq(dae.der(h), (q - leak * h + m_corr) / 200.0)
+        dae.eq(y, x)
+        dae.eq(level, h)
+        files = dae.export_fmu({"no_warning": True})
+        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
+        return directory / dae.pack_fmu(files, {})
+    finally:
+        os.chdir(cwd)

@@ -237,3 +237,59 @@ def test_track_command_json_and_report(case: Path, tmp_path: Path, capsys: pytes
     for name in ("summary.md", "tag_TI.png", "parameter_k.png", "tracking.csv", "checkpoint.json", "result.json"):
         assert (report / name).is_file(), name
     assert "| TI |" in (report / "summary.md").read_text()
+
+
+def test_state_compensation_keeps_twin_tank_on_plant_level(tmp_path: Path) -> None:
+    from _fixtures_tracking import make_tank_fmu
+    from trackingbox.fmu import FMUModel
+
+    plant = make_tank_fmu(tmp_path / "plant", leak=1.0)
+    twin = make_tank_fmu(tmp_path / "twin", leak=1.2)
+    t = np.arange(0.0, 3001.0, 10.0)
+    with FMUModel(plant) as m:
+        sim = m.simulate(stop_time=3000.0, output_interval=10.0,
+                         inputs=pd.DataFrame({"time": t, "u": 50.0 + 0 * t, "q": 1.0 + 0 * t}),
+                         parameters={"k": K_PLANT, "x": 50.0 / 1.4}, outputs=["y", "level"])
+    case = tmp_path / "case"
+    case.mkdir()
+    pd.DataFrame({"time": t, "FI": 50.0, "QI": 1.0, "TI": sim["y"], "LI": sim["level"]}).to_csv(
+        case / "measurements.csv", index=False)
+    (case / "twin.fmu").write_bytes(twin.read_bytes())
+    (case / "spec.toml").write_text('''twin = "twin.fmu"
+measurements = "measurements.csv"
+sample_time = 10.0
+[inputs]
+"FI" = "u"
+"QI" = "q"
+[outputs]
+"TI" = "y"
+[[parameters]]
+name = "k"
+start = 0.003
+min = 0.001
+max = 0.01
+[[pairs]]
+variable = "TI"
+parameter = "k"
+gain = -2551.0
+time_constant = 71.0
+lambda = 1.0
+[[states]]
+tag = "LI"
+variable = "level"
+correction = "m_corr"
+gain = 5.0
+''')
+    result = track(load_spec(case / "spec.toml"), out_dir=tmp_path / "out")
+    df = pd.read_csv(result.csv)
+    # plant level stays at q/leak = 1.0; without compensation the twin would drain to 1/1.2 = 0.833.
+    # Proportional compensation m = 5*(1 - h): steady state (1 + 5*1)/(1.2 + 5) = 0.967742,
+    # correction 5*(1 - 0.967742) = 0.16129 kg/s
+    last = df.iloc[-1]
+    assert last["measured:LI"] == pytest.approx(1.0, abs=1e-6)
+    assert last["tracked:LI"] == pytest.approx(6.0 / 6.2, abs=1e-5)
+    assert last["correction:m_corr"] == pytest.approx(5.0 * (1.0 - 6.0 / 6.2), abs=1e-4)
+    assert last["untracked_correction:m_corr"] == pytest.approx(5.0 * (1.0 - 6.0 / 6.2), abs=1e-4)
+    assert result.states["LI"].min > 0.96
+    assert result.corrections["m_corr"].final == pytest.approx(last["correction:m_corr"])
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)

@@ -131,6 +131,10 @@ class TrackingResult:
         Parameter name -> :class:`ParameterResult`.
     corrections : dict
         State-compensation input -> :class:`ParameterResult` (kg/s; bounds NaN).
+    states : dict
+        State tag -> :class:`ParameterResult` of the tracked twin's simulated
+        level (final/min/max over the run; bounds NaN), to check that no tank
+        empties or overflows.
     seconds : float
         Wall-clock seconds of the run (this call).
     seconds_untracked : float
@@ -150,6 +154,7 @@ class TrackingResult:
     variables: dict[str, VariableResult]
     parameters: dict[str, ParameterResult]
     corrections: dict[str, ParameterResult]
+    states: dict[str, ParameterResult]
     seconds: float
     seconds_untracked: float
     simulated_seconds: float
@@ -606,6 +611,7 @@ def track(
     corr_names = [s.correction for s in states]
     pstats = {n: _Stats() for n in param_names}
     cstats = {n: _Stats() for n in corr_names}
+    sstats = {s.tag: _Stats() for s in states}
     fits = {t: _Fit() for t in spec.outputs}
     read = plan.read_names
     ridx = {name: i for i, name in enumerate(read)}
@@ -647,6 +653,8 @@ def track(
                 pstats[n].restore(ckpt["parameter_stats"][n])
             for n in corr_names:
                 cstats[n].restore(ckpt["correction_stats"][n])
+            for n in sstats:
+                sstats[n].restore(ckpt["state_stats"][n])
             for t in fits:
                 fits[t].restore(ckpt["fits"][t])
             recovery_until = float(ckpt["recovery_until"])
@@ -700,6 +708,7 @@ def track(
             "x_untracked": plain.x.tolist() if plain is not None and plain.x is not None else None,
             "parameter_stats": {n: s.state() for n, s in pstats.items()},
             "correction_stats": {n: s.state() for n, s in cstats.items()},
+            "state_stats": {n: s.state() for n, s in sstats.items()},
             "fits": {t: f.state() for t, f in fits.items()},
             "recovery_until": recovery_until,
             "missing": missing,
@@ -762,7 +771,9 @@ def track(
             corr, corr_u = {}, {}
             for s in states:
                 meas = float(plan.measured[s.tag][k])
-                corr[s.correction] = s.tracked.update(meas, float(y[ridx[s.variable]]))
+                level = float(y[ridx[s.variable]])
+                sstats[s.tag].add(level)
+                corr[s.correction] = s.tracked.update(meas, level)
                 corr_u[s.correction] = s.untracked.update(meas, float(yu[ridx[s.variable]])) \
                     if plain is not None else math.nan
             params = {p.parameter: p.controller.value for p in pairs}
@@ -824,6 +835,7 @@ def track(
         parameters={n: ParameterResult(s.final, s.min, s.max, p.bounds[0], p.bounds[1])
                     for (n, s), p in zip(pstats.items(), pairs)},
         corrections={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan) for n, s in cstats.items()},
+        states={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan) for n, s in sstats.items()},
         seconds=seconds,
         seconds_untracked=plain.step_seconds if plain is not None else math.nan,
         simulated_seconds=float(grid[min(k, n_rows - 1)] - grid[k0]) if k > k0 else 0.0,
@@ -836,6 +848,8 @@ def track(
                "variables_detail": {t: {"samples": v.samples} for t, v in result.variables.items()},
                "corrections": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
                                for n, c in result.corrections.items()},
+               "states": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
+                          for n, c in result.states.items()},
                "events": [[e.time, e.kind, e.message] for e in events]}
     write_text_atomic(out_dir / RESULT_NAME, json.dumps(summary, indent=1))
     return result
