@@ -2,7 +2,7 @@ within TrackingBox.Benches.HeatProduction.Validation;
 model TwinDay "Twin over one day of varying heat demand"
   TrackingBox.Benches.HeatProduction.Twin bench "Model under test";
 protected
-  constant Real pi = 3.141592653589793;
+  constant Real pi = 3.141592653589793 "Circle constant";
 equation
   bench.mCold_flow = 0.06 - 0.015*cos(2*pi*time/86400) + 0.01*TrackingBox.Blocks.smoothStep(time, 3600, 300)
     - 0.015*TrackingBox.Blocks.smoothStep(time, 50000, 600);
