@@ -828,8 +828,12 @@ class Stepper:
 
     def _step_me(self, t_next: float) -> None:
         fmu, solver = self._fmu, self._solver
-        needs_completed = bool(self._md.modelExchange.needsCompletedIntegratorStep) if self._md.modelExchange \
-            else False
+        me = self._md.modelExchange
+        # FMI 2 asks for the call with needsCompletedIntegratorStep, FMI 3 waives it with ...NotNeeded
+        if self._fmi3:
+            needs_completed = not me.completedIntegratorStepNotNeeded
+        else:
+            needs_completed = bool(me.needsCompletedIntegratorStep)
         while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
             target = t_next
             if self._next_event is not None and self.time < self._next_event < t_next:
