@@ -804,8 +804,15 @@ def track(
             recovered = safe_step(twin, k, {**params, **corr}, [*param_names, *corr_names],
                                   [*(["parameter:"] * len(param_names)), *(["correction:"] * len(corr_names))])
             if plain is not None:
-                recovered |= safe_step(plain, k, dict(corr_u), list(corr_names),
-                                       ["untracked_correction:"] * len(corr_names))
+                try:
+                    safe_step(plain, k, dict(corr_u), list(corr_names),
+                              ["untracked_correction:"] * len(corr_names))
+                except SimulationError as exc:
+                    # the comparison run is not worth stopping the tracking for
+                    event(t, "untracked-abandoned", f"untracked twin failed for good and is dropped "
+                          f"(its columns are empty from here on): {exc}")
+                    plain.close()
+                    plain = None
             if recovered:
                 recovery_until = float(grid[k + 1]) + recovery_hold
                 event(t, "hold", f"controllers on hold until t = {recovery_until:g} s after the recovery")
