@@ -45,3 +45,28 @@ def build_step_fmu(directory) -> str:
     finally:
         os.chdir(cwd)
     return str(directory / path)
+
+
+def write_pair_case(directory, fmu: str, *, u: float = 1.5):
+    """A spec.toml + measurements.csv around the step-test FMU: FI drives u, Y1/Y2 measure y1/y2.
+
+    Returns the spec path. The measured ranges (0.2 for Y1, 0.4 for Y2) only
+    scale the gains; the pairing of a square system does not depend on them.
+    """
+    import shutil
+
+    import numpy as np
+
+    shutil.copy(fmu, directory / "twin.fmu")
+    t = np.arange(0.0, 7200.0, 60.0)
+    lines = ["time,FI,Y1,Y2"] + [f"{x:g},{u:g},{2.0 + 0.1 * np.sin(x / 600):.6f},{2.4 + 0.2 * np.cos(x / 900):.6f}"
+                                 for x in t]
+    (directory / "measurements.csv").write_text("\n".join(lines) + "\n")
+    spec = directory / "spec.toml"
+    spec.write_text(
+        'twin = "twin.fmu"\nmeasurements = "measurements.csv"\nsample_time = 1.0\n\n'
+        '[inputs]\n"FI" = "u"\n\n[outputs]\n"Y1" = "y1"\n"Y2" = "y2"\n\n'
+        '[[parameters]]\nname = "a"\nstart = 1.0\nmin = 0.5\nmax = 1.5\n\n'
+        '[[parameters]]\nname = "b"\nstart = 2.0\nmin = 1.0\nmax = 3.0\n\n'
+        '[windows]\ntraining = [0.0, 3600.0]\nvalidation = [3600.0, 7200.0]\n')
+    return spec

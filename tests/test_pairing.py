@@ -95,3 +95,61 @@ def test_all_zero_gains():
 def test_shape_mismatch_is_an_analysis_error():
     with pytest.raises(AnalysisError, match="shape"):
         choose_pairs([[1.0, 2.0]], ["y1", "y2"], ["a", "b"])
+
+
+# ---------------------------------------------------------------- the pair command
+
+@pytest.fixture(scope="module")
+def pair_fmu(tmp_path_factory):
+    from _fixtures_analysis import build_step_fmu
+
+    return build_step_fmu(tmp_path_factory.mktemp("pairfmu"))
+
+
+def test_pair_command_json_spec_and_report(tmp_path, pair_fmu, capsys):
+    import json
+
+    from _fixtures_analysis import write_pair_case
+    from trackingbox.cli import main
+    from trackingbox.spec import load_spec
+
+    spec = write_pair_case(tmp_path, pair_fmu, u=1.5)
+    rc = main(["pair", str(spec), "--freeze", "hold=1", "--json", "--workers", "1", "--report",
+               str(tmp_path / "rep")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    doc = json.loads(out)
+    # hand solution (see tests/test_steptest.py): G = [[u/0.9, 0.5/0.9], [0.2u/0.9, 10/9]], u = 1.5
+    G = [[1.5 / 0.9, 0.5 / 0.9], [0.3 / 0.9, 10 / 9]]
+    assert doc["gain_matrix"]["variables"] == ["Y1", "Y2"]
+    assert doc["gain_matrix"]["parameters"] == ["a", "b"]
+    assert np.allclose(doc["gain_matrix"]["values"], G, rtol=1e-4)
+    lam = G[0][0] * G[1][1] / (G[0][0] * G[1][1] - G[0][1] * G[1][0])  # = 10/9
+    assert np.allclose(doc["rga"]["values"], [[lam, 1 - lam], [1 - lam, lam]], rtol=1e-4)
+    assert [(p["variable"], p["parameter"]) for p in doc["pairs"]] == [("Y1", "a"), ("Y2", "b")]
+    assert doc["pairs"][0]["gain"] == pytest.approx(G[0][0], rel=1e-4)
+    assert doc["sobol"] is None and doc["agreement"] is None
+    assert doc["left_out"] == []
+    written = load_spec(spec)
+    assert [(p.variable, p.parameter) for p in written.pairs] == [("Y1", "a"), ("Y2", "b")]
+    assert written.pairs[1].gain == pytest.approx(10 / 9, rel=1e-4)
+    assert all(p.time_constant > 0 for p in written.pairs)
+    for name in ("rga.png", "gains_scaled.png"):
+        assert (tmp_path / "rep" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| Y1 | a |" in (tmp_path / "rep" / "pairing.md").read_text()
+
+
+def test_pair_command_no_write_and_bad_freeze(tmp_path, pair_fmu, capsys):
+    from _fixtures_analysis import write_pair_case
+    from trackingbox.cli import main
+
+    spec = write_pair_case(tmp_path, pair_fmu)
+    before = spec.read_bytes()
+    assert main(["pair", str(spec), "--freeze", "hold=1", "--workers", "1", "--no-write", "--one-sided"]) == 0
+    assert spec.read_bytes() == before
+    capsys.readouterr()
+    assert main(["pair", str(spec), "--freeze", "hold"]) == 2
+    assert "NAME=VALUE" in capsys.readouterr().err
+    assert main(["pair", str(spec), "--freeze", "hodl=1", "--workers", "1"]) == 2
+    assert "did you mean 'hold'" in capsys.readouterr().err
+    assert spec.read_bytes() == before

@@ -293,5 +293,5 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         left_out.append((parameters[j], reason))
 
     for msg in warnings:
-        logger.warning(msg)
+        logger.info(msg)
     return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond)
