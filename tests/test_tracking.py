@@ -293,3 +293,24 @@ gain = 5.0
     assert result.states["LI"].min > 0.96
     assert result.corrections["m_corr"].final == pytest.approx(last["correction:m_corr"])
     assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
+
+
+def test_given_untracked_simulation_is_used(case: Path, tmp_path: Path) -> None:
+    table = pd.DataFrame({"time": [0.0, 6000.0], "y": [38.0, 38.0]})
+    result = track(load_spec(case), out_dir=tmp_path, untracked=table)
+    df = pd.read_csv(result.csv)
+    assert (df["untracked:TI"] == 38.0).all()
+    assert np.isnan(result.seconds_untracked)  # no untracked twin was stepped
+    # NRMSE of the constant 38 against the measurements after the 200 s hold, by hand
+    m = pd.read_csv(case.with_name("measurements.csv"))
+    y = m.loc[m["time"] >= 200.0, "TI"].to_numpy()
+    expected = np.sqrt(np.mean((38.0 - y) ** 2)) / (y.max() - y.min())
+    assert result.variables["TI"].nrmse_untracked == pytest.approx(expected, rel=1e-12)
+
+
+def test_without_untracked_twin(case: Path, tmp_path: Path) -> None:
+    result = track(load_spec(case), out_dir=tmp_path, untracked=False)
+    df = pd.read_csv(result.csv)
+    assert df["untracked:TI"].isna().all()
+    assert np.isnan(result.variables["TI"].nrmse_untracked)
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)
