@@ -19,7 +19,9 @@ the **agreement** with the runtime: ``max_t |p_modelica - p_python| / (max - min
 
 Both runs start at the first sample because the twin's state at the start of
 the validation window is only known by simulating up to it; the metrics use
-the validation window only.
+the validation window only. State compensation (``[[states]]``) is not
+generated into the box: the tracked FMU's correction inputs are fed with the
+correction flows the Python runtime computed.
 """
 from __future__ import annotations
 
@@ -234,6 +236,13 @@ def validate(spec: Any, fmu: str | Path, *, work_dir: str | Path | None = None, 
     for pair in spec.pairs:
         inputs[f"{modelica_name(pair.variable)}_meas"] = _fill(measured[pair.variable])
     inputs[HOLD_INPUT] = _hold_signal(spec, grid, measured)
+    # State compensation ([[states]]) is not part of the generated box: the twin's
+    # correction inputs stay inputs of the tracked model and get the correction
+    # flows the Python runtime computed, so both runs see the same tanks.
+    for st in spec.states:
+        column = f"correction:{st.correction}"
+        if column in py:
+            inputs[st.correction] = _fill(py[column].to_numpy(dtype=float))
     outputs = list(dict.fromkeys([*(spec.outputs[p.variable] for p in spec.pairs), *pair_names.values()]))
 
     model = FMUModel(fmu, tolerance=tolerance)
