@@ -60,6 +60,8 @@ class TwinSource:
         rumoca's flat variables (name -> attribute dict).
     top_inputs, top_outputs : tuple[str, ...]
         The twin's own top-level inputs and outputs (sorted).
+    type_names : dict
+        Flat variable name -> type name (``Real``, ``Boolean``, ...).
     """
 
     path: Path
@@ -70,20 +72,14 @@ class TwinSource:
     variables: dict[str, Any]
     top_inputs: tuple[str, ...]
     top_outputs: tuple[str, ...]
+    type_names: dict[str, str]
 
     def is_boolean_parameter(self, name: str) -> bool:
         v = self.variables.get(name)
-        return bool(v) and _is_parameter(v) and _type_name(self, name) == "Boolean"
+        return bool(v) and _is_parameter(v) and self.type_names.get(name) == "Boolean"
 
     def parameters(self) -> list[str]:
         return sorted(n for n, v in self.variables.items() if _is_parameter(v))
-
-
-_TYPE_NAMES: dict[int, dict[str, str]] = {}
-
-
-def _type_name(src: TwinSource, name: str) -> str:
-    return _TYPE_NAMES.get(id(src.variables), {}).get(name, "")
 
 
 def _is_parameter(v: dict[str, Any]) -> bool:
@@ -143,11 +139,11 @@ def load_twin(path: str | Path, model: str) -> TwinSource:
         raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
     flat = loaded.to_dict("flat")
     variables = dict(flat["variables"])
-    _TYPE_NAMES[id(variables)] = dict(flat.get("variable_type_names", {}))
     top_inputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Input"))
     top_outputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Output"))
     return TwinSource(path=path.resolve(), model=model, root=root, top=top, files=files,
-                      variables=variables, top_inputs=top_inputs, top_outputs=top_outputs)
+                      variables=variables, top_inputs=top_inputs, top_outputs=top_outputs,
+                      type_names=dict(flat.get("variable_type_names", {})))
 
 
 @dataclass(frozen=True)
@@ -238,11 +234,13 @@ def find_declaration(src: TwinSource, name: str) -> Declaration | None:
     if not loc:
         return None
     leaf = name.rsplit(".", 1)[-1]
-    start, line = int(loc["start"]), int(loc["start_line"])
+    byte_start, line = int(loc["start"]), int(loc["start_line"])
     for file in src.files:
-        text = file.read_text(encoding="utf-8")
-        if text[start:start + 9] != "parameter":
+        raw = file.read_bytes()
+        if raw[byte_start:byte_start + 9] != b"parameter":  # rumoca's offsets count bytes
             continue
+        text = raw.decode("utf-8")
+        start = len(raw[:byte_start].decode("utf-8", errors="replace"))
         code = _blank_comments_strings(text)
         semi = code.find(";", start)
         if semi < 0 or not re.search(rf"\b{re.escape(leaf)}\b", code[start:semi]):
@@ -400,27 +398,21 @@ def rewrite_source(src: TwinSource, sites: list[ParameterSite], out_root: Path) 
         If a declaration cannot be found or cannot be rewritten safely.
     """
     connector = _connector_type(src)
-    patched: dict[Path, str] = {}
-    # Patch each declaring class once per leaf (components of the same class share it).
-    done: set[tuple[Path, str, str]] = set()
+    decls: dict[tuple[Path, str, str], tuple[Declaration, str]] = {}
     for site in sites:
         if site.has_pattern:
             continue
         decl = find_declaration(src, site.name)
         if decl is None:
             raise SpecError(f"cannot find the declaration of parameter {site.name!r} in {src.path}")
-        key = (decl.file, decl.class_name, site.leaf)
-        if key in done:
-            continue
-        done.add(key)
+        # components of the same class share one patch
+        decls.setdefault((decl.file, decl.class_name, site.leaf), (decl, site.leaf))
+    patched: dict[Path, str] = {}
+    # Patch from the end of each file backwards: a patch only changes text at or
+    # after its own declaration, so the offsets of earlier declarations stay valid.
+    for decl, leaf in sorted(decls.values(), key=lambda d: (str(d[0].file), -d[0].start)):
         text = patched.get(decl.file, decl.file.read_text(encoding="utf-8"))
-        if decl.file in patched:  # offsets moved: find the declaration again in the patched text
-            m = re.search(rf"\bparameter\b[^;]*?\b{re.escape(site.leaf)}\b", _blank_comments_strings(text))
-            if m is None:
-                raise SpecError(f"cannot find the declaration of {site.leaf!r} again in {decl.file}")
-            semi = _blank_comments_strings(text).find(";", m.start())
-            decl = Declaration(decl.file, decl.line, decl.class_name, decl.class_kind, m.start(), semi + 1)
-        patched[decl.file] = _patch_class_text(text, decl, site.leaf, connector)
+        patched[decl.file] = _patch_class_text(text, decl, leaf, connector)
     out_root = out_root.resolve()
     dest_top = out_root / src.top.name
     if dest_top.exists():
