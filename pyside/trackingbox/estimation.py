@@ -94,6 +94,9 @@ FAILED_COST = 1.0e3
 #: solver's relative tolerance so that the difference quotient is not solver noise.
 DIFF_STEP = 1.0e-4
 
+#: Refinement budget: least-squares iterations (each costs 1 + n_parameters simulations).
+MAX_REFINE_ITERATIONS = 20
+
 #: ``progress(stage, iteration, total, best_cost)``; stage is ``"global"`` or ``"local"``.
 ProgressCallback = Callable[[str, int, int, float], None]
 
@@ -674,10 +677,14 @@ def estimate(
                 callback=on_generation,
                 tol=1e-3,
             )
-        finally:
-            if pool is not None:
-                pool.close()
+        except BaseException:
+            if pool is not None:  # interrupted or failed: do not wait for running evaluations
+                pool.terminate()
                 pool.join()
+            raise
+        if pool is not None:
+            pool.close()
+            pool.join()
         evaluations += int(de.nfev)
         if de.fun < best_cost:
             best_x, best_cost = np.array(de.x, dtype=float), float(de.fun)
@@ -702,7 +709,9 @@ def estimate(
                 x_scale=span,
                 diff_step=DIFF_STEP,
                 method="trf",
-                max_nfev=50 * max(n, 1),
+                max_nfev=MAX_REFINE_ITERATIONS,
+                ftol=1e-6,
+                xtol=1e-6,
             )
             refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
             evaluations += counted
