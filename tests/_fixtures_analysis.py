@@ -23,18 +23,21 @@ def build_step_fmu(directory) -> str:
     r = dae.add("r", "parameter", "tunable", {"start": 2.0})
     u = dae.add("u", "input", {"start": 1.0})
     hold = dae.add("hold", "input", {"start": 0.0})
+    corr = dae.add("corr", "input", {"start": 0.0})
     x1 = dae.add("x1", "local", "continuous", {"start": 0.0, "initial": "exact"})
     x2 = dae.add("x2", "local", "continuous", {"start": 0.0, "initial": "exact"})
     x3 = dae.add("x3", "local", "continuous", {"start": 0.0, "initial": "exact"})
     z = dae.add("z", "local", "continuous", {"start": 0.0, "initial": "exact"})
     w = dae.add("w", "local", "continuous", {"start": 0.0, "initial": "exact"})
-    ys = [dae.add(n, "output", {}) for n in ("y1", "y2", "y3", "y4", "y5")]
+    level = dae.add("level", "local", "continuous", {"start": 1.0, "initial": "exact"})
+    ys = [dae.add(n, "output", {}) for n in ("y1", "y2", "y3", "y4", "y5", "y6")]
     dae.eq(dae.der(x1), (a * u + z - x1 + 0.5 * x2) / 5.0)
     dae.eq(dae.der(x2), (b - x2 + 0.2 * x1) / 10.0)
     dae.eq(dae.der(x3), (c - x3) / 20.0)
     dae.eq(dae.der(z), (1 - hold) * ki * (r - x1))
     dae.eq(dae.der(w), d - 1.0)
-    for y, expr in zip(ys, (x1, x2, x1 * x1, x3, w)):
+    dae.eq(dae.der(level), (c - 1.0 + corr) / 2.0)
+    for y, expr in zip(ys, (x1, x2, x1 * x1, x3, w, level)):
         dae.eq(y, expr)
     cwd = os.getcwd()
     os.chdir(directory)

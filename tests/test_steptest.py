@@ -7,6 +7,7 @@ The model (time in s)::
     dx3/dt = (c - x3) / 20                     y3 = x1**2,  y4 = x3
     dz/dt  = (1 - hold) * ki * (r - x1)        (PI-like integrator: holds when hold = 1)
     dw/dt  = d - 1                             y5 = w (never settles once d != 1)
+    dL/dt  = (c - 1 + corr) / 2                y6 = L (a tank level: integrates any imbalance)
 
 With z held constant the steady state is x1 = (a*u + z + 0.5*b) / 0.9,
 x2 = b + 0.2*x1, so dy1/da = u/0.9, dy1/db = 0.5/0.9, dy2/da = 0.2*u/0.9,
@@ -87,6 +88,24 @@ def test_step_that_never_settles_names_parameter(step_fmu):
         step_tests(prob, StepSettings(interval=1.0, window=20.0, tolerance=1e-6, max_time=100.0))
     msg = str(info.value)
     assert "step of d" in msg and "did not settle" in msg and "y5 moved" in msg
+
+
+def test_state_compensation_holds_an_integrating_level(step_fmu):
+    # correction = K (L_ref - L): a step dc gives dL/dt = (dc + K (L_ref - L)) / 2 = 0 at
+    # L = L_ref + dc / K, so the level settles with gain 1/K instead of ramping.
+    K = 0.5
+    prob = make_problem(step_fmu, outputs={"Y6": "y6", "Y4": "y4"}, parameters=[("c", 1.0, 0.0, 2.0)],
+                        ranges={"Y6": 1.0, "Y4": 1.0}, compensation=[("y6", "corr", K)])
+    res = step_tests(prob, StepSettings(**FAST))
+    assert res.gains[0, 0] == pytest.approx(1 / K, rel=1e-4)
+    # the correction is updated every interval T = 1 s (held in between), so the level error
+    # shrinks by (1 - K T / 2) per interval: 63.2 % after ln(e^-1) / ln(0.75) = 3.48 intervals
+    assert res.time_constants[0, 0] == pytest.approx(-1.0 / math.log(1 - K * 1.0 / 2), abs=0.1)
+    assert res.gains[1, 0] == pytest.approx(1.0, rel=1e-4)
+    # without compensation the level ramps and the step never settles
+    plain = make_problem(step_fmu, outputs={"Y6": "y6"}, parameters=[("c", 1.0, 0.0, 2.0)], ranges={"Y6": 1.0})
+    with pytest.raises(AnalysisError, match="y6 moved"):
+        step_tests(plain, StepSettings(interval=1.0, window=20.0, tolerance=1e-6, max_time=100.0))
 
 
 def test_unknown_names_get_did_you_mean(step_fmu):

@@ -191,7 +191,8 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
     base = baseline(problem, settings, executor)
     plans = [RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
                      base.freeze_time, base.step_time, tuple(zip(problem.parameters, map(float, x))),
-                     label=f"Sobol sample {k}", states=base.states)
+                     label=f"Sobol sample {k}", states=base.states, compensation=problem.compensation,
+                     levels_ref=base.levels_ref)
              for k, x in enumerate(X)]
     if executor is None:
         results = [run_plan(p) for p in plans]

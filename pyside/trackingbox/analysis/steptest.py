@@ -172,6 +172,8 @@ class RunPlan:
     change: tuple[tuple[str, float], ...] = ()
     label: str = "baseline"
     states: tuple[float, ...] | None = None
+    compensation: tuple[tuple[str, str, float], ...] = ()
+    levels_ref: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -187,6 +189,7 @@ class RunResult:
     times: np.ndarray
     trajectory: np.ndarray
     states: tuple[float, ...] | None = None
+    levels_ref: tuple[float, ...] | None = None
 
 
 class _Settle:
@@ -241,9 +244,17 @@ def run_plan(plan: RunPlan) -> RunResult:
         raise AnalysisError(f"step test {plan.label}: the twin could not be initialised: {exc}") from None
     outs = list(plan.outputs)
     k = int(round(t_start / s.interval))
+    levels = [c[0] for c in plan.compensation]
+    corrections = [c[1] for c in plan.compensation]
+    comp_gain = np.array([c[2] for c in plan.compensation], dtype=float)
+    ref: np.ndarray | None = None
+    if warm and plan.compensation:
+        ref = np.asarray(plan.levels_ref, dtype=float)
 
     def advance(kk: int) -> np.ndarray:
         try:
+            if ref is not None:  # proportional state compensation holds the tank levels
+                stepper.set(dict(zip(corrections, (comp_gain * (ref - stepper.get(levels))).tolist())))
             stepper.step(kk * s.interval)
         except TrackingError as exc:
             raise AnalysisError(f"step test {plan.label}: simulation failed at t = {kk * s.interval:g} s: "
@@ -279,6 +290,9 @@ def run_plan(plan: RunPlan) -> RunResult:
     else:
         run_to(int(round(plan.freeze_time / s.interval)))
     freeze_time = plan.freeze_time if warm else k * s.interval
+    if plan.compensation and ref is None:
+        ref = (np.asarray(plan.levels_ref, dtype=float) if plan.levels_ref is not None
+               else stepper.get(levels))
     # phase 2: controllers frozen
     if s.freeze and not warm:
         stepper.set(dict(s.freeze))
@@ -297,7 +311,8 @@ def run_plan(plan: RunPlan) -> RunResult:
             except TrackingError:
                 logger.info("no access to continuous states (co-simulation FMU): step runs replay the settle")
         return RunResult(plan.label, freeze_time, step_time, before, before, step_time,
-                         np.array([step_time]), before[None, :], states)
+                         np.array([step_time]), before[None, :], states,
+                         None if ref is None else tuple(float(x) for x in ref))
     # phase 3: the step
     stepper.set(dict(plan.change))
     det = _Settle(step_time, s.window, limits)
@@ -423,6 +438,11 @@ class StepProblem:
         Other values set before initialisation (known parameters, operating point).
     ranges : tuple of float
         Output ranges for the settle rule and the scaling.
+    compensation : tuple of (level variable, correction input, gain)
+        Tank levels held by proportional state compensation from the freeze
+        on (``correction = gain * (level at freeze - level)``), so that
+        integrating levels neither drift nor run dry while the controllers
+        are frozen (the spec's ``[[states]]``).
     """
 
     fmu: str
@@ -434,6 +454,7 @@ class StepProblem:
     upper: tuple[float, ...]
     fixed: tuple[tuple[str, float], ...] = ()
     ranges: tuple[float, ...] = ()
+    compensation: tuple[tuple[str, str, float], ...] = ()
 
     def start_values(self) -> tuple[tuple[str, float], ...]:
         """Values set before initialisation: fixed values, then parameter starts."""
@@ -442,8 +463,8 @@ class StepProblem:
 
 def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Sequence[tuple[str, float, float, float]],
                  fixed: Mapping[str, float] | None = None, operating: Mapping[str, float] | None = None,
-                 ranges: Mapping[str, float] | None = None, freeze: Mapping[str, float] | None = None
-                 ) -> StepProblem:
+                 ranges: Mapping[str, float] | None = None, freeze: Mapping[str, float] | None = None,
+                 compensation: Sequence[tuple[str, str, float]] = ()) -> StepProblem:
     """Check names against the FMU and build a :class:`StepProblem`.
 
     Parameters
@@ -463,6 +484,8 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
         tags are filled by :func:`default_ranges`.
     freeze : mapping, optional
         Freeze names, checked to exist as inputs or tunable parameters.
+    compensation : sequence of (level variable, correction input, gain), optional
+        State compensation during the frozen phases (see :class:`StepProblem`).
 
     Raises
     ------
@@ -498,6 +521,13 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
     for name in (operating or {}):
         if name not in names:
             problems.append(unknown_name("input", name, info.inputs, where))
+    for level, corr, gain in compensation:
+        if level not in names:
+            problems.append(unknown_name("level variable", level, list(names), where))
+        if corr not in settable:
+            problems.append(unknown_name("correction input", corr, sorted(settable), where))
+        if not gain > 0:
+            problems.append(f"state-compensation gain for {level!r} must be positive, got {gain}")
     if not outputs:
         problems.append("no tracking variables: the spec's [outputs] table is empty")
     if not parameters:
@@ -512,7 +542,8 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
         fmu=str(Path(fmu).resolve()), variables=tags, outputs=tuple(outputs[t] for t in tags),
         parameters=tuple(p[0] for p in parameters), starts=tuple(float(p[1]) for p in parameters),
         lower=tuple(float(p[2]) for p in parameters), upper=tuple(float(p[3]) for p in parameters),
-        fixed=fixed_items, ranges=rng)
+        fixed=fixed_items, ranges=rng,
+        compensation=tuple((str(a), str(b), float(c)) for a, b, c in compensation))
 
 
 def default_ranges(problem: StepProblem, settings: StepSettings) -> tuple[float, ...]:
@@ -532,7 +563,8 @@ def default_ranges(problem: StepProblem, settings: StepSettings) -> tuple[float,
 
 def baseline(problem: StepProblem, settings: StepSettings, executor: Executor | None = None) -> RunResult:
     """Run phases 1-2 once (controllers active, then frozen) and return when they settled."""
-    plan = RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings)
+    plan = RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
+                   compensation=problem.compensation)
     if executor is None:
         return run_plan(plan)
     return executor.submit(run_plan, plan).result()
@@ -580,7 +612,8 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
             plans.append((j, sgn, RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges,
                                           settings, base.freeze_time, base.step_time, ((name, value),),
                                           label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}",
-                                          states=base.states)))
+                                          states=base.states, compensation=problem.compensation,
+                                          levels_ref=base.levels_ref)))
     if executor is None:
         results = [run_plan(p) for _, _, p in plans]
     else:

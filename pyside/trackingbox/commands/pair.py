@@ -27,6 +27,8 @@ hour of the training window, or --at TIME); the twin runs with its controllers
 active until it settles; the --freeze values are set (e.g. holdControllers=1)
 and it settles again; then each [[parameters]] entry is stepped by +/- --step of
 its bound range and the new steady state of every [outputs] tag is recorded.
+Tank levels listed in [[states]] are held by proportional state compensation
+from the freeze on (they are not tracking variables).
 Settled = over --window seconds no output moved more than --tolerance x its
 measured range. Gains g_ij = dy_i/dp_j, scaled by measured ranges and parameter
 bound ranges, give the relative gain array; each tag gets the unused parameter
@@ -122,12 +124,16 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     frame, start, stop = _measured(spec)
     op = operating_point(frame, spec.inputs, start=start, duration=3600.0, at=args.at)
     train = take_window(frame, start, stop)
-    tags = list(spec.outputs)
+    state_tags = {st.tag for st in spec.states}
+    tags = [t for t in spec.outputs if t not in state_tags]
+    if state_tags:
+        _stderr("state-compensated tags are not tracking variables: " + ", ".join(sorted(state_tags)))
     spans = variable_ranges(train[tags].to_numpy(dtype=float)) if len(train) else np.full(len(tags), np.nan)
     ranges = {tag: float(r) for tag, r in zip(tags, spans) if math.isfinite(r) and r > 0}
     params = [(p.name, p.start, p.min, p.max) for p in spec.parameters]
-    problem = make_problem(spec.twin, outputs=spec.outputs, parameters=params, fixed=spec.fixed,
-                           operating=op, ranges=ranges, freeze=freeze)
+    problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in tags}, parameters=params,
+                           fixed=spec.fixed, operating=op, ranges=ranges, freeze=freeze,
+                           compensation=[(st.variable, st.correction, st.gain) for st in spec.states])
     interval = float(args.interval or spec.sample_time)
     settings = StepSettings(step=args.step, two_sided=not args.one_sided, freeze=tuple(freeze.items()),
                             interval=interval, window=float(args.window or 60 * interval),
