@@ -278,3 +278,21 @@ def test_openmodelica_backend_builds_fmi2(tmp_path):
     assert res.fmi_version == "2.0"
     out = simulate(res.fmu, 20, 0.5, output=["y"])
     assert np.allclose(out["y"], 3.0 + (0.5 - 3.0) * np.exp(-out["time"] / 5), atol=1e-4)
+
+
+def test_parameter_only_in_start_values_is_not_offered(tmp_path):
+    """A tunable parameter that cannot change anything must not be offered as one."""
+    src = write(tmp_path, "S0.mo", """
+model S0
+  parameter Real x_start = 2 "Only sets a start value";
+  parameter Real a = 0.5 "Decay rate";
+  Real x(start = x_start, fixed = true);
+equation
+  der(x) = -a*x;
+end S0;
+""")
+    res = compile_model(src, "S0", backend="embedded", output=tmp_path / "s0.fmu")
+    names = {v.name for v in fmpy.read_model_description(str(res.fmu)).modelVariables}
+    assert "a" in names and "x_start" not in names and "x_start" in res.log
+    out = simulate(res.fmu, 2, 1.0, output=["x"], start_values={"x": 4.0}, relative_tolerance=1e-9)
+    assert np.allclose(out["x"], 4.0 * np.exp(-0.5 * out["time"]), rtol=1e-5)

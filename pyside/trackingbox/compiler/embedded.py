@@ -119,5 +119,8 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
         f"{len(em.parameters)} tunable parameters, {em.n_loops} algebraic loops {em.loop_sizes}; "
         f"flatten {t1 - t0:.2f} s, causalise {t2 - t1:.2f} s, export+cc {t3 - t2:.2f} s"
     )
+    if em.unused_parameters:
+        summary += ("\nnot exported (no equation uses them; they can only set start values, which the "
+                    "FMU takes from the states' own start attributes): " + ", ".join(em.unused_parameters))
     log.info(summary)
     return summary + "\n" + build_log, len(em.states), len(em.parameters)

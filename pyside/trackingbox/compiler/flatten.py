@@ -84,6 +84,7 @@ class ExplicitModel:
     assignments: list[tuple[ca.MX, ca.MX]]
     n_loops: int = 0
     loop_sizes: list[int] = field(default_factory=list)
+    unused_parameters: list[str] = field(default_factory=list)
 
 
 def _kind_of(node: Any) -> tuple[str, Any]:
@@ -668,8 +669,14 @@ class FlatTranslator:
             sols = self._rootfinder(k, res, unk, [guess.get(u.name(), 0.0) for u in unk])
             assignments.extend(zip(unk, sols))
         log.debug("%s: %d blocks, %d algebraic loops %s", self.model, len(blocks), len(loop_sizes), loop_sizes)
+        # A parameter that no equation uses (e.g. one that only sets start values) would be a
+        # tunable parameter with no effect: the FMU's states start from fixed numbers, so it is
+        # not exported; set the state's own start value instead.
+        used = {s.name() for s in ca.symvar(ca.vertcat(*[e for _, e in assignments]))} if assignments else set()
+        unused = [sv.name for sv in params if sv.name not in used]
+        params = [sv for sv in params if sv.name in used]
         return ExplicitModel(
-            name=self.model, time=self.time, parameters=params, calculated=calculated,
+            name=self.model, time=self.time, parameters=params, calculated=calculated, unused_parameters=unused,
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes,
