@@ -199,7 +199,7 @@ def validate(spec: Any, fmu: str | Path, *, work_dir: str | Path | None = None, 
 
     from .fmu import FMUModel
     from .estimation import nrmse
-    from .tracking.runtime import CSV_NAME, track
+    from .tracking.runtime import track
 
     wall0 = _time.perf_counter()
     if not spec.pairs:

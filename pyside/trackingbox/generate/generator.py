@@ -144,14 +144,7 @@ def variable_span(gain: float, p_min: float, p_max: float) -> float:
 
 
 def _span(pair: Any, p_min: float, p_max: float) -> float:
-    """The span the Python runtime uses, if it says; else :func:`variable_span`."""
-    try:  # the tracking runtime may define its own rule; use it so both agree
-        from ..tracking import runtime as _rt  # type: ignore[attr-defined]
-        rule = getattr(_rt, "variable_span", None)
-        if callable(rule):
-            return float(rule(pair.gain, p_min, p_max))
-    except ImportError:
-        pass
+    """The span of a pair's variable; the same rule as the Python runtime (``tracking.runtime``)."""
     return variable_span(pair.gain, p_min, p_max)
 
 
