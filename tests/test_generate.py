@@ -79,6 +79,13 @@ def test_identifiers():
     assert filters.modelica_name("end") == "end_"
 
 
+def test_unit_modifier():
+    assert filters.modelica_unit_modifier("W/(m2.K)") == '(unit = "W/(m2.K)")'
+    assert filters.modelica_unit_modifier("K", min=0.0, start=None) == '(unit = "K", min = 0.0)'
+    assert filters.modelica_unit_modifier("", start=300) == "(start = 300.0)"
+    assert filters.modelica_unit_modifier("") == ""
+
+
 def test_environment_is_strict_and_brace_safe():
     env = environment()
     with pytest.raises(jinja2.UndefinedError):
@@ -131,11 +138,13 @@ def test_tracked_model_structure(case: Path):
     box = (result.package_dir / "TwinTrackingBox.mo").read_text()
     # bounds and spec gains appear as parameters with descriptions
     assert 'parameter Real hx_kht_min = 800.0 "Lower bound of hx.kht (0 % output)";' in box
-    assert 'parameter Real hx_kht_kp(min = 0.0) = 0.5 "' in box
-    assert 'parameter Real hx_kht_Ti(min = 0.0) = 60.0 "' in box
+    assert 'parameter Real hx_kht_kp(unit = "1", min = 0.0) = 0.5 "' in box
+    assert 'parameter Real hx_kht_Ti(unit = "s", min = 0.0) = 60.0 "' in box
     # span = |gain|*(max - min) = 0.005*400 = 2 K; reverse action for a negative gain
     assert "parameter Real TI_102_span(min = 0.0) = 2.0 " in box
-    assert "parameter Real hx_kht_direction = -1.0 " in box
+    assert 'parameter Real hx_kht_direction(unit = "1") = -1.0 ' in box
+    # the twin's description of the parameter is carried over
+    assert 'RealOutput hx_kht "Tracked value of hx.kht (Heat-transfer coefficient (W/(m2.K)))";' in box
 
 
 def test_simc_gains_when_spec_has_none(tmp_path: Path):

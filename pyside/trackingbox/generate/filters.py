@@ -26,7 +26,7 @@ import jinja2
 __all__ = [
     "MODELICA_KEYWORDS", "modelica_real", "modelica_bool", "modelica_array",
     "modelica_string", "modelica_ident", "modelica_name", "modelica_literal",
-    "is_identifier", "register",
+    "is_identifier", "modelica_unit_modifier", "register",
 ]
 
 #: Reserved words of Modelica 3.6 (section 2.3.3); none may be used as an identifier.
@@ -161,6 +161,19 @@ def modelica_array(values: Any) -> str:
     return "{" + ", ".join(modelica_literal(v) for v in values) + "}"
 
 
+def modelica_unit_modifier(unit: str, **attributes: Any) -> str:
+    """A modifier ``(unit = "K", min = 0.0)`` from a unit (``""`` = none) and further attributes.
+
+    Attributes whose value is ``None`` are left out; nothing at all gives ``""``.
+
+    >>> modelica_unit_modifier("K"), modelica_unit_modifier("", min=0.0), modelica_unit_modifier("")
+    ('(unit = "K")', '(min = 0.0)', '')
+    """
+    parts = [f"unit = {modelica_string(unit)}"] if unit else []
+    parts += [f"{modelica_ident(k)} = {modelica_literal(v)}" for k, v in attributes.items() if v is not None]
+    return "(" + ", ".join(parts) + ")" if parts else ""
+
+
 def register(env: jinja2.Environment) -> jinja2.Environment:
     """Register the filters on *env* under short names (``real``, ``bool``, ...)."""
     env.filters.update({
@@ -171,5 +184,6 @@ def register(env: jinja2.Environment) -> jinja2.Environment:
         "ident": modelica_ident,
         "mname": modelica_name,
         "literal": modelica_literal,
+        "unitmod": modelica_unit_modifier,
     })
     return env
