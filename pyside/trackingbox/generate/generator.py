@@ -91,7 +91,6 @@ class ControllerModel:
     direction: float
     gain: float
     time_constant: float
-    meas_start: float | None   # start value of the measurement input (the twin variable's), if known
     tuning: str              # how kp/ti were obtained (for the description)
     p_unit: str = ""         # unit of the parameter in the twin ("" if none)
     y_unit: str = ""         # unit of the tracking variable in the twin
@@ -249,18 +248,12 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
                 raise SpecError(f"name {names[kind]!r} for {pair.variable if kind == 'meas' else pair.parameter} "
                                 f"clashes with the {taken[names[kind]]} of that name in {src.model}")
             taken[names[kind]] = f"generated {kind}"
-        start = src.variables[twin_var].get("start")
-        meas_start: float | None = None
-        if isinstance(start, dict) and "Literal" in start:
-            val = start["Literal"].get("value", {})
-            if isinstance(val, dict) and val:
-                meas_start = float(next(iter(val.values())))
         controllers.append(ControllerModel(
             tag=pair.variable, parameter=pair.parameter, input=site.input, twin_variable=twin_var,
             out=out, meas=names["meas"], sim=names["sim"], span_name=f"{ident}_span",
             p_min=p_min, p_max=p_max, p_start=p_start, span=span, kp=kp, ti=ti,
             direction=1.0 if pair.gain > 0 else -1.0, gain=float(pair.gain),
-            time_constant=float(pair.time_constant), meas_start=meas_start, tuning=how,
+            time_constant=float(pair.time_constant), tuning=how,
             p_unit=_text_attr(src.variables[pair.parameter], "unit"),
             y_unit=_text_attr(src.variables[twin_var], "unit"),
             p_description=_text_attr(src.variables[pair.parameter], "description")))
