@@ -30,14 +30,16 @@ def build_step_fmu(directory) -> str:
     z = dae.add("z", "local", "continuous", {"start": 0.0, "initial": "exact"})
     w = dae.add("w", "local", "continuous", {"start": 0.0, "initial": "exact"})
     level = dae.add("level", "local", "continuous", {"start": 1.0, "initial": "exact"})
-    ys = [dae.add(n, "output", {}) for n in ("y1", "y2", "y3", "y4", "y5", "y6")]
+    slow = dae.add("slow", "local", "continuous", {"start": 0.0, "initial": "exact"})
+    ys = [dae.add(n, "output", {}) for n in ("y1", "y2", "y3", "y4", "y5", "y6", "y7")]
     dae.eq(dae.der(x1), (a * u + z - x1 + 0.5 * x2) / 5.0)
     dae.eq(dae.der(x2), (b - x2 + 0.2 * x1) / 10.0)
     dae.eq(dae.der(x3), (c - x3) / 20.0)
     dae.eq(dae.der(z), (1 - hold) * ki * (r - x1))
     dae.eq(dae.der(w), d - 1.0)
     dae.eq(dae.der(level), (c - 1.0 + corr) / 2.0)
-    for y, expr in zip(ys, (x1, x2, x1 * x1, x3, w, level)):
+    dae.eq(dae.der(slow), (1.0 - slow) / 1000.0)
+    for y, expr in zip(ys, (x1, x2, x1 * x1, x3, w, level, slow + 3.0 * x3)):
         dae.eq(y, expr)
     cwd = os.getcwd()
     os.chdir(directory)

@@ -8,6 +8,7 @@ The model (time in s)::
     dz/dt  = (1 - hold) * ki * (r - x1)        (PI-like integrator: holds when hold = 1)
     dw/dt  = d - 1                             y5 = w (never settles once d != 1)
     dL/dt  = (c - 1 + corr) / 2                y6 = L (a tank level: integrates any imbalance)
+    ds/dt  = (1 - s) / 1000                    y7 = s + 3*x3 (a slow drift on top of dy7/dc = 3)
 
 With z held constant the steady state is x1 = (a*u + z + 0.5*b) / 0.9,
 x2 = b + 0.2*x1, so dy1/da = u/0.9, dy1/db = 0.5/0.9, dy2/da = 0.2*u/0.9,
@@ -70,7 +71,7 @@ def test_gains_with_frozen_controller_match_hand_solution(step_fmu, workers, war
     assert res.asymmetry[2, 0] == pytest.approx(2 * dl / (2 * 2.0 + dl), rel=1e-3)
     assert math.isnan(res.asymmetry[0, 2])  # y1 does not respond to c at all
     assert res.time_constants[3, 2] == pytest.approx(20.0, abs=0.2)
-    assert res.runs == 1 + 2 * 3
+    assert res.runs == 2 + 2 * 3  # baseline, reference run, +/- step per parameter
 
 
 def test_without_freeze_the_active_controller_hides_the_gain(step_fmu):
@@ -106,6 +107,22 @@ def test_state_compensation_holds_an_integrating_level(step_fmu):
     plain = make_problem(step_fmu, outputs={"Y6": "y6"}, parameters=[("c", 1.0, 0.0, 2.0)], ranges={"Y6": 1.0})
     with pytest.raises(AnalysisError, match="y6 moved"):
         step_tests(plain, StepSettings(interval=1.0, window=20.0, tolerance=1e-6, max_time=100.0))
+
+
+def test_drift_correction_removes_a_slow_residual_drift(step_fmu):
+    # the baseline counts as settled once s moves < 0.01 per 50 s, i.e. with s ~ 0.8 still
+    # creeping towards 1 (tau 1000 s); the step response of y7 must still be dy7/dc = 3.
+    prob = make_problem(step_fmu, outputs={"Y7": "y7"}, parameters=[("c", 1.0, 0.0, 2.0)], ranges={"Y7": 1.0})
+    settings = StepSettings(interval=1.0, window=50.0, tolerance=1e-5, baseline_tolerance=1e-2, max_time=3000.0)
+    res = step_tests(prob, settings)
+    assert res.baseline[0] < 3.0 + 0.9  # s had not reached 1 at the step
+    assert res.gains[0, 0] == pytest.approx(3.0, rel=1e-3)
+    assert res.time_constants[0, 0] == pytest.approx(20.0, abs=0.2)
+    # without the reference run the drift never dies down within the tight step tolerance
+    from dataclasses import replace
+
+    with pytest.raises(AnalysisError, match="did not settle"):
+        step_tests(prob, replace(settings, drift_correction=False, max_time=300.0))
 
 
 def test_unknown_names_get_did_you_mean(step_fmu):

@@ -24,7 +24,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
 from .pairing import Pairing
-from .steptest import RunPlan, StepProblem, StepSettings, baseline, default_ranges, run_plan
+from .steptest import RunPlan, StepProblem, StepSettings, baseline, default_ranges, reference_run, run_plan
 
 logger = logging.getLogger(__name__)
 
@@ -189,10 +189,11 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
     X = sample_parameters(problem.parameters, problem.lower, problem.upper, n, seed=seed)
     logger.info("Sobol: %d runs (N = %d, %d parameters)", X.shape[0], n, len(problem.parameters))
     base = baseline(problem, settings, executor)
+    reference = reference_run(problem, settings, base, executor)
     plans = [RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
                      base.freeze_time, base.step_time, tuple(zip(problem.parameters, map(float, x))),
                      label=f"Sobol sample {k}", states=base.states, compensation=problem.compensation,
-                     levels_ref=base.levels_ref)
+                     levels_ref=base.levels_ref, reference=reference)
              for k, x in enumerate(X)]
     if executor is None:
         results = [run_plan(p) for p in plans]

@@ -60,7 +60,11 @@ class StepSettings:
     window : float
         Settle window (s).
     tolerance : float
-        Allowed change over the window, as a fraction of each output's range.
+        Allowed change of the (drift-corrected) step response over the
+        window, as a fraction of each output's range.
+    baseline_tolerance : float
+        The same for the settle phases before the step (looser: what is left
+        of their drift is removed by ``drift_correction``).
     max_time : float
         Longest time (s) any phase may take to settle.
     solver_tolerance : float
@@ -68,6 +72,10 @@ class StepSettings:
     warm_start : bool
         Start each step run from the baseline's continuous states at the step
         time (model-exchange FMUs) instead of replaying the settle phases.
+    drift_correction : bool
+        Run the baseline on without any step (a reference run) and measure each
+        response against it, ``y_step(t) - y_ref(t)``, so a slow residual drift
+        (a large tank still warming up) is not mistaken for a gain.
     """
 
     step: float = 0.05
@@ -76,12 +84,15 @@ class StepSettings:
     interval: float = 10.0
     window: float = 600.0
     tolerance: float = 1e-4
-    max_time: float = 36000.0
+    baseline_tolerance: float = 1e-3
+    max_time: float = 86400.0
     solver_tolerance: float = 1e-8
     warm_start: bool = True
+    drift_correction: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("step", "interval", "window", "tolerance", "max_time", "solver_tolerance"):
+        for name in ("step", "interval", "window", "tolerance", "baseline_tolerance", "max_time",
+                     "solver_tolerance"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise AnalysisError(f"step-test setting {name} must be a positive number, got {value!r}")
@@ -174,6 +185,8 @@ class RunPlan:
     states: tuple[float, ...] | None = None
     compensation: tuple[tuple[str, str, float], ...] = ()
     levels_ref: tuple[float, ...] | None = None
+    reference: np.ndarray | None = field(default=None, repr=False, compare=False)
+    record: bool = False
 
 
 @dataclass(frozen=True)
@@ -231,6 +244,7 @@ def run_plan(plan: RunPlan) -> RunResult:
     s = plan.settings
     model = cached_model(plan.fmu, s.solver_tolerance)
     limits = np.asarray(plan.ranges, dtype=float) * s.tolerance
+    base_limits = np.asarray(plan.ranges, dtype=float) * s.baseline_tolerance
     warm = plan.states is not None and not math.isnan(plan.step_time)
     t_start = plan.step_time if warm else 0.0
     start = dict(plan.start_values)
@@ -262,7 +276,7 @@ def run_plan(plan: RunPlan) -> RunResult:
         return stepper.get(outs)
 
     def settle(phase: str, k0: int) -> int:
-        det = _Settle(k0 * s.interval, s.window, limits)
+        det = _Settle(k0 * s.interval, s.window, base_limits)
         det.push(k0 * s.interval, stepper.get(outs))
         kk = k0
         k_max = k0 + int(math.ceil(s.max_time / s.interval))
@@ -273,7 +287,7 @@ def run_plan(plan: RunPlan) -> RunResult:
         raise AnalysisError(
             f"step test {plan.label}: {phase} did not settle within {s.max_time:g} s "
             f"(from t = {k0 * s.interval:g} s to {kk * s.interval:g} s): "
-            f"{_still_moving(outs, det.spans(), limits, s.window)}; raise --max-time or check the "
+            f"{_still_moving(outs, det.spans(), base_limits, s.window)}; raise --max-time or check the "
             "twin is stable at this operating point")
 
     def run_to(k_target: int) -> None:
@@ -303,6 +317,15 @@ def run_plan(plan: RunPlan) -> RunResult:
             run_to(int(round(plan.step_time / s.interval)))
     step_time = k * s.interval
     before = stepper.get(outs)
+    k_step = k
+    n_max = int(math.ceil(s.max_time / s.interval))
+    if plan.record:  # reference run: no change, the whole horizon
+        traj_ref = [before]
+        for kk in range(k_step + 1, k_step + n_max + 1):
+            traj_ref.append(advance(kk))
+        arr = np.array(traj_ref)
+        return RunResult(plan.label, freeze_time, step_time, before, arr[-1], (k_step + n_max) * s.interval,
+                         s.interval * np.arange(k_step, k_step + n_max + 1), arr)
     if not plan.change:
         states = None
         if s.warm_start:
@@ -313,13 +336,14 @@ def run_plan(plan: RunPlan) -> RunResult:
         return RunResult(plan.label, freeze_time, step_time, before, before, step_time,
                          np.array([step_time]), before[None, :], states,
                          None if ref is None else tuple(float(x) for x in ref))
-    # phase 3: the step
+    # phase 3: the step (measured against the reference run when there is one)
+    ref_traj = plan.reference
     stepper.set(dict(plan.change))
     det = _Settle(step_time, s.window, limits)
     det.push(step_time, before)
     times = [step_time]
     traj = [before]
-    k_max = k + int(math.ceil(s.max_time / s.interval))
+    k_max = k + n_max
     while True:
         if k >= k_max:
             raise AnalysisError(
@@ -327,6 +351,8 @@ def run_plan(plan: RunPlan) -> RunResult:
                 f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}")
         k += 1
         y = advance(k)
+        if ref_traj is not None:
+            y = before + (y - ref_traj[min(k - k_step, len(ref_traj) - 1)])
         times.append(k * s.interval)
         traj.append(y)
         if det.push(k * s.interval, y):
@@ -570,6 +596,22 @@ def baseline(problem: StepProblem, settings: StepSettings, executor: Executor | 
     return executor.submit(run_plan, plan).result()
 
 
+def reference_run(problem: StepProblem, settings: StepSettings, base: RunResult,
+                  executor: Executor | None = None) -> np.ndarray | None:
+    """Outputs of the unstepped twin from the step time over ``max_time`` (None without drift correction)."""
+    if not settings.drift_correction:
+        return None
+    plan = RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
+                   base.freeze_time, base.step_time, (), label="reference run", states=base.states,
+                   compensation=problem.compensation, levels_ref=base.levels_ref, record=True)
+    res = run_plan(plan) if executor is None else executor.submit(run_plan, plan).result()
+    drift = np.abs(res.trajectory - res.trajectory[0]).max(axis=0)
+    for i in np.flatnonzero(drift > np.asarray(problem.ranges) * settings.tolerance):
+        logger.info("%s drifts by %.3g over %g s without a step: responses are measured against that drift",
+                    problem.outputs[i], drift[i], settings.max_time)
+    return res.trajectory
+
+
 def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
                executor: Executor | None = None) -> StepTestResult:
     """Steady-state gain matrix of the twin by parameter step tests.
@@ -598,6 +640,7 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
     base = baseline(problem, settings, executor)
     logger.info("baseline settled: controllers frozen at t = %g s, steady at t = %g s",
                 base.freeze_time, base.step_time)
+    reference = reference_run(problem, settings, base, executor)
     plans: list[tuple[int, int, RunPlan]] = []
     n = len(problem.parameters)
     deltas = np.zeros(n)
@@ -613,7 +656,7 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
                                           settings, base.freeze_time, base.step_time, ((name, value),),
                                           label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}",
                                           states=base.states, compensation=problem.compensation,
-                                          levels_ref=base.levels_ref)))
+                                          levels_ref=base.levels_ref, reference=reference)))
     if executor is None:
         results = [run_plan(p) for _, _, p in plans]
     else:
@@ -655,7 +698,7 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
         gains=gains, gains_up=g_up, gains_down=g_dn, asymmetry=asym, time_constants=tau, deltas=deltas,
         baseline=base.before, ranges=np.asarray(problem.ranges, dtype=float), freeze_time=base.freeze_time,
         step_time=base.step_time, operating_point=dict(problem.fixed),
-        runs=1 + len(plans), seconds=_time.perf_counter() - t_wall)
+        runs=1 + (reference is not None) + len(plans), seconds=_time.perf_counter() - t_wall)
     for v, p, a in result.nonlinear():
         logger.warning("response of %s to %s is asymmetric (+/- step gains differ by %.0f %%)", v, p, 100 * a)
     return result

@@ -30,7 +30,8 @@ its bound range and the new steady state of every [outputs] tag is recorded.
 Tank levels listed in [[states]] are held by proportional state compensation
 from the freeze on (they are not tracking variables).
 Settled = over --window seconds no output moved more than --tolerance x its
-measured range. Gains g_ij = dy_i/dp_j, scaled by measured ranges and parameter
+measured range; responses are measured against an unstepped reference run, so
+a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled by measured ranges and parameter
 bound ranges, give the relative gain array; each tag gets the unused parameter
 with a positive relative gain closest to 1. The chosen pairs (gain, 63 % time
 constant) replace the spec's [[pairs]] unless --no-write; an existing pair keeps
@@ -68,8 +69,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--tolerance", type=float, default=1e-4,
                    help="settled when no output moves more than this fraction of its range over the "
                         "window (default 1e-4)")
-    p.add_argument("--max-time", type=float, default=36000.0, metavar="SECONDS",
-                   help="longest a phase may take to settle (default 36000 s)")
+    p.add_argument("--baseline-tolerance", type=float, default=1e-3,
+                   help="the same for the settle phases before the steps (default 1e-3; the rest of "
+                        "their drift is removed by measuring against an unstepped reference run)")
+    p.add_argument("--max-time", type=float, default=86400.0, metavar="SECONDS",
+                   help="longest a phase may take to settle (default 86400 s)")
     p.add_argument("--samples", type=int, default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=int, default=0, help="Sobol sampling seed (default 0)")
@@ -137,7 +141,8 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     interval = float(args.interval or spec.sample_time)
     settings = StepSettings(step=args.step, two_sided=not args.one_sided, freeze=tuple(freeze.items()),
                             interval=interval, window=float(args.window or 60 * interval),
-                            tolerance=args.tolerance, max_time=args.max_time)
+                            tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
+                            max_time=args.max_time)
     pranges = parameter_ranges([(p.min, p.max) for p in spec.parameters])
     sob = None
     with make_executor(args.scheduler, args.workers) as ex:
