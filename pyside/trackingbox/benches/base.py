@@ -48,12 +48,12 @@ log = logging.getLogger(__name__)
 SensorKind = Literal["temperature", "flow", "level", "pressure", "power", "other"]
 
 #: Default sensor noise: (standard deviation, relative?) per kind. Temperatures
-#: 0.1 K, flows 1 % of reading, levels 5 mm, pressures 0.5 % of reading.
+#: 0.1 K, flows 1 % of reading, levels 5 mm, pressures 0.2 % of reading.
 NOISE: dict[str, tuple[float, bool]] = {
     "temperature": (0.1, False),
     "flow": (0.01, True),
     "level": (0.005, False),
-    "pressure": (0.005, True),
+    "pressure": (0.002, True),
     "power": (0.01, True),
     "other": (0.0, False),
 }
