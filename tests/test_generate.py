@@ -247,6 +247,15 @@ def test_hold_freezes_the_parameter(case: Path, tmp_path: Path):
     assert _simulate_tracked(tmp_path / "s3", result, meas=305.5, hold=1.0) == pytest.approx(1000.0, abs=1e-9)
 
 
+def test_start_up_hold_from_the_spec(tmp_path: Path):
+    spec = write_case(tmp_path / "c")
+    spec.write_text(spec.read_text() + "\n[tracking]\nhold_until = 100000.0\n")
+    result = _generate(spec, tmp_path / "out")
+    assert "parameter Real holdUntil(unit = \"s\") = 100000.0 " in (result.package_dir / "TwinTracked.mo").read_text()
+    # hold input 0, but the start-up hold outlasts the run: kht stays at its start value
+    assert _simulate_tracked(tmp_path / "s4", result, meas=305.5, hold=0.0) == pytest.approx(1000.0, abs=1e-9)
+
+
 # ---------------------------------------------------------------- compiled FMU
 
 

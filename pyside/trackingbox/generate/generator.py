@@ -108,6 +108,7 @@ class GeneratedModel:
     twin_model: str
     sample_time: float
     stop_time: float
+    hold_until: float
     controllers: tuple[ControllerModel, ...]
     modifier_lines: tuple[str, ...]
     class_order: tuple[str, ...]
@@ -293,6 +294,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
     return GeneratedModel(
         header="\n".join(header_lines), package=package, box_class=box_class, tracked_class=tracked_class,
         twin_model=src.model, sample_time=float(spec.sample_time), stop_time=float(stop),
+        hold_until=float(spec.tracking.hold_until),
         controllers=tuple(controllers), modifier_lines=_modifier_lines(list(sites.values())),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
