@@ -289,8 +289,10 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         f"<html><p><code>{src.model}</code> with "
         + ", ".join(f"<code>{c.parameter}</code>" for c in controllers)
         + f" switched to their conditional inputs and driven by <code>{box_class}</code>. Inputs: the "
-        "twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>. Outputs: the "
-        "twin's own outputs and the tracked parameter values.</p></html>")
+        "twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; the box also "
+        "holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's own outputs "
+        "and the tracked parameter values. State compensation (<code>[[states]]</code> in the spec) is "
+        "not generated: the twin's correction inputs stay inputs.</p></html>")
     return GeneratedModel(
         header="\n".join(header_lines), package=package, box_class=box_class, tracked_class=tracked_class,
         twin_model=src.model, sample_time=float(spec.sample_time), stop_time=float(stop),
