@@ -355,6 +355,9 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
                   f"{json.dumps(overrides) if overrides else 'none'}\n"
                   f"true plant values are in truth.json (not read by the spec)")
         spec_text = dump_spec(spec, header=header)
+        # columns in the order of the spec's tags (inputs, outputs, measured states)
+        order = ["time", *spec.tags]
+        measurements = measurements[order + [c for c in measurements.columns if c not in order]]
         truth_doc = {"bench": definition.name, "seed": int(seed), "hours": hours,
                      "plant_model": definition.plant_model, "twin_model": definition.twin_model,
                      "overrides": overrides, "parameters": truth, "plant_parameters": plant_params}
