@@ -114,12 +114,15 @@ DEFINITION = BenchDefinition(
         ParameterSpec("PU200.uRise", 40000.0, 36000.0, 44000.0),
     ),
     scenario=heat_production_scenario,
-    # state compensation of the tank levels through the twin's correction-flow inputs;
-    # 2 kg/s per m on a 0.3 m2 tank (about 300 kg per m) closes a level gap in ~150 s
+    # state compensation of the tank levels through the twin's correction-flow inputs:
+    # 1 kg/s per m on a 0.3 m2 tank (about 295 kg per m of level) closes a level gap
+    # with a time constant of ~5 min and turns the 5 mm level noise into ~0.005 kg/s
     states=(
-        StateSpec("LI-100", "LI_100", "T100_m_flow_corr", 2.0),
-        StateSpec("LI-200", "LI_200", "T200_m_flow_corr", 2.0),
-        StateSpec("LI-400", "LI_400", "T400_m_flow_corr", 2.0),
+        StateSpec("LI-100", "LI_100", "T100_m_flow_corr", 1.0),
+        StateSpec("LI-200", "LI_200", "T200_m_flow_corr", 1.0),
+        StateSpec("LI-400", "LI_400", "T400_m_flow_corr", 1.0),
     ),
-    tracking=TrackingSettings(hold_until=1800.0),
+    # the twin starts from its declared initial state; its level and temperature
+    # controllers (integral times 150-1200 s) need about an hour to settle
+    tracking=TrackingSettings(hold_until=3600.0),
 )
