@@ -30,7 +30,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from ..errors import FMUError, SimulationError, did_you_mean
+from ..errors import FMUError, SimulationError, TrackingError, did_you_mean
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -263,9 +263,14 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
     from ..fmu import FMUModel, read_info  # lazy: fmpy
 
     out = Path(out).expanduser().resolve()
+    if out.exists() and not out.is_dir():
+        raise TrackingError(f"output directory {out} of bench {definition.name!r} exists and is not a directory")
     hours = float(definition.hours if hours is None else hours)
     if not hours > 0:
-        raise SimulationError(f"bench {definition.name!r}: --hours must be > 0, got {hours}")
+        raise TrackingError(f"bench {definition.name!r}: --hours must be > 0, got {hours}")
+    for given, what in ((plant_fmu, "plant"), (twin_fmu, "twin")):
+        if given is not None and not Path(given).is_file():
+            raise FMUError(f"{what} FMU {given} for bench {definition.name!r} does not exist")
     overrides = dict(overrides or {})
     seeds = np.random.SeedSequence(int(seed)).spawn(2)
     scenario_rng, noise_rng = (np.random.default_rng(s) for s in seeds)
