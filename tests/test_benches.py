@@ -126,6 +126,14 @@ def test_check_against_fmu_names_wrong_variables(hx_case):
 
 
 @pytest.mark.compile
+def test_check_against_fmu_rejects_bounds_wider_than_the_model_declares(hx_case):
+    # PartialBench.mo declares hx.kht(min=500, max=1500)
+    text = hx_case.spec.read_text().replace("min = 500.0", "min = 400.0")
+    with pytest.raises(SpecError, match=r"min = 400\.0 of parameter 'hx.kht' is below the min = 500\.0"):
+        check_against_fmu(loads_spec(text, hx_case.spec))
+
+
+@pytest.mark.compile
 def test_hx_sensor_noise_matches_requested_sigma(hx_case):
     inputs, clean = clean_plant(hx_case, ["ThOut", "TcOut"], hold=3600.0)
     meas = pd.read_csv(hx_case.measurements)
