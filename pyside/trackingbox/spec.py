@@ -421,8 +421,6 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             tag = _string(stable, "tag", label, problems)
             below = _number(stable, "below", label, problems)
             settle = _number(stable, "settle", label, problems, default=0.0, nonnegative=True)
-            if tag is not None and known_tags and tag not in known_tags:
-                problems.add(f"unknown tag {tag!r} in {label}{did_you_mean(tag, known_tags)}")
             if tag is not None and below is not None:
                 stoppage = StoppageRule(tag=tag, below=below, settle=settle or 0.0)
         max_gap = _number(dtable, "max_gap", "[data]", problems, positive=True)
@@ -479,6 +477,12 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             continue
         assert tag is not None and variable is not None and correction is not None and gain is not None
         states.append(StateSpec(tag=tag, variable=variable, correction=correction, gain=gain))
+
+    if data.stoppage is not None:
+        known_tags += [st.tag for st in states]
+        if data.stoppage.tag not in known_tags:
+            problems.add(f"unknown tag {data.stoppage.tag!r} in [data.stoppage]"
+                         f"{did_you_mean(data.stoppage.tag, known_tags)}")
 
     tracking = TrackingSettings()
     ttable = _table(raw, "tracking", problems)
