@@ -86,6 +86,21 @@ def test_dependent_parameter_is_left_out_not_crashing():
     assert math.isfinite(p.condition_number)
 
 
+def test_nearly_parallel_parameters_are_told_apart_only_within_rank_tolerance():
+    # p3's column [0.5, 0.001, 0.25] is half of p1's [1, 0, 0.5] up to an angle of ~0.0018 rad
+    # (a valve in series with a pipe): not separable at the default tolerance (0.01 rad), so the
+    # weaker of the two goes; separable when asked for 1e-6.
+    G = [[1.0, 0.0, 0.5], [0.0, 1.0, 0.001], [0.5, 0.5, 0.25]]
+    p = choose_pairs(G, ["F1", "F2", "P3"], ["p1", "p2", "p3"])
+    reason = _reason(p, "p3")
+    assert "parallel" in reason and "p1" in reason
+    assert set(_pairs(p).values()) == {"p1", "p2"}
+    assert p.condition_number < 100
+    strict = choose_pairs(G, ["F1", "F2", "P3"], ["p1", "p2", "p3"], rtol=1e-6)
+    assert not any("parallel" in r for _, r in strict.left_out)
+    assert strict.condition_number > 100
+
+
 def test_all_zero_gains():
     p = choose_pairs(np.zeros((2, 2)), ["y1", "y2"], ["a", "b"])
     assert p.pairs == ()

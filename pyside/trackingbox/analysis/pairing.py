@@ -27,10 +27,10 @@ LARGE_LAMBDA = 10.0
 NEGLIGIBLE = 1e-3
 #: Rank tolerance on the scaled gain matrix: a parameter whose gain column adds less than
 #: this fraction of the largest singular value (or whose column is parallel to a stronger one
-#: within ``1 - RANK_RTOL`` in cosine) cannot be told apart from the others and is left out
-#: before the RGA. 1e-3 keeps the condition number of what is paired below ~1e3; on the
+#: within ``RANK_RTOL`` rad) cannot be told apart from the others and is left out
+#: before the RGA. 1e-2 keeps the condition number of what is paired below ~1e2; on the
 #: heat-production bench it separates valves from the pipes in series with them.
-RANK_RTOL = 1e-3
+RANK_RTOL = 1e-2
 _FORBIDDEN = 1e6
 
 
@@ -207,8 +207,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         for b in order[pos + 1:]:
             if b in drop:
                 continue
-            cos = abs(float(sub[:, a] @ sub[:, b])) / (norms[a] * norms[b])
-            if cos > 1.0 - rtol:
+            cos = min(1.0, abs(float(sub[:, a] @ sub[:, b])) / (norms[a] * norms[b]))
+            if math.sqrt(1.0 - cos * cos) < rtol:  # angle between the columns below ~rtol rad
                 drop.add(b)
                 left_out.append((parameters[cols[b]], "its gain column is parallel to that of "
                                  f"{parameters[cols[a]]} (a linear combination of it): it cannot be "
@@ -223,10 +223,13 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         kept, dependent = list(range(sub.shape[1])), []
     for k in dependent:
         j = cols[k]
-        others = ", ".join(parameters[cols[q]] for q in kept)
-        left_out.append((parameters[j], "its gain column is (nearly) a linear combination of the "
-                                        f"columns of {others} over the variables left: it cannot be "
-                                        "told apart from them"))
+        coef = np.linalg.lstsq(sub[:, kept], sub[:, k], rcond=None)[0]
+        weight = np.abs(coef) * np.linalg.norm(sub[:, kept], axis=0)
+        top = [kept[q] for q in np.argsort(-weight)[:3] if weight[q] > 1e-3 * weight.max()]
+        others = ", ".join(parameters[cols[q]] for q in top)
+        left_out.append((parameters[j], "its gain column is (nearly) a linear combination of those of "
+                                        f"{others}{' and others' if len(kept) > len(top) else ''}: "
+                                        "it cannot be told apart from them"))
     cols = [cols[k] for k in kept]
     sub = S[np.ix_(rows, cols)]
 

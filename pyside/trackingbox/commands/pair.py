@@ -74,6 +74,9 @@ def register(subparsers: Any) -> None:
                         "their drift is removed by measuring against an unstepped reference run)")
     p.add_argument("--max-time", type=float, default=86400.0, metavar="SECONDS",
                    help="longest a phase may take to settle (default 86400 s)")
+    p.add_argument("--rank-tol", type=float, default=None, metavar="RTOL",
+                   help="leave out parameters whose scaled gain column adds less than RTOL x the largest "
+                        "singular value (cannot be told apart from the others; default 1e-2)")
     p.add_argument("--samples", type=int, default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=int, default=0, help="Sobol sampling seed (default 0)")
@@ -156,7 +159,8 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
             sob = sobol_indices(problem, settings, n=args.samples, seed=args.seed, executor=ex)
             _stderr(f"Sobol done in {sob.seconds:.1f} s")
     pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
-                           variable_ranges=st.ranges, parameter_ranges=pranges)
+                           variable_ranges=st.ranges, parameter_ranges=pranges,
+                           **({"rtol": args.rank_tol} if args.rank_tol else {}))
     agr = agreement(pairing, sob) if sob is not None else None
     if args.method == "sobol" and sob is not None:
         choice = sob.choice("total")
