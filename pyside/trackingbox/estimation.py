@@ -97,7 +97,9 @@ DIFF_STEP = 1.0e-4
 #: Refinement budget: least-squares iterations (each costs 1 + n_parameters simulations).
 MAX_REFINE_ITERATIONS = 20
 
-#: ``progress(stage, iteration, total, best_cost)``; stage is ``"global"`` or ``"local"``.
+#: ``progress(stage, iteration, total, cost)``: stage ``"global"`` after each generation (best mean NRMSE),
+#: ``"refine"`` after each refinement simulation (root mean square of the tags' NRMSE at that point, the
+#: budget as total), ``"local"`` once when the refinement is done (best mean NRMSE).
 ProgressCallback = Callable[[str, int, int, float], None]
 
 
@@ -575,6 +577,7 @@ def estimate(
     popsize: int = DEFAULT_POPSIZE,
     warmup: float | None = None,
     refine: bool = True,
+    refine_iterations: int = MAX_REFINE_ITERATIONS,
     progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
 ) -> EstimationResult:
@@ -598,6 +601,9 @@ def estimate(
         Steady-state pre-run before each window (s); default :data:`DEFAULT_WARMUP`.
     refine
         Run the least-squares refinement after the global search.
+    refine_iterations
+        Most least-squares iterations; each costs ``1 + n_parameters`` simulations
+        (finite-difference Jacobian).
     progress
         Called as ``progress(stage, iteration, total, best_cost)``.
     checkpoint
@@ -697,7 +703,10 @@ def estimate(
         def residuals(x: np.ndarray) -> np.ndarray:
             nonlocal counted
             counted += 1
-            return train.residuals(x)
+            r = train.residuals(x)
+            if progress is not None:
+                progress("refine", counted, refine_iterations * (n + 1), float(np.sqrt(np.sum(r * r))))
+            return r
 
         span = problem.upper - problem.lower
         x0 = np.clip(best_x, problem.lower, problem.upper)
@@ -709,7 +718,7 @@ def estimate(
                 x_scale=span,
                 diff_step=DIFF_STEP,
                 method="trf",
-                max_nfev=MAX_REFINE_ITERATIONS,
+                max_nfev=max(1, int(refine_iterations)),
                 ftol=1e-6,
                 xtol=1e-6,
             )

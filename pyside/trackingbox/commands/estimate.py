@@ -27,7 +27,7 @@ estimate and at the start values. With --report DIR a checkpoint
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ..estimation import DEFAULT_MAXITER, DEFAULT_POPSIZE, DEFAULT_WARMUP
+    from ..estimation import DEFAULT_MAXITER, DEFAULT_POPSIZE, DEFAULT_WARMUP, MAX_REFINE_ITERATIONS
 
     p = subparsers.add_parser(
         "estimate",
@@ -50,6 +50,9 @@ def register(subparsers: Any) -> None:
                    help=f"steady-state pre-run before each window, inputs held (default {DEFAULT_WARMUP:g} s)")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="skip the least-squares refinement")
+    p.add_argument("--refine-iterations", type=int, default=MAX_REFINE_ITERATIONS, metavar="N",
+                   help=f"most least-squares iterations (default {MAX_REFINE_ITERATIONS}; "
+                        "each costs 1 + n_parameters simulations)")
     p.add_argument("--write", action="store_true",
                    help="write the estimates back as the [[parameters]] start values of SPEC")
     p.set_defaults(func=run)
@@ -69,6 +72,10 @@ class _Progress:
         elapsed = time.perf_counter() - self.t0
         if stage == "global":
             text = f"global search: generation {iteration}/{total}, best NRMSE {best:.5g} ({elapsed:.0f} s)"
+        elif stage == "refine":
+            if not self.tty and iteration % 10:
+                return
+            text = f"refinement: simulation {iteration} (at most {total}), rms NRMSE {best:.5g} ({elapsed:.0f} s)"
         else:
             text = f"refinement done: NRMSE {best:.5g} ({elapsed:.0f} s)"
         if self.tty:
@@ -97,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         popsize=args.popsize,
         warmup=args.warmup,
         refine=args.refine,
+        refine_iterations=args.refine_iterations,
         progress=progress,
         checkpoint=checkpoint,
     )
