@@ -432,6 +432,28 @@ def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) ->
     return _Pair(pair.variable, spec.outputs[pair.variable], pair.parameter, ctrl, (p.min, p.max))
 
 
+def _check_authority(pair: _Pair, measured: npt.NDArray[np.float64], events: list[TrackingEvent]) -> None:
+    """Warn when the parameter's whole range moves the variable by little compared with the data.
+
+    ``|gain|·(p_max - p_min)`` (the controller's span) below 5 % of the measured
+    range (1st-99th percentile) means the controller can only correct a small
+    part of the error and will sit at a bound: a pairing problem, not a tuning one.
+    """
+    ok = measured[np.isfinite(measured)]
+    if ok.size < 10:
+        return
+    lo, hi = np.percentile(ok, [1.0, 99.0])
+    rng = float(hi - lo)
+    span = pair.controller.scaling.span
+    if rng > 0.0 and span < 0.05 * rng:
+        msg = (f"pair {pair.tag!r} -> {pair.parameter!r}: the parameter's whole range "
+               f"[{pair.bounds[0]:g}, {pair.bounds[1]:g}] moves {pair.tag!r} by only {span:.3g} "
+               f"against a measured range of {rng:.3g}; the controller will mostly sit at a bound "
+               "(consider another pairing)")
+        log.warning(msg)
+        events.append(TrackingEvent(0.0, "weak-pair", msg))
+
+
 def _plan(spec: Any, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
     from .. import data
 
@@ -603,6 +625,8 @@ def track(
     recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
 
     pairs = [_make_controller(spec, p, plan.measured[p.variable]) for p in spec.pairs]
+    for p in pairs:
+        _check_authority(p, plan.measured[p.tag], plan.events)
     states = [_State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts),
                      StateCompensator(s.gain, ts=ts)) for s in spec.states]
     base = {p.name: p.start for p in spec.parameters}
