@@ -47,7 +47,8 @@ def register(subparsers: Any) -> None:
                         "else 'track' beside the spec)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--window", choices=("training", "validation", "all"), default="all",
-                   help="window the NRMSE figures are taken over (default: all)")
+                   help="window the NRMSE figures are taken over, after the start-up hold; the run "
+                        "goes from the first sample to the window's end (default: all)")
     p.add_argument("--checkpoint-every", type=int, default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     p.set_defaults(func=run)
