@@ -382,3 +382,10 @@ def test_heat_production_bench_tracking(fmu_cache, tmp_path: Path) -> None:
     # no twin tank empties or overflows (inlets sit 1.2-1.5 m above the bottoms)
     for tag, level in result.states.items():
         assert 0.3 < level.min and level.max < 1.2, (tag, level)
+
+
+def test_resume_refuses_another_window(case: Path, tmp_path: Path) -> None:
+    spec = load_spec(case)
+    track(spec, out_dir=tmp_path, max_steps=20)
+    with pytest.raises(SpecError, match="window 'all'"):
+        track(spec, out_dir=tmp_path, resume=True, window="validation")

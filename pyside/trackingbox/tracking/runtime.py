@@ -660,6 +660,10 @@ def track(
                 or not math.isclose(float(ckpt.get("sample_time", -1)), ts):
             raise SpecError(f"checkpoint {ckpt_path} was written for a different spec or version; "
                             "run without --resume to start over")
+        if ckpt.get("window") != window or int(ckpt.get("rows_total", -1)) != n_rows:
+            raise SpecError(f"checkpoint {ckpt_path} was written for window {ckpt.get('window')!r} "
+                            f"({ckpt.get('rows_total')} rows), not {window!r} ({n_rows} rows); resume with "
+                            f"--window {ckpt.get('window')} or run without --resume")
     elif resume:
         log.info("no checkpoint in %s; starting from the beginning", out_dir)
 
@@ -719,6 +723,8 @@ def track(
             "sample_time": ts,
             "columns": plan.columns,
             "rows": rows,
+            "rows_total": n_rows,
+            "window": window,
             "time": float(grid[min(rows, n_rows - 1)]),
             "csv_bytes": fh_out.tell(),
             "complete": complete,
