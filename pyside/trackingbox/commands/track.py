@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
     else:
-        _print_summary(result)
+        _print_summary(result, {p.variable: p.parameter for p in spec.pairs})
         if args.report:
             print(f"report in {args.report}")
     return 0
@@ -102,12 +102,19 @@ def _fmt(x: float) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.4g}"
 
 
-def _summary_lines(result: Any) -> list[str]:
-    lines = [f"| tag | NRMSE untracked | NRMSE tracked | ratio | samples |", "|---|---:|---:|---:|---:|"]
-    for tag, v in result.variables.items():
+def _summary_lines(result: Any, paired: dict[str, str] | None = None) -> list[str]:
+    """Markdown tables; *paired* maps each tracking variable to its parameter (listed first)."""
+    paired = paired or {}
+    lines = ["| tag | tracked by | NRMSE untracked | NRMSE tracked | ratio | samples |",
+             "|---|---|---:|---:|---:|---:|"]
+    order = [t for t in result.variables if t in paired] + [t for t in result.variables if t not in paired]
+    for tag in order:
+        v = result.variables[tag]
         ratio = v.nrmse_tracked / v.nrmse_untracked if v.nrmse_untracked and math.isfinite(v.nrmse_untracked) \
             else math.nan
-        lines.append(f"| {tag} | {_fmt(v.nrmse_untracked)} | {_fmt(v.nrmse_tracked)} | {_fmt(ratio)} | {v.samples} |")
+        by = f"`{paired[tag]}`" if tag in paired else ""
+        lines.append(f"| {tag} | {by} | {_fmt(v.nrmse_untracked)} | {_fmt(v.nrmse_tracked)} | {_fmt(ratio)} "
+                     f"| {v.samples} |")
     lines += ["", "| parameter | final | min | max | lower bound | upper bound |", "|---|---:|---:|---:|---:|---:|"]
     for name, p in result.parameters.items():
         lines.append(f"| {name} | {_fmt(p.final)} | {_fmt(p.min)} | {_fmt(p.max)} | {_fmt(p.lower)} | {_fmt(p.upper)} |")
@@ -118,8 +125,8 @@ def _summary_lines(result: Any) -> list[str]:
     return lines
 
 
-def _print_summary(result: Any) -> None:
-    for line in _summary_lines(result):
+def _print_summary(result: Any, paired: dict[str, str] | None = None) -> None:
+    for line in _summary_lines(result, paired):
         print(line)
     state = "complete" if result.complete else "stopped early (resume to continue)"
     print(f"\n{result.steps} rows, {result.simulated_seconds:g} s simulated in {result.seconds:.1f} s; {state}")
@@ -208,7 +215,8 @@ def write_report(spec: Any, result: Any, out: Path) -> list[Path]:
           f"- metrics over [{result.window[0]:g}, {result.window[1]:g}) s (after the hold; stoppages and "
           "missing samples excluded); NRMSE = RMSE / measured range",
           f"- {result.steps} rows, {result.simulated_seconds:g} s simulated in {result.seconds:.1f} s wall",
-          f"- trajectory: `{result.csv}`", "", *_summary_lines(result), ""]
+          f"- trajectory: `{result.csv}`", "",
+          *_summary_lines(result, {p.variable: p.parameter for p in spec.pairs}), ""]
     if result.events:
         md += ["## Events", ""]
         md += [f"- t = {e.time:g} s, {e.kind}: {e.message}" for e in result.events[:50]]
