@@ -389,3 +389,43 @@ def test_resume_refuses_another_window(case: Path, tmp_path: Path) -> None:
     track(spec, out_dir=tmp_path, max_steps=20)
     with pytest.raises(SpecError, match="window 'all'"):
         track(spec, out_dir=tmp_path, resume=True, window="validation")
+
+
+def test_untracked_twin_failing_for_good_is_dropped(case: Path, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    from trackingbox import fmu as fmu_module
+
+    models: list[object] = []
+    original_init = fmu_module.FMUModel.__init__
+    original_stepper = fmu_module.FMUModel.stepper
+
+    def init(self, *a, **kw):  # type: ignore[no-untyped-def]
+        original_init(self, *a, **kw)
+        models.append(self)
+
+    class _AlwaysFails:
+        def __init__(self, inner: object) -> None:
+            self._inner = inner
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self._inner, name)
+
+        def step(self, t_next: float) -> None:
+            if t_next > 1000.0:
+                raise SimulationError(f"forced failure at t = {t_next}")
+            self._inner.step(t_next)
+
+    def stepper(self, **kw):  # type: ignore[no-untyped-def]
+        inner = original_stepper(self, **kw)
+        return _AlwaysFails(inner) if self is models[1] else inner  # the second model is the untracked twin
+
+    monkeypatch.setattr(fmu_module.FMUModel, "__init__", init)
+    monkeypatch.setattr(fmu_module.FMUModel, "stepper", stepper)
+    result = track(load_spec(case), out_dir=tmp_path)
+    df = pd.read_csv(result.csv)
+    assert len(df) == 601
+    assert "untracked-abandoned" in [e.kind for e in result.events]
+    assert df.loc[df["time"] <= 1000.0, "untracked:TI"].notna().all()
+    assert df.loc[df["time"] > 1000.0, "untracked:TI"].isna().all()
+    assert np.isnan(result.variables["TI"].nrmse_untracked)
+    assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)  # tracking went on
