@@ -101,8 +101,11 @@ def test_masked_samples_do_not_change_the_estimate(fmu: Path, tmp_path: Path) ->
 
     # hand count: training grid 0..7190 s (720 points); stoppage 2400..3290 (90) + settle to 3590 (30);
     # missing outlet 5000..5590 (60): 720 - 90 - 30 - 60 = 540 samples in the cost
-    training = load_windows(load_spec(spec_a))[0]
+    training, validation = load_windows(load_spec(spec_a))
     assert training.valid_counts() == {"TI-1": 540}
+    # the validation window [7200, 14400) s is led in by the 720 samples before it, which are not scored
+    assert validation.lead == 720 and validation.time[0] == 0.0
+    assert validation.valid_counts() == {"TI-1": 720}
     assert np.isnan(training.measured["TI-1"][training.time == 3580.0]).all()
     assert np.isfinite(training.measured["TI-1"][training.time == 3600.0]).all()
 
@@ -200,3 +203,33 @@ def test_estimate_command_json_report_write(fmu: Path, tmp_path: Path,
     assert "| `kht` | 1000 |" in (report / "parameters.md").read_text()
     # --write: the estimate is now the start value
     assert load_spec(spec_path).parameter("kht").start == pytest.approx(doc["parameters"]["kht"])
+
+
+# --------------------------------------------------------------------------- benches (Done criteria)
+
+
+@pytest.fixture(scope="module")
+def hx_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """Heat-exchanger plant and twin FMUs, compiled once for the bench cases below."""
+    from trackingbox.benches import make_bench
+
+    case = make_bench("heat-exchanger", tmp_path_factory.mktemp("hx-compile"), seed=0, hours=0.5)
+    return case.plant_fmu, case.twin_fmu
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "kht"), [(1, None), (2, 700.0), (3, 1300.0)])
+def test_heat_exchanger_bench_recovers_kht(hx_fmus: tuple[Path, Path], tmp_path: Path, seed: int,
+                                           kht: float | None) -> None:
+    from trackingbox.benches import make_bench
+
+    plant, twin = hx_fmus
+    case = make_bench("heat-exchanger", tmp_path, seed=seed, overrides={"hx.kht": kht} if kht else None,
+                      plant_fmu=plant, twin_fmu=twin)
+    true = case.truth["hx.kht"]
+    assert true == (kht if kht else 910.0)  # the plant's own value (method notes) unless --set
+    result = estimate(load_spec(case.spec), seed=seed, maxiter=12)
+    assert abs(result.parameters["hx.kht"] - true) <= 0.02 * true
+    # every truth here is >= 9 % away from the start value 1000: the estimate must fit the held-out data better
+    for tag, value in result.validation_nrmse.items():
+        assert value < 0.5 * result.validation_nrmse_initial[tag]

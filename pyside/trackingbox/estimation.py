@@ -30,13 +30,19 @@ same minimiser for a single tag.
 Initial states
 --------------
 The twin FMU starts from its own start values, not from the plant's state. Each
-simulation therefore begins with a *steady-state pre-run*: the window's inputs
-are held at their first values for ``warmup`` seconds (default
-:data:`DEFAULT_WARMUP`, rounded up to a whole number of sample times, with the
-candidate parameters applied), and only then does the window start; the pre-run
-is discarded. States that integrate (tank levels whose in- and outflows do not
-balance at the first input values) drift during the pre-run; give such twins a
-short ``warmup`` or a level controller.
+simulation therefore begins ``warmup`` seconds (default :data:`DEFAULT_WARMUP`)
+before its window, with the candidate parameters applied, and that warm-up is
+never scored:
+
+* where measurements precede the window (the validation window), the twin runs
+  through them (*lead-in*, measured inputs), so slow states follow the history;
+* the rest (all of it for a window at the first sample) is a *steady-state
+  pre-run*: the inputs held at their first values, rounded up to whole sample
+  times.
+
+States that integrate (tank levels whose in- and outflows do not balance at the
+first input values) drift during a held pre-run; give such twins a short
+``warmup`` or a level controller.
 
 Grid
 ----
@@ -79,8 +85,10 @@ from .io import write_text_atomic
 
 log = logging.getLogger(__name__)
 
-#: Default length of the steady-state pre-run before each window (s).
-DEFAULT_WARMUP = 3600.0
+#: Default warm-up before each window (s): lead-in through the measured history where there is
+#: some, else a held-input pre-run. Long enough for tank temperatures (time constants of hours)
+#: to settle; the held part costs little because the solver takes long steps there.
+DEFAULT_WARMUP = 4 * 3600.0
 #: Default number of differential-evolution generations.
 DEFAULT_MAXITER = 30
 #: Default population size multiplier of differential evolution (population = popsize * n_parameters,
@@ -203,7 +211,10 @@ class WindowData:
         FMU input name -> values on the grid (no NaN).
     measured
         Output tag -> measured values on the grid; NaN where a sample is excluded
-        from the cost (missing, long gap, stoppage).
+        from the cost (missing, long gap, stoppage, lead-in).
+    lead
+        Number of grid points before ``start`` (the lead-in through the measured
+        history, simulated but not scored).
     """
 
     name: str
@@ -212,6 +223,7 @@ class WindowData:
     time: np.ndarray
     inputs: dict[str, np.ndarray]
     measured: dict[str, np.ndarray]
+    lead: int = 0
 
     def valid_counts(self) -> dict[str, int]:
         """Number of samples of each output tag that enter the cost."""
@@ -282,14 +294,18 @@ def close_models() -> None:
 def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
     """Simulate the twin over *window* with parameter vector *x*.
 
-    Runs the steady-state pre-run first (inputs held at their first values), then
-    the window; returns output tag -> simulated values on the window grid.
+    Runs the held-input pre-run first (inputs held at their first values, for
+    the part of ``problem.warmup`` the window's lead-in does not cover), then
+    the lead-in and the window; returns output tag -> simulated values on the
+    window's grid (lead-in included).
     """
     values = np.asarray(x, dtype=float)
     parameters = dict(problem.fixed)
     parameters.update({name: float(v) for name, v in zip(problem.names, values)})
-    offset = problem.warmup
-    grid = window.time - window.start
+    lead_in = float(window.start - window.time[0])
+    offset = max(0.0, problem.warmup - lead_in)
+    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    grid = window.time - window.time[0]
     frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
     for name, series in window.inputs.items():
         frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
@@ -424,8 +440,21 @@ def _spans(time_s: np.ndarray, bad: np.ndarray) -> list[tuple[float, float]]:
     return spans
 
 
-def load_windows(spec: Any) -> tuple[WindowData, WindowData]:
+def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
     """Read the spec's measurements and cut the training and validation windows.
+
+    A window that starts after the first sample gets a *lead-in*: up to
+    ``warmup`` seconds of the measured inputs before it (never across an input
+    gap), simulated but not part of the cost, so the twin's slow states follow
+    the real history into the window. The rest of the warm-up is the held-input
+    pre-run (:func:`simulate_window`).
+
+    Parameters
+    ----------
+    spec
+        A loaded spec.
+    warmup
+        Warm-up before each window (s); default :data:`DEFAULT_WARMUP`.
 
     Raises
     ------
@@ -450,10 +479,13 @@ def load_windows(spec: Any) -> tuple[WindowData, WindowData]:
         if span is None:
             raise SpecError(f"spec {getattr(spec, 'path', '')} has no [windows] {name} = [start, stop]")
         start, stop = float(span[0]), float(span[1])
-        grid = np.arange(start, stop - 1e-9, float(spec.sample_time))
-        if len(grid) < 2:
+        dt = float(spec.sample_time)
+        window_grid = np.arange(start, stop - 1e-9, dt)
+        n_lead = int(math.floor(min(DEFAULT_WARMUP if warmup is None else float(warmup), start) / dt + 1e-9))
+        grid = np.concatenate((start - dt * np.arange(n_lead, 0, -1), window_grid))
+        if len(window_grid) < 2:
             raise DataError(
-                f"{name} window [{start:g}, {stop:g}) s holds {len(grid)} sample(s) of "
+                f"{name} window [{start:g}, {stop:g}) s holds {len(window_grid)} sample(s) of "
                 f"{spec.sample_time:g} s; estimation needs at least {MIN_VALID_SAMPLES}"
             )
         sampled = {}
@@ -461,16 +493,25 @@ def load_windows(spec: Any) -> tuple[WindowData, WindowData]:
             column = table[["time", tag]]
             gap = float(max_gap) if max_gap is not None else _default_max_gap(column)
             sampled[tag] = data.resample(column, t0 + grid, max_gap=gap)[tag]
+        # the lead-in starts after the last input gap before the window
+        cut = 0
+        for tag in spec.inputs:
+            bad_lead = np.flatnonzero(~np.isfinite(np.asarray(sampled[tag], dtype=float)[:n_lead]))
+            if bad_lead.size:
+                cut = max(cut, int(bad_lead[-1]) + 1)
+        grid = grid[cut:]
+        sampled = {tag: np.asarray(v, dtype=float)[cut:] for tag, v in sampled.items()}
+        lead = n_lead - cut
         problems = []
         inputs = {}
         for tag, fmu_name in spec.inputs.items():
-            v = np.asarray(sampled[tag], dtype=float)
+            v = sampled[tag]
             bad = ~np.isfinite(v)
             if bad.any():
                 spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, bad)[:5])
                 problems.append(
                     f"input tag {tag!r} in {where} has no valid data in the {name} window at {spans} "
-                    f"({int(bad.sum())} of {len(grid)} samples); the twin cannot be simulated across it"
+                    f"({int(bad.sum())} of {len(window_grid)} samples); the twin cannot be simulated across it"
                 )
             inputs[fmu_name] = v
         excluded = np.zeros(len(grid), dtype=bool)
@@ -485,17 +526,19 @@ def load_windows(spec: Any) -> tuple[WindowData, WindowData]:
         for tag in spec.outputs:
             v = np.asarray(sampled[tag], dtype=float).copy()
             v[excluded] = np.nan
+            v[:lead] = np.nan  # the lead-in is simulated, not scored
             n_ok = int(np.isfinite(v).sum())
             if n_ok < MIN_VALID_SAMPLES:
                 problems.append(
                     f"output tag {tag!r} has {n_ok} valid samples in the {name} window "
                     f"[{start:g}, {stop:g}) s after removing NaN, long gaps and stoppages "
-                    f"({int(excluded.sum())} stoppage samples); estimation needs at least {MIN_VALID_SAMPLES}"
+                    f"({int(excluded[lead:].sum())} stoppage samples); estimation needs at least "
+                    f"{MIN_VALID_SAMPLES}"
                 )
             measured[tag] = v
         if problems:
             raise DataError("; ".join(problems))
-        out.append(WindowData(name, start, stop, grid, inputs, measured))
+        out.append(WindowData(name, start, stop, grid, inputs, measured, lead))
     return out[0], out[1]
 
 
@@ -623,7 +666,7 @@ def estimate(
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
-    training, validation = load_windows(spec)
+    training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
     n = len(problem.names)
@@ -786,15 +829,16 @@ def fit_series(spec: Any, parameter_sets: Mapping[str, Mapping[str, float]], *,
     """
     problem = problem_from_spec(spec, warmup=warmup)
     out = {}
-    for window in load_windows(spec):
-        frame: dict[str, np.ndarray] = {"time": window.time}
+    for window in load_windows(spec, warmup=problem.warmup):
+        keep = slice(window.lead, None)
+        frame: dict[str, np.ndarray] = {"time": window.time[keep]}
         for tag in problem.outputs:
-            frame[tag] = window.measured[tag]
+            frame[tag] = window.measured[tag][keep]
         for label, values in parameter_sets.items():
             x = np.array([float(values.get(n, s)) for n, s in zip(problem.names, problem.start)])
             sim = simulate_window(problem, window, x)
             for tag, y in sim.items():
-                frame[f"{tag}:{label}"] = y
+                frame[f"{tag}:{label}"] = y[keep]
         out[window.name] = pd.DataFrame(frame)
     return out
 
