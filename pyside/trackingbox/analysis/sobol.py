@@ -24,7 +24,16 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
 from .pairing import Pairing
-from .steptest import RunPlan, StepProblem, StepSettings, baseline, default_ranges, reference_run, run_plan
+from .steptest import (
+    Progress,
+    RunPlan,
+    StepProblem,
+    StepSettings,
+    baseline,
+    default_ranges,
+    reference_run,
+    run_all,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -157,7 +166,8 @@ def indices_from_outputs(variables: Sequence[str], names: Sequence[str], lower: 
 
 
 def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(), *, n: int = 32,
-                  seed: int | None = 0, executor: Executor | None = None) -> SobolResult:
+                  seed: int | None = 0, executor: Executor | None = None,
+                  progress: Progress | None = None) -> SobolResult:
     """Sobol indices of the twin's steady-state outputs over the parameter bounds.
 
     Each sample sets all parameters at the baseline's step time (controllers
@@ -173,6 +183,8 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
     seed : int, optional
     executor : concurrent.futures.Executor, optional
         Serial in this process when omitted.
+    progress : callable, optional
+        ``progress(done, total)`` after each sample.
 
     Returns
     -------
@@ -195,10 +207,7 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
                      label=f"Sobol sample {k}", states=base.states, compensation=problem.compensation,
                      levels_ref=base.levels_ref, reference=reference)
              for k, x in enumerate(X)]
-    if executor is None:
-        results = [run_plan(p) for p in plans]
-    else:
-        results = [f.result() for f in [executor.submit(run_plan, p) for p in plans]]
+    results = run_all(plans, executor, progress)
     Y = np.array([r.after for r in results])
     return indices_from_outputs(problem.variables, problem.parameters, problem.lower, problem.upper, Y, n,
                                 seed=seed, seconds=_time.perf_counter() - t_wall)

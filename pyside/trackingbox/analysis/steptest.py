@@ -24,8 +24,8 @@ import logging
 import math
 import time as _time
 from collections import deque
-from collections.abc import Mapping, Sequence
-from concurrent.futures import Executor
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -360,6 +360,39 @@ def run_plan(plan: RunPlan) -> RunResult:
                      np.array(times), np.array(traj))
 
 
+#: ``progress(done, total)``, called after each finished run.
+Progress = Callable[[int, int], None]
+
+
+def run_all(plans: Sequence[RunPlan], executor: Executor | None = None,
+            progress: Progress | None = None) -> list[RunResult]:
+    """Run *plans* (in parallel on *executor*), results in plan order.
+
+    The first failure cancels the runs not yet started and is raised.
+    """
+    total = len(plans)
+    if executor is None:
+        out = []
+        for k, p in enumerate(plans):
+            out.append(run_plan(p))
+            if progress:
+                progress(k + 1, total)
+        return out
+    futures = {executor.submit(run_plan, p): k for k, p in enumerate(plans)}
+    results: list[RunResult | None] = [None] * total
+    try:
+        for done, f in enumerate(as_completed(futures), start=1):
+            results[futures[f]] = f.result()
+            logger.debug("done: %s", plans[futures[f]].label)
+            if progress:
+                progress(done, total)
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        raise
+    return [r for r in results if r is not None]
+
+
 def time_to_63(times: npt.ArrayLike, y: npt.ArrayLike, y0: float, y_end: float) -> float:
     """Time from ``times[0]`` until ``y`` first covers 63.2 % of ``y_end - y0`` (linear interpolation).
 
@@ -612,7 +645,7 @@ def reference_run(problem: StepProblem, settings: StepSettings, base: RunResult,
 
 
 def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
-               executor: Executor | None = None) -> StepTestResult:
+               executor: Executor | None = None, progress: Progress | None = None) -> StepTestResult:
     """Steady-state gain matrix of the twin by parameter step tests.
 
     Parameters
@@ -623,6 +656,8 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
     executor : concurrent.futures.Executor, optional
         Runs the step tests in parallel (see :func:`~trackingbox.analysis.executor.make_executor`);
         serial in this process when omitted.
+    progress : callable, optional
+        ``progress(done, total)`` after each step run.
 
     Returns
     -------
@@ -656,14 +691,7 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
                                           label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}",
                                           states=base.states, compensation=problem.compensation,
                                           levels_ref=base.levels_ref, reference=reference)))
-    if executor is None:
-        results = [run_plan(p) for _, _, p in plans]
-    else:
-        futures = [executor.submit(run_plan, p) for _, _, p in plans]
-        results = []
-        for f, (_, _, p) in zip(futures, plans):
-            results.append(f.result())
-            logger.info("done: %s", p.label)
+    results = run_all([p for _, _, p in plans], executor, progress)
     m = len(problem.outputs)
     g_up = np.full((m, n), math.nan)
     g_dn = np.full((m, n), math.nan)

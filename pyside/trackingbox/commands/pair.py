@@ -109,6 +109,26 @@ def _stderr(text: str) -> None:
     sys.stderr.flush()
 
 
+class _Progress:
+    """``stage: done/total`` on stderr, rewritten in place on a terminal."""
+
+    def __init__(self, stage: str) -> None:
+        self.stage = stage
+        self.tty = sys.stderr.isatty()
+        self.last = -1
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.tty:
+            sys.stderr.write(f"\r\033[K{self.stage}: {done}/{total}" + ("\n" if done == total else ""))
+        else:
+            step = max(1, total // 10)
+            if done != total and done // step == self.last:
+                return
+            self.last = done // step
+            sys.stderr.write(f"{self.stage}: {done}/{total}\n")
+        sys.stderr.flush()
+
+
 def _measured(spec: Any) -> tuple[Any, float, float]:
     from ..data import read_table
 
@@ -151,12 +171,13 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     with make_executor(args.scheduler, args.workers) as ex:
         _stderr(f"step tests: {len(params)} parameters x {2 if settings.two_sided else 1} directions, "
                 f"{len(tags)} variables")
-        st = step_tests(problem, settings, ex)
+        st = step_tests(problem, settings, ex, progress=_Progress("step runs"))
         _stderr(f"step tests done: {st.runs} runs in {st.seconds:.1f} s (controllers frozen at "
                 f"t = {st.freeze_time:g} s, steps at t = {st.step_time:g} s)")
         if args.method in ("sobol", "both"):
             _stderr(f"Sobol: {args.samples * (len(params) + 2)} runs")
-            sob = sobol_indices(problem, settings, n=args.samples, seed=args.seed, executor=ex)
+            sob = sobol_indices(problem, settings, n=args.samples, seed=args.seed, executor=ex,
+                                progress=_Progress("Sobol runs"))
             _stderr(f"Sobol done in {sob.seconds:.1f} s")
     pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=st.ranges, parameter_ranges=pranges,
