@@ -661,6 +661,17 @@ def estimate(
     ------
     SpecError, DataError, FMUError, EstimationError
     """
+    try:
+        return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
+                         refine=refine, refine_iterations=refine_iterations, progress=progress,
+                         checkpoint=checkpoint)
+    finally:
+        close_models()
+
+
+def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int, warmup: float | None,
+              refine: bool, refine_iterations: int, progress: ProgressCallback | None,
+              checkpoint: str | Path | None) -> EstimationResult:
     from scipy.optimize import differential_evolution, least_squares
 
     t_start = time.perf_counter()
@@ -829,18 +840,28 @@ def fit_series(spec: Any, parameter_sets: Mapping[str, Mapping[str, float]], *,
     """
     problem = problem_from_spec(spec, warmup=warmup)
     out = {}
-    for window in load_windows(spec, warmup=problem.warmup):
-        keep = slice(window.lead, None)
-        frame: dict[str, np.ndarray] = {"time": window.time[keep]}
-        for tag in problem.outputs:
-            frame[tag] = window.measured[tag][keep]
-        for label, values in parameter_sets.items():
-            x = np.array([float(values.get(n, s)) for n, s in zip(problem.names, problem.start)])
-            sim = simulate_window(problem, window, x)
-            for tag, y in sim.items():
-                frame[f"{tag}:{label}"] = y[keep]
-        out[window.name] = pd.DataFrame(frame)
+    try:
+        windows = load_windows(spec, warmup=problem.warmup)
+        for window in windows:
+            out[window.name] = _series(problem, window, parameter_sets)
+    finally:
+        close_models()
     return out
+
+
+def _series(problem: Problem, window: WindowData,
+            parameter_sets: Mapping[str, Mapping[str, float]]) -> pd.DataFrame:
+    """Measured and simulated series of one window (lead-in left out)."""
+    keep = slice(window.lead, None)
+    frame: dict[str, np.ndarray] = {"time": window.time[keep]}
+    for tag in problem.outputs:
+        frame[tag] = window.measured[tag][keep]
+    for label, values in parameter_sets.items():
+        x = np.array([float(values.get(n, s)) for n, s in zip(problem.names, problem.start)])
+        sim = simulate_window(problem, window, x)
+        for tag, y in sim.items():
+            frame[f"{tag}:{label}"] = y[keep]
+    return pd.DataFrame(frame)
 
 
 # --------------------------------------------------------------------------- writing back
