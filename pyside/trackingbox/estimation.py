@@ -91,9 +91,11 @@ log = logging.getLogger(__name__)
 DEFAULT_WARMUP = 4 * 3600.0
 #: Default number of differential-evolution generations.
 DEFAULT_MAXITER = 30
-#: Default population size multiplier of differential evolution (population = popsize * n_parameters,
-#: at least 5).
-DEFAULT_POPSIZE = 10
+#: Default population of differential evolution, in all (not per parameter): scipy's usual
+#: 15 per parameter is unaffordable when one simulation takes seconds and there are a dozen
+#: parameters; the refinement does the fine work. The population is ``max(2, ceil(15 / n))``
+#: per parameter: 15 for one parameter, 28 for fourteen.
+DEFAULT_POPULATION = 15
 #: Each output tag needs at least this many valid samples in each window.
 MIN_VALID_SAMPLES = 20
 #: Cost returned for a parameter set whose simulation fails (NRMSE units; a fit is << 1).
@@ -617,7 +619,7 @@ def estimate(
     seed: int = 0,
     workers: int | None = None,
     maxiter: int = DEFAULT_MAXITER,
-    popsize: int = DEFAULT_POPSIZE,
+    popsize: int | None = None,
     warmup: float | None = None,
     refine: bool = True,
     refine_iterations: int = MAX_REFINE_ITERATIONS,
@@ -639,7 +641,8 @@ def estimate(
         Generations of differential evolution (0: only the start values and the
         refinement).
     popsize
-        Population size multiplier (population = ``popsize * n_parameters``, at least 5).
+        Population size per parameter (population = ``popsize * n_parameters``, at least 5);
+        default ``max(2, ceil(DEFAULT_POPULATION / n_parameters))``.
     warmup
         Steady-state pre-run before each window (s); default :data:`DEFAULT_WARMUP`.
     refine
@@ -669,7 +672,8 @@ def estimate(
         close_models()
 
 
-def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int, warmup: float | None,
+def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
+              warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
               checkpoint: str | Path | None) -> EstimationResult:
     from scipy.optimize import differential_evolution, least_squares
@@ -727,7 +731,7 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                 train,
                 bounds,
                 maxiter=maxiter,
-                popsize=max(popsize, math.ceil(5 / n)),
+                popsize=max(popsize or max(2, math.ceil(DEFAULT_POPULATION / n)), math.ceil(5 / n)),
                 rng=seed,
                 polish=False,
                 init="latinhypercube" if n > 1 else "random",

@@ -27,7 +27,7 @@ estimate and at the start values. With --report DIR a checkpoint
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ..estimation import DEFAULT_MAXITER, DEFAULT_POPSIZE, DEFAULT_WARMUP, MAX_REFINE_ITERATIONS
+    from ..estimation import DEFAULT_MAXITER, DEFAULT_POPULATION, DEFAULT_WARMUP, MAX_REFINE_ITERATIONS
 
     p = subparsers.add_parser(
         "estimate",
@@ -44,10 +44,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes evaluating the population (default 1)")
     p.add_argument("--maxiter", type=int, default=DEFAULT_MAXITER,
                    help=f"generations of differential evolution (default {DEFAULT_MAXITER})")
-    p.add_argument("--popsize", type=int, default=DEFAULT_POPSIZE,
-                   help=f"population size per parameter (default {DEFAULT_POPSIZE})")
+    p.add_argument("--popsize", type=int, default=None,
+                   help=f"population size per parameter (default max(2, ceil({DEFAULT_POPULATION} / n_parameters)))")
     p.add_argument("--warmup", type=float, default=DEFAULT_WARMUP, metavar="SECONDS",
-                   help=f"steady-state pre-run before each window, inputs held (default {DEFAULT_WARMUP:g} s)")
+                   help="unscored warm-up before each window: measured history where there is some, "
+                        f"else inputs held at their first values (default {DEFAULT_WARMUP:g} s)")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="skip the least-squares refinement")
     p.add_argument("--refine-iterations", type=int, default=MAX_REFINE_ITERATIONS, metavar="N",
