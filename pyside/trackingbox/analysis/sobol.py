@@ -70,17 +70,25 @@ class SobolResult:
     runs: int = 0
     seconds: float = 0.0
 
-    def choice(self, index: Index = "total") -> dict[str, str]:
+    def choice(self, index: Index = "total", min_index: float = 0.05) -> dict[str, str]:
         """One parameter per variable, no parameter twice, maximising the summed index.
+
+        Parameters
+        ----------
+        index : {"total", "first"}
+        min_index : float
+            Assignments whose index is below this are dropped (the parameter
+            explains almost none of the variable's variance).
 
         Returns
         -------
         dict
-            Variable -> parameter, for ``min(m, n)`` variables.
+            Variable -> parameter, for at most ``min(m, n)`` variables.
         """
         S = np.nan_to_num(self.total if index == "total" else self.first, nan=0.0)
         rows, cols = linear_sum_assignment(-S)
-        return {self.variables[i]: self.parameters[j] for i, j in zip(rows, cols) if S[i, j] > 0}
+        return {self.variables[i]: self.parameters[j] for i, j in zip(rows, cols)
+                if S[i, j] >= min_index and S[i, j] > 0}
 
 
 def _problem_dict(names: Sequence[str], lower: Sequence[float], upper: Sequence[float]) -> dict:

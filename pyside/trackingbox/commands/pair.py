@@ -408,7 +408,8 @@ def write_report(spec: Any, res: dict[str, Any], out: Path) -> list[Path]:
             lines.append(f"| {v} | " + " | ".join(f"{x:.2f}" for x in sob.total[i]) + " |")
     if agr is not None:
         lines += ["", f"Sobol and RGA choose the same parameter for {agr.agree} of {agr.compared} variables:", ""]
-        lines += [f"- {v}: RGA `{a}`, Sobol `{b}`{'' if same else ' (differs)'}" for v, a, b, same in agr.rows]
+        lines += [f"- {v}: RGA `{a}`, Sobol `{b}`" + ("" if same else " (differs)" if a and b else " (not compared)")
+                  for v, a, b, same in agr.rows if a or b]
     target = out / "pairing.md"
     write_text_atomic(target, "\n".join(lines) + "\n")
     written.append(target)
