@@ -168,3 +168,24 @@ def test_pair_command_no_write_and_bad_freeze(tmp_path, pair_fmu, capsys):
     assert main(["pair", str(spec), "--freeze", "hodl=1", "--workers", "1"]) == 2
     assert "did you mean 'hold'" in capsys.readouterr().err
     assert spec.read_bytes() == before
+
+
+@pytest.mark.compile
+def test_pair_on_heat_exchanger_bench_is_physically_sensible(fmu_cache, tmp_path, capsys):
+    # Counter-flow heat exchanger: a larger heat-transfer coefficient cools the hot outlet
+    # and warms the cold outlet; the thesis pairs the hot outlet temperature with kht.
+    import json
+
+    from trackingbox.benches import make_bench
+    from trackingbox.cli import main
+
+    hx = "TrackingBox.Benches.HeatExchanger"
+    case = make_bench("heat-exchanger", tmp_path / "case", seed=0, hours=2.0,
+                      plant_fmu=fmu_cache(f"{hx}.Plant"), twin_fmu=fmu_cache(f"{hx}.Twin"))
+    spec = tmp_path / "case" / "spec.toml"
+    assert main(["pair", str(spec), "--json", "--no-write", "--workers", "1"]) == 0, case
+    doc = json.loads(capsys.readouterr().out)
+    gains = dict(zip(doc["gain_matrix"]["variables"], (row[0] for row in doc["gain_matrix"]["values"])))
+    assert gains["TI-102"] < 0 < gains["TI-202"]
+    assert [(p["variable"], p["parameter"]) for p in doc["pairs"]] == [("TI-102", "hx.kht")]
+    assert doc["pairs"][0]["time_constant"] > 0
