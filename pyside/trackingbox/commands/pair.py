@@ -35,7 +35,9 @@ a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled by
 bound ranges, give the relative gain array; each tag gets the unused parameter
 with a positive relative gain closest to 1. The chosen pairs (gain, 63 % time
 constant) replace the spec's [[pairs]] unless --no-write; an existing pair keeps
-its tuning settings (lambda, kp, ti, controller).
+its tuning settings (lambda, kp, ti, controller; a new pair gets lambda = 1, the
+tuning factor; the relative gain is reported, not written). Exit code 1 when no
+pair could be chosen.
 """
 
 
