@@ -31,9 +31,10 @@ Tank levels listed in [[states]] are held by proportional state compensation
 from the freeze on (they are not tracking variables).
 Settled = over --window seconds no output moved more than --tolerance x its
 measured range; responses are measured against an unstepped reference run, so
-a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled by measured ranges and parameter
-bound ranges, give the relative gain array; each tag gets the unused parameter
-with a positive relative gain closest to 1. The chosen pairs (gain, 63 % time
+a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled
+by measured ranges and parameter bound ranges, give the relative gain array
+(after leaving out parameters that cannot be told apart, see --rank-tol); each
+tag gets the unused parameter with a positive relative gain closest to 1. The chosen pairs (gain, 63 % time
 constant) replace the spec's [[pairs]] unless --no-write; an existing pair keeps
 its tuning settings (lambda, kp, ti, controller; a new pair gets lambda = 1, the
 tuning factor; the relative gain is reported, not written). Exit code 1 when no
