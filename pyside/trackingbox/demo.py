@@ -122,9 +122,11 @@ def main(argv: list[str] | None = None) -> int:
             summary["untracked"] = untracked_offset(spec, out / "untracked")
         if "estimate" in steps:
             step("estimate", "estimating initial parameters on the training window")
-            summary["estimate"] = _run(["estimate", str(spec), "--report", str(out / "estimate"), "--write"])
+            # Reported, not written into the spec: tracking then starts from the modeller's
+            # guess, which shows the parameter controllers closing the offset on their own.
+            summary["estimate"] = _run(["estimate", str(spec), "--report", str(out / "estimate")])
         if "pair" in steps:
-            step("pair", "step tests with frozen controllers → RGA pairing")
+            step("pair", "steady-state step tests → gain matrix → RGA pairing")
             summary["pair"] = _run(["pair", str(spec), "--report", str(out / "pair")])
         if "track" in steps:
             step("track", "tracking with parameter controllers in Python")
@@ -133,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
             step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled")
             summary["generate"] = _run(["generate", str(spec), "-o", str(out / "generated"), "--compile"])
         if "validate" in steps:
-            fmu = summary["generate"].get("fmu")
+            fmu = (summary["generate"].get("compile") or {}).get("fmu")
             step("validate", f"validating {fmu} on the held-out window")
             summary["validate"] = _run(["validate", str(spec), "--fmu", str(fmu), "--report", str(out / "validate")])
     except SystemExit as exc:
@@ -163,7 +165,10 @@ def _write_report(out: Path, summary: dict[str, Any], seconds: float) -> Path:
         lines.append("")
     if "estimate" in summary:
         est = summary["estimate"]
-        lines += ["## Estimation (training window)", "", "| parameter | estimate |", "|---|---|"]
+        lines += ["## Estimation (training window)", "",
+                  "Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
+                  "so that it shows the parameter controllers finding the plant's value themselves.", "",
+                  "| parameter | estimate |", "|---|---|"]
         lines += [f"| {k} | {v:.6g} |" for k, v in est.get("parameters", {}).items()]
         lines += ["", "Validation NRMSE (initial → estimated):", ""]
         for tag, v in est.get("validation", {}).get("nrmse", {}).items():
@@ -191,7 +196,7 @@ def _write_report(out: Path, summary: dict[str, Any], seconds: float) -> Path:
     if "generate" in summary:
         lines += ["## Generated Modelica", ""]
         for f in summary["generate"].get("files", []):
-            lines.append(f"- `{f}`")
+            lines.append(f"- `{Path(f).relative_to(out) if Path(f).is_relative_to(out) else f}`")
         lines.append("")
     target = out / "report.md"
     write_text_atomic(target, "\n".join(lines) + "\n")
