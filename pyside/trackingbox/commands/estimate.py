@@ -198,7 +198,8 @@ def write_report(spec: Any, result: Any, out: Path, *, warmup: float | None = No
         f"# Parameter estimation: {Path(spec.path).name}",
         "",
         f"Twin `{Path(spec.twin).name}`, {result.evaluations} simulations in {result.seconds:.1f} s, "
-        f"warm-up {result.warmup:g} s (inputs held at their first values).",
+        f"unscored warm-up of {result.warmup:g} s before each window (the measured history where there "
+        "is some, else the inputs held at their first values).",
         "",
         "| parameter | start | estimate | min | max | at bound |",
         "|---|---:|---:|---:|---:|---|",
