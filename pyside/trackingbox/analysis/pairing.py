@@ -4,6 +4,20 @@ The relative gain array of the (scaled) gain matrix decides: each variable gets
 the unused parameter whose relative gain is positive and closest to one, solved
 as an assignment problem so that no parameter is used twice. Every variable and
 parameter left out gets a reason.
+
+With data (``residuals``: the untracked twin beside the measurements, see
+:mod:`.offsets`) the pairing also asks whether tracking can *use* a pair:
+
+1. a variable whose untracked error is within ``noise_ratio`` x its sensor
+   noise has nothing to track and is left out;
+2. a pair whose parameter cannot close the variable's mean offset from inside
+   its bounds (``|gain| x remaining range < min_reach x |offset|``) is not
+   allowed; a variable no parameter can serve is left out before the RGA;
+3. the chosen set is checked with :func:`.offsets.predict_tracking` (all loops
+   together, parameters clipped to their bounds, first-order loops): while a
+   pair would leave more than ``max_ratio`` of its variable's untracked error
+   (a parameter pushed to its bound by the other loops, or an error faster than
+   the loop), the worst such pair is forbidden and the assignment redone.
 """
 from __future__ import annotations
 
@@ -17,6 +31,7 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
+from .offsets import OffsetStats, Residuals, predict_tracking, reach
 from .rga import _greedy_independent, condition_number, relative_gain_array, scale_gains
 
 logger = logging.getLogger(__name__)
@@ -32,6 +47,41 @@ NEGLIGIBLE = 1e-3
 #: heat-production bench it separates valves from the pipes in series with them.
 RANK_RTOL = 1e-2
 _FORBIDDEN = 1e6
+
+
+@dataclass(frozen=True)
+class DataChecks:
+    """Thresholds of the data-aware checks (used when residuals are given).
+
+    Attributes
+    ----------
+    noise_ratio : float
+        A variable whose untracked RMS error is below this many times its
+        sensor noise is left out (tracking cannot remove noise: at 5 it could
+        at best bring the error down to a fifth).
+    min_reach : float
+        A pair is allowed only if the parameter's remaining range, in the
+        direction that closes the mean offset, moves the variable by at least
+        this many times the offset. 0.5: the parameter alone closes at least
+        half of it; the rest is judged together with the other loops (which
+        also move the variable) by the prediction below.
+    max_ratio : float
+        Largest predicted tracked/untracked RMS ratio of a chosen pair (see
+        :func:`~trackingbox.analysis.offsets.predict_tracking`).
+    max_condition : float
+        Warn when the scaled gains of the chosen pairs have a larger condition number.
+    """
+
+    noise_ratio: float = 5.0
+    min_reach: float = 0.5
+    max_ratio: float = 0.25
+    max_condition: float = 100.0
+
+    def __post_init__(self) -> None:
+        for name in ("noise_ratio", "min_reach", "max_ratio", "max_condition"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise AnalysisError(f"pairing check {name} must be a non-negative number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -51,6 +101,10 @@ class Pair:
     time_constant : float
         First-order time constant (s) of the variable's step response to the
         parameter; NaN when unknown.
+    predicted_ratio : float
+        Expected tracked/untracked RMS ratio (NaN without data checks).
+    at_bound : float
+        Expected fraction of the time the parameter sits at a bound (NaN without data checks).
     """
 
     variable: str
@@ -58,6 +112,8 @@ class Pair:
     lambda_: float
     gain: float
     time_constant: float = math.nan
+    predicted_ratio: float = math.nan
+    at_bound: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -83,6 +139,16 @@ class Pairing:
         parameters that took part (NaN elsewhere).
     condition_number : float
         Condition number of the scaled gains that took part.
+    offsets : tuple of OffsetStats
+        Untracked error and sensor noise per variable (empty without data).
+    reach : ndarray, shape (m, n)
+        ``|gain| x remaining range / |offset|`` per pair (NaN without data).
+    checks : DataChecks or None
+        Thresholds used (None without data).
+    pairs_condition_number : float
+        Condition number of the scaled gains of the chosen pairs.
+    rejected : tuple of (variable, parameter, reason)
+        Pairs the tracking prediction forbade, in the order they were tried.
     """
 
     pairs: tuple[Pair, ...]
@@ -94,6 +160,11 @@ class Pairing:
     scaled_gains: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False, repr=False)
     rga: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False, repr=False)
     condition_number: float = math.nan
+    offsets: tuple[OffsetStats, ...] = ()
+    reach: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False, repr=False)
+    checks: DataChecks | None = None
+    pairs_condition_number: float = math.nan
+    rejected: tuple[tuple[str, str, str], ...] = ()
 
     def parameter_for(self, variable: str) -> str | None:
         """The parameter paired with *variable*, or None."""
@@ -112,7 +183,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  variable_ranges: npt.ArrayLike | None = None,
                  parameter_ranges: npt.ArrayLike | None = None,
                  negligible: float = NEGLIGIBLE, large: float = LARGE_LAMBDA,
-                 rtol: float = RANK_RTOL) -> Pairing:
+                 rtol: float = RANK_RTOL, residuals: Residuals | None = None,
+                 bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -138,6 +210,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         Relative gains above this are flagged.
     rtol : float
         Rank tolerance on the scaled gains.
+    residuals : Residuals, optional
+        Measured and untracked simulated series of the variables
+        (:func:`~trackingbox.analysis.offsets.simulate_untracked`); turns on the
+        data checks (noise level, reach, predicted tracking; see the module notes).
+        Variables without samples there are not checked.
+    bounds : array_like, shape (n, 3), optional
+        ``(start, min, max)`` of each parameter; required with *residuals*.
+    checks : DataChecks, optional
+        Thresholds of the data checks (defaults: :class:`DataChecks`).
 
     Returns
     -------
@@ -185,7 +266,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         return Pairing((), tuple(left_out), ("gain matrix is all zeros",), variables, parameters,
                        G, S, np.full((m, n), math.nan), math.inf)
 
-    col_ok = absS.max(axis=0) >= negligible * top
+    floor = negligible * top
+    col_ok = absS.max(axis=0) >= floor
     row_ok = absS.max(axis=1) >= negligible * top
     for j in np.flatnonzero(~col_ok):
         left_out.append((parameters[j], f"negligible gain: its largest scaled gain {_fmt(absS[:, j].max())} "
@@ -231,6 +313,20 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                                         f"{others}{' and others' if len(kept) > len(top) else ''}: "
                                         "it cannot be told apart from them"))
     cols = [cols[k] for k in kept]
+
+    # data checks: which variables are worth tracking. The RGA stays that of all the variables
+    # the parameters move (the interactions are a property of the model); the checks only
+    # restrict which pairs the assignment may choose.
+    data = _DataView(G, variables, parameters, residuals, bounds, checks) if residuals is not None else None
+    excluded: set[int] = set()
+    if data is not None:
+        usable = np.zeros(n, dtype=bool)
+        usable[cols] = True
+        for i in rows:
+            reason = data.row_reason(i, usable & (absS[i] >= floor))
+            if reason is not None:
+                excluded.add(i)
+                left_out.append((variables[i], reason))
     sub = S[np.ix_(rows, cols)]
 
     lam_sub = relative_gain_array(sub, rtol=rtol * 1e-3,
@@ -256,27 +352,52 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         warnings.append(f"scaled gain matrix is ill-conditioned (condition number {_fmt(cond)}): "
                         "parameter moves will be large for small errors")
 
-    cost = np.where(lam_sub > 1e-9, np.abs(lam_sub - 1.0), _FORBIDDEN)
-    r_idx, c_idx = linear_sum_assignment(cost)
-    chosen: dict[int, int] = {}
-    for a, b in zip(r_idx, c_idx):
-        if cost[a, b] < _FORBIDDEN:
-            chosen[rows[int(a)]] = cols[int(b)]
+    allowed = np.ones((len(rows), len(cols)), dtype=bool)
+    if data is not None:
+        allowed = data.allowed[np.ix_(rows, cols)].copy()
+        allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
+    predicted: dict[int, tuple[float, float]] = {}
+    while True:
+        cost = np.where((lam_sub > 1e-9) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
+        r_idx, c_idx = linear_sum_assignment(cost)
+        chosen: dict[int, int] = {}
+        for a, b in zip(r_idx, c_idx):
+            if cost[a, b] < _FORBIDDEN:
+                chosen[rows[int(a)]] = cols[int(b)]
+        if data is None or not chosen:
+            break
+        predicted, worst = data.predict(chosen, tau)
+        if worst is None:
+            break
+        allowed[rows.index(worst[0]), cols.index(worst[1])] = False
 
     pairs = []
     for i in range(m):
         if i in chosen:
             j = chosen[i]
-            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), float(G[i, j]), float(tau[i, j])))
+            ratio, at_bound = predicted.get(i, (math.nan, math.nan))
+            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), float(G[i, j]), float(tau[i, j]),
+                              ratio, at_bound))
             if lam[i, j] > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
                                 f"{_fmt(lam[i, j])}")
+    pairs_cond = math.nan
+    if chosen:
+        order_i = sorted(chosen)
+        pairs_cond = condition_number(S[np.ix_(order_i, [chosen[i] for i in order_i])])
+        limit = (checks or DataChecks()).max_condition if data is not None else None
+        if limit is not None and pairs_cond > limit:
+            warnings.append(f"the scaled gains of the chosen pairs are ill-conditioned (condition number "
+                            f"{_fmt(pairs_cond)} > {limit:g}): the loops will fight each other")
     used = set(chosen.values())
     for a, i in enumerate(rows):
-        if i in chosen:
+        if i in chosen or i in excluded:
             continue
-        positive = [(lam_sub[a, b], cols[b]) for b in range(len(cols)) if lam_sub[a, b] > 1e-9]
-        if not positive:
+        positive = [(lam_sub[a, b], cols[b]) for b in range(len(cols)) if lam_sub[a, b] > 1e-9 and allowed[a, b]]
+        rejected = data.rejection(i) if data is not None else None
+        if not positive and rejected is not None:
+            reason = rejected
+        elif not positive:
             reason = "no parameter has a positive relative gain with it"
         else:
             best_lam, j = min(positive, key=lambda t: abs(t[0] - 1.0))
@@ -284,12 +405,16 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             reason = (f"no unused parameter with a positive relative gain is left (best was {parameters[j]}, "
                       f"lambda {_fmt(best_lam)}, taken by {taker})" if taker else
                       "fewer usable parameters than variables")
+            if rejected is not None:
+                reason += f"; {rejected}"
         left_out.append((variables[i], reason))
     for b, j in enumerate(cols):
         if j in used:
             continue
         col = lam_sub[:, b]
-        if np.all(col <= 1e-9):
+        if excluded and len(excluded) == len(rows):
+            reason = "no tracking variable is worth tracking (see the variables' reasons)"
+        elif np.all(col <= 1e-9):
             reason = "no variable has a positive relative gain with it"
         elif len(used) >= len(rows):
             best = int(np.argmin(np.where(col > 1e-9, np.abs(col - 1.0), np.inf)))
@@ -301,4 +426,111 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
 
     for msg in warnings:
         logger.info(msg)
-    return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond)
+    if data is None:
+        return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
+                       pairs_condition_number=pairs_cond)
+    return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
+                   data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
+
+
+class _DataView:
+    """The data-aware checks of :func:`choose_pairs` (see the module notes)."""
+
+    def __init__(self, G: np.ndarray, variables: tuple[str, ...], parameters: tuple[str, ...],
+                 residuals: Residuals, bounds: npt.ArrayLike | None, checks: DataChecks | None) -> None:
+        m, n = G.shape
+        if bounds is None:
+            raise AnalysisError("the data checks need the parameter bounds (start, min, max)")
+        B = np.asarray(bounds, dtype=float)
+        if B.shape != (n, 3):
+            raise AnalysisError(f"bounds have shape {B.shape}, expected ({n}, 3): (start, min, max) per parameter")
+        self.G, self.B = G, B
+        self.variables, self.parameters = variables, parameters
+        self.checks = checks or DataChecks()
+        self.interval = float(residuals.interval)
+        by_name = {s.variable: s for s in residuals.stats()}
+        self.stats = tuple(by_name[v] for v in variables if v in by_name)
+        self.stat = [by_name.get(v) for v in variables]
+        R = np.full((m, residuals.time.size), math.nan)
+        for i, v in enumerate(variables):
+            if v in residuals.variables:
+                R[i] = residuals.residual[residuals.variables.index(v)]
+        self.R = R
+        self.reach = np.full((m, n), math.nan)
+        self.moves = np.full((m, n), math.nan)
+        self.allowed = np.ones((m, n), dtype=bool)
+        for i, st in enumerate(self.stat):
+            if st is None or st.samples == 0:
+                continue
+            for j in range(n):
+                mv, frac = reach(float(G[i, j]), st.mean, *B[j])
+                self.moves[i, j], self.reach[i, j] = mv, frac
+                self.allowed[i, j] = frac >= self.checks.min_reach
+        self.rejected: list[tuple[str, str, str]] = []
+        self._last: dict[int, str] = {}
+
+    def row_reason(self, i: int, usable: np.ndarray) -> str | None:
+        """Why variable *i* is left out before the RGA (noise level, no reachable parameter), or None."""
+        st = self.stat[i]
+        if st is None or st.samples == 0:
+            return None
+        c = self.checks
+        if st.noise_ratio < c.noise_ratio:
+            return (f"its untracked error is at noise level: RMS {_fmt(st.rms)} (mean {_fmt(st.mean)}) is "
+                    f"below {c.noise_ratio:g} x the sensor noise {_fmt(st.noise)} estimated from the data "
+                    "(nothing to track)")
+        ok = usable & self.allowed[i]
+        if ok.any():
+            return None
+        cand = np.flatnonzero(usable)
+        if cand.size == 0:
+            return None
+        j = int(cand[np.argmax(np.nan_to_num(self.reach[i, cand], nan=-1.0))])
+        return (f"no candidate parameter can close its offset from inside its bounds: the remaining range of "
+                f"{self.parameters[j]} moves {self.variables[i]} by {_fmt(self.moves[i, j])} toward the "
+                f"measurement, the offset is {_fmt(st.mean)} (mean of measured - untracked; needs "
+                f"{self.checks.min_reach:g} x)")
+
+    def predict(self, chosen: dict[int, int], tau: np.ndarray) -> tuple[dict[int, tuple[float, float]],
+                                                                          tuple[int, int] | None]:
+        """Predicted ratio and time at a bound per chosen pair; the worst pair above ``max_ratio`` (or None)."""
+        rows = [i for i in sorted(chosen) if self.stat[i] is not None and self.stat[i].samples > 0]
+        if not rows:
+            return {}, None
+        cols = [chosen[i] for i in rows]
+        taus = np.array([tau[i, j] if math.isfinite(tau[i, j]) and tau[i, j] > 0 else self.interval
+                         for i, j in zip(rows, cols)]) + 0.5 * self.interval
+        lo = self.B[cols, 1] - self.B[cols, 0]
+        hi = self.B[cols, 2] - self.B[cols, 0]
+        try:
+            pr = predict_tracking(self.G[np.ix_(rows, cols)], taus, self.R[rows], lo, hi, self.interval)
+        except AnalysisError as exc:
+            logger.info("tracking prediction skipped: %s", exc)
+            return {}, None
+        out = {i: (float(pr.ratio[a]), float(pr.at_bound[a])) for a, i in enumerate(rows)}
+        ratio = np.nan_to_num(pr.ratio, nan=-1.0)
+        a = int(np.argmax(ratio))
+        if ratio[a] <= self.checks.max_ratio:
+            return out, None
+        i, j = rows[a], cols[a]
+        reason = (f"paired with {self.parameters[j]} (together with the other pairs) tracking would leave "
+                  f"{100 * ratio[a]:.0f} % of its untracked RMS error (limit {100 * self.checks.max_ratio:.0f} %)")
+        if pr.at_bound[a] > 0.05:
+            reason += f"; {self.parameters[j]} would sit at a bound {100 * pr.at_bound[a]:.0f} % of the time"
+        if math.isfinite(pr.need[a]) and pr.need[a] > 1.0:
+            reason += (f" (closing the mean offsets needs {pr.need[a]:.2g} x its remaining range)")
+        self.rejected.append((self.variables[i], self.parameters[j], reason))
+        self._last[i] = reason
+        logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
+        return out, (i, j)
+
+    def rejection(self, i: int) -> str | None:
+        """The last prediction-based rejection of a pair of variable *i*, or a reach reason, or None."""
+        if i in self._last:
+            return self._last[i]
+        st = self.stat[i]
+        if st is None or st.samples == 0 or self.allowed[i].all():
+            return None
+        j = int(np.argmax(np.nan_to_num(np.where(self.allowed[i], -1.0, self.reach[i]), nan=-1.0)))
+        return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} "
+                f"toward the measurement, the offset is {_fmt(st.mean)}")

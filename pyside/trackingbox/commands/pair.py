@@ -34,7 +34,20 @@ measured range; responses are measured against an unstepped reference run, so
 a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled
 by measured ranges and parameter bound ranges, give the relative gain array
 (after leaving out parameters that cannot be told apart, see --rank-tol); each
-tag gets the unused parameter with a positive relative gain closest to 1. The chosen pairs (gain, 63 % time
+tag gets the unused parameter with a positive relative gain closest to 1.
+
+Data checks (off with --no-data-checks): before the assignment the twin runs
+untracked over the training window with the measured inputs (parameters at
+their starts, [[states]] compensation on, the first [tracking] hold_until
+seconds left out) and is compared with the measurements. A tag whose untracked
+RMS error is below --noise-ratio x its sensor noise (robust std of first
+differences / sqrt 2) has nothing to track and is left out. A pair is allowed
+only if the parameter's remaining range toward the measurement moves the tag
+by at least --min-reach x its mean offset. The chosen set is then simulated as
+first-order loops with the parameters clipped to their bounds; while a pair
+would leave more than --max-ratio of its tag's untracked RMS error, the worst
+one is forbidden and the assignment redone. Reasons go to the left-out list.
+The chosen pairs (gain, 63 % time
 constant) replace the spec's [[pairs]] unless --no-write; an existing pair keeps
 its tuning settings (lambda, kp, ti, controller; a new pair gets lambda = 1, the
 tuning factor; the relative gain is reported, not written). Exit code 1 when no
@@ -80,6 +93,17 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rank-tol", type=float, default=None, metavar="RTOL",
                    help="leave out parameters whose scaled gain column adds less than RTOL x the largest "
                         "singular value (cannot be told apart from the others; default 1e-2)")
+    p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
+                   help="pair from the gains alone (no untracked run over the training window)")
+    p.add_argument("--noise-ratio", type=float, default=5.0, metavar="K",
+                   help="leave out tags whose untracked RMS error is below K x their sensor noise "
+                        "(default 5)")
+    p.add_argument("--min-reach", type=float, default=0.5, metavar="F",
+                   help="allow a pair only if the parameter's remaining range moves the tag by at least "
+                        "F x its mean untracked offset (default 0.5)")
+    p.add_argument("--max-ratio", type=float, default=0.25, metavar="R",
+                   help="reject pairs predicted to leave more than R of the tag's untracked RMS error "
+                        "(default 0.25)")
     p.add_argument("--samples", type=int, default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=int, default=0, help="Sobol sampling seed (default 0)")
@@ -144,7 +168,9 @@ def _measured(spec: Any) -> tuple[Any, float, float]:
 def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     """Run the analysis the arguments ask for; returns the pieces (no output written)."""
     from ..analysis.executor import make_executor
-    from ..analysis.pairing import Pair, Pairing, choose_pairs
+    from dataclasses import replace
+
+    from ..analysis.pairing import Pair, choose_pairs
     from ..analysis.rga import parameter_ranges, variable_ranges
     from ..analysis.sobol import agreement, sobol_indices
     from ..analysis.steptest import StepSettings, make_problem, operating_point, step_tests
@@ -182,9 +208,18 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
             sob = sobol_indices(problem, settings, n=args.samples, seed=args.seed, executor=ex,
                                 progress=_Progress("Sobol runs"))
             _stderr(f"Sobol done in {sob.seconds:.1f} s")
+    residuals = checks = None
+    if getattr(args, "data_checks", True):
+        from ..analysis.offsets import simulate_untracked
+        from ..analysis.pairing import DataChecks
+
+        checks = DataChecks(noise_ratio=args.noise_ratio, min_reach=args.min_reach, max_ratio=args.max_ratio)
+        _stderr(f"data checks: untracked twin over the training window [{start:g}, {stop:g}) s")
+        residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=st.ranges, parameter_ranges=pranges,
-                           **({"rtol": args.rank_tol} if args.rank_tol else {}))
+                           residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
+                           checks=checks, **({"rtol": args.rank_tol} if args.rank_tol else {}))
     agr = agreement(pairing, sob) if sob is not None else None
     if args.method == "sobol" and sob is not None:
         choice = sob.choice("total")
@@ -198,8 +233,7 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
         chosen = {p.parameter for p in pairs} | {p.variable for p in pairs}
         left = tuple((n, "not chosen by the Sobol total indices") for n in (*st.variables, *st.parameters)
                      if n not in chosen)
-        pairing = Pairing(tuple(pairs), left, pairing.warnings, pairing.variables, pairing.parameters,
-                          pairing.gains, pairing.scaled_gains, pairing.rga, pairing.condition_number)
+        pairing = replace(pairing, pairs=tuple(pairs), left_out=left)
     warnings = list(pairing.warnings)
     for v, p, a in st.nonlinear():
         warnings.append(f"{v}/{p}: +/- step gains differ by {100 * a:.0f} % (nonlinear response)")
@@ -221,7 +255,9 @@ def to_json(res: dict[str, Any]) -> dict[str, Any]:
     st, pairing, sob, agr = res["steptest"], res["pairing"], res["sobol"], res["agreement"]
     doc: dict[str, Any] = {
         "pairs": [{"variable": p.variable, "parameter": p.parameter, "lambda": _finite(p.lambda_),
-                   "gain": _finite(p.gain), "time_constant": _finite(p.time_constant)} for p in pairing.pairs],
+                   "gain": _finite(p.gain), "time_constant": _finite(p.time_constant),
+                   "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound)}
+                  for p in pairing.pairs],
         "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
         "rga": _matrix(st.variables, st.parameters, pairing.rga),
         "condition_number": _finite(pairing.condition_number),
@@ -234,6 +270,14 @@ def to_json(res: dict[str, Any]) -> dict[str, Any]:
         "runs": st.runs + (sob.runs + 1 if sob is not None else 0),
         "sobol": None,
         "agreement": None,
+        "pairs_condition_number": _finite(pairing.pairs_condition_number),
+        "data_checks": None if pairing.checks is None else {
+            "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
+            "max_ratio": pairing.checks.max_ratio},
+        "offsets": [{"variable": o.variable, "noise": _finite(o.noise), "mean": _finite(o.mean),
+                     "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
+                    for o in pairing.offsets],
+        "rejected_pairs": [{"variable": v, "parameter": p, "reason": r} for v, p, r in pairing.rejected],
     }
     if sob is not None:
         doc["sobol"] = {"first": _matrix(sob.variables, sob.parameters, sob.first),
@@ -390,7 +434,26 @@ def write_report(spec: Any, res: dict[str, Any], out: Path) -> list[Path]:
     ]
     for p in pairing.pairs:
         lines.append(f"| {p.variable} | {p.parameter} | {p.lambda_:.3f} | {p.gain:.4g} | {p.time_constant:.4g} |")
-    lines += ["", f"Condition number of the scaled gain matrix: {pairing.condition_number:.4g}.", ""]
+    lines += ["", f"Condition number of the scaled gain matrix: {pairing.condition_number:.4g}; of the "
+              f"chosen pairs: {pairing.pairs_condition_number:.4g}.", ""]
+    if pairing.checks is not None:
+        c = pairing.checks
+        lines += ["## Data checks", "",
+                  "The twin ran untracked over the training window with the measured inputs. Noise = robust "
+                  "standard deviation of the measurement's first differences / sqrt(2). Thresholds: "
+                  f"untracked RMS error at least {c.noise_ratio:g} x noise; the parameter's remaining range "
+                  f"closes at least {c.min_reach:g} x the mean offset; predicted tracked/untracked RMS ratio "
+                  f"(all pairs together, first-order loops, parameters clipped) at most {c.max_ratio:g}.", "",
+                  "| variable | noise | mean offset | RMS error | RMS / noise |", "|---|---:|---:|---:|---:|"]
+        lines += [f"| {o.variable} | {o.noise:.3g} | {o.mean:.3g} | {o.rms:.3g} | {o.noise_ratio:.3g} |"
+                  for o in pairing.offsets]
+        lines += ["", "| pair | predicted ratio | time at a bound |", "|---|---:|---:|"]
+        lines += [f"| {p.variable} / {p.parameter} | {p.predicted_ratio:.2f} | {100 * p.at_bound:.0f} % |"
+                  for p in pairing.pairs]
+        if pairing.rejected:
+            lines += ["", "Pairs rejected by the prediction:", ""]
+            lines += [f"- {v} / {p}: {r}" for v, p, r in pairing.rejected]
+        lines += [""]
     if pairing.left_out:
         lines += ["## Left out", ""] + [f"- `{n}`: {r}" for n, r in pairing.left_out] + [""]
     if res["warnings"]:

@@ -1,0 +1,407 @@
+"""What the untracked twin gets wrong: offsets, sensor noise and what tracking could remove.
+
+Pairing by gains alone does not know whether a pair is *useful*. This module
+looks at the data: it runs the twin untracked over a window with the measured
+inputs (parameters at their starts, the spec's state compensation holding the
+tank levels, as ``track`` does) and compares its outputs with the
+measurements.
+
+* :func:`noise_sigma` estimates a sensor's noise level from the measurement
+  itself: the robust standard deviation (1.4826 x median absolute deviation)
+  of the first differences divided by sqrt(2). White noise of standard
+  deviation sigma gives differences of standard deviation sigma*sqrt(2); the
+  slow process movement adds little to the differences, and steps are
+  outliers the median ignores.
+* :func:`reach` tells how far a parameter's remaining range (in the direction
+  that closes the mean offset) moves a variable, compared with the offset.
+* :func:`predict_tracking` estimates, for a set of pairs, what tracking would
+  leave of the error: each loop is taken as a first-order closed loop (time
+  constant = the pair's step-response time constant, as the SIMC tuning of
+  ``track`` with lambda = 1 gives), so the parameters follow
+  ``G^-1 · lowpass(residual)`` clipped to their bounds, and the tracked error
+  is ``residual - G · clipped move``. A parameter that would sit at a bound, or
+  an error that changes faster than the loop, shows up as a ratio near one.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from ..errors import AnalysisError, TrackingError, unknown_name
+
+logger = logging.getLogger(__name__)
+
+_MAD = 1.482602218505602  # 1 / Phi^-1(3/4): MAD -> standard deviation for normal data
+
+
+def noise_sigma(values: npt.ArrayLike) -> float:
+    """Sensor-noise standard deviation estimated from a measured series.
+
+    ``1.4826 · median(|d - median(d)|) / sqrt(2)`` over the first differences
+    ``d`` of consecutive valid samples.
+
+    Parameters
+    ----------
+    values : array_like
+        Equally spaced samples; NaN marks missing samples (differences across
+        them are not used).
+
+    Returns
+    -------
+    float
+        The estimate; NaN with fewer than three usable differences.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> round(noise_sigma(np.linspace(0, 1, 20000) + rng.normal(0, 0.1, 20000)), 2)
+    0.1
+    """
+    x = np.asarray(values, dtype=float)
+    d = np.diff(x)
+    d = d[np.isfinite(d)]
+    if d.size < 3:
+        return math.nan
+    return float(_MAD * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+
+
+@dataclass(frozen=True)
+class OffsetStats:
+    """Untracked error of one variable (measured - simulated) over the analysis window.
+
+    Attributes
+    ----------
+    variable : str
+    noise : float
+        Sensor noise standard deviation (:func:`noise_sigma` of the measurement).
+    mean : float
+        Mean of ``measured - simulated`` (the offset; its sign says which way to move).
+    rms : float
+        Root mean square of ``measured - simulated``.
+    samples : int
+        Valid samples used.
+    """
+
+    variable: str
+    noise: float
+    mean: float
+    rms: float
+    samples: int
+
+    @property
+    def noise_ratio(self) -> float:
+        """``rms / noise`` (inf for a noise-free sensor with an error)."""
+        if self.noise > 0:
+            return self.rms / self.noise
+        return math.inf if self.rms > 0 else math.nan
+
+
+def offset_stats(variable: str, measured: npt.ArrayLike, simulated: npt.ArrayLike) -> OffsetStats:
+    """:class:`OffsetStats` of one variable from its measured and untracked simulated series.
+
+    Examples
+    --------
+    >>> s = offset_stats("T", [1.0, 2.0, 3.0, 4.0, 5.0], [0.0, 1.0, 2.0, 3.0, 4.0])
+    >>> (s.mean, s.rms, s.noise)
+    (1.0, 1.0, 0.0)
+    """
+    m = np.asarray(measured, dtype=float)
+    s = np.asarray(simulated, dtype=float)
+    r = m - s
+    ok = np.isfinite(r)
+    if not ok.any():
+        return OffsetStats(variable, noise_sigma(m), math.nan, math.nan, 0)
+    return OffsetStats(variable, noise_sigma(m), float(r[ok].mean()), float(np.sqrt(np.mean(r[ok] ** 2))),
+                       int(ok.sum()))
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Measured and untracked simulated series of the tracking variables on one time grid.
+
+    Attributes
+    ----------
+    variables : tuple of str
+        Tags (rows).
+    time : ndarray, shape (n,)
+        Seconds from the first measurement sample.
+    measured, simulated : ndarray, shape (m, n)
+        NaN where the measurement is missing or excluded (stoppage, start-up).
+    interval : float
+        Grid spacing (s).
+    """
+
+    variables: tuple[str, ...]
+    time: np.ndarray = field(repr=False, compare=False)
+    measured: np.ndarray = field(repr=False, compare=False)
+    simulated: np.ndarray = field(repr=False, compare=False)
+    interval: float = 10.0
+
+    @property
+    def residual(self) -> np.ndarray:
+        """``measured - simulated``, shape (m, n)."""
+        return self.measured - self.simulated
+
+    def stats(self) -> tuple[OffsetStats, ...]:
+        """:class:`OffsetStats` per variable."""
+        return tuple(offset_stats(v, self.measured[i], self.simulated[i]) for i, v in enumerate(self.variables))
+
+    def subset(self, variables: Sequence[str]) -> Residuals:
+        """The rows of *variables*, in that order."""
+        idx = [self.variables.index(v) for v in variables]
+        return Residuals(tuple(variables), self.time, self.measured[idx], self.simulated[idx], self.interval)
+
+
+def _stopped(values: npt.NDArray[np.float64], grid: npt.NDArray[np.float64], below: float,
+             settle: float) -> npt.NDArray[np.bool_]:
+    """True where ``values < below`` and for *settle* s after."""
+    low = np.isfinite(values) & (values < below)
+    if not low.any():
+        return low
+    times = grid[low]
+    idx = np.searchsorted(times, grid, side="right") - 1
+    last = np.where(idx >= 0, times[np.clip(idx, 0, None)], -np.inf)
+    return (grid - last) <= settle + 1e-9
+
+
+def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, stop: float,
+                       skip: float | None = None, tolerance: float = 1e-6) -> Residuals:
+    """Run the twin untracked from the first sample to *stop* and collect *variables*.
+
+    The twin gets the measured inputs (resampled onto the spec's
+    ``sample_time`` grid, gaps interpolated), the parameter starts and fixed
+    values, and the proportional state compensation of the spec's
+    ``[[states]]`` (the same correction ``track`` applies to its untracked
+    twin). Samples before ``max(start, skip)``, inside a stoppage, or with a
+    missing measurement are NaN in the result.
+
+    Parameters
+    ----------
+    spec : trackingbox.spec.Spec
+    variables : sequence of str
+        Tags of ``[outputs]`` to collect.
+    start, stop : float
+        Analysis window (s from the first sample), ``[start, stop)``.
+    skip : float, optional
+        Start-up time left out (default: the spec's ``tracking.hold_until``).
+    tolerance : float
+        FMU solver relative tolerance.
+
+    Returns
+    -------
+    Residuals
+
+    Raises
+    ------
+    AnalysisError
+        An unknown tag, a window without samples, or a twin that fails.
+    """
+    from .. import data
+    from ..fmu import FMUModel
+    from ..tracking.controllers import StateCompensator
+
+    table = data.read_table(spec.measurements, allow_nan=True)
+    where = Path(spec.measurements).name
+    columns = [c for c in table.columns if c != "time"]
+    for tag in [*spec.inputs, *variables, *(s.tag for s in spec.states)]:
+        if tag not in columns:
+            raise AnalysisError(unknown_name("tag", tag, columns, where))
+    t_abs = table["time"].to_numpy(dtype=float)
+    t0 = float(t_abs[0])
+    ts = float(spec.sample_time)
+    stop = min(float(stop), float(t_abs[-1] - t0) + ts)
+    n = int(math.ceil(stop / ts - 1e-9))
+    if n < 2 or stop <= start:
+        raise AnalysisError(f"the analysis window [{start:g}, {stop:g}) s of {where} holds no samples")
+    grid = ts * np.arange(n)
+    tags = list(dict.fromkeys([*spec.inputs, *variables, *(s.tag for s in spec.states)]))
+    rule = spec.data.stoppage
+    if rule is not None and rule.tag in columns and rule.tag not in tags:
+        tags.append(rule.tag)
+    sampled = data.resample(table[["time", *tags]], t0 + grid, max_gap=spec.data.max_gap)
+    inputs: dict[str, Any] = {"time": grid}
+    for tag, name in spec.inputs.items():
+        v = sampled[tag].to_numpy(dtype=float)
+        ok = np.isfinite(v)
+        if not ok.any():
+            raise AnalysisError(f"input tag {tag!r} in {where} has no valid value before {stop:g} s")
+        inputs[name] = v if ok.all() else np.interp(np.arange(v.size), np.flatnonzero(ok), v[ok])
+    base = {p.name: p.start for p in spec.parameters}
+    base.update(spec.fixed)
+    outs = [spec.outputs[v] for v in variables]
+    levels = [s.variable for s in spec.states]
+    comps = [StateCompensator(s.gain, ts=ts) for s in spec.states]
+    level_meas = [sampled[s.tag].to_numpy(dtype=float) for s in spec.states]
+    sim = np.full((len(outs), n), math.nan)
+    model = FMUModel(spec.twin, tolerance=tolerance)
+    try:
+        stepper = model.stepper(start_time=0.0, parameters={**base, **{s.correction: 0.0 for s in spec.states}},
+                                inputs=pd.DataFrame(inputs))
+        for k in range(n):
+            sim[:, k] = stepper.get(outs)
+            if k == n - 1:
+                break
+            if spec.states:
+                lv = stepper.get(levels)
+                stepper.set({s.correction: c.update(float(lm[k]), float(x))
+                             for s, c, lm, x in zip(spec.states, comps, level_meas, lv)})
+            stepper.step(float(grid[k + 1]))
+    except TrackingError as exc:
+        raise AnalysisError(f"the untracked twin failed over the training window: {exc}") from None
+    finally:
+        model.close()
+    meas = np.array([sampled[v].to_numpy(dtype=float) for v in variables]).reshape(len(variables), n)
+    first = max(float(start), float(spec.tracking.hold_until if skip is None else skip))
+    excluded = grid < first - 1e-9
+    if rule is not None and rule.tag in sampled.columns:
+        excluded |= _stopped(sampled[rule.tag].to_numpy(dtype=float), grid, float(rule.below),
+                             float(rule.settle))
+    meas[:, excluded] = math.nan
+    sim[:, excluded] = math.nan
+    keep = grid >= float(start) - 1e-9
+    return Residuals(tuple(variables), grid[keep], meas[:, keep], sim[:, keep], ts)
+
+
+def reach(gain: float, offset: float, start: float, lower: float, upper: float) -> tuple[float, float]:
+    """How far a parameter's remaining range moves a variable, against the offset to close.
+
+    The move needed is ``offset / gain``; the range available in that direction
+    is ``upper - start`` (upward) or ``start - lower`` (downward).
+
+    Parameters
+    ----------
+    gain : float
+        Steady-state gain ``d variable / d parameter``.
+    offset : float
+        Mean ``measured - simulated``.
+    start, lower, upper : float
+        Parameter start and bounds.
+
+    Returns
+    -------
+    moves : float
+        ``|gain| x available range``: how far the parameter can move the variable
+        toward the measurement.
+    fraction : float
+        ``moves / |offset|`` (inf for a zero offset, 0 for a zero gain).
+
+    Examples
+    --------
+    >>> reach(0.5, 2.0, 10.0, 0.0, 12.0)     # needs +4, has +2: closes half
+    (1.0, 0.5)
+    >>> reach(0.5, -2.0, 10.0, 0.0, 12.0)    # needs -4, has -10
+    (5.0, 2.5)
+    """
+    if gain == 0.0 or not math.isfinite(gain):
+        return 0.0, 0.0
+    need = offset / gain
+    available = (upper - start) if need > 0 else (start - lower)
+    moves = abs(gain) * max(available, 0.0)
+    return moves, (moves / abs(offset) if offset != 0 else math.inf)
+
+
+def lowpass(x: npt.ArrayLike, tau: float, dt: float) -> np.ndarray:
+    """First-order low-pass ``y_k = a·y_{k-1} + (1 - a)·x_k``, ``a = exp(-dt/tau)``; NaN samples hold ``y``.
+
+    Starts from the first finite sample.
+
+    Examples
+    --------
+    >>> lowpass([1.0, 1.0, 1.0], tau=1e-9, dt=1.0).tolist()
+    [1.0, 1.0, 1.0]
+    """
+    v = np.asarray(x, dtype=float)
+    a = math.exp(-dt / tau) if tau > 0 else 0.0
+    y = np.empty_like(v)
+    finite = np.flatnonzero(np.isfinite(v))
+    state = float(v[finite[0]]) if finite.size else math.nan
+    for k, xk in enumerate(v):
+        if math.isfinite(xk):
+            state = a * state + (1.0 - a) * xk
+        y[k] = state
+    return y
+
+
+@dataclass(frozen=True)
+class TrackingPrediction:
+    """What :func:`predict_tracking` expects of a set of pairs.
+
+    Attributes
+    ----------
+    ratio : ndarray, shape (k,)
+        Expected tracked/untracked RMS ratio per paired variable.
+    at_bound : ndarray, shape (k,)
+        Fraction of samples where the parameter would be held at a bound.
+    need : ndarray, shape (k,)
+        Mean parameter move that closes the mean offsets of all pairs together
+        (``G^-1 · mean offset``), as a fraction of the range available in its
+        direction (above 1: beyond the bound).
+    """
+
+    ratio: np.ndarray
+    at_bound: np.ndarray
+    need: np.ndarray
+
+
+def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residual: npt.ArrayLike,
+                     lower: npt.ArrayLike, upper: npt.ArrayLike, dt: float) -> TrackingPrediction:
+    """Expected effect of tracking a square set of pairs (linear, first-order loops).
+
+    Parameters
+    ----------
+    gains : array_like, shape (k, k)
+        ``G[a, b] = d variable_a / d parameter_b`` for the paired variables and
+        parameters (parameter ``b`` is paired with variable ``b``).
+    time_constants : array_like, shape (k,)
+        Closed-loop time constant of each loop (s).
+    residual : array_like, shape (k, n)
+        Untracked ``measured - simulated`` (NaN where missing).
+    lower, upper : array_like, shape (k,)
+        Parameter bounds relative to the start (``min - start <= 0 <= max - start``).
+    dt : float
+        Sample spacing (s).
+
+    Returns
+    -------
+    TrackingPrediction
+
+    Raises
+    ------
+    AnalysisError
+        If the gain matrix is singular.
+    """
+    G = np.atleast_2d(np.asarray(gains, dtype=float))
+    R = np.atleast_2d(np.asarray(residual, dtype=float))
+    lo = np.asarray(lower, dtype=float)
+    hi = np.asarray(upper, dtype=float)
+    tau = np.asarray(time_constants, dtype=float)
+    k = G.shape[0]
+    if G.shape != (k, k) or R.shape[0] != k:
+        raise AnalysisError(f"predict_tracking: gains {G.shape} and residuals {R.shape} do not match")
+    try:
+        Ginv = np.linalg.inv(G)
+    except np.linalg.LinAlgError:
+        raise AnalysisError("predict_tracking: the gain matrix of the pairs is singular") from None
+    ok = np.all(np.isfinite(R), axis=0)
+    if not ok.any():
+        nan = np.full(k, math.nan)
+        return TrackingPrediction(nan, nan, nan)
+    filtered = np.array([lowpass(R[a], float(tau[a]), dt) for a in range(k)])
+    moves = Ginv @ filtered
+    clipped = np.clip(moves, lo[:, None], hi[:, None])
+    tracked = R - G @ clipped
+    with np.errstate(all="ignore"):
+        ratio = np.sqrt(np.mean(tracked[:, ok] ** 2, axis=1) / np.mean(R[:, ok] ** 2, axis=1))
+        at_bound = np.mean((moves[:, ok] < lo[:, None]) | (moves[:, ok] > hi[:, None]), axis=1)
+        mean_move = Ginv @ R[:, ok].mean(axis=1)
+        avail = np.where(mean_move > 0, hi, -lo)
+        need = np.where(avail > 0, np.abs(mean_move) / avail, np.inf)
+    return TrackingPrediction(ratio, at_bound, need)
