@@ -308,21 +308,31 @@ def reach(gain: float, offset: float, start: float, lower: float, upper: float) 
     return moves, (moves / abs(offset) if offset != 0 else math.inf)
 
 
-def lowpass(x: npt.ArrayLike, tau: float, dt: float) -> np.ndarray:
+def lowpass(x: npt.ArrayLike, tau: float, dt: float, initial: float = 0.0) -> np.ndarray:
     """First-order low-pass ``y_k = a·y_{k-1} + (1 - a)·x_k``, ``a = exp(-dt/tau)``; NaN samples hold ``y``.
 
-    Starts from the first finite sample.
+    ``y_{-1} = initial`` (0: a loop that starts with no correction).
 
     Examples
     --------
     >>> lowpass([1.0, 1.0, 1.0], tau=1e-9, dt=1.0).tolist()
     [1.0, 1.0, 1.0]
+    >>> [round(float(v), 3) for v in lowpass([1.0, 1.0], tau=1.0, dt=math.log(2.0))]
+    [0.5, 0.75]
     """
+    from scipy.signal import lfilter
+
     v = np.asarray(x, dtype=float)
+    if v.size == 0:
+        return v.copy()
     a = math.exp(-dt / tau) if tau > 0 else 0.0
+    ok = np.isfinite(v)
+    # a NaN sample holds y: feed the filter its own previous output there (y_k = a y + (1-a) y = y)
+    if ok.all():
+        y, _ = lfilter([1.0 - a], [1.0, -a], v, zi=[a * initial])
+        return np.asarray(y)
     y = np.empty_like(v)
-    finite = np.flatnonzero(np.isfinite(v))
-    state = float(v[finite[0]]) if finite.size else math.nan
+    state = float(initial)
     for k, xk in enumerate(v):
         if math.isfinite(xk):
             state = a * state + (1.0 - a) * xk

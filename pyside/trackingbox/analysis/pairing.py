@@ -416,7 +416,12 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             reason = "no tracking variable is worth tracking (see the variables' reasons)"
         elif np.all(col <= 1e-9):
             reason = "no variable has a positive relative gain with it"
-        elif len(used) >= len(rows):
+        elif data is not None and not (allowed[:, b] & (col > 1e-9)).any():
+            dropped = [v for v, q, _ in data.rejected if q == parameters[j]]
+            reason = ("the data checks rejected it for every variable it could serve"
+                      + (f" (predicted tracking of {', '.join(dict.fromkeys(dropped))} too poor)" if dropped else
+                         " (it cannot close their offsets from inside its bounds, or they are at noise level)"))
+        elif len(used) >= len(rows) - len(excluded):
             best = int(np.argmin(np.where(col > 1e-9, np.abs(col - 1.0), np.inf)))
             reason = (f"not needed: every variable is paired (closest was {variables[rows[best]]}, "
                       f"lambda {_fmt(col[best])})")
