@@ -406,7 +406,7 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                       f"lambda {_fmt(best_lam)}, taken by {taker})" if taker else
                       "fewer usable parameters than variables")
             if rejected is not None:
-                reason += f"; {rejected}"
+                reason = f"{rejected}; {reason}"
         left_out.append((variables[i], reason))
     for b, j in enumerate(cols):
         if j in used:
@@ -421,6 +421,10 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             reason = ("the data checks rejected it for every variable it could serve"
                       + (f" (predicted tracking of {', '.join(dict.fromkeys(dropped))} too poor)" if dropped else
                          " (it cannot close their offsets from inside its bounds, or they are at noise level)"))
+        elif data is not None and _best_rejected(col, allowed[:, b]) is not None:
+            a_best = _best_rejected(col, allowed[:, b])
+            reason = (f"the data checks rejected its best pair, with {variables[rows[a_best]]} (lambda "
+                      f"{_fmt(col[a_best])}): see {variables[rows[a_best]]}")
         elif len(used) >= len(rows) - len(excluded):
             best = int(np.argmin(np.where(col > 1e-9, np.abs(col - 1.0), np.inf)))
             reason = (f"not needed: every variable is paired (closest was {variables[rows[best]]}, "
@@ -436,6 +440,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                        pairs_condition_number=pairs_cond)
     return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
                    data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
+
+
+def _best_rejected(col: np.ndarray, allowed: np.ndarray) -> int | None:
+    """Row of the positive relative gain closest to 1 in *col* if the data checks forbade it, else None."""
+    score = np.where(col > 1e-9, np.abs(col - 1.0), np.inf)
+    if not np.isfinite(score).any():
+        return None
+    a = int(np.argmin(score))
+    return None if allowed[a] else a
 
 
 class _DataView:
