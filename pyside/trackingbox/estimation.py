@@ -757,13 +757,28 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
 
     if refine:
         counted = 0
+        refine_best = math.inf
 
         def residuals(x: np.ndarray) -> np.ndarray:
-            nonlocal counted
+            nonlocal counted, refine_best
             counted += 1
             r = train.residuals(x)
+            rms = float(np.sqrt(np.sum(r * r)))
+            if rms < refine_best:  # keep the refinement's best point on disk too
+                refine_best = rms
+                _write_checkpoint(ckpt, {
+                    "stage": "refine",
+                    "iteration": counted,
+                    "best_cost": best_cost,
+                    "parameters": dict(zip(problem.names, map(float, best_x))),
+                    "refine_rms_nrmse": rms,
+                    "refine_parameters": dict(zip(problem.names, map(float, x))),
+                    "evaluations": evaluations + counted,
+                    "seconds": time.perf_counter() - t_start,
+                    "history": history,
+                })
             if progress is not None:
-                progress("refine", counted, refine_iterations * (n + 1), float(np.sqrt(np.sum(r * r))))
+                progress("refine", counted, refine_iterations * (n + 1), rms)
             return r
 
         span = problem.upper - problem.lower
