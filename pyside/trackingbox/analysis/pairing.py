@@ -46,6 +46,9 @@ NEGLIGIBLE = 1e-3
 #: before the RGA. 1e-2 keeps the condition number of what is paired below ~1e2; on the
 #: heat-production bench it separates valves from the pipes in series with them.
 RANK_RTOL = 1e-2
+#: Pairs with a smaller relative gain are not chosen: the loop's effect would depend almost
+#: entirely on the other loops (close to zero: the classic "never pair on lambda near 0").
+MIN_LAMBDA = 0.1
 _FORBIDDEN = 1e6
 
 
@@ -184,7 +187,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  parameter_ranges: npt.ArrayLike | None = None,
                  negligible: float = NEGLIGIBLE, large: float = LARGE_LAMBDA,
                  rtol: float = RANK_RTOL, residuals: Residuals | None = None,
-                 bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None) -> Pairing:
+                 bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None,
+                 other_gains: npt.ArrayLike | None = None, other_time_constants: npt.ArrayLike | None = None,
+                 min_lambda: float = MIN_LAMBDA) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -219,6 +224,13 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         ``(start, min, max)`` of each parameter; required with *residuals*.
     checks : DataChecks, optional
         Thresholds of the data checks (defaults: :class:`DataChecks`).
+    other_gains, other_time_constants : array_like, shape (m, n), optional
+        Gains and time constants from step tests at a second operating point.
+        A pair whose gain changes sign between the points is not chosen; a
+        chosen pair takes the gain of larger magnitude (and its time constant):
+        tuned for the highest gain seen, the loop stays stable where the gain grows.
+    min_lambda : float
+        Smallest relative gain a chosen pair may have.
 
     Returns
     -------
@@ -356,9 +368,23 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     if data is not None:
         allowed = data.allowed[np.ix_(rows, cols)].copy()
         allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
+    G2 = tau2 = None
+    flipped: dict[int, str] = {}
+    if other_gains is not None:
+        G2 = np.asarray(other_gains, dtype=float)
+        tau2 = (np.full(G.shape, math.nan) if other_time_constants is None
+                else np.asarray(other_time_constants, dtype=float))
+        if G2.shape != G.shape or tau2.shape != G.shape:
+            raise AnalysisError(f"gains at the second operating point have shape {G2.shape}, expected {G.shape}")
+        for a, i in enumerate(rows):
+            for b, j in enumerate(cols):
+                if G[i, j] * G2[i, j] < 0 and lam_sub[a, b] >= min_lambda:
+                    allowed[a, b] = False
+                    flipped[i] = (f"its gain to {parameters[j]} changes sign between the operating points "
+                                  f"({_fmt(G[i, j])} and {_fmt(G2[i, j])}): a loop on it would turn unstable")
     predicted: dict[int, tuple[float, float]] = {}
     while True:
-        cost = np.where((lam_sub > 1e-9) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
+        cost = np.where((lam_sub >= min_lambda) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
         r_idx, c_idx = linear_sum_assignment(cost)
         chosen: dict[int, int] = {}
         for a, b in zip(r_idx, c_idx):
@@ -376,8 +402,11 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         if i in chosen:
             j = chosen[i]
             ratio, at_bound = predicted.get(i, (math.nan, math.nan))
-            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), float(G[i, j]), float(tau[i, j]),
-                              ratio, at_bound))
+            gain, t63 = float(G[i, j]), float(tau[i, j])
+            if G2 is not None and tau2 is not None and abs(G2[i, j]) > abs(gain):
+                gain = float(G2[i, j])
+                t63 = float(tau2[i, j]) if math.isfinite(tau2[i, j]) else t63
+            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound))
             if lam[i, j] > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
                                 f"{_fmt(lam[i, j])}")
@@ -393,10 +422,17 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     for a, i in enumerate(rows):
         if i in chosen or i in excluded:
             continue
-        positive = [(lam_sub[a, b], cols[b]) for b in range(len(cols)) if lam_sub[a, b] > 1e-9 and allowed[a, b]]
+        positive = [(lam_sub[a, b], cols[b]) for b in range(len(cols))
+                    if lam_sub[a, b] >= min_lambda and allowed[a, b]]
         rejected = data.rejection(i) if data is not None else None
+        if i in flipped:
+            rejected = flipped[i] if rejected is None else f"{flipped[i]}; {rejected}"
         if not positive and rejected is not None:
             reason = rejected
+        elif not positive and (lam_sub[a] > 1e-9).any():
+            best = int(np.argmax(lam_sub[a]))
+            reason = (f"no parameter has a relative gain of at least {min_lambda:g} with it (largest: "
+                      f"{parameters[cols[best]]}, {_fmt(lam_sub[a, best])})")
         elif not positive:
             reason = "no parameter has a positive relative gain with it"
         else:

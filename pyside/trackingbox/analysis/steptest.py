@@ -735,3 +735,69 @@ def _nanmean2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Element-wise mean of two arrays ignoring NaN (NaN where both are NaN)."""
     both = np.isfinite(a) & np.isfinite(b)
     return np.where(both, (a + b) / 2.0, np.where(np.isfinite(a), a, b))
+
+
+def farthest_operating_point(measurements: pd.DataFrame, inputs: Mapping[str, str], reference: Mapping[str, float],
+                             *, start: float, stop: float, duration: float = 3600.0,
+                             min_distance: float = 0.05) -> tuple[float, dict[str, float]] | None:
+    """The operating point of the window that differs most from *reference*: a second point for step tests.
+
+    The window ``[start, stop)`` is cut into whole spans of *duration*; each
+    span's mean inputs are compared with *reference* by relative differences,
+    ``sqrt(sum(((u - u_ref) / max(|u|, |u_ref|))^2))`` (so a load that varies by
+    half counts far more than a temperature that varies by a few kelvin out
+    of 300).
+
+    Parameters
+    ----------
+    measurements : DataFrame
+        ``time`` (s from the first sample) and one column per tag.
+    inputs : mapping
+        Tag -> FMU input.
+    reference : mapping
+        FMU input -> value at the first operating point.
+    start, stop, duration : float
+        Window and span length (s).
+    min_distance : float
+        Below this relative distance the window has no second operating point.
+
+    Returns
+    -------
+    (float, dict) or None
+        Start time of the span and its FMU input values; None when no span
+        differs by at least *min_distance*.
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 4 * 3600.0, 60.0)
+    >>> df = pd.DataFrame({"time": t, "F": np.where(t < 7200, 1.0, 2.0), "T": 300.0 + 0 * t})
+    >>> farthest_operating_point(df, {"F": "f", "T": "temp"}, {"f": 1.0, "temp": 300.0}, start=0, stop=t[-1] + 60)
+    (7200.0, {'f': 2.0, 'temp': 300.0})
+    """
+    t = measurements["time"].to_numpy(dtype=float)
+    best: tuple[float, float, dict[str, float]] | None = None
+    k = 0
+    while start + (k + 1) * duration <= stop + 1e-9:
+        a = start + k * duration
+        sel = (t >= a) & (t < a + duration)
+        k += 1
+        values: dict[str, float] = {}
+        for tag, name in inputs.items():
+            col = measurements.loc[sel, tag].to_numpy(dtype=float) if tag in measurements.columns else np.array([])
+            col = col[np.isfinite(col)]
+            if not col.size:
+                break
+            values[name] = float(col.mean())
+        else:
+            d2 = 0.0
+            for name, u in values.items():
+                ref = float(reference.get(name, u))
+                scale = max(abs(u), abs(ref))
+                if scale > 0:
+                    d2 += ((u - ref) / scale) ** 2
+            dist = math.sqrt(d2)
+            if best is None or dist > best[0]:
+                best = (dist, a, values)
+    if best is None or best[0] < min_distance:
+        return None
+    return float(best[1]), best[2]

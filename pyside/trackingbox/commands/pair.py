@@ -93,6 +93,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rank-tol", type=float, default=None, metavar="RTOL",
                    help="leave out parameters whose scaled gain column adds less than RTOL x the largest "
                         "singular value (cannot be told apart from the others; default 1e-2)")
+    p.add_argument("--second-point", default="auto", metavar="auto|none|TIME",
+                   help="repeat the step tests at a second operating point: auto (default) = the hour of the "
+                        "training window whose mean inputs differ most (relatively) from the first point; "
+                        "TIME = measurements interpolated there; none = skip. A pair whose gain changes sign "
+                        "between the points is not chosen; a pair takes the larger of its two gains (tuning "
+                        "for the highest gain seen keeps the loop stable where the gain grows)")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
     p.add_argument("--noise-ratio", type=float, default=5.0, metavar="K",
@@ -203,6 +209,15 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
         st = step_tests(problem, settings, ex, progress=_Progress("step runs"))
         _stderr(f"step tests done: {st.runs} runs in {st.seconds:.1f} s (controllers frozen at "
                 f"t = {st.freeze_time:g} s, steps at t = {st.step_time:g} s)")
+        second = _second_point(args, frame, spec, op, start, stop)
+        st2 = None
+        if second is not None:
+            at2, op2 = second
+            _stderr(f"second operating point (t = {at2:g} s): "
+                    + ", ".join(f"{k} = {v:.4g}" for k, v in op2.items()))
+            st2 = step_tests(replace(problem, fixed=tuple((k, v) for k, v in problem.fixed if k not in op2)
+                                     + tuple(op2.items())), settings, ex, progress=_Progress("step runs (2nd point)"))
+            _stderr(f"step tests at the second point done: {st2.runs} runs in {st2.seconds:.1f} s")
         if args.method in ("sobol", "both"):
             _stderr(f"Sobol: {args.samples * (len(params) + 2)} runs")
             sob = sobol_indices(problem, settings, n=args.samples, seed=args.seed, executor=ex,
@@ -219,7 +234,9 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=st.ranges, parameter_ranges=pranges,
                            residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
-                           checks=checks, **({"rtol": args.rank_tol} if args.rank_tol else {}))
+                           checks=checks, other_gains=None if st2 is None else st2.gains,
+                           other_time_constants=None if st2 is None else st2.time_constants,
+                           **({"rtol": args.rank_tol} if args.rank_tol else {}))
     agr = agreement(pairing, sob) if sob is not None else None
     if args.method == "sobol" and sob is not None:
         choice = sob.choice("total")
@@ -238,7 +255,25 @@ def analyse(spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     for v, p, a in st.nonlinear():
         warnings.append(f"{v}/{p}: +/- step gains differ by {100 * a:.0f} % (nonlinear response)")
     return {"steptest": st, "pairing": pairing, "sobol": sob, "agreement": agr, "settings": settings,
-            "warnings": warnings, "operating_point": op}
+            "warnings": warnings, "operating_point": op, "steptest_second": st2,
+            "second_point": None if second is None else {"time": second[0], "inputs": second[1]}}
+
+
+def _second_point(args: argparse.Namespace, frame: Any, spec: Any, op: dict[str, float], start: float,
+                  stop: float) -> tuple[float, dict[str, float]] | None:
+    """The second operating point the arguments ask for, or None."""
+    from ..analysis.steptest import farthest_operating_point, operating_point
+
+    choice = str(getattr(args, "second_point", "auto")).strip().lower()
+    if choice == "none":
+        return None
+    if choice == "auto":
+        return farthest_operating_point(frame, spec.inputs, op, start=start, stop=stop)
+    try:
+        at = float(choice)
+    except ValueError:
+        raise AnalysisError(f"--second-point {args.second_point!r}: expected auto, none or a time in s") from None
+    return at, operating_point(frame, spec.inputs, at=at)
 
 
 def _finite(x: float) -> float | None:
@@ -278,7 +313,12 @@ def to_json(res: dict[str, Any]) -> dict[str, Any]:
                      "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
                     for o in pairing.offsets],
         "rejected_pairs": [{"variable": v, "parameter": p, "reason": r} for v, p, r in pairing.rejected],
+        "second_operating_point": res.get("second_point"),
+        "gain_matrix_second": None if res.get("steptest_second") is None else
+        _matrix(st.variables, st.parameters, res["steptest_second"].gains),
     }
+    if res.get("steptest_second") is not None:
+        doc["runs"] += res["steptest_second"].runs
     if sob is not None:
         doc["sobol"] = {"first": _matrix(sob.variables, sob.parameters, sob.first),
                         "total": _matrix(sob.variables, sob.parameters, sob.total),
