@@ -134,8 +134,8 @@ class EstimationResult:
     seconds
         Wall time of the whole estimation.
     history
-        Best cost (mean NRMSE) after each generation of the global search, then
-        after the refinement.
+        Training cost (mean NRMSE) at the start values, then the best cost after
+        each generation of the global search, then after the refinement.
     initial
         The start values the estimation began from.
     bounds
@@ -699,6 +699,7 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
     if start_cost >= FAILED_COST:
         log.warning("the twin fails at the start values; the global search starts without them")
     best_x, best_cost = problem.start.copy(), start_cost
+    history.append(start_cost)
     log.info("start values: cost %.6g (%s)", start_cost, _fmt(problem.names, best_x))
 
     def checkpoint_now(stage: str, iteration: int) -> None:

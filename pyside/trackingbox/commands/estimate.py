@@ -183,8 +183,8 @@ def write_report(spec: Any, result: Any, out: Path, *, warmup: float | None = No
         written.append(target)
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.semilogy(range(1, len(result.history) + 1), result.history, "o-", ms=3)
-    ax.set_xlabel("generation (last point: after refinement)")
+    ax.semilogy(range(len(result.history)), result.history, "o-", ms=3)
+    ax.set_xlabel("generation (0: start values; last point: after refinement)")
     ax.set_ylabel("best training cost (mean NRMSE)")
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
