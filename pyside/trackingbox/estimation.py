@@ -9,8 +9,10 @@ window and judged on the validation window. Two stages:
    opens the FMU once and keeps it for every later evaluation).
 2. **Local refinement**: :func:`scipy.optimize.least_squares` (trust-region
    reflective, bounded, ``x_scale`` = the bound ranges) on the residual vector,
-   started from the best global point. The refined point is kept only if it does
-   not raise the cost.
+   started from the best global point. With several output tags a second pass
+   reweights each tag by ``1 / NRMSE_tag`` at the first pass's point (iteratively
+   reweighted least squares), so that its steps follow the mean NRMSE itself. A
+   refined point is kept only if it does not raise the cost.
 
 Cost
 ----
