@@ -47,6 +47,11 @@ by at least --min-reach x its mean offset. The chosen set is then simulated as
 first-order loops with the parameters clipped to their bounds; while a pair
 would leave more than --max-ratio of its tag's untracked RMS error, the worst
 one is forbidden and the assignment redone. Reasons go to the left-out list.
+With --second-point (default auto) the step tests are repeated at the hour of
+the training window whose mean inputs differ most from the first point: a pair
+whose gain changes sign between the points is not chosen, and each pair is
+written with the larger of its two gains (and that point's time constant), so
+the loop, tuned for the highest gain seen, stays stable where the gain grows.
 The chosen pairs (gain, 63 % time
 constant) replace the spec's [[pairs]] unless --no-write; an existing pair keeps
 its tuning settings (lambda, kp, ti, controller; a new pair gets lambda = 1, the
@@ -465,7 +470,11 @@ def write_report(spec: Any, res: dict[str, Any], out: Path) -> list[Path]:
         + (f" ({', '.join(f'`{n}` = {v:g}' for n, v in s.freeze)})" if s.freeze else " (no freeze input given)")
         + f"; parameters stepped by {'+/-' if s.two_sided else '+'}{100 * s.step:g} % of their bound range "
         f"at t = {st.step_time:g} s. Settle rule: change below {s.tolerance:g} x range over {s.window:g} s. "
-        f"{st.runs} step-test runs in {st.seconds:.1f} s.",
+        f"{st.runs} step-test runs in {st.seconds:.1f} s."
+        + ("" if res.get("second_point") is None else
+           f" Repeated at a second operating point (the hour from t = {res['second_point']['time']:g} s: "
+           + ", ".join(f"`{k}` = {v:.4g}" for k, v in res["second_point"]["inputs"].items())
+           + "); each pair's gain is the larger of the two."),
         "",
         "## Chosen pairs",
         "",
