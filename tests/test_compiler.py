@@ -245,6 +245,13 @@ def test_structurally_singular_model(tmp_path):
     assert not (tmp_path / "s.fmu").exists()
 
 
+def test_unknown_class_in_package_suggests_names(tmp_path, library):
+    with pytest.raises(CompileError) as exc:
+        compile_model(library, "TrackingBox.Benches.HeatExchanger.Twinn", backend="embedded",
+                      output=tmp_path / "x.fmu")
+    assert "did you mean 'TrackingBox.Benches.HeatExchanger.Twin'" in str(exc.value)
+
+
 def test_missing_source(tmp_path):
     with pytest.raises(CompileError, match="does not exist"):
         compile_model(tmp_path / "nope.mo", "Nope", backend="embedded")

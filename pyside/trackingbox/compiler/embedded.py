@@ -12,10 +12,10 @@ from pathlib import Path
 
 import rumoca
 
-from ..errors import CompileError, UnsupportedConstructError
+from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
-from .source import ModelicaSource, experiment_settings, find_construct
+from .source import ModelicaSource, class_names, experiment_settings, find_construct
 
 log = logging.getLogger(__name__)
 
@@ -84,9 +84,12 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
         diags = _diagnostics(source)
         if "resolve/parse failed" in first or not diags:
             if not diags and ("not found" in first.lower() or "resolve/parse failed" in first):
-                raise CompileError(f"cannot compile {model!r} from {source.entry}: {first} "
-                                   f"(is the class name right? classes are named with their package, "
-                                   f"e.g. Pkg.Sub.Model)") from None
+                known = class_names(source)
+                if model not in known:
+                    raise CompileError(f"class {model!r} not found in {source.entry}"
+                                       f"{did_you_mean(model, known)} (classes are named with their "
+                                       f"package, e.g. Pkg.Sub.Model)") from None
+                raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}") from None
         construct = _mentioned_construct(str(exc), source)
         if construct is not None:
             raise construct from None

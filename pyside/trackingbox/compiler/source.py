@@ -136,3 +136,32 @@ def experiment_settings(source: ModelicaSource, model: str) -> dict[str, float]:
             except ValueError:
                 pass
     return settings
+
+
+_CLASS_DECL = re.compile(r"\b(?:model|block|class|package|connector|record|function)\s+([A-Za-z_]\w*)")
+
+
+def class_names(source: ModelicaSource) -> list[str]:
+    """Dotted names of the classes the source declares (for "did you mean" messages)."""
+    names: set[str] = set()
+    for file in source.files:
+        try:
+            rel = file.relative_to(source.root)
+        except ValueError:
+            continue
+        parts = list(rel.with_suffix("").parts)
+        if parts and parts[-1] == "package":
+            parts = parts[:-1]
+        prefix = ".".join(parts[:-1]) if len(source.files) > 1 or source.entry.name == "package.mo" else ""
+        try:
+            text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+        except OSError:
+            continue
+        declared = _CLASS_DECL.findall(text)
+        if not declared:
+            continue
+        top = ".".join(p for p in (prefix, declared[0]) if p)
+        names.add(top)
+        for inner in declared[1:]:
+            names.add(f"{top}.{inner}")
+    return sorted(names)
