@@ -303,3 +303,36 @@ end S0;
     assert "a" in names and "x_start" not in names and "x_start" in res.log
     out = simulate(res.fmu, 2, 1.0, output=["x"], start_values={"x": 4.0}, relative_tolerance=1e-9)
     assert np.allclose(out["x"], 4.0 * np.exp(-0.5 * out["time"]), rtol=1e-5)
+
+
+CHAIN = """
+model Chain "a pump curve against n linear resistances in series: one flow, n+1 pressures"
+  parameter Integer n = 8;
+  parameter Real R = 2 "resistance per pipe";
+  parameter Real dp0 = 100 "shut-off head";
+  parameter Real c = 1 "pump curve coefficient";
+  Real p[n + 1];
+  Real m(start = 1);
+  Real x(start = 0, fixed = true);
+equation
+  p[1] = dp0 - c*m*abs(m);
+  for i in 1:n loop
+    p[i] - p[i + 1] = R*m;
+  end for;
+  p[n + 1] = 0;
+  der(x) = m;
+end Chain;
+"""
+
+
+def test_algebraic_loop_is_torn_to_its_flow(tmp_path):
+    """p[n+1] = 0 stands alone; the other n+1 equations form one loop, torn at one variable."""
+    src = write(tmp_path, "Chain.mo", CHAIN)
+    res = compile_model(src, "Chain", backend="embedded", output=tmp_path / "chain.fmu")
+    assert "9->1" in res.log  # p[1..8] and m: one loop, a single tearing variable
+    out = simulate(res.fmu, 1, 0.5, output=["m", "p[1]", "p[5]", "x"])
+    n, R, dp0 = 8, 2.0, 100.0
+    m = (-n * R + math.sqrt((n * R) ** 2 + 4 * dp0)) / 2  # positive root of m^2 + nR m - dp0 = 0
+    assert np.allclose(out["m"], m, rtol=1e-9)
+    assert np.allclose(out["p[5]"], (n - 4) * R * m, rtol=1e-9)
+    assert np.allclose(out["x"], m * out["time"], rtol=1e-6)

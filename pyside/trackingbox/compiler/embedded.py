@@ -119,7 +119,8 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     t3 = time.perf_counter()
     summary = (
         f"{model}: {len(em.states)} states, {len(em.algebraics)} algebraic variables, "
-        f"{len(em.parameters)} tunable parameters, {em.n_loops} algebraic loops {em.loop_sizes}; "
+        f"{len(em.parameters)} tunable parameters, {em.n_loops} algebraic loops "
+        f"(equations -> tearing variables: {', '.join(f'{a}->{b}' for a, b in em.torn_sizes) or 'none'}); "
         f"flatten {t1 - t0:.2f} s, causalise {t2 - t1:.2f} s, export+cc {t3 - t2:.2f} s"
     )
     if em.unused_parameters:

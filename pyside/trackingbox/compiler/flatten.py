@@ -85,6 +85,7 @@ class ExplicitModel:
     n_loops: int = 0
     loop_sizes: list[int] = field(default_factory=list)
     unused_parameters: list[str] = field(default_factory=list)
+    torn_sizes: list[tuple[int, int]] = field(default_factory=list)
 
 
 def _kind_of(node: Any) -> tuple[str, Any]:
@@ -657,6 +658,8 @@ class FlatTranslator:
                 guess[sv.name] = 0.0
         assignments: list[tuple[ca.MX, ca.MX]] = []
         loop_sizes: list[int] = []
+        torn_sizes: list[tuple[int, int]] = []
+        self._parameter_names = {sv.name for sv in params}
         for k, block in enumerate(blocks):
             res = [residuals[i][0] for i in block.equations]
             unk = [unknowns[j] for j in block.unknowns]
@@ -665,10 +668,17 @@ class FlatTranslator:
                 if sol is not None:
                     assignments.append((unk[0], sol))
                     continue
-            loop_sizes.append(len(unk))
-            sols = self._rootfinder(k, res, unk, [guess.get(u.name(), 0.0) for u in unk])
-            assignments.extend(zip(unk, sols))
-        log.debug("%s: %d blocks, %d algebraic loops %s", self.model, len(blocks), len(loop_sizes), loop_sizes)
+            tears, solved, residual = self._tear(res, unk)
+            loop_sizes.append(len(tears))
+            torn_sizes.append((len(unk), len(tears)))
+            if not tears:  # every equation solved explicitly in turn (cannot happen for an SCC, kept safe)
+                assignments.extend(solved)
+                continue
+            sols = self._torn_rootfinder(k, residual, tears, solved, [guess.get(u.name(), 0.0) for u in tears])
+            assignments.extend(zip(tears, sols))
+            assignments.extend(solved)
+        log.debug("%s: %d blocks, algebraic loops (equations, tearing variables): %s",
+                  self.model, len(blocks), torn_sizes)
         # A parameter that no equation uses (e.g. one that only sets start values) would be a
         # tunable parameter with no effect: the FMU's states start from fixed numbers, so it is
         # not exported; set the state's own start value instead.
@@ -679,8 +689,72 @@ class FlatTranslator:
             name=self.model, time=self.time, parameters=params, calculated=calculated, unused_parameters=unused,
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
-            assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes,
+            assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
         )
+
+    def _tear(self, res: list[ca.MX], unk: list[ca.MX]) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
+        """Greedy tearing of an algebraic loop.
+
+        Repeatedly solve an equation that has one unknown left and is linear in
+        it with a coefficient that depends on parameters only (never zero at run
+        time by surprise); when none is left, make the unknown that appears in
+        the most remaining equations a tearing variable. Returns the tearing
+        variables, the explicit assignments in order, and the residual
+        equations (as many as tearing variables) that the rootfinder solves.
+        """
+        names = [u.name() for u in unk]
+        index = {n: i for i, n in enumerate(names)}
+        eq_vars = [{index[s.name()] for s in ca.symvar(r) if s.name() in index} for r in res]
+        known: set[int] = set()
+        remaining = list(range(len(res)))
+        tears: list[int] = []
+        solved: list[tuple[ca.MX, ca.MX]] = []
+        while remaining:
+            progress = False
+            for e in list(remaining):
+                left = eq_vars[e] - known
+                if len(left) != 1:
+                    continue
+                v = next(iter(left))
+                sol = self._solve_with_parameter_coefficient(res[e], unk[v])
+                if sol is None:
+                    continue
+                solved.append((unk[v], sol))
+                known.add(v)
+                remaining.remove(e)
+                progress = True
+            if progress:
+                continue
+            unknown = [v for v in range(len(unk)) if v not in known]
+            if not unknown:
+                break
+            counts = {v: sum(1 for e in remaining if v in eq_vars[e]) for v in unknown}
+            tear = max(unknown, key=lambda v: (counts[v], -v))
+            tears.append(tear)
+            known.add(tear)
+        if len(remaining) != len(tears):  # pragma: no cover - counting argument guarantees equality
+            raise CompileError(f"tearing of an algebraic loop in {self.model} went wrong "
+                               f"({len(remaining)} residuals for {len(tears)} tearing variables)")
+        return [unk[t] for t in tears], solved, [res[e] for e in remaining]
+
+    def _solve_with_parameter_coefficient(self, res: ca.MX, v: ca.MX) -> ca.MX | None:
+        jac = ca.jacobian(res, v)
+        if jac.is_zero():
+            return None
+        if any(s.name() not in self._parameter_names for s in ca.symvar(jac)):
+            return None
+        r0 = ca.substitute(res, v, ca.MX(0))
+        return -r0 / jac
+
+    def _torn_rootfinder(self, k: int, residual: list[ca.MX], tears: list[ca.MX],
+                         solved: list[tuple[ca.MX, ca.MX]], guess: list[float]) -> list[ca.MX]:
+        """Rootfinder over the tearing variables only; the torn equations are inlined."""
+        inner = list(residual)
+        # express the residuals in tearing variables and outer symbols: substitute the
+        # explicitly solved unknowns, latest first, so each definition sees the earlier ones
+        for var, expr in reversed(solved):
+            inner = ca.substitute(inner, [var], [expr])
+        return self._rootfinder(k, inner, tears, guess)
 
     def _rootfinder(self, k: int, res: list[ca.MX], unk: list[ca.MX], guess: list[float]) -> list[ca.MX]:
         others: dict[str, ca.MX] = {}
