@@ -69,7 +69,7 @@ import multiprocessing
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -91,20 +91,30 @@ log = logging.getLogger(__name__)
 #: some, else a held-input pre-run. Long enough for tank temperatures (time constants of hours)
 #: to settle; the held part costs little because the solver takes long steps there.
 DEFAULT_WARMUP = 4 * 3600.0
-#: Default number of differential-evolution generations.
+#: Default number of differential-evolution generations for a small problem; see
+#: :func:`default_maxiter` for the budget that applies to many parameters.
 DEFAULT_MAXITER = 30
+#: Default budget of the global search in simulations (coarse grid): the default number of
+#: generations is the most that keeps ``population * (generations + 1)`` within it.
+DEFAULT_GLOBAL_EVALUATIONS = 480
 #: Default population of differential evolution, in all (not per parameter): scipy's usual
 #: 15 per parameter is unaffordable when one simulation takes seconds and there are a dozen
 #: parameters; the refinement does the fine work. The population is ``max(2, ceil(15 / n))``
 #: per parameter: 15 for one parameter, 28 for fourteen.
 DEFAULT_POPULATION = 15
+#: Grid step of the global search's cost (s): the training window is simulated and scored on
+#: the largest multiple of ``sample_time`` not above this (inputs averaged over it), which makes
+#: each of its many simulations several times cheaper. The refinement and the reported NRMSE
+#: always use the full ``sample_time`` grid.
+DEFAULT_GLOBAL_GRID = 60.0
 #: Each output tag needs at least this many valid samples in each window.
 MIN_VALID_SAMPLES = 20
 #: Cost returned for a parameter set whose simulation fails (NRMSE units; a fit is << 1).
 FAILED_COST = 1.0e3
-#: Relative finite-difference step of the refinement's Jacobian. Larger than the
-#: solver's relative tolerance so that the difference quotient is not solver noise.
-DIFF_STEP = 1.0e-4
+#: Finite-difference step of the refinement's Jacobian, as a fraction of each parameter's
+#: bound range (not of its value: a pipe coefficient near its lower bound would otherwise get
+#: a step lost in solver noise). Forward differences, taken backwards at the upper bound.
+DIFF_STEP = 1.0e-3
 
 #: Refinement budget: least-squares iterations (each costs 1 + n_parameters simulations).
 MAX_REFINE_ITERATIONS = 20
@@ -394,6 +404,37 @@ class Objective:
         return np.concatenate(parts)
 
 
+class _Residuals:
+    """Picklable ``x -> Objective.residuals(x, weights)`` for a worker pool."""
+
+    def __init__(self, objective: Objective, weights: Mapping[str, float] | None) -> None:
+        self.objective = objective
+        self.weights = dict(weights) if weights else None
+
+    def __call__(self, x: npt.ArrayLike) -> np.ndarray:
+        return self.objective.residuals(x, self.weights)
+
+
+def jacobian_points(x: npt.ArrayLike, lower: npt.ArrayLike, upper: npt.ArrayLike,
+                    step: float = DIFF_STEP) -> tuple[np.ndarray, np.ndarray]:
+    """Perturbed points and signed steps of a forward-difference Jacobian inside the bounds.
+
+    Parameter ``j`` moves by ``step * (upper_j - lower_j)``, backwards where a
+    forward step would leave the bounds.
+
+    >>> pts, h = jacobian_points([0.0, 1.0], [0.0, 0.0], [1.0, 1.0], step=0.1)
+    >>> pts.tolist(), h.tolist()
+    ([[0.1, 1.0], [0.0, 0.9]], [0.1, -0.1])
+    """
+    x = np.asarray(x, dtype=float)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    h = step * (hi - lo)
+    h = np.where(x + h > hi, -h, h)
+    points = np.repeat(x[None, :], len(x), axis=0)
+    points[np.arange(len(x)), np.arange(len(x))] += h
+    return points, h
+
+
 def _fmt(names: Sequence[str], x: npt.ArrayLike) -> str:
     return ", ".join(f"{n}={v:.6g}" for n, v in zip(names, np.atleast_1d(np.asarray(x, dtype=float))))
 
@@ -447,6 +488,40 @@ def _spans(time_s: np.ndarray, bad: np.ndarray) -> list[tuple[float, float]]:
         else:
             i += 1
     return spans
+
+
+def coarsen(window: WindowData, stride: int) -> WindowData:
+    """Every *stride*-th grid point of *window*, for a cheaper cost in the global search.
+
+    The window's start stays on the coarse grid. Inputs are the centred moving
+    mean over *stride* samples (so the coarser input sampling does not pick
+    single noisy samples); measured outputs are taken as they are (the cost
+    averages over them anyway).
+
+    >>> w = WindowData("training", 20.0, 60.0, np.arange(0.0, 60.0, 10.0), {"u": np.arange(6.0)},
+    ...                {"y": np.array([np.nan, np.nan, 2.0, 3.0, 4.0, 5.0])}, lead=2)
+    >>> c = coarsen(w, 2)
+    >>> c.time.tolist(), c.inputs["u"].tolist(), c.lead
+    ([0.0, 20.0, 40.0], [0.0, 1.5, 3.5], 1)
+    """
+    if stride <= 1:
+        return window
+    first = window.lead % stride
+    index = np.arange(first, len(window.time), stride)
+
+    def smooth(v: np.ndarray) -> np.ndarray:
+        half = stride // 2
+        lo = np.clip(index - half, 0, len(v))
+        hi = np.clip(index - half + stride, 0, len(v))
+        csum = np.concatenate(([0.0], np.cumsum(v)))
+        return (csum[hi] - csum[lo]) / (hi - lo)
+
+    return WindowData(
+        window.name, window.start, window.stop, window.time[index],
+        {k: smooth(np.asarray(v, dtype=float)) for k, v in window.inputs.items()},
+        {k: np.asarray(v, dtype=float)[index] for k, v in window.measured.items()},
+        window.lead // stride,
+    )
 
 
 def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
@@ -625,13 +700,14 @@ def estimate(
     *,
     seed: int = 0,
     workers: int | None = None,
-    maxiter: int = DEFAULT_MAXITER,
+    maxiter: int | None = None,
     popsize: int | None = None,
     warmup: float | None = None,
     refine: bool = True,
     refine_iterations: int = MAX_REFINE_ITERATIONS,
     progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
+    global_grid: float | None = None,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -646,7 +722,7 @@ def estimate(
         process). Each worker opens the twin once.
     maxiter
         Generations of differential evolution (0: only the start values and the
-        refinement).
+        refinement); default :func:`default_maxiter`.
     popsize
         Population size per parameter (population = ``popsize * n_parameters``, at least 5);
         default ``max(2, ceil(DEFAULT_POPULATION / n_parameters))``.
@@ -661,7 +737,10 @@ def estimate(
         Called as ``progress(stage, iteration, total, best_cost)``.
     checkpoint
         If given, the best point so far is written there as JSON after every
-        generation (atomically), so an interrupted run keeps what it found.
+        generation and refinement step (atomically), so an interrupted run keeps what it found.
+    global_grid
+        Grid step (s) of the global search's cost; default :data:`DEFAULT_GLOBAL_GRID`
+        (``sample_time`` or less: the full grid).
 
     Returns
     -------
@@ -671,28 +750,186 @@ def estimate(
     ------
     SpecError, DataError, FMUError, EstimationError
     """
+    if maxiter is None:
+        maxiter = default_maxiter(len(list(spec.parameters)), popsize)
     try:
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
-                         checkpoint=checkpoint)
+                         checkpoint=checkpoint, global_grid=global_grid)
     finally:
         close_models()
+
+
+def default_maxiter(n_parameters: int, popsize: int | None = None) -> int:
+    """Default number of generations: :data:`DEFAULT_MAXITER`, capped by the simulation budget.
+
+    With ``P`` individuals in all, at most ``DEFAULT_GLOBAL_EVALUATIONS // P - 1``
+    generations (at least 2): 30 for one parameter (population 15), 16 for
+    fourteen (population 28).
+
+    >>> default_maxiter(1), default_maxiter(14)
+    (30, 16)
+    """
+    population = _population(n_parameters, popsize) * n_parameters
+    return max(2, min(DEFAULT_MAXITER, DEFAULT_GLOBAL_EVALUATIONS // population - 1))
+
+
+def _population(n: int, popsize: int | None) -> int:
+    """Population per parameter handed to differential evolution (total at least 5)."""
+    return max(popsize or max(2, math.ceil(DEFAULT_POPULATION / n)), math.ceil(5 / n))
+
+
+def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: Any, *, seed: int,
+                   maxiter: int, popsize: int | None, start_cost: float, history: list[float],
+                   best: tuple[np.ndarray, float], progress: ProgressCallback | None,
+                   checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
+    """Differential evolution on the *coarse* cost; returns best x, its *train* cost, evaluations.
+
+    The first population is a Latin hypercube with the start values in it. After
+    each generation the population's best point is scored once on the full grid
+    (*train*), so the best-so-far and the history are in the cost the report uses.
+    """
+    from scipy.optimize import differential_evolution
+
+    n = len(problem.names)
+    best_x, best_cost = best
+    per_parameter = _population(n, popsize)
+    generation = 0
+    scored: list[np.ndarray] = []
+
+    def on_generation(intermediate_result: Any) -> None:
+        nonlocal generation, best_x, best_cost
+        generation += 1
+        x = np.array(intermediate_result.x, dtype=float)
+        if coarse is train:
+            cost = float(intermediate_result.fun)
+        elif scored and np.array_equal(scored[-1], x):
+            cost = math.inf  # already scored
+        else:
+            scored.append(x)
+            cost = train(x)
+        if cost < best_cost:
+            best_x, best_cost = x, cost
+        history.append(best_cost)
+        checkpoint(generation, best_x, best_cost, (generation + 1) * per_parameter * n + len(scored))
+        if progress is not None:
+            progress("global", generation, maxiter, best_cost)
+
+    de = differential_evolution(
+        coarse,
+        list(zip(problem.lower, problem.upper)),
+        maxiter=maxiter,
+        popsize=per_parameter,
+        rng=seed,
+        polish=False,
+        init="latinhypercube" if n > 1 else "random",
+        x0=problem.start if start_cost < FAILED_COST else None,
+        updating="deferred" if pool is not None else "immediate",
+        workers=pool.map if pool is not None else 1,
+        callback=on_generation,
+        tol=1e-3,
+    )
+    x = np.array(de.x, dtype=float)
+    if coarse is train and de.fun < best_cost:
+        best_x, best_cost = x, float(de.fun)
+    elif coarse is not train and not any(np.array_equal(x, y) for y in scored):
+        scored.append(x)
+        cost = train(x)
+        if cost < best_cost:
+            best_x, best_cost = x, cost
+    log.info("global search: %d generations, %d evaluations (+%d on the full grid), cost %.6g (%s)",
+             de.nit, de.nfev, len(scored), best_cost, _fmt(problem.names, best_x))
+    return best_x, best_cost, int(de.nfev) + len(scored)
+
+
+def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.ndarray, float], iterations: int,
+            progress: ProgressCallback | None,
+            checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
+    """Bounded least squares (trust-region reflective) from *best*; returns best x, cost, evaluations.
+
+    The Jacobian is a forward difference on all parameters (:func:`jacobian_points`),
+    its ``n`` simulations spread over *pool*. With several output tags a second pass
+    reweights each tag by ``1 / NRMSE_tag`` at the first pass's point (iteratively
+    reweighted least squares), which makes the weighted mean of ``NRMSE**2`` agree with
+    the mean NRMSE there in value and gradient. A pass's point is kept only if its mean
+    NRMSE is not above the best so far.
+    """
+    from scipy.optimize import least_squares
+
+    best_x, best_cost = best
+    n = len(problem.names)
+    evaluations = 0
+    passes = 2 if len(problem.outputs) > 1 else 1
+    total = passes * iterations * (n + 1)
+    span = problem.upper - problem.lower
+    for k in range(passes):
+        weights: dict[str, float] | None = None
+        if k > 0:
+            try:
+                per_tag = train.nrmse(best_x)
+            except TrackingError as exc:
+                log.warning("no reweighted refinement: the twin failed at the estimate (%s)", exc)
+                break
+            evaluations += 1
+            mean_nrmse = float(np.mean(list(per_tag.values())))
+            weights = {tag: mean_nrmse / max(v, 1e-3 * mean_nrmse) for tag, v in per_tag.items()}
+        task = _Residuals(train, weights)
+        last: dict[str, Any] = {"x": None, "r": None, "best": math.inf}
+
+        def record(x: np.ndarray, r: np.ndarray) -> None:
+            nonlocal evaluations
+            evaluations += 1
+            rms = float(np.sqrt(np.sum(r * r)))
+            if rms < last["best"]:
+                last["best"] = rms
+                checkpoint(evaluations, x, rms, evaluations)
+            if progress is not None:
+                progress("refine", evaluations, total, rms)
+
+        def fun(x: np.ndarray) -> np.ndarray:
+            r = task(x)
+            last["x"], last["r"] = np.array(x, dtype=float), r
+            record(x, r)
+            return r
+
+        def jac(x: np.ndarray) -> np.ndarray:
+            if last["x"] is not None and np.array_equal(last["x"], x):
+                r0 = last["r"]
+            else:
+                r0 = fun(x)
+            points, h = jacobian_points(x, problem.lower, problem.upper)
+            rows = pool.map(task, list(points)) if pool is not None else [task(p) for p in points]
+            for p, r in zip(points, rows):
+                record(p, r)
+            return np.stack([(r - r0) / hj for r, hj in zip(rows, h)], axis=1)
+
+        try:
+            ls = least_squares(fun, np.clip(best_x, problem.lower, problem.upper), jac=jac,
+                               bounds=(problem.lower, problem.upper), x_scale=span, method="trf",
+                               max_nfev=max(1, int(iterations)), ftol=1e-6, xtol=1e-6)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            log.warning("refinement pass %d failed (%s); keeping the estimate so far", k + 1, exc)
+            continue
+        refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
+        refined_cost = train(refined)
+        evaluations += 1
+        log.info("refinement pass %d: %d iterations, cost %.6g -> %.6g", k + 1, ls.nfev, best_cost, refined_cost)
+        if refined_cost <= best_cost:
+            best_x, best_cost = refined, refined_cost
+    return best_x, best_cost, evaluations
+
 
 
 def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
-              checkpoint: str | Path | None) -> EstimationResult:
-    from scipy.optimize import differential_evolution, least_squares
-
+              checkpoint: str | Path | None, global_grid: float | None) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
-    n = len(problem.names)
-    bounds = list(zip(problem.lower, problem.upper))
     history: list[float] = []
     evaluations = 0
 
@@ -704,138 +941,47 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
     history.append(start_cost)
     log.info("start values: cost %.6g (%s)", start_cost, _fmt(problem.names, best_x))
 
-    def checkpoint_now(stage: str, iteration: int) -> None:
-        _write_checkpoint(ckpt, {
-            "stage": stage,
-            "iteration": iteration,
-            "best_cost": best_cost,
-            "parameters": dict(zip(problem.names, map(float, best_x))),
-            "evaluations": evaluations,
-            "seconds": time.perf_counter() - t_start,
-            "history": history,
-        })
-
-    if maxiter > 0:
-        pool = None
-        map_like: Any = 1
-        n_workers = int(workers or 1)
-        if n_workers > 1:
-            pool = multiprocessing.get_context("spawn").Pool(n_workers, initializer=_forget_models)
-            map_like = pool.map
-        generation = 0
-
-        def on_generation(intermediate_result: Any) -> None:
-            nonlocal generation, best_x, best_cost
-            generation += 1
-            history.append(float(intermediate_result.fun))
-            if intermediate_result.fun < best_cost:
-                best_x, best_cost = np.array(intermediate_result.x, dtype=float), float(intermediate_result.fun)
-            checkpoint_now("global", generation)
-            if progress is not None:
-                progress("global", generation, maxiter, best_cost)
-
-        try:
-            de = differential_evolution(
-                train,
-                bounds,
-                maxiter=maxiter,
-                popsize=max(popsize or max(2, math.ceil(DEFAULT_POPULATION / n)), math.ceil(5 / n)),
-                rng=seed,
-                polish=False,
-                init="latinhypercube" if n > 1 else "random",
-                x0=problem.start if start_cost < FAILED_COST else None,
-                updating="deferred" if pool is not None else "immediate",
-                workers=map_like,
-                callback=on_generation,
-                tol=1e-3,
-            )
-        except BaseException:
-            if pool is not None:  # interrupted or failed: do not wait for running evaluations
-                pool.terminate()
-                pool.join()
-            raise
-        if pool is not None:
-            pool.close()
-            pool.join()
-        evaluations += int(de.nfev)
-        if de.fun < best_cost:
-            best_x, best_cost = np.array(de.x, dtype=float), float(de.fun)
-        log.info("global search: %d generations, %d evaluations, cost %.6g (%s)",
-                 de.nit, de.nfev, best_cost, _fmt(problem.names, best_x))
-
-    if refine:
-        counted = 0
-        refine_best = math.inf
-        weights: dict[str, float] | None = None
-
-        def residuals(x: np.ndarray) -> np.ndarray:
-            nonlocal counted, refine_best
-            counted += 1
-            r = train.residuals(x, weights)
-            rms = float(np.sqrt(np.sum(r * r)))
-            if rms < refine_best:  # keep the refinement's best point on disk too
-                refine_best = rms
-                _write_checkpoint(ckpt, {
-                    "stage": "refine",
-                    "iteration": counted,
-                    "best_cost": best_cost,
+    n_workers = int(workers or 1)
+    pool = None
+    if n_workers > 1 and (maxiter > 0 or refine):
+        pool = multiprocessing.get_context("spawn").Pool(n_workers, initializer=_forget_models)
+    try:
+        if maxiter > 0:
+            stride = max(1, int(math.floor((global_grid or DEFAULT_GLOBAL_GRID) / problem.sample_time + 1e-9)))
+            coarse = train
+            if stride > 1:
+                coarse = Objective(replace(problem, sample_time=problem.sample_time * stride),
+                                   coarsen(training, stride))
+            best_x, best_cost, n_global = _global_search(
+                train, coarse, problem, pool, seed=seed, maxiter=maxiter, popsize=popsize, start_cost=start_cost,
+                history=history, best=(best_x, best_cost), progress=progress,
+                checkpoint=lambda g, x, c, e: _write_checkpoint(ckpt, {
+                    "stage": "global", "iteration": g, "best_cost": c,
+                    "parameters": dict(zip(problem.names, map(float, x))), "evaluations": evaluations + e,
+                    "seconds": time.perf_counter() - t_start, "history": history}))
+            evaluations += n_global
+        if refine:
+            best_x, best_cost, n_local = _refine(
+                train, problem, pool, best=(best_x, best_cost), iterations=refine_iterations,
+                progress=progress,
+                checkpoint=lambda k, x, c, e: _write_checkpoint(ckpt, {
+                    "stage": "refine", "iteration": k, "best_cost": best_cost,
                     "parameters": dict(zip(problem.names, map(float, best_x))),
-                    "refine_rms_nrmse": rms,
-                    "refine_parameters": dict(zip(problem.names, map(float, x))),
-                    "evaluations": evaluations + counted,
-                    "seconds": time.perf_counter() - t_start,
-                    "history": history,
-                })
+                    "refine_rms_nrmse": c, "refine_parameters": dict(zip(problem.names, map(float, x))),
+                    "evaluations": evaluations + e, "seconds": time.perf_counter() - t_start,
+                    "history": history}))
+            evaluations += n_local
+            history.append(best_cost)
             if progress is not None:
-                progress("refine", counted, passes * refine_iterations * (n + 1), rms)
-            return r
-
-        # Pass 1 minimises the mean of NRMSE**2. With several tags a second pass reweights each
-        # tag by 1 / NRMSE_tag at the first pass's point, which makes the weighted mean of
-        # NRMSE**2 agree with the mean NRMSE there in value and gradient (iteratively reweighted
-        # least squares): a Gauss-Newton step on the cost the global stage and the report use.
-        passes = 2 if len(problem.outputs) > 1 else 1
-        span = problem.upper - problem.lower
-        for k in range(passes):
-            if k > 0:
-                try:
-                    per_tag = train.nrmse(best_x)
-                except TrackingError as exc:
-                    log.warning("no reweighted refinement: the twin failed at the estimate (%s)", exc)
-                    break
-                evaluations += 1
-                mean_nrmse = float(np.mean(list(per_tag.values())))
-                weights = {tag: mean_nrmse / max(v, 1e-3 * mean_nrmse) for tag, v in per_tag.items()}
-                refine_best = math.inf
-            counted = 0
-            x0 = np.clip(best_x, problem.lower, problem.upper)
-            try:
-                ls = least_squares(
-                    residuals,
-                    x0,
-                    bounds=(problem.lower, problem.upper),
-                    x_scale=span,
-                    diff_step=DIFF_STEP,
-                    method="trf",
-                    max_nfev=max(1, int(refine_iterations)),
-                    ftol=1e-6,
-                    xtol=1e-6,
-                )
-                refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
-                evaluations += counted
-                refined_cost = train(refined)
-                evaluations += 1
-                log.info("refinement pass %d: %d evaluations, cost %.6g -> %.6g", k + 1, counted, best_cost,
-                         refined_cost)
-                if refined_cost <= best_cost:
-                    best_x, best_cost = refined, refined_cost
-            except (ValueError, np.linalg.LinAlgError) as exc:
-                evaluations += counted
-                log.warning("refinement pass %d failed (%s); keeping the estimate so far", k + 1, exc)
-        history.append(best_cost)
-        checkpoint_now("local", 1)
-        if progress is not None:
-            progress("local", 1, 1, best_cost)
+                progress("local", 1, 1, best_cost)
+    except BaseException:
+        if pool is not None:  # interrupted or failed: do not wait for running evaluations
+            pool.terminate()
+            pool.join()
+        raise
+    if pool is not None:
+        pool.close()
+        pool.join()
 
     if best_cost >= FAILED_COST:
         raise EstimationError(

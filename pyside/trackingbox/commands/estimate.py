@@ -27,7 +27,8 @@ estimate and at the start values. With --report DIR a checkpoint
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ..estimation import DEFAULT_MAXITER, DEFAULT_POPULATION, DEFAULT_WARMUP, MAX_REFINE_ITERATIONS
+    from ..estimation import (DEFAULT_GLOBAL_EVALUATIONS, DEFAULT_GLOBAL_GRID, DEFAULT_MAXITER, DEFAULT_POPULATION,
+                              DEFAULT_WARMUP, MAX_REFINE_ITERATIONS)
 
     p = subparsers.add_parser(
         "estimate",
@@ -42,8 +43,13 @@ def register(subparsers: Any) -> None:
                    help="write fit plots, convergence trace, parameter table and a checkpoint to DIR")
     p.add_argument("--seed", type=int, default=0, help="seed of the global search (default 0)")
     p.add_argument("--workers", type=int, default=1, help="processes evaluating the population (default 1)")
-    p.add_argument("--maxiter", type=int, default=DEFAULT_MAXITER,
-                   help=f"generations of differential evolution (default {DEFAULT_MAXITER})")
+    p.add_argument("--maxiter", type=int, default=None,
+                   help=f"generations of differential evolution (default {DEFAULT_MAXITER}, fewer when the "
+                        f"population times generations would exceed {DEFAULT_GLOBAL_EVALUATIONS} simulations; "
+                        "0: refinement only)")
+    p.add_argument("--global-grid", type=float, default=DEFAULT_GLOBAL_GRID, metavar="SECONDS",
+                   help="grid step of the global search's cost (inputs averaged over it; the refinement and "
+                        f"the reported NRMSE use sample_time; default {DEFAULT_GLOBAL_GRID:g} s)")
     p.add_argument("--popsize", type=int, default=None,
                    help=f"population size per parameter (default max(2, ceil({DEFAULT_POPULATION} / n_parameters)))")
     p.add_argument("--warmup", type=float, default=DEFAULT_WARMUP, metavar="SECONDS",
@@ -60,32 +66,58 @@ def register(subparsers: Any) -> None:
 
 
 class _Progress:
-    """One status line on stderr, rewritten in place on a terminal."""
+    """One status line on stderr (rewritten in place on a terminal), with elapsed time and an estimate
+    of the time left in the current stage (at most its budget: a stage may stop earlier)."""
 
-    def __init__(self, quiet: bool = False) -> None:
+    def __init__(self, quiet: bool = False, every: float = 15.0) -> None:
         self.tty = sys.stderr.isatty()
         self.quiet = quiet
+        self.every = every
         self.t0 = time.perf_counter()
+        self.stage = ""
+        self.stage_t0 = self.t0
+        self.stage_i0 = 0
+        self.last = -1.0e9
+        self.last_call = self.t0
 
     def __call__(self, stage: str, iteration: int, total: int, best: float) -> None:
         if self.quiet:
             return
-        elapsed = time.perf_counter() - self.t0
+        now = time.perf_counter()
+        if stage != self.stage:
+            self.stage, self.stage_t0, self.stage_i0 = stage, self.last_call, 0
+        self.last_call = now
+        elapsed = now - self.t0
+        rate = (now - self.stage_t0) / max(iteration - self.stage_i0, 1)
+        left = f", at most ~{_duration(rate * (total - iteration))} left" if iteration < total else ""
         if stage == "global":
-            text = f"global search: generation {iteration}/{total}, best NRMSE {best:.5g} ({elapsed:.0f} s)"
+            text = f"global search: generation {iteration}/{total}, best NRMSE {best:.5g}"
         elif stage == "refine":
-            if not self.tty and iteration % 10:
+            if not self.tty and now - self.last < self.every:
                 return
-            text = f"refinement: simulation {iteration} (at most {total}), rms NRMSE {best:.5g} ({elapsed:.0f} s)"
+            text = f"refinement: simulation {iteration}/{total} (budget), rms NRMSE {best:.5g}"
         else:
-            text = f"refinement done: NRMSE {best:.5g} ({elapsed:.0f} s)"
+            text = f"refinement done: NRMSE {best:.5g}"
+            left = ""
+        text += f" ({_duration(elapsed)} elapsed{left})"
+        self.last = now
         if self.tty:
             sys.stderr.write("\r\033[K" + text)
-            if stage != "global":
+            if stage == "local":
                 sys.stderr.write("\n")
         else:
             sys.stderr.write(text + "\n")
         sys.stderr.flush()
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``3 min 05 s``, ``1 h 02 min``."""
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -108,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
         refine_iterations=args.refine_iterations,
         progress=progress,
         checkpoint=checkpoint,
+        global_grid=args.global_grid,
     )
     if args.report:
         write_report(spec, result, args.report, warmup=args.warmup)
