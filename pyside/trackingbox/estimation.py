@@ -4,15 +4,23 @@ The spec's ``[[parameters]]`` (start, min, max) are estimated on the training
 window and judged on the validation window. Two stages:
 
 1. **Global search**: :func:`scipy.optimize.differential_evolution`, seeded,
-   bounded, with the start values in the first population; its population can
-   be evaluated in parallel over ``workers`` processes (each worker process
-   opens the FMU once and keeps it for every later evaluation).
+   bounded, Latin-hypercube first population with the start values in it; the
+   population can be evaluated in parallel over ``workers`` processes (each
+   worker process opens the FMU once and keeps it for every later evaluation).
+   Its cost is simulated on a coarser grid (:data:`DEFAULT_GLOBAL_GRID`, inputs
+   averaged over it, :func:`coarsen`), which is several times cheaper; the best
+   point of each generation is scored on the full grid, and that is what is kept.
+   The default number of generations is capped by a simulation budget
+   (:func:`default_maxiter`), so many-parameter twins stay affordable.
 2. **Local refinement**: :func:`scipy.optimize.least_squares` (trust-region
    reflective, bounded, ``x_scale`` = the bound ranges) on the residual vector,
-   started from the best global point. With several output tags a second pass
-   reweights each tag by ``1 / NRMSE_tag`` at the first pass's point (iteratively
-   reweighted least squares), so that its steps follow the mean NRMSE itself. A
-   refined point is kept only if it does not raise the cost.
+   started from the best point so far. Its Jacobian is a forward difference on
+   all parameters with a step of :data:`DIFF_STEP` times each bound range
+   (:func:`jacobian_points`), the ``n`` simulations spread over the workers. With
+   several output tags a second pass reweights each tag by ``1 / NRMSE_tag`` at
+   the first pass's point (iteratively reweighted least squares), so that its
+   steps follow the mean NRMSE itself. A refined point is kept only if it does
+   not raise the cost.
 
 Cost
 ----
@@ -116,7 +124,8 @@ FAILED_COST = 1.0e3
 #: a step lost in solver noise). Forward differences, taken backwards at the upper bound.
 DIFF_STEP = 1.0e-3
 
-#: Refinement budget: least-squares iterations (each costs 1 + n_parameters simulations).
+#: Refinement budget per pass: least-squares iterations (each costs 1 + n_parameters simulations,
+#: the n of the Jacobian in parallel over the workers).
 MAX_REFINE_ITERATIONS = 20
 
 #: ``progress(stage, iteration, total, cost)``: stage ``"global"`` after each generation (best mean NRMSE),

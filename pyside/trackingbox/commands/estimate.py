@@ -17,11 +17,19 @@ examples:
   trackingbox estimate case1/spec.toml --report case1/estimate --seed 3 --workers 2
   trackingbox estimate case1/spec.toml --maxiter 10 --popsize 8 --json
   trackingbox estimate case1/spec.toml --write      # estimates become the [[parameters]] start values
+  trackingbox estimate hp/spec.toml --workers 2 --maxiter 8 --refine-iterations 6   # ~3-4 min budget
 
 The cost is the NRMSE (RMSE / measured range) per output tag, averaged over the
 tags, on the training window; the validation window reports the NRMSE at the
 estimate and at the start values. With --report DIR a checkpoint
 (DIR/checkpoint.json, best point so far) is kept up to date during the run.
+
+Budget: the global search (differential evolution, scored on a --global-grid
+grid) runs --maxiter generations of max(2, ceil(15 / n)) * n individuals; by
+default at most 480 simulations. The refinement then takes up to two passes of
+--refine-iterations least-squares iterations, each 1 + n simulations (the n of
+the Jacobian in parallel over --workers). Progress (with the time left at most)
+goes to stderr.
 """
 
 
