@@ -334,3 +334,25 @@ def nan_spans(series: pd.Series, time: npt.ArrayLike | None = None) -> list[tupl
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1) - 1
     return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends)]
+
+
+def stoppage_mask(grid: np.ndarray, values: np.ndarray, below: float, settle: float = 0.0) -> np.ndarray:
+    """True on the grid inside a stoppage and for *settle* seconds after it.
+
+    A stoppage is where the tag's value is below *below* (the spec's
+    ``data.stoppage`` rule). Samples there, and up to *settle* s after the last
+    stopped sample, are excluded from costs and hold the parameter
+    controllers. NaN values are not a stoppage (they are missing data).
+
+    >>> stoppage_mask(np.array([0., 10., 20., 30., 40.]), np.array([1., 0., 1., 1., 1.]), 0.5, 10.0).tolist()
+    [False, True, True, False, False]
+    """
+    grid = np.asarray(grid, dtype=float)
+    values = np.asarray(values, dtype=float)
+    stopped = np.isfinite(values) & (values < below)
+    if not stopped.any():
+        return stopped
+    stop_times = grid[stopped]
+    idx = np.searchsorted(stop_times, grid, side="right") - 1
+    last = np.where(idx >= 0, stop_times[np.clip(idx, 0, None)], -np.inf)
+    return (grid - last) <= settle + 1e-9

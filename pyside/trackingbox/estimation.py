@@ -90,6 +90,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from .data import stoppage_mask
 from .errors import DataError, EstimationError, SimulationError, SpecError, TrackingError, unknown_name
 from .io import write_text_atomic
 
@@ -459,15 +460,6 @@ def _get(obj: Any, name: str, default: Any = None) -> Any:
     return getattr(obj, name, default)
 
 
-def _stoppage_mask(time_s: np.ndarray, values: np.ndarray, below: float, settle: float) -> np.ndarray:
-    """True where the grid is inside a stoppage (value < below) or within *settle* s after one."""
-    stopped = np.isfinite(values) & (values < below)
-    if not stopped.any():
-        return stopped
-    stop_times = time_s[stopped]
-    idx = np.searchsorted(stop_times, time_s, side="right") - 1
-    last = np.where(idx >= 0, stop_times[np.clip(idx, 0, None)], -np.inf)
-    return (time_s - last) <= settle + 1e-9
 
 
 def _default_max_gap(column: pd.DataFrame) -> float:
@@ -609,7 +601,7 @@ def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData,
             inputs[fmu_name] = v
         excluded = np.zeros(len(grid), dtype=bool)
         if stoppage is not None:
-            excluded = _stoppage_mask(
+            excluded = stoppage_mask(
                 grid,
                 np.asarray(sampled[_get(stoppage, "tag")], dtype=float),
                 float(_get(stoppage, "below")),

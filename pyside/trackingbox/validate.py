@@ -151,11 +151,11 @@ def _hold_signal(spec: Any, grid: np.ndarray, measured: dict[str, np.ndarray]) -
     hold = grid < float(spec.tracking.hold_until) - 1e-9
     stop = spec.data.stoppage
     if stop is not None:
-        from .tracking.runtime import _stoppage_mask
+        from .data import stoppage_mask
 
         values = measured.get(stop.tag)
         if values is not None:
-            hold |= _stoppage_mask(grid, values, float(stop.below), float(stop.settle))
+            hold |= stoppage_mask(grid, values, float(stop.below), float(stop.settle))
     for pair in spec.pairs:
         hold |= ~np.isfinite(measured[pair.variable])
     return hold.astype(float)

@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from ..data import stoppage_mask
 from ..errors import AnalysisError, TrackingError, unknown_name
 
 logger = logging.getLogger(__name__)
@@ -160,16 +161,6 @@ class Residuals:
         return Residuals(tuple(variables), self.time, self.measured[idx], self.simulated[idx], self.interval)
 
 
-def _stopped(values: npt.NDArray[np.float64], grid: npt.NDArray[np.float64], below: float,
-             settle: float) -> npt.NDArray[np.bool_]:
-    """True where ``values < below`` and for *settle* s after."""
-    low = np.isfinite(values) & (values < below)
-    if not low.any():
-        return low
-    times = grid[low]
-    idx = np.searchsorted(times, grid, side="right") - 1
-    last = np.where(idx >= 0, times[np.clip(idx, 0, None)], -np.inf)
-    return (grid - last) <= settle + 1e-9
 
 
 def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, stop: float,
@@ -262,8 +253,8 @@ def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, sto
     first = max(float(start), float(spec.tracking.hold_until if skip is None else skip))
     excluded = grid < first - 1e-9
     if rule is not None and rule.tag in sampled.columns:
-        excluded |= _stopped(sampled[rule.tag].to_numpy(dtype=float), grid, float(rule.below),
-                             float(rule.settle))
+        excluded |= stoppage_mask(grid, sampled[rule.tag].to_numpy(dtype=float), float(rule.below),
+                                  float(rule.settle))
     meas[:, excluded] = math.nan
     sim[:, excluded] = math.nan
     keep = grid >= float(start) - 1e-9

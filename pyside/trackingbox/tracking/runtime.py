@@ -56,6 +56,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from ..data import stoppage_mask
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
 from .controllers import Scaling, ScaledPI, SlidingMode, StateCompensator, direction_from_gain
@@ -244,16 +245,6 @@ class _Fit:
         self.n, self.n_u = int(self.n), int(self.n_u)
 
 
-def _stoppage_mask(grid: npt.NDArray[np.float64], values: npt.NDArray[np.float64], below: float,
-                   settle: float) -> npt.NDArray[np.bool_]:
-    """True inside a stoppage (value < below) and for *settle* s after its last stopped sample."""
-    stopped = np.isfinite(values) & (values < below)
-    if not stopped.any():
-        return stopped
-    stop_times = grid[stopped]
-    idx = np.searchsorted(stop_times, grid, side="right") - 1
-    last = np.where(idx >= 0, stop_times[np.clip(idx, 0, None)], -np.inf)
-    return (grid - last) <= settle + 1e-9
 
 
 def _fill(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -509,7 +500,7 @@ def _plan(spec: Any, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
         inputs[name] = _fill(v)
     stopped = np.zeros(grid.size, dtype=bool)
     if stoppage is not None:
-        stopped = _stoppage_mask(grid, measured[stoppage.tag], float(stoppage.below), float(stoppage.settle))
+        stopped = stoppage_mask(grid, measured[stoppage.tag], float(stoppage.below), float(stoppage.settle))
 
     out_tags: list[str] = list(spec.outputs)
     tag_var = dict(spec.outputs)
