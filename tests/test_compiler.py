@@ -336,3 +336,23 @@ def test_algebraic_loop_is_torn_to_its_flow(tmp_path):
     assert np.allclose(out["m"], m, rtol=1e-9)
     assert np.allclose(out["p[5]"], (n - 4) * R * m, rtol=1e-9)
     assert np.allclose(out["x"], m * out["time"], rtol=1e-6)
+
+
+def test_model_without_states_follows_time(tmp_path):
+    """No state, so no state update between steps: the outputs must still follow time
+    (CasADi's generated fmi3SetTime kept its cached evaluation; the export patches it)."""
+    src = write(tmp_path, "Clock.mo", """
+model Clock
+  parameter Real a = 2;
+  output Real y;
+  output Real z;
+equation
+  y = a*time;
+  z = sin(time) + y;
+end Clock;
+""")
+    res = compile_model(src, "Clock", backend="embedded", output=tmp_path / "clock.fmu")
+    out = simulate(res.fmu, 2, 0.25, output=["y", "z"])
+    assert len(out) == 9
+    assert np.allclose(out["y"], 2 * out["time"], rtol=1e-12)
+    assert np.allclose(out["z"], np.sin(out["time"]) + 2 * out["time"], rtol=1e-12)

@@ -153,6 +153,9 @@ def export_fmu(
             os.chdir(cwd)
         tmpdir = Path(tmp)
         sources = [name for name in files if name.endswith(".c")]
+        for name in sources:
+            if name.endswith("_wrap.c"):
+                _patch_set_time(tmpdir / name)
         unity = tmpdir / f"{ident}_unity.c"
         unity.write_text("".join(f'#include "{name}"\n' for name in sorted(sources)))
         libdir = tmpdir / "binaries" / "x86_64-linux"
@@ -187,6 +190,25 @@ def export_fmu(
             if os.path.exists(part):
                 os.unlink(part)
     return "\n".join(logs)
+
+
+#: CasADi 3.8's generated ``fmi3SetTime`` stores the time but keeps the cached
+#: evaluation, so a model without states (where no state update follows) would
+#: report the values of its first evaluation at every later time. The patch
+#: invalidates the cache when the time changes.
+_SET_TIME = "  // Initialize time\n  m->t = time;\n"
+_SET_TIME_PATCHED = "  // Initialize time (trackingbox: a new time invalidates the cached evaluation)\n" \
+                    "  if (m->t != time) m->up_to_date = 0;\n  m->t = time;\n"
+
+
+def _patch_set_time(wrapper: Path) -> None:
+    text = wrapper.read_text()
+    if text.count(_SET_TIME) != 1:
+        raise CompileError(
+            f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): fmi3SetTime not found "
+            "as expected; the embedded path is pinned to casadi 3.8.2"
+        )
+    wrapper.write_text(text.replace(_SET_TIME, _SET_TIME_PATCHED))
 
 
 def _tidy_model_description(
