@@ -2,6 +2,7 @@ within TrackingBox.Fluid;
 model Pipe "Pipe with a quadratic (plant) or linear (twin) pressure loss"
   extends TrackingBox.Interfaces.PartialTwoPort;
   parameter Boolean quadratic = true "= true: pressure loss quadratic in the flow; false: linear";
+  parameter Boolean tangent = false "Linear law only: = true: tangent of the quadratic law at m_flow_nominal (forward flow near nominal); false: secant through zero flow";
   parameter Real k(unit="1", min=0) = 0.005 "Dynamic pressure-drop coefficient: pressure loss at m_flow_nominal divided by dp_ref";
   parameter TrackingBox.Units.MassFlowRate m_flow_nominal(min=1e-6) = 0.07 "Nominal mass flow rate";
   parameter TrackingBox.Units.PressureDifference dp_ref = 1e6 "Reference pressure difference of k";
@@ -18,6 +19,8 @@ equation
   x = m_flow/m_flow_nominal;
   if quadratic then
     dp = dp_ref*k_internal*x*noEvent(abs(x));
+  elseif tangent then
+    dp = dp_ref*k_internal*(2*x - 1);
   else
     dp = dp_ref*k_internal*x;
   end if;
@@ -25,6 +28,11 @@ equation
   annotation (Documentation(info="<html>
 <p><code>dp = dp_ref&middot;k&middot;x&middot;|x|</code> (quadratic) or
 <code>dp = dp_ref&middot;k&middot;x</code> (linear), <code>x = m_flow/m_flow_nominal</code>.
+With <code>tangent = true</code> the linear law is instead the tangent of the
+quadratic one at nominal flow, <code>dp = dp_ref&middot;k&middot;(2x - 1)</code>:
+the same loss and slope there, so a twin linearised at its operating point. It
+is meant for forward flow near nominal (below half the nominal flow it would
+give a pressure gain).
 With the default <code>dp_ref = 1 MPa</code>, <code>k = 0.005</code> is a
 5 kPa loss at nominal flow. Both laws agree at nominal flow. No heat loss,
 no storage.</p>

@@ -2,6 +2,7 @@ within TrackingBox.Fluid;
 model Pump "Centrifugal pump with speed input and a quadratic (plant) or linear (twin) curve"
   extends TrackingBox.Interfaces.PartialTwoPort;
   parameter Boolean quadratic = true "= true: quadratic pump curve; false: linear";
+  parameter Boolean tangent = false "Linear curve only: = true: tangent of the quadratic curve at x = s; false: secant through the shut-off point";
   parameter TrackingBox.Units.VolumeFlowRate VFlowDesign(min=1e-9) = 6.6e-5 "Design volume flow rate at nominal speed";
   parameter TrackingBox.Units.PressureDifference uRise(min=0) = 40000 "Pressure rise at design flow and nominal speed";
   parameter Real shutOffRatio(unit="1", min=1.01) = 1.5 "Pressure rise at zero flow divided by uRise";
@@ -40,17 +41,26 @@ equation
   dpRise = -dp;
   if quadratic then
     dpRise = uRise_internal*(shutOffRatio*s^2 - (shutOffRatio - 1)*x*noEvent(abs(x)));
+  elseif tangent then
+    dpRise = uRise_internal*((2*shutOffRatio - 1)*s^2 - 2*(shutOffRatio - 1)*noEvent(max(s, speedMinLinear))*x);
   else
     dpRise = uRise_internal*(shutOffRatio*s^2 - (shutOffRatio - 1)*noEvent(max(s, speedMinLinear))*x);
   end if;
   port_b.T = port_a.T;
   annotation (Documentation(info="<html>
 <p>Curve through the design point (<code>VFlowDesign</code>, <code>uRise</code>)
-at nominal speed and the shut-off point (0, <code>shutOffRatio&middot;uRise</code>),
-scaled by the affinity laws (<code>x = V_flow/VFlowDesign</code>, speed <code>s</code>):
-quadratic <code>dp = uRise&middot;(r&middot;s&sup2; - (r-1)&middot;x&sup2;)</code>,
-linear <code>dp = uRise&middot;(r&middot;s&sup2; - (r-1)&middot;s&middot;x)</code>
-(the linear flow term uses at least <code>speedMinLinear</code>, so a stopped
-pump still resists flow). The medium temperature is not changed.</p>
+at nominal speed, scaled by the affinity laws (<code>x = V_flow/VFlowDesign</code>,
+speed <code>s</code>, <code>r = shutOffRatio</code>):</p>
+<ul>
+<li>quadratic: <code>dp = uRise&middot;(r&middot;s&sup2; - (r-1)&middot;x&sup2;)</code>,
+through the shut-off point (0, <code>r&middot;uRise</code>);</li>
+<li>linear (<code>tangent = false</code>): <code>dp = uRise&middot;(r&middot;s&sup2; - (r-1)&middot;s&middot;x)</code>,
+the secant through the shut-off point and the affinity point <code>x = s</code>;</li>
+<li>linear (<code>tangent = true</code>): <code>dp = uRise&middot;((2r-1)&middot;s&sup2; - 2(r-1)&middot;s&middot;x)</code>,
+the tangent of the quadratic curve at <code>x = s</code>: the same head and the
+same slope there (a linear model fitted at the operating point).</li>
+</ul>
+<p>The linear flow terms use at least <code>speedMinLinear</code>, so a stopped
+pump still resists flow. The medium temperature is not changed.</p>
 </html>"));
 end Pump;
