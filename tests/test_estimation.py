@@ -275,30 +275,28 @@ def test_default_budget_for_many_parameters() -> None:
 # --------------------------------------------------------------------------- heat-production bench
 
 
-HP_HOURS = 12.0
-
-
 @pytest.mark.slow
-def test_heat_production_bench_fits_as_well_as_the_truth(tmp_path: Path) -> None:
-    """14-parameter heat-production bench (12 h of data instead of 24 h to keep the test short).
+def test_heat_production_bench_halves_the_validation_error(tmp_path: Path) -> None:
+    """The issue's criterion on the full 24 h heat-production bench, CLI default budget.
 
-    The twin's pipe and pump curves are linear where the plant's are quadratic, so
-    even the plant's true values leave a structural error: the independent
-    expectation is that the bounded estimate fits the training window at least as
-    well as the true values do, stays in its bounds, finds the two heat-transfer
-    coefficients (seen directly by TI-310 / TI-301), and clearly improves the
-    held-out validation window.
+    Fourteen parameters. The twin's pipe and pump curves are linear (tangents at
+    the design point) where the plant's are quadratic, so even the plant's true
+    values leave a structural error. Expected, independently of our numbers: the
+    held-out validation NRMSE (mean over the tags) falls by at least 50 % from the
+    start values; every estimate stays in its bounds; the estimate fits the
+    training window at least as well as the true values do; the two heat-transfer
+    coefficients (seen directly by TI-310 / TI-301) are found.
     """
     from trackingbox.benches import make_bench
     from trackingbox.estimation import Objective, problem_from_spec
 
-    case = make_bench("heat-production", tmp_path / "hp", seed=0, hours=HP_HOURS)
+    case = make_bench("heat-production", tmp_path / "hp", seed=0)
     spec = load_spec(case.spec)
-    result = estimate(spec, seed=0, workers=2, maxiter=4, refine_iterations=6)
+    result = estimate(spec, seed=0, workers=2)
     for p in spec.parameters:
         assert p.min <= result.parameters[p.name] <= p.max, p.name
     for name in ("HU300.kht", "HEX300.kht"):
-        assert abs(result.parameters[name] - case.truth[name]) <= 0.03 * case.truth[name], name
+        assert abs(result.parameters[name] - case.truth[name]) <= 0.02 * case.truth[name], name
     problem = problem_from_spec(spec)
     training = load_windows(spec)[0]
     truth = np.array([case.truth[name] for name in problem.names])
@@ -307,4 +305,4 @@ def test_heat_production_bench_fits_as_well_as_the_truth(tmp_path: Path) -> None
     assert at_estimate <= at_truth
     initial = float(np.mean(list(result.validation_nrmse_initial.values())))
     final = float(np.mean(list(result.validation_nrmse.values())))
-    assert final <= 0.65 * initial, (initial, final)  # measured: 0.1596 -> 0.0920 (-42 %)
+    assert final <= 0.5 * initial, (initial, final)

@@ -346,16 +346,14 @@ def test_heat_exchanger_bench_kht_converges_to_plant(fmu_cache, tmp_path: Path, 
 
 
 # Closed-loop pairing of the heat-production bench (the twin's own controllers active, as
-# they are while tracking): variables whose untracked error is well above the sensor noise,
-# each with the parameter that moves it most; gain and time constant from step tests of the
-# twin at the bench's starting operating point.
+# they are while tracking), as `trackingbox pair` chooses it on this 12 h, seed-1 case:
+# the two heat-transfer coefficients. The pipe and pump parameters are left out there
+# because from inside their bounds they cannot close the pressure and speed offsets of
+# the twin's start values (the tangent pipe law loses authority at part load); the
+# estimation handles those. Gain and time constant from its step tests.
 HEAT_PRODUCTION_PAIRS = (
-    ("TI-301", "HEX300.kht", -0.0107829, 90.0),
-    ("TI-310", "HU300.kht", -0.0169151, 110.0),
-    ("PI-100", "Pipe100.k", 634403.0, 160.0),
-    ("PI-200", "Pipe200.k", 632897.0, 100.0),
-    ("SI-100", "PU100.uRise", -5.23545e-06, 330.0),
-    ("SI-200", "PU200.uRise", -5.68755e-06, 120.0),
+    ("TI-301", "HEX300.kht", -0.0166551, 100.0),
+    ("TI-310", "HU300.kht", -0.0313353, 157.0),
 )
 
 

@@ -10,8 +10,9 @@ equation
   connect(T200_m_flow_corr, T200.m_flow_corr_in);
   connect(T400_m_flow_corr, T400.m_flow_corr_in);
   annotation (Documentation(info="<html>
-<p>Linear pipe and pump curves (secants of the quadratic ones through the
-design point) and the initial parameter values of the method notes. For state
+<p>Linear pipe and pump curves (the tangents of the plant's quadratic curves
+at the design point: same pressure and slope there, wrong by the curvature away
+from it) and the initial parameter values of the method notes. For state
 compensation each tank takes a correction flow from a top-level input
 <code>T100_m_flow_corr</code>, <code>T200_m_flow_corr</code>,
 <code>T400_m_flow_corr</code> (kg/s), added to the tunable parameter
