@@ -21,7 +21,7 @@ from .cli import main as cli_main
 from .errors import TrackingError
 
 #: Estimation budget per bench: the heat-production bench has 14 parameters and a 24 h record;
-#: this budget took 148 s for a 47 % validation-NRMSE reduction (the default budget: 283 s, 48 %).
+#: this budget took 214 s for a 70 % validation-NRMSE reduction (the default budget: 327 s, 70 %; seed 0).
 ESTIMATE_BUDGET = {
     "heat-exchanger": ["--workers", "2"],
     "heat-production": ["--workers", "2", "--maxiter", "8", "--refine-iterations", "6"],
