@@ -7,6 +7,11 @@ from pathlib import Path
 
 import pytest
 
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
 from trackingbox.errors import SpecError
 from trackingbox.spec import (
     PairSpec,
@@ -16,6 +21,7 @@ from trackingbox.spec import (
     dump_spec,
     load_spec,
     loads_spec,
+    update_spec,
     write_pairs,
 )
 
@@ -294,3 +300,205 @@ def test_example_in_architecture_doc_is_valid(tmp_path):
     spec = load_spec(path)
     assert spec.pairs[0].parameter == "hx.kht"
     assert spec.states[0].correction == "T200.m_flow_corr"
+
+
+# --------------------------------------------------------------------------- update_spec (tomlkit writer)
+
+#: A spec as a person writes it: comments everywhere, odd spacing, inline tables,
+#: pairs in the middle of the file followed by a comment about the next table.
+HANDWRITTEN = """\
+# heat exchanger, plant 3
+twin   =   "twin.fmu"   # compiled by hand
+measurements = "data/measurements.csv"
+sample_time=10.0
+parameters = [
+    { name = "hx.kht", start = 1000, min = 800.0, max = 1200.0 },   # W/K
+    {name="hx.n",start=2.0,min=1.0,max=3.0},
+]
+
+[inputs]  # what drives the twin
+"FI-101" = "mHot_flow"
+"TI-100"="ThIn"
+
+[outputs]
+"TI-102" = "ThOut"
+"LI-200" = "level"
+"""
+
+HANDWRITTEN_TABLES = """\
+# heat exchanger, plant 3
+twin = "twin.fmu"
+measurements = "data/measurements.csv"
+sample_time = 10.0
+
+[outputs]
+"TI-102" = "ThOut"
+"LI-200" = "level"
+
+[[parameters]]
+name    = "hx.kht"      # the one we track
+start   =   1000        # from the datasheet
+min = 800.0
+max = 1200.0
+
+[[parameters]]
+  name = "hx.n"
+  start = 2.0
+  min = 1.0
+  max = 3.0
+
+[[pairs]]   # written by trackingbox pair
+variable = "TI-102"
+parameter = "hx.kht"
+gain = -0.004
+time_constant = 300.0
+lambda = 2.0
+
+# the tank level is compensated, not tracked
+[[states]]
+tag = "LI-200"
+variable = "T200.level"
+correction = "T200.m_flow_corr"
+gain = 5.0
+
+[tracking]
+hold_until = 600.0   # start-up
+"""
+
+#: What HANDWRITTEN_TABLES must become after the starts and pairs below are written:
+#: typed by hand, not produced by the code.
+HANDWRITTEN_TABLES_AFTER = """\
+# heat exchanger, plant 3
+twin = "twin.fmu"
+measurements = "data/measurements.csv"
+sample_time = 10.0
+
+[outputs]
+"TI-102" = "ThOut"
+"LI-200" = "level"
+
+[[parameters]]
+name    = "hx.kht"      # the one we track
+start   =   912.5        # from the datasheet
+min = 800.0
+max = 1200.0
+
+[[parameters]]
+  name = "hx.n"
+  start = 2.0
+  min = 1.0
+  max = 3.0
+
+[[pairs]]
+variable = "TI-102"
+parameter = "hx.n"
+gain = 1.5
+time_constant = 120.0
+lambda = 1.0
+kp = 0.25
+ti = 200.0
+
+[[pairs]]
+variable = "LI-200"
+parameter = "hx.kht"
+gain = -0.0002
+time_constant = 900.0
+lambda = 3.0
+controller = "sliding"
+
+# the tank level is compensated, not tracked
+[[states]]
+tag = "LI-200"
+variable = "T200.level"
+correction = "T200.m_flow_corr"
+gain = 5.0
+
+[tracking]
+hold_until = 600.0   # start-up
+"""
+
+NEW_PAIRS = (PairSpec("TI-102", "hx.n", 1.5, 120.0, 1.0, kp=0.25, ti=200.0),
+             PairSpec("LI-200", "hx.kht", -2e-4, 900.0, 3.0, controller="sliding"))
+
+
+def test_update_spec_gives_the_hand_written_text(tmp_path):
+    """Starts and pairs written into a commented spec: exactly the text typed above."""
+    path = make_case(tmp_path, HANDWRITTEN_TABLES)
+    written = update_spec(path, pairs=NEW_PAIRS, starts={"hx.kht": 912.5})
+    assert path.read_text() == HANDWRITTEN_TABLES_AFTER
+    assert written == load_spec(path)
+    # the values load back with a plain TOML reader too
+    raw = tomllib.loads(path.read_text())
+    assert raw["parameters"][0]["start"] == 912.5
+    assert [(p["variable"], p["parameter"]) for p in raw["pairs"]] == [("TI-102", "hx.n"),
+                                                                     ("LI-200", "hx.kht")]
+    assert raw["pairs"][1]["gain"] == -2e-4
+
+
+def test_update_spec_is_idempotent(tmp_path):
+    path = make_case(tmp_path, HANDWRITTEN_TABLES)
+    update_spec(path, pairs=NEW_PAIRS, starts={"hx.kht": 912.5})
+    once = path.read_bytes()
+    update_spec(path, pairs=NEW_PAIRS, starts={"hx.kht": 912.5})
+    assert path.read_bytes() == once
+
+
+def test_update_spec_inline_tables_keep_layout(tmp_path):
+    """Starts inside inline tables change in place; the pairs go to the end of the file."""
+    path = make_case(tmp_path, HANDWRITTEN)
+    update_spec(path, starts={"hx.kht": 1100.0, "hx.n": 2.5}, pairs=NEW_PAIRS[:1])
+    text = path.read_text()
+    before, after = HANDWRITTEN.split("parameters = [", 1)
+    assert text.startswith(before)  # comments, spacing and unquoted oddities untouched
+    assert ('parameters = [\n'
+            '    { name = "hx.kht", start = 1100.0, min = 800.0, max = 1200.0 },   # W/K\n'
+            '    {name="hx.n",start=2.5,min=1.0,max=3.0},\n'
+            ']\n') in text
+    assert text.endswith('"LI-200" = "level"\n\n[[pairs]]\nvariable = "TI-102"\nparameter = "hx.n"\n'
+                         'gain = 1.5\ntime_constant = 120.0\nlambda = 1.0\nkp = 0.25\nti = 200.0\n')
+    assert text.count("[inputs]  # what drives the twin\n") == 1
+    raw = tomllib.loads(text)
+    assert raw["pairs"] == [{"variable": "TI-102", "parameter": "hx.n", "gain": 1.5,
+                             "time_constant": 120.0, "lambda": 1.0, "kp": 0.25, "ti": 200.0}]
+    assert [p["start"] for p in raw["parameters"]] == [1100.0, 2.5]
+
+
+def test_update_spec_removing_pairs_keeps_the_comment_of_the_next_table(tmp_path):
+    path = make_case(tmp_path, HANDWRITTEN_TABLES)
+    spec = update_spec(path, pairs=[])
+    assert spec.pairs == ()
+    text = path.read_text()
+    head, tail = HANDWRITTEN_TABLES.split("[[pairs]]", 1)
+    tail = tail.split("lambda = 2.0\n", 1)[1]
+    assert text == head.rstrip("\n") + "\n" + tail
+
+
+def test_update_spec_only_changes_start_lines(tmp_path):
+    path = make_case(tmp_path)  # GOOD
+    update_spec(path, starts={"hx.n": 1.75})
+    changed = [(a, b) for a, b in zip(GOOD.splitlines(), path.read_text().splitlines()) if a != b]
+    assert changed == [("start = 2.0", "start = 1.75")]
+    assert len(path.read_text().splitlines()) == len(GOOD.splitlines())
+
+
+@pytest.mark.parametrize("starts, message", [
+    ({"hx.khtt": 900.0}, "unknown parameter 'hx.khtt' in [[parameters]] (did you mean 'hx.kht'?)"),
+    ({"hx.kht": 5000.0}, "start 5000.0 of 'hx.kht' is outside its bounds [800.0, 1200.0]"),
+    ({"hx.n": float("nan")}, "start nan of 'hx.n' is outside its bounds"),
+])
+def test_update_spec_bad_starts_leave_file(tmp_path, starts, message):
+    path = make_case(tmp_path, HANDWRITTEN_TABLES)
+    with pytest.raises(SpecError) as info:
+        update_spec(path, starts=starts, pairs=NEW_PAIRS)
+    assert message in str(info.value) and str(path) in str(info.value)
+    assert path.read_text() == HANDWRITTEN_TABLES
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")] == []
+
+
+def test_write_starts_in_estimation_is_the_same_writer(tmp_path):
+    from trackingbox.estimation import write_starts
+
+    path = make_case(tmp_path, HANDWRITTEN_TABLES)
+    spec = write_starts(path, {"hx.kht": 912.5})
+    assert spec.parameter("hx.kht").start == 912.5
+    assert path.read_text() == HANDWRITTEN_TABLES.replace("start   =   1000 ", "start   =   912.5 ")

@@ -1059,93 +1059,12 @@ def _series(problem: Problem, window: WindowData,
 
 # --------------------------------------------------------------------------- writing back
 
-_HEADER = re.compile(r"^\s*\[")
-_PARAMS_HEADER = re.compile(r"^\s*\[\[\s*parameters\s*\]\]")
-_KEY_LINE = re.compile(r"^(\s*)(name|start)(\s*=\s*)(.*?)(\s*(#.*)?)$")
-
-
 def write_starts(path: str | Path, values: Mapping[str, float]) -> Any:
     """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
 
-    Only the ``start = ...`` lines of the named parameters change; comments and
-    layout are kept. The new text is validated (it must load back with exactly
-    these starts and nothing else changed) before it replaces the file; if the
-    file's layout defeats the line edit (e.g. inline tables), the whole spec is
-    rewritten by :func:`trackingbox.spec.write_spec` instead (comments are lost then).
-
-    Returns
-    -------
-    Spec
-        The spec as written.
-
-    Raises
-    ------
-    SpecError
-        A name in *values* is not one of the spec's parameters, or a value is
-        outside its bounds.
+    Delegates to :func:`trackingbox.spec.write_starts` (one writer for the spec,
+    keeping comments and layout); kept here for existing callers.
     """
-    from dataclasses import replace
+    from .spec import write_starts as _write_starts
 
-    from .spec import load_spec, loads_spec, write_spec
-
-    path = Path(path).expanduser().resolve()
-    old = load_spec(path, check_files=False)
-    names = [p.name for p in old.parameters]
-    problems = []
-    for name, value in values.items():
-        if name not in names:
-            problems.append(unknown_name("parameter", name, names, f"[[parameters]] of {path}"))
-            continue
-        p = old.parameter(name)
-        if not p.min <= float(value) <= p.max:
-            problems.append(f"estimate {float(value)!r} of {name!r} is outside [{p.min!r}, {p.max!r}] in {path}")
-    if problems:
-        raise SpecError("; ".join(problems))
-    wanted = replace(old, parameters=tuple(
-        replace(p, start=float(values[p.name])) if p.name in values else p for p in old.parameters))
-
-    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
-    in_params = False
-    block: list[int] = []
-    blocks: list[list[int]] = []
-    for i, line in enumerate(lines):
-        if _HEADER.match(line):
-            if in_params:
-                blocks.append(block)
-            in_params = bool(_PARAMS_HEADER.match(line))
-            block = []
-        elif in_params:
-            block.append(i)
-    if in_params:
-        blocks.append(block)
-    for block in blocks:
-        name = None
-        start_line = None
-        for i in block:
-            m = _KEY_LINE.match(lines[i].rstrip("\n"))
-            if not m:
-                continue
-            if m.group(2) == "name":
-                try:
-                    name = tomllib.loads(f"v = {m.group(4)}")["v"]
-                except (tomllib.TOMLDecodeError, KeyError):
-                    name = None
-            else:
-                start_line = i
-        if name in values and start_line is not None:
-            m = _KEY_LINE.match(lines[start_line].rstrip("\n"))
-            assert m is not None
-            newline = "\n" if lines[start_line].endswith("\n") else ""
-            lines[start_line] = f"{m.group(1)}start{m.group(3)}{float(values[name])!r}{m.group(5)}{newline}"
-    text = "".join(lines)
-    try:
-        ok = loads_spec(text, path, check_files=False) == wanted
-    except SpecError:
-        ok = False
-    if ok:
-        write_text_atomic(path, text)
-        return wanted
-    log.warning("could not edit the start values of %s in place; rewriting the whole spec "
-                "(comments are not kept)", path)
-    write_spec(wanted, path)
-    return wanted
+    return _write_starts(path, values)

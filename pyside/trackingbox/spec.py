@@ -28,8 +28,10 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 import tomli_w
+import tomlkit
+from tomlkit.items import AoT, Comment, Table, Whitespace
 
-from .errors import SpecError, did_you_mean
+from .errors import SpecError, did_you_mean, unknown_name
 from .io import write_text_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -746,53 +748,204 @@ def write_spec(spec: Spec, path: str | os.PathLike[str] | None = None, *, header
     return target
 
 
-_PAIRS_HEADER = re.compile(r"^\s*\[\[\s*pairs\s*\]\]")
-_ANY_HEADER = re.compile(r"^\s*\[")
+def _trailing_trivia(table: tomlkit.items.Table) -> list[tomlkit.items.Item]:
+    """Comments and blank lines at the end of *table*'s body (they precede the next header).
+
+    TOML has no notion of a comment "belonging" to the table after it, so tomlkit
+    keeps ``# about [tracking]`` in the body of the table before ``[tracking]``.
+    When that table is replaced, these lines are carried over.
+    """
+    body = table.value.body
+    n = len(body)
+    while n and body[n - 1][0] is None and isinstance(body[n - 1][1], (Comment, Whitespace)):
+        n -= 1
+    trivia = [item for _, item in body[n:]]
+    del body[n:]
+    return trivia
 
 
-def _strip_pairs(text: str) -> str:
-    """Remove every ``[[pairs]]`` table (header to the next table header) from TOML text."""
-    out: list[str] = []
-    in_pairs = False
-    for line in text.splitlines(keepends=True):
-        if _PAIRS_HEADER.match(line):
-            in_pairs = True
+def _previous_table(doc: tomlkit.TOMLDocument, key: str) -> tomlkit.items.Table | None:
+    """The table (or last table of an array of tables) just before *key* at the top level."""
+    previous = None
+    for k, item in doc.body:
+        if k is not None and k.key == key:
+            return previous
+        if isinstance(item, Table):
+            previous = item
+        elif isinstance(item, AoT) and len(item):
+            previous = item[-1]
+        elif k is not None:
+            previous = None
+    return None
+
+
+def _set_pairs(doc: tomlkit.TOMLDocument, pairs: tuple[PairSpec, ...]) -> None:
+    """Replace the document's ``[[pairs]]`` by *pairs*, keeping the comments around them."""
+    tables = []
+    for pair in pairs:
+        table = tomlkit.table()
+        for k, v in _pair_dict(pair).items():
+            table[k] = v
+        tables.append(table)
+    old = doc.get("pairs")
+    if isinstance(old, AoT) and len(old):
+        trivia = _trailing_trivia(old[-1])
+        if tables:  # replace in place: the pairs stay where the user put them
+            while len(old):
+                del old[0]
+            for i, table in enumerate(tables):
+                if i:  # a blank line between tables, as the user's file has
+                    old[-1].add(tomlkit.nl())
+                old.append(table)
+            host: tomlkit.items.Table | None = old[-1]
+        else:
+            host = _previous_table(doc, "pairs")
+            del doc["pairs"]
+        if host is not None:
+            body = host.value.body
+            if body and body[-1][0] is None and isinstance(body[-1][1], Whitespace):
+                while trivia and isinstance(trivia[0], Whitespace):  # no double blank line
+                    trivia.pop(0)
+            for item in trivia:
+                host.value.append(None, item)
+        elif any(isinstance(item, Comment) for item in trivia):
+            log.warning("comments after the last [[pairs]] table have no table to stay with; dropped")
+        return
+    if old is not None:  # e.g. an inline ``pairs = [...]``: the tables go to the end
+        del doc["pairs"]
+    if tables:
+        aot = tomlkit.aot()
+        for table in tables:
+            aot.append(table)
+        doc.append("pairs", aot)
+
+
+def _set_starts(doc: tomlkit.TOMLDocument, starts: Mapping[str, float]) -> None:
+    """Set ``start`` of the named ``[[parameters]]`` entries (tables or inline tables)."""
+    for table in doc.get("parameters", ()):
+        name = table.get("name")
+        if isinstance(name, str) and str(name) in starts:
+            table["start"] = float(starts[str(name)])
+
+
+def _check_starts(old: Spec, starts: Mapping[str, float]) -> None:
+    names = list(old.parameter_names)
+    problems = _Problems(str(old.path))
+    for name, value in starts.items():
+        if name not in names:
+            problems.add(unknown_name("parameter", name, names, "[[parameters]]"))
             continue
-        if in_pairs and _ANY_HEADER.match(line):
-            in_pairs = False
-        if not in_pairs:
-            out.append(line)
-    return "".join(out)
+        p = old.parameter(name)
+        if not (math.isfinite(float(value)) and p.min <= float(value) <= p.max):
+            problems.add(f"start {float(value)!r} of {name!r} is outside its bounds "
+                         f"[{p.min!r}, {p.max!r}] in [[parameters]]")
+    problems.raise_if_any()
+
+
+def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | None = None,
+                starts: Mapping[str, float] | None = None) -> Spec:
+    """Write pairs and/or parameter start values into the spec file *path*, atomically.
+
+    The file is edited as a TOML document (tomlkit), so everything the call does
+    not change -- comments, blank lines, key order, spacing, inline tables -- is
+    kept byte for byte. The new text is loaded back and checked (it must be a
+    valid spec equal to the old one with exactly these changes) before it
+    replaces the file; on any problem the file is left untouched.
+
+    Parameters
+    ----------
+    path : path-like
+        The spec file.
+    pairs : iterable of PairSpec, optional
+        The new ``[[pairs]]`` (they replace all existing ones; empty removes
+        them). ``None`` leaves the pairs alone.
+    starts : mapping of str to float, optional
+        New ``start`` values of named ``[[parameters]]``.
+
+    Returns
+    -------
+    Spec
+        The spec as written.
+
+    Raises
+    ------
+    SpecError
+        The file is not a valid spec, a start names an unknown parameter or lies
+        outside its bounds, or a pair names an unknown tag or parameter.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / "spec.toml").write_text(
+    ...     'twin = "twin.fmu"  # the twin\\n'
+    ...     'measurements = "data.csv"\\nsample_time = 10.0\\n'
+    ...     '[outputs]\\n"TI-1" = "T"\\n'
+    ...     '[[parameters]]\\nname = "k"\\nstart = 1.0  # first guess\\nmin = 0.0\\nmax = 2.0\\n')
+    >>> spec = update_spec(folder / "spec.toml", starts={"k": 1.25})
+    >>> spec.parameter("k").start
+    1.25
+    >>> print((folder / "spec.toml").read_text().splitlines()[-3])
+    start = 1.25  # first guess
+    """
+    path = Path(path).expanduser().resolve()
+    old = load_spec(path, check_files=False)
+    new_pairs = tuple(pairs) if pairs is not None else old.pairs
+    new_starts = dict(starts or {})
+    _check_starts(old, new_starts)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise SpecError(f"cannot read spec file {path}: {exc}") from None
+    doc = tomlkit.parse(text)
+    if pairs is not None:
+        _set_pairs(doc, new_pairs)
+    if new_starts:
+        _set_starts(doc, new_starts)
+    new_text = tomlkit.dumps(doc)
+    new = loads_spec(new_text, path, check_files=False)
+    wanted = replace(old, pairs=new_pairs, parameters=tuple(
+        replace(p, start=float(new_starts[p.name])) if p.name in new_starts else p
+        for p in old.parameters))
+    if new != wanted:
+        raise SpecError(f"{path}: writing back {len(new_pairs)} pairs and {len(new_starts)} start "
+                        f"values did not give the expected spec; the file is left unchanged")
+    write_text_atomic(path, new_text)
+    log.info("updated %s: %s", path, ", ".join(
+        [*([f"{len(new_pairs)} pairs"] if pairs is not None else []),
+         *([f"start of {', '.join(new_starts)}"] if new_starts else [])]) or "nothing")
+    return new
 
 
 def write_pairs(path: str | os.PathLike[str], pairs: Iterable[PairSpec]) -> Spec:
     """Replace the ``[[pairs]]`` of the spec file *path* by *pairs*, atomically.
 
-    Everything else in the file, comments included, is kept. The new file is
-    validated before it replaces the old one.
+    A thin call of :func:`update_spec`: everything else in the file, comments
+    included, is kept, and the new file is validated before it replaces the old one.
 
     Returns
     -------
     Spec
         The spec as written.
     """
-    path = Path(path).expanduser().resolve()
-    old = load_spec(path, check_files=False)
-    text = path.read_text(encoding="utf-8")
-    pairs = tuple(pairs)
-    body = _strip_pairs(text).rstrip("\n")
-    if pairs:
-        body += "\n" + _emit({"pairs": [_pair_dict(p) for p in pairs]}).rstrip("\n")
-    new_text = body + "\n"
-    try:
-        new = loads_spec(new_text, path, check_files=False)
-        ok = new.pairs == pairs and replace(new, pairs=()) == replace(old, pairs=())
-    except SpecError:
-        ok = False
-    if not ok:  # unusual layout (e.g. inline `pairs = [...]`): rewrite the whole document
-        log.debug("rewriting %s from scratch: text-level pair replacement did not round-trip", path)
-        new_text = dump_spec(replace(old, pairs=pairs))
-        new = loads_spec(new_text, path, check_files=False)
-    write_text_atomic(path, new_text)
-    log.info("wrote %d pairs to %s", len(pairs), path)
-    return new
+    return update_spec(path, pairs=pairs)
+
+
+def write_starts(path: str | os.PathLike[str], values: Mapping[str, float]) -> Spec:
+    """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
+
+    A thin call of :func:`update_spec`: only the ``start`` values of the named
+    parameters change; comments and layout are kept.
+
+    Returns
+    -------
+    Spec
+        The spec as written.
+
+    Raises
+    ------
+    SpecError
+        A name in *values* is not one of the spec's parameters, or a value is
+        outside its bounds.
+    """
+    return update_spec(path, starts=values)
