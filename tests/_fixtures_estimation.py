@@ -13,11 +13,12 @@ state and adding Gaussian noise.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from _fixtures_casadi import build_casadi_fmu
 
 CP = 4186.0
 C_TH = 2.0e5
@@ -27,28 +28,14 @@ AREA = 2.0
 
 def build_fmu(directory: Path) -> Path:
     """Compile the first-order heat-exchanger FMU into *directory*; return its path."""
-    import casadi
-    import fmpy
-
-    directory.mkdir(parents=True, exist_ok=True)
-    cwd = os.getcwd()
-    os.chdir(directory)
-    try:
-        dae = casadi.DaeBuilder("hx1")
-        kht = dae.add("kht", "parameter", "tunable", {"start": 1000.0, "min": 100.0, "max": 5000.0})
-        area = dae.add("A", "parameter", "tunable", {"start": 1.0})
-        m_flow = dae.add("m_flow", "input", {"start": 0.5})
-        t_in = dae.add("T_in", "input", {"start": 80.0})
-        temp = dae.add("T", "local", "continuous", {"start": 20.0, "initial": "exact"})
-        y = dae.add("T_out", "output", {})
-        dae.eq(dae.der(temp), (m_flow * CP * (t_in - temp) - kht * area * (temp - T_AMB)) / C_TH)
-        dae.eq(y, temp)
-        files = dae.export_fmu({"no_warning": True})
-        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
-        name = dae.pack_fmu(files, {})
-    finally:
-        os.chdir(cwd)
-    return directory / name
+    return build_casadi_fmu(directory, "hx1", constants={"CP": CP, "C_TH": C_TH, "T_AMB": T_AMB}, variables=[
+        ("kht", ("parameter", "tunable"), {"start": 1000.0, "min": 100.0, "max": 5000.0}),
+        ("A", ("parameter", "tunable"), {"start": 1.0}),
+        ("m_flow", ("input",), {"start": 0.5}),
+        ("T_in", ("input",), {"start": 80.0}),
+        ("T", ("local", "continuous"), {"start": 20.0, "initial": "exact"}),
+        ("T_out", ("output",), {}),
+    ], equations=[("der(T)", "(m_flow * CP * (T_in - T) - kht * A * (T - T_AMB)) / C_TH"), ("T_out", "T")])
 
 
 def steady_state(m_flow: float, t_in: float, kht: float) -> float:

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import fmpy
 
+from _fixtures_casadi import build_casadi_fmu
+
 _ROOT = Path(tempfile.mkdtemp(prefix="tb-test-fmus-"))
 atexit.register(shutil.rmtree, _ROOT, True)
 
@@ -44,26 +46,12 @@ def _dir(name: str) -> Path:
 @functools.lru_cache(maxsize=None)
 def me3_fmu() -> Path:
     """FMI 3.0 ME FMU 'firstorder': k (tunable, 2, [0.5, 5]), u (input, 1), x (state, 0.5), y (output)."""
-    import casadi
-
-    d = _dir("me3")
-    cwd = os.getcwd()
-    os.chdir(d)
-    try:
-        dae = casadi.DaeBuilder("firstorder")
-        k = dae.add("k", "parameter", "tunable", {"start": 2.0, "min": 0.5, "max": 5.0,
-                                                   "description": "rate constant"})
-        u = dae.add("u", "input", {"start": 1.0})
-        x = dae.add("x", "local", "continuous", {"start": 0.5, "initial": "exact"})
-        y = dae.add("y", "output", {})
-        dae.eq(dae.der(x), k * (u - x))
-        dae.eq(y, x)
-        files = dae.export_fmu({"no_warning": True})
-        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
-        path = Path(dae.pack_fmu(files, {}))
-    finally:
-        os.chdir(cwd)
-    return (d / path).resolve()
+    return build_casadi_fmu(_dir("me3"), "firstorder", variables=[
+        ("k", ("parameter", "tunable"), {"start": 2.0, "min": 0.5, "max": 5.0, "description": "rate constant"}),
+        ("u", ("input",), {"start": 1.0}),
+        ("x", ("local", "continuous"), {"start": 0.5, "initial": "exact"}),
+        ("y", ("output",), {}),
+    ], equations=[("der(x)", "k * (u - x)"), ("y", "x")])
 
 
 _CS_SOURCE = '''

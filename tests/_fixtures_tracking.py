@@ -8,11 +8,12 @@ operating point; the response time constant is ``1/(1/tau + k) = 71 s``.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from _fixtures_casadi import build_casadi_fmu
 
 TAU = 100.0
 K_PLANT = 0.004
@@ -21,25 +22,12 @@ K_TWIN = 0.003
 
 def make_first_order_fmu(directory: Path) -> Path:
     """Export, compile and pack the model as an FMI 3.0 model-exchange FMU in *directory*."""
-    import casadi
-    import fmpy
-
-    directory.mkdir(parents=True, exist_ok=True)
-    cwd = os.getcwd()
-    os.chdir(directory)
-    try:
-        dae = casadi.DaeBuilder("hx1")
-        k = dae.add("k", "parameter", "tunable", {"start": K_TWIN, "min": 0.0, "max": 0.1})
-        u = dae.add("u", "input", {"start": 50.0})
-        x = dae.add("x", "local", "continuous", {"start": 38.0, "initial": "exact"})
-        y = dae.add("y", "output", {})
-        dae.eq(dae.der(x), (u - x) / TAU - k * x)
-        dae.eq(y, x)
-        files = dae.export_fmu({"no_warning": True})
-        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
-        return directory / dae.pack_fmu(files, {})
-    finally:
-        os.chdir(cwd)
+    return build_casadi_fmu(directory, "hx1", constants={"TAU": TAU}, variables=[
+        ("k", ("parameter", "tunable"), {"start": K_TWIN, "min": 0.0, "max": 0.1}),
+        ("u", ("input",), {"start": 50.0}),
+        ("x", ("local", "continuous"), {"start": 38.0, "initial": "exact"}),
+        ("y", ("output",), {}),
+    ], equations=[("der(x)", "(u - x) / TAU - k * x"), ("y", "x")])
 
 
 def plant_input(t: np.ndarray) -> np.ndarray:
@@ -120,28 +108,14 @@ def make_tank_fmu(directory: Path, *, leak: float) -> Path:
     an input (kg/s), ``m_corr`` the state-compensation input, ``leak`` fixed
     (the plant's differs from the twin's).
     """
-    import casadi
-    import fmpy
-
-    directory.mkdir(parents=True, exist_ok=True)
-    cwd = os.getcwd()
-    os.chdir(directory)
-    try:
-        dae = casadi.DaeBuilder("tank1")
-        k = dae.add("k", "parameter", "tunable", {"start": K_TWIN, "min": 0.0, "max": 0.1})
-        u = dae.add("u", "input", {"start": 50.0})
-        q = dae.add("q", "input", {"start": 1.0})
-        m_corr = dae.add("m_corr", "input", {"start": 0.0})
-        x = dae.add("x", "local", "continuous", {"start": 38.0, "initial": "exact"})
-        h = dae.add("h", "local", "continuous", {"start": 1.0, "initial": "exact"})
-        y = dae.add("y", "output", {})
-        level = dae.add("level", "output", {})
-        dae.eq(dae.der(x), (u - x) / TAU - k * x)
-        dae.eq(dae.der(h), (q - leak * h + m_corr) / 200.0)
-        dae.eq(y, x)
-        dae.eq(level, h)
-        files = dae.export_fmu({"no_warning": True})
-        files = dae.compile_fmu(files, {"include_dirs": [os.path.join(os.path.dirname(fmpy.__file__), "c-code")]})
-        return directory / dae.pack_fmu(files, {})
-    finally:
-        os.chdir(cwd)
+    return build_casadi_fmu(directory, "tank1", constants={"TAU": TAU, "leak": leak}, variables=[
+        ("k", ("parameter", "tunable"), {"start": K_TWIN, "min": 0.0, "max": 0.1}),
+        ("u", ("input",), {"start": 50.0}),
+        ("q", ("input",), {"start": 1.0}),
+        ("m_corr", ("input",), {"start": 0.0}),
+        ("x", ("local", "continuous"), {"start": 38.0, "initial": "exact"}),
+        ("h", ("local", "continuous"), {"start": 1.0, "initial": "exact"}),
+        ("y", ("output",), {}),
+        ("level", ("output",), {}),
+    ], equations=[("der(x)", "(u - x) / TAU - k * x"), ("der(h)", "(q - leak * h + m_corr) / 200.0"),
+                  ("y", "x"), ("level", "h")])

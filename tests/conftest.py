@@ -1,8 +1,14 @@
-"""Shared fixtures: compile each Modelica class at most once per test run."""
+"""Shared fixtures: compile each Modelica class and build each small test FMU at most once per run.
+
+The CasADi-made FMUs (``_fixtures_casadi.build_casadi_fmu``) are built in a child
+process inside a session temporary directory, never by changing the test
+process's working directory.
+"""
 from __future__ import annotations
 
 import shutil
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -36,6 +42,47 @@ def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> FMUCache:
 @pytest.fixture(scope="session")
 def library() -> Path:
     return library_path()
+
+
+@pytest.fixture(scope="session")
+def step_fmu(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """The step-test twin of ``_fixtures_analysis`` (seven states, hold and correction inputs)."""
+    from _fixtures_analysis import build_step_fmu
+
+    return build_step_fmu(tmp_path_factory.mktemp("steptwin"))
+
+
+@pytest.fixture(scope="session")
+def first_order_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first-order tracking twin of ``_fixtures_tracking`` (tunable ``k``, input ``u``, output ``y``)."""
+    from _fixtures_tracking import make_first_order_fmu
+
+    return make_first_order_fmu(tmp_path_factory.mktemp("hx1"))
+
+
+@pytest.fixture(scope="session")
+def tank_fmu(tmp_path_factory: pytest.TempPathFactory) -> Callable[[float], Path]:
+    """``tank_fmu(leak)``: the first-order twin plus a tank (``_fixtures_tracking.make_tank_fmu``), built once per leak."""
+    from _fixtures_tracking import make_tank_fmu
+
+    built: dict[float, Path] = {}
+    lock = threading.Lock()
+
+    def get(leak: float) -> Path:
+        with lock:
+            if leak not in built:
+                built[leak] = make_tank_fmu(tmp_path_factory.mktemp(f"tank-leak{leak:g}"), leak=leak)
+            return built[leak]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def hx_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first-order heat-exchanger FMU of ``_fixtures_estimation`` (parameter ``kht``)."""
+    from _fixtures_estimation import build_fmu
+
+    return build_fmu(tmp_path_factory.mktemp("hx1fmu"))
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

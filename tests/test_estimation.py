@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _fixtures_estimation import build_fmu, plant_data, steady_state, write_case
+from _fixtures_estimation import plant_data, steady_state, write_case
 from trackingbox.errors import DataError, SpecError
 from trackingbox.estimation import EstimationResult, estimate, load_windows, nrmse, write_starts
 from trackingbox.spec import load_spec
@@ -25,8 +25,8 @@ pytestmark = pytest.mark.compile
 
 
 @pytest.fixture(scope="module")
-def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_fmu(tmp_path_factory.mktemp("hx1fmu"))
+def fmu(hx_fmu: Path) -> Path:
+    return hx_fmu  # built once per session (conftest)
 
 
 @pytest.fixture(scope="module")

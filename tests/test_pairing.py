@@ -115,10 +115,8 @@ def test_shape_mismatch_is_an_analysis_error():
 # ---------------------------------------------------------------- the pair command
 
 @pytest.fixture(scope="module")
-def pair_fmu(tmp_path_factory):
-    from _fixtures_analysis import build_step_fmu
-
-    return build_step_fmu(tmp_path_factory.mktemp("pairfmu"))
+def pair_fmu(step_fmu):
+    return step_fmu  # the session's step-test twin (conftest)
 
 
 def test_pair_command_json_spec_and_report(tmp_path, pair_fmu, capsys):

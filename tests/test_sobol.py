@@ -6,7 +6,6 @@ import math
 import numpy as np
 import pytest
 
-from _fixtures_analysis import build_step_fmu
 from trackingbox.analysis.executor import make_executor
 from trackingbox.analysis.pairing import choose_pairs
 from trackingbox.analysis.sobol import (
@@ -51,12 +50,12 @@ def test_sample_size_must_be_power_of_two():
         sample_parameters(["a"], [0.0], [1.0], 100)
 
 
-def test_twin_steady_state_indices_match_hand_variances(tmp_path):
+def test_twin_steady_state_indices_match_hand_variances(step_fmu):
     # Steady state with the integrator frozen (see test_steptest): y1 = (1.5 a + z + 0.5 b)/0.9,
     # y2 = b + 0.2 y1. a ~ U(0.5, 1.5) (var 1/12), b ~ U(1, 3) (var 4/12):
     # S_a(y1) = 1.5^2 / (1.5^2 + 0.5^2 * 4) = 2.25 / 3.25
     # S_a(y2) = (0.3/0.9)^2 / ((0.3/0.9)^2 + (10/9)^2 * 4)
-    fmu = build_step_fmu(tmp_path)
+    fmu = step_fmu
     prob = make_problem(fmu, outputs={"Y1": "y1", "Y2": "y2"},
                         parameters=[("a", 1.0, 0.5, 1.5), ("b", 2.0, 1.0, 3.0)],
                         operating={"u": 1.5}, ranges={"Y1": 1.0, "Y2": 1.0}, freeze={"hold": 1.0})

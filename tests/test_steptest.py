@@ -29,14 +29,8 @@ from trackingbox.analysis.executor import make_executor
 from trackingbox.analysis.steptest import StepSettings, make_problem, operating_point, step_tests, time_to_63
 from trackingbox.errors import AnalysisError
 
-from _fixtures_analysis import build_step_fmu
 
 U = 1.5
-
-
-@pytest.fixture(scope="module")
-def step_fmu(tmp_path_factory):
-    return build_step_fmu(tmp_path_factory.mktemp("steptwin"))
 
 
 OUTPUTS = {"Y1": "y1", "Y2": "y2", "Y3": "y3", "Y4": "y4"}

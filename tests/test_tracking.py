@@ -13,15 +13,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from _fixtures_tracking import K_PLANT, K_TWIN, TAU, make_case, make_first_order_fmu
+from _fixtures_tracking import K_PLANT, K_TWIN, TAU, make_case
 from trackingbox.errors import SimulationError, SpecError
 from trackingbox.spec import load_spec
 from trackingbox.tracking.runtime import track
 
 
 @pytest.fixture(scope="module")
-def fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make_first_order_fmu(tmp_path_factory.mktemp("hx1"))
+def fmu(first_order_fmu: Path) -> Path:
+    return first_order_fmu  # built once per session (conftest)
 
 
 @pytest.fixture(scope="module")
@@ -239,12 +239,11 @@ def test_track_command_json_and_report(case: Path, tmp_path: Path, capsys: pytes
     assert "| TI |" in (report / "summary.md").read_text()
 
 
-def test_state_compensation_keeps_twin_tank_on_plant_level(tmp_path: Path) -> None:
-    from _fixtures_tracking import make_tank_fmu
+def test_state_compensation_keeps_twin_tank_on_plant_level(tmp_path: Path, tank_fmu) -> None:
     from trackingbox.fmu import FMUModel
 
-    plant = make_tank_fmu(tmp_path / "plant", leak=1.0)
-    twin = make_tank_fmu(tmp_path / "twin", leak=1.2)
+    plant = tank_fmu(1.0)
+    twin = tank_fmu(1.2)
     t = np.arange(0.0, 3001.0, 10.0)
     with FMUModel(plant) as m:
         sim = m.simulate(stop_time=3000.0, output_interval=10.0,
