@@ -13,6 +13,24 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside *target*; on success rename it onto *target*.
 
     If the body raises, the temporary file is removed and *target* is untouched.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> target = Path(tempfile.mkdtemp()) / "result.txt"
+    >>> _ = target.write_text("old")
+    >>> try:
+    ...     with atomic_path(target) as tmp:
+    ...         _ = tmp.write_text("half-writ")
+    ...         raise RuntimeError("failed while writing")
+    ... except RuntimeError:
+    ...     pass
+    >>> target.read_text(), sorted(p.name for p in target.parent.iterdir())
+    ('old', ['result.txt'])
+    >>> with atomic_path(target) as tmp:
+    ...     _ = tmp.write_text("new")
+    >>> target.read_text(), sorted(p.name for p in target.parent.iterdir())
+    ('new', ['result.txt'])
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
