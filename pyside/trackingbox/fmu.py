@@ -10,6 +10,16 @@ A thin wrapper around FMPy. The model description is FMPy's
 * :class:`Stepper`: advance one communication step at a time and change tunable
   parameters and inputs between steps, as the tracking loop does.
 
+Layout: :class:`FMUModel` owns the FMU instance and hands each run a driver
+behind the one :class:`Stepper` interface, :class:`ModelExchangeStepper` or
+:class:`CoSimulationStepper`; the two talk only through public methods
+(``FMUModel.variable``, ``begin_run``, ``note_changed``; ``Stepper.finish``,
+``input_times``, ``reader``). What differs between FMI 2 and FMI 3 (typed
+Real access, initialisation, event iteration, derivative call, termination
+flags) sits in the thin adapters ``_FMI2``/``_FMI3``. A failure reported by
+the FMU or the solver becomes a :class:`~trackingbox.errors.SimulationError`
+in one place, :func:`_simulation_failure`.
+
 Model exchange FMUs (FMI 2 and FMI 3) are integrated with CVODE (BDF, dense
 direct solver) from FMPy's bundled SUNDIALS; after every parameter change,
 input override or state overwrite the integrator is re-initialised, because such
@@ -26,7 +36,7 @@ import os
 import shutil
 import weakref
 import zipfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -241,6 +251,165 @@ def read_info(path: str | Path) -> FMUInfo:
 
 
 # ---------------------------------------------------------------------------
+# error translation
+# ---------------------------------------------------------------------------
+
+def _simulation_failure(what: str, cause: object) -> SimulationError:
+    """The one place where a failure reported by an FMU or the solver becomes a :class:`SimulationError`.
+
+    *what* says what failed, naming the FMU and the time (``"simulation of
+    twin.fmu failed at t = 12 s"``); *cause* is the exception (or solver message)
+    that reported it. Every driver below raises through this function, so a
+    finer classification of FMU failures belongs here.
+    """
+    return SimulationError(f"{what}: {cause}")
+
+
+@contextlib.contextmanager
+def _fmu_calls(what: str) -> Iterator[None]:
+    """Translate any exception of the FMU calls in the body (ours pass unchanged); see :func:`_simulation_failure`."""
+    try:
+        yield
+    except (FMUError, SimulationError):
+        raise
+    except Exception as exc:
+        raise _simulation_failure(what, exc) from None
+
+
+# ---------------------------------------------------------------------------
+# FMI 2 / FMI 3 adapters
+# ---------------------------------------------------------------------------
+
+class _FMI:
+    """What differs between FMI 2 and FMI 3 for the drivers, on one FMPy instance.
+
+    Everything else (``reset``, ``setTime``, ``doStep``, the continuous-state
+    calls, the typed ``get*``/``set*``) has the same name in FMPy's FMI 2 and
+    FMI 3 classes and is called on :attr:`instance` directly.
+    """
+
+    #: FMI type name under which an enumeration is read and written.
+    enumeration_type = "Integer"
+
+    def __init__(self, instance: Any, model_description: ModelDescription) -> None:
+        self.instance = instance
+        self.model_description = model_description
+
+    def real_reader(self, value_references: Sequence[int]) -> Callable[[], npt.NDArray[np.float64]]:
+        """A fast reader of these Real/Float64 variables (one C call, values copied)."""
+        raise NotImplementedError
+
+    def real_writer(self, value_references: Sequence[int]) -> Callable[[Any], None]:
+        """A fast writer of these Real/Float64 variables (one C call)."""
+        raise NotImplementedError
+
+    def enter_initialization_mode(self, *, tolerance: float, start_time: float) -> None:
+        raise NotImplementedError
+
+    def update_discrete_states(self) -> tuple[bool, bool, bool, float]:
+        """One event-iteration call: ``(needed, terminate, next_event_defined, next_event_time)``."""
+        raise NotImplementedError
+
+    @property
+    def get_derivatives(self) -> Callable[..., Any]:
+        """FMPy's call filling the state-derivative vector (model exchange)."""
+        raise NotImplementedError
+
+    def needs_completed_integrator_step(self) -> bool:
+        """Whether ``completedIntegratorStep`` must be called after each solver step (model exchange)."""
+        raise NotImplementedError
+
+    def terminated(self, do_step_result: Any) -> bool:
+        """Whether a ``doStep`` result says the FMU asked to terminate (co-simulation)."""
+        return False
+
+
+def _buffer(value_references: Sequence[int]) -> tuple[int, Any, npt.NDArray[np.float64], Any]:
+    n = len(value_references)
+    vr = (ctypes.c_uint32 * n)(*value_references)
+    buf = np.zeros(n)
+    return n, vr, buf, buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+class _FMI2(_FMI):
+    enumeration_type = "Integer"
+
+    def real_reader(self, value_references: Sequence[int]) -> Callable[[], npt.NDArray[np.float64]]:
+        n, vr, buf, pbuf = _buffer(value_references)
+        func, comp = self.instance.fmi2GetReal, self.instance.component
+
+        def read() -> npt.NDArray[np.float64]:
+            func(comp, vr, n, pbuf)
+            return buf.copy()
+        return read
+
+    def real_writer(self, value_references: Sequence[int]) -> Callable[[Any], None]:
+        n, vr, buf, pbuf = _buffer(value_references)
+        func, comp = self.instance.fmi2SetReal, self.instance.component
+
+        def write(values: Any) -> None:
+            buf[:] = values
+            func(comp, vr, n, pbuf)
+        return write
+
+    def enter_initialization_mode(self, *, tolerance: float, start_time: float) -> None:
+        self.instance.setupExperiment(tolerance=tolerance, startTime=start_time)
+        self.instance.enterInitializationMode()
+
+    def update_discrete_states(self) -> tuple[bool, bool, bool, float]:
+        needed, terminate, _, _, next_defined, next_time = self.instance.newDiscreteStates()
+        return needed, terminate, next_defined, next_time
+
+    @property
+    def get_derivatives(self) -> Callable[..., Any]:
+        return self.instance.getDerivatives
+
+    def needs_completed_integrator_step(self) -> bool:
+        # FMI 2 asks for the call with needsCompletedIntegratorStep
+        return bool(self.model_description.modelExchange.needsCompletedIntegratorStep)
+
+
+class _FMI3(_FMI):
+    enumeration_type = "Int64"
+
+    def real_reader(self, value_references: Sequence[int]) -> Callable[[], npt.NDArray[np.float64]]:
+        n, vr, buf, pbuf = _buffer(value_references)
+        func, comp = self.instance.fmi3GetFloat64, self.instance.component
+
+        def read() -> npt.NDArray[np.float64]:
+            func(comp, vr, n, pbuf, n)
+            return buf.copy()
+        return read
+
+    def real_writer(self, value_references: Sequence[int]) -> Callable[[Any], None]:
+        n, vr, buf, pbuf = _buffer(value_references)
+        func, comp = self.instance.fmi3SetFloat64, self.instance.component
+
+        def write(values: Any) -> None:
+            buf[:] = values
+            func(comp, vr, n, pbuf, n)
+        return write
+
+    def enter_initialization_mode(self, *, tolerance: float, start_time: float) -> None:
+        self.instance.enterInitializationMode(tolerance=tolerance, startTime=start_time)
+
+    def update_discrete_states(self) -> tuple[bool, bool, bool, float]:
+        needed, terminate, _, _, next_defined, next_time = self.instance.updateDiscreteStates()
+        return needed, terminate, next_defined, next_time
+
+    @property
+    def get_derivatives(self) -> Callable[..., Any]:
+        return self.instance.getContinuousStateDerivatives
+
+    def needs_completed_integrator_step(self) -> bool:
+        # FMI 3 waives the call with completedIntegratorStepNotNeeded
+        return not self.model_description.modelExchange.completedIntegratorStepNotNeeded
+
+    def terminated(self, do_step_result: Any) -> bool:
+        return do_step_result is not None and bool(do_step_result[1])
+
+
+# ---------------------------------------------------------------------------
 # FMUModel
 # ---------------------------------------------------------------------------
 
@@ -277,9 +446,11 @@ class FMUModel:
 
     Examples
     --------
-    >>> with FMUModel("twin.fmu") as model:                    # doctest: +SKIP
-    ...     for k in (800.0, 1000.0):
-    ...         df = model.simulate(stop_time=3600, output_interval=10, parameters={"hx.kht": k})
+    Run one FMU for several parameter values (it is extracted once)::
+
+        with FMUModel("twin.fmu") as model:
+            for k in (800.0, 1000.0):
+                df = model.simulate(stop_time=3600, output_interval=10, parameters={"hx.kht": k})
     """
 
     def __init__(self, path: str | Path, *, tolerance: float = 1e-6, interface: Interface | None = None):
@@ -288,7 +459,6 @@ class FMUModel:
         self.tolerance = float(tolerance)
         md = self.info.model_description
         assert md is not None
-        self._md: ModelDescription = md
         if interface is None:
             interface = "ModelExchange" if md.modelExchange is not None else "CoSimulation"
         if interface not in self.info.interfaces:
@@ -297,7 +467,6 @@ class FMUModel:
                 f"(it provides: {', '.join(self.info.interfaces) or 'none'})"
             )
         self.interface: Interface = interface
-        self._fmi3 = self.info.fmi_version.startswith("3")
         if self.info.fmi_version.startswith("1"):
             raise FMUError(f"FMU {self.path} is FMI {self.info.fmi_version}; only FMI 2.0 and 3.0 are supported")
 
@@ -326,10 +495,11 @@ class FMUModel:
             self._finalizer()
             raise FMUError(f"FMU {self.path} could not be loaded and instantiated: {exc}") from None
         self._holder["fmu"] = fmu
-        self._fmu = fmu
+        adapter = _FMI3 if self.info.fmi_version.startswith("3") else _FMI2
+        self._fmi: _FMI = adapter(fmu, md)
         self._used = False
         self._active: Stepper | None = None
-        self._dirty: set[str] = set()
+        self._changed: set[str] = set()
         log.debug("opened %s (FMI %s, %s) in %s", self.path, self.info.fmi_version, interface, self._tempdir)
 
     # -- context manager / cleanup ------------------------------------------
@@ -341,9 +511,7 @@ class FMUModel:
 
     def close(self) -> None:
         """Free the FMU instance and delete the extracted files (idempotent)."""
-        if self._active is not None:
-            self._active._closed = True
-            self._active = None
+        self._finish_active()
         self._finalizer()
 
     @property
@@ -351,12 +519,40 @@ class FMUModel:
         """True once :meth:`close` has run."""
         return not self._finalizer.alive
 
+    def _finish_active(self) -> None:
+        if self._active is not None:
+            self._active.finish()
+            self._active = None
+
     # -- name resolution ----------------------------------------------------
-    def _variable(self, name: str, what: str = "variable") -> ModelVariable:
+    def variable(self, name: str, what: str = "variable") -> ModelVariable:
+        """FMPy's description of the variable *name*.
+
+        Raises
+        ------
+        FMUError
+            No such variable (with a did-you-mean); *what* names the role in the message.
+        """
         try:
             return self._vars[name]
         except KeyError:
             raise FMUError(unknown_name(what, name, self._vars, f"FMU {self.path.name}")) from None
+
+    # -- start values changed by runs -------------------------------------------
+    def begin_run(self, parameters: Mapping[str, Any]) -> dict[str, Any]:
+        """Start values to restore before a run that sets *parameters*.
+
+        Returns the declared start value of every variable an earlier run changed
+        and this run does not set (robust against FMUs whose ``reset`` is
+        partial), and records *parameters* as changed by this run.
+        """
+        restore = [n for n in self._changed if n not in parameters and self._vars[n].start is not None]
+        self._changed = set(parameters)
+        return {n: _start_value(self._vars[n]) for n in restore}
+
+    def note_changed(self, names: Iterable[str]) -> None:
+        """Record that the running run changed the parameters *names* (restored at the next run)."""
+        self._changed.update(names)
 
     # -- runs -----------------------------------------------------------------
     def stepper(
@@ -370,6 +566,8 @@ class FMUModel:
         """Initialise a new run at *start_time* and return its :class:`Stepper`.
 
         Any previous stepper of this model becomes unusable (one FMU instance).
+        The stepper is a :class:`ModelExchangeStepper` or a
+        :class:`CoSimulationStepper`, after :attr:`interface`.
 
         Parameters
         ----------
@@ -388,17 +586,16 @@ class FMUModel:
         """
         if self.closed:
             raise FMUError(f"FMU {self.path} is closed")
-        if self._active is not None:
-            self._active._closed = True
-            self._active = None
+        self._finish_active()
         if self._used:
             try:
-                self._fmu.reset()
+                self._fmi.instance.reset()
             except Exception as exc:
                 raise FMUError(f"FMU {self.path}: reset failed: {exc}") from None
         self._used = True
-        stepper = Stepper(self, start_time=float(start_time), parameters=dict(parameters or {}),
-                          inputs=inputs, max_step=max_step)
+        driver = ModelExchangeStepper if self.interface == "ModelExchange" else CoSimulationStepper
+        stepper = driver(self, self._fmi, start_time=float(start_time), parameters=dict(parameters or {}),
+                         inputs=inputs, max_step=max_step)
         self._active = stepper
         return stepper
 
@@ -440,24 +637,25 @@ class FMUModel:
             raise FMUError(f"output interval must be a positive number, not {output_interval}")
         names = list(outputs) if outputs is not None else self.info.outputs
         for name in names:
-            self._variable(name, "output variable")
+            self.variable(name, "output variable")
         n = int(math.floor((stop_time - start_time) / output_interval + 1e-9))
         grid = start_time + output_interval * np.arange(n + 1)
         if grid[-1] < stop_time - 1e-9 * max(1.0, abs(stop_time)):
             grid = np.append(grid, stop_time)
         points = grid
         stepper = self.stepper(start_time=start_time, parameters=parameters, inputs=inputs)
-        if stepper._in_times is not None and stepper._in_times.size:
-            extra = stepper._in_times[(stepper._in_times > start_time) & (stepper._in_times < stop_time)]
+        input_times = stepper.input_times
+        if input_times is not None and input_times.size:
+            extra = input_times[(input_times > start_time) & (input_times < stop_time)]
             points = np.union1d(grid, extra)
         record = np.isin(points, grid)
         rows = np.empty((grid.size, len(names)))
-        getter = stepper._getter(tuple(names))
+        read = stepper.reader(names)
         j = 0
         for t, keep in zip(points, record):
             stepper.step(float(t))
             if keep:
-                rows[j] = getter()
+                rows[j] = read()
                 j += 1
         bad = ~np.isfinite(rows)
         if bad.any():
@@ -472,8 +670,328 @@ class FMUModel:
 
 
 # ---------------------------------------------------------------------------
-# Stepper
+# Stepper: the interface, and one driver per FMI interface
 # ---------------------------------------------------------------------------
+
+class Stepper:
+    """One run of an FMU, advanced communication step by communication step.
+
+    Create with :meth:`FMUModel.stepper`, which returns the driver for the
+    model's interface (:class:`ModelExchangeStepper` or
+    :class:`CoSimulationStepper`). Between steps, :meth:`set` changes tunable
+    parameters and inputs and :meth:`get` reads any variables.
+
+    Attributes
+    ----------
+    time : float
+        The current simulation time (s).
+    """
+
+    def __init__(self, model: FMUModel, fmi: _FMI, *, start_time: float, parameters: dict[str, Any],
+                 inputs: pd.DataFrame | None, max_step: float | None) -> None:
+        self.model = model
+        self.time = start_time
+        self._finished = False
+        self._fmi = fmi
+        self._fmu = fmi.instance
+        self._getters: dict[tuple[str, ...], Callable[[], npt.NDArray[np.float64]]] = {}
+        self._setters: dict[tuple[str, ...], Callable[[Any], None]] = {}
+        self._in_names: list[str] = []
+        self._in_times: npt.NDArray[np.float64] | None = None
+        self._in_table: npt.NDArray[np.float64] | None = None
+        self._in_set: Callable[[Any], None] | None = None
+        self._last_set: dict[str, Any] = {}
+        self._prepare_inputs(inputs)
+        self._initialize(parameters, max_step)
+
+    # -- what each driver provides ------------------------------------------------
+    def _after_initialization(self) -> None:
+        """Called inside initialisation, after ``exitInitializationMode``."""
+
+    def _start(self, max_step: float | None) -> None:
+        """Called once initialisation succeeded."""
+
+    def _advance(self, t_next: float) -> None:
+        """Advance from :attr:`time` to *t_next* (> :attr:`time`)."""
+        raise NotImplementedError
+
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+        """Write *values* between steps (inside the error translation of :meth:`set`)."""
+        raise NotImplementedError
+
+    # -- inputs -------------------------------------------------------------
+    def _prepare_inputs(self, inputs: pd.DataFrame | None) -> None:
+        if inputs is None:
+            return
+        where = "the inputs table"
+        if "time" not in inputs.columns:
+            raise DataError(f"{where} has no 'time' column (columns: {', '.join(map(str, inputs.columns))})")
+        names = [str(c) for c in inputs.columns if c != "time"]
+        model_inputs = self.model.info.inputs
+        for name in names:
+            if name not in model_inputs:
+                raise FMUError(unknown_name("input", name, model_inputs, f"FMU {self.model.path.name}"))
+            kind = self.model.variable(name).type
+            if kind not in _REAL_TYPES:
+                raise FMUError(f"input {name!r} of FMU {self.model.path.name} is {kind}; "
+                               "only Real inputs can be driven from a table")
+        try:
+            t = inputs["time"].to_numpy(dtype=float)
+            table = inputs[names].to_numpy(dtype=float) if names else np.zeros((len(t), 0))
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{where} has non-numeric values: {exc}") from None
+        if t.size == 0:
+            raise DataError(f"{where} has no rows")
+        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            raise DataError(f"{where}: 'time' must be finite and strictly increasing")
+        for j, name in enumerate(names):
+            bad = ~np.isfinite(table[:, j])
+            if bad.any():
+                raise DataError(f"input {name!r} in {where} has {int(bad.sum())} NaN/inf values "
+                                f"(first at t = {t[bad][0]:g} s)")
+        if not names:
+            return
+        self._in_names = names
+        self._in_times = t
+        self._in_table = np.ascontiguousarray(table)
+        self._in_set = self._setter(tuple(names))
+
+    @property
+    def input_times(self) -> npt.NDArray[np.float64] | None:
+        """Sample times of the ``inputs`` table of this run (``None`` without one)."""
+        return self._in_times
+
+    def _input_values(self, t: float) -> npt.NDArray[np.float64]:
+        times, table = self._in_times, self._in_table
+        assert times is not None and table is not None
+        if t <= times[0]:
+            return table[0]
+        if t >= times[-1]:
+            return table[-1]
+        i = int(np.searchsorted(times, t, side="right"))
+        t0, t1 = times[i - 1], times[i]
+        w = (t - t0) / (t1 - t0)
+        return table[i - 1] + w * (table[i] - table[i - 1])
+
+    def _apply_inputs(self, t: float) -> None:
+        if self._in_set is not None:
+            self._in_set(self._input_values(t))
+
+    def _drop_inputs(self, names: set[str]) -> None:
+        """Stop driving *names* from the table (the caller set them explicitly)."""
+        if not self._in_names or not names.intersection(self._in_names):
+            return
+        keep = [j for j, n in enumerate(self._in_names) if n not in names]
+        assert self._in_table is not None
+        self._in_names = [self._in_names[j] for j in keep]
+        self._in_table = np.ascontiguousarray(self._in_table[:, keep])
+        self._in_set = self._setter(tuple(self._in_names)) if self._in_names else None
+
+    # -- value access -----------------------------------------------------------
+    def _getter(self, names: tuple[str, ...]) -> Callable[[], npt.NDArray[np.float64]]:
+        getter = self._getters.get(names)
+        if getter is not None:
+            return getter
+        fmu = self._fmu
+        variables = [self.model.variable(n) for n in names]
+        if all(v.type in ("Real", "Float64") for v in variables):
+            getter = self._fmi.real_reader([v.valueReference for v in variables])
+        else:
+            calls = []
+            for v in variables:
+                kind = v.type
+                if kind == "Enumeration":
+                    kind = self._fmi.enumeration_type
+                if kind in ("String", "Binary", "Clock"):
+                    raise FMUError(f"variable {v.name!r} of FMU {self.model.path.name} is a {v.type}, not a number")
+                calls.append((getattr(fmu, "get" + kind), v.valueReference))
+
+            def getter() -> npt.NDArray[np.float64]:
+                return np.array([float(g([vr])[0]) for g, vr in calls])
+        self._getters[names] = getter
+        return getter
+
+    def _setter(self, names: tuple[str, ...]) -> Callable[[Any], None]:
+        setter = self._setters.get(names)
+        if setter is not None:
+            return setter
+        fmu = self._fmu
+        variables = [self.model.variable(n) for n in names]
+        if all(v.type in ("Real", "Float64") for v in variables):
+            setter = self._fmi.real_writer([v.valueReference for v in variables])
+        else:
+            calls = []
+            for v in variables:
+                kind = v.type
+                if kind == "Enumeration":
+                    kind = self._fmi.enumeration_type
+                py = {"Boolean": bool, "String": str}.get(kind, float if kind in _REAL_TYPES else int)
+                calls.append((getattr(fmu, "set" + kind), v.valueReference, py))
+
+            def setter(values: Any) -> None:
+                for (s, vr, py), value in zip(calls, values):
+                    s([vr], [py(value)])
+        self._setters[names] = setter
+        return setter
+
+    # -- initialisation -----------------------------------------------------------
+    def _settable_before_init(self, name: str) -> ModelVariable:
+        v = self.model.variable(name)
+        if v.causality in ("independent", "calculatedParameter") or v.variability == "constant":
+            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
+                           f"{v.causality if v.variability != 'constant' else 'a constant'}; it cannot be set")
+        if v.causality == "output" or (v.causality == "local" and v.initial not in ("exact", "approx")):
+            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is a computed "
+                           f"{v.causality} variable; it cannot be set")
+        return v
+
+    def _initialize(self, parameters: dict[str, Any], max_step: float | None) -> None:
+        model = self.model
+        variables = {name: self._settable_before_init(name) for name in parameters}
+        # inputs given as constants are not driven by the table any more
+        self._drop_inputs(set(parameters))
+        early = model.begin_run(parameters)
+        early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
+                      or v.causality == "input"})
+        late = {n: parameters[n] for n, v in variables.items() if n not in early}
+        with _fmu_calls(f"initialisation of {model.path.name} at t = {self.time:g} s failed"):
+            self._set_values(early)
+            self._fmi.enter_initialization_mode(tolerance=model.tolerance, start_time=self.time)
+            self._set_values(late)
+            self._apply_inputs(self.time)
+            self._fmu.exitInitializationMode()
+            self._after_initialization()
+        self._start(max_step)
+
+    def _set_values(self, values: Mapping[str, Any]) -> None:
+        if not values:
+            return
+        names = tuple(values)
+        vals = [values[n] for n in names]
+        for n, value in zip(names, vals):
+            if isinstance(value, str):
+                raise FMUError(f"value of {n!r} must be a number, not {value!r}")
+        self._setter(names)(vals)
+
+    def _check_open(self) -> None:
+        if self._finished or self.model.closed:
+            raise FMUError(f"this stepper of {self.model.path.name} is finished "
+                           "(the model was closed or a newer run was started)")
+
+    # -- public API -----------------------------------------------------------------
+    def finish(self) -> None:
+        """Make this stepper unusable (its model starts a newer run or closes)."""
+        self._finished = True
+
+    def step(self, t_next: float) -> None:
+        """Integrate from :attr:`time` to *t_next*.
+
+        Raises
+        ------
+        SimulationError
+            The solver failed or the states became non-finite; names the time.
+        """
+        self._check_open()
+        t_next = float(t_next)
+        tol = 1e-12 * max(1.0, abs(t_next))
+        if t_next < self.time - tol:
+            raise SimulationError(f"cannot step {self.model.path.name} back in time from "
+                                  f"t = {self.time:g} s to t = {t_next:g} s")
+        if t_next <= self.time + tol:
+            return
+        self._advance(t_next)
+
+    def set(self, values: Mapping[str, float]) -> None:
+        """Set tunable parameters and/or inputs before the next step.
+
+        An input set here is no longer driven by the ``inputs`` table of this run.
+        For model exchange, the change is a discontinuity: tunable parameters are
+        set in event mode and the solver is re-initialised.
+
+        Raises
+        ------
+        FMUError
+            Unknown names, or variables that cannot change during a run.
+        """
+        self._check_open()
+        # values equal to what this method set last time change nothing: no event, no solver restart
+        values = {n: v for n, v in values.items() if self._last_set.get(n) != v}
+        if not values:
+            return
+        params = False
+        for name in values:
+            v = self.model.variable(name)
+            if v.causality == "input":
+                continue
+            if v.causality == "parameter" and v.variability == "tunable":
+                params = True
+                continue
+            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
+                           f"{v.variability} {v.causality}; only tunable parameters and inputs can be set "
+                           "between steps")
+        self._drop_inputs(set(values))
+        with _fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed"):
+            self._apply_set(values, params)
+        self.model.note_changed(n for n in values if self.model.variable(n).causality == "parameter")
+        self._last_set.update(values)
+
+    def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
+        """Current values of *names* as a float array (same order)."""
+        self._check_open()
+        return self._getter(tuple(names))()
+
+    def reader(self, names: Sequence[str]) -> Callable[[], npt.NDArray[np.float64]]:
+        """A function returning the current values of *names* (as :meth:`get`, without its checks).
+
+        For tight loops; valid while this stepper is.
+        """
+        return self._getter(tuple(names))
+
+    def get_continuous_states(self) -> npt.NDArray[np.float64]:
+        """The continuous state vector (model exchange only), for checkpoints."""
+        raise NotImplementedError
+
+    def set_continuous_states(self, x: npt.ArrayLike) -> None:
+        """Overwrite the continuous state vector (model exchange only); the solver restarts."""
+        raise NotImplementedError
+
+    @property
+    def state_names(self) -> list[str]:
+        """Names of the continuous states, in state-vector order (model exchange)."""
+        md = self._fmi.model_description
+        return [d.variable.derivative.name for d in md.derivatives if d.variable.derivative is not None]
+
+
+class CoSimulationStepper(Stepper):
+    """The co-simulation driver: the FMU integrates itself, one ``doStep`` per communication step.
+
+    Inputs are applied at the start of each step and held over it.
+    """
+
+    def _advance(self, t_next: float) -> None:
+        with _fmu_calls(f"simulation of {self.model.path.name} failed in the step from "
+                        f"t = {self.time:g} s to t = {t_next:g} s"):
+            self._apply_inputs(self.time)
+            result = self._fmu.doStep(currentCommunicationPoint=self.time,
+                                      communicationStepSize=t_next - self.time)
+        if self._fmi.terminated(result):
+            raise SimulationError(f"{self.model.path.name} requested termination at t = {t_next:g} s")
+        self.time = t_next
+        self._apply_inputs(self.time)
+
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+        self._set_values(values)
+
+    def get_continuous_states(self) -> npt.NDArray[np.float64]:
+        """Not available: a co-simulation FMU keeps its states to itself (:class:`FMUError`)."""
+        self._check_open()
+        raise FMUError(f"{self.model.path.name} runs as co-simulation; its states are not accessible")
+
+    def set_continuous_states(self, x: npt.ArrayLike) -> None:
+        """Not available: a co-simulation FMU keeps its states to itself (:class:`FMUError`)."""
+        self._check_open()
+        raise FMUError(f"{self.model.path.name} runs as co-simulation; its states are not accessible")
+
 
 def _cvode_solver_class() -> type:
     """A CVodeSolver whose callbacks report Python errors to CVODE instead of swallowing them."""
@@ -507,249 +1025,46 @@ class _NoInput:
         return None
 
 
-class Stepper:
-    """One run of an FMU, advanced communication step by communication step.
+class ModelExchangeStepper(Stepper):
+    """The model-exchange driver: CVODE (BDF) integrates the FMU's derivatives.
 
-    Create with :meth:`FMUModel.stepper`. Between steps, :meth:`set` changes
-    tunable parameters and inputs and :meth:`get` reads any variables.
-
-    Attributes
-    ----------
-    time : float
-        The current simulation time (s).
+    Parameter changes, input overrides and state overwrites are discontinuities:
+    the integrator is re-initialised after each. Time events and state events
+    trigger FMI event iterations.
     """
 
-    def __init__(self, model: FMUModel, *, start_time: float, parameters: dict[str, Any],
+    def __init__(self, model: FMUModel, fmi: _FMI, *, start_time: float, parameters: dict[str, Any],
                  inputs: pd.DataFrame | None, max_step: float | None) -> None:
-        self.model = model
-        self.time = start_time
-        self._closed = False
-        self._fmu = model._fmu
-        self._fmi3 = model._fmi3
-        self._me = model.interface == "ModelExchange"
-        self._md = model._md
-        self._getters: dict[tuple[str, ...], Any] = {}
-        self._setters: dict[tuple[str, ...], Any] = {}
+        md = fmi.model_description
         self._solver: Any = None
         self._next_event: float | None = None
-        self._in_names: list[str] = []
-        self._in_times: npt.NDArray[np.float64] | None = None
-        self._in_table: npt.NDArray[np.float64] | None = None
-        self._in_set: Any = None
-        self._last_set: dict[str, Any] = {}
-        self._prepare_inputs(inputs)
-        self._nx = int(self._md.numberOfContinuousStates or 0)
-        self._nz = int(self._md.numberOfEventIndicators or 0)
+        self._nx = int(md.numberOfContinuousStates or 0)
+        self._nz = int(md.numberOfEventIndicators or 0)
         self._x = np.zeros(max(self._nx, 1))
         self._px = self._x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self._initialize(parameters, max_step)
+        super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
+                         max_step=max_step)
 
-    # -- inputs -------------------------------------------------------------
-    def _prepare_inputs(self, inputs: pd.DataFrame | None) -> None:
-        if inputs is None:
-            return
-        where = "the inputs table"
-        if "time" not in inputs.columns:
-            raise DataError(f"{where} has no 'time' column (columns: {', '.join(map(str, inputs.columns))})")
-        names = [str(c) for c in inputs.columns if c != "time"]
-        model_inputs = self.model.info.inputs
-        for name in names:
-            if name not in model_inputs:
-                raise FMUError(unknown_name("input", name, model_inputs, f"FMU {self.model.path.name}"))
-            if self.model._vars[name].type not in _REAL_TYPES:
-                raise FMUError(f"input {name!r} of FMU {self.model.path.name} is {self.model._vars[name].type}; "
-                               "only Real inputs can be driven from a table")
-        try:
-            t = inputs["time"].to_numpy(dtype=float)
-            table = inputs[names].to_numpy(dtype=float) if names else np.zeros((len(t), 0))
-        except (TypeError, ValueError) as exc:
-            raise DataError(f"{where} has non-numeric values: {exc}") from None
-        if t.size == 0:
-            raise DataError(f"{where} has no rows")
-        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-            raise DataError(f"{where}: 'time' must be finite and strictly increasing")
-        for j, name in enumerate(names):
-            bad = ~np.isfinite(table[:, j])
-            if bad.any():
-                raise DataError(f"input {name!r} in {where} has {int(bad.sum())} NaN/inf values "
-                                f"(first at t = {t[bad][0]:g} s)")
-        if not names:
-            return
-        self._in_names = names
-        self._in_times = t
-        self._in_table = np.ascontiguousarray(table)
-        self._in_set = self._setter(tuple(names))
+    def _after_initialization(self) -> None:
+        self._event_iteration(initial=True)
 
-    def _input_values(self, t: float) -> npt.NDArray[np.float64]:
-        times, table = self._in_times, self._in_table
-        assert times is not None and table is not None
-        if t <= times[0]:
-            return table[0]
-        if t >= times[-1]:
-            return table[-1]
-        i = int(np.searchsorted(times, t, side="right"))
-        t0, t1 = times[i - 1], times[i]
-        w = (t - t0) / (t1 - t0)
-        return table[i - 1] + w * (table[i] - table[i - 1])
-
-    def _apply_inputs(self, t: float) -> None:
-        if self._in_set is not None:
-            self._in_set(self._input_values(t))
-
-    def _drop_inputs(self, names: set[str]) -> None:
-        """Stop driving *names* from the table (the caller set them explicitly)."""
-        if not self._in_names or not names.intersection(self._in_names):
-            return
-        keep = [j for j, n in enumerate(self._in_names) if n not in names]
-        assert self._in_table is not None
-        self._in_names = [self._in_names[j] for j in keep]
-        self._in_table = np.ascontiguousarray(self._in_table[:, keep])
-        self._in_set = self._setter(tuple(self._in_names)) if self._in_names else None
-
-    # -- value access -----------------------------------------------------------
-    def _getter(self, names: tuple[str, ...]) -> Any:
-        getter = self._getters.get(names)
-        if getter is not None:
-            return getter
+    def _start(self, max_step: float | None) -> None:
         fmu = self._fmu
-        variables = [self.model._variable(n) for n in names]
-        if all(v.type in ("Real", "Float64") for v in variables):
-            n = len(variables)
-            vr = (ctypes.c_uint32 * n)(*[v.valueReference for v in variables])
-            buf = np.zeros(n)
-            pbuf = buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-            if self._fmi3:
-                func, comp = fmu.fmi3GetFloat64, fmu.component
-
-                def getter() -> npt.NDArray[np.float64]:
-                    func(comp, vr, n, pbuf, n)
-                    return buf.copy()
-            else:
-                func, comp = fmu.fmi2GetReal, fmu.component
-
-                def getter() -> npt.NDArray[np.float64]:
-                    func(comp, vr, n, pbuf)
-                    return buf.copy()
-        else:
-            calls = []
-            for v in variables:
-                kind = v.type
-                if kind == "Enumeration":
-                    kind = "Int64" if self._fmi3 else "Integer"
-                if kind in ("String", "Binary", "Clock"):
-                    raise FMUError(f"variable {v.name!r} of FMU {self.model.path.name} is a {v.type}, not a number")
-                calls.append((getattr(fmu, "get" + kind), v.valueReference))
-
-            def getter() -> npt.NDArray[np.float64]:
-                return np.array([float(g([vr])[0]) for g, vr in calls])
-        self._getters[names] = getter
-        return getter
-
-    def _setter(self, names: tuple[str, ...]) -> Any:
-        setter = self._setters.get(names)
-        if setter is not None:
-            return setter
-        fmu = self._fmu
-        variables = [self.model._variable(n) for n in names]
-        if all(v.type in ("Real", "Float64") for v in variables):
-            n = len(variables)
-            vr = (ctypes.c_uint32 * n)(*[v.valueReference for v in variables])
-            buf = np.zeros(n)
-            pbuf = buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-            comp = fmu.component
-            if self._fmi3:
-                func = fmu.fmi3SetFloat64
-
-                def setter(values: Any) -> None:
-                    buf[:] = values
-                    func(comp, vr, n, pbuf, n)
-            else:
-                func = fmu.fmi2SetReal
-
-                def setter(values: Any) -> None:
-                    buf[:] = values
-                    func(comp, vr, n, pbuf)
-        else:
-            calls = []
-            for v in variables:
-                kind = v.type
-                if kind == "Enumeration":
-                    kind = "Int64" if self._fmi3 else "Integer"
-                py = {"Boolean": bool, "String": str}.get(kind, float if kind in _REAL_TYPES else int)
-                calls.append((getattr(fmu, "set" + kind), v.valueReference, py))
-
-            def setter(values: Any) -> None:
-                for (s, vr, py), value in zip(calls, values):
-                    s([vr], [py(value)])
-        self._setters[names] = setter
-        return setter
-
-    # -- initialisation -----------------------------------------------------------
-    def _settable_before_init(self, name: str) -> ModelVariable:
-        v = self.model._variable(name)
-        if v.causality in ("independent", "calculatedParameter") or v.variability == "constant":
-            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
-                           f"{v.causality if v.variability != 'constant' else 'a constant'}; it cannot be set")
-        if v.causality == "output" or (v.causality == "local" and v.initial not in ("exact", "approx")):
-            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is a computed "
-                           f"{v.causality} variable; it cannot be set")
-        return v
-
-    def _initialize(self, parameters: dict[str, Any], max_step: float | None) -> None:
-        fmu, model = self._fmu, self.model
-        variables = {name: self._settable_before_init(name) for name in parameters}
-        # inputs given as constants are not driven by the table any more
-        self._drop_inputs(set(parameters))
-        # restore start values changed by an earlier run (robust against FMUs whose reset is partial)
-        restore = [n for n in model._dirty if n not in parameters and model._vars[n].start is not None]
-        model._dirty = set(parameters)
-        early = {n: _start_value(model._vars[n]) for n in restore}
-        early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
-                      or v.causality == "input"})
-        late = {n: parameters[n] for n, v in variables.items() if n not in early}
-        try:
-            self._set_values(early)
-            if self._fmi3:
-                fmu.enterInitializationMode(tolerance=model.tolerance, startTime=self.time)
-            else:
-                fmu.setupExperiment(tolerance=model.tolerance, startTime=self.time)
-                fmu.enterInitializationMode()
-            self._set_values(late)
-            self._apply_inputs(self.time)
-            fmu.exitInitializationMode()
-            if self._me:
-                self._event_iteration(initial=True)
-        except (FMUError, SimulationError):
-            raise
-        except Exception as exc:
-            raise SimulationError(f"initialisation of {model.path.name} at t = {self.time:g} s failed: {exc}") \
-                from None
-        if self._me:
-            if max_step is None:
-                max_step = float("inf")
-                if self._in_times is not None and self._in_times.size > 1:
-                    max_step = float(np.min(np.diff(self._in_times)))
-            solver_cls = _cvode_solver_class()
-            self._solver = solver_cls(
-                nx=self._nx, nz=self._nz,
-                get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
-                get_dx=fmu.getContinuousStateDerivatives if self._fmi3 else fmu.getDerivatives,
-                get_z=fmu.getEventIndicators,
-                get_nominals=fmu.getNominalsOfContinuousStates,
-                set_time=self._set_time, input=_NoInput(), startTime=self.time,
-                maxStep=max_step, relativeTolerance=model.tolerance, maxNumSteps=100000,
-            )
-            self._check_states()
-
-    def _set_values(self, values: Mapping[str, Any]) -> None:
-        if not values:
-            return
-        names = tuple(values)
-        vals = [values[n] for n in names]
-        for n, value in zip(names, vals):
-            if isinstance(value, str):
-                raise FMUError(f"value of {n!r} must be a number, not {value!r}")
-        self._setter(names)(vals)
+        if max_step is None:
+            max_step = float("inf")
+            if self._in_times is not None and self._in_times.size > 1:
+                max_step = float(np.min(np.diff(self._in_times)))
+        solver_cls = _cvode_solver_class()
+        self._solver = solver_cls(
+            nx=self._nx, nz=self._nz,
+            get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
+            get_dx=self._fmi.get_derivatives,
+            get_z=fmu.getEventIndicators,
+            get_nominals=fmu.getNominalsOfContinuousStates,
+            set_time=self._set_time, input=_NoInput(), startTime=self.time,
+            maxStep=max_step, relativeTolerance=self.model.tolerance, maxNumSteps=100000,
+        )
+        self._check_states()
 
     def _set_time(self, t: float) -> None:
         self._fmu.setTime(t)
@@ -764,14 +1079,10 @@ class Stepper:
         fmu.enterContinuousTimeMode()
 
     def _update_discrete_states(self) -> None:
-        fmu = self._fmu
         needed, terminate = True, False
         next_defined, next_time = False, 0.0
         while needed and not terminate:
-            if self._fmi3:
-                needed, terminate, _, _, next_defined, next_time = fmu.updateDiscreteStates()
-            else:
-                needed, terminate, _, _, next_defined, next_time = fmu.newDiscreteStates()
+            needed, terminate, next_defined, next_time = self._fmi.update_discrete_states()
         if terminate:
             raise SimulationError(f"{self.model.path.name} requested termination at t = {self.time:g} s")
         self._next_event = float(next_time) if next_defined else None
@@ -781,59 +1092,15 @@ class Stepper:
             return
         self._fmu.getContinuousStates(self._px, self._nx)
         if not np.all(np.isfinite(self._x[: self._nx])):
-            bad = [d.variable.derivative.name for d, ok in zip(self._md.derivatives, np.isfinite(self._x))
+            md = self._fmi.model_description
+            bad = [d.variable.derivative.name for d, ok in zip(md.derivatives, np.isfinite(self._x))
                    if not ok and d.variable.derivative is not None]
             raise SimulationError(f"simulation of {self.model.path.name} produced non-finite states "
                                   f"{', '.join(map(repr, bad)) or ''} at t = {self.time:g} s")
 
-    def _check_open(self) -> None:
-        if self._closed or self.model.closed:
-            raise FMUError(f"this stepper of {self.model.path.name} is finished "
-                           "(the model was closed or a newer run was started)")
-
-    # -- public API -----------------------------------------------------------------
-    def step(self, t_next: float) -> None:
-        """Integrate from :attr:`time` to *t_next*.
-
-        Raises
-        ------
-        SimulationError
-            The solver failed or the states became non-finite; names the time.
-        """
-        self._check_open()
-        t_next = float(t_next)
-        tol = 1e-12 * max(1.0, abs(t_next))
-        if t_next < self.time - tol:
-            raise SimulationError(f"cannot step {self.model.path.name} back in time from "
-                                  f"t = {self.time:g} s to t = {t_next:g} s")
-        if t_next <= self.time + tol:
-            return
-        if self._me:
-            self._step_me(t_next)
-        else:
-            self._step_cs(t_next)
-
-    def _step_cs(self, t_next: float) -> None:
-        fmu = self._fmu
-        try:
-            self._apply_inputs(self.time)
-            result = fmu.doStep(currentCommunicationPoint=self.time, communicationStepSize=t_next - self.time)
-        except Exception as exc:
-            raise SimulationError(f"simulation of {self.model.path.name} failed in the step from "
-                                  f"t = {self.time:g} s to t = {t_next:g} s: {exc}") from None
-        if self._fmi3 and result is not None and result[1]:
-            raise SimulationError(f"{self.model.path.name} requested termination at t = {t_next:g} s")
-        self.time = t_next
-        self._apply_inputs(self.time)
-
-    def _step_me(self, t_next: float) -> None:
+    def _advance(self, t_next: float) -> None:
         fmu, solver = self._fmu, self._solver
-        me = self._md.modelExchange
-        # FMI 2 asks for the call with needsCompletedIntegratorStep, FMI 3 waives it with ...NotNeeded
-        if self._fmi3:
-            needs_completed = not me.completedIntegratorStepNotNeeded
-        else:
-            needs_completed = bool(me.needsCompletedIntegratorStep)
+        needs_completed = self._fmi.needs_completed_integrator_step()
         while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
             target = t_next
             if self._next_event is not None and self.time < self._next_event < t_next:
@@ -846,10 +1113,10 @@ class Stepper:
                 info = getattr(solver, "error_info", None)
                 if solver.callback_error is None and info and len(info) > 3:
                     cause = str(info[3]).strip()
-                raise SimulationError(f"solver failed in {self.model.path.name} between t = {self.time:g} s "
-                                      f"and t = {target:g} s: {cause}") from None
+                raise _simulation_failure(f"solver failed in {self.model.path.name} between "
+                                          f"t = {self.time:g} s and t = {target:g} s", cause) from None
             self.time = float(t_ret)
-            try:
+            with _fmu_calls(f"simulation of {self.model.path.name} failed at t = {self.time:g} s"):
                 self._set_time(self.time)
                 step_event = False
                 if needs_completed:
@@ -861,87 +1128,31 @@ class Stepper:
                 if state_event or step_event or time_event:
                     self._event_iteration()
                     solver.reset(self.time)
-            except SimulationError:
-                raise
-            except Exception as exc:
-                raise SimulationError(f"simulation of {self.model.path.name} failed at "
-                                      f"t = {self.time:g} s: {exc}") from None
             self._check_states()
         self.time = t_next
 
-    def set(self, values: Mapping[str, float]) -> None:
-        """Set tunable parameters and/or inputs before the next step.
-
-        An input set here is no longer driven by the ``inputs`` table of this run.
-        For model exchange, the change is a discontinuity: tunable parameters are
-        set in event mode and the solver is re-initialised.
-
-        Raises
-        ------
-        FMUError
-            Unknown names, or variables that cannot change during a run.
-        """
-        self._check_open()
-        # values equal to what this method set last time change nothing: no event, no solver restart
-        values = {n: v for n, v in values.items() if self._last_set.get(n) != v}
-        if not values:
-            return
-        params = False
-        for name in values:
-            v = self.model._variable(name)
-            if v.causality == "input":
-                continue
-            if v.causality == "parameter" and v.variability == "tunable":
-                params = True
-                continue
-            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
-                           f"{v.variability} {v.causality}; only tunable parameters and inputs can be set "
-                           "between steps")
-        self._drop_inputs(set(values))
-        try:
-            if self._me and params:
-                self._fmu.enterEventMode()
-                self._set_values(values)
-                self._update_discrete_states()
-                self._fmu.enterContinuousTimeMode()
-            else:
-                self._set_values(values)
-            if self._me:
-                self._solver.reset(self.time)
-        except (FMUError, SimulationError):
-            raise
-        except Exception as exc:
-            raise SimulationError(f"setting {', '.join(values)} in {self.model.path.name} at "
-                                  f"t = {self.time:g} s failed: {exc}") from None
-        self.model._dirty.update(n for n in values if self.model._vars[n].causality == "parameter")
-        self._last_set.update(values)
-
-    def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
-        """Current values of *names* as a float array (same order)."""
-        self._check_open()
-        return self._getter(tuple(names))()
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+        if parameters_changed:
+            self._fmu.enterEventMode()
+            self._set_values(values)
+            self._update_discrete_states()
+            self._fmu.enterContinuousTimeMode()
+        else:
+            self._set_values(values)
+        self._solver.reset(self.time)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
-        """The continuous state vector (model exchange only), for checkpoints."""
+        """The continuous state vector, for checkpoints."""
         self._check_open()
-        if not self._me:
-            raise FMUError(f"{self.model.path.name} runs as co-simulation; its states are not accessible")
         self._fmu.getContinuousStates(self._px, self._nx)
         return self._x[: self._nx].copy()
 
     def set_continuous_states(self, x: npt.ArrayLike) -> None:
-        """Overwrite the continuous state vector (model exchange only); the solver restarts."""
+        """Overwrite the continuous state vector; the solver restarts."""
         self._check_open()
-        if not self._me:
-            raise FMUError(f"{self.model.path.name} runs as co-simulation; its states are not accessible")
         arr = np.asarray(x, dtype=float).ravel()
         if arr.size != self._nx:
             raise FMUError(f"{self.model.path.name} has {self._nx} continuous states, not {arr.size}")
         self._x[: self._nx] = arr
         self._fmu.setContinuousStates(self._px, self._nx)
         self._solver.reset(self.time)
-
-    @property
-    def state_names(self) -> list[str]:
-        """Names of the continuous states, in state-vector order (model exchange)."""
-        return [d.variable.derivative.name for d in self._md.derivatives if d.variable.derivative is not None]
