@@ -314,3 +314,39 @@ def test_forked_child_dropping_a_model_keeps_the_parents_files():
         lag(1.0, 0.5, 1.0, 2.0), rel=RTOL)
     m.close()
     assert not tempdir.exists()
+
+
+# -- layout: one driver per interface, public methods only --------------------------
+
+@pytest.mark.parametrize("name, driver", [("fmi3-me", "ModelExchangeStepper"), ("fmi2-me", "ModelExchangeStepper"),
+                                          ("fmi2-cs", "CoSimulationStepper"), ("fmi3-cs", "CoSimulationStepper")])
+def test_stepper_is_the_driver_of_the_interface_the_fmu_declares(name, driver):
+    import trackingbox.fmu as fmu_module
+
+    with FMUModel(FMUS[name]()) as m:
+        st = m.stepper()
+        assert type(st).__name__ == driver
+        assert isinstance(st, fmu_module.Stepper)
+        # the interface is the one in the model description
+        declared = zipfile.ZipFile(FMUS[name]()).read("modelDescription.xml").decode()
+        assert ("<ModelExchange" in declared) == (driver == "ModelExchangeStepper")
+        m.stepper()  # a newer run finishes the old stepper
+        with pytest.raises(FMUError, match="finished"):
+            st.step(0.1)
+
+
+def test_fmu_classes_use_no_private_attribute_of_another_object():
+    """FMUModel and the steppers reach other objects through public names only (``self._x`` is fine)."""
+    import ast
+
+    import trackingbox.fmu as fmu_module
+
+    tree = ast.parse(Path(fmu_module.__file__).read_text())
+    offending = []
+    for cls in (n for n in tree.body if isinstance(n, ast.ClassDef)
+                and n.name in ("FMUModel", "Stepper", "ModelExchangeStepper", "CoSimulationStepper")):
+        for node in ast.walk(cls):
+            if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
+                    and not (isinstance(node.value, ast.Name) and node.value.id == "self")):
+                offending.append(f"{cls.name} line {node.lineno}: {ast.unparse(node)}")
+    assert offending == []
