@@ -389,7 +389,7 @@ max = 1200.0
   min = 1.0
   max = 3.0
 
-[[pairs]]
+[[pairs]]   # written by trackingbox pair
 variable = "TI-102"
 parameter = "hx.n"
 gain = 1.5

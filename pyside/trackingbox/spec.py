@@ -791,6 +791,9 @@ def _set_pairs(doc: tomlkit.TOMLDocument, pairs: tuple[PairSpec, ...]) -> None:
     if isinstance(old, AoT) and len(old):
         trivia = _trailing_trivia(old[-1])
         if tables:  # replace in place: the pairs stay where the user put them
+            # a comment on the first header (``[[pairs]]  # chosen by pair``) stays on it
+            tables[0].trivia.comment_ws = old[0].trivia.comment_ws
+            tables[0].trivia.comment = old[0].trivia.comment
             while len(old):
                 del old[0]
             for i, table in enumerate(tables):
