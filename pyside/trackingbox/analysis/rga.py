@@ -139,6 +139,17 @@ def check_rank(G: npt.ArrayLike, *, variables: Sequence[str] | None = None,
     -------
     RankReport
         The report, when the rank is full.
+
+    Examples
+    --------
+    The second column is twice the first: rank 1, the RGA does not exist.
+
+    >>> check_rank([[1.0, 2.0], [3.0, 4.0]]).rank
+    2
+    >>> check_rank([[1.0, 2.0], [2.0, 4.0]], variables=["T", "L"], parameters=["kht", "UA"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    trackingbox.errors.AnalysisError: gain matrix (2 variables x 2 parameters) has rank 1 < 2, so the RGA is undefined; ...
     """
     A = _as_matrix(G)
     rows = _names(variables, A.shape[0], "variable")

@@ -118,6 +118,17 @@ def tune_scaled_pi(gain: float, time_constant: float, scaling: Scaling, *, ts: f
         ``τc/τ``, the desired closed-loop speed relative to the open loop.
     delay : float
         Process delay (s), if known.
+
+    Examples
+    --------
+    Gain -0.004 K per unit of a parameter bounded to [800, 1200], variable span
+    3.2 K: ``Ks = -0.5``. With ``τ = 300 s``, ``Ts = 20 s`` (θ = 10 s) and
+    ``lam = 0.3`` (τc = 90 s): ``Kp = 300/(0.5·100) = 6``, ``Ti = min(300, 400)``,
+    ``Kc = 6·400/3.2 = 750``.
+
+    >>> g = tune_scaled_pi(-0.004, 300.0, Scaling(800.0, 1200.0, span=3.2), ts=20.0, lam=0.3)
+    >>> g.kp, g.ti, g.kc, g.tau_c, g.delay
+    (6.0, 300.0, 750.0, 90.0, 10.0)
     """
     if not lam > 0.0:
         raise ValueError(f"lambda must be positive, got {lam}")
