@@ -18,11 +18,13 @@ with ``doStep``.
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import ctypes
 import logging
 import math
 import os
+import re
 import shutil
 import weakref
 import zipfile
@@ -37,7 +39,7 @@ import numpy.typing as npt
 import pandas as pd
 from fmpy.model_description import ModelDescription, ModelVariable
 
-from .errors import DataError, FMUError, SimulationError, unknown_name
+from .errors import AssertionFailed, DataError, FMUError, SimulationError, unknown_name
 
 log = logging.getLogger(__name__)
 
@@ -261,6 +263,36 @@ def _cleanup(holder: dict[str, Any], tempdir: str | None, pid: int) -> None:
         shutil.rmtree(tempdir, ignore_errors=True)
 
 
+def _fmi3_logger(name: str, messages: collections.deque) -> Any:
+    """An FMI 3 log callback: keeps (status, category, message) and logs to Python logging."""
+
+    def log_message(env: Any, status: int, category: bytes | None, message: bytes | None) -> None:
+        text = (message or b"").decode("utf-8", errors="replace")
+        cat = (category or b"").decode("utf-8", errors="replace")
+        messages.append((int(status), cat, text))
+        # errors become exceptions (and the CLI's error line); log them only for -vv
+        level = logging.DEBUG if status >= 3 or status == 0 else logging.WARNING
+        log.log(level, "%s: %s", name, text)
+
+    return log_message
+
+
+_ASSERT_LOG = re.compile(r"assert failed at t = (\S+) s: (.*)", re.S)
+
+
+def _failure(model: FMUModel, message: str) -> SimulationError:
+    """The error for a failed FMU call: :class:`AssertionFailed` if the FMU logged a failed assert,
+    else a :class:`SimulationError` with *message* and the FMU's last logged error."""
+    for status, _category, text in reversed(model._messages):
+        if status < 3:
+            continue
+        found = _ASSERT_LOG.match(text)
+        if found:
+            return AssertionFailed(found.group(2), float(found.group(1)), model.path.name)
+        return SimulationError(f"{message}: {text}")
+    return SimulationError(message)
+
+
 class FMUModel:
     """An FMU extracted and instantiated once, simulated many times.
 
@@ -312,6 +344,7 @@ class FMUModel:
         for v in md.modelVariables:
             self._vars.setdefault(v.name, v)
         self._holder: dict[str, Any] = {}
+        self._messages: collections.deque[tuple[int, str, str]] = collections.deque(maxlen=20)
         self._tempdir: str | None = None
         try:
             self._tempdir = str(fmpy.extract(str(self.path)))
@@ -321,7 +354,9 @@ class FMUModel:
         try:
             from fmpy.simulation import instantiate_fmu
 
-            fmu = instantiate_fmu(self._tempdir, md, fmi_type=interface)
+            # FMI 3: the FMU's log goes to Python logging and is kept for error reports (asserts)
+            logger = _fmi3_logger(self.path.name, self._messages) if self._fmi3 else None
+            fmu = instantiate_fmu(self._tempdir, md, fmi_type=interface, logger=logger)
         except Exception as exc:
             self._finalizer()
             raise FMUError(f"FMU {self.path} could not be loaded and instantiated: {exc}") from None
@@ -707,6 +742,7 @@ class Stepper:
         early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
                       or v.causality == "input"})
         late = {n: parameters[n] for n, v in variables.items() if n not in early}
+        model._messages.clear()
         try:
             self._set_values(early)
             if self._fmi3:
@@ -722,7 +758,7 @@ class Stepper:
         except (FMUError, SimulationError):
             raise
         except Exception as exc:
-            raise SimulationError(f"initialisation of {model.path.name} at t = {self.time:g} s failed: {exc}") \
+            raise _failure(model, f"initialisation of {model.path.name} at t = {self.time:g} s failed: {exc}") \
                 from None
         if self._me:
             if max_step is None:
@@ -864,8 +900,8 @@ class Stepper:
             except SimulationError:
                 raise
             except Exception as exc:
-                raise SimulationError(f"simulation of {self.model.path.name} failed at "
-                                      f"t = {self.time:g} s: {exc}") from None
+                raise _failure(self.model, f"simulation of {self.model.path.name} failed at "
+                                           f"t = {self.time:g} s: {exc}") from None
             self._check_states()
         self.time = t_next
 
@@ -911,8 +947,8 @@ class Stepper:
         except (FMUError, SimulationError):
             raise
         except Exception as exc:
-            raise SimulationError(f"setting {', '.join(values)} in {self.model.path.name} at "
-                                  f"t = {self.time:g} s failed: {exc}") from None
+            raise _failure(self.model, f"setting {', '.join(values)} in {self.model.path.name} at "
+                                       f"t = {self.time:g} s failed: {exc}") from None
         self.model._dirty.update(n for n in values if self.model._vars[n].causality == "parameter")
         self._last_set.update(values)
 
