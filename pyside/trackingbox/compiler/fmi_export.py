@@ -281,6 +281,24 @@ def _tidy_model_description(
     for elem in list(structure):
         if elem.tag in ("Output", "InitialUnknown") and elem.get("valueReference") in demoted:
             structure.remove(elem)
+    if initial is not None:
+        # the initial equations make the free states and fixed = false parameters initial unknowns;
+        # every initial unknown may then depend on every known (no dependencies attribute)
+        computed = set(initial.free_states) | set(initial.computed_parameters)
+        new_vrs = sorted(int(var.get("valueReference", "0")) for var in variables if var.get("name") in computed)
+        listed = set()
+        for elem in structure:
+            if elem.tag == "InitialUnknown":
+                elem.attrib.pop("dependencies", None)
+                elem.attrib.pop("dependenciesKind", None)
+                listed.add(int(elem.get("valueReference", "0")))
+        kinds = [c.tag for c in structure]
+        at = max((i + 1 for i, k in enumerate(kinds) if k in ("Output", "ContinuousStateDerivative",
+                                                               "ClockedState", "InitialUnknown")), default=0)
+        for vr in new_vrs:
+            if vr not in listed:
+                structure.insert(at, ET.Element("InitialUnknown", {"valueReference": str(vr)}))
+                at += 1
     children = list(root)
     insert_at = next((i for i, c in enumerate(children) if c.tag == "ModelVariables"), len(children))
     if experiment:
