@@ -652,16 +652,27 @@ class FlatTranslator:
     # ------------------------------------------------------------- asserts
     def add_assert(self, body: dict[str, Any], env: dict[str, Value] | None, origin: str) -> None:
         """Record ``assert(condition, message, level)``; *env* is a function's environment."""
-        level = "error"
-        if body.get("level") is not None:
-            lv = self.expr(body["level"], env)
-            if not _num(lv):
-                raise CompileError(f"the level of an assert in {origin} of {self.model} is not a constant")
-            level = "warning" if int(lv) == 1 else "error"  # AssertionLevel.warning = 1, error = 2
         message = self._message_text(body.get("message"), env)
         cond = self.expr(body["condition"], env)
         if isinstance(cond, np.ndarray):
             raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is an array")
+        if _num(cond) and not isinstance(cond, (bool, np.bool_)):
+            raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is the "
+                               f"number {cond!r}, not a Boolean")
+        level = "error"
+        if body.get("level") is not None:
+            lv = self.expr(body["level"], env)  # AssertionLevel.warning = 1, error = 2
+            if not _num(lv):
+                # a level that changes during the run: an error-level assert where the level is error,
+                # a warning-level one where it is warning
+                c = ca.MX(1.0 if bool(cond) else 0.0) if _num(cond) else cond
+                self._record_assert(ca.logic_or(c, lv == 1), message, "error", origin)
+                self._record_assert(ca.logic_or(c, lv == 2), message, "warning", origin)
+                return
+            level = "warning" if int(lv) == 1 else "error"
+        self._record_assert(cond, message, level, origin)
+
+    def _record_assert(self, cond: Any, message: str, level: str, origin: str) -> None:
         for guard in self._guards:  # an assert in a function's if-branch only counts where it is taken
             cond = ca.logic_or(_not(guard), cond) if not _num(cond) or not bool(cond) else cond
         if _num(cond):
@@ -680,7 +691,7 @@ class FlatTranslator:
             val = body.get("value") or {}
             if isinstance(val, dict) and "String" in val:
                 return str(val["String"])
-            return str(next(iter(val.values()))) if isinstance(val, dict) and val else str(val)
+            raise CompileError(f"the message of an assert in {self.model} is {_literal_text(val)}, not a String")
         if kind == "Parenthesized":
             return self._message_text(body.get("expr", body.get("inner")), env)
         if kind == "Binary" and str(body.get("op")) in ("Add", "AddElem"):
@@ -1020,6 +1031,13 @@ class FlatTranslator:
         if eqs and n_eq != n_unk or (eqs and unk):
             parts.append("equations with no variable left to solve for, from: " + ", ".join(eqs))
         return "; ".join(parts)
+
+
+def _literal_text(val: Any) -> str:
+    if isinstance(val, dict) and len(val) == 1:
+        kind, v = next(iter(val.items()))
+        return f"the {kind} {v!r}"
+    return repr(val)
 
 
 def _branch_guard(cond: Any, prior: list[Any]) -> Any:
