@@ -193,7 +193,6 @@ class FlatTranslator:
         self._inline_depth = 0
         self.asserts: list[Assertion] = []
         self._guards: list[Any] = []  # conditions of the function if-branches being inlined
-        self._origin = ""
 
     # ------------------------------------------------------------------ errors
     def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
