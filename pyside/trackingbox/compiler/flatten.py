@@ -661,13 +661,9 @@ class FlatTranslator:
         level = "error"
         if body.get("level") is not None:
             lv = self.expr(body["level"], env)  # AssertionLevel.warning = 1, error = 2
-            if not _num(lv):
-                # a level that changes during the run: an error-level assert where the level is error,
-                # a warning-level one where it is warning
-                c = ca.MX(1.0 if bool(cond) else 0.0) if _num(cond) else cond
-                self._record_assert(ca.logic_or(c, lv == 1), message, "error", origin)
-                self._record_assert(ca.logic_or(c, lv == 2), message, "warning", origin)
-                return
+            if not _num(lv):  # rumoca already refuses this (MLS 8.3.7); kept as a clear error
+                raise CompileError(f"the level of assert({message!r}) in {origin} of {self.model} "
+                                   "is not a constant")
             level = "warning" if int(lv) == 1 else "error"
         self._record_assert(cond, message, level, origin)
 
