@@ -211,7 +211,7 @@ model Ramp "x = t"
 equation
   der(x) = 1;
   assert(x < 2, "x too large");
-  assert(k > 0, "k must be positive");
+  assert(k > 0, "k must be positive: \\"k\\" in 1/°C, 100% sure");
   assert(x < 1, "x above one", AssertionLevel.warning);
 end Ramp;
 """
@@ -243,6 +243,7 @@ def test_parameter_assert_is_checked_at_initialisation_and_after_a_change(ramp_f
         with pytest.raises(AssertionFailed, match="k must be positive") as exc:
             model.simulate(stop_time=1, output_interval=0.1, parameters={"k": -1.0})
         assert exc.value.time == 0.0
+        assert exc.value.message == 'k must be positive: "k" in 1/°C, 100% sure'  # quotes, UTF-8, % kept
         stepper = model.stepper(start_time=0.0)
         stepper.step(0.5)
         with pytest.raises(AssertionFailed, match="k must be positive") as exc:
