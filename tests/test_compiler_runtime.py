@@ -321,3 +321,22 @@ end Plain;
     assert "sources/tbx_runtime.c" not in names and "tbx_" not in wrapper
     with zipfile.ZipFile(build(tmp_path, "Ramp", RAMP)) as zf:
         assert "sources/tbx_runtime.c" in zf.namelist()
+
+
+DRAIN = """
+model Drain "empties at t* = 2 (1 - ln 2); beyond it sqrt(h) has no value and the solver fails"
+  Real h(start = 1, fixed = true);
+equation
+  der(h) = -sqrt(h) - 1;
+  assert(h > 0, "tank empty");
+end Drain;
+"""
+
+
+def test_assert_failing_inside_a_step_the_solver_cannot_finish_is_reported(tmp_path):
+    fmu = build(tmp_path, "Drain", DRAIN)
+    t_empty = 2 * (1 - math.log(2))  # by hand: s = sqrt(h), 2 s ds/dt = -(s + 1), t* = int_0^1 2s/(s+1) ds
+    with FMUModel(fmu) as model, pytest.raises(AssertionFailed) as exc:
+        model.simulate(stop_time=20, output_interval=10)  # the assert fails long before the first point
+    assert exc.value.message == "tank empty"
+    assert abs(exc.value.time - t_empty) <= 0.05  # a trial point of the failed step

@@ -280,10 +280,18 @@ def _fmi3_logger(name: str, messages: collections.deque) -> Any:
 _ASSERT_LOG = re.compile(r"assert failed at t = (\S+) s: (.*)", re.S)
 
 
-def _failure(model: FMUModel, message: str) -> SimulationError:
+def _failure(model: FMUModel, message: str, solver: bool = False) -> SimulationError:
     """The error for a failed FMU call: :class:`AssertionFailed` if the FMU logged a failed assert,
-    else a :class:`SimulationError` with *message* and the FMU's last logged error."""
-    for status, _category, text in reversed(model._messages):
+    else a :class:`SimulationError` with *message* and the FMU's last logged error.
+
+    With *solver* (the integrator failed), an assert the FMU saw failing at a trial point of the
+    failed step (category ``assert-trial``) is reported as the cause.
+    """
+    for status, category, text in reversed(model._messages):
+        if solver and category == "assert-trial":
+            found = _ASSERT_LOG.match(text)
+            if found:
+                return AssertionFailed(found.group(2), float(found.group(1)), model.path.name)
         if status < 3:
             continue
         found = _ASSERT_LOG.match(text)
@@ -882,8 +890,8 @@ class Stepper:
                 info = getattr(solver, "error_info", None)
                 if solver.callback_error is None and info and len(info) > 3:
                     cause = str(info[3]).strip()
-                raise SimulationError(f"solver failed in {self.model.path.name} between t = {self.time:g} s "
-                                      f"and t = {target:g} s: {cause}") from None
+                raise _failure(self.model, f"solver failed in {self.model.path.name} between t = {self.time:g} s "
+                                           f"and t = {target:g} s: {cause}", solver=True) from None
             self.time = float(t_ret)
             try:
                 self._set_time(self.time)

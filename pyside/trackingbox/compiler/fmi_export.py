@@ -25,7 +25,11 @@ unit) and called from patched FMI functions of the wrapper:
   event, e.g. a parameter change) and ``fmi3CompletedIntegratorStep`` check the
   asserts: a failing error-level assert logs ``assert failed at t = T s:
   message`` (category ``assert``, status error) through the FMI logger and the
-  call returns ``fmi3Error``; a warning-level assert logs once per violation.
+  call returns ``fmi3Error``; a warning-level assert logs once per violation;
+* ``fmi3GetContinuousStateDerivatives`` (the solver's trial points) only notes
+  the first failing error-level assert (category ``assert-trial``, status OK),
+  so that an importer whose solver then fails can name the assert; a completed
+  step clears the note.
 
 Asserts are checked at the points the importer completes a step (for
 :class:`trackingbox.fmu.Stepper`: every communication point), not at the
@@ -407,21 +411,43 @@ static void tbx_log(casadi_fmi_memory* m, fmi3Status status, const char* categor
 """
 
 _ASSERTS = """
-static fmi3Status tbx_check_asserts(casadi_fmi_memory* m) {
-  casadi_real win[TBX_A_NW + 1], c[TBX_N_ASSERT + 1];
+static int tbx_eval_asserts(casadi_fmi_memory* m, casadi_real* c) {
+  casadi_real win[TBX_A_NW + 1];
   const casadi_real* arg[TBX_A_SZ_ARG + 1];
   casadi_real* res[TBX_A_SZ_RES + 1];
-  char text[1400];
   size_t i;
-  int k;
   if (!m->up_to_date) {
-    if (evaluate(m)) return fmi3Error;
+    if (evaluate(m)) return 1;
     m->up_to_date = 1;
   }
   for (i = 0; i < TBX_A_NW; ++i) win[i] = tbx_value(m, tbx_a_vr[i]);
   arg[0] = win;
   res[0] = c;
-  if (tbx_call_tbx_asserts(arg, res)) return fmi3Error;
+  return tbx_call_tbx_asserts(arg, res);
+}
+/* At the solver's trial points (derivative calls) a failing error-level assert is only noted
+   (category assert-trial, status OK): the step may be rejected. If the solver then fails, the
+   importer can report the assert; a completed step clears the note. */
+static void tbx_note_asserts(casadi_fmi_memory* m) {
+  casadi_real c[TBX_N_ASSERT + 1];
+  char text[1400];
+  int k;
+  if (m->tbx_pending >= 0 || tbx_eval_asserts(m, c)) return;
+  for (k = 0; k < TBX_N_ASSERT; ++k) {
+    if (tbx_a_error[k] && !(c[k] > 0.5)) {
+      m->tbx_pending = k;
+      snprintf(text, sizeof text, "assert failed at t = %.17g s: %s", m->t, tbx_a_message[k]);
+      tbx_log(m, fmi3OK, "assert-trial", text);
+      return;
+    }
+  }
+}
+static fmi3Status tbx_check_asserts(casadi_fmi_memory* m) {
+  casadi_real c[TBX_N_ASSERT + 1];
+  char text[1400];
+  int k;
+  if (tbx_eval_asserts(m, c)) return fmi3Error;
+  m->tbx_pending = -1;
   for (k = 0; k < TBX_N_ASSERT; ++k) {
     if (c[k] > 0.5) {
       m->tbx_warned[k] = 0;
@@ -560,12 +586,12 @@ def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str,
         ("  const char* instance_name;\n",
          "  const char* instance_name;\n  // trackingbox runtime: FMI logger and assert warning flags\n"
          "  fmi3LogMessageCallback tbx_logger;\n  fmi3InstanceEnvironment tbx_env;\n"
-         f"  int tbx_warned[{max(n_assert, 1)}];\n"),
+         f"  int tbx_warned[{max(n_assert, 1)}];\n  int tbx_pending;\n"),
         ("    m->instance_name = instanceName;\n",
          "    m->instance_name = instanceName;\n    m->tbx_logger = logMessage;\n"
          "    m->tbx_env = instanceEnvironment;\n"),
         ("  // Zero index is negative: No event\n",
-         f"  for (i = 0; i < {max(n_assert, 1)}; ++i) m->tbx_warned[i] = 0;\n"
+         f"  for (i = 0; i < {max(n_assert, 1)}; ++i) m->tbx_warned[i] = 0;\n  m->tbx_pending = -1;\n"
          "  // Zero index is negative: No event\n"),
         ("FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n",
          "".join(glue) + "FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n"),
@@ -580,6 +606,11 @@ def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str,
          "  (void)noSetFMUStatePriorToCurrentPoint;\n  if (enterEventMode) *enterEventMode = fmi3False;\n"
          "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + check),
     ]
+    if em.asserts:
+        patches.append((
+            "  return fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n",
+            "  fmi3Status status = fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n"
+            "  if (status == fmi3OK) tbx_note_asserts((casadi_fmi_memory*)instance);\n  return status;\n"))
     for old, new in patches:
         if text.count(old) != 1:
             raise CompileError(
