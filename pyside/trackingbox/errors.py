@@ -38,6 +38,23 @@ class SimulationError(TrackingError, RuntimeError):
     """A simulation failed (solver failure, non-finite values)."""
 
 
+class AssertionFailed(SimulationError):
+    """A Modelica ``assert`` of level error failed during a simulation.
+
+    Attributes
+    ----------
+    message : str
+        The assert's message, as written in the model.
+    time : float
+        The simulation time (s) at which the failure was detected.
+    """
+
+    def __init__(self, message: str, time: float, where: str = "") -> None:
+        self.message = message
+        self.time = float(time)
+        super().__init__(f"assert failed{' in ' + where if where else ''} at t = {self.time:g} s: {message}")
+
+
 class EstimationError(TrackingError, RuntimeError):
     """Parameter estimation could not run or failed."""
 

@@ -28,11 +28,13 @@ with ``doStep``.
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import ctypes
 import logging
 import math
 import os
+import re
 import shutil
 import weakref
 import zipfile
@@ -47,7 +49,7 @@ import numpy.typing as npt
 import pandas as pd
 from fmpy.model_description import ModelDescription, ModelVariable
 
-from .errors import DataError, FMUError, SimulationError, unknown_name
+from .errors import AssertionFailed, DataError, FMUError, SimulationError, unknown_name
 
 log = logging.getLogger(__name__)
 
@@ -254,26 +256,66 @@ def read_info(path: str | Path) -> FMUInfo:
 # error translation
 # ---------------------------------------------------------------------------
 
-def _simulation_failure(what: str, cause: object) -> SimulationError:
+Messages = collections.deque  # (status, category, text) logged by an FMU, newest last
+
+_ASSERT_LOG = re.compile(r"assert failed at t = (\S+) s: (.*)", re.S)
+
+
+def _fmi3_logger(name: str, messages: Messages) -> Any:
+    """An FMI 3 log callback: keeps (status, category, message) and logs to Python logging."""
+
+    def log_message(env: Any, status: int, category: bytes | None, message: bytes | None) -> None:
+        text = (message or b"").decode("utf-8", errors="replace")
+        cat = (category or b"").decode("utf-8", errors="replace")
+        messages.append((int(status), cat, text))
+        # errors become exceptions (and the CLI's error line); log them only for -vv
+        level = logging.DEBUG if status >= 3 or status == 0 else logging.WARNING
+        log.log(level, "%s: %s", name, text)
+
+    return log_message
+
+
+def _simulation_failure(what: str, cause: object, messages: Messages | None = None, *,
+                        solver: bool = False) -> SimulationError:
     """The one place where a failure reported by an FMU or the solver becomes a :class:`SimulationError`.
 
     *what* says what failed, naming the FMU and the time (``"simulation of
     twin.fmu failed at t = 12 s"``); *cause* is the exception (or solver message)
-    that reported it. Every driver below raises through this function, so a
-    finer classification of FMU failures belongs here.
+    that reported it; *messages* are what the FMU logged (FMI 3). A failed
+    ``assert`` the FMU logged becomes :class:`AssertionFailed` with the model's
+    message and time; otherwise the FMU's last logged error is added to the text.
+    With *solver* (the integrator failed), an assert the FMU saw failing at a
+    trial point of the failed step (category ``assert-trial``) is the cause.
+    Every driver below raises through this function.
     """
+    for status, category, text in reversed(messages or ()):
+        if solver and category == "assert-trial":
+            found = _ASSERT_LOG.match(text)
+            if found:
+                return AssertionFailed(found.group(2), float(found.group(1)), _fmu_name(what))
+        if status < 3:
+            continue
+        found = _ASSERT_LOG.match(text)
+        if found:
+            return AssertionFailed(found.group(2), float(found.group(1)), _fmu_name(what))
+        return SimulationError(f"{what}: {cause}: {text}")
     return SimulationError(f"{what}: {cause}")
 
 
+def _fmu_name(what: str) -> str:
+    found = re.search(r"(\S+\.fmu)", what)
+    return found.group(1) if found else "the FMU"
+
+
 @contextlib.contextmanager
-def _fmu_calls(what: str) -> Iterator[None]:
+def _fmu_calls(what: str, messages: Messages | None = None) -> Iterator[None]:
     """Translate any exception of the FMU calls in the body (ours pass unchanged); see :func:`_simulation_failure`."""
     try:
         yield
     except (FMUError, SimulationError):
         raise
     except Exception as exc:
-        raise _simulation_failure(what, exc) from None
+        raise _simulation_failure(what, exc, messages) from None
 
 
 # ---------------------------------------------------------------------------
@@ -481,6 +523,8 @@ class FMUModel:
         for v in md.modelVariables:
             self._vars.setdefault(v.name, v)
         self._holder: dict[str, Any] = {}
+        #: what the FMU logged (FMI 3), newest last: error reports read failed asserts from it
+        self.log_messages: Messages = collections.deque(maxlen=20)
         self._tempdir: str | None = None
         try:
             self._tempdir = str(fmpy.extract(str(self.path)))
@@ -490,7 +534,10 @@ class FMUModel:
         try:
             from fmpy.simulation import instantiate_fmu
 
-            fmu = instantiate_fmu(self._tempdir, md, fmi_type=interface)
+            # FMI 3: the FMU's log goes to Python logging and is kept for error reports (asserts)
+            logger = (_fmi3_logger(self.path.name, self.log_messages)
+                      if self.info.fmi_version.startswith("3") else None)
+            fmu = instantiate_fmu(self._tempdir, md, fmi_type=interface, logger=logger)
         except Exception as exc:
             self._finalizer()
             raise FMUError(f"FMU {self.path} could not be loaded and instantiated: {exc}") from None
@@ -854,7 +901,8 @@ class Stepper:
         early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
                       or v.causality == "input"})
         late = {n: parameters[n] for n, v in variables.items() if n not in early}
-        with _fmu_calls(f"initialisation of {model.path.name} at t = {self.time:g} s failed"):
+        model.log_messages.clear()
+        with _fmu_calls(f"initialisation of {model.path.name} at t = {self.time:g} s failed", model.log_messages):
             self._set_values(early)
             self._fmi.enter_initialization_mode(tolerance=model.tolerance, start_time=self.time)
             self._set_values(late)
@@ -930,7 +978,8 @@ class Stepper:
                            f"{v.variability} {v.causality}; only tunable parameters and inputs can be set "
                            "between steps")
         self._drop_inputs(set(values))
-        with _fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed"):
+        with _fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed",
+                        self.model.log_messages):
             self._apply_set(values, params)
         self.model.note_changed(n for n in values if self.model.variable(n).causality == "parameter")
         self._last_set.update(values)
@@ -970,7 +1019,7 @@ class CoSimulationStepper(Stepper):
 
     def _advance(self, t_next: float) -> None:
         with _fmu_calls(f"simulation of {self.model.path.name} failed in the step from "
-                        f"t = {self.time:g} s to t = {t_next:g} s"):
+                        f"t = {self.time:g} s to t = {t_next:g} s", self.model.log_messages):
             self._apply_inputs(self.time)
             result = self._fmu.doStep(currentCommunicationPoint=self.time,
                                       communicationStepSize=t_next - self.time)
@@ -1114,9 +1163,11 @@ class ModelExchangeStepper(Stepper):
                 if solver.callback_error is None and info and len(info) > 3:
                     cause = str(info[3]).strip()
                 raise _simulation_failure(f"solver failed in {self.model.path.name} between "
-                                          f"t = {self.time:g} s and t = {target:g} s", cause) from None
+                                          f"t = {self.time:g} s and t = {target:g} s", cause,
+                                          self.model.log_messages, solver=True) from None
             self.time = float(t_ret)
-            with _fmu_calls(f"simulation of {self.model.path.name} failed at t = {self.time:g} s"):
+            with _fmu_calls(f"simulation of {self.model.path.name} failed at t = {self.time:g} s",
+                            self.model.log_messages):
                 self._set_time(self.time)
                 step_event = False
                 if needs_completed:

@@ -16,10 +16,31 @@ stand at each right-hand-side call: there is no event detection, so the
 integrator crosses a switch like any other steep change. ``noEvent`` and
 ``smooth`` are therefore accepted and change nothing.
 
+``assert(condition, message, level)`` in equation sections and in the
+algorithm bodies of inlined functions becomes an :class:`Assertion` (a
+condition in the model's variables, its message and level; an assert inside
+an ``if`` branch of a function holds only where the branch is taken). The
+exported FMU evaluates every condition when it leaves initialisation mode,
+after each event (e.g. a parameter change) and at each completed integrator
+step: a failing error-level assert makes the call return ``fmi3Error`` after
+logging ``assert failed at t = ... s: message`` (category ``assert``); a
+warning-level one logs a warning once per violation and the run goes on.
+
+``initial equation`` sections are solved when the FMU leaves initialisation
+mode (:class:`InitialSystem`): the unknowns are the states that are not
+``fixed = true`` and the parameters declared ``fixed = false``; the equations
+are the initial equations, in which ``der(x)`` and the algebraic variables are
+replaced by their causalised expressions, plus ``x = start`` for states with
+``fixed = true``. If there are fewer equations than unknowns, states that no
+initial equation mentions keep their start values. The system is solved by
+a Newton rootfinder compiled into the FMU, from the start values as guesses
+and with the parameters as the user set them. Models without initial
+equations are exported exactly as before.
+
 Anything else (when-clauses, algorithm sections in models, discrete variables,
-``pre``/``edge``/``sample``/``reinit``, external functions, initial equations
-other than start values) raises :class:`UnsupportedConstructError` naming the
-construct and where it stands.
+``pre``/``edge``/``sample``/``reinit``/``initial()``/``terminal()``, initial
+algorithm sections, external functions) raises
+:class:`UnsupportedConstructError` naming the construct and where it stands.
 """
 from __future__ import annotations
 
@@ -63,6 +84,34 @@ class ScalarVar:
     value: Any = None  # evaluated value for structural/constant
 
 
+@dataclass(frozen=True)
+class Assertion:
+    """One ``assert(condition, message, level)`` of the model or of an inlined function."""
+
+    condition: ca.MX  # 1 where the assert holds, 0 where it fails
+    message: str
+    level: str  # "error" | "warning"
+    origin: str
+
+
+@dataclass(frozen=True)
+class InitialSystem:
+    """The initialisation problem solved when the FMU leaves initialisation mode.
+
+    ``residual`` (one entry per equation) is expressed in ``unknowns`` (free
+    states, then ``fixed = false`` parameters) and ``knowns`` (time,
+    parameters, inputs, fixed states); no algebraic variable or derivative
+    is left in it.
+    """
+
+    unknowns: list[ca.MX]
+    knowns: list[ca.MX]
+    residual: list[ca.MX]
+    free_states: list[str]
+    computed_parameters: list[str]
+    origins: list[str]
+
+
 @dataclass
 class ExplicitModel:
     """The causalised model, ready for FMU export.
@@ -86,6 +135,8 @@ class ExplicitModel:
     loop_sizes: list[int] = field(default_factory=list)
     unused_parameters: list[str] = field(default_factory=list)
     torn_sizes: list[tuple[int, int]] = field(default_factory=list)
+    asserts: list[Assertion] = field(default_factory=list)
+    initial: InitialSystem | None = None
 
 
 def _kind_of(node: Any) -> tuple[str, Any]:
@@ -140,6 +191,8 @@ class FlatTranslator:
         self.der_placeholders: dict[str, ca.MX] = {}
         self._evaluating: set[str] = set()
         self._inline_depth = 0
+        self.asserts: list[Assertion] = []
+        self._guards: list[Any] = []  # conditions of the function if-branches being inlined
 
     # ------------------------------------------------------------------ errors
     def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
@@ -164,11 +217,6 @@ class FlatTranslator:
             raise self.unsupported("algorithm section in a model", r"\balgorithm\b")
         if flat.get("initial_algorithms"):
             raise self.unsupported("initial algorithm section", r"\binitial\s+algorithm\b")
-        if flat.get("initial_equations"):
-            raise self.unsupported(
-                "initial equation section", r"\binitial\s+equation\b",
-                "set start values with fixed = true instead",
-            )
         for fname, fn in self.functions.items():
             if fn.get("external"):
                 raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
@@ -542,6 +590,8 @@ class FlatTranslator:
                 self._if_statement(body, env, fname)
             elif kind == "For":
                 self._for_statement(body, env, fname)
+            elif kind == "Assert":
+                self.add_assert(body, env, f"function {fname}")
             else:
                 pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
                 raise self.unsupported(f"{kind.lower()} statement in function {fname!r}", pattern)
@@ -550,6 +600,7 @@ class FlatTranslator:
         blocks = body.get("cond_blocks") or body.get("branches") or []
         else_block = body.get("else_block") or body.get("else_branch") or []
         conds_and_envs = []
+        prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
         for blk in blocks:
             if isinstance(blk, dict):
                 cond_node, stmts = blk.get("cond"), blk.get("stmts", blk.get("body", []))
@@ -559,16 +610,17 @@ class FlatTranslator:
             if _num(cond):
                 if bool(cond):
                     branch_env = dict(env)
-                    self._statements(stmts, branch_env, fname)
+                    self._guarded(_branch_guard(None, prior), stmts, branch_env, fname)
                     conds_and_envs.append((True, branch_env))
                     break
                 continue
             branch_env = dict(env)
-            self._statements(stmts, branch_env, fname)
+            self._guarded(_branch_guard(cond, prior), stmts, branch_env, fname)
+            prior.append(cond)
             conds_and_envs.append((cond, branch_env))
         else:
             final_env = dict(env)
-            self._statements(else_block or [], final_env, fname)
+            self._guarded(_branch_guard(None, prior), else_block or [], final_env, fname)
             conds_and_envs.append((True, final_env))
         # merge from the last branch backwards
         merged = conds_and_envs[-1][1]
@@ -587,6 +639,74 @@ class FlatTranslator:
         env.clear()
         env.update(merged)
 
+    def _guarded(self, guard: Any, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
+        if guard is not None:
+            self._guards.append(guard)
+        try:
+            self._statements(stmts, env, fname)
+        finally:
+            if guard is not None:
+                self._guards.pop()
+
+    # ------------------------------------------------------------- asserts
+    def add_assert(self, body: dict[str, Any], env: dict[str, Value] | None, origin: str) -> None:
+        """Record ``assert(condition, message, level)``; *env* is a function's environment."""
+        message = self._message_text(body.get("message"), env)
+        cond = self.expr(body["condition"], env)
+        if isinstance(cond, np.ndarray):
+            raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is an array")
+        if _num(cond) and not isinstance(cond, (bool, np.bool_)):
+            raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is the "
+                               f"number {cond!r}, not a Boolean")
+        level = "error"
+        if body.get("level") is not None:
+            lv = self.expr(body["level"], env)  # AssertionLevel.warning = 1, error = 2
+            if not _num(lv):  # rumoca already refuses this (MLS 8.3.7); kept as a clear error
+                raise CompileError(f"the level of assert({message!r}) in {origin} of {self.model} "
+                                   "is not a constant")
+            level = "warning" if int(lv) == 1 else "error"
+        self._record_assert(cond, message, level, origin)
+
+    def _record_assert(self, cond: Any, message: str, level: str, origin: str) -> None:
+        for guard in self._guards:  # an assert in a function's if-branch only counts where it is taken
+            cond = ca.logic_or(_not(guard), cond) if not _num(cond) or not bool(cond) else cond
+        if _num(cond):
+            cond = ca.MX(1.0 if bool(cond) else 0.0)
+        elif not isinstance(cond, ca.MX):
+            cond = ca.MX(cond)
+        self.asserts.append(Assertion(condition=ca.if_else(cond, 1.0, 0.0), message=message,
+                                      level=level, origin=origin))
+
+    def _message_text(self, node: Any, env: dict[str, Value] | None) -> str:
+        """The text of an assert message: literals and constant ``String(...)`` parts; others as ``<...>``."""
+        kind, body = _kind_of(node)
+        if node is None:
+            return "assertion failed"
+        if kind == "Literal":
+            val = body.get("value") or {}
+            if isinstance(val, dict) and "String" in val:
+                return str(val["String"])
+            raise CompileError(f"the message of an assert in {self.model} is {_literal_text(val)}, not a String")
+        if kind == "Parenthesized":
+            return self._message_text(body.get("expr", body.get("inner")), env)
+        if kind == "Binary" and str(body.get("op")) in ("Add", "AddElem"):
+            return self._message_text(body["lhs"], env) + self._message_text(body["rhs"], env)
+        if kind == "VarRef":
+            name = body["name"]["name"]
+            sv = self.scalars.get(name)
+            if sv is not None and sv.type == STRING:
+                return str(sv.value)
+        try:
+            args = (body.get("args") or []) if isinstance(body, dict) else []
+            fn = str(body.get("function") or (body.get("name") or {}).get("name", "")) if isinstance(body, dict) else ""
+            if fn.lower() == "string" and args:
+                val = self.expr(args[0], env)
+                if _num(val):
+                    return f"{float(val):g}" if not isinstance(val, (bool, np.bool_)) else str(bool(val)).lower()
+        except CompileError:
+            pass
+        return "<...>"
+
     def _for_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
         indices = body.get("indices") or []
         if len(indices) != 1:
@@ -604,10 +724,18 @@ class FlatTranslator:
         self.collect_variables()
         # Real parameters: tunable (value does not depend on other parameters) or calculated.
         params, calculated, calc_eqs = [], [], []
+        computed: list[ScalarVar] = []  # parameters with fixed = false, solved at initialisation
+        init_residuals: list[tuple[ca.MX, str]] = []
         for sv in self.scalars.values():
             if sv.kind != "parameter":
                 continue
             node = sv.binding_node
+            if sv.fixed is False:
+                params.append(sv)
+                computed.append(sv)
+                if node is not None:  # the binding of a fixed = false parameter is an initial equation
+                    init_residuals.append((sv.sym - self._element(sv, node), f"binding of parameter {sv.name}"))
+                continue
             if node is None:
                 params.append(sv)
                 continue
@@ -617,6 +745,9 @@ class FlatTranslator:
             else:
                 calculated.append(sv)
                 calc_eqs.append((sv.sym - val, f"binding of parameter {sv.name}"))
+        for sv in computed:  # the start value is the guess; the binding (if any) is an initial equation
+            sv.value = 0.0 if sv.start_node is None else self.numeric(
+                self._element(sv, sv.start_node), f"start value of parameter {sv.name!r}")
         for sv in params:
             self.parameter_start(sv)
         residuals: list[tuple[ca.MX, str]] = list(calc_eqs)
@@ -634,8 +765,27 @@ class FlatTranslator:
             if sv.kind == "continuous" and sv.binding_node is not None:
                 residuals.append((sv.sym - self._element(sv, sv.binding_node), f"binding of {sv.name}"))
 
+        for a in self.flat.get("assert_equations") or []:
+            self.add_assert(a, None, f"equation {self._where(a.get('origin'))}")
+        for a in self.flat.get("initial_assert_equations") or []:
+            self.add_assert(a, None, f"initial equation {self._where(a.get('origin'))}")
+
         states = [self.scalars[n] for n in self.der_placeholders]
         state_names = set(self.der_placeholders)
+        for eq in self.flat.get("initial_equations") or []:
+            origin = f"initial equation {self._where(eq.get('origin'))}"
+            val = self.expr(eq["residual"])
+            for r in (val.ravel() if isinstance(val, np.ndarray) else [val]):
+                if _num(r):
+                    if abs(float(r)) > 0:
+                        raise CompileError(f"{origin} in {self.model} reduces to {r} = 0")
+                    continue
+                init_residuals.append((r, origin))
+        extra = [n for n in self.der_placeholders if n not in state_names]
+        if extra:
+            raise self.unsupported(
+                f"der({extra[0]}) in an initial equation, where {extra[0]} is not a state "
+                "(no equation of the model differentiates it)", r"\binitial\s+equation\b")
         algebraics = [sv for sv in self.scalars.values() if sv.kind == "continuous" and sv.name not in state_names]
         unknowns: list[ca.MX] = [self.der_placeholders[s.name] for s in states]
         unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
@@ -682,14 +832,102 @@ class FlatTranslator:
         # A parameter that no equation uses (e.g. one that only sets start values) would be a
         # tunable parameter with no effect: the FMU's states start from fixed numbers, so it is
         # not exported; set the state's own start value instead.
-        used = {s.name() for s in ca.symvar(ca.vertcat(*[e for _, e in assignments]))} if assignments else set()
+        initial = None
+        if init_residuals or computed:
+            initial = self._initial_system(init_residuals, states, computed, assignments)
+        asserts = self._unique_asserts()
+        exprs = [e for _, e in assignments] + [a.condition for a in asserts]
+        if initial is not None:
+            exprs += initial.residual
+        used = {s.name() for s in ca.symvar(ca.vertcat(*exprs))} if exprs else set()
+        used |= {sv.name for sv in computed}
         unused = [sv.name for sv in params if sv.name not in used]
         params = [sv for sv in params if sv.name in used]
         return ExplicitModel(
+            asserts=asserts, initial=initial,
             name=self.model, time=self.time, parameters=params, calculated=calculated, unused_parameters=unused,
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
+        )
+
+    def _where(self, origin: Any) -> str:
+        text = _origin_text(origin)
+        return f"of {self.model}" if text == "of component (top level)" else text
+
+    def _unique_asserts(self) -> list[Assertion]:
+        """The asserts, each once (a function inlined twice with the same arguments asserts once)."""
+        seen: set[tuple[str, str, str]] = set()
+        out = []
+        for a in self.asserts:
+            key = (a.message, a.level, str(a.condition))
+            if key not in seen:
+                seen.add(key)
+                out.append(a)
+        return out
+
+    def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
+                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]]) -> InitialSystem:
+        """Build the initialisation problem (see the module docstring)."""
+        mentioned: set[str] = set()
+        for r, _ in residuals:
+            for sym in ca.symvar(r):
+                name = sym.name()
+                mentioned.add(name[4:-1] if name.startswith("der(") and name.endswith(")") else name)
+        free = [s for s in states if s.fixed is not True]
+        if len(residuals) < len(free) + len(computed):
+            kept = []
+            for s in list(free):
+                if len(residuals) >= len(free) + len(computed):
+                    break
+                if s.name not in mentioned:
+                    free.remove(s)
+                    kept.append(s.name)
+            if kept:
+                log.info("%s: states kept at their start values at initialisation (no initial equation "
+                         "for them): %s", self.model, ", ".join(kept))
+        n_unknowns = len(free) + len(computed)
+        if len(residuals) != n_unknowns:
+            what = []
+            if free:
+                what.append("states " + ", ".join(s.name for s in free))
+            if computed:
+                what.append("parameters with fixed = false " + ", ".join(s.name for s in computed))
+            raise CompileError(
+                f"the initialisation problem of {self.model} has {len(residuals)} equations for {n_unknowns} "
+                f"unknowns ({'; '.join(what) or 'none'}); "
+                + ("add initial equations or set fixed = true on start values"
+                   if len(residuals) < n_unknowns else
+                   "remove initial equations, or fixed = true from the start values they conflict with")
+            )
+        exprs = [r for r, _ in residuals]
+        # replace derivatives and algebraic variables by their causalised expressions, latest first
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        unknowns = [s.sym for s in free] + [s.sym for s in computed]
+        unknown_names = [u.name() for u in unknowns]
+        position = {n: i for i, n in enumerate(unknown_names)}
+        knowns: dict[str, ca.MX] = {}
+        for e in exprs:
+            for sym in ca.symvar(e):
+                if sym.name() not in position:
+                    knowns.setdefault(sym.name(), sym)
+        incidence = [sorted({position[s.name()] for s in ca.symvar(e) if s.name() in position}) for e in exprs]
+        try:
+            blt(incidence, len(unknowns))
+        except StructuralError as exc:
+            eqs = sorted({residuals[i][1] for i in exc.equations})[:8]
+            unk = [unknown_names[j] for j in exc.unknowns][:8]
+            raise CompileError(
+                f"the initialisation problem of {self.model} is structurally singular"
+                + (f"; not determined by the initial equations: {', '.join(unk)}" if unk else "")
+                + (f"; equations with no unknown left, from: {', '.join(eqs)}" if eqs else "")
+            ) from None
+        return InitialSystem(
+            unknowns=unknowns, knowns=[knowns[n] for n in sorted(knowns)], residual=list(exprs),
+            free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
+            origins=[o for _, o in residuals],
         )
 
     def _tear(self, res: list[ca.MX], unk: list[ca.MX]) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
@@ -788,6 +1026,21 @@ class FlatTranslator:
         if eqs and n_eq != n_unk or (eqs and unk):
             parts.append("equations with no variable left to solve for, from: " + ", ".join(eqs))
         return "; ".join(parts)
+
+
+def _literal_text(val: Any) -> str:
+    if isinstance(val, dict) and len(val) == 1:
+        kind, v = next(iter(val.items()))
+        return f"the {kind} {v!r}"
+    return repr(val)
+
+
+def _branch_guard(cond: Any, prior: list[Any]) -> Any:
+    """The condition under which an if-branch is taken: *cond* and none of the *prior* ones."""
+    guard = None if cond is None else cond
+    for p in prior:
+        guard = _not(p) if guard is None else ca.logic_and(guard, _not(p))
+    return guard
 
 
 def _origin_text(origin: Any) -> str:

@@ -10,6 +10,30 @@ headers that fmpy ships, then tidy the model description:
 * CasADi's internal ``__assign__*`` helper variables are dropped;
 * units used by variables are declared in ``UnitDefinitions``;
 * the model's ``experiment`` annotation becomes ``DefaultExperiment``.
+
+Models with asserts or initial equations get a small runtime (only they: an
+FMU of a model without either is exactly what CasADi exports, with the
+``fmi3SetTime`` fix). The assert conditions and the initialisation solve are
+separate CasADi functions, generated as ``tbx_runtime.c`` (its own translation
+unit) and called from patched FMI functions of the wrapper:
+
+* ``fmi3ExitInitializationMode`` solves the initial equations (Newton, from the
+  current values of the unknowns as guesses and with the parameters as set)
+  and writes the states and ``fixed = false`` parameters; a residual left above
+  1e-6 fails the call with a logged message (category ``init``);
+* ``fmi3ExitInitializationMode``, ``fmi3EnterContinuousTimeMode`` (after every
+  event, e.g. a parameter change) and ``fmi3CompletedIntegratorStep`` check the
+  asserts: a failing error-level assert logs ``assert failed at t = T s:
+  message`` (category ``assert``, status error) through the FMI logger and the
+  call returns ``fmi3Error``; a warning-level assert logs once per violation;
+* ``fmi3GetContinuousStateDerivatives`` (the solver's trial points) only notes
+  the first failing error-level assert (category ``assert-trial``, status OK),
+  so that an importer whose solver then fails can name the assert; a completed
+  step clears the note.
+
+Asserts are checked at the points the importer completes a step (for
+:class:`trackingbox.fmu.Stepper`: every communication point), not at the
+solver's internal steps.
 """
 from __future__ import annotations
 
@@ -27,7 +51,7 @@ from pathlib import Path
 import casadi as ca
 
 from ..errors import CompileError
-from .flatten import ExplicitModel, ScalarVar
+from .flatten import ExplicitModel, InitialSystem, ScalarVar
 
 log = logging.getLogger(__name__)
 
@@ -156,6 +180,14 @@ def export_fmu(
         for name in sources:
             if name.endswith("_wrap.c"):
                 _patch_set_time(tmpdir / name)
+        extra_sources: list[str] = []
+        if em.asserts or em.initial is not None:
+            wrapper = next(tmpdir / name for name in sources if name.endswith("_wrap.c"))
+            refs = _value_references((tmpdir / "modelDescription.xml").read_text())
+            runtime = _add_runtime(em, wrapper, tmpdir, refs)
+            extra_sources.append(runtime)
+            files[runtime] = f"sources/{runtime}"
+            _add_build_source(tmpdir / "buildDescription.xml", runtime)
         unity = tmpdir / f"{ident}_unity.c"
         unity.write_text("".join(f'#include "{name}"\n' for name in sorted(sources)))
         libdir = tmpdir / "binaries" / "x86_64-linux"
@@ -165,7 +197,7 @@ def export_fmu(
         if shutil.which(cc) is None:
             raise CompileError(f"no C compiler: {cc!r} not found on PATH (set CC or install gcc)")
         cmd = [cc, optimize, "-shared", "-fPIC", "-I", str(_fmi_headers()), "-I", str(tmpdir),
-               "-o", str(lib), str(unity), "-lm"]
+               "-o", str(lib), str(unity), *[str(tmpdir / name) for name in extra_sources], "-lm"]
         log.debug("compiling FMU binary: %s", shlex.join(cmd))
         proc = subprocess.run(cmd, capture_output=True, text=True)
         logs.append("$ " + shlex.join(cmd) + "\n" + proc.stdout + proc.stderr)
@@ -173,7 +205,8 @@ def export_fmu(
             raise CompileError(f"C compilation of {em.name} failed:\n{proc.stderr[-4000:]}")
         md_path = tmpdir / "modelDescription.xml"
         md_path.write_text(
-            _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description)
+            _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
+                                    initial=em.initial)
         )
         output.parent.mkdir(parents=True, exist_ok=True)
         fd, part = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part", dir=output.parent)
@@ -218,6 +251,7 @@ def _tidy_model_description(
     model: str,
     experiment: dict[str, float] | None,
     description: str | None,
+    initial: InitialSystem | None = None,
 ) -> str:
     root = ET.fromstring(xml)
     root.set("modelName", model)
@@ -238,11 +272,37 @@ def _tidy_model_description(
         if name in exposed and causality.get(name) == "local" and var.get("causality") == "output":
             del var.attrib["causality"]
             demoted.add(var.get("valueReference", ""))
+        if initial is not None and name in initial.computed_parameters:
+            # fixed = false: computed by the initial equations, not set by the user
+            var.set("causality", "calculatedParameter")
+            var.set("variability", "fixed")
+            var.set("initial", "calculated")
+            var.attrib.pop("start", None)
+        elif initial is not None and name in initial.free_states:
+            var.set("initial", "approx")  # the start value is a guess for the initial equations
         if var.get("unit"):
             units.add(var.get("unit", ""))
     for elem in list(structure):
         if elem.tag in ("Output", "InitialUnknown") and elem.get("valueReference") in demoted:
             structure.remove(elem)
+    if initial is not None:
+        # the initial equations make the free states and fixed = false parameters initial unknowns;
+        # every initial unknown may then depend on every known (no dependencies attribute)
+        computed = set(initial.free_states) | set(initial.computed_parameters)
+        new_vrs = sorted(int(var.get("valueReference", "0")) for var in variables if var.get("name") in computed)
+        listed = set()
+        for elem in structure:
+            if elem.tag == "InitialUnknown":
+                elem.attrib.pop("dependencies", None)
+                elem.attrib.pop("dependenciesKind", None)
+                listed.add(int(elem.get("valueReference", "0")))
+        kinds = [c.tag for c in structure]
+        at = max((i + 1 for i, k in enumerate(kinds) if k in ("Output", "ContinuousStateDerivative",
+                                                               "ClockedState", "InitialUnknown")), default=0)
+        for vr in new_vrs:
+            if vr not in listed:
+                structure.insert(at, ET.Element("InitialUnknown", {"valueReference": str(vr)}))
+                at += 1
     children = list(root)
     insert_at = next((i for i, c in enumerate(children) if c.tag == "ModelVariables"), len(children))
     if experiment:
@@ -263,3 +323,309 @@ def _tidy_model_description(
         root.insert(me_index + 1, unit_defs)
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+# ---------------------------------------------------------------------------
+# runtime: asserts and initial equations
+# ---------------------------------------------------------------------------
+
+#: the largest residual of an initial equation accepted after the Newton solve
+INIT_TOLERANCE = 1e-6
+
+_TIME_VR = -1  # marks the time in the runtime's tables of value references
+
+
+def _value_references(xml: str) -> dict[str, int]:
+    root = ET.fromstring(xml)
+    variables = root.find("ModelVariables")
+    refs: dict[str, int] = {}
+    for var in (variables if variables is not None else []):
+        refs[var.get("name", "")] = int(var.get("valueReference", "0"))
+    return refs
+
+
+def _c_string(text: str) -> str:
+    """A C string literal of *text* (UTF-8, every byte outside printable ASCII as an octal escape)."""
+    out = []
+    for byte in text.encode("utf-8"):
+        ch = chr(byte)
+        if ch in '"\\':
+            out.append("\\" + ch)
+        elif 32 <= byte < 127 and ch != "?":
+            out.append(ch)
+        else:
+            out.append(f"\\{byte:03o}")
+    return '"' + "".join(out) + '"'
+
+
+def _c_array(ctype: str, name: str, values: list[str]) -> str:
+    body = ", ".join(values) if values else "0"
+    return f"static const {ctype} {name}[{max(len(values), 1)}] = {{{body}}};\n"
+
+
+def _vrs(syms: list[ca.MX], refs: dict[str, int], model: str, what: str) -> list[str]:
+    out = []
+    for sym in syms:
+        name = sym.name()
+        if name == "time":
+            out.append(str(_TIME_VR))
+        elif name in refs:
+            out.append(str(refs[name]))
+        else:
+            raise CompileError(f"{what} of {model} uses {name!r}, which the exported FMU does not have")
+    return out
+
+
+def _work_defines(prefix: str, fn: ca.Function) -> str:
+    return (f"#define {prefix}_SZ_ARG {fn.sz_arg()}\n#define {prefix}_SZ_RES {fn.sz_res()}\n"
+            f"#define {prefix}_SZ_IW {fn.sz_iw()}\n#define {prefix}_SZ_W {fn.sz_w()}\n")
+
+
+_CALL = """
+static int tbx_call_%(fn)s(const casadi_real** arg, casadi_real** res) {
+  casadi_int* iw = (casadi_int*)malloc(sizeof(casadi_int) * (%(P)s_SZ_IW + 1));
+  casadi_real* w = (casadi_real*)malloc(sizeof(casadi_real) * (%(P)s_SZ_W + 1));
+  int mem, flag = 1;
+  if (iw && w) {
+    mem = %(fn)s_checkout();
+    flag = %(fn)s(arg, res, iw, w, mem);
+    %(fn)s_release(mem);
+  }
+  free(iw);
+  free(w);
+  return flag;
+}
+"""
+
+_COMMON = """
+/* trackingbox runtime: asserts and initial equations (generated by trackingbox.compiler.fmi_export) */
+#include <stdio.h>
+#include <stdlib.h>
+#include <math.h>
+static double tbx_value(casadi_fmi_memory* m, long vr) {
+  return vr < 0 ? m->t : m->v[var_offset[vr]];
+}
+static void tbx_log(casadi_fmi_memory* m, fmi3Status status, const char* category, const char* text) {
+  if (m->tbx_logger) m->tbx_logger(m->tbx_env, status, category, text);
+}
+"""
+
+_ASSERTS = """
+static int tbx_eval_asserts(casadi_fmi_memory* m, casadi_real* c) {
+  casadi_real win[TBX_A_NW + 1];
+  const casadi_real* arg[TBX_A_SZ_ARG + 1];
+  casadi_real* res[TBX_A_SZ_RES + 1];
+  size_t i;
+  if (!m->up_to_date) {
+    if (evaluate(m)) return 1;
+    m->up_to_date = 1;
+  }
+  for (i = 0; i < TBX_A_NW; ++i) win[i] = tbx_value(m, tbx_a_vr[i]);
+  arg[0] = win;
+  res[0] = c;
+  return tbx_call_tbx_asserts(arg, res);
+}
+/* At the solver's trial points (derivative calls) a failing error-level assert is only noted
+   (category assert-trial, status OK): the step may be rejected. If the solver then fails, the
+   importer can report the assert; a completed step clears the note. */
+static void tbx_note_asserts(casadi_fmi_memory* m) {
+  casadi_real c[TBX_N_ASSERT + 1];
+  char text[1400];
+  int k;
+  if (m->tbx_pending >= 0 || tbx_eval_asserts(m, c)) return;
+  for (k = 0; k < TBX_N_ASSERT; ++k) {
+    if (tbx_a_error[k] && !(c[k] > 0.5)) {
+      m->tbx_pending = k;
+      snprintf(text, sizeof text, "assert failed at t = %.17g s: %s", m->t, tbx_a_message[k]);
+      tbx_log(m, fmi3OK, "assert-trial", text);
+      return;
+    }
+  }
+}
+static fmi3Status tbx_check_asserts(casadi_fmi_memory* m) {
+  casadi_real c[TBX_N_ASSERT + 1];
+  char text[1400];
+  int k;
+  if (tbx_eval_asserts(m, c)) return fmi3Error;
+  m->tbx_pending = -1;
+  for (k = 0; k < TBX_N_ASSERT; ++k) {
+    if (c[k] > 0.5) {
+      m->tbx_warned[k] = 0;
+      continue;
+    }
+    if (tbx_a_error[k]) {
+      snprintf(text, sizeof text, "assert failed at t = %.17g s: %s", m->t, tbx_a_message[k]);
+      tbx_log(m, fmi3Error, "assert", text);
+      return fmi3Error;
+    }
+    if (!m->tbx_warned[k]) {
+      snprintf(text, sizeof text, "assert warning at t = %.17g s: %s", m->t, tbx_a_message[k]);
+      tbx_log(m, fmi3Warning, "assert", text);
+      m->tbx_warned[k] = 1;
+    }
+  }
+  return fmi3OK;
+}
+"""
+
+_INIT = """
+static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
+  casadi_real z0[TBX_I_NZ + 1], wk[TBX_I_NK + 1], z[TBX_I_NZ + 1], r[TBX_I_NZ + 1];
+  const casadi_real* arg[TBX_I_SZ_ARG + 1];
+  casadi_real* res[TBX_I_SZ_RES + 1];
+  char text[1400];
+  size_t i, worst = 0;
+  for (i = 0; i < TBX_I_NZ; ++i) z0[i] = m->v[var_offset[tbx_i_unknown_vr[i]]];
+  for (i = 0; i < TBX_I_NK; ++i) wk[i] = tbx_value(m, tbx_i_known_vr[i]);
+  arg[0] = z0;
+  arg[1] = wk;
+  res[0] = z;
+  res[1] = r;
+  if (tbx_call_tbx_init(arg, res)) {
+    tbx_log(m, fmi3Error, "init", "initialisation failed: the Newton solve of the initial equations failed");
+    return fmi3Error;
+  }
+  for (i = 0; i < TBX_I_NZ; ++i) {
+    if (!(fabs(r[i]) <= fabs(r[worst])) || !isfinite(z[i])) worst = i;
+  }
+  for (i = 0; i < TBX_I_NZ; ++i) {
+    if (!(fabs(r[i]) <= TBX_I_TOL) || !isfinite(z[i])) {
+      snprintf(text, sizeof text, "initialisation failed at t = %.17g s: the initial equations have no "
+               "solution near the start values (residual %g of the %s)", m->t, r[worst], tbx_i_origin[worst]);
+      tbx_log(m, fmi3Error, "init", text);
+      return fmi3Error;
+    }
+  }
+  for (i = 0; i < TBX_I_NZ; ++i) m->v[var_offset[tbx_i_unknown_vr[i]]] = z[i];
+  m->up_to_date = 0;
+  return fmi3OK;
+}
+"""
+
+
+def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX], list[ca.MX]]:
+    """CasADi functions ``tbx_asserts(w) -> c`` and ``tbx_init(z0, wk) -> (z, r)``; their input symbols."""
+    functions: list[ca.Function] = []
+    assert_syms: list[ca.MX] = []
+    if em.asserts:
+        conds = [a.condition for a in em.asserts]
+        seen: dict[str, ca.MX] = {}
+        for c in conds:
+            for sym in ca.symvar(c):
+                seen.setdefault(sym.name(), sym)
+        assert_syms = [seen[n] for n in sorted(seen)]
+        w = ca.MX.sym("w", len(assert_syms))
+        body = ca.vertcat(*conds)
+        if assert_syms:
+            body = ca.substitute([body], assert_syms, [w[i] for i in range(len(assert_syms))])[0]
+        functions.append(ca.Function("tbx_asserts", [w], [body]))
+    known_syms: list[ca.MX] = []
+    if em.initial is not None:
+        init = em.initial
+        known_syms = list(init.knowns)
+        nz, nk = len(init.unknowns), len(known_syms)
+        z = ca.MX.sym("z", nz)
+        wk = ca.MX.sym("wk", nk)
+        g = ca.substitute([ca.vertcat(*init.residual)], init.unknowns + known_syms,
+                          [z[i] for i in range(nz)] + [wk[i] for i in range(nk)])[0]
+        newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
+                               {"abstol": 1e-12, "max_iter": 100})
+        residual = ca.Function("tbx_init_residual", [z, wk], [g])
+        z0 = ca.MX.sym("z0", nz)
+        zsol = newton(z0, wk)
+        functions.append(ca.Function("tbx_init", [z0, wk], [zsol, residual(zsol, wk)]))
+    return functions, assert_syms, known_syms
+
+
+def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, int]) -> str:
+    """Generate ``tbx_runtime.c`` and patch the wrapper to call it; return the new source's name."""
+    functions, assert_syms, known_syms = _runtime_functions(em)
+    name = "tbx_runtime.c"
+    gen = ca.CodeGenerator(name, {"with_header": False})
+    for fn in functions:
+        gen.add(fn)
+    gen.generate(str(tmpdir) + os.sep)
+    by_name = {fn.name(): fn for fn in functions}
+
+    n_assert = len(em.asserts)
+    glue = [_COMMON]
+    if em.asserts:
+        fn = by_name["tbx_asserts"]
+        glue.append(f"#define TBX_N_ASSERT {n_assert}\n#define TBX_A_NW {len(assert_syms)}\n")
+        glue.append(_work_defines("TBX_A", fn))
+        glue.append("int tbx_asserts(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
+                    "int mem);\nint tbx_asserts_checkout(void);\nvoid tbx_asserts_release(int mem);\n")
+        glue.append(_c_array("long", "tbx_a_vr", _vrs(assert_syms, refs, em.name, "an assert")))
+        glue.append(_c_array("char*", "tbx_a_message", [_c_string(a.message) for a in em.asserts]))
+        glue.append(_c_array("int", "tbx_a_error", ["1" if a.level == "error" else "0" for a in em.asserts]))
+        glue.append(_CALL % {"fn": "tbx_asserts", "P": "TBX_A"})
+        glue.append(_ASSERTS)
+    if em.initial is not None:
+        init = em.initial
+        fn = by_name["tbx_init"]
+        glue.append(f"#define TBX_I_NZ {len(init.unknowns)}\n#define TBX_I_NK {len(known_syms)}\n"
+                    f"#define TBX_I_TOL {INIT_TOLERANCE!r}\n")
+        glue.append(_work_defines("TBX_I", fn))
+        glue.append("int tbx_init(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
+                    "int mem);\nint tbx_init_checkout(void);\nvoid tbx_init_release(int mem);\n")
+        glue.append(_c_array("long", "tbx_i_unknown_vr", _vrs(init.unknowns, refs, em.name, "the initial equations")))
+        glue.append(_c_array("long", "tbx_i_known_vr", _vrs(known_syms, refs, em.name, "the initial equations")))
+        glue.append(_c_array("char*", "tbx_i_origin", [_c_string(o) for o in init.origins]))
+        glue.append(_CALL % {"fn": "tbx_init", "P": "TBX_I"})
+        glue.append(_INIT)
+
+    exit_body = ["  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n"]
+    if em.initial is not None:
+        exit_body.append("  if (tbx_initialize(m) != fmi3OK) return fmi3Error;\n")
+    exit_body.append("  return tbx_check_asserts(m);\n" if em.asserts else "  (void)m;\n  return fmi3OK;\n")
+    check = "  return tbx_check_asserts((casadi_fmi_memory*)instance);\n" if em.asserts else \
+            "  (void)instance;\n  return fmi3OK;\n"
+
+    text = wrapper.read_text()
+    patches = [
+        ("  const char* instance_name;\n",
+         "  const char* instance_name;\n  // trackingbox runtime: FMI logger and assert warning flags\n"
+         "  fmi3LogMessageCallback tbx_logger;\n  fmi3InstanceEnvironment tbx_env;\n"
+         f"  int tbx_warned[{max(n_assert, 1)}];\n  int tbx_pending;\n"),
+        ("    m->instance_name = instanceName;\n",
+         "    m->instance_name = instanceName;\n    m->tbx_logger = logMessage;\n"
+         "    m->tbx_env = instanceEnvironment;\n"),
+        ("  // Zero index is negative: No event\n",
+         f"  for (i = 0; i < {max(n_assert, 1)}; ++i) m->tbx_warned[i] = 0;\n  m->tbx_pending = -1;\n"
+         "  // Zero index is negative: No event\n"),
+        ("FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n",
+         "".join(glue) + "FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n"),
+        ("FMI3_Export fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {\n  // Unused variables\n"
+         "  (void)instance;  // unused\n  // Always successful return\n  return fmi3OK;\n}\n",
+         "FMI3_Export fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {\n"
+         + "".join(exit_body) + "}\n"),
+        ("FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n  // Unused variables\n"
+         "  (void)instance;  // unused\n  // Always successful return\n  return fmi3OK;\n}\n",
+         "FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n" + check + "}\n"),
+        ("  // We should not need this as there are no internal iterations\n  return fmi3OK;\n",
+         "  (void)noSetFMUStatePriorToCurrentPoint;\n  if (enterEventMode) *enterEventMode = fmi3False;\n"
+         "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + check),
+    ]
+    if em.asserts:
+        patches.append((
+            "  return fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n",
+            "  fmi3Status status = fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n"
+            "  if (status == fmi3OK) tbx_note_asserts((casadi_fmi_memory*)instance);\n  return status;\n"))
+    for old, new in patches:
+        if text.count(old) != 1:
+            raise CompileError(
+                f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): "
+                f"{old.strip().splitlines()[0]!r} not found once; the embedded path is pinned to casadi 3.8.2")
+        text = text.replace(old, new)
+    wrapper.write_text(text)
+    return name
+
+
+def _add_build_source(build_description: Path, source: str) -> None:
+    if not build_description.exists():
+        return
+    root = ET.fromstring(build_description.read_text())
+    for file_set in root.iter("SourceFileSet"):
+        ET.SubElement(file_set, "SourceFile", {"name": source})
+    ET.indent(root, space="    ")
+    build_description.write_text('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n")

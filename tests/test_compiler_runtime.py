@@ -1,0 +1,342 @@
+"""Runtime semantics of embedded-path FMUs: asserts and initial equations.
+
+Expectations are hand-computed: the steady state of a tank with a PI level
+controller solved on paper, the time at which ``x = t`` crosses an assert's
+bound, and the parameter an initial equation determines.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.validation import validate_fmu
+
+from trackingbox.cli import main
+from trackingbox.compiler import compile_model
+from trackingbox.errors import AssertionFailed, CompileError, SimulationError, UnsupportedConstructError
+from trackingbox.fmu import FMUModel
+
+pytestmark = pytest.mark.compile
+
+
+def build(tmp_path: Path, name: str, text: str) -> Path:
+    src = tmp_path / f"{name}.mo"
+    src.write_text(text)
+    return compile_model(src, name, backend="embedded", output=tmp_path / f"{name}.fmu").fmu
+
+
+# ---------------------------------------------------------------------------
+# initial equations: a tank with a PI controller on its outflow valve
+# ---------------------------------------------------------------------------
+
+TANK = """
+model TankPI "Tank level h held at hSet by a PI controller on the outflow valve"
+  parameter Real A = 2 "Tank cross-section (m2)";
+  parameter Real Cv = 0.4 "Valve coefficient (m2.5/s)";
+  parameter Real hSet = 1.5 "Level set-point (m)";
+  parameter Real Kp = 2 "Controller gain (1/m)";
+  parameter Real Ti = 10 "Integral time (s)";
+  input Real qIn(start = 0.5) "Inflow (m3/s)";
+  Real h(start = 0.2) "Level (m), a guess for the initialisation";
+  Real I(start = 0) "Integral of the control error (m.s)";
+  Real u "Valve opening";
+  output Real qOut "Outflow (m3/s)";
+equation
+  A*der(h) = qIn - qOut;
+  qOut = Cv*u*sqrt(h);
+  u = Kp*((h - hSet) + I/Ti);
+  der(I) = h - hSet;
+initial equation
+  der(h) = 0;
+  der(I) = 0;
+end TankPI;
+"""
+
+
+def tank_steady_state(qIn: float, Cv: float, hSet: float, Kp: float, Ti: float) -> tuple[float, float, float]:
+    """By hand: der(I) = 0 gives h = hSet; der(h) = 0 gives Cv*u*sqrt(hSet) = qIn, and u = Kp*I/Ti."""
+    u = qIn / (Cv * math.sqrt(hSet))
+    return hSet, Ti * u / Kp, u
+
+
+@pytest.fixture(scope="module")
+def tank_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build(tmp_path_factory.mktemp("tank"), "TankPI", TANK)
+
+
+def test_tank_starts_and_stays_at_hand_solved_steady_state(tank_fmu):
+    assert validate_fmu(str(tank_fmu)) == []
+    h0, i0, u0 = tank_steady_state(0.5, 0.4, 1.5, 2, 10)
+    names = ["h", "I", "u", "der(h)", "der(I)"]
+    with FMUModel(tank_fmu, tolerance=1e-10) as model:
+        df = model.simulate(stop_time=200, output_interval=10, parameters={"qIn": 0.5}, outputs=names)
+    first = df.iloc[0]
+    assert abs(first["der(h)"]) < 1e-8 and abs(first["der(I)"]) < 1e-8
+    assert np.isclose(first["h"], h0, rtol=1e-9) and np.isclose(first["I"], i0, rtol=1e-9)
+    assert np.isclose(first["u"], u0, rtol=1e-9)
+    # constant inflow: it stays there over the run
+    assert np.allclose(df["h"], h0, rtol=1e-7) and np.allclose(df["I"], i0, rtol=1e-7)
+    assert np.abs(df[["der(h)", "der(I)"]].to_numpy()).max() < 1e-8
+
+
+def test_tank_steady_state_moves_with_parameters_set_before_initialisation(tank_fmu):
+    h0, i0, _ = tank_steady_state(0.8, 0.3, 2.0, 2, 10)
+    with FMUModel(tank_fmu, tolerance=1e-10) as model:
+        df = model.simulate(stop_time=50, output_interval=10, parameters={"qIn": 0.8, "hSet": 2.0, "Cv": 0.3},
+                            outputs=["h", "I", "der(h)", "der(I)"])
+        # a later run with the defaults goes back to the first steady state (nothing kept from the last run)
+        back = model.simulate(stop_time=10, output_interval=10, parameters={"qIn": 0.5}, outputs=["h", "I"])
+    assert np.isclose(df["h"].iloc[0], h0, rtol=1e-9) and np.isclose(df["I"].iloc[0], i0, rtol=1e-9)
+    assert abs(df["der(h)"].iloc[0]) < 1e-8 and abs(df["der(I)"].iloc[0]) < 1e-8
+    assert np.allclose(df["h"], h0, rtol=1e-7)
+    h1, i1, _ = tank_steady_state(0.5, 0.4, 1.5, 2, 10)
+    assert np.isclose(back["h"].iloc[0], h1, rtol=1e-9) and np.isclose(back["I"].iloc[0], i1, rtol=1e-9)
+
+
+def test_states_with_initial_equations_are_initial_unknowns(tank_fmu):
+    with FMUModel(tank_fmu) as model:
+        h = model.info.variable("h")
+    assert h.causality == "local"
+    from fmpy import read_model_description
+
+    md = read_model_description(str(tank_fmu))
+    initial = {u.variable.name for u in md.initialUnknowns}
+    assert {"h", "I"} <= initial
+
+
+HEATER = """
+model Heater "A heated room whose heat-transfer coefficient UA follows from a measured steady temperature"
+  parameter Real C = 5e5 "Heat capacity (J/K)";
+  parameter Real P = 2000 "Heating power (W)";
+  parameter Real Ta = 5 "Ambient temperature (degC)";
+  parameter Real Tmeas = 21 "Measured steady room temperature (degC)";
+  parameter Real UA(fixed = false, start = 50) "Heat-transfer coefficient (W/K), from the initial equations";
+  Real T(start = 15) "Room temperature (degC)";
+equation
+  C*der(T) = P - UA*(T - Ta);
+initial equation
+  der(T) = 0;
+  T = Tmeas;
+end Heater;
+"""
+
+
+def test_fixed_false_parameter_is_determined_by_initial_equations(tmp_path):
+    fmu = build(tmp_path, "Heater", HEATER)
+    assert validate_fmu(str(fmu)) == []
+    with FMUModel(fmu) as model:
+        assert model.info.variable("UA").causality == "calculatedParameter"
+        assert "UA" not in model.info.tunable_parameters
+        df = model.simulate(stop_time=3600, output_interval=600, outputs=["T", "UA", "der(T)"])
+        df2 = model.simulate(stop_time=600, output_interval=600, parameters={"P": 3000.0}, outputs=["T", "UA"])
+    # by hand: at steady state P = UA*(Tmeas - Ta)
+    assert np.allclose(df["UA"], 2000 / (21 - 5), rtol=1e-10)
+    assert np.allclose(df["T"], 21, rtol=1e-9)
+    assert abs(df["der(T)"].iloc[0]) < 1e-10
+    assert np.allclose(df2["UA"], 3000 / (21 - 5), rtol=1e-10)
+
+
+def test_fixed_false_parameter_cannot_be_set(tmp_path):
+    fmu = build(tmp_path, "Heater", HEATER)
+    from trackingbox.errors import FMUError
+
+    with FMUModel(fmu) as model, pytest.raises(FMUError, match="UA"):
+        model.simulate(stop_time=10, output_interval=10, parameters={"UA": 100.0})
+
+
+def test_initial_equations_without_a_solution_fail_with_a_clear_error(tmp_path):
+    text = """
+model NoRoot
+  parameter Real c = 1;
+  Real x(start = 1);
+equation
+  der(x) = x*x + c;
+initial equation
+  der(x) = 0;
+end NoRoot;
+"""
+    fmu = build(tmp_path, "NoRoot", text)  # x^2 + 1 = 0 has no real root
+    with FMUModel(fmu) as model, pytest.raises(SimulationError, match="initialisation .*initial equation"):
+        model.simulate(stop_time=1, output_interval=1)
+    with FMUModel(fmu) as model:  # with c = -4 the root x = 2 is found from the start value 1
+        df = model.simulate(stop_time=1, output_interval=1, parameters={"c": -4.0}, outputs=["x"])
+    assert np.isclose(df["x"].iloc[0], 2.0, rtol=1e-10)
+
+
+def test_unbalanced_initial_equations_are_refused_naming_the_counts(tmp_path):
+    text = """
+model TooMany
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -x;
+initial equation
+  der(x) = 0;
+end TooMany;
+"""
+    with pytest.raises(CompileError, match=r"1 equations for 0 unknowns"):
+        build(tmp_path, "TooMany", text)
+
+
+def test_state_without_initial_equation_keeps_its_start_value(tmp_path):
+    text = """
+model Two
+  parameter Real a = 2;
+  Real x(start = 3);
+  Real y(start = 0.25);
+equation
+  der(x) = a - x;
+  der(y) = -y;
+initial equation
+  der(x) = 0;
+end Two;
+"""
+    fmu = build(tmp_path, "Two", text)
+    with FMUModel(fmu, tolerance=1e-10) as model:
+        df = model.simulate(stop_time=1, output_interval=1, outputs=["x", "y"])
+    assert np.isclose(df["x"].iloc[0], 2.0) and np.isclose(df["y"].iloc[0], 0.25)
+    assert np.isclose(df["y"].iloc[1], 0.25 * math.exp(-1), rtol=1e-6)
+
+
+# ---------------------------------------------------------------------------
+# asserts
+# ---------------------------------------------------------------------------
+
+RAMP = """
+model Ramp "x = t"
+  parameter Real k = 1;
+  Real x(start = 0, fixed = true);
+equation
+  der(x) = 1;
+  assert(x < 2, "x too large");
+  assert(k > 0, "k must be positive: \\"k\\" in 1/°C, 100% sure");
+  assert(x < 1, "x above one", AssertionLevel.warning);
+end Ramp;
+"""
+
+
+@pytest.fixture(scope="module")
+def ramp_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build(tmp_path_factory.mktemp("ramp"), "Ramp", RAMP)
+
+
+def test_failing_assert_stops_the_simulation_with_message_and_time(ramp_fmu):
+    with FMUModel(ramp_fmu) as model, pytest.raises(AssertionFailed) as exc:
+        model.simulate(stop_time=3, output_interval=0.01, outputs=["x"])
+    assert isinstance(exc.value, SimulationError)
+    assert exc.value.message == "x too large"
+    assert 2.0 <= exc.value.time <= 2.01 + 1e-9  # x = t reaches 2 at t = 2; checked every 0.01 s
+
+
+def test_warning_assert_logs_and_the_run_finishes(ramp_fmu, caplog):
+    with caplog.at_level(logging.WARNING, logger="trackingbox.fmu"), FMUModel(ramp_fmu) as model:
+        df = model.simulate(stop_time=1.5, output_interval=0.1, outputs=["x"])
+    assert np.isclose(df["x"].iloc[-1], 1.5)
+    warnings = [r.getMessage() for r in caplog.records if "x above one" in r.getMessage()]
+    assert len(warnings) == 1 and "t = 1 s" in warnings[0]
+
+
+def test_parameter_assert_is_checked_at_initialisation_and_after_a_change(ramp_fmu):
+    with FMUModel(ramp_fmu) as model:
+        with pytest.raises(AssertionFailed, match="k must be positive") as exc:
+            model.simulate(stop_time=1, output_interval=0.1, parameters={"k": -1.0})
+        assert exc.value.time == 0.0
+        assert exc.value.message == 'k must be positive: "k" in 1/°C, 100% sure'  # quotes, UTF-8, % kept
+        stepper = model.stepper(start_time=0.0)
+        stepper.step(0.5)
+        with pytest.raises(AssertionFailed, match="k must be positive") as exc:
+            stepper.set({"k": -2.0})
+        assert exc.value.time == 0.5
+
+
+def test_cli_simulate_prints_one_error_line_and_fails(ramp_fmu, tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    code = main(["simulate", str(ramp_fmu), "-o", str(out), "--stop", "3", "--step", "0.01"])
+    err = capsys.readouterr().err
+    errors = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert code != 0
+    assert len(errors) == 1 and "x too large" in errors[0] and "t = 2" in errors[0]
+    assert "Traceback" not in err and not out.exists()
+
+
+FUNCTION_ASSERT = """
+model FunctionAssert
+  function checked "2u; asserts u < 3, and u < 1 only where u > 5"
+    input Real u;
+    output Real y;
+  algorithm
+    assert(u < 3, "u too large in checked");
+    if u > 5 then
+      assert(u < 1, "never reached before t = 5");
+    end if;
+    y := 2*u;
+  end checked;
+  output Real y;
+equation
+  y = checked(time);
+end FunctionAssert;
+"""
+
+
+def test_assert_in_an_inlined_function(tmp_path):
+    fmu = build(tmp_path, "FunctionAssert", FUNCTION_ASSERT)
+    with FMUModel(fmu) as model:
+        df = model.simulate(stop_time=2.5, output_interval=0.5, outputs=["y"])
+        assert np.allclose(df["y"], 2 * df["time"])  # the assert inside the if-branch does not fire
+        with pytest.raises(AssertionFailed, match="u too large in checked") as exc:
+            model.simulate(stop_time=4, output_interval=0.5)
+    assert exc.value.time == 3.0
+
+
+@pytest.mark.parametrize("construct", ["initial", "terminal"])
+def test_initial_and_terminal_are_refused(tmp_path, construct):
+    text = f"""
+model UsesIt
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -x;
+  assert({construct}() or x > 0, "x positive");
+end UsesIt;
+"""
+    with pytest.raises(UnsupportedConstructError, match=rf"{construct}\(\).*UsesIt\.mo:6"):
+        build(tmp_path, "UsesIt", text)
+
+
+def test_models_without_asserts_or_initial_equations_get_no_runtime(tmp_path):
+    text = """
+model Plain
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -x;
+end Plain;
+"""
+    import zipfile
+
+    fmu = build(tmp_path, "Plain", text)
+    with zipfile.ZipFile(fmu) as zf:
+        names = zf.namelist()
+        wrapper = zf.read("sources/Plain_wrap.c").decode()
+    assert "sources/tbx_runtime.c" not in names and "tbx_" not in wrapper
+    with zipfile.ZipFile(build(tmp_path, "Ramp", RAMP)) as zf:
+        assert "sources/tbx_runtime.c" in zf.namelist()
+
+
+DRAIN = """
+model Drain "empties at t* = 2 (1 - ln 2); beyond it sqrt(h) has no value and the solver fails"
+  Real h(start = 1, fixed = true);
+equation
+  der(h) = -sqrt(h) - 1;
+  assert(h > 0, "tank empty");
+end Drain;
+"""
+
+
+def test_assert_failing_inside_a_step_the_solver_cannot_finish_is_reported(tmp_path):
+    fmu = build(tmp_path, "Drain", DRAIN)
+    t_empty = 2 * (1 - math.log(2))  # by hand: s = sqrt(h), 2 s ds/dt = -(s + 1), t* = int_0^1 2s/(s+1) ds
+    with FMUModel(fmu) as model, pytest.raises(AssertionFailed) as exc:
+        model.simulate(stop_time=20, output_interval=10)  # the assert fails long before the first point
+    assert exc.value.message == "tank empty"
+    assert abs(exc.value.time - t_empty) <= 0.05  # a trial point of the failed step
