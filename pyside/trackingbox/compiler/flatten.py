@@ -26,8 +26,10 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -37,7 +39,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
-from .source import Location, ModelicaSource, class_file, find_construct
+from .source import Location, ModelicaSource, class_file, find_construct, strip_comments
 
 log = logging.getLogger(__name__)
 
@@ -142,6 +144,7 @@ class FlatTranslator:
         self.der_placeholders: dict[str, ca.MX] = {}
         self._evaluating: set[str] = set()
         self._inline_depth = 0
+        self._text_cache: dict[Path, str] | None = None
 
     # ------------------------------------------------------------------ errors
     def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
@@ -499,7 +502,44 @@ class FlatTranslator:
             return arr.cat(1, [arr.promote2(v) for v in vals], "matrix constructor [a; b]")
         if kind != "Array":
             raise self.unsupported(f"array constructor of kind {kind!r}")
+        if vals and not any(arr.is_array(v) for v in vals):
+            where = self._multi_iterator_comprehension(body)
+            if where is not None:
+                raise UnsupportedConstructError(
+                    f"unsupported Modelica construct in {self.model}: array comprehension with several "
+                    f"iterators ({{e for i in u, j in v}}) at {where}: the front end flattens it into a vector, "
+                    "losing its size; write nested comprehensions {{e for i in u} for j in v} instead"
+                )
         return arr.stack(vals)
+
+    _MULTI_ITERATOR = re.compile(r"\s*for\s+\w+\s+in\s+[^{};]*?,\s*\w+\s+in\b")
+
+    def _multi_iterator_comprehension(self, body: Any) -> Location | None:
+        """Where a vector came from ``{e for i in u, j in v}``, which rumoca flattens to one dimension.
+
+        The flat vector carries the span of the element expression ``e``; the
+        source text right after it shows the iterators.
+        """
+        span = body.get("span") if isinstance(body, dict) else None
+        if not isinstance(span, dict) or not isinstance(span.get("end"), int):
+            return None
+        start, end = span.get("start", 0), span["end"]
+        for file, text in self._texts().items():
+            if end > len(text) or text[start:end].lstrip().startswith(("{", "[")):
+                continue
+            if self._MULTI_ITERATOR.match(text, end):
+                return Location(file, text.count("\n", 0, start) + 1)
+        return None
+
+    def _texts(self) -> dict[Path, str]:
+        if self._text_cache is None:
+            self._text_cache = {}
+            for file in self.source.files:
+                try:
+                    self._text_cache[file] = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+                except OSError:
+                    continue
+        return self._text_cache
 
     def _x_ArrayComprehension(self, body: Any, env: Any) -> Value:
         """``{e for i in u, j in v}`` = ``{{e for i in u} for j in v}`` (MLS 10.4.2)."""
