@@ -1,0 +1,275 @@
+"""Array algebra in the embedded compile path: Modelica's meaning, or a clean refusal.
+
+Each model is compiled once with the embedded backend and simulated with fmpy;
+the expected values are computed here with NumPy/SciPy from the same numbers
+(matrix products, powers, a matrix exponential) or by hand (MLS chapter 10
+examples), never taken from the compiler.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pytest
+import scipy.linalg
+
+from trackingbox.compiler import compile_model
+from trackingbox.errors import CompileError, UnsupportedConstructError
+
+pytestmark = pytest.mark.compile
+
+A = np.array([[1.0, 2.0], [3.0, 4.0]])
+B = np.array([[5.0, 6.0, 7.0], [8.0, 9.0, 10.0]])
+V = np.array([1.0, 2.0])
+W = np.array([3.0, -1.0, 2.0])
+
+PRODUCTS = """
+model Products
+  parameter Real A[2, 2] = [1, 2; 3, 4];
+  parameter Real B[2, 3] = {{5, 6, 7}, {8, 9, 10}};
+  parameter Real v[2] = {1, 2};
+  Real C[2, 3] = A*B "matrix*matrix";
+  Real Av[2] = A*v "matrix*vector";
+  Real vA[2] = v*A "vector*matrix";
+  Real vv = v*v "scalar product";
+  Real vAv = v*A*v;
+  Real P0[2, 2] = A^0;
+  Real P3[2, 2] = A^3;
+  Real Em[2, 2] = A .* A;
+  Real Ed[2, 3] = B ./ 2;
+  Real Ep[2, 2] = A .^ 2;
+  Real Eb[2, 2] = 1 .+ A;
+  Real Es[2, 2] = A .- 1;
+  Real Sc[2, 2] = 2*A - A/4;
+  Real N[2, 2] = -A + A*A;
+  Real x[2](each start = 1, each fixed = true);
+equation
+  der(x) = -A*x;
+  annotation(experiment(StopTime = 1));
+end Products;
+"""
+
+PRODUCT_CASES = {
+    "C": A @ B,
+    "Av": A @ V,
+    "vA": V @ A,
+    "vv": V @ V,
+    "vAv": V @ A @ V,
+    "P0": np.eye(2),
+    "P3": np.linalg.matrix_power(A, 3),
+    "Em": A * A,
+    "Ed": B / 2,
+    "Ep": A**2,
+    "Eb": 1 + A,
+    "Es": A - 1,
+    "Sc": 2 * A - A / 4,
+    "N": -A + A @ A,
+}
+
+CONSTRUCTORS = """
+model Constructors
+  parameter Integer n = 3;
+  parameter Real A[2, 2] = [1, 2; 3, 4];
+  parameter Real B[2, 3] = {{5, 6, 7}, {8, 9, 10}};
+  parameter Real v[2] = {1, 2};
+  parameter Real w[3] = {3, -1, 2};
+  Real f[2, 3] = fill(time + 2, 2, 3);
+  Real z[2] = zeros(2);
+  Real o[3] = ones(n);
+  Real I[3, 3] = identity(n);
+  Real D[3, 3] = diagonal(w);
+  Real l[5] = linspace(0, 2, 5);
+  Real c1[5] = cat(1, v, w);
+  Real c2[2, 5] = cat(2, A, B);
+  Real h[2, 5] = [A, B];
+  Real m[3, 2] = [A; {{7, 8}}];
+  Real T[3, 2] = transpose(B);
+  Real O[2, 3] = outerProduct(v, w);
+  Real s1 = size(B, 2);
+  Real q[4] = {i^2 for i in 1:4};
+  Real Q[2, 3] = {{10*i + j for j in 1:3} for i in 1:2};
+  Real sA = sum(A);
+  Real pw = product(w);
+  Real mn = min(w);
+  Real mx = max(B);
+  Real sw = sum(w[i]*i for i in 1:3);
+  Real K[3, 3] = skew(w);
+  Real X[3] = cross(w, {1.0, 2.0, 0.5});
+  Real row[3] = B[2, :];
+  Real col[2] = B[:, 3];
+  Real last = w[end];
+  Real mid[2] = w[2:3];
+  Real pick[2] = B[{2, 1}, 1];
+  Real vec[3] = vector({{1}, {2}, {3}});
+  Real ab[3] = abs(-w);
+  annotation(experiment(StopTime = 1));
+end Constructors;
+"""
+
+CONSTRUCTOR_CASES = {
+    "f": np.full((2, 3), 2.0),  # at t = 0
+    "z": np.zeros(2),
+    "o": np.ones(3),
+    "I": np.eye(3),
+    "D": np.diag(W),
+    "l": np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
+    "c1": np.concatenate([V, W]),
+    "c2": np.hstack([A, B]),
+    "h": np.hstack([A, B]),
+    "m": np.vstack([A, [[7.0, 8.0]]]),
+    "T": B.T,
+    "O": np.outer(V, W),
+    "s1": 3.0,
+    "q": np.array([1.0, 4.0, 9.0, 16.0]),
+    "Q": np.array([[11.0, 12.0, 13.0], [21.0, 22.0, 23.0]]),
+    "sA": 10.0,
+    "pw": -6.0,
+    "mn": -1.0,
+    "mx": 10.0,
+    "sw": 3.0 * 1 - 1.0 * 2 + 2.0 * 3,
+    "K": np.array([[0.0, -2.0, -1.0], [2.0, 0.0, -3.0], [1.0, 3.0, 0.0]]),
+    "X": np.cross(W, [1.0, 2.0, 0.5]),
+    "row": B[1, :],
+    "col": B[:, 2],
+    "last": 2.0,
+    "mid": W[1:],
+    "pick": B[[1, 0], 0],
+    "vec": np.array([1.0, 2.0, 3.0]),
+    "ab": np.abs(W),
+}
+
+FUNCTIONS = """
+model Functions
+  function quad "x' M x"
+    input Real M[:, :];
+    input Real x[size(M, 1)];
+    output Real y;
+  algorithm
+    y := x*M*x;
+  end quad;
+  function ramp "rows {a*i, -a*i}, then R[1, 2] = 100"
+    input Real a;
+    input Integer n;
+    output Real R[n, 2];
+  algorithm
+    R := zeros(n, 2);
+    for i in 1:n loop
+      R[i, :] := {a*i, -a*i};
+    end for;
+    R[1, 2] := 100;
+  end ramp;
+  parameter Real A[2, 2] = [1, 2; 3, 4];
+  parameter Real v[2] = {1, 2};
+  Real q = quad(A, v);
+  Real R[3, 2] = ramp(time + 1, 3);
+  annotation(experiment(StopTime = 1));
+end Functions;
+"""
+
+
+def _compile(tmp_path_factory: pytest.TempPathFactory, name: str, text: str) -> Path:
+    root = tmp_path_factory.mktemp(name)
+    src = root / f"{name}.mo"
+    src.write_text(text)
+    return compile_model(src, name, backend="embedded", output=root / f"{name}.fmu").fmu
+
+
+def _names(var: str, shape: tuple[int, ...]) -> list[str]:
+    if not shape:
+        return [var]
+    return [var + "[" + ",".join(str(i + 1) for i in idx) + "]" for idx in np.ndindex(shape)]
+
+
+def _simulate(fmu: Path, outputs: list[str], **kw) -> np.ndarray:
+    return fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=outputs,
+                             relative_tolerance=1e-8, **kw)
+
+
+@pytest.fixture(scope="module")
+def products(tmp_path_factory: pytest.TempPathFactory) -> np.ndarray:
+    fmu = _compile(tmp_path_factory, "Products", PRODUCTS)
+    names = [n for var, exp in PRODUCT_CASES.items() for n in _names(var, np.shape(exp))]
+    return _simulate(fmu, names + ["x[1]", "x[2]"]), fmu
+
+
+@pytest.fixture(scope="module")
+def constructors(tmp_path_factory: pytest.TempPathFactory) -> np.ndarray:
+    fmu = _compile(tmp_path_factory, "Constructors", CONSTRUCTORS)
+    names = [n for var, exp in CONSTRUCTOR_CASES.items() for n in _names(var, np.shape(exp))]
+    return _simulate(fmu, names)
+
+
+def _values(out: np.ndarray, var: str, shape: tuple[int, ...], row: int = 0) -> np.ndarray:
+    return np.array([out[n][row] for n in _names(var, shape)]).reshape(shape)
+
+
+@pytest.mark.parametrize("var", list(PRODUCT_CASES))
+def test_products_and_powers_have_their_modelica_meaning(products, var):
+    out, _ = products
+    expected = PRODUCT_CASES[var]
+    assert np.allclose(_values(out, var, np.shape(expected)), expected), var
+
+
+def test_matrix_state_equation_follows_the_matrix_exponential(products):
+    out, _ = products
+    x = np.column_stack([out["x[1]"], out["x[2]"]])
+    expected = np.array([scipy.linalg.expm(-A * t) @ np.ones(2) for t in out["time"]])
+    assert np.allclose(x, expected, atol=1e-6)
+
+
+def test_products_follow_a_tunable_parameter(products):
+    """The product is built symbolically: changing A in the FMU changes C = A*B."""
+    _, fmu = products
+    A2 = np.array([[0.5, -1.0], [2.0, 0.0]])
+    starts = {f"A[{i + 1},{j + 1}]": float(A2[i, j]) for i in range(2) for j in range(2)}
+    out = _simulate(fmu, _names("C", (2, 3)) + _names("P3", (2, 2)), start_values=starts)
+    assert np.allclose(_values(out, "C", (2, 3)), A2 @ B)
+    assert np.allclose(_values(out, "P3", (2, 2)), np.linalg.matrix_power(A2, 3))
+
+
+@pytest.mark.parametrize("var", list(CONSTRUCTOR_CASES))
+def test_constructors_reductions_and_slices(constructors, var):
+    expected = CONSTRUCTOR_CASES[var]
+    assert np.allclose(_values(constructors, var, np.shape(expected)), expected), var
+
+
+def test_fill_of_a_time_varying_value_follows_time(constructors):
+    assert np.allclose(constructors["f[2,3]"], constructors["time"] + 2.0)
+
+
+def test_array_functions_are_inlined_with_array_semantics(tmp_path_factory):
+    fmu = _compile(tmp_path_factory, "Functions", FUNCTIONS)
+    out = _simulate(fmu, ["q"] + _names("R", (3, 2)))
+    assert np.allclose(out["q"], V @ A @ V)  # 27
+    a = out["time"] + 1.0
+    R = np.stack([_values(out, "R", (3, 2), k) for k in range(len(a))])
+    expected = np.stack([np.column_stack([ak * np.arange(1, 4), -ak * np.arange(1, 4)]) for ak in a])
+    expected[:, 0, 1] = 100.0
+    assert np.allclose(R, expected)
+
+
+# ----------------------------------------------------------------- refusals
+REFUSALS = [
+    ("parameter Real p = sqrt(-1); Real y = p*time;", CompileError, "sqrt(-1)"),
+    ("parameter Real p = acos(2); Real y = p*time;", CompileError, "acos(2)"),
+    ("constant Real c = log(0); Real y = c*time;", CompileError, "log(0)"),
+    ("Real y = asin(-3) + time;", CompileError, "asin(-3)"),
+    ("Real y = 1/0 + time;", CompileError, "division by zero"),
+    ("Real y = (-8)^(1/3) + time;", CompileError, "negative base"),
+    ("parameter Real M[2, 2] = [1, 2; 3, 4]; Real Y[2, 2] = M^(-1);", CompileError, "Integer >= 0"),
+    ("Real y[6] = {10*i + j for i in 1:2, j in 1:3};", UnsupportedConstructError, "several iterators"),
+    ("Real y = min({time for i in 1:0});", CompileError, "empty array"),
+]
+
+
+@pytest.mark.parametrize("decl,error,needle", REFUSALS, ids=[r[2] for r in REFUSALS])
+def test_invalid_constants_and_unsupported_arrays_are_refused_at_their_line(tmp_path, decl, error, needle):
+    src = tmp_path / "Bad.mo"
+    src.write_text(f"model Bad\n  Real x(start = 0, fixed = true);\n  {decl}\nequation\n  der(x) = 1;\nend Bad;\n")
+    with pytest.raises(error) as info:
+        compile_model(src, "Bad", backend="embedded", output=tmp_path / "bad.fmu")
+    message = str(info.value)
+    assert needle in message
+    assert f"{src}:3" in message  # the file and the line of the declaration
+    assert not (tmp_path / "bad.fmu").exists()
