@@ -273,3 +273,82 @@ def test_invalid_constants_and_unsupported_arrays_are_refused_at_their_line(tmp_
     assert needle in message
     assert f"{src}:3" in message  # the file and the line of the declaration
     assert not (tmp_path / "bad.fmu").exists()
+
+
+# --------------------------------------------- modifications the front end loses
+MODIFIERS = """
+package Mods
+  model Inner
+    parameter Real a = 1;
+    parameter Real b = 2*a;
+  end Inner;
+  model Outer
+    Inner i(a = 10);
+  end Outer;
+  model W1
+    Outer o1(i(b = 7));
+    Outer o2;
+  end W1;
+  model LostNested "extends W1(o1(i(a = 70))) must keep o1.i.b = 7"
+    extends W1(o1(i(a = 70)));
+  end LostNested;
+  model Base
+    parameter Real k = 1;
+  end Base;
+  model Holder
+    replaceable model M = Base;
+    M m;
+  end Holder;
+  model LostRedeclare "the redeclaration's k = 5 must reach h.m.k"
+    Holder h(redeclare model M = Base(k = 5));
+  end LostRedeclare;
+  package Medium
+    constant Real cp = 4180;
+  end Medium;
+  package Medium2
+    extends Medium(cp = 1000);
+  end Medium2;
+  model MixedMedia "Medium.cp must stay 4180"
+    Real c1 = Medium.cp*(1 + time);
+    Real c2 = Medium2.cp*(1 + time);
+  end MixedMedia;
+  model Kept "modifications rumoca keeps: merged through extends and components"
+    Inner c(b = 7);
+    W1 w(o1(i(a = 4)));
+    Outer2 o;
+    Real y = (c.a + c.b + w.o1.i.a + w.o1.i.b + w.o2.i.a + w.o2.i.b + o.i.a + o.i.b)*(1 + time);
+  end Kept;
+  model Outer2
+    extends Outer(i(a = 20));
+  end Outer2;
+end Mods;
+"""
+
+LOST = [
+    ("LostNested", "o1.i", "package.mo:15"),
+    ("LostRedeclare", "class redeclaration with a modification", "package.mo:25"),
+    ("MixedMedia", "package Medium2 extends Medium", "package.mo:31"),
+]
+
+
+@pytest.fixture(scope="module")
+def mods_package(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("mods") / "Mods"
+    root.mkdir()
+    (root / "package.mo").write_text(MODIFIERS)
+    return root
+
+
+@pytest.mark.parametrize("model,needle,where", LOST, ids=[m[0] for m in LOST])
+def test_modifications_the_front_end_would_lose_are_refused(mods_package, tmp_path, model, needle, where):
+    with pytest.raises(UnsupportedConstructError) as info:
+        compile_model(mods_package, f"Mods.{model}", backend="embedded", output=tmp_path / "m.fmu")
+    assert needle in str(info.value) and where in str(info.value)
+    assert not (tmp_path / "m.fmu").exists()
+
+
+def test_modifications_the_front_end_keeps_still_compile(mods_package, tmp_path):
+    res = compile_model(mods_package, "Mods.Kept", backend="embedded", output=tmp_path / "k.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
+    # c: a = 1, b = 7; w.o1.i: a = 4, b = 7; w.o2.i: a = 10, b = 20; o.i: a = 20, b = 40
+    assert np.allclose(out["y"], (1 + 7 + 4 + 7 + 10 + 20 + 20 + 40) * (1 + out["time"]))

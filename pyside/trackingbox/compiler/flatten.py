@@ -39,6 +39,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
+from .modifiers import modifier_check
 from .source import Location, ModelicaSource, class_file, find_construct, strip_comments
 
 log = logging.getLogger(__name__)
@@ -185,7 +186,16 @@ class FlatTranslator:
             return REAL
         return int(t.get("canonical_type", REAL))
 
+    def check_modifiers(self) -> None:
+        """Refuse models whose modifications rumoca 0.10.2 loses (see :mod:`.modifiers`)."""
+        lost = modifier_check(self.source).check(self.model)
+        if lost:
+            log.warning("%s: bounds or units lost by the front end (no effect on values): %s",
+                        self.model, "; ".join(lost))
+
     def collect_variables(self) -> None:
+        # values are only as good as the modifications the front end kept
+        self.check_modifiers()
         top_inputs = set(self.flat.get("top_level_input_components") or [])
         for name, v in self.flat["variables"].items():
             vtype = self._type_of(v)
