@@ -168,6 +168,40 @@ end Functions;
 """
 
 
+CALLS = """
+model Calls
+  type Phase = enumeration(solid, liquid, gas);
+  function stats "sum, weighted sum and sum of squares of a vector"
+    input Real a[:];
+    input Real w = 2;
+    output Real s;
+    output Real ws;
+    output Real sq;
+  algorithm
+    s := 0;
+    ws := 0;
+    sq := 0;
+    for i in 1:size(a, 1) loop
+      s := s + a[i];
+      ws := ws + w*i*a[i];
+      sq := sq + a[i]^2;
+    end for;
+  end stats;
+  parameter Real v[3] = {1, 2, 4};
+  parameter Real byPhase[Phase] = {10, 20, 30};
+  Real s;
+  Real ws;
+  Real sq;
+  Real t;
+  Real g = byPhase[Phase.gas] + time;
+equation
+  (s, ws, sq) = stats(v*(1 + time));
+  (t, , ) = stats(a = {3, 4}, w = 5);
+  annotation(experiment(StopTime = 1));
+end Calls;
+"""
+
+
 def _compile(tmp_path_factory: pytest.TempPathFactory, name: str, text: str) -> Path:
     root = tmp_path_factory.mktemp(name)
     src = root / f"{name}.mo"
@@ -247,6 +281,17 @@ def test_array_functions_are_inlined_with_array_semantics(tmp_path_factory):
     expected = np.stack([np.column_stack([ak * np.arange(1, 4), -ak * np.arange(1, 4)]) for ak in a])
     expected[:, 0, 1] = 100.0
     assert np.allclose(R, expected)
+
+
+def test_multiple_outputs_named_arguments_and_enumeration_indices(tmp_path_factory):
+    fmu = _compile(tmp_path_factory, "Calls", CALLS)
+    out = _simulate(fmu, ["s", "ws", "sq", "t", "g"])
+    k = 1 + out["time"]
+    assert np.allclose(out["s"], 7 * k)  # 1 + 2 + 4
+    assert np.allclose(out["ws"], 2 * (1 * 1 + 2 * 2 + 3 * 4) * k)  # w = 2 by default
+    assert np.allclose(out["sq"], 21 * k**2)  # 1 + 4 + 16
+    assert np.allclose(out["t"], 7.0)  # the first output only
+    assert np.allclose(out["g"], 30 + out["time"])  # Phase.gas is the third element
 
 
 # ----------------------------------------------------------------- refusals

@@ -7,6 +7,13 @@ Modelica source. This module reads the flat model (``Model.to_dict("flat")``):
   Boolean) and constants are evaluated, every Real parameter becomes a symbol;
 * expressions become CasADi ``MX`` expressions; Modelica functions are inlined
   symbolically (assignments, if-statements, for-loops over constant ranges);
+* arrays keep their Modelica meaning (:mod:`.arrays`): matrix and vector
+  products, matrix powers, element-wise operators, slices, array constructors,
+  comprehensions and reductions; sizes that do not fit and constants a
+  function cannot take (``sqrt(-1)``, ``1/0``) are errors naming the
+  expression and its line;
+* modifications that rumoca is known to lose are refused before they give
+  wrong numbers (:mod:`.modifiers`);
 * the equations are matched to their unknowns and sorted into blocks
   (:mod:`.causalize`): a scalar block linear in its unknown is solved
   symbolically, anything else goes to a Newton rootfinder.
@@ -348,15 +355,25 @@ class FlatTranslator:
         if name == "time":
             return self.time
         if name not in self.vars:
+            ordinal = (self.flat.get("enum_literal_ordinals") or {}).get(name)
+            if ordinal is not None and not subs:  # an enumeration literal is its ordinal (MLS 4.9.5)
+                return int(ordinal)
             # component_ref names of array elements of components come as "a[2].b"
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
-        if subs and len(subs) == len(dims) and all(_kind_of(s)[0] == "Index" for s in subs):
-            idx = tuple(int(_kind_of(s)[1]["value"]) for s in subs)
-            sname = name + "[" + ",".join(str(i) for i in idx) + "]"
+        picks: list[Value] = []
+        if subs:
+            if len(subs) > len(dims):
+                raise CompileError(f"{len(subs)} subscripts for {name!r} of size {arr.size_text(dims)} "
+                                   f"in {self.model}")
+            # ``end`` comes as size(name, k): evaluate it on a placeholder of the right size
+            shape_only = arr.new(dims)
+            picks = [self._subscript(s, shape_only, k, env) for k, s in enumerate(subs)]
+        if picks and len(picks) == len(dims) and all(isinstance(p, int) for p in picks):
+            sname = name + "[" + ",".join(str(i) for i in picks) + "]"
             if sname not in self.scalars:
-                raise CompileError(f"index {list(idx)} out of range for {name!r} of size "
+                raise CompileError(f"index {picks} out of range for {name!r} of size "
                                    f"{arr.size_text(dims)} in {self.model}")
             return self._scalar_value(self.scalars[sname])
         if dims:
@@ -366,24 +383,13 @@ class FlatTranslator:
         else:
             full = self._scalar_value(scalars[0])
         if subs:
-            return arr.subscript(full, [self._subscript(s, full, k, env) for k, s in enumerate(subs)], repr(name))
+            return arr.subscript(full, picks, repr(name))
         return full
 
     def _scalar_value(self, sv: ScalarVar) -> Value:
         if sv.kind in ("structural", "constant"):
             return self.structural_value(sv)
         return sv.sym
-
-    def _index(self, sub: Any, env: dict[str, Value] | None = None) -> int:
-        kind, body = _kind_of(sub)
-        if kind == "Index":
-            return int(body["value"])
-        if kind == "Expr":
-            val = self.expr(body["expr"], env)
-            if not _num(val):
-                raise CompileError(f"non-constant array index `{expression_text(body['expr'])}` in {self.model}")
-            return int(round(float(val)))
-        raise self.unsupported(f"array subscript {kind!r} here")
 
     def _subscript(self, sub: Any, value: Value, k: int, env: dict[str, Value] | None) -> Value:
         """One subscript: an Integer, a vector of Integers, or None for ``:``.
@@ -467,9 +473,40 @@ class FlatTranslator:
 
     def _x_Binary(self, body: Any, env: Any) -> Value:
         op = body["op"]
+        if _kind_of(body["lhs"])[0] == "Tuple":
+            return self._tuple_equation(body, env)
         lhs = self.expr(body["lhs"], env)
         rhs = self.expr(body["rhs"], env)
         return _binary(str(op), lhs, rhs, self)
+
+    def _tuple_equation(self, body: Any, env: Any) -> Value:
+        """``(a, , c) = f(x)``: one residual per output that is not omitted, flattened."""
+        kind, call = _kind_of(body["rhs"])
+        if str(body["op"]).lower() != "sub" or kind != "FunctionCall":
+            raise self.unsupported("tuple expression other than the left side of (a, b) = f(x)")
+        fname = call["name"]["name"]
+        fn = self.functions.get(fname)
+        if fn is None:
+            raise CompileError(f"call of unknown function {fname!r} in {self.model}")
+        args = [self.expr(a, env) for a in (call.get("args") or [])]
+        outs = self.inline(fname, fn, args)
+        targets = body["lhs"]["Tuple"].get("elements") or []
+        if len(targets) > len(outs):
+            raise CompileError(f"{len(targets)} results taken from {fname!r}, which has {len(outs)} outputs, "
+                               f"in {self.model}")
+        residuals: list[Value] = []
+        for target, out in zip(targets, outs):
+            if _kind_of(target)[0] == "Empty":
+                continue
+            residuals.extend(arr.elements([_binary("Sub", self.expr(target, env), out, self)]))
+        return arr.from_list(residuals)
+
+    def _x_Index(self, body: Any, env: Any) -> Value:
+        """A subscripted expression, e.g. ``f(x)[2]`` or an array input ``A[i]`` inside a function."""
+        base = self.expr(body["base"], env)
+        subs = body.get("subscripts") or []
+        return arr.subscript(base, [self._subscript(s, base, k, env) for k, s in enumerate(subs)],
+                             f"`{expression_text(body['base'])}`")
 
     def _x_Unary(self, body: Any, env: Any) -> Value:
         op = body.get("op")
@@ -1229,6 +1266,10 @@ def expression_text(node: Any, depth: int = 0) -> str:
         if kind == "ArrayComprehension":
             its = ", ".join(f"{ix['name']} in {sub(ix['range'])}" for ix in body.get("indices") or [])
             return "{" + f"{sub(body['expr'])} for {its}" + "}"
+        if kind == "Index":
+            return sub(body["base"]) + "[" + ", ".join(_sub_text(s, depth) for s in body.get("subscripts") or []) + "]"
+        if kind == "Tuple":
+            return "(" + ", ".join("" if _kind_of(e)[0] == "Empty" else sub(e) for e in body.get("elements") or []) + ")"
         if kind == "If":
             return "if ... then ... else ..."
         if kind == "Parenthesized":
