@@ -28,6 +28,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -35,7 +36,7 @@ import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
 from .causalize import StructuralError, blt
-from .source import ModelicaSource, find_construct
+from .source import Location, ModelicaSource, locate, model_files, span_location, span_sources
 
 log = logging.getLogger(__name__)
 
@@ -140,14 +141,42 @@ class FlatTranslator:
         self.der_placeholders: dict[str, ca.MX] = {}
         self._evaluating: set[str] = set()
         self._inline_depth = 0
+        self._span: dict[str, Any] | None = None  # span of the expression being translated (for errors)
+        self._files: tuple[Path, ...] | None = None
+        self._sources: dict[int, Path] | None = None
 
     # ------------------------------------------------------------------ errors
-    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
-        where = ""
+    def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
+        """Where a construct stands: the model's own file (or a class it uses) and the line.
+
+        From the front end's *span* (default: the expression being translated) when it
+        matches *pattern*; else from a search for *pattern* restricted to the files of
+        the classes the model uses (:func:`.source.locate`), never other files of the package.
+        """
+        if self._files is None:
+            self._files = model_files(self.source, self.model)
+            self._sources = span_sources(self.flat, self._files)
+        span = span if span is not None else self._span
+        if span is not None:
+            known = self._sources.get(span.get("source")) if self._sources else None
+            files = (known,) if known is not None else self._files
+            loc = span_location(span, files, pattern)
+            if loc is not None:
+                return [loc]
         if pattern:
-            locs = find_construct(self.source.files, pattern)
+            locs = locate(self.source, self.model, pattern)
             if locs:
-                where = " at " + ", ".join(str(loc) for loc in locs)
+                return locs
+        if span is not None and pattern:
+            loc = span_location(span, files, None)
+            if loc is not None:
+                return [loc]
+        return []
+
+    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "", *,
+                    span: dict[str, Any] | None = None) -> UnsupportedConstructError:
+        locs = self.location(pattern, span)
+        where = (" at " + ", ".join(str(loc) for loc in locs)) if locs else ""
         msg = (
             f"unsupported Modelica construct in {self.model}: {construct}{where}"
             f"{': ' + detail if detail else ''}. The embedded backend cannot compile it; "
@@ -371,6 +400,8 @@ class FlatTranslator:
     # ------------------------------------------------------------ expressions
     def expr(self, node: Any, env: dict[str, Value] | None = None) -> Value:
         kind, body = _kind_of(node)
+        if isinstance(body, dict) and isinstance(body.get("span"), dict):
+            self._span = body["span"]
         method: Callable[[Any, dict[str, Value] | None], Value] | None = getattr(self, f"_x_{kind}", None)
         if method is None:
             raise self.unsupported(f"expression of kind {kind!r}")
