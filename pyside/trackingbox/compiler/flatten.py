@@ -47,7 +47,8 @@ from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .modifiers import modifier_check
-from .source import Location, ModelicaSource, class_file, find_construct, strip_comments
+from .source import (Location, ModelicaSource, locate, model_files, span_location, span_sources,
+                     strip_comments)
 
 log = logging.getLogger(__name__)
 
@@ -152,15 +153,43 @@ class FlatTranslator:
         self.der_placeholders: dict[str, ca.MX] = {}
         self._evaluating: set[str] = set()
         self._inline_depth = 0
-        self._text_cache: dict[Path, str] | None = None
+        self._span: dict[str, Any] | None = None  # span of the expression being translated (for errors)
+        self._files: tuple[Path, ...] | None = None
+        self._sources: dict[int, Path] | None = None
+        self._text_cache: dict[Path, str] = {}
 
     # ------------------------------------------------------------------ errors
-    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
-        where = ""
+    def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
+        """Where a construct stands: the model's own file (or a class it uses) and the line.
+
+        From the front end's *span* (default: the expression being translated) when it
+        matches *pattern*; else from a search for *pattern* restricted to the files of
+        the classes the model uses (:func:`.source.locate`), never other files of the package.
+        """
+        if self._files is None:
+            self._files = model_files(self.source, self.model)
+            self._sources = span_sources(self.flat, self._files)
+        span = span if span is not None else self._span
+        if span is not None:
+            known = self._sources.get(span.get("source")) if self._sources else None
+            files = (known,) if known is not None else self._files
+            loc = span_location(span, files, pattern)
+            if loc is not None:
+                return [loc]
         if pattern:
-            locs = find_construct(self.source.files, pattern)
+            locs = locate(self.source, self.model, pattern)
             if locs:
-                where = " at " + ", ".join(str(loc) for loc in locs)
+                return locs
+        if span is not None and pattern:
+            loc = span_location(span, files, None)
+            if loc is not None:
+                return [loc]
+        return []
+
+    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "", *,
+                    span: dict[str, Any] | None = None) -> UnsupportedConstructError:
+        locs = self.location(pattern, span)
+        where = (" at " + ", ".join(str(loc) for loc in locs)) if locs else ""
         msg = (
             f"unsupported Modelica construct in {self.model}: {construct}{where}"
             f"{': ' + detail if detail else ''}. The embedded backend cannot compile it; "
@@ -419,6 +448,8 @@ class FlatTranslator:
     # ------------------------------------------------------------ expressions
     def expr(self, node: Any, env: dict[str, Value] | None = None) -> Value:
         kind, body = _kind_of(node)
+        if isinstance(body, dict) and isinstance(body.get("span"), dict):
+            self._span = body["span"]
         method: Callable[[Any, dict[str, Value] | None], Value] | None = getattr(self, f"_x_{kind}", None)
         if method is None:
             raise self.unsupported(f"expression of kind {kind!r}")
@@ -426,36 +457,12 @@ class FlatTranslator:
             return method(body, env)
         except ArrayError as exc:
             # the innermost expression that failed names itself; outer ones pass the error on
-            where = self._span_location(body)
-            raise CompileError(
-                f"{exc} in `{expression_text(node)}` in {self.model}{' at ' + str(where) if where else ''}"
-            ) from None
-
-    def _span_location(self, body: Any) -> Location | None:
-        """File and line of an expression from its span (character offsets into its file).
-
-        The flat model identifies the file by an opaque number, so the file is the
-        one whose text at the span starts like the expression: the model's own
-        file first, then the other files of the source.
-        """
-        span = body.get("span") if isinstance(body, dict) else None
-        if not isinstance(span, dict) or not isinstance(span.get("start"), int):
-            return None
-        start, end = span["start"], span.get("end", span["start"])
-        own = class_file(self.source, self.model)
-        files = ([own] if own else []) + [f for f in self.source.files if f != own]
-        hint = _span_hint(body)
-        for file in files:
-            try:
-                text = file.read_text(encoding="utf-8", errors="replace")
-            except OSError:
-                continue
-            if end > len(text):
-                continue
-            piece = text[start:end]
-            if hint is None or hint.lower() in piece.lower():
-                return Location(file, text.count("\n", 0, start) + 1)
-        return None
+            span = body.get("span") if isinstance(body, dict) else None
+            hint = _span_hint(body)
+            locs = self.location(rf"\s*{re.escape(hint)}\b" if hint else None,
+                                 span if isinstance(span, dict) else None)
+            where = f" at {locs[0]}" if locs else ""
+            raise CompileError(f"{exc} in `{expression_text(node)}` in {self.model}{where}") from None
 
     def _x_Literal(self, body: Any, env: Any) -> Value:
         kind, val = _kind_of(body["value"])
@@ -570,23 +577,30 @@ class FlatTranslator:
         span = body.get("span") if isinstance(body, dict) else None
         if not isinstance(span, dict) or not isinstance(span.get("end"), int):
             return None
+        self.location()  # learns the model's files and the span source numbers
+        known = (self._sources or {}).get(span.get("source"))
+        files = (known,) if known is not None else (self._files or ())
         start, end = span.get("start", 0), span["end"]
-        for file, text in self._texts().items():
+        for file in files:
+            text = self._code(file)
             if end > len(text) or text[start:end].lstrip().startswith(("{", "[")):
                 continue
             if self._MULTI_ITERATOR.match(text, end):
                 return Location(file, text.count("\n", 0, start) + 1)
         return None
 
-    def _texts(self) -> dict[Path, str]:
-        if self._text_cache is None:
-            self._text_cache = {}
-            for file in self.source.files:
-                try:
-                    self._text_cache[file] = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
-                except OSError:
-                    continue
-        return self._text_cache
+    def _code(self, file: Path) -> str:
+        """A file's text with comments and strings blanked (cached)."""
+        if file not in self._text_cache:
+            try:
+                data = file.read_bytes()
+            except OSError:
+                data = b""
+            if data.startswith(b"\xef\xbb\xbf"):
+                data = data[3:]
+            # spans are byte offsets: keep one character per byte
+            self._text_cache[file] = strip_comments(data.decode("latin-1"))
+        return self._text_cache[file]
 
     def _x_ArrayComprehension(self, body: Any, env: Any) -> Value:
         """``{e for i in u, j in v}`` = ``{{e for i in u} for j in v}`` (MLS 10.4.2)."""

@@ -1,0 +1,345 @@
+"""Run the Modelica compliance suite through the embedded compile path.
+
+Every test model of the suite (a class annotated
+``__ModelicaAssociation(TestCase(shouldPass = true|false, ...))``) is compiled
+from the suite's package with the embedded backend, in its own worker process
+with a time limit; the valid ones are then simulated over their ``experiment``
+so that their ``assert``\\ s are evaluated. Each model gets one outcome:
+
+``pass``
+    valid, compiled and simulated to the end (its asserts held).
+``refused-construct``
+    valid, refused naming an unsupported construct (UnsupportedConstructError).
+``refused-other``
+    valid, refused with any other compile error.
+``crashed``
+    the worker died (signal, abort) or raised something that is not a
+    :class:`~trackingbox.errors.TrackingError` (a traceback for the user).
+``hang``
+    the worker did not finish within the time limit.
+``wrong-values``
+    valid, compiled, and an assert failed during the simulation.
+``sim-failed``
+    valid, compiled, and the simulation failed for another reason.
+``rejected`` / ``accepted``
+    an invalid model (``shouldPass = false``) was refused (compile or
+    simulation error) / compiled and simulated without complaint.
+
+Results are appended to a JSON-lines file as each model finishes, so an
+interrupted run keeps what it computed (``--resume`` continues it). Run it as
+``scripts/compliance`` (see ``--help``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+log = logging.getLogger(__name__)
+
+Outcome = Literal["pass", "refused-construct", "refused-other", "crashed", "hang", "wrong-values",
+                  "sim-failed", "rejected", "accepted"]
+VALID_OUTCOMES: tuple[str, ...] = ("pass", "refused-construct", "refused-other", "crashed", "hang",
+                                   "wrong-values", "sim-failed")
+INVALID_OUTCOMES: tuple[str, ...] = ("rejected", "accepted", "crashed", "hang")
+
+_TESTCASE = re.compile(r"TestCase\s*\(\s*shouldPass\s*=\s*(true|false)")
+_WITHIN = re.compile(r"^\s*within\s+([\w.]+)\s*;", re.M)
+_DECL = re.compile(r"\b(?:(?:partial|encapsulated|final|replaceable)\s+)*"
+                   r"(?:model|block|class|package|connector|record|function|type)\s+([A-Za-z_]\w*)")
+_END = re.compile(r"\bend\s+([A-Za-z_]\w*)\s*;")
+_LOCATION = re.compile(r"(/[^\s:,()]+\.mo):(\d+)")
+
+
+@dataclass(frozen=True)
+class TestModel:
+    """One test model of the suite."""
+
+    name: str
+    file: Path
+    should_pass: bool
+
+    @property
+    def section(self) -> str:
+        """The suite's top-level section (``Arrays``, ``Operators``, ...)."""
+        parts = self.name.split(".")
+        return parts[1] if len(parts) > 2 else parts[0]
+
+
+@dataclass(frozen=True)
+class ModelResult:
+    """The outcome of one test model (one line of the results file)."""
+
+    model: str
+    section: str
+    should_pass: bool
+    outcome: str
+    message: str
+    seconds: float
+    file: str
+    locations: tuple[tuple[str, int], ...] = ()
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["locations"] = [list(x) for x in self.locations]
+        return d
+
+
+def _strip(text: str) -> str:
+    from .compiler.source import strip_comments
+
+    return strip_comments(text)
+
+
+def discover(suite: Path) -> list[TestModel]:
+    """The test models of the suite package directory *suite* (sorted by name).
+
+    A test model is the class whose annotation holds ``TestCase(shouldPass=...)``;
+    its name is the file's ``within`` prefix plus the enclosing classes.
+    """
+    suite = Path(suite)
+    models: list[TestModel] = []
+    for file in sorted(suite.rglob("*.mo")):
+        raw = file.read_text(encoding="utf-8-sig", errors="replace")
+        hits = list(_TESTCASE.finditer(raw))
+        if not hits:
+            continue
+        code = _strip(raw)
+        within = _WITHIN.search(code)
+        prefix = within.group(1) if within else ""
+        events = sorted([(m.start(), "decl", m.group(1)) for m in _DECL.finditer(code)]
+                        + [(m.start(), "end", m.group(1)) for m in _END.finditer(code)])
+        for hit in hits:
+            stack: list[str] = []
+            for pos, kind, name in events:
+                if pos > hit.start():
+                    break
+                if kind == "decl":
+                    stack.append(name)
+                elif name in stack:
+                    del stack[len(stack) - 1 - stack[::-1].index(name):]
+            if not stack:
+                continue
+            name = ".".join(p for p in (prefix, *stack) if p)
+            models.append(TestModel(name, file, hit.group(1) == "true"))
+    return sorted(models, key=lambda m: m.name)
+
+
+def locations_in(message: str) -> tuple[tuple[str, int], ...]:
+    """The ``file.mo:line`` positions a message names."""
+    return tuple((f, int(n)) for f, n in _LOCATION.findall(message))
+
+
+def _assert_failure(message: str) -> bool:
+    return "assert" in message.lower()
+
+
+def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
+    """Compile (and simulate, for a valid model) *model* in this process: (outcome, message)."""
+    from .compiler import compile_model
+    from .compiler.source import experiment_settings, resolve_source
+    from .errors import CompileError, SimulationError, TrackingError, UnsupportedConstructError
+    from .fmu import FMUModel
+
+    fmu = workdir / (model.name.rsplit(".", 1)[-1] + ".fmu")
+    try:
+        compile_model(suite, model.name, backend="embedded", output=fmu)
+    except UnsupportedConstructError as exc:
+        return ("refused-construct" if model.should_pass else "rejected"), str(exc)
+    except CompileError as exc:
+        return ("refused-other" if model.should_pass else "rejected"), str(exc)
+    except TrackingError as exc:
+        return ("refused-other" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}"
+    settings = experiment_settings(resolve_source(suite), model.name)
+    start = settings.get("StartTime", 0.0)
+    stop = settings.get("StopTime", 1.0)
+    if stop <= start:
+        stop = start + 1e-6
+    interval = settings.get("Interval", (stop - start) / 100)
+    try:
+        with FMUModel(fmu, tolerance=settings.get("Tolerance", 1e-6)) as fm:
+            fm.simulate(start_time=start, stop_time=stop, output_interval=interval)
+    except SimulationError as exc:
+        text = str(exc)
+        if not model.should_pass:
+            return "rejected", text
+        return ("wrong-values" if _assert_failure(text) else "sim-failed"), text
+    except TrackingError as exc:
+        return ("sim-failed" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}"
+    return ("pass" if model.should_pass else "accepted"), ""
+
+
+def _worker_main(argv: list[str]) -> int:
+    """``python -m trackingbox.compliance --one NAME FILE true|false SUITE``: one model, JSON on stdout."""
+    name, file, should, suite = argv
+    model = TestModel(name, Path(file), should == "true")
+    logging.basicConfig(level=logging.WARNING)
+    with tempfile.TemporaryDirectory(prefix="tbx-compliance-") as tmp:
+        try:
+            outcome, message = run_one(model, Path(suite), Path(tmp))
+        except BaseException as exc:  # noqa: BLE001 - the point is to classify everything
+            import traceback
+
+            outcome = "crashed"
+            message = f"{type(exc).__name__}: {exc}\n" + "".join(traceback.format_exc(limit=-3))
+    sys.stdout.write("\n@@RESULT@@" + json.dumps({"outcome": outcome, "message": message}) + "\n")
+    sys.stdout.flush()
+    return 0
+
+
+def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
+    """Run *model* in a fresh worker process with a time limit; never raises for the model's sake."""
+    cmd = [sys.executable, "-m", "trackingbox.compliance", "--one", model.name, str(model.file),
+           "true" if model.should_pass else "false", str(suite)]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, errors="replace")
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate()
+        outcome, message = "hang", f"no result after {timeout:g} s"
+    else:
+        marker = out.rfind("@@RESULT@@")
+        if marker >= 0:
+            data = json.loads(out[marker + len("@@RESULT@@"):].strip())
+            outcome, message = data["outcome"], data["message"]
+        elif proc.returncode < 0:
+            outcome = "crashed"
+            message = f"worker killed by signal {signal.Signals(-proc.returncode).name}: {err.strip()[-500:]}"
+        else:
+            outcome = "crashed"
+            message = f"worker exited with {proc.returncode}: {err.strip()[-1500:]}"
+    seconds = time.perf_counter() - t0
+    message = message.strip()
+    return ModelResult(model.name, model.section, model.should_pass, outcome, message[:4000],
+                       round(seconds, 2), str(model.file), locations_in(message))
+
+
+def load_results(path: Path) -> dict[str, dict]:
+    """Results already in a JSON-lines file, by model name (later lines win)."""
+    done: dict[str, dict] = {}
+    if path.is_file():
+        for line in path.read_text(encoding="utf-8").splitlines():
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # a line cut by an interruption
+            done[rec["model"]] = rec
+    return done
+
+
+def table(results: list[dict]) -> str:
+    """The per-section summary table."""
+    sections = sorted({r["section"] for r in results})
+    cols = [("pass", "pass", True), ("refused-construct", "ref:construct", True),
+            ("refused-other", "ref:other", True), ("crashed", "crashed", None), ("hang", "hang", None),
+            ("wrong-values", "wrong", True), ("sim-failed", "sim-fail", True),
+            ("rejected", "inv:rejected", False), ("accepted", "inv:accepted", False)]
+    head = f"{'section':12s} {'valid':>5s} " + " ".join(f"{c[1]:>13s}" for c in cols) + f" {'invalid':>7s}"
+    lines = [head, "-" * len(head)]
+    for sec in sections + ["TOTAL"]:
+        rows = results if sec == "TOTAL" else [r for r in results if r["section"] == sec]
+        count = Counter(r["outcome"] for r in rows)
+        valid = sum(1 for r in rows if r["should_pass"])
+        invalid = len(rows) - valid
+        lines.append(f"{sec:12s} {valid:5d} " + " ".join(f"{count.get(c[0], 0):13d}" for c in cols)
+                     + f" {invalid:7d}")
+    return "\n".join(lines)
+
+
+def default_suite() -> Path:
+    """``../shared/modelica-compliance/ModelicaCompliance`` beside the repository, or $TRACKINGBOX_COMPLIANCE."""
+    env = os.environ.get("TRACKINGBOX_COMPLIANCE")
+    if env:
+        return Path(env)
+    repo = Path(__file__).resolve().parents[2]
+    return repo.parent / "shared" / "modelica-compliance" / "ModelicaCompliance"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--one"]:
+        return _worker_main(argv[1:])
+    p = argparse.ArgumentParser(
+        prog="scripts/compliance",
+        description="Compile every test model of the Modelica compliance suite with the embedded backend, "
+                    "simulate the valid ones, and print a table of outcomes per section.",
+        epilog="examples:\n  scripts/compliance\n  scripts/compliance --match Arrays.Functions -j 1\n"
+               "  scripts/compliance --resume --out compliance-out/results.jsonl",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--suite", type=Path, default=None, help="the suite's package directory "
+                   "(default: ../shared/modelica-compliance/ModelicaCompliance)")
+    p.add_argument("--out", type=Path, default=Path("compliance-out/results.jsonl"),
+                   help="JSON-lines results file, written as models finish (default: %(default)s)")
+    p.add_argument("-j", "--jobs", type=int, default=2, help="parallel worker processes (default: 2)")
+    p.add_argument("--timeout", type=float, default=180.0, help="seconds per model (default: 180)")
+    p.add_argument("--match", action="append", default=[], help="only models whose name contains this "
+                   "(repeatable)")
+    p.add_argument("--limit", type=int, default=None, help="at most this many models")
+    p.add_argument("--resume", action="store_true", help="skip models already in --out")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    suite = (args.suite or default_suite()).resolve()
+    if not (suite / "package.mo").is_file():
+        print(f"error: compliance suite package {suite} not found (no package.mo); give --suite",
+              file=sys.stderr)
+        return 2
+    models = discover(suite)
+    if args.match:
+        models = [m for m in models if any(s in m.name for s in args.match)]
+    if args.limit is not None:
+        models = models[: args.limit]
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    done = load_results(args.out) if args.resume else {}
+    if not args.resume:
+        args.out.write_text("", encoding="utf-8")
+    todo = [m for m in models if m.name not in done]
+    log.info("%d test models (%d already done), %d jobs, %g s per model -> %s",
+             len(models), len(models) - len(todo), args.jobs, args.timeout, args.out)
+    lock = threading.Lock()
+    t0 = time.perf_counter()
+    with open(args.out, "a", encoding="utf-8") as fh, ThreadPoolExecutor(max(1, args.jobs)) as pool:
+        futures = {pool.submit(run_isolated, m, suite, args.timeout): m for m in todo}
+        try:
+            for k, fut in enumerate(as_completed(futures), 1):
+                res = fut.result()
+                with lock:
+                    fh.write(json.dumps(res.to_json()) + "\n")
+                    fh.flush()
+                done[res.model] = res.to_json()
+                log.info("[%d/%d] %-70s %-17s %6.1f s", k, len(todo), res.model, res.outcome, res.seconds)
+        except KeyboardInterrupt:
+            for f in futures:
+                f.cancel()
+            log.info("interrupted: results so far are in %s (continue with --resume)", args.out)
+            raise
+    names = {m.name for m in models}
+    results = [r for n, r in done.items() if n in names]
+    print(table(results))
+    print(f"{len(results)} models in {time.perf_counter() - t0:.0f} s; per-model results in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
