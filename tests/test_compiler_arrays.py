@@ -397,3 +397,63 @@ def test_modifications_the_front_end_keeps_still_compile(mods_package, tmp_path)
     out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
     # c: a = 1, b = 7; w.o1.i: a = 4, b = 7; w.o2.i: a = 10, b = 20; o.i: a = 20, b = 40
     assert np.allclose(out["y"], (1 + 7 + 4 + 7 + 10 + 20 + 20 + 40) * (1 + out["time"]))
+
+
+# ------------------------------------------------- array helpers without a compile
+def test_array_module_examples_hold():
+    import doctest
+
+    from trackingbox.compiler import arrays
+
+    assert doctest.testmod(arrays).failed == 0
+
+
+def _obj(values) -> np.ndarray:
+    return np.array(values, dtype=object)
+
+
+@pytest.mark.parametrize("call,needle", [
+    (lambda a: a.matmul(_obj([[1, 2], [3, 4]]), _obj([1, 2, 3])), "matrix*vector product of sizes [2, 2] and [3]"),
+    (lambda a: a.matmul(_obj([1, 2]), _obj([1, 2, 3])), "scalar product of vectors"),
+    (lambda a: a.power(_obj([[1, 2, 3], [4, 5, 6]]), 2), "only a square matrix"),
+    (lambda a: a.power(_obj([[1, 2], [3, 4]]), 1.5), "constant Integer >= 0"),
+    (lambda a: a.divide(1.0, _obj([1, 2])), "use ./"),
+    (lambda a: a.map2(lambda x, y: x + y, _obj([1, 2]), 1.0, "addition '+'", broadcast=False), "element-wise"),
+    (lambda a: a.cat(1, [_obj([[1, 2]]), _obj([[1, 2, 3]])]), "cat() along dimension 1"),
+    (lambda a: a.linspace(0.0, 1.0, 1), "at least 2"),
+    (lambda a: a.cross(_obj([1, 2]), _obj([1, 2, 3])), "vector of size 3"),
+    (lambda a: a.to_scalar(_obj([1, 2])), "every size must be 1"),
+    (lambda a: a.subscript(_obj([1, 2, 3]), [4], "'v'"), "index 4 out of range 1..3"),
+], ids=["mat-vec", "vec-vec", "non-square", "fraction", "scalar/array", "broadcast", "cat", "linspace",
+        "cross", "scalar", "index"])
+def test_array_sizes_that_do_not_fit_are_errors(call, needle):
+    from trackingbox.compiler import arrays
+
+    with pytest.raises(arrays.ArrayError) as info:
+        call(arrays)
+    assert needle in str(info.value)
+    assert isinstance(info.value, CompileError)
+
+
+def test_vector_subscripts_pick_rows_and_columns_like_modelica():
+    from trackingbox.compiler import arrays
+
+    M = _obj([[1, 2, 3], [4, 5, 6]])
+    # M[{2, 1}, {3, 1}] is the 2x2 matrix of rows 2, 1 and columns 3, 1 (not NumPy's paired indexing)
+    picked = arrays.subscript(M, [_obj([2, 1]), _obj([3, 1])], "'M'")
+    assert picked.tolist() == [[6, 4], [3, 1]]
+    assert arrays.subscript(M, [None, 2], "'M'").tolist() == [2, 5]
+
+
+def test_modification_parser_reads_nesting_values_and_skips_redeclarations():
+    from trackingbox.compiler.modifiers import parse_modification
+
+    text = "(each k = f(1, 2), o1(i(a = 70), b.c = {1, 2}), redeclare model M = Base(k = 5), final x)"
+    mods, end = parse_modification(text, 0)
+    assert end == len(text)
+    assert [m.name for m in mods] == ["k", "o1", "x"]
+    assert mods[0].has_value and not mods[0].subs
+    o1 = mods[1]
+    assert [s.name for s in o1.subs] == ["i", "b"]
+    assert o1.subs[0].subs[0].name == "a" and o1.subs[0].subs[0].has_value
+    assert o1.subs[1].subs[0].name == "c"  # b.c = ... is b(c = ...)

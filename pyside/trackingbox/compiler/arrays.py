@@ -216,10 +216,7 @@ def stack(values: Sequence[Value], what: str = "array constructor {...}") -> np.
             raise ArrayError(f"{what} with elements of different sizes {size_text(s)} and {size_text(shape(v))}")
     out = new((len(values),) + s)
     for i, v in enumerate(values):
-        if s:
-            out[i] = v
-        else:
-            out[i] = v
+        out[i] = v
     return out
 
 
@@ -463,13 +460,6 @@ def subscript(a: Value, subs: Sequence[Value | None], what: str) -> Value:
     if isinstance(result, np.ndarray) and result.shape == ():
         return result[()]
     return result
-
-
-def check_size(value: Value, expected: tuple[int, ...], what: str) -> None:
-    """Raise unless *value* is a scalar (taken for each element) or has size *expected*."""
-    s = shape(value)
-    if s and s != expected:
-        raise ArrayError(f"{what}: value of size {size_text(s)} for a variable of size {size_text(expected)}")
 
 
 def fold_math(name: str, fn: Callable[[float], float], x: Value) -> float:
