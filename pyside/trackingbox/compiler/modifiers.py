@@ -165,6 +165,7 @@ class ModifierCheck:
             self.texts[file] = text
             self._index_classes(file, text)
         self.by_name: dict[str, list[ClassText]] = {}
+        self._declared: dict[tuple[str, tuple[int, ...]], list[list[Mod]]] = {}
         for c in self.classes:
             self.by_name.setdefault(c.name, []).append(c)
 
@@ -231,13 +232,22 @@ class ModifierCheck:
     # --------------------------------------------------------------- checks
     def declared_subs(self, used: list[ClassText], component: str) -> list[list[Mod]]:
         """Modifications of every declaration of *component* among *used* classes."""
-        pattern = re.compile(rf"(?<![.\w])[A-Za-z_][\w.]*\s+{re.escape(component)}\s*(?:\[[^\]]*\]\s*)?\(")
+        key = (component, tuple(id(c) for c in used))
+        if key not in self._declared:
+            self._declared[key] = self._find_declarations(used, component)
+        return self._declared[key]
+
+    def _find_declarations(self, used: list[ClassText], component: str) -> list[list[Mod]]:
+        # "Type component[...](" : the name and a parenthesis, preceded by a type name
+        pattern = re.compile(rf"(?<![.\w]){re.escape(component)}\s*(?:\[[^\]]*\]\s*)?\(")
+        type_before = re.compile(r"(?<![.\w])([A-Za-z_][\w.]*)\s+$")
         found = []
         for c in used:
             text = self.body(c)
             for m in pattern.finditer(text):
-                head = text[max(0, m.start() - 12):m.start()]
-                if re.search(r"\b(?:extends|end|import|within)\s*$", head):
+                before = type_before.search(text, max(0, m.start() - 120), m.start())
+                if before is None or before.group(1) in ("extends", "end", "import", "within", "if", "then",
+                                                          "else", "and", "or", "not", "in", "loop"):
                     continue
                 mods, _ = parse_modification(text, m.end() - 1)
                 found.append(mods)
