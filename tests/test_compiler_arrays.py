@@ -294,6 +294,26 @@ def test_multiple_outputs_named_arguments_and_enumeration_indices(tmp_path_facto
     assert np.allclose(out["g"], 30 + out["time"])  # Phase.gas is the third element
 
 
+LINEAR_SYSTEM = """
+model LinearSystem "A*y = b with zero entries in the parameter matrix A"
+  parameter Real A[3, 3] = [4, 1, 0; 1, 3, 1; 0, 1, 2];
+  Real b[3] = {1, 2, 3}*(1 + time);
+  Real y[3];
+equation
+  A*y = b;
+  annotation(experiment(StopTime = 1));
+end LinearSystem;
+"""
+
+
+def test_matrix_equation_solves_the_linear_system(tmp_path_factory):
+    fmu = _compile(tmp_path_factory, "LinearSystem", LINEAR_SYSTEM)
+    out = _simulate(fmu, _names("y", (3,)))
+    M = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 2.0]])
+    for k, t in enumerate(out["time"]):
+        assert np.allclose(_values(out, "y", (3,), k), np.linalg.solve(M, np.array([1.0, 2.0, 3.0]) * (1 + t)))
+
+
 # ----------------------------------------------------------------- refusals
 REFUSALS = [
     ("parameter Real p = sqrt(-1); Real y = p*time;", CompileError, "sqrt(-1)"),

@@ -956,6 +956,10 @@ class FlatTranslator:
             return None
         if any(s.name() not in self._parameter_names for s in ca.symvar(jac)):
             return None
+        # a coefficient that is zero at the parameters' values (e.g. a zero entry of a parameter
+        # matrix in A*y = b) cannot be divided by
+        if abs(self.numeric(jac, "coefficient in an algebraic loop")) < 1e-12:
+            return None
         r0 = ca.substitute(res, v, ca.MX(0))
         return -r0 / jac
 
