@@ -163,6 +163,9 @@ model Functions
   parameter Real v[2] = {1, 2};
   Real q = quad(A, v);
   Real R[3, 2] = ramp(time + 1, 3);
+  Real dq = div(0.5 - 2*time, 0.4) "towards zero";
+  Real rq = rem(0.5 - 2*time, 0.4);
+  Real mq = mod(0.5 - 2*time, 0.4);
   annotation(experiment(StopTime = 1));
 end Functions;
 """
@@ -274,13 +277,17 @@ def test_fill_of_a_time_varying_value_follows_time(constructors):
 
 def test_array_functions_are_inlined_with_array_semantics(tmp_path_factory):
     fmu = _compile(tmp_path_factory, "Functions", FUNCTIONS)
-    out = _simulate(fmu, ["q"] + _names("R", (3, 2)))
+    out = _simulate(fmu, ["q", "dq", "rq", "mq"] + _names("R", (3, 2)))
     assert np.allclose(out["q"], V @ A @ V)  # 27
     a = out["time"] + 1.0
     R = np.stack([_values(out, "R", (3, 2), k) for k in range(len(a))])
     expected = np.stack([np.column_stack([ak * np.arange(1, 4), -ak * np.arange(1, 4)]) for ak in a])
     expected[:, 0, 1] = 100.0
     assert np.allclose(R, expected)
+    x = 0.5 - 2 * out["time"]  # from 0.5 down to -1.5: both signs
+    assert np.allclose(out["dq"], np.trunc(x / 0.4))
+    assert np.allclose(out["rq"], np.fmod(x, 0.4))
+    assert np.allclose(out["mq"], x - np.floor(x / 0.4) * 0.4)
 
 
 def test_multiple_outputs_named_arguments_and_enumeration_indices(tmp_path_factory):

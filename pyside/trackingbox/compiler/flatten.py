@@ -1222,7 +1222,11 @@ def _divmod(n: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
         return a - math.trunc(a / b) * b
     if n == "mod":
         return a - ca.floor(a / b) * b
-    raise tr.unsupported(f"built-in {n}() of a variable")
+    q = a / b
+    truncated = ca.sign(q) * ca.floor(ca.fabs(q))  # integer part, towards zero
+    if n == "div":
+        return truncated
+    return a - truncated * b
 
 
 def _span_hint(body: Any) -> str | None:
