@@ -11,6 +11,7 @@ backends return the same :class:`CompileResult`:
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -116,6 +117,10 @@ def compile_model(
             version = "2.0"
     except TrackingError:
         raise
+    except RecursionError:  # before RuntimeError, its base class
+        raise CompileError(f"{model!r} from {src.entry} nests expressions or function calls too deeply for "
+                           f"the {chosen} backend's translation (Python's recursion limit, "
+                           f"{sys.getrecursionlimit()}): split the expression") from None
     except RuntimeError as exc:  # CasADi and friends: never a traceback for a model problem
         raise CompileError(f"{chosen} backend failed on {model!r}: {str(exc).strip()[:2000]}") from None
     seconds = time.perf_counter() - t0

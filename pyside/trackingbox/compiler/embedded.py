@@ -6,43 +6,33 @@ FMI 3.0 model-exchange FMUs. See :mod:`.flatten` for what Modelica it accepts.
 from __future__ import annotations
 
 import logging
+import os
+import pickle
 import re
+import signal
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
-
-import rumoca
 
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
-from .source import ModelicaSource, class_names, experiment_settings, find_construct
+from .source import BOM, ModelicaSource, class_names, experiment_settings, has_bom, locate, model_files
 
 log = logging.getLogger(__name__)
 
 
-def _diagnostics(source: ModelicaSource, limit: int = 5) -> list[str]:
-    """rumoca's error diagnostics for the source files, as ``file:line: message``."""
+def _diagnostics(raw: list[tuple[str, str, int | None]]) -> list[str]:
+    """rumoca's error diagnostics (from the worker) as ``file:line: message``."""
     found: list[str] = []
-    for file in source.files:
-        try:
-            diags = rumoca.validate(str(file))
-        except Exception:  # noqa: BLE001 - I/O failures: nothing to add
-            continue
-        for d in diags:
-            if getattr(d, "level", "") != "error":
-                continue
-            text = str(getattr(d, "message", d))
-            line = getattr(d, "line", None)
-            # rumoca's message carries the exact position as ╭─[file:line:col]
-            pos = re.search(r"\[([^\]\[]+?):(\d+):(\d+)\]", text)
-            if pos:
-                where = f"{pos.group(1)}:{pos.group(2)}:{pos.group(3)}"
-            else:
-                where = f"{file}:{line}"
-            summary = next((ln.strip(" ×") for ln in text.splitlines() if "×" in ln), text.splitlines()[0])
-            found.append(f"{where}: {summary.strip()}")
-            if len(found) >= limit:
-                return found
+    for file, text, line in raw:
+        # rumoca's message carries the exact position as ╭─[file:line:col]
+        pos = re.search(r"\[([^\]\[]+?):(\d+):(\d+)\]", text)
+        where = f"{pos.group(1)}:{pos.group(2)}:{pos.group(3)}" if pos else f"{file}:{line}"
+        summary = next((ln.strip(" ×") for ln in text.splitlines() if "×" in ln), text.splitlines()[0])
+        found.append(f"{where}: {summary.strip()}")
     return found
 
 
@@ -58,12 +48,13 @@ _MENTIONED = (
 )
 
 
-def _mentioned_construct(message: str, source: ModelicaSource) -> UnsupportedConstructError | None:
-    """rumoca refused a construct the embedded path does not support either: say where it is."""
+def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+    """rumoca refused a construct the embedded path does not support either: say where it is
+    (in the model's own file or a class it uses, never elsewhere in the package)."""
     low = message.lower()
     for needle, construct, pattern in _MENTIONED:
         if needle in low:
-            locs = find_construct(source.files, pattern)
+            locs = locate(source, model, pattern)
             if locs:
                 where = ", ".join(str(loc) for loc in locs)
                 return UnsupportedConstructError(
@@ -73,31 +64,126 @@ def _mentioned_construct(message: str, source: ModelicaSource) -> UnsupportedCon
     return None
 
 
+FRONTEND_TIMEOUT = 600.0
+"""Seconds the front end (rumoca load + flatten) may take before it counts as hung;
+``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
+
+
+def _signal_name(code: int) -> str:
+    try:
+        return signal.Signals(-code).name
+    except ValueError:
+        return f"signal {-code}"
+
+
+def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = (),
+                 validate: tuple[Path, ...] | None = None, parse_error: bool = False) -> dict:
+    """Run rumoca's load + flatten (or, given *validate*, its diagnostics of those files)
+    in a worker process and return the worker's answer.
+
+    A worker that dies (segmentation fault, abort, stack overflow) or outlives
+    :data:`FRONTEND_TIMEOUT` raises :class:`CompileError` naming the model and
+    the signal; the tool itself never goes down with it.
+    """
+    request = {
+        "mode": "flatten" if validate is None else "validate",
+        "parse_error": parse_error,
+        "entry": str(source.entry),
+        "model": model,
+        "roots": ([str(source.root)] + [str(p) for p in libraries]) if libraries else None,
+        "validate": [str(f) for f in validate or ()],
+        "validate_all": [str(f) for f in source.files],
+    }
+    timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
+    with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
+        req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
+        if any(has_bom(f) for f in source.files):  # rumoca refuses a byte-order mark: give it a copy without
+
+            copy = _without_bom(source, Path(tmp) / "src")
+            request["entry"] = str(copy / source.entry.relative_to(source.root))
+            if request["roots"]:
+                request["roots"] = [str(copy), *request["roots"][1:]]
+            for key in ("validate", "validate_all"):
+                request[key] = [str(copy / Path(f).relative_to(source.root)) for f in request[key]]
+            answer = _run_worker(request, req, res, source, model, timeout)
+            return _rename(answer, str(copy), str(source.root))
+        return _run_worker(request, req, res, source, model, timeout)
+
+
+def _without_bom(source: ModelicaSource, dest: Path) -> Path:
+    """A copy of the package's files under *dest*, byte-order marks removed (same relative paths)."""
+    for file in source.files:
+        target = dest / file.relative_to(source.root)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        data = file.read_bytes()
+        target.write_bytes(data[3:] if data.startswith(BOM) else data)
+    return dest
+
+
+def _rename(obj: object, old: str, new: str) -> object:
+    """*obj* with the path prefix *old* replaced by *new* in every string of messages and diagnostics."""
+    if isinstance(obj, dict):
+        return {k: (v if k == "flat" else _rename(v, old, new)) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_rename(v, old, new) for v in obj)
+    if isinstance(obj, str):
+        return obj.replace(old, new)
+    return obj
+
+
+def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, model: str,
+                timeout: float) -> dict:
+    req.write_bytes(pickle.dumps(request))
+    cmd = [sys.executable, str(Path(__file__).with_name("_frontend.py")), str(req), str(res)]
+    log.debug("front end: %s", " ".join(cmd))
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise CompileError(f"the Modelica front end did not finish on {model} from {source.entry} "
+                           f"within {timeout:g} s (set TRACKINGBOX_FRONTEND_TIMEOUT to wait longer)") from None
+    tail = out.decode("utf-8", "replace").strip()[-300:]
+    if proc.returncode < 0:
+        raise CompileError(f"the Modelica front end crashed on {model} from {source.entry} "
+                           f"({_signal_name(proc.returncode)}; rumoca died, e.g. on an expression "
+                           f"nested too deeply or a very long sum)") from None
+    if proc.returncode != 0 or not res.is_file():
+        raise CompileError(f"the Modelica front end crashed on {model} from {source.entry} "
+                           f"(exit status {proc.returncode}{': ' + tail if tail else ''})") from None
+    return pickle.loads(res.read_bytes())
+
+
 def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> dict:
     """Run rumoca on *model*; raise :class:`CompileError` with file:line diagnostics."""
-    roots = [str(source.root)] + [str(p) for p in libraries]
-    session = rumoca.Session(roots=roots) if libraries else rumoca.Session()
-    try:
-        rmodel = session.load(str(source.entry), model=model)
-    except rumoca.RumocaError as exc:
-        first = str(exc).splitlines()[0]
-        diags = _diagnostics(source)
-        if "resolve/parse failed" in first or not diags:
-            if not diags and ("not found" in first.lower() or "resolve/parse failed" in first):
-                known = class_names(source)
-                if model not in known:
-                    raise CompileError(f"class {model!r} not found in {source.entry}"
-                                       f"{did_you_mean(model, known)} (classes are named with their "
-                                       f"package, e.g. Pkg.Sub.Model)") from None
-                raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}") from None
-        construct = _mentioned_construct(str(exc), source)
-        if construct is not None:
-            raise construct from None
-        detail = ("\n  " + "\n  ".join(diags)) if diags else ""
-        raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}") from None
-    except Exception as exc:  # rumoca raises plain errors for some internal failures
-        raise CompileError(f"rumoca failed on {model!r} from {source.entry}: {exc}") from None
-    return rmodel.to_dict("flat")
+    answer = run_frontend(source, model, libraries)
+    if answer["ok"]:
+        return answer["flat"]
+    message = answer["message"]
+    if answer["kind"] != "rumoca":
+        raise CompileError(f"rumoca failed on {model!r} from {source.entry}: {message}")
+    first = message.splitlines()[0] if message else "rumoca error"
+    try:  # diagnostics of the model's own files (and of every file for a syntax error elsewhere)
+        raw = run_frontend(source, model, libraries, validate=model_files(source, model),
+                           parse_error="parse" in message.lower())["diagnostics"]
+    except CompileError:
+        raw = []
+    diags = _diagnostics(raw)
+    if "resolve/parse failed" in first or not diags:
+        if not diags and ("not found" in first.lower() or "resolve/parse failed" in first):
+            known = class_names(source)
+            if model not in known:
+                raise CompileError(f"class {model!r} not found in {source.entry}"
+                                   f"{did_you_mean(model, known)} (classes are named with their "
+                                   f"package, e.g. Pkg.Sub.Model)")
+            raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
+    construct = _mentioned_construct(message, source, model)
+    if construct is not None:
+        raise construct
+    detail = ("\n  " + "\n  ".join(diags)) if diags else ""
+    raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
 def compile_embedded(source: ModelicaSource, model: str, output: Path,

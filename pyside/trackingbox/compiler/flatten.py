@@ -7,6 +7,13 @@ Modelica source. This module reads the flat model (``Model.to_dict("flat")``):
   Boolean) and constants are evaluated, every Real parameter becomes a symbol;
 * expressions become CasADi ``MX`` expressions; Modelica functions are inlined
   symbolically (assignments, if-statements, for-loops over constant ranges);
+* arrays keep their Modelica meaning (:mod:`.arrays`): matrix and vector
+  products, matrix powers, element-wise operators, slices, array constructors,
+  comprehensions and reductions; sizes that do not fit and constants a
+  function cannot take (``sqrt(-1)``, ``1/0``) are errors naming the
+  expression and its line;
+* modifications that rumoca is known to lose are refused before they give
+  wrong numbers (:mod:`.modifiers`);
 * the equations are matched to their unknowns and sorted into blocks
   (:mod:`.causalize`): a scalar block linear in its unknown is solved
   symbolically, anything else goes to a Newton rootfinder.
@@ -47,16 +54,22 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
+from . import arrays as arr
+from .arrays import ArrayError
 from .causalize import StructuralError, blt
-from .source import ModelicaSource, find_construct
+from .modifiers import modifier_check
+from .source import (Location, ModelicaSource, locate, model_files, span_location, span_sources,
+                     strip_comments)
 
 log = logging.getLogger(__name__)
 
@@ -193,14 +206,43 @@ class FlatTranslator:
         self._inline_depth = 0
         self.asserts: list[Assertion] = []
         self._guards: list[Any] = []  # conditions of the function if-branches being inlined
+        self._span: dict[str, Any] | None = None  # span of the expression being translated (for errors)
+        self._files: tuple[Path, ...] | None = None
+        self._sources: dict[int, Path] | None = None
+        self._text_cache: dict[Path, str] = {}
 
     # ------------------------------------------------------------------ errors
-    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "") -> UnsupportedConstructError:
-        where = ""
+    def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
+        """Where a construct stands: the model's own file (or a class it uses) and the line.
+
+        From the front end's *span* (default: the expression being translated) when it
+        matches *pattern*; else from a search for *pattern* restricted to the files of
+        the classes the model uses (:func:`.source.locate`), never other files of the package.
+        """
+        if self._files is None:
+            self._files = model_files(self.source, self.model)
+            self._sources = span_sources(self.flat, self._files)
+        span = span if span is not None else self._span
+        if span is not None:
+            known = self._sources.get(span.get("source")) if self._sources else None
+            files = (known,) if known is not None else self._files
+            loc = span_location(span, files, pattern)
+            if loc is not None:
+                return [loc]
         if pattern:
-            locs = find_construct(self.source.files, pattern)
+            locs = locate(self.source, self.model, pattern)
             if locs:
-                where = " at " + ", ".join(str(loc) for loc in locs)
+                return locs
+        if span is not None and pattern:
+            loc = span_location(span, files, None)
+            if loc is not None:
+                return [loc]
+        return []
+
+    def unsupported(self, construct: str, pattern: str | None = None, detail: str = "", *,
+                    span: dict[str, Any] | None = None) -> UnsupportedConstructError:
+        locs = self.location(pattern, span)
+        where = (" at " + ", ".join(str(loc) for loc in locs)) if locs else ""
         msg = (
             f"unsupported Modelica construct in {self.model}: {construct}{where}"
             f"{': ' + detail if detail else ''}. The embedded backend cannot compile it; "
@@ -228,7 +270,16 @@ class FlatTranslator:
             return REAL
         return int(t.get("canonical_type", REAL))
 
+    def check_modifiers(self) -> None:
+        """Refuse models whose modifications rumoca 0.10.2 loses (see :mod:`.modifiers`)."""
+        lost = modifier_check(self.source).check(self.model)
+        if lost:
+            log.warning("%s: bounds or units lost by the front end (no effect on values): %s",
+                        self.model, "; ".join(lost))
+
     def collect_variables(self) -> None:
+        # values are only as good as the modifications the front end kept
+        self.check_modifiers()
         top_inputs = set(self.flat.get("top_level_input_components") or [])
         for name, v in self.flat["variables"].items():
             vtype = self._type_of(v)
@@ -303,8 +354,13 @@ class FlatTranslator:
         """Evaluate an attribute node (start/binding) for one scalar of an array."""
         val = self.expr(node)
         if isinstance(val, np.ndarray):
-            if not sv.index:
-                raise CompileError(f"array value for scalar {sv.name!r} in {self.model}")
+            base = sv.name.split("[", 1)[0] if sv.index else sv.name
+            expected = self.dims.get(base, ())
+            if val.shape != expected:
+                raise CompileError(
+                    f"value of size {arr.size_text(val.shape)} given to {base!r} of size "
+                    f"{arr.size_text(expected)} in {self.model}: `{expression_text(node)}`"
+                )
             return val[tuple(i - 1 for i in sv.index)]
         return val
 
@@ -371,58 +427,90 @@ class FlatTranslator:
         if env is not None and name in env:
             val = env[name]
             if subs:
-                idx = tuple(self._index(s) - 1 for s in subs)
-                return val[idx] if isinstance(val, np.ndarray) else val
+                return arr.subscript(val, [self._subscript(s, val, k, env) for k, s in enumerate(subs)], repr(name))
             return val
         if name == "time":
             return self.time
         if name not in self.vars:
+            ordinal = (self.flat.get("enum_literal_ordinals") or {}).get(name)
+            if ordinal is not None and not subs:  # an enumeration literal is its ordinal (MLS 4.9.5)
+                return int(ordinal)
             # component_ref names of array elements of components come as "a[2].b"
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
+        picks: list[Value] = []
         if subs:
-            idx = tuple(self._index(s) for s in subs)
-            if len(idx) != len(dims):
-                return self._slice(name, dims, idx)
-            sname = name + "[" + ",".join(str(i) for i in idx) + "]"
+            if len(subs) > len(dims):
+                raise CompileError(f"{len(subs)} subscripts for {name!r} of size {arr.size_text(dims)} "
+                                   f"in {self.model}")
+            # ``end`` comes as size(name, k): evaluate it on a placeholder of the right size
+            shape_only = arr.new(dims)
+            picks = [self._subscript(s, shape_only, k, env) for k, s in enumerate(subs)]
+        if picks and len(picks) == len(dims) and all(isinstance(p, int) for p in picks):
+            sname = name + "[" + ",".join(str(i) for i in picks) + "]"
             if sname not in self.scalars:
-                raise CompileError(f"index {list(idx)} out of range for {name!r} in {self.model}")
+                raise CompileError(f"index {picks} out of range for {name!r} of size "
+                                   f"{arr.size_text(dims)} in {self.model}")
             return self._scalar_value(self.scalars[sname])
         if dims:
-            arr = np.empty(dims, dtype=object)
+            full = arr.new(dims)
             for sv in scalars:
-                arr[tuple(i - 1 for i in sv.index)] = self._scalar_value(sv)
-            return arr
-        return self._scalar_value(scalars[0])
-
-    def _slice(self, name: str, dims: tuple[int, ...], idx: tuple[int, ...]) -> Value:
-        full = self.ref(name, [], None)
-        return full[tuple(i - 1 for i in idx)]
+                full[tuple(i - 1 for i in sv.index)] = self._scalar_value(sv)
+        else:
+            full = self._scalar_value(scalars[0])
+        if subs:
+            return arr.subscript(full, picks, repr(name))
+        return full
 
     def _scalar_value(self, sv: ScalarVar) -> Value:
         if sv.kind in ("structural", "constant"):
             return self.structural_value(sv)
         return sv.sym
 
-    def _index(self, sub: Any) -> int:
+    def _subscript(self, sub: Any, value: Value, k: int, env: dict[str, Value] | None) -> Value:
+        """One subscript: an Integer, a vector of Integers, or None for ``:``.
+
+        ``end`` comes from the flat model as ``size(a, k)`` of the array itself.
+        """
         kind, body = _kind_of(sub)
         if kind == "Index":
             return int(body["value"])
+        if kind == "Colon":
+            return None
         if kind == "Expr":
-            val = self.expr(body["expr"])
+            val = self.expr(body["expr"], env)
+            if arr.is_array(val):
+                if not all(_num(v) for v in val.ravel()):
+                    raise CompileError(f"non-constant array subscript `{expression_text(body['expr'])}` "
+                                       f"in {self.model}")
+                return val
             if not _num(val):
-                raise CompileError(f"non-constant array index in {self.model}")
+                raise self.unsupported(
+                    f"subscript with a variable index `{expression_text(body['expr'])}`",
+                    detail="indices must be parameters or constants",
+                )
             return int(round(float(val)))
-        raise self.unsupported(f"array subscript {kind!r} (slices)")
+        raise self.unsupported(f"array subscript {kind!r}")
 
     # ------------------------------------------------------------ expressions
     def expr(self, node: Any, env: dict[str, Value] | None = None) -> Value:
         kind, body = _kind_of(node)
+        if isinstance(body, dict) and isinstance(body.get("span"), dict):
+            self._span = body["span"]
         method: Callable[[Any, dict[str, Value] | None], Value] | None = getattr(self, f"_x_{kind}", None)
         if method is None:
             raise self.unsupported(f"expression of kind {kind!r}")
-        return method(body, env)
+        try:
+            return method(body, env)
+        except ArrayError as exc:
+            # the innermost expression that failed names itself; outer ones pass the error on
+            span = body.get("span") if isinstance(body, dict) else None
+            hint = _span_hint(body)
+            locs = self.location(rf"\s*{re.escape(hint)}\b" if hint else None,
+                                 span if isinstance(span, dict) else None)
+            where = f" at {locs[0]}" if locs else ""
+            raise CompileError(f"{exc} in `{expression_text(node)}` in {self.model}{where}") from None
 
     def _x_Literal(self, body: Any, env: Any) -> Value:
         kind, val = _kind_of(body["value"])
@@ -440,20 +528,51 @@ class FlatTranslator:
 
     def _x_Binary(self, body: Any, env: Any) -> Value:
         op = body["op"]
+        if _kind_of(body["lhs"])[0] == "Tuple":
+            return self._tuple_equation(body, env)
         lhs = self.expr(body["lhs"], env)
         rhs = self.expr(body["rhs"], env)
-        return _binary(op, lhs, rhs, self)
+        return _binary(str(op), lhs, rhs, self)
+
+    def _tuple_equation(self, body: Any, env: Any) -> Value:
+        """``(a, , c) = f(x)``: one residual per output that is not omitted, flattened."""
+        kind, call = _kind_of(body["rhs"])
+        if str(body["op"]).lower() != "sub" or kind != "FunctionCall":
+            raise self.unsupported("tuple expression other than the left side of (a, b) = f(x)")
+        fname = call["name"]["name"]
+        fn = self.functions.get(fname)
+        if fn is None:
+            raise CompileError(f"call of unknown function {fname!r} in {self.model}")
+        args = [self.expr(a, env) for a in (call.get("args") or [])]
+        outs = self.inline(fname, fn, args)
+        targets = body["lhs"]["Tuple"].get("elements") or []
+        if len(targets) > len(outs):
+            raise CompileError(f"{len(targets)} results taken from {fname!r}, which has {len(outs)} outputs, "
+                               f"in {self.model}")
+        residuals: list[Value] = []
+        for target, out in zip(targets, outs):
+            if _kind_of(target)[0] == "Empty":
+                continue
+            residuals.extend(arr.elements([_binary("Sub", self.expr(target, env), out, self)]))
+        return arr.from_list(residuals)
+
+    def _x_Index(self, body: Any, env: Any) -> Value:
+        """A subscripted expression, e.g. ``f(x)[2]`` or an array input ``A[i]`` inside a function."""
+        base = self.expr(body["base"], env)
+        subs = body.get("subscripts") or []
+        return arr.subscript(base, [self._subscript(s, base, k, env) for k, s in enumerate(subs)],
+                             f"`{expression_text(body['base'])}`")
 
     def _x_Unary(self, body: Any, env: Any) -> Value:
         op = body.get("op")
         arg = self.expr(body.get("rhs", body.get("arg", body.get("expr"))), env)
         opname = str(op).lower()
-        if opname in ("minus", "neg", "sub", "dotminus", "elemminus", "negate"):
-            return _elementwise(lambda a: -a, arg)
-        if opname in ("plus", "add", "dotplus"):
+        if opname in ("minus", "neg", "sub", "dotminus", "elemminus", "negate", "subelem", "minuselem"):
+            return arr.map1(lambda a: -a, arg)
+        if opname in ("plus", "add", "dotplus", "addelem", "pluselem"):
             return arg
         if opname == "not":
-            return _elementwise(_not, arg)
+            return arr.map1(_not, arg)
         raise self.unsupported(f"unary operator {op!r}")
 
     def _x_If(self, body: Any, env: Any) -> Value:
@@ -466,7 +585,10 @@ class FlatTranslator:
                     result = self.expr(val_node, env)
                 continue
             val = self.expr(val_node, env)
-            result = _elementwise2(lambda a, b: ca.if_else(cond, a, b), val, result)
+            if arr.is_array(cond):
+                raise ArrayError("if-expression with an array condition")
+            result = arr.map2(lambda a, b, c=cond: ca.if_else(c, a, b), val, result,
+                              "if-expression branches", broadcast=False)
         return result
 
     def _x_Parenthesized(self, body: Any, env: Any) -> Value:
@@ -474,13 +596,84 @@ class FlatTranslator:
 
     def _x_Array(self, body: Any, env: Any) -> Value:
         elements = body.get("elements", body) if isinstance(body, dict) else body
+        kind = str(body.get("kind", "Array")) if isinstance(body, dict) else "Array"
         vals = [self.expr(e, env) for e in elements]
-        arr = np.empty(len(vals), dtype=object)
-        for i, v in enumerate(vals):
-            arr[i] = v
-        if vals and isinstance(vals[0], np.ndarray):
-            return np.array([list(v) for v in vals], dtype=object)
-        return arr
+        if kind == "Horizontal":  # [a, b]: cat(2, promote(a, 2), promote(b, 2))
+            return arr.cat(2, [arr.promote2(v) for v in vals], "matrix constructor [a, b]")
+        if kind == "Vertical":  # [a; b]: cat(1, promote(a, 2), promote(b, 2))
+            return arr.cat(1, [arr.promote2(v) for v in vals], "matrix constructor [a; b]")
+        if kind != "Array":
+            raise self.unsupported(f"array constructor of kind {kind!r}")
+        if vals and not any(arr.is_array(v) for v in vals):
+            where = self._multi_iterator_comprehension(body)
+            if where is not None:
+                raise UnsupportedConstructError(
+                    f"unsupported Modelica construct in {self.model}: array comprehension with several "
+                    f"iterators ({{e for i in u, j in v}}) at {where}: the front end flattens it into a vector, "
+                    "losing its size; write nested comprehensions {{e for i in u} for j in v} instead"
+                )
+        return arr.stack(vals)
+
+    _MULTI_ITERATOR = re.compile(r"\s*for\s+\w+\s+in\s+[^{};]*?,\s*\w+\s+in\b")
+
+    def _multi_iterator_comprehension(self, body: Any) -> Location | None:
+        """Where a vector came from ``{e for i in u, j in v}``, which rumoca flattens to one dimension.
+
+        The flat vector carries the span of the element expression ``e``; the
+        source text right after it shows the iterators.
+        """
+        span = body.get("span") if isinstance(body, dict) else None
+        if not isinstance(span, dict) or not isinstance(span.get("end"), int):
+            return None
+        self.location()  # learns the model's files and the span source numbers
+        known = (self._sources or {}).get(span.get("source"))
+        files = (known,) if known is not None else (self._files or ())
+        start, end = span.get("start", 0), span["end"]
+        for file in files:
+            text = self._code(file)
+            if end > len(text) or text[start:end].lstrip().startswith(("{", "[")):
+                continue
+            if self._MULTI_ITERATOR.match(text, end):
+                return Location(file, text.count("\n", 0, start) + 1)
+        return None
+
+    def _code(self, file: Path) -> str:
+        """A file's text with comments and strings blanked (cached)."""
+        if file not in self._text_cache:
+            try:
+                data = file.read_bytes()
+            except OSError:
+                data = b""
+            if data.startswith(b"\xef\xbb\xbf"):
+                data = data[3:]
+            # spans are byte offsets: keep one character per byte
+            self._text_cache[file] = strip_comments(data.decode("latin-1"))
+        return self._text_cache[file]
+
+    def _x_ArrayComprehension(self, body: Any, env: Any) -> Value:
+        """``{e for i in u, j in v}`` = ``{{e for i in u} for j in v}`` (MLS 10.4.2)."""
+        if body.get("filter") is not None:
+            raise self.unsupported("array comprehension with an if-filter", r"\bfor\b[^;]*\bif\b")
+        indices = body.get("indices") or []
+        if not indices:
+            raise self.unsupported("array comprehension without an iterator")
+        ranges = []
+        for ix in indices:
+            if ix.get("range") is None:
+                raise self.unsupported("array comprehension with an implicit range", r"\bfor\s+\w+\s*[},]")
+            rng = self.expr(ix["range"], env)
+            if not arr.is_array(rng) or len(rng.shape) != 1:
+                raise ArrayError(f"iterator {ix['name']!r} ranges over a value of size {arr.size_text(arr.shape(rng))}")
+            ranges.append((ix["name"], list(rng)))
+
+        def build(level: int, scope: dict[str, Value]) -> Value:
+            # the last iterator is the outermost dimension
+            if level < 0:
+                return self.expr(body["expr"], scope)
+            name, values = ranges[level]
+            return arr.stack([build(level - 1, {**scope, name: v}) for v in values], "array comprehension")
+
+        return build(len(ranges) - 1, dict(env or {}))
 
     def _x_Range(self, body: Any, env: Any) -> Value:
         start = self.expr(body["start"], env)
@@ -488,15 +681,11 @@ class FlatTranslator:
         end = self.expr(body["end"], env)
         if not all(_num(v) for v in (start, step, end)):
             raise self.unsupported("range with non-constant bounds")
-        vals = []
-        x = start
-        while (step > 0 and x <= end + 1e-12) or (step < 0 and x >= end - 1e-12):
-            vals.append(x)
-            x += step
-        arr = np.empty(len(vals), dtype=object)
-        for i, v in enumerate(vals):
-            arr[i] = v
-        return arr
+        if float(step) == 0.0:
+            raise ArrayError("range with step 0")
+        count = max(0, math.floor((float(end) - float(start)) / float(step) + 1e-10) + 1)
+        integer = all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (start, step, end))
+        return arr.from_list([start + k * step if integer else float(start) + k * float(step) for k in range(count)])
 
     def _x_BuiltinCall(self, body: Any, env: Any) -> Value:
         fn = str(body["function"])
@@ -512,7 +701,7 @@ class FlatTranslator:
     def _x_FunctionCall(self, body: Any, env: Any) -> Value:
         fname = body["name"]["name"]
         args = [self.expr(a, env) for a in (body.get("args") or [])]
-        if fname in _BUILTIN_NAMES:
+        if fname in _BUILTIN_NAMES or (fname.lower() in _ARRAY_BUILTINS and fname not in self.functions):
             return _builtin(fname.lower(), args, self)
         fn = self.functions.get(fname)
         if fn is None:
@@ -525,7 +714,7 @@ class FlatTranslator:
         if kind != "VarRef":
             raise self.unsupported("der() of an expression", r"\bder\s*\(", "write der(x) of a variable")
         val = self._x_VarRef(body, env)
-        return _elementwise(self._der_scalar, val)
+        return arr.map1(self._der_scalar, val)
 
     def _der_scalar(self, sym: Value) -> ca.MX:
         if not isinstance(sym, ca.MX) or not sym.is_symbolic():
@@ -577,13 +766,37 @@ class FlatTranslator:
                 ident = parts[0]["ident"]
                 subs = parts[0].get("subs") or []
                 if subs:
-                    idx = tuple(self._index(s) - 1 for s in subs)
-                    arr = env.get(ident)
-                    if not isinstance(arr, np.ndarray):
+                    target = env.get(ident)
+                    if not isinstance(target, np.ndarray):
                         raise self.unsupported(f"indexed assignment to {ident!r} in function {fname!r}")
-                    arr = arr.copy()
-                    arr[idx] = value
-                    env[ident] = arr
+                    picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
+                    if len(picks) != target.ndim:
+                        raise CompileError(f"assignment to {ident!r} in function {fname!r} with {len(picks)} "
+                                           f"subscripts for an array of size {arr.size_text(target.shape)}")
+                    index = tuple(
+                        slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
+                        for p in picks
+                    )
+                    for k, p in enumerate(picks):
+                        bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
+                               and not 1 <= int(i) <= target.shape[k]]
+                        if bad:
+                            raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
+                                               f"to {ident!r} in function {fname!r}")
+                    target = target.copy()
+                    try:
+                        target[np.ix_(*[range(target.shape[k]) if p is None else
+                                        ([i] if isinstance(i, int) else i) for k, (p, i) in
+                                        enumerate(zip(picks, index))])] = (
+                            np.asarray(value, dtype=object).reshape(
+                                [target.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
+                                 for k, (p, i) in enumerate(zip(picks, index))])
+                            if arr.is_array(value) else value)
+                    except ValueError:
+                        raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
+                                           f"to a part of {ident!r} in function {fname!r} that does not "
+                                           "have that size") from None
+                    env[ident] = target
                 else:
                     env[ident] = value
             elif kind == "If":
@@ -634,7 +847,7 @@ class FlatTranslator:
                 elif a is b:
                     out[key] = a
                 else:
-                    out[key] = _elementwise2(lambda x, y: ca.if_else(cond, x, y), a, b)
+                    out[key] = arr.map2(lambda x, y, c=cond: ca.if_else(c, x, y), a, b, f"if-branches of {key!r}")
             merged = out
         env.clear()
         env.update(merged)
@@ -981,6 +1194,10 @@ class FlatTranslator:
             return None
         if any(s.name() not in self._parameter_names for s in ca.symvar(jac)):
             return None
+        # a coefficient that is zero at the parameters' values (e.g. a zero entry of a parameter
+        # matrix in A*y = b) cannot be divided by
+        if abs(self.numeric(jac, "coefficient in an algebraic loop")) < 1e-12:
+            return None
         r0 = ca.substitute(res, v, ca.MX(0))
         return -r0 / jac
 
@@ -1069,24 +1286,11 @@ _BUILTIN_NAMES = {
     "semiLinear", "sum", "product", "integer", "div", "mod", "rem",
 }
 
-
-def _elementwise(fn: Callable[[Any], Any], a: Value) -> Value:
-    if isinstance(a, np.ndarray):
-        out = np.empty(a.shape, dtype=object)
-        for idx in np.ndindex(a.shape):
-            out[idx] = fn(a[idx])
-        return out
-    return fn(a)
-
-
-def _elementwise2(fn: Callable[[Any, Any], Any], a: Value, b: Value) -> Value:
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        shape = a.shape if isinstance(a, np.ndarray) else b.shape
-        out = np.empty(shape, dtype=object)
-        for idx in np.ndindex(shape):
-            out[idx] = fn(a[idx] if isinstance(a, np.ndarray) else a, b[idx] if isinstance(b, np.ndarray) else b)
-        return out
-    return fn(a, b)
+# array built-ins (MLS 10.3): recognised by name when the model defines no function of that name
+_ARRAY_BUILTINS = {
+    "size", "ndims", "scalar", "vector", "matrix", "identity", "diagonal", "zeros", "ones", "fill",
+    "linspace", "cat", "transpose", "outerproduct", "symmetric", "cross", "skew",
+}
 
 
 def _not(a: Any) -> Any:
@@ -1094,85 +1298,88 @@ def _not(a: Any) -> Any:
 
 
 def _binary(op: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
+    """A binary operator with its Modelica meaning (rumoca names: Add, Sub, Mul, Div, Exp, and
+    AddElem ... ExpElem for the element-wise ``.+ .- .* ./ .^``)."""
     o = op.lower()
-    if o.startswith("dot") or o.startswith("elem"):
-        o = o.replace("dot", "").replace("elem", "")
-    both_num = _num(a) and _num(b)
+    elementwise = False
+    for prefix in ("dot", "elem"):
+        if o.startswith(prefix):
+            o, elementwise = o[len(prefix):], True
+    if o.endswith("elem"):
+        o, elementwise = o[: -len("elem")], True
     if o in ("add", "plus"):
-        return _elementwise2(lambda x, y: x + y, a, b)
+        return arr.map2(lambda x, y: x + y, a, b, "'.+'" if elementwise else "addition '+'", broadcast=elementwise)
     if o in ("sub", "minus"):
-        return _elementwise2(lambda x, y: x - y, a, b)
+        return arr.map2(lambda x, y: x - y, a, b, "'.-'" if elementwise else "subtraction '-'",
+                        broadcast=elementwise)
     if o in ("mul", "times"):
-        if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.ndim == 1 and b.ndim == 1:
-            return sum((a[i] * b[i] for i in range(len(a))), 0.0)
-        return _elementwise2(lambda x, y: x * y, a, b)
+        if elementwise:
+            return arr.map2(lambda x, y: x * y, a, b, "'.*'")
+        return arr.matmul(a, b)
     if o == "div":
-        return _elementwise2(lambda x, y: x / y, a, b)
+        if elementwise:
+            return arr.map2(arr.scalar_div, a, b, "'./'")
+        return arr.divide(a, b)
     if o in ("exp", "pow", "power"):
-        def power(x: Any, y: Any) -> Any:
-            if _num(x) and _num(y):
-                return float(x) ** float(y)
-            if _num(y) and float(y) == 2.0:
-                return x * x
-            if _num(y) and float(y).is_integer() and 0 < abs(float(y)) <= 8:
-                return ca.constpow(x, float(y))
-            return ca.power(x, y)
-        return _elementwise2(power, a, b)
+        if elementwise:
+            return arr.map2(arr.scalar_pow, a, b, "'.^'")
+        return arr.power(a, b)
     cmp = {"lt": "<", "le": "<=", "gt": ">", "ge": ">=", "eq": "==", "neq": "!=", "ne": "!="}
     if o in cmp:
-        if both_num:
-            return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b, "==": a == b, "!=": a != b}[cmp[o]]
+        if arr.is_array(a) or arr.is_array(b):
+            raise ArrayError(f"relational operator {cmp[o]} on arrays (sizes {arr.size_text(arr.shape(a))} "
+                             f"and {arr.size_text(arr.shape(b))}); Modelica compares scalars only")
         x, y = a, b
         return {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[cmp[o]]
-    if o == "and":
-        if _num(a) and not a:
-            return False
-        if _num(b) and not b:
-            return False
-        if _num(a):
-            return b
-        if _num(b):
-            return a
-        return ca.logic_and(a, b)
-    if o == "or":
-        if (_num(a) and a) or (_num(b) and b):
-            return True
-        if _num(a):
-            return b
-        if _num(b):
-            return a
-        return ca.logic_or(a, b)
+    if o in ("and", "or"):
+        return arr.map2(_and if o == "and" else _or, a, b, f"'{o}'", broadcast=False)
     raise tr.unsupported(f"binary operator {op!r}")
 
 
-def _fold(values: list[Value]) -> list[Value]:
-    out: list[Value] = []
-    for v in values:
-        if isinstance(v, np.ndarray):
-            out.extend(v.ravel().tolist())
-        else:
-            out.append(v)
-    return out
+def _and(a: Any, b: Any) -> Any:
+    if (_num(a) and not a) or (_num(b) and not b):
+        return False
+    if _num(a):
+        return b
+    if _num(b):
+        return a
+    return ca.logic_and(a, b)
+
+
+def _or(a: Any, b: Any) -> Any:
+    if (_num(a) and a) or (_num(b) and b):
+        return True
+    if _num(a):
+        return b
+    if _num(b):
+        return a
+    return ca.logic_or(a, b)
+
+
+_SIMPLE = {
+    "sqrt": (math.sqrt, ca.sqrt), "exp": (math.exp, ca.exp), "log": (math.log, ca.log),
+    "log10": (math.log10, ca.log10), "sin": (math.sin, ca.sin), "cos": (math.cos, ca.cos),
+    "tan": (math.tan, ca.tan), "asin": (math.asin, ca.asin), "acos": (math.acos, ca.acos),
+    "atan": (math.atan, ca.atan), "sinh": (math.sinh, ca.sinh), "cosh": (math.cosh, ca.cosh),
+    "tanh": (math.tanh, ca.tanh), "abs": (abs, ca.fabs), "floor": (math.floor, ca.floor),
+    "ceil": (math.ceil, ca.ceil), "sign": (lambda x: float(np.sign(x)), ca.sign),
+    "integer": (lambda x: float(math.floor(x)), ca.floor),
+}
+
+
+def _arity(name: str, args: list[Value], *allowed: int) -> None:
+    if len(args) not in allowed:
+        want = " or ".join(str(n) for n in allowed)
+        raise ArrayError(f"{name}() takes {want} argument(s), got {len(args)}")
 
 
 def _builtin(name: str, args: list[Value], tr: FlatTranslator) -> Value:
-    def unary(f_num: Callable[[float], float], f_sym: Callable[[Any], Any]) -> Value:
-        return _elementwise(lambda a: f_num(float(a)) if _num(a) else f_sym(a), args[0])
-
     n = name.lower()
-    simple = {
-        "sqrt": (math.sqrt, ca.sqrt), "exp": (math.exp, ca.exp), "log": (math.log, ca.log),
-        "log10": (math.log10, ca.log10), "sin": (math.sin, ca.sin), "cos": (math.cos, ca.cos),
-        "tan": (math.tan, ca.tan), "asin": (math.asin, ca.asin), "acos": (math.acos, ca.acos),
-        "atan": (math.atan, ca.atan), "sinh": (math.sinh, ca.sinh), "cosh": (math.cosh, ca.cosh),
-        "tanh": (math.tanh, ca.tanh), "abs": (abs, ca.fabs), "floor": (math.floor, ca.floor),
-        "ceil": (math.ceil, ca.ceil), "sign": (lambda x: float(np.sign(x)), ca.sign),
-    }
-    if n in simple:
-        return unary(*simple[n])
-    if n == "integer":
-        return unary(lambda x: float(math.floor(x)), ca.floor)
-    if n in ("noevent",):
+    if n in _SIMPLE:
+        _arity(n, args, 1)
+        f_num, f_sym = _SIMPLE[n]
+        return arr.map1(lambda a: arr.fold_math(n, f_num, a) if _num(a) else f_sym(a), args[0])
+    if n == "noevent":
         return args[0]
     if n == "smooth":
         return args[1]
@@ -1182,37 +1389,177 @@ def _builtin(name: str, args: list[Value], tr: FlatTranslator) -> Value:
         x, a, b = args
         return ca.if_else(x >= 0, a * x, b * x) if not _num(x) else (a * x if x >= 0 else b * x)
     if n == "atan2":
-        return _elementwise2(lambda y, x: math.atan2(y, x) if _num(y) and _num(x) else ca.atan2(y, x), args[0], args[1])
+        _arity(n, args, 2)
+        return arr.map2(lambda y, x: math.atan2(y, x) if _num(y) and _num(x) else ca.atan2(y, x),
+                        args[0], args[1], "atan2()")
     if n in ("min", "max"):
-        vals = _fold(args) if len(args) == 1 else args
-        if len(vals) == 2 and (isinstance(vals[0], np.ndarray) or isinstance(vals[1], np.ndarray)):
-            fn = ca.fmin if n == "min" else ca.fmax
-            return _elementwise2(lambda x, y: fn(x, y), vals[0], vals[1])
-        acc = vals[0]
-        for v in vals[1:]:
-            if _num(acc) and _num(v):
-                acc = min(acc, v) if n == "min" else max(acc, v)
-            else:
-                acc = ca.fmin(acc, v) if n == "min" else ca.fmax(acc, v)
-        return acc
+        _arity(n, args, 1, 2)
+        if len(args) == 1:  # reduction over an array (or a comprehension)
+            if not arr.is_array(args[0]):
+                raise ArrayError(f"{n}() of one scalar: it needs an array or two scalars")
+            return arr.extremum(arr.elements(args), n)
+        if arr.is_array(args[0]) or arr.is_array(args[1]):
+            raise ArrayError(f"{n}(a, b) of sizes {arr.size_text(arr.shape(args[0]))} and "
+                             f"{arr.size_text(arr.shape(args[1]))}: it takes two scalars or one array")
+        return arr.extremum(list(args), n)
     if n == "sum":
-        return sum(_fold(args), 0.0)
+        _arity(n, args, 1)
+        return arr.reduce_sum(args[0])
     if n == "product":
-        acc: Value = 1.0
-        for v in _fold(args):
-            acc = acc * v
-        return acc
+        _arity(n, args, 1)
+        return arr.reduce_product(args[0])
     if n in ("div", "mod", "rem"):
-        a, b = args
-        if _num(a) and _num(b):
-            if n == "div":
-                return float(math.trunc(a / b))
-            if n == "mod":
-                return a - math.floor(a / b) * b
-            return a - math.trunc(a / b) * b
-        if n == "mod":
-            return a - ca.floor(a / b) * b
-        raise tr.unsupported(f"built-in {n}() of a variable")
+        _arity(n, args, 2)
+        return arr.map2(lambda a, b: _divmod(n, a, b, tr), args[0], args[1], f"{n}()", broadcast=False)
     if n == "size":
-        raise tr.unsupported("size() left unevaluated")
+        _arity(n, args, 1, 2)
+        return arr.sizes(args[0], args[1] if len(args) == 2 else None)
+    if n == "ndims":
+        _arity(n, args, 1)
+        return len(arr.shape(args[0]))
+    if n == "scalar":
+        _arity(n, args, 1)
+        return arr.to_scalar(args[0])
+    if n == "vector":
+        _arity(n, args, 1)
+        return arr.to_vector(args[0])
+    if n == "matrix":
+        _arity(n, args, 1)
+        return arr.to_matrix(args[0])
+    if n == "identity":
+        _arity(n, args, 1)
+        (size,) = arr.ints(args, "identity()")
+        return arr.identity(size)
+    if n == "diagonal":
+        _arity(n, args, 1)
+        return arr.diagonal(args[0])
+    if n in ("zeros", "ones"):
+        return arr.fill(0.0 if n == "zeros" else 1.0, args, f"{n}()")
+    if n == "fill":
+        if len(args) < 2:
+            raise ArrayError("fill() needs a value and at least one size")
+        return arr.fill(args[0], args[1:])
+    if n == "linspace":
+        _arity(n, args, 3)
+        return arr.linspace(*args)
+    if n == "cat":
+        if len(args) < 2:
+            raise ArrayError("cat() needs a dimension and at least one array")
+        return arr.cat(args[0], args[1:])
+    if n == "transpose":
+        _arity(n, args, 1)
+        return arr.transpose(args[0])
+    if n == "outerproduct":
+        _arity(n, args, 2)
+        return arr.outer(args[0], args[1])
+    if n == "symmetric":
+        _arity(n, args, 1)
+        return arr.symmetric(args[0])
+    if n == "cross":
+        _arity(n, args, 2)
+        return arr.cross(args[0], args[1])
+    if n == "skew":
+        _arity(n, args, 1)
+        return arr.skew(args[0])
     raise tr.unsupported(f"built-in {n}()", rf"\b{n}\s*\(")
+
+
+def _divmod(n: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
+    if _num(a) and _num(b):
+        if float(b) == 0.0:
+            raise ArrayError(f"{n}({a}, {b}): division by zero")
+        if n == "div":
+            return float(math.trunc(a / b))
+        if n == "mod":
+            return a - math.floor(a / b) * b
+        return a - math.trunc(a / b) * b
+    if n == "mod":
+        return a - ca.floor(a / b) * b
+    q = a / b
+    truncated = ca.sign(q) * ca.floor(ca.fabs(q))  # integer part, towards zero
+    if n == "div":
+        return truncated
+    return a - truncated * b
+
+
+def _span_hint(body: Any) -> str | None:
+    """A word the source text at an expression's span must contain (to pick the right file)."""
+    if not isinstance(body, dict):
+        return None
+    if "function" in body:
+        return str(body["function"])
+    name = body.get("name")
+    if isinstance(name, dict) and isinstance(name.get("name"), str):
+        return name["name"].rsplit(".", 1)[-1]
+    return None
+
+
+_OP_TEXT = {
+    "add": "+", "sub": "-", "mul": "*", "div": "/", "exp": "^", "addelem": ".+", "subelem": ".-",
+    "mulelem": ".*", "divelem": "./", "expelem": ".^", "lt": "<", "le": "<=", "gt": ">", "ge": ">=",
+    "eq": "==", "neq": "<>", "ne": "<>", "and": "and", "or": "or",
+}
+
+
+def expression_text(node: Any, depth: int = 0) -> str:
+    """Modelica-like text of a flat-model expression, for error messages."""
+    if depth > 12:
+        return "..."
+    kind, body = _kind_of(node)
+    sub = lambda n: expression_text(n, depth + 1)  # noqa: E731
+    try:
+        if kind == "Literal":
+            _k, val = _kind_of(body["value"])
+            if isinstance(val, bool):
+                return "true" if val else "false"
+            return repr(val) if isinstance(val, str) else f"{val}"
+        if kind == "VarRef":
+            subs = body.get("subscripts") or []
+            return body["name"]["name"] + (("[" + ", ".join(_sub_text(s, depth) for s in subs) + "]") if subs else "")
+        if kind == "Binary":
+            op = _OP_TEXT.get(str(body["op"]).lower(), str(body["op"]))
+            return f"({sub(body['lhs'])} {op} {sub(body['rhs'])})"
+        if kind == "Unary":
+            op = "-" if "minus" in str(body.get("op")).lower() else ("not " if str(body.get("op")).lower() == "not" else "")
+            return f"{op}{sub(body.get('rhs', body.get('arg', body.get('expr'))))}"
+        if kind == "BuiltinCall":
+            return f"{str(body['function'])[:1].lower()}{str(body['function'])[1:]}(" + ", ".join(
+                sub(a) for a in body.get("args") or []) + ")"
+        if kind == "FunctionCall":
+            return f"{body['name']['name']}(" + ", ".join(sub(a) for a in body.get("args") or []) + ")"
+        if kind == "Array":
+            els = body.get("elements", []) if isinstance(body, dict) else body
+            k = body.get("kind", "Array") if isinstance(body, dict) else "Array"
+            if k == "Horizontal":
+                return "[" + ", ".join(sub(e) for e in els) + "]"
+            if k == "Vertical":
+                return "[" + "; ".join(sub(e).strip("[]") for e in els) + "]"
+            return "{" + ", ".join(sub(e) for e in els) + "}"
+        if kind == "Range":
+            step = f"{sub(body['step'])}:" if body.get("step") is not None else ""
+            return f"{sub(body['start'])}:{step}{sub(body['end'])}"
+        if kind == "ArrayComprehension":
+            its = ", ".join(f"{ix['name']} in {sub(ix['range'])}" for ix in body.get("indices") or [])
+            return "{" + f"{sub(body['expr'])} for {its}" + "}"
+        if kind == "Index":
+            return sub(body["base"]) + "[" + ", ".join(_sub_text(s, depth) for s in body.get("subscripts") or []) + "]"
+        if kind == "Tuple":
+            return "(" + ", ".join("" if _kind_of(e)[0] == "Empty" else sub(e) for e in body.get("elements") or []) + ")"
+        if kind == "If":
+            return "if ... then ... else ..."
+        if kind == "Parenthesized":
+            return sub(body.get("inner", body))
+    except (KeyError, TypeError, AttributeError):
+        pass
+    return f"<{kind}>"
+
+
+def _sub_text(s: Any, depth: int) -> str:
+    kind, body = _kind_of(s)
+    if kind == "Index":
+        return str(body["value"])
+    if kind == "Colon":
+        return ":"
+    if kind == "Expr":
+        return expression_text(body["expr"], depth + 1)
+    return "?"

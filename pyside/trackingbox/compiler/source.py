@@ -7,6 +7,7 @@ construct stands even when the flattened model no longer carries positions.
 """
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -87,7 +88,7 @@ def find_construct(files: tuple[Path, ...], pattern: str, limit: int = 5) -> lis
     found: list[Location] = []
     for file in files:
         try:
-            text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+            text = strip_comments(read_text(file))
         except OSError:
             continue
         for match in regex.finditer(text):
@@ -99,6 +100,9 @@ def find_construct(files: tuple[Path, ...], pattern: str, limit: int = 5) -> lis
 
 def class_file(source: ModelicaSource, model: str) -> Path | None:
     """The file that defines the class *model* (``Pkg.Sub.Model``), if found."""
+    exact = _file_of(source, model)
+    if exact is not None:
+        return exact
     short = model.rsplit(".", 1)[-1]
     pattern = re.compile(
         rf"\b(?:model|block|class|package|connector|record|function)\s+{re.escape(short)}\b"
@@ -106,12 +110,209 @@ def class_file(source: ModelicaSource, model: str) -> Path | None:
     candidates = [f for f in source.files if f.stem == short] + list(source.files)
     for file in candidates:
         try:
-            text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+            text = strip_comments(read_text(file))
         except OSError:
             continue
         if pattern.search(text):
             return file
     return None
+
+
+BOM = b"\xef\xbb\xbf"
+
+
+def read_text(file: Path) -> str:
+    """The text of a ``.mo`` file, a leading byte-order mark removed."""
+    return file.read_text(encoding="utf-8-sig", errors="replace")
+
+
+def has_bom(file: Path) -> bool:
+    """Whether *file* starts with a UTF-8 byte-order mark (rumoca refuses those)."""
+    try:
+        with open(file, "rb") as fh:
+            return fh.read(3) == BOM
+    except OSError:
+        return False
+
+
+_DECL_OF = r"\b(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator|pure|impure)\s+)*" \
+           r"(?:model|block|class|package|connector|record|function|type)\s+{name}\b"
+
+
+@functools.lru_cache(maxsize=4096)
+def _code_cached(file: Path, mtime_ns: int, size: int) -> str:
+    return strip_comments(read_text(file))
+
+
+def _code(file: Path) -> str:
+    """The text of *file* without comments and strings (cached while the file is unchanged)."""
+    try:
+        st = file.stat()
+    except OSError:
+        return ""
+    return _code_cached(file, st.st_mtime_ns, st.st_size)
+
+
+def _declares(text: str, name: str) -> re.Match[str] | None:
+    return re.search(_DECL_OF.format(name=re.escape(name)), text)
+
+
+def _class_range(code: str, name: str) -> tuple[int, int] | None:
+    """Character range of the declaration of class *name* in comment-free *code* (first one)."""
+    start = _declares(code, name)
+    if start is None:
+        return None
+    end = re.compile(rf"\bend\s+{re.escape(name)}\s*;").search(code, start.end())
+    return start.start(), (end.end() if end else len(code))
+
+
+def _file_of(source: ModelicaSource, dotted: str) -> Path | None:
+    """The file that declares the class *dotted* (``Pkg.Sub.Model``) in *source*, by Modelica's
+    file mapping (``Pkg/Sub/Model.mo``, ``Pkg/Sub/package.mo``, or a class nested in a file)."""
+    parts = dotted.split(".")
+    if source.entry.name != "package.mo":  # a single file: every class is in it
+        text = _code(source.entry)
+        return source.entry if _declares(text, parts[-1]) else None
+    cur = source.root
+    holder: Path | None = None
+    for k, part in enumerate(parts):
+        if (cur / part / "package.mo").is_file():
+            cur = cur / part
+            holder = cur / "package.mo"
+            continue
+        if (cur / f"{part}.mo").is_file():
+            file = cur / f"{part}.mo"
+            rest = parts[k:]
+        elif holder is not None:
+            file, rest = holder, parts[k:]
+        else:
+            return None
+        text = _code(file)
+        return file if all(_declares(text, p) for p in rest) else None
+    return holder
+
+
+_NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)")
+
+
+def model_files(source: ModelicaSource, model: str, limit: int = 40) -> tuple[Path, ...]:
+    """The files of the classes *model* uses: its own class file first, then the files of the
+    classes its text names (extends, component types, functions), followed transitively.
+
+    Names are looked up from the innermost enclosing package outwards, as Modelica
+    does; names that resolve to no file of *source* (built-ins, variables) are skipped.
+    """
+    own = _file_of(source, model)
+    if own is None:
+        return ()
+    found: list[Path] = [own]
+    queue: list[tuple[Path, str]] = [(own, model)]
+    seen_names: set[str] = {model}
+    seen_classes: set[tuple[Path, str]] = {(own, model.rsplit(".", 1)[-1])}
+    while queue and len(found) < limit:
+        file, cls = queue.pop(0)
+        code = _code(file)
+        rng = _class_range(code, cls.rsplit(".", 1)[-1])
+        body = code[rng[0]:rng[1]] if rng else code
+        scopes = cls.split(".")
+        for name in dict.fromkeys(_NAME.findall(body)):
+            for depth in range(len(scopes), -1, -1):
+                full = ".".join([*scopes[:depth], name])
+                if full in seen_names:
+                    break
+                target = _file_of(source, full)
+                if target is not None:
+                    seen_names.add(full)
+                    key = (target, full.rsplit(".", 1)[-1])
+                    if key not in seen_classes:
+                        seen_classes.add(key)
+                        if target not in found:
+                            found.append(target)
+                        queue.append((target, full))
+                    break
+    return tuple(found[:limit])
+
+
+def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5) -> list[Location]:
+    """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
+
+    Unlike :func:`find_construct` over every file, only the model's own class file and the
+    files of the classes it uses are searched (its own file first), and in each only the
+    text of the class concerned, so an occurrence elsewhere in the package is never named.
+    """
+    regex = re.compile(pattern)
+    files = model_files(source, model)
+    found: list[Location] = []
+    for k, file in enumerate(files):
+        code = _code(file)
+        lo, hi = 0, len(code)
+        if k == 0:
+            rng = _class_range(code, model.rsplit(".", 1)[-1])
+            if rng:
+                lo, hi = rng
+        for match in regex.finditer(code, lo, hi):
+            found.append(Location(file, code.count("\n", 0, match.start()) + 1))
+            if len(found) >= limit:
+                return found
+    return found
+
+
+def span_location(span: dict | None, files: tuple[Path, ...], expect: str | None = None) -> Location | None:
+    """The file and line of a rumoca ``span`` (``{"source", "start", "end"}``, byte offsets).
+
+    rumoca names a span's file by an opaque number, so the file is the first of *files*
+    (the model's own files, see :func:`model_files`) whose text at the span matches the
+    regular expression *expect* (or is merely long enough when *expect* is None).
+    """
+    if not isinstance(span, dict) or not isinstance(span.get("start"), int):
+        return None
+    start, end = int(span["start"]), int(span.get("end", span["start"]))
+    for file in files:
+        try:
+            data = file.read_bytes()
+        except OSError:
+            continue
+        if data.startswith(BOM):
+            data = data[3:]
+        if end > len(data):
+            continue
+        if expect is not None:
+            snippet = data[start:max(end, start + 80)].decode("utf-8", "replace")
+            if not re.match(expect, snippet):
+                continue
+        return Location(file, data.count(b"\n", 0, start) + 1)
+    return None
+
+
+def span_sources(flat: dict, files: tuple[Path, ...]) -> dict[int, Path]:
+    """Which of *files* each of rumoca's span source numbers stands for.
+
+    Learnt from the flat model's variables: a variable's declaration span starts
+    with its own name in the file it is declared in.
+    """
+    texts: dict[Path, bytes] = {}
+    for file in files:
+        try:
+            data = file.read_bytes()
+        except OSError:
+            continue
+        texts[file] = data[3:] if data.startswith(BOM) else data
+    found: dict[int, Path] = {}
+    for var in (flat.get("variables") or {}).values():
+        if not isinstance(var, dict):
+            continue
+        parts = (var.get("component_ref") or {}).get("parts") or []
+        span = var.get("source_span")
+        if not parts or not isinstance(span, dict) or span.get("source") in found:
+            continue
+        ident = str(parts[-1].get("ident", "")).encode()
+        start = span.get("start")
+        if not ident or not isinstance(start, int):
+            continue
+        hits = [f for f, data in texts.items() if data[start:start + len(ident)] == ident]
+        if len(hits) == 1:
+            found[span["source"]] = hits[0]
+    return found
 
 
 _EXPERIMENT = re.compile(r"experiment\s*\(([^()]*)\)", re.S)
@@ -123,7 +324,7 @@ def experiment_settings(source: ModelicaSource, model: str) -> dict[str, float]:
     file = class_file(source, model)
     if file is None:
         return {}
-    text = file.read_text(encoding="utf-8", errors="replace")
+    text = read_text(file)
     short = model.rsplit(".", 1)[-1]
     start = re.search(rf"\b(?:model|block|class)\s+{re.escape(short)}\b", text)
     end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text)
@@ -154,7 +355,7 @@ def class_names(source: ModelicaSource) -> list[str]:
             parts = parts[:-1]
         prefix = ".".join(parts[:-1]) if len(source.files) > 1 or source.entry.name == "package.mo" else ""
         try:
-            text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+            text = strip_comments(read_text(file))
         except OSError:
             continue
         declared = _CLASS_DECL.findall(text)

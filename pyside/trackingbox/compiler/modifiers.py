@@ -1,0 +1,333 @@
+"""Find the modifications that rumoca 0.10.2 loses, before they give wrong numbers.
+
+rumoca flattens most modifications right, but in three situations it silently
+drops or mixes up values (each found by flattening small models; see
+``tests/test_compiler_arrays.py``):
+
+* **Merging into a nested modification through ``extends``.** In
+  ``extends W(o(i(a = 7)))`` the modification of ``o.i`` replaces, rather than
+  merges with, what the declaration ``Outer o(i(b = 3))`` (or ``i``'s own
+  declaration) says about ``o.i``: ``o.i.b`` loses its value, a start value
+  given there is lost, and so are bounds.
+* **A class redeclaration with a modification**
+  (``redeclare model M = Base(k = 5)``): the modification is dropped.
+* **A package that extends another with a modified constant**
+  (``package Water2 extends Water(cp = 1000)``): when a model uses both, the
+  base package's constant takes the modified value too.
+
+The check works on the source text (comments and strings blanked), on the
+classes the model can reach by name, so it errs on the side of refusing. Lost
+bounds, units or nominal values change no number and give a warning instead
+(the benches rely on that: ``extends PartialBench(hx(kht = 910))``).
+"""
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import UnsupportedConstructError
+from .source import Location, ModelicaSource, strip_comments
+
+log = logging.getLogger(__name__)
+
+# attributes whose loss changes no simulated number
+_HARMLESS = {"min", "max", "nominal", "unit", "displayUnit", "quantity", "stateSelect"}
+_KINDS = r"(?:model|block|class|package|connector|record|function|type|operator)"
+_CLASS_START = re.compile(
+    rf"\b(?:(?:partial|encapsulated|final|replaceable|expandable|pure|impure|operator|redeclare)\s+)*"
+    rf"({_KINDS})\s+([A-Za-z_]\w*)\b"
+)
+_IDENT = re.compile(r"[A-Za-z_]\w*")
+_KEYWORDS = {"each", "final", "redeclare", "replaceable"}
+
+
+_CACHE: dict[Path, tuple[tuple[object, ...], ModifierCheck]] = {}
+
+
+@dataclass
+class Mod:
+    """One element of a modification: ``name(sub...) = value``."""
+
+    name: str
+    subs: list[Mod] = field(default_factory=list)
+    has_value: bool = False
+    offset: int = 0
+
+
+@dataclass
+class ClassText:
+    kind: str
+    name: str
+    file: Path
+    start: int
+    end: int
+
+
+def _skip_expr(text: str, pos: int) -> int:
+    """Position of the ``,`` or ``)`` that ends the expression starting at *pos*."""
+    depth = 0
+    while pos < len(text):
+        ch = text[pos]
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            if depth == 0:
+                return pos
+            depth -= 1
+        elif ch == "," and depth == 0:
+            return pos
+        pos += 1
+    return pos
+
+
+def parse_modification(text: str, pos: int) -> tuple[list[Mod], int]:
+    """Parse ``( ... )`` at *pos* (comments and strings already blanked); return the elements and the end."""
+    assert text[pos] == "("
+    pos += 1
+    mods: list[Mod] = []
+    while pos < len(text):
+        while pos < len(text) and text[pos] in " \t\r\n,":
+            pos += 1
+        if pos >= len(text):
+            break
+        if text[pos] == ")":
+            return mods, pos + 1
+        start = pos
+        m = _IDENT.match(text, pos)
+        while m and m.group(0) in _KEYWORDS:
+            if m.group(0) in ("redeclare", "replaceable"):
+                m = None
+                break
+            pos = m.end()
+            while pos < len(text) and text[pos] in " \t\r\n":
+                pos += 1
+            m = _IDENT.match(text, pos)
+        if m is None:  # a redeclaration or something we do not read: skip it
+            pos = _skip_expr(text, pos)
+            continue
+        names = [m.group(0)]
+        pos = m.end()
+        while pos < len(text) and text[pos] == ".":  # a.b = 1 is a(b = 1)
+            m2 = _IDENT.match(text, pos + 1)
+            if not m2:
+                break
+            names.append(m2.group(0))
+            pos = m2.end()
+        while pos < len(text) and text[pos] in " \t\r\n":
+            pos += 1
+        if pos < len(text) and text[pos] == "[":  # subscripted element: skip the subscripts
+            pos = _skip_expr(text, pos)
+        mod = Mod(names[-1], offset=start)
+        if pos < len(text) and text[pos] == "(":
+            mod.subs, pos = parse_modification(text, pos)
+        while pos < len(text) and text[pos] in " \t\r\n":
+            pos += 1
+        if pos < len(text) and text[pos] in "=:":
+            mod.has_value = True
+            pos = _skip_expr(text, pos + 1)
+        else:
+            pos = _skip_expr(text, pos)
+        for outer in reversed(names[:-1]):
+            mod = Mod(outer, subs=[mod], offset=start)
+        mods.append(mod)
+    return mods, pos
+
+
+def modifier_check(source: ModelicaSource) -> ModifierCheck:
+    """A :class:`ModifierCheck` of *source*, reused while its files are unchanged."""
+    stamps = []
+    for file in source.files:
+        try:
+            stamps.append(file.stat().st_mtime_ns)
+        except OSError:
+            stamps.append(-1)
+    key = (source.files, tuple(stamps))
+    cached = _CACHE.get(source.entry)
+    if cached is None or cached[0] != key:
+        cached = (key, ModifierCheck(source))
+        _CACHE[source.entry] = cached
+    return cached[1]
+
+
+class ModifierCheck:
+    """The classes of a source and the modification patterns rumoca gets wrong."""
+
+    def __init__(self, source: ModelicaSource):
+        self.texts: dict[Path, str] = {}
+        self.classes: list[ClassText] = []
+        for file in source.files:
+            try:
+                text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
+            except OSError:
+                continue
+            self.texts[file] = text
+            self._index_classes(file, text)
+        self.by_name: dict[str, list[ClassText]] = {}
+        self._declared: dict[tuple[str, tuple[int, ...]], list[list[Mod]]] = {}
+        for c in self.classes:
+            self.by_name.setdefault(c.name, []).append(c)
+
+    def _index_classes(self, file: Path, text: str) -> None:
+        for m in _CLASS_START.finditer(text):
+            kind, name = m.group(1), m.group(2)
+            if "redeclare" in m.group(0):  # part of a modification: read with its enclosing class
+                continue
+            after = text[m.end():m.end() + 200].lstrip()
+            if after.startswith("="):  # short class definition: up to the semicolon
+                end = text.find(";", m.end())
+                self.classes.append(ClassText(kind, name, file, m.start(), end if end >= 0 else len(text)))
+                continue
+            end_m = re.compile(rf"\bend\s+{re.escape(name)}\s*;").search(text, m.end())
+            self.classes.append(ClassText(kind, name, file, m.start(), end_m.end() if end_m else len(text)))
+
+    def body(self, c: ClassText) -> str:
+        return self.texts[c.file][c.start:c.end]
+
+    def used_classes(self, model: str) -> list[ClassText]:
+        """Classes reachable from *model* by name (an over-approximation)."""
+        parts = model.split(".")
+        candidates = self.by_name.get(parts[-1], [])
+        if len(candidates) > 1:  # the class whose file path matches the dotted name best
+            def score(c: ClassText) -> int:
+                return sum(1 for p in parts if p in c.file.with_suffix("").parts)
+            best = max(score(c) for c in candidates)
+            candidates = [c for c in candidates if score(c) == best]
+        todo = list(candidates)
+        seen: set[int] = set()
+        out: list[ClassText] = []
+        while todo:
+            c = todo.pop()
+            if id(c) in seen:
+                continue
+            seen.add(id(c))
+            out.append(c)
+            for word in set(_IDENT.findall(self.body(c))) - {c.name}:
+                todo.extend(self._nearest(self.by_name.get(word, []), c))
+        return out
+
+    @staticmethod
+    def _nearest(candidates: list[ClassText], user: ClassText) -> list[ClassText]:
+        """Of same-named classes, those nearest to *user* in the file tree (Modelica's lookup goes
+        outwards through the enclosing packages)."""
+        if len(candidates) <= 1:
+            return candidates
+
+        def shared(c: ClassText) -> int:
+            n = 0
+            for a, b in zip(c.file.parent.parts, user.file.parent.parts):
+                if a != b:
+                    break
+                n += 1
+            return n
+
+        best = max(shared(c) for c in candidates)
+        return [c for c in candidates if shared(c) == best]
+
+    def _location(self, c: ClassText, offset: int) -> Location:
+        text = self.texts[c.file]
+        return Location(c.file, text.count("\n", 0, c.start + offset) + 1)
+
+    # --------------------------------------------------------------- checks
+    def declared_subs(self, used: list[ClassText], component: str) -> list[list[Mod]]:
+        """Modifications of every declaration of *component* among *used* classes."""
+        key = (component, tuple(id(c) for c in used))
+        if key not in self._declared:
+            self._declared[key] = self._find_declarations(used, component)
+        return self._declared[key]
+
+    def _find_declarations(self, used: list[ClassText], component: str) -> list[list[Mod]]:
+        # "Type component[...](" : the name and a parenthesis, preceded by a type name
+        pattern = re.compile(rf"(?<![.\w]){re.escape(component)}\s*(?:\[[^\]]*\]\s*)?\(")
+        type_before = re.compile(r"(?<![.\w])([A-Za-z_][\w.]*)\s+$")
+        found = []
+        for c in used:
+            text = self.body(c)
+            for m in pattern.finditer(text):
+                before = type_before.search(text, max(0, m.start() - 120), m.start())
+                if before is None or before.group(1) in ("extends", "end", "import", "within", "if", "then",
+                                                          "else", "and", "or", "not", "in", "loop"):
+                    continue
+                mods, _ = parse_modification(text, m.end() - 1)
+                found.append(mods)
+        return found
+
+    def _lost(self, comp: str, ext: Mod, used: list[ClassText]) -> tuple[set[str], set[str]]:
+        """What ``extends B(comp(ext))`` drops: (value-changing, harmless) names.
+
+        Two sources are replaced rather than merged: the modification of
+        ``ext.name`` inside a declaration of *comp* (``Outer comp(i(b = 3))``),
+        and, when the extends clause gives a value, the attributes declared with
+        the element itself (``parameter Real q(min = 0)``).
+        """
+        changing: set[str] = set()
+        harmless: set[str] = set()
+        given = {s.name for s in ext.subs}
+        for decl_mods in self.declared_subs(used, comp):
+            for d in decl_mods:
+                if d.name != ext.name:
+                    continue
+                for key in {s.name for s in d.subs} - given:
+                    (harmless if key in _HARMLESS else changing).add(key)
+                if d.has_value and not ext.has_value:
+                    changing.add(f"the value of {ext.name}")
+        if ext.has_value:  # a new value: start/fixed of the element no longer matter
+            for decl_mods in self.declared_subs(used, ext.name):
+                for key in {d.name for d in decl_mods} - given:
+                    (harmless if key in _HARMLESS | {"start", "fixed"} else changing).add(key)
+        return changing, harmless
+
+    def check(self, model: str) -> list[str]:
+        """Refuse what rumoca would get wrong; return warnings for lost bounds and units."""
+        used = self.used_classes(model)
+        warnings: list[str] = []
+        for c in used:
+            text = self.body(c)
+            for m in re.finditer(r"\bextends\s+([\w.]+)\s*\(", text):
+                mods, _ = parse_modification(text, m.end() - 1)
+                base = m.group(1).rsplit(".", 1)[-1]
+                if c.kind == "package" and any(x.has_value for x in mods) and self._used_directly(used, base, c):
+                    raise UnsupportedConstructError(
+                        f"unsupported Modelica construct in {model}: package {c.name} extends {base} with a "
+                        f"modified constant at {self._location(c, m.start())}, and {model} also uses {base} "
+                        f"itself: rumoca 0.10.2 would give {base}'s constant the modified value too"
+                    )
+                for comp in mods:  # extends B(p(q ...)): p.q replaces what p's declarations say about q
+                    for inner in comp.subs:
+                        changing, harmless = self._lost(comp.name, inner, used)
+                        where = self._location(c, m.start())
+                        path = f"{comp.name}.{inner.name}"
+                        if changing:
+                            raise UnsupportedConstructError(
+                                f"unsupported Modelica construct in {model}: the modification of {path} in "
+                                f"'extends {m.group(1)}(...)' at {where} would lose "
+                                f"{', '.join(sorted(changing))} declared for it elsewhere (rumoca 0.10.2 "
+                                "replaces instead of merging a nested modification given through extends); "
+                                "repeat those modifications in the extends clause or modify the component "
+                                "where it is declared"
+                            )
+                        if harmless:
+                            warnings.append(f"{path}: {', '.join(sorted(harmless))} declared for it are not "
+                                            f"kept through 'extends {m.group(1)}(...)' at {where}")
+            for m in re.finditer(rf"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*{_KINDS}\s+\w+\s*=\s*[\w.]+\s*\(",
+                                 text):
+                raise UnsupportedConstructError(
+                    f"unsupported Modelica construct in {model}: class redeclaration with a modification at "
+                    f"{self._location(c, m.start())} (rumoca 0.10.2 drops the modification); declare a "
+                    "short class with the modification and redeclare to it"
+                )
+        return warnings
+
+    def _used_directly(self, used: list[ClassText], base: str, extender: ClassText) -> bool:
+        """Whether *base* is named by a used class other than through *extender*'s extends clause."""
+        word = re.compile(rf"\b{re.escape(base)}\b")
+        for c in used:
+            text = self.body(c)
+            if c is extender:
+                text = re.sub(rf"\bextends\s+[\w.]*\b{re.escape(base)}\b", " ", text)
+            if c.name == base and c.kind == "package":
+                continue
+            if word.search(re.sub(rf"\b(?:{_KINDS})\s+{re.escape(base)}\b|\bend\s+{re.escape(base)}\b", " ", text)):
+                return True
+        return False
