@@ -64,6 +64,39 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> Un
     return None
 
 
+_POSITION = re.compile(r"\[([^\]\[]+?\.mo):(\d+):\d+\]")
+_IMPLICIT_RANGE = "indices require an explicit range"
+
+
+def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
+                    model: str) -> UnsupportedConstructError | None:
+    """rumoca said it does not support something (not that the model is wrong): refuse naming
+    the construct in rumoca's words and where it stands in the model's own files."""
+    low = message.lower()
+    first = message.splitlines()[0]
+    if _IMPLICIT_RANGE in low:
+        construct = "for-loop without an explicit range (for i loop ...)"
+        pattern: str | None = r"\bfor\s+\w+\s+loop\b"
+    elif "unsupported" in low:
+        detail = first[low.index("unsupported"):].strip()
+        construct = f"{detail[len('unsupported '):]} (not supported by the rumoca front end)"
+        op = re.search(r"operator `(\w+)`", detail)
+        pattern = (rf"\b{re.escape(op.group(1))}\s*\(" if op
+                   else r"\balgorithm\b" if "algorithm" in detail else None)
+    else:
+        return None
+    allowed = {str(f) for f in model_files(source, model)}
+    where = [f"{f}:{n}" for f, n in _POSITION.findall(message) if f in allowed]
+    where += [d.split(": ", 1)[0].rsplit(":", 1)[0] for d in diags
+              if d.split(":", 1)[0] in allowed and (_IMPLICIT_RANGE[:20] in d or "unsupported" in d.lower())]
+    if not where and pattern:
+        where = [str(loc) for loc in locate(source, model, pattern)]
+    at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
+    return UnsupportedConstructError(
+        f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
+        "it; use --backend openmodelica where omc is installed, or rewrite the model")
+
+
 FRONTEND_TIMEOUT = 600.0
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
@@ -179,7 +212,7 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
-    construct = _mentioned_construct(message, source, model)
+    construct = _mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
