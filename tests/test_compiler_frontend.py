@@ -144,3 +144,12 @@ def test_byte_order_mark_in_a_package_and_refusal_lines_stay_right(tmp_path):
     with pytest.raises(UnsupportedConstructError) as exc:
         compile_model(root, "Q.Late", backend="embedded", output=tmp_path / "l.fmu")
     assert f"{root / 'Late.mo'}:5" in str(exc.value)
+
+
+def test_implicit_range_for_is_refused_at_its_line(tmp_path):
+    src = tmp_path / "Implicit.mo"
+    src.write_text("model Implicit\n  Real x[3];\nequation\n  for i loop\n    x[i] = i;\n  end for;\nend Implicit;\n")
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(src, "Implicit", backend="embedded", output=tmp_path / "i.fmu")
+    assert "for-loop without an explicit range" in str(exc.value)
+    assert f"{src}:4" in str(exc.value)

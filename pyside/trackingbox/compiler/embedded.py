@@ -74,9 +74,14 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     the construct in rumoca's words and where it stands in the model's own files."""
     low = message.lower()
     first = message.splitlines()[0]
+    nested = re.search(r"unresolved import: '([\w.]+)'", first)
     if _IMPLICIT_RANGE in low:
         construct = "for-loop without an explicit range (for i loop ...)"
         pattern: str | None = r"\bfor\s+\w+\s+loop\b"
+    elif nested and nested.group(1).startswith(model + "."):
+        construct = (f"import of {nested.group(1)}, a class nested in the model itself "
+                     "(not supported by the rumoca front end)")
+        pattern = rf"\bimport\s+{re.escape(nested.group(1))}\b"
     elif "unsupported" in low:
         detail = first[low.index("unsupported"):].strip()
         construct = f"{detail[len('unsupported '):]} (not supported by the rumoca front end)"
