@@ -212,6 +212,21 @@ def _worker_main(argv: list[str]) -> int:
     return 0
 
 
+_LIVE: set[subprocess.Popen] = set()  # worker processes running now (killed on interruption)
+
+
+def _stop_workers() -> None:
+    for proc in list(_LIVE):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     """Run *model* in a fresh worker process with a time limit; never raises for the model's sake."""
     cmd = [sys.executable, "-m", "trackingbox.compliance", "--one", model.name, str(model.file),
@@ -219,6 +234,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, errors="replace")
+    _LIVE.add(proc)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -229,6 +245,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
         proc.communicate()
         outcome, message = "hang", f"no result after {timeout:g} s"
     else:
+        _LIVE.discard(proc)
         marker = out.rfind("@@RESULT@@")
         if marker >= 0:
             data = json.loads(out[marker + len("@@RESULT@@"):].strip())
@@ -331,9 +348,11 @@ def main(argv: list[str] | None = None) -> int:
              len(models), len(models) - len(todo), args.jobs, args.timeout, args.out)
     lock = threading.Lock()
     t0 = time.perf_counter()
-    with open(args.out, "a", encoding="utf-8") as fh, ThreadPoolExecutor(max(1, args.jobs)) as pool:
-        futures = {pool.submit(run_isolated, m, suite, args.timeout): m for m in todo}
-        try:
+    signal.signal(signal.SIGTERM, _interrupt)
+    pool = ThreadPoolExecutor(max(1, args.jobs))
+    try:
+        with open(args.out, "a", encoding="utf-8") as fh:
+            futures = {pool.submit(run_isolated, m, suite, args.timeout): m for m in todo}
             for k, fut in enumerate(as_completed(futures), 1):
                 res = fut.result()
                 with lock:
@@ -341,11 +360,12 @@ def main(argv: list[str] | None = None) -> int:
                     fh.flush()
                 done[res.model] = res.to_json()
                 log.info("[%d/%d] %-70s %-17s %6.1f s", k, len(todo), res.model, res.outcome, res.seconds)
-        except KeyboardInterrupt:
-            for f in futures:
-                f.cancel()
-            log.info("interrupted: results so far are in %s (continue with --resume)", args.out)
-            raise
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)
+        _stop_workers()
+        log.info("interrupted: the results so far are in %s (continue with --resume)", args.out)
+        return 130
+    pool.shutdown()
     names = {m.name for m in models}
     results = [r for n, r in done.items() if n in names]
     print(table(results))
