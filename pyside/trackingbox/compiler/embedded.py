@@ -19,7 +19,8 @@ from pathlib import Path
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
-from .source import BOM, ModelicaSource, class_names, experiment_settings, has_bom, locate, model_files
+from .rewrite import frontend_bytes
+from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +136,9 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
     timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
-        if any(has_bom(f) for f in source.files):  # rumoca refuses a byte-order mark: give it a copy without
+        # rumoca refuses a byte-order mark and loses some der() equations in for-loops: give it a copy
+        # without the mark and with those equations protected (.rewrite; lines and offsets unchanged)
+        if any(frontend_bytes(f) is not None for f in source.files):
 
             copy = _without_bom(source, Path(tmp) / "src")
             request["entry"] = str(copy / source.entry.relative_to(source.root))
@@ -149,12 +152,13 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
 
 
 def _without_bom(source: ModelicaSource, dest: Path) -> Path:
-    """A copy of the package's files under *dest*, byte-order marks removed (same relative paths)."""
+    """A copy of the package's files under *dest* as rumoca should read them (same relative
+    paths; byte-order marks removed, der() equations in for-loops protected: :mod:`.rewrite`)."""
     for file in source.files:
         target = dest / file.relative_to(source.root)
         target.parent.mkdir(parents=True, exist_ok=True)
-        data = file.read_bytes()
-        target.write_bytes(data[3:] if data.startswith(BOM) else data)
+        data = frontend_bytes(file)
+        target.write_bytes(file.read_bytes() if data is None else data)
     return dest
 
 
