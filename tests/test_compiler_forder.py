@@ -75,18 +75,18 @@ equation
   end for;
 end H2;
 """, "H2", {f"x[{i},{j}]": (0.0, 1.0, float(2 * (i - 1) + j)) for i in (1, 2, 3) for j in (1, 2)}),
-    "nested loops": ("""
+    "nested loops (the inner one loses its third iteration)": ("""
 model HN
-  parameter Real a[3, 2] = {{1, 2}, {3, 4}, {5, 6}};
-  Real x[3, 2];
+  parameter Real a[2, 3] = {{1, 2, 3}, {4, 5, 6}};
+  Real x[2, 3];
 equation
-  for i in 1:3 loop
-    for j in 1:2 loop
+  for i in 1:2 loop
+    for j in 1:3 loop
       der(x[i, j]) = a[i, j] - x[i, j];
     end for;
   end for;
 end HN;
-""", "HN", {f"x[{i},{j}]": (float(2 * (i - 1) + j), 0.0, 1.0) for i in (1, 2, 3) for j in (1, 2)}),
+""", "HN", {f"x[{i},{j}]": (float(3 * (i - 1) + j), 0.0, 1.0) for i in (1, 2) for j in (1, 2, 3)}),
     "loop inside an instantiated component": ("""
 package P
   model C
@@ -106,14 +106,14 @@ end P;
              **{f"c2.x[{i}]": (float(i + 3), 0.0, 1.0) for i in (1, 2, 3)}}),
     "no blanks, split over lines, comments, if-equation": ("""
 model HS
-  parameter Real a[4] = {1, 2, 3, 4};
+  parameter Real a[6] = {1, 2, 3, 4, 5, 6};
   parameter Boolean fast = true;
-  Real x[4];
+  Real x[6];
 equation
-  for i in 1:2 loop
+  for i in 1:3 loop
 der(x[i])=a[i]-x[i]; // no blank before or after
   end for;
-  for i in 3:4 loop
+  for i in 4:6 loop
     /* der(x[i]) = 0; */
     if fast then
       der(x[i])
@@ -123,7 +123,7 @@ der(x[i])=a[i]-x[i]; // no blank before or after
     end if;
   end for;
 end HS;
-""", "HS", {"x[1]": (1.0, 0.0, 1.0), "x[2]": (2.0, 0.0, 1.0), "x[3]": (3.0, 0.0, 2.0), "x[4]": (4.0, 0.0, 2.0)}),
+""", "HS", {f"x[{i}]": (float(i), 0.0, 1.0 if i <= 3 else 2.0) for i in range(1, 7)}),
 }
 
 

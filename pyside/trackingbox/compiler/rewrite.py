@@ -40,6 +40,9 @@ log = logging.getLogger(__name__)
 # comments, string literals and quoted identifiers: never code
 _NOT_CODE = re.compile(rb"//[^\n]*|/\*.*?(?:\*/|\Z)|\"(?:\\.|[^\"\\])*(?:\"|\Z)|'(?:\\.|[^'\\])*(?:'|\Z)", re.S)
 _TOKEN = re.compile(rb"[A-Za-z_][A-Za-z_0-9]*|\d+(?:\.\d*)?(?:[eE][-+]?\d+)?|\S")
+_DER_CALL = re.compile(rb"\bder\s*\(")
+_EQUALS = re.compile(rb"\s*=(?!=)")  # '=' of an equation, not '=='
+_BLANK_RUN = re.compile(rb"[ \t]{2,}")
 _STATEMENT_START = {b";", b"loop", b"then", b"else", b"equation"}
 _SECTION_END = {b"algorithm", b"public", b"protected", b"external"}
 _BLOCK_END = {b"for", b"if", b"when", b"while"}
@@ -97,13 +100,13 @@ def _der_equations(code: bytes) -> list[tuple[int, int]]:
     """(start of ``der``, offset of its closing parenthesis) of every equation inside a
     for-equation of an equation section whose left-hand side is a bare ``der(...)``."""
     found: list[tuple[int, int]] = []
-    tokens = [(m.group(0), m.start(), m.end()) for m in _TOKEN.finditer(code)]
+    tokens = [(m.group(0), m.start()) for m in _TOKEN.finditer(code)]
     in_equations = False
     loops = 0
     prev = b";"
     k = 0
     while k < len(tokens):
-        tok, start, end = tokens[k]
+        tok, start = tokens[k]
         nxt = tokens[k + 1][0] if k + 1 < len(tokens) else b""
         if tok == b"equation":
             in_equations, loops = True, 0
@@ -122,7 +125,7 @@ def _der_equations(code: bytes) -> list[tuple[int, int]]:
             elif tok == b"der" and loops and nxt == b"(":
                 close = _matching_paren(code, tokens[k + 1][1])
                 if close is not None:
-                    after = re.compile(rb"\s*=(?!=)").match(code, close + 1)
+                    after = _EQUALS.match(code, close + 1)
                     if after is not None:
                         found.append((start, close))
         prev = tok
@@ -154,7 +157,7 @@ def protect_der_equations(data: bytes) -> Rewrite:
     >>> protect_der_equations(src).data.decode().splitlines()[2]
     '   (der(x[i]))= -x[i];'
     """
-    if b"der" not in data:
+    if b"loop" not in data or not _DER_CALL.search(data):  # the common case, cheaply
         return Rewrite(data, (), True)
     code, nc_starts, nc_ends = _code_mask(data)
     sites = _der_equations(code)
@@ -174,7 +177,7 @@ def protect_der_equations(data: bytes) -> Rewrite:
         """Remove one blank of a later run of at least two blanks (in code)."""
         pos = after
         while True:
-            hit = re.compile(rb"[ \t]{2,}").search(data, pos)
+            hit = _BLANK_RUN.search(data, pos)
             if hit is None:
                 return False
             for q in range(hit.start(), hit.end() - 1):  # always leave one blank of the run
