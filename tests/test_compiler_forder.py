@@ -21,7 +21,7 @@ from trackingbox.compiler import compile_model
 from trackingbox.compiler.flatten import FlatTranslator, check_lost_der_equations
 from trackingbox.compiler.rewrite import protect_der_equations
 from trackingbox.compiler.source import resolve_source
-from trackingbox.errors import CompileError
+from trackingbox.errors import CompileError, UnsupportedConstructError
 
 pytestmark = pytest.mark.compile
 
@@ -203,6 +203,27 @@ def test_error_after_a_rewritten_equation_names_the_users_file_and_line(tmp_path
     assert f"{src}:7:14" in msg, msg  # the ';' after '+': line and column as the user wrote them
     assert "tbx-frontend" not in msg
     assert not (tmp_path / "E.fmu").exists()
+
+
+
+def test_package_with_byte_order_marks_and_loops_compiles_and_refusals_keep_their_line(tmp_path):
+    bom = b"\xef\xbb\xbf"
+    root = tmp_path / "Q"
+    root.mkdir()
+    (root / "package.mo").write_bytes(bom + b"package Q\nend Q;\n")
+    (root / "Loops.mo").write_bytes(bom + b"within Q;\nmodel Loops\n  parameter Real a[3] = {1, 2, 3};\n"
+                                    b"  Real x[3];\nequation\n  for i in 1:3 loop\nder(x[i])=a[i]-x[i];\n"
+                                    b"  end for;\nend Loops;\n")
+    (root / "Late.mo").write_bytes(bom + b"within Q;\nmodel Late\n  Real x[3];\n  Real y;\nequation\n"
+                                   b"  for i in 1:3 loop\nder(x[i])=-x[i];\n  end for;\n  y = delay(x[1], 1.0);\n"
+                                   b"end Late;\n")
+    fmu = compile_model(root, "Q.Loops", backend="embedded", output=tmp_path / "loops.fmu").fmu
+    res = fmpy.simulate_fmu(str(fmu), stop_time=2.0, relative_tolerance=1e-8, output=["x[1]", "x[2]", "x[3]"])
+    assert np.allclose([res[f"x[{i}]"][-1] for i in (1, 2, 3)], np.array([1, 2, 3]) * (1 - np.exp(-2.0)),
+                       rtol=1e-5)
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(root, "Q.Late", backend="embedded", output=tmp_path / "late.fmu")
+    assert f"{root / 'Late.mo'}:9" in str(exc.value)  # the delay(...) line, as the user wrote it
 
 
 # ---------------------------------------------------------------- the safety net
