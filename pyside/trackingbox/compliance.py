@@ -13,8 +13,10 @@ so that their ``assert``\\ s are evaluated. Each model gets one outcome:
 ``refused-other``
     valid, refused with any other compile error.
 ``crashed``
-    the worker died (signal, abort) or raised something that is not a
-    :class:`~trackingbox.errors.TrackingError` (a traceback for the user).
+    the worker died (signal, abort), raised something that is not a
+    :class:`~trackingbox.errors.TrackingError` (a traceback for the user), or the
+    compiler reported an internal error (an unexpected exception it caught), or
+    the front end crashed (rumoca died in its worker process).
 ``hang``
     the worker did not finish within the time limit.
 ``wrong-values``
@@ -120,7 +122,10 @@ def discover(suite: Path) -> list[TestModel]:
         code = _strip(raw)
         within = _WITHIN.search(code)
         prefix = within.group(1) if within else ""
-        events = sorted([(m.start(), "decl", m.group(1)) for m in _DECL.finditer(code)]
+        # short class definitions (type E = enumeration(...);) have no end, and "function f(...)"
+        # in an expression is a partial application: neither encloses anything
+        events = sorted([(m.start(), "decl", m.group(1)) for m in _DECL.finditer(code)
+                         if not re.match(r"\s*[=(]", code[m.end():])]
                         + [(m.start(), "end", m.group(1)) for m in _END.finditer(code)])
         for hit in hits:
             stack: list[str] = []
@@ -149,7 +154,7 @@ def _assert_failure(message: str) -> bool:
 
 def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
     """Compile (and simulate, for a valid model) *model* in this process: (outcome, message)."""
-    from .compiler import compile_model
+    from .compiler import InternalCompileError, compile_model
     from .compiler.source import experiment_settings, resolve_source
     from .errors import CompileError, SimulationError, TrackingError, UnsupportedConstructError
     from .fmu import FMUModel
@@ -157,10 +162,17 @@ def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
     fmu = workdir / (model.name.rsplit(".", 1)[-1] + ".fmu")
     try:
         compile_model(suite, model.name, backend="embedded", output=fmu)
+    except InternalCompileError as exc:  # a clean message for the user, but a bug of ours: count it
+        return "crashed", str(exc)
     except UnsupportedConstructError as exc:
         return ("refused-construct" if model.should_pass else "rejected"), str(exc)
     except CompileError as exc:
-        return ("refused-other" if model.should_pass else "rejected"), str(exc)
+        text = str(exc)
+        if "front end crashed" in text:
+            return "crashed", text
+        if "front end did not finish" in text:
+            return "hang", text
+        return ("refused-other" if model.should_pass else "rejected"), text
     except TrackingError as exc:
         return ("refused-other" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}"
     settings = experiment_settings(resolve_source(suite), model.name)
@@ -200,6 +212,21 @@ def _worker_main(argv: list[str]) -> int:
     return 0
 
 
+_LIVE: set[subprocess.Popen] = set()  # worker processes running now (killed on interruption)
+
+
+def _stop_workers() -> None:
+    for proc in list(_LIVE):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     """Run *model* in a fresh worker process with a time limit; never raises for the model's sake."""
     cmd = [sys.executable, "-m", "trackingbox.compliance", "--one", model.name, str(model.file),
@@ -207,6 +234,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, errors="replace")
+    _LIVE.add(proc)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -217,6 +245,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
         proc.communicate()
         outcome, message = "hang", f"no result after {timeout:g} s"
     else:
+        _LIVE.discard(proc)
         marker = out.rfind("@@RESULT@@")
         if marker >= 0:
             data = json.loads(out[marker + len("@@RESULT@@"):].strip())
@@ -319,9 +348,11 @@ def main(argv: list[str] | None = None) -> int:
              len(models), len(models) - len(todo), args.jobs, args.timeout, args.out)
     lock = threading.Lock()
     t0 = time.perf_counter()
-    with open(args.out, "a", encoding="utf-8") as fh, ThreadPoolExecutor(max(1, args.jobs)) as pool:
-        futures = {pool.submit(run_isolated, m, suite, args.timeout): m for m in todo}
-        try:
+    signal.signal(signal.SIGTERM, _interrupt)
+    pool = ThreadPoolExecutor(max(1, args.jobs))
+    try:
+        with open(args.out, "a", encoding="utf-8") as fh:
+            futures = {pool.submit(run_isolated, m, suite, args.timeout): m for m in todo}
             for k, fut in enumerate(as_completed(futures), 1):
                 res = fut.result()
                 with lock:
@@ -329,11 +360,12 @@ def main(argv: list[str] | None = None) -> int:
                     fh.flush()
                 done[res.model] = res.to_json()
                 log.info("[%d/%d] %-70s %-17s %6.1f s", k, len(todo), res.model, res.outcome, res.seconds)
-        except KeyboardInterrupt:
-            for f in futures:
-                f.cancel()
-            log.info("interrupted: results so far are in %s (continue with --resume)", args.out)
-            raise
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)
+        _stop_workers()
+        log.info("interrupted: the results so far are in %s (continue with --resume)", args.out)
+        return 130
+    pool.shutdown()
     names = {m.name for m in models}
     results = [r for n, r in done.items() if n in names]
     print(table(results))

@@ -24,6 +24,11 @@ from .source import resolve_source
 
 log = logging.getLogger(__name__)
 
+class InternalCompileError(CompileError):
+    """A backend failed with an unexpected exception (a bug of trackingbox, not of the model):
+    reported as a clean error naming the model and the exception instead of a traceback."""
+
+
 Backend = Literal["auto", "embedded", "openmodelica"]
 BACKENDS = ("auto", "embedded", "openmodelica")
 
@@ -123,9 +128,14 @@ def compile_model(
                            f"{sys.getrecursionlimit()}): split the expression") from None
     except RuntimeError as exc:  # CasADi and friends: never a traceback for a model problem
         raise CompileError(f"{chosen} backend failed on {model!r}: {str(exc).strip()[:2000]}") from None
+    except Exception as exc:  # noqa: BLE001 - a bug of ours: a clean error, the traceback in the debug log
+        log.debug("internal error compiling %s", model, exc_info=True)
+        raise InternalCompileError(
+            f"internal error of the {chosen} backend on {model!r} from {src.entry}: "
+            f"{type(exc).__name__}: {str(exc)[:500]} (please report it with the model)") from None
     seconds = time.perf_counter() - t0
     log.info("compiled %s with %s in %.2f s -> %s", model, chosen, seconds, out)
     return CompileResult(out, chosen, version, seconds, states, params, text)
 
 
-__all__ = ["BACKENDS", "CompileResult", "compile_model", "library_path", "omc_available"]
+__all__ = ["BACKENDS", "CompileResult", "InternalCompileError", "compile_model", "library_path", "omc_available"]

@@ -20,6 +20,12 @@ from __future__ import annotations
 
 import pickle
 import sys
+import threading
+
+STACK_MB = 64
+"""Native stack of the thread rumoca runs on (MiB; ``TRACKINGBOX_FRONTEND_STACK_MB`` overrides):
+eight times the usual 8 MiB, so deeper expressions pass, while a runaway recursion still
+fails within seconds rather than minutes."""
 
 
 def _diagnostics(files: list[str], limit: int) -> list[tuple[str, str, int | None]]:
@@ -67,7 +73,16 @@ def main(argv: list[str]) -> int:
     request_path, result_path = argv
     with open(request_path, "rb") as fh:
         request = pickle.load(fh)
-    result = work(request)
+    # rumoca recurses on the native stack: give it a thread with a large one (reserved, not used,
+    # unless needed), so that deep but sane expressions pass; deeper ones still fail here, not in the tool.
+    import os
+
+    threading.stack_size(max(1, int(os.environ.get("TRACKINGBOX_FRONTEND_STACK_MB", STACK_MB))) * 1024 * 1024)
+    box: list[dict] = []
+    worker = threading.Thread(target=lambda: box.append(work(request)))
+    worker.start()
+    worker.join()
+    result = box[0]
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 20000))
     try:
         data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
@@ -76,8 +91,6 @@ def main(argv: list[str]) -> int:
                              "message": "the flattened model is nested too deeply to pass on"})
     with open(result_path + ".part", "wb") as fh:
         fh.write(data)
-    import os
-
     os.replace(result_path + ".part", result_path)
     return 0
 

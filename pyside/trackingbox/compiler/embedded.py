@@ -19,7 +19,8 @@ from pathlib import Path
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
-from .source import BOM, ModelicaSource, class_names, experiment_settings, has_bom, locate, model_files
+from .rewrite import frontend_bytes
+from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,44 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> Un
     return None
 
 
+_POSITION = re.compile(r"\[([^\]\[]+?\.mo):(\d+):\d+\]")
+_IMPLICIT_RANGE = "indices require an explicit range"
+
+
+def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
+                    model: str) -> UnsupportedConstructError | None:
+    """rumoca said it does not support something (not that the model is wrong): refuse naming
+    the construct in rumoca's words and where it stands in the model's own files."""
+    low = message.lower()
+    first = message.splitlines()[0]
+    nested = re.search(r"unresolved import: '([\w.]+)'", first)
+    if _IMPLICIT_RANGE in low:
+        construct = "for-loop without an explicit range (for i loop ...)"
+        pattern: str | None = r"\bfor\s+\w+\s+loop\b"
+    elif nested and nested.group(1).startswith(model + "."):
+        construct = (f"import of {nested.group(1)}, a class nested in the model itself "
+                     "(not supported by the rumoca front end)")
+        pattern = rf"\bimport\s+{re.escape(nested.group(1))}\b"
+    elif "unsupported" in low:
+        detail = first[low.index("unsupported"):].strip()
+        construct = f"{detail[len('unsupported '):]} (not supported by the rumoca front end)"
+        op = re.search(r"operator `(\w+)`", detail)
+        pattern = (rf"\b{re.escape(op.group(1))}\s*\(" if op
+                   else r"\balgorithm\b" if "algorithm" in detail else None)
+    else:
+        return None
+    allowed = {str(f) for f in model_files(source, model)}
+    where = [f"{f}:{n}" for f, n in _POSITION.findall(message) if f in allowed]
+    where += [d.split(": ", 1)[0].rsplit(":", 1)[0] for d in diags
+              if d.split(":", 1)[0] in allowed and (_IMPLICIT_RANGE[:20] in d or "unsupported" in d.lower())]
+    if not where and pattern:
+        where = [str(loc) for loc in locate(source, model, pattern)]
+    at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
+    return UnsupportedConstructError(
+        f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
+        "it; use --backend openmodelica where omc is installed, or rewrite the model")
+
+
 FRONTEND_TIMEOUT = 600.0
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
@@ -97,7 +136,9 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
     timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
-        if any(has_bom(f) for f in source.files):  # rumoca refuses a byte-order mark: give it a copy without
+        # rumoca refuses a byte-order mark and loses some der() equations in for-loops: give it a copy
+        # without the mark and with those equations protected (.rewrite; lines and offsets unchanged)
+        if any(frontend_bytes(f) is not None for f in source.files):
 
             copy = _without_bom(source, Path(tmp) / "src")
             request["entry"] = str(copy / source.entry.relative_to(source.root))
@@ -111,12 +152,13 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
 
 
 def _without_bom(source: ModelicaSource, dest: Path) -> Path:
-    """A copy of the package's files under *dest*, byte-order marks removed (same relative paths)."""
+    """A copy of the package's files under *dest* as rumoca should read them (same relative
+    paths; byte-order marks removed, der() equations in for-loops protected: :mod:`.rewrite`)."""
     for file in source.files:
         target = dest / file.relative_to(source.root)
         target.parent.mkdir(parents=True, exist_ok=True)
-        data = file.read_bytes()
-        target.write_bytes(data[3:] if data.startswith(BOM) else data)
+        data = frontend_bytes(file)
+        target.write_bytes(file.read_bytes() if data is None else data)
     return dest
 
 
@@ -179,7 +221,7 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
-    construct = _mentioned_construct(message, source, model)
+    construct = _mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""

@@ -964,6 +964,7 @@ class FlatTranslator:
         for sv in params:
             self.parameter_start(sv)
         residuals: list[tuple[ca.MX, str]] = list(calc_eqs)
+        check_lost_der_equations(self.flat, self.source, self.model)
         for eq in self.flat.get("equations", []):
             origin = _origin_text(eq.get("origin"))
             val = self.expr(eq["residual"])
@@ -1563,3 +1564,81 @@ def _sub_text(s: Any, depth: int) -> str:
     if kind == "Expr":
         return expression_text(body["expr"], depth + 1)
     return "?"
+
+
+def _ref_text(node: Any) -> str:
+    """``x[3,1]`` for a flat variable reference with constant subscripts (best effort)."""
+    kind, body = _kind_of(node)
+    if kind != "VarRef" or not isinstance(body, dict):
+        return "?"
+    subs = []
+    for sub in body.get("subscripts") or []:
+        skind, sbody = _kind_of(sub)
+        subs.append(str(sbody.get("value")) if skind == "Index" and isinstance(sbody, dict) else ":")
+    return str(body["name"]["name"]) + (f"[{','.join(subs)}]" if subs else "")
+
+
+def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model: str) -> None:
+    """Refuse a flat model in which the front end lost the right-hand side of a ``der`` equation.
+
+    rumoca 0.10.2 flattens ``der(x[i]) = a[i] - x[i]`` in a for-loop into
+    ``der(x[3]) - 0.0`` for some iterations (the embedded backend writes such
+    equations so that rumoca gets them right, :mod:`.rewrite`; this is the safety
+    net). The signature: a residual ``der(v) - literal`` whose literal carries the
+    equation's own span, and the source text at that span is not that literal (it
+    is the loop's iterator). A literal the user wrote, ``der(x[i]) = 0``, spans its
+    own text and passes.
+
+    Raises
+    ------
+    CompileError
+        Naming the model, each equation lost (variable) and the line of its loop.
+    """
+    suspects = []
+    for eq in flat.get("equations") or []:
+        kind, body = _kind_of(eq.get("residual"))
+        if kind != "Binary" or not isinstance(body, dict) or body.get("op") != "Sub":
+            continue
+        lkind, lhs = _kind_of(body.get("lhs"))
+        while lkind == "Parenthesized" and isinstance(lhs, dict):
+            lkind, lhs = _kind_of(lhs.get("inner"))
+        rkind, rhs = _kind_of(body.get("rhs"))
+        if lkind != "BuiltinCall" or str(lhs.get("function", "")).lower() != "der" or rkind != "Literal":
+            continue
+        span = eq.get("span")
+        if isinstance(span, dict) and isinstance(span.get("start"), int) and rhs.get("span") == span:
+            suspects.append((_ref_text((lhs.get("args") or [None])[0]), rhs, span))
+    if not suspects:
+        return
+    from .source import BOM
+
+    files = model_files(source, model)
+    known = span_sources(flat, files)
+    lost = []
+    for var, lit, span in suspects:
+        candidates = [known[span["source"]]] if span.get("source") in known else list(files)
+        text, loc = None, None
+        for file in candidates:
+            try:
+                data = file.read_bytes()
+            except OSError:
+                continue
+            data = data[3:] if data.startswith(BOM) else data
+            if span.get("end", span["start"]) <= len(data):
+                text = data[span["start"]:span.get("end", span["start"])].decode("utf-8", "replace").strip()
+                loc = Location(file, data.count(b"\n", 0, span["start"]) + 1)
+                break
+        value = _kind_of(lit.get("value"))[1]
+        try:
+            genuine = text is not None and float(text) == float(value)
+        except (TypeError, ValueError):
+            genuine = False
+        if not genuine:
+            lost.append(f"der({var}) = ... came back as der({var}) = {value}"
+                        + (f" (for-loop at {loc})" if loc else ""))
+    if lost:
+        shown = "; ".join(lost[:8]) + (f"; and {len(lost) - 8} more" if len(lost) > 8 else "")
+        raise CompileError(
+            f"the Modelica front end (rumoca) lost the right-hand side of {len(lost)} equation(s) of "
+            f"{model}: {shown}. This is a rumoca bug with der(...) = ... in for-loops; write the left-hand "
+            "side in parentheses, (der(x[i])) = ..., or use --backend openmodelica")

@@ -1,0 +1,236 @@
+"""Source rewrites that steer the rumoca front end around its known bugs.
+
+rumoca 0.10.2 silently drops the right-hand side of an equation whose left-hand
+side is a bare ``der(...)`` inside a for-equation, for some iterations: in
+
+.. code-block:: modelica
+
+    for i in 1:3 loop
+      der(x[i]) = a[i] - x[i];
+    end for;
+
+the flat model holds ``der(x[3]) = 0.0`` (from the third iteration on in a loop
+over one index, from the fourth in ``for i in 1:3, j in 1:2``). Nothing warns.
+The same equation with its left-hand side in parentheses, ``(der(x[i])) = ...``,
+is flattened correctly, so the embedded backend hands rumoca a copy of the
+source in which every such equation inside a for-equation is written that way
+(:func:`protect_der_equations`). :func:`.flatten.check_lost_der_equations`
+refuses the model should an equation still come back with the bug's signature.
+
+The copy keeps every byte offset where it can, and every line always: the
+opening parenthesis takes the place of a blank before ``der`` and the closing one
+the place of a blank after the call; where there is no blank the parenthesis is
+inserted and a blank of a later run of blanks on the following text is removed to
+compensate. So rumoca's positions (line, column, byte spans) in the copy are
+those of the user's file, and messages about the copy can name the original.
+"""
+from __future__ import annotations
+
+import bisect
+import functools
+import logging
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from .source import BOM
+
+log = logging.getLogger(__name__)
+
+# comments, string literals and quoted identifiers: never code
+_NOT_CODE = re.compile(rb"//[^\n]*|/\*.*?(?:\*/|\Z)|\"(?:\\.|[^\"\\])*(?:\"|\Z)|'(?:\\.|[^'\\])*(?:'|\Z)", re.S)
+_TOKEN = re.compile(rb"[A-Za-z_][A-Za-z_0-9]*|\d+(?:\.\d*)?(?:[eE][-+]?\d+)?|\S")
+_DER_CALL = re.compile(rb"\bder\s*\(")
+_EQUALS = re.compile(rb"\s*=(?!=)")  # '=' of an equation, not '=='
+_BLANK_RUN = re.compile(rb"[ \t]{2,}")
+_STATEMENT_START = {b";", b"loop", b"then", b"else", b"equation"}
+_SECTION_END = {b"algorithm", b"public", b"protected", b"external"}
+_BLOCK_END = {b"for", b"if", b"when", b"while"}
+
+
+@dataclass(frozen=True)
+class Rewrite:
+    """What :func:`protect_der_equations` did to one text.
+
+    Attributes
+    ----------
+    data:
+        The rewritten text (bytes, same encoding as given).
+    lines:
+        The 1-based lines of the equations put in parentheses.
+    offsets_kept:
+        Whether every byte after each edit stands at its original offset
+        (always true of lines; false only where no blank could compensate).
+    """
+
+    data: bytes
+    lines: tuple[int, ...]
+    offsets_kept: bool
+
+
+def _code_mask(data: bytes) -> tuple[bytes, list[int], list[int]]:
+    """*data* with comments, strings and quoted identifiers blanked (newlines kept), and the
+    start and end offsets of those blanked ranges."""
+    starts: list[int] = []
+    ends: list[int] = []
+
+    def blank(match: re.Match[bytes]) -> bytes:
+        starts.append(match.start())
+        ends.append(match.end())
+        return re.sub(rb"[^\n]", b" ", match.group(0))
+
+    return _NOT_CODE.sub(blank, data), starts, ends
+
+
+def _matching_paren(code: bytes, open_at: int) -> int | None:
+    """Offset of the parenthesis closing the one at *open_at* in comment-free *code*."""
+    depth = 0
+    for k in range(open_at, len(code)):
+        c = code[k : k + 1]
+        if c == b"(":
+            depth += 1
+        elif c == b")":
+            depth -= 1
+            if depth == 0:
+                return k
+    return None
+
+
+def _der_equations(code: bytes) -> list[tuple[int, int]]:
+    """(start of ``der``, offset of its closing parenthesis) of every equation inside a
+    for-equation of an equation section whose left-hand side is a bare ``der(...)``."""
+    found: list[tuple[int, int]] = []
+    tokens = [(m.group(0), m.start()) for m in _TOKEN.finditer(code)]
+    in_equations = False
+    loops = 0
+    prev = b";"
+    k = 0
+    while k < len(tokens):
+        tok, start = tokens[k]
+        nxt = tokens[k + 1][0] if k + 1 < len(tokens) else b""
+        if tok == b"equation":
+            in_equations, loops = True, 0
+        elif tok in _SECTION_END:
+            in_equations, loops = False, 0
+        elif tok == b"end":
+            if nxt in _BLOCK_END:
+                if nxt == b"for" and loops:
+                    loops -= 1
+                prev, k = nxt, k + 2
+                continue
+            in_equations, loops = False, 0  # end of a class
+        elif in_equations and prev in _STATEMENT_START:
+            if tok == b"for":
+                loops += 1
+            elif tok == b"der" and loops and nxt == b"(":
+                close = _matching_paren(code, tokens[k + 1][1])
+                if close is not None:
+                    after = _EQUALS.match(code, close + 1)
+                    if after is not None:
+                        found.append((start, close))
+        prev = tok
+        k += 1
+    return found
+
+
+def protect_der_equations(data: bytes) -> Rewrite:
+    """Write every ``der(...) = ...`` equation inside a for-equation as ``(der(...)) = ...``.
+
+    Only equations in equation sections, whose left-hand side is exactly one call of
+    ``der`` followed by ``=`` (not ``==`` or ``:=``), are changed; comments, strings
+    and quoted identifiers are never touched. Line numbers never change, and byte
+    offsets only where no blank was at hand to compensate (see the module docstring).
+
+    Parameters
+    ----------
+    data:
+        The text of a ``.mo`` file (without byte-order mark).
+
+    Returns
+    -------
+    Rewrite
+        The new text and the lines changed.
+
+    Examples
+    --------
+    >>> src = b"equation\\n  for i in 1:3 loop\\n    der(x[i]) = -x[i];\\n  end for;\\n"
+    >>> protect_der_equations(src).data.decode().splitlines()[2]
+    '   (der(x[i]))= -x[i];'
+    """
+    if b"loop" not in data or not _DER_CALL.search(data):  # the common case, cheaply
+        return Rewrite(data, (), True)
+    code, nc_starts, nc_ends = _code_mask(data)
+    sites = _der_equations(code)
+    if not sites:
+        return Rewrite(data, (), True)
+
+    def in_code(pos: int) -> bool:
+        k = bisect.bisect_right(nc_starts, pos) - 1
+        return k < 0 or pos >= nc_ends[k]
+
+    replace: dict[int, bytes] = {}  # offset -> byte put in place of a blank
+    insert: dict[int, bytes] = {}  # offset -> bytes inserted before it
+    drop: set[int] = set()  # blanks removed to compensate an insertion
+    kept = True
+
+    def compensate(after: int) -> bool:
+        """Remove one blank of a later run of at least two blanks (in code)."""
+        pos = after
+        while True:
+            hit = _BLANK_RUN.search(data, pos)
+            if hit is None:
+                return False
+            for q in range(hit.start(), hit.end() - 1):  # always leave one blank of the run
+                if q not in drop and q not in replace and in_code(q):
+                    drop.add(q)
+                    return True
+            pos = hit.end()
+
+    def place(offset: int, blank_at: int, char: bytes) -> None:
+        nonlocal kept
+        if 0 <= blank_at < len(data) and data[blank_at : blank_at + 1] in (b" ", b"\t") \
+                and blank_at not in replace and blank_at not in drop and in_code(blank_at):
+            replace[blank_at] = char
+            return
+        insert[offset] = insert.get(offset, b"") + char
+        if not compensate(offset):
+            kept = False
+
+    for start, close in sites:
+        place(start, start - 1, b"(")
+        place(close + 1, close + 1, b")")
+    out = bytearray()
+    for pos in range(len(data) + 1):
+        if pos in insert:
+            out += insert[pos]
+        if pos == len(data):
+            break
+        if pos in drop:
+            continue
+        out += replace.get(pos, data[pos : pos + 1])
+    lines = tuple(sorted({data.count(b"\n", 0, start) + 1 for start, _ in sites}))
+    return Rewrite(bytes(out), lines, kept)
+
+
+@functools.lru_cache(maxsize=4096)
+def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int) -> bytes | None:
+    data = file.read_bytes()
+    bom = data.startswith(BOM)
+    body = data[3:] if bom else data
+    rewrite = protect_der_equations(body)
+    if rewrite.lines:
+        log.debug("%s: der(...) equations in for-loops put in parentheses for rumoca at lines %s%s",
+                  file, ", ".join(map(str, rewrite.lines)),
+                  "" if rewrite.offsets_kept else " (byte offsets after them shifted)")
+        return rewrite.data
+    return body if bom else None
+
+
+def frontend_bytes(file: Path) -> bytes | None:
+    """What rumoca should read for *file* if not the file itself: its text without a
+    byte-order mark and with :func:`protect_der_equations` applied; None if neither changes it."""
+    try:
+        st = file.stat()
+        return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size)
+    except OSError:
+        return None

@@ -1,0 +1,155 @@
+"""The embedded front end cannot take the tool down, refusals name the model's own file and line,
+and a byte-order mark is harmless (issue 14, items 4 and 5)."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import fmpy
+import pytest
+
+from trackingbox.cli import main
+from trackingbox.compiler import compile_model
+from trackingbox.compiler.source import locate, model_files, resolve_source
+from trackingbox.errors import CompileError, UnsupportedConstructError
+
+pytestmark = pytest.mark.compile
+
+DEPTH = 100_000  # parentheses: rumoca recurses once per level
+
+
+def deep_model(tmp_path: Path) -> Path:
+    src = tmp_path / "Deep.mo"
+    src.write_text("model Deep\n  Real x;\nequation\n  x = " + "(" * DEPTH + "time" + ")" * DEPTH + ";\nend Deep;\n")
+    return src
+
+
+def test_rumoca_crash_becomes_compile_error(tmp_path, monkeypatch):
+    # The worker's rumoca thread gets the usual 8 MiB stack, so the crash comes within seconds.
+    monkeypatch.setenv("TRACKINGBOX_FRONTEND_STACK_MB", "8")
+    src = deep_model(tmp_path)
+    # Independent check that this input really kills a process running rumoca directly.
+    probe = subprocess.run(
+        [sys.executable, "-c", f"import rumoca; rumoca.Session().load({str(src)!r}, model='Deep')"],
+        capture_output=True, timeout=300)
+    assert probe.returncode < 0, f"rumoca did not crash on the probe (exit {probe.returncode})"
+    with pytest.raises(CompileError) as exc:
+        compile_model(src, "Deep", backend="embedded", output=tmp_path / "deep.fmu")
+    msg = str(exc.value)
+    assert "the Modelica front end crashed on Deep" in msg
+    assert "SIG" in msg  # the signal is named
+    assert not (tmp_path / "deep.fmu").exists()
+
+
+def test_cli_prints_one_error_line_on_a_front_end_crash(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("TRACKINGBOX_FRONTEND_STACK_MB", "8")
+    src = deep_model(tmp_path)
+    code = main(["compile", str(src), "--model", "Deep", "--backend", "embedded", "-o", str(tmp_path / "d.fmu")])
+    err = capsys.readouterr().err
+    assert code != 0
+    assert err.startswith("error: the Modelica front end crashed on Deep")
+    assert "Traceback" not in err
+
+
+def test_recursion_in_translation_is_a_compile_error(tmp_path):
+    # 2000 terms: rumoca (64 MiB stack) passes it on as a left-deep tree of 2000 additions,
+    # deeper than Python's default recursion limit of 1000 frames.
+    terms = " + ".join(f"{k}.0*time" for k in range(2000))
+    src = tmp_path / "LongSum.mo"
+    src.write_text(f"model LongSum\n  Real x;\nequation\n  x = {terms};\nend LongSum;\n")
+    with pytest.raises(CompileError) as exc:
+        compile_model(src, "LongSum", backend="embedded", output=tmp_path / "s.fmu")
+    assert "LongSum" in str(exc.value) and "too deeply" in str(exc.value)
+
+
+# A package whose model uses a construct, with a decoy occurrence in another file that sorts
+# first: the refusal must name the model's own file and the construct's line there.
+PACKAGE = {
+    "package.mo": "package P\nend P;\n",
+    "package.order": "Decoy\nPlant\n",
+    "Decoy.mo": ("within P;\nmodel Decoy\n  Real d(start = 0, fixed = true);\nequation\n"
+                 "  der(d) = delay(time, 1);\n  when d > 1 then\n    reinit(d, 0);\n  end when;\nend Decoy;\n"),
+    "Plant.mo": ("within P;\nmodel Plant\n  // a comment mentioning when and delay(\n"
+                 "  Real x(start = 0, fixed = true);\n  Real y;\nequation\n  der(x) = 1 - x;\n"
+                 "  y = delay(x, 0.5);\nend Plant;\n"),
+    "Tank.mo": ("within P;\nmodel Tank\n  extends P.Base;\n  Real h(start = 1, fixed = true);\nequation\n"
+                "  der(h) = -h;\nend Tank;\n"),
+    "Base.mo": ("within P;\npartial model Base\n  Real v(start = 0, fixed = true);\nequation\n"
+                "  when time > 0.5 then\n    reinit(v, 1);\n  end when;\n  der(v) = 0;\nend Base;\n"),
+}
+
+
+@pytest.fixture
+def package(tmp_path: Path) -> Path:
+    root = tmp_path / "P"
+    root.mkdir()
+    for name, text in PACKAGE.items():
+        (root / name).write_text(text)
+    return root
+
+
+def test_refusal_names_the_models_own_file_and_line(package, tmp_path):
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(package, "P.Plant", backend="embedded", output=tmp_path / "p.fmu")
+    msg = str(exc.value)
+    assert "delay" in msg
+    assert f"{package / 'Plant.mo'}:8" in msg  # y = delay(x, 0.5); is line 8
+    assert "Decoy.mo" not in msg
+
+
+def test_refusal_in_an_extended_class_names_that_class_file(package, tmp_path):
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(package, "P.Tank", backend="embedded", output=tmp_path / "t.fmu")
+    msg = str(exc.value)
+    assert "when" in msg
+    assert f"{package / 'Base.mo'}:5" in msg
+    assert "Decoy.mo" not in msg
+
+
+def test_model_files_and_locate(package):
+    src = resolve_source(package)
+    assert model_files(src, "P.Tank") == (package / "Tank.mo", package / "Base.mo")
+    assert model_files(src, "P.Plant") == (package / "Plant.mo",)
+    # the comment on line 3 does not count; line 8 holds the call
+    assert [(loc.file.name, loc.line) for loc in locate(src, "P.Plant", r"\bdelay\s*\(")] == [("Plant.mo", 8)]
+
+
+BOM = b"\xef\xbb\xbf"
+DECAY = "model Decay\n  Real x(start = 1, fixed = true);\nequation\n  der(x) = -x;\nend Decay;\n"
+
+
+def x_at_one(fmu: Path) -> float:
+    res = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.01, relative_tolerance=1e-8,
+                            output=["x"])
+    return float(res["x"][-1])
+
+
+def test_byte_order_mark_in_a_single_file(tmp_path):
+    src = tmp_path / "Decay.mo"
+    src.write_bytes(BOM + DECAY.encode())
+    out = compile_model(src, "Decay", backend="embedded", output=tmp_path / "decay.fmu").fmu
+    assert math.isclose(x_at_one(out), math.exp(-1.0), rel_tol=1e-4)  # x(t) = exp(-t)
+
+
+def test_byte_order_mark_in_a_package_and_refusal_lines_stay_right(tmp_path):
+    root = tmp_path / "Q"
+    root.mkdir()
+    (root / "package.mo").write_bytes(BOM + b"package Q\nend Q;\n")
+    (root / "Decay.mo").write_bytes(BOM + b"within Q;\n" + DECAY.encode())
+    (root / "Late.mo").write_bytes(BOM + b"within Q;\nmodel Late\n  Real x;\nequation\n  x = delay(time, 1.0);\nend Late;\n")
+    out = compile_model(root, "Q.Decay", backend="embedded", output=tmp_path / "q.fmu").fmu
+    assert math.isclose(x_at_one(out), math.exp(-1.0), rel_tol=1e-4)
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(root, "Q.Late", backend="embedded", output=tmp_path / "l.fmu")
+    assert f"{root / 'Late.mo'}:5" in str(exc.value)
+
+
+def test_implicit_range_for_is_refused_at_its_line(tmp_path):
+    src = tmp_path / "Implicit.mo"
+    src.write_text("model Implicit\n  Real x[3];\nequation\n  for i loop\n    x[i] = i;\n  end for;\nend Implicit;\n")
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(src, "Implicit", backend="embedded", output=tmp_path / "i.fmu")
+    assert "for-loop without an explicit range" in str(exc.value)
+    assert f"{src}:4" in str(exc.value)
