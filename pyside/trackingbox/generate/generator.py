@@ -36,6 +36,7 @@ import jinja2
 from .. import __version__
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
+from ..tracking.tuning import pair_settings, variable_span
 from . import filters
 from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin, parameter_site,
                      refusal_message, rewrite_source, stage_packages)
@@ -131,40 +132,6 @@ class GenerateResult:
     controllers: tuple[ControllerModel, ...] = field(default=())
 
 
-def variable_span(gain: float, p_min: float, p_max: float) -> float:
-    """Range of a tracking variable that normalises its error: ``|gain|·(p_max - p_min)``.
-
-    It is the change of the variable when the parameter sweeps its bounds, so
-    in the scaled domain the process gain is ±1 (% error per % output).
-
-    >>> variable_span(-0.004, 800.0, 1200.0)
-    1.6
-    """
-    span = abs(gain) * (p_max - p_min)
-    if not span > 0.0:
-        raise ValueError(f"span must be positive (gain {gain}, bounds [{p_min}, {p_max}])")
-    return span
-
-
-def _span(pair: Any, p_min: float, p_max: float) -> float:
-    """The span of a pair's variable; the same rule as the Python runtime (``tracking.runtime``)."""
-    return variable_span(pair.gain, p_min, p_max)
-
-
-def _gains(pair: Any, p_min: float, p_max: float, span: float, sample_time: float) -> tuple[float, float, str]:
-    """(kp, ti, how) for a pair: explicit ``kp``/``ti`` in the spec, else SIMC tuning."""
-    if pair.kp is not None and pair.ti is not None:
-        return abs(float(pair.kp)), float(pair.ti), "from the spec"
-    from ..tracking.controllers import Scaling
-    from ..tracking.tuning import tune_scaled_pi
-
-    g = tune_scaled_pi(pair.gain, pair.time_constant, Scaling(p_min, p_max, span=span),
-                       ts=sample_time, lam=pair.lambda_)
-    kp = abs(float(pair.kp)) if pair.kp is not None else g.kp
-    ti = float(pair.ti) if pair.ti is not None else g.ti
-    return kp, ti, f"SIMC, tau_c = {filters.modelica_real(g.tau_c)} s"
-
-
 def _modifier_lines(sites: Sequence[ParameterSite]) -> tuple[str, ...]:
     """Nested modifiers ``hx(use_kht_in = true)`` merged per component, sorted."""
     tree: dict[str, Any] = {}
@@ -239,8 +206,8 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         param = spec.parameter(pair.parameter)
         site = sites[pair.parameter]
         p_min, p_max, p_start = float(param.min), float(param.max), float(param.start)
-        span = _span(pair, p_min, p_max)
-        kp, ti, how = _gains(pair, p_min, p_max, span, spec.sample_time)
+        settings = pair_settings(pair, p_min, p_max, ts=float(spec.sample_time), where=where)
+        span, kp, ti, how = settings.scaling.span, settings.kp, settings.ti, settings.tuning
         ident = filters.modelica_name(pair.variable)
         out = filters.modelica_name(pair.parameter)
         names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out}
@@ -253,7 +220,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             tag=pair.variable, parameter=pair.parameter, input=site.input, twin_variable=twin_var,
             out=out, meas=names["meas"], sim=names["sim"], span_name=f"{ident}_span",
             p_min=p_min, p_max=p_max, p_start=p_start, span=span, kp=kp, ti=ti,
-            direction=1.0 if pair.gain > 0 else -1.0, gain=float(pair.gain),
+            direction=float(settings.direction), gain=float(pair.gain),
             time_constant=float(pair.time_constant), tuning=how,
             p_unit=_text_attr(src.variables[pair.parameter], "unit"),
             y_unit=_text_attr(src.variables[twin_var], "unit"),
