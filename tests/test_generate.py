@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import rumoca
 
+from trackingbox.compiler import library_path
 from trackingbox.errors import SpecError
 from trackingbox.generate import filters
 from trackingbox.generate.generator import environment, generate
@@ -116,6 +117,49 @@ def test_generated_package_snapshot(case: Path, snapshot):
         assert (result.package_dir / name).read_text() == snapshot(name=name)
 
 
+def test_generated_package_snapshot_with_units_and_state(tmp_path: Path, snapshot):
+    # every variable of the Units twin has a unit: the box carries them onto bounds, spans,
+    # measurements, outputs and the state-compensation gain ((kg/s)/m)
+    result = _generate(write_case(tmp_path / "case", library="Units"), tmp_path / "out")
+    for name in ("TwinTrackingBox.mo", "TwinTracked.mo"):
+        assert (result.package_dir / name).read_text() == snapshot(name=name)
+
+
+def _declarations(text: str) -> list[str]:
+    """The variable declarations of a generated class (parameters, connectors), one per entry."""
+    keep = ("parameter Real ", "RealInput ", "RealOutput ")
+    return [line.strip() for line in text.splitlines() if line.strip().startswith(keep)]
+
+
+def test_every_generated_variable_has_its_unit(tmp_path: Path):
+    result = _generate(write_case(tmp_path / "case", library="Units"), tmp_path / "out")
+    for name in ("TwinTrackingBox.mo", "TwinTracked.mo"):
+        decls = _declarations((result.package_dir / name).read_text())
+        assert decls, name
+        assert not [d for d in decls if "(unit = " not in d], name
+
+
+@pytest.mark.compile
+def test_generated_state_compensation_holds_the_level(tmp_path: Path):
+    """The compiled box tracks kht and compensates the tank level, against hand-solved steady states."""
+    from trackingbox.fmu import FMUModel
+    from trackingbox.generate.generator import compile_generated
+
+    import pandas as pd
+
+    result = _generate(write_case(tmp_path / "case", library="Units"), tmp_path / "out")
+    fmu = compile_generated(result, backend="embedded").fmu
+    inputs = pd.DataFrame({"time": [0.0, 30000.0], "Qin": 50000.0, "m_flow_in": 2.0, "hold": 0.0,
+                           "TI_102_meas": 305.5, "LI_100_meas": 1.5})
+    with FMUModel(fmu) as model:
+        df = model.simulate(stop_time=30000.0, output_interval=1000.0, inputs=inputs,
+                            outputs=["LI_100", "hx_kht"])
+    # rho*A*dL/dt = m_in + K (L_meas - L) - kOut L = 0  ->  L = (2 + 5*1.5)/(2 + 5)
+    assert df["LI_100"].iloc[-1] == pytest.approx(9.5 / 7.0, rel=1e-6)
+    # kht = Qin/(A (T - Tc)) = 50000/(10*5.5)
+    assert df["hx_kht"].iloc[-1] == pytest.approx(50000.0 / 55.0, rel=1e-6)
+
+
 def test_generation_is_deterministic(case: Path):
     a = _generate(case, case.parent / "a")
     b = _generate(case, case.parent / "b")
@@ -133,18 +177,28 @@ def test_tracked_model_structure(case: Path):
     text = (result.package_dir / "TwinTracked.mo").read_text()
     assert "within TwinTracking;" in text
     assert "extends Mini.Twin(\n    hx(use_kht_in = true)\n  );" in text
-    assert "connect(box.hx_kht, hx.kht_in);" in text
-    assert "box.TI_102_sim = ThOut;" in text
+    assert "connect(box.hx_kht, hx.kht_in)\n    annotation (Line(points = " in text
+    assert "connect(box.hx_kht, hx_kht)\n    annotation (Line(points = " in text
+    assert "box.TI_102_sim = ThOut;" in text  # a twin variable is not a connector
     box = (result.package_dir / "TwinTrackingBox.mo").read_text()
     # bounds and spec gains appear as parameters with descriptions
     assert 'parameter Real hx_kht_min = 800.0 "Lower bound of hx.kht (0 % output)";' in box
     assert 'parameter Real hx_kht_kp(unit = "1", min = 0.0) = 0.5 "' in box
-    assert 'parameter Real hx_kht_Ti(unit = "s", min = 0.0) = 60.0 "' in box
-    # span = |gain|*(max - min) = 0.005*400 = 2 K; reverse action for a negative gain
-    assert "parameter Real TI_102_span(min = 0.0) = 2.0 " in box
-    assert 'parameter Real hx_kht_direction(unit = "1") = -1.0 ' in box
+    assert 'parameter Real hx_kht_Ti(unit = "s", min = 1e-09) = 60.0 "' in box
+    # span = |gain|*(max - min) = 0.005*400 = 2 K, a divisor with min > 0; reverse action for a negative gain
+    assert "parameter Real TI_102_span(min = 1e-12) = 2.0 " in box
+    assert "TrackingBox.Blocks.ParameterController hx_kht_controller(yMin = hx_kht_min, yMax = hx_kht_max, " in box
+    assert "span = TI_102_span, kp = hx_kht_kp, Ti = hx_kht_Ti, Te = Te, reverseActing = true)" in box
+    # Te = Ts/10 = 1 s, the same memory time constant as the Python controller's default
+    assert 'parameter Real Te(unit = "s", min = 1e-09) = 1.0 ' in box
     # the twin's description of the parameter is carried over
-    assert 'RealOutput hx_kht "Tracked value of hx.kht (Heat-transfer coefficient (W/(m2.K)))";' in box
+    assert 'RealOutput hx_kht "Tracked value of hx.kht (Heat-transfer coefficient (W/(m2.K)))"' in box
+    # one law only: no controller equations in generated code, every connect drawn, every instance placed
+    assert "der(" not in box and "der(" not in text
+    for t in (box, text):
+        assert t.count("connect(") == t.count("annotation (Line(points = ")
+    assert box.count("Placement(transformation(") == 6  # hold, meas, sim, output, controller, holdAll
+    assert "Icon(coordinateSystem(" in box
 
 
 def test_simc_gains_when_spec_has_none(tmp_path: Path):
@@ -223,6 +277,7 @@ def _simulate_tracked(stage: Path, result, *, meas: float, hold: float = 0.0, st
     stage.mkdir(parents=True, exist_ok=True)
     shutil.copytree(result.library, stage / result.library.name, dirs_exist_ok=True)
     shutil.copytree(result.package_dir, stage / result.package, dirs_exist_ok=True)
+    shutil.copytree(library_path(), stage / "TrackingBox", dirs_exist_ok=True)  # the box's Blocks
     entry = harness(stage, result.package, result.tracked_model.rsplit(".", 1)[1], meas=meas, hold=hold)
     model = rumoca.Session(roots=[str(stage)]).load(str(entry), model="Harness.Run")
     df = model.simulate((0.0, stop), dt=10.0).to_dataframe()

@@ -3,15 +3,20 @@
 From a ``spec.toml`` that has ``[source]`` and ``[[pairs]]`` this writes a
 Modelica package ``<Twin>Tracking`` with
 
-* ``<Twin>TrackingBox``: a block with one scaled PI parameter controller per
-  pair, the continuous equivalent of the velocity-form controller of
-  :class:`trackingbox.tracking.controllers.ScaledPI` (error in % of the
-  variable's span, output 0-100 % mapped onto the parameter's bounds, clamped
-  with back-calculation anti-windup, a ``hold`` input that freezes it);
+* ``<Twin>TrackingBox``: a block with one library block
+  ``TrackingBox.Blocks.ParameterController`` per pair and one
+  ``TrackingBox.Blocks.StateCompensation`` per ``[[states]]`` entry, wired
+  with ``connect`` and drawn (every instance a ``Placement``, every connect a
+  ``Line``). The law lives in those blocks only; the Python runtime's
+  :class:`~trackingbox.tracking.controllers.ScaledPI` is their exact
+  discretisation, and the settings come from the one rule
+  :func:`trackingbox.tracking.tuning.pair_settings`;
 * ``<Twin>Tracked``: the twin extended with its tracked parameters switched to
   their conditional inputs (``hx(use_kht_in = true)``), the measurements as
-  top-level inputs and the box connected between measurements, twin sensors and
-  the parameter inputs. The tracked parameters are outputs.
+  top-level inputs and the box connected between measurements, twin sensors,
+  the parameter inputs and the twin's correction-flow inputs. The tracked
+  parameters are outputs. A twin variable that is not a connector (a sensor
+  value such as ``ThOut``) reaches the box through an equation.
 
 The tracked model *extends* the twin rather than instantiating it: a connect
 equation may only name a connector of a direct component (``hx.kht_in``), and
@@ -27,7 +32,7 @@ import logging
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +41,7 @@ import jinja2
 from .. import __version__
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
+from ..tracking.controllers import MEMORY_FRACTION
 from ..tracking.tuning import pair_settings, variable_span
 from . import filters
 from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin, parameter_site,
@@ -43,7 +49,7 @@ from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin,
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ControllerModel", "GeneratedModel", "GenerateResult", "build_model", "render",
+__all__ = ["ControllerModel", "StateModel", "Layout", "GeneratedModel", "GenerateResult", "build_model", "render",
            "generate", "environment", "variable_span"]
 
 
@@ -96,6 +102,56 @@ class ControllerModel:
     p_unit: str = ""         # unit of the parameter in the twin ("" if none)
     y_unit: str = ""         # unit of the tracking variable in the twin
     p_description: str = ""  # the parameter's description in the twin
+    instance: str = ""       # the ParameterController instance in the box, e.g. "hx_kht_controller"
+    layout: Layout | None = None
+
+
+@dataclass(frozen=True)
+class StateModel:
+    """One state compensation of the box (one ``[[states]]`` entry)."""
+
+    tag: str                 # level measurement tag, e.g. "LI-100"
+    variable: str            # twin variable of the level, e.g. "LI_100"
+    correction: str          # the twin's correction-flow input, e.g. "T100_m_flow_corr"
+    meas: str                # box/model input with the measured level, e.g. "LI_100_meas"
+    sim: str                 # box input with the twin's level, e.g. "LI_100_sim"
+    out: str                 # box output with the correction flow (named after the twin input)
+    gain_name: str           # box parameter with the gain, e.g. "T100_m_flow_corr_k"
+    instance: str            # the StateCompensation instance, e.g. "T100_m_flow_corr_compensation"
+    gain: float
+    target: str = ""         # the component's conditional input it drives ("tank.m_flow_corr_in"), or ""
+    level_unit: str = ""
+    flow_unit: str = ""
+    gain_unit: str = ""
+    layout: Layout | None = None
+
+    @property
+    def exposed(self) -> str:
+        """Output of the tracked model that carries a correction for a top-level twin input ("" if wired)."""
+        return "" if self.target else f"{self.out}_comp"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Diagram geometry of one row of the box (one pair or state) and its wiring in the tracked model.
+
+    Extents and points are in the box's (``box_*``) or the tracked model's
+    (``tracked_*``) diagram coordinates, ready for :func:`filters.modelica_points`.
+    """
+
+    meas_extent: tuple[tuple[float, float], ...]
+    sim_extent: tuple[tuple[float, float], ...]
+    out_extent: tuple[tuple[float, float], ...]
+    block_extent: tuple[tuple[float, float], ...]
+    line_meas: tuple[tuple[float, float], ...]
+    line_sim: tuple[tuple[float, float], ...]
+    line_hold: tuple[tuple[float, float], ...]
+    line_out: tuple[tuple[float, float], ...]
+    tracked_meas_extent: tuple[tuple[float, float], ...]
+    tracked_out_extent: tuple[tuple[float, float], ...]
+    tracked_line_meas: tuple[tuple[float, float], ...]
+    tracked_line_out: tuple[tuple[float, float], ...]
+    tracked_line_input: tuple[tuple[float, float], ...]
 
 
 @dataclass(frozen=True)
@@ -111,6 +167,14 @@ class GeneratedModel:
     stop_time: float
     hold_until: float
     controllers: tuple[ControllerModel, ...]
+    states: tuple[StateModel, ...]
+    te: float                  # time constant of the error memories (s)
+    box_extent: tuple[tuple[float, float], ...]
+    hold_extent: tuple[tuple[float, float], ...]
+    hold_all_extent: tuple[tuple[float, float], ...]
+    tracked_box_extent: tuple[tuple[float, float], ...]
+    tracked_hold_extent: tuple[tuple[float, float], ...]
+    tracked_line_hold: tuple[tuple[float, float], ...]
     modifier_lines: tuple[str, ...]
     class_order: tuple[str, ...]
     package_info: str
@@ -130,6 +194,48 @@ class GenerateResult:
     library: Path              # the twin's library (patched copy with --rewrite)
     rewrite: Rewrite | None = None
     controllers: tuple[ControllerModel, ...] = field(default=())
+    states: tuple[StateModel, ...] = field(default=())
+
+
+#: Row pitch of the box's diagram and the scale of the box instance in the tracked model.
+_PITCH = 80.0
+_SCALE = 0.4
+
+Points = tuple[tuple[float, float], ...]
+
+
+def _half_height(rows: int) -> float:
+    """Half the height of the box's coordinate system for *rows* rows (pairs + states)."""
+    return _PITCH / 2.0 * rows + 40.0
+
+
+def _row_layout(i: int, rows: int, *, with_hold: bool) -> Layout:
+    """Geometry of row *i*: inputs left, the library block in the middle, the output right."""
+    h = _half_height(rows)
+    yc = h - _PITCH - _PITCH * i
+    k = _SCALE
+    return Layout(
+        meas_extent=((-140, yc + 5), (-100, yc + 25)),
+        sim_extent=((-140, yc - 25), (-100, yc - 5)),
+        out_extent=((100, yc - 10), (120, yc + 10)),
+        block_extent=((-20, yc - 20), (20, yc + 20)),
+        line_meas=((-120, yc + 15), (-40, yc + 15), (-40, yc), (-24, yc)),
+        line_sim=((-120, yc - 15), (-50, yc - 15), (-50, yc - 34), (0, yc - 34), (0, yc - 24)),
+        line_hold=((-60, h - 20), (-30, h - 20), (-30, yc + 34), (-12, yc + 34), (-12, yc + 24)) if with_hold else (),
+        line_out=((22, yc), (110, yc)),
+        tracked_meas_extent=((-140, k * (yc + 15) - 10), (-100, k * (yc + 15) + 10)),
+        tracked_out_extent=((100, k * yc - 10), (120, k * yc + 10)),
+        tracked_line_meas=((-120, k * (yc + 15)), (-120 * k, k * (yc + 15))),
+        tracked_line_out=((110 * k, k * yc), (110, k * yc)),
+        tracked_line_input=((110 * k, k * yc), (70, k * yc), (70, k * yc + 20)),
+    )
+
+
+def _BLOCKS_LIBRARY() -> Path:  # noqa: N802 - reads as the constant it is
+    """The shipped library whose ``Blocks`` the generated box instantiates."""
+    from ..compiler import library_path
+
+    return library_path()
 
 
 def _modifier_lines(sites: Sequence[ParameterSite]) -> tuple[str, ...]:
@@ -224,7 +330,46 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             time_constant=float(pair.time_constant), tuning=how,
             p_unit=_text_attr(src.variables[pair.parameter], "unit"),
             y_unit=_text_attr(src.variables[twin_var], "unit"),
-            p_description=_text_attr(src.variables[pair.parameter], "description")))
+            p_description=_text_attr(src.variables[pair.parameter], "description"),
+            instance=f"{out}_controller"))
+    states: list[StateModel] = []
+    for st in sorted(spec.states, key=lambda x: x.correction):
+        label = f"[[states]] {st.tag!r} in {where}"
+        if st.variable not in src.variables:
+            raise SpecError(unknown_name("twin level variable", st.variable, sorted(src.variables),
+                                         f"model {src.model} ({label})"))
+        if st.correction in src.top_inputs:
+            # A top-level input of the twin cannot be driven from a model that extends the
+            # twin: the embedded path keeps it an FMU input whatever binds it. The box's
+            # correction is then an output of the tracked model, to be fed to that input.
+            target, flow_var = "", src.variables[st.correction]
+        elif st.correction in sites:
+            target, flow_var = sites[st.correction].input, src.variables[st.correction]
+        else:  # pragma: no cover - generate() collects a site for every non-input correction
+            raise SpecError(f"{label}: correction {st.correction!r} is neither a top-level input of "
+                            f"{src.model} nor a component parameter with a conditional input")
+        ident = filters.modelica_name(st.tag)
+        corr = filters.modelica_name(st.correction)
+        names = {"meas": f"{ident}_meas", "out": f"{corr}_comp"}
+        for kind, name in names.items():
+            if kind == "out" and target:
+                continue
+            if name in taken:
+                raise SpecError(f"name {name!r} for {label} clashes with the {taken[name]} of that name in "
+                                f"{src.model}")
+            taken[name] = f"generated {kind}"
+        level_unit = _text_attr(src.variables[st.variable], "unit")
+        flow_unit = _text_attr(flow_var, "unit")
+        states.append(StateModel(
+            tag=st.tag, variable=st.variable, correction=st.correction, meas=names["meas"], sim=f"{ident}_sim",
+            out=corr, gain_name=f"{corr}_k", instance=f"{corr}_compensation", gain=float(st.gain),
+            target=target, level_unit=level_unit, flow_unit=flow_unit,
+            gain_unit=filters.unit_quotient(flow_unit, level_unit)))
+    rows = len(controllers) + len(states)
+    controllers = [replace(c, layout=_row_layout(i, rows, with_hold=True)) for i, c in enumerate(controllers)]
+    states = [replace(x, layout=_row_layout(len(controllers) + i, rows, with_hold=False))
+              for i, x in enumerate(states)]
+    h = _half_height(rows)
     stop = spec.windows.get("validation", spec.windows.get("training", (0.0, 3600.0)))[1]
     header_lines = [
         f"// Generated by trackingbox {__version__} (trackingbox generate / gen-trackingbox). Do not edit:",
@@ -235,36 +380,56 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
     for c in controllers:
         header_lines.append(f"// pair:  {c.tag} -> {c.parameter} (kp = {filters.modelica_real(c.kp)}, "
                             f"Ti = {filters.modelica_real(c.ti)} s, span = {filters.modelica_real(c.span)})")
+    for x in states:
+        header_lines.append(f"// state: {x.tag} -> {x.correction} (k = {filters.modelica_real(x.gain)}, "
+                            f"level {x.variable})")
     pairs_html = "".join(
         f"<li><code>{c.parameter}</code> tracks <code>{c.tag}</code> (twin variable "
         f"<code>{c.twin_variable}</code>), bounds [{filters.modelica_real(c.p_min)}, "
         f"{filters.modelica_real(c.p_max)}]</li>" for c in controllers)
+    states_html = "".join(
+        f"<li><code>{x.correction}</code> keeps <code>{x.variable}</code> on <code>{x.tag}</code></li>"
+        for x in states)
     package_info = (f"<html><p>Generated by trackingbox {__version__} for <code>{src.model}</code>. "
                     f"<code>{tracked_class}</code> is the twin with its parameters tracked by "
-                    f"<code>{box_class}</code>:</p><ul>{pairs_html}</ul></html>")
+                    f"<code>{box_class}</code>:</p><ul>{pairs_html}{states_html}</ul></html>")
     box_info = (
-        "<html><p>One PI parameter controller per pair. The error "
-        "<code>e = 100 (measured - simulated)/span</code> is in % of the variable's span; the output "
-        "<code>u</code> is 0..100 % of the parameter's bounds. The law is the continuous form of the "
-        "velocity (incremental) PI <code>u(k) = u(k-1) + d kp (e(k) - e(k-1) + Ts/Ti e(k))</code>: "
-        "<code>du/dt = d kp (de/dt + e/Ti)</code>, with <code>de/dt</code> taken as "
-        "<code>(e - ef)/Tf</code> (<code>ef</code> lags <code>e</code> by the sample time <code>Tf</code>). "
-        "The output is clamped to 0..100 % and pulled back by back-calculation (<code>Tt</code>), so "
-        "it never winds up. <code>hold = 1</code> freezes every output (start-up, missing data); "
-        "tracking resumes without a bump.</p></html>")
+        "<html><p>One <code>TrackingBox.Blocks.ParameterController</code> per pair (error in % of the "
+        "variable's span, output 0..100 % of the parameter's bounds, direction from the sign of the "
+        "pair's gain, clamp with anti-windup) and one <code>TrackingBox.Blocks.StateCompensation</code> "
+        "per state (correction = k (measured - simulated level)). The law and its hold are documented "
+        "in those blocks; the Python runtime implements the same law. <code>hold = 1</code>, and any "
+        "time before <code>holdUntil</code> (the start-up hold), freezes every parameter controller: "
+        "nothing integrates and tracking resumes without a bump. State compensation keeps running "
+        "through holds, as in the Python runtime.</p></html>")
     tracked_info = (
         f"<html><p><code>{src.model}</code> with "
         + ", ".join(f"<code>{c.parameter}</code>" for c in controllers)
-        + f" switched to their conditional inputs and driven by <code>{box_class}</code>. Inputs: the "
-        "twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; the box also "
-        "holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's own outputs "
-        "and the tracked parameter values. State compensation (<code>[[states]]</code> in the spec) is "
-        "not generated: the twin's correction inputs stay inputs.</p></html>")
+        + f" switched to their conditional inputs and driven by <code>{box_class}</code>"
+        + "".join(f", <code>{x.correction}</code> driven by the box's state compensation" for x in states
+                  if x.target)
+        + "".join(f". <code>{x.correction}</code> is a top-level input of the twin, which a model that "
+                  f"extends the twin cannot drive: the box's correction is the output <code>{x.exposed}</code>; "
+                  f"feed it to <code>{x.correction}</code> each sample, as the Python runtime does"
+                  for x in states if not x.target)
+        + ". Inputs: the twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; "
+        "the box also holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's "
+        "own outputs and the tracked parameter values. Twin variables that are not connectors (the "
+        "simulated sensors) reach the box through equations; everything else is connected.</p></html>")
+    k = _SCALE
     return GeneratedModel(
         header="\n".join(header_lines), package=package, box_class=box_class, tracked_class=tracked_class,
         twin_model=src.model, sample_time=float(spec.sample_time), stop_time=float(stop),
         hold_until=float(spec.tracking.hold_until),
-        controllers=tuple(controllers), modifier_lines=_modifier_lines(list(sites.values())),
+        controllers=tuple(controllers), states=tuple(states),
+        te=MEMORY_FRACTION * float(spec.sample_time),
+        box_extent=((-100, -h), (100, h)),
+        hold_extent=((-140, h - 30), (-100, h - 10)),
+        hold_all_extent=((-80, h - 30), (-60, h - 10)),
+        tracked_box_extent=((-100 * k, -h * k), (100 * k, h * k)),
+        tracked_hold_extent=((-140, k * (h - 20) - 10), (-100, k * (h - 20) + 10)),
+        tracked_line_hold=((-120, k * (h - 20)), (-120 * k, k * (h - 20))),
+        modifier_lines=_modifier_lines(list(sites.values())),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
 
@@ -316,6 +481,9 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         if pair.parameter not in known:
             raise SpecError(unknown_name("parameter", pair.parameter, sorted(known), f"[[pairs]] of {where}"))
         sites[pair.parameter] = parameter_site(src, pair.parameter, f"[[pairs]] of {where}")
+    for st in spec.states:
+        if st.correction not in src.top_inputs:
+            sites[st.correction] = parameter_site(src, st.correction, f"[[states]] {st.tag!r} of {where}")
     missing = [s for s in sites.values() if not s.has_pattern]
     rw: Rewrite | None = None
     library = src.top
@@ -326,7 +494,7 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         logger.info("wrote a patched copy of the twin's source to %s", rw.path)
         src_new = load_twin(rw.path, spec.source.model)
         for name in sites:
-            sites[name] = parameter_site(src_new, name, f"[[pairs]] of {where}")
+            sites[name] = parameter_site(src_new, name, f"[[pairs]]/[[states]] of {where}")
             if not sites[name].has_pattern:
                 raise SpecError(f"rewriting the source did not give {name!r} a conditional input")
         src = src_new
@@ -340,6 +508,8 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         for name, text in texts.items():
             (staged_gen / name).write_text(text, encoding="utf-8")
         pkg = stage_packages(Path(tmp) / "stage", library, staged_gen)
+        if library.name != _BLOCKS_LIBRARY().name:  # the box instantiates TrackingBox.Blocks
+            stage_packages(Path(tmp) / "stage", _BLOCKS_LIBRARY(), staged_gen)
         check_loads(pkg, f"{model.package}.{model.tracked_class}", pkg.parent)
     pkg_dir = out_dir / model.package
     pkg_dir.mkdir(parents=True, exist_ok=True)
@@ -351,7 +521,7 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     return GenerateResult(package_dir=pkg_dir, files=tuple(written), package=model.package,
                           tracked_model=f"{model.package}.{model.tracked_class}",
                           box_model=f"{model.package}.{model.box_class}", library=library,
-                          rewrite=rw, controllers=model.controllers)
+                          rewrite=rw, controllers=model.controllers, states=model.states)
 
 
 def compile_generated(result: GenerateResult, *, backend: str = "auto", output: Path | None = None) -> Any:
@@ -367,5 +537,14 @@ def compile_generated(result: GenerateResult, *, backend: str = "auto", output: 
     from ..compiler import compile_model
 
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
-    return compile_model(result.package_dir, result.tracked_model, backend=backend, output=output,
-                         libraries=[result.library])
+    # The generated package, the twin's library and TrackingBox (whose Blocks the box
+    # instantiates) are staged side by side under one root: rumoca resolves a
+    # component of a library class from a multi-file package only that way.
+    with tempfile.TemporaryDirectory(prefix="trackingbox-compile-") as tmp:
+        stage = Path(tmp)
+        pkg = stage_packages(stage, result.library, result.package_dir)
+        libraries = [stage / result.library.name]
+        if result.library.name != _BLOCKS_LIBRARY().name:
+            stage_packages(stage, _BLOCKS_LIBRARY(), result.package_dir)
+            libraries.append(stage / _BLOCKS_LIBRARY().name)
+        return compile_model(pkg, result.tracked_model, backend=backend, output=output, libraries=libraries)
