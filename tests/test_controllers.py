@@ -44,6 +44,7 @@ def test_pi_velocity_form_sequence_by_hand() -> None:
     # kp=2, Ts/Ti=1/4; errors 10 %, 5 %, 0 %:
     # du1 = 2*0 + 0.5*10 = 5 -> 55 %; du2 = 2*(-5) + 0.5*5 = -7.5 -> 47.5 %; du3 = 2*(-5) + 0 = -10 -> 37.5 %
     pi = _pi()
+    assert pi.update(1.0, 0.8, hold=True) == 5.0  # start-up hold: the error memory settles on 10 %
     assert pi.update(1.0, 0.8) == pytest.approx(5.5)
     assert pi.update(1.0, 0.9) == pytest.approx(4.75)
     assert pi.update(1.0, 1.0) == pytest.approx(3.75)
@@ -53,6 +54,7 @@ def test_pi_velocity_form_sequence_by_hand() -> None:
 def test_pi_reverse_acting_mirrors_increments() -> None:
     # negative pair gain: same increments with the opposite sign -> 45 %, 52.5 %, 62.5 %
     pi = _pi(direction=direction_from_gain(-0.004))
+    pi.update(1.0, 0.8, hold=True)
     assert [pi.update(1.0, pv) for pv in (0.8, 0.9, 1.0)] == pytest.approx([4.5, 5.25, 6.25])
 
 
@@ -65,6 +67,7 @@ def test_direction_from_gain() -> None:
 
 def test_pi_clamps_and_leaves_bound_at_once() -> None:
     pi = _pi(p0=9.8)  # 98 %
+    pi.update(1.0, 0.8, hold=True)
     assert pi.update(1.0, 0.8) == 10.0  # 98 + 5 -> clamped at 100 %
     assert pi.update(1.0, 0.8) == 10.0  # still pushing: stays at 100 %, nothing stored
     # error flips to -10 %: du = 2*(-20) + 0.5*(-10) = -45 -> 55 % on this very step
@@ -73,6 +76,7 @@ def test_pi_clamps_and_leaves_bound_at_once() -> None:
 
 def test_pi_clamps_at_lower_bound() -> None:
     pi = _pi(p0=0.1)  # 1 %
+    pi.update(1.0, 1.2, hold=True)
     assert pi.update(1.0, 1.2) == 0.0  # du = -5 -> -4 % clamped to 0 %
     assert 0.0 <= pi.value <= 10.0
 
@@ -81,8 +85,14 @@ def test_pi_initial_value_outside_bounds_is_clamped() -> None:
     assert _pi(p0=12.0).value == 10.0
 
 
+def test_pi_first_sample_without_hold_acts_on_the_whole_error() -> None:
+    # the memory starts at 0 (as the block's state): kp*(10 - 0) + Ts/Ti*kp*10 = 25 % -> 75 %
+    assert _pi().update(1.0, 0.8) == pytest.approx(7.5)
+
+
 def test_pi_hold_on_nan_and_bumpless_resume() -> None:
     pi = _pi()
+    pi.update(1.0, 0.8, hold=True)
     assert pi.update(1.0, 0.8) == pytest.approx(5.5)  # e = 10 %
     assert pi.update(math.nan, 0.8) == pytest.approx(5.5)  # missing measurement: frozen
     assert pi.mode == "hold"
@@ -96,6 +106,7 @@ def test_pi_hold_on_nan_and_bumpless_resume() -> None:
 
 def test_pi_state_round_trip() -> None:
     a, b = _pi(), _pi()
+    a.update(1.0, 0.8, hold=True)
     a.update(1.0, 0.8)
     b.restore(a.state())
     assert a.update(1.0, 0.9) == b.update(1.0, 0.9)

@@ -362,3 +362,71 @@ def test_generated_package_compiles_with_openmodelica(case: Path, tmp_path: Path
     assert cr.fmi_version == "2.0"
     res = _fmu_kht(cr.fmu, 305.5)
     assert res["hx_kht"][-1] == pytest.approx(909.0909090909, rel=1e-3)
+
+
+# ---------------------------------------------------------------- box vs Python runtime
+
+
+def _aligned_agreement(series, name: str, hold_until: float, lower: float, upper: float) -> float:
+    """max |p_box - p_python| / (upper - lower) after the start-up hold.
+
+    The runtime's CSV row ``k`` holds the value it applies over ``[t_k, t_k+1)``,
+    computed from the error at ``t_k``: the exact discretisation of the box's
+    law gives the box's value at ``t_k+1``. So row ``k`` of the runtime is
+    compared with row ``k + 1`` of the box.
+    """
+    t = series["time"].to_numpy()
+    box = series[f"modelica:{name}"].to_numpy()[1:]
+    python = series[f"python:{name}"].to_numpy()[:-1]
+    after = t[:-1] >= hold_until - 1e-9
+    return float(np.max(np.abs(box - python)[after]) / (upper - lower))
+
+
+@pytest.mark.compile
+def test_compiled_box_agrees_with_python_runtime_and_would_catch_wrong_gains(tmp_path: Path):
+    """Box and runtime from the same spec agree within 1 % of the bounds after the start-up hold.
+
+    The comparison covers the transient after the hold (kht moves from 1000 to
+    the plant's 900 within about 100 s), where the gains matter: a box
+    generated with kp or Ti 1.5 times the runtime's must fail the same criterion.
+    """
+    from trackingbox.compiler import compile_model
+    from trackingbox.fmu import FMUModel
+    from trackingbox.generate.generator import compile_generated
+    from trackingbox.tracking.tuning import pair_settings
+    from trackingbox.validate import validate
+
+    import pandas as pd
+
+    spec_path = write_case(tmp_path / "case", gains="")
+    case = spec_path.parent
+    spec_path.write_text(spec_path.read_text().replace("validation = [3600.0, 7200.0]", "validation = [0.0, 7200.0]")
+                         + "\n[tracking]\nhold_until = 600.0\n")
+    compile_model(case / "Mini", "Mini.Twin", backend="embedded", output=case / "twin.fmu")
+    grid = np.arange(0.0, 7200.0 + 1e-9, 10.0)
+    qin = np.where(grid < 2400.0, 50000.0, np.where(grid < 4800.0, 40000.0, 55000.0))
+    with FMUModel(case / "twin.fmu") as plant:  # the plant: the twin with kht = 900
+        y = plant.simulate(stop_time=7200.0, output_interval=10.0, parameters={"hx.kht": 900.0},
+                           inputs=pd.DataFrame({"time": grid, "Qin": qin}), outputs=["ThOut"])
+    pd.DataFrame({"time": grid, "QI-100": qin, "TI-102": y["ThOut"].to_numpy()}).to_csv(
+        case / "measurements.csv", index=False)
+    spec = load_spec(spec_path)
+    param = spec.parameter("hx.kht")
+    tuned = pair_settings(spec.pairs[0], param.min, param.max, ts=spec.sample_time)
+
+    def run(kp_factor: float, ti_factor: float) -> float:
+        text = spec_path.read_text()
+        if (kp_factor, ti_factor) != (1.0, 1.0):  # a box generated with other gains than the runtime's
+            text = text.replace("lambda = 1.0\n", f"lambda = 1.0\nkp = {tuned.kp * kp_factor!r}\n"
+                                                  f"ti = {tuned.ti * ti_factor!r}\n")
+        variant = case / f"spec_{kp_factor}_{ti_factor}.toml"
+        variant.write_text(text)
+        result = _generate(variant, tmp_path / f"gen_{kp_factor}_{ti_factor}")
+        fmu = compile_generated(result, backend="embedded").fmu
+        res = validate(spec, fmu, work_dir=tmp_path / f"work_{kp_factor}_{ti_factor}")
+        assert res.parameters["hx.kht"].final == pytest.approx(900.0, rel=1e-3)  # every variant converges
+        return _aligned_agreement(res.series, "hx.kht", 600.0, param.min, param.max)
+
+    assert run(1.0, 1.0) <= 0.01
+    assert run(1.5, 1.0) > 0.01
+    assert run(1.0, 1.5) > 0.01

@@ -65,8 +65,9 @@ proportional term sees no step (bumpless resume).</li>
 compiles on the embedded path. For an error held constant over each sample
 period, <code>trackingbox.tracking.controllers.ScaledPI</code> is the exact
 discretisation of this law; a test drives both with the same error sequence.
-The error memory starts at 0: start the block on hold for a few
-<code>Te</code> (the start-up hold of a tracking box) so that it starts without a
-proportional kick.</p>
+The error memory starts at 0, in the block and in the Python class: without a
+start-up hold the proportional action acts on the whole initial error; start
+the block on hold for a few <code>Te</code> (the start-up hold of a tracking
+box) and it starts without a kick.</p>
 </html>"));
 end ParameterController;

@@ -39,7 +39,12 @@ while the error memory keeps following the error, so resuming gives no
 proportional kick (bumpless). The Python controllers are held by ``hold=True``
 (start-up hold, stoppage, solver recovery) and while the measurement or the
 simulated value is missing (NaN); a missing error cannot be followed, so the
-memory is then set to the first valid error after the gap.
+memory is then set to the first valid error after the gap. The memory starts
+at 0 in both (the embedded path has no initial equations to start it at the
+first error): without a start-up hold the first sample gets the proportional
+action on the whole initial error; with a start-up hold of a few samples
+(``[tracking] hold_until``) the memory settles first and tracking starts
+without a kick.
 
 Clamp and anti-windup: the output stops at 0 and 100 % while its rate points
 out of the range (conditional integration). A saturated controller stores no
@@ -216,7 +221,9 @@ class ScaledPI:
     Examples
     --------
     >>> pi = ScaledPI(Scaling(0.0, 10.0, span=2.0), kp=1.0, ti=20.0, ts=10.0, direction=1, p0=5.0)
-    >>> pi.update(1.0, 0.8)   # e = 10 %, memory starts at e: Ts/Ti*kp*e = 5 % -> u = 55 %
+    >>> pi.update(1.0, 0.8, hold=True)  # start-up hold: frozen, the memory settles on e = 10 %
+    5.0
+    >>> round(pi.update(1.0, 0.8), 3)   # no proportional kick: Ts/Ti*kp*e = 5 % -> u = 55 %
     5.5
     """
 
@@ -239,8 +246,8 @@ class ScaledPI:
         self.direction = int(direction)
         #: controller output, % of the parameter range, always within [0, 100]
         self.u = _clamp(scaling.to_percent(p0))
-        #: error memory (%); None until the first valid error (and after a missing one)
-        self.e_mem: float | None = None
+        #: error memory (%): starts at 0 as in the block; None after a missing error
+        self.e_mem: float | None = 0.0
         self.mode: Mode = "hold"
 
     @property
