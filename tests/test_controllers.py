@@ -314,3 +314,27 @@ def test_exact_step_matches_a_fine_clamped_integration(u0: float, e: float, mem:
     pi = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, te=te, direction=1, p0=u0)
     pi.e_mem = mem
     assert pi.update(e, 0.0) == pytest.approx(u, abs=1e-3)
+
+
+def test_plant_pi_block_hold_limits_and_setpoint(fmu_cache) -> None:
+    """Blocks.Validation.PIHoldAndLimits simulated (the plant-side PI, not the parameter controller).
+
+    Hand-derived expectations: integral action brings the first-order process
+    to the setpoint (0.5, then 0.9 after 200 s; both below the output limit 1);
+    the setpoint step asks for k*0.4 + 0.5 = 1.3 > 1, so the output sits at its
+    limit for a while and never exceeds it; while held (600-900 s) the output
+    is frozen and on release it continues without a step.
+    """
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.PIHoldAndLimits")
+    with FMUModel(fmu, tolerance=1e-8) as model:
+        df = model.simulate(stop_time=1500.0, output_interval=1.0, outputs=["con.y", "x"])
+    t, y, x = df["time"].to_numpy(), df["con.y"].to_numpy(), df["x"].to_numpy()
+    assert x[t == 199.0][0] == pytest.approx(0.5, abs=0.01)  # still settling from x = 0
+    assert x[t == 599.0][0] == pytest.approx(0.9, abs=2e-3)
+    assert y.max() <= 1.0 + 1e-9 and y.min() >= 0.0 - 1e-9
+    assert np.any((t > 200.0) & (t < 260.0) & (y > 1.0 - 1e-9))  # at the limit after the step
+    held = (t >= 601.0) & (t <= 899.0)
+    assert np.ptp(y[held]) < 1e-5  # frozen (to the solver's crossing of the unevented switch at 600 s)
+    assert abs(y[t == 902.0][0] - y[t == 899.0][0]) < 1e-3  # bumpless release
