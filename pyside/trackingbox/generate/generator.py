@@ -527,8 +527,9 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
 def compile_generated(result: GenerateResult, *, backend: str = "auto", output: Path | None = None) -> Any:
     """Compile the tracked model with :func:`trackingbox.compiler.compile_model`.
 
-    The twin's library (the patched copy after ``--rewrite``) is passed as a
-    further library, the generated package as the source.
+    The generated package is the source; the twin's library (the patched copy
+    after ``--rewrite``) and the shipped ``TrackingBox`` library (whose
+    ``Blocks`` the box instantiates) are further libraries, staged beside it.
 
     Returns
     -------
