@@ -49,6 +49,9 @@ from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin,
 
 logger = logging.getLogger(__name__)
 
+#: Diagram coordinates: the corners of an extent or the points of a line.
+Points = tuple[tuple[float, float], ...]
+
 __all__ = ["ControllerModel", "StateModel", "Layout", "GeneratedModel", "GenerateResult", "build_model", "render",
            "generate", "environment", "variable_span"]
 
@@ -139,19 +142,19 @@ class Layout:
     (``tracked_*``) diagram coordinates, ready for :func:`filters.modelica_points`.
     """
 
-    meas_extent: tuple[tuple[float, float], ...]
-    sim_extent: tuple[tuple[float, float], ...]
-    out_extent: tuple[tuple[float, float], ...]
-    block_extent: tuple[tuple[float, float], ...]
-    line_meas: tuple[tuple[float, float], ...]
-    line_sim: tuple[tuple[float, float], ...]
-    line_hold: tuple[tuple[float, float], ...]
-    line_out: tuple[tuple[float, float], ...]
-    tracked_meas_extent: tuple[tuple[float, float], ...]
-    tracked_out_extent: tuple[tuple[float, float], ...]
-    tracked_line_meas: tuple[tuple[float, float], ...]
-    tracked_line_out: tuple[tuple[float, float], ...]
-    tracked_line_input: tuple[tuple[float, float], ...]
+    meas_extent: Points
+    sim_extent: Points
+    out_extent: Points
+    block_extent: Points
+    line_meas: Points
+    line_sim: Points
+    line_hold: Points
+    line_out: Points
+    tracked_meas_extent: Points
+    tracked_out_extent: Points
+    tracked_line_meas: Points
+    tracked_line_out: Points
+    tracked_line_input: Points
 
 
 @dataclass(frozen=True)
@@ -169,12 +172,12 @@ class GeneratedModel:
     controllers: tuple[ControllerModel, ...]
     states: tuple[StateModel, ...]
     te: float                  # time constant of the error memories (s)
-    box_extent: tuple[tuple[float, float], ...]
-    hold_extent: tuple[tuple[float, float], ...]
-    hold_all_extent: tuple[tuple[float, float], ...]
-    tracked_box_extent: tuple[tuple[float, float], ...]
-    tracked_hold_extent: tuple[tuple[float, float], ...]
-    tracked_line_hold: tuple[tuple[float, float], ...]
+    box_extent: Points
+    hold_extent: Points
+    hold_all_extent: Points
+    tracked_box_extent: Points
+    tracked_hold_extent: Points
+    tracked_line_hold: Points
     modifier_lines: tuple[str, ...]
     class_order: tuple[str, ...]
     package_info: str
@@ -200,9 +203,6 @@ class GenerateResult:
 #: Row pitch of the box's diagram and the scale of the box instance in the tracked model.
 _PITCH = 80.0
 _SCALE = 0.4
-
-Points = tuple[tuple[float, float], ...]
-
 
 def _half_height(rows: int) -> float:
     """Half the height of the box's coordinate system for *rows* rows (pairs + states)."""
