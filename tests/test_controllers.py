@@ -338,3 +338,27 @@ def test_plant_pi_block_hold_limits_and_setpoint(fmu_cache) -> None:
     held = (t >= 601.0) & (t <= 899.0)
     assert np.ptp(y[held]) < 1e-5  # frozen (to the solver's crossing of the unevented switch at 600 s)
     assert abs(y[t == 902.0][0] - y[t == 899.0][0]) < 1e-3  # bumpless release
+
+
+def test_parameter_controller_closed_loop_validation_model(fmu_cache) -> None:
+    """Blocks.Validation.ParameterControllerLoop: the tracked gain against the hand-known truth.
+
+    Plant and twin ``tau dx/dt = k - x``: in steady state the twin matches the
+    plant only with ``k_twin = k_plant``; 4.0 is above the bound 3, so the
+    output sits at 3; held, it stays there; released, it converges to 1.0
+    without first winding down from a stored integral.
+    """
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.ParameterControllerLoop")
+    with FMUModel(fmu, tolerance=1e-8) as model:
+        df = model.simulate(stop_time=6000.0, output_interval=10.0, outputs=["con.y", "xPlant", "xTwin"])
+    t, k = df["time"].to_numpy(), df["con.y"].to_numpy()
+    assert k[t == 1990.0][0] == pytest.approx(1.5, abs=1e-3)
+    assert k[t == 3490.0][0] == pytest.approx(3.0, abs=1e-9)  # at the upper bound
+    assert k.max() <= 3.0 + 1e-9 and k.min() >= 0.5 - 1e-9
+    held = (t >= 3500.0) & (t <= 3990.0)
+    assert np.ptp(k[held]) < 1e-6
+    assert k[t == 5990.0][0] == pytest.approx(1.0, abs=1e-3)
+    # no windup: after the release the output leaves the bound at once
+    assert k[t == 4100.0][0] < 3.0 - 0.1
