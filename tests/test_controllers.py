@@ -15,11 +15,14 @@ from trackingbox.tracking.controllers import (
 )
 from trackingbox.tracking.tuning import scaled_process_gain, simc_pi, tune_scaled_pi
 
-# Scaling(0, 10, span=2): 1 parameter unit = 10 %, 0.1 variable units = 5 % error
+# Scaling(0, 10, span=2): 1 parameter unit = 10 %, 0.1 variable units = 5 % error.
+# te = ts/100: the error memory settles to exp(-100) within a sample, so the
+# hand-computed numbers are those of the textbook velocity form
+# u(k) = u(k-1) + kp (e(k) - e(k-1)) + kp Ts/Ti e(k).
 
 
 def _pi(direction: int = 1, p0: float = 5.0, span: float = 2.0) -> ScaledPI:
-    return ScaledPI(Scaling(0.0, 10.0, span=span), kp=2.0, ti=40.0, ts=10.0, direction=direction, p0=p0)
+    return ScaledPI(Scaling(0.0, 10.0, span=span), kp=2.0, ti=40.0, ts=10.0, direction=direction, p0=p0, te=0.1)
 
 
 def test_scaling_maps_bounds_and_normalises_error() -> None:
@@ -41,6 +44,7 @@ def test_pi_velocity_form_sequence_by_hand() -> None:
     # kp=2, Ts/Ti=1/4; errors 10 %, 5 %, 0 %:
     # du1 = 2*0 + 0.5*10 = 5 -> 55 %; du2 = 2*(-5) + 0.5*5 = -7.5 -> 47.5 %; du3 = 2*(-5) + 0 = -10 -> 37.5 %
     pi = _pi()
+    assert pi.update(1.0, 0.8, hold=True) == 5.0  # start-up hold: the error memory settles on 10 %
     assert pi.update(1.0, 0.8) == pytest.approx(5.5)
     assert pi.update(1.0, 0.9) == pytest.approx(4.75)
     assert pi.update(1.0, 1.0) == pytest.approx(3.75)
@@ -50,6 +54,7 @@ def test_pi_velocity_form_sequence_by_hand() -> None:
 def test_pi_reverse_acting_mirrors_increments() -> None:
     # negative pair gain: same increments with the opposite sign -> 45 %, 52.5 %, 62.5 %
     pi = _pi(direction=direction_from_gain(-0.004))
+    pi.update(1.0, 0.8, hold=True)
     assert [pi.update(1.0, pv) for pv in (0.8, 0.9, 1.0)] == pytest.approx([4.5, 5.25, 6.25])
 
 
@@ -62,6 +67,7 @@ def test_direction_from_gain() -> None:
 
 def test_pi_clamps_and_leaves_bound_at_once() -> None:
     pi = _pi(p0=9.8)  # 98 %
+    pi.update(1.0, 0.8, hold=True)
     assert pi.update(1.0, 0.8) == 10.0  # 98 + 5 -> clamped at 100 %
     assert pi.update(1.0, 0.8) == 10.0  # still pushing: stays at 100 %, nothing stored
     # error flips to -10 %: du = 2*(-20) + 0.5*(-10) = -45 -> 55 % on this very step
@@ -70,6 +76,7 @@ def test_pi_clamps_and_leaves_bound_at_once() -> None:
 
 def test_pi_clamps_at_lower_bound() -> None:
     pi = _pi(p0=0.1)  # 1 %
+    pi.update(1.0, 1.2, hold=True)
     assert pi.update(1.0, 1.2) == 0.0  # du = -5 -> -4 % clamped to 0 %
     assert 0.0 <= pi.value <= 10.0
 
@@ -78,8 +85,14 @@ def test_pi_initial_value_outside_bounds_is_clamped() -> None:
     assert _pi(p0=12.0).value == 10.0
 
 
+def test_pi_first_sample_without_hold_acts_on_the_whole_error() -> None:
+    # the memory starts at 0 (as the block's state): kp*(10 - 0) + Ts/Ti*kp*10 = 25 % -> 75 %
+    assert _pi().update(1.0, 0.8) == pytest.approx(7.5)
+
+
 def test_pi_hold_on_nan_and_bumpless_resume() -> None:
     pi = _pi()
+    pi.update(1.0, 0.8, hold=True)
     assert pi.update(1.0, 0.8) == pytest.approx(5.5)  # e = 10 %
     assert pi.update(math.nan, 0.8) == pytest.approx(5.5)  # missing measurement: frozen
     assert pi.mode == "hold"
@@ -93,6 +106,7 @@ def test_pi_hold_on_nan_and_bumpless_resume() -> None:
 
 def test_pi_state_round_trip() -> None:
     a, b = _pi(), _pi()
+    a.update(1.0, 0.8, hold=True)
     a.update(1.0, 0.8)
     b.restore(a.state())
     assert a.update(1.0, 0.9) == b.update(1.0, 0.9)
@@ -143,32 +157,47 @@ def test_sliding_mode_hold_reverse_and_clamp() -> None:
 
 
 def test_state_compensator_proportional_by_hand() -> None:
-    sc = StateCompensator(5.0, ts=10.0)
+    sc = StateCompensator(5.0, ts=10.0, te=0.1)
     assert sc.update(2.0, 1.8) == pytest.approx(1.0)  # 5 kg/s/m * 0.2 m
     assert sc.update(2.0, 1.9) == pytest.approx(0.5)  # follows K*e
     assert sc.update(2.0, 2.1) == pytest.approx(-0.5)
 
 
-def test_state_compensator_with_integral_hold_and_resume() -> None:
-    sc = StateCompensator(5.0, ts=10.0, ti=100.0)
-    assert sc.update(2.0, 1.8) == pytest.approx(1.1)  # 5*0.2 + 5*0.1*0.2
-    assert sc.update(2.0, 1.9) == pytest.approx(0.65)  # + 5*(-0.1) + 0.5*0.1
-    assert sc.update(math.nan, 1.9) == pytest.approx(0.65)  # held
+def test_state_compensator_default_memory_lags_by_exp_minus_ten() -> None:
+    # te = ts/10 by default: the first step reaches K*e*(1 - exp(-10)) from zero
+    sc = StateCompensator(5.0, ts=10.0)
+    assert sc.update(2.0, 1.8) == pytest.approx(1.0 * (1.0 - math.exp(-10.0)), rel=1e-12)
+
+
+def test_state_compensator_hold_and_bumpless_resume() -> None:
+    sc = StateCompensator(5.0, ts=10.0, te=0.1)
+    assert sc.update(2.0, 1.8) == pytest.approx(1.0)
+    assert sc.update(2.0, 1.5, hold=True) == pytest.approx(1.0)  # frozen; memory follows e = 0.5
     assert sc.mode == "hold"
-    assert sc.update(2.0, 1.7) == pytest.approx(0.8)  # bumpless: + 0.5*0.3 only
+    assert sc.update(2.0, 1.4) == pytest.approx(1.5)  # resumes from 1.0: + 5*(0.6 - 0.5)
+    assert sc.update(math.nan, 1.4) == pytest.approx(1.5)  # missing: frozen
+    assert sc.update(2.0, 1.0) == pytest.approx(1.5)  # memory restarts at the first valid e: no step
+    assert sc.update(2.0, 1.2) == pytest.approx(0.5)  # then K*(e - e_prev) again
 
 
-def test_state_compensator_keeps_integrating_level_on_plant() -> None:
-    # twin tank: level integrates (inflow - outflow + correction)/(rho*A), with a 0.2 kg/s
-    # outflow the plant does not have; the correction must hold the level near the plant's
+def test_state_compensator_holds_level_with_proportional_offset() -> None:
+    # twin tank: level integrates (correction - 0.2 kg/s)/(rho*A), a 0.2 kg/s outflow the plant
+    # does not have. A proportional correction settles where K*e = 0.2: e = 0.2/50 = 4 mm.
     rho_a, ts = 1000.0, 10.0
-    sc = StateCompensator(50.0, ts=ts, ti=400.0)
+    sc = StateCompensator(50.0, ts=ts)
     level, plant = 1.0, 1.0
     for _ in range(600):
         m = sc.update(plant, level)
         level += ts * (m - 0.2) / rho_a
-    assert level == pytest.approx(plant, abs=1e-4)
-    assert sc.m == pytest.approx(0.2, rel=1e-3)
+    assert plant - level == pytest.approx(0.004, rel=1e-4)
+    assert sc.m == pytest.approx(0.2, rel=1e-6)
+
+
+def test_state_round_trips() -> None:
+    a, b = StateCompensator(5.0, ts=10.0), StateCompensator(5.0, ts=10.0)
+    a.update(2.0, 1.8)
+    b.restore(a.state())
+    assert a.update(2.0, 1.7) == b.update(2.0, 1.7)
 
 
 def test_simc_by_hand() -> None:
@@ -198,3 +227,138 @@ def test_tuning_rejects_zero_gain() -> None:
     with pytest.raises(ValueError):
         simc_pi(0.0, 100.0)
     assert np.isfinite(simc_pi(1e-9, 1.0)[0])
+
+
+def test_pair_settings_one_rule_for_span_and_gains() -> None:
+    from types import SimpleNamespace
+
+    from trackingbox.errors import SpecError
+    from trackingbox.tracking.tuning import pair_settings
+
+    pair = SimpleNamespace(variable="TI-102", parameter="hx.kht", gain=-0.004, time_constant=300.0,
+                           lambda_=1.0, kp=None, ti=None)
+    s = pair_settings(pair, 800.0, 1200.0, ts=10.0)
+    # span = |g|*(pmax - pmin) = 1.6; Ks = -1; SIMC with theta = 5 s, tau_c = 300 s
+    assert s.scaling.span == pytest.approx(1.6)
+    assert (s.kp, s.ti, s.direction) == pytest.approx((300.0 / 305.0, 300.0, -1))
+    explicit = SimpleNamespace(**{**vars(pair), "kp": 0.7, "ti": 90.0})
+    assert (pair_settings(explicit, 800.0, 1200.0, ts=10.0).kp, 90.0) == (0.7, 90.0)
+    with pytest.raises(SpecError, match=r"TI-102 -> hx.kht.*kp = -0.7.*magnitude"):
+        pair_settings(SimpleNamespace(**{**vars(pair), "kp": -0.7}), 800.0, 1200.0, ts=10.0)
+    with pytest.raises(SpecError, match="span"):
+        pair_settings(SimpleNamespace(**{**vars(pair), "gain": 0.0}), 800.0, 1200.0, ts=10.0)
+
+
+# -- the Python controllers against the compiled Modelica blocks -------------
+
+# The settings of TrackingBox.Blocks.Validation.ParameterControllerInputs
+_BLOCK = {"p_min": 800.0, "p_max": 1200.0, "p0": 1000.0, "span": 2.0, "kp": 0.5, "ti": 60.0, "te": 1.0, "k": 5.0}
+_TS = 10.0
+
+# u_s - u_m per sample (span 2: 0.02 is 1 %) and the hold input: start-up hold, a large
+# positive error that drives the direct controller to 100 % and the reverse one to 0 %,
+# a small error whose proportional step pulls both off their bounds while the integral
+# pushes back (the rate changes sign within a sample), a hold with a changing error,
+# a negative error that saturates both the other way, resumption and a noisy stretch.
+_DIFF = ([0.2, 0.4, 0.4] + [2.0] * 6 + [0.1] * 3 + [-0.5, -1.0, -1.5, -1.0] + [-1.5] * 10 + [0.3] * 5
+         + list(np.round(np.random.default_rng(8).normal(0.0, 0.3, 20), 4)))
+_HOLD = [1.0] * 3 + [0.0] * 9 + [1.0] * 4 + [0.0] * 15 + [1.0 if 40 <= k < 43 else 0.0 for k in range(31, 51)]
+
+
+def test_python_controllers_match_the_compiled_blocks(fmu_cache) -> None:
+    from trackingbox.fmu import FMUModel
+
+    assert len(_DIFF) == len(_HOLD) == 51
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.ParameterControllerInputs")
+    b = _BLOCK
+    scaling = Scaling(b["p_min"], b["p_max"], span=b["span"])
+    direct = ScaledPI(scaling, kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], direction=1, p0=b["p0"])
+    reverse = ScaledPI(scaling, kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], direction=-1, p0=b["p0"])
+    comp = StateCompensator(b["k"], ts=_TS, te=b["te"])
+    py, mo = [], []
+    with FMUModel(fmu, tolerance=1e-10) as model:
+        run = model.stepper(start_time=0.0)
+        for k, (diff, hold) in enumerate(zip(_DIFF, _HOLD)):
+            u_s, u_m = 50.0 + diff, 50.0
+            run.set({"u_s": u_s, "u_m": u_m, "hold": hold})
+            run.step((k + 1) * _TS)
+            mo.append(run.get(["yDirect", "yReverse", "m"]))
+            py.append([direct.update(u_s, u_m, hold=hold > 0.5), reverse.update(u_s, u_m, hold=hold > 0.5),
+                       comp.update(u_s, u_m, hold=hold > 0.5)])
+    py_a, mo_a = np.array(py), np.array(mo)
+    # the sequence does what it claims: both bounds reached by both controllers, holds freeze
+    for j in (0, 1):
+        assert py_a[:, j].max() == b["p_max"] and py_a[:, j].min() == b["p_min"]
+    assert np.all(py_a[12:16, :] == py_a[11, :])
+    tol = 1e-6 * (b["p_max"] - b["p_min"])
+    assert np.abs(py_a[:, :2] - mo_a[:, :2]).max() <= tol, np.abs(py_a - mo_a).max(axis=0)
+    # the correction: within 1e-6 of its range K*max|diff|
+    assert np.abs(py_a[:, 2] - mo_a[:, 2]).max() <= 1e-6 * b["k"] * 2.0
+
+
+@pytest.mark.parametrize("u0, e, mem", [(1.0, 5.0, 40.0), (99.0, -5.0, -40.0), (99.5, 30.0, 35.0), (50.0, 10.0, 0.0)])
+def test_exact_step_matches_a_fine_clamped_integration(u0: float, e: float, mem: float) -> None:
+    # one sample of du/dt = kp (e/Ti + (e - m)/Te), dm/dt = (e - m)/Te with u clamped to 0..100 by
+    # conditional integration, integrated with 200 000 explicit Euler steps. In the first two cases
+    # the proportional step runs into a bound and the integral brings u back: the result is 20 % from
+    # the bound, where clamping the whole increment once would give the bound itself.
+    kp, ti, ts, te = 2.0, 5.0, 10.0, 1.0
+    n = 200_000
+    h = ts / n
+    u, m = u0, mem
+    for _ in range(n):
+        rate = kp * (e / ti + (e - m) / te)
+        if not ((u >= 100.0 and rate > 0.0) or (u <= 0.0 and rate < 0.0)):
+            u = min(max(u + h * rate, 0.0), 100.0)
+        m += h * (e - m) / te
+    pi = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, te=te, direction=1, p0=u0)
+    pi.e_mem = mem
+    assert pi.update(e, 0.0) == pytest.approx(u, abs=1e-3)
+
+
+def test_plant_pi_block_hold_limits_and_setpoint(fmu_cache) -> None:
+    """Blocks.Validation.PIHoldAndLimits simulated (the plant-side PI, not the parameter controller).
+
+    Hand-derived expectations: integral action brings the first-order process
+    to the setpoint (0.5, then 0.9 after 200 s; both below the output limit 1);
+    the setpoint step asks for k*0.4 + 0.5 = 1.3 > 1, so the output sits at its
+    limit for a while and never exceeds it; while held (600-900 s) the output
+    is frozen and on release it continues without a step.
+    """
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.PIHoldAndLimits")
+    with FMUModel(fmu, tolerance=1e-8) as model:
+        df = model.simulate(stop_time=1500.0, output_interval=1.0, outputs=["con.y", "x"])
+    t, y, x = df["time"].to_numpy(), df["con.y"].to_numpy(), df["x"].to_numpy()
+    assert x[t == 199.0][0] == pytest.approx(0.5, abs=0.01)  # still settling from x = 0
+    assert x[t == 599.0][0] == pytest.approx(0.9, abs=2e-3)
+    assert y.max() <= 1.0 + 1e-9 and y.min() >= 0.0 - 1e-9
+    assert np.any((t > 200.0) & (t < 260.0) & (y > 1.0 - 1e-9))  # at the limit after the step
+    held = (t >= 601.0) & (t <= 899.0)
+    assert np.ptp(y[held]) < 1e-5  # frozen (to the solver's crossing of the unevented switch at 600 s)
+    assert abs(y[t == 902.0][0] - y[t == 899.0][0]) < 1e-3  # bumpless release
+
+
+def test_parameter_controller_closed_loop_validation_model(fmu_cache) -> None:
+    """Blocks.Validation.ParameterControllerLoop: the tracked gain against the hand-known truth.
+
+    Plant and twin ``tau dx/dt = k - x``: in steady state the twin matches the
+    plant only with ``k_twin = k_plant``; 4.0 is above the bound 3, so the
+    output sits at 3; held, it stays there; released, it converges to 1.0
+    without first winding down from a stored integral.
+    """
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.ParameterControllerLoop")
+    with FMUModel(fmu, tolerance=1e-8) as model:
+        df = model.simulate(stop_time=6000.0, output_interval=10.0, outputs=["con.y", "xPlant", "xTwin"])
+    t, k = df["time"].to_numpy(), df["con.y"].to_numpy()
+    assert k[t == 1990.0][0] == pytest.approx(1.5, abs=1e-3)
+    assert k[t == 3490.0][0] == pytest.approx(3.0, abs=1e-9)  # at the upper bound
+    assert k.max() <= 3.0 + 1e-9 and k.min() >= 0.5 - 1e-9
+    held = (t >= 3500.0) & (t <= 3990.0)
+    assert np.ptp(k[held]) < 1e-6
+    assert k[t == 5990.0][0] == pytest.approx(1.0, abs=1e-3)
+    # no windup: after the release the output leaves the bound at once
+    assert k[t == 4100.0][0] < 3.0 - 0.1

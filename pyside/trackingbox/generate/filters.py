@@ -26,7 +26,7 @@ import jinja2
 __all__ = [
     "MODELICA_KEYWORDS", "modelica_real", "modelica_bool", "modelica_array",
     "modelica_string", "modelica_ident", "modelica_name", "modelica_literal",
-    "is_identifier", "modelica_unit_modifier", "register",
+    "is_identifier", "modelica_unit_modifier", "modelica_points", "unit_quotient", "register",
 ]
 
 #: Reserved words of Modelica 3.6 (section 2.3.3); none may be used as an identifier.
@@ -174,6 +174,37 @@ def modelica_unit_modifier(unit: str, **attributes: Any) -> str:
     return "(" + ", ".join(parts) + ")" if parts else ""
 
 
+def modelica_points(points: Any) -> str:
+    """Graphics coordinates ``[(x, y), ...]`` as a Modelica array ``{{x, y}, ...}`` (integers where exact).
+
+    >>> modelica_points([(-120, 15), (-40.5, 0)])
+    '{{-120, 15}, {-40.5, 0}}'
+    """
+    def num(v: Any) -> str:
+        v = float(v)
+        if not math.isfinite(v):
+            raise ValueError(f"graphics coordinate must be finite, got {v!r}")
+        return str(int(v)) if v == int(v) else repr(round(v, 3))
+
+    pts = [(num(x), num(y)) for x, y in points]
+    if not pts:
+        raise ValueError("a line or extent needs at least one point")
+    return "{" + ", ".join("{" + x + ", " + y + "}" for x, y in pts) + "}"
+
+
+def unit_quotient(numerator: str, denominator: str) -> str:
+    """The unit of a ratio, ``""`` when either unit is unknown.
+
+    >>> unit_quotient("kg/s", "m"), unit_quotient("W", "m2.K"), unit_quotient("kg/s", "")
+    ('(kg/s)/m', 'W/(m2.K)', '')
+    """
+    if not numerator or not denominator:
+        return ""
+    num = f"({numerator})" if "/" in numerator else numerator
+    den = f"({denominator})" if any(c in denominator for c in "/.") else denominator
+    return f"{num}/{den}"
+
+
 def register(env: jinja2.Environment) -> jinja2.Environment:
     """Register the filters on *env* under short names (``real``, ``bool``, ...)."""
     env.filters.update({
@@ -185,5 +216,6 @@ def register(env: jinja2.Environment) -> jinja2.Environment:
         "mname": modelica_name,
         "literal": modelica_literal,
         "unitmod": modelica_unit_modifier,
+        "points": modelica_points,
     })
     return env

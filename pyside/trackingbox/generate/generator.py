@@ -3,15 +3,20 @@
 From a ``spec.toml`` that has ``[source]`` and ``[[pairs]]`` this writes a
 Modelica package ``<Twin>Tracking`` with
 
-* ``<Twin>TrackingBox``: a block with one scaled PI parameter controller per
-  pair, the continuous equivalent of the velocity-form controller of
-  :class:`trackingbox.tracking.controllers.ScaledPI` (error in % of the
-  variable's span, output 0-100 % mapped onto the parameter's bounds, clamped
-  with back-calculation anti-windup, a ``hold`` input that freezes it);
+* ``<Twin>TrackingBox``: a block with one library block
+  ``TrackingBox.Blocks.ParameterController`` per pair and one
+  ``TrackingBox.Blocks.StateCompensation`` per ``[[states]]`` entry, wired
+  with ``connect`` and drawn (every instance a ``Placement``, every connect a
+  ``Line``). The law lives in those blocks only; the Python runtime's
+  :class:`~trackingbox.tracking.controllers.ScaledPI` is their exact
+  discretisation, and the settings come from the one rule
+  :func:`trackingbox.tracking.tuning.pair_settings`;
 * ``<Twin>Tracked``: the twin extended with its tracked parameters switched to
   their conditional inputs (``hx(use_kht_in = true)``), the measurements as
-  top-level inputs and the box connected between measurements, twin sensors and
-  the parameter inputs. The tracked parameters are outputs.
+  top-level inputs and the box connected between measurements, twin sensors,
+  the parameter inputs and the twin's correction-flow inputs. The tracked
+  parameters are outputs. A twin variable that is not a connector (a sensor
+  value such as ``ThOut``) reaches the box through an equation.
 
 The tracked model *extends* the twin rather than instantiating it: a connect
 equation may only name a connector of a direct component (``hx.kht_in``), and
@@ -27,7 +32,7 @@ import logging
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,13 +41,18 @@ import jinja2
 from .. import __version__
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
+from ..tracking.controllers import MEMORY_FRACTION
+from ..tracking.tuning import pair_settings, variable_span
 from . import filters
 from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin, parameter_site,
                      refusal_message, rewrite_source, stage_packages)
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ControllerModel", "GeneratedModel", "GenerateResult", "build_model", "render",
+#: Diagram coordinates: the corners of an extent or the points of a line.
+Points = tuple[tuple[float, float], ...]
+
+__all__ = ["ControllerModel", "StateModel", "Layout", "GeneratedModel", "GenerateResult", "build_model", "render",
            "generate", "environment", "variable_span"]
 
 
@@ -95,6 +105,56 @@ class ControllerModel:
     p_unit: str = ""         # unit of the parameter in the twin ("" if none)
     y_unit: str = ""         # unit of the tracking variable in the twin
     p_description: str = ""  # the parameter's description in the twin
+    instance: str = ""       # the ParameterController instance in the box, e.g. "hx_kht_controller"
+    layout: Layout | None = None
+
+
+@dataclass(frozen=True)
+class StateModel:
+    """One state compensation of the box (one ``[[states]]`` entry)."""
+
+    tag: str                 # level measurement tag, e.g. "LI-100"
+    variable: str            # twin variable of the level, e.g. "LI_100"
+    correction: str          # the twin's correction-flow input, e.g. "T100_m_flow_corr"
+    meas: str                # box/model input with the measured level, e.g. "LI_100_meas"
+    sim: str                 # box input with the twin's level, e.g. "LI_100_sim"
+    out: str                 # box output with the correction flow (named after the twin input)
+    gain_name: str           # box parameter with the gain, e.g. "T100_m_flow_corr_k"
+    instance: str            # the StateCompensation instance, e.g. "T100_m_flow_corr_compensation"
+    gain: float
+    target: str = ""         # the component's conditional input it drives ("tank.m_flow_corr_in"), or ""
+    level_unit: str = ""
+    flow_unit: str = ""
+    gain_unit: str = ""
+    layout: Layout | None = None
+
+    @property
+    def exposed(self) -> str:
+        """Output of the tracked model that carries a correction for a top-level twin input ("" if wired)."""
+        return "" if self.target else f"{self.out}_comp"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Diagram geometry of one row of the box (one pair or state) and its wiring in the tracked model.
+
+    Extents and points are in the box's (``box_*``) or the tracked model's
+    (``tracked_*``) diagram coordinates, ready for :func:`filters.modelica_points`.
+    """
+
+    meas_extent: Points
+    sim_extent: Points
+    out_extent: Points
+    block_extent: Points
+    line_meas: Points
+    line_sim: Points
+    line_hold: Points
+    line_out: Points
+    tracked_meas_extent: Points
+    tracked_out_extent: Points
+    tracked_line_meas: Points
+    tracked_line_out: Points
+    tracked_line_input: Points
 
 
 @dataclass(frozen=True)
@@ -110,6 +170,14 @@ class GeneratedModel:
     stop_time: float
     hold_until: float
     controllers: tuple[ControllerModel, ...]
+    states: tuple[StateModel, ...]
+    te: float                  # time constant of the error memories (s)
+    box_extent: Points
+    hold_extent: Points
+    hold_all_extent: Points
+    tracked_box_extent: Points
+    tracked_hold_extent: Points
+    tracked_line_hold: Points
     modifier_lines: tuple[str, ...]
     class_order: tuple[str, ...]
     package_info: str
@@ -129,40 +197,45 @@ class GenerateResult:
     library: Path              # the twin's library (patched copy with --rewrite)
     rewrite: Rewrite | None = None
     controllers: tuple[ControllerModel, ...] = field(default=())
+    states: tuple[StateModel, ...] = field(default=())
 
 
-def variable_span(gain: float, p_min: float, p_max: float) -> float:
-    """Range of a tracking variable that normalises its error: ``|gain|·(p_max - p_min)``.
+#: Row pitch of the box's diagram and the scale of the box instance in the tracked model.
+_PITCH = 80.0
+_SCALE = 0.4
 
-    It is the change of the variable when the parameter sweeps its bounds, so
-    in the scaled domain the process gain is ±1 (% error per % output).
-
-    >>> variable_span(-0.004, 800.0, 1200.0)
-    1.6
-    """
-    span = abs(gain) * (p_max - p_min)
-    if not span > 0.0:
-        raise ValueError(f"span must be positive (gain {gain}, bounds [{p_min}, {p_max}])")
-    return span
+def _half_height(rows: int) -> float:
+    """Half the height of the box's coordinate system for *rows* rows (pairs + states)."""
+    return _PITCH / 2.0 * rows + 40.0
 
 
-def _span(pair: Any, p_min: float, p_max: float) -> float:
-    """The span of a pair's variable; the same rule as the Python runtime (``tracking.runtime``)."""
-    return variable_span(pair.gain, p_min, p_max)
+def _row_layout(i: int, rows: int, *, with_hold: bool) -> Layout:
+    """Geometry of row *i*: inputs left, the library block in the middle, the output right."""
+    h = _half_height(rows)
+    yc = h - _PITCH - _PITCH * i
+    k = _SCALE
+    return Layout(
+        meas_extent=((-140, yc + 5), (-100, yc + 25)),
+        sim_extent=((-140, yc - 25), (-100, yc - 5)),
+        out_extent=((100, yc - 10), (120, yc + 10)),
+        block_extent=((-20, yc - 20), (20, yc + 20)),
+        line_meas=((-120, yc + 15), (-40, yc + 15), (-40, yc), (-24, yc)),
+        line_sim=((-120, yc - 15), (-50, yc - 15), (-50, yc - 34), (0, yc - 34), (0, yc - 24)),
+        line_hold=((-60, h - 20), (-30, h - 20), (-30, yc + 34), (-12, yc + 34), (-12, yc + 24)) if with_hold else (),
+        line_out=((22, yc), (110, yc)),
+        tracked_meas_extent=((-140, k * (yc + 15) - 10), (-100, k * (yc + 15) + 10)),
+        tracked_out_extent=((100, k * yc - 10), (120, k * yc + 10)),
+        tracked_line_meas=((-120, k * (yc + 15)), (-120 * k, k * (yc + 15))),
+        tracked_line_out=((110 * k, k * yc), (110, k * yc)),
+        tracked_line_input=((110 * k, k * yc), (70, k * yc), (70, k * yc + 20)),
+    )
 
 
-def _gains(pair: Any, p_min: float, p_max: float, span: float, sample_time: float) -> tuple[float, float, str]:
-    """(kp, ti, how) for a pair: explicit ``kp``/``ti`` in the spec, else SIMC tuning."""
-    if pair.kp is not None and pair.ti is not None:
-        return abs(float(pair.kp)), float(pair.ti), "from the spec"
-    from ..tracking.controllers import Scaling
-    from ..tracking.tuning import tune_scaled_pi
+def _BLOCKS_LIBRARY() -> Path:  # noqa: N802 - reads as the constant it is
+    """The shipped library whose ``Blocks`` the generated box instantiates."""
+    from ..compiler import library_path
 
-    g = tune_scaled_pi(pair.gain, pair.time_constant, Scaling(p_min, p_max, span=span),
-                       ts=sample_time, lam=pair.lambda_)
-    kp = abs(float(pair.kp)) if pair.kp is not None else g.kp
-    ti = float(pair.ti) if pair.ti is not None else g.ti
-    return kp, ti, f"SIMC, tau_c = {filters.modelica_real(g.tau_c)} s"
+    return library_path()
 
 
 def _modifier_lines(sites: Sequence[ParameterSite]) -> tuple[str, ...]:
@@ -239,8 +312,8 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         param = spec.parameter(pair.parameter)
         site = sites[pair.parameter]
         p_min, p_max, p_start = float(param.min), float(param.max), float(param.start)
-        span = _span(pair, p_min, p_max)
-        kp, ti, how = _gains(pair, p_min, p_max, span, spec.sample_time)
+        settings = pair_settings(pair, p_min, p_max, ts=float(spec.sample_time), where=where)
+        span, kp, ti, how = settings.scaling.span, settings.kp, settings.ti, settings.tuning
         ident = filters.modelica_name(pair.variable)
         out = filters.modelica_name(pair.parameter)
         names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out}
@@ -253,11 +326,50 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             tag=pair.variable, parameter=pair.parameter, input=site.input, twin_variable=twin_var,
             out=out, meas=names["meas"], sim=names["sim"], span_name=f"{ident}_span",
             p_min=p_min, p_max=p_max, p_start=p_start, span=span, kp=kp, ti=ti,
-            direction=1.0 if pair.gain > 0 else -1.0, gain=float(pair.gain),
+            direction=float(settings.direction), gain=float(pair.gain),
             time_constant=float(pair.time_constant), tuning=how,
             p_unit=_text_attr(src.variables[pair.parameter], "unit"),
             y_unit=_text_attr(src.variables[twin_var], "unit"),
-            p_description=_text_attr(src.variables[pair.parameter], "description")))
+            p_description=_text_attr(src.variables[pair.parameter], "description"),
+            instance=f"{out}_controller"))
+    states: list[StateModel] = []
+    for st in sorted(spec.states, key=lambda x: x.correction):
+        label = f"[[states]] {st.tag!r} in {where}"
+        if st.variable not in src.variables:
+            raise SpecError(unknown_name("twin level variable", st.variable, sorted(src.variables),
+                                         f"model {src.model} ({label})"))
+        if st.correction in src.top_inputs:
+            # A top-level input of the twin cannot be driven from a model that extends the
+            # twin: the embedded path keeps it an FMU input whatever binds it. The box's
+            # correction is then an output of the tracked model, to be fed to that input.
+            target, flow_var = "", src.variables[st.correction]
+        elif st.correction in sites:
+            target, flow_var = sites[st.correction].input, src.variables[st.correction]
+        else:  # pragma: no cover - generate() collects a site for every non-input correction
+            raise SpecError(f"{label}: correction {st.correction!r} is neither a top-level input of "
+                            f"{src.model} nor a component parameter with a conditional input")
+        ident = filters.modelica_name(st.tag)
+        corr = filters.modelica_name(st.correction)
+        names = {"meas": f"{ident}_meas", "out": f"{corr}_comp"}
+        for kind, name in names.items():
+            if kind == "out" and target:
+                continue
+            if name in taken:
+                raise SpecError(f"name {name!r} for {label} clashes with the {taken[name]} of that name in "
+                                f"{src.model}")
+            taken[name] = f"generated {kind}"
+        level_unit = _text_attr(src.variables[st.variable], "unit")
+        flow_unit = _text_attr(flow_var, "unit")
+        states.append(StateModel(
+            tag=st.tag, variable=st.variable, correction=st.correction, meas=names["meas"], sim=f"{ident}_sim",
+            out=corr, gain_name=f"{corr}_k", instance=f"{corr}_compensation", gain=float(st.gain),
+            target=target, level_unit=level_unit, flow_unit=flow_unit,
+            gain_unit=filters.unit_quotient(flow_unit, level_unit)))
+    rows = len(controllers) + len(states)
+    controllers = [replace(c, layout=_row_layout(i, rows, with_hold=True)) for i, c in enumerate(controllers)]
+    states = [replace(x, layout=_row_layout(len(controllers) + i, rows, with_hold=False))
+              for i, x in enumerate(states)]
+    h = _half_height(rows)
     stop = spec.windows.get("validation", spec.windows.get("training", (0.0, 3600.0)))[1]
     header_lines = [
         f"// Generated by trackingbox {__version__} (trackingbox generate / gen-trackingbox). Do not edit:",
@@ -268,36 +380,56 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
     for c in controllers:
         header_lines.append(f"// pair:  {c.tag} -> {c.parameter} (kp = {filters.modelica_real(c.kp)}, "
                             f"Ti = {filters.modelica_real(c.ti)} s, span = {filters.modelica_real(c.span)})")
+    for x in states:
+        header_lines.append(f"// state: {x.tag} -> {x.correction} (k = {filters.modelica_real(x.gain)}, "
+                            f"level {x.variable})")
     pairs_html = "".join(
         f"<li><code>{c.parameter}</code> tracks <code>{c.tag}</code> (twin variable "
         f"<code>{c.twin_variable}</code>), bounds [{filters.modelica_real(c.p_min)}, "
         f"{filters.modelica_real(c.p_max)}]</li>" for c in controllers)
+    states_html = "".join(
+        f"<li><code>{x.correction}</code> keeps <code>{x.variable}</code> on <code>{x.tag}</code></li>"
+        for x in states)
     package_info = (f"<html><p>Generated by trackingbox {__version__} for <code>{src.model}</code>. "
                     f"<code>{tracked_class}</code> is the twin with its parameters tracked by "
-                    f"<code>{box_class}</code>:</p><ul>{pairs_html}</ul></html>")
+                    f"<code>{box_class}</code>:</p><ul>{pairs_html}{states_html}</ul></html>")
     box_info = (
-        "<html><p>One PI parameter controller per pair. The error "
-        "<code>e = 100 (measured - simulated)/span</code> is in % of the variable's span; the output "
-        "<code>u</code> is 0..100 % of the parameter's bounds. The law is the continuous form of the "
-        "velocity (incremental) PI <code>u(k) = u(k-1) + d kp (e(k) - e(k-1) + Ts/Ti e(k))</code>: "
-        "<code>du/dt = d kp (de/dt + e/Ti)</code>, with <code>de/dt</code> taken as "
-        "<code>(e - ef)/Tf</code> (<code>ef</code> lags <code>e</code> by the sample time <code>Tf</code>). "
-        "The output is clamped to 0..100 % and pulled back by back-calculation (<code>Tt</code>), so "
-        "it never winds up. <code>hold = 1</code> freezes every output (start-up, missing data); "
-        "tracking resumes without a bump.</p></html>")
+        "<html><p>One <code>TrackingBox.Blocks.ParameterController</code> per pair (error in % of the "
+        "variable's span, output 0..100 % of the parameter's bounds, direction from the sign of the "
+        "pair's gain, clamp with anti-windup) and one <code>TrackingBox.Blocks.StateCompensation</code> "
+        "per state (correction = k (measured - simulated level)). The law and its hold are documented "
+        "in those blocks; the Python runtime implements the same law. <code>hold = 1</code>, and any "
+        "time before <code>holdUntil</code> (the start-up hold), freezes every parameter controller: "
+        "nothing integrates and tracking resumes without a bump. State compensation keeps running "
+        "through holds, as in the Python runtime.</p></html>")
     tracked_info = (
         f"<html><p><code>{src.model}</code> with "
         + ", ".join(f"<code>{c.parameter}</code>" for c in controllers)
-        + f" switched to their conditional inputs and driven by <code>{box_class}</code>. Inputs: the "
-        "twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; the box also "
-        "holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's own outputs "
-        "and the tracked parameter values. State compensation (<code>[[states]]</code> in the spec) is "
-        "not generated: the twin's correction inputs stay inputs.</p></html>")
+        + f" switched to their conditional inputs and driven by <code>{box_class}</code>"
+        + "".join(f", <code>{x.correction}</code> driven by the box's state compensation" for x in states
+                  if x.target)
+        + "".join(f". <code>{x.correction}</code> is a top-level input of the twin, which a model that "
+                  f"extends the twin cannot drive: the box's correction is the output <code>{x.exposed}</code>; "
+                  f"feed it to <code>{x.correction}</code> each sample, as the Python runtime does"
+                  for x in states if not x.target)
+        + ". Inputs: the twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; "
+        "the box also holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's "
+        "own outputs and the tracked parameter values. Twin variables that are not connectors (the "
+        "simulated sensors) reach the box through equations; everything else is connected.</p></html>")
+    k = _SCALE
     return GeneratedModel(
         header="\n".join(header_lines), package=package, box_class=box_class, tracked_class=tracked_class,
         twin_model=src.model, sample_time=float(spec.sample_time), stop_time=float(stop),
         hold_until=float(spec.tracking.hold_until),
-        controllers=tuple(controllers), modifier_lines=_modifier_lines(list(sites.values())),
+        controllers=tuple(controllers), states=tuple(states),
+        te=MEMORY_FRACTION * float(spec.sample_time),
+        box_extent=((-100, -h), (100, h)),
+        hold_extent=((-140, h - 30), (-100, h - 10)),
+        hold_all_extent=((-80, h - 30), (-60, h - 10)),
+        tracked_box_extent=((-100 * k, -h * k), (100 * k, h * k)),
+        tracked_hold_extent=((-140, k * (h - 20) - 10), (-100, k * (h - 20) + 10)),
+        tracked_line_hold=((-120, k * (h - 20)), (-120 * k, k * (h - 20))),
+        modifier_lines=_modifier_lines(list(sites.values())),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
 
@@ -349,6 +481,9 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         if pair.parameter not in known:
             raise SpecError(unknown_name("parameter", pair.parameter, sorted(known), f"[[pairs]] of {where}"))
         sites[pair.parameter] = parameter_site(src, pair.parameter, f"[[pairs]] of {where}")
+    for st in spec.states:
+        if st.correction not in src.top_inputs:
+            sites[st.correction] = parameter_site(src, st.correction, f"[[states]] {st.tag!r} of {where}")
     missing = [s for s in sites.values() if not s.has_pattern]
     rw: Rewrite | None = None
     library = src.top
@@ -359,7 +494,7 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         logger.info("wrote a patched copy of the twin's source to %s", rw.path)
         src_new = load_twin(rw.path, spec.source.model)
         for name in sites:
-            sites[name] = parameter_site(src_new, name, f"[[pairs]] of {where}")
+            sites[name] = parameter_site(src_new, name, f"[[pairs]]/[[states]] of {where}")
             if not sites[name].has_pattern:
                 raise SpecError(f"rewriting the source did not give {name!r} a conditional input")
         src = src_new
@@ -373,6 +508,8 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
         for name, text in texts.items():
             (staged_gen / name).write_text(text, encoding="utf-8")
         pkg = stage_packages(Path(tmp) / "stage", library, staged_gen)
+        if library.name != _BLOCKS_LIBRARY().name:  # the box instantiates TrackingBox.Blocks
+            stage_packages(Path(tmp) / "stage", _BLOCKS_LIBRARY(), staged_gen)
         check_loads(pkg, f"{model.package}.{model.tracked_class}", pkg.parent)
     pkg_dir = out_dir / model.package
     pkg_dir.mkdir(parents=True, exist_ok=True)
@@ -384,14 +521,15 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     return GenerateResult(package_dir=pkg_dir, files=tuple(written), package=model.package,
                           tracked_model=f"{model.package}.{model.tracked_class}",
                           box_model=f"{model.package}.{model.box_class}", library=library,
-                          rewrite=rw, controllers=model.controllers)
+                          rewrite=rw, controllers=model.controllers, states=model.states)
 
 
 def compile_generated(result: GenerateResult, *, backend: str = "auto", output: Path | None = None) -> Any:
     """Compile the tracked model with :func:`trackingbox.compiler.compile_model`.
 
-    The twin's library (the patched copy after ``--rewrite``) is passed as a
-    further library, the generated package as the source.
+    The generated package is the source; the twin's library (the patched copy
+    after ``--rewrite``) and the shipped ``TrackingBox`` library (whose
+    ``Blocks`` the box instantiates) are further libraries, staged beside it.
 
     Returns
     -------
@@ -400,5 +538,14 @@ def compile_generated(result: GenerateResult, *, backend: str = "auto", output: 
     from ..compiler import compile_model
 
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
-    return compile_model(result.package_dir, result.tracked_model, backend=backend, output=output,
-                         libraries=[result.library])
+    # The generated package, the twin's library and TrackingBox (whose Blocks the box
+    # instantiates) are staged side by side under one root: rumoca resolves a
+    # component of a library class from a multi-file package only that way.
+    with tempfile.TemporaryDirectory(prefix="trackingbox-compile-") as tmp:
+        stage = Path(tmp)
+        pkg = stage_packages(stage, result.library, result.package_dir)
+        libraries = [stage / result.library.name]
+        if result.library.name != _BLOCKS_LIBRARY().name:
+            stage_packages(stage, _BLOCKS_LIBRARY(), result.package_dir)
+            libraries.append(stage / _BLOCKS_LIBRARY().name)
+        return compile_model(pkg, result.tracked_model, backend=backend, output=output, libraries=libraries)

@@ -14,17 +14,41 @@ so the controller gains are dimensionless (% output per % error). The action is
 positive (a measurement above the simulation raises the parameter) and *reverse*
 when it is negative.
 
-Every controller can be *held*: while the measurement is missing (NaN), flagged
-(masked by a data rule, stoppage) or the start-up hold is on, the output is
-frozen and nothing integrates. On the first valid sample after a hold the error
-history is reset to the current error, so the proportional term sees no jump
-(bumpless resume, no derivative kick).
+One law in two places, proven equal. The PI parameter controller and the
+state compensation are the Modelica blocks ``TrackingBox.Blocks.ParameterController``
+and ``TrackingBox.Blocks.StateCompensation`` (continuous laws, no events, so
+they compile on the embedded path). :class:`ScaledPI` and
+:class:`StateCompensator` are their *exact discretisations* for an error held
+constant over each sample period (zero-order hold, as the runtime applies it):
+``update`` at ``t_k`` with the error ``e_k`` returns the block's output at
+``t_k + Ts``. ``tests/test_controllers.py`` drives the compiled blocks and these
+classes with one error sequence and requires the same outputs.
 
-Anti-windup: both controllers are in *velocity* (incremental) form and apply
-each increment to the previous, already clamped output. A clamped output
-therefore stores no hidden integral; when the error changes sign the output
-leaves the bound on the very next step. No separate anti-windup logic is
-needed (this is the classic argument for the velocity form).
+Why a continuous law discretised exactly, and not the textbook discrete
+velocity form ``u(k) = u(k-1) + kp (e(k) - e(k-1)) + kp Ts/Ti e(k)``: the
+embedded compile path accepts no ``when``, ``pre`` or ``sample``, so the
+Modelica block cannot store ``e(k-1)``. It stores instead an *error memory*
+``eMem`` that follows the error with a short time constant ``Te`` (a tenth of
+the sample time by default), and the proportional action is
+``kp (e - eMem)/Te``. Over one sample this moves the output by
+``kp (e(k) - eMem(k)) (1 - exp(-Ts/Te))``, which is the velocity form's
+``kp (e(k) - e(k-1))`` to within ``exp(-10) = 4.5e-5`` of the step.
+
+Hold (one meaning everywhere): the output is frozen and nothing integrates,
+while the error memory keeps following the error, so resuming gives no
+proportional kick (bumpless). The Python controllers are held by ``hold=True``
+(start-up hold, stoppage, solver recovery) and while the measurement or the
+simulated value is missing (NaN); a missing error cannot be followed, so the
+memory is then set to the first valid error after the gap. The memory starts
+at 0 in both (the embedded path has no initial equations to start it at the
+first error): without a start-up hold the first sample gets the proportional
+action on the whole initial error; with a start-up hold of a few samples
+(``[tracking] hold_until``) the memory settles first and tracking starts
+without a kick.
+
+Clamp and anti-windup: the output stops at 0 and 100 % while its rate points
+out of the range (conditional integration). A saturated controller stores no
+hidden integral and leaves the bound as soon as the rate changes sign.
 """
 from __future__ import annotations
 
@@ -37,7 +61,12 @@ logger = logging.getLogger(__name__)
 
 Mode = Literal["auto", "hold"]
 
-__all__ = ["Scaling", "ScaledPI", "SlidingMode", "StateCompensator", "Mode"]
+__all__ = ["Scaling", "ScaledPI", "SlidingMode", "StateCompensator", "Mode", "MEMORY_FRACTION"]
+
+#: Default time constant of the error memory as a fraction of the sample time
+#: (``Te = Ts/10``): the proportional step then completes to ``exp(-10)``
+#: within one sample.
+MEMORY_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -85,7 +114,11 @@ def _valid(x: float | None) -> bool:
 
 
 class _ScaledController:
-    """Shared machinery: scaling, direction, clamping, hold and bumpless resume."""
+    """Discrete velocity-form machinery of :class:`SlidingMode`: clamping, hold, bumpless resume.
+
+    Held (NaN or ``hold``), the output is frozen and the error history restarts
+    at the next valid sample (no derivative kick on resume).
+    """
 
     def __init__(self, scaling: Scaling, *, ts: float, direction: int, p0: float) -> None:
         if ts <= 0.0 or not math.isfinite(ts):
@@ -148,12 +181,24 @@ class _ScaledController:
         self.mode = state["mode"]
 
 
-class ScaledPI(_ScaledController):
-    """PI parameter controller in velocity form on a 0-100 % output.
+class ScaledPI:
+    """PI parameter controller on a 0-100 % output: the exact discretisation of ``ParameterController``.
 
-    ``u(k) = clamp(u(k-1) + d·[Kp·(e(k) - e(k-1)) + Kp·Ts/Ti·e(k)], 0, 100)``
-    with ``d = +1`` (direct) or ``-1`` (reverse acting) and ``e`` in % of the
-    variable's span.
+    The continuous law of ``TrackingBox.Blocks.ParameterController`` is
+
+    ``du/dt = d·kp·(e/Ti + (e - m)/Te)``, ``dm/dt = (e - m)/Te``
+
+    with ``u`` clamped to 0..100 % by conditional integration and frozen on
+    hold; ``m`` is the error memory and ``d = ±1`` the direction. For ``e``
+    constant over a sample, ``m`` relaxes exactly
+    (``m(k+1) = e + (m(k) - e)·exp(-Ts/Te)``) and the unclamped increment is
+
+    ``Δu = d·kp·(Ts/Ti·e + (e - m(k))·(1 - exp(-Ts/Te)))``.
+
+    The rate has at most one sign change within a sample (where
+    ``exp(-t/Te) = -Te·e/(Ti·(e - m(k)))``); on each monotone piece the
+    clamped integral is the clamped sum, so the update splits the increment
+    there and clamps after each piece. This is exact, not an approximation.
 
     Parameters
     ----------
@@ -170,23 +215,104 @@ class ScaledPI(_ScaledController):
         (see :func:`direction_from_gain`).
     p0 : float
         Initial parameter value (clamped into the bounds).
+    te : float, optional
+        Time constant of the error memory (s); default ``ts/10``.
 
     Examples
     --------
     >>> pi = ScaledPI(Scaling(0.0, 10.0, span=2.0), kp=1.0, ti=20.0, ts=10.0, direction=1, p0=5.0)
-    >>> pi.update(1.0, 0.8)   # e = 10 %: Kp*Ts/Ti*e = 5 % -> u = 55 %
+    >>> pi.update(1.0, 0.8, hold=True)  # start-up hold: frozen, the memory settles on e = 10 %
+    5.0
+    >>> round(pi.update(1.0, 0.8), 3)   # no proportional kick: Ts/Ti*kp*e = 5 % -> u = 55 %
     5.5
     """
 
-    def __init__(self, scaling: Scaling, *, kp: float, ti: float, ts: float, direction: int, p0: float) -> None:
-        super().__init__(scaling, ts=ts, direction=direction, p0=p0)
+    def __init__(self, scaling: Scaling, *, kp: float, ti: float, ts: float, direction: int, p0: float,
+                 te: float | None = None) -> None:
+        if ts <= 0.0 or not math.isfinite(ts):
+            raise ValueError(f"sample time must be positive, got {ts}")
+        if direction not in (1, -1):
+            raise ValueError(f"direction must be +1 (direct) or -1 (reverse), got {direction}")
         if not kp > 0.0 or not ti > 0.0:
             raise ValueError(f"PI gains must be positive, got kp={kp}, ti={ti}")
+        te = ts * MEMORY_FRACTION if te is None else float(te)
+        if not (te > 0.0 and math.isfinite(te)):
+            raise ValueError(f"error-memory time constant must be positive, got {te}")
+        self.scaling = scaling
         self.kp = float(kp)
         self.ti = float(ti)
+        self.ts = float(ts)
+        self.te = te
+        self.direction = int(direction)
+        #: controller output, % of the parameter range, always within [0, 100]
+        self.u = _clamp(scaling.to_percent(p0))
+        #: error memory (%): starts at 0 as in the block; None after a missing error
+        self.e_mem: float | None = 0.0
+        self.mode: Mode = "hold"
 
-    def _increment(self, e: float, e_prev: float) -> float:
-        return self.kp * (e - e_prev) + self.kp * self.ts / self.ti * e
+    @property
+    def value(self) -> float:
+        """The parameter value the controller currently outputs."""
+        return self.scaling.to_parameter(self.u)
+
+    def update(self, setpoint: float | None, process_value: float | None, *, hold: bool = False) -> float:
+        """Advance one sample with the error held over it; return the parameter value at its end.
+
+        Parameters
+        ----------
+        setpoint : float or None
+            The plant measurement; NaN/None puts the controller on hold.
+        process_value : float or None
+            The twin's simulated sensor; NaN/None puts the controller on hold.
+        hold : bool
+            Force a hold (start-up, stoppage, flagged data, solver recovery).
+        """
+        if not (_valid(setpoint) and _valid(process_value)):
+            if self.mode != "hold":
+                logger.debug("ScaledPI: hold (missing value)")
+            self.mode = "hold"
+            self.e_mem = None  # cannot follow a missing error: restart at the next valid one
+            return self.value
+        e = self.scaling.error_percent(float(setpoint), float(process_value))  # type: ignore[arg-type]
+        m = e if self.e_mem is None else self.e_mem
+        if hold:
+            if self.mode != "hold":
+                logger.debug("ScaledPI: hold")
+            self.mode = "hold"
+        else:
+            self.mode = "auto"
+            self.u = _integrate_clamped(self.u, self.direction * self.kp, e / self.ti, e - m, self.ts, self.te)
+        self.e_mem = e + (m - e) * math.exp(-self.ts / self.te)
+        return self.value
+
+    # -- checkpointing -------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """JSON-serialisable state, for checkpoints."""
+        return {"u": self.u, "e_mem": self.e_mem, "mode": self.mode}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state`."""
+        self.u = float(state["u"])
+        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
+        self.mode = state["mode"]
+
+
+def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
+    """Exact end value of ``du/dt = gain·(rate + step/te·exp(-t/te))`` over ``[0, ts]``, clamped to 0..100.
+
+    The clamp is conditional integration (the output stops at a bound while
+    the rate points outwards). The rate changes sign at most once; on each
+    monotone piece the clamped integral equals the clamped sum.
+    """
+    a = math.exp(-ts / te)
+    total = gain * (rate * ts + step * (1.0 - a))
+    if step != 0.0:
+        r = -rate * te / step  # exp(-t*/te) at the sign change of the rate
+        if a < r < 1.0:
+            t_turn = -te * math.log(r)
+            first = gain * (rate * t_turn + step * (1.0 - r))
+            return _clamp(_clamp(u + first) + (total - first))
+    return _clamp(u + total)
 
 
 class SlidingMode(_ScaledController):
@@ -240,16 +366,24 @@ class SlidingMode(_ScaledController):
 
 
 class StateCompensator:
-    """Direct state compensation: a correction flow that keeps a twin level on the plant's.
+    """Direct state compensation: the exact discretisation of ``TrackingBox.Blocks.StateCompensation``.
 
-    ``m(k) = m(k-1) + K·(e(k) - e(k-1)) + K·Ts/Ti·e(k)``,  ``e = L_meas - L_sim``
+    A correction flow that keeps a twin level on the plant's. The block's law
+    is ``dm/dt = K·(e - eMem)/Te``, ``deMem/dt = (e - eMem)/Te`` with
+    ``e = L_meas - L_sim``: ``m`` follows ``K·e`` (from a zero start), lagged
+    by ``Te``. For ``e`` constant over a sample (``a = exp(-Ts/Te)``):
 
-    in kg/s with ``K`` in kg/s per m of level difference. With ``ti=None`` the
-    integral part is off and the law is proportional, ``m = K·e`` (plus the
-    value held from before a hold); this is the safe default because a level
-    is an integrating state, so a purely integral correction
-    (``m(k+1) = m(k) + K·e(k)``) would oscillate without damping. The
-    correction flow is its own recorded signal, never a parameter change.
+    ``m(k+1) = m(k) + K·(e(k) - eMem(k))·(1 - a)``, ``eMem(k+1) = e(k) + (eMem(k) - e(k))·a``
+
+    in kg/s with ``K`` in kg/s per m of level difference. A proportional law,
+    because a level is an integrating state and a purely integral correction
+    would oscillate without damping. The correction flow is its own recorded
+    signal, never a parameter change. Both memories start at zero, as in the
+    block.
+
+    Hold: the correction is frozen and the memory keeps following the
+    difference (bumpless resume). While a value is missing (NaN) it is held
+    too and the memory restarts at the first valid difference.
 
     Parameters
     ----------
@@ -258,59 +392,57 @@ class StateCompensator:
         adds flow into the twin's tank).
     ts : float
         Sample time (s).
-    ti : float or None
-        Integral time (s) or None for proportional only.
-    limit : float or None
-        Optional bound on ``|m|`` (kg/s).
+    te : float, optional
+        Time constant of the error memory (s); default ``ts/10``.
+
+    Examples
+    --------
+    >>> sc = StateCompensator(2.0, ts=10.0)
+    >>> round(sc.update(1.5, 1.0), 6)   # K*e*(1 - exp(-10)) from zero
+    0.999955
     """
 
-    def __init__(self, gain: float, *, ts: float, ti: float | None = None, limit: float | None = None) -> None:
+    def __init__(self, gain: float, *, ts: float, te: float | None = None) -> None:
         if not gain > 0.0:
             raise ValueError(f"state-compensation gain must be positive, got {gain}")
-        if ti is not None and not ti > 0.0:
-            raise ValueError(f"integral time must be positive, got {ti}")
+        if not (ts > 0.0 and math.isfinite(ts)):
+            raise ValueError(f"sample time must be positive, got {ts}")
+        te = ts * MEMORY_FRACTION if te is None else float(te)
+        if not (te > 0.0 and math.isfinite(te)):
+            raise ValueError(f"error-memory time constant must be positive, got {te}")
         self.gain = float(gain)
         self.ts = float(ts)
-        self.ti = None if ti is None else float(ti)
-        self.limit = None if limit is None else abs(float(limit))
+        self.te = te
         self.m = 0.0
-        self.e_prev: float | None = None
+        self.e_mem: float | None = 0.0
         self.mode: Mode = "hold"
-        self.started = False
 
     def update(self, measured: float | None, simulated: float | None, *, hold: bool = False) -> float:
-        """Advance one sample; return the correction flow (kg/s). Holds on NaN or ``hold``."""
-        if hold or not (_valid(measured) and _valid(simulated)):
+        """Advance one sample with the difference held over it; return the correction at its end (kg/s)."""
+        if not (_valid(measured) and _valid(simulated)):
             self.mode = "hold"
-            self.e_prev = None
+            self.e_mem = None
             return self.m
         e = float(measured) - float(simulated)  # type: ignore[arg-type]
-        if self.e_prev is None:
-            # first sample: m = K*e from zero; resume after a hold: bumpless, the
-            # held flow is the starting point and the history restarts at e
-            self.e_prev = e if self.started else 0.0
-        self.started = True
-        self.mode = "auto"
-        dm = self.gain * (e - self.e_prev)
-        if self.ti is not None:
-            dm += self.gain * self.ts / self.ti * e
-        m = self.m + dm
-        if self.limit is not None:
-            m = max(-self.limit, min(self.limit, m))
-        self.m = m
-        self.e_prev = e
+        mem = e if self.e_mem is None else self.e_mem
+        a = math.exp(-self.ts / self.te)
+        if hold:
+            self.mode = "hold"
+        else:
+            self.mode = "auto"
+            self.m += self.gain * (e - mem) * (1.0 - a)
+        self.e_mem = e + (mem - e) * a
         return self.m
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable state, for checkpoints."""
-        return {"m": self.m, "e_prev": self.e_prev, "mode": self.mode, "started": self.started}
+        return {"m": self.m, "e_mem": self.e_mem, "mode": self.mode}
 
     def restore(self, state: dict[str, Any]) -> None:
         """Restore a state produced by :meth:`state`."""
         self.m = float(state["m"])
-        self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
+        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
         self.mode = state["mode"]
-        self.started = bool(state["started"])
 
 
 def direction_from_gain(gain: float) -> int:

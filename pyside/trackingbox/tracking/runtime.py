@@ -60,7 +60,7 @@ from ..data import stoppage_mask
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
 from .controllers import Scaling, ScaledPI, SlidingMode, StateCompensator, direction_from_gain
-from .tuning import tune_scaled_pi
+from .tuning import pair_settings
 
 log = logging.getLogger(__name__)
 
@@ -385,33 +385,13 @@ class _Plan:
     events: list[TrackingEvent] = field(default_factory=list)
 
 
-def _span(pair: Any, p_min: float, p_max: float, measured: npt.NDArray[np.float64]) -> float:
-    """Variable span for error normalisation: what moving the parameter over its range moves the variable.
-
-    ``|gain|·(p_max - p_min)`` when the pair has a gain; else the measured range; else 1.
-    """
-    gain = float(getattr(pair, "gain", math.nan) or math.nan)
-    if math.isfinite(gain) and gain != 0.0:
-        return abs(gain) * (p_max - p_min)
-    ok = measured[np.isfinite(measured)]
-    if ok.size and float(ok.max() - ok.min()) > 0.0:
-        return float(ok.max() - ok.min())
-    return 1.0
-
-
 def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) -> _Pair:
     p = spec.parameter(pair.parameter)
-    span = _span(pair, p.min, p.max, measured)
-    scaling = Scaling(p.min, p.max, span=span)
     ts = float(spec.sample_time)
-    gain = float(pair.gain)
-    direction = direction_from_gain(gain)
-    if pair.kp is not None and pair.ti is not None:
-        kp, ti = float(pair.kp), float(pair.ti)
-    else:
-        tuned = tune_scaled_pi(gain, float(pair.time_constant), scaling, ts=ts, lam=float(pair.lambda_))
-        kp = float(pair.kp) if pair.kp is not None else tuned.kp
-        ti = float(pair.ti) if pair.ti is not None else tuned.ti
+    # the one span/tuning rule, shared with the generated Modelica box
+    settings = pair_settings(pair, float(p.min), float(p.max), ts=ts, where=spec.path.name)
+    scaling, kp, ti, direction = settings.scaling, settings.kp, settings.ti, settings.direction
+    span = scaling.span
     kind = getattr(pair, "controller", "pi")
     if kind == "sliding":
         ctrl: ScaledPI | SlidingMode = SlidingMode.from_pi(scaling, kp=kp, ti=ti, ts=ts, direction=direction,

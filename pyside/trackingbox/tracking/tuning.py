@@ -17,15 +17,23 @@ of the parameter range, error in % of the variable span. The process gain in
 that domain is ``Ks = K·(p_max - p_min)/span`` and the scaled controller gain
 ``Kp = τ / (|Ks| (τc + θ))`` is dimensionless. The direction (sign of ``K``) is
 handled by the controller, so the gains here are positive.
+
+:func:`variable_span` and :func:`pair_settings` are the one rule that turns a
+``[[pairs]]`` entry into controller settings; the Python runtime
+(:mod:`.runtime`) and the generated Modelica tracking box
+(:mod:`trackingbox.generate`) both use them, so they cannot disagree.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from .controllers import Scaling
+from ..errors import SpecError
+from .controllers import Scaling, direction_from_gain
 
-__all__ = ["PIGains", "simc_pi", "scaled_process_gain", "tune_scaled_pi"]
+__all__ = ["PIGains", "ControllerSettings", "simc_pi", "scaled_process_gain", "tune_scaled_pi",
+           "variable_span", "pair_settings"]
 
 
 @dataclass(frozen=True)
@@ -138,3 +146,110 @@ def tune_scaled_pi(gain: float, time_constant: float, scaling: Scaling, *, ts: f
     kp, ti = simc_pi(ks, time_constant, theta, tau_c=tau_c)
     kc = kp * (scaling.p_max - scaling.p_min) / scaling.span
     return PIGains(kp=kp, ti=ti, kc=kc, tau_c=tau_c, delay=theta)
+
+
+def variable_span(gain: float, p_min: float, p_max: float) -> float:
+    """Range of a tracking variable that normalises its error: ``|gain|·(p_max - p_min)``.
+
+    It is how far the variable moves when the parameter sweeps its bounds, so
+    in the scaled domain the process gain is ±1 (% error per % output). There
+    is no fallback (a measured range, or 1): a pair always has a gain, and a
+    span that depended on the data would make the generated box and the
+    runtime disagree.
+
+    Raises
+    ------
+    ValueError
+        If the gain is zero or not finite, or the bounds are not increasing.
+
+    Examples
+    --------
+    >>> variable_span(-0.004, 800.0, 1200.0)
+    1.6
+    """
+    span = abs(gain) * (p_max - p_min)
+    if not (math.isfinite(span) and span > 0.0):
+        raise ValueError(f"span must be positive and finite (gain {gain}, bounds [{p_min}, {p_max}])")
+    return span
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """Settings of one parameter controller, from one ``[[pairs]]`` entry.
+
+    Attributes
+    ----------
+    scaling : Scaling
+        Parameter bounds and the variable span (:func:`variable_span`).
+    kp : float
+        Dimensionless gain (% output per % error), ``> 0``.
+    ti : float
+        Integral time (s), ``> 0``.
+    direction : int
+        ``+1`` direct, ``-1`` reverse action (sign of the pair's gain).
+    tuning : str
+        How ``kp``/``ti`` were obtained, for logs and generated comments.
+    """
+
+    scaling: Scaling
+    kp: float
+    ti: float
+    direction: int
+    tuning: str
+
+
+def pair_settings(pair: Any, p_min: float, p_max: float, *, ts: float, where: str = "the spec") -> ControllerSettings:
+    """The controller settings of a ``[[pairs]]`` entry: the one rule for runtime and generated code.
+
+    * span: :func:`variable_span` of the pair's gain and the parameter's bounds;
+    * direction: the sign of the gain (:func:`~.controllers.direction_from_gain`);
+    * ``kp``/``ti``: the spec's values where given, SIMC (:func:`tune_scaled_pi`
+      with the pair's ``lambda``) for the missing ones. ``kp`` is a magnitude:
+      the direction comes from the gain alone, so a negative ``kp`` is refused
+      rather than silently flipped or ignored.
+
+    Parameters
+    ----------
+    pair : trackingbox.spec.PairSpec
+        The pair (``variable``, ``parameter``, ``gain``, ``time_constant``,
+        ``lambda_``, ``kp``, ``ti``).
+    p_min, p_max : float
+        The parameter's bounds.
+    ts : float
+        The tracking sample time (s).
+    where : str
+        Where the pair is written, for error messages (e.g. the spec's file name).
+
+    Raises
+    ------
+    SpecError
+        A non-positive ``kp`` or ``ti``, a zero gain or bounds that give no span.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> pair = SimpleNamespace(variable="TI-102", parameter="hx.kht", gain=-0.005, time_constant=40.0,
+    ...                        lambda_=1.0, kp=0.5, ti=None)
+    >>> s = pair_settings(pair, 800.0, 1200.0, ts=10.0)
+    >>> (s.scaling.span, s.kp, s.ti, s.direction)
+    (2.0, 0.5, 40.0, -1)
+    """
+    label = f"[[pairs]] {pair.variable} -> {pair.parameter} in {where}"
+    try:
+        span = variable_span(float(pair.gain), p_min, p_max)
+        direction = direction_from_gain(float(pair.gain))
+    except ValueError as exc:
+        raise SpecError(f"{label}: {exc}") from None
+    scaling = Scaling(p_min, p_max, span=span)
+    for name in ("kp", "ti"):
+        value = getattr(pair, name)
+        if value is not None and not (math.isfinite(float(value)) and float(value) > 0.0):
+            raise SpecError(f"{label}: {name} = {value} must be positive"
+                            + (" (kp is a magnitude: the direction comes from the sign of gain)"
+                               if name == "kp" else ""))
+    if pair.kp is not None and pair.ti is not None:
+        return ControllerSettings(scaling, float(pair.kp), float(pair.ti), direction, "from the spec")
+    tuned = tune_scaled_pi(float(pair.gain), float(pair.time_constant), scaling, ts=ts, lam=float(pair.lambda_))
+    kp = float(pair.kp) if pair.kp is not None else tuned.kp
+    ti = float(pair.ti) if pair.ti is not None else tuned.ti
+    return ControllerSettings(scaling, kp, ti, direction, f"SIMC, tau_c = {tuned.tau_c:.6g} s")
