@@ -85,9 +85,11 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     elif "unsupported" in low:
         detail = first[low.index("unsupported"):].strip()
         construct = f"{detail[len('unsupported '):]} (not supported by the rumoca front end)"
-        op = re.search(r"operator `(\w+)`", detail)
+        op = (re.search(r"operator `(\w+)`", detail)
+              or re.search(r"\b(der|delay|pre|edge|sample|reinit|spatialDistribution|cardinality)\b", detail))
         pattern = (rf"\b{re.escape(op.group(1))}\s*\(" if op
                    else r"\bfor\s+\w+\s*(?:[),]|in\s*\{)" if "comprehension" in detail
+                   else r"\bfor\b" if "for-equation" in detail
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
