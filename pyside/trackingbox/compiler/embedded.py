@@ -86,17 +86,26 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     elif "unsupported" in low:
         detail = first[low.index("unsupported"):].strip()
         construct = f"{detail[len('unsupported '):]} (not supported by the rumoca front end)"
-        op = re.search(r"operator `(\w+)`", detail)
+        op = (re.search(r"operator `(\w+)`", detail)
+              or re.search(r"\b(der|delay|pre|edge|sample|reinit|spatialDistribution|cardinality)\b", detail))
         pattern = (rf"\b{re.escape(op.group(1))}\s*\(" if op
+                   else r"\bfor\s+\w+\s*(?:[),]|in\s*\{)" if "comprehension" in detail
+                   else r"\bfor\b" if "for-equation" in detail
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
     allowed = {str(f) for f in model_files(source, model)}
     where = [f"{f}:{n}" for f, n in _POSITION.findall(message) if f in allowed]
     where += [d.split(": ", 1)[0].rsplit(":", 1)[0] for d in diags
-              if d.split(":", 1)[0] in allowed and (_IMPLICIT_RANGE[:20] in d or "unsupported" in d.lower())]
+              if d.split(":", 1)[0] in allowed and ("indices require" in d or "unsupported" in d.lower())]
     if not where and pattern:
         where = [str(loc) for loc in locate(source, model, pattern)]
+    if not where:  # the first occurrence of a name rumoca quotes (`f`, `findValue`) in the model's own code
+        for name in re.findall(r"`([A-Za-z_]\w*)`", first):
+            found = locate(source, model, rf"\b{re.escape(name)}\b", limit=1)
+            if found:
+                where = [str(found[0])]
+                break
     at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
     return UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
