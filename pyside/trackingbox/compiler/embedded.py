@@ -254,9 +254,12 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     settings = experiment_settings(source, model)
     build_log = export_fmu(em, translator, output, experiment=settings)
     t3 = time.perf_counter()
+    computed = set(em.initial.computed_parameters) if em.initial is not None else set()
+    tunable = sum(1 for p in em.parameters if p.name not in computed)  # fixed = false ones are calculated
     summary = (
         f"{model}: {len(em.states)} states, {len(em.algebraics)} algebraic variables, "
-        f"{len(em.parameters)} tunable parameters, {em.n_loops} algebraic loops "
+        f"{tunable} tunable parameters"
+        f"{f' and {len(computed)} computed at initialisation' if computed else ''}, {em.n_loops} algebraic loops "
         f"(equations -> tearing variables: {', '.join(f'{a}->{b}' for a, b in em.torn_sizes) or 'none'}); "
         f"flatten {t1 - t0:.2f} s, causalise {t2 - t1:.2f} s, export+cc {t3 - t2:.2f} s"
     )
@@ -264,4 +267,4 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
         summary += ("\nnot exported (no equation uses them; they can only set start values, which the "
                     "FMU takes from the states' own start attributes): " + ", ".join(em.unused_parameters))
     log.info(summary)
-    return summary + "\n" + build_log, len(em.states), len(em.parameters)
+    return summary + "\n" + build_log, len(em.states), tunable
