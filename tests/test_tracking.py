@@ -101,8 +101,8 @@ def test_resume_without_fmu_states_replays_trajectory(case: Path, baseline: tupl
     track(spec, out_dir=tmp_path, max_steps=300, checkpoint_every=50)
     ck = tmp_path / "checkpoint.json"
     data = json.loads(ck.read_text())
-    data["x"] = None
-    data["x_untracked"] = None
+    data["twin"]["x"] = None
+    data["untracked_twin"]["x"] = None
     ck.write_text(json.dumps(data))
     df = pd.read_csv(track(spec, out_dir=tmp_path, resume=True).csv)
     num = [c for c in full.columns if not c.startswith("mode:")]
