@@ -464,9 +464,7 @@ def _check_authority(pair: _Pair, measured: npt.NDArray[np.float64], events: lis
         events.append(TrackingEvent(0.0, "weak-pair", msg))
 
 
-def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
-    from ..data import MeasurementView
-
+def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: MeasurementView | None = None) -> _Plan:
     if not spec.pairs:
         raise SpecError(f"spec {spec.path} has no [[pairs]]; run `trackingbox pair` first or add them")
     problems = []
@@ -475,7 +473,12 @@ def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
             problems.append(unknown_name("tracking variable", pair.variable, spec.outputs, f"[outputs] of {spec.path}"))
     if problems:
         raise DataError("; ".join(problems))
-    view = MeasurementView.from_spec(spec, window, skip=float(spec.tracking.hold_until))
+    if view is None:
+        view = MeasurementView.from_spec(spec, window, skip=float(spec.tracking.hold_until))
+    elif view.grid.size == 0 or view.grid[0] != 0.0 or view.skip != float(spec.tracking.hold_until):
+        raise DataError(f"the measurement view given to track() must start at the first sample and skip the "
+                        f"start-up hold ({spec.tracking.hold_until:g} s): build it with "
+                        f"MeasurementView.from_spec(spec, {window!r}, skip=spec.tracking.hold_until)")
     where = view.source.name
     grid = view.grid
     for tag in spec.inputs:
@@ -682,7 +685,8 @@ class TrackingLoop:
 
     def __init__(self, spec: Spec, *, out_dir: str | Path, window: Window = "all",
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
-                 recovery_hold: float | None = None, tolerance: float = 1e-6) -> None:
+                 recovery_hold: float | None = None, tolerance: float = 1e-6,
+                 view: MeasurementView | None = None) -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -694,7 +698,7 @@ class TrackingLoop:
         self.ckpt_path = self.out_dir / CHECKPOINT_NAME
         self.checkpoint_every = int(checkpoint_every)
         check_against_fmu(spec)
-        self.plan = plan = _plan(spec, window, untracked)
+        self.plan = plan = _plan(spec, window, untracked, view)
         self.view = plan.view
         self.grid = plan.view.grid
         self.n_rows = self.grid.size
@@ -977,6 +981,7 @@ def track(
     checkpoint_every: int = 200,
     recovery_hold: float | None = None,
     tolerance: float = 1e-6,
+    view: MeasurementView | None = None,
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -1005,6 +1010,10 @@ def track(
         ``10·sample_time``.
     tolerance : float
         Relative solver tolerance of the twins.
+    view : trackingbox.data.MeasurementView, optional
+        The measurements to track, when the caller has built them already
+        (``MeasurementView.from_spec(spec, window, skip=spec.tracking.hold_until)``);
+        default: built here from the spec.
 
     Returns
     -------
@@ -1019,7 +1028,8 @@ def track(
         up to that time stay in the CSV).
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
-                        checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance)
+                        checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
+                        view=view)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
