@@ -243,3 +243,16 @@ def test_view_stops_at_the_last_row_and_names_bad_input(tmp_path):
         MeasurementView.from_spec(bad)
     with pytest.raises(DataError, match="'TX' is not in the measurement view"):
         v.values("TX")
+
+
+def test_view_as_a_table_and_an_open_ended_window(tmp_path):
+    t = np.arange(0.0, 60.0, 10.0)
+    fi = np.array([5.0, 5.0, 0.0, 5.0, 5.0, 5.0])
+    spec = _spec(tmp_path, _rows(t, FI=fi, TI=t + 1.0), stoppage=StoppageRule("FI", 1.0, 0.0))
+    v = MeasurementView.from_spec(spec, (10.0, float("inf")))
+    assert v.grid.tolist() == t.tolist()
+    frame = v.to_frame()
+    assert list(frame.columns) == ["time", "FI", "TI"] and frame["TI"].tolist() == (t + 1.0).tolist()
+    # scored: from 10 s on, not at the stopped 20 s
+    assert v.to_frame(scored=True)["TI"].isna().tolist() == [True, False, True, False, False, False]
+    assert v.to_frame(scored=True)["FI"].tolist() == fi.tolist()  # not an output: unchanged
