@@ -180,6 +180,14 @@ class _ScaledController:
         self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
         self.mode = state["mode"]
 
+    def state_dict(self) -> dict[str, Any]:
+        """The controller's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
+        return self.state()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        self.restore(state)
+
 
 class ScaledPI:
     """PI parameter controller on a 0-100 % output: the exact discretisation of ``ParameterController``.
@@ -443,6 +451,14 @@ class StateCompensator:
         self.m = float(state["m"])
         self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
         self.mode = state["mode"]
+
+    def state_dict(self) -> dict[str, Any]:
+        """The compensator's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
+        return self.state()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        self.restore(state)
 
 
 def direction_from_gain(gain: float) -> int:
