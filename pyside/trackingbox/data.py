@@ -1,4 +1,4 @@
-"""Measurement and input tables: reading, validation, resampling, NaN spans.
+"""Measurement and input tables: reading, validation, resampling, NaN spans, the measurement view.
 
 A table is a CSV file with a ``time`` column and one numeric column per tag or
 FMU input. ``time`` is either seconds (floats) or ISO 8601 timestamps; timestamps
@@ -7,20 +7,32 @@ are converted to seconds from the first row and the first timestamp is kept in
 
 :func:`read_table` checks everything it can and reports *all* problems of a file
 in one :class:`~trackingbox.errors.DataError`, so a user fixes a file in one go.
+
+:class:`MeasurementView` is what every stage (estimation, pairing, tracking,
+validation, the offset analysis) uses: the spec's measurements read once,
+resampled onto the simulation grid with one gap rule, the stoppage mask, the
+twin's input table and the samples each tag is scored on. No stage reads or
+resamples the CSV itself.
 """
 from __future__ import annotations
 
 import csv
 import logging
 import os
+import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal, Union
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from .errors import DataError, did_you_mean
+from .errors import DataError, SpecError, did_you_mean
+
+if TYPE_CHECKING:
+    from .spec import Spec
 
 log = logging.getLogger(__name__)
 
@@ -356,3 +368,257 @@ def stoppage_mask(grid: np.ndarray, values: np.ndarray, below: float, settle: fl
     idx = np.searchsorted(stop_times, grid, side="right") - 1
     last = np.where(idx >= 0, stop_times[np.clip(idx, 0, None)], -np.inf)
     return (grid - last) <= settle + 1e-9
+
+
+def fill_nan(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Linear interpolation over NaN between valid samples, held at both ends.
+
+    For signals that must be finite everywhere (the twin's inputs, the tracked
+    FMU's measurement inputs). All-NaN or all-valid input is returned as is.
+
+    >>> fill_nan([np.nan, 1.0, np.nan, 3.0, np.nan]).tolist()
+    [1.0, 1.0, 2.0, 3.0, 3.0]
+    """
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    if ok.all() or not ok.any():
+        return v
+    idx = np.arange(v.size)
+    return np.interp(idx, idx[ok], v[ok])
+
+
+#: Default gap limit, in multiples of a tag's own median sampling interval, when the spec sets
+#: no ``[data] max_gap``; see :func:`default_max_gap`.
+GAP_FACTOR = 2.5
+
+
+def default_max_gap(time: npt.ArrayLike, values: npt.ArrayLike) -> float:
+    """Longest gap bridged in a tag when the spec sets no ``max_gap``: 2.5 x its median sampling interval.
+
+    Why this rule: a tag is interpolated between its *own* samples, so a tag
+    logged every 30 s in a CSV with 10 s rows (empty cells in between), or with
+    jittered timestamps, is used at every grid point; one dropped sample (a
+    2 x gap) is bridged as well; two or more dropped samples in a row (3 x or
+    more) are missing data, and the grid points inside are NaN: they are not
+    scored and the parameter controllers hold there, instead of tracking a
+    straight line drawn across the hole. A fixed limit in seconds cannot do this
+    for tags of different rates. (Estimation used 1.5 x, which masks the longer
+    intervals of irregularly sampled tags; pairing, tracking and validation used
+    to bridge every gap.) The twin's *inputs* are still filled across any gap
+    (:attr:`MeasurementView.inputs`), because the twin cannot run without them.
+
+    Returns ``inf`` (bridge everything) for a tag with fewer than two valid samples.
+
+    >>> default_max_gap([0.0, 10.0, 20.0, 30.0, 100.0], [1.0, 1.0, 1.0, 1.0, 1.0])
+    25.0
+    """
+    t = np.asarray(time, dtype=float)
+    y = np.asarray(values, dtype=float)
+    t = t[np.isfinite(y) & np.isfinite(t)]
+    if t.size < 2:
+        return math.inf
+    return GAP_FACTOR * float(np.median(np.diff(t)))
+
+
+WindowName = Literal["training", "validation", "all"]
+#: A window of a spec by name, or ``(start, stop)`` in s from the first sample.
+WindowArg = Union[WindowName, tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class MeasurementView:
+    """The spec's measurements on the simulation grid, as every stage sees them.
+
+    Built once by :meth:`from_spec`. The grid is ``k * sample_time`` seconds
+    from the first row of the CSV (the same grid points for every stage and
+    every window), from the first point at or after ``window start - lead``
+    (default: the first sample) up to the last point before the window's stop
+    that is not after the last row.
+
+    Attributes
+    ----------
+    source : Path
+        The measurements file.
+    sample_time : float
+        Grid step (s).
+    window : tuple of float
+        ``[start, stop)`` (s from the first sample): the scored part of the grid.
+    grid : ndarray
+        Grid times (s from the first sample).
+    samples : dict of str to ndarray
+        Tag -> values on the grid: linear interpolation between the tag's own
+        valid samples, NaN outside them and inside gaps longer than
+        ``max_gap[tag]`` (:func:`resample`).
+    max_gap : dict of str to float
+        Tag -> the gap limit used (s): the spec's ``[data] max_gap`` if set,
+        else :func:`default_max_gap` of the tag.
+    stopped : ndarray of bool
+        Grid points inside a stoppage (``[data] stoppage``: its tag below
+        ``below``) or within ``settle`` s after one (:func:`stoppage_mask`);
+        all False without a stoppage rule.
+    inputs : pandas.DataFrame
+        The twin's input table: ``time`` (the grid) and one column per FMU
+        input of ``[inputs]``, filled across gaps (:func:`fill_nan`).
+    scored : dict of str to ndarray of bool
+        Output tag -> grid points where the tag counts in a cost: valid sample,
+        inside the window, not before ``skip``, not stopped.
+    skip : float
+        Start-up time left out of the scores (s from the first sample).
+    t0 : float
+        The first row's ``time`` as read (added to the grid to index the file).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from trackingbox.spec import Spec
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (d / "m.csv").write_text("time,u,y\\n0,1,0\\n10,1,1\\n20,1,2\\n30,1,3\\n")
+    >>> spec = Spec(path=d / "s.toml", twin=d / "t.fmu", measurements=d / "m.csv", sample_time=5.0,
+    ...             inputs={"u": "u_in"}, outputs={"y": "y_out"})
+    >>> v = MeasurementView.from_spec(spec, (10.0, 25.0))
+    >>> v.grid.tolist(), v.samples["y"].tolist()
+    ([0.0, 5.0, 10.0, 15.0, 20.0], [0.0, 0.5, 1.0, 1.5, 2.0])
+    >>> v.scored["y"].tolist()
+    [False, False, True, True, True]
+    """
+
+    source: Path
+    sample_time: float
+    window: tuple[float, float]
+    grid: npt.NDArray[np.float64] = field(repr=False)
+    samples: dict[str, npt.NDArray[np.float64]] = field(repr=False)
+    max_gap: dict[str, float]
+    stopped: npt.NDArray[np.bool_] = field(repr=False)
+    inputs: pd.DataFrame = field(repr=False)
+    scored: dict[str, npt.NDArray[np.bool_]] = field(repr=False)
+    skip: float = 0.0
+    t0: float = 0.0
+
+    # ------------------------------------------------------------------ building
+
+    @classmethod
+    def from_spec(cls, spec: Spec, window: WindowArg = "all", *, lead: float | None = None,
+                  skip: float = 0.0, tags: Iterable[str] = ()) -> MeasurementView:
+        """Read the spec's measurements once and lay them on the grid of *window*.
+
+        Parameters
+        ----------
+        spec : trackingbox.spec.Spec
+            The spec: ``measurements``, ``sample_time``, ``inputs``, ``outputs``,
+            ``states``, ``windows`` and ``data`` (``max_gap``, ``stoppage``).
+        window : {"all", "training", "validation"} or (start, stop)
+            The scored window (s from the first sample); ``"all"`` is the whole file.
+        lead : float, optional
+            History before the window's start to put on the grid (a lead-in that
+            is simulated, not scored); default: everything from the first sample.
+        skip : float
+            Grid points before this time are not scored (a start-up hold).
+        tags : iterable of str
+            Extra tags to resample (besides inputs, outputs, states and the
+            stoppage tag).
+
+        Raises
+        ------
+        SpecError
+            The spec has no window of that name.
+        DataError
+            The file is unreadable, a tag is missing from it (did-you-mean), or
+            the window holds fewer than two grid points.
+        """
+        ts = float(spec.sample_time)
+        where = Path(spec.measurements).name
+        if isinstance(window, str):
+            if window == "all":
+                bounds: tuple[float, float] | None = None
+            elif window in spec.windows:
+                bounds = (float(spec.windows[window][0]), float(spec.windows[window][1]))
+            else:
+                have = f" (it has: {', '.join(spec.windows)})" if spec.windows else ""
+                raise SpecError(f"spec {spec.path} has no [windows] {window} = [start, stop]{have}")
+        else:
+            bounds = (float(window[0]), float(window[1]))
+        stoppage = spec.data.stoppage
+        needed = [*spec.inputs, *spec.outputs, *(s.tag for s in spec.states),
+                  *([stoppage.tag] if stoppage is not None else []), *tags]
+        needed = list(dict.fromkeys(needed))
+        table = read_table(spec.measurements, required=needed, allow_nan=True)
+        t_abs = table["time"].to_numpy(dtype=float)
+        t0 = float(t_abs[0])
+        end = float(t_abs[-1]) - t0
+        if bounds is None:
+            bounds = (0.0, end + ts)
+        start, stop = bounds
+        if stop <= start:
+            raise DataError(f"window [{start:g}, {stop:g}) s of {where} ends before it starts")
+        first = 0.0 if lead is None else max(0.0, start - float(lead))
+        k_first = int(math.ceil(first / ts - 1e-9))
+        # points before the window's stop and not after the last row
+        k_stop = int(math.ceil(min(stop, end + ts) / ts - 1e-9))
+        k_stop = min(k_stop, int(math.floor(end / ts + 1e-9)) + 1)
+        grid = ts * np.arange(k_first, k_stop, dtype=float)
+        in_window = (grid >= start - 1e-9) & (grid < stop - 1e-9)
+        if int(in_window.sum()) < 2:
+            raise DataError(f"window [{start:g}, {stop:g}) s of {where} holds {int(in_window.sum())} grid "
+                            f"point(s) of {ts:g} s between the first sample and the last ({end:g} s)")
+        rule = spec.data.max_gap
+        samples: dict[str, npt.NDArray[np.float64]] = {}
+        gaps: dict[str, float] = {}
+        for tag in needed:
+            column = table[["time", tag]]
+            gap = float(rule) if rule is not None else default_max_gap(t_abs, column[tag].to_numpy(dtype=float))
+            gaps[tag] = gap
+            samples[tag] = resample(column, t0 + grid, max_gap=None if math.isinf(gap) else gap)[tag] \
+                .to_numpy(dtype=float)
+        stopped = np.zeros(grid.size, dtype=bool)
+        if stoppage is not None:
+            stopped = stoppage_mask(grid, samples[stoppage.tag], float(stoppage.below), float(stoppage.settle))
+        frame: dict[str, npt.NDArray[np.float64]] = {"time": grid}
+        for tag, name in spec.inputs.items():
+            frame[name] = fill_nan(samples[tag])
+        counted = in_window & (grid >= float(skip) - 1e-9) & ~stopped
+        scored = {tag: counted & np.isfinite(samples[tag]) for tag in spec.outputs}
+        view = cls(source=Path(spec.measurements), sample_time=ts, window=(start, stop), grid=grid,
+                   samples=samples, max_gap=gaps, stopped=stopped, inputs=pd.DataFrame(frame), scored=scored,
+                   skip=float(skip), t0=t0)
+        log.debug("measurement view of %s: %d grid points from %g s, window [%g, %g) s, gap limits %s",
+                  where, grid.size, grid[0], start, stop, gaps)
+        return view
+
+    # ------------------------------------------------------------------ reading
+
+    @property
+    def in_window(self) -> npt.NDArray[np.bool_]:
+        """Grid points inside ``[start, stop)`` of :attr:`window`."""
+        return (self.grid >= self.window[0] - 1e-9) & (self.grid < self.window[1] - 1e-9)
+
+    @property
+    def lead(self) -> int:
+        """Number of grid points before the window's start (the lead-in)."""
+        return int(np.count_nonzero(self.grid < self.window[0] - 1e-9))
+
+    def values(self, tag: str) -> npt.NDArray[np.float64]:
+        """The tag's samples on the grid (NaN where missing or in a long gap)."""
+        try:
+            return self.samples[tag]
+        except KeyError:
+            raise DataError(f"tag {tag!r} is not in the measurement view of {self.source.name}"
+                            f"{did_you_mean(tag, list(self.samples))}") from None
+
+    def scored_values(self, tag: str) -> npt.NDArray[np.float64]:
+        """The tag's samples with NaN wherever it is not scored (:attr:`scored`)."""
+        if tag not in self.scored:
+            raise DataError(f"tag {tag!r} is not an output tag of the measurement view of {self.source.name}"
+                            f"{did_you_mean(tag, list(self.scored))}")
+        return np.where(self.scored[tag], self.values(tag), np.nan)
+
+    def filled(self, tag: str) -> npt.NDArray[np.float64]:
+        """The tag's samples filled across gaps (:func:`fill_nan`), for FMU inputs."""
+        return fill_nan(self.values(tag))
+
+    def gaps(self, tag: str) -> list[tuple[float, float]]:
+        """``(first, last)`` grid times of each run of missing samples of *tag* (:func:`nan_spans`)."""
+        return nan_spans(pd.Series(self.values(tag)), self.grid)
+
+    def scored_counts(self) -> dict[str, int]:
+        """Number of scored grid points per output tag."""
+        return {tag: int(mask.sum()) for tag, mask in self.scored.items()}
