@@ -3,15 +3,50 @@
 :func:`pair` is what ``trackingbox pair`` and the demo call, and what a notebook
 calls::
 
-    from trackingbox import load_spec, pair
+    from trackingbox import PairSettings, load_spec, pair
     result = pair(load_spec("case1/spec.toml"), PairSettings(freeze=(("holdControllers", 1.0),)))
     result.pairing.pairs            # the chosen (variable, parameter) pairs
     result.to_json()                # the ``pair --json`` document
 
-The procedure (operating point, settle rule, second operating point, data
-checks) is described in ``trackingbox pair --help``; this module only chains
-:mod:`~trackingbox.analysis.steptest`, :mod:`~trackingbox.analysis.pairing`,
-:mod:`~trackingbox.analysis.offsets` and :mod:`~trackingbox.analysis.sobol`.
+This module chains :mod:`~trackingbox.analysis.steptest`,
+:mod:`~trackingbox.analysis.pairing`, :mod:`~trackingbox.analysis.offsets` and
+:mod:`~trackingbox.analysis.sobol`.
+
+The procedure (the options are :class:`PairSettings` fields, named as
+the command's): the twin's inputs are held at an operating point (mean of the first
+hour of the training window, or --at TIME); the twin runs with its controllers
+active until it settles; the --freeze values are set (e.g. holdControllers=1)
+and it settles again; then each [[parameters]] entry is stepped by +/- --step of
+its bound range and the new steady state of every [outputs] tag is recorded.
+Tank levels listed in [[states]] are held by proportional state compensation
+from the freeze on (they are not tracking variables).
+Settled = over --window seconds no output moved more than --tolerance x its
+measured range; responses are measured against an unstepped reference run, so
+a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled
+by measured ranges and parameter bound ranges, give the relative gain array
+(after leaving out parameters that cannot be told apart, see --rank-tol); each
+tag gets the unused parameter with a positive relative gain closest to 1.
+
+Data checks (off with --no-data-checks): before the assignment the twin runs
+untracked over the training window with the measured inputs (parameters at
+their starts, [[states]] compensation on, the first [tracking] hold_until
+seconds left out) and is compared with the measurements. A tag whose untracked
+RMS error is below --noise-ratio x its sensor noise (robust std of first
+differences / sqrt 2) has nothing to track and is left out. A pair is allowed
+only if the parameter's remaining range toward the measurement moves the tag
+by at least --min-reach x its mean offset. The chosen set is then simulated as
+first-order loops with the parameters clipped to their bounds; while a pair
+would leave more than --max-ratio of its tag's untracked RMS error, the worst
+one is forbidden and the assignment redone. Reasons go to the left-out list.
+With --second-point (default auto) the step tests are repeated at the hour of
+the training window whose mean inputs differ most from the first point: a pair
+whose gain changes sign between the points is not chosen, and each pair is
+written with the larger of its two gains (and that point's time constant), so
+the loop, tuned for the highest gain seen, stays stable where the gain grows.
+:func:`spec_pairs` turns the chosen pairs (gain, 63 % time constant) into
+``[[pairs]]`` entries; an existing pair keeps its tuning settings (lambda, kp,
+ti, controller; a new pair gets lambda = 1; the relative gain is reported, not
+written).
 """
 from __future__ import annotations
 
@@ -23,6 +58,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+import pandas as pd
 
 from ..errors import AnalysisError, SpecError
 
@@ -189,14 +225,14 @@ def _matrix(rows: tuple[str, ...], cols: tuple[str, ...], values: npt.ArrayLike)
             "values": [[_finite(float(x)) for x in row] for row in np.asarray(values, dtype=float)]}
 
 
-def _measured(spec: Spec) -> tuple[Any, float, float]:
-    """The measurements and the training window ``[start, stop)`` (all data when the spec has none)."""
-    from ..data import read_table
+def _measured(spec: Spec) -> tuple[pd.DataFrame, npt.NDArray[np.bool_], float, float]:
+    """The measurements on the spec's grid (:class:`~trackingbox.data.MeasurementView`), the training-window
+    mask and the window ``[start, stop)`` (all data when the spec has no training window)."""
+    from ..data import MeasurementView
 
-    frame = read_table(spec.measurements, required=list(spec.inputs) + list(spec.outputs), allow_nan=True)
-    t = frame["time"].to_numpy(dtype=float)
-    start, stop = spec.windows.get("training", (float(t[0]), float(t[-1]) + 1.0))
-    return frame, float(start), float(stop)
+    view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
+    frame = pd.DataFrame({"time": view.grid, **view.samples})
+    return frame, view.in_window, float(view.window[0]), float(view.window[1])
 
 
 def second_operating_point(choice: str | float, frame: Any, spec: Spec, op: dict[str, float], start: float,
@@ -252,14 +288,13 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     from .rga import parameter_ranges, variable_ranges
     from .sobol import agreement, sobol_indices
     from .steptest import StepSettings, make_problem, operating_point, step_tests
-    from ..data import window as take_window
 
     s = settings or PairSettings()
     if not spec.parameters:
         raise SpecError(f"{spec.path} has no [[parameters]]: nothing to pair")
-    frame, start, stop = _measured(spec)
+    frame, in_window, start, stop = _measured(spec)
     op = operating_point(frame, spec.inputs, start=start, duration=3600.0, at=s.at)
-    train = take_window(frame, start, stop)
+    train = frame[in_window]
     state_tags = {st.tag for st in spec.states}
     tags = [t for t in spec.outputs if t not in state_tags]
     if state_tags:
