@@ -16,14 +16,11 @@ examples:
   trackingbox pair case2/spec.toml --method both --samples 64 --workers 2 --json --no-write
   trackingbox pair case2/spec.toml --scheduler tcp://10.0.0.5:8786     # run on a Dask cluster
 
-Procedure (details: the trackingbox.analysis.pair_stage docstring): hold the
-inputs at an operating point, settle with the controllers active, --freeze,
-settle, step each [[parameters]] entry by +/- --step of its range and record the
-new steady state of every [outputs] tag ([[states]] tags are compensated, not
-paired); scaled gains -> RGA -> assignment. Data checks leave out tags with
-nothing to track and pairs that cannot close the offset; --second-point repeats
-the step tests at a second operating point. The chosen pairs replace the spec's
-[[pairs]] unless --no-write. Exit code 1 when no pair could be chosen.
+Procedure (in full: the docstring of trackingbox.analysis.pair_stage): settle
+the twin at an operating point, --freeze its controllers, step each parameter by
++/- --step of its range; scaled steady-state gains -> RGA -> assignment, after
+data checks on an untracked run. The chosen pairs replace the spec's [[pairs]]
+unless --no-write. Exit code 1 when no pair could be chosen.
 """
 
 
@@ -141,16 +138,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(result: Any) -> None:
-    pairing = result.pairing
-    if pairing.pairs:
-        wv = max(8, *(len(p.variable) for p in pairing.pairs))
-        wp = max(9, *(len(p.parameter) for p in pairing.pairs))
-        print(f"{'variable':<{wv}}  {'parameter':<{wp}}  {'lambda':>8}  {'gain':>12}  {'tau (s)':>9}")
-        for p in pairing.pairs:
-            print(f"{p.variable:<{wv}}  {p.parameter:<{wp}}  {p.lambda_:>8.3f}  {p.gain:>12.4g}  "
-                  f"{p.time_constant:>9.4g}")
-    else:
-        print("no pairs found")
+    from ..report import Document
+
+    pairing, doc = result.pairing, Document("")
+    doc.table(["variable", "parameter", "lambda", "gain", "tau (s)"],
+              [[p.variable, p.parameter, f"{p.lambda_:.3f}", f"{p.gain:.4g}", f"{p.time_constant:.4g}"]
+               for p in pairing.pairs], align="llrrr")
+    print(doc.markdown().rstrip() if pairing.pairs else "no pairs found")
     print(f"\ncondition number (scaled gains): {pairing.condition_number:.4g}; {result.runs} simulations")
     for name, reason in pairing.left_out:
         print(f"left out {name}: {reason}")
