@@ -138,3 +138,121 @@ def test_nan_spans():
     t = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0]
     assert nan_spans(s, t) == [(0.0, 0.0), (20.0, 30.0), (50.0, 50.0)]
     assert nan_spans(pd.Series([1.0, 2.0])) == []
+
+
+# --------------------------------------------------------------------------- the measurement view
+
+from trackingbox.data import MeasurementView, default_max_gap, fill_nan  # noqa: E402
+from trackingbox.errors import SpecError  # noqa: E402
+from trackingbox.spec import DataRules, Spec, StoppageRule  # noqa: E402
+
+
+def _spec(tmp_path, csv_text, *, max_gap=None, stoppage=None, windows=None, sample_time=10.0):
+    path = write(tmp_path, csv_text)
+    return Spec(path=tmp_path / "spec.toml", twin=tmp_path / "twin.fmu", measurements=path,
+                sample_time=sample_time, inputs={"FI": "u"}, outputs={"TI": "y"},
+                windows=windows or {}, data=DataRules(stoppage=stoppage, max_gap=max_gap))
+
+
+def _rows(times, **columns):
+    """CSV text; a column's value None is an empty cell."""
+    names = list(columns)
+    lines = ["time," + ",".join(names)]
+    for i, t in enumerate(times):
+        cells = ["" if columns[n][i] is None else repr(float(columns[n][i])) for n in names]
+        lines.append(f"{t:g}," + ",".join(cells))
+    return "\n".join(lines) + "\n"
+
+
+def test_fill_nan_interpolates_and_holds_the_ends():
+    assert fill_nan([np.nan, 2.0, np.nan, np.nan, 8.0, np.nan]).tolist() == [2.0, 2.0, 4.0, 6.0, 8.0, 8.0]
+    assert np.isnan(fill_nan([np.nan, np.nan])).all()
+
+
+def test_default_gap_is_two_and_a_half_median_intervals_of_the_tag():
+    # spacing 10, 10, 10, 40: median 10 -> 25 s
+    assert default_max_gap([0, 10, 20, 30, 70], [1, 1, 1, 1, 1]) == 25.0
+    # NaN samples do not count: valid at 0, 30, 60 -> median 30 -> 75 s
+    assert default_max_gap([0, 10, 20, 30, 60], [1, np.nan, np.nan, 1, 1]) == 75.0
+    assert default_max_gap([0, 10], [1, np.nan]) == np.inf
+
+
+def test_view_irregular_tags_are_bridged_and_a_hole_is_masked(tmp_path):
+    # FI every 10 s; TI every 30 s (empty cells between) with its samples from 90 to 150 s missing:
+    # valid TI at 0, 30, 60, 180, 210; median 30 -> gap limit 75 s; 60 -> 180 is 120 s: grid points
+    # 70 .. 170 are masked, 10, 20, 40, 50 interpolated by hand, 180 and 200 exact / interpolated
+    t = np.arange(0.0, 220.0, 10.0)
+    ti = [float(x) if x % 30 == 0 and not 90 <= x <= 150 else None for x in t]
+    spec = _spec(tmp_path, _rows(t, FI=np.full(t.size, 5.0), TI=ti))
+    v = MeasurementView.from_spec(spec)
+    assert v.max_gap == {"FI": 25.0, "TI": 75.0}
+    assert v.grid.tolist() == t.tolist()
+    expected = [x if not 70 <= x <= 170 else np.nan for x in t]  # TI = time where valid (linear)
+    np.testing.assert_array_equal(v.values("TI"), expected)
+    assert v.gaps("TI") == [(70.0, 170.0)]
+    assert v.scored["TI"].tolist() == [not 70 <= x <= 170 for x in t]
+    assert (v.inputs["u"] == 5.0).all() and v.inputs["time"].tolist() == t.tolist()
+
+
+def test_view_max_gap_of_the_spec_rules_every_tag(tmp_path):
+    t = np.arange(0.0, 220.0, 10.0)
+    ti = [float(x) if x % 30 == 0 and not 90 <= x <= 150 else None for x in t]
+    spec = _spec(tmp_path, _rows(t, FI=np.full(t.size, 5.0), TI=ti), max_gap=200.0)
+    v = MeasurementView.from_spec(spec)
+    assert v.max_gap == {"FI": 200.0, "TI": 200.0}
+    np.testing.assert_allclose(v.values("TI"), t[:-1].tolist() + [t[-1]])  # the hole is bridged: TI = time
+    spec = _spec(tmp_path, _rows(t, FI=np.full(t.size, 5.0), TI=ti), max_gap=20.0)
+    v = MeasurementView.from_spec(spec)
+    # 30 s between TI samples is already a gap: only the samples themselves remain
+    assert np.flatnonzero(np.isfinite(v.values("TI"))).tolist() == [0, 3, 6, 18, 21]
+
+
+def test_view_stoppage_with_settle_window_lead_and_skip(tmp_path):
+    # FI below 1 from 100 to 130 s (samples every 10 s): stopped 100..130, settle 25 s -> up to 155
+    # (grid points 140 and 150); window [60, 200), lead 30 s -> grid from 30; skip 70 s
+    t = np.arange(0.0, 250.0, 10.0)
+    fi = np.where((t >= 100) & (t <= 130), 0.0, 5.0)
+    ti = 20.0 + t / 10.0
+    ti[t == 180.0] = np.nan
+    spec = _spec(tmp_path, _rows(t, FI=fi, TI=ti), stoppage=StoppageRule("FI", 1.0, 25.0),
+                 windows={"training": (60.0, 200.0)})
+    v = MeasurementView.from_spec(spec, "training", lead=30.0, skip=70.0)
+    assert v.grid.tolist() == list(np.arange(30.0, 200.0, 10.0))
+    assert v.lead == 3 and v.window == (60.0, 200.0)
+    assert v.grid[v.stopped].tolist() == [100.0, 110.0, 120.0, 130.0, 140.0, 150.0]
+    # one NaN sample (a 20 s hole, below 2.5 x 10 s) is bridged: 180 s is interpolated, scored
+    assert v.values("TI")[v.grid == 180.0].tolist() == [38.0]
+    scored = v.grid[v.scored["TI"]].tolist()
+    assert scored == [70.0, 80.0, 90.0, 160.0, 170.0, 180.0, 190.0]
+    assert v.scored_counts() == {"TI": 7}
+    assert np.isnan(v.scored_values("TI")[v.grid == 60.0]).all()
+
+
+def test_view_stops_at_the_last_row_and_names_bad_input(tmp_path):
+    t = np.arange(0.0, 55.0, 10.0)
+    spec = _spec(tmp_path, _rows(t, FI=np.ones(t.size), TI=np.ones(t.size)),
+                 windows={"validation": (30.0, 100.0), "training": (45.0, 49.0)})
+    v = MeasurementView.from_spec(spec, "validation")
+    assert v.grid.tolist() == [0.0, 10.0, 20.0, 30.0, 40.0, 50.0]  # not past the last row
+    with pytest.raises(SpecError, match="no \\[windows\\] calibration.*validation, training"):
+        MeasurementView.from_spec(spec, "calibration")  # type: ignore[arg-type]
+    with pytest.raises(DataError, match="holds 0 grid point"):
+        MeasurementView.from_spec(spec, "training")
+    bad = _spec(tmp_path, _rows(t, FI=np.ones(t.size), TJ=np.ones(t.size)))
+    with pytest.raises(DataError, match="tag 'TI' is missing from measurements.csv"):
+        MeasurementView.from_spec(bad)
+    with pytest.raises(DataError, match="'TX' is not in the measurement view"):
+        v.values("TX")
+
+
+def test_view_as_a_table_and_an_open_ended_window(tmp_path):
+    t = np.arange(0.0, 60.0, 10.0)
+    fi = np.array([5.0, 5.0, 0.0, 5.0, 5.0, 5.0])
+    spec = _spec(tmp_path, _rows(t, FI=fi, TI=t + 1.0), stoppage=StoppageRule("FI", 1.0, 0.0))
+    v = MeasurementView.from_spec(spec, (10.0, float("inf")))
+    assert v.grid.tolist() == t.tolist()
+    frame = v.to_frame()
+    assert list(frame.columns) == ["time", "FI", "TI"] and frame["TI"].tolist() == (t + 1.0).tolist()
+    # scored: from 10 s on, not at the stopped 20 s
+    assert v.to_frame(scored=True)["TI"].isna().tolist() == [True, False, True, False, False, False]
+    assert v.to_frame(scored=True)["FI"].tolist() == fi.tolist()  # not an output: unchanged

@@ -619,6 +619,17 @@ class MeasurementView:
         """``(first, last)`` grid times of each run of missing samples of *tag* (:func:`nan_spans`)."""
         return nan_spans(pd.Series(self.values(tag)), self.grid)
 
+    def to_frame(self, *, scored: bool = False) -> pd.DataFrame:
+        """``time`` (the grid) and one column per tag, as a table.
+
+        With *scored*, output tags are NaN where they are not scored
+        (:meth:`scored_values`); other tags are as in :attr:`samples`.
+        """
+        frame: dict[str, npt.NDArray[np.float64]] = {"time": self.grid}
+        for tag in self.samples:
+            frame[tag] = self.scored_values(tag) if scored and tag in self.scored else self.samples[tag]
+        return pd.DataFrame(frame)
+
     def scored_counts(self) -> dict[str, int]:
         """Number of scored grid points per output tag."""
         return {tag: int(mask.sum()) for tag, mask in self.scored.items()}

@@ -56,15 +56,15 @@ first input values) drift during a held pre-run; give such twins a short
 
 Grid
 ----
-Every window is simulated on the spec's ``sample_time`` grid starting at the
-window's start. Each tag is resampled onto that grid separately by
-:func:`trackingbox.data.resample`: linear interpolation between that tag's
-valid samples, never across a gap longer than ``data.max_gap`` (grid points in
-such a gap are NaN). Without ``max_gap`` in the spec, a tag's gap limit is 1.5
-times its median sampling interval, so irregular per-tag sampling is
-interpolated but a stretch of missing (NaN) samples is not. Output samples that
-are NaN, in a long gap, or in a stoppage (``data.stoppage``: the tag below the
-threshold, plus ``settle`` seconds after) are left out of the cost. Inputs must
+Every window is taken from the spec's measurement view
+(:class:`trackingbox.data.MeasurementView`), the one tracking and validation
+use: grid points ``k * sample_time`` from the first sample, each tag
+resampled onto them separately (linear interpolation between that tag's valid
+samples, never across a gap longer than ``data.max_gap``, or, without it,
+:func:`trackingbox.data.default_max_gap`: 2.5 times the tag's median sampling
+interval). Output samples that are NaN, in a long gap, or in a stoppage
+(``data.stoppage``: the tag below the threshold, plus ``settle`` seconds
+after) are left out of the cost (the view's ``scored`` samples). Inputs must
 be valid over the whole window, otherwise the twin cannot be simulated
 (:class:`~trackingbox.errors.DataError` naming the tag and the span).
 """
@@ -79,7 +79,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 try:  # Python >= 3.11
     import tomllib
@@ -90,9 +90,11 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from .data import stoppage_mask
 from .errors import DataError, EstimationError, SimulationError, SpecError, TrackingError, unknown_name
 from .io import write_text_atomic
+
+if TYPE_CHECKING:
+    from .spec import Spec
 
 log = logging.getLogger(__name__)
 
@@ -462,19 +464,6 @@ def _get(obj: Any, name: str, default: Any = None) -> Any:
 
 
 
-def _default_max_gap(column: pd.DataFrame) -> float:
-    """Gap bridged when the spec sets no ``max_gap``: 1.5 x the tag's median sampling interval.
-
-    So a tag sampled irregularly (empty cells between its samples in a wide CSV)
-    is interpolated between its own samples, while a stretch of missing samples
-    longer than its usual spacing is masked, not bridged.
-    """
-    t = column["time"].to_numpy(dtype=float)[np.isfinite(column.iloc[:, 1].to_numpy(dtype=float))]
-    if t.size < 2:
-        return math.inf
-    return 1.5 * float(np.median(np.diff(t)))
-
-
 def _spans(time_s: np.ndarray, bad: np.ndarray) -> list[tuple[float, float]]:
     spans: list[tuple[float, float]] = []
     i = 0
@@ -525,9 +514,11 @@ def coarsen(window: WindowData, stride: int) -> WindowData:
     )
 
 
-def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
-    """Read the spec's measurements and cut the training and validation windows.
+def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
+    """Cut the training and validation windows out of the spec's measurement view.
 
+    Each window is a :class:`~trackingbox.data.MeasurementView` (same grid,
+    gap rule, stoppage mask and scored samples as tracking and validation).
     A window that starts after the first sample gets a *lead-in*: up to
     ``warmup`` seconds of the measured inputs before it (never across an input
     gap), simulated but not part of the cost, so the twin's slow states follow
@@ -547,77 +538,55 @@ def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData,
         A tag is missing from the measurements, an input has no valid data over
         part of a window, or an output tag has too few valid samples.
     """
-    from . import data
+    from .data import MeasurementView
 
-    rules = _get(spec, "data")
-    stoppage = _get(rules, "stoppage")
-    max_gap = _get(rules, "max_gap")
-    tags = list(dict.fromkeys([*spec.inputs, *spec.outputs, *([_get(stoppage, "tag")] if stoppage else [])]))
-    table = data.read_table(spec.measurements, required=tags, allow_nan=True)
-    t0 = float(table["time"].iloc[0])
     where = Path(spec.measurements).name
-
     windows = _get(spec, "windows")
+    lead_s = DEFAULT_WARMUP if warmup is None else float(warmup)
     out = []
     for name in ("training", "validation"):
         span = _get(windows, name)
         if span is None:
             raise SpecError(f"spec {getattr(spec, 'path', '')} has no [windows] {name} = [start, stop]")
         start, stop = float(span[0]), float(span[1])
-        dt = float(spec.sample_time)
-        window_grid = np.arange(start, stop - 1e-9, dt)
-        n_lead = int(math.floor(min(DEFAULT_WARMUP if warmup is None else float(warmup), start) / dt + 1e-9))
-        grid = np.concatenate((start - dt * np.arange(n_lead, 0, -1), window_grid))
-        if len(window_grid) < 2:
-            raise DataError(
-                f"{name} window [{start:g}, {stop:g}) s holds {len(window_grid)} sample(s) of "
-                f"{spec.sample_time:g} s; estimation needs at least {MIN_VALID_SAMPLES}"
-            )
-        sampled = {}
-        for tag in tags:
-            column = table[["time", tag]]
-            gap = float(max_gap) if max_gap is not None else _default_max_gap(column)
-            sampled[tag] = data.resample(column, t0 + grid, max_gap=gap)[tag]
+        try:
+            view = MeasurementView.from_spec(spec, name, lead=lead_s)
+        except DataError as exc:
+            raise DataError(f"{name} window: {exc}; estimation needs at least {MIN_VALID_SAMPLES} samples") \
+                from None
+        grid = view.grid
+        n_lead = view.lead
+        n_window = grid.size - n_lead
         # the lead-in starts after the last input gap before the window
         cut = 0
         for tag in spec.inputs:
-            bad_lead = np.flatnonzero(~np.isfinite(np.asarray(sampled[tag], dtype=float)[:n_lead]))
+            bad_lead = np.flatnonzero(~np.isfinite(view.values(tag)[:n_lead]))
             if bad_lead.size:
                 cut = max(cut, int(bad_lead[-1]) + 1)
         grid = grid[cut:]
-        sampled = {tag: np.asarray(v, dtype=float)[cut:] for tag, v in sampled.items()}
         lead = n_lead - cut
         problems = []
         inputs = {}
         for tag, fmu_name in spec.inputs.items():
-            v = sampled[tag]
+            v = view.values(tag)[cut:]
             bad = ~np.isfinite(v)
             if bad.any():
                 spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, bad)[:5])
                 problems.append(
                     f"input tag {tag!r} in {where} has no valid data in the {name} window at {spans} "
-                    f"({int(bad.sum())} of {len(window_grid)} samples); the twin cannot be simulated across it"
+                    f"({int(bad.sum())} of {n_window} samples); the twin cannot be simulated across it"
                 )
             inputs[fmu_name] = v
-        excluded = np.zeros(len(grid), dtype=bool)
-        if stoppage is not None:
-            excluded = stoppage_mask(
-                grid,
-                np.asarray(sampled[_get(stoppage, "tag")], dtype=float),
-                float(_get(stoppage, "below")),
-                float(_get(stoppage, "settle", 0.0) or 0.0),
-            )
+        n_stopped = int((view.stopped & view.in_window).sum())
         measured = {}
         for tag in spec.outputs:
-            v = np.asarray(sampled[tag], dtype=float).copy()
-            v[excluded] = np.nan
-            v[:lead] = np.nan  # the lead-in is simulated, not scored
+            v = view.scored_values(tag)[cut:]  # NaN: missing, long gap, stoppage, lead-in
             n_ok = int(np.isfinite(v).sum())
             if n_ok < MIN_VALID_SAMPLES:
                 problems.append(
                     f"output tag {tag!r} has {n_ok} valid samples in the {name} window "
                     f"[{start:g}, {stop:g}) s after removing NaN, long gaps and stoppages "
-                    f"({int(excluded[lead:].sum())} stoppage samples); estimation needs at least "
+                    f"({n_stopped} stoppage samples); estimation needs at least "
                     f"{MIN_VALID_SAMPLES}"
                 )
             measured[tag] = v
@@ -627,7 +596,7 @@ def load_windows(spec: Any, *, warmup: float | None = None) -> tuple[WindowData,
     return out[0], out[1]
 
 
-def problem_from_spec(spec: Any, *, warmup: float | None = None) -> Problem:
+def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
     """Build the picklable :class:`Problem` of a loaded spec.
 
     Checks that every estimated and fixed parameter and every input/output name

@@ -18,8 +18,11 @@ tracked parameter: final value, range, whether it stayed within its bounds and
 the **agreement** with the runtime: ``max_t |p_modelica - p_python| / (max - min)``.
 
 Both runs start at the first sample because the twin's state at the start of
-the validation window is only known by simulating up to it; the metrics use
-the validation window only. State compensation (``[[states]]``) is not
+the validation window is only known by simulating up to it. Both runs and the
+metrics use one :class:`~trackingbox.data.MeasurementView` of the validation
+window: the NRMSE figures are taken over the samples it scores (valid, inside
+the window, after the start-up hold, outside stoppages), the same samples
+``track`` and ``estimate`` score there. State compensation (``[[states]]``) is not
 generated into the box: the tracked FMU's correction inputs are fed with the
 correction flows the Python runtime computed.
 """
@@ -30,14 +33,18 @@ import math
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
 from .generate.filters import modelica_name
+
+if TYPE_CHECKING:
+    from .spec import Spec
 
 logger = logging.getLogger(__name__)
 
@@ -145,30 +152,16 @@ def agreement(p_a: npt.ArrayLike, p_b: npt.ArrayLike, lower: float, upper: float
     return float(np.max(np.abs(a[ok] - b[ok])) / (upper - lower))
 
 
-def _hold_signal(spec: Any, grid: np.ndarray, measured: dict[str, np.ndarray]) -> np.ndarray:
-    """1 where the Python runtime would hold the controllers (start-up, stoppage, missing data)."""
-    hold = grid < float(spec.tracking.hold_until) - 1e-9
-    stop = spec.data.stoppage
-    if stop is not None:
-        from .data import stoppage_mask
-
-        values = measured.get(stop.tag)
-        if values is not None:
-            hold |= stoppage_mask(grid, values, float(stop.below), float(stop.settle))
+def _hold_signal(spec: Spec, view: MeasurementView) -> np.ndarray:
+    """1 where the Python runtime holds the controllers (start-up, stoppage, missing data), else 0."""
+    hold = view.grid < float(spec.tracking.hold_until) - 1e-9
+    hold = hold | view.stopped
     for pair in spec.pairs:
-        hold |= ~np.isfinite(measured[pair.variable])
+        hold |= ~np.isfinite(view.values(pair.variable))
     return hold.astype(float)
 
 
-def _fill(values: np.ndarray) -> np.ndarray:
-    ok = np.isfinite(values)
-    if ok.all() or not ok.any():
-        return values
-    idx = np.arange(values.size)
-    return np.interp(idx, idx[ok], values[ok])
-
-
-def validate(spec: Any, fmu: str | Path, *, work_dir: str | Path | None = None, band: float = 0.05,
+def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None, band: float = 0.05,
              smooth: int = 5, tolerance: float = 1e-6) -> ValidationResult:
     """Run the tracked FMU, the untracked twin and the Python runtime; compare on the validation window.
 
@@ -209,39 +202,34 @@ def validate(spec: Any, fmu: str | Path, *, work_dir: str | Path | None = None, 
     if not fmu.is_file():
         raise FMUError(f"tracked FMU {fmu} does not exist (make it with `trackingbox generate SPEC --compile`)")
 
+    # one view for the runtime and the tracked FMU: grid, samples, stoppage, twin inputs, scored samples
+    view = MeasurementView.from_spec(spec, "validation", skip=float(spec.tracking.hold_until))
     with tempfile.TemporaryDirectory(prefix="trackingbox-validate-") as tmp:
         run_dir = Path(work_dir) if work_dir is not None else Path(tmp)
         logger.info("running the Python tracking runtime (and the untracked twin)")
-        tr = track(spec, out_dir=run_dir / "python", window="validation", untracked=True, tolerance=tolerance)
+        tr = track(spec, out_dir=run_dir / "python", window="validation", untracked=True, tolerance=tolerance,
+                   view=view)
         py = pd.read_csv(tr.csv)
     window = tuple(float(v) for v in tr.window)
-    grid = py["time"].to_numpy(dtype=float)
-    measured = {tag: py[f"measured:{tag}"].to_numpy(dtype=float) for tag in spec.outputs if f"measured:{tag}" in py}
+    grid = view.grid
+    if py.shape[0] != grid.size or not np.array_equal(py["time"].to_numpy(dtype=float), grid):
+        raise DataError(f"the Python runtime's grid ({py.shape[0]} rows) differs from the measurement view's "
+                        f"({grid.size} points) for {spec.path}")
 
-    # Inputs of the tracked FMU: the twin's inputs (from their tags), the measurements, hold.
-    from . import data
-
-    table = data.read_table(spec.measurements, allow_nan=True)
-    t0 = float(table["time"].iloc[0])
-    tags = list(dict.fromkeys([*spec.inputs, *(p.variable for p in spec.pairs),
-                               *([spec.data.stoppage.tag] if spec.data.stoppage else [])]))
-    sampled = data.resample(table[["time", *tags]], t0 + grid, max_gap=spec.data.max_gap)
-    for tag in tags:
-        measured.setdefault(tag, np.asarray(sampled[tag], dtype=float))
-    inputs = {"time": grid}
-    for tag, name in spec.inputs.items():
-        inputs[name] = _fill(np.asarray(sampled[tag], dtype=float))
+    # Inputs of the tracked FMU: the twin's inputs, the measurements (filled), hold.
+    inputs = view.inputs.to_dict(orient="series")
+    inputs = {name: np.asarray(v, dtype=float) for name, v in inputs.items()}
     pair_names = {p.parameter: modelica_name(p.parameter) for p in spec.pairs}
     for pair in spec.pairs:
-        inputs[f"{modelica_name(pair.variable)}_meas"] = _fill(measured[pair.variable])
-    inputs[HOLD_INPUT] = _hold_signal(spec, grid, measured)
+        inputs[f"{modelica_name(pair.variable)}_meas"] = view.filled(pair.variable)
+    inputs[HOLD_INPUT] = _hold_signal(spec, view)
     # State compensation ([[states]]) is not part of the generated box: the twin's
     # correction inputs stay inputs of the tracked model and get the correction
     # flows the Python runtime computed, so both runs see the same tanks.
     for st in spec.states:
         column = f"correction:{st.correction}"
         if column in py:
-            inputs[st.correction] = _fill(py[column].to_numpy(dtype=float))
+            inputs[st.correction] = fill_nan(py[column].to_numpy(dtype=float))
     outputs = list(dict.fromkeys([*(spec.outputs[p.variable] for p in spec.pairs), *pair_names.values()]))
 
     model = FMUModel(fmu, tolerance=tolerance)
@@ -260,22 +248,20 @@ def validate(spec: Any, fmu: str | Path, *, work_dir: str | Path | None = None, 
         sim = pd.DataFrame({c: np.interp(grid, sim["time"], sim[c]) for c in sim.columns if c != "time"})
         sim.insert(0, "time", grid)
 
-    in_window = (grid >= window[0] - 1e-9) & (grid < window[1] - 1e-9)
-    if not in_window.any():
-        raise DataError(f"the validation window {list(window)} of {spec.path} holds no measurement samples")
+    in_window = view.in_window
     series = pd.DataFrame({"time": grid, HOLD_INPUT: inputs[HOLD_INPUT]})
     variables: dict[str, VariableValidation] = {}
     for pair in sorted(spec.pairs, key=lambda p: p.variable):
         tag = pair.variable
         if tag in variables:
             continue
-        meas = measured[tag]
+        meas = view.values(tag)
         tracked = sim[spec.outputs[tag]].to_numpy(dtype=float)
         untracked = py[f"untracked:{tag}"].to_numpy(dtype=float)
         python = py[f"tracked:{tag}"].to_numpy(dtype=float)
         p = spec.parameter(pair.parameter)
         span = abs(pair.gain) * (p.max - p.min)
-        w = in_window
+        w = view.scored[tag]  # the samples tracking and estimation score too
         # convergence is timed over the whole run, from the first sample
         conv = time_to_converge(grid, tracked - meas, band * span, smooth=smooth)
         variables[tag] = VariableValidation(

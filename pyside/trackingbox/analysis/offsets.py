@@ -28,15 +28,15 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
-from ..data import stoppage_mask
-from ..errors import AnalysisError, TrackingError, unknown_name
+from ..errors import AnalysisError, DataError, TrackingError, unknown_name
+
+if TYPE_CHECKING:
+    from ..spec import Spec
 
 logger = logging.getLogger(__name__)
 
@@ -163,16 +163,18 @@ class Residuals:
 
 
 
-def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, stop: float,
+def simulate_untracked(spec: Spec, variables: Sequence[str], *, start: float, stop: float,
                        skip: float | None = None, tolerance: float = 1e-6) -> Residuals:
     """Run the twin untracked from the first sample to *stop* and collect *variables*.
 
-    The twin gets the measured inputs (resampled onto the spec's
-    ``sample_time`` grid, gaps interpolated), the parameter starts and fixed
+    The data come from the spec's measurement view
+    (:class:`trackingbox.data.MeasurementView`, the one tracking and validation
+    use). The twin gets its input table (gaps filled), the parameter starts and fixed
     values, and the proportional state compensation of the spec's
     ``[[states]]`` (the same correction ``track`` applies to its untracked
-    twin). Samples before ``max(start, skip)``, inside a stoppage, or with a
-    missing measurement are NaN in the result.
+    twin). Samples the view does not score (before ``max(start, skip)``,
+    inside a stoppage, missing, or in a gap longer than the view's gap limit)
+    are NaN in the result.
 
     Parameters
     ----------
@@ -195,47 +197,36 @@ def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, sto
     AnalysisError
         An unknown tag, a window without samples, or a twin that fails.
     """
-    from .. import data
+    from ..data import MeasurementView
     from ..fmu import FMUModel
     from ..tracking.controllers import StateCompensator
 
-    table = data.read_table(spec.measurements, allow_nan=True)
-    where = Path(spec.measurements).name
-    columns = [c for c in table.columns if c != "time"]
-    for tag in [*spec.inputs, *variables, *(s.tag for s in spec.states)]:
-        if tag not in columns:
-            raise AnalysisError(unknown_name("tag", tag, columns, where))
-    t_abs = table["time"].to_numpy(dtype=float)
-    t0 = float(t_abs[0])
-    ts = float(spec.sample_time)
-    stop = min(float(stop), float(t_abs[-1] - t0) + ts)
-    n = int(math.ceil(stop / ts - 1e-9))
-    if n < 2 or stop <= start:
-        raise AnalysisError(f"the analysis window [{start:g}, {stop:g}) s of {where} holds no samples")
-    grid = ts * np.arange(n)
-    tags = list(dict.fromkeys([*spec.inputs, *variables, *(s.tag for s in spec.states)]))
-    rule = spec.data.stoppage
-    if rule is not None and rule.tag in columns and rule.tag not in tags:
-        tags.append(rule.tag)
-    sampled = data.resample(table[["time", *tags]], t0 + grid, max_gap=spec.data.max_gap)
-    inputs: dict[str, Any] = {"time": grid}
-    for tag, name in spec.inputs.items():
-        v = sampled[tag].to_numpy(dtype=float)
-        ok = np.isfinite(v)
-        if not ok.any():
-            raise AnalysisError(f"input tag {tag!r} in {where} has no valid value before {stop:g} s")
-        inputs[name] = v if ok.all() else np.interp(np.arange(v.size), np.flatnonzero(ok), v[ok])
+    for tag in variables:
+        if tag not in spec.outputs:
+            raise AnalysisError(unknown_name("tag", tag, list(spec.outputs), f"[outputs] of {spec.path}"))
+    first = max(float(start), float(spec.tracking.hold_until if skip is None else skip))
+    try:
+        view = MeasurementView.from_spec(spec, (float(start), float(stop)), skip=first, tags=variables)
+    except DataError as exc:
+        raise AnalysisError(f"the untracked analysis over [{start:g}, {stop:g}) s: {exc}") from None
+    where = view.source.name
+    grid = view.grid
+    n = grid.size
+    ts = view.sample_time
+    for tag in spec.inputs:
+        if not np.isfinite(view.values(tag)).any():
+            raise AnalysisError(f"input tag {tag!r} in {where} has no valid value before {grid[-1]:g} s")
     base = {p.name: p.start for p in spec.parameters}
     base.update(spec.fixed)
     outs = [spec.outputs[v] for v in variables]
     levels = [s.variable for s in spec.states]
     comps = [StateCompensator(s.gain, ts=ts) for s in spec.states]
-    level_meas = [sampled[s.tag].to_numpy(dtype=float) for s in spec.states]
+    level_meas = [view.values(s.tag) for s in spec.states]
     sim = np.full((len(outs), n), math.nan)
     model = FMUModel(spec.twin, tolerance=tolerance)
     try:
         stepper = model.stepper(start_time=0.0, parameters={**base, **{s.correction: 0.0 for s in spec.states}},
-                                inputs=pd.DataFrame(inputs))
+                                inputs=view.inputs)
         for k in range(n):
             sim[:, k] = stepper.get(outs)
             if k == n - 1:
@@ -249,14 +240,11 @@ def simulate_untracked(spec: Any, variables: Sequence[str], *, start: float, sto
         raise AnalysisError(f"the untracked twin failed over the training window: {exc}") from None
     finally:
         model.close()
-    meas = np.array([sampled[v].to_numpy(dtype=float) for v in variables]).reshape(len(variables), n)
-    first = max(float(start), float(spec.tracking.hold_until if skip is None else skip))
-    excluded = grid < first - 1e-9
-    if rule is not None and rule.tag in sampled.columns:
-        excluded |= stoppage_mask(grid, sampled[rule.tag].to_numpy(dtype=float), float(rule.below),
-                                  float(rule.settle))
-    meas[:, excluded] = math.nan
-    sim[:, excluded] = math.nan
+    # scored: valid, inside [start, stop), after the start-up skip, not in a stoppage
+    scored = np.array([view.scored[v] for v in variables]).reshape(len(variables), n)
+    meas = np.array([view.values(v) for v in variables]).reshape(len(variables), n)
+    meas[~scored] = math.nan
+    sim[~scored] = math.nan
     keep = grid >= float(start) - 1e-9
     return Residuals(tuple(variables), grid[keep], meas[:, keep], sim[:, keep], ts)
 

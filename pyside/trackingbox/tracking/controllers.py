@@ -147,6 +147,14 @@ class _ScaledController:
         self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
         self.mode = state["mode"]
 
+    def state_dict(self) -> dict[str, Any]:
+        """The controller's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
+        return self.state()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        self.restore(state)
+
 
 class ScaledPI(_ScaledController):
     """PI parameter controller in velocity form on a 0-100 % output.
@@ -311,6 +319,14 @@ class StateCompensator:
         self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
         self.mode = state["mode"]
         self.started = bool(state["started"])
+
+    def state_dict(self) -> dict[str, Any]:
+        """The compensator's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
+        return self.state()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        self.restore(state)
 
 
 def direction_from_gain(gain: float) -> int:

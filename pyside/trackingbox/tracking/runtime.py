@@ -23,12 +23,22 @@ missing (NaN, long gaps masked by ``data.max_gap``), during a flow stoppage
 running through start-up hold and stoppages (it protects the twin's tanks)
 and holds only while its own level measurement is missing.
 
-Checkpoints (JSON, every ``checkpoint_every`` steps and at the end) hold the
-step index, the CSV length, controller and compensator states, metric
-accumulators and, for model-exchange FMUs, the continuous state vectors of both
-twins. ``resume=True`` truncates the CSV to the checkpoint and continues. For
-co-simulation FMUs, whose states are not accessible, the twins are rebuilt by
-*replaying* the recorded parameter and correction trajectory from the CSV.
+The loop is a :class:`TrackingLoop` whose parts (the parameter controllers,
+the state compensation, the tracked and untracked twins, the output stream)
+each save and restore their own state (``state_dict()`` /
+``load_state_dict()``). A checkpoint (JSON, every ``checkpoint_every`` steps
+and at the end) is the loop's state: the row index and the parts' states
+(controller and compensator states, the applied values and, for
+model-exchange FMUs, the continuous states of both twins, the CSV length and
+the summaries). ``resume=True`` truncates the CSV to the checkpoint and
+continues. For co-simulation FMUs, whose states are not accessible, the twins
+are rebuilt by *replaying* the recorded parameter and correction trajectory
+from the CSV. Every checkpoint is also a restart point of an uninterrupted
+run, so a run resumed from a checkpoint writes the same bytes.
+
+The data (grid, per-tag samples with the gap rule, stoppage mask, the twin's
+input table and the samples scored per tag) come from the spec's
+:class:`~trackingbox.data.MeasurementView`, as in estimation and validation.
 
 A :class:`~trackingbox.errors.SimulationError` during a step is logged, the
 twin is re-initialised from its last good state (the continuous states after
@@ -50,17 +60,20 @@ import time as _time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from ..data import stoppage_mask
+from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
 from .controllers import Scaling, ScaledPI, SlidingMode, StateCompensator, direction_from_gain
 from .tuning import tune_scaled_pi
+
+if TYPE_CHECKING:
+    from ..spec import Spec
 
 log = logging.getLogger(__name__)
 
@@ -70,12 +83,12 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 1
+_CHECKPOINT_VERSION = 2  # 2: one entry per part of the loop (controllers, compensation, twins, output)
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
 __all__ = [
-    "TrackingResult", "VariableResult", "ParameterResult", "TrackingEvent", "track",
+    "TrackingResult", "VariableResult", "ParameterResult", "TrackingEvent", "TrackingLoop", "track",
     "CSV_NAME", "CHECKPOINT_NAME", "RESULT_NAME",
 ]
 
@@ -247,15 +260,6 @@ class _Fit:
 
 
 
-def _fill(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Linear interpolation over NaN, held at the ends (inputs must be finite)."""
-    ok = np.isfinite(values)
-    if ok.all() or not ok.any():
-        return values
-    idx = np.arange(values.size)
-    return np.interp(idx, idx[ok], values[ok])
-
-
 def _json_float(x: float | None) -> Any:
     if x is None:
         return None
@@ -294,10 +298,12 @@ class _Twin:
     """One FMU run that can be restarted from saved states or a replayed trajectory."""
 
     def __init__(self, path: Path, *, label: str, base: Mapping[str, float], inputs: pd.DataFrame | None,
-                 tolerance: float) -> None:
+                 tolerance: float, recorded: Mapping[str, str]) -> None:
         from ..fmu import FMUModel
 
         self.label = label
+        #: value name -> CSV column holding what was applied (for a replay)
+        self.recorded = dict(recorded)
         self.model = FMUModel(path, tolerance=tolerance)
         self.base = dict(base)
         self.inputs = inputs
@@ -346,6 +352,23 @@ class _Twin:
         if first:
             self.start(t0, {})
 
+    def replay_csv(self, csv_path: Path, rows: int, grid: npt.NDArray[np.float64]) -> None:
+        """Rebuild the run from 0 by replaying the values recorded in the first *rows* rows of the CSV."""
+        self.replay(0.0, _read_rows(csv_path, rows, self.recorded, grid))
+
+    def state_dict(self) -> dict[str, Any]:
+        """The values applied and, for model exchange, the continuous states after the last step."""
+        return {"applied": dict(self.applied), "x": self.x.tolist() if self.x is not None else None}
+
+    def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
+                        grid: npt.NDArray[np.float64]) -> None:
+        """Put the twin at *t* as :meth:`state_dict` saved it: from its states, else by replaying the CSV."""
+        x = state.get("x")
+        if x is not None and self.me:
+            self.start(t, {n: float(v) for n, v in state["applied"].items()}, x)
+        else:
+            self.replay_csv(csv_path, rows, grid)
+
     def close(self) -> None:
         self.model.close()
 
@@ -372,11 +395,7 @@ class _State:
 
 @dataclass
 class _Plan:
-    grid: npt.NDArray[np.float64]          # s from the first sample
-    measured: dict[str, npt.NDArray[np.float64]]
-    inputs: pd.DataFrame
-    stopped: npt.NDArray[np.bool_]
-    metric_window: tuple[float, float]
+    view: MeasurementView                  # grid, samples, stoppage mask, twin inputs, scored samples
     columns: list[str]
     read_names: list[str]                  # twin variables read each step (output + state variables)
     out_tags: list[str]                    # tags with a tracked/untracked column, in column order
@@ -445,62 +464,30 @@ def _check_authority(pair: _Pair, measured: npt.NDArray[np.float64], events: lis
         events.append(TrackingEvent(0.0, "weak-pair", msg))
 
 
-def _plan(spec: Any, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
-    from .. import data
-
+def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: MeasurementView | None = None) -> _Plan:
     if not spec.pairs:
         raise SpecError(f"spec {spec.path} has no [[pairs]]; run `trackingbox pair` first or add them")
-    table = data.read_table(spec.measurements, allow_nan=True)
-    where = Path(spec.measurements).name
-    columns = [c for c in table.columns if c != "time"]
     problems = []
-    stoppage = spec.data.stoppage
-    needed = [*spec.inputs, *(p.variable for p in spec.pairs), *(s.tag for s in spec.states)]
-    if stoppage is not None:
-        needed.append(stoppage.tag)
-    for tag in dict.fromkeys(needed):
-        if tag not in columns:
-            problems.append(unknown_name("tag", tag, columns, where))
     for pair in spec.pairs:
         if pair.variable not in spec.outputs:
             problems.append(unknown_name("tracking variable", pair.variable, spec.outputs, f"[outputs] of {spec.path}"))
     if problems:
         raise DataError("; ".join(problems))
-
-    t_abs = table["time"].to_numpy(dtype=float)
-    t0 = float(t_abs[0])
-    end = float(t_abs[-1] - t0)
-    ts = float(spec.sample_time)
-    if window == "all":
-        metric = (0.0, end + ts)
-    else:
-        if window not in spec.windows:
-            raise SpecError(f"spec {spec.path} has no [windows] {window} = [start, stop]"
-                            f"{'' if not spec.windows else ' (it has: ' + ', '.join(spec.windows) + ')'}")
-        metric = tuple(float(v) for v in spec.windows[window])  # type: ignore[assignment]
-    stop = min(end, metric[1])
-    n = int(math.floor(stop / ts + 1e-9)) + 1
-    if metric[1] <= end:  # [start, stop): do not step onto the window's end
-        n = int(math.ceil(metric[1] / ts - 1e-9))
-    grid = ts * np.arange(max(n, 2))
-    tags = list(dict.fromkeys([*needed, *spec.outputs]))
-    tags = [t for t in tags if t in columns]
-    sampled = data.resample(table[["time", *tags]], t0 + grid, max_gap=spec.data.max_gap)
-    measured = {tag: np.asarray(sampled[tag], dtype=float) for tag in tags}
-
-    inputs = {"time": grid}
-    for tag, name in spec.inputs.items():
-        v = measured[tag]
-        bad = ~np.isfinite(v)
+    if view is None:
+        view = MeasurementView.from_spec(spec, window, skip=float(spec.tracking.hold_until))
+    elif view.grid.size == 0 or view.grid[0] != 0.0 or view.skip != float(spec.tracking.hold_until):
+        raise DataError(f"the measurement view given to track() must start at the first sample and skip the "
+                        f"start-up hold ({spec.tracking.hold_until:g} s): build it with "
+                        f"MeasurementView.from_spec(spec, {window!r}, skip=spec.tracking.hold_until)")
+    where = view.source.name
+    grid = view.grid
+    for tag in spec.inputs:
+        bad = ~np.isfinite(view.values(tag))
         if bad.all():
             raise DataError(f"input tag {tag!r} in {where} has no valid value between 0 and {grid[-1]:g} s")
         if bad.any():
             log.warning("input tag %r in %s is missing at %d of %d samples; interpolated/held for the twin",
                         tag, where, int(bad.sum()), bad.size)
-        inputs[name] = _fill(v)
-    stopped = np.zeros(grid.size, dtype=bool)
-    if stoppage is not None:
-        stopped = stoppage_mask(grid, measured[stoppage.tag], float(stoppage.below), float(stoppage.settle))
 
     out_tags: list[str] = list(spec.outputs)
     tag_var = dict(spec.outputs)
@@ -526,29 +513,464 @@ def _plan(spec: Any, window: Window, untracked: bool | pd.DataFrame) -> _Plan:
             if name not in untracked.columns:
                 raise DataError(unknown_name("column", name, untracked.columns, "the untracked simulation table"))
             untracked_table[name] = np.interp(grid, ut, untracked[name].to_numpy(dtype=float))
-    return _Plan(grid, measured, pd.DataFrame(inputs), stopped, metric, cols, read_names, out_tags, tag_var,
-                 untracked_table)
+    return _Plan(view, cols, read_names, out_tags, tag_var, untracked_table)
 
 
-def _read_rows(path: Path, upto: int, names: Sequence[str], prefix: str, grid: npt.NDArray[np.float64],
+def _read_rows(path: Path, upto: int, columns: Mapping[str, str], grid: npt.NDArray[np.float64],
                ) -> Iterator[tuple[float, dict[str, float]]]:
-    """Recorded values of *names* (columns ``prefix + name``) for rows ``0 .. upto-1``, as replay steps."""
+    """Recorded values (name -> its CSV column) of rows ``0 .. upto-1``, as replay steps ``(t_next, values)``."""
     if upto <= 0:
         return
     with open(path, newline="", encoding="utf-8") as fh:
         reader = csv.reader(fh)
         header = next(reader)
-        idx = [header.index(prefix[i] + n) for i, n in enumerate(names)]
+        idx = {name: header.index(column) for name, column in columns.items()}
         for k, row in enumerate(reader):
             if k >= upto:
                 break
-            yield float(grid[k + 1]), {n: float(row[j]) for n, j in zip(names, idx)}
+            yield float(grid[k + 1]), {n: float(row[j]) for n, j in idx.items()}
+
+
+# --------------------------------------------------------------------------- the parts of the loop
+
+class _Controllers:
+    """The parameter controllers of the ``[[pairs]]`` and their missing-data bookkeeping."""
+
+    def __init__(self, pairs: Sequence[_Pair]) -> None:
+        self.pairs = list(pairs)
+        self.names = [p.parameter for p in self.pairs]
+        #: tag -> time its measurement went missing (None while present)
+        self.missing: dict[str, float | None] = {p.tag: None for p in self.pairs}
+
+    def values(self) -> dict[str, float]:
+        """Parameter name -> the value its controller outputs."""
+        return {p.parameter: p.controller.value for p in self.pairs}
+
+    def update(self, t: float, k: int, y: npt.NDArray[np.float64], ridx: Mapping[str, int], view: MeasurementView,
+               hold: bool, event: Callable[..., None]) -> list[str]:
+        """Advance every controller one sample (setpoint: the measured tag); return their modes."""
+        modes = []
+        for p in self.pairs:
+            sp = float(view.samples[p.tag][k])
+            pv = float(y[ridx[p.fmu_name]])
+            ok = math.isfinite(sp)
+            if not ok and self.missing[p.tag] is None:
+                self.missing[p.tag] = t
+                event(t, "missing", f"tag {p.tag!r} missing from t = {t:g} s: controller of "
+                      f"{p.parameter!r} on hold", logging.INFO)
+            elif ok and self.missing[p.tag] is not None:
+                event(t, "resumed", f"tag {p.tag!r} back at t = {t:g} s after {t - self.missing[p.tag]:g} s; "
+                      f"controller of {p.parameter!r} resumes (bumpless)", logging.INFO)
+                self.missing[p.tag] = None
+            p.controller.update(sp, pv, hold=hold)
+            modes.append(p.controller.mode)
+        return modes
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"controllers": {p.parameter: p.controller.state_dict() for p in self.pairs},
+                "missing": dict(self.missing)}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        for p in self.pairs:
+            p.controller.load_state_dict(state["controllers"][p.parameter])
+        self.missing = {k: _from_json_float(v) for k, v in state["missing"].items()}
+
+
+class _Compensation:
+    """State compensation of the ``[[states]]``: one compensator for each twin (tracked, untracked)."""
+
+    def __init__(self, states: Sequence[_State]) -> None:
+        self.states = list(states)
+        self.names = [s.correction for s in self.states]
+
+    def update(self, k: int, y: npt.NDArray[np.float64], yu: npt.NDArray[np.float64] | None,
+               ridx: Mapping[str, int], view: MeasurementView) -> tuple[dict[str, float], dict[str, float]]:
+        """Correction flows for the tracked twin and the untracked one (NaN without it)."""
+        corr, corr_u = {}, {}
+        for s in self.states:
+            meas = float(view.samples[s.tag][k])
+            corr[s.correction] = s.tracked.update(meas, float(y[ridx[s.variable]]))
+            corr_u[s.correction] = s.untracked.update(meas, float(yu[ridx[s.variable]])) \
+                if yu is not None else math.nan
+        return corr, corr_u
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"tracked": {s.correction: s.tracked.state_dict() for s in self.states},
+                "untracked": {s.correction: s.untracked.state_dict() for s in self.states}}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        for s in self.states:
+            s.tracked.load_state_dict(state["tracked"][s.correction])
+            s.untracked.load_state_dict(state["untracked"][s.correction])
+
+
+class _Output:
+    """The streamed CSV and the summaries of the run (parameter, correction and level ranges, fits)."""
+
+    def __init__(self, path: Path, columns: Sequence[str], parameters: Sequence[str], corrections: Sequence[str],
+                 levels: Sequence[str], fitted: Sequence[str]) -> None:
+        self.path = path
+        self.columns = list(columns)
+        self.pstats = {n: _Stats() for n in parameters}
+        self.cstats = {n: _Stats() for n in corrections}
+        self.sstats = {n: _Stats() for n in levels}
+        self.fits = {t: _Fit() for t in fitted}
+        self._fh: Any = None
+        self._writer: Any = None
+
+    def open(self) -> None:
+        """Start a new CSV with its header."""
+        self._fh = open(self.path, "w", newline="", encoding="utf-8")
+        self._writer = csv.writer(self._fh)
+        self._writer.writerow(self.columns)
+
+    def write(self, row: Sequence[Any]) -> None:
+        self._writer.writerow(row)
+
+    def flush(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def state_dict(self) -> dict[str, Any]:
+        """The CSV's valid length (bytes) and the summaries; flushes the CSV first."""
+        self._fh.flush()
+        return {"csv_bytes": self._fh.tell(),
+                "parameter_stats": {n: s.state() for n, s in self.pstats.items()},
+                "correction_stats": {n: s.state() for n, s in self.cstats.items()},
+                "state_stats": {n: s.state() for n, s in self.sstats.items()},
+                "fits": {t: f.state() for t, f in self.fits.items()}}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Cut the CSV back to the saved length (rows after it are redone) and append from there."""
+        with open(self.path, "r+b") as fh:
+            fh.truncate(int(state["csv_bytes"]))
+        for n in self.pstats:
+            self.pstats[n].restore(state["parameter_stats"][n])
+        for n in self.cstats:
+            self.cstats[n].restore(state["correction_stats"][n])
+        for n in self.sstats:
+            self.sstats[n].restore(state["state_stats"][n])
+        for t in self.fits:
+            self.fits[t].restore(state["fits"][t])
+        self._fh = open(self.path, "a", newline="", encoding="utf-8")
+        self._writer = csv.writer(self._fh)
 
 
 # --------------------------------------------------------------------------- the loop
 
+class TrackingLoop:
+    """The tracking loop over a spec's measurement view, made of parts that save their own state.
+
+    Parts: the parameter controllers, the state compensation, the tracked twin,
+    the untracked twin (optional) and the output stream (CSV and summaries).
+    Each has ``state_dict()`` / ``load_state_dict()``; :meth:`state_dict` of
+    the loop is theirs plus the loop's own (row, recovery hold, events) and is
+    what ``checkpoint.json`` holds. Use it through :func:`track`, or::
+
+        loop = TrackingLoop(spec, out_dir=out)
+        try:
+            loop.begin(resume=False)
+            loop.run()
+        finally:
+            loop.close()
+        result = loop.result()
+
+    Parameters are those of :func:`track`.
+    """
+
+    def __init__(self, spec: Spec, *, out_dir: str | Path, window: Window = "all",
+                 untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
+                 recovery_hold: float | None = None, tolerance: float = 1e-6,
+                 view: MeasurementView | None = None) -> None:
+        from ..spec import check_against_fmu
+
+        self.wall0 = _time.perf_counter()
+        self.spec = spec
+        self.window = window
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.csv_path = self.out_dir / CSV_NAME
+        self.ckpt_path = self.out_dir / CHECKPOINT_NAME
+        self.checkpoint_every = int(checkpoint_every)
+        check_against_fmu(spec)
+        self.plan = plan = _plan(spec, window, untracked, view)
+        self.view = plan.view
+        self.grid = plan.view.grid
+        self.n_rows = self.grid.size
+        self.ts = ts = float(spec.sample_time)
+        self.hold_until = float(spec.tracking.hold_until)
+        self.recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
+        self.events = plan.events
+
+        pairs = [_make_controller(spec, p, self.view.samples[p.variable]) for p in spec.pairs]
+        for p in pairs:
+            _check_authority(p, self.view.samples[p.tag], self.events)
+        self.controllers = _Controllers(pairs)
+        self.compensation = _Compensation([
+            _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts), StateCompensator(s.gain, ts=ts))
+            for s in spec.states])
+        self.output = _Output(self.csv_path, plan.columns, self.controllers.names, self.compensation.names,
+                              [s.tag for s in spec.states], list(spec.outputs))
+        self.read = plan.read_names
+        self.ridx = {name: i for i, name in enumerate(self.read)}
+        self.recovery_until = -math.inf
+        self.k = 0
+        self.k0 = 0
+        self.complete = True
+        base = {p.name: p.start for p in spec.parameters}
+        base.update(spec.fixed)
+        recorded = {**{n: f"parameter:{n}" for n in self.controllers.names},
+                    **{n: f"correction:{n}" for n in self.compensation.names}}
+        self.twin: _Twin | None = None
+        self.plain: _Twin | None = None
+        self.twin = _Twin(spec.twin, label="tracked", base=base, inputs=self.view.inputs, tolerance=tolerance,
+                          recorded=recorded)
+        if untracked is True:
+            try:
+                self.plain = _Twin(spec.twin, label="untracked", base=base, inputs=self.view.inputs,
+                                   tolerance=tolerance,
+                                   recorded={n: f"untracked_correction:{n}" for n in self.compensation.names})
+            except BaseException:
+                self.twin.close()
+                raise
+
+    # ------------------------------------------------------------------ state
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to continue the run from row :attr:`k` (JSON-serialisable after ``_jsonify``)."""
+        assert self.twin is not None
+        rows = self.k
+        return {
+            "version": _CHECKPOINT_VERSION,
+            "spec": str(self.spec.path),
+            "sample_time": self.ts,
+            "columns": self.plan.columns,
+            "rows": rows,
+            "rows_total": self.n_rows,
+            "window": self.window,
+            "time": float(self.grid[min(rows, self.n_rows - 1)]),
+            "complete": rows >= self.n_rows,
+            "parameters": self.controllers.values(),
+            "loop": {"recovery_until": self.recovery_until,
+                     "events": [[e.time, e.kind, e.message] for e in self.events]},
+            "controllers": self.controllers.state_dict(),
+            "compensation": self.compensation.state_dict(),
+            "twin": self.twin.state_dict(),
+            "untracked_twin": self.plain.state_dict() if self.plain is not None else None,
+            "output": self.output.state_dict(),
+        }
+
+    def check_state(self, state: Mapping[str, Any]) -> None:
+        """:class:`SpecError` unless *state* was saved by a run of this spec, version and window."""
+        if state.get("version") != _CHECKPOINT_VERSION or state.get("columns") != self.plan.columns \
+                or not math.isclose(float(state.get("sample_time", -1)), self.ts):
+            raise SpecError(f"checkpoint {self.ckpt_path} was written for a different spec or version; "
+                            "run without --resume to start over")
+        if state.get("window") != self.window or int(state.get("rows_total", -1)) != self.n_rows:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written for window {state.get('window')!r} "
+                            f"({state.get('rows_total')} rows), not {self.window!r} ({self.n_rows} rows); resume "
+                            f"with --window {state.get('window')} or run without --resume")
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Continue from a saved state: each part restores its own; the twins from states or a replay."""
+        assert self.twin is not None
+        self.check_state(state)
+        self.k = self.k0 = int(state["rows"])
+        self.output.load_state_dict(state["output"])
+        self.controllers.load_state_dict(state["controllers"])
+        self.compensation.load_state_dict(state["compensation"])
+        self.recovery_until = float(state["loop"]["recovery_until"])
+        for e in state["loop"].get("events", []):
+            self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
+        t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
+        self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid)
+        if self.plain is not None:
+            self.plain.load_state_dict(state["untracked_twin"] or {"x": None}, t=t_k, csv_path=self.csv_path,
+                                       rows=self.k0, grid=self.grid)
+        log.info("resumed at row %d (t = %g s) from %s", self.k0, t_k, self.ckpt_path)
+
+    # ------------------------------------------------------------------ running
+
+    def begin(self, *, resume: bool = False) -> None:
+        """Start fresh, or from ``checkpoint.json`` when *resume* and there is one."""
+        assert self.twin is not None
+        if resume and self.ckpt_path.exists() and self.csv_path.exists():
+            self.load_state_dict(_unjsonify(json.loads(self.ckpt_path.read_text(encoding="utf-8"))))
+            return
+        if resume:
+            log.info("no checkpoint in %s; starting from the beginning", self.out_dir)
+        corrections = {c: 0.0 for c in self.compensation.names}
+        self.twin.start(0.0, {**self.controllers.values(), **corrections})
+        if self.plain is not None:
+            self.plain.start(0.0, dict(corrections))
+        self.output.open()
+
+    def checkpoint(self) -> None:
+        """Write :meth:`state_dict` to ``checkpoint.json``, atomically."""
+        write_text_atomic(self.ckpt_path, json.dumps(_jsonify(self.state_dict()), indent=1))
+
+    def event(self, t: float, kind: str, message: str, level: int = logging.WARNING) -> None:
+        log.log(level, "t = %g s: %s", t, message)
+        if len(self.events) < 1000:
+            self.events.append(TrackingEvent(float(t), kind, message))
+
+    def _safe_step(self, tw: _Twin, k: int, values: dict[str, float]) -> bool:
+        """Step *tw* from row k to k+1; recover from a solver failure. True if it had to recover."""
+        grid = self.grid
+        t_k, t_next = float(grid[k]), float(grid[k + 1])
+        try:
+            tw.step(t_next, values)
+            return False
+        except SimulationError as exc:
+            self.event(t_k, "solver-failure", f"{tw.label} twin failed between {t_k:g} s and {t_next:g} s: {exc}")
+        self.output.flush()
+        try:
+            if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
+                tw.start(t_k, values, tw.x)
+            else:
+                tw.replay_csv(self.csv_path, k, grid)
+                tw.stepper.set(values)
+                tw.applied.update(values)
+            tw.step(t_next, values)
+            self.event(t_k, "recovered", f"{tw.label} twin re-initialised from its state at {t_k:g} s and continued")
+            return True
+        except SimulationError as exc:
+            self.event(t_k, "solver-failure", f"{tw.label} twin failed again after re-initialisation: {exc}")
+        tw.start(t_k, values)  # cold start: fresh initialisation at t_k
+        tw.step(t_next, values)  # a third failure propagates
+        self.event(t_k, "cold-start", f"{tw.label} twin cold-started (fresh initialisation) at {t_k:g} s")
+        return True
+
+    def _row(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
+        """Read the twins, update the controllers and compensation, write row *k*.
+
+        Returns the values to apply to the tracked twin (parameters and
+        corrections) and to the untracked one (its corrections).
+        """
+        assert self.twin is not None
+        view, plan, read, ridx = self.view, self.plan, self.read, self.ridx
+        t = float(self.grid[k])
+        y = self.twin.get(read)
+        yu = self.plain.get(read) if self.plain is not None else (
+            np.array([plan.untracked_table[n][k] for n in read]) if plan.untracked_table is not None
+            else np.full(len(read), np.nan))
+        hold_all = t < self.hold_until - 1e-9 or bool(view.stopped[k]) or t < self.recovery_until - 1e-9
+        modes = self.controllers.update(t, k, y, ridx, view, hold_all, self.event)
+        for s in self.compensation.states:
+            self.output.sstats[s.tag].add(float(y[ridx[s.variable]]))
+        corr, corr_u = self.compensation.update(k, y, yu if self.plain is not None else None, ridx, view)
+        params = self.controllers.values()
+        row: list[Any] = [t]
+        fits = self.output.fits
+        for tag in plan.out_tags:
+            j = ridx[plan.tag_var[tag]]
+            m = float(view.samples[tag][k])
+            row += [m, float(y[j]), float(yu[j])]
+            if tag in fits and view.scored[tag][k]:
+                fits[tag].add(m, float(y[j]), float(yu[j]))
+        row += [params[n] for n in self.controllers.names]
+        row += [corr[n] for n in self.compensation.names]
+        row += [corr_u[n] for n in self.compensation.names]
+        row += modes
+        self.output.write(row)
+        for n in self.controllers.names:
+            self.output.pstats[n].add(params[n])
+        for n in self.compensation.names:
+            self.output.cstats[n].add(corr[n])
+        return {**params, **corr}, corr_u
+
+    def run(self, *, max_steps: int | None = None, progress: Callable[[int, int], None] | None = None) -> bool:
+        """Step to the end (or *max_steps* rows); checkpoint on the way and at the end. True if complete."""
+        assert self.twin is not None
+        n_rows = self.n_rows
+        rows_this_call = 0
+        self.complete = True
+        while self.k < n_rows:
+            k = self.k
+            values, corr_u = self._row(k)
+            rows_this_call += 1
+            if progress is not None:
+                progress(k + 1, n_rows)
+            if k == n_rows - 1:
+                self.k += 1
+                break
+            recovered = self._safe_step(self.twin, k, values)
+            if self.plain is not None:
+                try:
+                    self._safe_step(self.plain, k, dict(corr_u))
+                except SimulationError as exc:
+                    # the comparison run is not worth stopping the tracking for
+                    self.event(float(self.grid[k]), "untracked-abandoned", f"untracked twin failed for good and "
+                               f"is dropped (its columns are empty from here on): {exc}")
+                    self.plain.close()
+                    self.plain = None
+            if recovered:
+                self.recovery_until = float(self.grid[k + 1]) + self.recovery_hold
+                self.event(float(self.grid[k]), "hold",
+                           f"controllers on hold until t = {self.recovery_until:g} s after the recovery")
+            self.k += 1
+            if self.k % self.checkpoint_every == 0:
+                self.checkpoint()
+                # a checkpoint is a restart point: re-initialise from the saved states, exactly
+                # as a resume would, so a resumed run is identical to an uninterrupted one
+                for tw in (self.twin, self.plain):
+                    if tw is not None and tw.me and tw.x is not None:
+                        tw.start(float(self.grid[self.k]), dict(tw.applied), tw.x)
+            if max_steps is not None and rows_this_call >= max_steps and self.k < n_rows:
+                self.complete = False
+                break
+        self.checkpoint()
+        return self.complete
+
+    def close(self) -> None:
+        """Close the CSV and both twins."""
+        self.output.close()
+        for tw in (self.twin, self.plain):
+            if tw is not None:
+                tw.close()
+
+    # ------------------------------------------------------------------ result
+
+    def result(self) -> TrackingResult:
+        """The run's :class:`TrackingResult` (also written to ``result.json``)."""
+        grid, k, k0, ts = self.grid, self.k, self.k0, self.ts
+        metric = self.view.window
+        out = self.output
+        result = TrackingResult(
+            csv=self.csv_path,
+            window=(max(metric[0], self.hold_until), min(metric[1], float(grid[-1]) + ts)),
+            variables={t: f.result() for t, f in out.fits.items()},
+            parameters={n: ParameterResult(s.final, s.min, s.max, p.bounds[0], p.bounds[1])
+                        for (n, s), p in zip(out.pstats.items(), self.controllers.pairs)},
+            corrections={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan)
+                         for n, s in out.cstats.items()},
+            states={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan) for n, s in out.sstats.items()},
+            seconds=_time.perf_counter() - self.wall0,
+            seconds_untracked=self.plain.step_seconds if self.plain is not None else math.nan,
+            simulated_seconds=float(grid[min(k, self.n_rows - 1)] - grid[k0]) if k > k0 else 0.0,
+            steps=k,
+            complete=self.complete,
+            events=tuple(self.events),
+        )
+        summary = {**result.to_json(), "complete": self.complete, "steps": k, "csv": str(self.csv_path),
+                   "window": list(result.window),
+                   "variables_detail": {t: {"samples": v.samples} for t, v in result.variables.items()},
+                   "corrections": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
+                                   for n, c in result.corrections.items()},
+                   "states": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
+                              for n, c in result.states.items()},
+                   "events": [[e.time, e.kind, e.message] for e in self.events]}
+        write_text_atomic(self.out_dir / RESULT_NAME, json.dumps(summary, indent=1))
+        return result
+
+
 def track(
-    spec: Any,
+    spec: Spec,
     *,
     out_dir: str | Path,
     resume: bool = False,
@@ -559,6 +981,7 @@ def track(
     checkpoint_every: int = 200,
     recovery_hold: float | None = None,
     tolerance: float = 1e-6,
+    view: MeasurementView | None = None,
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -587,6 +1010,10 @@ def track(
         ``10·sample_time``.
     tolerance : float
         Relative solver tolerance of the twins.
+    view : trackingbox.data.MeasurementView, optional
+        The measurements to track, when the caller has built them already
+        (``MeasurementView.from_spec(spec, window, skip=spec.tracking.hold_until)``);
+        default: built here from the spec.
 
     Returns
     -------
@@ -600,293 +1027,12 @@ def track(
         The twin failed at the same time even after a cold restart (the rows
         up to that time stay in the CSV).
     """
-    from ..spec import check_against_fmu
-
-    wall0 = _time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    csv_path = out_dir / CSV_NAME
-    ckpt_path = out_dir / CHECKPOINT_NAME
-    check_against_fmu(spec)
-    plan = _plan(spec, window, untracked)
-    grid = plan.grid
-    n_rows = grid.size
-    ts = float(spec.sample_time)
-    hold_until = float(spec.tracking.hold_until)
-    recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
-
-    pairs = [_make_controller(spec, p, plan.measured[p.variable]) for p in spec.pairs]
-    for p in pairs:
-        _check_authority(p, plan.measured[p.tag], plan.events)
-    states = [_State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts),
-                     StateCompensator(s.gain, ts=ts)) for s in spec.states]
-    base = {p.name: p.start for p in spec.parameters}
-    base.update(spec.fixed)
-    param_names = [p.parameter for p in pairs]
-    corr_names = [s.correction for s in states]
-    pstats = {n: _Stats() for n in param_names}
-    cstats = {n: _Stats() for n in corr_names}
-    sstats = {s.tag: _Stats() for s in states}
-    fits = {t: _Fit() for t in spec.outputs}
-    read = plan.read_names
-    ridx = {name: i for i, name in enumerate(read)}
-    events = plan.events
-    run_untracked = untracked is True
-
-    def event(t: float, kind: str, message: str, level: int = logging.WARNING) -> None:
-        log.log(level, "t = %g s: %s", t, message)
-        if len(events) < 1000:
-            events.append(TrackingEvent(float(t), kind, message))
-
-    twin = _Twin(spec.twin, label="tracked", base=base, inputs=plan.inputs, tolerance=tolerance)
-    plain = _Twin(spec.twin, label="untracked", base=base, inputs=plan.inputs, tolerance=tolerance) \
-        if run_untracked else None
-    k0 = 0
-    recovery_until = -math.inf
-    missing: dict[str, float | None] = {p.tag: None for p in pairs}
-    ckpt: dict[str, Any] | None = None
-    if resume and ckpt_path.exists() and csv_path.exists():
-        ckpt = _unjsonify(json.loads(ckpt_path.read_text(encoding="utf-8")))
-        if ckpt.get("version") != _CHECKPOINT_VERSION or ckpt.get("columns") != plan.columns \
-                or not math.isclose(float(ckpt.get("sample_time", -1)), ts):
-            raise SpecError(f"checkpoint {ckpt_path} was written for a different spec or version; "
-                            "run without --resume to start over")
-        if ckpt.get("window") != window or int(ckpt.get("rows_total", -1)) != n_rows:
-            raise SpecError(f"checkpoint {ckpt_path} was written for window {ckpt.get('window')!r} "
-                            f"({ckpt.get('rows_total')} rows), not {window!r} ({n_rows} rows); resume with "
-                            f"--window {ckpt.get('window')} or run without --resume")
-    elif resume:
-        log.info("no checkpoint in %s; starting from the beginning", out_dir)
-
+    loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
+                        checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
+                        view=view)
     try:
-        if ckpt is not None:
-            k0 = int(ckpt["rows"])
-            with open(csv_path, "r+b") as fh:
-                fh.truncate(int(ckpt["csv_bytes"]))
-            for p in pairs:
-                p.controller.restore(ckpt["controllers"][p.parameter])
-            for s in states:
-                s.tracked.restore(ckpt["compensators"][s.correction])
-                s.untracked.restore(ckpt["untracked_compensators"][s.correction])
-            for n in param_names:
-                pstats[n].restore(ckpt["parameter_stats"][n])
-            for n in corr_names:
-                cstats[n].restore(ckpt["correction_stats"][n])
-            for n in sstats:
-                sstats[n].restore(ckpt["state_stats"][n])
-            for t in fits:
-                fits[t].restore(ckpt["fits"][t])
-            recovery_until = float(ckpt["recovery_until"])
-            missing = {k: _from_json_float(v) for k, v in ckpt["missing"].items()}
-            for e in ckpt.get("events", []):
-                events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
-            t_k = float(grid[k0]) if k0 < n_rows else float(grid[-1])
-            applied = {**{n: float(v) for n, v in ckpt["applied"].items()}}
-            _restore_twin(twin, ckpt.get("x"), t_k, applied, csv_path, k0, grid,
-                          [*param_names, *corr_names],
-                          [*(["parameter:"] * len(param_names)), *(["correction:"] * len(corr_names))])
-            if plain is not None:
-                applied_u = {n: float(v) for n, v in ckpt["applied_untracked"].items()}
-                _restore_twin(plain, ckpt.get("x_untracked"), t_k, applied_u, csv_path, k0, grid,
-                              corr_names, ["untracked_correction:"] * len(corr_names))
-            log.info("resumed at row %d (t = %g s) from %s", k0, t_k, ckpt_path)
-            fh_out = open(csv_path, "a", newline="", encoding="utf-8")
-            writer = csv.writer(fh_out)
-        else:
-            start_values = {p.parameter: p.controller.value for p in pairs}
-            twin.start(0.0, {**start_values, **{c: 0.0 for c in corr_names}})
-            if plain is not None:
-                plain.start(0.0, {c: 0.0 for c in corr_names})
-            fh_out = open(csv_path, "w", newline="", encoding="utf-8")
-            writer = csv.writer(fh_out)
-            writer.writerow(plan.columns)
-    except BaseException:
-        twin.close()
-        if plain is not None:
-            plain.close()
-        raise
-
-    def checkpoint(rows: int, complete: bool) -> None:
-        fh_out.flush()
-        payload = {
-            "version": _CHECKPOINT_VERSION,
-            "spec": str(spec.path),
-            "sample_time": ts,
-            "columns": plan.columns,
-            "rows": rows,
-            "rows_total": n_rows,
-            "window": window,
-            "time": float(grid[min(rows, n_rows - 1)]),
-            "csv_bytes": fh_out.tell(),
-            "complete": complete,
-            "controllers": {p.parameter: p.controller.state() for p in pairs},
-            "compensators": {s.correction: s.tracked.state() for s in states},
-            "untracked_compensators": {s.correction: s.untracked.state() for s in states},
-            "parameters": {p.parameter: p.controller.value for p in pairs},
-            "applied": dict(twin.applied),
-            "applied_untracked": dict(plain.applied) if plain is not None else {},
-            "x": twin.x.tolist() if twin.x is not None else None,
-            "x_untracked": plain.x.tolist() if plain is not None and plain.x is not None else None,
-            "parameter_stats": {n: s.state() for n, s in pstats.items()},
-            "correction_stats": {n: s.state() for n, s in cstats.items()},
-            "state_stats": {n: s.state() for n, s in sstats.items()},
-            "fits": {t: f.state() for t, f in fits.items()},
-            "recovery_until": recovery_until,
-            "missing": missing,
-            "events": [[e.time, e.kind, e.message] for e in events],
-        }
-        write_text_atomic(ckpt_path, json.dumps(_jsonify(payload), indent=1))
-
-    def safe_step(tw: _Twin, k: int, values: dict[str, float], names: list[str], prefixes: list[str]) -> bool:
-        """Step *tw* from row k to k+1; recover from a solver failure. True if it had to recover."""
-        t_k, t_next = float(grid[k]), float(grid[k + 1])
-        try:
-            tw.step(t_next, values)
-            return False
-        except SimulationError as exc:
-            event(t_k, "solver-failure", f"{tw.label} twin failed between {t_k:g} s and {t_next:g} s: {exc}")
-        fh_out.flush()
-        try:
-            if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
-                tw.start(t_k, values, tw.x)
-            else:
-                tw.replay(0.0, _read_rows(csv_path, k, names, prefixes, grid))
-                tw.stepper.set(values)
-                tw.applied.update(values)
-            tw.step(t_next, values)
-            event(t_k, "recovered", f"{tw.label} twin re-initialised from its state at {t_k:g} s and continued")
-            return True
-        except SimulationError as exc:
-            event(t_k, "solver-failure", f"{tw.label} twin failed again after re-initialisation: {exc}")
-        tw.start(t_k, values)  # cold start: fresh initialisation at t_k
-        tw.step(t_next, values)  # a third failure propagates
-        event(t_k, "cold-start", f"{tw.label} twin cold-started (fresh initialisation) at {t_k:g} s")
-        return True
-
-    rows_this_call = 0
-    complete = True
-    k = k0
-    try:
-        while k < n_rows:
-            t = float(grid[k])
-            y = twin.get(read)
-            yu = plain.get(read) if plain is not None else (
-                np.array([plan.untracked_table[n][k] for n in read]) if plan.untracked_table is not None
-                else np.full(len(read), np.nan))
-            hold_all = t < hold_until - 1e-9 or bool(plan.stopped[k]) or t < recovery_until - 1e-9
-            modes = []
-            for p in pairs:
-                sp = float(plan.measured[p.tag][k])
-                pv = float(y[ridx[p.fmu_name]])
-                ok = math.isfinite(sp)
-                if not ok and missing[p.tag] is None:
-                    missing[p.tag] = t
-                    event(t, "missing", f"tag {p.tag!r} missing from t = {t:g} s: controller of "
-                          f"{p.parameter!r} on hold", logging.INFO)
-                elif ok and missing[p.tag] is not None:
-                    event(t, "resumed", f"tag {p.tag!r} back at t = {t:g} s after {t - missing[p.tag]:g} s; "
-                          f"controller of {p.parameter!r} resumes (bumpless)", logging.INFO)
-                    missing[p.tag] = None
-                p.controller.update(sp, pv, hold=hold_all)
-                modes.append(p.controller.mode)
-            corr, corr_u = {}, {}
-            for s in states:
-                meas = float(plan.measured[s.tag][k])
-                level = float(y[ridx[s.variable]])
-                sstats[s.tag].add(level)
-                corr[s.correction] = s.tracked.update(meas, level)
-                corr_u[s.correction] = s.untracked.update(meas, float(yu[ridx[s.variable]])) \
-                    if plain is not None else math.nan
-            params = {p.parameter: p.controller.value for p in pairs}
-            in_metric = plan.metric_window[0] - 1e-9 <= t < plan.metric_window[1] - 1e-9 \
-                and t >= hold_until - 1e-9 and not plan.stopped[k]
-            row: list[Any] = [t]
-            for tag in plan.out_tags:
-                j = ridx[plan.tag_var[tag]]
-                m = float(plan.measured[tag][k])
-                row += [m, float(y[j]), float(yu[j])]
-                if in_metric and tag in fits:
-                    fits[tag].add(m, float(y[j]), float(yu[j]))
-            row += [params[n] for n in param_names]
-            row += [corr[n] for n in corr_names]
-            row += [corr_u[n] for n in corr_names]
-            row += modes
-            writer.writerow(row)
-            for n in param_names:
-                pstats[n].add(params[n])
-            for n in corr_names:
-                cstats[n].add(corr[n])
-            rows_this_call += 1
-            if progress is not None:
-                progress(k + 1, n_rows)
-            if k == n_rows - 1:
-                k += 1
-                break
-            recovered = safe_step(twin, k, {**params, **corr}, [*param_names, *corr_names],
-                                  [*(["parameter:"] * len(param_names)), *(["correction:"] * len(corr_names))])
-            if plain is not None:
-                try:
-                    safe_step(plain, k, dict(corr_u), list(corr_names),
-                              ["untracked_correction:"] * len(corr_names))
-                except SimulationError as exc:
-                    # the comparison run is not worth stopping the tracking for
-                    event(t, "untracked-abandoned", f"untracked twin failed for good and is dropped "
-                          f"(its columns are empty from here on): {exc}")
-                    plain.close()
-                    plain = None
-            if recovered:
-                recovery_until = float(grid[k + 1]) + recovery_hold
-                event(t, "hold", f"controllers on hold until t = {recovery_until:g} s after the recovery")
-            k += 1
-            if k % checkpoint_every == 0:
-                checkpoint(k, False)
-                # a checkpoint is a restart point: re-initialise from the saved states, exactly
-                # as a resume would, so a resumed run is identical to an uninterrupted one
-                for tw in (twin, plain):
-                    if tw is not None and tw.me and tw.x is not None:
-                        tw.start(float(grid[k]), dict(tw.applied), tw.x)
-            if max_steps is not None and rows_this_call >= max_steps and k < n_rows:
-                complete = False
-                break
-        checkpoint(k, complete)
+        loop.begin(resume=resume)
+        loop.run(max_steps=max_steps, progress=progress)
     finally:
-        fh_out.close()
-        twin.close()
-        if plain is not None:
-            plain.close()
-
-    seconds = _time.perf_counter() - wall0
-    result = TrackingResult(
-        csv=csv_path,
-        window=(max(plan.metric_window[0], hold_until), min(plan.metric_window[1], float(grid[-1]) + ts)),
-        variables={t: f.result() for t, f in fits.items()},
-        parameters={n: ParameterResult(s.final, s.min, s.max, p.bounds[0], p.bounds[1])
-                    for (n, s), p in zip(pstats.items(), pairs)},
-        corrections={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan) for n, s in cstats.items()},
-        states={n: ParameterResult(s.final, s.min, s.max, math.nan, math.nan) for n, s in sstats.items()},
-        seconds=seconds,
-        seconds_untracked=plain.step_seconds if plain is not None else math.nan,
-        simulated_seconds=float(grid[min(k, n_rows - 1)] - grid[k0]) if k > k0 else 0.0,
-        steps=k,
-        complete=complete,
-        events=tuple(events),
-    )
-    summary = {**result.to_json(), "complete": complete, "steps": k, "csv": str(csv_path),
-               "window": list(result.window),
-               "variables_detail": {t: {"samples": v.samples} for t, v in result.variables.items()},
-               "corrections": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
-                               for n, c in result.corrections.items()},
-               "states": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
-                          for n, c in result.states.items()},
-               "events": [[e.time, e.kind, e.message] for e in events]}
-    write_text_atomic(out_dir / RESULT_NAME, json.dumps(summary, indent=1))
-    return result
-
-
-def _restore_twin(tw: _Twin, x: Any, t_k: float, applied: dict[str, float], csv_path: Path, rows: int,
-                  grid: npt.NDArray[np.float64], names: list[str], prefixes: list[str]) -> None:
-    """Put *tw* at ``t_k`` with *applied* values: from saved states, else by replaying the CSV."""
-    if x is not None and tw.me:
-        tw.start(t_k, applied, x)
-    else:
-        tw.replay(0.0, _read_rows(csv_path, rows, names, prefixes, grid))
+        loop.close()
+    return loop.result()
