@@ -58,11 +58,12 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
 from ..errors import AnalysisError, SpecError
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from ..spec import PairSpec, Spec
     from .pairing import Pairing
     from .sobol import Agreement, SobolResult
@@ -231,7 +232,7 @@ def _measured(spec: Spec) -> tuple[pd.DataFrame, npt.NDArray[np.bool_], float, f
     from ..data import MeasurementView
 
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
-    frame = pd.DataFrame({"time": view.grid, **view.samples})
+    frame = view.to_frame()
     return frame, view.in_window, float(view.window[0]), float(view.window[1])
 
 
