@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .commands._progress import Progress
-from .commands.bench import _assignment
+from .commands._args import parse_assignments
 from .errors import TrackingError
 from .report import Document, StageReport
 
@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bench", choices=("heat-exchanger", "heat-production"), default="heat-exchanger")
     p.add_argument("--out", type=Path, default=None, help="output directory (default demo-out/<bench>)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--set", action="append", default=[], type=_assignment, metavar="NAME=VALUE",
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="plant parameter override")
     p.add_argument("--until", choices=STEPS, default=STEPS[-1], help="stop after this step")
     return p
@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     t_all = time.perf_counter()
     code = 0
     try:
-        _pipeline(run, steps, dict(args.set), progress)
+        _pipeline(run, steps, parse_assignments(args.set, "--set"), progress)
     except TrackingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         print(f"demo stopped; what earlier steps wrote is in {out}", file=sys.stderr)

@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
-from ..errors import AnalysisError
+from ._args import parse_assignments
 
 EPILOG = """\
 examples:
@@ -81,27 +80,13 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def parse_freeze(items: list[str]) -> tuple[tuple[str, float], ...]:
-    """``["holdControllers=1"]`` -> ``(("holdControllers", 1.0),)``; :class:`AnalysisError` on bad syntax."""
-    out: dict[str, float] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            number = float(value)
-        except ValueError:
-            number = math.nan
-        if not sep or not name.strip() or not math.isfinite(number):
-            raise AnalysisError(f"--freeze {item!r}: expected NAME=VALUE with a number, e.g. holdControllers=1")
-        out[name.strip()] = number
-    return tuple(out.items())
-
-
 def settings(args: argparse.Namespace) -> Any:
     """The :class:`~trackingbox.analysis.pair_stage.PairSettings` the arguments ask for."""
     from ..analysis.pair_stage import PairSettings
 
     return PairSettings(method=args.method, step=args.step, two_sided=not args.one_sided,
-                        freeze=parse_freeze(args.freeze), at=args.at, interval=args.interval, window=args.window,
+                        freeze=tuple(parse_assignments(args.freeze, "--freeze").items()), at=args.at,
+                        interval=args.interval, window=args.window,
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,

@@ -109,7 +109,7 @@ def parameter(x: npt.ArrayLike, lines: Sequence[Line], *, name: str, lower: floa
     ax.axhline(lower, color="k", ls="--", lw=0.8, label="bounds")
     ax.axhline(upper, color="k", ls="--", lw=0.8)
     if truth is not None and np.isfinite(truth):
-        ax.axhline(truth, color=TRUTH, ls=":", lw=1.6, label=f"plant truth ({truth:.6g})")
+        ax.axhline(truth, color=TRUTH, ls=":", lw=1.8, zorder=5, label=f"plant truth ({truth:.6g})")
     _band(ax, band, band_label)
     ax.set_xlabel("time (h)")
     ax.set_ylabel(name)

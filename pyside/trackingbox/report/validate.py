@@ -57,7 +57,7 @@ def write_validate_report(spec: Spec, result: ValidationResult, fmu: str | os.Pa
         fig = plots.parameter(hours, [plots.Line(s[f"python:{name}"], "Python runtime", plots.PYTHON, "--", 1.0),
                                       plots.Line(s[f"modelica:{name}"], "Modelica box (FMU)", plots.TRACKED)],
                               name=name, lower=p.lower, upper=p.upper, truth=plots.truth_for(truth, name),
-                              band=window, title=f"{name}: trajectory")
+                              band=window, band_label="validation window", title=f"{name}: trajectory")
         files.append(plots.save(fig, out / f"parameter_{modelica_name(name)}.png"))
         images.append((files[-1], f"{name}: trajectory"))
     csv = out / "validation.csv"
