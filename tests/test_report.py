@@ -118,3 +118,16 @@ def test_spec_pairs_keeps_tuning_of_existing_pairs(tmp_path: Path) -> None:
     assert (kept.gain, kept.time_constant, kept.lambda_, kept.kp, kept.ti) == (-0.02, 120.0, 2.5, 0.3, 40.0)
     # a new pair: lambda 1; no measurable time constant -> the step interval
     assert (new.variable, new.parameter, new.gain, new.time_constant, new.lambda_) == ("LI", "q", 3.0, 10.0, 1.0)
+
+
+def test_demo_overview_puts_plant_truth_beside_tracked_values(tmp_path: Path) -> None:
+    from trackingbox.demo import Run, summary_document
+
+    run = Run(out=tmp_path, bench="heat-exchanger", seed=0, truth={"hx.kht": 910.0}, summary={
+        "track": {"variables": {"TI-102": {"nrmse_untracked": 0.1453, "nrmse_tracked": 0.01087}},
+                  "parameters": {"hx.kht": {"final": 902.457, "min": 891.934, "max": 1000.0}}, "seconds": 1.0}})
+    md = summary_document(run, 12.0).markdown()
+    assert "## Tracking in Python" in md
+    assert "| TI-102 | 0.1453 | 0.01087 |" in md
+    assert "| hx.kht | 902.457 | 891.934 | 1000 | 910 |" in md
+    assert "## Compiled TrackingBox" not in md  # a step that did not run has no section
