@@ -1,101 +1,96 @@
 """The main job (``scripts/demo``): the whole tracking pipeline on a bench.
 
 bench → untracked offset → estimate → pair → track → gen-trackingbox → compile
-→ validate → report. Each step is the same subcommand a user would run; the
-demo chains them, shows progress, and prints the report's path at the end.
-A step that fails stops the demo with its error message and a non-zero exit;
-what the earlier steps wrote stays on disk.
+→ validate → report. Each step calls the same library function the subcommand
+calls (``trackingbox.estimate``, ``pair``, ``track``, ``generate``,
+``validate``); the demo chains them, shows progress, and writes ``report.md``
+and a self-contained ``report.html`` (every stage's report, plots embedded,
+the plant's true parameter values beside the tracked ones). A step that fails
+stops the demo with its error message and a non-zero exit; what the earlier
+steps wrote stays on disk, and the report covers them.
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
+import math
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from .cli import main as cli_main
+from .commands._progress import Progress
+from .commands._args import parse_assignments
 from .errors import TrackingError
+from .report import Document, StageReport
+
+if TYPE_CHECKING:
+    from .spec import Spec
 
 #: Estimation budget per bench: the heat-production bench has 14 parameters and a 24 h record;
 #: this budget took 214 s for a 70 % validation-NRMSE reduction (the default budget: 327 s, 70 %; seed 0).
-ESTIMATE_BUDGET = {
-    "heat-exchanger": ["--workers", "2"],
-    "heat-production": ["--workers", "2", "--maxiter", "8", "--refine-iterations", "6"],
+ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
+    "heat-exchanger": {"workers": 2},
+    "heat-production": {"workers": 2, "maxiter": 8, "refine_iterations": 6},
 }
 
 STEPS = ("bench", "offset", "estimate", "pair", "track", "generate", "validate")
 
 
-def _run(argv: list[str], *, want_json: bool = True) -> Any:
-    """Run one subcommand in-process; return its JSON document."""
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        code = cli_main(argv + (["--json"] if want_json else []))
-    if code != 0:
-        raise SystemExit(code)
-    text = buf.getvalue().strip()
-    return json.loads(text) if want_json and text else text
+@dataclass
+class Run:
+    """What the demo has done so far: JSON documents per step and the stages' reports."""
+
+    out: Path
+    bench: str
+    seed: int
+    summary: dict[str, Any] = field(default_factory=dict)
+    reports: dict[str, StageReport] = field(default_factory=dict)
+    truth: dict[str, float] = field(default_factory=dict)
 
 
-def untracked_offset(spec_path: Path, out_dir: Path) -> dict[str, dict[str, float]]:
-    """Simulate the twin on the measured inputs; write the offset CSV and a plot.
+def untracked_offset(spec: Spec, out_dir: Path) -> tuple[StageReport, dict[str, dict[str, float]]]:
+    """Simulate the twin untracked on the measured inputs; write the offset CSV, a plot and a report.
 
-    Returns per output tag the mean and RMS of measured − simulated.
+    The run is :func:`trackingbox.analysis.offsets.simulate_untracked` (the
+    pairing stage's data check): inputs and gaps as every stage sees them,
+    ``[[states]]`` compensation on, stoppages left out. The report's
+    document carries, per output tag, the mean and RMS of measured − simulated; so does the returned
+    dictionary (tag -> ``mean_offset``, ``rms_offset``).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
     import pandas as pd
 
-    from .data import read_table
-    from .fmu import FMUModel
+    from .analysis.offsets import simulate_untracked
     from .io import atomic_path
-    from .spec import load_spec
+    from .report import plots
 
-    spec = load_spec(spec_path)
-    data = read_table(spec.measurements, required=list(spec.inputs) + list(spec.outputs), allow_nan=True)
-    inputs = pd.DataFrame({"time": data["time"]})
-    for tag, var in spec.inputs.items():
-        inputs[var] = data[tag].interpolate(limit_direction="both")
-    starts = {p.name: p.start for p in spec.parameters}
-    starts.update(spec.fixed)
-    t = data["time"].to_numpy()
-    with FMUModel(spec.twin) as model:
-        sim = model.simulate(start_time=float(t[0]), stop_time=float(t[-1]), output_interval=spec.sample_time,
-                             inputs=inputs, parameters=starts, outputs=list(spec.outputs.values()))
-    frame = pd.DataFrame({"time": t})
-    stats: dict[str, dict[str, float]] = {}
-    for tag, var in spec.outputs.items():
-        simulated = np.interp(t, sim["time"].to_numpy(), sim[var].to_numpy())
-        frame[f"{tag} measured"] = data[tag].to_numpy()
-        frame[f"{tag} twin"] = simulated
-        diff = data[tag].to_numpy() - simulated
-        ok = np.isfinite(diff)
-        stats[tag] = {"mean_offset": float(np.mean(diff[ok])), "rms_offset": float(np.sqrt(np.mean(diff[ok] ** 2)))}
+    tags = list(spec.outputs)
+    res = simulate_untracked(spec, tags, start=0.0, stop=math.inf, skip=0.0)
     out_dir.mkdir(parents=True, exist_ok=True)
+    frame = pd.DataFrame({"time": res.time})
+    doc = Document("Untracked twin vs measurements")
+    rows = []
+    plt = plots.pyplot()
+    fig, axes = plt.subplots(len(tags), 1, figsize=(10, 2.6 * len(tags)), sharex=True, squeeze=False)
+    for i, (tag, stats) in enumerate(zip(tags, res.stats())):
+        frame[f"{tag} measured"] = res.measured[i]
+        frame[f"{tag} twin"] = res.simulated[i]
+        rows.append([tag, f"{stats.mean:+.4g}", f"{stats.rms:.4g}", str(stats.samples)])
+        plots.series(axes[i, 0], res.time / 3600.0, res.measured[i],
+                     [plots.Line(res.simulated[i], "twin (untracked)", plots.UNTRACKED)], ylabel=tag,
+                     title=f"{tag}: mean offset {stats.mean:+.3g}, RMS {stats.rms:.3g}",
+                     xlabel="time (h)" if i == len(tags) - 1 else None)
     with atomic_path(out_dir / "untracked.csv") as tmp:
         frame.to_csv(tmp, index=False)
-    tags = list(spec.outputs)
-    fig, axes = plt.subplots(len(tags), 1, figsize=(10, 2.6 * len(tags)), sharex=True, squeeze=False)
-    for ax, tag in zip(axes[:, 0], tags):
-        ax.plot(t / 3600, frame[f"{tag} measured"], ".", ms=1.5, color="0.5", label="measured")
-        ax.plot(t / 3600, frame[f"{tag} twin"], color="C3", label="twin (untracked)")
-        ax.set_ylabel(tag)
-        ax.set_title(f"{tag}: mean offset {stats[tag]['mean_offset']:+.3g}, RMS {stats[tag]['rms_offset']:.3g}",
-                     fontsize=9, loc="left")
-    axes[0, 0].legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("time [h]")
-    fig.tight_layout()
-    with atomic_path(out_dir / "untracked.png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return stats
+    png = plots.save(fig, out_dir / "untracked.png")
+    doc.paragraph("The twin at the spec's start values on the measured inputs ([[states]] compensation on; "
+                  "stoppages and missing samples left out). Offset = measured − simulated.")
+    doc.table(["tag", "mean offset", "RMS offset", "samples"], rows)
+    doc.image(png, "untracked")
+    md = doc.write_markdown(out_dir / "untracked.md")
+    stats = {s.variable: {"mean_offset": s.mean, "rms_offset": s.rms} for s in res.stats()}
+    return StageReport(markdown=md, files=(out_dir / "untracked.csv", png, md), document=doc), stats
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -104,112 +99,155 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bench", choices=("heat-exchanger", "heat-production"), default="heat-exchanger")
     p.add_argument("--out", type=Path, default=None, help="output directory (default demo-out/<bench>)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="plant parameter override")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="plant parameter override")
     p.add_argument("--until", choices=STEPS, default=STEPS[-1], help="stop after this step")
     return p
+
+
+def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], progress: Progress) -> None:
+    """Run *steps* in order, recording each one's result in *run*."""
+    from . import estimate, generate, pair, track, validate
+    from .analysis.pair_stage import spec_pairs
+    from .benches import make_bench
+    from .generate.generator import compile_generated
+    from .report import (write_estimate_report, write_pair_report, write_track_report,
+                         write_validate_report)
+    from .spec import check_against_fmu, load_spec, write_pairs
+
+    out, summary = run.out, run.summary
+
+    def step(name: str, text: str) -> bool:
+        if name in steps:
+            progress.note(f"[{steps.index(name) + 1}/{len(steps)}] {text}")
+        return name in steps
+
+    step("bench", f"building the {run.bench} bench case in {out}")
+    case = make_bench(run.bench, out, seed=run.seed, overrides=overrides)
+    summary["bench_case"] = case.to_json()
+    run.truth = dict(case.truth)
+    spec = load_spec(case.spec)
+    check_against_fmu(spec)
+    if step("offset", "simulating the untracked twin on the measured inputs"):
+        run.reports["offset"], summary["untracked"] = untracked_offset(spec, out / "untracked")
+    if step("estimate", "estimating initial parameters on the training window"):
+        # Reported, not written into the spec: tracking then starts from the modeller's
+        # guess, which shows the parameter controllers closing the offset on their own.
+        est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
+                       **ESTIMATE_BUDGET.get(run.bench, {}))
+        summary["estimate"] = est.to_json()
+        run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
+    if step("pair", "steady-state step tests → gain matrix → RGA pairing"):
+        res = pair(spec, progress=progress)
+        summary["pair"] = res.to_json()
+        run.reports["pair"] = write_pair_report(spec, res, out / "pair")
+        if not res.pairing.pairs:
+            raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
+        spec = write_pairs(spec.path, spec_pairs(spec, res))
+    if step("track", "tracking with parameter controllers in Python"):
+        tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"))
+        summary["track"] = tr.to_json()
+        run.reports["track"] = write_track_report(spec, tr, out / "track", truth=run.truth)
+    if step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled"):
+        gen = generate(spec, out / "generated")
+        compiled = compile_generated(gen)
+        summary["generate"] = {**gen.to_json(), "compile": compiled.to_json()}
+    if step("validate", "validating the compiled TrackingBox on the held-out window"):
+        fmu = Path(summary["generate"]["compile"]["fmu"])
+        val = validate(spec, fmu)
+        summary["validate"] = val.to_json()
+        run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out = (args.out or Path("demo-out") / args.bench).resolve()
-    spec = out / "spec.toml"
-    summary: dict[str, Any] = {"bench": args.bench, "seed": args.seed}
+    run = Run(out=out, bench=args.bench, seed=args.seed)
     steps = STEPS[: STEPS.index(args.until) + 1]
+    progress = Progress()
     t_all = time.perf_counter()
-
-    def step(name: str, text: str) -> None:
-        print(f"[{steps.index(name) + 1}/{len(steps)}] {text}", file=sys.stderr, flush=True)
-
+    code = 0
     try:
-        step("bench", f"building the {args.bench} bench case in {out}")
-        sets = [x for s in args.set for x in ("--set", s)]
-        summary["bench_case"] = _run(["bench", args.bench, "--out", str(out), "--seed", str(args.seed), *sets])
-        if "offset" in steps:
-            step("offset", "simulating the untracked twin on the measured inputs")
-            summary["untracked"] = untracked_offset(spec, out / "untracked")
-        if "estimate" in steps:
-            step("estimate", "estimating initial parameters on the training window")
-            # Reported, not written into the spec: tracking then starts from the modeller's
-            # guess, which shows the parameter controllers closing the offset on their own.
-            budget = ESTIMATE_BUDGET.get(args.bench, [])
-            summary["estimate"] = _run(["estimate", str(spec), "--report", str(out / "estimate"), *budget])
-        if "pair" in steps:
-            step("pair", "steady-state step tests → gain matrix → RGA pairing")
-            summary["pair"] = _run(["pair", str(spec), "--report", str(out / "pair")])
-        if "track" in steps:
-            step("track", "tracking with parameter controllers in Python")
-            summary["track"] = _run(["track", str(spec), "--out", str(out / "track"), "--report", str(out / "track")])
-        if "generate" in steps:
-            step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled")
-            summary["generate"] = _run(["generate", str(spec), "-o", str(out / "generated"), "--compile"])
-        if "validate" in steps:
-            fmu = (summary["generate"].get("compile") or {}).get("fmu")
-            step("validate", f"validating {fmu} on the held-out window")
-            summary["validate"] = _run(["validate", str(spec), "--fmu", str(fmu), "--report", str(out / "validate")])
-    except SystemExit as exc:
-        print(f"demo stopped: a step failed (exit {exc.code}); what earlier steps wrote is in {out}", file=sys.stderr)
-        _write_report(out, summary, time.perf_counter() - t_all)
-        return int(exc.code or 1)
+        _pipeline(run, steps, parse_assignments(args.set, "--set"), progress)
     except TrackingError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        _write_report(out, summary, time.perf_counter() - t_all)
-        return 2
-    report = _write_report(out, summary, time.perf_counter() - t_all)
-    print(report)
-    return 0
+        print(f"demo stopped; what earlier steps wrote is in {out}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        code = 130
+    if out.is_dir():
+        md, page = write_report(run, time.perf_counter() - t_all)
+        print(md)
+        print(page)
+    return code
 
 
-def _write_report(out: Path, summary: dict[str, Any], seconds: float) -> Path:
-    from .io import write_text_atomic
-
-    lines = [f"# trackingbox demo: {summary['bench']} bench (seed {summary['seed']})", ""]
-    lines.append(f"Pipeline run time: {seconds:.1f} s. Files are relative to this report.")
-    lines.append("")
-    if "untracked" in summary:
-        lines += ["## Untracked twin vs measurements", "", "![untracked](untracked/untracked.png)", "",
-                  "| tag | mean offset | RMS offset |", "|---|---|---|"]
-        for tag, s in summary["untracked"].items():
-            lines.append(f"| {tag} | {s['mean_offset']:+.4g} | {s['rms_offset']:.4g} |")
-        lines.append("")
-    if "estimate" in summary:
-        est = summary["estimate"]
-        lines += ["## Estimation (training window)", "",
-                  "Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
-                  "so that it shows the parameter controllers finding the plant's value themselves.", "",
-                  "| parameter | estimate |", "|---|---|"]
-        lines += [f"| {k} | {v:.6g} |" for k, v in est.get("parameters", {}).items()]
-        lines += ["", "Validation NRMSE (initial → estimated):", ""]
-        for tag, v in est.get("validation", {}).get("nrmse", {}).items():
-            v0 = est["validation"].get("nrmse_initial", {}).get(tag, float("nan"))
-            lines.append(f"- {tag}: {v0:.4g} → {v:.4g}")
-        lines += ["", "Details: [estimate/](estimate/)", ""]
-    if "pair" in summary:
-        lines += ["## Pairing (RGA)", "", "| variable | parameter | λ | gain |", "|---|---|---|---|"]
-        for p in summary["pair"].get("pairs", []):
-            lines.append(f"| {p['variable']} | {p['parameter']} | {p['lambda']:.3g} | {p['gain']:.4g} |")
-        lines += ["", "Details: [pair/](pair/)", ""]
+def summary_document(run: Run, seconds: float) -> Document:
+    """The demo's overview: one table per step with its headline figures."""
+    s = run.summary
+    doc = Document(f"trackingbox demo: {run.bench} bench (seed {run.seed})")
+    doc.paragraph(f"Pipeline run time: {seconds:.1f} s. Files are relative to this report; report.html holds "
+                  "every stage's report with its plots.")
+    if run.truth:
+        doc.paragraph("Plant truth (bench case, not read by the spec): "
+                      + ", ".join(f"`{k}` = {v:.6g}" for k, v in run.truth.items()) + ".")
+    if "offset" in run.reports:
+        doc.heading("Untracked twin vs measurements")
+        doc.blocks += [b for b in run.reports["offset"].document.blocks if b[0] == "table"]
+    if "estimate" in s:
+        est = s["estimate"]
+        doc.heading("Estimation (training window)")
+        doc.paragraph("Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
+                      "so that it shows the parameter controllers finding the plant's value themselves.")
+        doc.table(["parameter", "estimate", "plant truth"],
+                  [[k, f"{v:.6g}", _truth(run, k)] for k, v in est["parameters"].items()])
+        doc.table(["tag", "validation NRMSE initial", "estimated"],
+                  [[t, _g(est["validation"]["nrmse_initial"].get(t)), _g(v)]
+                   for t, v in est["validation"]["nrmse"].items()])
+    if "pair" in s:
+        doc.heading("Pairing (RGA)")
+        doc.table(["variable", "parameter", "λ", "gain"],
+                  [[p["variable"], p["parameter"], _g(p["lambda"], ".3g"), _g(p["gain"])] for p in s["pair"]["pairs"]],
+                  align="llrr")
     for key, title in (("track", "Tracking in Python"), ("validate", "Compiled TrackingBox on held-out data")):
-        if key in summary:
-            doc = summary[key]
-            lines += [f"## {title}", "", "| tag | NRMSE untracked | NRMSE tracked |", "|---|---|---|"]
-            for tag, v in doc.get("variables", {}).items():
-                lines.append(f"| {tag} | {v['nrmse_untracked']:.4g} | {v['nrmse_tracked']:.4g} |")
-            lines += ["", "| parameter | final | min | max |", "|---|---|---|---|"]
-            for name, v in doc.get("parameters", {}).items():
-                lines.append(f"| {name} | {v['final']:.6g} | {v['min']:.6g} | {v['max']:.6g} |")
-            if "agreement" in doc:
-                lines += ["", f"Agreement with the Python runtime (max parameter difference / bound range): "
-                              f"{doc['agreement']:.3g}"]
-            lines += ["", f"Details: [{key}/]({key}/)", ""]
-    if "generate" in summary:
-        lines += ["## Generated Modelica", ""]
-        for f in summary["generate"].get("files", []):
-            lines.append(f"- `{Path(f).relative_to(out) if Path(f).is_relative_to(out) else f}`")
-        lines.append("")
-    target = out / "report.md"
-    write_text_atomic(target, "\n".join(lines) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
-    return target
+        if key in s:
+            doc.heading(title)
+            doc.table(["tag", "NRMSE untracked", "NRMSE tracked"],
+                      [[t, _g(v["nrmse_untracked"]), _g(v["nrmse_tracked"])] for t, v in s[key]["variables"].items()])
+            doc.table(["parameter", "final", "min", "max", "plant truth"],
+                      [[n, _g(v["final"], ".6g"), _g(v["min"], ".6g"), _g(v["max"], ".6g"), _truth(run, n)]
+                       for n, v in s[key]["parameters"].items()])
+            if s[key].get("agreement") is not None:
+                doc.paragraph("Agreement with the Python runtime (max parameter difference / bound range): "
+                              f"{s[key]['agreement']:.3g}")
+    if "generate" in s:
+        doc.heading("Generated Modelica")
+        doc.bullets([f"`{Path(f).relative_to(run.out) if Path(f).is_relative_to(run.out) else f}`"
+                     for f in s["generate"]["files"]])
+    doc.heading("Stage reports")
+    doc.bullets([f"[{k}]({r.markdown.relative_to(run.out).as_posix()})" for k, r in run.reports.items()])
+    return doc
+
+
+def _g(x: float | None, spec: str = ".4g") -> str:
+    return "-" if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def _truth(run: Run, name: str) -> str:
+    return _g(run.truth.get(name), ".6g")
+
+
+def write_report(run: Run, seconds: float) -> tuple[Path, Path]:
+    """Write ``report.md`` (overview), ``report.html`` (overview and every stage's report) and ``summary.json``."""
+    from .io import write_text_atomic
+    from .report import write_html
+
+    doc = summary_document(run, seconds)
+    md = doc.write_markdown(run.out / "report.md")
+    page = write_html(run.out / "report.html", doc.title, [doc, *(r.document for r in run.reports.values())])
+    write_text_atomic(run.out / "summary.json", json.dumps(run.summary, indent=2, default=str) + "\n")
+    return md, page
 
 
 if __name__ == "__main__":

@@ -42,7 +42,6 @@ import pandas as pd
 from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
 from .generate.filters import modelica_name
-from .io import atomic_path, write_text_atomic
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -288,83 +287,3 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     worst = max((v.agreement for v in parameters.values() if math.isfinite(v.agreement)), default=math.nan)
     return ValidationResult(window=window, variables=variables, parameters=parameters, agreement=worst,
                             seconds=_time.perf_counter() - wall0, series=series)
-
-
-def write_report(result: ValidationResult, spec: Any, fmu: Path, out_dir: str | Path) -> Path:
-    """Write ``validation.md`` with PNG plots and ``validation.csv`` into *out_dir*; return the Markdown path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    s = result.series
-    t_h = s["time"].to_numpy() / 3600.0
-    w0, w1 = (x / 3600.0 for x in result.window)
-    images: list[tuple[str, str]] = []
-
-    def save(fig: Any, name: str, title: str) -> None:
-        with atomic_path(out / name) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-        plt.close(fig)
-        images.append((name, title))
-
-    for tag in result.variables:
-        fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, height_ratios=[2, 1])
-        ax.plot(t_h, s[f"measured:{tag}"], ".", ms=2, color="0.5", label="measured")
-        ax.plot(t_h, s[f"untracked:{tag}"], color="tab:red", lw=1, label="twin (untracked)")
-        ax.plot(t_h, s[f"python:{tag}"], color="tab:green", lw=1, ls="--", label="tracked (Python runtime)")
-        ax.plot(t_h, s[f"tracked:{tag}"], color="tab:blue", lw=1.2, label="tracked (Modelica box, FMU)")
-        ax.axvspan(w0, w1, color="0.9", zorder=0, label="validation window")
-        ax.set_ylabel(tag)
-        ax.legend(loc="best", fontsize=8)
-        ax2.plot(t_h, s[f"untracked:{tag}"] - s[f"measured:{tag}"], color="tab:red", lw=0.8, label="untracked")
-        ax2.plot(t_h, s[f"tracked:{tag}"] - s[f"measured:{tag}"], color="tab:blue", lw=0.8, label="tracked (FMU)")
-        ax2.axhline(0.0, color="k", lw=0.5)
-        ax2.set_ylabel("residual")
-        ax2.set_xlabel("time (h)")
-        ax2.legend(loc="best", fontsize=8)
-        fig.tight_layout()
-        save(fig, f"variable_{modelica_name(tag)}.png", f"{tag}: measured, twin and tracked; residuals")
-    for name, p in result.parameters.items():
-        fig, ax = plt.subplots(figsize=(9, 3.5))
-        ax.plot(t_h, s[f"python:{name}"], color="tab:green", lw=1, ls="--", label="Python runtime")
-        ax.plot(t_h, s[f"modelica:{name}"], color="tab:blue", lw=1.2, label="Modelica box (FMU)")
-        ax.axhline(p.lower, color="k", lw=0.6, ls=":")
-        ax.axhline(p.upper, color="k", lw=0.6, ls=":", label="bounds")
-        ax.axvspan(w0, w1, color="0.9", zorder=0)
-        ax.set_ylabel(name)
-        ax.set_xlabel("time (h)")
-        ax.legend(loc="best", fontsize=8)
-        fig.tight_layout()
-        save(fig, f"parameter_{modelica_name(name)}.png", f"{name}: trajectory")
-    with atomic_path(out / "validation.csv") as tmp:
-        s.to_csv(tmp, index=False)
-
-    def f(x: float | None, fmt: str = ".4g") -> str:
-        return "-" if x is None or not math.isfinite(x) else format(x, fmt)
-
-    lines = [
-        "# Validation of the tracked model", "",
-        f"- tracked FMU: `{fmu.name}`", f"- spec: `{Path(spec.path).name}`",
-        f"- validation window: {result.window[0]:g} s to {result.window[1]:g} s (runs start at the first sample)",
-        f"- agreement Modelica box vs Python runtime (max |Δp| / (max − min)): **{f(result.agreement)}**", "",
-        "## Tracking variables (NRMSE on the validation window)", "",
-        "| tag | untracked | tracked (FMU) | tracked (Python) | converged at (s) | band |",
-        "|---|---|---|---|---|---|",
-    ]
-    for tag, v in result.variables.items():
-        lines.append(f"| {tag} | {f(v.nrmse_untracked)} | {f(v.nrmse_tracked)} | {f(v.nrmse_python)} | "
-                     f"{f(v.converged_at, '.0f') if v.converged_at is not None else 'not converged'} | {f(v.band)} |")
-    lines += ["", "## Tracking parameters", "",
-              "| parameter | final (FMU) | final (Python) | min | max | bounds | within | agreement |",
-              "|---|---|---|---|---|---|---|---|"]
-    for name, p in result.parameters.items():
-        lines.append(f"| {name} | {f(p.final)} | {f(p.final_python)} | {f(p.min)} | {f(p.max)} | "
-                     f"[{p.lower:g}, {p.upper:g}] | {'yes' if p.within_bounds else 'NO'} | {f(p.agreement)} |")
-    lines += ["", "## Plots", ""]
-    lines += [f"![{title}]({name})\n" for name, title in images]
-    md = out / "validation.md"
-    write_text_atomic(md, "\n".join(lines) + "\n")
-    return md

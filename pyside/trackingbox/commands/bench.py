@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
 from ..errors import TrackingError
+from ._args import parse_assignments
 
 EPILOG = """\
 examples:
@@ -31,20 +31,6 @@ the whole case could be generated.
 """
 
 
-def _assignment(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    name = name.strip()
-    if not sep or not name:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"value of {name!r} must be a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise argparse.ArgumentTypeError(f"value of {name!r} must be finite, got {value!r}")
-    return name, number
-
-
 def register(subparsers: Any) -> None:
     """Add the ``bench`` subcommand."""
     from ..benches import BENCHES
@@ -60,7 +46,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("bench", choices=sorted(BENCHES), help="which bench")
     p.add_argument("--out", "-o", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=int, default=0, help="seed of the scenario and the noise (default 0)")
-    p.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[],
+    p.add_argument("--set", dest="overrides", action="append", default=[],
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
     p.add_argument("--hours", type=float, default=None,
                    help="measured period in hours (default 8 heat-exchanger, 24 heat-production)")
@@ -74,11 +60,7 @@ def run(args: argparse.Namespace) -> int:
     """Generate the case; print a summary (or JSON)."""
     from ..benches import make_bench
 
-    overrides: dict[str, float] = {}
-    for name, value in args.overrides:
-        if name in overrides:
-            raise TrackingError(f"--set {name} given twice")
-        overrides[name] = value
+    overrides = parse_assignments(args.overrides, "--set")
     if args.hours is not None and not args.hours > 0:
         raise TrackingError(f"--hours must be > 0, got {args.hours:g}")
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=args.hours,

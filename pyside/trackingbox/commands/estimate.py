@@ -4,8 +4,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -73,70 +71,17 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-class _Progress:
-    """One status line on stderr (rewritten in place on a terminal), with elapsed time and an estimate
-    of the time left in the current stage (at most its budget: a stage may stop earlier)."""
-
-    def __init__(self, quiet: bool = False, every: float = 15.0) -> None:
-        self.tty = sys.stderr.isatty()
-        self.quiet = quiet
-        self.every = every
-        self.t0 = time.perf_counter()
-        self.stage = ""
-        self.stage_t0 = self.t0
-        self.stage_i0 = 0
-        self.last = -1.0e9
-        self.last_call = self.t0
-
-    def __call__(self, stage: str, iteration: int, total: int, best: float) -> None:
-        if self.quiet:
-            return
-        now = time.perf_counter()
-        if stage != self.stage:
-            self.stage, self.stage_t0, self.stage_i0 = stage, self.last_call, 0
-        self.last_call = now
-        elapsed = now - self.t0
-        rate = (now - self.stage_t0) / max(iteration - self.stage_i0, 1)
-        left = f", at most ~{_duration(rate * (total - iteration))} left" if iteration < total else ""
-        if stage == "global":
-            text = f"global search: generation {iteration}/{total}, best NRMSE {best:.5g}"
-        elif stage == "refine":
-            if not self.tty and now - self.last < self.every:
-                return
-            text = f"refinement: simulation {iteration}/{total} (budget), rms NRMSE {best:.5g}"
-        else:
-            text = f"refinement done: NRMSE {best:.5g}"
-            left = ""
-        text += f" ({_duration(elapsed)} elapsed{left})"
-        self.last = now
-        if self.tty:
-            sys.stderr.write("\r\033[K" + text)
-            if stage == "local":
-                sys.stderr.write("\n")
-        else:
-            sys.stderr.write(text + "\n")
-        sys.stderr.flush()
-
-
-def _duration(seconds: float) -> str:
-    """``42 s``, ``3 min 05 s``, ``1 h 02 min``."""
-    seconds = max(0.0, seconds)
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    if seconds < 3600:
-        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
-    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the estimation; exit code 0 on success."""
     from ..estimation import estimate, write_starts
+    from ..report import write_estimate_report
     from ..spec import check_against_fmu, load_spec
+    from ._progress import Progress
 
     spec = load_spec(args.spec)
     check_against_fmu(spec)
     checkpoint = args.report / "checkpoint.json" if args.report else None
-    progress = _Progress()
+    progress = Progress(every=15.0)
     result = estimate(
         spec,
         seed=args.seed,
@@ -146,12 +91,12 @@ def run(args: argparse.Namespace) -> int:
         warmup=args.warmup,
         refine=args.refine,
         refine_iterations=args.refine_iterations,
-        progress=progress,
+        progress=progress.estimation,
         checkpoint=checkpoint,
         global_grid=args.global_grid,
     )
     if args.report:
-        write_report(spec, result, args.report, warmup=args.warmup)
+        write_estimate_report(spec, result, args.report, warmup=args.warmup)
     if args.write:
         write_starts(spec.path, result.parameters)
         log.info("wrote the estimates as start values to %s", spec.path)
@@ -180,93 +125,3 @@ def _print_table(result: Any) -> None:
         print(f"{tag:<{twidth}}  {result.training_nrmse[tag]:>12.4g}  {result.validation_nrmse[tag]:>12.4g}"
               f"  {result.validation_nrmse_initial[tag]:>13.4g}")
     print(f"\n{result.evaluations} simulations in {result.seconds:.1f} s")
-
-
-def _safe(tag: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in tag)
-
-
-def write_report(spec: Any, result: Any, out: Path, *, warmup: float | None = None) -> list[Path]:
-    """Fit plots per tag, convergence trace, parameter table and result JSON in *out*.
-
-    Every file is written atomically. Returns the paths written.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..estimation import fit_series
-    from ..io import atomic_path, write_text_atomic
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    written: list[Path] = []
-    series = fit_series(spec, {"initial": result.initial, "estimated": result.parameters}, warmup=warmup)
-    for tag in spec.outputs:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
-        for ax, (window, frame) in zip(axes, series.items()):
-            hours = frame["time"] / 3600.0
-            ax.plot(hours, frame[tag], ".", ms=2, color="0.4", label="measured (used in cost)")
-            ax.plot(hours, frame[f"{tag}:initial"], "-", lw=1.2, color="tab:orange", label="start values")
-            ax.plot(hours, frame[f"{tag}:estimated"], "-", lw=1.2, color="tab:blue", label="estimate")
-            nr = (result.training_nrmse if window == "training" else result.validation_nrmse)[tag]
-            ax.set_title(f"{tag}: {window} (NRMSE {nr:.3g})")
-            ax.set_xlabel("time from first sample (h)")
-            ax.grid(alpha=0.3)
-        axes[0].set_ylabel(f"{tag} ({spec.outputs[tag]})")
-        axes[0].legend(fontsize=8)
-        fig.tight_layout()
-        target = out / f"fit_{_safe(tag)}.png"
-        with atomic_path(target) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-        plt.close(fig)
-        written.append(target)
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.semilogy(range(len(result.history)), result.history, "o-", ms=3)
-    ax.set_xlabel("generation (0: start values; last point: after refinement)")
-    ax.set_ylabel("best training cost (mean NRMSE)")
-    ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    target = out / "convergence.png"
-    with atomic_path(target) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    written.append(target)
-
-    lines = [
-        f"# Parameter estimation: {Path(spec.path).name}",
-        "",
-        f"Twin `{Path(spec.twin).name}`, {result.evaluations} simulations in {result.seconds:.1f} s, "
-        f"unscored warm-up of {result.warmup:g} s before each window (the measured history where there "
-        "is some, else the inputs held at their first values).",
-        "",
-        "| parameter | start | estimate | min | max | at bound |",
-        "|---|---:|---:|---:|---:|---|",
-    ]
-    for name, value in result.parameters.items():
-        lo, hi = result.bounds[name]
-        tol = 1e-6 * (hi - lo)
-        at = "min" if value - lo <= tol else "max" if hi - value <= tol else ""
-        lines.append(f"| `{name}` | {result.initial[name]:.6g} | {value:.6g} | {lo:.6g} | {hi:.6g} | {at} |")
-    lines += [
-        "",
-        "NRMSE = RMSE / (max - min of the measured tag over the window's valid samples).",
-        "",
-        "| tag | training | validation | validation at start values | change |",
-        "|---|---:|---:|---:|---:|",
-    ]
-    for tag in result.validation_nrmse:
-        v, v0 = result.validation_nrmse[tag], result.validation_nrmse_initial[tag]
-        change = f"{100.0 * (v - v0) / v0:+.1f} %" if v0 > 0 else ""
-        lines.append(f"| `{tag}` | {result.training_nrmse[tag]:.4g} | {v:.4g} | {v0:.4g} | {change} |")
-    lines += ["", "![convergence](convergence.png)", ""]
-    lines += [f"![{tag}](fit_{_safe(tag)}.png)" for tag in spec.outputs]
-    target = out / "parameters.md"
-    write_text_atomic(target, "\n".join(lines) + "\n")
-    written.append(target)
-    target = out / "result.json"
-    write_text_atomic(target, json.dumps({**result.to_json(), "history": list(result.history)}, indent=2) + "\n")
-    written.append(target)
-    return written

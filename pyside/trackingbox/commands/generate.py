@@ -59,30 +59,10 @@ def run(args: argparse.Namespace) -> int:
         # The diff is part of what the user asked for; keep stdout clean for --json.
         stream = sys.stderr if args.json else sys.stdout
         stream.write(result.rewrite.diff)
-    fmu = None
-    compiled: dict[str, Any] | None = None
-    if args.compile:
-        cr = compile_generated(result, backend=args.backend)
-        fmu = cr.fmu
-        compiled = {"fmu": str(cr.fmu), "backend": cr.backend, "fmi_version": cr.fmi_version,
-                    "seconds": round(cr.seconds, 3), "states": cr.states}
+    compiled = compile_generated(result, backend=args.backend) if args.compile else None
     if args.json:
-        doc = {
-            "package": result.package,
-            "package_dir": str(result.package_dir),
-            "files": [str(f) for f in result.files],
-            "tracked_model": result.tracked_model,
-            "box_model": result.box_model,
-            "library": str(result.library),
-            "patched_source": None if result.rewrite is None else str(result.rewrite.path),
-            "controllers": [
-                {"tag": c.tag, "parameter": c.parameter, "kp": c.kp, "ti": c.ti, "span": c.span,
-                 "direction": int(c.direction), "min": c.p_min, "max": c.p_max, "start": c.p_start}
-                for c in result.controllers
-            ],
-            "compile": compiled,
-        }
-        print(json.dumps(doc, indent=2))
+        print(json.dumps({**result.to_json(), "compile": None if compiled is None else compiled.to_json()},
+                         indent=2))
     else:
         print(f"wrote {result.package_dir} ({', '.join(f.name for f in result.files)})")
         for c in result.controllers:
@@ -90,6 +70,6 @@ def run(args: argparse.Namespace) -> int:
                   f"bounds [{c.p_min:g}, {c.p_max:g}]")
         if result.rewrite is not None:
             print(f"patched source: {result.rewrite.path}")
-        if fmu is not None:
-            print(f"compiled {result.tracked_model} -> {fmu}")
+        if compiled is not None:
+            print(f"compiled {result.tracked_model} -> {compiled.fmu}")
     return 0

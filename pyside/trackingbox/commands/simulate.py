@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import FMUError, TrackingError, did_you_mean
+from ._args import parse_assignments
 
 log = logging.getLogger(__name__)
 
@@ -57,36 +58,13 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def parse_assignments(items: list[str]) -> dict[str, float]:
-    """Parse ``NAME=VALUE`` strings; :class:`TrackingError` naming the bad item."""
-    values: dict[str, float] = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        name, text = name.strip(), text.strip()
-        if not sep or not name or not text:
-            raise TrackingError(f"--set {item!r}: expected NAME=VALUE, e.g. --set hx.kht=900")
-        try:
-            value = float(text)
-        except ValueError:
-            if text.lower() in ("true", "false"):
-                value = 1.0 if text.lower() == "true" else 0.0
-            else:
-                raise TrackingError(f"--set {item!r}: value {text!r} is not a number") from None
-        if not math.isfinite(value):
-            raise TrackingError(f"--set {item!r}: value must be finite")
-        if name in values:
-            raise TrackingError(f"--set {name!r} is given twice")
-        values[name] = value
-    return values
-
-
 def run(args: argparse.Namespace) -> int:
     """Validate everything, simulate, write the CSV atomically; 0 on success."""
     from ..data import read_table
     from ..fmu import FMUModel, read_info
     from ..io import atomic_path
 
-    settings = parse_assignments(args.set_values)
+    settings = parse_assignments(args.set_values, "--set")
     info = read_info(args.fmu)
     names = {v.name for v in info.variables}
     where = f"FMU {args.fmu.name}"

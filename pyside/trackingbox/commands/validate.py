@@ -45,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
     """Validate; print a summary (or JSON)."""
     from ..errors import TrackingError
     from ..spec import load_spec
-    from ..validate import validate, write_report
+    from ..report import write_validate_report
+    from ..validate import validate
 
     if not (args.band > 0.0 and math.isfinite(args.band)):
         raise TrackingError(f"--band must be a positive number, got {args.band}")
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     result = validate(spec, args.fmu, band=args.band)
     report = None
     if args.report is not None:
-        report = write_report(result, spec, args.fmu, args.report)
+        report = write_validate_report(spec, result, args.fmu, args.report).markdown
     if args.json:
         doc = result.to_json()
         if report is not None:

@@ -199,6 +199,23 @@ class GenerateResult:
     controllers: tuple[ControllerModel, ...] = field(default=())
     states: tuple[StateModel, ...] = field(default=())
 
+    def to_json(self) -> dict[str, Any]:
+        """The ``trackingbox generate --json`` document (without its ``compile`` entry)."""
+        return {
+            "package": self.package,
+            "package_dir": str(self.package_dir),
+            "files": [str(f) for f in self.files],
+            "tracked_model": self.tracked_model,
+            "box_model": self.box_model,
+            "library": str(self.library),
+            "patched_source": None if self.rewrite is None else str(self.rewrite.path),
+            "controllers": [
+                {"tag": c.tag, "parameter": c.parameter, "kp": c.kp, "ti": c.ti, "span": c.span,
+                 "direction": int(c.direction), "min": c.p_min, "max": c.p_max, "start": c.p_start}
+                for c in self.controllers
+            ],
+        }
+
 
 #: Row pitch of the box's diagram and the scale of the box instance in the tracked model.
 _PITCH = 80.0

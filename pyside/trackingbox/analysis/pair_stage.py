@@ -1,0 +1,395 @@
+"""The pairing stage: step tests on the twin, relative gain array, data checks, chosen pairs.
+
+:func:`pair` is what ``trackingbox pair`` and the demo call, and what a notebook
+calls::
+
+    from trackingbox import PairSettings, load_spec, pair
+    result = pair(load_spec("case1/spec.toml"), PairSettings(freeze=(("holdControllers", 1.0),)))
+    result.pairing.pairs            # the chosen (variable, parameter) pairs
+    result.to_json()                # the ``pair --json`` document
+
+This module chains :mod:`~trackingbox.analysis.steptest`,
+:mod:`~trackingbox.analysis.pairing`, :mod:`~trackingbox.analysis.offsets` and
+:mod:`~trackingbox.analysis.sobol`.
+
+The procedure (the options are :class:`PairSettings` fields, named as
+the command's): the twin's inputs are held at an operating point (mean of the first
+hour of the training window, or --at TIME); the twin runs with its controllers
+active until it settles; the --freeze values are set (e.g. holdControllers=1)
+and it settles again; then each [[parameters]] entry is stepped by +/- --step of
+its bound range and the new steady state of every [outputs] tag is recorded.
+Tank levels listed in [[states]] are held by proportional state compensation
+from the freeze on (they are not tracking variables).
+Settled = over --window seconds no output moved more than --tolerance x its
+measured range; responses are measured against an unstepped reference run, so
+a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled
+by measured ranges and parameter bound ranges, give the relative gain array
+(after leaving out parameters that cannot be told apart, see --rank-tol); each
+tag gets the unused parameter with a positive relative gain closest to 1.
+
+Data checks (off with --no-data-checks): before the assignment the twin runs
+untracked over the training window with the measured inputs (parameters at
+their starts, [[states]] compensation on, the first [tracking] hold_until
+seconds left out) and is compared with the measurements. A tag whose untracked
+RMS error is below --noise-ratio x its sensor noise (robust std of first
+differences / sqrt 2) has nothing to track and is left out. A pair is allowed
+only if the parameter's remaining range toward the measurement moves the tag
+by at least --min-reach x its mean offset. The chosen set is then simulated as
+first-order loops with the parameters clipped to their bounds; while a pair
+would leave more than --max-ratio of its tag's untracked RMS error, the worst
+one is forbidden and the assignment redone. Reasons go to the left-out list.
+With --second-point (default auto) the step tests are repeated at the hour of
+the training window whose mean inputs differ most from the first point: a pair
+whose gain changes sign between the points is not chosen, and each pair is
+written with the larger of its two gains (and that point's time constant), so
+the loop, tuned for the highest gain seen, stays stable where the gain grows.
+:func:`spec_pairs` turns the chosen pairs (gain, 63 % time constant) into
+``[[pairs]]`` entries; an existing pair keeps its tuning settings (lambda, kp,
+ti, controller; a new pair gets lambda = 1; the relative gain is reported, not
+written).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import AnalysisError, SpecError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..spec import PairSpec, Spec
+    from .pairing import Pairing
+    from .sobol import Agreement, SobolResult
+    from .steptest import StepSettings, StepTestResult
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PairSettings", "PairingResult", "pair", "spec_pairs"]
+
+#: ``progress(stage, done, total)``: stage ``"step runs"``, ``"step runs (2nd point)"`` or ``"Sobol runs"``.
+StageProgress = Callable[[str, int, int], None]
+
+Method = Literal["rga", "sobol", "both"]
+
+
+@dataclass(frozen=True)
+class PairSettings:
+    """Settings of :func:`pair` (the ``trackingbox pair`` options, same names and defaults).
+
+    Attributes
+    ----------
+    method
+        ``"rga"``: pairs from the relative gain array; ``"sobol"``: from Sobol total
+        indices; ``"both"``: RGA pairs plus Sobol indices and their agreement.
+    step, two_sided
+        Parameter step as a fraction of its bound range; also step down (linearity check).
+    freeze
+        ``(name, value)`` set after the first settle to freeze the twin's controllers.
+    at
+        Operating point time (s from the first sample); ``None``: mean of the
+        first hour of the training window.
+    interval, window
+        Communication step (default ``sample_time``) and settle window (default 60 intervals), s.
+    tolerance, baseline_tolerance, max_time
+        Settle rule of the step phase and the phases before it; longest settle (s).
+    rank_tol
+        Relative singular-value threshold for parameters that cannot be told apart
+        (``None``: :func:`~trackingbox.analysis.pairing.choose_pairs`' default).
+    second_point
+        ``"auto"``, ``"none"`` or a time (s): the second operating point of the step tests.
+    data_checks, noise_ratio, min_reach, max_ratio
+        The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks`.
+    samples, seed
+        Sobol base sample size and seed.
+    workers, scheduler
+        Local worker processes (``None``: all cores) or a Dask scheduler address.
+    """
+
+    method: Method = "rga"
+    step: float = 0.05
+    two_sided: bool = True
+    freeze: tuple[tuple[str, float], ...] = ()
+    at: float | None = None
+    interval: float | None = None
+    window: float | None = None
+    tolerance: float = 1e-4
+    baseline_tolerance: float = 1e-3
+    max_time: float = 86400.0
+    rank_tol: float | None = None
+    second_point: str | float = "auto"
+    data_checks: bool = True
+    noise_ratio: float = 5.0
+    min_reach: float = 0.5
+    max_ratio: float = 0.25
+    samples: int = 32
+    seed: int = 0
+    workers: int | None = None
+    scheduler: str | None = None
+
+
+@dataclass(frozen=True)
+class PairingResult:
+    """What :func:`pair` found.
+
+    Attributes
+    ----------
+    pairing
+        The chosen pairs, RGA, scaled gains, data checks (:class:`~trackingbox.analysis.pairing.Pairing`).
+    steptest, steptest_second
+        Step tests at the operating point and at the second one (``None`` if skipped).
+    sobol, agreement
+        Sobol indices and their agreement with the RGA (``None`` unless asked for).
+    step_settings
+        The step-test settings used (interval, window, freeze).
+    operating_point
+        Twin input -> value the inputs were held at.
+    second_point
+        ``(time, {input: value})`` of the second operating point, or ``None``.
+    warnings
+        Pairing warnings and nonlinear step responses.
+    """
+
+    pairing: Pairing
+    steptest: StepTestResult
+    step_settings: StepSettings
+    operating_point: dict[str, float]
+    warnings: tuple[str, ...] = ()
+    steptest_second: StepTestResult | None = None
+    second_point: tuple[float, dict[str, float]] | None = None
+    sobol: SobolResult | None = None
+    agreement: Agreement | None = None
+    settings: PairSettings = field(default_factory=PairSettings)
+
+    @property
+    def runs(self) -> int:
+        """Twin simulations run (step tests at both points, Sobol with its base run)."""
+        n = self.steptest.runs + (0 if self.steptest_second is None else self.steptest_second.runs)
+        return n + (0 if self.sobol is None else self.sobol.runs + 1)
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``trackingbox pair --json`` document (NaN as ``null``)."""
+        st, pairing, sob, agr = self.steptest, self.pairing, self.sobol, self.agreement
+        doc: dict[str, Any] = {
+            "pairs": [{"variable": p.variable, "parameter": p.parameter, "lambda": _finite(p.lambda_),
+                       "gain": _finite(p.gain), "time_constant": _finite(p.time_constant),
+                       "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound)}
+                      for p in pairing.pairs],
+            "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
+            "rga": _matrix(st.variables, st.parameters, pairing.rga),
+            "condition_number": _finite(pairing.condition_number),
+            "left_out": [{"name": n, "reason": r} for n, r in pairing.left_out],
+            "warnings": list(self.warnings),
+            "asymmetry": _matrix(st.variables, st.parameters, st.asymmetry),
+            "time_constants": _matrix(st.variables, st.parameters, st.time_constants),
+            "operating_point": dict(self.operating_point),
+            "step_time": st.step_time,
+            "runs": self.runs,
+            "sobol": None,
+            "agreement": None,
+            "pairs_condition_number": _finite(pairing.pairs_condition_number),
+            "data_checks": None if pairing.checks is None else {
+                "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
+                "max_ratio": pairing.checks.max_ratio},
+            "offsets": [{"variable": o.variable, "noise": _finite(o.noise), "mean": _finite(o.mean),
+                         "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
+                        for o in pairing.offsets],
+            "rejected_pairs": [{"variable": v, "parameter": p, "reason": r} for v, p, r in pairing.rejected],
+            "second_operating_point": None if self.second_point is None else
+            {"time": self.second_point[0], "inputs": dict(self.second_point[1])},
+            "gain_matrix_second": None if self.steptest_second is None else
+            _matrix(st.variables, st.parameters, self.steptest_second.gains),
+        }
+        if sob is not None:
+            doc["sobol"] = {"first": _matrix(sob.variables, sob.parameters, sob.first),
+                            "total": _matrix(sob.variables, sob.parameters, sob.total),
+                            "samples": sob.samples, "runs": sob.runs}
+        if agr is not None:
+            doc["agreement"] = {"index": agr.index, "agree": agr.agree, "compared": agr.compared,
+                                "rows": [{"variable": v, "rga": a, "sobol": b, "same": s}
+                                         for v, a, b, s in agr.rows]}
+        return doc
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _matrix(rows: tuple[str, ...], cols: tuple[str, ...], values: npt.ArrayLike) -> dict[str, Any]:
+    return {"variables": list(rows), "parameters": list(cols),
+            "values": [[_finite(float(x)) for x in row] for row in np.asarray(values, dtype=float)]}
+
+
+def _measured(spec: Spec) -> tuple[pd.DataFrame, npt.NDArray[np.bool_], float, float]:
+    """The measurements on the spec's grid (:class:`~trackingbox.data.MeasurementView`), the training-window
+    mask and the window ``[start, stop)`` (all data when the spec has no training window)."""
+    from ..data import MeasurementView
+
+    view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
+    frame = view.to_frame()
+    return frame, view.in_window, float(view.window[0]), float(view.window[1])
+
+
+def second_operating_point(choice: str | float, frame: Any, spec: Spec, op: dict[str, float], start: float,
+                           stop: float) -> tuple[float, dict[str, float]] | None:
+    """The second operating point *choice* asks for (``"auto"``, ``"none"`` or a time in s), or ``None``."""
+    from .steptest import farthest_operating_point, operating_point
+
+    text = str(choice).strip().lower()
+    if text == "none":
+        return None
+    if text == "auto":
+        return farthest_operating_point(frame, spec.inputs, op, start=start, stop=stop)
+    try:
+        at = float(text)
+    except ValueError:
+        raise AnalysisError(f"second operating point {choice!r}: expected auto, none or a time in s") from None
+    return at, operating_point(frame, spec.inputs, at=at)
+
+
+def _counter(progress: StageProgress | None, stage: str) -> Callable[[int, int], None] | None:
+    if progress is None:
+        return None
+    return lambda done, total: progress(stage, done, total)
+
+
+def pair(spec: Spec, settings: PairSettings | None = None, *,
+         progress: StageProgress | None = None) -> PairingResult:
+    """Choose a tracking parameter for each tracking variable of *spec*.
+
+    Parameters
+    ----------
+    spec : trackingbox.spec.Spec
+        A loaded spec with ``[[parameters]]``; ``[[states]]`` tags are compensated, not paired.
+    settings : PairSettings, optional
+        Step-test, data-check and assignment settings (defaults: ``PairSettings()``).
+    progress : callable, optional
+        ``progress(stage, runs_done, runs_total)`` while simulations run.
+
+    Returns
+    -------
+    PairingResult
+        Nothing is written: :func:`spec_pairs` gives the ``[[pairs]]`` entries to write.
+
+    Raises
+    ------
+    SpecError
+        The spec has no ``[[parameters]]``.
+    AnalysisError, DataError, FMUError
+        Unusable settings, data or twin (named).
+    """
+    from .executor import make_executor
+    from .pairing import DataChecks, choose_pairs
+    from .rga import parameter_ranges, variable_ranges
+    from .sobol import agreement, sobol_indices
+    from .steptest import StepSettings, make_problem, operating_point, step_tests
+
+    s = settings or PairSettings()
+    if not spec.parameters:
+        raise SpecError(f"{spec.path} has no [[parameters]]: nothing to pair")
+    frame, in_window, start, stop = _measured(spec)
+    op = operating_point(frame, spec.inputs, start=start, duration=3600.0, at=s.at)
+    train = frame[in_window]
+    state_tags = {st.tag for st in spec.states}
+    tags = [t for t in spec.outputs if t not in state_tags]
+    if state_tags:
+        log.info("state-compensated tags are not tracking variables: %s", ", ".join(sorted(state_tags)))
+    spans = variable_ranges(train[tags].to_numpy(dtype=float)) if len(train) else np.full(len(tags), np.nan)
+    ranges = {tag: float(r) for tag, r in zip(tags, spans) if math.isfinite(r) and r > 0}
+    params = [(p.name, p.start, p.min, p.max) for p in spec.parameters]
+    freeze = dict(s.freeze)
+    problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in tags}, parameters=params,
+                           fixed=spec.fixed, operating=op, ranges=ranges, freeze=freeze,
+                           compensation=[(st.variable, st.correction, st.gain) for st in spec.states])
+    interval = float(s.interval or spec.sample_time)
+    step_settings = StepSettings(step=s.step, two_sided=s.two_sided, freeze=tuple(freeze.items()),
+                                 interval=interval, window=float(s.window or 60 * interval),
+                                 tolerance=s.tolerance, baseline_tolerance=s.baseline_tolerance,
+                                 max_time=s.max_time)
+    sob = st2 = None
+    with make_executor(s.scheduler, s.workers) as ex:
+        log.info("step tests: %d parameters x %d directions, %d variables", len(params),
+                 2 if s.two_sided else 1, len(tags))
+        st = step_tests(problem, step_settings, ex, progress=_counter(progress, "step runs"))
+        second = second_operating_point(s.second_point, frame, spec, op, start, stop)
+        if second is not None:
+            at2, op2 = second
+            log.info("second operating point (t = %g s): %s", at2, op2)
+            fixed2 = tuple((k, v) for k, v in problem.fixed if k not in op2) + tuple(op2.items())
+            st2 = step_tests(replace(problem, fixed=fixed2), step_settings, ex,
+                             progress=_counter(progress, "step runs (2nd point)"))
+        if s.method in ("sobol", "both"):
+            sob = sobol_indices(problem, step_settings, n=s.samples, seed=s.seed, executor=ex,
+                                progress=_counter(progress, "Sobol runs"))
+    residuals = checks = None
+    if s.data_checks:
+        from .offsets import simulate_untracked
+
+        checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio)
+        log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
+        residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
+    pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
+                           variable_ranges=st.ranges,
+                           parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]),
+                           residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
+                           checks=checks, other_gains=None if st2 is None else st2.gains,
+                           other_time_constants=None if st2 is None else st2.time_constants,
+                           **({"rtol": s.rank_tol} if s.rank_tol else {}))
+    agr = agreement(pairing, sob) if sob is not None else None
+    if s.method == "sobol" and sob is not None:
+        pairing = _sobol_pairs(pairing, sob, st)
+    warnings = list(pairing.warnings)
+    warnings += [f"{v}/{p}: +/- step gains differ by {100 * a:.0f} % (nonlinear response)"
+                 for v, p, a in st.nonlinear()]
+    return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
+                         warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
+                         agreement=agr, settings=s)
+
+
+def _sobol_pairs(pairing: Pairing, sob: SobolResult, st: StepTestResult) -> Pairing:
+    """*pairing* with its pairs replaced by the Sobol total-index choice."""
+    from .pairing import Pair
+
+    choice = sob.choice("total")
+    idx = {n: k for k, n in enumerate(st.parameters)}
+    pairs = []
+    for i, v in enumerate(st.variables):
+        if v in choice:
+            j = idx[choice[v]]
+            pairs.append(Pair(v, choice[v], float(pairing.rga[i, j]), float(st.gains[i, j]),
+                              float(st.time_constants[i, j])))
+    chosen = {p.parameter for p in pairs} | {p.variable for p in pairs}
+    left = tuple((n, "not chosen by the Sobol total indices") for n in (*st.variables, *st.parameters)
+                 if n not in chosen)
+    return replace(pairing, pairs=tuple(pairs), left_out=left)
+
+
+def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
+    """``[[pairs]]`` entries for the chosen pairs; an existing identical pair keeps its tuning settings.
+
+    A pair without a measurable time constant gets the step interval (logged as a warning).
+    """
+    from ..spec import PairSpec
+
+    interval = result.step_settings.interval
+    old = {(p.variable, p.parameter): p for p in spec.pairs}
+    out = []
+    for p in result.pairing.pairs:
+        measured = math.isfinite(p.time_constant) and p.time_constant > 0
+        tau = p.time_constant if measured else interval
+        if not measured:
+            log.warning("pair %s/%s has no measurable time constant; writing %g s (the step interval)",
+                        p.variable, p.parameter, interval)
+        prev = old.get((p.variable, p.parameter))
+        if prev is not None:
+            out.append(replace(prev, gain=float(p.gain), time_constant=float(tau)))
+        else:
+            out.append(PairSpec(variable=p.variable, parameter=p.parameter, gain=float(p.gain),
+                                time_constant=float(tau), lambda_=1.0))
+    return out

@@ -1,0 +1,101 @@
+"""The one progress display of the commands (and the demo): a status line on stderr.
+
+On a terminal the line is rewritten in place (at most five times a second);
+elsewhere (a log file, CI) a line is written when the stage changes, at the end
+of a stage, and otherwise at most every *every* seconds. Each line carries the
+elapsed time and, once a stage has made progress, an estimate of the time left
+in it (at most: a stage may stop before its budget).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+
+def duration(seconds: float) -> str:
+    """``42 s``, ``3 min 05 s``, ``1 h 02 min``.
+
+    >>> duration(42.4), duration(185), duration(3720)
+    ('42 s', '3 min 05 s', '1 h 02 min')
+    """
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
+
+
+class Progress:
+    """``progress(stage, done, total, detail="")``: one status line per call worth showing.
+
+    Parameters
+    ----------
+    every : float
+        Seconds between lines when stderr is not a terminal.
+    stream : file, optional
+        Where the lines go (default ``sys.stderr``).
+    """
+
+    def __init__(self, every: float = 5.0, stream: TextIO | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.tty = self.stream.isatty()
+        self.every = every
+        self.t0 = time.perf_counter()
+        self.stage = ""
+        self.stage_t0 = self.t0
+        self.stage_done0 = 0
+        self.last = -1.0e9
+
+    def __call__(self, stage: str, done: int, total: int, detail: str = "", unit: str = "") -> None:
+        now = time.perf_counter()
+        new_stage = stage != self.stage
+        if new_stage:
+            self.stage, self.stage_t0, self.stage_done0 = stage, now, done
+        finished = done >= total
+        if not (new_stage or finished) and now - self.last < (0.2 if self.tty else self.every):
+            return
+        self.last = now
+        rate = (now - self.stage_t0) / max(done - self.stage_done0, 1)
+        left = f", at most ~{duration(rate * (total - done))} left" if 0 < done - self.stage_done0 and \
+            not finished else ""
+        text = f"{stage}: {unit + ' ' if unit else ''}{done}/{total}{', ' + detail if detail else ''} " \
+               f"({duration(now - self.t0)} elapsed{left})"
+        if self.tty:
+            self.stream.write("\r\033[K" + text + ("\n" if finished else ""))
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def counter(self, stage: str, unit: str = "") -> Counter:
+        """A ``progress(done, total)`` callable for one stage (tracking rows, step-test runs)."""
+        return Counter(self, stage, unit)
+
+    def note(self, text: str) -> None:
+        """A line of its own (a stage finished, a file written)."""
+        if self.tty:
+            self.stream.write("\r\033[K")
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def estimation(self, stage: str, iteration: int, total: int, best: float) -> None:
+        """The estimation's ``progress(stage, iteration, total, best_cost)`` callback."""
+        if stage == "global":
+            self("global search", iteration, total, f"best NRMSE {best:.5g}", unit="generation")
+        elif stage == "refine":
+            self("refinement", iteration, total, f"rms NRMSE {best:.5g}", unit="simulation")
+        else:
+            self.note(f"refinement done: NRMSE {best:.5g} ({duration(time.perf_counter() - self.t0)} elapsed)")
+
+
+class Counter:
+    """``counter(done, total)`` → ``progress(stage, done, total)``."""
+
+    def __init__(self, progress: Progress, stage: str, unit: str = "") -> None:
+        self.progress = progress
+        self.stage = stage
+        self.unit = unit
+
+    def __call__(self, done: int, total: int) -> None:
+        self.progress(self.stage, done, total, unit=self.unit)

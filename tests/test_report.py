@@ -1,0 +1,133 @@
+"""The report package's shared pieces, the commands' progress line and the pairing stage's spec entries.
+
+Expected texts are written out by hand; nothing is compared with the code's own output.
+"""
+from __future__ import annotations
+
+import base64
+import io
+import math
+import re
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from trackingbox.report import Document, write_html
+from trackingbox.report import plots
+
+PNG_1X1 = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg==")
+
+
+def _doc(tmp_path: Path) -> Document:
+    (tmp_path / "plots").mkdir()
+    (tmp_path / "plots" / "a.png").write_bytes(PNG_1X1)
+    doc = Document("Run <1>")
+    doc.paragraph("kht went `hx.kht` < **900**, see [track](track/summary.md)")
+    doc.heading("Fit")
+    doc.table(["tag", "NRMSE"], [["TI-102", "0.01"], ["TI-202", "-"]])
+    doc.bullets(["one", "two"])
+    doc.bullets([])  # nothing
+    doc.image(tmp_path / "plots" / "a.png", "a plot")
+    return doc
+
+
+def test_markdown_text(tmp_path: Path) -> None:
+    md = _doc(tmp_path).write_markdown(tmp_path / "report.md")
+    assert md.read_text() == (
+        "# Run <1>\n\n"
+        "kht went `hx.kht` < **900**, see [track](track/summary.md)\n\n"
+        "## Fit\n\n"
+        "| tag | NRMSE |\n|---|---:|\n| TI-102 | 0.01 |\n| TI-202 | - |\n\n"
+        "- one\n- two\n\n"
+        "![a plot](plots/a.png)\n")
+
+
+def test_html_page_is_self_contained(tmp_path: Path) -> None:
+    page = write_html(tmp_path / "out" / "page.html", "demo", [_doc(tmp_path)]).read_text()
+    assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
+    assert "<h1>Run &lt;1&gt;</h1>" in page
+    assert ('<p>kht went <code>hx.kht</code> &lt; <b>900</b>, see <a href="track/summary.md">track</a></p>'
+            in page)
+    assert '<td>TI-102</td><td class="num">0.01</td>' in page
+    [data] = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    assert base64.b64decode(data) == PNG_1X1  # the plot itself, not a link to it
+    assert "a.png" not in page
+
+
+def test_table_align_must_match_columns() -> None:
+    with pytest.raises(ValueError, match="2 letters for 3 columns"):
+        Document("x").table(["a", "b", "c"], [], align="lr")
+
+
+def test_extend_moves_headings_down() -> None:
+    inner = Document("Stage")
+    inner.heading("Part")
+    outer = Document("All")
+    outer.extend(inner)
+    assert outer.markdown() == "# All\n\n## Stage\n\n### Part\n"
+
+
+def test_parameter_plot_shows_truth_and_bounds() -> None:
+    x = np.linspace(0.0, 2.0, 5)
+    fig = plots.parameter(x, [plots.Line([1000, 950, 920, 912, 910], "tracked")], name="hx.kht",
+                          lower=500.0, upper=1500.0, truth=910.0)
+    ax = fig.axes[0]
+    flat = {ln.get_label(): set(np.asarray(ln.get_ydata(), dtype=float)) for ln in ax.get_lines()}
+    assert flat["plant truth (910)"] == {910.0}
+    assert flat["bounds"] == {500.0}
+    assert "tracked" in flat
+    plots.pyplot().close(fig)
+    fig = plots.parameter(x, [plots.Line(x, "tracked")], name="p", lower=0.0, upper=1.0, truth=None)
+    assert not any(ln.get_label().startswith("plant truth") for ln in fig.axes[0].get_lines())
+    plots.pyplot().close(fig)
+
+
+def test_progress_lines_on_a_log_stream(monkeypatch: pytest.MonkeyPatch) -> None:
+    from trackingbox.commands import _progress
+
+    clock = iter([0.0, 0.0, 1.0, 2.0, 7.0, 8.0, 9.0])
+    monkeypatch.setattr(_progress.time, "perf_counter", lambda: next(clock))
+    stream = io.StringIO()
+    p = _progress.Progress(every=5.0, stream=stream)     # t0 = 0
+    count = p.counter("tracking", unit="row")
+    count(1, 10)    # t = 0: new stage -> shown
+    count(2, 10)    # t = 1: within 5 s -> not shown
+    count(3, 10)    # t = 2: not shown
+    count(6, 10)    # t = 7: shown; 5 rows in 7 s since the stage began -> 4 rows left ~ 5.6 s
+    count(7, 10)    # t = 8: not shown
+    count(10, 10)   # t = 9: the end -> shown
+    assert stream.getvalue().splitlines() == [
+        "tracking: row 1/10 (0 s elapsed)",
+        "tracking: row 6/10 (7 s elapsed, at most ~6 s left)",
+        "tracking: row 10/10 (9 s elapsed)",
+    ]
+
+
+def test_spec_pairs_keeps_tuning_of_existing_pairs(tmp_path: Path) -> None:
+    from trackingbox.analysis.pair_stage import spec_pairs
+    from trackingbox.spec import PairSpec
+
+    old = PairSpec(variable="TI", parameter="k", gain=1.0, time_constant=5.0, lambda_=2.5, kp=0.3, ti=40.0)
+    spec = SimpleNamespace(pairs=(old,))
+    chosen = (SimpleNamespace(variable="TI", parameter="k", gain=-0.02, time_constant=120.0),
+              SimpleNamespace(variable="LI", parameter="q", gain=3.0, time_constant=math.nan))
+    result = SimpleNamespace(pairing=SimpleNamespace(pairs=chosen), step_settings=SimpleNamespace(interval=10.0))
+    kept, new = spec_pairs(spec, result)  # type: ignore[arg-type]
+    assert (kept.gain, kept.time_constant, kept.lambda_, kept.kp, kept.ti) == (-0.02, 120.0, 2.5, 0.3, 40.0)
+    # a new pair: lambda 1; no measurable time constant -> the step interval
+    assert (new.variable, new.parameter, new.gain, new.time_constant, new.lambda_) == ("LI", "q", 3.0, 10.0, 1.0)
+
+
+def test_demo_overview_puts_plant_truth_beside_tracked_values(tmp_path: Path) -> None:
+    from trackingbox.demo import Run, summary_document
+
+    run = Run(out=tmp_path, bench="heat-exchanger", seed=0, truth={"hx.kht": 910.0}, summary={
+        "track": {"variables": {"TI-102": {"nrmse_untracked": 0.1453, "nrmse_tracked": 0.01087}},
+                  "parameters": {"hx.kht": {"final": 902.457, "min": 891.934, "max": 1000.0}}, "seconds": 1.0}})
+    md = summary_document(run, 12.0).markdown()
+    assert "## Tracking in Python" in md
+    assert "| TI-102 | 0.1453 | 0.01087 |" in md
+    assert "| hx.kht | 902.457 | 891.934 | 1000 | 910 |" in md
+    assert "## Compiled TrackingBox" not in md  # a step that did not run has no section
