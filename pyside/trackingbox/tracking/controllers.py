@@ -304,6 +304,14 @@ class ScaledPI:
         self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
         self.mode = state["mode"]
 
+    def state_dict(self) -> dict[str, Any]:
+        """The controller's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
+        return self.state()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        self.restore(state)
+
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
     """Exact end value of ``du/dt = gain·(rate + step/te·exp(-t/te))`` over ``[0, ts]``, clamped to 0..100.
