@@ -108,7 +108,7 @@ def test_pi_state_round_trip() -> None:
     a, b = _pi(), _pi()
     a.update(1.0, 0.8, hold=True)
     a.update(1.0, 0.8)
-    b.restore(a.state())
+    b.load_state_dict(a.state_dict())
     assert a.update(1.0, 0.9) == b.update(1.0, 0.9)
 
 
@@ -196,7 +196,7 @@ def test_state_compensator_holds_level_with_proportional_offset() -> None:
 def test_state_round_trips() -> None:
     a, b = StateCompensator(5.0, ts=10.0), StateCompensator(5.0, ts=10.0)
     a.update(2.0, 1.8)
-    b.restore(a.state())
+    b.load_state_dict(a.state_dict())
     assert a.update(2.0, 1.7) == b.update(2.0, 1.7)
 
 

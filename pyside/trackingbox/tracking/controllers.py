@@ -170,23 +170,15 @@ class _ScaledController:
         raise NotImplementedError
 
     # -- checkpointing -------------------------------------------------------
-    def state(self) -> dict[str, Any]:
-        """JSON-serialisable state, for checkpoints."""
-        return {"u": self.u, "e_prev": self.e_prev, "mode": self.mode}
-
-    def restore(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state`."""
-        self.u = float(state["u"])
-        self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
-        self.mode = state["mode"]
-
     def state_dict(self) -> dict[str, Any]:
-        """The controller's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
-        return self.state()
+        """JSON-serialisable state, for the tracking loop's checkpoints."""
+        return {"u": self.u, "e_prev": self.e_prev, "mode": self.mode}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore a state produced by :meth:`state_dict`."""
-        self.restore(state)
+        self.u = float(state["u"])
+        self.e_prev = None if state["e_prev"] is None else float(state["e_prev"])
+        self.mode = state["mode"]
 
 
 class ScaledPI:
@@ -294,23 +286,15 @@ class ScaledPI:
         return self.value
 
     # -- checkpointing -------------------------------------------------------
-    def state(self) -> dict[str, Any]:
-        """JSON-serialisable state, for checkpoints."""
-        return {"u": self.u, "e_mem": self.e_mem, "mode": self.mode}
-
-    def restore(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state`."""
-        self.u = float(state["u"])
-        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
-        self.mode = state["mode"]
-
     def state_dict(self) -> dict[str, Any]:
-        """The controller's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
-        return self.state()
+        """JSON-serialisable state, for the tracking loop's checkpoints."""
+        return {"u": self.u, "e_mem": self.e_mem, "mode": self.mode}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore a state produced by :meth:`state_dict`."""
-        self.restore(state)
+        self.u = float(state["u"])
+        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
+        self.mode = state["mode"]
 
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
@@ -450,23 +434,15 @@ class StateCompensator:
         self.e_mem = e + (mem - e) * a
         return self.m
 
-    def state(self) -> dict[str, Any]:
-        """JSON-serialisable state, for checkpoints."""
-        return {"m": self.m, "e_mem": self.e_mem, "mode": self.mode}
-
-    def restore(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state`."""
-        self.m = float(state["m"])
-        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
-        self.mode = state["mode"]
-
     def state_dict(self) -> dict[str, Any]:
-        """The compensator's own state, for the tracking loop's checkpoints (as :meth:`state`)."""
-        return self.state()
+        """JSON-serialisable state, for the tracking loop's checkpoints."""
+        return {"m": self.m, "e_mem": self.e_mem, "mode": self.mode}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore a state produced by :meth:`state_dict`."""
-        self.restore(state)
+        self.m = float(state["m"])
+        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
+        self.mode = state["mode"]
 
 
 def direction_from_gain(gain: float) -> int:
