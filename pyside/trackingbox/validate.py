@@ -15,16 +15,20 @@ and the *time to converge*: the first time after which the tracked FMU's error,
 averaged over ``smooth`` samples against measurement noise, stays within
 ``band`` (a fraction of the variable's span ``|gain|·(max - min)``). Per
 tracked parameter: final value, range, whether it stayed within its bounds and
-the **agreement** with the runtime: ``max_t |p_modelica - p_python| / (max - min)``.
+the **agreement** with the runtime: ``max_k |p_modelica(t_k+1) - p_python[k]| / (max - min)``
+(the runtime's row ``k`` is the value it applies over ``[t_k, t_k+1]``, the exact
+discretisation of the box's law over that sample, so it is compared with the
+box at the end of the sample).
 
 Both runs start at the first sample because the twin's state at the start of
 the validation window is only known by simulating up to it. Both runs and the
 metrics use one :class:`~trackingbox.data.MeasurementView` of the validation
 window: the NRMSE figures are taken over the samples it scores (valid, inside
 the window, after the start-up hold, outside stoppages), the same samples
-``track`` and ``estimate`` score there. State compensation (``[[states]]``) is not
-generated into the box: the tracked FMU's correction inputs are fed with the
-correction flows the Python runtime computed.
+``track`` and ``estimate`` score there. State compensation (``[[states]]``) is
+generated into the box and gets the measured levels; where a correction is a
+top-level input of the twin (the tracked FMU keeps it an input), that input is
+fed with the correction flows the Python runtime computed.
 """
 from __future__ import annotations
 
@@ -223,18 +227,21 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     for pair in spec.pairs:
         inputs[f"{modelica_name(pair.variable)}_meas"] = view.filled(pair.variable)
     inputs[HOLD_INPUT] = _hold_signal(spec, view)
-    # State compensation ([[states]]) is not part of the generated box: the twin's
-    # correction inputs stay inputs of the tracked model and get the correction
-    # flows the Python runtime computed, so both runs see the same tanks.
+    # State compensation ([[states]]): the generated box compensates from the measured
+    # levels. Where the correction is a top-level input of the twin (the embedded path
+    # keeps it an input), the tracked model exposes the box's correction as an output
+    # and the input gets the correction flows the Python runtime computed, so both
+    # runs see the same tanks.
     for st in spec.states:
-        column = f"correction:{st.correction}"
-        if column in py:
-            inputs[st.correction] = fill_nan(py[column].to_numpy(dtype=float))
+        inputs[f"{modelica_name(st.tag)}_meas"] = view.filled(st.tag)
+    corrections = {st.correction: fill_nan(py[f"correction:{st.correction}"].to_numpy(dtype=float))
+                   for st in spec.states if f"correction:{st.correction}" in py}
     outputs = list(dict.fromkeys([*(spec.outputs[p.variable] for p in spec.pairs), *pair_names.values()]))
 
     model = FMUModel(fmu, tolerance=tolerance)
     try:
         known_inputs = set(model.info.inputs)
+        inputs.update({name: v for name, v in corrections.items() if name in known_inputs})
         for name in inputs:
             if name != "time" and name not in known_inputs:
                 raise FMUError(unknown_name("input", name, sorted(known_inputs), f"tracked FMU {fmu.name}")
@@ -272,6 +279,9 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         series[f"tracked:{tag}"] = tracked
         series[f"python:{tag}"] = python
     parameters: dict[str, ParameterValidation] = {}
+    # The runtime's row k is the value it applies over [t_k, t_k+1]: the exact
+    # discretisation of the box's law over that sample, i.e. the box's value at t_k+1.
+    aligned = in_window[:-1]
     for pair in sorted(spec.pairs, key=lambda p: p.parameter):
         name = pair.parameter
         p = spec.parameter(name)
@@ -281,7 +291,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         parameters[name] = ParameterValidation(
             final=float(pm[-1]), min=float(pm.min()), max=float(pm.max()), lower=p.min, upper=p.max,
             within_bounds=bool(pm.min() >= p.min - tol and pm.max() <= p.max + tol),
-            final_python=float(pp[-1]), agreement=agreement(pm[in_window], pp[in_window], p.min, p.max))
+            final_python=float(pp[-1]), agreement=agreement(pm[1:][aligned], pp[:-1][aligned], p.min, p.max))
         series[f"modelica:{name}"] = pm
         series[f"python:{name}"] = pp
     worst = max((v.agreement for v in parameters.values() if math.isfinite(v.agreement)), default=math.nan)
