@@ -5,6 +5,7 @@ FMI 3.0 model-exchange FMUs. See :mod:`.flatten` for what Modelica it accepts.
 """
 from __future__ import annotations
 
+import importlib.metadata
 import logging
 import os
 import pickle
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
@@ -110,6 +112,120 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     return UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
         "it; use --backend openmodelica where omc is installed, or rewrite the model")
+
+
+def _frontend_version() -> str:
+    try:
+        return importlib.metadata.version("rumoca")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - rumoca is a dependency
+        return "unknown version"
+
+
+@dataclass(frozen=True)
+class FrontendGap:
+    """A valid construct the front end (rumoca) refuses with a message that does not say so.
+
+    Attributes
+    ----------
+    construct:
+        The construct as the README's refused list names it.
+    message:
+        Regular expression on rumoca's message; its named groups fill ``{...}`` in the patterns.
+    where:
+        Regular expression (a template) for the construct in the model's code: the refusal
+        names the model only where it is found, and the line it is found on.
+    requires:
+        Optional second template that must also match in the model's code.
+    """
+
+    construct: str
+    message: str
+    where: str
+    requires: str | None = None
+
+
+_ENUM_TAIL = r"(?:[\w]+\.)*(?P<enum>\w+)"
+FRONTEND_GAPS: tuple[FrontendGap, ...] = (
+    FrontendGap("array dimension or for-range over Boolean (`b[Boolean]`, `for i in false:true`)",
+                r"could not be evaluated: \[Expression\(\w+\)\]|expected `Boolean`, found `Integer`",
+                r"\[\s*Boolean\s*\]|\bin\s+(?:Boolean\b|false\s*:\s*true\b)"),
+    FrontendGap("array dimension or for-range over an enumeration type (`x[E]`, `for e in E`)",
+                rf"expected `{_ENUM_TAIL}`, found `Integer`",
+                r"\[\s*{enum}\s*\]|\bin\s+{enum}\b", requires=r"\btype\s+{enum}\s*=\s*enumeration\b"),
+    FrontendGap("for-loop over an array of Strings (`for s in {\"a\", \"b\"}`)",
+                r"expected `Integer`, found `String`",
+                r"\bfor\s+\w+\s+in\s*\{"),
+    FrontendGap("Integer array bound to `ones(...)` or `zeros(...)` (the front end types them Real)",
+                r"expected `Integer`, found `Real`",
+                r"\bInteger\b[^;]*=\s*(?:ones|zeros)\s*\("),
+    FrontendGap("logical operator (`and`, `or`, `not`) on arrays",
+                r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
+                r"(?:colon dimension|:)",
+                r"\b{var}\s*\[[\s:,]*\]\s*=[^;]*\b(?:and|or|not)\b"),
+    FrontendGap("flexible array size `:` taken from a function result (`x[:] = f(...)`)",
+                r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
+                r"(?:colon dimension|:)",
+                r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]"),
+    FrontendGap("`cross`/`skew` of Integer vectors",
+                r"ToDae.*expression type mismatch: expected Real, found Integer",
+                r"\b(?:cross|skew)\s*\("),
+    FrontendGap("`end` inside a subscript of the binding of a flexible-size array (`y[:] = x[1:end-1]`)",
+                r"ToDae.*expression shape mismatch",
+                r"\[[\s:,]*\]\s*=[^;]*\[[^\[\];]*\bend\b"),
+    FrontendGap("concatenation of blocks of different sizes (`cat(...)`, `[a, b]`)",
+                r"ToDae.*expression shape mismatch",
+                r"\bcat\s*\(|=\s*\[[^\];]*,"),
+    FrontendGap("call of a function whose inputs and defaults come through `extends`",
+                r"invalid call of function `(?:\w+\.)*(?P<fn>\w+)`: input `\w+` has no argument and no default",
+                r"\b{fn}\s*\(", requires=r"\bfunction\s+{fn}\s+extends\b"),
+    FrontendGap("partial application of a function argument (`function f(a = ...)`)",
+                r"must be a function name or a partial application|type mismatch: expected `[\w.]+`, found `[\w.]+`",
+                r"\bfunction\s+[\w.]+\s*\("),
+    FrontendGap("partial derivative of a function (`function f_x = der(f, x)`)",
+                r"function-selection identity",
+                r"\bfunction\s+\w+\s*=\s*der\s*\("),
+    FrontendGap("`flow` prefix on a component outside a connector",
+                r"component '(?P<var>\w+)' cannot have 'flow' prefix outside a connector",
+                r"\bflow\s+[\w.]+\s+{var}\b"),
+    FrontendGap("`inStream` of a field of a stream variable of record type",
+                r"inStream\(\) is only allowed on stream variables",
+                r"\binStream\s*\(", requires=r"\bstream\s+(?!Real\b|Integer\b)[A-Za-z_][\w.]*\s+\w+"),
+    FrontendGap("`String()` of an enumeration value",
+                r"String conversion currently requires .*found Enumeration",
+                r"\bString\s*\("),
+    FrontendGap("`cardinality()`",
+                r"unresolved Flat reference",
+                r"\bcardinality\s*\("),
+)
+"""Valid constructs the front end refuses without saying it does not support them (found on the
+Modelica compliance suite); each is listed in the README's compile section."""
+
+
+def _frontend_gap(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+    """rumoca refused a valid construct with a type or shape error: name the construct and the
+    line where it stands in the model's own code, saying that the front end does not support it."""
+    for gap in FRONTEND_GAPS:
+        found = re.search(gap.message, message, re.S)
+        if found is None:
+            continue
+        names = {k: re.escape(v) for k, v in found.groupdict().items() if v is not None}
+
+        def fill(template: str) -> str:
+            for key, value in names.items():
+                template = template.replace("{" + key + "}", value)
+            return template
+
+        if gap.requires and not locate(source, model, fill(gap.requires), limit=1):
+            continue
+        locs = locate(source, model, fill(gap.where), limit=3)
+        if not locs:
+            continue
+        where = ", ".join(dict.fromkeys(str(loc) for loc in locs))
+        return UnsupportedConstructError(
+            f"unsupported Modelica construct in {model}: {gap.construct} at {where}. The front end "
+            f"(rumoca {_frontend_version()}) does not support it (rumoca: {message.splitlines()[0][:200]}); "
+            "use --backend openmodelica where omc is installed, or rewrite the model")
+    return None
 
 
 FRONTEND_TIMEOUT = 600.0
@@ -230,7 +346,8 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
-    construct = _mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
+    construct = (_mentioned_construct(message, source, model) or _frontend_gap(message, source, model)
+                 or _frontend_limit(message, diags, source, model))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
