@@ -67,6 +67,7 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> Un
     return None
 
 
+_CLASS_DECL = r"\b(?:model|block|class|connector|record|package|function|type)\s+{name}\b"
 _POSITION = re.compile(r"\[([^\]\[]+?\.mo):(\d+):\d+\]")
 _IMPLICIT_RANGE = "indices require an explicit range"
 
@@ -172,14 +173,20 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
     FrontendGap("`end` inside a subscript of the binding of a flexible-size array (`y[:] = x[1:end-1]`)",
                 r"ToDae.*expression shape mismatch",
                 r"\[[\s:,]*\]\s*=[^;]*\[[^\[\];]*\bend\b"),
-    FrontendGap("concatenation of blocks of different sizes (`cat(...)`, `[a, b]`)",
+    FrontendGap("`cat(3, ...)`: concatenation along the third dimension",
                 r"ToDae.*expression shape mismatch",
-                r"\bcat\s*\(|=\s*\[[^\];]*,"),
+                r"\bcat\s*\(\s*3\s*,"),
+    FrontendGap("Integer array concatenated from `zeros(...)` or `ones(...)` blocks (`[-1, zeros(1, 2)]`)",
+                r"ToDae.*expression shape mismatch",
+                r"\bInteger\b[^;]*=\s*(?:\[|cat\s*\()[^;]*\b(?:zeros|ones)\s*\("),
     FrontendGap("call of a function whose inputs and defaults come through `extends`",
                 r"invalid call of function `(?:\w+\.)*(?P<fn>\w+)`: input `\w+` has no argument and no default",
                 r"\b{fn}\s*\(", requires=r"\bfunction\s+{fn}\s+extends\b"),
-    FrontendGap("partial application of a function argument (`function f(a = ...)`)",
-                r"must be a function name or a partial application|type mismatch: expected `[\w.]+`, found `[\w.]+`",
+    FrontendGap("partial application that binds inputs before the free ones (`function f(a = ...)`)",
+                r"type mismatch: expected `[\w.]+`, found `[\w.]+`",
+                r"\bfunction\s+[\w.]+\s*\("),
+    FrontendGap("partial application of a functional input inside a function (`function integrand(y = x)`)",
+                r"must be a function name or a partial application",
                 r"\bfunction\s+[\w.]+\s*\("),
     FrontendGap("partial derivative of a function (`function f_x = der(f, x)`)",
                 r"function-selection identity",
@@ -194,7 +201,7 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
                 r"String conversion currently requires .*found Enumeration",
                 r"\bString\s*\("),
     FrontendGap("`cardinality()`",
-                r"unresolved Flat reference",
+                r"unresolved Flat reference|cardinality\(\) may only be used",
                 r"\bcardinality\s*\("),
 )
 """Valid constructs the front end refuses without saying it does not support them (found on the
@@ -351,6 +358,10 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
+    if not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
+        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
+        if decl:
+            detail = f" ({model} is declared at {decl[0]}; the front end gave no position)"
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
