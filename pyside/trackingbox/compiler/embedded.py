@@ -137,72 +137,93 @@ class FrontendGap:
         names the model only where it is found, and the line it is found on.
     requires:
         Optional second template that must also match in the model's code.
+    readme:
+        The words the README's list of refused constructs uses for it (a test checks they are there).
     """
 
     construct: str
     message: str
     where: str
     requires: str | None = None
+    readme: str = ""
 
 
 _ENUM_TAIL = r"(?:[\w]+\.)*(?P<enum>\w+)"
 FRONTEND_GAPS: tuple[FrontendGap, ...] = (
     FrontendGap("array dimension or for-range over Boolean (`b[Boolean]`, `for i in false:true`)",
                 r"could not be evaluated: \[Expression\(\w+\)\]|expected `Boolean`, found `Integer`",
-                r"\[\s*Boolean\s*\]|\bin\s+(?:Boolean\b|false\s*:\s*true\b)"),
+                r"\[\s*Boolean\s*\]|\bin\s+(?:Boolean\b|false\s*:\s*true\b)",
+                readme="Boolean or enumeration array dimensions and for-ranges"),
     FrontendGap("array dimension or for-range over an enumeration type (`x[E]`, `for e in E`)",
                 rf"expected `{_ENUM_TAIL}`, found `Integer`",
-                r"\[\s*{enum}\s*\]|\bin\s+{enum}\b", requires=r"\btype\s+{enum}\s*=\s*enumeration\b"),
+                r"\[\s*{enum}\s*\]|\bin\s+{enum}\b", requires=r"\btype\s+{enum}\s*=\s*enumeration\b",
+                readme="Boolean or enumeration array dimensions and for-ranges"),
     FrontendGap("for-loop over an array of Strings (`for s in {\"a\", \"b\"}`)",
                 r"expected `Integer`, found `String`",
-                r"\bfor\s+\w+\s+in\s*\{"),
+                r"\bfor\s+\w+\s+in\s*\{",
+                readme="for-loops over Strings"),
     FrontendGap("Integer array bound to `ones(...)` or `zeros(...)` (the front end types them Real)",
                 r"expected `Integer`, found `Real`",
-                r"\bInteger\b[^;]*=\s*(?:ones|zeros)\s*\("),
+                r"\bInteger\b[^;]*=\s*(?:ones|zeros)\s*\(",
+                readme="Integer arrays bound to `ones`/`zeros`"),
     FrontendGap("logical operator (`and`, `or`, `not`) on arrays",
                 r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
                 r"(?:colon dimension|:)",
-                r"\b{var}\s*\[[\s:,]*\]\s*=[^;]*\b(?:and|or|not)\b"),
+                r"\b{var}\s*\[[\s:,]*\]\s*=[^;]*\b(?:and|or|not)\b",
+                readme="logical operators on arrays"),
     FrontendGap("flexible array size `:` taken from a function result (`x[:] = f(...)`)",
                 r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
                 r"(?:colon dimension|:)",
-                r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]"),
+                r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]",
+                readme="flexible `:` sizes taken from a function result"),
     FrontendGap("`cross`/`skew` of Integer vectors",
                 r"ToDae.*expression type mismatch: expected Real, found Integer",
-                r"\b(?:cross|skew)\s*\("),
+                r"\b(?:cross|skew)\s*\(",
+                readme="`cross`/`skew` of Integer vectors"),
     FrontendGap("`end` inside a subscript of the binding of a flexible-size array (`y[:] = x[1:end-1]`)",
                 r"ToDae.*expression shape mismatch",
-                r"\[[\s:,]*\]\s*=[^;]*\[[^\[\];]*\bend\b"),
+                r"\[[\s:,]*\]\s*=[^;]*\[[^\[\];]*\bend\b",
+                readme="`end` in subscripts of such a binding"),
     FrontendGap("`cat(3, ...)`: concatenation along the third dimension",
                 r"ToDae.*expression shape mismatch",
-                r"\bcat\s*\(\s*3\s*,"),
+                r"\bcat\s*\(\s*3\s*,",
+                readme="`cat(3, ...)`"),
     FrontendGap("Integer array concatenated from `zeros(...)` or `ones(...)` blocks (`[-1, zeros(1, 2)]`)",
                 r"ToDae.*expression shape mismatch",
-                r"\bInteger\b[^;]*=\s*(?:\[|cat\s*\()[^;]*\b(?:zeros|ones)\s*\("),
+                r"\bInteger\b[^;]*=\s*(?:\[|cat\s*\()[^;]*\b(?:zeros|ones)\s*\(",
+                readme="Integer arrays concatenated from `zeros`/`ones`"),
     FrontendGap("call of a function whose inputs and defaults come through `extends`",
                 r"invalid call of function `(?:\w+\.)*(?P<fn>\w+)`: input `\w+` has no argument and no default",
-                r"\b{fn}\s*\(", requires=r"\bfunction\s+{fn}\s+extends\b"),
+                r"\b{fn}\s*\(", requires=r"\bfunction\s+{fn}\s+extends\b",
+                readme="function inputs inherited through `extends`"),
     FrontendGap("partial application that binds inputs before the free ones (`function f(a = ...)`)",
                 r"type mismatch: expected `[\w.]+`, found `[\w.]+`",
-                r"\bfunction\s+[\w.]+\s*\("),
+                r"\bfunction\s+[\w.]+\s*\(",
+                readme="partial application binding leading inputs or of a functional input"),
     FrontendGap("partial application of a functional input inside a function (`function integrand(y = x)`)",
                 r"must be a function name or a partial application",
-                r"\bfunction\s+[\w.]+\s*\("),
+                r"\bfunction\s+[\w.]+\s*\(",
+                readme="partial application binding leading inputs or of a functional input"),
     FrontendGap("partial derivative of a function (`function f_x = der(f, x)`)",
                 r"function-selection identity",
-                r"\bfunction\s+\w+\s*=\s*der\s*\("),
+                r"\bfunction\s+\w+\s*=\s*der\s*\(",
+                readme="partial derivatives of functions"),
     FrontendGap("`flow` prefix on a component outside a connector",
                 r"component '(?P<var>\w+)' cannot have 'flow' prefix outside a connector",
-                r"\bflow\s+[\w.]+\s+{var}\b"),
+                r"\bflow\s+[\w.]+\s+{var}\b",
+                readme="`flow` outside connectors"),
     FrontendGap("`inStream` of a field of a stream variable of record type",
                 r"inStream\(\) is only allowed on stream variables",
-                r"\binStream\s*\(", requires=r"\bstream\s+(?!Real\b|Integer\b)[A-Za-z_][\w.]*\s+\w+"),
+                r"\binStream\s*\(", requires=r"\bstream\s+(?!Real\b|Integer\b)[A-Za-z_][\w.]*\s+\w+",
+                readme="`inStream` of record stream variables"),
     FrontendGap("`String()` of an enumeration value",
                 r"String conversion currently requires .*found Enumeration",
-                r"\bString\s*\("),
+                r"\bString\s*\(",
+                readme="`String()` of an enumeration"),
     FrontendGap("`cardinality()`",
                 r"unresolved Flat reference|cardinality\(\) may only be used",
-                r"\bcardinality\s*\("),
+                r"\bcardinality\s*\(",
+                readme="`cardinality()`"),
 )
 """Valid constructs the front end refuses without saying it does not support them (found on the
 Modelica compliance suite); each is listed in the README's compile section."""
