@@ -374,8 +374,8 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
-    construct = (_mentioned_construct(message, source, model) or _frontend_gap(message, source, model)
-                 or _frontend_limit(message, diags, source, model))
+    construct = (_mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
+                 or _frontend_gap(message, source, model))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
