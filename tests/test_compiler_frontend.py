@@ -12,6 +12,7 @@ import pytest
 
 from trackingbox.cli import main
 from trackingbox.compiler import compile_model
+from trackingbox.compiler.embedded import FRONTEND_GAPS
 from trackingbox.compiler.source import locate, model_files, resolve_source
 from trackingbox.errors import CompileError, UnsupportedConstructError
 
@@ -153,3 +154,221 @@ def test_implicit_range_for_is_refused_at_its_line(tmp_path):
         compile_model(src, "Implicit", backend="embedded", output=tmp_path / "i.fmu")
     assert "for-loop without an explicit range" in str(exc.value)
     assert f"{src}:4" in str(exc.value)
+
+
+# Valid constructs that rumoca 0.10.2 refuses with a type or shape error (found on the compliance
+# suite): each small model below is valid Modelica, and the refusal must name the construct (in the
+# README's words) and the line where it stands, counted by hand in the text.
+FRONTEND_GAP_MODELS = {
+    "boolean": (
+        "model M\n"
+        "  Real r[Boolean] = {1, 2};\n"
+        "  Real y = r[true];\n"
+        "end M;\n",
+        "over Boolean", 2),
+    "enumeration": (
+        "model M\n"
+        "  type E = enumeration(a, b);\n"
+        "  E r[E];\n"
+        "algorithm\n"
+        "  for e in E loop\n"
+        "    r[e] := e;\n"
+        "  end for;\n"
+        "end M;\n",
+        "enumeration type", 3),
+    "string_range": (
+        "model M\n"
+        "  Real n;\n"
+        "algorithm\n"
+        "  n := 0;\n"
+        '  for s in {"a", "b"} loop\n'
+        '    if s == "a" then\n'
+        "      n := n + 1;\n"
+        "    end if;\n"
+        "  end for;\n"
+        "end M;\n",
+        "array of Strings", 5),
+    "ones_integer": (
+        "model M\n"
+        "  parameter Integer k[2] = ones(2);\n"
+        "  Real y = k[1];\n"
+        "end M;\n",
+        "`ones(...)`", 2),
+    "logical_array": (
+        "model M\n"
+        "  Boolean a[:] = {true, false};\n"
+        "  Boolean b[:] = {false, false};\n"
+        "  Boolean c[:] = a and b;\n"
+        "  Real y = if c[1] then 1 else 0;\n"
+        "end M;\n",
+        "logical operator", 4),
+    "flexible_result": (
+        "model M\n"
+        "  function twice\n"
+        "    input Real u[:];\n"
+        "    output Real y[:];\n"
+        "  algorithm\n"
+        "    y := cat(1, u, u);\n"
+        "  end twice;\n"
+        "  Real x[:] = twice({1.0, 2.0});\n"
+        "end M;\n",
+        "flexible array size", 8),
+    "cross": (
+        "model M\n"
+        "  Real c[3] = cross({1, 0, 0}, {0, 1, 0});\n"
+        "end M;\n",
+        "`cross`/`skew`", 2),
+    "end_flexible": (
+        "model M\n"
+        "  parameter Integer x[2,2] = {{1,1},{1,1}};\n"
+        "  parameter Integer y[:,:] = x[1:end-1,1:end-1];\n"
+        "  Real z = y[1,1];\n"
+        "end M;\n",
+        "`end` inside a subscript", 3),
+    "concatenation": (
+        "model M\n"
+        "  Real r[1, 1, 3] = cat(3, {{{1}}}, {{{2, 3}}});\n"
+        "end M;\n",
+        "`cat(3, ...)`", 2),
+    "integer_concatenation": (
+        "model M\n"
+        "  Integer r[1, 4] = [-1, zeros(1, 2), 1];\n"
+        "end M;\n",
+        "Integer array concatenated", 2),
+    "inherited_inputs": (
+        "model M\n"
+        "  function F1\n"
+        "    input Integer x;\n"
+        "  end F1;\n"
+        "  function F2\n"
+        "    extends F1(x = 10);\n"
+        "    output Integer y;\n"
+        "  end F2;\n"
+        "  function F3\n"
+        "    extends F2;\n"
+        "  algorithm\n"
+        "    y := x;\n"
+        "  end F3;\n"
+        "  Integer i = F3();\n"
+        "end M;\n",
+        "through `extends`", 14),
+    "partial_application": (
+        "model M\n"
+        "  partial function F\n"
+        "    input Real x;\n"
+        "    output Real y;\n"
+        "  end F;\n"
+        "  function apply\n"
+        "    input F f;\n"
+        "    input Real x;\n"
+        "    output Real y;\n"
+        "  algorithm\n"
+        "    y := f(x);\n"
+        "  end apply;\n"
+        "  function scale\n"
+        "    input Real k;\n"
+        "    input Real x;\n"
+        "    output Real y;\n"
+        "  algorithm\n"
+        "    y := k*x;\n"
+        "  end scale;\n"
+        "  Real z = apply(function scale(k = 2), time);\n"
+        "end M;\n",
+        "partial application", 20),
+    "partial_derivative": (
+        "model M\n"
+        "  function g\n"
+        "    input Real p;\n"
+        "    input Real T;\n"
+        "    output Real y;\n"
+        "  algorithm\n"
+        "    y := p*T;\n"
+        "  end g;\n"
+        "  function g_T = der(g, T);\n"
+        "  function h\n"
+        "    input Real p;\n"
+        "    input Real T;\n"
+        "    output Real y;\n"
+        "  algorithm\n"
+        "    y := g_T(p, T);\n"
+        "  end h;\n"
+        "  Real z = h(2, time);\n"
+        "end M;\n",
+        "partial derivative", 9),
+    "flow_outside": (
+        "model M\n"
+        "  Real y = 1;\n"
+        "  flow Real x = 3.0;\n"
+        "end M;\n",
+        "`flow` prefix", 3),
+    "instream_record": (
+        "model M\n"
+        "  record R\n"
+        "    Real x = 2.0;\n"
+        "  end R;\n"
+        "  connector C\n"
+        "    flow Real f;\n"
+        "    Real e = 1.0;\n"
+        "    stream R r;\n"
+        "  end C;\n"
+        "  C c;\n"
+        "  Real x = inStream(c.r.x);\n"
+        "end M;\n",
+        "`inStream`", 11),
+    "string_of_enum": (
+        "model M\n"
+        "  type E = enumeration(one, two);\n"
+        "  Real y = 1;\n"
+        "equation\n"
+        '  assert(String(E.one) == "one", "wrong");\n'
+        "end M;\n",
+        "`String()` of an enumeration", 5),
+    "cardinality": (
+        "model M\n"
+        "  connector C\n"
+        "    Real e;\n"
+        "    flow Real f;\n"
+        "  end C;\n"
+        "  model N\n"
+        "    C c1;\n"
+        "    Real k;\n"
+        "  equation\n"
+        "    k = cardinality(c1);\n"
+        "    c1.e = 1;\n"
+        "  end N;\n"
+        "  N m;\n"
+        "end M;\n",
+        "`cardinality()`", 10),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FRONTEND_GAP_MODELS))
+def test_front_end_gap_is_refused_naming_the_construct_and_line(tmp_path, name):
+    text, construct, line = FRONTEND_GAP_MODELS[name]
+    src = tmp_path / "M.mo"
+    src.write_text(text)
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(src, "M", backend="embedded", output=tmp_path / "m.fmu")
+    msg = str(exc.value)
+    assert construct in msg
+    assert f"{src}:{line}" in msg
+    assert "front end (rumoca" in msg and "does not support" in msg
+    assert not (tmp_path / "m.fmu").exists()
+
+
+def test_every_front_end_gap_is_listed_in_the_readme():
+    readme = " ".join((Path(__file__).parents[1] / "README.md").read_text().split())
+    missing = [gap.construct for gap in FRONTEND_GAPS if not gap.readme or gap.readme not in readme]
+    assert missing == []
+
+
+def test_invalid_model_without_a_front_end_position_names_the_class_line(tmp_path):
+    # a shape error (2 + 3 elements) that is no listed construct: a plain CompileError, and since
+    # rumoca gives no position the message names the line declaring the model (line 2, after a comment)
+    src = tmp_path / "Bad.mo"
+    src.write_text("// adds arrays of different sizes\nmodel Bad\n  Real x[2] = {1, 2};\n"
+                   "  Real y[3] = x + {1, 2, 3};\nend Bad;\n")
+    with pytest.raises(CompileError) as exc:
+        compile_model(src, "Bad", backend="embedded", output=tmp_path / "b.fmu")
+    assert not isinstance(exc.value, UnsupportedConstructError)
+    assert f"Bad is declared at {src}:2" in str(exc.value)

@@ -5,6 +5,7 @@ FMI 3.0 model-exchange FMUs. See :mod:`.flatten` for what Modelica it accepts.
 """
 from __future__ import annotations
 
+import importlib.metadata
 import logging
 import os
 import pickle
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
@@ -65,6 +67,7 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> Un
     return None
 
 
+_CLASS_DECL = r"\b(?:model|block|class|connector|record|package|function|type)\s+{name}\b"
 _POSITION = re.compile(r"\[([^\]\[]+?\.mo):(\d+):\d+\]")
 _IMPLICIT_RANGE = "indices require an explicit range"
 
@@ -110,6 +113,147 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     return UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
         "it; use --backend openmodelica where omc is installed, or rewrite the model")
+
+
+def _frontend_version() -> str:
+    try:
+        return importlib.metadata.version("rumoca")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - rumoca is a dependency
+        return "unknown version"
+
+
+@dataclass(frozen=True)
+class FrontendGap:
+    """A valid construct the front end (rumoca) refuses with a message that does not say so.
+
+    Attributes
+    ----------
+    construct:
+        The construct as the README's refused list names it.
+    message:
+        Regular expression on rumoca's message; its named groups fill ``{...}`` in the patterns.
+    where:
+        Regular expression (a template) for the construct in the model's code: the refusal
+        names the model only where it is found, and the line it is found on.
+    requires:
+        Optional second template that must also match in the model's code.
+    readme:
+        The words the README's list of refused constructs uses for it (a test checks they are there).
+    """
+
+    construct: str
+    message: str
+    where: str
+    requires: str | None = None
+    readme: str = ""
+
+
+_ENUM_TAIL = r"(?:[\w]+\.)*(?P<enum>\w+)"
+FRONTEND_GAPS: tuple[FrontendGap, ...] = (
+    FrontendGap("array dimension or for-range over Boolean (`b[Boolean]`, `for i in false:true`)",
+                r"could not be evaluated: \[Expression\(\w+\)\]|expected `Boolean`, found `Integer`",
+                r"\[\s*Boolean\s*\]|\bin\s+(?:Boolean\b|false\s*:\s*true\b)",
+                readme="Boolean or enumeration array dimensions and for-ranges"),
+    FrontendGap("array dimension or for-range over an enumeration type (`x[E]`, `for e in E`)",
+                rf"expected `{_ENUM_TAIL}`, found `Integer`",
+                r"\[\s*{enum}\s*\]|\bin\s+{enum}\b", requires=r"\btype\s+{enum}\s*=\s*enumeration\b",
+                readme="Boolean or enumeration array dimensions and for-ranges"),
+    FrontendGap("for-loop over an array of Strings (`for s in {\"a\", \"b\"}`)",
+                r"expected `Integer`, found `String`",
+                r"\bfor\s+\w+\s+in\s*\{",
+                readme="for-loops over Strings"),
+    FrontendGap("Integer array bound to `ones(...)` or `zeros(...)` (the front end types them Real)",
+                r"expected `Integer`, found `Real`",
+                r"\bInteger\b[^;]*=\s*(?:ones|zeros)\s*\(",
+                readme="Integer arrays bound to `ones`/`zeros`"),
+    FrontendGap("logical operator (`and`, `or`, `not`) on arrays",
+                r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
+                r"(?:colon dimension|:)",
+                r"\b{var}\s*\[[\s:,]*\]\s*=[^;]*\b(?:and|or|not)\b",
+                readme="logical operators on arrays"),
+    FrontendGap("flexible array size `:` taken from a function result (`x[:] = f(...)`)",
+                r"(?:unevaluable array dimensions for '|unresolved component dimension for )(?P<var>\w+)'?: "
+                r"(?:colon dimension|:)",
+                r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]",
+                readme="flexible `:` sizes taken from a function result"),
+    FrontendGap("`cross`/`skew` of Integer vectors",
+                r"ToDae.*expression type mismatch: expected Real, found Integer",
+                r"\b(?:cross|skew)\s*\(",
+                readme="`cross`/`skew` of Integer vectors"),
+    FrontendGap("`end` inside a subscript of the binding of a flexible-size array (`y[:] = x[1:end-1]`)",
+                r"ToDae.*expression shape mismatch",
+                r"\[[\s:,]*\]\s*=[^;]*\[[^\[\];]*\bend\b",
+                readme="`end` in subscripts of such a binding"),
+    FrontendGap("`cat(3, ...)`: concatenation along the third dimension",
+                r"ToDae.*expression shape mismatch",
+                r"\bcat\s*\(\s*3\s*,",
+                readme="`cat(3, ...)`"),
+    FrontendGap("Integer array concatenated from `zeros(...)` or `ones(...)` blocks (`[-1, zeros(1, 2)]`)",
+                r"ToDae.*expression shape mismatch",
+                r"\bInteger\b[^;]*=\s*(?:\[|cat\s*\()[^;]*\b(?:zeros|ones)\s*\(",
+                readme="Integer arrays concatenated from `zeros`/`ones`"),
+    FrontendGap("call of a function whose inputs and defaults come through `extends`",
+                r"invalid call of function `(?:\w+\.)*(?P<fn>\w+)`: input `\w+` has no argument and no default",
+                r"\b{fn}\s*\(", requires=r"\bfunction\s+{fn}\s+extends\b",
+                readme="function inputs inherited through `extends`"),
+    FrontendGap("partial application that binds inputs before the free ones (`function f(a = ...)`)",
+                r"type mismatch: expected `[\w.]+`, found `[\w.]+`",
+                r"\bfunction\s+[\w.]+\s*\(",
+                readme="partial application binding leading inputs or of a functional input"),
+    FrontendGap("partial application of a functional input inside a function (`function integrand(y = x)`)",
+                r"must be a function name or a partial application",
+                r"\bfunction\s+[\w.]+\s*\(",
+                readme="partial application binding leading inputs or of a functional input"),
+    FrontendGap("partial derivative of a function (`function f_x = der(f, x)`)",
+                r"function-selection identity",
+                r"\bfunction\s+\w+\s*=\s*der\s*\(",
+                readme="partial derivatives of functions"),
+    FrontendGap("`flow` prefix on a component outside a connector",
+                r"component '(?P<var>\w+)' cannot have 'flow' prefix outside a connector",
+                r"\bflow\s+[\w.]+\s+{var}\b",
+                readme="`flow` outside connectors"),
+    FrontendGap("`inStream` of a field of a stream variable of record type",
+                r"inStream\(\) is only allowed on stream variables",
+                r"\binStream\s*\(", requires=r"\bstream\s+(?!Real\b|Integer\b)[A-Za-z_][\w.]*\s+\w+",
+                readme="`inStream` of record stream variables"),
+    FrontendGap("`String()` of an enumeration value",
+                r"String conversion currently requires .*found Enumeration",
+                r"\bString\s*\(",
+                readme="`String()` of an enumeration"),
+    FrontendGap("`cardinality()`",
+                r"unresolved Flat reference|cardinality\(\) may only be used",
+                r"\bcardinality\s*\(",
+                readme="`cardinality()`"),
+)
+"""Valid constructs the front end refuses without saying it does not support them (found on the
+Modelica compliance suite); each is listed in the README's compile section."""
+
+
+def _frontend_gap(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+    """rumoca refused a valid construct with a type or shape error: name the construct and the
+    line where it stands in the model's own code, saying that the front end does not support it."""
+    for gap in FRONTEND_GAPS:
+        found = re.search(gap.message, message, re.S)
+        if found is None:
+            continue
+        names = {k: re.escape(v) for k, v in found.groupdict().items() if v is not None}
+
+        def fill(template: str) -> str:
+            for key, value in names.items():
+                template = template.replace("{" + key + "}", value)
+            return template
+
+        if gap.requires and not locate(source, model, fill(gap.requires), limit=1):
+            continue
+        locs = locate(source, model, fill(gap.where), limit=3)
+        if not locs:
+            continue
+        where = ", ".join(dict.fromkeys(str(loc) for loc in locs))
+        return UnsupportedConstructError(
+            f"unsupported Modelica construct in {model}: {gap.construct} at {where}. The front end "
+            f"(rumoca {_frontend_version()}) does not support it (rumoca: {message.splitlines()[0][:200]}); "
+            "use --backend openmodelica where omc is installed, or rewrite the model")
+    return None
 
 
 FRONTEND_TIMEOUT = 600.0
@@ -230,10 +374,15 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
-    construct = _mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
+    construct = (_mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
+                 or _frontend_gap(message, source, model))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
+    if not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
+        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
+        if decl:
+            detail = f" ({model} is declared at {decl[0]}; the front end gave no position)"
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
