@@ -28,6 +28,7 @@ with ``doStep``.
 """
 from __future__ import annotations
 
+import abc
 import collections
 import contextlib
 import ctypes
@@ -322,7 +323,7 @@ def _fmu_calls(what: str, messages: Messages | None = None) -> Iterator[None]:
 # FMI 2 / FMI 3 adapters
 # ---------------------------------------------------------------------------
 
-class _FMI:
+class _FMI(abc.ABC):
     """What differs between FMI 2 and FMI 3 for the drivers, on one FMPy instance.
 
     Everything else (``reset``, ``setTime``, ``doStep``, the continuous-state
@@ -337,29 +338,30 @@ class _FMI:
         self.instance = instance
         self.model_description = model_description
 
+    @abc.abstractmethod
     def real_reader(self, value_references: Sequence[int]) -> Callable[[], npt.NDArray[np.float64]]:
         """A fast reader of these Real/Float64 variables (one C call, values copied)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def real_writer(self, value_references: Sequence[int]) -> Callable[[Any], None]:
         """A fast writer of these Real/Float64 variables (one C call)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def enter_initialization_mode(self, *, tolerance: float, start_time: float) -> None:
-        raise NotImplementedError
+        """Enter initialisation mode with the run's tolerance and start time."""
 
+    @abc.abstractmethod
     def update_discrete_states(self) -> tuple[bool, bool, bool, float]:
         """One event-iteration call: ``(needed, terminate, next_event_defined, next_event_time)``."""
-        raise NotImplementedError
 
     @property
+    @abc.abstractmethod
     def get_derivatives(self) -> Callable[..., Any]:
         """FMPy's call filling the state-derivative vector (model exchange)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def needs_completed_integrator_step(self) -> bool:
         """Whether ``completedIntegratorStep`` must be called after each solver step (model exchange)."""
-        raise NotImplementedError
 
     def terminated(self, do_step_result: Any) -> bool:
         """Whether a ``doStep`` result says the FMU asked to terminate (co-simulation)."""
@@ -720,7 +722,7 @@ class FMUModel:
 # Stepper: the interface, and one driver per FMI interface
 # ---------------------------------------------------------------------------
 
-class Stepper:
+class Stepper(abc.ABC):
     """One run of an FMU, advanced communication step by communication step.
 
     Create with :meth:`FMUModel.stepper`, which returns the driver for the
@@ -758,13 +760,13 @@ class Stepper:
     def _start(self, max_step: float | None) -> None:
         """Called once initialisation succeeded."""
 
+    @abc.abstractmethod
     def _advance(self, t_next: float) -> None:
         """Advance from :attr:`time` to *t_next* (> :attr:`time`)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
         """Write *values* between steps (inside the error translation of :meth:`set`)."""
-        raise NotImplementedError
 
     # -- inputs -------------------------------------------------------------
     def _prepare_inputs(self, inputs: pd.DataFrame | None) -> None:
@@ -996,13 +998,13 @@ class Stepper:
         """
         return self._getter(tuple(names))
 
+    @abc.abstractmethod
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector (model exchange only), for checkpoints."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def set_continuous_states(self, x: npt.ArrayLike) -> None:
         """Overwrite the continuous state vector (model exchange only); the solver restarts."""
-        raise NotImplementedError
 
     @property
     def state_names(self) -> list[str]:
