@@ -318,7 +318,7 @@ def refusal_message(src: TwinSource, site: ParameterSite) -> str:
         f"parameter {site.name!r} cannot be tracked: {where} has no conditional input "
         f"{site.flag.rsplit('.', 1)[1]!r}. Add beside the declaration of {site.leaf}:\n"
         + "\n".join(ind + s for s in lines["declarations"])
-        + f"\n  in its protected section:\n" + "\n".join(ind + s for s in lines["protected"])
+        + "\n  in its protected section:\n" + "\n".join(ind + s for s in lines["protected"])
         + f"\n  in its equation section (and use {site.leaf}_internal instead of {site.leaf} in its equations):\n"
         + "\n".join(ind + s for s in lines["equations"])
         + "\n  or run again with --rewrite to write a patched copy of the source"

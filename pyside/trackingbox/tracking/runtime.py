@@ -69,7 +69,7 @@ import pandas as pd
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
-from .controllers import Scaling, ScaledPI, SlidingMode, StateCompensator, direction_from_gain
+from .controllers import ScaledPI, SlidingMode, StateCompensator
 from .tuning import pair_settings
 
 if TYPE_CHECKING:
