@@ -113,12 +113,8 @@ def _valid(x: float | None) -> bool:
     return x is not None and math.isfinite(x)
 
 
-class _ScaledController:
-    """Discrete velocity-form machinery of :class:`SlidingMode`: clamping, hold, bumpless resume.
-
-    Held (NaN or ``hold``), the output is frozen and the error history restarts
-    at the next valid sample (no derivative kick on resume).
-    """
+class _ScaledOutput:
+    """What every parameter controller has: scaling, sample time, direction and a 0-100 % output."""
 
     def __init__(self, scaling: Scaling, *, ts: float, direction: int, p0: float) -> None:
         if ts <= 0.0 or not math.isfinite(ts):
@@ -130,14 +126,25 @@ class _ScaledController:
         self.direction = int(direction)
         #: controller output, % of the parameter range, always within [0, 100]
         self.u = _clamp(scaling.to_percent(p0))
-        #: last error (%) used by the incremental law; None right after a hold
-        self.e_prev: float | None = None
         self.mode: Mode = "hold"
 
     @property
     def value(self) -> float:
         """The parameter value the controller currently outputs."""
         return self.scaling.to_parameter(self.u)
+
+
+class _ScaledController(_ScaledOutput):
+    """Discrete velocity-form machinery of :class:`SlidingMode`: clamping, hold, bumpless resume.
+
+    Held (NaN or ``hold``), the output is frozen and the error history restarts
+    at the next valid sample (no derivative kick on resume).
+    """
+
+    def __init__(self, scaling: Scaling, *, ts: float, direction: int, p0: float) -> None:
+        super().__init__(scaling, ts=ts, direction=direction, p0=p0)
+        #: last error (%) used by the incremental law; None right after a hold
+        self.e_prev: float | None = None
 
     def update(self, setpoint: float | None, process_value: float | None, *, hold: bool = False) -> float:
         """Advance one sample and return the new parameter value.
@@ -181,7 +188,7 @@ class _ScaledController:
         self.mode = state["mode"]
 
 
-class ScaledPI:
+class ScaledPI(_ScaledOutput):
     """PI parameter controller on a 0-100 % output: the exact discretisation of ``ParameterController``.
 
     The continuous law of ``TrackingBox.Blocks.ParameterController`` is
@@ -229,31 +236,17 @@ class ScaledPI:
 
     def __init__(self, scaling: Scaling, *, kp: float, ti: float, ts: float, direction: int, p0: float,
                  te: float | None = None) -> None:
-        if ts <= 0.0 or not math.isfinite(ts):
-            raise ValueError(f"sample time must be positive, got {ts}")
-        if direction not in (1, -1):
-            raise ValueError(f"direction must be +1 (direct) or -1 (reverse), got {direction}")
+        super().__init__(scaling, ts=ts, direction=direction, p0=p0)
         if not kp > 0.0 or not ti > 0.0:
             raise ValueError(f"PI gains must be positive, got kp={kp}, ti={ti}")
         te = ts * MEMORY_FRACTION if te is None else float(te)
         if not (te > 0.0 and math.isfinite(te)):
             raise ValueError(f"error-memory time constant must be positive, got {te}")
-        self.scaling = scaling
         self.kp = float(kp)
         self.ti = float(ti)
-        self.ts = float(ts)
         self.te = te
-        self.direction = int(direction)
-        #: controller output, % of the parameter range, always within [0, 100]
-        self.u = _clamp(scaling.to_percent(p0))
         #: error memory (%): starts at 0 as in the block; None after a missing error
         self.e_mem: float | None = 0.0
-        self.mode: Mode = "hold"
-
-    @property
-    def value(self) -> float:
-        """The parameter value the controller currently outputs."""
-        return self.scaling.to_parameter(self.u)
 
     def update(self, setpoint: float | None, process_value: float | None, *, hold: bool = False) -> float:
         """Advance one sample with the error held over it; return the parameter value at its end.
