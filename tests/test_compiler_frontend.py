@@ -156,6 +156,19 @@ def test_implicit_range_for_is_refused_at_its_line(tmp_path):
     assert f"{src}:4" in str(exc.value)
 
 
+def test_if_equation_with_unbalanced_branches_is_refused_at_the_if(tmp_path):
+    # invalid Modelica (a non-parameter condition whose branches differ in equation count):
+    # rumoca refuses it without a position; the refusal must still point at the if-equation
+    src = tmp_path / "Branches.mo"
+    src.write_text("model Branches\n  Real x = time;\n  Real y;\nequation\n"
+                   "  if x < 0.5 then\n    y = 1;\n  end if;\nend Branches;\n")
+    with pytest.raises(UnsupportedConstructError) as exc:
+        compile_model(src, "Branches", backend="embedded", output=tmp_path / "b.fmu")
+    assert "if-equation" in str(exc.value)
+    assert f"{src}:5" in str(exc.value)
+    assert not (tmp_path / "b.fmu").exists()
+
+
 # Valid constructs that rumoca 0.10.2 refuses with a type or shape error (found on the compliance
 # suite): each small model below is valid Modelica, and the refusal must name the construct (in the
 # README's words) and the line where it stands, counted by hand in the text.

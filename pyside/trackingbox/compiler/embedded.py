@@ -94,6 +94,7 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
         pattern = (rf"\b{re.escape(op.group(1))}\s*\(" if op
                    else r"\bfor\s+\w+\s*(?:[),]|in\s*\{)" if "comprehension" in detail
                    else r"\bfor\b" if "for-equation" in detail
+                   else r"\bif\b" if "if-equation" in detail
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
@@ -109,6 +110,9 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
             if found:
                 where = [str(found[0])]
                 break
+    if not where:  # nothing to point at: at least the line that declares the model
+        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
+        where = [f"{decl[0]} (the model's declaration; the front end gave no position)"] if decl else []
     at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
     return UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
