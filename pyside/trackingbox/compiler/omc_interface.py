@@ -9,6 +9,7 @@ one :class:`~trackingbox.errors.CompileError`.
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,6 +111,20 @@ def _real(type_: str) -> bool:
     return type_ in ("Real", "Float64", "Float32")
 
 
+def _key(name: str) -> str:
+    return re.sub(r"[^0-9a-z]", "", name.lower())
+
+
+def _suggest(name: str, candidates: list[str]) -> str:
+    """Near names: the same name spelt with other separators (``hx.kht`` / ``hx_kht``), one that
+    ends with it (``hx_UA`` for ``UA``), else :func:`did_you_mean`'s close matches."""
+    key = _key(name)
+    same = [c for c in candidates if _key(c) == key or (key and _key(c).endswith(key))]
+    if same:
+        return " (did you mean " + ", ".join(repr(c) for c in same[:3]) + "?)"
+    return did_you_mean(name, candidates)
+
+
 def compare_interface(fmu: Path | Any, expected: ExpectedInterface, *, require_tunable: bool = True
                       ) -> InterfaceReport:
     """Compare an FMU's model description with the expected names.
@@ -138,7 +153,7 @@ def compare_interface(fmu: Path | Any, expected: ExpectedInterface, *, require_t
         for name in names:
             v = by_name.get(name)
             if v is None:
-                problems.append(InterfaceProblem(name, role, "missing", hint=did_you_mean(name, candidates)))
+                problems.append(InterfaceProblem(name, role, "missing", hint=_suggest(name, candidates)))
             elif v.causality not in causalities:
                 problems.append(InterfaceProblem(name, role, "causality", v.causality))
             elif not _real(v.type):
