@@ -70,7 +70,8 @@ class InterfaceProblem:
         if self.problem == "missing":
             return f"{self.expected} {self.name!r} is not in the FMU{self.hint}"
         if self.problem == "causality":
-            return f"{self.expected} {self.name!r} is a {self.found} variable in the FMU"
+            article = "an" if self.found[:1] in "aeiou" else "a"
+            return f"{self.expected} {self.name!r} is {article} {self.found} variable in the FMU"
         if self.problem == "type":
             return f"{self.expected} {self.name!r} is of type {self.found}, not Real"
         return (f"parameter {self.name!r} is {self.found} in the FMU, not tunable: it can be set before "
@@ -115,11 +116,15 @@ def _key(name: str) -> str:
     return re.sub(r"[^0-9a-z]", "", name.lower())
 
 
+def _last(name: str) -> str:
+    return re.split(r"[._]", name)[-1]
+
+
 def _suggest(name: str, candidates: list[str]) -> str:
     """Near names: the same name spelt with other separators (``hx.kht`` / ``hx_kht``), one that
     ends with it (``hx_UA`` for ``UA``), else :func:`did_you_mean`'s close matches."""
     key = _key(name)
-    same = [c for c in candidates if _key(c) == key or (key and _key(c).endswith(key))]
+    same = [c for c in candidates if _key(c) == key or _last(c) == name or _last(name) == c]
     if same:
         return " (did you mean " + ", ".join(repr(c) for c in same[:3]) + "?)"
     return did_you_mean(name, candidates)
