@@ -214,3 +214,33 @@ def test_failed_build_writes_nothing(heater, tmp_path):
                                            r"/x/Heater.mo:7:3: error"):
         compile_openmodelica(resolve_source(src), "Heater", out, session=Recorder({"buildModelFMU": failed}, fmu))
     assert not out.exists()
+
+
+def test_ompython_session_without_omc_is_a_compile_error():
+    from trackingbox.compiler.openmodelica import OMPythonSession
+
+    if omc_available():
+        pytest.skip("omc is installed here: the message for its absence cannot be checked")
+    with pytest.raises(CompileError, match="could not start omc through OMPython"):
+        OMPythonSession()
+
+
+def test_ompython_adapter_hands_out_the_messages_ompython_raised():
+    """OMPython 4 raises on omc's errors (and has already read the messages): the adapter
+    answers "" for the command and gives the messages on the next getErrorString()."""
+    from trackingbox.compiler.omc_messages import parse_error_string
+    from trackingbox.compiler.openmodelica import OMPythonSession
+
+    class Raising:  # scripted like OMPython 4: raises with its message list, then getErrorString() is empty
+        def sendExpression(self, expr, parsed=True):  # noqa: N802
+            if expr.startswith("loadModel"):
+                raise RuntimeError("OMC error occurred for 'sendExpression(expr=loadModel(Modelica), parsed=False):\n"
+                                   "00: [SCRIPTING:error:1] [:true:0:0:0:0] Failed to load package Modelica (4.0.0)")
+            return '""' if expr == "getErrorString()" else "true"
+
+    session = object.__new__(OMPythonSession)
+    session._omc, session._pending = Raising(), []
+    assert session.sendExpression('loadModel(Modelica, {"4.0.0"})') == ""
+    (msg,) = parse_error_string(session.sendExpression("getErrorString()"))
+    assert (msg.level, msg.file, msg.message) == ("error", None, "Failed to load package Modelica (4.0.0)")
+    assert session.sendExpression("getErrorString()") == ""
