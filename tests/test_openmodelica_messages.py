@@ -78,3 +78,11 @@ def test_ompython4_exception_text_is_rewritten():
     msgs = parse_error_string(ompython_log_to_error_string(exc))
     assert msgs[0] == OmcMessage("error", "Variable y not found in scope P.", Path("/w/P.mo"), 4, 3, 4, 9)
     assert (msgs[1].level, msgs[1].file, msgs[1].message) == ("warning", None, "Something\nover two lines")
+
+
+def test_zero_position_of_a_package_notification():
+    # the shape of the package manager's notifications in OpenModelica's User's Guide
+    (m,) = parse_error_string('"[/tmp/lib/Complex 4.0.0/package.mo:0:0-0:0:readonly] Notification: Package installed '
+                              'successfully (SHA 0123abc).\n"')
+    assert (m.level, m.file, m.line, m.where) == ("notification", Path("/tmp/lib/Complex 4.0.0/package.mo"), 0,
+                                                  "/tmp/lib/Complex 4.0.0/package.mo")
