@@ -33,7 +33,7 @@ from typing import Literal, Protocol
 
 from ..errors import CompileError
 from ..io import atomic_path
-from .omc_interface import ExpectedInterface, InterfaceReport, compare_interface
+from .omc_interface import ExpectedInterface, compare_interface
 from .omc_messages import OmcMessage, compile_error, errors_of, parse_error_string
 from .omc_uses import LibraryUse, library_uses, merge_uses, source_uses
 from .source import ModelicaSource, read_text, strip_comments
@@ -311,10 +311,9 @@ def compile_openmodelica(source: ModelicaSource, model: str, output: Path,
             if own:
                 session.close()
         notes = [str(m) for m in messages if m.level != "notification"]
-        report: InterfaceReport | None = None
         if expected is not None:
-            report = compare_interface(built, expected, require_tunable=False)
-            report.raise_for_problems(f"the OpenModelica FMU of {model}")
+            compare_interface(built, expected, require_tunable=False).raise_for_problems(
+                f"the OpenModelica FMU of {model}")
             fixed = compare_interface(built, ExpectedInterface(parameters=expected.parameters))
             notes += [str(p) for p in fixed.problems]
         output.parent.mkdir(parents=True, exist_ok=True)
