@@ -62,10 +62,14 @@ def library_path() -> Path:
 
 
 def choose_backend(backend: str) -> str:
+    """The backend *backend* names; ``auto`` is ``openmodelica`` when ``omc`` is on PATH (or under
+    ``$OPENMODELICAHOME/bin``), else ``embedded``. The choice is logged (INFO)."""
     if backend not in BACKENDS:
         raise CompileError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if backend == "auto":
-        return "openmodelica" if omc_available() else "embedded"
+        chosen = "openmodelica" if omc_available() else "embedded"
+        log.info("backend auto: %s (%s)", chosen, "omc found" if chosen == "openmodelica" else "no omc on PATH")
+        return chosen
     return backend
 
 
