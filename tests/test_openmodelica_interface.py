@@ -93,3 +93,42 @@ def test_input_expected_but_missing_and_fixed_parameter(heater_fmu, tmp_path):
         ("Tamb", "not_tunable", "fixed"), ("Q", "missing", "")]
     assert "parameter 'Tamb' is fixed in the FMU, not tunable" in str(report.problems[0])
     assert [p.name for p in compare_interface(other, expected, require_tunable=False).problems] == ["Q"]
+
+
+def _spec(path: Path, output: str) -> Path:
+    path.write_text(f"""twin = "Heater.fmu"
+measurements = "m.csv"
+sample_time = 10.0
+[inputs]
+JI-1 = "Q"
+[outputs]
+TI-1 = "{output}"
+[[parameters]]
+name = "UA"
+start = 50.0
+min = 10.0
+max = 100.0
+[windows]
+training = [0.0, 100.0]
+validation = [100.0, 200.0]
+""")
+    return path
+
+
+def test_compile_command_checks_the_spec_names_on_the_embedded_path(tmp_path, capsys):
+    """``compile --spec``: the same name check whatever the backend; a wrong name is an error naming
+    it, exit 2, and no FMU is left behind."""
+    from trackingbox.cli import main
+
+    (tmp_path / "Heater.mo").write_text(HEATER)
+    ok = tmp_path / "ok.fmu"
+    assert main(["compile", str(tmp_path / "Heater.mo"), "--model", "Heater", "--backend", "embedded",
+                 "-o", str(ok), "--spec", str(_spec(tmp_path / "good.toml", "T"))]) == 0
+    assert ok.exists()
+    bad = tmp_path / "bad.fmu"
+    code = main(["compile", str(tmp_path / "Heater.mo"), "--model", "Heater", "--backend", "embedded",
+                 "-o", str(bad), "--spec", str(_spec(tmp_path / "bad.toml", "Tout"))])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "output 'Tout' is not in the FMU" in err
+    assert not bad.exists()

@@ -30,13 +30,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", help="FMU to write (default: <Model>.fmu here)")
     p.add_argument("--library", action="append", default=[], metavar="DIR",
                    help="further Modelica package directory the source uses (repeatable)")
+    p.add_argument("--spec", metavar="SPEC",
+                   help="check that the FMU exposes this spec's parameters (tunable), inputs and outputs "
+                        "under the same names; a difference is an error naming each variable")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    expected = None
+    if args.spec:
+        from ..compiler.omc_interface import ExpectedInterface
+        from ..spec import load_spec
+
+        expected = ExpectedInterface.from_spec(load_spec(args.spec, check_files=False))
     result = compile_model(args.source, args.model, backend=args.backend, output=args.output,
-                           libraries=args.library)
+                           libraries=args.library, expected=expected)
     if args.json:
         print(json.dumps(result.to_json()))
     else:

@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from ..errors import CompileError, TrackingError
 from .openmodelica import omc_available
@@ -80,6 +80,7 @@ def compile_model(
     backend: str = "auto",
     output: str | Path | None = None,
     libraries: tuple[str | Path, ...] | list[str | Path] = (),
+    expected: Any = None,
 ) -> CompileResult:
     """Compile the Modelica class *model* from *source* into an FMU.
 
@@ -98,6 +99,12 @@ def compile_model(
     libraries:
         Further package directories the source uses (e.g. the shipped
         library when compiling generated code that lives elsewhere).
+    expected:
+        An :class:`~trackingbox.compiler.omc_interface.ExpectedInterface`
+        (e.g. ``ExpectedInterface.from_spec(spec)``): after the build, the FMU
+        must expose these parameters (tunable), inputs and outputs under these
+        names, whichever backend built it; otherwise a :class:`CompileError`
+        names each difference and no FMU is left behind.
 
     Raises
     ------
@@ -122,7 +129,7 @@ def compile_model(
         else:
             from .openmodelica import compile_openmodelica
 
-            text, states, params = compile_openmodelica(src, model, out, libs)
+            text, states, params = compile_openmodelica(src, model, out, libs, expected=expected)
             version = "2.0"
     except TrackingError:
         raise
@@ -138,6 +145,13 @@ def compile_model(
             f"internal error of the {chosen} backend on {model!r} from {src.entry}: "
             f"{type(exc).__name__}: {str(exc)[:500]} (please report it with the model)") from None
     seconds = time.perf_counter() - t0
+    if expected is not None and chosen == "embedded":  # omc's build checks before writing
+        from .omc_interface import compare_interface
+
+        report = compare_interface(out, expected)
+        if not report.ok:
+            out.unlink(missing_ok=True)
+            report.raise_for_problems(f"{out.name} (model {model})")
     log.info("compiled %s with %s in %.2f s -> %s", model, chosen, seconds, out)
     return CompileResult(out, chosen, version, seconds, states, params, text)
 
