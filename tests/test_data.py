@@ -262,8 +262,6 @@ def test_view_as_a_table_and_an_open_ended_window(tmp_path):
 # A plant historian's long export (tag,time,value; ISO 8601 UTC; an empty value is a bad-quality
 # event) read by hand-checkable examples: the expected values below are worked out from the rows.
 
-from trackingbox.data import heartbeat_max_gap  # noqa: E402
-
 START = pd.Timestamp("2026-03-01T10:00:00+00:00")
 
 
