@@ -7,7 +7,7 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   parameter TrackingBox.Units.Height bodyLevelSet = 1.2 "Setpoint of the effect level (as read by LI_body)";
   parameter TrackingBox.Units.Height flashLevelSet = 1.0 "Setpoint of the flash-tank level (as read by LI_flash)";
   parameter TrackingBox.Units.Height condensateLevelSet = 0.8 "Setpoint of the condensate-tank level (as read by LI_condensate)";
-  parameter Real steamRatio(unit="s/kg") = 0.35 "Steam-valve opening = tanh(steamRatio*FI_feed) (ratio station)";
+  parameter Real steamRatio(unit="s/kg") = 0.32 "Steam-valve opening = tanh(steamRatio*FI_feed) (ratio station)";
   TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=2) "Setpoint of the inlet flow loop";
   TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.52) "Dry-solids fraction of the incoming liquor";
   TrackingBox.Interfaces.RealInput feedT(unit="K", start=368.15) "Temperature of the incoming liquor";
