@@ -69,7 +69,7 @@ equation
   port_c.m_flow = -m_c;
   port_c.x = 0;
   port_c.T = T_s;
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Line(points={{-40,90},{-40,-10}}, color={255,0,0}), Line(points={{0,90},{0,-10}}, color={255,0,0}), Line(points={{40,90},{40,-10}}, color={255,0,0})}), Documentation(info="<html>
 <p>The liquor body, vapour space and level are those of
 <code>BaseClasses.PartialVessel</code> (states <code>M</code>, <code>M_s</code>,
 <code>T</code>, <code>M_vap</code>). The feed mixes with the recirculation

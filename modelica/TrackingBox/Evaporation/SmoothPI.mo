@@ -29,7 +29,7 @@ equation
   v = k*(eF + I);
   der(I) = run*(eF/Ti + (y - v)/(k*Tt));
   y = TrackingBox.Evaporation.Functions.splus(v, yEps) - TrackingBox.Evaporation.Functions.splus(v - 1, yEps);
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Line(points={{-80,-70},{-80,20},{0,40},{80,60}}, color={0,0,127}), Text(extent={{-40,-20},{80,-80}}, textString="PI"), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p>The smooth PI of the evaporator notes (section 3):
 <code>v = k&middot;(e_f + I)</code>,
 <code>dI/dt = e_f/Ti + (y - v)/(k&middot;Tt)</code>, with the output limited
