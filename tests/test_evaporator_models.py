@@ -133,3 +133,24 @@ def test_temperatures_do_not_jump(stoppage):
         steps = np.abs(np.diff(df[tag].to_numpy()))
         assert steps.max() < 0.2, tag  # K per 10 s
         assert (df[tag] - before[tag]).abs().max() < 3.0, tag
+
+
+def test_hold_freezes_every_controller(fmu_cache):
+    """holdControllers > 0.5 holds the valve positions (step tests with frozen loops), and releasing it is bumpless."""
+    import pandas as pd
+
+    inputs = pd.DataFrame({"time": [0.0, 3600.0, 3601.0, 5400.0, 5401.0, 9000.0],
+                           "holdControllers": [0.0, 0.0, 1.0, 1.0, 0.0, 0.0],
+                           "feedFlowSet": [2.0, 2.0, 2.0, 2.0, 2.0, 2.0]})
+    # a feed-DS step while held moves levels and flows, not the valves
+    inputs["feedDS"] = [0.52, 0.52, 0.54, 0.54, 0.54, 0.54]
+    zi = ["ZI_inlet", "ZI_outlet", "ZI_product", "ZI_condensate"]
+    with FMUModel(fmu_cache("TrackingBox.Benches.Evaporator.Twin")) as m:
+        df = m.simulate(stop_time=9000, output_interval=10, inputs=inputs, outputs=zi + ["LI_body", "DI_product"])
+    held = df[(df.time >= 3700) & (df.time <= 5400)]
+    for tag in zi:
+        assert np.ptp(held[tag]) < 1e-4, tag
+    assert np.ptp(held["DI_product"]) > 1e-3  # the process did move
+    released = df[df.time >= 5400]
+    for tag in zi:  # no jump on release: at most 0.01 per 10 s
+        assert np.abs(np.diff(released[tag].to_numpy())).max() < 0.01, tag
