@@ -362,3 +362,28 @@ def test_parameter_controller_closed_loop_validation_model(fmu_cache) -> None:
     assert k[t == 5990.0][0] == pytest.approx(1.0, abs=1e-3)
     # no windup: after the release the output leaves the bound at once
     assert k[t == 4100.0][0] < 3.0 - 0.1
+
+
+@pytest.mark.parametrize("u0, e0, e1, mem", [(1.0, 5.0, -3.0, 40.0), (99.0, -5.0, 8.0, -40.0),
+                                             (99.5, 30.0, -30.0, 35.0), (50.0, 10.0, 12.0, 0.0),
+                                             (2.0, -20.0, 25.0, -5.0)])
+def test_linear_step_matches_a_fine_clamped_integration(u0: float, e0: float, e1: float, mem: float) -> None:
+    # one sample of the block's law with the error going linearly from e0 to e1 (as the compiled box
+    # sees an interpolated measurement), u clamped to 0..100 by conditional integration, integrated
+    # with 200 000 explicit Euler steps; the rate changes sign once or twice in these cases.
+    kp, ti, ts, te = 2.0, 5.0, 10.0, 1.0
+    n = 200_000
+    h = ts / n
+    u, m = u0, mem
+    for i in range(n):
+        e = e0 + (e1 - e0) * (i * h) / ts
+        rate = kp * (e / ti + (e - m) / te)
+        if not ((u >= 100.0 and rate > 0.0) or (u <= 0.0 and rate < 0.0)):
+            u = min(max(u + h * rate, 0.0), 100.0)
+        m += h * (e - m) / te
+    pi = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, te=te, direction=1, p0=u0,
+                  interpolation="linear")
+    pi.update(e0, 0.0)  # the first call records e0
+    pi.e_mem = mem
+    assert pi.update(e1, 0.0) == pytest.approx(u, abs=1e-3)
+    assert pi.e_mem == pytest.approx(m, abs=1e-3)

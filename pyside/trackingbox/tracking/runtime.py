@@ -69,7 +69,7 @@ import pandas as pd
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
-from .controllers import ScaledPI, SlidingMode, StateCompensator
+from .controllers import Interpolation, ScaledPI, SlidingMode, StateCompensator
 from .tuning import pair_settings
 
 if TYPE_CHECKING:
@@ -83,7 +83,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 2  # 2: one entry per part of the loop (controllers, compensation, twins, output)
+_CHECKPOINT_VERSION = 3  # 3: the controllers' error interpolation state; 2: one entry per part of the loop (controllers, compensation, twins, output)
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -404,7 +404,8 @@ class _Plan:
     events: list[TrackingEvent] = field(default_factory=list)
 
 
-def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) -> _Pair:
+def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64],
+                     interpolation: Interpolation = "linear") -> _Pair:
     p = spec.parameter(pair.parameter)
     ts = float(spec.sample_time)
     # the one span/tuning rule, shared with the generated Modelica box
@@ -416,7 +417,7 @@ def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) ->
         ctrl: ScaledPI | SlidingMode = SlidingMode.from_pi(scaling, kp=kp, ti=ti, ts=ts, direction=direction,
                                                            p0=p.start, phi=SLIDING_PHI)
     else:
-        ctrl = ScaledPI(scaling, kp=kp, ti=ti, ts=ts, direction=direction, p0=p.start)
+        ctrl = ScaledPI(scaling, kp=kp, ti=ti, ts=ts, direction=direction, p0=p.start, interpolation=interpolation)
     log.info("pair %s -> %s: %s kp=%.4g ti=%.4g s (scaled), span=%.4g, %s acting", pair.variable, pair.parameter,
              kind, kp, ti, span, "direct" if direction > 0 else "reverse")
     return _Pair(pair.variable, spec.outputs[pair.variable], pair.parameter, ctrl, (p.min, p.max))
@@ -666,7 +667,7 @@ class TrackingLoop:
     def __init__(self, spec: Spec, *, out_dir: str | Path, window: Window = "all",
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
-                 view: MeasurementView | None = None) -> None:
+                 view: MeasurementView | None = None, interpolation: Interpolation = "linear") -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -687,12 +688,16 @@ class TrackingLoop:
         self.recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
         self.events = plan.events
 
-        pairs = [_make_controller(spec, p, self.view.samples[p.variable]) for p in spec.pairs]
+        if interpolation not in ("zoh", "linear"):
+            raise ValueError(f"interpolation must be 'zoh' or 'linear', got {interpolation!r}")
+        self.interpolation = interpolation
+        pairs = [_make_controller(spec, p, self.view.samples[p.variable], interpolation) for p in spec.pairs]
         for p in pairs:
             _check_authority(p, self.view.samples[p.tag], self.events)
         self.controllers = _Controllers(pairs)
         self.compensation = _Compensation([
-            _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts), StateCompensator(s.gain, ts=ts))
+            _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts, interpolation=interpolation),
+                   StateCompensator(s.gain, ts=ts, interpolation=interpolation))
             for s in spec.states])
         self.output = _Output(self.csv_path, plan.columns, self.controllers.names, self.compensation.names,
                               [s.tag for s in spec.states], list(spec.outputs))
@@ -733,6 +738,7 @@ class TrackingLoop:
             "rows": rows,
             "rows_total": self.n_rows,
             "window": self.window,
+            "interpolation": self.interpolation,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
@@ -751,6 +757,9 @@ class TrackingLoop:
                 or not math.isclose(float(state.get("sample_time", -1)), self.ts):
             raise SpecError(f"checkpoint {self.ckpt_path} was written for a different spec or version; "
                             "run without --resume to start over")
+        if state.get("interpolation") != self.interpolation:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with interpolation "
+                            f"{state.get('interpolation')!r}, not {self.interpolation!r}; run without --resume")
         if state.get("window") != self.window or int(state.get("rows_total", -1)) != self.n_rows:
             raise SpecError(f"checkpoint {self.ckpt_path} was written for window {state.get('window')!r} "
                             f"({state.get('rows_total')} rows), not {self.window!r} ({self.n_rows} rows); resume "
@@ -962,6 +971,7 @@ def track(
     recovery_hold: float | None = None,
     tolerance: float = 1e-6,
     view: MeasurementView | None = None,
+    interpolation: Interpolation = "linear",
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -994,6 +1004,14 @@ def track(
         The measurements to track, when the caller has built them already
         (``MeasurementView.from_spec(spec, window, skip=spec.tracking.hold_until)``);
         default: built here from the spec.
+    interpolation : {"linear", "zoh"}
+        How the controllers see the error between samples (see
+        :class:`~trackingbox.tracking.controllers.ScaledPI`). ``"linear"``
+        (default): the error goes linearly from one sample to the next, as in
+        the compiled box (interpolated measurement, continuous twin output);
+        the parameter of row ``k`` is the controller's value at ``t_k``, held
+        over ``[t_k, t_k+1]``. ``"zoh"``: the error held over the sample; the
+        parameter of row ``k`` is the value at ``t_k+1``, applied from ``t_k``.
 
     Returns
     -------
@@ -1009,7 +1027,7 @@ def track(
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
-                        view=view)
+                        view=view, interpolation=interpolation)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
