@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from trackingbox.tracking.controllers import (
@@ -293,6 +294,43 @@ def test_python_controllers_match_the_compiled_blocks(fmu_cache) -> None:
     tol = 1e-6 * (b["p_max"] - b["p_min"])
     assert np.abs(py_a[:, :2] - mo_a[:, :2]).max() <= tol, np.abs(py_a - mo_a).max(axis=0)
     # the correction: within 1e-6 of its range K*max|diff|
+    assert np.abs(py_a[:, 2] - mo_a[:, 2]).max() <= 1e-6 * b["k"] * 2.0
+
+
+def test_linear_python_controllers_match_the_compiled_blocks_with_interpolated_inputs(fmu_cache) -> None:
+    # The same recorded sequence, this time as the compiled box sees a measurement: u_s linear between
+    # the samples (the FMU's input table), the hold a flag per sample (set between steps). The
+    # controllers with interpolation="linear" return, at the call with sample k, the block's value at t_k.
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.ParameterControllerInputs")
+    b = _BLOCK
+    scaling = Scaling(b["p_min"], b["p_max"], span=b["span"])
+    kw = dict(kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], p0=b["p0"], interpolation="linear")
+    direct, reverse = ScaledPI(scaling, direction=1, **kw), ScaledPI(scaling, direction=-1, **kw)
+    comp = StateCompensator(b["k"], ts=_TS, te=b["te"], interpolation="linear")
+    grid = _TS * np.arange(len(_DIFF))
+    table = pd.DataFrame({"time": grid, "u_s": 50.0 + np.asarray(_DIFF), "u_m": np.full(grid.size, 50.0)})
+    py, mo = [], []
+    with FMUModel(fmu, tolerance=1e-10) as model:
+        run = model.stepper(start_time=0.0, inputs=table)
+        for k, (diff, hold) in enumerate(zip(_DIFF, _HOLD)):
+            mo.append(run.get(["yDirect", "yReverse", "m"]))
+            u_s = 50.0 + diff
+            py.append([direct.update(u_s, 50.0, hold=hold > 0.5), reverse.update(u_s, 50.0, hold=hold > 0.5),
+                       comp.update(u_s, 50.0, hold=hold > 0.5)])
+            if k + 1 < grid.size:
+                run.set({"hold": hold})
+                run.step(grid[k + 1])
+    py_a, mo_a = np.array(py), np.array(mo)
+    # both bounds are reached (the ramped error saturates less than the held one, see above)
+    assert py_a[:, :2].max() == b["p_max"] and py_a[:, :2].min() == b["p_min"], (py_a[:, 0].max(), py_a[:, 1].min())
+    # the linear error differs from the held one: the check is not the zero-order-hold one again
+    zoh = ScaledPI(scaling, kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], direction=1, p0=b["p0"])
+    held = [b["p0"]] + [zoh.update(50.0 + d, 50.0, hold=h > 0.5) for d, h in zip(_DIFF[:-1], _HOLD[:-1])]
+    assert np.abs(np.array(held) - py_a[:, 0]).max() > 1e-2 * (b["p_max"] - b["p_min"])
+    tol = 1e-6 * (b["p_max"] - b["p_min"])
+    assert np.abs(py_a[:, :2] - mo_a[:, :2]).max() <= tol, np.abs(py_a - mo_a).max(axis=0)
     assert np.abs(py_a[:, 2] - mo_a[:, 2]).max() <= 1e-6 * b["k"] * 2.0
 
 
