@@ -83,7 +83,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 3  # 3: the controllers' error interpolation state; 2: one entry per part of the loop (controllers, compensation, twins, output)
+_CHECKPOINT_VERSION = 3  # 3: error interpolation in the controllers; 2: one entry per part of the loop
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
