@@ -210,4 +210,4 @@ def test_heat_exchanger_chain_tracks_plant_kht(tmp_path: Path):
     assert kht.within_bounds
     v = res.variables["TI-102"]
     assert v.nrmse_tracked < 0.25 * v.nrmse_untracked
-    assert res.agreement < 0.05
+    assert res.agreement <= 0.01                                    # noisy data: the criterion

@@ -28,7 +28,8 @@ the window, after the start-up hold, outside stoppages), the same samples
 ``track`` and ``estimate`` score there. State compensation (``[[states]]``) is
 generated into the box and gets the measured levels; where a correction is a
 top-level input of the twin (the tracked FMU keeps it an input), that input is
-fed with the correction flows the Python runtime computed.
+fed with the correction flows the Python runtime computed, held over each sample
+as the runtime applies them (set between communication steps, like ``hold``).
 """
 from __future__ import annotations
 
@@ -175,19 +176,21 @@ def _hold_signal(spec: Spec, view: MeasurementView, lead: int = 0) -> np.ndarray
     return hold.astype(float)
 
 
-def _run_box(model: Any, inputs: pd.DataFrame, hold: np.ndarray, grid: np.ndarray,
+def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid: np.ndarray,
              outputs: list[str]) -> pd.DataFrame:
-    """Run the tracked FMU over *grid*: *inputs* interpolated linearly, ``hold`` held over each sample.
+    """Run the tracked FMU over *grid*: *inputs* interpolated linearly, *held* held over each sample.
 
-    The hold is a flag per sample (as the runtime applies it), so it is set
+    The held inputs (``hold``, and correction flows fed from the Python
+    runtime) are values per sample as the runtime applies them, so they are set
     between communication steps instead of being interpolated between samples.
     """
-    run = model.stepper(start_time=float(grid[0]), parameters={HOLD_INPUT: float(hold[0])}, inputs=inputs)
+    run = model.stepper(start_time=float(grid[0]), parameters={n: float(v[0]) for n, v in held.items()},
+                        inputs=inputs)
     read = run.reader(outputs)
     rows = np.empty((grid.size, len(outputs)))
     rows[0] = read()
     for k in range(grid.size - 1):
-        run.set({HOLD_INPUT: float(hold[k])})
+        run.set({n: float(v[k]) for n, v in held.items()})
         run.step(float(grid[k + 1]))
         rows[k + 1] = read()
     run.finish()
@@ -277,13 +280,14 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     model = FMUModel(fmu, tolerance=tolerance)
     try:
         known_inputs = set(model.info.inputs)
-        inputs.update({name: v for name, v in corrections.items() if name in known_inputs})
-        for name in [*inputs, HOLD_INPUT]:
+        # the runtime applies its corrections per sample (held over [t_k, t_k+1]): so does the box's twin
+        held = {HOLD_INPUT: hold, **{name: v for name, v in corrections.items() if name in known_inputs}}
+        for name in [*inputs, *held]:
             if name != "time" and name not in known_inputs:
                 raise FMUError(unknown_name("input", name, sorted(known_inputs), f"tracked FMU {fmu.name}")
                                + " (was it generated from this spec?)")
         logger.info("running the tracked FMU %s", fmu.name)
-        sim = _run_box(model, pd.DataFrame(inputs), hold, grid, outputs)
+        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs)
     finally:
         model.close()
 
