@@ -298,10 +298,16 @@ class _Twin:
     """One FMU run that can be restarted from saved states or a replayed trajectory."""
 
     def __init__(self, path: Path, *, label: str, base: Mapping[str, float], inputs: pd.DataFrame | None,
-                 tolerance: float, recorded: Mapping[str, str]) -> None:
+                 tolerance: float, recorded: Mapping[str, str],
+                 extrapolate: Mapping[str, tuple[float, float]] | None = None) -> None:
         from ..fmu import FMUModel
 
         self.label = label
+        #: parameter -> bounds: applied over [t_k, t_k+1] as the mean of the controller's ramp over
+        #: that sample, predicted from the last one (see :meth:`_applied`)
+        self.extrapolate = dict(extrapolate or {})
+        #: the values given for the previous step (before extrapolation)
+        self.given: dict[str, float] = {}
         #: value name -> CSV column holding what was applied (for a replay)
         self.recorded = dict(recorded)
         self.model = FMUModel(path, tolerance=tolerance)
@@ -330,8 +336,27 @@ class _Twin:
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
         return self.stepper.get(names)
 
+    def _applied(self, values: Mapping[str, float]) -> dict[str, float]:
+        """The values to apply over the coming sample (:meth:`step` then remembers the given ones).
+
+        A parameter in :attr:`extrapolate` with the controller's value ``p_k``
+        at ``t_k`` (linear error interpolation) is applied as
+        ``p_k + (p_k - p_k-1)/2``, clamped to its bounds: the compiled box's
+        parameter ramps over the sample, and this is the ramp's mean predicted
+        from the previous sample, so the twin does not see the parameter one
+        half sample late.
+        """
+        out = dict(values)
+        for name, (lo, hi) in self.extrapolate.items():
+            if name in values and name in self.given:
+                p = float(values[name])
+                out[name] = min(max(p + 0.5 * (p - self.given[name]), lo), hi)
+        return out
+
     def step(self, t_next: float, values: Mapping[str, float]) -> None:
         """Apply the values that changed and integrate to *t_next*."""
+        given = {n: float(v) for n, v in values.items()}
+        values = self._applied(values)
         changed = {n: v for n, v in values.items() if self.applied.get(n) != v}
         t0 = _time.perf_counter()
         if changed:
@@ -339,11 +364,13 @@ class _Twin:
             self.applied.update(changed)
         self.stepper.step(t_next)
         self.step_seconds += _time.perf_counter() - t0
+        self.given = given
         self._save()
 
     def replay(self, t0: float, rows: Iterator[tuple[float, dict[str, float]]]) -> None:
         """Rebuild the run from *t0* by re-applying recorded values: ``(t_next, values)`` per step."""
         first = True
+        self.given = {}
         for t_next, values in rows:
             if first:
                 self.start(t0, values)
@@ -358,7 +385,8 @@ class _Twin:
 
     def state_dict(self) -> dict[str, Any]:
         """The values applied and, for model exchange, the continuous states after the last step."""
-        return {"applied": dict(self.applied), "x": self.x.tolist() if self.x is not None else None}
+        return {"applied": dict(self.applied), "given": dict(self.given),
+                "x": self.x.tolist() if self.x is not None else None}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
                         grid: npt.NDArray[np.float64]) -> None:
@@ -366,6 +394,7 @@ class _Twin:
         x = state.get("x")
         if x is not None and self.me:
             self.start(t, {n: float(v) for n, v in state["applied"].items()}, x)
+            self.given = {n: float(v) for n, v in state.get("given", {}).items()}
         else:
             self.replay_csv(csv_path, rows, grid)
 
@@ -713,8 +742,10 @@ class TrackingLoop:
                     **{n: f"correction:{n}" for n in self.compensation.names}}
         self.twin: _Twin | None = None
         self.plain: _Twin | None = None
+        extrapolate = {p.parameter: p.bounds for p in pairs if isinstance(p.controller, ScaledPI)} \
+            if interpolation == "linear" else {}
         self.twin = _Twin(spec.twin, label="tracked", base=base, inputs=self.view.inputs, tolerance=tolerance,
-                          recorded=recorded)
+                          recorded=recorded, extrapolate=extrapolate)
         if untracked is True:
             try:
                 self.plain = _Twin(spec.twin, label="untracked", base=base, inputs=self.view.inputs,
