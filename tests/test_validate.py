@@ -114,7 +114,7 @@ def test_agreement_through_a_parameter_step_and_a_runtime_with_another_gain(step
     # the bounds; a runtime with kp or 1/Ti 1.5 times larger is another controller, and the metric
     # must say so (> 0.01). (The twin is fast here, tau = 40 s for Ts = 10 s: the runtime's twin
     # sees the parameter one sample later than the box's, held over the sample where the box's
-    # ramps, which leaves about 0.15 % of the bounds per % of parameter step; measured 0.0147
+    # ramps; before the runtime applied the ramp's predicted mean this left 0.0078 here, and 0.0147
     # for a 900 -> 1000 step, where kp x 2 gave 0.097 and Ti / 2 gave 0.074.)
     import dataclasses
 
