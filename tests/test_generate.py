@@ -518,18 +518,18 @@ time_constant = 300.0
 
 @pytest.mark.slow
 @pytest.mark.compile
-@pytest.mark.parametrize("bench, hours, max_allowed", [("heat-exchanger", 3.0, 0.01), ("heat-production", 2.0, 0.015)])
+@pytest.mark.parametrize("bench, hours, max_allowed", [("heat-exchanger", 3.0, 0.01), ("heat-production", 2.0, 0.01)])
 def test_bench_box_compiles_and_agrees_with_runtime(bench: str, hours: float, max_allowed: float, fmu_cache,
                                                      tmp_path: Path):
     """Both benches: the generated box compiles on the embedded path and follows the runtime.
 
     Criterion: ``|p_box - p_python| / (max - min)`` after the start-up hold,
-    at most 1 % on 95 % of the samples and at most *max_allowed* anywhere.
-    The heat exchanger meets 1 % everywhere. On the heat-production bench
-    (noisy temperatures, kp about 1) single samples reach 1.3 %: the box is
-    continuous and its proportional action also sees how the twin's
-    temperature moves *within* a sample, which the sampled runtime sees one
-    sample later (measured: 0.0075 at the 95th percentile, 0.013 at most).
+    at most 1 % on 95 % of the samples and at most *max_allowed* (1 %) anywhere.
+    Measured with the runtime's linear error interpolation: heat exchanger 0.0009
+    (95th percentile 0.0005), heat production 0.0053 / 0.0033 (``HEX300.kht``) and
+    0.0014 / 0.0009 (``HU300.kht``); with the error held over each sample the heat
+    production reached 0.013 at most (0.0075 at the 95th percentile): the box's
+    proportional action sees the next sample one sample before a held-error runtime.
     """
     from trackingbox.benches import make_bench
     from trackingbox.generate.generator import compile_generated
