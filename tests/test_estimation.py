@@ -275,6 +275,7 @@ def test_default_budget_for_many_parameters() -> None:
 # --------------------------------------------------------------------------- heat-production bench
 
 
+@pytest.mark.slow
 def test_heat_production_short_window_finds_the_heat_transfer_coefficients(fmu_cache, tmp_path: Path) -> None:
     """Estimation on the heat-production bench, short: 4 h of data, the two heat-transfer coefficients.
 
