@@ -15,7 +15,7 @@ independent of the estimator's own numbers:
 
 Prints one line per criterion and the wall time; exits 1 when a criterion
 fails (a failing benchmark is a defect), 2 on a usage or pipeline error.
-Takes about 20 min on two loaded cores; the test suite keeps a short version
+As a test it took 1124 s of the suite's time; the suite keeps a short version
 (``tests/test_estimation.py::test_heat_production_short_window_finds_the_heat_transfer_coefficients``).
 """
 from __future__ import annotations
