@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from trackingbox.tracking.controllers import (
@@ -296,6 +297,43 @@ def test_python_controllers_match_the_compiled_blocks(fmu_cache) -> None:
     assert np.abs(py_a[:, 2] - mo_a[:, 2]).max() <= 1e-6 * b["k"] * 2.0
 
 
+def test_linear_python_controllers_match_the_compiled_blocks_with_interpolated_inputs(fmu_cache) -> None:
+    # The same recorded sequence, this time as the compiled box sees a measurement: u_s linear between
+    # the samples (the FMU's input table), the hold a flag per sample (set between steps). The
+    # controllers with interpolation="linear" return, at the call with sample k, the block's value at t_k.
+    from trackingbox.fmu import FMUModel
+
+    fmu = fmu_cache("TrackingBox.Blocks.Validation.ParameterControllerInputs")
+    b = _BLOCK
+    scaling = Scaling(b["p_min"], b["p_max"], span=b["span"])
+    kw = dict(kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], p0=b["p0"], interpolation="linear")
+    direct, reverse = ScaledPI(scaling, direction=1, **kw), ScaledPI(scaling, direction=-1, **kw)
+    comp = StateCompensator(b["k"], ts=_TS, te=b["te"], interpolation="linear")
+    grid = _TS * np.arange(len(_DIFF))
+    table = pd.DataFrame({"time": grid, "u_s": 50.0 + np.asarray(_DIFF), "u_m": np.full(grid.size, 50.0)})
+    py, mo = [], []
+    with FMUModel(fmu, tolerance=1e-10) as model:
+        run = model.stepper(start_time=0.0, inputs=table)
+        for k, (diff, hold) in enumerate(zip(_DIFF, _HOLD)):
+            mo.append(run.get(["yDirect", "yReverse", "m"]))
+            u_s = 50.0 + diff
+            py.append([direct.update(u_s, 50.0, hold=hold > 0.5), reverse.update(u_s, 50.0, hold=hold > 0.5),
+                       comp.update(u_s, 50.0, hold=hold > 0.5)])
+            if k + 1 < grid.size:
+                run.set({"hold": hold})
+                run.step(grid[k + 1])
+    py_a, mo_a = np.array(py), np.array(mo)
+    # both bounds are reached (the ramped error saturates less than the held one, see above)
+    assert py_a[:, :2].max() == b["p_max"] and py_a[:, :2].min() == b["p_min"], (py_a[:, 0].max(), py_a[:, 1].min())
+    # the linear error differs from the held one: the check is not the zero-order-hold one again
+    zoh = ScaledPI(scaling, kp=b["kp"], ti=b["ti"], ts=_TS, te=b["te"], direction=1, p0=b["p0"])
+    held = [b["p0"]] + [zoh.update(50.0 + d, 50.0, hold=h > 0.5) for d, h in zip(_DIFF[:-1], _HOLD[:-1])]
+    assert np.abs(np.array(held) - py_a[:, 0]).max() > 1e-2 * (b["p_max"] - b["p_min"])
+    tol = 1e-6 * (b["p_max"] - b["p_min"])
+    assert np.abs(py_a[:, :2] - mo_a[:, :2]).max() <= tol, np.abs(py_a - mo_a).max(axis=0)
+    assert np.abs(py_a[:, 2] - mo_a[:, 2]).max() <= 1e-6 * b["k"] * 2.0
+
+
 @pytest.mark.parametrize("u0, e, mem", [(1.0, 5.0, 40.0), (99.0, -5.0, -40.0), (99.5, 30.0, 35.0), (50.0, 10.0, 0.0)])
 def test_exact_step_matches_a_fine_clamped_integration(u0: float, e: float, mem: float) -> None:
     # one sample of du/dt = kp (e/Ti + (e - m)/Te), dm/dt = (e - m)/Te with u clamped to 0..100 by
@@ -362,3 +400,28 @@ def test_parameter_controller_closed_loop_validation_model(fmu_cache) -> None:
     assert k[t == 5990.0][0] == pytest.approx(1.0, abs=1e-3)
     # no windup: after the release the output leaves the bound at once
     assert k[t == 4100.0][0] < 3.0 - 0.1
+
+
+@pytest.mark.parametrize("u0, e0, e1, mem", [(1.0, 5.0, -3.0, 40.0), (99.0, -5.0, 8.0, -40.0),
+                                             (99.5, 30.0, -30.0, 35.0), (50.0, 10.0, 12.0, 0.0),
+                                             (2.0, -20.0, 25.0, -5.0)])
+def test_linear_step_matches_a_fine_clamped_integration(u0: float, e0: float, e1: float, mem: float) -> None:
+    # one sample of the block's law with the error going linearly from e0 to e1 (as the compiled box
+    # sees an interpolated measurement), u clamped to 0..100 by conditional integration, integrated
+    # with 200 000 explicit Euler steps; the rate changes sign once or twice in these cases.
+    kp, ti, ts, te = 2.0, 5.0, 10.0, 1.0
+    n = 200_000
+    h = ts / n
+    u, m = u0, mem
+    for i in range(n):
+        e = e0 + (e1 - e0) * (i * h) / ts
+        rate = kp * (e / ti + (e - m) / te)
+        if not ((u >= 100.0 and rate > 0.0) or (u <= 0.0 and rate < 0.0)):
+            u = min(max(u + h * rate, 0.0), 100.0)
+        m += h * (e - m) / te
+    pi = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, te=te, direction=1, p0=u0,
+                  interpolation="linear")
+    pi.update(e0, 0.0)  # the first call records e0
+    pi.e_mem = mem
+    assert pi.update(e1, 0.0) == pytest.approx(u, abs=1e-3)
+    assert pi.e_mem == pytest.approx(m, abs=1e-3)

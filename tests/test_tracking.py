@@ -449,3 +449,23 @@ def test_untracked_twin_failing_for_good_is_dropped(case: Path, tmp_path: Path,
     assert df.loc[df["time"] > 1000.0, "untracked:TI"].isna().all()
     assert np.isnan(result.variables["TI"].nrmse_untracked)
     assert _k_end(df) == pytest.approx(K_PLANT, rel=0.01)  # tracking went on
+
+
+def test_tracked_twin_gets_the_predicted_mean_of_the_parameter_ramp() -> None:
+    # With the linear error interpolation the compiled box's parameter ramps from p_k to p_k+1 over a
+    # sample; the runtime's twin gets p_k + (p_k - p_k-1)/2 over it, clamped to the bounds, and the
+    # values given (not applied) are what the next prediction starts from. Hand-computed numbers.
+    from trackingbox.tracking.runtime import _Twin
+
+    tw = object.__new__(_Twin)  # the prediction only: no FMU needed
+    tw.extrapolate = {"k": (0.0, 10.0)}
+    tw.given = {}
+    assert tw._applied({"k": 4.0, "corr": 1.0}) == {"k": 4.0, "corr": 1.0}  # nothing before: as given
+    tw.given = {"k": 4.0, "corr": 1.0}
+    assert tw._applied({"k": 5.0, "corr": 3.0}) == {"k": 5.5, "corr": 3.0}  # corrections untouched
+    tw.given = {"k": 2.0}
+    assert tw._applied({"k": 9.5}) == {"k": 10.0}  # 9.5 + 3.75 clamped at the upper bound
+    tw.given = {"k": 1.0}
+    assert tw._applied({"k": 0.4})["k"] == pytest.approx(0.1)
+    tw.given = {"k": 0.5}
+    assert tw._applied({"k": 0.1}) == {"k": 0.0}  # clamped at the lower bound

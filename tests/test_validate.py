@@ -74,8 +74,66 @@ def test_tracked_fmu_finds_plant_kht_and_agrees_with_python(mini_case):
     v = res.variables["TI-102"]
     assert v.nrmse_tracked < 0.2 * v.nrmse_untracked
     assert v.converged_at is not None and v.converged_at < 3600.0
-    assert res.agreement < 0.05                                     # within 5 % of the parameter range
+    assert res.agreement <= 0.01                                    # within 1 % of the parameter range
     assert res.window == (3600.0, 7200.0)
+
+
+@pytest.fixture(scope="module")
+def step_case(mini_case, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """The mini case with the plant's kht stepping 900 -> 950 at 5400 s, inside the validation window.
+
+    Same spec, twin and compiled box (copied); only the measurements differ, so
+    the window holds a tracking transient where kp and Ti shape the trajectory.
+    """
+    import shutil
+
+    from trackingbox.fmu import FMUModel
+    from trackingbox.spec import load_spec
+
+    case = tmp_path_factory.mktemp("validate-step") / "case"
+    shutil.copytree(mini_case["spec"].path.parent, case)
+    grid = np.arange(0.0, 7200.0 + 1e-9, 10.0)
+    qin = np.where(grid < 2400.0, 50000.0, np.where(grid < 4800.0, 40000.0, 55000.0))
+    out = np.empty(grid.size)
+    with FMUModel(case / "twin.fmu") as plant:
+        run = plant.stepper(parameters={"hx.kht": 900.0}, inputs=pd.DataFrame({"time": grid, "Qin": qin}))
+        out[0] = run.get(["ThOut"])[0]
+        for k in range(grid.size - 1):
+            if grid[k] == 5400.0:
+                run.set({"hx.kht": 950.0})
+            run.step(grid[k + 1])
+            out[k + 1] = run.get(["ThOut"])[0]
+    pd.DataFrame({"time": grid, "QI-100": qin, "TI-102": out}).to_csv(case / "measurements.csv", index=False)
+    return {"spec": load_spec(case / "spec.toml"),
+            "fmu": case / mini_case["fmu"].relative_to(mini_case["spec"].path.parent)}
+
+
+@pytest.mark.compile
+def test_agreement_through_a_parameter_step_and_a_runtime_with_another_gain(step_case):
+    # Through the transient the box and the runtime with the spec's tuning agree within 0.01 of
+    # the bounds; a runtime with kp or 1/Ti 1.5 times larger is another controller, and the metric
+    # must say so (> 0.01). (The twin is fast here, tau = 40 s for Ts = 10 s: the runtime's twin
+    # sees the parameter one sample later than the box's, held over the sample where the box's
+    # ramps; before the runtime applied the ramp's predicted mean this left 0.0078 here, and 0.0147
+    # for a 900 -> 1000 step, where kp x 2 gave 0.097 and Ti / 2 gave 0.074.)
+    import dataclasses
+
+    from trackingbox.tracking.tuning import pair_settings
+    from trackingbox.validate import validate
+
+    spec = step_case["spec"]
+    res = validate(spec, step_case["fmu"])
+    assert res.parameters["hx.kht"].final == pytest.approx(950.0, rel=0.005)  # the plant's new value
+    assert res.agreement <= 0.01
+    pair = spec.pairs[0]
+    p = spec.parameter(pair.parameter)
+    tuned = pair_settings(pair, p.min, p.max, ts=spec.sample_time)
+    for field, factor in (("kp", 1.5), ("ti", 1.0 / 1.5)):
+        gains = {"kp": tuned.kp, "ti": tuned.ti}
+        gains[field] *= factor
+        other = dataclasses.replace(spec, pairs=(dataclasses.replace(pair, **gains),))
+        wrong = validate(other, step_case["fmu"])
+        assert wrong.agreement > 0.01, (field, wrong.agreement)
 
 
 @pytest.mark.compile
@@ -188,4 +246,4 @@ def test_heat_exchanger_chain_tracks_plant_kht(tmp_path: Path):
     assert kht.within_bounds
     v = res.variables["TI-102"]
     assert v.nrmse_tracked < 0.25 * v.nrmse_untracked
-    assert res.agreement < 0.05
+    assert res.agreement <= 0.01                                    # noisy data: the issue's criterion

@@ -28,7 +28,8 @@ the window, after the start-up hold, outside stoppages), the same samples
 ``track`` and ``estimate`` score there. State compensation (``[[states]]``) is
 generated into the box and gets the measured levels; where a correction is a
 top-level input of the twin (the tracked FMU keeps it an input), that input is
-fed with the correction flows the Python runtime computed.
+fed with the correction flows the Python runtime computed, held over each sample
+as the runtime applies them (set between communication steps, like ``hold``).
 """
 from __future__ import annotations
 
@@ -49,6 +50,7 @@ from .generate.filters import modelica_name
 
 if TYPE_CHECKING:
     from .spec import Spec
+    from .tracking.controllers import Interpolation
 
 logger = logging.getLogger(__name__)
 
@@ -156,17 +158,49 @@ def agreement(p_a: npt.ArrayLike, p_b: npt.ArrayLike, lower: float, upper: float
     return float(np.max(np.abs(a[ok] - b[ok])) / (upper - lower))
 
 
-def _hold_signal(spec: Spec, view: MeasurementView) -> np.ndarray:
-    """1 where the Python runtime holds the controllers (start-up, stoppage, missing data), else 0."""
+def _hold_signal(spec: Spec, view: MeasurementView, lead: int = 0) -> np.ndarray:
+    """Per sample ``k``: 1 where the Python runtime holds the controllers over ``[t_k, t_k+1]``, else 0.
+
+    The runtime holds over the sample after a start-up-hold, stoppage or
+    missing-data row; with *lead* = 0 (linear interpolation of the error) a
+    sample whose end has a missing measurement is held too (no error to
+    interpolate towards).
+    """
     hold = view.grid < float(spec.tracking.hold_until) - 1e-9
     hold = hold | view.stopped
     for pair in spec.pairs:
-        hold |= ~np.isfinite(view.values(pair.variable))
+        missing = ~np.isfinite(view.values(pair.variable))
+        hold |= missing
+        if lead == 0:
+            hold[:-1] |= missing[1:]
     return hold.astype(float)
 
 
+def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid: np.ndarray,
+             outputs: list[str]) -> pd.DataFrame:
+    """Run the tracked FMU over *grid*: *inputs* interpolated linearly, *held* held over each sample.
+
+    The held inputs (``hold``, and correction flows fed from the Python
+    runtime) are values per sample as the runtime applies them, so they are set
+    between communication steps instead of being interpolated between samples.
+    """
+    run = model.stepper(start_time=float(grid[0]), parameters={n: float(v[0]) for n, v in held.items()},
+                        inputs=inputs)
+    read = run.reader(outputs)
+    rows = np.empty((grid.size, len(outputs)))
+    rows[0] = read()
+    for k in range(grid.size - 1):
+        run.set({n: float(v[k]) for n, v in held.items()})
+        run.step(float(grid[k + 1]))
+        rows[k + 1] = read()
+    run.finish()
+    sim = pd.DataFrame(rows, columns=outputs)
+    sim.insert(0, "time", grid)
+    return sim
+
+
 def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None, band: float = 0.05,
-             smooth: int = 5, tolerance: float = 1e-6) -> ValidationResult:
+             smooth: int = 5, tolerance: float = 1e-6, interpolation: Interpolation = "linear") -> ValidationResult:
     """Run the tracked FMU, the untracked twin and the Python runtime; compare on the validation window.
 
     Parameters
@@ -183,6 +217,10 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         Samples in the moving mean of the error for the convergence time.
     tolerance : float
         Relative solver tolerance.
+    interpolation : {"linear", "zoh"}
+        The Python runtime's error interpolation (:func:`~trackingbox.tracking.runtime.track`).
+        ``"linear"``: its row ``k`` is compared with the box at ``t_k``;
+        ``"zoh"``: with the box at ``t_k+1``.
 
     Raises
     ------
@@ -212,7 +250,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         run_dir = Path(work_dir) if work_dir is not None else Path(tmp)
         logger.info("running the Python tracking runtime (and the untracked twin)")
         tr = track(spec, out_dir=run_dir / "python", window="validation", untracked=True, tolerance=tolerance,
-                   view=view)
+                   view=view, interpolation=interpolation)
         py = pd.read_csv(tr.csv)
     window = tuple(float(v) for v in tr.window)
     grid = view.grid
@@ -226,7 +264,8 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     pair_names = {p.parameter: modelica_name(p.parameter) for p in spec.pairs}
     for pair in spec.pairs:
         inputs[f"{modelica_name(pair.variable)}_meas"] = view.filled(pair.variable)
-    inputs[HOLD_INPUT] = _hold_signal(spec, view)
+    lead = 1 if interpolation == "zoh" else 0
+    hold = _hold_signal(spec, view, lead)
     # State compensation ([[states]]): the generated box compensates from the measured
     # levels. Where the correction is a top-level input of the twin (the embedded path
     # keeps it an input), the tracked model exposes the box's correction as an output
@@ -241,22 +280,19 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     model = FMUModel(fmu, tolerance=tolerance)
     try:
         known_inputs = set(model.info.inputs)
-        inputs.update({name: v for name, v in corrections.items() if name in known_inputs})
-        for name in inputs:
+        # the runtime applies its corrections per sample (held over [t_k, t_k+1]): so does the box's twin
+        held = {HOLD_INPUT: hold, **{name: v for name, v in corrections.items() if name in known_inputs}}
+        for name in [*inputs, *held]:
             if name != "time" and name not in known_inputs:
                 raise FMUError(unknown_name("input", name, sorted(known_inputs), f"tracked FMU {fmu.name}")
                                + " (was it generated from this spec?)")
         logger.info("running the tracked FMU %s", fmu.name)
-        sim = model.simulate(start_time=0.0, stop_time=float(grid[-1]), output_interval=float(spec.sample_time),
-                             inputs=pd.DataFrame(inputs), outputs=outputs)
+        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs)
     finally:
         model.close()
-    if sim.shape[0] != grid.size or not np.allclose(sim["time"].to_numpy(), grid):
-        sim = pd.DataFrame({c: np.interp(grid, sim["time"], sim[c]) for c in sim.columns if c != "time"})
-        sim.insert(0, "time", grid)
 
     in_window = view.in_window
-    series = pd.DataFrame({"time": grid, HOLD_INPUT: inputs[HOLD_INPUT]})
+    series = pd.DataFrame({"time": grid, HOLD_INPUT: hold})
     variables: dict[str, VariableValidation] = {}
     for pair in sorted(spec.pairs, key=lambda p: p.variable):
         tag = pair.variable
@@ -279,9 +315,10 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         series[f"tracked:{tag}"] = tracked
         series[f"python:{tag}"] = python
     parameters: dict[str, ParameterValidation] = {}
-    # The runtime's row k is the value it applies over [t_k, t_k+1]: the exact
-    # discretisation of the box's law over that sample, i.e. the box's value at t_k+1.
-    aligned = in_window[:-1]
+    # The runtime's row k is the value it applies over [t_k, t_k+1]: with the error linear
+    # between samples, the box's law integrated up to t_k (the box's value at t_k); with the
+    # error held over the sample, integrated up to t_k+1 (the box's value at t_k+1).
+    aligned = in_window[:-1] if lead else in_window
     for pair in sorted(spec.pairs, key=lambda p: p.parameter):
         name = pair.parameter
         p = spec.parameter(name)
@@ -291,7 +328,8 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         parameters[name] = ParameterValidation(
             final=float(pm[-1]), min=float(pm.min()), max=float(pm.max()), lower=p.min, upper=p.max,
             within_bounds=bool(pm.min() >= p.min - tol and pm.max() <= p.max + tol),
-            final_python=float(pp[-1]), agreement=agreement(pm[1:][aligned], pp[:-1][aligned], p.min, p.max))
+            final_python=float(pp[-1]),
+            agreement=agreement(pm[lead:][aligned], pp[:pp.size - lead][aligned], p.min, p.max))
         series[f"modelica:{name}"] = pm
         series[f"python:{name}"] = pp
     worst = max((v.agreement for v in parameters.values() if math.isfinite(v.agreement)), default=math.nan)

@@ -62,9 +62,18 @@ integrates; the error memory keeps following the error, so on release the
 proportional term sees no step (bumpless resume).</li>
 </ul>
 <p>There are no events, discrete variables or <code>pre()</code>, so the block
-compiles on the embedded path. For an error held constant over each sample
-period, <code>trackingbox.tracking.controllers.ScaledPI</code> is the exact
-discretisation of this law; a test drives both with the same error sequence.
+compiles on the embedded path. <code>trackingbox.tracking.controllers.ScaledPI</code>
+is the exact discretisation of this law for two error signals: held constant
+over each sample period (<code>interpolation=\"zoh\"</code>), or linear from
+one sample to the next (<code>interpolation=\"linear\"</code>). The second is
+what this block sees in a tracking box: the measurement is interpolated
+linearly between its samples and the twin's output is continuous. The Python
+tracking runtime uses it by default, so the compiled box and the runtime agree
+closely; what remains comes from the twin, which sees the parameter ramp within
+a sample in the box and a predicted mean held over the sample in the runtime
+(it grows with the sample time over the twin's time constant and with the size
+of the parameter's moves). Tests drive both with the same recorded error
+sequence, held and interpolated, and require the same outputs.
 The error memory starts at 0, in the block and in the Python class: without a
 start-up hold the proportional action acts on the whole initial error; start
 the block on hold for a few <code>Te</code> (the start-up hold of a tracking

@@ -46,8 +46,10 @@ level would oscillate without damping.</p>
 <p><b>Hold</b> (<code>hold &gt; 0.5</code>, only with <code>use_hold_in</code>):
 the correction is frozen and the error memory keeps following the difference,
 so on release the correction continues from the held value without a step.</p>
-<p>For a difference held constant over each sample period,
-<code>trackingbox.tracking.controllers.StateCompensator</code> is the exact
-discretisation of this law.</p>
+<p><code>trackingbox.tracking.controllers.StateCompensator</code> is the exact
+discretisation of this law for a difference held constant over each sample
+period (<code>interpolation=\"zoh\"</code>) or linear between samples
+(<code>interpolation=\"linear\"</code>, the tracking runtime's default: how
+this block sees an interpolated measurement and a continuous twin level).</p>
 </html>"));
 end StateCompensation;

@@ -69,7 +69,7 @@ import pandas as pd
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
-from .controllers import ScaledPI, SlidingMode, StateCompensator
+from .controllers import Interpolation, ScaledPI, SlidingMode, StateCompensator
 from .tuning import pair_settings
 
 if TYPE_CHECKING:
@@ -83,7 +83,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 2  # 2: one entry per part of the loop (controllers, compensation, twins, output)
+_CHECKPOINT_VERSION = 3  # 3: error interpolation in the controllers; 2: one entry per part of the loop
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -298,10 +298,16 @@ class _Twin:
     """One FMU run that can be restarted from saved states or a replayed trajectory."""
 
     def __init__(self, path: Path, *, label: str, base: Mapping[str, float], inputs: pd.DataFrame | None,
-                 tolerance: float, recorded: Mapping[str, str]) -> None:
+                 tolerance: float, recorded: Mapping[str, str],
+                 extrapolate: Mapping[str, tuple[float, float]] | None = None) -> None:
         from ..fmu import FMUModel
 
         self.label = label
+        #: parameter -> bounds: applied over [t_k, t_k+1] as the mean of the controller's ramp over
+        #: that sample, predicted from the last one (see :meth:`_applied`)
+        self.extrapolate = dict(extrapolate or {})
+        #: the values given for the previous step (before extrapolation)
+        self.given: dict[str, float] = {}
         #: value name -> CSV column holding what was applied (for a replay)
         self.recorded = dict(recorded)
         self.model = FMUModel(path, tolerance=tolerance)
@@ -330,8 +336,27 @@ class _Twin:
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
         return self.stepper.get(names)
 
+    def _applied(self, values: Mapping[str, float]) -> dict[str, float]:
+        """The values to apply over the coming sample (:meth:`step` then remembers the given ones).
+
+        A parameter in :attr:`extrapolate` with the controller's value ``p_k``
+        at ``t_k`` (linear error interpolation) is applied as
+        ``p_k + (p_k - p_k-1)/2``, clamped to its bounds: the compiled box's
+        parameter ramps over the sample, and this is the ramp's mean predicted
+        from the previous sample, so the twin does not see the parameter one
+        half sample late.
+        """
+        out = dict(values)
+        for name, (lo, hi) in self.extrapolate.items():
+            if name in values and name in self.given:
+                p = float(values[name])
+                out[name] = min(max(p + 0.5 * (p - self.given[name]), lo), hi)
+        return out
+
     def step(self, t_next: float, values: Mapping[str, float]) -> None:
         """Apply the values that changed and integrate to *t_next*."""
+        given = {n: float(v) for n, v in values.items()}
+        values = self._applied(values)
         changed = {n: v for n, v in values.items() if self.applied.get(n) != v}
         t0 = _time.perf_counter()
         if changed:
@@ -339,11 +364,13 @@ class _Twin:
             self.applied.update(changed)
         self.stepper.step(t_next)
         self.step_seconds += _time.perf_counter() - t0
+        self.given = given
         self._save()
 
     def replay(self, t0: float, rows: Iterator[tuple[float, dict[str, float]]]) -> None:
         """Rebuild the run from *t0* by re-applying recorded values: ``(t_next, values)`` per step."""
         first = True
+        self.given = {}
         for t_next, values in rows:
             if first:
                 self.start(t0, values)
@@ -358,7 +385,8 @@ class _Twin:
 
     def state_dict(self) -> dict[str, Any]:
         """The values applied and, for model exchange, the continuous states after the last step."""
-        return {"applied": dict(self.applied), "x": self.x.tolist() if self.x is not None else None}
+        return {"applied": dict(self.applied), "given": dict(self.given),
+                "x": self.x.tolist() if self.x is not None else None}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
                         grid: npt.NDArray[np.float64]) -> None:
@@ -366,6 +394,7 @@ class _Twin:
         x = state.get("x")
         if x is not None and self.me:
             self.start(t, {n: float(v) for n, v in state["applied"].items()}, x)
+            self.given = {n: float(v) for n, v in state.get("given", {}).items()}
         else:
             self.replay_csv(csv_path, rows, grid)
 
@@ -404,7 +433,8 @@ class _Plan:
     events: list[TrackingEvent] = field(default_factory=list)
 
 
-def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) -> _Pair:
+def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64],
+                     interpolation: Interpolation = "linear") -> _Pair:
     p = spec.parameter(pair.parameter)
     ts = float(spec.sample_time)
     # the one span/tuning rule, shared with the generated Modelica box
@@ -416,7 +446,7 @@ def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64]) ->
         ctrl: ScaledPI | SlidingMode = SlidingMode.from_pi(scaling, kp=kp, ti=ti, ts=ts, direction=direction,
                                                            p0=p.start, phi=SLIDING_PHI)
     else:
-        ctrl = ScaledPI(scaling, kp=kp, ti=ti, ts=ts, direction=direction, p0=p.start)
+        ctrl = ScaledPI(scaling, kp=kp, ti=ti, ts=ts, direction=direction, p0=p.start, interpolation=interpolation)
     log.info("pair %s -> %s: %s kp=%.4g ti=%.4g s (scaled), span=%.4g, %s acting", pair.variable, pair.parameter,
              kind, kp, ti, span, "direct" if direction > 0 else "reverse")
     return _Pair(pair.variable, spec.outputs[pair.variable], pair.parameter, ctrl, (p.min, p.max))
@@ -666,7 +696,7 @@ class TrackingLoop:
     def __init__(self, spec: Spec, *, out_dir: str | Path, window: Window = "all",
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
-                 view: MeasurementView | None = None) -> None:
+                 view: MeasurementView | None = None, interpolation: Interpolation = "linear") -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -687,12 +717,16 @@ class TrackingLoop:
         self.recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
         self.events = plan.events
 
-        pairs = [_make_controller(spec, p, self.view.samples[p.variable]) for p in spec.pairs]
+        if interpolation not in ("zoh", "linear"):
+            raise ValueError(f"interpolation must be 'zoh' or 'linear', got {interpolation!r}")
+        self.interpolation = interpolation
+        pairs = [_make_controller(spec, p, self.view.samples[p.variable], interpolation) for p in spec.pairs]
         for p in pairs:
             _check_authority(p, self.view.samples[p.tag], self.events)
         self.controllers = _Controllers(pairs)
         self.compensation = _Compensation([
-            _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts), StateCompensator(s.gain, ts=ts))
+            _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts, interpolation=interpolation),
+                   StateCompensator(s.gain, ts=ts, interpolation=interpolation))
             for s in spec.states])
         self.output = _Output(self.csv_path, plan.columns, self.controllers.names, self.compensation.names,
                               [s.tag for s in spec.states], list(spec.outputs))
@@ -708,8 +742,10 @@ class TrackingLoop:
                     **{n: f"correction:{n}" for n in self.compensation.names}}
         self.twin: _Twin | None = None
         self.plain: _Twin | None = None
+        extrapolate = {p.parameter: p.bounds for p in pairs if isinstance(p.controller, ScaledPI)} \
+            if interpolation == "linear" else {}
         self.twin = _Twin(spec.twin, label="tracked", base=base, inputs=self.view.inputs, tolerance=tolerance,
-                          recorded=recorded)
+                          recorded=recorded, extrapolate=extrapolate)
         if untracked is True:
             try:
                 self.plain = _Twin(spec.twin, label="untracked", base=base, inputs=self.view.inputs,
@@ -733,6 +769,7 @@ class TrackingLoop:
             "rows": rows,
             "rows_total": self.n_rows,
             "window": self.window,
+            "interpolation": self.interpolation,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
@@ -751,6 +788,9 @@ class TrackingLoop:
                 or not math.isclose(float(state.get("sample_time", -1)), self.ts):
             raise SpecError(f"checkpoint {self.ckpt_path} was written for a different spec or version; "
                             "run without --resume to start over")
+        if state.get("interpolation") != self.interpolation:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with interpolation "
+                            f"{state.get('interpolation')!r}, not {self.interpolation!r}; run without --resume")
         if state.get("window") != self.window or int(state.get("rows_total", -1)) != self.n_rows:
             raise SpecError(f"checkpoint {self.ckpt_path} was written for window {state.get('window')!r} "
                             f"({state.get('rows_total')} rows), not {self.window!r} ({self.n_rows} rows); resume "
@@ -962,6 +1002,7 @@ def track(
     recovery_hold: float | None = None,
     tolerance: float = 1e-6,
     view: MeasurementView | None = None,
+    interpolation: Interpolation = "linear",
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -994,6 +1035,14 @@ def track(
         The measurements to track, when the caller has built them already
         (``MeasurementView.from_spec(spec, window, skip=spec.tracking.hold_until)``);
         default: built here from the spec.
+    interpolation : {"linear", "zoh"}
+        How the controllers see the error between samples (see
+        :class:`~trackingbox.tracking.controllers.ScaledPI`). ``"linear"``
+        (default): the error goes linearly from one sample to the next, as in
+        the compiled box (interpolated measurement, continuous twin output);
+        the parameter of row ``k`` is the controller's value at ``t_k``, held
+        over ``[t_k, t_k+1]``. ``"zoh"``: the error held over the sample; the
+        parameter of row ``k`` is the value at ``t_k+1``, applied from ``t_k``.
 
     Returns
     -------
@@ -1009,7 +1058,7 @@ def track(
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
-                        view=view)
+                        view=view, interpolation=interpolation)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
