@@ -123,3 +123,40 @@ def test_dependence_on_an_input_and_significant_period():
     assert abs(res.conditions_r2 - explained / (explained + sigma ** 2)) < 0.05
     # the last three of six hour-blocks carry 0.2 K = 2 sigma: one merged period from 3 h
     assert res.periods == ((3 * 3600.0, t[-1] + 10.0),)
+
+
+# --------------------------------------------------------------------------- screening transforms
+
+from trackingbox.diagnose import screen as sc  # noqa: E402
+
+
+def test_first_order_matches_the_analytic_step_response():
+    t = np.arange(0.0, 600.0, 10.0)
+    u = np.where(t >= 10.0, 1.0, 0.0)          # a ramp from 0 to 1 over the first step, then held
+    x = sc.first_order(t, u, 60.0)
+    # after the ramp [0, 10] the response is 1 - (tau/h)(1 - exp(-h/tau)) exp(-(t - h)/tau) (hand-solved)
+    h, tau = 10.0, 60.0
+    expected = 1.0 - (tau / h) * (1.0 - math.exp(-h / tau)) * np.exp(-(t[1:] - h) / tau)
+    assert np.allclose(x[1:], expected, atol=1e-12)
+
+
+def test_sensor_transforms_recover_bias_drift_and_lag():
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 3 * 3600.0, 10.0)
+    y = 40.0 + 4.0 * np.sin(t / 700.0) + 2.0 * (t > 5000)
+    sigma = 0.05
+    e = rng.normal(0.0, sigma, t.size)
+    b, after = sc.fit_bias(y + 0.4 + e - y)
+    assert abs(b - 0.4) < 3 * sigma / math.sqrt(t.size) and abs(np.std(after) - sigma) < 0.1 * sigma
+    (a, c), _ = sc.fit_drift(t, 0.1 + 2e-5 * t + e)
+    assert abs(a - 0.1) < 0.01 and abs(c - 2e-5) < 1e-6
+    measured = sc.first_order(t, y, 120.0) + e
+    tau, after = sc.fit_lag(t, y, measured, bounds=(0.0, 1800.0))
+    assert abs(tau - 120.0) < 5.0 and abs(np.std(after) - sigma) < 0.1 * sigma
+
+
+def test_delta_bic_prefers_a_true_bias_and_refuses_a_spurious_one():
+    rng = np.random.default_rng(8)
+    e = rng.normal(0.0, 0.1, 2000)
+    assert sc.delta_bic({"T": e + 0.1}, {"T": e}, 1) > 10         # one sigma of bias over 2000 samples
+    assert sc.delta_bic({"T": e}, {"T": e - e.mean()}, 1) < 0     # fitting the noise's mean costs ln(n)

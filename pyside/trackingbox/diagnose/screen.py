@@ -1,0 +1,507 @@
+"""Screen every candidate effect cheaply and rank them by the BIC gain on training.
+
+A candidate is an effect entry of the library applied to one target
+(:func:`trackingbox.diagnose.library.targets`). How it is screened follows the
+entry's ``screen``:
+
+``bias`` / ``drift`` / ``lag``
+    A sensor effect only transforms the simulated output of its tag: the null
+    model's output is transformed and the transform fitted in closed form or by
+    a one-parameter bounded fit: a constant (``bias``), an offset plus a slope in
+    time (``drift``), a first-order lag of time constant ``tau`` (``lag``, the
+    exact discretisation for an output linear between samples).
+``coefficient-ramp``
+    A parameter of the target (``<target>.<coefficient>``) falls linearly with
+    time around the null model's value: ``p(t) = p0 * (1 - rate * (t - t_mid))``
+    with ``t_mid`` the middle of the training window, set between steps of the
+    twin (:meth:`trackingbox.fmu.FMUModel.stepper`); ``rate`` is a bounded scalar
+    fit. No compile.
+``compile``
+    Fitted through its patched, compiled twin with a short budget
+    (:func:`trackingbox.diagnose.fit.fit_candidate`) when the settings allow it,
+    else skipped with the reason.
+
+Score
+-----
+For each affected tag ``t`` with ``n_t`` scored samples and residual sums of
+squares ``RSS0`` (null) and ``RSS1`` (candidate),
+
+``delta_bic = sum_t n_eff_t * ln(RSS0_t / RSS1_t) - k * ln(N)``
+
+with ``k`` the effect's number of parameters, ``N = sum n_t`` and
+``n_eff_t = n_t * (1 - rho) / (1 + rho)`` where ``rho`` (clipped to [0, 0.99])
+is the lag-one autocorrelation of the candidate's residual: a candidate that
+leaves a coloured residual behind is credited with fewer independent samples.
+Positive ``delta_bic`` favours the candidate.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .residuals import WindowResiduals, ljung_box_lag1
+
+if TYPE_CHECKING:
+    from .residuals import WhereResult
+
+log = logging.getLogger(__name__)
+
+#: Upper bound of the first-order sensor lag searched when the entry gives none (s).
+DEFAULT_MAX_LAG = 1800.0
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+def fit_bias(residual: npt.ArrayLike) -> tuple[float, np.ndarray]:
+    """Constant ``b`` minimising ``sum (r - b)**2`` (the mean), and the residual after.
+
+    >>> b, after = fit_bias([1.0, 3.0, np.nan])
+    >>> b, after.tolist()[:2]
+    (2.0, [-1.0, 1.0])
+    """
+    r = np.asarray(residual, dtype=float)
+    b = float(np.nanmean(r))
+    return b, r - b
+
+
+def fit_drift(time: npt.ArrayLike, residual: npt.ArrayLike) -> tuple[tuple[float, float], np.ndarray]:
+    """Offset ``a`` (at the first sample) and slope ``c`` (per second) of ``r ~ a + c (t - t0)``.
+
+    >>> (a, c), after = fit_drift([0.0, 10.0, 20.0], [1.0, 1.5, 2.0])
+    >>> round(a, 6), round(c, 6), float(np.abs(after).max()) < 1e-12
+    (1.0, 0.05, True)
+    """
+    t = np.asarray(time, dtype=float)
+    r = np.asarray(residual, dtype=float)
+    ok = np.isfinite(r)
+    dt = t - t[0]
+    a_mat = np.column_stack([np.ones(ok.sum()), dt[ok]])
+    coef, *_ = np.linalg.lstsq(a_mat, r[ok], rcond=None)
+    return (float(coef[0]), float(coef[1])), r - (coef[0] + coef[1] * dt)
+
+
+def first_order(time: npt.ArrayLike, y: npt.ArrayLike, tau: float) -> np.ndarray:
+    """Output of ``tau dx/dt = y - x``, ``x(t0) = y(t0)``, for *y* linear between samples.
+
+    Exact for a piecewise-linear input: with ``h`` the step and ``a = exp(-h / tau)``,
+    ``x_{k+1} = a x_k + (1 - a) y_{k+1} - (tau (1 - a) - a h) (y_{k+1} - y_k) / h``.
+
+    A ramp of slope 1 is followed with the delay ``tau`` once the transient has died out:
+
+    >>> t = np.arange(0.0, 200.0, 5.0)
+    >>> x = first_order(t, t, 10.0)
+    >>> round(float(t[-1] - x[-1]), 6)
+    10.0
+    """
+    t = np.asarray(time, dtype=float)
+    u = np.asarray(y, dtype=float)
+    x = np.empty_like(u)
+    x[0] = u[0]
+    if tau <= 0:
+        return u.copy()
+    for k in range(len(u) - 1):
+        h = t[k + 1] - t[k]
+        a = math.exp(-h / tau)
+        slope = (u[k + 1] - u[k]) / h
+        # x(h) = u_{k+1} - tau*slope + (x_k - u_k + tau*slope) * a
+        x[k + 1] = u[k + 1] - tau * slope + (x[k] - u[k] + tau * slope) * a
+    return x
+
+
+def fit_lag(time: npt.ArrayLike, simulated: npt.ArrayLike, measured: npt.ArrayLike, *,
+            bounds: tuple[float, float] = (0.0, DEFAULT_MAX_LAG)) -> tuple[float, np.ndarray]:
+    """Time constant ``tau`` in *bounds* whose first-order lag of *simulated* best fits *measured*.
+
+    Returns ``tau`` and the residual ``measured - lag(simulated)``.
+    """
+    from scipy.optimize import minimize_scalar
+
+    t = np.asarray(time, dtype=float)
+    y = np.asarray(simulated, dtype=float)
+    m = np.asarray(measured, dtype=float)
+    ok = np.isfinite(m)
+
+    def sse(tau: float) -> float:
+        e = m[ok] - first_order(t, y, tau)[ok]
+        return float(np.dot(e, e))
+
+    lo, hi = max(0.0, float(bounds[0])), float(bounds[1])
+    res = minimize_scalar(sse, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo) + 1e-6})
+    tau = float(res.x)
+    if sse(lo) <= res.fun:
+        tau = lo
+    return tau, m - first_order(t, y, tau)
+
+
+def delta_bic(before: Mapping[str, npt.ArrayLike], after: Mapping[str, npt.ArrayLike], k: int) -> float:
+    """BIC of the null minus BIC of the candidate (module docstring), over the tags of *after*.
+
+    >>> rng = np.random.default_rng(0)
+    >>> e = rng.normal(0.0, 1.0, 1000)
+    >>> delta_bic({"y": e + 1.0}, {"y": e}, 1) > 100
+    True
+    >>> delta_bic({"y": e}, {"y": e - e.mean()}, 1) < 0
+    True
+    """
+    total, n_all = 0.0, 0
+    for tag, r1 in after.items():
+        r1 = np.asarray(r1, dtype=float)
+        r0 = np.asarray(before[tag], dtype=float)
+        ok = np.isfinite(r0) & np.isfinite(r1)
+        n = int(ok.sum())
+        if n < 3:
+            continue
+        rss0 = float(np.dot(r0[ok], r0[ok]))
+        rss1 = float(np.dot(r1[ok], r1[ok]))
+        rho = min(max(ljung_box_lag1(r1[ok]), 0.0), 0.99)
+        n_eff = n * (1.0 - rho) / (1.0 + rho)
+        total += n_eff * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
+        n_all += n
+    return total - k * math.log(max(n_all, 1))
+
+
+def noise_gain(before: npt.ArrayLike, after: npt.ArrayLike, sigma: float) -> float:
+    """Drop of the mean square residual, in noise variances: ``(MSE0 - MSE1) / sigma**2``.
+
+    >>> round(noise_gain([2.0, -2.0, 2.0], [1.0, -1.0, 1.0], 1.0), 3)
+    3.0
+    """
+    r0 = np.asarray(before, dtype=float)
+    r1 = np.asarray(after, dtype=float)
+    ok = np.isfinite(r0) & np.isfinite(r1)
+    if not ok.any() or not sigma > 0:
+        return math.nan
+    return float((np.mean(r0[ok] ** 2) - np.mean(r1[ok] ** 2)) / sigma ** 2)
+
+
+def nrmse_of(residual: npt.ArrayLike, measured: npt.ArrayLike) -> float:
+    """RMS of *residual* over the range of *measured* (valid samples), as estimation's NRMSE."""
+    r = np.asarray(residual, dtype=float)
+    m = np.asarray(measured, dtype=float)
+    ok = np.isfinite(r) & np.isfinite(m)
+    if not ok.any():
+        return math.nan
+    span = float(m[ok].max() - m[ok].min())
+    scale = span if span > 0 else max(abs(float(m[ok].mean())), 1.0)
+    return float(np.sqrt(np.mean(r[ok] ** 2)) / scale)
+
+
+# --------------------------------------------------------------------------- candidates
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect on one target, screened (and maybe fitted).
+
+    Attributes
+    ----------
+    effect, target
+        The effect id and its target (a tag for sensor effects, a component instance otherwise).
+    kind
+        ``"sensor"`` or ``"process"``.
+    stage
+        ``"screen"`` (cheap transform or ramp), ``"fit"`` (patched and compiled) or ``"skipped"``.
+    delta_bic
+        BIC gain over the null on the training window (positive favours the candidate).
+    validation_gain
+        Relative fall of the NRMSE of the affected tags on the validation window
+        (mean over the tags; 0.7 = 70 % smaller).
+    noise_gain
+        Drop of the validation mean square residual of the affected tags, in noise variances (summed).
+    tags
+        Tags the candidate changes.
+    values
+        Fitted values (screening quantities such as ``bias`` or ``tau``, or the effect's parameters after a fit).
+    nrmse_before, nrmse_after
+        Validation NRMSE per affected tag, null and candidate.
+    whiteness
+        Lag-one autocorrelation of the candidate's training residual per affected tag.
+    pinned
+        Effect parameters at (within 0.1 % of the range of) one of their bounds.
+    reason
+        Why it was skipped, or a remark.
+    """
+
+    effect: str
+    target: str
+    kind: str
+    stage: str
+    delta_bic: float = math.nan
+    validation_gain: float = math.nan
+    noise_gain: float = math.nan
+    tags: tuple[str, ...] = ()
+    values: dict[str, float] = field(default_factory=dict)
+    nrmse_before: dict[str, float] = field(default_factory=dict)
+    nrmse_after: dict[str, float] = field(default_factory=dict)
+    whiteness: dict[str, float] = field(default_factory=dict)
+    pinned: tuple[str, ...] = ()
+    reason: str = ""
+    fit: Any = field(default=None, repr=False, compare=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """An entry of ``diagnose --json``'s ``candidates``."""
+        def num(x: float) -> float | None:
+            return float(x) if x is not None and math.isfinite(x) else None
+
+        return {"effect": self.effect, "target": self.target, "stage": self.stage,
+                "delta_bic": num(self.delta_bic), "validation_gain": num(self.validation_gain),
+                "noise_gain": num(self.noise_gain), "tags": list(self.tags),
+                "values": {k: num(v) for k, v in self.values.items()},
+                **({"reason": self.reason} if self.reason else {})}
+
+
+def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k: int,
+          training_after: Mapping[str, np.ndarray], validation_after: Mapping[str, np.ndarray],
+          values: Mapping[str, float], *, pinned: Sequence[str] = (), fit: Any = None,
+          reason: str = "") -> Candidate:
+    """Score a candidate from its residuals on both windows (same grids as the null model's).
+
+    A tag counts as affected when the candidate changes its training residual by
+    more than a hundredth of its noise sigma RMS.
+    """
+    tr, va = where.training, where.validation
+    before_t = {t: tr.residual(t) for t in training_after}
+    tags = []
+    for t, r1 in training_after.items():
+        d = np.asarray(r1) - before_t[t]
+        d = d[np.isfinite(d)]
+        if d.size and float(np.sqrt(np.mean(d * d))) > 0.01 * where.noise[t]:
+            tags.append(t)
+    if not tags:
+        tags = list(training_after)
+    dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
+    nb, na, gains, ng, white = {}, {}, [], 0.0, {}
+    for t in tags:
+        r0 = va.residual(t)
+        r1 = np.asarray(validation_after[t], dtype=float)
+        nb[t] = nrmse_of(r0, va.measured[t])
+        na[t] = nrmse_of(r1, va.measured[t])
+        if nb[t] > 0:
+            gains.append(1.0 - na[t] / nb[t])
+        ng += noise_gain(r0, r1, where.noise[t])
+        white[t] = ljung_box_lag1(training_after[t])
+    return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
+                     tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit)
+
+
+def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
+    params = list(getattr(effect, "parameters", ()) or ())
+    if len(params) == 1:
+        p = params[0]
+        return float(getattr(p, "min", default[0])), float(getattr(p, "max", default[1]))
+    return default
+
+
+def screen_sensor(effect: Any, tag: str, where: WhereResult) -> Candidate:
+    """Screen a sensor effect on *tag* by transforming the null model's output."""
+    how = effect.screen
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    tr, va = where.training, where.validation
+    if how == "bias":
+        b, after_t = fit_bias(tr.residual(tag))
+        after_v = va.residual(tag) - b
+        values = {"bias": b}
+    elif how == "drift":
+        (a, c), after_t = fit_drift(tr.time, tr.residual(tag))
+        after_v = va.residual(tag) - (a + c * (va.time - tr.time[0]))
+        values = {"offset": a, "rate": c}
+    elif how == "lag":
+        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
+        tau, after_t = fit_lag(tr.time, tr.simulated[tag], tr.measured[tag], bounds=(lo, hi))
+        after_v = va.measured[tag] - first_order(va.time, va.simulated[tag], tau)
+        values = {"tau": tau}
+    else:
+        raise ValueError(f"not a sensor screen: {how!r}")
+    pinned = []
+    if how == "lag":
+        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
+        if values["tau"] >= hi - 1e-3 * (hi - lo):
+            pinned.append("tau")
+    return score(effect.id, tag, "sensor", "screen", where, k, {tag: after_t}, {tag: after_v}, values,
+                 pinned=pinned)
+
+
+def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, base: float, rate: float,
+                  t_mid: float, *, interval: float = 300.0) -> dict[str, np.ndarray]:
+    """Simulate *window* with parameter *name* = ``base * (1 - rate * (t - t_mid))``, set between steps.
+
+    Times are seconds from the first sample; *rate* is per second. The
+    held-input pre-run of :func:`trackingbox.estimation.simulate_window` comes
+    first, with the parameter at its value at the window's first grid point.
+    Returns output tag -> values on the window's grid (lead-in cut off).
+    """
+    import pandas as pd
+
+    from ..estimation import _model
+
+    problem = where.problem
+    values = np.asarray(x, dtype=float)
+    parameters = dict(problem.fixed)
+    parameters.update({n: float(v) for n, v in zip(problem.names, values)})
+    lead_in = float(window.start - window.time[0])
+    offset = max(0.0, problem.warmup - lead_in)
+    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    grid = window.time - window.time[0]
+    frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
+    for n, series in window.inputs.items():
+        frame[n] = np.concatenate(([series[0]], series)) if offset > 0 else series
+    inputs = pd.DataFrame(frame) if window.inputs else None
+
+    def value_at(t_abs: float) -> float:
+        return base * (1.0 - rate * (t_abs - t_mid))
+
+    parameters[name] = value_at(float(window.time[0]))
+    model = _model(problem.twin)
+    stepper = model.stepper(start_time=0.0, parameters=parameters, inputs=inputs)
+    outputs = list(problem.outputs.values())
+    if offset > 0:
+        stepper.step(offset)
+    result = np.empty((grid.size, len(outputs)))
+    result[0] = stepper.get(outputs)
+    every = max(1, int(round(interval / problem.sample_time)))
+    for i in range(1, grid.size):
+        if (i - 1) % every == 0:
+            stepper.set({name: value_at(float(window.time[i - 1]) + 0.5 * every * problem.sample_time)})
+        stepper.step(offset + float(grid[i]))
+        result[i] = stepper.get(outputs)
+    keep = slice(window.lead, None)
+    return {tag: result[keep, j] for j, tag in enumerate(problem.outputs)}
+
+
+def read_info_start(fmu: Any, name: str) -> float | None:
+    """Start value of variable *name* in *fmu* (None if absent or without a start)."""
+    from ..fmu import read_info
+
+    for v in read_info(fmu).variables:
+        if v.name == name and v.start is not None:
+            try:
+                return float(v.start)
+            except (TypeError, ValueError):
+                return None
+    return None
+
+
+def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float = 0.5,
+                evaluations: int = 12) -> Candidate:
+    """Screen a coefficient that falls linearly with time (fouling) on *target*, without compiling."""
+    from scipy.optimize import minimize_scalar
+
+    from ..estimation import close_models
+
+    problem = where.problem
+    name = f"{target}.{effect.coefficient}"
+    x = np.array([where.null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
+    if name in problem.names:
+        base = float(x[list(problem.names).index(name)])
+    elif name in problem.fixed:
+        base = float(problem.fixed[name])
+    else:
+        base = read_info_start(problem.twin, name)
+        if base is None:
+            return Candidate(effect.id, target, "process", "skipped",
+                             reason=f"the twin has no tunable parameter {name!r} to ramp")
+    training, validation = where.windows
+    tr = where.training
+    t_mid = 0.5 * (float(tr.time[0]) + float(tr.time[-1]))
+    span = float(tr.time[-1] - tr.time[0])
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    tags = list(problem.outputs)
+
+    def sse(rate: float) -> float:
+        try:
+            sim = simulate_ramp(where, training, x, name, base, rate, t_mid)
+        except Exception as exc:  # noqa: BLE001 - a failing point is a bad point
+            log.debug("ramp %g failed: %s", rate, exc)
+            return math.inf
+        return float(sum(np.nansum(((tr.measured[t] - sim[t]) / where.noise[t]) ** 2) for t in tags))
+
+    hi = max_fall / max(span, 1.0)
+    try:
+        res = minimize_scalar(sse, bounds=(0.0, hi), method="bounded",
+                              options={"maxiter": evaluations, "xatol": 1e-3 * hi})
+        rate = float(res.x)
+        sim_t = simulate_ramp(where, training, x, name, base, rate, t_mid)
+        sim_v = simulate_ramp(where, validation, x, name, base, rate, t_mid)
+    finally:
+        close_models()
+    after_t = {t: tr.measured[t] - sim_t[t] for t in tags}
+    after_v = {t: where.validation.measured[t] - sim_v[t] for t in tags}
+    pinned = ["rate"] if rate >= hi * 0.999 else []
+    return score(effect.id, target, "process", "screen", where, k, after_t, after_v,
+                 {"rate_per_hour": rate * 3600.0, name: base}, pinned=pinned)
+
+
+def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
+           fit_compiled: Callable[[Any, str], Candidate] | None = None,
+           only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None) -> list[Candidate]:
+    """Screen every effect × target; return the candidates ranked by ``delta_bic`` (best first).
+
+    Parameters
+    ----------
+    effects
+        Effect id -> entry (:func:`trackingbox.diagnose.library.load_effects`).
+    spec
+        The loaded spec (targets are found in it).
+    where
+        The null model's residuals (:func:`trackingbox.diagnose.residuals.where`).
+    fit_compiled
+        ``fit_compiled(effect, target) -> Candidate`` for ``screen = "compile"``
+        entries (a short fit of the patched twin); None: those are skipped.
+    only
+        Effect ids to screen (all when empty).
+    progress
+        ``progress("screen", done, total)``.
+    """
+    from . import library
+
+    jobs = []
+    for eid in sorted(effects):
+        if only and eid not in only:
+            continue
+        effect = effects[eid]
+        for target in library.targets(effect, spec):
+            jobs.append((effect, target))
+    out: list[Candidate] = []
+    for i, (effect, target) in enumerate(jobs):
+        how = getattr(effect, "screen", "compile")
+        try:
+            if how in ("bias", "drift", "lag"):
+                if target not in where.tags:
+                    cand = Candidate(effect.id, target, "sensor", "skipped",
+                                     reason=f"tag {target!r} is not an output tag of the spec")
+                else:
+                    cand = screen_sensor(effect, target, where)
+            elif how == "coefficient-ramp":
+                cand = screen_ramp(effect, target, where)
+            elif fit_compiled is not None:
+                cand = fit_compiled(effect, target)
+            else:
+                cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                                 reason="screened only by compiling its patch, which these settings do not allow")
+        except Exception as exc:  # noqa: BLE001 - one failing candidate does not stop the screening
+            from ..errors import TrackingError
+
+            if not isinstance(exc, (TrackingError, ArithmeticError, ValueError)):
+                raise
+            log.warning("screening %s on %s failed: %s", effect.id, target, exc)
+            cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                             reason=f"screening failed: {exc}")
+        log.info("screened %s on %s: delta BIC %.4g, validation gain %.3g", cand.effect, cand.target,
+                 cand.delta_bic, cand.validation_gain)
+        out.append(cand)
+        if progress is not None:
+            progress("screen", i + 1, len(jobs))
+    return rank(out)
+
+
+def rank(candidates: Sequence[Candidate]) -> list[Candidate]:
+    """Best first: by ``delta_bic`` (NaN last), then effect and target for a stable order."""
+    return sorted(candidates, key=lambda c: (-(c.delta_bic if math.isfinite(c.delta_bic) else -math.inf),
+                                             c.effect, c.target))
