@@ -1,0 +1,105 @@
+"""Judge the candidates on held-out data and give the verdict.
+
+A candidate *passes* when all of these hold:
+
+* ``delta_bic > MIN_DELTA_BIC`` (10) on the training window;
+* on the validation window its affected tags' mean square residual falls by
+  more than noise allows: ``noise_gain > max(MIN_NOISE_GAIN, 4 * sqrt(2 / n))``
+  noise variances (``n``: validation samples per tag; the second term is four
+  standard deviations of the change a mean square of ``n`` white-noise samples
+  shows by chance), and its NRMSE falls (``validation_gain > 0``);
+* no fitted parameter is pinned at a bound.
+
+Verdict: ``effect`` when the best-ranked passing candidate exists (it alone is
+named); ``unexplained`` when none passes but the null model's residual is
+significant somewhere (the tags and periods are said); ``none`` otherwise. A
+candidate that does not pass is never named.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+from .screen import Candidate
+
+if TYPE_CHECKING:
+    from .residuals import WhereResult
+
+Verdict = Literal["effect", "none", "unexplained"]
+
+#: ΔBIC a candidate must exceed (strong evidence on Kass and Raftery's scale).
+MIN_DELTA_BIC = 10.0
+#: Smallest validation gain in noise variances a candidate must show, whatever the sample count.
+MIN_NOISE_GAIN = 0.25
+
+
+def noise_threshold(samples: int) -> float:
+    """Validation gain (noise variances) beyond what noise allows with *samples* per tag.
+
+    >>> round(noise_threshold(720), 3)
+    0.25
+    >>> round(noise_threshold(50), 3)
+    0.8
+    """
+    return max(MIN_NOISE_GAIN, 4.0 * math.sqrt(2.0 / max(samples, 1)))
+
+
+def reasons_against(c: Candidate, samples: int) -> list[str]:
+    """Why *c* does not pass (empty when it passes)."""
+    out = []
+    if c.stage == "skipped":
+        return [c.reason or "not screened"]
+    if not (math.isfinite(c.delta_bic) and c.delta_bic > MIN_DELTA_BIC):
+        out.append(f"delta BIC {c.delta_bic:.3g} is not above {MIN_DELTA_BIC:g}")
+    limit = noise_threshold(samples)
+    if not (math.isfinite(c.noise_gain) and c.noise_gain > limit):
+        out.append(f"validation gain {c.noise_gain:.3g} noise variances is not above {limit:.3g}")
+    if not (math.isfinite(c.validation_gain) and c.validation_gain > 0):
+        out.append("validation NRMSE does not fall")
+    if c.pinned:
+        out.append(f"pinned at a bound: {', '.join(c.pinned)}")
+    return out
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """The verdict and what supports it.
+
+    Attributes
+    ----------
+    verdict
+        ``"effect"``, ``"none"`` or ``"unexplained"``.
+    named
+        The passing candidate named (``effect`` only).
+    reasons
+        Candidate ``effect@target`` -> why it did not pass.
+    unexplained
+        Tag -> periods ``(start, stop)`` s where a significant residual remains unexplained.
+    """
+
+    verdict: Verdict
+    named: Candidate | None
+    reasons: dict[str, list[str]]
+    unexplained: dict[str, list[tuple[float, float]]]
+
+
+def judge(candidates: Sequence[Candidate], where: WhereResult) -> Judgement:
+    """Give the verdict over ranked *candidates* (best first)."""
+    samples = min((res.samples for res in where.validation_tags.values()), default=0)
+    reasons: dict[str, list[str]] = {}
+    named = None
+    for c in candidates:
+        why = reasons_against(c, samples)
+        if why:
+            reasons[f"{c.effect}@{c.target}"] = why
+        elif named is None:
+            named = c
+    if named is not None:
+        return Judgement("effect", named, reasons, {})
+    unexplained = {}
+    for tag in where.significant:
+        periods = list(where.tags[tag].periods) + list(where.validation_tags[tag].periods)
+        unexplained[tag] = [(float(a), float(b)) for a, b in periods]
+    return Judgement("unexplained" if unexplained else "none", None, reasons, unexplained)
