@@ -71,12 +71,31 @@ def _get(obj: Any, name: str, default: Any = None) -> Any:
     return getattr(obj, name, default)
 
 
-def warm_values(effect: Any, screened: Candidate | None) -> dict[str, float]:
+def render(spec: Any, effect: Any, target: str, values: Mapping[str, float]) -> Any:
+    """``library.render_patch`` of one effect on one target with *values*."""
+    from . import library
+
+    return library.render_patch(spec, [library.Finding(effect.id, target, dict(values))],
+                                effects={effect.id: effect})
+
+
+def _short(full: str, effect: Any) -> str:
+    """The effect's own parameter name in a patch parameter's full name (``sensorBias_TI_102_b`` -> ``b``)."""
+    for p in getattr(effect, "parameters", ()) or ():
+        if full == p.name or full.endswith(("_" + p.name, "." + p.name)):
+            return p.name
+    return full
+
+
+def warm_values(effect: Any, screened: Candidate | None,
+                bounds: Mapping[str, tuple[float, float]] | None = None) -> dict[str, float]:
     """Start values of the effect's parameters: its starts, or the screening's estimate where it is the same quantity.
 
     A one-parameter ``bias`` entry starts at the screened bias, a one-parameter
-    ``lag`` entry at the screened time constant; the value is clipped to the
-    parameter's bounds.
+    ``lag`` entry at the screened time constant, a one-parameter ``drift`` or
+    ``coefficient-ramp`` entry at the screened rate (per second); the value is clipped to the
+    parameter's bounds (*bounds*: short name -> (min, max) as the patch resolved them for
+    the target's unit; else the entry's own).
 
     >>> from types import SimpleNamespace as NS
     >>> e = NS(screen="bias", parameters=[NS(name="b", start=0.0, min=-2.0, max=2.0)])
@@ -87,12 +106,14 @@ def warm_values(effect: Any, screened: Candidate | None) -> dict[str, float]:
     """
     params = list(getattr(effect, "parameters", ()) or ())
     values = {p.name: float(p.start) for p in params}
-    key = {"bias": "bias", "lag": "tau"}.get(getattr(effect, "screen", ""))
+    key = {"bias": "bias", "lag": "tau", "drift": "rate", "coefficient-ramp": "rate"}.get(
+        getattr(effect, "screen", ""))
     if screened is not None and key and len(params) == 1 and key in screened.values:
         p = params[0]
         v = float(screened.values[key])
+        lo, hi = (bounds or {}).get(p.name, (float(p.min), float(p.max)))
         if math.isfinite(v):
-            values[p.name] = float(min(max(v, float(p.min)), float(p.max)))
+            values[p.name] = float(min(max(v, lo), hi))
     return values
 
 
@@ -134,25 +155,18 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
 
     folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
     folder.mkdir(parents=True, exist_ok=True)
-    start = warm_values(effect, screened)
-    patch = library.render_patch(spec, [library.Finding(effect, target, start)])
-    fmu = folder / "twin.fmu"
-    cached = folder / ".compiled"
-    if not (fmu.is_file() and cached.is_file() and cached.read_text() == patch.source):
-        result = library.compile_patch(patch, folder)
-        produced = Path(result.fmu)
-        if produced != fmu:
-            import shutil
-
-            shutil.copyfile(produced, fmu)
-        cached.write_text(patch.source)
+    patch = render(spec, effect, target, warm_values(effect, screened))
+    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in patch.parameters}
+    start = warm_values(effect, screened, bounds)
+    patch = render(spec, effect, target, start)
+    fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
+    marker = folder / ".compiled"
+    # the effect's parameters are tunable: one FMU per effect and target serves every value
+    if not (fmu.is_file() and marker.is_file() and marker.read_text() == patch.model):
+        fmu = Path(library.compile_patch(patch, folder).fmu)
+        marker.write_text(patch.model)
     spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
-    full = {}
-    for p in patch.parameters:
-        name = str(_get(p, "name"))
-        for short in start:
-            if name == short or name.endswith(("_" + short, "." + short)):
-                full[short] = name
+    full = {_short(p.name, effect): p.name for p in patch.parameters}
     starts = {n: float(v) for n, v in where.null.parameters.items()}
     starts.update({full[s]: v for s, v in start.items() if s in full})
     pspec = load_spec(spec_path)
@@ -174,14 +188,13 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     after_v = {t: series[1].residual(t) for t in tags}
     fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
     pinned = []
-    for p in getattr(effect, "parameters", ()) or ():
-        if p.name in fitted:
-            lo, hi = float(p.min), float(p.max)
+    for short, v in fitted.items():
+        if short in bounds:
+            lo, hi = bounds[short]
             tol = 1e-3 * (hi - lo)
-            v = fitted[p.name]
             # a bound that is also the "no effect" value (a leak of 0) is not a pin but a null result
             if (v <= lo + tol and lo != 0.0) or v >= hi - tol:
-                pinned.append(p.name)
+                pinned.append(short)
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     outcome = FitOutcome(patch, fmu, spec_path, est, full)
     return score(effect.id, target, getattr(effect, "kind", "process"), stage, where, k, after_t, after_v, fitted,

@@ -8,7 +8,7 @@ entry's ``screen``:
     A sensor effect only transforms the simulated output of its tag: the null
     model's output is transformed and the transform fitted in closed form or by
     a one-parameter bounded fit: a constant (``bias``), an offset plus a slope in
-    time (``drift``), a first-order lag of time constant ``tau`` (``lag``, the
+    time (``drift``; a slope from zero at the first sample for a one-parameter entry), a first-order lag of time constant ``tau`` (``lag``, the
     exact discretisation for an output linear between samples).
 ``coefficient-ramp``
     A parameter of the target (``<target>.<coefficient>``) falls linearly with
@@ -244,6 +244,7 @@ class Candidate:
     pinned: tuple[str, ...] = ()
     reason: str = ""
     fit: Any = field(default=None, repr=False, compare=False)
+    validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         """An entry of ``diagnose --json``'s ``candidates``."""
@@ -288,7 +289,8 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
         ng += noise_gain(r0, r1, where.noise[t])
         white[t] = ljung_box_lag1(training_after[t])
     return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
-                     tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit)
+                     tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
+                     {t: np.asarray(validation_after[t], dtype=float) for t in tags})
 
 
 def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
@@ -308,6 +310,14 @@ def screen_sensor(effect: Any, tag: str, where: WhereResult) -> Candidate:
         b, after_t = fit_bias(tr.residual(tag))
         after_v = va.residual(tag) - b
         values = {"bias": b}
+    elif how == "drift" and k == 1:
+        # one parameter: the error grows from zero at the first sample (grid time 0)
+        r = tr.residual(tag)
+        ok = np.isfinite(r)
+        c = float(np.dot(tr.time[ok], r[ok]) / np.dot(tr.time[ok], tr.time[ok]))
+        after_t = r - c * tr.time
+        after_v = va.residual(tag) - c * va.time
+        values = {"rate": c}
     elif how == "drift":
         (a, c), after_t = fit_drift(tr.time, tr.residual(tag))
         after_v = va.residual(tag) - (a + c * (va.time - tr.time[0]))
@@ -435,7 +445,7 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
     after_v = {t: where.validation.measured[t] - sim_v[t] for t in tags}
     pinned = ["rate"] if rate >= hi * 0.999 else []
     return score(effect.id, target, "process", "screen", where, k, after_t, after_v,
-                 {"rate_per_hour": rate * 3600.0, name: base}, pinned=pinned)
+                 {"rate": rate, name: base}, pinned=pinned)
 
 
 def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
@@ -461,14 +471,20 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
     """
     from . import library
 
+    from ..errors import SpecError
+
     jobs = []
+    out: list[Candidate] = []
     for eid in sorted(effects):
         if only and eid not in only:
             continue
         effect = effects[eid]
-        for target in library.targets(effect, spec):
-            jobs.append((effect, target))
-    out: list[Candidate] = []
+        try:
+            found = library.targets(effect, spec)
+        except SpecError as exc:
+            out.append(Candidate(eid, "", getattr(effect, "kind", "process"), "skipped", reason=str(exc)))
+            continue
+        jobs.extend((effect, target) for target in found)
     for i, (effect, target) in enumerate(jobs):
         how = getattr(effect, "screen", "compile")
         try:

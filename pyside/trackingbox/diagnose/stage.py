@@ -241,16 +241,20 @@ def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
            work: Path | None) -> tuple[Any, Path | None, Path | None, Path | None]:
     """Render the named effect; compile and write it as the settings ask."""
     from . import library
-    from .fit import warm_values
+    from .fit import _short, render, warm_values
 
     if named.fit is not None:
         outcome = named.fit
-        values = {s: named.values.get(s, v) for s, v in warm_values(effect, None).items()}
-        patch = library.render_patch(spec, [library.Finding(effect, named.target, values)])
+        bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in outcome.patch.parameters}
+        values = {s: min(max(named.values.get(s, v), bounds.get(s, (-math.inf, math.inf))[0]),
+                         bounds.get(s, (-math.inf, math.inf))[1])
+                  for s, v in warm_values(effect, None).items()}
+        patch = render(spec, effect, named.target, values)
         fmu = outcome.fmu
     else:
-        values = warm_values(effect, named)
-        patch = library.render_patch(spec, [library.Finding(effect, named.target, values)])
+        first = render(spec, effect, named.target, warm_values(effect, None))
+        bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in first.parameters}
+        patch = render(spec, effect, named.target, warm_values(effect, named, bounds))
         fmu = None
         if settings.compile or settings.out_dir:
             assert work is not None
