@@ -133,6 +133,20 @@ class BalanceSpec:
 
 
 @dataclass(frozen=True)
+class DiagnoseSpec:
+    """The spec's ``[diagnose]`` table.
+
+    Attributes
+    ----------
+    effects : tuple of Path
+        Folders of user effect entries (absolute, resolved relative to the spec
+        file); ``diagnose`` reads them beside the built-in entries.
+    """
+
+    effects: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
 class StoppageRule:
     """Rows where ``tag < below`` are excluded, plus ``settle`` seconds after each stoppage."""
 
@@ -178,6 +192,7 @@ class Spec:
     states: tuple[StateSpec, ...] = ()
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
     balances: tuple[BalanceSpec, ...] = ()
+    diagnose: DiagnoseSpec = field(default_factory=DiagnoseSpec)
 
     def parameter(self, name: str) -> ParameterSpec:
         """Return the candidate parameter *name*; :class:`SpecError` with did-you-mean if absent."""
@@ -206,7 +221,7 @@ class Spec:
 
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
              "fixed", "windows", "data", "pairs", "states", "tracking",
-             "balances")
+             "balances", "diagnose")
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
 
@@ -511,6 +526,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         tracking = TrackingSettings(hold_until=hold or 0.0)
 
     balances = _parse_balances(raw, problems)
+    diagnose = _parse_diagnose(raw, base, problems, check_files=check_files)
 
     # tags against the measurement file header --------------------------------
     meas = files.get("measurements")
@@ -530,7 +546,28 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     return Spec(path=path, twin=files["twin"], measurements=files["measurements"],
                 sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
                 parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
-                pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances)
+                pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances,
+                diagnose=diagnose)
+
+
+def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
+                    check_files: bool) -> DiagnoseSpec:
+    """``[diagnose]``: ``effects``, a list of folders (relative to the spec file) of user effect entries."""
+    table = _table(raw, "diagnose", problems)
+    if table is None:
+        return DiagnoseSpec()
+    _check_keys(table, ("effects",), (), "[diagnose]", problems)
+    value = table.get("effects", [])
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        problems.add(f"effects in [diagnose] must be a list of folder paths (strings), got {value!r}")
+        return DiagnoseSpec()
+    folders: list[Path] = []
+    for item in value:
+        resolved = _resolve(base, item)
+        if check_files and not resolved.is_dir():
+            problems.add(f"effects folder {item!r} in [diagnose] does not exist (looked for {resolved})")
+        folders.append(resolved)
+    return DiagnoseSpec(effects=tuple(folders))
 
 
 def _parse_balances(raw: Mapping[str, Any], problems: _Problems) -> tuple[BalanceSpec, ...]:
@@ -733,6 +770,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                           "gain": float(s.gain)} for s in spec.states]
     if spec.tracking != TrackingSettings():
         doc["tracking"] = {"hold_until": float(spec.tracking.hold_until)}
+    if spec.diagnose.effects:
+        doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:
         doc["balances"] = [{"name": b.name, "terms": dict(b.terms),
                             **({"tolerance": float(b.tolerance)} if b.tolerance else {})} for b in spec.balances]
