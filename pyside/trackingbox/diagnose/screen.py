@@ -301,41 +301,91 @@ def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
     return default
 
 
+def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
+          extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
+          jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None,
+          ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float]:
+    """Fit an effect's linear terms jointly with the spec's candidates (linearised) on training.
+
+    Every output tag's residual *r_train* is fitted by ``J delta + T beta``: ``J``
+    the null model's output sensitivity to the candidates, ``T`` the effect's
+    columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
+    Returns ``beta``, the residuals after on training and on validation (the
+    same coefficients with the validation window's ``J`` and ``T``) and the
+    weighted training cost.
+    """
+    from .residuals import joint_lstsq
+
+    j_train, j_val = jac if jac is not None else where.jacobian
+    tags = list(r_train)
+    p = next(iter(j_train.values())).shape[1] if j_train else 0
+    m = next(iter(extra_train.values())).shape[1] if extra_train else 0
+
+    def cols(j: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray] | None, tag: str, n: int) -> np.ndarray:
+        a = j[tag] if tag in j else np.zeros((n, p))
+        e = extra[tag] if extra and tag in extra else np.zeros((n, m))
+        return np.hstack([a, e])
+
+    ct = {t: cols(j_train, extra_train, t, len(r_train[t])) for t in tags}
+    coef = joint_lstsq(r_train, ct, where.noise)
+    after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
+    after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
+    cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
+    return coef[p:], after_t, after_v, cost
+
+
 def screen_sensor(effect: Any, tag: str, where: WhereResult) -> Candidate:
-    """Screen a sensor effect on *tag* by transforming the null model's output."""
+    """Screen a sensor effect on *tag*: transform the null model's output, refit the candidates linearised."""
     how = effect.screen
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     tr, va = where.training, where.validation
+    rt = {t: tr.residual(t) for t in where.tags}
+    rv = {t: va.residual(t) for t in where.tags}
+    pinned = []
     if how == "bias":
-        b, after_t = fit_bias(tr.residual(tag))
-        after_v = va.residual(tag) - b
-        values = {"bias": b}
+        beta, after_t, after_v, _ = joint(where, rt, rv, {tag: np.ones((tr.time.size, 1))},
+                                          {tag: np.ones((va.time.size, 1))})
+        values = {"bias": float(beta[0])}
     elif how == "drift" and k == 1:
         # one parameter: the error grows from zero at the first sample (grid time 0)
-        r = tr.residual(tag)
-        ok = np.isfinite(r)
-        c = float(np.dot(tr.time[ok], r[ok]) / np.dot(tr.time[ok], tr.time[ok]))
-        after_t = r - c * tr.time
-        after_v = va.residual(tag) - c * va.time
-        values = {"rate": c}
+        beta, after_t, after_v, _ = joint(where, rt, rv, {tag: tr.time[:, None]}, {tag: va.time[:, None]})
+        values = {"rate": float(beta[0])}
     elif how == "drift":
-        (a, c), after_t = fit_drift(tr.time, tr.residual(tag))
-        after_v = va.residual(tag) - (a + c * (va.time - tr.time[0]))
-        values = {"offset": a, "rate": c}
+        t0 = tr.time[0]
+        beta, after_t, after_v, _ = joint(where, rt, rv,
+                                          {tag: np.column_stack([np.ones(tr.time.size), tr.time - t0])},
+                                          {tag: np.column_stack([np.ones(va.time.size), va.time - t0])})
+        values = {"offset": float(beta[0]), "rate": float(beta[1])}
     elif how == "lag":
+        from scipy.optimize import minimize_scalar
+
         lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
-        tau, after_t = fit_lag(tr.time, tr.simulated[tag], tr.measured[tag], bounds=(lo, hi))
-        after_v = va.measured[tag] - first_order(va.time, va.simulated[tag], tau)
+        lo = max(lo, 0.0)
+        j_train, j_val = where.jacobian
+
+        def lagged(tau: float) -> tuple[Any, ...]:
+            rt2, rv2 = dict(rt), dict(rv)
+            rt2[tag] = tr.measured[tag] - first_order(tr.time, tr.simulated[tag], tau)
+            rv2[tag] = va.measured[tag] - first_order(va.time, va.simulated[tag], tau)
+            jt, jv = dict(j_train), dict(j_val)
+            if tag in jt and jt[tag].shape[1]:
+                jt[tag] = np.column_stack([first_order(tr.time, c, tau) for c in jt[tag].T])
+                jv[tag] = np.column_stack([first_order(va.time, c, tau) for c in jv[tag].T])
+            return joint(where, rt2, rv2, jac=(jt, jv))
+
+        res = minimize_scalar(lambda tau: lagged(tau)[3], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-3 * (hi - lo) + 1e-6})
+        tau = float(res.x)
+        _, after_t, after_v, cost = lagged(tau)
+        if lagged(lo)[3] <= cost:
+            tau = lo
+            _, after_t, after_v, _ = lagged(lo)
         values = {"tau": tau}
+        if tau >= hi - 1e-3 * (hi - lo):
+            pinned.append("tau")
     else:
         raise ValueError(f"not a sensor screen: {how!r}")
-    pinned = []
-    if how == "lag":
-        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
-        if values["tau"] >= hi - 1e-3 * (hi - lo):
-            pinned.append("tau")
-    return score(effect.id, tag, "sensor", "screen", where, k, {tag: after_t}, {tag: after_v}, values,
-                 pinned=pinned)
+    return score(effect.id, tag, "sensor", "screen", where, k, after_t, after_v, values, pinned=pinned)
 
 
 def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, base: float, rate: float,
@@ -424,25 +474,31 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     tags = list(problem.outputs)
 
+    va = where.validation
+    rv0 = {t: va.residual(t) for t in tags}
+
+    def fitted(rate: float, sim_v: Mapping[str, np.ndarray] | None = None) -> tuple[Any, ...]:
+        sim = simulate_ramp(where, training, x, name, base, rate, t_mid)
+        rt = {t: tr.measured[t] - sim[t] for t in tags}
+        rv = rv0 if sim_v is None else {t: va.measured[t] - sim_v[t] for t in tags}
+        return joint(where, rt, rv)
+
     def sse(rate: float) -> float:
         try:
-            sim = simulate_ramp(where, training, x, name, base, rate, t_mid)
+            return fitted(rate)[3]
         except Exception as exc:  # noqa: BLE001 - a failing point is a bad point
             log.debug("ramp %g failed: %s", rate, exc)
             return math.inf
-        return float(sum(np.nansum(((tr.measured[t] - sim[t]) / where.noise[t]) ** 2) for t in tags))
 
     hi = max_fall / max(span, 1.0)
     try:
         res = minimize_scalar(sse, bounds=(0.0, hi), method="bounded",
                               options={"maxiter": evaluations, "xatol": 1e-3 * hi})
         rate = float(res.x)
-        sim_t = simulate_ramp(where, training, x, name, base, rate, t_mid)
         sim_v = simulate_ramp(where, validation, x, name, base, rate, t_mid)
+        _, after_t, after_v, _ = fitted(rate, sim_v)
     finally:
         close_models()
-    after_t = {t: tr.measured[t] - sim_t[t] for t in tags}
-    after_v = {t: where.validation.measured[t] - sim_v[t] for t in tags}
     pinned = ["rate"] if rate >= hi * 0.999 else []
     return score(effect.id, target, "process", "screen", where, k, after_t, after_v,
                  {"rate": rate, name: base}, pinned=pinned)
