@@ -160,3 +160,110 @@ def test_delta_bic_prefers_a_true_bias_and_refuses_a_spurious_one():
     e = rng.normal(0.0, 0.1, 2000)
     assert sc.delta_bic({"T": e + 0.1}, {"T": e}, 1) > 10         # one sigma of bias over 2000 samples
     assert sc.delta_bic({"T": e}, {"T": e - e.mean()}, 1) < 0     # fitting the noise's mean costs ln(n)
+
+
+# --------------------------------------------------------------------------- judging (fast)
+
+from trackingbox.diagnose import judge as jd  # noqa: E402
+
+
+def test_a_candidate_failing_any_check_is_never_named():
+    good = sc.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=50.0, validation_gain=0.5, noise_gain=3.0)
+    assert jd.reasons_against(good, 500) == []
+    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 9.0, 0.5, 3.0), 500)      # ΔBIC <= 10
+    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 0.1), 500)     # within noise
+    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, -0.1, 3.0), 500)    # NRMSE rises
+    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 3.0, pinned=("tau",)), 500)
+
+
+# --------------------------------------------------------------------------- end to end on the heat-exchanger bench
+
+HX = "TrackingBox.Benches.HeatExchanger"
+#: Bias added to TI-102 (K): ten times the bench's 0.1 K thermometer noise.
+BIAS = 1.0
+
+
+@pytest.fixture(scope="module")
+def hx_bench(fmu_cache, tmp_path_factory):
+    from trackingbox.benches import make_bench
+
+    return make_bench("heat-exchanger", tmp_path_factory.mktemp("dg-hx") / "case", seed=0, hours=3.0,
+                      plant_fmu=fmu_cache(f"{HX}.Plant"), twin_fmu=fmu_cache(f"{HX}.Twin"))
+
+
+def _copy_case(bench, directory, bias=0.0):
+    import shutil
+
+    import pandas as pd
+
+    src = bench.directory
+    directory.mkdir()
+    for name in ("spec.toml", "twin.fmu"):
+        shutil.copy(src / name, directory / name)
+    frame = pd.read_csv(src / "measurements.csv")
+    frame["TI-102"] = frame["TI-102"] + bias
+    frame.to_csv(directory / "measurements.csv", index=False)
+    return load_spec(directory / "spec.toml")
+
+
+SETTINGS = dict(maxiter=4)
+
+
+@pytest.mark.compile
+@pytest.mark.slow
+def test_plain_bench_gives_verdict_none(hx_bench, tmp_path):
+    from trackingbox.diagnose import DiagnoseSettings, diagnose
+
+    spec = _copy_case(hx_bench, tmp_path / "plain")
+    result = diagnose(spec, DiagnoseSettings(**SETTINGS))
+    doc = result.to_json()
+    assert doc["verdict"] == "none", doc["candidates"]
+    assert doc["findings"] == []
+    assert not any(w["significant"] for w in doc["where"].values())
+
+
+@pytest.mark.compile
+@pytest.mark.slow
+def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path):
+    from trackingbox.diagnose import DiagnoseSettings, diagnose
+    from trackingbox.report.diagnose import write_diagnose_report
+
+    spec = _copy_case(hx_bench, tmp_path / "biased", bias=BIAS)
+    result = diagnose(spec, DiagnoseSettings(**SETTINGS, out_dir=tmp_path / "patched"))
+    doc = result.to_json()
+    assert doc["verdict"] == "effect", doc["candidates"]
+    (finding,) = doc["findings"]
+    assert (finding["effect"], finding["target"]) == ("sensor-bias", "TI-102")
+    # the bias added, within two noise standard deviations of the thermometer (estimated from the data)
+    noise = doc["where"]["TI-102"]["noise"]
+    assert abs(noise - 0.1) < 0.02                      # the bench's thermometer noise
+    (value,) = finding["parameters"].values()
+    assert abs(value - BIAS) < 2 * noise
+    assert finding["delta_bic"] > 10
+    before, after = finding["validation"]["nrmse_before"]["TI-102"], finding["validation"]["nrmse_after"]["TI-102"]
+    assert after < 0.5 * before
+    # the patch: <Twin>Diagnosed.mo written, naming the effect and the value
+    assert doc["patch"]["model"].endswith("TwinDiagnosed")
+    assert (tmp_path / "patched" / "TwinDiagnosed.mo").read_text() == doc["patch"]["source"]
+    assert "sensor-bias on TI-102" in doc["patch"]["source"]
+    report = write_diagnose_report(spec, result, tmp_path / "report")
+    text = report.markdown.read_text()
+    assert "sensor-bias" in text and "```diff" in text and (tmp_path / "report" / "gap_TI-102.png").is_file()
+
+
+def test_held_out_data_decide_between_candidates_alike_on_training():
+    from types import SimpleNamespace as NS
+
+    where = NS(validation_tags={"T": NS(samples=500)}, significant=["T"], tags={})
+    a = sc.Candidate("sensor-bias", "T1", "sensor", "screen", delta_bic=100.0, validation_gain=0.5, noise_gain=3.0)
+    b = sc.Candidate("sensor-bias", "T2", "sensor", "screen", delta_bic=95.0, validation_gain=0.6, noise_gain=4.0)
+    c = sc.Candidate("sensor-drift", "T2", "sensor", "screen", delta_bic=60.0, validation_gain=0.9, noise_gain=9.0)
+    verdict = jd.judge([a, b, c], where)
+    assert verdict.verdict == "effect" and verdict.named is b
+    assert "smaller validation gain" in verdict.reasons["sensor-bias@T1"][0]
+    assert "by a BIC difference above 10" in verdict.reasons["sensor-drift@T2"][0]
+    # nothing passes but the residual is significant: unexplained, saying where
+    where.tags = {"T": NS(periods=((0.0, 3600.0),))}
+    where.validation_tags["T"].periods = ()
+    verdict = jd.judge([sc.Candidate("sensor-bias", "T", "sensor", "screen", 5.0, 0.1, 0.1)], where)
+    assert verdict.verdict == "unexplained" and verdict.unexplained == {"T": [(0.0, 3600.0)]}

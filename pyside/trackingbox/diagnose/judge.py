@@ -10,8 +10,11 @@ A candidate *passes* when all of these hold:
   shows by chance), and its NRMSE falls (``validation_gain > 0``);
 * no fitted parameter is pinned at a bound.
 
-Verdict: ``effect`` when the best-ranked passing candidate exists (it alone is
-named); ``unexplained`` when none passes but the null model's residual is
+Verdict: ``effect`` when a candidate passes. One is named: among the passing
+candidates that the training data do not strongly separate from the best-ranked
+one (their BIC difference, computed between the two candidates' own residuals
+by :func:`~trackingbox.diagnose.screen.delta_bic`, is within :data:`MIN_DELTA_BIC`), the one with the largest validation gain in noise
+variances (the held-out data decide); ``unexplained`` when none passes but the null model's residual is
 significant somewhere (the tags and periods are said); ``none`` otherwise. A
 candidate that does not pass is never named.
 """
@@ -85,18 +88,47 @@ class Judgement:
     unexplained: dict[str, list[tuple[float, float]]]
 
 
+def between(a: Candidate, b: Candidate) -> float:
+    """BIC evidence for *a* over *b* on training, from their own residuals (tags both have).
+
+    Falls back to the difference of their ΔBIC over the null when either lacks residuals.
+    """
+    from .screen import delta_bic
+
+    tags = [t for t in a.training_residual if t in b.training_residual]
+    if not tags:
+        return a.delta_bic - b.delta_bic
+    return delta_bic({t: b.training_residual[t] for t in tags}, {t: a.training_residual[t] for t in tags}, 0)
+
+
 def judge(candidates: Sequence[Candidate], where: WhereResult) -> Judgement:
     """Give the verdict over ranked *candidates* (best first)."""
     samples = min((res.samples for res in where.validation_tags.values()), default=0)
     reasons: dict[str, list[str]] = {}
-    named = None
+    passing = []
     for c in candidates:
         why = reasons_against(c, samples)
         if why:
             reasons[f"{c.effect}@{c.target}"] = why
-        elif named is None:
-            named = c
-    if named is not None:
+        else:
+            passing.append(c)
+    if passing:
+        top = max(passing, key=lambda c: c.delta_bic)
+        best = top.delta_bic
+        contenders = [c for c in passing if c is top or between(top, c) <= MIN_DELTA_BIC]
+        named = max(contenders, key=lambda c: (c.noise_gain, c.delta_bic))
+        for c in passing:
+            if c is named:
+                continue
+            if c in contenders:
+                reasons[f"{c.effect}@{c.target}"] = [
+                    f"as likely on training as {named.effect}@{named.target} (BIC difference within "
+                    f"{MIN_DELTA_BIC:g}) "
+                    f"but a smaller validation gain ({c.noise_gain:.3g} vs {named.noise_gain:.3g} noise variances)"]
+            else:
+                reasons[f"{c.effect}@{c.target}"] = [f"passes, but the training data favour "
+                                                     f"{top.effect}@{top.target} by a BIC difference above "
+                                                     f"{MIN_DELTA_BIC:g} (ΔBIC {c.delta_bic:.4g} vs {best:.4g})"]
         return Judgement("effect", named, reasons, {})
     unexplained = {}
     for tag in where.significant:

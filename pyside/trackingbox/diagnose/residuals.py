@@ -419,6 +419,8 @@ class WhereResult:
     windows: Any = field(default=None, repr=False)
     corrections: dict[str, float] = field(default_factory=dict)
     jacobian: tuple[dict[str, np.ndarray], dict[str, np.ndarray]] = field(default=({}, {}), repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+    input_tags: dict[str, str] = field(default_factory=dict, repr=False)
 
     @property
     def significant(self) -> list[str]:
@@ -495,7 +497,7 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
         jac = [output_jacobian(problem, w, x, spec.inputs, s) for w, s in zip((training, validation), series)]
     finally:
         close_models()
-    series = polish(series, jac, noise)
+    series, delta0 = polish(series, jac, noise)
     described = []
     for s in series:
         idx = np.searchsorted(view.grid, s.time)
@@ -517,7 +519,29 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
         log.info("%s: noise %.3g, rms %.3g, offset %.3g, trend %.3g/h%s", tag, res.noise, res.rms, res.offset,
                  res.trend, " (significant)" if res.significant else "")
     return WhereResult(null, described[0], described[1], balances, series[0], series[1], noise, problem,
-                       (training, validation), corrections, (jac[0], jac[1]))
+                       (training, validation), corrections, (jac[0], jac[1]), x + delta0 if delta0.size else x,
+                       dict(spec.inputs))
+
+
+def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
+    """*result* with its series and Jacobian simulated again at ``x + delta`` (clipped to the bounds).
+
+    One Gauss-Newton step of a joint fit (:func:`trackingbox.diagnose.screen.joint`)
+    moves the candidates by *delta*; re-linearising there removes the error of the
+    first linearisation when the move is large (a bias absorbed into a coefficient).
+    """
+    from ..estimation import close_models
+
+    problem = result.problem
+    x1 = np.clip(np.asarray(result.x, dtype=float) + delta, problem.lower, problem.upper)
+    try:
+        series = [window_series(problem, w, x1, result.input_tags) for w in result.windows]
+        jac = [output_jacobian(problem, w, x1, result.input_tags, s) for w, s in zip(result.windows, series)]
+    finally:
+        close_models()
+    from dataclasses import replace
+
+    return replace(result, training=series[0], validation=series[1], jacobian=(jac[0], jac[1]), x=x1)
 
 
 def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Mapping[str, str],
@@ -564,8 +588,8 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
 
 
 def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndarray]],
-           noise: Mapping[str, float]) -> list[WindowResiduals]:
-    """The null model moved by one linearised step to the noise-weighted least-squares optimum.
+           noise: Mapping[str, float]) -> tuple[list[WindowResiduals], np.ndarray]:
+    """The null model (and the step taken) moved by one linearised step to the noise-weighted least-squares optimum.
 
     The estimate minimises the mean NRMSE (tags weighted by their range); the
     screening scores candidates by residuals weighted by the noise. Moving the
@@ -576,12 +600,12 @@ def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndar
     train, valid = series
     delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise)
     if delta.size == 0:
-        return list(series)
+        return list(series), delta
     out = []
     for s, j in zip(series, jac):
         sim = {t: v + j[t] @ delta for t, v in s.simulated.items()}
         out.append(WindowResiduals(s.name, s.time, s.measured, sim, s.inputs))
-    return out
+    return out, delta
 
 
 def _after_stoppage(view: Any) -> np.ndarray | None:

@@ -16,6 +16,12 @@ entry's ``screen``:
     with ``t_mid`` the middle of the training window, set between steps of the
     twin (:meth:`trackingbox.fmu.FMUModel.stepper`); ``rate`` is a bounded scalar
     fit. No compile.
+The spec's candidates are refitted jointly with every screened effect, linearised:
+the null model's output sensitivity ``J`` to the candidates (forward differences,
+computed once) enters each transform's least squares as extra columns (the lag
+filters them too; the ramp fits them at each trial rate), so a bias is not
+taken for a shifted coefficient or the reverse (:func:`joint`).
+
 ``compile``
     Fitted through its patched, compiled twin with a short budget
     (:func:`trackingbox.diagnose.fit.fit_candidate`) when the settings allow it,
@@ -245,6 +251,7 @@ class Candidate:
     reason: str = ""
     fit: Any = field(default=None, repr=False, compare=False)
     validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    training_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         """An entry of ``diagnose --json``'s ``candidates``."""
@@ -290,7 +297,8 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
         white[t] = ljung_box_lag1(training_after[t])
     return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
                      tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
-                     {t: np.asarray(validation_after[t], dtype=float) for t in tags})
+                     {t: np.asarray(validation_after[t], dtype=float) for t in tags},
+                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()})
 
 
 def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
@@ -304,15 +312,15 @@ def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
 def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
           extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
           jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None,
-          ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float]:
+          ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float, np.ndarray]:
     """Fit an effect's linear terms jointly with the spec's candidates (linearised) on training.
 
     Every output tag's residual *r_train* is fitted by ``J delta + T beta``: ``J``
     the null model's output sensitivity to the candidates, ``T`` the effect's
     columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
     Returns ``beta``, the residuals after on training and on validation (the
-    same coefficients with the validation window's ``J`` and ``T``) and the
-    weighted training cost.
+    same coefficients with the validation window's ``J`` and ``T``), the
+    weighted training cost and the candidates' step ``delta``.
     """
     from .residuals import joint_lstsq
 
@@ -331,37 +339,40 @@ def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[
     after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
     after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
     cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
-    return coef[p:], after_t, after_v, cost
+    return coef[p:], after_t, after_v, cost, coef[:p]
 
 
-def screen_sensor(effect: Any, tag: str, where: WhereResult) -> Candidate:
-    """Screen a sensor effect on *tag*: transform the null model's output, refit the candidates linearised."""
+def sensor_fit(effect: Any, tag: str, base: WhereResult) -> tuple[dict[str, float], dict[str, np.ndarray],
+                                                                   dict[str, np.ndarray], np.ndarray]:
+    """Fit a sensor transform on *tag* jointly with the candidates, linearised around *base*.
+
+    Returns the effect's values, the residuals after on training and validation, and the candidates' step.
+    """
     how = effect.screen
     k = len(getattr(effect, "parameters", ()) or ()) or 1
-    tr, va = where.training, where.validation
-    rt = {t: tr.residual(t) for t in where.tags}
-    rv = {t: va.residual(t) for t in where.tags}
-    pinned = []
+    tr, va = base.training, base.validation
+    rt = {t: tr.residual(t) for t in base.tags}
+    rv = {t: va.residual(t) for t in base.tags}
     if how == "bias":
-        beta, after_t, after_v, _ = joint(where, rt, rv, {tag: np.ones((tr.time.size, 1))},
-                                          {tag: np.ones((va.time.size, 1))})
-        values = {"bias": float(beta[0])}
-    elif how == "drift" and k == 1:
+        beta, after_t, after_v, _, delta = joint(base, rt, rv, {tag: np.ones((tr.time.size, 1))},
+                                                 {tag: np.ones((va.time.size, 1))})
+        return {"bias": float(beta[0])}, after_t, after_v, delta
+    if how == "drift" and k == 1:
         # one parameter: the error grows from zero at the first sample (grid time 0)
-        beta, after_t, after_v, _ = joint(where, rt, rv, {tag: tr.time[:, None]}, {tag: va.time[:, None]})
-        values = {"rate": float(beta[0])}
-    elif how == "drift":
+        beta, after_t, after_v, _, delta = joint(base, rt, rv, {tag: tr.time[:, None]}, {tag: va.time[:, None]})
+        return {"rate": float(beta[0])}, after_t, after_v, delta
+    if how == "drift":
         t0 = tr.time[0]
-        beta, after_t, after_v, _ = joint(where, rt, rv,
-                                          {tag: np.column_stack([np.ones(tr.time.size), tr.time - t0])},
-                                          {tag: np.column_stack([np.ones(va.time.size), va.time - t0])})
-        values = {"offset": float(beta[0]), "rate": float(beta[1])}
-    elif how == "lag":
+        beta, after_t, after_v, _, delta = joint(
+            base, rt, rv, {tag: np.column_stack([np.ones(tr.time.size), tr.time - t0])},
+            {tag: np.column_stack([np.ones(va.time.size), va.time - t0])})
+        return {"offset": float(beta[0]), "rate": float(beta[1])}, after_t, after_v, delta
+    if how == "lag":
         from scipy.optimize import minimize_scalar
 
         lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
         lo = max(lo, 0.0)
-        j_train, j_val = where.jacobian
+        j_train, j_val = base.jacobian
 
         def lagged(tau: float) -> tuple[Any, ...]:
             rt2, rv2 = dict(rt), dict(rv)
@@ -371,20 +382,43 @@ def screen_sensor(effect: Any, tag: str, where: WhereResult) -> Candidate:
             if tag in jt and jt[tag].shape[1]:
                 jt[tag] = np.column_stack([first_order(tr.time, c, tau) for c in jt[tag].T])
                 jv[tag] = np.column_stack([first_order(va.time, c, tau) for c in jv[tag].T])
-            return joint(where, rt2, rv2, jac=(jt, jv))
+            return joint(base, rt2, rv2, jac=(jt, jv))
 
         res = minimize_scalar(lambda tau: lagged(tau)[3], bounds=(lo, hi), method="bounded",
                               options={"xatol": 1e-3 * (hi - lo) + 1e-6})
         tau = float(res.x)
-        _, after_t, after_v, cost = lagged(tau)
-        if lagged(lo)[3] <= cost:
+        _, after_t, after_v, cost, delta = lagged(tau)
+        low = lagged(lo)
+        if low[3] <= cost:
             tau = lo
-            _, after_t, after_v, _ = lagged(lo)
-        values = {"tau": tau}
-        if tau >= hi - 1e-3 * (hi - lo):
+            _, after_t, after_v, _, delta = low
+        return {"tau": tau}, after_t, after_v, delta
+    raise ValueError(f"not a sensor screen: {how!r}")
+
+
+#: A joint fit is re-linearised where it moved the candidates by more than this share of their ranges.
+RELINEARISE_STEP = 1.0e-3
+
+
+def screen_sensor(effect: Any, tag: str, where: WhereResult, *, relinearise: bool = True) -> Candidate:
+    """Screen a sensor effect on *tag*: transform the null model's output, refit the candidates linearised.
+
+    With *relinearise*, a fit that moved the candidates is repeated once around
+    the moved point (one more Gauss-Newton step: ``1 + p`` simulations per window).
+    """
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    values, after_t, after_v, delta = sensor_fit(effect, tag, where)
+    problem = where.problem
+    if (relinearise and problem is not None and where.x is not None and delta.size
+            and np.any(np.abs(delta) > RELINEARISE_STEP * (problem.upper - problem.lower))):
+        from .residuals import relinearised
+
+        values, after_t, after_v, _ = sensor_fit(effect, tag, relinearised(where, delta))
+    pinned = []
+    if effect.screen == "lag":
+        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
+        if values["tau"] >= hi - 1e-3 * (hi - lo):
             pinned.append("tau")
-    else:
-        raise ValueError(f"not a sensor screen: {how!r}")
     return score(effect.id, tag, "sensor", "screen", where, k, after_t, after_v, values, pinned=pinned)
 
 
@@ -496,7 +530,7 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
                               options={"maxiter": evaluations, "xatol": 1e-3 * hi})
         rate = float(res.x)
         sim_v = simulate_ramp(where, validation, x, name, base, rate, t_mid)
-        _, after_t, after_v, _ = fitted(rate, sim_v)
+        _, after_t, after_v, _, _ = fitted(rate, sim_v)
     finally:
         close_models()
     pinned = ["rate"] if rate >= hi * 0.999 else []
