@@ -9,6 +9,7 @@ independent truth).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -224,13 +225,18 @@ def test_plain_bench_gives_verdict_none(hx_bench, tmp_path):
 
 @pytest.mark.compile
 @pytest.mark.slow
-def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path):
-    from trackingbox.diagnose import DiagnoseSettings, diagnose
-    from trackingbox.report.diagnose import write_diagnose_report
+def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path, capsys):
+    """Through the command: --json is the issue's contract, --report and -o write their files."""
+    import json
+
+    from trackingbox.cli import main
 
     spec = _copy_case(hx_bench, tmp_path / "biased", bias=BIAS)
-    result = diagnose(spec, DiagnoseSettings(**SETTINGS, out_dir=tmp_path / "patched"))
-    doc = result.to_json()
+    code = main(["diagnose", str(spec.path), "--json", "--maxiter", str(SETTINGS["maxiter"]),
+                 "--report", str(tmp_path / "report"), "-o", str(tmp_path / "patched")])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc) >= {"verdict", "findings", "candidates", "where", "patch", "seconds"}
     assert doc["verdict"] == "effect", doc["candidates"]
     (finding,) = doc["findings"]
     assert (finding["effect"], finding["target"]) == ("sensor-bias", "TI-102")
@@ -242,13 +248,26 @@ def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path):
     assert finding["delta_bic"] > 10
     before, after = finding["validation"]["nrmse_before"]["TI-102"], finding["validation"]["nrmse_after"]["TI-102"]
     assert after < 0.5 * before
-    # the patch: <Twin>Diagnosed.mo written, naming the effect and the value
+    # the patch: <Twin>Diagnosed.mo written and compiled, naming the effect; a spec for the patched twin
     assert doc["patch"]["model"].endswith("TwinDiagnosed")
     assert (tmp_path / "patched" / "TwinDiagnosed.mo").read_text() == doc["patch"]["source"]
     assert "sensor-bias on TI-102" in doc["patch"]["source"]
-    report = write_diagnose_report(spec, result, tmp_path / "report")
-    text = report.markdown.read_text()
+    patched = load_spec(doc["patch"]["spec"])
+    assert patched.outputs["TI-102"] != spec.outputs["TI-102"] and Path(doc["patch"]["fmu"]).is_file()
+    text = (tmp_path / "report" / "diagnosis.md").read_text()
     assert "sensor-bias" in text and "```diff" in text and (tmp_path / "report" / "gap_TI-102.png").is_file()
+
+
+@pytest.mark.compile
+def test_bad_input_is_one_error_line_and_exit_2(hx_bench, tmp_path, capsys):
+    from trackingbox.cli import main
+
+    assert main(["diagnose", str(tmp_path / "nope.toml")]) == 2
+    assert capsys.readouterr().err.startswith("error: ")
+    spec = _copy_case(hx_bench, tmp_path / "case")
+    assert main(["diagnose", str(spec.path), "--effects", "sensor-bais"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown effect 'sensor-bais'" in err and "did you mean 'sensor-bias'" in err
 
 
 def test_held_out_data_decide_between_candidates_alike_on_training():

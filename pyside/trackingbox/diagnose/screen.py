@@ -108,10 +108,20 @@ def first_order(time: npt.ArrayLike, y: npt.ArrayLike, tau: float) -> np.ndarray
     """
     t = np.asarray(time, dtype=float)
     u = np.asarray(y, dtype=float)
-    x = np.empty_like(u)
-    x[0] = u[0]
     if tau <= 0:
         return u.copy()
+    steps = np.diff(t)
+    if steps.size and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0):
+        # uniform grid: the recurrence is a linear filter on u - u0 with a zero initial state
+        from scipy.signal import lfilter
+
+        h = float(steps[0])
+        a = math.exp(-h / tau)
+        b0 = 1.0 - tau / h + tau * a / h
+        b1 = tau / h - a - tau * a / h
+        return u[0] + lfilter([b0, b1], [1.0, -a], u - u[0])
+    x = np.empty_like(u)
+    x[0] = u[0]
     for k in range(len(u) - 1):
         h = t[k + 1] - t[k]
         a = math.exp(-h / tau)
@@ -540,7 +550,8 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
 
 def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
            fit_compiled: Callable[[Any, str], Candidate] | None = None,
-           only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None) -> list[Candidate]:
+           only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None,
+           relinearise: int = 3) -> list[Candidate]:
     """Screen every effect × target; return the candidates ranked by ``delta_bic`` (best first).
 
     Parameters
@@ -558,6 +569,9 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         Effect ids to screen (all when empty).
     progress
         ``progress("screen", done, total)``.
+    relinearise
+        How many of the best sensor candidates are fitted again around their moved candidates
+        (:func:`screen_sensor`).
     """
     from . import library
 
@@ -583,7 +597,7 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
                     cand = Candidate(effect.id, target, "sensor", "skipped",
                                      reason=f"tag {target!r} is not an output tag of the spec")
                 else:
-                    cand = screen_sensor(effect, target, where)
+                    cand = screen_sensor(effect, target, where, relinearise=False)
             elif how == "coefficient-ramp":
                 cand = screen_ramp(effect, target, where)
             elif fit_compiled is not None:
@@ -604,7 +618,13 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         out.append(cand)
         if progress is not None:
             progress("screen", i + 1, len(jobs))
-    return rank(out)
+    # the best few sensor candidates once more, re-linearised around where their joint fit moved the candidates
+    ranked = rank(out)
+    sensors = [c for c in ranked if c.stage == "screen" and c.kind == "sensor" and c.delta_bic > 0][:relinearise]
+    for c in sensors:
+        again = screen_sensor(effects[c.effect], c.target, where, relinearise=True)
+        ranked[ranked.index(c)] = again
+    return rank(ranked)
 
 
 def rank(candidates: Sequence[Candidate]) -> list[Candidate]:
