@@ -121,6 +121,28 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
+def level(where: WhereResult, after_t: dict[str, np.ndarray],
+          after_v: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Move a fitted candidate's residuals to the noise-weighted optimum of the spec's candidates.
+
+    The estimation minimises the mean NRMSE, the null model was moved to the
+    noise-weighted least-squares optimum (:func:`trackingbox.diagnose.residuals.polish`);
+    one linearised step with the null model's output Jacobian puts the fitted
+    candidate on the same footing, so that a mere shift along the trade-off between
+    tags is not credited to the effect.
+    """
+    from .residuals import joint_lstsq
+
+    j_train, j_val = where.jacobian
+    if not j_train or not all(t in j_train for t in after_t):
+        return after_t, after_v
+    delta = joint_lstsq(after_t, {t: j_train[t] for t in after_t}, where.noise)
+    if delta.size == 0:
+        return after_t, after_v
+    return ({t: r - j_train[t] @ delta for t, r in after_t.items()},
+            {t: r - j_val[t] @ delta for t, r in after_v.items()})
+
+
 def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,
                   screened: Candidate | None = None, budget: FitBudget = FitBudget(),
                   stage: str = "fit") -> Candidate:
@@ -186,6 +208,7 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     tags = [t for t in pspec.outputs if t in where.tags]
     after_t = {t: series[0].residual(t) for t in tags}
     after_v = {t: series[1].residual(t) for t in tags}
+    after_t, after_v = level(where, after_t, after_v)
     fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
     pinned = []
     for short, v in fitted.items():
