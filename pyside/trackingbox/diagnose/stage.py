@@ -217,6 +217,15 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
             ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
         nameable = [c for c in ranked if c.fit is not None] if settings.compile else ranked
         judgement = judge(nameable, found)
+        if settings.compile:
+            from .judge import reasons_against
+
+            samples = min((r.samples for r in found.validation_tags.values()), default=0)
+            for c in ranked:
+                key = f"{c.effect}@{c.target}"
+                if c.fit is None and key not in judgement.reasons:
+                    judgement.reasons[key] = reasons_against(c, samples) or [
+                        "passes its screening but was not fitted (with --compile only fitted candidates are named)"]
         named = judgement.named
         patch = patch_fmu = patch_spec = patch_file = None
         if named is not None and spec.source is not None:
