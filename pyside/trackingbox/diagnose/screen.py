@@ -272,6 +272,7 @@ class Candidate:
                 "delta_bic": num(self.delta_bic), "validation_gain": num(self.validation_gain),
                 "noise_gain": num(self.noise_gain), "tags": list(self.tags),
                 "values": {k: num(v) for k, v in self.values.items()},
+                "whiteness": {k: num(v) for k, v in self.whiteness.items()},
                 **({"reason": self.reason} if self.reason else {})}
 
 

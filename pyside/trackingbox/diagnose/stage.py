@@ -101,6 +101,7 @@ class DiagnosisResult:
                 "delta_bic": _num(c.delta_bic), "tags": list(c.tags),
                 "validation": {"nrmse_before": {k: _num(v) for k, v in c.nrmse_before.items()},
                                "nrmse_after": {k: _num(v) for k, v in c.nrmse_after.items()}},
+                "whiteness": {k: _num(v) for k, v in c.whiteness.items()},
                 "explanation": self.effects.get(c.effect, ""),
                 "stage": c.stage,
             })

@@ -101,10 +101,11 @@ def write_diagnose_report(spec: Spec, result: DiagnosisResult, out: str | os.Pat
         doc.paragraph(f"`{named.effect}` on `{named.target}`: {expl} Fitted: "
                       + ", ".join(f"`{k}` = {v:.6g}" for k, v in named.values.items())
                       + f"; ΔBIC {named.delta_bic:.1f} ({named.stage}).")
-        doc.table(["tag", "validation NRMSE twin", "validation NRMSE patched", "change"],
+        doc.table(["tag", "validation NRMSE twin", "validation NRMSE patched", "change",
+                   "residual lag-1 autocorrelation after"],
                   [[f"`{t}`", fmt(named.nrmse_before[t]), fmt(named.nrmse_after[t]),
                     f"{100 * (named.nrmse_after[t] / named.nrmse_before[t] - 1):+.1f} %"
-                    if named.nrmse_before[t] else ""] for t in named.tags])
+                    if named.nrmse_before[t] else "", fmt(named.whiteness.get(t), ".2f")] for t in named.tags])
         va = w.validation
         for tag in named.tags:
             after = named.validation_residual.get(tag)
