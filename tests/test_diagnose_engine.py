@@ -68,7 +68,8 @@ def test_balance_tag_must_be_a_column(tmp_path):
 def test_balance_survives_dump_and_reload(tmp_path):
     from trackingbox.spec import dump_spec, loads_spec
 
-    spec = load_spec(_case(tmp_path, '\n[[balances]]\nname = "hot side"\nterms = { "FI-101" = 1.0, "FI-102" = -2.0 }\n'))
+    text = '\n[[balances]]\nname = "hot side"\nterms = { "FI-101" = 1.0, "FI-102" = -2.0 }\n'
+    spec = load_spec(_case(tmp_path, text))
     assert loads_spec(dump_spec(spec), spec.path) == spec
 
 

@@ -13,7 +13,8 @@ A candidate *passes* when all of these hold:
 Verdict: ``effect`` when a candidate passes. One is named: among the passing
 candidates that the training data do not strongly separate from the best-ranked
 one (their BIC difference, computed between the two candidates' own residuals
-by :func:`~trackingbox.diagnose.screen.delta_bic`, is within :data:`MIN_DELTA_BIC`), the one with the largest validation gain in noise
+by :func:`~trackingbox.diagnose.screen.delta_bic`, is within :data:`MIN_DELTA_BIC`),
+the one with the largest validation gain in noise
 variances (the held-out data decide); ``unexplained`` when none passes but the null model's residual is
 significant somewhere (the tags and periods are said); ``none`` otherwise. A
 candidate that does not pass is never named.

@@ -8,7 +8,8 @@ entry's ``screen``:
     A sensor effect only transforms the simulated output of its tag: the null
     model's output is transformed and the transform fitted in closed form or by
     a one-parameter bounded fit: a constant (``bias``), an offset plus a slope in
-    time (``drift``; a slope from zero at the first sample for a one-parameter entry), a first-order lag of time constant ``tau`` (``lag``, the
+    time (``drift``; a slope from zero at the first sample for a one-parameter
+    entry), a first-order lag of time constant ``tau`` (``lag``, the
     exact discretisation for an output linear between samples).
 ``coefficient-ramp``
     A parameter of the target (``<target>.<coefficient>``) falls linearly with
@@ -51,7 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from .residuals import WindowResiduals, ljung_box_lag1
+from .residuals import ljung_box_lag1
 
 if TYPE_CHECKING:
     from .residuals import WhereResult
