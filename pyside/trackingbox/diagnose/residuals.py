@@ -56,6 +56,10 @@ OFFSET_THRESHOLD = 1.0
 PERIOD_THRESHOLD = 1.0
 #: Number of blocks the heat map and the periods cut a window into.
 DEFAULT_BLOCKS = 12
+#: Smallest noise level a tag is given, as a fraction of its measured range over the record: a
+#: signal with (almost) no noise, such as a controller output or a speed, is judged against its
+#: resolution instead of a near-zero sigma.
+NOISE_FLOOR = 1.0e-3
 
 
 # --------------------------------------------------------------------------- numerics
@@ -97,6 +101,22 @@ def noise_sigma(values: npt.ArrayLike) -> float:
         return math.nan
     mad = float(np.median(np.abs(d - np.median(d))))
     return 1.4826 * mad / math.sqrt(6.0)
+
+
+def noise_level(values: npt.ArrayLike) -> float:
+    """:func:`noise_sigma`, at least :data:`NOISE_FLOOR` times the series' range (NaN ignored).
+
+    >>> noise_level(np.linspace(0.0, 10.0, 101))   # a noise-free ramp: its resolution floor
+    0.01
+    """
+    y = np.asarray(values, dtype=float)
+    ok = np.isfinite(y)
+    sigma = noise_sigma(y)
+    span = float(y[ok].max() - y[ok].min()) if ok.any() else 0.0
+    floor = NOISE_FLOOR * span
+    if not math.isfinite(sigma):
+        return floor if floor > 0 else math.nan
+    return max(sigma, floor)
 
 
 def ljung_box_lag1(residual: npt.ArrayLike) -> float:
@@ -490,7 +510,7 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
     x = np.array([null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
     balance_tags = [t for b in getattr(spec, "balances", ()) or () for t in b.terms]
     view = MeasurementView.from_spec(spec, "all", tags=balance_tags)
-    noise = {tag: noise_sigma(view.values(tag)) for tag in spec.outputs}
+    noise = {tag: noise_level(view.values(tag)) for tag in spec.outputs}
     after = _after_stoppage(view)
     try:
         series = [window_series(problem, w, x, spec.inputs) for w in (training, validation)]
