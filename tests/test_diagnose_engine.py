@@ -287,3 +287,12 @@ def test_held_out_data_decide_between_candidates_alike_on_training():
     where.validation_tags["T"].periods = ()
     verdict = jd.judge([sc.Candidate("sensor-bias", "T", "sensor", "screen", 5.0, 0.1, 0.1)], where)
     assert verdict.verdict == "unexplained" and verdict.unexplained == {"T": [(0.0, 3600.0)]}
+
+
+def test_a_sensor_effect_must_gain_on_its_own_tag_and_harm_no_other():
+    c = sc.Candidate("sensor-lag", "Z", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=50.0,
+                     noise_gains={"Z": 0.01, "T": 49.99})
+    assert any("own tag Z" in r for r in jd.reasons_against(c, 500))
+    c = sc.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=3.0,
+                     noise_gains={"T": 5.0, "F": -2.0})
+    assert any("makes F worse" in r for r in jd.reasons_against(c, 500))

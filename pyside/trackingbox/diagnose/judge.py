@@ -7,7 +7,9 @@ A candidate *passes* when all of these hold:
   more than noise allows: ``noise_gain > max(MIN_NOISE_GAIN, 4 * sqrt(2 / n))``
   noise variances (``n``: validation samples per tag; the second term is four
   standard deviations of the change a mean square of ``n`` white-noise samples
-  shows by chance), and its NRMSE falls (``validation_gain > 0``);
+  shows by chance), and its NRMSE falls (``validation_gain > 0``); a sensor
+  effect must pass that gain on its own tag, and no tag may get worse by more
+  than the same margin;
 * no fitted parameter is pinned at a bound.
 
 Verdict: ``effect`` when a candidate passes. One is named: among the passing
@@ -62,6 +64,12 @@ def reasons_against(c: Candidate, samples: int) -> list[str]:
         out.append(f"validation gain {c.noise_gain:.3g} noise variances is not above {limit:.3g}")
     if not (math.isfinite(c.validation_gain) and c.validation_gain > 0):
         out.append("validation NRMSE does not fall")
+    if c.kind == "sensor" and c.noise_gains and not c.noise_gains.get(c.target, -math.inf) > limit:
+        out.append(f"the validation gain on its own tag {c.target} "
+                   f"({c.noise_gains.get(c.target, math.nan):.3g} noise variances) is not above {limit:.3g}")
+    worse = [t for t, g in c.noise_gains.items() if g < -limit]
+    if worse:
+        out.append(f"makes {', '.join(worse)} worse on validation beyond noise")
     if c.pinned:
         out.append(f"pinned at a bound: {', '.join(c.pinned)}")
     return out

@@ -232,6 +232,8 @@ class Candidate:
         (mean over the tags; 0.7 = 70 % smaller).
     noise_gain
         Drop of the validation mean square residual of the affected tags, in noise variances (summed).
+    noise_gains
+        The same per affected tag.
     tags
         Tags the candidate changes.
     values
@@ -263,6 +265,7 @@ class Candidate:
     fit: Any = field(default=None, repr=False, compare=False)
     validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
     training_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    noise_gains: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """An entry of ``diagnose --json``'s ``candidates``."""
@@ -297,7 +300,7 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
     if not tags:
         tags = list(training_after)
     dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
-    nb, na, gains, ng, white = {}, {}, [], 0.0, {}
+    nb, na, gains, ng, white, per_tag = {}, {}, [], 0.0, {}, {}
     for t in tags:
         r0 = va.residual(t)
         r1 = np.asarray(validation_after[t], dtype=float)
@@ -305,12 +308,13 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
         na[t] = nrmse_of(r1, va.measured[t])
         if nb[t] > 0:
             gains.append(1.0 - na[t] / nb[t])
-        ng += noise_gain(r0, r1, where.noise[t])
+        per_tag[t] = noise_gain(r0, r1, where.noise[t])
+        ng += per_tag[t]
         white[t] = ljung_box_lag1(training_after[t])
     return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
                      tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
                      {t: np.asarray(validation_after[t], dtype=float) for t in tags},
-                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()})
+                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag)
 
 
 def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
