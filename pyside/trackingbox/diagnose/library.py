@@ -94,7 +94,10 @@ class EffectParameter:
 
     def resolved(self, variable_unit: str = "") -> tuple[str, float, float, float]:
         """(unit, start, min, max) for a target whose variable has unit *variable_unit*."""
-        unit = self.unit.replace(UNIT_OF_VARIABLE, variable_unit or "1")
+        base = variable_unit or "1"
+        if self.unit != UNIT_OF_VARIABLE and "/" in base:  # "{unit}/s" of kg/s is (kg/s)/s
+            base = f"({base})"
+        unit = self.unit.replace(UNIT_OF_VARIABLE, base)
         lo, hi = self.ranges.get(variable_unit, (self.min, self.max))
         start = min(max(self.start, lo), hi)
         return unit, float(start), float(lo), float(hi)
@@ -400,7 +403,7 @@ class _ClassIndex:
         return comps
 
 
-def targets(effect: Effect, spec: Any) -> list[str]:
+def targets(effect: Effect, spec: Any, *, _index: _ClassIndex | None = None) -> list[str]:
     """Where *effect* may act in *spec*'s twin.
 
     Sensor effects: the tags of ``[outputs]`` (spec order). Process effects: the
@@ -417,7 +420,7 @@ def targets(effect: Effect, spec: Any) -> list[str]:
     if spec.source is None:
         raise SpecError(f"effect {effect.id!r} acts on components of the twin's Modelica source, but "
                         f"{spec.path} has no [source] table")
-    index = _ClassIndex(spec.source.path)
+    index = _index or _ClassIndex(spec.source.path)
     if index.body(spec.source.model) is None:
         raise SpecError(f"model {spec.source.model!r} in [source] of {spec.path} is not found in "
                         f"{spec.source.path}")
@@ -587,6 +590,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         raise SpecError(f"patched model name {model!r} is not a Modelica identifier")
     ordered = sorted(findings, key=lambda f: (f.effect, f.target))
     units: dict[str, str] | None = None
+    index: _ClassIndex | None = None
     modifiers: dict[str, list[str]] = {}
     declarations: list[str] = []
     hidden: list[str] = []
@@ -623,13 +627,14 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             context["unit"] = variable_unit
             outputs[f.target] = context["output"]
         else:
-            known = targets(effect, spec)
+            if index is None:
+                index = _ClassIndex(spec.source.path)
+            known = targets(effect, spec, _index=index)
             if f.target not in known:
                 raise SpecError(f"{where}: {f.target!r} is not a component of {twin} that the effect applies to "
                                 f"(classes {', '.join(effect.classes)}){did_you_mean(f.target, known)}")
             if effect.hook:
                 modifiers.setdefault(f.target, []).append(f"{effect.hook} = true")
-            index = _ClassIndex(spec.source.path)
             cls = index.components(twin)[f.target]
             context["cls"] = cls
             context["bases"] = index.bases(cls)
