@@ -335,3 +335,22 @@ def test_patched_spec_continues_on_the_patch(hp_spec, hp_patch, tmp_path):
     leak = spec.parameter("leak_T200_k")
     assert (leak.start, leak.min, leak.max) == (0.004, 0.0, 0.03)
     shutil.rmtree(tmp_path / "patched")
+
+
+@pytest.mark.compile
+def test_documented_user_entry_compiles_and_acts(hp_spec, tmp_path):
+    """docs/examples/effects/leak-sqrt (the example of docs/diagnose-effects.md) on T200."""
+    from trackingbox.diagnose.library import compile_patch
+    from trackingbox.fmu import FMUModel
+
+    folder = Path(__file__).resolve().parents[1] / "docs" / "examples" / "effects"
+    effects = load_effects([folder])
+    assert targets(effects["leak-sqrt"], hp_spec) == ["T100", "T200", "T400"]
+    patch = render_patch(hp_spec, [Finding("leak-sqrt", "T200", {"c": 0.005})], effects=effects)
+    model = FMUModel(compile_patch(patch, tmp_path).fmu)
+    try:
+        df = model.simulate(stop_time=300.0, output_interval=10.0,
+                            outputs=["T200.level", "T200.m_flow_leak_internal"])
+    finally:
+        model.close()
+    np.testing.assert_allclose(df["T200.m_flow_leak_internal"], 0.005 * np.sqrt(df["T200.level"]), rtol=1e-9)
