@@ -138,3 +138,30 @@ def test_hp_fouling_and_drift(fmu_cache):
     t = drift["time"].to_numpy()
     np.testing.assert_allclose(drift["TI_100_sensor"] - drift["TI_100"], -2.0 * (1 - np.exp(-t / 50000.0)),
                                atol=1e-6)
+
+
+def test_bench_hidden_case_and_noise_scale(fmu_cache, tmp_path):
+    import json
+
+    from trackingbox.benches import make_bench
+    from trackingbox.spec import load_spec
+
+    fmus = {"plant_fmu": fmu_cache(f"{HX}.Hidden.SensorDrift"), "twin_fmu": fmu_cache(f"{HX}.Twin")}
+    cases = {s: make_bench("heat-exchanger", tmp_path / f"x{s}", seed=4, hours=1.0, hidden="sensor-drift",
+                           noise_scale=s, **fmus) for s in (1.0, 3.0)}
+    truth = json.loads(cases[3.0].truth_file.read_text())
+    assert truth["hidden"]["effect"] == "sensor-drift" and truth["hidden"]["target"] == "TI-102"
+    assert truth["noise_scale"] == 3.0 and truth["plant_model"].endswith("Hidden.SensorDrift")
+    spec = load_spec(cases[3.0].spec)
+    assert spec.outputs["TI-102"] == "ThOut"  # the twin and spec are the plain bench's
+    # the same seed draws the same numbers: input noise (measured - true input) scales by exactly 3,
+    # and its standard deviation is 3 x 0.1 K for a thermometer
+    noise = {}
+    for s, case in cases.items():
+        meas, true = pd.read_csv(case.measurements), pd.read_csv(case.plant_inputs)
+        noise[s] = (meas["TI-100"] - true["ThIn"]).to_numpy()
+    np.testing.assert_allclose(noise[3.0], 3.0 * noise[1.0], atol=2e-5)  # CSV keeps 9 digits
+    assert 0.25 < noise[3.0].std() < 0.35
+    with pytest.raises(Exception, match=r"unknown hidden-effect case 'leak' of bench 'heat-exchanger'"):
+        make_bench("heat-exchanger", tmp_path / "bad", hidden="leak", **fmus)
+    assert not (tmp_path / "bad").exists()
