@@ -354,3 +354,21 @@ def test_documented_user_entry_compiles_and_acts(hp_spec, tmp_path):
     finally:
         model.close()
     np.testing.assert_allclose(df["T200.m_flow_leak_internal"], 0.005 * np.sqrt(df["T200.level"]), rtol=1e-9)
+
+
+@pytest.mark.compile
+def test_fluid_validation_hooks(fmu_cache):
+    """Fluid.Validation.DiagnosisHooks: equal in- and outflow, so the level falls at leak/(rho*A)."""
+    from trackingbox.fmu import FMUModel
+
+    model = FMUModel(fmu_cache("TrackingBox.Fluid.Validation.DiagnosisHooks"))
+    try:
+        df = model.simulate(stop_time=600.0, output_interval=5.0,
+                            outputs=["tank.level", "tank.rho", "heater.kht_internal", "hex.Q_flow_loss_internal"])
+    finally:
+        model.close()
+    t = df["time"].to_numpy()
+    rate = np.gradient(df["tank.level"].to_numpy(), t)
+    np.testing.assert_allclose(rate[2:-2], (-0.01 / (df["tank.rho"] * 0.2))[2:-2], rtol=1e-3)
+    np.testing.assert_allclose(df["heater.kht_internal"], 1050.0 * (1 - 1e-4 * t), rtol=1e-9)
+    np.testing.assert_allclose(df["hex.Q_flow_loss_internal"], 2000.0)
