@@ -183,7 +183,8 @@ def test_render_is_deterministic_and_states_the_values(hp_spec):
     assert "extends TrackingBox.Benches.HeatProduction.Twin(" in a.source
     assert "T200(use_heatLoss = true, use_leak = true)" in a.source
     assert "//   leak on T200: leak_T200_k = 0.004 kg/s" in a.source
-    assert a.diff.startswith("--- a/Twin.mo\n+++ b/TwinDiagnosed.mo\n")
+    assert a.diff.startswith("--- /dev/null\n+++ b/TwinDiagnosed.mo\n@@ -0,0 +1,")
+    assert "\n+  extends TrackingBox.Benches.HeatProduction.Twin(" in a.diff
     assert a.outputs["TI-300"] == "sensorBias_TI_300_y" or a.outputs["TI-300"].endswith("_TI_300_y")
     assert {p.name for p in a.parameters} >= {"leak_T200_k", "fouling_HEX300_r", "heatLoss_T100_UA"}
 

@@ -468,7 +468,7 @@ class Patch:
     source : str
         Text of ``<model>.mo``.
     diff : str
-        Unified diff of the twin's class file against the patched twin.
+        Unified diff that adds ``<model>.mo`` (the twin's own file is unchanged: the patch extends it).
     outputs : dict
         Tag -> new output variable, for sensor effects.
     parameters : tuple of PatchParameter
@@ -687,25 +687,19 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
     lines += [f"  annotation (Documentation(info = \"<html><p>Diagnosed effects:</p><ul>{info}</ul></html>\"));",
               f"end {model};", ""]
     source = "\n".join(lines)
-    diff = _diff(spec, source, model)
+    diff = _diff(source, model)
     return Patch(model=model, twin=twin, source=source, diff=diff, outputs=outputs, parameters=tuple(parameters),
                  findings=tuple(ordered), library=Path(spec.source.path))
 
 
-def _diff(spec: Any, source: str, model: str) -> str:
-    """Unified diff from the twin's class file to the patched twin's file."""
-    from ..compiler.source import class_file, read_text, resolve_source
+def _diff(source: str, model: str) -> str:
+    """The change to review, as a unified diff: the new file ``<model>.mo`` beside the unchanged twin.
 
-    old_text, old_name = "", spec.source.model
-    try:
-        file = class_file(resolve_source(spec.source.path), spec.source.model)
-        if file is not None:
-            old_text = read_text(file)
-            old_name = file.name
-    except Exception as exc:  # noqa: BLE001 - the diff is for review only
-        log.warning("cannot read the twin's file for the diff: %s", exc)
-    return "".join(difflib.unified_diff(old_text.splitlines(keepends=True), source.splitlines(keepends=True),
-                                        fromfile=f"a/{old_name}", tofile=f"b/{model}.mo"))
+    The patch extends the twin rather than editing it, so the twin's own file
+    does not change; the diff adds the patched class.
+    """
+    return "".join(difflib.unified_diff([], source.splitlines(keepends=True), fromfile="/dev/null",
+                                        tofile=f"b/{model}.mo"))
 
 
 def write_patch(patch: Patch, out_dir: str | Path) -> Path:
