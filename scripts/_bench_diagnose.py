@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", default="1,3", help="comma-separated noise scales (default 1,3)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--hours", type=float, default=None, help="measured period (default: the bench's)")
-    ap.add_argument("--work", type=Path, default=Path(".cache/bench-diagnose"), help="where the cases are written")
+    ap.add_argument("--work", type=Path, default=Path("out/bench-diagnose"), help="where the cases are written")
     ap.add_argument("--json", action="store_true", help="print the rows and criteria as one JSON document")
     ap.add_argument("diagnose_args", nargs="*", help="further arguments for trackingbox diagnose (after --)")
     args = ap.parse_args(argv)
