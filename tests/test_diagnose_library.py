@@ -373,3 +373,11 @@ def test_fluid_validation_hooks(fmu_cache):
     np.testing.assert_allclose(rate[2:-2], (-0.01 / (df["tank.rho"] * 0.2))[2:-2], rtol=1e-3)
     np.testing.assert_allclose(df["heater.kht_internal"], 1050.0 * (1 - 1e-4 * t), rtol=1e-9)
     np.testing.assert_allclose(df["hex.Q_flow_loss_internal"], 2000.0)
+
+
+@pytest.mark.compile
+def test_one_hook_driven_once(hp_spec):
+    folder = Path(__file__).resolve().parents[1] / "docs" / "examples" / "effects"
+    effects = load_effects([folder])
+    with pytest.raises(SpecError, match=r"already uses the hook 'use_leak' of 'T200'"):
+        render_patch(hp_spec, [Finding("leak", "T200", {}), Finding("leak-sqrt", "T200", {})], effects=effects)

@@ -634,6 +634,9 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
                 raise SpecError(f"{where}: {f.target!r} is not a component of {twin} that the effect applies to "
                                 f"(classes {', '.join(effect.classes)}){did_you_mean(f.target, known)}")
             if effect.hook:
+                if f"{effect.hook} = true" in modifiers.get(f.target, []):
+                    raise SpecError(f"{where}: another effect of the patch already uses the hook {effect.hook!r} "
+                                    f"of {f.target!r}; one patch can drive a hook once")
                 modifiers.setdefault(f.target, []).append(f"{effect.hook} = true")
             cls = index.components(twin)[f.target]
             context["cls"] = cls
@@ -663,6 +666,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         header.append(f"//   {effect.id} on {f.target}: {values}")
 
     from .. import __version__
+    from ..generate.filters import modelica_string
 
     mods = ", ".join(f"{t}({', '.join(sorted(set(m)))})" for t, m in sorted(modifiers.items()))
     extends = f"  extends {twin}({mods});" if mods else f"  extends {twin};"
@@ -672,7 +676,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         f"// {twin} extended with the effect(s) diagnosis found, with the fitted values:",
         *header,
         "// Review it like hand-written Modelica; regenerate rather than edit.",
-        f"model {model} \"{twin} with {summary}\"",
+        f"model {model} {modelica_string(f'{twin} with {summary}')}",
         extends,
         *declarations,
     ]
@@ -684,7 +688,8 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         lines += ["equation", *equations]
     info = "".join(f"<li>{f.effect} on <code>{f.target}</code>: {effects[f.effect].explanation}</li>"
                    for f in ordered)
-    lines += [f"  annotation (Documentation(info = \"<html><p>Diagnosed effects:</p><ul>{info}</ul></html>\"));",
+    info = modelica_string(f"<html><p>Diagnosed effects:</p><ul>{info}</ul></html>")
+    lines += [f"  annotation (Documentation(info = {info}));",
               f"end {model};", ""]
     source = "\n".join(lines)
     diff = _diff(source, model)
