@@ -9,6 +9,8 @@ keep the runs short.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -165,3 +167,26 @@ def test_bench_hidden_case_and_noise_scale(fmu_cache, tmp_path):
     with pytest.raises(Exception, match=r"unknown hidden-effect case 'leak' of bench 'heat-exchanger'"):
         make_bench("heat-exchanger", tmp_path / "bad", hidden="leak", **fmus)
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_hidden_sensor_drift_named_end_to_end(fmu_cache, tmp_path):
+    """A short hidden case through dg-engine's stage: the drifting TI-102 is named, patched and compiled."""
+    import trackingbox.diagnose as diagnosis
+
+    if not hasattr(diagnosis, "diagnose"):
+        pytest.skip("the diagnose stage (dg-engine) is not in this branch")
+    from trackingbox.benches import make_bench
+    from trackingbox.diagnose import DiagnoseSettings, diagnose
+    from trackingbox.spec import load_spec
+
+    case = make_bench("heat-exchanger", tmp_path / "case", seed=2, hours=4.0, hidden="sensor-drift",
+                      plant_fmu=fmu_cache(f"{HX}.Hidden.SensorDrift"), twin_fmu=fmu_cache(f"{HX}.Twin"))
+    result = diagnose(load_spec(case.spec), DiagnoseSettings(compile=True, out_dir=tmp_path / "out"))
+    doc = result.to_json()
+    assert doc["verdict"] == "effect"
+    top = doc["findings"][0]
+    assert (top["effect"], top["target"]) == ("sensor-drift", "TI-102")
+    before, after = top["validation"]["nrmse_before"]["TI-102"], top["validation"]["nrmse_after"]["TI-102"]
+    assert after < 0.5 * before
+    assert doc["patch"]["fmu"] and Path(doc["patch"]["fmu"]).is_file()
