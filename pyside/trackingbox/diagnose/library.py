@@ -94,7 +94,10 @@ class EffectParameter:
 
     def resolved(self, variable_unit: str = "") -> tuple[str, float, float, float]:
         """(unit, start, min, max) for a target whose variable has unit *variable_unit*."""
-        unit = self.unit.replace(UNIT_OF_VARIABLE, variable_unit or "1")
+        base = variable_unit or "1"
+        if self.unit != UNIT_OF_VARIABLE and "/" in base:  # "{unit}/s" of kg/s is (kg/s)/s
+            base = f"({base})"
+        unit = self.unit.replace(UNIT_OF_VARIABLE, base)
         lo, hi = self.ranges.get(variable_unit, (self.min, self.max))
         start = min(max(self.start, lo), hi)
         return unit, float(start), float(lo), float(hi)
@@ -400,7 +403,7 @@ class _ClassIndex:
         return comps
 
 
-def targets(effect: Effect, spec: Any) -> list[str]:
+def targets(effect: Effect, spec: Any, *, _index: _ClassIndex | None = None) -> list[str]:
     """Where *effect* may act in *spec*'s twin.
 
     Sensor effects: the tags of ``[outputs]`` (spec order). Process effects: the
@@ -417,7 +420,7 @@ def targets(effect: Effect, spec: Any) -> list[str]:
     if spec.source is None:
         raise SpecError(f"effect {effect.id!r} acts on components of the twin's Modelica source, but "
                         f"{spec.path} has no [source] table")
-    index = _ClassIndex(spec.source.path)
+    index = _index or _ClassIndex(spec.source.path)
     if index.body(spec.source.model) is None:
         raise SpecError(f"model {spec.source.model!r} in [source] of {spec.path} is not found in "
                         f"{spec.source.path}")
@@ -465,7 +468,7 @@ class Patch:
     source : str
         Text of ``<model>.mo``.
     diff : str
-        Unified diff of the twin's class file against the patched twin.
+        Unified diff that adds ``<model>.mo`` (the twin's own file is unchanged: the patch extends it).
     outputs : dict
         Tag -> new output variable, for sensor effects.
     parameters : tuple of PatchParameter
@@ -587,6 +590,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         raise SpecError(f"patched model name {model!r} is not a Modelica identifier")
     ordered = sorted(findings, key=lambda f: (f.effect, f.target))
     units: dict[str, str] | None = None
+    index: _ClassIndex | None = None
     modifiers: dict[str, list[str]] = {}
     declarations: list[str] = []
     hidden: list[str] = []
@@ -623,13 +627,17 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             context["unit"] = variable_unit
             outputs[f.target] = context["output"]
         else:
-            known = targets(effect, spec)
+            if index is None:
+                index = _ClassIndex(spec.source.path)
+            known = targets(effect, spec, _index=index)
             if f.target not in known:
                 raise SpecError(f"{where}: {f.target!r} is not a component of {twin} that the effect applies to "
                                 f"(classes {', '.join(effect.classes)}){did_you_mean(f.target, known)}")
             if effect.hook:
+                if f"{effect.hook} = true" in modifiers.get(f.target, []):
+                    raise SpecError(f"{where}: another effect of the patch already uses the hook {effect.hook!r} "
+                                    f"of {f.target!r}; one patch can drive a hook once")
                 modifiers.setdefault(f.target, []).append(f"{effect.hook} = true")
-            index = _ClassIndex(spec.source.path)
             cls = index.components(twin)[f.target]
             context["cls"] = cls
             context["bases"] = index.bases(cls)
@@ -658,6 +666,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         header.append(f"//   {effect.id} on {f.target}: {values}")
 
     from .. import __version__
+    from ..generate.filters import modelica_string
 
     mods = ", ".join(f"{t}({', '.join(sorted(set(m)))})" for t, m in sorted(modifiers.items()))
     extends = f"  extends {twin}({mods});" if mods else f"  extends {twin};"
@@ -667,7 +676,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         f"// {twin} extended with the effect(s) diagnosis found, with the fitted values:",
         *header,
         "// Review it like hand-written Modelica; regenerate rather than edit.",
-        f"model {model} \"{twin} with {summary}\"",
+        f"model {model} {modelica_string(f'{twin} with {summary}')}",
         extends,
         *declarations,
     ]
@@ -679,28 +688,23 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         lines += ["equation", *equations]
     info = "".join(f"<li>{f.effect} on <code>{f.target}</code>: {effects[f.effect].explanation}</li>"
                    for f in ordered)
-    lines += [f"  annotation (Documentation(info = \"<html><p>Diagnosed effects:</p><ul>{info}</ul></html>\"));",
+    info = modelica_string(f"<html><p>Diagnosed effects:</p><ul>{info}</ul></html>")
+    lines += [f"  annotation (Documentation(info = {info}));",
               f"end {model};", ""]
     source = "\n".join(lines)
-    diff = _diff(spec, source, model)
+    diff = _diff(source, model)
     return Patch(model=model, twin=twin, source=source, diff=diff, outputs=outputs, parameters=tuple(parameters),
                  findings=tuple(ordered), library=Path(spec.source.path))
 
 
-def _diff(spec: Any, source: str, model: str) -> str:
-    """Unified diff from the twin's class file to the patched twin's file."""
-    from ..compiler.source import class_file, read_text, resolve_source
+def _diff(source: str, model: str) -> str:
+    """The change to review, as a unified diff: the new file ``<model>.mo`` beside the unchanged twin.
 
-    old_text, old_name = "", spec.source.model
-    try:
-        file = class_file(resolve_source(spec.source.path), spec.source.model)
-        if file is not None:
-            old_text = read_text(file)
-            old_name = file.name
-    except Exception as exc:  # noqa: BLE001 - the diff is for review only
-        log.warning("cannot read the twin's file for the diff: %s", exc)
-    return "".join(difflib.unified_diff(old_text.splitlines(keepends=True), source.splitlines(keepends=True),
-                                        fromfile=f"a/{old_name}", tofile=f"b/{model}.mo"))
+    The patch extends the twin rather than editing it, so the twin's own file
+    does not change; the diff adds the patched class.
+    """
+    return "".join(difflib.unified_diff([], source.splitlines(keepends=True), fromfile="/dev/null",
+                                        tofile=f"b/{model}.mo"))
 
 
 def write_patch(patch: Patch, out_dir: str | Path) -> Path:
