@@ -36,7 +36,7 @@ ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
 }
 
 #: Default case of ``--diagnose``.
-DIAGNOSE_CASE = "bias"
+DIAGNOSE_CASE = "sensor-lag"
 
 STEPS = ("bench", "offset", "estimate", "pair", "track", "generate", "validate")
 
