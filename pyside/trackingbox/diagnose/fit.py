@@ -101,16 +101,17 @@ def warm_values(effect: Any, screened: Candidate | None,
     >>> e = NS(screen="bias", parameters=[NS(name="b", start=0.0, min=-2.0, max=2.0)])
     >>> warm_values(e, NS(values={"bias": 0.7}))
     {'b': 0.7}
-    >>> warm_values(e, NS(values={"bias": 9.0}))
+    >>> warm_values(e, NS(values={"b": 9.0}))
     {'b': 2.0}
     """
     params = list(getattr(effect, "parameters", ()) or ())
     values = {p.name: float(p.start) for p in params}
     key = {"bias": "bias", "lag": "tau", "drift": "rate", "coefficient-ramp": "rate"}.get(
         getattr(effect, "screen", ""))
-    if screened is not None and key and len(params) == 1 and key in screened.values:
+    if screened is not None and key and len(params) == 1 and (key in screened.values
+                                                             or params[0].name in screened.values):
         p = params[0]
-        v = float(screened.values[key])
+        v = float(screened.values.get(p.name, screened.values.get(key, math.nan)))
         lo, hi = (bounds or {}).get(p.name, (float(p.min), float(p.max)))
         if math.isfinite(v):
             values[p.name] = float(min(max(v, lo), hi))

@@ -435,6 +435,11 @@ def screen_sensor(effect: Any, tag: str, where: WhereResult, *, relinearise: boo
         lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
         if values["tau"] >= hi - 1e-3 * (hi - lo):
             pinned.append("tau")
+    params = list(getattr(effect, "parameters", ()) or ())
+    if len(params) == 1 and len(values) == 1:
+        # a one-parameter entry: report the screened quantity under the entry's own parameter name
+        values = {params[0].name: next(iter(values.values()))}
+        pinned = [params[0].name] if pinned else []
     return score(effect.id, tag, "sensor", "screen", where, k, after_t, after_v, values, pinned=pinned)
 
 
