@@ -296,3 +296,12 @@ def test_a_sensor_effect_must_gain_on_its_own_tag_and_harm_no_other():
     c = sc.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=3.0,
                      noise_gains={"T": 5.0, "F": -2.0})
     assert any("makes F worse" in r for r in jd.reasons_against(c, 500))
+
+
+def test_document_code_block_is_verbatim_in_markdown_and_html():
+    from trackingbox.report.document import Document
+
+    doc = Document("t")
+    doc.code("-a < b\n+`c`\n", "diff")
+    assert "```diff\n-a < b\n+`c`\n```" in doc.markdown()
+    assert "<pre><code>-a &lt; b\n+`c`</code></pre>" in doc.html_body().replace("\n</code>", "</code>")
