@@ -274,7 +274,8 @@ def test_bad_input_is_one_error_line_and_exit_2(hx_bench, tmp_path, capsys):
 def test_held_out_data_decide_between_candidates_alike_on_training():
     from types import SimpleNamespace as NS
 
-    where = NS(validation_tags={"T": NS(samples=500)}, significant=["T"], tags={})
+    where = NS(validation_tags={t: NS(samples=500, periods=()) for t in ("T", "T1", "T2")},
+               significant=["T1", "T2"], tags={t: NS(periods=()) for t in ("T1", "T2")})
     a = sc.Candidate("sensor-bias", "T1", "sensor", "screen", delta_bic=100.0, validation_gain=0.5, noise_gain=3.0)
     b = sc.Candidate("sensor-bias", "T2", "sensor", "screen", delta_bic=95.0, validation_gain=0.6, noise_gain=4.0)
     c = sc.Candidate("sensor-drift", "T2", "sensor", "screen", delta_bic=60.0, validation_gain=0.9, noise_gain=9.0)
@@ -282,9 +283,13 @@ def test_held_out_data_decide_between_candidates_alike_on_training():
     assert verdict.verdict == "effect" and verdict.named is b
     assert "smaller validation gain" in verdict.reasons["sensor-bias@T1"][0]
     assert "by a BIC difference above 10" in verdict.reasons["sensor-drift@T2"][0]
+    # a candidate whose tag shows no gap beyond noise is never named
+    d = sc.Candidate("sensor-bias", "T3", "sensor", "screen", delta_bic=500.0, validation_gain=0.9, noise_gain=9.0)
+    verdict = jd.judge([d], where)
+    assert verdict.verdict != "effect" and "within noise" in verdict.reasons["sensor-bias@T3"][-1]
     # nothing passes but the residual is significant: unexplained, saying where
+    where.significant = ["T"]
     where.tags = {"T": NS(periods=((0.0, 3600.0),))}
-    where.validation_tags["T"].periods = ()
     verdict = jd.judge([sc.Candidate("sensor-bias", "T", "sensor", "screen", 5.0, 0.1, 0.1)], where)
     assert verdict.verdict == "unexplained" and verdict.unexplained == {"T": [(0.0, 3600.0)]}
 

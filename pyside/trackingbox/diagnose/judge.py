@@ -10,6 +10,8 @@ A candidate *passes* when all of these hold:
   shows by chance), and its NRMSE falls (``validation_gain > 0``); a sensor
   effect must pass that gain on its own tag, and no tag may get worse by more
   than the same margin;
+* it explains a gap step 1 found: a sensor effect's tag, or one of the tags a
+  process effect changes, is significant (:attr:`WhereResult.significant`);
 * no fitted parameter is pinned at a bound.
 
 Verdict: ``effect`` when a candidate passes. One is named: among the passing
@@ -113,10 +115,16 @@ def between(a: Candidate, b: Candidate) -> float:
 def judge(candidates: Sequence[Candidate], where: WhereResult) -> Judgement:
     """Give the verdict over ranked *candidates* (best first)."""
     samples = min((res.samples for res in where.validation_tags.values()), default=0)
+    significant = set(where.significant)
     reasons: dict[str, list[str]] = {}
     passing = []
     for c in candidates:
         why = reasons_against(c, samples)
+        if c.stage != "skipped":
+            if c.kind == "sensor" and c.target not in significant:
+                why.append(f"the residual of its tag {c.target} is within noise (nothing there to explain)")
+            elif c.kind != "sensor" and not significant & set(c.tags):
+                why.append("none of the tags it changes has a residual beyond noise (nothing there to explain)")
         if why:
             reasons[f"{c.effect}@{c.target}"] = why
         else:
