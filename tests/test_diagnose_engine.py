@@ -175,6 +175,7 @@ def test_a_candidate_failing_any_check_is_never_named():
     assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 9.0, 0.5, 3.0), 500)      # ΔBIC <= 10
     assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 0.1), 500)     # within noise
     assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, -0.1, 3.0), 500)    # NRMSE rises
+    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.04, 3.0), 500)    # falls 4 %
     assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 3.0, pinned=("tau",)), 500)
 
 

@@ -7,7 +7,8 @@ A candidate *passes* when all of these hold:
   more than noise allows: ``noise_gain > max(MIN_NOISE_GAIN, 4 * sqrt(2 / n))``
   noise variances (``n``: validation samples per tag; the second term is four
   standard deviations of the change a mean square of ``n`` white-noise samples
-  shows by chance), and its NRMSE falls (``validation_gain > 0``); a sensor
+  shows by chance), and its NRMSE falls by at least :data:`MIN_VALIDATION_GAIN`
+  (10 %, mean over the affected tags); a sensor
   effect must pass that gain on its own tag, and no tag may get worse by more
   than the same margin;
 * it explains a gap step 1 found: a sensor effect's tag, or one of the tags a
@@ -41,6 +42,10 @@ Verdict = Literal["effect", "none", "unexplained"]
 MIN_DELTA_BIC = 10.0
 #: Smallest validation gain in noise variances a candidate must show, whatever the sample count.
 MIN_NOISE_GAIN = 0.25
+#: Smallest relative fall of the affected tags' validation NRMSE (mean over the tags) worth naming an
+#: effect for: a statistically clear but practically negligible gain (a 4 % fall on the plain
+#: heat-production bench) is no missing effect.
+MIN_VALIDATION_GAIN = 0.10
 
 
 def noise_threshold(samples: int) -> float:
@@ -66,6 +71,9 @@ def reasons_against(c: Candidate, samples: int) -> list[str]:
         out.append(f"validation gain {c.noise_gain:.3g} noise variances is not above {limit:.3g}")
     if not (math.isfinite(c.validation_gain) and c.validation_gain > 0):
         out.append("validation NRMSE does not fall")
+    elif c.validation_gain < MIN_VALIDATION_GAIN:
+        out.append(f"validation NRMSE falls by {100 * c.validation_gain:.1f} %, less than "
+                   f"{100 * MIN_VALIDATION_GAIN:g} %")
     if c.kind == "sensor" and c.noise_gains and not c.noise_gains.get(c.target, -math.inf) > limit:
         out.append(f"the validation gain on its own tag {c.target} "
                    f"({c.noise_gains.get(c.target, math.nan):.3g} noise variances) is not above {limit:.3g}")
