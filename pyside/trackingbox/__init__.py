@@ -16,6 +16,7 @@ commands and ``scripts/demo`` call these, and so can a notebook::
     gen = tb.generate(spec, "case1/generated")          # GenerateResult
     fmu = tb.compile_generated(gen).fmu
     val = tb.validate(spec, fmu)                        # ValidationResult
+    dia = tb.diagnose(spec, tb.DiagnoseSettings())      # DiagnosisResult
 
 The other names are imported on first use.
 """
@@ -42,14 +43,17 @@ _API = {
     "GenerateResult": "generate.generator",
     "ValidationResult": "validate",
     "MeasurementView": "data",
+    "DiagnoseSettings": "diagnose.stage",
+    "DiagnosisResult": "diagnose.stage",
 }
 
 # ``generate`` and ``validate`` are also the names of a subpackage and a module: loading those sets the
 # package attribute to the module, so the functions are bound here, after the modules are loaded.
 from .generate.generator import generate  # noqa: E402
 from .validate import validate  # noqa: E402
+from .diagnose.stage import diagnose  # noqa: E402
 
-__all__ = ["__version__", "generate", "validate", *_API]
+__all__ = ["__version__", "generate", "validate", "diagnose", *_API]
 
 
 def __getattr__(name: str) -> Any:

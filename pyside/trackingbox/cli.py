@@ -26,6 +26,7 @@ COMMANDS = (
     "track",
     "generate",
     "validate",
+    "diagnose",
 )
 
 EPILOG = """\
@@ -39,6 +40,7 @@ examples:
   trackingbox track case1/spec.toml --report case1/track
   gen-trackingbox case1/spec.toml -o case1/generated --compile
   trackingbox validate case1/spec.toml --fmu case1/generated/TwinTracked.fmu
+  trackingbox diagnose case1/spec.toml --compile --report case1/diagnose -o case1/patched
 """
 
 

@@ -35,6 +35,9 @@ ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
     "heat-production": {"workers": 2, "maxiter": 8, "refine_iterations": 6},
 }
 
+#: Default case of ``--diagnose``.
+DIAGNOSE_CASE = "sensor-lag"
+
 STEPS = ("bench", "offset", "estimate", "pair", "track", "generate", "validate")
 
 
@@ -102,6 +105,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="plant parameter override")
     p.add_argument("--until", choices=STEPS, default=STEPS[-1], help="stop after this step")
+    p.add_argument("--diagnose", action="store_true",
+                   help="instead of the tracking pipeline: one hidden-effect case of the heat-exchanger bench "
+                        "through `trackingbox diagnose`, with the patched twin compiled; written to "
+                        "demo-out/diagnose")
+    p.add_argument("--diagnose-case", default=DIAGNOSE_CASE, metavar="CASE",
+                   help=f"the --diagnose case: 'bias' (--diagnose-bias K added to the TI-102 column of the "
+                        f"measurements) or a hidden plant variant of `trackingbox bench heat-exchanger --hidden` "
+                        f"(default {DIAGNOSE_CASE})")
+    p.add_argument("--diagnose-bias", type=float, default=1.0, metavar="K",
+                   help="the sensor bias of --diagnose-case bias (default 1.0 K)")
     return p
 
 
@@ -161,6 +174,9 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.diagnose:
+        return diagnose_demo((args.out or Path("demo-out") / "diagnose").resolve(), seed=args.seed,
+                             case=args.diagnose_case, bias=args.diagnose_bias)
     out = (args.out or Path("demo-out") / args.bench).resolve()
     run = Run(out=out, bench=args.bench, seed=args.seed)
     steps = STEPS[: STEPS.index(args.until) + 1]
@@ -248,6 +264,80 @@ def write_report(run: Run, seconds: float) -> tuple[Path, Path]:
     page = write_html(run.out / "report.html", doc.title, [doc, *(r.document for r in run.reports.values())])
     write_text_atomic(run.out / "summary.json", json.dumps(run.summary, indent=2, default=str) + "\n")
     return md, page
+
+
+#: The tag the --diagnose bias case biases (the heat-exchanger bench's hot outlet thermometer).
+DIAGNOSE_TAG = "TI-102"
+
+
+def diagnose_demo(out: Path, *, seed: int = 0, case: str = "bias", bias: float = 1.0, hours: float = 6.0) -> int:
+    """``scripts/demo --diagnose``: a hidden effect found, named, patched and shown shrinking.
+
+    Builds the heat-exchanger bench (*hours* of data). With *case* ``"bias"`` it
+    adds *bias* to the ``TI-102`` column of a copy of its measurements; any other
+    *case* is a hidden plant variant of the bench (``make_bench(hidden=case)``).
+    The truth is written to ``hidden.json`` (``diagnose`` never reads it). Runs
+    :func:`trackingbox.diagnose.diagnose` with the patched twin compiled and
+    written to ``out/patched``, and writes the diagnosis report (``out/diagnose``),
+    ``report.md``, ``report.html`` and ``summary.json``.
+    """
+    import shutil
+
+    import pandas as pd
+
+    from .benches import make_bench
+    from .diagnose import DiagnoseSettings, diagnose
+    from .io import write_text_atomic
+    from .report import write_html
+    from .report.diagnose import write_diagnose_report
+    from .spec import check_against_fmu, load_spec
+
+    progress = Progress()
+    t0 = time.perf_counter()
+    try:
+        progress.note(f"[1/3] building the heat-exchanger bench case ({case}) in {out / 'bench'}")
+        built = make_bench("heat-exchanger", out / "bench", seed=seed, hours=hours,
+                           hidden=None if case == "bias" else case)
+        hidden = out / "case"
+        hidden.mkdir(parents=True, exist_ok=True)
+        for name in ("spec.toml", "twin.fmu"):
+            shutil.copyfile(built.directory / name, hidden / name)
+        frame = pd.read_csv(built.measurements)
+        if case == "bias":
+            frame[DIAGNOSE_TAG] = frame[DIAGNOSE_TAG] + bias
+            truth = {"effect": "sensor-bias", "target": DIAGNOSE_TAG, "bias": bias, "plant": built.truth}
+            what = f"a bias of {bias:g} K on `{DIAGNOSE_TAG}`"
+        else:
+            truth = json.loads(built.truth_file.read_text())
+            what = f"the hidden plant variant `{case}`: {truth.get('hidden', {}).get('description', case)}"
+        frame.to_csv(hidden / "measurements.csv", index=False)
+        write_text_atomic(hidden / "hidden.json", json.dumps(truth, indent=2, default=str) + "\n")
+        spec = load_spec(hidden / "spec.toml")
+        check_against_fmu(spec)
+        progress.note("[2/3] diagnose: null model, screening, fit of the best candidates (patched twins compiled)")
+        result = diagnose(spec, DiagnoseSettings(compile=True, out_dir=out / "patched", workers=2),
+                          progress=lambda stage, done, total: progress(stage, done, total))
+        progress.note("[3/3] writing the report")
+        report = write_diagnose_report(spec, result, out / "diagnose")
+    except TrackingError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    seconds = time.perf_counter() - t0
+    doc = Document(f"trackingbox demo: diagnosis of a hidden effect (seed {seed})")
+    named = result.named
+    doc.paragraph(f"Hidden in the measurements (not read by diagnose): {what}. "
+                  f"Verdict: **{result.verdict}**"
+                  + (f", named `{named.effect}` on `{named.target}` ("
+                     + ", ".join(f"{k} = {v:.4g}" for k, v in named.values.items()) + ")" if named else "")
+                  + f". Run time {seconds:.1f} s.")
+    doc.bullets([f"[diagnosis report]({report.markdown.relative_to(out).as_posix()})"])
+    md = doc.write_markdown(out / "report.md")
+    page = write_html(out / "report.html", doc.title, [doc, report.document])
+    write_text_atomic(out / "summary.json", json.dumps({"hidden": truth, "diagnose": result.to_json(),
+                                                        "seconds": seconds}, indent=2, default=str) + "\n")
+    print(md)
+    print(page)
+    return 0
 
 
 if __name__ == "__main__":

@@ -118,6 +118,35 @@ class StateSpec:
 
 
 @dataclass(frozen=True)
+class BalanceSpec:
+    """A balance over measured tags (``[[balances]]``): ``sum(factor * tag)`` should vanish.
+
+    ``terms`` maps a measurement column to its signed factor (e.g. a mass balance
+    ``{"FI-101" = 1.0, "FI-102" = -1.0}``); ``tolerance`` is the imbalance accepted
+    beyond the noise of the terms (units of the terms). ``diagnose`` uses it to tell
+    a faulty sensor (the balance does not close) from a process change (it closes).
+    """
+
+    name: str
+    terms: dict[str, float]
+    tolerance: float = 0.0
+
+
+@dataclass(frozen=True)
+class DiagnoseSpec:
+    """The spec's ``[diagnose]`` table.
+
+    Attributes
+    ----------
+    effects : tuple of Path
+        Folders of user effect entries (absolute, resolved relative to the spec
+        file); ``diagnose`` reads them beside the built-in entries.
+    """
+
+    effects: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
 class StoppageRule:
     """Rows where ``tag < below`` are excluded, plus ``settle`` seconds after each stoppage."""
 
@@ -171,6 +200,8 @@ class Spec:
     pairs: tuple[PairSpec, ...] = ()
     states: tuple[StateSpec, ...] = ()
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
+    balances: tuple[BalanceSpec, ...] = ()
+    diagnose: DiagnoseSpec = field(default_factory=DiagnoseSpec)
 
     def parameter(self, name: str) -> ParameterSpec:
         """Return the candidate parameter *name*; :class:`SpecError` with did-you-mean if absent."""
@@ -198,7 +229,8 @@ class Spec:
 # --------------------------------------------------------------------------- parsing
 
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
-             "fixed", "windows", "data", "pairs", "states", "tracking")
+             "fixed", "windows", "data", "pairs", "states", "tracking",
+             "balances", "diagnose")
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
 
@@ -531,6 +563,9 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         hold = _number(ttable, "hold_until", "[tracking]", problems, default=0.0, nonnegative=True)
         tracking = TrackingSettings(hold_until=hold or 0.0)
 
+    balances = _parse_balances(raw, problems)
+    diagnose = _parse_diagnose(raw, base, problems, check_files=check_files)
+
     # tags against the measurement file header --------------------------------
     meas = files.get("measurements")
     if check_files and meas is not None and meas.is_file():
@@ -539,7 +574,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             # a historian's long export: the tags are the values of its 'tag' column
             header = ["time", *_long_tags(meas, header.index("tag"))]
         if header is not None:
-            tags = [*inputs, *outputs, *(s.tag for s in states)]
+            tags = [*inputs, *outputs, *(s.tag for s in states), *(t for b in balances for t in b.terms)]
             columns = [c for c in header if c != "time"]
             if "time" not in header:
                 problems.add(f"measurements file {meas.name} has no 'time' column")
@@ -552,7 +587,59 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     return Spec(path=path, twin=files["twin"], measurements=files["measurements"],
                 sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
                 parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
-                pairs=tuple(pairs), states=tuple(states), tracking=tracking)
+                pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances,
+                diagnose=diagnose)
+
+
+def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
+                    check_files: bool) -> DiagnoseSpec:
+    """``[diagnose]``: ``effects``, a list of folders (relative to the spec file) of user effect entries."""
+    table = _table(raw, "diagnose", problems)
+    if table is None:
+        return DiagnoseSpec()
+    _check_keys(table, ("effects",), (), "[diagnose]", problems)
+    value = table.get("effects", [])
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        problems.add(f"effects in [diagnose] must be a list of folder paths (strings), got {value!r}")
+        return DiagnoseSpec()
+    folders: list[Path] = []
+    for item in value:
+        resolved = _resolve(base, item)
+        if check_files and not resolved.is_dir():
+            problems.add(f"effects folder {item!r} in [diagnose] does not exist (looked for {resolved})")
+        folders.append(resolved)
+    return DiagnoseSpec(effects=tuple(folders))
+
+
+def _parse_balances(raw: Mapping[str, Any], problems: _Problems) -> tuple[BalanceSpec, ...]:
+    """``[[balances]]``: name, terms (tag -> nonzero factor, at least two), optional tolerance >= 0."""
+    out: list[BalanceSpec] = []
+    keys = ("name", "terms", "tolerance")
+    names: list[str] = []
+    for i, table in enumerate(_array_of_tables(raw, "balances", problems)):
+        label = f"[[balances]] #{i + 1}"
+        _check_keys(table, keys, ("name", "terms"), label, problems)
+        name = _string(table, "name", label, problems)
+        tolerance = _number(table, "tolerance", label, problems, default=0.0, nonnegative=True)
+        terms = table.get("terms")
+        if "terms" in table and not isinstance(terms, dict):
+            problems.add(f"'terms' in {label} must be a table of tag = factor, got {_type_name(terms)}")
+            continue
+        parsed: dict[str, float] = {}
+        for tag, factor in (terms or {}).items():
+            if not _is_number(factor) or float(factor) == 0.0:
+                problems.add(f"factor of tag {tag!r} in {label} terms must be a nonzero number, got {factor!r}")
+            else:
+                parsed[str(tag)] = float(factor)
+        if terms is not None and len(terms) < 2:
+            problems.add(f"{label} terms need at least two tags, got {len(terms)}")
+        if name is not None and name in names:
+            problems.add(f"{label}: balance name {name!r} is used twice")
+        if name is None or len(parsed) < 2 or len(parsed) != len(terms or {}):
+            continue
+        names.append(name)
+        out.append(BalanceSpec(name=name, terms=parsed, tolerance=tolerance or 0.0))
+    return tuple(out)
 
 
 def load_spec(path: str | os.PathLike[str], *, check_files: bool = True) -> Spec:
@@ -728,6 +815,11 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                           "gain": float(s.gain)} for s in spec.states]
     if spec.tracking != TrackingSettings():
         doc["tracking"] = {"hold_until": float(spec.tracking.hold_until)}
+    if spec.diagnose.effects:
+        doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
+    if spec.balances:
+        doc["balances"] = [{"name": b.name, "terms": dict(b.terms),
+                            **({"tolerance": float(b.tolerance)} if b.tolerance else {})} for b in spec.balances]
     return doc
 
 

@@ -12,11 +12,13 @@ model HeatExchanger "Counter-flow water/water heat exchanger with n cells per si
   parameter TrackingBox.Units.Temperature T1_start = 333.15 "Initial temperature of side 1";
   parameter TrackingBox.Units.Temperature T2_start = 303.15 "Initial temperature of side 2";
   parameter Boolean use_kht_in = false "= true to take kht from the input kht_in";
+  parameter Boolean use_heatLoss = false "= true for a heat loss Q_flow_loss_in from side 1 to the surroundings";
   TrackingBox.Interfaces.FluidPort_a port_a1 "Side 1 (hot) inlet";
   TrackingBox.Interfaces.FluidPort_b port_b1 "Side 1 (hot) outlet";
   TrackingBox.Interfaces.FluidPort_a port_a2 "Side 2 (cold) inlet";
   TrackingBox.Interfaces.FluidPort_b port_b2 "Side 2 (cold) outlet";
   TrackingBox.Interfaces.RealInput kht_in(unit="W/(m2.K)") if use_kht_in "Heat-transfer coefficient from outside";
+  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Heat flow lost from side 1 to the surroundings, shared evenly by its cells";
   TrackingBox.Units.Temperature T1[n](each start=T1_start, each fixed=true) "Side 1 cell temperatures, in flow order";
   TrackingBox.Units.Temperature T2[n](each start=T2_start, each fixed=true) "Side 2 cell temperatures; cell i faces T1[i], flow from n to 1";
   TrackingBox.Units.HeatFlowRate Q_flow[n] "Heat flow from side 1 to side 2 per cell";
@@ -25,12 +27,17 @@ model HeatExchanger "Counter-flow water/water heat exchanger with n cells per si
   TrackingBox.Units.MassFlowRate m2_flow "Side 2 mass flow rate";
 protected
   TrackingBox.Interfaces.RealInput kht_internal(unit="W/(m2.K)") "Used heat-transfer coefficient";
+  TrackingBox.Interfaces.RealInput Q_flow_loss_internal(unit="W") "Heat loss of side 1 (0 without it)";
   TrackingBox.Units.Temperature T1_in[n] "Inlet temperature of each side-1 cell";
   TrackingBox.Units.Temperature T2_in[n] "Inlet temperature of each side-2 cell";
 equation
   connect(kht_in, kht_internal);
+  connect(Q_flow_loss_in, Q_flow_loss_internal);
   if not use_kht_in then
     kht_internal = kht;
+  end if;
+  if not use_heatLoss then
+    Q_flow_loss_internal = 0;
   end if;
   port_a1.m_flow + port_b1.m_flow = 0;
   port_a2.m_flow + port_b2.m_flow = 0;
@@ -48,7 +55,7 @@ equation
   end for;
   for i in 1:n loop
     Q_flow[i] = kht_internal*A/n*(T1[i] - T2[i]);
-    TrackingBox.Media.Water.rho(T1[i])*V1/n*der(T1[i]) = noEvent(max(m1_flow, 0))*(T1_in[i] - T1[i]) - Q_flow[i]/TrackingBox.Media.Water.cp(T1[i]);
+    TrackingBox.Media.Water.rho(T1[i])*V1/n*der(T1[i]) = noEvent(max(m1_flow, 0))*(T1_in[i] - T1[i]) - (Q_flow[i] + Q_flow_loss_internal/n)/TrackingBox.Media.Water.cp(T1[i]);
     TrackingBox.Media.Water.rho(T2[i])*V2/n*der(T2[i]) = noEvent(max(m2_flow, 0))*(T2_in[i] - T2[i]) + Q_flow[i]/TrackingBox.Media.Water.cp(T2[i]);
   end for;
   Q_total = sum(Q_flow);
@@ -63,5 +70,9 @@ capacity is neglected. Optional linear pressure loss per side.</p>
 <p>The upwind cell chain slightly underestimates the effectiveness of an
 ideal counter-flow exchanger: with <code>n = 10</code> and NTU = 1 the hot outlet
 is about 1.8 K warmer than the analytic &epsilon;-NTU value (80 K span).</p>
+<p>Hooks for diagnosis (off by default): <code>use_kht_in</code> takes the
+coefficient from the input <code>kht_in</code>; <code>use_heatLoss</code>
+takes a heat flow <code>Q_flow_loss_in</code> (W) that side 1 loses to the
+surroundings, each cell losing <code>Q_flow_loss_in/n</code>.</p>
 </html>"));
 end HeatExchanger;

@@ -14,11 +14,15 @@ model OpenTank "Open, well-mixed tank with level, mass and energy balance"
   parameter Boolean use_m_flow_corr_in = false "= true to add the input m_flow_corr_in to the correction flow";
   parameter Boolean use_Q_flow_in = false "= true for a heater with power from the input Q_flow_in";
   parameter Boolean use_TAmb_in = false "= true to take the ambient temperature from the input TAmb_in";
+  parameter Boolean use_leak = false "= true for a leak: the flow m_flow_leak_in leaves the tank at the tank temperature";
+  parameter Boolean use_heatLoss = false "= true for an extra heat loss Q_flow_loss_in to the surroundings";
   TrackingBox.Interfaces.FluidPort_a port_a[nPorts_a] "Inlets";
   TrackingBox.Interfaces.FluidPort_b port_b "Outlet at the bottom";
   TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside";
   TrackingBox.Interfaces.RealInput Q_flow_in(unit="W") if use_Q_flow_in "Heater power";
   TrackingBox.Interfaces.RealInput TAmb_in(unit="K") if use_TAmb_in "Ambient temperature";
+  TrackingBox.Interfaces.RealInput m_flow_leak_in(unit="kg/s") if use_leak "Leak flow leaving the tank";
+  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Extra heat flow lost to the surroundings";
   TrackingBox.Units.Height level(start=level_start, fixed=true) "Water level";
   TrackingBox.Units.Temperature T(start=T_start, fixed=true) "Water temperature";
   TrackingBox.Units.Mass m "Water mass";
@@ -33,12 +37,16 @@ protected
   TrackingBox.Interfaces.RealInput m_flow_corr_internal(unit="kg/s") "Correction flow from outside (0 without input)";
   TrackingBox.Interfaces.RealInput Q_flow_internal(unit="W") "Used heater power";
   TrackingBox.Interfaces.RealInput TAmb_internal(unit="K") "Used ambient temperature";
+  TrackingBox.Interfaces.RealInput m_flow_leak_internal(unit="kg/s") "Leak flow (0 without leak)";
+  TrackingBox.Interfaces.RealInput Q_flow_loss_internal(unit="W") "Extra heat loss (0 without it)";
   TrackingBox.Units.MassFlowRate m_in[nPorts_a] "Inlet flows";
   TrackingBox.Units.HeatFlowRate H_in[nPorts_a] "Enthalpy flows of the inlets relative to the tank temperature";
 equation
   connect(m_flow_corr_in, m_flow_corr_internal);
   connect(Q_flow_in, Q_flow_internal);
   connect(TAmb_in, TAmb_internal);
+  connect(m_flow_leak_in, m_flow_leak_internal);
+  connect(Q_flow_loss_in, Q_flow_loss_internal);
   if not use_m_flow_corr_in then
     m_flow_corr_internal = 0;
   end if;
@@ -47,6 +55,12 @@ equation
   end if;
   if not use_TAmb_in then
     TAmb_internal = TAmb;
+  end if;
+  if not use_leak then
+    m_flow_leak_internal = 0;
+  end if;
+  if not use_heatLoss then
+    Q_flow_loss_internal = 0;
   end if;
   rho = TrackingBox.Media.Water.rho(T);
   cp = TrackingBox.Media.Water.cp(T);
@@ -60,9 +74,9 @@ equation
   H_flow_in = sum(H_in);
   m_flow_out = -port_b.m_flow;
   m_flow_corr_total = m_flow_corr + m_flow_corr_internal;
-  rho*A*der(level) = m_flow_in - m_flow_out + m_flow_corr_total;
+  rho*A*der(level) = m_flow_in - m_flow_out + m_flow_corr_total - m_flow_leak_internal;
   Q_loss = UA*(T - TAmb_internal);
-  m*cp*der(T) = H_flow_in + Q_flow_internal - Q_loss;
+  m*cp*der(T) = H_flow_in + Q_flow_internal - Q_loss - Q_flow_loss_internal;
   port_b.p = pAmb + rho*g*(zBottom + level);
   port_b.T = T;
   annotation (Documentation(info="<html>
@@ -75,5 +89,11 @@ heater power and heat loss <code>UA&middot;(T - TAmb)</code>. Outlet pressure
 <p>State compensation: the correction flow <code>m_flow_corr</code> (tunable
 parameter) plus the optional input <code>m_flow_corr_in</code> is added to the
 mass balance. The level is not limited: keep it positive with the controls.</p>
+<p>Hooks for diagnosis (off by default; off, the equations are those above):
+<code>use_leak</code> takes a leak flow from the input <code>m_flow_leak_in</code>
+(kg/s leaving the tank at the tank temperature, so it lowers the mass but
+leaves the temperature balance unchanged); <code>use_heatLoss</code> takes an
+extra heat loss from the input <code>Q_flow_loss_in</code> (W), subtracted in
+the energy balance beside <code>UA&middot;(T - TAmb)</code>.</p>
 </html>"));
 end OpenTank;

@@ -15,9 +15,9 @@ import os
 from collections.abc import Mapping
 
 from ..errors import TrackingError, did_you_mean
-from .base import BenchCase, BenchDefinition, Sensor, build_case
+from .base import BenchCase, BenchDefinition, HiddenCase, Sensor, build_case
 
-__all__ = ["BENCHES", "BenchCase", "BenchDefinition", "Sensor", "bench_definition", "make_bench"]
+__all__ = ["BENCHES", "BenchCase", "BenchDefinition", "HiddenCase", "Sensor", "bench_definition", "make_bench"]
 
 #: Bench names the ``bench`` command accepts, with the module that defines each.
 BENCHES: dict[str, str] = {
@@ -40,7 +40,8 @@ def bench_definition(name: str) -> BenchDefinition:
 def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
                overrides: Mapping[str, float] | None = None, hours: float | None = None, *,
                plant_fmu: str | os.PathLike[str] | None = None,
-               twin_fmu: str | os.PathLike[str] | None = None) -> BenchCase:
+               twin_fmu: str | os.PathLike[str] | None = None,
+               hidden: str | None = None, noise_scale: float = 1.0) -> BenchCase:
     """Generate bench case *name* into directory *out*.
 
     Parameters
@@ -56,6 +57,10 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
         Measured period in hours (default: 8 for the heat exchanger, 24 for heat production).
     plant_fmu, twin_fmu : path-like, optional
         Already-compiled FMUs of the bench's plant and twin, reused instead of compiling.
+    hidden : str, optional
+        Hidden-effect case (``BenchDefinition.hidden``): simulate that plant variant.
+    noise_scale : float
+        Factor on every sensor's noise.
 
     Returns
     -------
@@ -63,4 +68,4 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
         Paths of the written files and the true parameter values.
     """
     return build_case(bench_definition(name), out, seed=seed, overrides=overrides, hours=hours,
-                      plant_fmu=plant_fmu, twin_fmu=twin_fmu)
+                      plant_fmu=plant_fmu, twin_fmu=twin_fmu, hidden=hidden, noise_scale=noise_scale)

@@ -9,7 +9,12 @@ sensors with which noise, which candidate parameters, and a scenario function);
     measurements.csv   time (s) + measured tags (inputs and outputs, with sensor noise)
     plant_inputs.csv   time (s) + the plant's true (noise-free) inputs, FMU names
     spec.toml          the tracking specification (loads with trackingbox.spec.load_spec)
-    truth.json         true plant parameter values, seed, overrides (not read by the spec)
+    truth.json         true plant parameter values, seed, overrides (not read by the spec);
+                       for a hidden-effect case also what is hidden (``hidden``)
+
+A *hidden-effect case* (:class:`HiddenCase`, ``build_case(..., hidden=NAME)``)
+simulates a plant variant that carries an effect the twin lacks (the suite of
+``trackingbox diagnose``); the twin and the spec are those of the plain bench.
 
 Nothing is written into the output directory until every step has succeeded.
 """
@@ -23,7 +28,7 @@ import shutil
 import tempfile
 import time as _time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -100,6 +105,41 @@ class Sensor:
 
 
 @dataclass(frozen=True)
+class HiddenCase:
+    """A plant variant with an effect the twin lacks (``Benches.<Bench>.Hidden.<Model>``).
+
+    Attributes
+    ----------
+    name : str
+        Case name on the command line (``--hidden NAME``).
+    model : str
+        Full class name of the plant variant.
+    effect : str or None
+        Id of the library effect that describes it (``None``: outside the library).
+    target : str or None
+        Component instance (process effects) or tag (sensor effects) it acts on.
+    description : str
+        What is hidden, in its own functional form.
+    sensors : mapping
+        Tag -> plant variable that replaces the plain plant's (a faulty sensor's reading).
+    affected : tuple of str
+        Output tags the effect shows in (the NRMSE criterion of the suite).
+    """
+
+    name: str
+    model: str
+    effect: str | None
+    target: str | None
+    description: str
+    sensors: Mapping[str, str] = field(default_factory=dict)
+    affected: tuple[str, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return {"case": self.name, "model": self.model, "effect": self.effect, "target": self.target,
+                "description": self.description, "sensors": dict(self.sensors), "affected": list(self.affected)}
+
+
+@dataclass(frozen=True)
 class BenchDefinition:
     """Everything that makes one bench case.
 
@@ -125,6 +165,8 @@ class BenchDefinition:
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
     truth_map: Mapping[str, str] = field(default_factory=dict)
     """Twin candidate parameter -> plant parameter holding its true value, where names differ."""
+    hidden: Mapping[str, HiddenCase] = field(default_factory=dict)
+    """Hidden-effect cases of this bench, by name."""
 
 
 @dataclass(frozen=True)
@@ -233,7 +275,8 @@ def _write_csv(frame: pd.DataFrame, target: Path) -> None:
 def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed: int = 0,
                overrides: Mapping[str, float] | None = None, hours: float | None = None,
                plant_fmu: str | os.PathLike[str] | None = None,
-               twin_fmu: str | os.PathLike[str] | None = None) -> BenchCase:
+               twin_fmu: str | os.PathLike[str] | None = None,
+               hidden: str | None = None, noise_scale: float = 1.0) -> BenchCase:
     """Generate one bench case into directory *out* (see the module docstring for the files).
 
     Parameters
@@ -250,6 +293,11 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
     plant_fmu, twin_fmu : path-like, optional
         Already-compiled FMUs of the bench's plant and twin classes, copied instead
         of compiling.
+    hidden : str, optional
+        A hidden-effect case of the bench (:class:`HiddenCase`): its plant variant
+        is simulated (and *plant_fmu*, if given, must be that variant's FMU).
+    noise_scale : float
+        Factor on every sensor's noise standard deviation (default 1).
 
     Returns
     -------
@@ -274,6 +322,17 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         if given is not None and not Path(given).is_file():
             raise FMUError(f"{what} FMU {given} for bench {definition.name!r} does not exist")
     overrides = dict(overrides or {})
+    case_hidden: HiddenCase | None = None
+    if hidden is not None:
+        if hidden not in definition.hidden:
+            raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench {definition.name!r}"
+                                f"{did_you_mean(hidden, list(definition.hidden))}; choose one of "
+                                f"{', '.join(definition.hidden) or '(none)'}")
+        case_hidden = definition.hidden[hidden]
+        definition = replace(definition, plant_model=case_hidden.model, outputs=tuple(
+            replace(s, plant=case_hidden.sensors.get(s.tag, s.plant)) for s in definition.outputs))
+    if not (math.isfinite(noise_scale) and noise_scale >= 0):
+        raise TrackingError(f"bench {definition.name!r}: --noise-scale must be a number >= 0, got {noise_scale}")
     seeds = np.random.SeedSequence(int(seed)).spawn(2)
     scenario_rng, noise_rng = (np.random.default_rng(s) for s in seeds)
 
@@ -324,10 +383,11 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         columns: dict[str, np.ndarray] = {"time": t_meas}
         for s in definition.inputs:
             sigma, rel = s.noise
-            columns[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
+            columns[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma * noise_scale, rel,
+                                       noise_rng)
         for s in definition.outputs:
             sigma, rel = s.noise
-            columns[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
+            columns[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma * noise_scale, rel, noise_rng)
         measurements = pd.DataFrame(columns)
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas
@@ -358,7 +418,9 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
             windows={"training": (0.0, half), "validation": (half, end)},
             data=definition.data, states=definition.states, tracking=definition.tracking,
         )
-        header = (f"{definition.title}: generated by `trackingbox bench {definition.name}`\n"
+        command = f"trackingbox bench {definition.name}" + (f" --hidden {hidden}" if hidden else "") + (
+            f" --noise-scale {noise_scale:g}" if noise_scale != 1.0 else "")
+        header = (f"{definition.title}: generated by `{command}`\n"
                   f"seed = {seed}, hours = {hours:g}, plant overrides = "
                   f"{json.dumps(overrides) if overrides else 'none'}\n"
                   f"true plant values are in truth.json (not read by the spec)")
@@ -368,7 +430,9 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         measurements = measurements[order + [c for c in measurements.columns if c not in order]]
         truth_doc = {"bench": definition.name, "seed": int(seed), "hours": hours,
                      "plant_model": definition.plant_model, "twin_model": definition.twin_model,
-                     "overrides": overrides, "parameters": truth, "plant_parameters": plant_params}
+                     "overrides": overrides, "parameters": truth, "plant_parameters": plant_params,
+                     "noise_scale": float(noise_scale),
+                     "hidden": case_hidden.to_json() if case_hidden is not None else None}
 
         # the spec must fit the twin it names before anything is published
         check_against_fmu(loads_spec(spec_text, out / "spec.toml", check_files=False), read_info(staged_twin))

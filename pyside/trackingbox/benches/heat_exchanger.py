@@ -10,7 +10,7 @@ import numpy as np
 
 from ..spec import ParameterSpec, TrackingSettings
 from . import scenario as sc
-from .base import BenchDefinition, Sensor
+from .base import BenchDefinition, HiddenCase, Sensor
 
 PACKAGE = "TrackingBox.Benches.HeatExchanger"
 
@@ -41,6 +41,27 @@ def heat_exchanger_scenario(t: np.ndarray, rng: np.random.Generator, warmup: flo
     return out
 
 
+_HIDDEN = f"{PACKAGE}.Hidden"
+
+#: The hidden-effect suite of this bench (``trackingbox bench heat-exchanger --hidden NAME``).
+HIDDEN = {c.name: c for c in (
+    HiddenCase("fouling-exp", f"{_HIDDEN}.FoulingExp", "fouling", "hx",
+               "hx.kht falls exponentially from the start of the data (25 % in the limit, time constant 4 h)",
+               affected=("TI-102", "TI-202")),
+    HiddenCase("heat-loss", f"{_HIDDEN}.HeatLoss", "heat-loss", "hx",
+               "the hot side loses 40 W/K^1.25 * (T1[1] - 18 degC)^1.25 (about 6-8 kW) to the surroundings",
+               affected=("TI-102", "TI-202")),
+    HiddenCase("sensor-drift", f"{_HIDDEN}.SensorDrift", "sensor-drift", "TI-102",
+               "TI-102 reads 1.5 K * (1 - exp(-t/20000 s)) too high", sensors={"TI-102": "ThOut_sensor"},
+               affected=("TI-102",)),
+    HiddenCase("sensor-lag", f"{_HIDDEN}.SensorLag", "sensor-lag", "TI-202",
+               "TI-202 reads through two first-order lags in series (90 s and 30 s)",
+               sensors={"TI-202": "TcOut_sensor"}, affected=("TI-202",)),
+    HiddenCase("bypass", f"{_HIDDEN}.Bypass", None, None,
+               "10 % of the hot flow bypasses the exchanger and joins before TI-102 (outside the library)",
+               affected=("TI-102", "TI-202")),
+)}
+
 DEFINITION = BenchDefinition(
     name="heat-exchanger",
     title="Heat-exchanger bench (TrackingBox.Benches.HeatExchanger)",
@@ -65,4 +86,5 @@ DEFINITION = BenchDefinition(
     # the twin starts from its own initial temperatures: hold the controllers
     # until that start-up transient (residence times 1-2 min) has died out
     tracking=TrackingSettings(hold_until=600.0),
+    hidden=HIDDEN,
 )

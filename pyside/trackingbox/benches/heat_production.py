@@ -13,7 +13,7 @@ import numpy as np
 
 from ..spec import ParameterSpec, StateSpec, TrackingSettings
 from . import scenario as sc
-from .base import BenchDefinition, Sensor
+from .base import BenchDefinition, HiddenCase, Sensor
 
 PACKAGE = "TrackingBox.Benches.HeatProduction"
 
@@ -55,6 +55,24 @@ def heat_production_scenario(t: np.ndarray, rng: np.random.Generator, warmup: fl
 def _out(tag: str, variable: str, kind: str, **kw: object) -> Sensor:
     return Sensor(tag, variable, variable, kind, **kw)  # type: ignore[arg-type]
 
+
+_HIDDEN = f"{PACKAGE}.Hidden"
+
+#: The hidden-effect suite of this bench (``trackingbox bench heat-production --hidden NAME``).
+HIDDEN = {c.name: c for c in (
+    HiddenCase("leak-level", f"{_HIDDEN}.LeakLevel", "leak", "T200",
+               "T200 leaks 0.0045 kg/s * sqrt(level / 1 m) (4 g/s at 0.8 m) from the start",
+               affected=("FI-100", "SI-100")),
+    HiddenCase("fouling-exp", f"{_HIDDEN}.FoulingExp", "fouling", "HEX300",
+               "HEX300.kht falls exponentially from the start of the data (35 % in the limit, time constant 10 h)",
+               affected=("TI-301", "FI-200", "SI-200")),
+    HiddenCase("heat-loss", f"{_HIDDEN}.HeatLoss", "heat-loss", "T100",
+               "T100 loses 8 W/K^1.25 * (T - TAmb)^1.25 (about 0.7 kW) more than designed, from the start",
+               affected=("QI-100",)),
+    HiddenCase("sensor-drift", f"{_HIDDEN}.SensorDrift", "sensor-drift", "TI-100",
+               "TI-100 reads -2 K * (1 - exp(-t/50000 s)) off", sensors={"TI-100": "TI_100_sensor"},
+               affected=("TI-100",)),
+)}
 
 DEFINITION = BenchDefinition(
     name="heat-production",
@@ -126,4 +144,5 @@ DEFINITION = BenchDefinition(
     # the twin starts from its declared initial state; its level and temperature
     # controllers (integral times 150-1200 s) need about an hour to settle
     tracking=TrackingSettings(hold_until=3600.0),
+    hidden=HIDDEN,
 )

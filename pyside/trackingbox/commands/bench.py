@@ -15,6 +15,7 @@ examples:
   trackingbox bench heat-exchanger --out case1
   trackingbox bench heat-exchanger --out case2 --seed 3 --set hx.kht=850 --hours 4
   trackingbox bench heat-production --out hp --json
+  trackingbox bench heat-production --out leak --hidden leak-level --noise-scale 2
 
 writes into --out:
   plant.fmu, twin.fmu     the "physical" plant and the digital twin (FMUs)
@@ -50,6 +51,12 @@ def register(subparsers: Any) -> None:
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
     p.add_argument("--hours", type=float, default=None,
                    help="measured period in hours (default 8 heat-exchanger, 24 heat-production)")
+    p.add_argument("--hidden", default=None, metavar="CASE",
+                   help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
+                        "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
+                        "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift); truth.json says which")
+    p.add_argument("--noise-scale", type=float, default=1.0, metavar="S",
+                   help="factor on every sensor's noise (default 1)")
     p.add_argument("--plant-fmu", type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument("--twin-fmu", type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
@@ -64,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.hours is not None and not args.hours > 0:
         raise TrackingError(f"--hours must be > 0, got {args.hours:g}")
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=args.hours,
-                      plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu)
+                      plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,
+                      noise_scale=args.noise_scale)
     if args.json:
         json.dump(case.to_json(), sys.stdout, indent=2)
         sys.stdout.write("\n")

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..io import write_text_atomic
+from .diagnose import write_diagnose_report
 from .document import Document, StageReport, fmt, html_page
 from .estimate import write_estimate_report
 from .pair import write_pair_report
@@ -24,7 +25,7 @@ from .track import write_track_report
 from .validate import write_validate_report
 
 __all__ = ["StageReport", "Document", "fmt", "html_page", "write_html", "write_estimate_report",
-           "write_pair_report", "write_track_report", "write_validate_report"]
+           "write_pair_report", "write_track_report", "write_validate_report", "write_diagnose_report"]
 
 
 def write_html(path: str | os.PathLike[str], title: str, documents: Sequence[Document]) -> Path:

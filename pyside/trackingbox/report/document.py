@@ -95,6 +95,10 @@ class Document:
             raise ValueError(f"align {align!r} has {len(align)} letters for {len(header)} columns")
         self.blocks.append(("table", _Table(tuple(header), tuple(tuple(str(c) for c in r) for r in rows), align)))
 
+    def code(self, text: str, language: str = "") -> None:
+        """A preformatted block (a Modelica source, a diff), shown verbatim."""
+        self.blocks.append(("code", (language, text)))
+
     def image(self, path: str | os.PathLike[str], alt: str) -> None:
         """A PNG plot (a file written beside the report)."""
         self.blocks.append(("image", _Image(Path(path), alt)))
@@ -127,6 +131,10 @@ class Document:
                 out.append("|" + "".join("---:|" if a == "r" else "---|" for a in t.align))
                 out += ["| " + " | ".join(r) + " |" for r in t.rows]
                 out.append("")
+            elif kind == "code":
+                language, text = value  # type: ignore[misc]
+                fence = "~~~~" if "```" in text else "```"
+                out += [f"{fence}{language}", text.rstrip("\n"), fence, ""]
             else:
                 img: _Image = value  # type: ignore[assignment]
                 link = os.path.relpath(img.path, base) if base is not None else img.path.as_posix()
@@ -160,6 +168,9 @@ class Document:
                 body = "".join("<tr>" + "".join(f"<td{c}>{_inline(x)}</td>" for c, x in zip(cls, r)) + "</tr>"
                                for r in t.rows)
                 out.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+            elif kind == "code":
+                _, text = value  # type: ignore[misc]
+                out.append(f"<pre><code>{html.escape(text)}</code></pre>")
             else:
                 img: _Image = value  # type: ignore[assignment]
                 data = base64.b64encode(img.path.read_bytes()).decode("ascii")
@@ -213,6 +224,7 @@ th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; } th { background: #f3f3
 td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { margin: 1em 0; } img { max-width: 100%; } figcaption { font-size: 0.85em; color: #555; }
 code { background: #f3f3f3; padding: 0 0.2em; }
+pre { background: #f6f6f6; padding: 0.6em; overflow-x: auto; font-size: 0.85em; }
 """
 
 

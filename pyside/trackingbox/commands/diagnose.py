@@ -1,0 +1,105 @@
+"""``trackingbox diagnose``: where twin and plant disagree, which missing effect explains it, the patch."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+EPILOG = """\
+examples:
+  trackingbox diagnose case1/spec.toml
+  trackingbox diagnose case1/spec.toml --json
+  trackingbox diagnose case1/spec.toml --compile --report case1/diagnose -o case1/patched
+  trackingbox diagnose case1/spec.toml --effects sensor-bias,sensor-drift
+
+The null model is the twin with the spec's [[parameters]] fitted on the training
+window. Every tag's residual is described against its noise level; every effect
+of the library (built-ins plus the spec's [diagnose] effects folders) is screened
+on every target it applies to; without --compile only the cheap screening runs
+(sensor effects as transforms of the simulated output, fouling as a coefficient
+ramp); with --compile the best candidates are fitted through their patched,
+compiled twin (jointly with the spec's parameters) and the named patch's FMU is
+built. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
+<Twin>Diagnosed.mo, its diff and (when an FMU was built) the patched spec.
+"""
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``diagnose`` subcommand."""
+    p = subparsers.add_parser(
+        "diagnose",
+        help="find where the twin and the measurements disagree and name the missing effect",
+        description="Discrepancy diagnosis: residuals, effect screening, fit, judgement on held-out data.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("spec", type=Path, help="spec.toml")
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    p.add_argument("--report", type=Path, metavar="DIR", help="write the diagnosis report (Markdown, plots) to DIR")
+    p.add_argument("-o", "--output", type=Path, metavar="DIR",
+                   help="write <Twin>Diagnosed.mo, its diff and the patched spec to DIR")
+    p.add_argument("--compile", action="store_true",
+                   help="fit the best candidates through their patched, compiled twin and build the patch's FMU")
+    p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
+    p.add_argument("--fit-best", type=int, default=2, metavar="N",
+                   help="candidates fitted properly with --compile (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the null model's estimation (default 0)")
+    p.add_argument("--workers", type=int, default=1, help="processes for the estimations (default 1)")
+    p.add_argument("--maxiter", type=int, default=None,
+                   help="generations of the null model's global search (default: estimate's)")
+    p.add_argument("--warmup", type=float, default=None, metavar="SECONDS",
+                   help="unscored warm-up before each window (default: estimate's)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the diagnosis; exit code 0 for every verdict."""
+    from ..diagnose import DiagnoseSettings, diagnose
+    from ..spec import check_against_fmu, load_spec
+    from ._progress import Progress
+
+    spec = load_spec(args.spec)
+    check_against_fmu(spec)
+    settings = DiagnoseSettings(
+        effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()),
+        compile=args.compile, fit_best=args.fit_best, out_dir=args.output, seed=args.seed,
+        workers=args.workers, maxiter=args.maxiter, warmup=args.warmup)
+    progress = Progress(every=15.0)
+    result = diagnose(spec, settings, progress=lambda stage, done, total: progress(stage, done, total))
+    if args.report:
+        from ..report.diagnose import write_diagnose_report
+
+        write_diagnose_report(spec, result, args.report)
+    if args.json:
+        print(json.dumps(result.to_json(), indent=2))
+        return 0
+    _print(result)
+    if args.report:
+        print(f"report in {args.report}")
+    return 0
+
+
+def _print(result: Any) -> None:
+    print(f"verdict: {result.verdict}")
+    c = result.named
+    if c is not None:
+        values = ", ".join(f"{k} = {v:.4g}" for k, v in c.values.items())
+        print(f"named: {c.effect} on {c.target} ({values}); delta BIC {c.delta_bic:.1f}")
+        for tag in c.tags:
+            print(f"  {tag}: validation NRMSE {c.nrmse_before[tag]:.4g} -> {c.nrmse_after[tag]:.4g}")
+    for tag, periods in result.judgement.unexplained.items():
+        where = ", ".join(f"{a / 3600:.1f}-{b / 3600:.1f} h" for a, b in periods) or "throughout"
+        print(f"unexplained residual on {tag}: {where}")
+    print(f"\n{'effect':<14} {'target':<12} {'stage':<8} {'delta BIC':>10} {'valid gain':>10}")
+    for cand in result.candidates[:10]:
+        print(f"{cand.effect:<14} {cand.target:<12} {cand.stage:<8} {cand.delta_bic:>10.4g} "
+              f"{cand.validation_gain:>10.3g}")
+    if result.patch_file:
+        print(f"\npatch: {result.patch_file}")
+    if result.patch_spec:
+        print(f"patched spec: {result.patch_spec}")
+    print(f"{result.seconds:.1f} s")

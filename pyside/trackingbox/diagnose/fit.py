@@ -1,0 +1,225 @@
+"""Fit a candidate effect properly: patch the twin, compile it, estimate it with the spec's candidates.
+
+:func:`fit_candidate` renders the effect into ``<Twin>Diagnosed``
+(:func:`trackingbox.diagnose.library.render_patch`), compiles it on the embedded
+path (:func:`~trackingbox.diagnose.library.compile_patch`, once per effect and
+target: the FMU is cached in the work folder), writes the patched spec
+(:func:`~trackingbox.diagnose.library.patched_spec`: same tags, sensor tags
+re-mapped, the effect's parameters added to ``[[parameters]]``), sets the starts
+to the null fit (the spec's candidates) and the screening values (the effect's
+parameters, where the screening measured them), and runs
+:func:`trackingbox.estimation.estimate` on it with a short budget. The fitted
+twin's residuals on both windows are scored as the screening scores a transform
+(:func:`trackingbox.diagnose.screen.score`).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .screen import Candidate, score
+
+if TYPE_CHECKING:
+    from .residuals import WhereResult
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FitBudget:
+    """Budget of a candidate's estimation.
+
+    Attributes
+    ----------
+    maxiter
+        Generations of the global search (0: refinement from the warm start only).
+    refine_iterations
+        Least-squares iterations of the refinement.
+    workers
+        Processes for the estimation.
+    warmup
+        Warm-up before each window (s); None: the estimation's default.
+    """
+
+    maxiter: int = 0
+    refine_iterations: int = 8
+    workers: int | None = None
+    warmup: float | None = None
+
+
+@dataclass(frozen=True)
+class FitOutcome:
+    """What fitting one candidate produced (kept on :attr:`Candidate.fit`)."""
+
+    patch: Any
+    fmu: Path
+    spec_path: Path
+    estimate: Any
+    effect_parameters: dict[str, str]   # short effect parameter name -> full name in the patched twin
+
+
+def _get(obj: Any, name: str, default: Any = None) -> Any:
+    if isinstance(obj, Mapping):
+        return obj.get(name, default)
+    return getattr(obj, name, default)
+
+
+def render(spec: Any, effect: Any, target: str, values: Mapping[str, float]) -> Any:
+    """``library.render_patch`` of one effect on one target with *values*."""
+    from . import library
+
+    return library.render_patch(spec, [library.Finding(effect.id, target, dict(values))],
+                                effects={effect.id: effect})
+
+
+def _short(full: str, effect: Any) -> str:
+    """The effect's own parameter name in a patch parameter's full name (``sensorBias_TI_102_b`` -> ``b``)."""
+    for p in getattr(effect, "parameters", ()) or ():
+        if full == p.name or full.endswith(("_" + p.name, "." + p.name)):
+            return p.name
+    return full
+
+
+def warm_values(effect: Any, screened: Candidate | None,
+                bounds: Mapping[str, tuple[float, float]] | None = None) -> dict[str, float]:
+    """Start values of the effect's parameters: its starts, or the screening's estimate where it is the same quantity.
+
+    A one-parameter ``bias`` entry starts at the screened bias, a one-parameter
+    ``lag`` entry at the screened time constant, a one-parameter ``drift`` or
+    ``coefficient-ramp`` entry at the screened rate (per second); the value is clipped to the
+    parameter's bounds (*bounds*: short name -> (min, max) as the patch resolved them for
+    the target's unit; else the entry's own).
+
+    >>> from types import SimpleNamespace as NS
+    >>> e = NS(screen="bias", parameters=[NS(name="b", start=0.0, min=-2.0, max=2.0)])
+    >>> warm_values(e, NS(values={"bias": 0.7}))
+    {'b': 0.7}
+    >>> warm_values(e, NS(values={"b": 9.0}))
+    {'b': 2.0}
+    """
+    params = list(getattr(effect, "parameters", ()) or ())
+    values = {p.name: float(p.start) for p in params}
+    key = {"bias": "bias", "lag": "tau", "drift": "rate", "coefficient-ramp": "rate"}.get(
+        getattr(effect, "screen", ""))
+    if screened is not None and key and len(params) == 1 and (key in screened.values
+                                                             or params[0].name in screened.values):
+        p = params[0]
+        v = float(screened.values.get(p.name, screened.values.get(key, math.nan)))
+        lo, hi = (bounds or {}).get(p.name, (float(p.min), float(p.max)))
+        if math.isfinite(v):
+            values[p.name] = float(min(max(v, lo), hi))
+    return values
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+
+
+def level(where: WhereResult, after_t: dict[str, np.ndarray],
+          after_v: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Move a fitted candidate's residuals to the noise-weighted optimum of the spec's candidates.
+
+    The estimation minimises the mean NRMSE, the null model was moved to the
+    noise-weighted least-squares optimum (:func:`trackingbox.diagnose.residuals.polish`);
+    one linearised step with the null model's output Jacobian puts the fitted
+    candidate on the same footing, so that a mere shift along the trade-off between
+    tags is not credited to the effect.
+    """
+    from .residuals import joint_lstsq
+
+    j_train, j_val = where.jacobian
+    if not j_train or not all(t in j_train for t in after_t):
+        return after_t, after_v
+    delta = joint_lstsq(after_t, {t: j_train[t] for t in after_t}, where.noise)
+    if delta.size == 0:
+        return after_t, after_v
+    return ({t: r - j_train[t] @ delta for t, r in after_t.items()},
+            {t: r - j_val[t] @ delta for t, r in after_v.items()})
+
+
+def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,
+                  screened: Candidate | None = None, budget: FitBudget = FitBudget(),
+                  stage: str = "fit") -> Candidate:
+    """Patch, compile and estimate one effect on one target; score it against the null model.
+
+    Parameters
+    ----------
+    spec
+        The loaded spec.
+    where
+        The null model's residuals.
+    effect, target
+        The library entry and its target.
+    work_dir
+        Folder for the patch, its FMU and its spec (one sub-folder per effect and target).
+    screened
+        The candidate's screening (warm start of the effect's parameters).
+    budget
+        The estimation's budget.
+    stage
+        Label of the result (``"fit"``; ``"screen"`` when used as the screening of a compile-only entry).
+
+    Returns
+    -------
+    Candidate
+        With :attr:`Candidate.fit` = :class:`FitOutcome`.
+    """
+    from ..estimation import close_models, estimate, load_windows, problem_from_spec
+    from ..spec import load_spec, write_starts
+    from . import library
+    from .residuals import window_series
+
+    folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
+    folder.mkdir(parents=True, exist_ok=True)
+    patch = render(spec, effect, target, warm_values(effect, screened))
+    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in patch.parameters}
+    start = warm_values(effect, screened, bounds)
+    patch = render(spec, effect, target, start)
+    fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
+    marker = folder / ".compiled"
+    # the effect's parameters are tunable: one FMU per effect and target serves every value
+    if not (fmu.is_file() and marker.is_file() and marker.read_text() == patch.model):
+        fmu = Path(library.compile_patch(patch, folder).fmu)
+        marker.write_text(patch.model)
+    spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
+    full = {_short(p.name, effect): p.name for p in patch.parameters}
+    starts = {n: float(v) for n, v in where.null.parameters.items()}
+    starts.update({full[s]: v for s, v in start.items() if s in full})
+    pspec = load_spec(spec_path)
+    known = set(pspec.parameter_names)
+    write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
+    pspec = load_spec(spec_path)
+    log.info("fitting %s on %s (%d parameters)", effect.id, target, len(pspec.parameters))
+    est = estimate(pspec, maxiter=budget.maxiter, refine=True, refine_iterations=budget.refine_iterations,
+                   workers=budget.workers, warmup=budget.warmup)
+    problem = problem_from_spec(pspec, warmup=budget.warmup)
+    training, validation = load_windows(pspec, warmup=problem.warmup)
+    x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
+    try:
+        series = [window_series(problem, w, x, pspec.inputs) for w in (training, validation)]
+    finally:
+        close_models()
+    tags = [t for t in pspec.outputs if t in where.tags]
+    after_t = {t: series[0].residual(t) for t in tags}
+    after_v = {t: series[1].residual(t) for t in tags}
+    after_t, after_v = level(where, after_t, after_v)
+    fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
+    pinned = []
+    for short, v in fitted.items():
+        if short in bounds:
+            lo, hi = bounds[short]
+            tol = 1e-3 * (hi - lo)
+            # a bound that is also the "no effect" value (a leak of 0) is not a pin but a null result
+            if (v <= lo + tol and lo != 0.0) or v >= hi - tol:
+                pinned.append(short)
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    outcome = FitOutcome(patch, fmu, spec_path, est, full)
+    return score(effect.id, target, getattr(effect, "kind", "process"), stage, where, k, after_t, after_v, fitted,
+                 pinned=pinned, fit=outcome)

@@ -1,0 +1,659 @@
+"""Where twin and plant disagree: the null model's residual, tag by tag, against the tag's noise.
+
+The *null model* is the twin with the spec's candidate ``[[parameters]]`` fitted on
+the training window (:func:`trackingbox.estimation.estimate`), so that a plain
+parameter error is never taken for a missing effect. For every output tag the
+residual ``r = measured - simulated`` on the window's scored samples is described
+against the tag's noise level ``sigma`` estimated from the measurements themselves
+(:func:`noise_sigma`):
+
+* ``offset``: the mean residual;
+* ``trend``: the least-squares slope of the residual in time (tag units per hour);
+* ``conditions``: the regression of the residual on the standardised inputs
+  (coefficient per input tag, in tag units per input standard deviation, and the
+  share of the residual variance it explains);
+* ``lag``: the regression of the residual on the simulated output's time
+  derivative; a measurement lagging the process by a first-order time constant
+  ``tau`` reads ``y - tau * dy/dt`` to first order, so ``lag_seconds = -slope``;
+* ``stoppages``: the residual RMS in the settle periods after stoppages against
+  the rest;
+* ``periods``: the window cut into blocks; a block whose mean residual exceeds
+  :data:`PERIOD_THRESHOLD` noise standard deviations is a significant period.
+
+A tag is *significant* when its residual is larger than its noise allows:
+``rms(r) > RMS_THRESHOLD * sigma``, or ``|offset| > OFFSET_THRESHOLD * sigma``, or
+a trend moving the residual by more than ``OFFSET_THRESHOLD * sigma`` over the
+window. (A white residual of the noise alone has ``rms / sigma`` close to 1 and a
+mean and trend of order ``sigma / sqrt(n)``.)
+
+Balances (``[[balances]]`` in the spec: a sum of signed measured tags that
+should vanish) are checked on the measurements alone: one that does not close
+points at a faulty sensor among its tags; one that closes while the twin's
+residual is significant points at a process change the twin lacks.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from ..estimation import EstimationResult, Problem, WindowData
+    from ..spec import Spec
+
+log = logging.getLogger(__name__)
+
+#: A tag is significant when the residual RMS exceeds this many noise standard deviations.
+RMS_THRESHOLD = 1.5
+#: ... or its mean (or its trend over the window) exceeds this many noise standard deviations.
+OFFSET_THRESHOLD = 1.0
+#: A period (block of the window) is significant when its mean residual exceeds this many sigmas.
+PERIOD_THRESHOLD = 1.0
+#: Number of blocks the heat map and the periods cut a window into.
+DEFAULT_BLOCKS = 12
+#: Smallest noise level a tag is given, as a fraction of its measured range over the record: a
+#: signal with (almost) no noise, such as a controller output or a speed, is judged against its
+#: resolution instead of a near-zero sigma.
+NOISE_FLOOR = 1.0e-3
+
+
+# --------------------------------------------------------------------------- numerics
+
+
+def noise_sigma(values: npt.ArrayLike) -> float:
+    """Standard deviation of the white measurement noise in a series, from its high frequencies.
+
+    The second difference ``d_k = y_{k+1} - 2 y_k + y_{k-1}`` removes a signal
+    that is smooth on the sampling scale (a linear piece exactly) and leaves
+    ``e_{k+1} - 2 e_k + e_{k-1}`` of white noise ``e``, whose variance is
+    ``6 sigma**2``. The spread of ``d`` is taken robustly (1.4826 times the median
+    absolute deviation), so steps in the signal do not inflate it. NaN samples
+    break the series: only differences of three valid neighbours count.
+
+    Parameters
+    ----------
+    values
+        Equally spaced samples.
+
+    Returns
+    -------
+    float
+        The estimated sigma (NaN with fewer than 5 usable differences).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> t = np.arange(5000.0)
+    >>> round(noise_sigma(np.sin(t / 300.0) + rng.normal(0.0, 0.2, t.size)), 2)
+    0.2
+    """
+    y = np.asarray(values, dtype=float)
+    if y.size < 3:
+        return math.nan
+    d = y[2:] - 2.0 * y[1:-1] + y[:-2]
+    d = d[np.isfinite(d)]
+    if d.size < 5:
+        return math.nan
+    mad = float(np.median(np.abs(d - np.median(d))))
+    return 1.4826 * mad / math.sqrt(6.0)
+
+
+def noise_level(values: npt.ArrayLike) -> float:
+    """:func:`noise_sigma`, at least :data:`NOISE_FLOOR` times the series' range (NaN ignored).
+
+    >>> noise_level(np.linspace(0.0, 10.0, 101))   # a noise-free ramp: its resolution floor
+    0.01
+    """
+    y = np.asarray(values, dtype=float)
+    ok = np.isfinite(y)
+    sigma = noise_sigma(y)
+    span = float(y[ok].max() - y[ok].min()) if ok.any() else 0.0
+    floor = NOISE_FLOOR * span
+    if not math.isfinite(sigma):
+        return floor if floor > 0 else math.nan
+    return max(sigma, floor)
+
+
+def ljung_box_lag1(residual: npt.ArrayLike) -> float:
+    """Lag-one autocorrelation of a residual (NaN samples dropped): ~0 for white noise.
+
+    >>> round(ljung_box_lag1([1.0, -1.0, 1.0, -1.0, 1.0, -1.0]), 3)
+    -0.833
+    """
+    r = np.asarray(residual, dtype=float)
+    r = r[np.isfinite(r)]
+    if r.size < 3:
+        return math.nan
+    r = r - r.mean()
+    den = float(np.dot(r, r))
+    return float(np.dot(r[:-1], r[1:]) / den) if den > 0 else 0.0
+
+
+def _lstsq(columns: Sequence[np.ndarray], y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.column_stack(columns)
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return coef, y - a @ coef
+
+
+@dataclass(frozen=True)
+class TagResidual:
+    """How one tag's residual departs from its noise.
+
+    Attributes
+    ----------
+    tag
+        The output tag.
+    noise
+        Noise standard deviation estimated from the measured series (tag units).
+    rms
+        Residual root mean square (tag units).
+    offset
+        Mean residual (tag units).
+    trend
+        Residual slope in time (tag units per hour).
+    lag_seconds
+        First-order lag the residual's correlation with ``-dy_sim/dt`` indicates (s).
+    lag_correlation
+        Correlation of the residual with ``-dy_sim/dt``.
+    conditions
+        Input tag -> residual change per standard deviation of that input (tag units).
+    conditions_r2
+        Share of the residual variance the inputs explain (linear regression).
+    stoppage_rms
+        Residual RMS in the settle periods after stoppages (NaN without any).
+    whiteness
+        Lag-one autocorrelation of the residual.
+    periods
+        ``(start, stop)`` seconds of the blocks whose mean residual exceeds the threshold.
+    blocks
+        Block mean of the residual in noise sigmas (the heat-map row).
+    block_edges
+        Block boundaries (s), ``len(blocks) + 1`` values.
+    samples
+        Number of scored samples.
+    significant
+        The residual is larger than the noise allows (module docstring).
+    """
+
+    tag: str
+    noise: float
+    rms: float
+    offset: float
+    trend: float
+    lag_seconds: float
+    lag_correlation: float
+    conditions: dict[str, float]
+    conditions_r2: float
+    stoppage_rms: float
+    whiteness: float
+    periods: tuple[tuple[float, float], ...]
+    blocks: tuple[float, ...]
+    block_edges: tuple[float, ...]
+    samples: int
+    significant: bool
+
+    def to_json(self) -> dict[str, Any]:
+        """The tag's entry of ``diagnose --json``'s ``where``."""
+        return {
+            "offset": _num(self.offset), "trend": _num(self.trend), "noise": _num(self.noise),
+            "rms": _num(self.rms), "lag_seconds": _num(self.lag_seconds),
+            "lag_correlation": _num(self.lag_correlation),
+            "conditions": {k: _num(v) for k, v in self.conditions.items()},
+            "conditions_r2": _num(self.conditions_r2), "stoppage_rms": _num(self.stoppage_rms),
+            "whiteness": _num(self.whiteness), "periods": [list(p) for p in self.periods],
+            "samples": int(self.samples), "significant": bool(self.significant),
+        }
+
+
+def _num(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def characterise(tag: str, time: npt.ArrayLike, residual: npt.ArrayLike, sigma: float, *,
+                 simulated: npt.ArrayLike | None = None, inputs: Mapping[str, npt.ArrayLike] | None = None,
+                 after_stoppage: npt.ArrayLike | None = None, blocks: int = DEFAULT_BLOCKS) -> TagResidual:
+    """Describe a residual series against its noise level.
+
+    Parameters
+    ----------
+    tag
+        Tag name (for the result).
+    time
+        Grid times (s).
+    residual
+        ``measured - simulated``; NaN where not scored.
+    sigma
+        The tag's noise standard deviation (:func:`noise_sigma` of the measured series).
+    simulated
+        The simulated output on the grid (for the lag structure), no NaN.
+    inputs
+        Input tag -> values on the grid (for the operating-condition regression).
+    after_stoppage
+        Boolean mask of the grid points in the settle periods after stoppages.
+    blocks
+        Number of periods the window is cut into.
+
+    Returns
+    -------
+    TagResidual
+
+    Examples
+    --------
+    >>> t = np.arange(0.0, 3600.0, 10.0)
+    >>> res = characterise("TI", t, 0.5 + 0.0 * t, 0.1)
+    >>> round(res.offset, 3), res.significant
+    (0.5, True)
+    """
+    t = np.asarray(time, dtype=float)
+    r = np.asarray(residual, dtype=float)
+    ok = np.isfinite(r)
+    n = int(ok.sum())
+    edges = np.linspace(t[0], t[-1] + (t[1] - t[0] if t.size > 1 else 1.0), blocks + 1)
+    if n < 3:
+        return TagResidual(tag, sigma, math.nan, math.nan, math.nan, math.nan, math.nan, {}, math.nan,
+                           math.nan, math.nan, (), tuple([math.nan] * blocks), tuple(map(float, edges)), n, False)
+    tk, rk = t[ok], r[ok]
+    rms = float(np.sqrt(np.mean(rk * rk)))
+    offset = float(rk.mean())
+    tc = (tk - tk.mean()) / 3600.0
+    coef, _ = _lstsq([np.ones_like(tc), tc], rk)
+    trend = float(coef[1])
+    span_h = float(tk.max() - tk.min()) / 3600.0
+
+    lag_seconds, lag_corr = math.nan, math.nan
+    if simulated is not None:
+        y = np.asarray(simulated, dtype=float)
+        dy = np.gradient(y, t)[ok]
+        dyc = dy - dy.mean()
+        rc = rk - rk.mean()
+        den = float(np.dot(dyc, dyc))
+        if den > 0 and float(np.dot(rc, rc)) > 0:
+            lag_seconds = float(-np.dot(rc, dyc) / den)
+            lag_corr = float(-np.dot(rc, dyc) / math.sqrt(den * float(np.dot(rc, rc))))
+
+    conditions: dict[str, float] = {}
+    r2 = math.nan
+    if inputs:
+        cols, names = [np.ones(n)], []
+        for name, values in inputs.items():
+            u = np.asarray(values, dtype=float)[ok]
+            sd = float(np.std(u))
+            if np.all(np.isfinite(u)) and sd > 0:
+                cols.append((u - u.mean()) / sd)
+                names.append(name)
+        if names:
+            c, rest = _lstsq(cols, rk)
+            conditions = {name: float(v) for name, v in zip(names, c[1:])}
+            var = float(np.var(rk))
+            r2 = float(1.0 - np.var(rest) / var) if var > 0 else 0.0
+
+    stoppage_rms = math.nan
+    if after_stoppage is not None:
+        mask = np.asarray(after_stoppage, dtype=bool)[ok]
+        if mask.any():
+            stoppage_rms = float(np.sqrt(np.mean(rk[mask] ** 2)))
+
+    means, periods = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        sel = (tk >= a) & (tk < b)
+        m = float(rk[sel].mean() / sigma) if sel.sum() >= 2 and sigma > 0 else math.nan
+        means.append(m)
+        if math.isfinite(m) and abs(m) > PERIOD_THRESHOLD:
+            periods.append((float(a), float(b)))
+    merged: list[tuple[float, float]] = []
+    for a, b in periods:
+        if merged and abs(merged[-1][1] - a) < 1e-9:
+            merged[-1] = (merged[-1][0], b)
+        else:
+            merged.append((a, b))
+
+    significant = bool(sigma > 0 and (rms > RMS_THRESHOLD * sigma or abs(offset) > OFFSET_THRESHOLD * sigma
+                                      or abs(trend) * span_h > OFFSET_THRESHOLD * sigma))
+    return TagResidual(tag, float(sigma), rms, offset, trend, lag_seconds, lag_corr, conditions, r2,
+                       stoppage_rms, ljung_box_lag1(rk), tuple(merged), tuple(means),
+                       tuple(float(e) for e in edges), n, significant)
+
+
+@dataclass(frozen=True)
+class BalanceCheck:
+    """A ``[[balances]]`` entry checked on the measurements.
+
+    Attributes
+    ----------
+    name
+        The balance's name.
+    tags
+        Its tags.
+    imbalance
+        Mean of the signed sum (units of the terms).
+    noise
+        Standard deviation the noise of its terms gives the sum (``sqrt(sum f**2 sigma**2)``).
+    closes
+        ``|imbalance| <= max(tolerance, 3 * noise / sqrt(n_eff))`` (the sum vanishes within noise).
+    """
+
+    name: str
+    tags: tuple[str, ...]
+    imbalance: float
+    noise: float
+    closes: bool
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "tags": list(self.tags), "imbalance": _num(self.imbalance),
+                "noise": _num(self.noise), "closes": self.closes}
+
+
+def check_balance(name: str, terms: Mapping[str, float], series: Mapping[str, npt.ArrayLike], *,
+                  tolerance: float = 0.0) -> BalanceCheck:
+    """Check that ``sum(factor * series[tag])`` vanishes within the noise of its terms.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> a = 2.0 + rng.normal(0, 0.01, 2000)
+    >>> b = 2.0 + rng.normal(0, 0.01, 2000)
+    >>> check_balance("m", {"a": 1.0, "b": -1.0}, {"a": a, "b": b}).closes
+    True
+    >>> check_balance("m", {"a": 1.0, "b": -1.0}, {"a": a, "b": b + 0.05}).closes
+    False
+    """
+    total = None
+    var = 0.0
+    for tag, factor in terms.items():
+        v = np.asarray(series[tag], dtype=float)
+        total = factor * v if total is None else total + factor * v
+        var += (factor * noise_sigma(v)) ** 2
+    assert total is not None
+    ok = np.isfinite(total)
+    imbalance = float(np.mean(total[ok])) if ok.any() else math.nan
+    noise = math.sqrt(var)
+    # the terms' slow errors make the sum autocorrelated: count one independent sample per 10
+    n_eff = max(1.0, ok.sum() / 10.0)
+    closes = bool(abs(imbalance) <= max(tolerance, 3.0 * noise / math.sqrt(n_eff) + 1e-12))
+    return BalanceCheck(name, tuple(terms), imbalance, noise, closes)
+
+
+# --------------------------------------------------------------------------- from a spec
+
+
+@dataclass(frozen=True)
+class WindowResiduals:
+    """The null model's outputs and residuals on one window (scored samples; lead-in cut off).
+
+    Attributes
+    ----------
+    name
+        ``"training"`` or ``"validation"``.
+    time
+        Grid times (s from the first sample).
+    measured, simulated
+        Output tag -> series (measured NaN where not scored).
+    inputs
+        Input tag -> measured input series.
+    """
+
+    name: str
+    time: np.ndarray
+    measured: dict[str, np.ndarray]
+    simulated: dict[str, np.ndarray]
+    inputs: dict[str, np.ndarray]
+
+    def residual(self, tag: str) -> np.ndarray:
+        """``measured - simulated`` of *tag* (NaN where not scored)."""
+        return self.measured[tag] - self.simulated[tag]
+
+
+@dataclass(frozen=True)
+class WhereResult:
+    """Where the null model and the measurements disagree.
+
+    Attributes
+    ----------
+    null
+        The null estimate (the spec's candidates fitted on training).
+    tags
+        Output tag -> :class:`TagResidual` on the training window.
+    validation_tags
+        Output tag -> :class:`TagResidual` on the validation window.
+    balances
+        The spec's balances checked on the measurements.
+    training, validation
+        The null model's series per window.
+    noise
+        Output tag -> noise sigma (from the whole measured series).
+    """
+
+    null: EstimationResult
+    tags: dict[str, TagResidual]
+    validation_tags: dict[str, TagResidual]
+    balances: tuple[BalanceCheck, ...]
+    training: WindowResiduals
+    validation: WindowResiduals
+    noise: dict[str, float]
+    problem: Any = field(default=None, repr=False)
+    windows: Any = field(default=None, repr=False)
+    corrections: dict[str, float] = field(default_factory=dict)
+    jacobian: tuple[dict[str, np.ndarray], dict[str, np.ndarray]] = field(default=({}, {}), repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+    input_tags: dict[str, str] = field(default_factory=dict, repr=False)
+
+    @property
+    def significant(self) -> list[str]:
+        """Tags whose residual is significant on training or validation."""
+        return [t for t in self.tags if self.tags[t].significant or self.validation_tags[t].significant]
+
+    def to_json(self) -> dict[str, Any]:
+        """``diagnose --json``'s ``where``: per tag, the training description plus the validation flag."""
+        out = {}
+        for tag, res in self.tags.items():
+            doc = res.to_json()
+            val = self.validation_tags[tag]
+            doc["significant"] = bool(res.significant or val.significant)
+            doc["validation"] = {"offset": _num(val.offset), "trend": _num(val.trend), "rms": _num(val.rms),
+                                 "significant": bool(val.significant)}
+            if tag in self.corrections:
+                doc["correction"] = _num(self.corrections[tag])
+            out[tag] = doc
+        return out
+
+
+def window_series(problem: Problem, window: WindowData, x: npt.ArrayLike,
+                  input_tags: Mapping[str, str]) -> WindowResiduals:
+    """Simulate *window* at parameters *x* and cut off the lead-in."""
+    from ..estimation import simulate_window
+
+    sim = simulate_window(problem, window, x)
+    keep = slice(window.lead, None)
+    by_fmu = {fmu: tag for tag, fmu in input_tags.items()}
+    return WindowResiduals(
+        window.name, np.asarray(window.time[keep], dtype=float),
+        {tag: np.asarray(v[keep], dtype=float) for tag, v in window.measured.items()},
+        {tag: np.asarray(v[keep], dtype=float) for tag, v in sim.items()},
+        {by_fmu.get(k, k): np.asarray(v[keep], dtype=float) for k, v in window.inputs.items()},
+    )
+
+
+def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options: Mapping[str, Any] | None = None,
+          blocks: int = DEFAULT_BLOCKS) -> WhereResult:
+    """Fit the null model (unless given) and describe every output tag's residual.
+
+    Parameters
+    ----------
+    spec
+        A loaded spec.
+    null
+        An existing estimate of the spec's candidates on its training window (skips
+        the estimation).
+    estimate_options
+        Keyword arguments for :func:`trackingbox.estimation.estimate`.
+    blocks
+        Periods per window for the heat map.
+
+    Returns
+    -------
+    WhereResult
+    """
+    from ..data import MeasurementView
+    from ..estimation import close_models, estimate, load_windows, problem_from_spec
+
+    options = dict(estimate_options or {})
+    if null is None:
+        log.info("fitting the null model (the spec's %d candidate parameters)", len(spec.parameters))
+        null = estimate(spec, **options)
+    problem = problem_from_spec(spec, warmup=options.get("warmup"))
+    training, validation = load_windows(spec, warmup=problem.warmup)
+    x = np.array([null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
+    balance_tags = [t for b in getattr(spec, "balances", ()) or () for t in b.terms]
+    view = MeasurementView.from_spec(spec, "all", tags=balance_tags)
+    noise = {tag: noise_level(view.values(tag)) for tag in spec.outputs}
+    after = _after_stoppage(view)
+    try:
+        series = [window_series(problem, w, x, spec.inputs) for w in (training, validation)]
+        jac = [output_jacobian(problem, w, x, spec.inputs, s) for w, s in zip((training, validation), series)]
+    finally:
+        close_models()
+    series, delta0 = polish(series, jac, noise)
+    described = []
+    for s in series:
+        idx = np.searchsorted(view.grid, s.time)
+        idx = np.clip(idx, 0, view.grid.size - 1)
+        described.append({
+            tag: characterise(tag, s.time, s.residual(tag), noise[tag], simulated=s.simulated[tag],
+                              inputs=s.inputs, after_stoppage=after[idx] if after is not None else None,
+                              blocks=blocks)
+            for tag in spec.outputs})
+    balances = tuple(
+        check_balance(b.name, b.terms, {t: view.values(t) for t in b.terms}, tolerance=b.tolerance)
+        for b in getattr(spec, "balances", ()) or ())
+    corrections = {}
+    for state in spec.states:
+        if state.tag in spec.outputs:
+            r = series[0].residual(state.tag)
+            corrections[state.tag] = float(state.gain * np.nanmean(r))
+    for tag, res in described[0].items():
+        log.info("%s: noise %.3g, rms %.3g, offset %.3g, trend %.3g/h%s", tag, res.noise, res.rms, res.offset,
+                 res.trend, " (significant)" if res.significant else "")
+    return WhereResult(null, described[0], described[1], balances, series[0], series[1], noise, problem,
+                       (training, validation), corrections, (jac[0], jac[1]), x + delta0 if delta0.size else x,
+                       dict(spec.inputs))
+
+
+def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
+    """*result* with its series and Jacobian simulated again at ``x + delta`` (clipped to the bounds).
+
+    One Gauss-Newton step of a joint fit (:func:`trackingbox.diagnose.screen.joint`)
+    moves the candidates by *delta*; re-linearising there removes the error of the
+    first linearisation when the move is large (a bias absorbed into a coefficient).
+    """
+    from ..estimation import close_models
+
+    problem = result.problem
+    x1 = np.clip(np.asarray(result.x, dtype=float) + delta, problem.lower, problem.upper)
+    try:
+        series = [window_series(problem, w, x1, result.input_tags) for w in result.windows]
+        jac = [output_jacobian(problem, w, x1, result.input_tags, s) for w, s in zip(result.windows, series)]
+    finally:
+        close_models()
+    from dataclasses import replace
+
+    return replace(result, training=series[0], validation=series[1], jacobian=(jac[0], jac[1]), x=x1)
+
+
+def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Mapping[str, str],
+                    base: WindowResiduals, step: float = 1.0e-3) -> dict[str, np.ndarray]:
+    """Tag -> ``(n, p)`` sensitivity of the simulated output to the spec's candidates (forward differences).
+
+    The step is *step* times each bound range, backwards at the upper bound
+    (:func:`trackingbox.estimation.jacobian_points`).
+    """
+    from ..estimation import jacobian_points
+
+    points, h = jacobian_points(x, problem.lower, problem.upper, step)
+    cols: dict[str, list[np.ndarray]] = {tag: [] for tag in base.simulated}
+    for point, hj in zip(points, h):
+        sim = window_series(problem, window, point, input_tags).simulated
+        for tag in cols:
+            cols[tag].append((sim[tag] - base.simulated[tag]) / hj)
+    return {tag: np.column_stack(c) if c else np.zeros((base.time.size, 0)) for tag, c in cols.items()}
+
+
+def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.ndarray],
+                noise: Mapping[str, float]) -> np.ndarray:
+    """Coefficients ``c`` minimising ``sum_tag sum_k ((r - A c) / sigma_tag)**2`` over valid samples.
+
+    *columns*: tag -> ``(n, m)`` matrix ``A`` of that tag (same ``m`` for all tags).
+
+    >>> A = {"y": np.array([[1.0], [2.0], [3.0]])}
+    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).tolist()
+    [2.0]
+    """
+    rows, rhs = [], []
+    for tag, r in residual.items():
+        r = np.asarray(r, dtype=float)
+        a = np.asarray(columns[tag], dtype=float)
+        ok = np.isfinite(r) & np.all(np.isfinite(a), axis=1)
+        w = 1.0 / noise[tag] if noise[tag] > 0 else 1.0
+        rows.append(a[ok] * w)
+        rhs.append(r[ok] * w)
+    a_all = np.vstack(rows)
+    if a_all.shape[1] == 0:
+        return np.zeros(0)
+    coef, *_ = np.linalg.lstsq(a_all, np.concatenate(rhs), rcond=None)
+    return coef
+
+
+def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndarray]],
+           noise: Mapping[str, float]) -> tuple[list[WindowResiduals], np.ndarray]:
+    """The null model (and the step taken) moved by one linearised step to the noise-weighted least-squares optimum.
+
+    The estimate minimises the mean NRMSE (tags weighted by their range); the
+    screening scores candidates by residuals weighted by the noise. Moving the
+    null to the noise-weighted optimum first (one Gauss-Newton step with the
+    training Jacobian, applied to both windows) means a candidate's gain is never
+    just that reweighting.
+    """
+    train, valid = series
+    delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise)
+    if delta.size == 0:
+        return list(series), delta
+    out = []
+    for s, j in zip(series, jac):
+        sim = {t: v + j[t] @ delta for t, v in s.simulated.items()}
+        out.append(WindowResiduals(s.name, s.time, s.measured, sim, s.inputs))
+    return out, delta
+
+
+def _after_stoppage(view: Any) -> np.ndarray | None:
+    """Grid points in the hour after each stoppage ends (None without stoppages)."""
+    stopped = np.asarray(view.stopped, dtype=bool)
+    if not stopped.any():
+        return None
+    out = np.zeros_like(stopped)
+    ends = np.flatnonzero(stopped[:-1] & ~stopped[1:]) + 1
+    width = int(round(3600.0 / view.sample_time))
+    for e in ends:
+        out[e:e + width] = True
+    return out & ~stopped
+
+
+def heatmap_matrix(result: WhereResult) -> tuple[list[str], list[str], np.ndarray]:
+    """Rows (tags), columns (period labels, hours from the first sample) and values for the heat map.
+
+    The values are the block means of the normalised residual ``r / sigma`` over the
+    training then the validation window.
+    """
+    tags = list(result.tags)
+    cols: list[str] = []
+    rows = []
+    for described in (result.tags, result.validation_tags):
+        first = described[tags[0]]
+        edges = first.block_edges
+        cols += [f"{a / 3600:.1f}-{b / 3600:.1f} h" for a, b in zip(edges[:-1], edges[1:])]
+    for tag in tags:
+        rows.append(list(result.tags[tag].blocks) + list(result.validation_tags[tag].blocks))
+    return tags, cols, np.array(rows, dtype=float)

@@ -1,0 +1,644 @@
+"""Screen every candidate effect cheaply and rank them by the BIC gain on training.
+
+A candidate is an effect entry of the library applied to one target
+(:func:`trackingbox.diagnose.library.targets`). How it is screened follows the
+entry's ``screen``:
+
+``bias`` / ``drift`` / ``lag``
+    A sensor effect only transforms the simulated output of its tag: the null
+    model's output is transformed and the transform fitted in closed form or by
+    a one-parameter bounded fit: a constant (``bias``), an offset plus a slope in
+    time (``drift``; a slope from zero at the first sample for a one-parameter
+    entry), a first-order lag of time constant ``tau`` (``lag``, the
+    exact discretisation for an output linear between samples).
+``coefficient-ramp``
+    A parameter of the target (``<target>.<coefficient>``) falls linearly with
+    time around the null model's value: ``p(t) = p0 * (1 - rate * (t - t_mid))``
+    with ``t_mid`` the middle of the training window, set between steps of the
+    twin (:meth:`trackingbox.fmu.FMUModel.stepper`); ``rate`` is a bounded scalar
+    fit. No compile.
+The spec's candidates are refitted jointly with every screened effect, linearised:
+the null model's output sensitivity ``J`` to the candidates (forward differences,
+computed once) enters each transform's least squares as extra columns (the lag
+filters them too; the ramp fits them at each trial rate), so a bias is not
+taken for a shifted coefficient or the reverse (:func:`joint`).
+
+``compile``
+    Fitted through its patched, compiled twin with a short budget
+    (:func:`trackingbox.diagnose.fit.fit_candidate`) when the settings allow it,
+    else skipped with the reason.
+
+Score
+-----
+For each affected tag ``t`` with ``n_t`` scored samples and residual sums of
+squares ``RSS0`` (null) and ``RSS1`` (candidate),
+
+``delta_bic = sum_t n_eff_t * ln(RSS0_t / RSS1_t) - k * ln(N)``
+
+with ``k`` the effect's number of parameters, ``N = sum n_t`` and
+``n_eff_t = n_t * (1 - rho) / (1 + rho)`` where ``rho`` (clipped to [0, 0.99])
+is the lag-one autocorrelation of the candidate's residual: a candidate that
+leaves a coloured residual behind is credited with fewer independent samples.
+Positive ``delta_bic`` favours the candidate.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .residuals import ljung_box_lag1
+
+if TYPE_CHECKING:
+    from .residuals import WhereResult
+
+log = logging.getLogger(__name__)
+
+#: Upper bound of the first-order sensor lag searched when the entry gives none (s).
+DEFAULT_MAX_LAG = 1800.0
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+def fit_bias(residual: npt.ArrayLike) -> tuple[float, np.ndarray]:
+    """Constant ``b`` minimising ``sum (r - b)**2`` (the mean), and the residual after.
+
+    >>> b, after = fit_bias([1.0, 3.0, np.nan])
+    >>> b, after.tolist()[:2]
+    (2.0, [-1.0, 1.0])
+    """
+    r = np.asarray(residual, dtype=float)
+    b = float(np.nanmean(r))
+    return b, r - b
+
+
+def fit_drift(time: npt.ArrayLike, residual: npt.ArrayLike) -> tuple[tuple[float, float], np.ndarray]:
+    """Offset ``a`` (at the first sample) and slope ``c`` (per second) of ``r ~ a + c (t - t0)``.
+
+    >>> (a, c), after = fit_drift([0.0, 10.0, 20.0], [1.0, 1.5, 2.0])
+    >>> round(a, 6), round(c, 6), float(np.abs(after).max()) < 1e-12
+    (1.0, 0.05, True)
+    """
+    t = np.asarray(time, dtype=float)
+    r = np.asarray(residual, dtype=float)
+    ok = np.isfinite(r)
+    dt = t - t[0]
+    a_mat = np.column_stack([np.ones(ok.sum()), dt[ok]])
+    coef, *_ = np.linalg.lstsq(a_mat, r[ok], rcond=None)
+    return (float(coef[0]), float(coef[1])), r - (coef[0] + coef[1] * dt)
+
+
+def first_order(time: npt.ArrayLike, y: npt.ArrayLike, tau: float) -> np.ndarray:
+    """Output of ``tau dx/dt = y - x``, ``x(t0) = y(t0)``, for *y* linear between samples.
+
+    Exact for a piecewise-linear input: with ``h`` the step and ``a = exp(-h / tau)``,
+    ``x_{k+1} = a x_k + (1 - a) y_{k+1} - (tau (1 - a) - a h) (y_{k+1} - y_k) / h``.
+
+    A ramp of slope 1 is followed with the delay ``tau`` once the transient has died out:
+
+    >>> t = np.arange(0.0, 200.0, 5.0)
+    >>> x = first_order(t, t, 10.0)
+    >>> round(float(t[-1] - x[-1]), 6)
+    10.0
+    """
+    t = np.asarray(time, dtype=float)
+    u = np.asarray(y, dtype=float)
+    if tau <= 0:
+        return u.copy()
+    steps = np.diff(t)
+    if steps.size and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0):
+        # uniform grid: the recurrence is a linear filter on u - u0 with a zero initial state
+        from scipy.signal import lfilter
+
+        h = float(steps[0])
+        a = math.exp(-h / tau)
+        b0 = 1.0 - tau / h + tau * a / h
+        b1 = tau / h - a - tau * a / h
+        return u[0] + lfilter([b0, b1], [1.0, -a], u - u[0])
+    x = np.empty_like(u)
+    x[0] = u[0]
+    for k in range(len(u) - 1):
+        h = t[k + 1] - t[k]
+        a = math.exp(-h / tau)
+        slope = (u[k + 1] - u[k]) / h
+        # x(h) = u_{k+1} - tau*slope + (x_k - u_k + tau*slope) * a
+        x[k + 1] = u[k + 1] - tau * slope + (x[k] - u[k] + tau * slope) * a
+    return x
+
+
+def fit_lag(time: npt.ArrayLike, simulated: npt.ArrayLike, measured: npt.ArrayLike, *,
+            bounds: tuple[float, float] = (0.0, DEFAULT_MAX_LAG)) -> tuple[float, np.ndarray]:
+    """Time constant ``tau`` in *bounds* whose first-order lag of *simulated* best fits *measured*.
+
+    Returns ``tau`` and the residual ``measured - lag(simulated)``.
+    """
+    from scipy.optimize import minimize_scalar
+
+    t = np.asarray(time, dtype=float)
+    y = np.asarray(simulated, dtype=float)
+    m = np.asarray(measured, dtype=float)
+    ok = np.isfinite(m)
+
+    def sse(tau: float) -> float:
+        e = m[ok] - first_order(t, y, tau)[ok]
+        return float(np.dot(e, e))
+
+    lo, hi = max(0.0, float(bounds[0])), float(bounds[1])
+    res = minimize_scalar(sse, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo) + 1e-6})
+    tau = float(res.x)
+    if sse(lo) <= res.fun:
+        tau = lo
+    return tau, m - first_order(t, y, tau)
+
+
+def delta_bic(before: Mapping[str, npt.ArrayLike], after: Mapping[str, npt.ArrayLike], k: int) -> float:
+    """BIC of the null minus BIC of the candidate (module docstring), over the tags of *after*.
+
+    >>> rng = np.random.default_rng(0)
+    >>> e = rng.normal(0.0, 1.0, 1000)
+    >>> delta_bic({"y": e + 1.0}, {"y": e}, 1) > 100
+    True
+    >>> delta_bic({"y": e}, {"y": e - e.mean()}, 1) < 0
+    True
+    """
+    total, n_all = 0.0, 0
+    for tag, r1 in after.items():
+        r1 = np.asarray(r1, dtype=float)
+        r0 = np.asarray(before[tag], dtype=float)
+        ok = np.isfinite(r0) & np.isfinite(r1)
+        n = int(ok.sum())
+        if n < 3:
+            continue
+        rss0 = float(np.dot(r0[ok], r0[ok]))
+        rss1 = float(np.dot(r1[ok], r1[ok]))
+        rho = min(max(ljung_box_lag1(r1[ok]), 0.0), 0.99)
+        n_eff = n * (1.0 - rho) / (1.0 + rho)
+        total += n_eff * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
+        n_all += n
+    return total - k * math.log(max(n_all, 1))
+
+
+def noise_gain(before: npt.ArrayLike, after: npt.ArrayLike, sigma: float) -> float:
+    """Drop of the mean square residual, in noise variances: ``(MSE0 - MSE1) / sigma**2``.
+
+    >>> round(noise_gain([2.0, -2.0, 2.0], [1.0, -1.0, 1.0], 1.0), 3)
+    3.0
+    """
+    r0 = np.asarray(before, dtype=float)
+    r1 = np.asarray(after, dtype=float)
+    ok = np.isfinite(r0) & np.isfinite(r1)
+    if not ok.any() or not sigma > 0:
+        return math.nan
+    return float((np.mean(r0[ok] ** 2) - np.mean(r1[ok] ** 2)) / sigma ** 2)
+
+
+def nrmse_of(residual: npt.ArrayLike, measured: npt.ArrayLike) -> float:
+    """RMS of *residual* over the range of *measured* (valid samples), as estimation's NRMSE."""
+    r = np.asarray(residual, dtype=float)
+    m = np.asarray(measured, dtype=float)
+    ok = np.isfinite(r) & np.isfinite(m)
+    if not ok.any():
+        return math.nan
+    span = float(m[ok].max() - m[ok].min())
+    scale = span if span > 0 else max(abs(float(m[ok].mean())), 1.0)
+    return float(np.sqrt(np.mean(r[ok] ** 2)) / scale)
+
+
+# --------------------------------------------------------------------------- candidates
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect on one target, screened (and maybe fitted).
+
+    Attributes
+    ----------
+    effect, target
+        The effect id and its target (a tag for sensor effects, a component instance otherwise).
+    kind
+        ``"sensor"`` or ``"process"``.
+    stage
+        ``"screen"`` (cheap transform or ramp), ``"fit"`` (patched and compiled) or ``"skipped"``.
+    delta_bic
+        BIC gain over the null on the training window (positive favours the candidate).
+    validation_gain
+        Relative fall of the NRMSE of the affected tags on the validation window
+        (mean over the tags; 0.7 = 70 % smaller).
+    noise_gain
+        Drop of the validation mean square residual of the affected tags, in noise variances (summed).
+    noise_gains
+        The same per affected tag.
+    tags
+        Tags the candidate changes.
+    values
+        Fitted values (screening quantities such as ``bias`` or ``tau``, or the effect's parameters after a fit).
+    nrmse_before, nrmse_after
+        Validation NRMSE per affected tag, null and candidate.
+    whiteness
+        Lag-one autocorrelation of the candidate's training residual per affected tag.
+    pinned
+        Effect parameters at (within 0.1 % of the range of) one of their bounds.
+    reason
+        Why it was skipped, or a remark.
+    """
+
+    effect: str
+    target: str
+    kind: str
+    stage: str
+    delta_bic: float = math.nan
+    validation_gain: float = math.nan
+    noise_gain: float = math.nan
+    tags: tuple[str, ...] = ()
+    values: dict[str, float] = field(default_factory=dict)
+    nrmse_before: dict[str, float] = field(default_factory=dict)
+    nrmse_after: dict[str, float] = field(default_factory=dict)
+    whiteness: dict[str, float] = field(default_factory=dict)
+    pinned: tuple[str, ...] = ()
+    reason: str = ""
+    fit: Any = field(default=None, repr=False, compare=False)
+    validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    training_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    noise_gains: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """An entry of ``diagnose --json``'s ``candidates``."""
+        def num(x: float) -> float | None:
+            return float(x) if x is not None and math.isfinite(x) else None
+
+        return {"effect": self.effect, "target": self.target, "stage": self.stage,
+                "delta_bic": num(self.delta_bic), "validation_gain": num(self.validation_gain),
+                "noise_gain": num(self.noise_gain), "tags": list(self.tags),
+                "values": {k: num(v) for k, v in self.values.items()},
+                "whiteness": {k: num(v) for k, v in self.whiteness.items()},
+                **({"reason": self.reason} if self.reason else {})}
+
+
+def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k: int,
+          training_after: Mapping[str, np.ndarray], validation_after: Mapping[str, np.ndarray],
+          values: Mapping[str, float], *, pinned: Sequence[str] = (), fit: Any = None,
+          reason: str = "") -> Candidate:
+    """Score a candidate from its residuals on both windows (same grids as the null model's).
+
+    A tag counts as affected when the candidate changes its training residual by
+    more than a hundredth of its noise sigma RMS.
+    """
+    tr, va = where.training, where.validation
+    before_t = {t: tr.residual(t) for t in training_after}
+    tags = []
+    for t, r1 in training_after.items():
+        d = np.asarray(r1) - before_t[t]
+        d = d[np.isfinite(d)]
+        if d.size and float(np.sqrt(np.mean(d * d))) > 0.01 * where.noise[t]:
+            tags.append(t)
+    if not tags:
+        tags = list(training_after)
+    dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
+    nb, na, gains, ng, white, per_tag = {}, {}, [], 0.0, {}, {}
+    for t in tags:
+        r0 = va.residual(t)
+        r1 = np.asarray(validation_after[t], dtype=float)
+        nb[t] = nrmse_of(r0, va.measured[t])
+        na[t] = nrmse_of(r1, va.measured[t])
+        if nb[t] > 0:
+            gains.append(1.0 - na[t] / nb[t])
+        per_tag[t] = noise_gain(r0, r1, where.noise[t])
+        ng += per_tag[t]
+        white[t] = ljung_box_lag1(training_after[t])
+    return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
+                     tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
+                     {t: np.asarray(validation_after[t], dtype=float) for t in tags},
+                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag)
+
+
+def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
+    params = list(getattr(effect, "parameters", ()) or ())
+    if len(params) == 1:
+        p = params[0]
+        return float(getattr(p, "min", default[0])), float(getattr(p, "max", default[1]))
+    return default
+
+
+def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
+          extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
+          jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None,
+          ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float, np.ndarray]:
+    """Fit an effect's linear terms jointly with the spec's candidates (linearised) on training.
+
+    Every output tag's residual *r_train* is fitted by ``J delta + T beta``: ``J``
+    the null model's output sensitivity to the candidates, ``T`` the effect's
+    columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
+    Returns ``beta``, the residuals after on training and on validation (the
+    same coefficients with the validation window's ``J`` and ``T``), the
+    weighted training cost and the candidates' step ``delta``.
+    """
+    from .residuals import joint_lstsq
+
+    j_train, j_val = jac if jac is not None else where.jacobian
+    tags = list(r_train)
+    p = next(iter(j_train.values())).shape[1] if j_train else 0
+    m = next(iter(extra_train.values())).shape[1] if extra_train else 0
+
+    def cols(j: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray] | None, tag: str, n: int) -> np.ndarray:
+        a = j[tag] if tag in j else np.zeros((n, p))
+        e = extra[tag] if extra and tag in extra else np.zeros((n, m))
+        return np.hstack([a, e])
+
+    ct = {t: cols(j_train, extra_train, t, len(r_train[t])) for t in tags}
+    coef = joint_lstsq(r_train, ct, where.noise)
+    after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
+    after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
+    cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
+    return coef[p:], after_t, after_v, cost, coef[:p]
+
+
+def sensor_fit(effect: Any, tag: str, base: WhereResult) -> tuple[dict[str, float], dict[str, np.ndarray],
+                                                                   dict[str, np.ndarray], np.ndarray]:
+    """Fit a sensor transform on *tag* jointly with the candidates, linearised around *base*.
+
+    Returns the effect's values, the residuals after on training and validation, and the candidates' step.
+    """
+    how = effect.screen
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    tr, va = base.training, base.validation
+    rt = {t: tr.residual(t) for t in base.tags}
+    rv = {t: va.residual(t) for t in base.tags}
+    if how == "bias":
+        beta, after_t, after_v, _, delta = joint(base, rt, rv, {tag: np.ones((tr.time.size, 1))},
+                                                 {tag: np.ones((va.time.size, 1))})
+        return {"bias": float(beta[0])}, after_t, after_v, delta
+    if how == "drift" and k == 1:
+        # one parameter: the error grows from zero at the first sample (grid time 0)
+        beta, after_t, after_v, _, delta = joint(base, rt, rv, {tag: tr.time[:, None]}, {tag: va.time[:, None]})
+        return {"rate": float(beta[0])}, after_t, after_v, delta
+    if how == "drift":
+        t0 = tr.time[0]
+        beta, after_t, after_v, _, delta = joint(
+            base, rt, rv, {tag: np.column_stack([np.ones(tr.time.size), tr.time - t0])},
+            {tag: np.column_stack([np.ones(va.time.size), va.time - t0])})
+        return {"offset": float(beta[0]), "rate": float(beta[1])}, after_t, after_v, delta
+    if how == "lag":
+        from scipy.optimize import minimize_scalar
+
+        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
+        lo = max(lo, 0.0)
+        j_train, j_val = base.jacobian
+
+        def lagged(tau: float) -> tuple[Any, ...]:
+            rt2, rv2 = dict(rt), dict(rv)
+            rt2[tag] = tr.measured[tag] - first_order(tr.time, tr.simulated[tag], tau)
+            rv2[tag] = va.measured[tag] - first_order(va.time, va.simulated[tag], tau)
+            jt, jv = dict(j_train), dict(j_val)
+            if tag in jt and jt[tag].shape[1]:
+                jt[tag] = np.column_stack([first_order(tr.time, c, tau) for c in jt[tag].T])
+                jv[tag] = np.column_stack([first_order(va.time, c, tau) for c in jv[tag].T])
+            return joint(base, rt2, rv2, jac=(jt, jv))
+
+        res = minimize_scalar(lambda tau: lagged(tau)[3], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-3 * (hi - lo) + 1e-6})
+        tau = float(res.x)
+        _, after_t, after_v, cost, delta = lagged(tau)
+        low = lagged(lo)
+        if low[3] <= cost:
+            tau = lo
+            _, after_t, after_v, _, delta = low
+        return {"tau": tau}, after_t, after_v, delta
+    raise ValueError(f"not a sensor screen: {how!r}")
+
+
+#: A joint fit is re-linearised where it moved the candidates by more than this share of their ranges.
+RELINEARISE_STEP = 1.0e-3
+
+
+def screen_sensor(effect: Any, tag: str, where: WhereResult, *, relinearise: bool = True) -> Candidate:
+    """Screen a sensor effect on *tag*: transform the null model's output, refit the candidates linearised.
+
+    With *relinearise*, a fit that moved the candidates is repeated once around
+    the moved point (one more Gauss-Newton step: ``1 + p`` simulations per window).
+    """
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    values, after_t, after_v, delta = sensor_fit(effect, tag, where)
+    problem = where.problem
+    if (relinearise and problem is not None and where.x is not None and delta.size
+            and np.any(np.abs(delta) > RELINEARISE_STEP * (problem.upper - problem.lower))):
+        from .residuals import relinearised
+
+        values, after_t, after_v, _ = sensor_fit(effect, tag, relinearised(where, delta))
+    pinned = []
+    if effect.screen == "lag":
+        lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
+        if values["tau"] >= hi - 1e-3 * (hi - lo):
+            pinned.append("tau")
+    params = list(getattr(effect, "parameters", ()) or ())
+    if len(params) == 1 and len(values) == 1:
+        # a one-parameter entry: report the screened quantity under the entry's own parameter name
+        values = {params[0].name: next(iter(values.values()))}
+        pinned = [params[0].name] if pinned else []
+    return score(effect.id, tag, "sensor", "screen", where, k, after_t, after_v, values, pinned=pinned)
+
+
+def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, base: float, rate: float,
+                  t_mid: float, *, interval: float = 300.0) -> dict[str, np.ndarray]:
+    """Simulate *window* with parameter *name* = ``base * (1 - rate * (t - t_mid))``, set between steps.
+
+    Times are seconds from the first sample; *rate* is per second. The
+    held-input pre-run of :func:`trackingbox.estimation.simulate_window` comes
+    first, with the parameter at its value at the window's first grid point.
+    Returns output tag -> values on the window's grid (lead-in cut off).
+    """
+    import pandas as pd
+
+    from ..estimation import _model
+
+    problem = where.problem
+    values = np.asarray(x, dtype=float)
+    parameters = dict(problem.fixed)
+    parameters.update({n: float(v) for n, v in zip(problem.names, values)})
+    lead_in = float(window.start - window.time[0])
+    offset = max(0.0, problem.warmup - lead_in)
+    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    grid = window.time - window.time[0]
+    frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
+    for n, series in window.inputs.items():
+        frame[n] = np.concatenate(([series[0]], series)) if offset > 0 else series
+    inputs = pd.DataFrame(frame) if window.inputs else None
+
+    def value_at(t_abs: float) -> float:
+        return base * (1.0 - rate * (t_abs - t_mid))
+
+    parameters[name] = value_at(float(window.time[0]))
+    model = _model(problem.twin)
+    stepper = model.stepper(start_time=0.0, parameters=parameters, inputs=inputs)
+    outputs = list(problem.outputs.values())
+    if offset > 0:
+        stepper.step(offset)
+    result = np.empty((grid.size, len(outputs)))
+    result[0] = stepper.get(outputs)
+    every = max(1, int(round(interval / problem.sample_time)))
+    for i in range(1, grid.size):
+        if (i - 1) % every == 0:
+            stepper.set({name: value_at(float(window.time[i - 1]) + 0.5 * every * problem.sample_time)})
+        stepper.step(offset + float(grid[i]))
+        result[i] = stepper.get(outputs)
+    keep = slice(window.lead, None)
+    return {tag: result[keep, j] for j, tag in enumerate(problem.outputs)}
+
+
+def read_info_start(fmu: Any, name: str) -> float | None:
+    """Start value of variable *name* in *fmu* (None if absent or without a start)."""
+    from ..fmu import read_info
+
+    for v in read_info(fmu).variables:
+        if v.name == name and v.start is not None:
+            try:
+                return float(v.start)
+            except (TypeError, ValueError):
+                return None
+    return None
+
+
+def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float = 0.5,
+                evaluations: int = 12) -> Candidate:
+    """Screen a coefficient that falls linearly with time (fouling) on *target*, without compiling."""
+    from scipy.optimize import minimize_scalar
+
+    from ..estimation import close_models
+
+    problem = where.problem
+    name = f"{target}.{effect.coefficient}"
+    x = np.array([where.null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
+    if name in problem.names:
+        base = float(x[list(problem.names).index(name)])
+    elif name in problem.fixed:
+        base = float(problem.fixed[name])
+    else:
+        base = read_info_start(problem.twin, name)
+        if base is None:
+            return Candidate(effect.id, target, "process", "skipped",
+                             reason=f"the twin has no tunable parameter {name!r} to ramp")
+    training, validation = where.windows
+    tr = where.training
+    t_mid = 0.5 * (float(tr.time[0]) + float(tr.time[-1]))
+    span = float(tr.time[-1] - tr.time[0])
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    tags = list(problem.outputs)
+
+    va = where.validation
+    rv0 = {t: va.residual(t) for t in tags}
+
+    def fitted(rate: float, sim_v: Mapping[str, np.ndarray] | None = None) -> tuple[Any, ...]:
+        sim = simulate_ramp(where, training, x, name, base, rate, t_mid)
+        rt = {t: tr.measured[t] - sim[t] for t in tags}
+        rv = rv0 if sim_v is None else {t: va.measured[t] - sim_v[t] for t in tags}
+        return joint(where, rt, rv)
+
+    def sse(rate: float) -> float:
+        try:
+            return fitted(rate)[3]
+        except Exception as exc:  # noqa: BLE001 - a failing point is a bad point
+            log.debug("ramp %g failed: %s", rate, exc)
+            return math.inf
+
+    hi = max_fall / max(span, 1.0)
+    try:
+        res = minimize_scalar(sse, bounds=(0.0, hi), method="bounded",
+                              options={"maxiter": evaluations, "xatol": 1e-3 * hi})
+        rate = float(res.x)
+        sim_v = simulate_ramp(where, validation, x, name, base, rate, t_mid)
+        _, after_t, after_v, _, _ = fitted(rate, sim_v)
+    finally:
+        close_models()
+    pinned = ["rate"] if rate >= hi * 0.999 else []
+    return score(effect.id, target, "process", "screen", where, k, after_t, after_v,
+                 {"rate": rate, name: base}, pinned=pinned)
+
+
+def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
+           fit_compiled: Callable[[Any, str], Candidate] | None = None,
+           only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None,
+           relinearise: int = 3) -> list[Candidate]:
+    """Screen every effect × target; return the candidates ranked by ``delta_bic`` (best first).
+
+    Parameters
+    ----------
+    effects
+        Effect id -> entry (:func:`trackingbox.diagnose.library.load_effects`).
+    spec
+        The loaded spec (targets are found in it).
+    where
+        The null model's residuals (:func:`trackingbox.diagnose.residuals.where`).
+    fit_compiled
+        ``fit_compiled(effect, target) -> Candidate`` for ``screen = "compile"``
+        entries (a short fit of the patched twin); None: those are skipped.
+    only
+        Effect ids to screen (all when empty).
+    progress
+        ``progress("screen", done, total)``.
+    relinearise
+        How many of the best sensor candidates are fitted again around their moved candidates
+        (:func:`screen_sensor`).
+    """
+    from . import library
+
+    from ..errors import SpecError
+
+    jobs = []
+    out: list[Candidate] = []
+    for eid in sorted(effects):
+        if only and eid not in only:
+            continue
+        effect = effects[eid]
+        try:
+            found = library.targets(effect, spec)
+        except SpecError as exc:
+            out.append(Candidate(eid, "", getattr(effect, "kind", "process"), "skipped", reason=str(exc)))
+            continue
+        jobs.extend((effect, target) for target in found)
+    for i, (effect, target) in enumerate(jobs):
+        how = getattr(effect, "screen", "compile")
+        try:
+            if how in ("bias", "drift", "lag"):
+                if target not in where.tags:
+                    cand = Candidate(effect.id, target, "sensor", "skipped",
+                                     reason=f"tag {target!r} is not an output tag of the spec")
+                else:
+                    cand = screen_sensor(effect, target, where, relinearise=False)
+            elif how == "coefficient-ramp":
+                cand = screen_ramp(effect, target, where)
+            elif fit_compiled is not None:
+                cand = fit_compiled(effect, target)
+            else:
+                cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                                 reason="screened only by compiling its patch, which these settings do not allow")
+        except Exception as exc:  # noqa: BLE001 - one failing candidate does not stop the screening
+            from ..errors import TrackingError
+
+            if not isinstance(exc, (TrackingError, ArithmeticError, ValueError)):
+                raise
+            log.warning("screening %s on %s failed: %s", effect.id, target, exc)
+            cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                             reason=f"screening failed: {exc}")
+        log.info("screened %s on %s: delta BIC %.4g, validation gain %.3g", cand.effect, cand.target,
+                 cand.delta_bic, cand.validation_gain)
+        out.append(cand)
+        if progress is not None:
+            progress("screen", i + 1, len(jobs))
+    # the best few sensor candidates once more, re-linearised around where their joint fit moved the candidates
+    ranked = rank(out)
+    sensors = [c for c in ranked if c.stage == "screen" and c.kind == "sensor" and c.delta_bic > 0][:relinearise]
+    for c in sensors:
+        again = screen_sensor(effects[c.effect], c.target, where, relinearise=True)
+        ranked[ranked.index(c)] = again
+    return rank(ranked)
+
+
+def rank(candidates: Sequence[Candidate]) -> list[Candidate]:
+    """Best first: by ``delta_bic`` (NaN last), then effect and target for a stable order."""
+    return sorted(candidates, key=lambda c: (-(c.delta_bic if math.isfinite(c.delta_bic) else -math.inf),
+                                             c.effect, c.target))

@@ -1,0 +1,287 @@
+"""The diagnosis stage: ``diagnose(spec, settings) -> DiagnosisResult``.
+
+1. **Where** (:mod:`.residuals`): fit the null model (the spec's candidates on
+   the training window) and describe every tag's residual against its noise.
+2. **Which** (:mod:`.screen`): screen every effect of the library on every
+   target it applies to; rank by the BIC gain on training.
+3. **Fit** (:mod:`.fit`, with ``settings.compile``): the best
+   ``settings.fit_best`` screened candidates (and the ``compile``-only entries,
+   with a shorter budget) are fitted properly through their patched, compiled
+   twin, jointly with the spec's candidates, warm-started from the null fit.
+   Without ``compile`` the screening results are judged (a sensor transform is
+   the effect itself; the fouling ramp is its time-varying form) and nothing is
+   compiled.
+4. **Judge** (:mod:`.judge`) on the validation window; name at most one effect.
+5. **Patch**: the named effect rendered as ``<Twin>Diagnosed.mo`` (and, with
+   ``compile``, its FMU); with ``out_dir`` the Modelica file and the patched
+   spec are written there.
+
+``diagnose`` reads the spec, the twin and the measurements only.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .judge import Judgement, judge
+from .residuals import WhereResult, where
+from .screen import Candidate, rank, screen
+
+log = logging.getLogger(__name__)
+
+#: ``progress(stage, done, total)``: stages ``"null"``, ``"screen"``, ``"fit"``.
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class DiagnoseSettings:
+    """Settings of :func:`diagnose` (the command's options, same names).
+
+    Attributes
+    ----------
+    effects
+        Effect ids to consider (all when empty).
+    compile
+        Fit the best candidates through their patched, compiled twins and build
+        the named patch's FMU; without it only the cheap screening runs.
+    fit_best
+        How many of the best screened candidates are fitted properly (with ``compile``).
+    out_dir
+        Where ``<Twin>Diagnosed.mo`` and the patched spec are written (None: not written).
+    work_dir
+        Folder for patches and FMUs of the fits (None: a temporary folder; ``out_dir/work`` when given).
+    seed, workers, maxiter, warmup
+        The null estimation's options (:func:`trackingbox.estimation.estimate`).
+    fit_iterations
+        Refinement iterations of each candidate's estimation.
+    """
+
+    effects: tuple[str, ...] = ()
+    compile: bool = False
+    fit_best: int = 2
+    out_dir: Path | None = None
+    work_dir: Path | None = None
+    seed: int = 0
+    workers: int | None = None
+    maxiter: int | None = None
+    warmup: float | None = None
+    fit_iterations: int = 8
+
+
+@dataclass(frozen=True)
+class DiagnosisResult:
+    """What :func:`diagnose` found (``to_json()`` is the ``diagnose --json`` document)."""
+
+    verdict: str
+    named: Candidate | None
+    candidates: tuple[Candidate, ...]
+    where: WhereResult
+    judgement: Judgement
+    patch: Any = None
+    patch_fmu: Path | None = None
+    patch_spec: Path | None = None
+    patch_file: Path | None = None
+    seconds: float = 0.0
+    effects: dict[str, str] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """The issue's contract: verdict, findings, candidates, where, patch, seconds."""
+        findings = []
+        if self.named is not None:
+            c = self.named
+            findings.append({
+                "effect": c.effect, "target": c.target,
+                "parameters": {k: _num(v) for k, v in c.values.items()},
+                "delta_bic": _num(c.delta_bic), "tags": list(c.tags),
+                "validation": {"nrmse_before": {k: _num(v) for k, v in c.nrmse_before.items()},
+                               "nrmse_after": {k: _num(v) for k, v in c.nrmse_after.items()}},
+                "whiteness": {k: _num(v) for k, v in c.whiteness.items()},
+                "explanation": self.effects.get(c.effect, ""),
+                "stage": c.stage,
+            })
+        doc: dict[str, Any] = {
+            "verdict": self.verdict,
+            "findings": findings,
+            "candidates": [c.to_json() for c in self.candidates],
+            "where": self.where.to_json(),
+            "patch": {"source": getattr(self.patch, "source", None), "model": getattr(self.patch, "model", None),
+                      "fmu": str(self.patch_fmu) if self.patch_fmu else None,
+                      "spec": str(self.patch_spec) if self.patch_spec else None},
+            "seconds": float(self.seconds),
+        }
+        if self.verdict == "unexplained":
+            doc["unexplained"] = {t: [list(p) for p in ps] for t, ps in self.judgement.unexplained.items()}
+        if self.where.balances:
+            doc["balances"] = [b.to_json() for b in self.where.balances]
+        doc["null"] = {"parameters": dict(self.where.null.parameters),
+                       "validation_nrmse": dict(self.where.null.validation_nrmse)}
+        return doc
+
+
+def _num(x: float) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _effect_folders(spec: Any) -> tuple[str, ...]:
+    table = getattr(spec, "diagnose", None)
+    folders = getattr(table, "effects", None) if table is not None else None
+    return tuple(str(f) for f in folders or ())
+
+
+def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, progress: Progress | None = None,
+             null: Any = None) -> DiagnosisResult:
+    """Find where the twin and the measurements disagree, which effect explains it, and patch the twin.
+
+    Parameters
+    ----------
+    spec
+        A loaded spec (with ``[source]`` for process effects and patches).
+    settings
+        :class:`DiagnoseSettings`.
+    progress
+        ``progress(stage, done, total)``.
+    null
+        An existing estimate of the spec's candidates (skips the null fit).
+
+    Returns
+    -------
+    DiagnosisResult
+
+    Raises
+    ------
+    SpecError, DataError, FMUError, EstimationError, CompileError
+    """
+    from ..errors import SpecError
+    from . import library
+
+    t0 = time.perf_counter()
+    effects = library.load_effects(_effect_folders(spec))
+    unknown = [e for e in settings.effects if e not in effects]
+    if unknown:
+        from ..errors import did_you_mean
+
+        raise SpecError("; ".join(f"unknown effect {e!r}{did_you_mean(e, sorted(effects))}" for e in unknown))
+    if progress is not None:
+        progress("null", 0, 1)
+    options = {"seed": settings.seed, "workers": settings.workers, "maxiter": settings.maxiter,
+               "warmup": settings.warmup}
+    found = where(spec, null=null, estimate_options=options)
+    if progress is not None:
+        progress("null", 1, 1)
+
+    tmp = None
+    work = settings.work_dir or (Path(settings.out_dir) / "work" if settings.out_dir else None)
+    if work is None and (settings.compile or settings.out_dir):
+        tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
+        work = Path(tmp.name)
+    try:
+        from .fit import FitBudget, fit_candidate
+
+        budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations, workers=settings.workers,
+                           warmup=settings.warmup)
+        short = FitBudget(maxiter=0, refine_iterations=max(2, settings.fit_iterations // 2),
+                          workers=settings.workers, warmup=settings.warmup)
+        compiled = None
+        if settings.compile:
+            def compiled(effect: Any, target: str) -> Candidate:
+                assert work is not None
+                return fit_candidate(spec, found, effect, target, work, budget=short, stage="screen")
+
+        screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress)
+        ranked = list(screened)
+        if settings.compile:
+            best = [c for c in screened if c.stage != "skipped" and c.fit is None
+                    and math.isfinite(c.delta_bic) and c.delta_bic > 0][: settings.fit_best]
+            fitted = {}
+            for i, c in enumerate(best):
+                assert work is not None
+                try:
+                    fitted[(c.effect, c.target)] = fit_candidate(spec, found, effects[c.effect], c.target, work,
+                                                                 screened=c, budget=budget)
+                except Exception as exc:  # noqa: BLE001 - a failed fit leaves the screening, marked
+                    from ..errors import TrackingError
+
+                    if not isinstance(exc, TrackingError):
+                        raise
+                    log.warning("fitting %s on %s failed: %s", c.effect, c.target, exc)
+                    fitted[(c.effect, c.target)] = Candidate(c.effect, c.target, c.kind, "skipped",
+                                                             delta_bic=c.delta_bic, reason=f"fit failed: {exc}")
+                if progress is not None:
+                    progress("fit", i + 1, len(best))
+            # a fitted candidate replaces its screening; with compile only fitted candidates can be named
+            ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
+        nameable = [c for c in ranked if c.fit is not None] if settings.compile else ranked
+        judgement = judge(nameable, found)
+        if settings.compile:
+            from .judge import reasons_against
+
+            samples = min((r.samples for r in found.validation_tags.values()), default=0)
+            for c in ranked:
+                key = f"{c.effect}@{c.target}"
+                if c.fit is None and key not in judgement.reasons:
+                    judgement.reasons[key] = reasons_against(c, samples) or [
+                        "passes its screening but was not fitted (with --compile only fitted candidates are named)"]
+        named = judgement.named
+        patch = patch_fmu = patch_spec = patch_file = None
+        if named is not None and spec.source is not None:
+            patch, patch_fmu, patch_spec, patch_file = _patch(spec, effects[named.effect], named, settings, work)
+        elif named is not None:
+            log.warning("the spec has no [source]: the named effect is not rendered into a patch")
+    finally:
+        if tmp is not None and not settings.out_dir:
+            # the fitted FMU lives only as long as this call when no output folder is given
+            tmp.cleanup()
+            patch_fmu_alive = False
+        else:
+            patch_fmu_alive = True
+    if not patch_fmu_alive:
+        patch_fmu = patch_spec = None
+    return DiagnosisResult(judgement.verdict, named, tuple(ranked), found, judgement, patch, patch_fmu, patch_spec,
+                           patch_file, time.perf_counter() - t0,
+                           {k: getattr(v, "explanation", "") for k, v in effects.items()})
+
+
+def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
+           work: Path | None) -> tuple[Any, Path | None, Path | None, Path | None]:
+    """Render the named effect; compile and write it as the settings ask."""
+    from . import library
+    from .fit import _short, render, warm_values
+
+    if named.fit is not None:
+        outcome = named.fit
+        bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in outcome.patch.parameters}
+        values = {s: min(max(named.values.get(s, v), bounds.get(s, (-math.inf, math.inf))[0]),
+                         bounds.get(s, (-math.inf, math.inf))[1])
+                  for s, v in warm_values(effect, None).items()}
+        patch = render(spec, effect, named.target, values)
+        fmu = outcome.fmu
+    else:
+        first = render(spec, effect, named.target, warm_values(effect, None))
+        bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in first.parameters}
+        patch = render(spec, effect, named.target, warm_values(effect, named, bounds))
+        fmu = None
+        if settings.compile or settings.out_dir:
+            assert work is not None
+            folder = Path(work) / "named"
+            folder.mkdir(parents=True, exist_ok=True)
+            fmu = Path(library.compile_patch(patch, folder).fmu)
+    patch_file = patch_spec = None
+    if settings.out_dir is not None:
+        out = Path(settings.out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        written = library.write_patch(patch, out)
+        patch_file = Path(written) if written is not None else None
+        if fmu is not None:
+            import shutil
+
+            target = out / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
+            shutil.copyfile(fmu, target)
+            fmu = target
+            patch_spec = Path(library.patched_spec(spec, patch, out, fmu))
+    return patch, fmu, patch_spec, patch_file

@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""Benchmark: the hidden-effect suite of ``trackingbox diagnose``.
+
+For each bench (``heat-exchanger``, ``heat-production``), each hidden-effect case
+(``trackingbox bench BENCH --hidden CASE``) and the plain bench (the no-effect
+case ``none``), at each noise scale, this writes the case, runs
+``trackingbox diagnose SPEC --json --compile`` on it (which reads only the spec,
+the twin and the measurements) and compares what was named with the case's
+``truth.json``. It prints one row per case: what was hidden, what was named,
+the verdict, ΔBIC, the median validation NRMSE over the affected tags before and
+after the patch, and the wall time of ``diagnose``; then the criteria of issue 10:
+
+* effect and target named correctly in >= 90 % of the in-library cases;
+* no effect named in any no-effect case;
+* median validation NRMSE on the affected tags falls >= 70 % with the patch;
+* every named case's patched model compiled (``patch.fmu`` set);
+* wall time per case: heat-exchanger <= 3 min, heat-production <= 15 min.
+
+The exit code is 1 when one fails. Cases are written under ``--work`` and reused
+when their ``truth.json`` is there (delete the folder to rebuild).
+
+Examples::
+
+    scripts/bench_diagnose                                  # both benches, noise x1 and x3
+    scripts/bench_diagnose --bench heat-exchanger --noise 1 --cases fouling-exp,none
+    scripts/bench_diagnose --json > suite.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from trackingbox.benches import bench_definition, make_bench
+
+LIMITS = {"heat-exchanger": 180.0, "heat-production": 900.0}
+
+
+def _cases(bench: str, wanted: list[str] | None) -> list[str]:
+    names = ["none", *bench_definition(bench).hidden]
+    return [n for n in names if wanted is None or n in wanted]
+
+
+def _build(bench: str, case: str, scale: float, seed: int, work: Path, hours: float | None,
+           twin: Path | None) -> Path:
+    folder = work / bench / f"{case}-x{scale:g}-s{seed}"
+    if (folder / "truth.json").is_file() and (folder / "spec.toml").is_file():
+        return folder
+    built = make_bench(bench, folder, seed=seed, hours=hours, twin_fmu=twin,
+                       hidden=None if case == "none" else case, noise_scale=scale)
+    return built.directory
+
+
+def _median(values: list[float]) -> float | None:
+    return statistics.median(values) if values else None
+
+
+def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str]) -> dict:
+    truth = json.loads((folder / "truth.json").read_text())
+    hidden = truth.get("hidden")
+    cmd = [sys.executable, "-m", "trackingbox.cli", "diagnose", str(folder / "spec.toml"), "--json", "--compile",
+           "-o", str(folder / "diagnose"), *extra]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    row = {"bench": bench, "case": case, "noise_scale": scale, "seconds": seconds,
+           "hidden": (f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}" if hidden else "none"),
+           "expected_effect": hidden["effect"] if hidden else None,
+           "expected_target": hidden["target"] if hidden else None,
+           "affected": hidden["affected"] if hidden else [], "exit": proc.returncode}
+    if proc.returncode != 0:
+        row.update(verdict="error", named="-", delta_bic=None, before=None, after=None, fmu=None,
+                   error=proc.stderr.strip().splitlines()[-1:] or ["?"])
+        return row
+    doc = json.loads(proc.stdout)
+    findings = doc.get("findings") or []
+    top = findings[0] if findings else None
+    before, after = [], []
+    if top is not None:
+        val = top.get("validation", {})
+        for tag in row["affected"] or top.get("tags", []):
+            if tag in val.get("nrmse_before", {}) and tag in val.get("nrmse_after", {}):
+                before.append(val["nrmse_before"][tag])
+                after.append(val["nrmse_after"][tag])
+    row.update(verdict=doc.get("verdict"), named=f"{top['effect']}@{top['target']}" if top else "-",
+               named_effect=top["effect"] if top else None, named_target=top["target"] if top else None,
+               delta_bic=top.get("delta_bic") if top else None, before=_median(before), after=_median(after),
+               fmu=(doc.get("patch") or {}).get("fmu"))
+    return row
+
+
+def _fmt(x: float | None, spec: str = ".3f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--bench", action="append", choices=sorted(LIMITS), help="bench (repeatable; default both)")
+    ap.add_argument("--cases", default=None, help="comma-separated case names ('none' = the plain bench)")
+    ap.add_argument("--noise", default="1,3", help="comma-separated noise scales (default 1,3)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--hours", type=float, default=None, help="measured period (default: the bench's)")
+    ap.add_argument("--work", type=Path, default=Path("out/bench-diagnose"), help="where the cases are written")
+    ap.add_argument("--json", action="store_true", help="print the rows and criteria as one JSON document")
+    ap.add_argument("diagnose_args", nargs="*", help="further arguments for trackingbox diagnose (after --)")
+    args = ap.parse_args(argv)
+    benches = args.bench or sorted(LIMITS)
+    wanted = args.cases.split(",") if args.cases else None
+    scales = [float(s) for s in args.noise.split(",")]
+    rows = []
+    for bench in benches:
+        twin = None
+        for case in _cases(bench, wanted):
+            for scale in scales:
+                folder = _build(bench, case, scale, args.seed, args.work, args.hours, twin)
+                twin = folder / "twin.fmu"
+                row = _run_case(bench, case, scale, folder, args.diagnose_args)
+                rows.append(row)
+                if not args.json:
+                    print(f"{bench:16s} {case:13s} x{scale:<3g} hidden {row['hidden']:24s} named {row['named']:24s} "
+                          f"{row['verdict']:12s} dBIC {_fmt(row['delta_bic'], '.1f'):>8s} NRMSE "
+                          f"{_fmt(row['before'])} -> {_fmt(row['after'])} {row['seconds']:7.1f} s", flush=True)
+    in_lib = [r for r in rows if r["expected_effect"]]
+    correct = [r for r in in_lib if r.get("verdict") == "effect" and r.get("named_effect") == r["expected_effect"]
+               and r.get("named_target") == r["expected_target"]]
+    none_rows = [r for r in rows if r["case"] == "none"]
+    gains = [1 - r["after"] / r["before"] for r in correct if r["before"] and r["after"] is not None]
+    criteria = {
+        "named_correctly": {"value": len(correct) / len(in_lib) if in_lib else None, "limit": ">= 0.9",
+                            "ok": (len(correct) >= 0.9 * len(in_lib)) if in_lib else True},
+        "no_effect_named_in_plain_cases": {"value": sum(r.get("verdict") == "effect" for r in none_rows),
+                                           "limit": "== 0",
+                                           "ok": not any(r.get("verdict") == "effect" for r in none_rows)},
+        "median_nrmse_reduction": {"value": _median(gains), "limit": ">= 0.7",
+                                   "ok": bool(gains) and _median(gains) >= 0.7 if in_lib else True},
+        "patched_models_compiled": {"value": sum(bool(r.get("fmu")) for r in correct), "limit": f"== {len(correct)}",
+                                    "ok": all(r.get("fmu") for r in correct)},
+        "wall_time": {"value": {b: max((r["seconds"] for r in rows if r["bench"] == b), default=0.0) for b in benches},
+                      "limit": LIMITS, "ok": all(r["seconds"] <= LIMITS[r["bench"]] for r in rows)},
+        "no_errors": {"value": sum(r["verdict"] == "error" for r in rows), "limit": "== 0",
+                      "ok": not any(r["verdict"] == "error" for r in rows)},
+    }
+    ok = all(c["ok"] for c in criteria.values())
+    if args.json:
+        json.dump({"rows": rows, "criteria": criteria, "ok": ok}, sys.stdout, indent=2, default=str)
+        sys.stdout.write("\n")
+    else:
+        for name, c in criteria.items():
+            print(f"{'ok  ' if c['ok'] else 'FAIL'} {name}: {c['value']} (limit {c['limit']})")
+        for r in rows:
+            if r["verdict"] == "error":
+                print(f"error in {r['bench']} {r['case']} x{r['noise_scale']:g}: {r['error'][0]}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
