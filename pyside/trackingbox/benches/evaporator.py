@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import shutil
 import tempfile
@@ -109,34 +110,33 @@ class Stoppage:
                 "ramp_down": self.ramp_down, "ramp_up": self.ramp_up}
 
 
-def stoppage_schedule(duration: float, rng: np.random.Generator, *, per_day: float = 3.0,
-                      first_after: float = 3 * 3600.0, min_running: float = 2 * 3600.0,
-                      hold: tuple[float, float] = (600.0, 3600.0), ramp_down: tuple[float, float] = (20.0, 60.0),
+def stoppage_schedule(duration: float, rng: np.random.Generator, *, per_day: tuple[int, int] = (2, 4),
+                      first_after: float = 2 * 3600.0, hold: tuple[float, float] = (600.0, 3600.0),
+                      ramp_down: tuple[float, float] = (20.0, 60.0),
                       ramp_up: tuple[float, float] = (120.0, 300.0)) -> list[Stoppage]:
     """Random flow stoppages over *duration* s: several a day, 10-60 min each.
 
-    Stoppages start at exponentially distributed intervals (mean ``86400/per_day``
-    s, but never sooner than *min_running* s after the previous restart and not
-    before *first_after*), the feed falls within *ramp_down* s (under a minute),
-    is held off for a time drawn uniformly in *hold* and restarts over *ramp_up* s.
-    Only stoppages that end inside *duration* are kept.
+    Each day gets between ``per_day[0]`` and ``per_day[1]`` stoppages, one in each
+    of that many equal slots of the day (at a uniformly drawn time in the slot's
+    first half, so they never overlap); the feed falls within *ramp_down* s (under a
+    minute), is held off for a time drawn uniformly in *hold* and restarts over
+    *ramp_up* s. Stoppages before *first_after* s or not over by *duration* are dropped.
 
     >>> s = stoppage_schedule(3 * 86400.0, np.random.default_rng(0))
-    >>> len(s) >= 3 and all(600.0 <= x.restart - x.start - x.ramp_down <= 3600.0 for x in s)
+    >>> len(s) >= 5 and all(600.0 <= x.restart - x.start - x.ramp_down <= 3600.0 for x in s)
     True
     """
     out: list[Stoppage] = []
-    when = first_after + rng.exponential(86400.0 / per_day)
-    while True:
-        down = rng.uniform(*ramp_down)
-        held = rng.uniform(*hold)
-        up = rng.uniform(*ramp_up)
-        stop = Stoppage(start=float(when), restart=float(when + down + held), ramp_down=float(down),
-                        ramp_up=float(up))
-        if stop.end >= duration:
-            break
-        out.append(stop)
-        when = stop.end + min_running + rng.exponential(86400.0 / per_day)
+    for day in range(int(math.ceil(duration / 86400.0))):
+        n = int(rng.integers(per_day[0], per_day[1] + 1))
+        slot = 86400.0 / n
+        for i in range(n):
+            when = day * 86400.0 + i * slot + rng.uniform(0.0, 0.5 * slot)
+            down, held, up = rng.uniform(*ramp_down), rng.uniform(*hold), rng.uniform(*ramp_up)
+            stop = Stoppage(start=float(when), restart=float(when + down + held), ramp_down=float(down),
+                            ramp_up=float(up))
+            if when >= first_after and stop.end < duration:
+                out.append(stop)
     return out
 
 
@@ -160,7 +160,8 @@ def evaporator_inputs(t: FloatArray, rng: np.random.Generator, warmup: float,
     """The plant's input trajectories on *t* (s, warm-up included), held through the warm-up.
 
     * ``feedFlowSet``: nominal feed with operator moves of +-10 % every ~6 h and a
-      2 % drift, times :func:`stoppage_factor` (the stoppages).
+      2 % drift, brought down to 1 % of the nominal feed in the stoppages
+      (:func:`stoppage_factor`).
     * ``feedDS``: 52 % with moves in 50-55 % every ~8 h and a 0.4 %DS drift.
     * ``feedT``: nominal with a 1.5 K drift (3 h correlation).
     * ``steamP``: 3.5 bar(a) with moves in 3.1-4.2 bar every ~12 h and a 0.05 bar drift
@@ -172,7 +173,8 @@ def evaporator_inputs(t: FloatArray, rng: np.random.Generator, warmup: float,
     flow = sc.moves(tm, rng, base=f0, low=0.9 * f0, high=1.1 * f0, mean_interval=6 * 3600.0,
                     ramp_fraction=0.6, hold_start=2 * 3600.0)
     flow = flow * (1.0 + sc.drift(tm, rng, sigma=0.02, time_constant=1800.0))
-    flow = flow * stoppage_factor(t - warmup, stoppages)
+    stopped = STOPPED_FRACTION * f0
+    flow = stopped + (flow - stopped) * stoppage_factor(t - warmup, stoppages, 0.0)
     ds = sc.moves(tm, rng, base=nominal["feedDS"], low=0.50, high=0.55, mean_interval=8 * 3600.0,
                   ramp_fraction=0.8, ramp_duration=(1800.0, 5400.0), hold_start=3 * 3600.0)
     ds = np.clip(ds + sc.drift(tm, rng, sigma=0.004, time_constant=3600.0), 0.49, 0.56)
@@ -325,7 +327,7 @@ def historian_settings(tags: Sequence[Sensor]) -> dict[str, Any]:
 def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str, float] | None = None,
           hours: float | None = None, plant_fmu: str | os.PathLike[str] | None = None,
           twin_fmu: str | os.PathLike[str] | None = None, start: str = "2026-01-12T06:00:00+00:00",
-          historian_export: bool = True) -> BenchCase:
+          historian_export: bool = True, stoppages: Sequence[Stoppage] | None = None) -> BenchCase:
     """Generate the evaporator case into *out* (the files of :func:`trackingbox.benches.make_bench`).
 
     Differs from the generic :func:`~trackingbox.benches.base.build_case` in three ways:
@@ -348,6 +350,9 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         ISO 8601 time of the first measured sample.
     historian_export : bool
         False writes the dense noisy samples (time in s) instead.
+    stoppages : sequence of Stoppage, optional
+        The flow stoppages (s from the first measured sample); default: drawn by
+        :func:`stoppage_schedule` from the seed.
 
     Returns
     -------
@@ -383,7 +388,8 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         dt, warmup = d.sample_time, d.warmup
         n_meas, n_warm = int(round(hours * 3600.0 / dt)), int(round(warmup / dt))
         t_all = np.arange(n_warm + n_meas + 1) * dt
-        stoppages = stoppage_schedule(hours * 3600.0, scenario_rng)
+        drawn = stoppage_schedule(hours * 3600.0, scenario_rng)
+        stoppages = drawn if stoppages is None else list(stoppages)
         true_inputs = evaporator_inputs(t_all, scenario_rng, warmup, stoppages)
         frame = pd.DataFrame({"time": t_all, **true_inputs})
 

@@ -1,0 +1,125 @@
+"""The evaporator bench: scenario, stoppages, the case it writes and the pipeline's key properties.
+
+Fast tests check the scenario against the issue's numbers (several stoppages a day,
+feed to ~0 within a minute, held 10-60 min; the notes' last-effect ranges) and the
+done-criteria checks on a hand-built run. The ``compile`` tests build a short case
+from the Plant and Twin (compiled once per session) and check it against the
+plant's own truth; the 3-day run belongs to ``scripts/demo --bench evaporator``
+and ``scripts/bench_tracking``.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trackingbox.benches import BENCHES, bench_definition
+from trackingbox.benches.evaporator import (
+    NOMINAL,
+    STOPPED_FRACTION,
+    Stoppage,
+    evaporator_inputs,
+    stoppage_factor,
+    stoppage_schedule,
+    truth_on,
+)
+from trackingbox.data import stoppage_mask
+
+
+def test_registered() -> None:
+    assert "evaporator" in BENCHES
+    d = bench_definition("evaporator")
+    # the contract's fixed names: inputs and outputs of Plant and Twin
+    assert {s.plant for s in d.inputs} == {"feedFlowSet", "feedDS", "feedT", "steamP", "nextP"}
+    assert {s.plant for s in d.outputs} == {
+        "FI_feed", "FI_product", "FI_condensate", "PI_vapour", "PI_flash", "TI_body", "TI_flash", "LI_body",
+        "LI_flash", "LI_condensate", "DI_product", "ZI_inlet", "ZI_outlet"}
+    assert {(s.variable, s.correction) for s in d.states} == {
+        ("LI_body", "body_m_flow_corr"), ("LI_flash", "flash_m_flow_corr"), ("LI_condensate", "cond_m_flow_corr")}
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_stoppages_several_a_day_within_a_minute_held_10_to_60_min(seed: int) -> None:
+    days = 3
+    stops = stoppage_schedule(days * 86400.0, np.random.default_rng(seed))
+    assert len(stops) >= 2 * days - 1, "several stoppages a day"
+    for s in stops:
+        assert s.ramp_down <= 60.0
+        held = s.restart - (s.start + s.ramp_down)
+        assert 600.0 <= held <= 3600.0
+    for a, b in zip(stops, stops[1:]):
+        assert b.start > a.end, "stoppages do not overlap"
+
+
+def test_stoppage_factor_by_hand() -> None:
+    s = Stoppage(start=100.0, restart=1000.0, ramp_down=50.0, ramp_up=200.0)
+    t = np.array([0.0, 100.0, 125.0, 150.0, 500.0, 1000.0, 1100.0, 1200.0, 5000.0])
+    # hand values: linear ramps between 1 and the floor 0.01
+    expected = [1.0, 1.0, 1 - 0.99 * 0.5, 0.01, 0.01, 0.01, 0.01 + 0.99 * 0.5, 1.0, 1.0]
+    assert np.allclose(stoppage_factor(t, [s], 0.01), expected)
+
+
+def test_inputs_stay_in_the_notes_ranges_and_stop_to_near_zero() -> None:
+    rng = np.random.default_rng(4)
+    warm = 3600.0
+    t = np.arange(0.0, warm + 3 * 86400.0 + 1, 10.0)
+    stops = stoppage_schedule(3 * 86400.0, np.random.default_rng(4))
+    u = evaporator_inputs(t, rng, warm, stops)
+    assert 0.49 <= u["feedDS"].min() and u["feedDS"].max() <= 0.56   # last effect in: 50-55 % DS
+    assert 3.0e5 <= u["steamP"].min() and u["steamP"].max() <= 4.5e5  # 3-4.5 bar(a)
+    f0 = NOMINAL["feedFlowSet"]
+    tm = t - warm
+    for s in stops:
+        held = (tm >= s.start + s.ramp_down) & (tm <= s.restart)
+        assert u["feedFlowSet"][held].max() <= STOPPED_FRACTION * f0 + 1e-12
+    # the data layer's stoppage rule finds every stoppage of the schedule, and nothing else
+    mask = stoppage_mask(tm, u["feedFlowSet"], 0.3 * f0)
+    for s in stops:
+        assert mask[(tm >= s.start + s.ramp_down) & (tm <= s.restart)].all()
+    running = np.ones(t.size, dtype=bool)
+    for s in stops:
+        running &= ~((tm >= s.start) & (tm <= s.end))
+    assert not mask[running & (tm >= 0)].any()
+
+
+def test_truth_on_interpolates_the_trajectory() -> None:
+    truth = {"trajectories": {"effect.Rf": {"time": [0.0, 3600.0], "value": [0.0, 1e-4]}},
+             "parameters": {"pump.dp0": 2e5}}
+    assert np.allclose(truth_on(truth, "effect.Rf", [1800.0, 7200.0]), [5e-5, 1e-4])
+    assert np.allclose(truth_on(truth, "pump.dp0", [0.0]), [2e5])
+    assert truth_on(truth, "nothing", [0.0]) is None
+
+
+def test_assess_on_a_hand_built_run(tmp_path: Path) -> None:
+    """Errors of the fouling check, level and NRMSE checks, computed by hand on a made-up run."""
+    from types import SimpleNamespace
+
+    from trackingbox.benches.evaporator_report import assess
+    from trackingbox.spec import PairSpec, ParameterSpec, StateSpec, StoppageRule
+
+    t = np.arange(0.0, 48 * 3600.0 + 1, 600.0)
+    truth_rf = 2e-4 * (1 - np.exp(-t / 86400.0))
+    tracked = truth_rf + 3e-5  # 3e-5 / 6e-4 = 5 % of the bound range
+    tracked[t > 40 * 3600.0] += 4e-5  # then 7e-5 / 6e-4 = 11.7 %
+    frame = pd.DataFrame({"time": t, "parameter:effect.Rf": tracked,
+                          "tracked:LI-6111": 0.5 + 0.1 * np.sin(t / 1e4)})
+    csv = tmp_path / "tracking.csv"
+    frame.to_csv(csv, index=False)
+    spec = SimpleNamespace(
+        pairs=[PairSpec("FI-6125", "effect.Rf", 1.0, 100.0)],
+        parameters=[ParameterSpec("effect.Rf", 0.0, 0.0, 6e-4)],
+        states=[StateSpec("LI-6111", "LI_body", "body_m_flow_corr", 4.0)],
+        data=SimpleNamespace(stoppage=StoppageRule("FI-6110", 0.6, 1800.0)))
+    truth = {"trajectories": {"effect.Rf": {"time": t.tolist(), "value": truth_rf.tolist()}},
+             "stoppages": [{"start": 20 * 3600.0, "end": 21 * 3600.0}]}
+    res = assess(spec, csv, truth, nrmse={"FI-6125": (0.2, 0.05)}, heights={"LI-6111": 0.55})
+    assert res.heat_transfer_pair == ("FI-6125", "effect.Rf")
+    assert res.nrmse["FI-6125"][2] == pytest.approx(0.25) and res.nrmse_ok
+    assert res.fouling is not None
+    assert res.fouling.max_error == pytest.approx(7e-5 / 6e-4)
+    assert res.fouling.max_error_stoppages == pytest.approx(3e-5 / 6e-4)
+    assert not res.fouling.passed and res.fouling.within_bounds
+    assert res.levels[0].max == pytest.approx(0.6, abs=1e-3) and not res.levels_ok  # 0.6 m > 0.55 m vessel
