@@ -109,7 +109,7 @@ def test_assess_on_a_hand_built_run(tmp_path: Path) -> None:
     csv = tmp_path / "tracking.csv"
     frame.to_csv(csv, index=False)
     spec = SimpleNamespace(
-        pairs=[PairSpec("FI-6125", "effect.Rf", 1.0, 100.0)],
+        pairs=[PairSpec("FI-6125", "effect.Rf", 1.0, 100.0, 1.0)],
         parameters=[ParameterSpec("effect.Rf", 0.0, 0.0, 6e-4)],
         states=[StateSpec("LI-6111", "LI_body", "body_m_flow_corr", 4.0)],
         data=SimpleNamespace(stoppage=StoppageRule("FI-6110", 0.6, 1800.0)))
