@@ -123,3 +123,110 @@ def test_assess_on_a_hand_built_run(tmp_path: Path) -> None:
     assert res.fouling.max_error_stoppages == pytest.approx(3e-5 / 6e-4)
     assert not res.fouling.passed and res.fouling.within_bounds
     assert res.levels[0].max == pytest.approx(0.6, abs=1e-3) and not res.levels_ok  # 0.6 m > 0.55 m vessel
+
+
+# --------------------------------------------------------------------------- compiled: a short case
+
+EV = "TrackingBox.Benches.Evaporator"
+#: One 40-min stoppage in a 10 h case (5 h training, 5 h validation), after the 1 h start-up hold.
+STOP = Stoppage(start=6.0 * 3600.0, restart=6.0 * 3600.0 + 40 * 60.0, ramp_down=40.0, ramp_up=180.0)
+#: Plant fouling that grows within hours instead of days (the asymptote and its time constant).
+FAST_FOULING = {"RfInf": 2.0e-4, "tauFouling": 3 * 3600.0}
+
+
+@pytest.fixture(scope="module")
+def short_case(fmu_cache, tmp_path_factory):
+    """A 10 h evaporator case, seed 1, one known stoppage, fast fouling; pairs from ``pair``."""
+    from trackingbox.analysis.pair_stage import PairSettings, pair, spec_pairs
+    from trackingbox.benches.evaporator import build, load_truth
+    from trackingbox.fmu import read_info
+    from trackingbox.spec import load_spec, write_pairs
+
+    out = tmp_path_factory.mktemp("evcase")
+    twin = fmu_cache(f"{EV}.Twin")
+    case = build(out, seed=1, hours=10.0, overrides=FAST_FOULING, plant_fmu=fmu_cache(f"{EV}.Plant"),
+                 twin_fmu=twin, stoppages=[STOP])
+    spec = load_spec(case.spec)
+    freeze = (("holdControllers", 1.0),) if "holdControllers" in {getattr(v, "name", v)
+                                                                  for v in read_info(twin).inputs} else ()
+    result = pair(spec, PairSettings(freeze=freeze, workers=1))
+    spec = write_pairs(case.spec, spec_pairs(spec, result))
+    return case, spec, result, load_truth(case.truth_file)
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_case_is_a_historian_export_with_the_plants_fouling(short_case) -> None:
+    case, spec, _, truth = short_case
+    raw = pd.read_csv(case.measurements)
+    # ISO 8601 timestamps with an offset; dead-band reporting logs steady tags rarely
+    assert str(raw["time"].iloc[0]).startswith("2026-01-12T06:00")
+    dense_rows = 10 * 3600 / 10 + 1
+    assert raw["FIC-6110.SP"].notna().sum() < 0.2 * dense_rows
+    # the plant fouls: the recorded resistance grows towards RfInf (3 time constants: 95 %)
+    t = np.asarray(truth["trajectories"]["effect.Rf"]["time"])
+    rf = np.asarray(truth["trajectories"]["effect.Rf"]["value"])
+    assert np.all(np.diff(rf) >= -1e-12) and rf[-1] > 0.5 * FAST_FOULING["RfInf"]
+    assert truth["stoppages"] == [STOP.to_json()]
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_stoppage_is_masked_from_the_measurements(short_case) -> None:
+    from trackingbox.data import MeasurementView
+
+    _, spec, _, _ = short_case
+    view = MeasurementView.from_spec(spec, "all")
+    g = view.grid
+    held = (g >= STOP.start + STOP.ramp_down + 60.0) & (g <= STOP.restart)
+    assert view.stopped[held].all()
+    assert not view.stopped[g < STOP.start - 60.0].any()
+    assert not view.stopped[g > STOP.end + spec.data.stoppage.settle + 60.0].any()
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_pairing_is_physical(short_case) -> None:
+    _, spec, result, _ = short_case
+    pairs = {p.parameter: p.variable for p in spec.pairs}
+    heat = pairs.get("effect.Rf") or pairs.get("effect.U0")
+    assert heat in ("FI-6125", "TI-6111", "PI-6111"), pairs
+    left = {n for n, _ in result.pairing.left_out}
+    for name in ("effect.Rf", "effect.U0", "inletValve.KvMax", "outletValve.KvMax", "pump.dp0", "pump.VMax"):
+        assert name in pairs or name in left, f"{name} neither paired nor left out with a reason"
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_tracking_holds_through_the_stoppage_and_follows_the_fouling(short_case, tmp_path) -> None:
+    from trackingbox.benches.evaporator_report import assess, vessel_heights
+    from trackingbox.fmu import read_info
+    from trackingbox.tracking.runtime import track
+
+    case, spec, _, truth = short_case
+    res = track(spec, out_dir=tmp_path / "track", window="validation")
+    df = pd.read_csv(res.csv)
+    t = df["time"].to_numpy(float)
+    # parameters frozen while the feed is stopped (the stoppage we imposed), and no bump at the restart
+    held = (t >= STOP.start + STOP.ramp_down + 60.0) & (t <= STOP.restart)
+    for p in spec.pairs:
+        col = df[f"parameter:{p.parameter}"].to_numpy(float)
+        assert np.ptp(col[held]) == 0.0, p.parameter
+        lo, hi = next((q.min, q.max) for q in spec.parameters if q.name == p.parameter)
+        assert np.all((col >= lo) & (col <= hi))
+    # the source's failure case must not happen: the twin's levels follow the measured ones through the
+    # stoppage, and its temperatures do not jump
+    window = (t >= STOP.start) & (t <= STOP.end + 1800.0)
+    for st in spec.states:
+        err = np.abs(df[f"tracked:{st.tag}"] - df[f"measured:{st.tag}"]).to_numpy(float)[window]
+        assert np.nanmax(err) < 0.05, st.tag
+    for tag in ("TI-6111", "TI-6151"):
+        if f"tracked:{tag}" in df.columns:
+            assert np.nanmax(np.abs(np.diff(df[f"tracked:{tag}"].to_numpy(float)[window]))) < 1.0, tag
+    nrmse = {tag: (v.nrmse_untracked, v.nrmse_tracked) for tag, v in res.variables.items()
+             if tag in {p.variable for p in spec.pairs}}
+    result = assess(spec, res.csv, truth, nrmse=nrmse, heights=vessel_heights(read_info(spec.twin)),
+                    settle=4 * 3600.0)
+    assert result.levels_ok, result.levels
+    assert result.fouling is not None and result.fouling.within_bounds
+    assert result.fouling.max_error <= 0.1, result.fouling
