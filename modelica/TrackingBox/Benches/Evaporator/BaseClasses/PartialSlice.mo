@@ -1,0 +1,132 @@
+within TrackingBox.Benches.Evaporator.BaseClasses;
+partial model PartialSlice "Last-effect slice: inlet flow loop, effect with level loop, flash tank, pump, condensate tank"
+  parameter TrackingBox.Units.Pressure feedSourceP = 3.5e5 "Pressure of the liquor source ahead of the inlet valve";
+  parameter TrackingBox.Units.Pressure flashSinkP = 1.0e5 "Pressure of the header receiving the flash vapour";
+  parameter TrackingBox.Units.Pressure productSinkP = 3e5 "Pressure at the end of the product line";
+  parameter TrackingBox.Units.Pressure condensateSinkP = 1e5 "Pressure at the end of the condensate line";
+  parameter TrackingBox.Units.Height bodyLevelSet = 1.2 "Setpoint of the effect level (as read by LI_body)";
+  parameter TrackingBox.Units.Height flashLevelSet = 1.0 "Setpoint of the flash-tank level (as read by LI_flash)";
+  parameter TrackingBox.Units.Height condensateLevelSet = 0.8 "Setpoint of the condensate-tank level (as read by LI_condensate)";
+  parameter Real steamRatio(unit="s/kg") = 0.32 "Steam-valve opening = tanh(steamRatio*FI_feed) (ratio station)";
+  TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=2) "Setpoint of the inlet flow loop";
+  TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.52) "Dry-solids fraction of the incoming liquor";
+  TrackingBox.Interfaces.RealInput feedT(unit="K", start=368.15) "Temperature of the incoming liquor";
+  TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the steam source";
+  TrackingBox.Interfaces.RealInput nextP(unit="Pa", start=1.4e5) "Vapour boundary pressure (steam chest of the next effect)";
+  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
+  TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Liquor inflow";
+  TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow";
+  TrackingBox.Interfaces.RealOutput FI_condensate(unit="kg/s") "Condensate flow from the steam chest";
+  TrackingBox.Interfaces.RealOutput FI_steam(unit="kg/s") "Steam flow into the steam chest";
+  TrackingBox.Interfaces.RealOutput PI_vapour(unit="Pa") "Pressure in the effect's vapour space";
+  TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the flash tank";
+  TrackingBox.Interfaces.RealOutput PI_steamChest(unit="Pa") "Pressure in the steam chest";
+  TrackingBox.Interfaces.RealOutput TI_body(unit="K") "Liquor temperature in the effect";
+  TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Liquor temperature after the flash tank";
+  TrackingBox.Interfaces.RealOutput LI_body(unit="m") "Effect level from the dP transmitter";
+  TrackingBox.Interfaces.RealOutput LI_flash(unit="m") "Flash-tank level from the dP transmitter";
+  TrackingBox.Interfaces.RealOutput LI_condensate(unit="m") "Condensate-tank level from the dP transmitter";
+  TrackingBox.Interfaces.RealOutput DI_product(unit="1") "Product dry solids (DS meter)";
+  TrackingBox.Interfaces.RealOutput ZI_inlet(unit="1") "Inlet valve position";
+  TrackingBox.Interfaces.RealOutput ZI_outlet(unit="1") "Outlet valve position (effect level loop)";
+  TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash level loop)";
+  TrackingBox.Interfaces.RealOutput ZI_condensate(unit="1") "Condensate valve position (condensate level loop)";
+  TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Steam valve position";
+  TrackingBox.Evaporation.Sources.LiquorSource feedSource(p=feedSourceP, use_T_in=true, use_x_in=true) "Liquor from the previous effect";
+  TrackingBox.Evaporation.LiquorValve inletValve(KvMax=17, equalPercentage=true) "Inlet valve (flow loop)";
+  TrackingBox.Evaporation.Effect effect "The last effect";
+  TrackingBox.Evaporation.LiquorValve outletValve(KvMax=7) "Outlet valve (effect level loop)";
+  TrackingBox.Evaporation.FlashTank flash "Product flash tank";
+  TrackingBox.Evaporation.LiquorPump pump(dp0=4e5, VMax=3e-3) "Product pump";
+  TrackingBox.Evaporation.LiquorValve productValve(KvMax=6) "Product valve (flash level loop)";
+  TrackingBox.Evaporation.Sources.LiquorSink productSink(p=productSinkP) "Product line";
+  TrackingBox.Evaporation.CondensateTank condTank "Condensate tank";
+  TrackingBox.Evaporation.LiquorValve condValve(KvMax=8) "Condensate valve (condensate level loop)";
+  TrackingBox.Evaporation.Sources.LiquorSink condSink(p=condensateSinkP) "Condensate line";
+  TrackingBox.Fluid.Sources.PressureSource steamSource(use_p_in=true, T=416) "Steam header";
+  TrackingBox.Fluid.Sources.PressureSink vapourSink(use_p_in=true) "Next effect (vapour)";
+  TrackingBox.Fluid.Sources.PressureSink condVapourSink(use_p_in=true) "Next effect (condensate flash)";
+  TrackingBox.Fluid.Sources.PressureSink flashVapourSink(p=flashSinkP) "Flash-vapour header";
+  TrackingBox.Evaporation.LevelTransmitter LT_body(rho_cal=1450) "Effect level transmitter";
+  TrackingBox.Evaporation.LevelTransmitter LT_flash(rho_cal=1450) "Flash-tank level transmitter";
+  TrackingBox.Evaporation.LevelTransmitter LT_condensate(rho_cal=950) "Condensate-tank level transmitter";
+  TrackingBox.Evaporation.DrySolidsMeter DS_product "Product DS meter";
+  TrackingBox.Evaporation.SmoothPI FIC_feed(k=0.1, Ti=10, Tt=10, Tf=1, y_start=0.6, use_hold_in=true) "Inlet flow loop";
+  TrackingBox.Evaporation.SmoothPI LIC_body(k=-5, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true) "Effect level loop";
+  TrackingBox.Evaporation.SmoothPI LIC_flash(k=-3, Ti=1200, Tt=120, Tf=2, y_start=0.45, use_hold_in=true) "Flash-tank level loop";
+  TrackingBox.Evaporation.SmoothPI LIC_condensate(k=-2, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true) "Condensate level loop";
+equation
+  connect(feedT, feedSource.T_in);
+  connect(feedDS, feedSource.x_in);
+  connect(feedSource.port, inletValve.port_a);
+  connect(inletValve.port_b, effect.port_a);
+  connect(effect.port_b, outletValve.port_a);
+  connect(outletValve.port_b, flash.port_a);
+  connect(flash.port_b, pump.port_a);
+  connect(pump.port_b, productValve.port_a);
+  connect(pump.port_b, DS_product.port);
+  connect(productValve.port_b, productSink.port);
+  connect(steamP, steamSource.p_in);
+  connect(steamSource.port, effect.port_s);
+  connect(nextP, vapourSink.p_in);
+  connect(nextP, condVapourSink.p_in);
+  connect(effect.port_v, vapourSink.port);
+  connect(effect.port_c, condTank.port_a);
+  connect(condTank.port_v, condVapourSink.port);
+  connect(condTank.port_b, condValve.port_a);
+  connect(condValve.port_b, condSink.port);
+  connect(flash.port_v, flashVapourSink.port);
+  connect(effect.dp_level, LT_body.dp);
+  connect(flash.dp_level, LT_flash.dp);
+  connect(condTank.dp_level, LT_condensate.dp);
+  connect(feedFlowSet, FIC_feed.u_s);
+  connect(holdControllers, FIC_feed.hold);
+  connect(holdControllers, LIC_body.hold);
+  connect(holdControllers, LIC_flash.hold);
+  connect(holdControllers, LIC_condensate.hold);
+  FIC_feed.u_m = inletValve.m_flow;
+  FIC_feed.y = inletValve.opening;
+  LIC_body.u_s = bodyLevelSet;
+  LIC_body.u_m = LT_body.y;
+  LIC_body.y = outletValve.opening;
+  LIC_flash.u_s = flashLevelSet;
+  LIC_flash.u_m = LT_flash.y;
+  LIC_flash.y = productValve.opening;
+  LIC_condensate.u_s = condensateLevelSet;
+  LIC_condensate.u_m = LT_condensate.y;
+  LIC_condensate.y = condValve.opening;
+  effect.steamOpening = tanh(steamRatio*TrackingBox.Evaporation.Functions.splus(inletValve.m_flow, 1e-3));
+  FI_feed = inletValve.m_flow;
+  FI_product = productValve.m_flow;
+  FI_condensate = effect.m_c;
+  FI_steam = effect.m_steam;
+  PI_vapour = effect.p_vap;
+  PI_flash = flash.p_vap;
+  PI_steamChest = effect.p_s;
+  TI_body = effect.T;
+  TI_flash = flash.T;
+  LI_body = LT_body.y;
+  LI_flash = LT_flash.y;
+  LI_condensate = LT_condensate.y;
+  DI_product = DS_product.y;
+  ZI_inlet = FIC_feed.y;
+  ZI_outlet = LIC_body.y;
+  ZI_product = LIC_flash.y;
+  ZI_condensate = LIC_condensate.y;
+  ZI_steam = effect.steamOpening;
+  annotation (Documentation(info="<html>
+<p>Design point (1/10 scale of the last effect of the evaporator notes,
+section 2): feed 2 kg/s at 52 % DS and 95 &deg;C, product about 1.35 kg/s at
+77-78 % DS, steam header 4 bar(a) (chest about 3.5 bar), vapour to the next
+effect at 1.4 bar, body about 131 &deg;C with a boiling-point rise of about
+20 K, evaporation about 0.65 kg/s.</p>
+<p>Control: the inlet flow loop <code>FIC_feed</code> (inlet valve, equal
+percentage) follows <code>feedFlowSet</code> from a source at the fixed
+pressure <code>feedSourceP</code>; the level loops open their outlet valves on
+high level; the steam valve opens in ratio to the measured feed
+(<code>tanh(steamRatio&middot;FI_feed)</code>), so that in a flow stoppage the
+steam is shut off with the feed and the effect neither boils dry nor floods.
+All controllers are smooth (<code>Evaporation.SmoothPI</code>) and share the
+hold input <code>holdControllers</code>.</p>
+</html>"));
+end PartialSlice;

@@ -1,0 +1,122 @@
+within TrackingBox.Evaporation.BaseClasses;
+partial model PartialVessel "Well-mixed liquor volume boiling into a vapour space that vents through a vapour line"
+  import TrackingBox.Media.BlackLiquor;
+  import TrackingBox.Media.Water.Saturation;
+  import TrackingBox.Evaporation.Functions;
+  constant Real R_w(unit="J/(kg.K)") = 461.5 "Specific gas constant of water vapour";
+  parameter TrackingBox.Units.Area A_sump = 2 "Cross-section of the liquid space above the level's zero";
+  parameter TrackingBox.Units.Volume V_hold = 0 "Liquid held below the level's zero (film, sump cone, piping)";
+  parameter TrackingBox.Units.Height H = 3 "Height of the liquid space above the level's zero (the level must stay in 0..H)";
+  parameter TrackingBox.Units.Height z_out = 0 "Elevation of the level's zero above the outlet port (port_b)";
+  parameter TrackingBox.Units.Volume V_vap = 5 "Volume of the vapour space";
+  parameter TrackingBox.Units.Temperature T_ref_vap = 373.15 "Temperature in the ideal-gas law of the vapour space (fixed: it sets the vapour capacity only)";
+  parameter TrackingBox.Units.MassFlowRate m_flow_vap_nominal = 1 "Vapour-line flow at dp_vap_nominal";
+  parameter TrackingBox.Units.PressureDifference dp_vap_nominal = 5000 "Vapour-line pressure drop at m_flow_vap_nominal";
+  parameter TrackingBox.Units.PressureDifference dp_vap_small = 100 "Regularisation of the vapour-line square-root law";
+  parameter Real K_ev(unit="kg/(s.K)") = 5 "Evaporation per kelvin of liquid temperature above the boiling point";
+  parameter TrackingBox.Units.TemperatureDifference dT_smooth = 0.01 "Smoothing width of the evaporation law";
+  parameter TrackingBox.Units.TemperatureDifference dBPR = 0 "Offset added to the boiling point (plant: composition effects)";
+  parameter Real epsBPR(unit="1") = 0 "Relative error of the boiling-point rise (plant)";
+  parameter TrackingBox.Units.ThermalConductance UA_loss = 0 "Heat-loss conductance of the liquid to ambient";
+  parameter TrackingBox.Units.Temperature T_amb = 293.15 "Ambient temperature";
+  parameter TrackingBox.Units.Acceleration g = 9.81 "Gravity";
+  parameter TrackingBox.Units.MassFlowRate m_flow_corr = 0 "Correction flow into the liquid (state compensation), added to m_flow_corr_in";
+  parameter Boolean use_m_flow_corr_in = false "= true to add the input m_flow_corr_in to the correction flow";
+  parameter TrackingBox.Units.Fraction x_start = 0.5 "Initial dry-solids fraction";
+  parameter TrackingBox.Units.Temperature T_start = 373.15 "Initial liquid temperature";
+  parameter TrackingBox.Units.Height L_start = 1 "Initial level";
+  parameter TrackingBox.Units.Pressure p_start = 1e5 "Initial vapour-space pressure";
+  parameter TrackingBox.Units.Mass M_start = BlackLiquor.density(x_start, T_start)*(V_hold + A_sump*L_start) "Initial liquid mass";
+  parameter TrackingBox.Units.Mass M_vap_start = p_start*V_vap/(R_w*T_ref_vap) "Initial vapour mass";
+  TrackingBox.Evaporation.LiquorPort_a port_a "Liquid inlet (enters the vapour space from above)";
+  TrackingBox.Evaporation.LiquorPort_b port_b "Liquid outlet at the bottom";
+  TrackingBox.Interfaces.FluidPort_b port_v "Vapour outlet";
+  TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside";
+  TrackingBox.Interfaces.RealOutput dp_level(unit="Pa") "Hydrostatic pressure of the liquid above the level's zero (what a dP transmitter sees)";
+  TrackingBox.Units.Mass M(start=M_start, fixed=true) "Liquid mass";
+  TrackingBox.Units.Mass M_s(start=x_start*M_start, fixed=true) "Dry-solids mass";
+  TrackingBox.Units.Temperature T(start=T_start, fixed=true) "Liquid temperature";
+  TrackingBox.Units.Mass M_vap(start=M_vap_start, fixed=true) "Vapour mass in the vapour space";
+  TrackingBox.Units.Fraction x "Dry-solids fraction";
+  Real h(unit="J/kg") "Specific enthalpy of the liquid";
+  Real h_in(unit="J/kg") "Specific enthalpy of the inflow";
+  Real h_vap(unit="J/kg") "Specific enthalpy of the vapour leaving the liquid";
+  Real dhdx(unit="J/kg") "Partial derivative of h in x";
+  TrackingBox.Units.SpecificHeatCapacity cp "Specific heat capacity of the liquid";
+  TrackingBox.Units.Density rho "Density of the liquid";
+  TrackingBox.Units.Height level "Level above the level's zero";
+  TrackingBox.Units.Pressure p_vap "Vapour-space pressure";
+  TrackingBox.Units.Temperature T_vap "Saturation temperature of the vapour space";
+  TrackingBox.Units.TemperatureDifference BPR "Boiling-point rise";
+  TrackingBox.Units.Temperature T_b "Boiling temperature of the liquid";
+  TrackingBox.Units.MassFlowRate m_in "Inflow";
+  TrackingBox.Units.MassFlowRate m_out "Outflow at the bottom";
+  TrackingBox.Units.MassFlowRate m_ev "Evaporation (or flash) rate";
+  TrackingBox.Units.MassFlowRate m_vap_out "Vapour flow out through the vapour line";
+  TrackingBox.Units.MassFlowRate m_corr "Correction flow (at the vessel's own x and T)";
+  TrackingBox.Units.HeatFlowRate Q "Heat into the liquid (from a steam chest; 0 in tanks)";
+  TrackingBox.Units.HeatFlowRate Q_loss "Heat loss to ambient";
+  Real dMdt(unit="kg/s") "Rate of change of the liquid mass";
+  Real dMsdt(unit="kg/s") "Rate of change of the dry-solids mass";
+  Real dxdt(unit="1/s") "Rate of change of the dry-solids fraction";
+protected
+  TrackingBox.Interfaces.RealInput m_flow_corr_internal(unit="kg/s") "Correction flow from outside (0 without input)";
+equation
+  connect(m_flow_corr_in, m_flow_corr_internal);
+  if not use_m_flow_corr_in then
+    m_flow_corr_internal = 0;
+  end if;
+  m_corr = m_flow_corr + m_flow_corr_internal;
+  m_in = port_a.m_flow;
+  m_out = -port_b.m_flow;
+  x = M_s/M;
+  h = BlackLiquor.specificEnthalpy(x, T);
+  h_in = BlackLiquor.specificEnthalpy(port_a.x, port_a.T);
+  dhdx = Functions.enthalpyDerivativeX(x, T);
+  cp = BlackLiquor.cp(x, T);
+  rho = BlackLiquor.density(x, T);
+  level = (M/rho - V_hold)/A_sump;
+  dp_level = rho*g*level;
+  p_vap = M_vap*R_w*T_ref_vap/V_vap;
+  T_vap = Saturation.TSat(p_vap);
+  h_vap = Saturation.hVapour(T_vap);
+  BPR = BlackLiquor.boilingPointRise(x, p_vap);
+  T_b = T_vap + dBPR + (1 + epsBPR)*BPR;
+  m_ev = K_ev*Functions.splus(T - T_b, dT_smooth);
+  m_vap_out = m_flow_vap_nominal*Functions.regRoot(p_vap - port_v.p, dp_vap_small)/sqrt(dp_vap_nominal);
+  der(M_vap) = m_ev - m_vap_out;
+  port_v.m_flow = -m_vap_out;
+  port_v.T = T_vap;
+  port_a.p = p_vap;
+  port_b.p = p_vap + rho*g*(level + z_out);
+  port_b.x = x;
+  port_b.T = T;
+  Q_loss = UA_loss*(T - T_amb);
+  dMdt = m_in - m_out - m_ev + m_corr;
+  dMsdt = port_a.x*m_in - x*m_out + x*m_corr;
+  der(M) = dMdt;
+  der(M_s) = dMsdt;
+  dxdt = (dMsdt - x*dMdt)/M;
+  M*cp*der(T) + M*dhdx*dxdt + h*dMdt = m_in*h_in - m_out*h - m_ev*h_vap + m_corr*h + Q - Q_loss;
+  annotation (Documentation(info="<html>
+<p>States: liquid mass <code>M</code>, dry-solids mass <code>M_s</code>,
+temperature <code>T</code> and vapour mass <code>M_vap</code>. The energy
+balance is that of the inventory <code>M&middot;h(x, T)</code>:
+<code>M&middot;cp&middot;dT/dt + M&middot;(&part;h/&part;x)&middot;dx/dt + h&middot;dM/dt</code>
+equals the enthalpy flows, so it is exact, not only for slowly varying
+<code>x</code>. The liquid boils as a smooth relaxation towards the boiling
+point: <code>m_ev = K_ev&middot;s&#8314;(T - T_b)</code> with
+<code>T_b = TSat(p_vap) + dBPR + (1 + epsBPR)&middot;BPR(x, p_vap)</code>;
+the vapour leaves the liquid with <code>hVapour(TSat(p_vap))</code>.</p>
+<p>The vapour space is an ideal gas at the fixed temperature
+<code>T_ref_vap</code> (<code>p_vap = M_vap&middot;R_w&middot;T_ref_vap/V_vap</code>):
+the vapour mass balance is exact; the fixed temperature only sets how fast the
+pressure moves. The vapour line follows the regularised square-root law.
+The correction flow <code>m_corr</code> enters at the vessel's own
+<code>x</code> and <code>h</code>: it changes the mass, never the composition
+or the temperature.</p>
+<p>Level: <code>(M/&rho; - V_hold)/A_sump</code>; <code>dp_level =
+&rho;&middot;g&middot;level</code> is what a dP transmitter with its lower tap at the
+level's zero sees.</p>
+</html>"));
+end PartialVessel;

@@ -1,0 +1,3 @@
+within TrackingBox.Evaporation;
+package Functions "Smooth helper functions of the evaporation components"
+end Functions;

@@ -1,0 +1,14 @@
+within TrackingBox.Evaporation;
+block LevelTransmitter "dP level transmitter with a fixed calibration density"
+  parameter TrackingBox.Units.Density rho_cal = 1450 "Calibration density";
+  parameter TrackingBox.Units.PressureDifference dp0 = 0 "Zero offset of the transmitter (dP at zero level)";
+  parameter TrackingBox.Units.Acceleration g = 9.81 "Gravity";
+  TrackingBox.Interfaces.RealInput dp(unit="Pa") "Hydrostatic pressure difference between the taps";
+  TrackingBox.Interfaces.RealOutput y(unit="m") "Level reading";
+equation
+  y = (dp - dp0)/(rho_cal*g);
+  annotation (Documentation(info="<html>
+<p><code>L_m = (dP - dP0)/(&rho;_cal&middot;g)</code>: a liquor denser than
+<code>rho_cal</code> reads high, a lighter one (or foam) reads low.</p>
+</html>"));
+end LevelTransmitter;

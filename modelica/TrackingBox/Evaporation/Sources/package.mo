@@ -1,0 +1,3 @@
+within TrackingBox.Evaporation;
+package Sources "Liquor pressure boundaries"
+end Sources;
