@@ -72,15 +72,15 @@ FloatArray = npt.NDArray[np.float64]
 
 # --------------------------------------------------------------------------- operating point
 
-#: The slice's operating point (the notes' last effect on the liquor side, 1/10 scale):
-#: feed (kg/s), feed dry solids (1), feed temperature (K), steam pressure (Pa),
-#: next-effect vapour pressure (Pa).
+#: The slice's operating point (the notes' last effect on the liquor side, 1/10 scale; the
+#: design point of ``Benches.Evaporator``): feed (kg/s), feed dry solids (1), feed
+#: temperature (K), steam header pressure (Pa), next-effect vapour pressure (Pa).
 NOMINAL: dict[str, float] = {
     "feedFlowSet": 2.0,
     "feedDS": 0.52,
-    "feedT": 377.15,
-    "steamP": 3.5e5,
-    "nextP": 1.46e5,
+    "feedT": 368.15,
+    "steamP": 4.0e5,
+    "nextP": 1.4e5,
 }
 
 #: Feed setpoint during a stoppage, as a fraction of the nominal feed ("to ~0").
@@ -164,8 +164,8 @@ def evaporator_inputs(t: FloatArray, rng: np.random.Generator, warmup: float,
       (:func:`stoppage_factor`).
     * ``feedDS``: 52 % with moves in 50-55 % every ~8 h and a 0.4 %DS drift.
     * ``feedT``: nominal with a 1.5 K drift (3 h correlation).
-    * ``steamP``: 3.5 bar(a) with moves in 3.1-4.2 bar every ~12 h and a 0.05 bar drift
-      (kept in 3.0-4.5 bar).
+    * ``steamP``: 4 bar(a) header with moves in 3.5-4.4 bar every ~12 h and a 0.05 bar
+      drift (kept in 3.0-4.5 bar).
     * ``nextP``: nominal with a 3 kPa drift (2 h correlation).
     """
     tm = np.maximum(t - warmup, 0.0)
@@ -178,7 +178,7 @@ def evaporator_inputs(t: FloatArray, rng: np.random.Generator, warmup: float,
     ds = sc.moves(tm, rng, base=nominal["feedDS"], low=0.50, high=0.55, mean_interval=8 * 3600.0,
                   ramp_fraction=0.8, ramp_duration=(1800.0, 5400.0), hold_start=3 * 3600.0)
     ds = np.clip(ds + sc.drift(tm, rng, sigma=0.004, time_constant=3600.0), 0.49, 0.56)
-    steam = sc.moves(tm, rng, base=nominal["steamP"], low=3.1e5, high=4.2e5, mean_interval=12 * 3600.0,
+    steam = sc.moves(tm, rng, base=nominal["steamP"], low=3.5e5, high=4.4e5, mean_interval=12 * 3600.0,
                      ramp_fraction=0.7, ramp_duration=(600.0, 3600.0), hold_start=4 * 3600.0)
     steam = np.clip(steam + sc.drift(tm, rng, sigma=5e3, time_constant=1800.0), 3.0e5, 4.5e5)
     return {
@@ -228,9 +228,12 @@ OUTPUTS = (
     _s("ZI-6150", "ZI_outlet", "other"),
 )
 
-#: Level tag -> (twin level output, twin correction-flow input, gain kg/s per m).
+#: Level tag -> (twin level output, twin correction-flow input, gain kg/s per m). The
+#: vessels hold ~4350 (effect, 3 m2 at ~1450 kg/m3), ~2900 (flash tank) and ~950
+#: (condensate tank) kg per m of level: the gains close a level gap in 8-25 min and
+#: turn the 5 mm level noise into 0.01-0.03 kg/s of correction.
 STATES = (
-    StateSpec("LI-6111", "LI_body", "body_m_flow_corr", 4.0),
+    StateSpec("LI-6111", "LI_body", "body_m_flow_corr", 6.0),
     StateSpec("LI-6151", "LI_flash", "flash_m_flow_corr", 2.0),
     StateSpec("LI-6125", "LI_condensate", "cond_m_flow_corr", 2.0),
 )
@@ -247,7 +250,7 @@ CANDIDATES: dict[str, tuple[float, float]] = {
 RF_BOUNDS = (0.0, 6.0e-4)
 
 #: Plant variables recorded in truth.json over time: twin parameter -> plant variable.
-TRAJECTORIES: dict[str, str] = {"effect.Rf": "effect.Rf"}
+TRAJECTORIES: dict[str, str] = {"effect.Rf": "Rf_true"}
 
 #: Feed flow below this fraction of nominal is a stoppage; the settle time after one.
 STOPPAGE_BELOW = 0.3
@@ -266,7 +269,9 @@ DEFINITION = BenchDefinition(
     parameters=(ParameterSpec("effect.Rf", 0.0, *RF_BOUNDS),),  # completed from the twin FMU in build()
     scenario=_scenario,
     states=STATES,
-    data=DataRules(stoppage=StoppageRule("FI-6110", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE)),
+    # a tag silent for longer than 1.5 heartbeats is missing (a communication loss), not a steady value
+    data=DataRules(stoppage=StoppageRule("FI-6110", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE),
+                   max_gap=1.5 * 600.0),
     tracking=TrackingSettings(hold_until=3600.0),
 )
 
@@ -293,35 +298,43 @@ def candidate_parameters(twin_info: Any) -> tuple[ParameterSpec, ...]:
     return tuple(out)
 
 
-def _export(dense: pd.DataFrame, tags: Sequence[Sensor], rng: np.random.Generator,
-            start: pd.Timestamp) -> pd.DataFrame:
-    """The dense noisy frame as a plant historian exports it (ISO 8601 timestamps)."""
-    from . import historian
+#: Heartbeat of every tag (s): the historian archives a steady tag at least this often.
+HEARTBEAT = 600.0
+#: The historian export's CSV form (``wide``: ``time`` + one column per tag, empty where
+#: nothing was archived).
+MEASUREMENT_FORM = "wide"
 
-    return historian.export_frame(dense, start=start, rng=rng, settings=historian_settings(tags))
 
+def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
+    """Per-tag scan, dead band and heartbeat for :func:`~trackingbox.benches.historian.export_history`.
 
-def historian_settings(tags: Sequence[Sensor]) -> dict[str, Any]:
-    """Per-tag historian settings: scan interval, dead band, heartbeat (see :mod:`.historian`)."""
-    from . import historian
+    Valve positions and setpoints are scanned every 2 s (dead band 0.2 % / 0.5 % of the
+    nominal feed), flows and levels every 5 s (dead band 1 % / 5 mm), pressures and
+    temperatures every 10 s (0.3 kPa / 0.2 K), the dry-solids analysers every 60 s
+    (0.2 %DS); every tag has the heartbeat :data:`HEARTBEAT`. Two communication losses
+    a day on average (5-45 min), half of them taking every tag.
+    """
+    from .historian import HistorianSettings, TagSettings
 
-    settings = {}
+    f0 = NOMINAL["feedFlowSet"]
+    out = {}
     for s in tags:
-        kind = s.kind
-        if s.tag.endswith(".SP") or s.tag.startswith("ZI"):
-            interval, band = 5.0, 0.002
-        elif kind == "flow":
-            interval, band = 5.0, 0.01
-        elif kind == "pressure":
-            interval, band = 10.0, 300.0
-        elif kind == "temperature":
-            interval, band = 10.0, 0.2
-        elif kind == "level":
-            interval, band = 5.0, 0.005
-        else:  # dry solids: a slow analyser
-            interval, band = 60.0, 0.002
-        settings[s.tag] = historian.TagSettings(interval=interval, deadband=band)
-    return settings
+        if s.tag.endswith(".SP"):
+            scan, band = 2.0, 0.005 * f0
+        elif s.tag.startswith("ZI"):
+            scan, band = 2.0, 0.002
+        elif s.kind == "flow":
+            scan, band = 5.0, 0.01 * f0
+        elif s.kind == "level":
+            scan, band = 5.0, 0.005
+        elif s.kind == "pressure":
+            scan, band = 10.0, 300.0
+        elif s.kind == "temperature":
+            scan, band = 10.0, 0.2
+        else:  # dry-solids analysers
+            scan, band = 60.0, 0.002
+        out[s.tag] = TagSettings(scan=scan, jitter=0.2, deadband=band, heartbeat=HEARTBEAT)
+    return HistorianSettings(tags=out, start=start, seed=int(seed))
 
 
 def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str, float] | None = None,
@@ -370,8 +383,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     for given, what in ((plant_fmu, "plant"), (twin_fmu, "twin")):
         if given is not None and not Path(given).is_file():
             raise FMUError(f"{what} FMU {given} for bench 'evaporator' does not exist")
-    scenario_rng, noise_rng, export_rng = (np.random.default_rng(s)
-                                           for s in np.random.SeedSequence(int(seed)).spawn(3))
+    scenario_rng, noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(2))
 
     with tempfile.TemporaryDirectory(prefix="bench-evaporator-") as tmpdir:
         stage = Path(tmpdir)
@@ -420,10 +432,11 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
             sigma, rel = s.noise
             dense[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
         dense_frame = pd.DataFrame(dense)
+        history = None
         if historian_export:
-            measurements = _export(dense_frame, (*d.inputs, *d.outputs), export_rng, pd.Timestamp(start))
-        else:
-            measurements = dense_frame
+            from .historian import export_history
+
+            history = export_history(dense_frame, historian_settings((*d.inputs, *d.outputs), start, seed))
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas
 
@@ -438,6 +451,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
                      "plant_model": d.plant_model, "twin_model": d.twin_model, "overrides": overrides,
                      "parameters": truth, "plant_parameters": plant_params, "trajectories": trajectories,
                      "stoppages": [s.to_json() for s in stoppages],
+                     "historian": history.to_json() if history is not None else None,
                      "plant_simulation_seconds": plant_seconds}
 
         # spec
@@ -464,9 +478,13 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         for what, name in ((staged["plant"], "plant.fmu"), (staged["twin"], "twin.fmu")):
             with atomic_path(out / name) as tmp:
                 shutil.copyfile(what, tmp)
-        for df, name in ((measurements, "measurements.csv"), (plant_inputs, "plant_inputs.csv")):
-            with atomic_path(out / name) as tmp:
-                df.to_csv(tmp, index=False, float_format="%.9g")
+        if history is not None:
+            history.write(out / "measurements.csv", MEASUREMENT_FORM)
+        else:
+            with atomic_path(out / "measurements.csv") as tmp:
+                dense_frame.to_csv(tmp, index=False, float_format="%.9g")
+        with atomic_path(out / "plant_inputs.csv") as tmp:
+            plant_inputs.to_csv(tmp, index=False, float_format="%.9g")
         write_text_atomic(out / "truth.json", json.dumps(truth_doc, indent=2, sort_keys=True) + "\n")
         write_text_atomic(out / "spec.toml", spec_text)
 

@@ -35,8 +35,9 @@ FloatArray = npt.NDArray[np.float64]
 HEAT_TRANSFER_TAGS = ("FI-6125", "TI-6111", "PI-6111")
 #: Valve capacity -> tags it moves (closed loop: the valve position; frozen: the flow).
 VALVE_TAGS = {"inletValve.KvMax": ("ZI-6110", "FI-6110"), "outletValve.KvMax": ("ZI-6150", "FI-6150")}
-#: Twin parameter giving each level's vessel height (m); levels must stay in [0, height].
-VESSEL_HEIGHT = {"LI-6111": "effect.levelMax", "LI-6151": "flashTank.levelMax", "LI-6125": "condTank.levelMax"}
+#: Level tag -> (twin parameter of its vessel's height, the height declared in the library, m);
+#: levels must stay in [0, height]. The FMU's value is used when it exports the parameter.
+VESSEL_HEIGHT = {"LI-6111": ("effect.H", 3.0), "LI-6151": ("flash.H", 3.0), "LI-6125": ("condTank.H", 2.0)}
 
 
 @dataclass(frozen=True)
@@ -175,15 +176,15 @@ def assess(spec: Any, tracking_csv: str | Path, truth: Mapping[str, Any], *,
 
 
 def vessel_heights(twin_info: Any) -> dict[str, float]:
-    """Level tag -> vessel height from the twin FMU's parameters (those it has)."""
+    """Level tag -> vessel height (m), from the twin FMU's parameters where it exports them."""
     out = {}
-    for tag, name in VESSEL_HEIGHT.items():
+    for tag, (name, declared) in VESSEL_HEIGHT.items():
         try:
             var = twin_info.variable(name)
-        except FMUError:  # a twin without that parameter: no height check for this level
+        except FMUError:  # not exported (no equation uses it): the library's declared height
+            out[tag] = declared
             continue
-        if var is not None and var.start is not None:
-            out[tag] = float(var.start)
+        out[tag] = float(var.start) if var.start is not None else declared
     return out
 
 
