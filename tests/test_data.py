@@ -256,3 +256,201 @@ def test_view_as_a_table_and_an_open_ended_window(tmp_path):
     # scored: from 10 s on, not at the stopped 20 s
     assert v.to_frame(scored=True)["TI"].isna().tolist() == [True, False, True, False, False, False]
     assert v.to_frame(scored=True)["FI"].tolist() == fi.tolist()  # not an output: unchanged
+
+
+# --------------------------------------------------------------------------- historian exports
+# A plant historian's long export (tag,time,value; ISO 8601 UTC; an empty value is a bad-quality
+# event) read by hand-checkable examples: the expected values below are worked out from the rows.
+
+from trackingbox.data import heartbeat_max_gap  # noqa: E402
+
+START = pd.Timestamp("2026-03-01T10:00:00+00:00")
+
+
+def _long(records):
+    """CSV text of ``(tag, seconds from START, value or None)`` rows, in the order given."""
+    lines = ["tag,time,value"]
+    for tag, s, v in records:
+        stamp = (START + pd.Timedelta(seconds=s)).isoformat(timespec="milliseconds")
+        lines.append(f"{tag},{stamp},{'' if v is None else repr(float(v))}")
+    return "\n".join(lines) + "\n"
+
+
+# TI: exception-reported (heartbeat 600 s) with jittered timestamps: steady at 80 (archived by
+# heartbeat only), a step to 81 at 1250.4 s, a communication loss from 1900.2 s (bad event) to
+# 3100.7 s, then 82. LI: steady, heartbeat records, silent from 1200 to 2500 s with no bad event
+# (longer than 1.5 x 600 s: missing). FI: the twin's input, every 600 s.
+HISTORY = (
+    [("FI", s, 5.0) for s in (0.0, 600.0, 1200.0, 1800.0, 2400.0, 3000.0, 3600.0, 3700.0)]
+    + [("LI", 0.0, 1.0), ("LI", 600.0, 1.0), ("LI", 1200.0, 1.0), ("LI", 2500.0, 1.5),
+       ("LI", 3100.0, 1.5), ("LI", 3700.0, 1.5)]
+    + [("TI", 0.0, 80.0), ("TI", 597.3, 80.0), ("TI", 1190.8, 80.0), ("TI", 1250.4, 81.0),
+       ("TI", 1850.9, 81.0), ("TI", 1900.2, None), ("TI", 3100.7, 82.0), ("TI", 3700.0, 82.0)]
+)
+
+
+def test_long_export_is_read_wide_with_its_bad_events(tmp_path):
+    text = "tag,time,value\nTI,2026-03-01T10:00:00.000+00:00,80\nTI,2026-03-01T10:00:09.250+00:00,\n" \
+           "TI,2026-03-01T10:01:00.000+00:00,81.5\nFI,2026-03-01T09:59:59.500+00:00,5\n" \
+           "FI,2026-03-01T10:00:30.000+00:00,4\n"
+    df = read_table(write(tmp_path, text), required=["TI", "FI"], allow_nan=True)
+    # seconds from the earliest timestamp (FI's, on line 5), one row per time
+    assert df["time"].tolist() == [0.0, 0.5, 9.75, 30.5, 60.5]
+    assert list(df.columns) == ["time", "TI", "FI"]
+    np.testing.assert_array_equal(df["TI"], [np.nan, 80.0, np.nan, np.nan, 81.5])
+    np.testing.assert_array_equal(df["FI"], [5.0, np.nan, np.nan, 4.0, np.nan])
+    assert df.attrs["breaks"] == {"TI": (9.75,)}
+    assert df.attrs["t0"] == pd.Timestamp("2026-03-01T09:59:59.500+00:00")
+
+
+def test_long_export_problems_name_tag_and_line(tmp_path):
+    text = "tag,time,value\nTI,2026-03-01T10:00:00+00:00,80\nTI,2026-03-01T10:00:00+00:00,81\n" \
+           "FI,2026-03-01T10:00:10+00:00,x\nFI,2026-03-01T10:00:05+00:00,4\nPI,2026-03-01T10:00:05+00:00,\n"
+    with pytest.raises(DataError) as err:
+        read_table(write(tmp_path, text), required=["PIX"])
+    msg = str(err.value)
+    assert "5 problems" in msg, msg
+    assert "tag 'TI' in measurements.csv has duplicate times: line 3 repeats 0 s" in msg
+    assert "column 'value' in measurements.csv has non-numeric values: 'x' on line 4" in msg
+    assert "tag 'FI' in measurements.csv goes backwards: line 5 has 5 s after 10 s on line 4" in msg
+    assert "tag 'PI' in measurements.csv has 1 bad-quality value (empty 'value'), first on line 6" in msg
+    assert "tag 'PIX' is missing from measurements.csv (did you mean 'PI'?)" in msg
+
+
+def test_resample_hold_keeps_the_last_value_and_stops_at_a_bad_event():
+    df = pd.DataFrame({"time": [0.0, 100.0, 130.0, 400.0], "y": [1.0, 2.0, 3.0, 4.0]})
+    g = [0.0, 50.0, 100.0, 120.0, 200.0, 400.0, 450.0, 600.0]
+    # gap limit 250: 130 -> 400 (270 s) is a gap; after the last sample hold for 250 s (to 650)
+    out = resample(df, g, max_gap=250.0, method="hold")["y"].tolist()
+    np.testing.assert_array_equal(out, [1.0, 1.0, 2.0, 2.0, np.nan, 4.0, 4.0, 4.0])
+    # a bad event at 150 s: the loss begins there (the silence before it is 20 s, not a gap)
+    out = resample(df, g + [140.0], max_gap=250.0, method="hold", breaks={"y": [150.0]})["y"].tolist()
+    np.testing.assert_array_equal(out, [1.0, 1.0, 2.0, 2.0, np.nan, 4.0, 4.0, 4.0, 3.0])
+    # linear interpolation never crosses the bad event either
+    out = resample(df, [50.0, 140.0, 200.0], breaks={"y": [150.0]})["y"].tolist()
+    np.testing.assert_array_equal(out, [1.5, np.nan, np.nan])
+
+
+def _history_spec(tmp_path, records, heartbeat, **rules):
+    path = write(tmp_path, _long(records))
+    return Spec(path=tmp_path / "spec.toml", twin=tmp_path / "twin.fmu", measurements=path, sample_time=10.0,
+                inputs={"FI": "u"}, outputs={"TI": "y"}, data=DataRules(heartbeat=heartbeat, **rules))
+
+
+def test_view_of_an_exception_reported_history(tmp_path):
+    spec = _history_spec(tmp_path, HISTORY, {"*": 600.0})
+    v = MeasurementView.from_spec(spec, tags=["LI"])
+    g = v.grid
+    assert g[0] == 0.0 and g[-1] == 3700.0
+    assert v.max_gap == {"FI": 900.0, "TI": 900.0, "LI": 900.0}
+    assert v.method == {"FI": "hold", "TI": "hold", "LI": "hold"}
+    # TI: steady 80 archived by heartbeat only is NOT a gap; the step is held from its record;
+    # the communication loss stays NaN from the bad event to the next record
+    expected_ti = np.select([g < 1250.4, g < 1900.2, g < 3100.7], [80.0, 81.0, np.nan], 82.0)
+    np.testing.assert_array_equal(v.values("TI"), expected_ti)
+    assert v.gaps("TI") == [(1910.0, 3100.0)]
+    # LI: 1300 s of silence without a bad event is longer than 1.5 x 600 s: missing in between
+    expected_li = np.select([g <= 1200.0, g < 2500.0], [1.0, np.nan], 1.5)
+    np.testing.assert_array_equal(v.values("LI"), expected_li)
+    # the input is held at its records and never NaN
+    assert (v.inputs["u"] == 5.0).all()
+    # scored: every valid TI point
+    assert v.scored["TI"].tolist() == np.isfinite(expected_ti).tolist()
+
+
+def test_steady_dead_banded_tag_is_not_a_gap_but_the_median_rule_made_it_one(tmp_path):
+    # TI moves for 5 minutes (a record every 10 s), then is steady: heartbeat records every 600 s
+    busy = [("TI", float(s), 80.0 + s / 100.0) for s in range(0, 300, 10)]
+    steady = [("TI", s, 82.9) for s in (890.0, 1490.0, 2090.0)]
+    fi = [("FI", float(s), 5.0) for s in range(0, 2100, 600)] + [("FI", 2090.0, 5.0)]
+    records = fi + busy + steady
+    old = MeasurementView.from_spec(_history_spec(tmp_path, records, {}))
+    # the median rule: median spacing 10 s -> gaps longer than 25 s; the steady stretch is "missing"
+    quiet = (old.grid > 290) & (old.grid < 2090) & ~np.isin(old.grid, [890.0, 1490.0])  # the records stay
+    assert old.max_gap["TI"] == 25.0 and np.isnan(old.values("TI")[quiet]).all()
+    new = MeasurementView.from_spec(_history_spec(tmp_path, records, {"TI": 600.0, "FI": 600.0}))
+    ti = new.values("TI")
+    g = new.grid
+    # held: each busy record until the next (80 + s/100 at s = 0, 10, .., 290 s), then 82.9, the last
+    # busy value, confirmed by the heartbeat records at 890, 1490 and 2090 s: never missing
+    np.testing.assert_allclose(ti[g < 300], 80.0 + np.floor(g[g < 300] / 10.0) / 10.0)
+    np.testing.assert_allclose(ti[g >= 300], 82.9)
+    assert not np.isnan(ti).any()
+
+
+def test_jittered_records_of_one_tag_are_used_at_their_own_times(tmp_path):
+    # FI and TI archived at scan times moved by jitter; hold reconstruction at each grid point takes
+    # the record at or before it
+    ti = [("TI", 0.0, 1.0), ("TI", 9.7, 2.0), ("TI", 20.3, 3.0), ("TI", 29.9, 4.0), ("TI", 40.2, 5.0)]
+    fi = [("FI", 0.4, 5.0), ("FI", 40.0, 5.0)]
+    v = MeasurementView.from_spec(_history_spec(tmp_path, ti + fi, {"*": 60.0}))
+    assert v.grid.tolist() == [0.0, 10.0, 20.0, 30.0, 40.0]
+    assert v.values("TI").tolist() == [1.0, 2.0, 2.0, 4.0, 4.0]
+    # FI's first record is at 0.4 s: nothing is known before it
+    assert np.isnan(v.values("FI")[0]) and v.values("FI")[1:].tolist() == [5.0] * 4
+
+
+def test_stoppage_of_a_flow_falling_to_zero_in_a_minute_is_masked(tmp_path):
+    """The feed flow ramps from 5 to 0 kg/s over 60 s at 1000 s, stays at ~0 for 30 min, ramps back.
+
+    Archived by exception (dead band 0.05 kg/s, scan 2 s, heartbeat 600 s). Rule: stopped below
+    0.5 kg/s, 300 s settle. By hand: the ramp crosses 0.5 kg/s at 1054 s (down) and at 2866 s
+    (up); with held values the grid (10 s) is below 0.5 kg/s from 1060 s (the record at 1060 s is 0;
+    1050 s holds 0.83) to 2860 s (2870 s holds 0.83): the mask runs from 1060 s to 2860 + 300 s.
+    """
+    t = np.arange(0.0, 4000.0, 2.0)
+    flow = np.interp(t, [0.0, 1000.0, 1060.0, 2860.0, 2920.0, 4000.0], [5.0, 5.0, 0.0, 0.0, 5.0, 5.0])
+    records, last_t, last_v = [], -1e9, None
+    for s, f in zip(t, flow):  # exception reporting written out by hand
+        if last_v is None or abs(f - last_v) > 0.05 or s - last_t >= 600.0:
+            records.append(("FI", float(s), float(f)))
+            last_t, last_v = s, f
+    records += [("TI", float(s), 80.0) for s in range(0, 4000, 600)] + [("TI", 3998.0, 80.0)]
+    spec = _history_spec(tmp_path, records, {"*": 600.0}, stoppage=StoppageRule("FI", 0.5, 300.0))
+    v = MeasurementView.from_spec(spec)
+    stopped = v.grid[v.stopped]
+    assert stopped[0] == 1060.0 and stopped[-1] == 3160.0
+    assert np.all(np.diff(stopped) == 10.0)  # one stretch
+    assert not v.scored["TI"][v.stopped].any()
+
+
+# --------------------------------------------------------------------------- [data] heartbeat in the spec
+
+from trackingbox.spec import loads_spec, write_spec  # noqa: E402
+
+SPEC_TOML = """
+twin = "twin.fmu"
+measurements = "m.csv"
+sample_time = 10.0
+[inputs]
+FI = "u"
+[outputs]
+TI = "y"
+[data]
+{data}
+"""
+
+
+def test_spec_heartbeat_for_every_tag_or_per_tag(tmp_path):
+    spec = loads_spec(SPEC_TOML.format(data="heartbeat = 600"), tmp_path / "s.toml", check_files=False)
+    assert spec.data.heartbeat_of("TI") == 600.0 and spec.data.heartbeat_of("FI") == 600.0
+    spec = loads_spec(SPEC_TOML.format(data="[data.heartbeat]\nTI = 900\n\"*\" = 300"), tmp_path / "s.toml",
+                      check_files=False)
+    assert spec.data.heartbeat_of("TI") == 900.0 and spec.data.heartbeat_of("FI") == 300.0
+    spec = loads_spec(SPEC_TOML.format(data="[data.heartbeat]\nTI = 900"), tmp_path / "s.toml", check_files=False)
+    assert spec.data.heartbeat_of("FI") is None
+    # written back and read again: the same rules
+    again = loads_spec(write_spec(spec, tmp_path / "back.toml").read_text(), tmp_path / "back.toml",
+                       check_files=False)
+    assert dict(again.data.heartbeat) == {"TI": 900.0}
+
+
+def test_spec_heartbeat_problems_are_named(tmp_path):
+    with pytest.raises(SpecError) as err:
+        loads_spec(SPEC_TOML.format(data="[data.heartbeat]\nTIX = 900\nFI = -1"), tmp_path / "s.toml",
+                   check_files=False)
+    msg = str(err.value)
+    assert "unknown tag 'TIX' in [data.heartbeat] (did you mean 'TI'?)" in msg
+    assert "'FI' in [data.heartbeat] must be > 0" in msg
+    with pytest.raises(SpecError, match="'heartbeat' in \\[data\\] must be a number"):
+        loads_spec(SPEC_TOML.format(data='heartbeat = "10 min"'), tmp_path / "s.toml", check_files=False)

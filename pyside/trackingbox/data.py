@@ -3,7 +3,12 @@
 A table is a CSV file with a ``time`` column and one numeric column per tag or
 FMU input. ``time`` is either seconds (floats) or ISO 8601 timestamps; timestamps
 are converted to seconds from the first row and the first timestamp is kept in
-``df.attrs["t0"]``.
+``df.attrs["t0"]``. A plant historian's *long* export (``tag,time,value``, one
+row per archived value, :mod:`trackingbox.benches.historian`) is read too: it is
+laid out wide (one row per time at which any tag was archived, NaN where a tag
+was not), and its bad-quality events (empty ``value``) are kept per tag in
+``df.attrs["breaks"]``: a tag's value is unknown from such an event until its
+next record, and nothing is interpolated across it.
 
 :func:`read_table` checks everything it can and reports *all* problems of a file
 in one :class:`~trackingbox.errors.DataError`, so a user fixes a file in one go.
@@ -20,7 +25,7 @@ import csv
 import logging
 import os
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Union
@@ -177,6 +182,8 @@ def read_table(
     if header is None:
         raise DataError(f"{what} file {path} is empty")
     raw.columns = [str(c).strip() for c in raw.columns]
+    if sorted(header) == list(LONG_COLUMNS):
+        return _read_long(raw, path, required=required, allow_nan=allow_nan, what=what)
 
     problems: list[str] = []
     kind = "tag" if what == "measurements" else "column"
@@ -241,7 +248,85 @@ def read_table(
     return out
 
 
-def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: float | None = None) -> pd.DataFrame:
+#: Columns of a historian's long export (any order).
+LONG_COLUMNS = ("tag", "time", "value")
+
+
+def _read_long(raw: pd.DataFrame, path: Path, *, required: Iterable[str], allow_nan: bool,
+               what: str) -> pd.DataFrame:
+    """The long form (``tag,time,value``) laid out wide, bad-quality events in ``attrs["breaks"]``."""
+    where = path.name
+    problems: list[str] = []
+    kind = "tag" if what == "measurements" else "column"
+    if len(raw) == 0:
+        raise DataError(f"{where} has a header but no data rows")
+    tags = raw["tag"].fillna("").astype(str).str.strip()
+    empty_tag = np.flatnonzero(tags.to_numpy() == "")
+    if empty_tag.size:
+        problems.append(f"column 'tag' in {where} has {_n(empty_tag.size, 'empty value')}, "
+                        f"first on line {_line(int(empty_tag[0]))}")
+    t, t0 = _parse_time(raw["time"], where, problems)
+    col = raw["value"]
+    na = col.isna().to_numpy()
+    values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
+    bad = np.flatnonzero(~na & np.isnan(values))
+    if bad.size:
+        cells = ", ".join(f"{col.iloc[i]!r} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
+        more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
+        problems.append(f"column 'value' in {where} has non-numeric values: {cells}{more}")
+    infinite = np.flatnonzero(np.isinf(values))
+    if infinite.size:
+        problems.append(f"column 'value' in {where} has infinite values, first on line {_line(int(infinite[0]))}")
+    names = list(dict.fromkeys(tags[tags != ""]))
+    for c in required:
+        if c not in names:
+            problems.append(f"{kind} {c!r} is missing from {where}{did_you_mean(c, names)}")
+    if t0 is not None:
+        # seconds from the earliest timestamp, not from the first row (the file is sorted by tag)
+        first = np.nanmin(t)
+        t0 = t0 + pd.Timedelta(seconds=float(first))
+        t = t - first
+    for name in names:
+        rows = np.flatnonzero((tags == name).to_numpy())
+        tt = t[rows]
+        ok = rows[np.isfinite(tt)]
+        d = np.diff(t[ok])
+        if np.any(d == 0):
+            i = int(ok[np.flatnonzero(d == 0)[0] + 1])
+            problems.append(f"tag {name!r} in {where} has duplicate times: line {_line(i)} repeats {_fmt(t[i])}")
+        if np.any(d < 0):
+            k = int(np.flatnonzero(d < 0)[0])
+            problems.append(f"tag {name!r} in {where} goes backwards: line {_line(int(ok[k + 1]))} has "
+                            f"{_fmt(t[ok[k + 1]])} after {_fmt(t[ok[k]])} on line {_line(int(ok[k]))}")
+        if not allow_nan and na[rows].any():
+            first_na = int(rows[np.flatnonzero(na[rows])[0]])
+            problems.append(f"{kind} {name!r} in {where} has {_n(int(na[rows].sum()), 'bad-quality value')} "
+                            f"(empty 'value'), first on line {_line(first_na)}")
+    if problems:
+        if len(problems) == 1:
+            raise DataError(problems[0])
+        raise DataError(f"{what} file {where} has {len(problems)} problems:\n  - " + "\n  - ".join(problems))
+    records = pd.DataFrame({"tag": tags.to_numpy(), "time": t, "value": values})
+    table = records.pivot(index="time", columns="tag", values="value").reindex(columns=names).sort_index()
+    out = pd.DataFrame({"time": table.index.to_numpy(dtype=float)})
+    for name in names:
+        out[name] = table[name].to_numpy(dtype=float)
+    bad_events = records[np.isnan(records["value"].to_numpy())]
+    out.attrs["t0"] = t0
+    out.attrs["source"] = str(path)
+    # tuples, not arrays: pandas compares attrs when it combines frames
+    out.attrs["breaks"] = {str(name): tuple(sorted(float(x) for x in g["time"]))
+                           for name, g in bad_events.groupby("tag", sort=False)}
+    log.debug("read %s (long form): %d records, %d tags, %d bad-quality events", path, len(records), len(names),
+              len(bad_events))
+    return out
+
+
+Method = Literal["linear", "hold"]
+
+
+def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: float | None = None, *,
+             method: Method = "linear", breaks: Mapping[str, npt.ArrayLike] | None = None) -> pd.DataFrame:
     """Interpolate every column of *df* onto the time *grid*, never across long gaps.
 
     Method: for each column separately, take only that column's valid (non-NaN)
@@ -252,7 +337,15 @@ def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: f
       extrapolation), or
     * the two valid samples around it are more than *max_gap* seconds apart
       (the point is inside a gap; grid points that coincide with a valid sample
-      keep that sample's value).
+      keep that sample's value), or
+    * a bad-quality event of the column (*breaks*) lies between the point's two
+      valid samples (communication loss: the value is not known there).
+
+    With ``method="hold"`` (exception-reported tags) a grid point takes the
+    value of the column's last valid sample at or before it (sample-and-hold),
+    also after the last sample for up to *max_gap*; it is NaN before the first
+    sample, when the samples around it are more than *max_gap* apart, and from a
+    bad-quality event to the next valid sample.
 
     Parameters
     ----------
@@ -263,6 +356,11 @@ def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: f
     max_gap
         Longest span (s) between valid samples that may be bridged; ``None``:
         any gap is bridged.
+    method
+        ``"linear"`` interpolation or ``"hold"`` (sample-and-hold).
+    breaks
+        Column -> times (s) of bad-quality events (``df.attrs["breaks"]`` of a
+        historian's long export when not given).
 
     Returns
     -------
@@ -274,9 +372,17 @@ def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: f
     >>> df = pd.DataFrame({"time": [0.0, 10.0, 20.0, 100.0], "T": [0.0, 1.0, 2.0, 10.0]})
     >>> resample(df, [5.0, 15.0, 50.0], max_gap=30.0)["T"].tolist()
     [0.5, 1.5, nan]
+    >>> resample(df, [5.0, 15.0, 50.0], max_gap=30.0, method="hold")["T"].tolist()
+    [0.0, 1.0, nan]
+    >>> resample(df, [5.0, 15.0], breaks={"T": [12.0]}, method="hold")["T"].tolist()
+    [0.0, nan]
     """
     if "time" not in df.columns:
         raise DataError("cannot resample a table without a 'time' column")
+    if method not in ("linear", "hold"):
+        raise DataError(f"resample method must be 'linear' or 'hold', not {method!r}")
+    if breaks is None:
+        breaks = df.attrs.get("breaks") or {}
     g = np.asarray(grid, dtype=float).ravel()
     t = df["time"].to_numpy(dtype=float)
     out = {"time": g}
@@ -287,7 +393,10 @@ def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: f
         ok = ~np.isnan(y) & ~np.isnan(t)
         tv, yv = t[ok], y[ok]
         res = np.full(g.shape, np.nan)
-        if tv.size == 1:
+        b = np.sort(np.asarray(breaks.get(c, ()), dtype=float))
+        if method == "hold":
+            res = _hold(g, tv, yv, max_gap, b)
+        elif tv.size == 1:
             res[g == tv[0]] = yv[0]
         elif tv.size > 1:
             inside = (g >= tv[0]) & (g <= tv[-1])
@@ -298,10 +407,53 @@ def resample(df: pd.DataFrame, grid: Sequence[float] | npt.ArrayLike, max_gap: f
                 exact = np.isin(g, tv)
                 in_gap = inside & ((right - left) > max_gap) & ~exact
                 res[in_gap] = np.nan
+        if method == "linear" and b.size and tv.size:
+            res[_across_break(g, tv, b)] = np.nan
         out[c] = res
     result = pd.DataFrame(out)
     result.attrs.update(df.attrs)
     return result
+
+
+def _hold(g: npt.NDArray[np.float64], tv: npt.NDArray[np.float64], yv: npt.NDArray[np.float64],
+          max_gap: float | None, b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Sample-and-hold of the valid samples ``(tv, yv)`` on *g*.
+
+    A point holds its last sample (``left``) unless a bad-quality event (times
+    *b*) came after that sample, or the silence it sits in is longer than
+    *max_gap*: the silence runs from ``left`` to the next sample, or to the
+    next bad event if that comes first (the loss began there), or, after the
+    last sample, to the point itself.
+    """
+    res = np.full(g.shape, np.nan)
+    if tv.size == 0:
+        return res
+    i = np.searchsorted(tv, g, side="right") - 1
+    have = i >= 0
+    left = np.where(have, tv[np.clip(i, 0, None)], -np.inf)
+    res[have] = yv[i[have]]
+    exact = have & (left == g)
+    right = np.where(i + 1 < tv.size, tv[np.clip(i + 1, 0, tv.size - 1)], g)
+    if b.size:
+        k = np.searchsorted(b, left, side="right")  # first bad event after the last sample
+        next_break = np.where(k < b.size, b[np.clip(k, 0, b.size - 1)], np.inf)
+        res[have & ~exact & (next_break <= g)] = np.nan  # inside the loss
+        right = np.minimum(right, next_break)
+    if max_gap is not None:
+        res[have & ~exact & ((right - left) > max_gap)] = np.nan
+    return res
+
+
+def _across_break(g: npt.NDArray[np.float64], tv: npt.NDArray[np.float64],
+                  b: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+    """Grid points whose two valid samples around them have a bad-quality event (times *b*) between them."""
+    i = np.searchsorted(tv, g, side="right") - 1
+    left = np.where(i >= 0, tv[np.clip(i, 0, None)], -np.inf)
+    right = np.where(i + 1 < tv.size, tv[np.clip(i + 1, 0, tv.size - 1)], np.inf)
+    exact = (i >= 0) & (left == g)
+    k = np.searchsorted(b, left, side="right")
+    next_break = np.where(k < b.size, b[np.clip(k, 0, b.size - 1)], np.inf)
+    return (next_break < right) & ~exact
 
 
 def window(df: pd.DataFrame, start: float, stop: float) -> pd.DataFrame:
@@ -391,6 +543,30 @@ def fill_nan(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
 #: no ``[data] max_gap``; see :func:`default_max_gap`.
 GAP_FACTOR = 2.5
 
+#: Gap limit of an exception-reported tag, in multiples of its heartbeat; see :func:`heartbeat_max_gap`.
+HEARTBEAT_FACTOR = 1.5
+
+
+def heartbeat_max_gap(heartbeat: float) -> float:
+    """Longest silence of an exception-reported tag that is not missing data: 1.5 x its heartbeat.
+
+    A historian archives a tag when its value leaves the dead band around the last
+    archived value, and at the latest at the first scan after the heartbeat has
+    elapsed. A tag that is silent for a while is therefore steady, not missing,
+    as long as the silence is not longer than the heartbeat plus one scan (with
+    jitter). Its median sampling interval says nothing about that: a tag that
+    moves often has a short median and long quiet stretches, and the median
+    rule (:func:`default_max_gap`) would call every quiet stretch a gap. The
+    factor 1.5 covers a scan of up to 60 s with its jitter for heartbeats from
+    4 min up, and still calls one missed heartbeat (2 x) a gap. A
+    communication loss shorter than that is caught by the historian's
+    bad-quality event (the long export's empty ``value``), not by this rule.
+
+    >>> heartbeat_max_gap(600.0)
+    900.0
+    """
+    return HEARTBEAT_FACTOR * float(heartbeat)
+
 
 def default_max_gap(time: npt.ArrayLike, values: npt.ArrayLike) -> float:
     """Longest gap bridged in a tag when the spec sets no ``max_gap``: 2.5 x its median sampling interval.
@@ -446,12 +622,19 @@ class MeasurementView:
     grid : ndarray
         Grid times (s from the first sample).
     samples : dict of str to ndarray
-        Tag -> values on the grid: linear interpolation between the tag's own
-        valid samples, NaN outside them and inside gaps longer than
-        ``max_gap[tag]`` (:func:`resample`).
+        Tag -> values on the grid (:func:`resample`): linear interpolation
+        between the tag's own valid samples, or, for an exception-reported tag
+        (one with a ``[data] heartbeat``), its last archived value held
+        (sample-and-hold: the historian archived the value again as soon as it
+        left the dead band, so the held value is right to within the dead band,
+        where linear interpolation across a long quiet stretch would smear a
+        step over it); NaN outside the samples, inside gaps longer than
+        ``max_gap[tag]`` and from a bad-quality event (communication loss) of
+        the tag to its next valid sample.
     max_gap : dict of str to float
-        Tag -> the gap limit used (s): the spec's ``[data] max_gap`` if set,
-        else :func:`default_max_gap` of the tag.
+        Tag -> the gap limit used (s): :func:`heartbeat_max_gap` for a tag with
+        a heartbeat, else the spec's ``[data] max_gap`` if set, else
+        :func:`default_max_gap` of the tag.
     stopped : ndarray of bool
         Grid points inside a stoppage (``[data] stoppage``: its tag below
         ``below``) or within ``settle`` s after one (:func:`stoppage_mask`);
@@ -466,6 +649,8 @@ class MeasurementView:
         Start-up time left out of the scores (s from the first sample).
     t0 : float
         The first row's ``time`` as read (added to the grid to index the file).
+    method : dict of str to {"linear", "hold"}
+        Tag -> the reconstruction used.
 
     Examples
     --------
@@ -493,6 +678,7 @@ class MeasurementView:
     scored: dict[str, npt.NDArray[np.bool_]] = field(repr=False)
     skip: float = 0.0
     t0: float = 0.0
+    method: dict[str, Method] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ building
 
@@ -561,13 +747,21 @@ class MeasurementView:
             raise DataError(f"window [{start:g}, {stop:g}) s of {where} holds {int(in_window.sum())} grid "
                             f"point(s) of {ts:g} s between the first sample and the last ({end:g} s)")
         rule = spec.data.max_gap
+        breaks = table.attrs.get("breaks") or {}
         samples: dict[str, npt.NDArray[np.float64]] = {}
         gaps: dict[str, float] = {}
+        methods: dict[str, Method] = {}
         for tag in needed:
             column = table[["time", tag]]
-            gap = float(rule) if rule is not None else default_max_gap(t_abs, column[tag].to_numpy(dtype=float))
+            heartbeat = spec.data.heartbeat_of(tag)
+            if heartbeat is not None:
+                gap, methods[tag] = heartbeat_max_gap(heartbeat), "hold"
+            else:
+                gap = float(rule) if rule is not None else default_max_gap(t_abs, column[tag].to_numpy(dtype=float))
+                methods[tag] = "linear"
             gaps[tag] = gap
-            samples[tag] = resample(column, t0 + grid, max_gap=None if math.isinf(gap) else gap)[tag] \
+            samples[tag] = resample(column, t0 + grid, max_gap=None if math.isinf(gap) else gap,
+                                    method=methods[tag], breaks={tag: breaks.get(tag, ())})[tag] \
                 .to_numpy(dtype=float)
         stopped = np.zeros(grid.size, dtype=bool)
         if stoppage is not None:
@@ -579,7 +773,7 @@ class MeasurementView:
         scored = {tag: counted & np.isfinite(samples[tag]) for tag in spec.outputs}
         view = cls(source=Path(spec.measurements), sample_time=ts, window=(start, stop), grid=grid,
                    samples=samples, max_gap=gaps, stopped=stopped, inputs=pd.DataFrame(frame), scored=scored,
-                   skip=float(skip), t0=t0)
+                   skip=float(skip), t0=t0, method=methods)
         log.debug("measurement view of %s: %d grid points from %g s, window [%g, %g) s, gap limits %s",
                   where, grid.size, grid[0], start, stop, gaps)
         return view

@@ -132,6 +132,15 @@ class DataRules:
 
     stoppage: StoppageRule | None = None
     max_gap: float | None = None
+    #: Exception-reported tags: tag -> the historian's heartbeat (s), the longest interval between
+    #: archived values of a tag whose value did not move (``[data] heartbeat = s`` for every tag or
+    #: ``[data.heartbeat]`` per tag; ``"*"`` there is every tag not listed). See ``data.MeasurementView``.
+    heartbeat: Mapping[str, float] = field(default_factory=dict)
+
+    def heartbeat_of(self, tag: str) -> float | None:
+        """The heartbeat (s) of *tag*, or None when the tag is not exception-reported."""
+        value = self.heartbeat.get(tag, self.heartbeat.get("*"))
+        return None if value is None else float(value)
 
 
 @dataclass(frozen=True)
@@ -414,7 +423,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     data = DataRules()
     dtable = _table(raw, "data", problems)
     if dtable is not None:
-        _check_keys(dtable, ("stoppage", "max_gap"), (), "[data]", problems)
+        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat"), (), "[data]", problems)
         stoppage = None
         stable = _table(dtable, "stoppage", problems)
         if stable is not None:
@@ -426,7 +435,17 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             if tag is not None and below is not None:
                 stoppage = StoppageRule(tag=tag, below=below, settle=settle or 0.0)
         max_gap = _number(dtable, "max_gap", "[data]", problems, positive=True)
-        data = DataRules(stoppage=stoppage, max_gap=max_gap)
+        heartbeat: dict[str, float] = {}
+        if isinstance(dtable.get("heartbeat"), dict):
+            for key in dtable["heartbeat"]:
+                value = _number(dtable["heartbeat"], key, "[data.heartbeat]", problems, positive=True)
+                if value is not None:
+                    heartbeat[str(key)] = value
+        elif "heartbeat" in dtable:
+            value = _number(dtable, "heartbeat", "[data]", problems, positive=True)
+            if value is not None:
+                heartbeat["*"] = value
+        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat)
 
     # pairs -----------------------------------------------------------------
     pairs: list[PairSpec] = []
@@ -480,8 +499,12 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         assert tag is not None and variable is not None and correction is not None and gain is not None
         states.append(StateSpec(tag=tag, variable=variable, correction=correction, gain=gain))
 
-    if data.stoppage is not None:
+    if data.stoppage is not None or data.heartbeat:
         known_tags += [st.tag for st in states]
+    for tag in data.heartbeat:
+        if tag != "*" and tag not in known_tags:
+            problems.add(f"unknown tag {tag!r} in [data.heartbeat]{did_you_mean(tag, known_tags)}")
+    if data.stoppage is not None:
         if data.stoppage.tag not in known_tags:
             problems.add(f"unknown tag {data.stoppage.tag!r} in [data.stoppage]"
                          f"{did_you_mean(data.stoppage.tag, known_tags)}")
@@ -666,7 +689,7 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
         doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
     if spec.windows:
         doc["windows"] = {k: [float(a), float(b)] for k, (a, b) in spec.windows.items()}
-    if spec.data.stoppage is not None or spec.data.max_gap is not None:
+    if spec.data.stoppage is not None or spec.data.max_gap is not None or spec.data.heartbeat:
         data: dict[str, Any] = {}
         if spec.data.stoppage is not None:
             st = spec.data.stoppage
@@ -675,6 +698,10 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                 data["stoppage"]["settle"] = float(st.settle)
         if spec.data.max_gap is not None:
             data["max_gap"] = float(spec.data.max_gap)
+        if set(spec.data.heartbeat) == {"*"}:
+            data["heartbeat"] = float(spec.data.heartbeat["*"])
+        elif spec.data.heartbeat:
+            data["heartbeat"] = {k: float(v) for k, v in spec.data.heartbeat.items()}
         doc["data"] = data
     if spec.pairs:
         doc["pairs"] = [_pair_dict(p) for p in spec.pairs]
