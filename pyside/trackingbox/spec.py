@@ -328,7 +328,17 @@ def _csv_header(path: Path) -> list[str] | None:
             row = next(csv.reader(fh), None)
     except (OSError, UnicodeDecodeError):
         return None
-    return [c.strip() for c in row] if row else None
+    header = [c.strip() for c in row] if row else None
+    if header is not None and sorted(header) == ["tag", "time", "value"]:
+        # a historian's long export (data.LONG_COLUMNS): its tags are the values of the 'tag' column
+        try:
+            import pandas as pd
+
+            tags = pd.read_csv(path, usecols=["tag"], dtype=str)["tag"].dropna().unique().tolist()
+        except (OSError, ValueError):
+            return None
+        return ["time", *tags]
+    return header
 
 
 def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
