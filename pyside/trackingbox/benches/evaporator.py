@@ -498,6 +498,33 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
                      plant_parameters=plant_params, seed=int(seed), hours=hours)
 
 
+# --------------------------------------------------------------------------- tuning
+
+#: Closed-loop time constant (s) the evaporator's parameter controllers are tuned for.
+CLOSED_LOOP = 1200.0
+
+
+def slow_pairs(spec_path: str | os.PathLike[str], closed_loop: float = CLOSED_LOOP) -> Spec:
+    """Set each pair's ``lambda`` so that its closed-loop time constant is at least *closed_loop* s.
+
+    The heat-transfer coefficient moves the condensate flow within seconds and then
+    creeps back over an hour (the steam chest settles): the step test's time constant
+    is a few seconds, shorter than the 10 s sample time, and SIMC tuning on it gives a
+    per-sample loop gain near 1.4 on the final gain, over 2 on the first jump: the
+    parameter then flips between its bounds every sample. Fouling, wear and scale
+    change over hours to days, so a closed loop of ~20 min loses nothing. Pairs that
+    already have a larger ``lambda`` (or explicit ``kp``/``ti``) keep them.
+    """
+    from dataclasses import replace
+
+    from ..spec import write_pairs
+
+    spec = load_spec(spec_path)
+    pairs = [p if (p.kp is not None or p.ti is not None or p.lambda_ * p.time_constant >= closed_loop)
+             else replace(p, lambda_=closed_loop / p.time_constant) for p in spec.pairs]
+    return write_pairs(spec_path, pairs)
+
+
 # --------------------------------------------------------------------------- truth helpers
 
 
