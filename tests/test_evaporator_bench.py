@@ -138,7 +138,7 @@ FAST_FOULING = {"RfInf": 2.0e-4, "tauFouling": 3 * 3600.0}
 def short_case(fmu_cache, tmp_path_factory):
     """A 10 h evaporator case, seed 1, one known stoppage, fast fouling; pairs from ``pair``."""
     from trackingbox.analysis.pair_stage import PairSettings, pair, spec_pairs
-    from trackingbox.benches.evaporator import build, load_truth
+    from trackingbox.benches.evaporator import build, load_truth, slow_pairs
     from trackingbox.fmu import read_info
     from trackingbox.spec import load_spec, write_pairs
 
@@ -150,7 +150,8 @@ def short_case(fmu_cache, tmp_path_factory):
     freeze = (("holdControllers", 1.0),) if "holdControllers" in {getattr(v, "name", v)
                                                                   for v in read_info(twin).inputs} else ()
     result = pair(spec, PairSettings(freeze=freeze, workers=1))
-    spec = write_pairs(case.spec, spec_pairs(spec, result))
+    write_pairs(case.spec, spec_pairs(spec, result))
+    spec = slow_pairs(case.spec)
     return case, spec, result, load_truth(case.truth_file)
 
 

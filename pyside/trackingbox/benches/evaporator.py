@@ -239,7 +239,7 @@ STATES = (
 )
 
 #: Candidate tracking parameters: name -> (lower, upper) as fractions of the twin's
-#: declared start value; ``effect.Rf`` has the contract's absolute bounds.
+#: declared start value.
 CANDIDATES: dict[str, tuple[float, float]] = {
     "effect.U0": (0.7, 1.3),
     "inletValve.KvMax": (0.7, 1.3),
@@ -248,6 +248,13 @@ CANDIDATES: dict[str, tuple[float, float]] = {
     "pump.VMax": (0.7, 1.3),
 }
 RF_BOUNDS = (0.0, 6.0e-4)
+#: Candidates with absolute (start, lower, upper): the contract's fouling resistance, and the
+#: boiling-point offset (K) that separates the liquor's composition from fouling (notes,
+#: section 4: without it a real liquor's 1 K offset reads as ~1.7e-4 m2.K/W of fouling).
+ABSOLUTE: dict[str, tuple[float, float, float]] = {
+    "effect.Rf": (0.0, *RF_BOUNDS),
+    "effect.dBPR": (0.0, 0.0, 3.0),
+}
 
 #: Plant variables recorded in truth.json over time: twin parameter -> plant variable.
 TRAJECTORIES: dict[str, str] = {"effect.Rf": "Rf_true"}
@@ -281,7 +288,7 @@ DEFINITION = BenchDefinition(
 
 
 def candidate_parameters(twin_info: Any) -> tuple[ParameterSpec, ...]:
-    """The candidates with starts from the twin FMU's declared values and the bounds of :data:`CANDIDATES`.
+    """The candidates: :data:`ABSOLUTE`, and :data:`CANDIDATES` around the twin FMU's declared starts.
 
     Raises
     ------
@@ -289,10 +296,10 @@ def candidate_parameters(twin_info: Any) -> tuple[ParameterSpec, ...]:
         A candidate the twin does not have (the contract's names are fixed).
     """
     params = _tunable_parameters(twin_info)
-    missing = [n for n in ("effect.Rf", *CANDIDATES) if n not in params]
+    missing = [n for n in (*ABSOLUTE, *CANDIDATES) if n not in params]
     if missing:
         raise FMUError(f"the evaporator twin ({PACKAGE}.Twin) lacks the tunable parameters {missing}")
-    out = [ParameterSpec("effect.Rf", 0.0, *RF_BOUNDS)]
+    out = [ParameterSpec(name, *values) for name, values in ABSOLUTE.items()]
     for name, (lo, hi) in CANDIDATES.items():
         start = float(params[name].start)
         out.append(ParameterSpec(name, start, lo * start, hi * start))
