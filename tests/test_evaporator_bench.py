@@ -231,3 +231,15 @@ def test_tracking_holds_through_the_stoppage_and_follows_the_fouling(short_case,
     assert result.levels_ok, result.levels
     assert result.fouling is not None and result.fouling.within_bounds
     assert result.fouling.max_error <= 0.1, result.fouling
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--days", "0"], "--days must be > 0"),
+    (["--days", "1", "--hours", "2"], "give --days or --hours, not both"),
+])
+def test_bench_command_rejects_bad_periods(tmp_path, capsys, argv, message) -> None:
+    from trackingbox.cli import main
+
+    assert main(["bench", "evaporator", "--out", str(tmp_path / "case"), *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "case").exists()
