@@ -248,12 +248,12 @@ CANDIDATES: dict[str, tuple[float, float]] = {
     "pump.VMax": (0.7, 1.3),
 }
 RF_BOUNDS = (0.0, 6.0e-4)
-#: Candidates with absolute (start, lower, upper): the contract's fouling resistance, and the
-#: boiling-point offset (K) that separates the liquor's composition from fouling (notes,
-#: section 4: without it a real liquor's 1 K offset reads as ~1.7e-4 m2.K/W of fouling).
+#: Candidates with absolute (start, lower, upper): the contract's fouling resistance. (The
+#: boiling-point offset ``effect.dBPR`` was tried as a candidate to separate composition from
+#: fouling, notes section 4: the pairing then put ``effect.U0`` with TI-6111 and dBPR with
+#: TI-6151, the data checks rejected both, and the heat-transfer parameter went unpaired.)
 ABSOLUTE: dict[str, tuple[float, float, float]] = {
     "effect.Rf": (0.0, *RF_BOUNDS),
-    "effect.dBPR": (0.0, 0.0, 3.0),
 }
 
 #: Plant variables recorded in truth.json over time: twin parameter -> plant variable.
