@@ -204,7 +204,7 @@ def test_pairing_is_physical(short_case) -> None:
 
 @pytest.mark.slow
 @pytest.mark.compile
-def test_tracking_holds_through_the_stoppage_and_follows_the_fouling(short_case, tmp_path) -> None:
+def test_tracking_holds_through_the_stoppage_and_closes_the_heat_transfer_offset(short_case, tmp_path) -> None:
     from trackingbox.benches.evaporator_report import assess, vessel_heights
     from trackingbox.fmu import read_info
     from trackingbox.tracking.runtime import track
