@@ -240,8 +240,10 @@ STATES = (
 
 #: Candidate tracking parameters: name -> (lower, upper) as fractions of the twin's
 #: declared start value.
+#: ``effect.U0`` is not one: its step-test column is parallel to ``effect.Rf``'s (the pairing
+#: can only keep one of the two), and the Effect has no conditional input for it, so a pair on it
+#: stops gen-trackingbox; the fouling resistance, with ``use_Rf_in``, is the tracked coefficient.
 CANDIDATES: dict[str, tuple[float, float]] = {
-    "effect.U0": (0.7, 1.3),
     "inletValve.KvMax": (0.7, 1.3),
     "outletValve.KvMax": (0.7, 1.3),
     "pump.dp0": (0.7, 1.3),
