@@ -11,6 +11,7 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
   parameter TrackingBox.Units.CoefficientOfHeatTransfer U0(min=100, max=3000) = 700 "Clean overall heat-transfer coefficient at the reference viscosity nu_ref";
   parameter Real Rf(unit="m2.K/W", min=0, max=6e-4) = 0 "Fouling resistance, used when use_Rf_in = false";
   parameter Boolean use_Rf_in = false "= true to take the fouling resistance from the input Rf_in";
+  parameter Boolean use_U0_in = false "= true to take the clean coefficient from the input U0_in";
   parameter Real nu_ref(unit="m2/s") = 8e-5 "Reference kinematic viscosity (the liquor at about 79 % DS and 132 degC)";
   parameter Real n_visc(unit="1") = 0.41 "Exponent of the viscosity ratio in the clean coefficient";
   parameter TrackingBox.Units.MassFlowRate m_flow_rec = 10 "Recirculation flow (mixes with the feed on top of the tubes)";
@@ -26,6 +27,7 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
   TrackingBox.Evaporation.LiquorPort_b port_c "Condensate outlet (drains freely at the condensing rate)";
   TrackingBox.Interfaces.RealInput steamOpening(unit="1") "Steam-valve opening, 0..1";
   TrackingBox.Interfaces.RealInput Rf_in(unit="m2.K/W") if use_Rf_in "Fouling resistance from outside";
+  TrackingBox.Interfaces.RealInput U0_in(unit="W/(m2.K)") if use_U0_in "Clean coefficient from outside";
   TrackingBox.Units.Mass M_steam(start=p_steam_start*V_steam/(R_w*T_ref_steam), fixed=true) "Steam mass in the chest";
   TrackingBox.Units.Pressure p_s "Steam-chest pressure";
   TrackingBox.Units.Temperature T_s "Condensing temperature";
@@ -39,16 +41,21 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
   Real h_c(unit="J/kg") "Specific enthalpy of the condensate (saturated liquid at T_s)";
 protected
   TrackingBox.Interfaces.RealInput Rf_internal(unit="m2.K/W") "Used fouling resistance";
+  TrackingBox.Interfaces.RealInput U0_internal(unit="W/(m2.K)") "Used clean coefficient";
   TrackingBox.Units.MassFlowRate m_feed_pos "Feed flow, smoothly kept positive for the mixing rule";
 equation
   connect(Rf_in, Rf_internal);
+  connect(U0_in, U0_internal);
   if not use_Rf_in then
     Rf_internal = Rf;
+  end if;
+  if not use_U0_in then
+    U0_internal = U0;
   end if;
   m_feed_pos = Functions.splus(m_in, 1e-3);
   x_d = (m_feed_pos*port_a.x + m_flow_rec*x)/(m_feed_pos + m_flow_rec);
   nu = Functions.kinematicViscosity(x_d, T);
-  U_clean = U0*(nu_ref/nu)^n_visc;
+  U_clean = U0_internal*(nu_ref/nu)^n_visc;
   U_eff = 1/(1/U_clean + Rf_internal);
   p_s = M_steam*R_w*T_ref_steam/V_steam;
   T_s = Saturation.TSat(p_s);
@@ -62,7 +69,7 @@ equation
   port_c.m_flow = -m_c;
   port_c.x = 0;
   port_c.T = T_s;
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Line(points={{-40,90},{-40,-10}}, color={255,0,0}), Line(points={{0,90},{0,-10}}, color={255,0,0}), Line(points={{40,90},{40,-10}}, color={255,0,0})}), Documentation(info="<html>
 <p>The liquor body, vapour space and level are those of
 <code>BaseClasses.PartialVessel</code> (states <code>M</code>, <code>M_s</code>,
 <code>T</code>, <code>M_vap</code>). The feed mixes with the recirculation
@@ -71,7 +78,8 @@ equation
 clean coefficient is <code>U_clean = U0&middot;(nu_ref/&nu;)^0.41</code>
 (falling-film liquor side, evaporator notes section 1). With the fouling
 resistance <code>Rf</code> (tunable; or the input <code>Rf_in</code> with
-<code>use_Rf_in = true</code>, which is how a generated TrackingBox drives it):
+<code>use_Rf_in = true</code>, which is how a generated TrackingBox drives it; <code>U0</code> likewise has
+<code>use_U0_in</code>):
 <code>U_eff = 1/(1/U_clean + Rf)</code> and
 <code>Q = U_eff&middot;A&middot;(T_s - T)</code>.</p>
 <p>Steam chest: one state (steam mass <code>M_steam</code>, ideal gas at the

@@ -7,7 +7,7 @@ block LevelTransmitter "dP level transmitter with a fixed calibration density"
   TrackingBox.Interfaces.RealOutput y(unit="m") "Level reading";
 equation
   y = (dp - dp0)/(rho_cal*g);
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Ellipse(extent={{-80,80},{80,-80}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Text(extent={{-60,40},{60,-40}}, textString="LT"), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p><code>L_m = (dP - dP0)/(&rho;_cal&middot;g)</code>: a liquor denser than
 <code>rho_cal</code> reads high, a lighter one (or foam) reads low.</p>
 </html>"));

@@ -32,7 +32,7 @@ equation
   port_a.m_flow + port_b.m_flow = 0;
   port_b.x = port_a.x;
   port_b.T = port_a.T;
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Ellipse(extent={{-80,80},{80,-80}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Polygon(points={{-40,60},{70,0},{-40,-60},{-40,60}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p><code>&Delta;p = dp0&middot;(1 - (V/VMax)&sup2;)</code> at constant speed (the form
 of the thesis's <code>uRise</code>/<code>VFlowDesign</code> curve). The
 pump's work is neglected in the energy balance (x and T pass unchanged).</p>

@@ -30,7 +30,7 @@ equation
   port_a.m_flow + port_b.m_flow = 0;
   port_b.x = port_a.x;
   port_b.T = port_a.T;
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Polygon(points={{-100,50},{0,0},{-100,-50},{-100,50}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Polygon(points={{100,50},{0,0},{100,-50},{100,50}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Line(points={{0,0},{0,80}}, color={0,0,127}), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p><code>m_flow = KvMax/3600&middot;(leakage + (1 - leakage)&middot;f(y))&middot;sqrt(1000&middot;&rho;&middot;&Delta;p/1e5)</code>
 (the Kv definition: m3/h of a liquid of specific gravity &rho;/1000 at 1 bar),
 with the square root regularised as <code>regRoot(&Delta;p, dp_small)</code>.

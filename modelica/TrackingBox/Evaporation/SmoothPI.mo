@@ -25,11 +25,11 @@ equation
   end if;
   run = 0.5 - 0.5*tanh((hold_internal - 0.5)/0.05);
   e = u_s - u_m;
-  der(eF) = run*(e - eF)/Tf;
+  der(eF) = (e - eF)/Tf;
   v = k*(eF + I);
-  der(I) = run*(eF/Ti + (y - v)/(k*Tt));
+  der(I) = run*(eF/Ti + (y - v)/(k*Tt)) - (1 - run)*(e - eF)/Tf;
   y = TrackingBox.Evaporation.Functions.splus(v, yEps) - TrackingBox.Evaporation.Functions.splus(v - 1, yEps);
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Line(points={{-80,-70},{-80,20},{0,40},{80,60}}, color={0,0,127}), Text(extent={{-40,-20},{80,-80}}, textString="PI"), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p>The smooth PI of the evaporator notes (section 3):
 <code>v = k&middot;(e_f + I)</code>,
 <code>dI/dt = e_f/Ti + (y - v)/(k&middot;Tt)</code>, with the output limited
@@ -41,9 +41,11 @@ no linear part, so the back-calculation term <code>(y - v)/(k&middot;Tt)</code>
 acts everywhere and balances the integral action away from saturation (an
 inlet flow loop with setpoint 0.01 kg/s stayed at 0.33 kg/s).</p>
 <p>The error is filtered (<code>Tf</code>) so that the output is a function of
-states and can be held: the input <code>hold</code> above 0.5 stops both
-states (through a smooth switch), below 0.5 the controller resumes without a
-bump. A negative <code>k</code> gives reverse action (a level loop on an
+states and can be held: while the input <code>hold</code> is above 0.5 (a
+smooth switch <code>run</code>), the integral action stops and the integral
+state moves opposite to the filtered error, so <code>v</code> and the output
+stay constant while <code>e_f</code> keeps following the error; below 0.5
+the controller resumes from there without a proportional kick (bumpless). A negative <code>k</code> gives reverse action (a level loop on an
 outlet valve).</p>
 </html>"));
 end SmoothPI;

@@ -98,7 +98,7 @@ equation
   der(M_s) = dMsdt;
   dxdt = (dMsdt - x*dMdt)/M;
   M*cp*der(T) + M*dhdx*dxdt + h*dMdt = m_in*h_in - m_out*h - m_ev*h_vap + m_corr*h + Q - Q_loss;
-  annotation (Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-60,100},{60,-100}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Rectangle(extent={{-60,-10},{60,-100}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
 <p>States: liquid mass <code>M</code>, dry-solids mass <code>M_s</code>,
 temperature <code>T</code> and vapour mass <code>M_vap</code>. The energy
 balance is that of the inventory <code>M&middot;h(x, T)</code>:
