@@ -262,8 +262,6 @@ def test_view_as_a_table_and_an_open_ended_window(tmp_path):
 # A plant historian's long export (tag,time,value; ISO 8601 UTC; an empty value is a bad-quality
 # event) read by hand-checkable examples: the expected values below are worked out from the rows.
 
-from trackingbox.data import heartbeat_max_gap  # noqa: E402
-
 START = pd.Timestamp("2026-03-01T10:00:00+00:00")
 
 
@@ -454,3 +452,13 @@ def test_spec_heartbeat_problems_are_named(tmp_path):
     assert "'FI' in [data.heartbeat] must be > 0" in msg
     with pytest.raises(SpecError, match="'heartbeat' in \\[data\\] must be a number"):
         loads_spec(SPEC_TOML.format(data='heartbeat = "10 min"'), tmp_path / "s.toml", check_files=False)
+
+
+def test_spec_checks_the_tags_of_a_long_export(tmp_path):
+    (tmp_path / "twin.fmu").write_bytes(b"")
+    (tmp_path / "m.csv").write_text(_long([("FI", 0.0, 5.0), ("TI", 0.0, 80.0), ("TI", 10.0, 81.0)]))
+    spec = loads_spec(SPEC_TOML.format(data="heartbeat = 600"), tmp_path / "s.toml")
+    assert spec.data.heartbeat_of("TI") == 600.0
+    (tmp_path / "m.csv").write_text(_long([("FI", 0.0, 5.0), ("TJ", 0.0, 80.0)]))
+    with pytest.raises(SpecError, match="tag 'TI' is not a column of m.csv"):
+        loads_spec(SPEC_TOML.format(data="heartbeat = 600"), tmp_path / "s.toml")

@@ -328,17 +328,22 @@ def _csv_header(path: Path) -> list[str] | None:
             row = next(csv.reader(fh), None)
     except (OSError, UnicodeDecodeError):
         return None
-    header = [c.strip() for c in row] if row else None
-    if header is not None and sorted(header) == ["tag", "time", "value"]:
-        # a historian's long export (data.LONG_COLUMNS): its tags are the values of the 'tag' column
-        try:
-            import pandas as pd
+    return [c.strip() for c in row] if row else None
 
-            tags = pd.read_csv(path, usecols=["tag"], dtype=str)["tag"].dropna().unique().tolist()
-        except (OSError, ValueError):
-            return None
-        return ["time", *tags]
-    return header
+
+def _long_tags(path: Path, column: int) -> list[str]:
+    """The tags of a historian's long export (``tag,time,value``), in order of appearance."""
+    tags: dict[str, None] = {}
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = csv.reader(fh)
+            next(rows, None)
+            for row in rows:
+                if len(row) > column:
+                    tags.setdefault(row[column].strip(), None)
+    except (OSError, UnicodeDecodeError):
+        return []
+    return list(tags)
 
 
 def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
@@ -530,6 +535,9 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     meas = files.get("measurements")
     if check_files and meas is not None and meas.is_file():
         header = _csv_header(meas)
+        if header is not None and sorted(header) == ["tag", "time", "value"]:
+            # a historian's long export: the tags are the values of its 'tag' column
+            header = ["time", *_long_tags(meas, header.index("tag"))]
         if header is not None:
             tags = [*inputs, *outputs, *(s.tag for s in states)]
             columns = [c for c in header if c != "time"]

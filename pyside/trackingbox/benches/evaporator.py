@@ -290,7 +290,8 @@ DEFINITION = BenchDefinition(
 
 
 def candidate_parameters(twin_info: Any) -> tuple[ParameterSpec, ...]:
-    """The candidates: :data:`ABSOLUTE`, and :data:`CANDIDATES` around the twin FMU's declared starts.
+    """The candidates: :data:`ABSOLUTE`, and :data:`CANDIDATES` around the twin FMU's declared starts
+    (within its declared min/max).
 
     Raises
     ------
@@ -303,8 +304,11 @@ def candidate_parameters(twin_info: Any) -> tuple[ParameterSpec, ...]:
         raise FMUError(f"the evaporator twin ({PACKAGE}.Twin) lacks the tunable parameters {missing}")
     out = [ParameterSpec(name, *values) for name, values in ABSOLUTE.items()]
     for name, (lo, hi) in CANDIDATES.items():
-        start = float(params[name].start)
-        out.append(ParameterSpec(name, start, lo * start, hi * start))
+        var = params[name]
+        start = float(var.start)
+        lower = max(lo * start, float(var.min)) if var.min is not None else lo * start
+        upper = min(hi * start, float(var.max)) if var.max is not None else hi * start
+        out.append(ParameterSpec(name, start, lower, upper))
     return tuple(out)
 
 
