@@ -33,10 +33,14 @@ if TYPE_CHECKING:
 ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
     "heat-exchanger": {"workers": 2},
     "heat-production": {"workers": 2, "maxiter": 8, "refine_iterations": 6},
+    "evaporator": {"workers": 2, "maxiter": 1, "popsize": 1, "refine": False},
 }
 
 #: Default case of ``--diagnose``.
 DIAGNOSE_CASE = "sensor-lag"
+
+#: Window the tracking stage scores per bench (the evaporator's criteria are on the validation window).
+TRACK_WINDOW: dict[str, str] = {"evaporator": "validation"}
 
 STEPS = ("bench", "offset", "estimate", "pair", "track", "generate", "validate")
 
@@ -99,7 +103,9 @@ def untracked_offset(spec: Spec, out_dir: Path) -> tuple[StageReport, dict[str, 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="scripts/demo", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--bench", choices=("heat-exchanger", "heat-production"), default="heat-exchanger")
+    from .benches import BENCHES
+
+    p.add_argument("--bench", choices=sorted(BENCHES), default="heat-exchanger")
     p.add_argument("--out", type=Path, default=None, help="output directory (default demo-out/<bench>)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -146,21 +152,37 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
     if step("estimate", "estimating initial parameters on the training window"):
         # Reported, not written into the spec: tracking then starts from the modeller's
         # guess, which shows the parameter controllers closing the offset on their own.
-        est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
-                       **ESTIMATE_BUDGET.get(run.bench, {}))
-        summary["estimate"] = est.to_json()
-        run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
+        try:
+            est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
+                           **ESTIMATE_BUDGET.get(run.bench, {}))
+        except TrackingError as exc:
+            if run.bench != "evaporator":
+                raise
+            # the historian's communication losses leave the inputs without data in places, which
+            # estimation refuses; tracking starts from the spec's values anyway, so go on
+            progress.note(f"estimate skipped: {exc}")
+            summary["estimate_skipped"] = str(exc)
+        else:
+            summary["estimate"] = est.to_json()
+            run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
     if step("pair", "steady-state step tests → gain matrix → RGA pairing"):
-        res = pair(spec, progress=progress)
+        res = pair(spec, _pair_settings(spec), progress=progress)
         summary["pair"] = res.to_json()
         run.reports["pair"] = write_pair_report(spec, res, out / "pair")
         if not res.pairing.pairs:
             raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
         spec = write_pairs(spec.path, spec_pairs(spec, res))
+        if run.bench == "evaporator":  # fouling and wear are slow: tune for a closed loop of ~20 min
+            from .benches.evaporator import slow_pairs
+
+            spec = slow_pairs(spec.path)
     if step("track", "tracking with parameter controllers in Python"):
-        tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"))
+        tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"),
+                   window=TRACK_WINDOW.get(run.bench, "all"))
         summary["track"] = tr.to_json()
         run.reports["track"] = write_track_report(spec, tr, out / "track", truth=run.truth)
+        if run.bench == "evaporator":
+            _evaporator_report(run, spec, tr, case)
     if step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled"):
         gen = generate(spec, out / "generated")
         compiled = compile_generated(gen)
@@ -170,6 +192,31 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         val = validate(spec, fmu)
         summary["validate"] = val.to_json()
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
+
+
+def _pair_settings(spec: Spec) -> Any:
+    """Pairing settings: step tests with the twin's controllers frozen where it has ``holdControllers``."""
+    from .analysis.pair_stage import PairSettings
+    from .fmu import read_info
+
+    inputs = read_info(spec.twin).inputs
+    names = {getattr(v, "name", v) for v in inputs}
+    return PairSettings(freeze=(("holdControllers", 1.0),) if "holdControllers" in names else ())
+
+
+def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
+    """The evaporator's checks against the plant's fouling trajectory, and its fouling and stoppage plots."""
+    from .benches.evaporator import load_truth
+    from .benches.evaporator_report import assess, vessel_heights, write_evaporator_report
+    from .fmu import read_info
+
+    truth = load_truth(case.truth_file)
+    left_out = [(x["name"], x["reason"]) for x in run.summary.get("pair", {}).get("left_out", [])]
+    nrmse = {t: (v.nrmse_untracked, v.nrmse_tracked) for t, v in tr.variables.items()
+             if t in {p.variable for p in spec.pairs}}
+    result = assess(spec, tr.csv, truth, nrmse=nrmse, left_out=left_out, heights=vessel_heights(read_info(spec.twin)))
+    run.summary["evaporator"] = result.to_json()
+    run.reports["evaporator"] = write_evaporator_report(spec, tr.csv, truth, run.out / "evaporator", result)
 
 
 def main(argv: list[str] | None = None) -> int:

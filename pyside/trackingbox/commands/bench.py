@@ -16,6 +16,7 @@ examples:
   trackingbox bench heat-exchanger --out case2 --seed 3 --set hx.kht=850 --hours 4
   trackingbox bench heat-production --out hp --json
   trackingbox bench heat-production --out leak --hidden leak-level --noise-scale 2
+  trackingbox bench evaporator --out ev --days 3 --seed 1 --set RfInf=2e-4
 
 writes into --out:
   plant.fmu, twin.fmu     the "physical" plant and the digital twin (FMUs)
@@ -29,6 +30,10 @@ writes into --out:
 --set NAME=VALUE changes a plant parameter (the truth); unknown names and values
 outside the parameter's declared min/max are errors. Nothing is written unless
 the whole case could be generated.
+
+evaporator: measurements.csv is a historian export (ISO 8601 timestamps,
+per-tag sampling, dead-band reporting, communication losses); truth.json also
+holds the plant's fouling resistance over time and the flow stoppages.
 """
 
 
@@ -50,7 +55,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
     p.add_argument("--hours", type=float, default=None,
-                   help="measured period in hours (default 8 heat-exchanger, 24 heat-production)")
+                   help="measured period in hours (default 8 heat-exchanger, 24 heat-production, "
+                        "72 evaporator)")
+    p.add_argument("--days", type=float, default=None,
+                   help="measured period in days (instead of --hours; default 3 for the evaporator)")
     p.add_argument("--hidden", default=None, metavar="CASE",
                    help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
@@ -70,7 +78,12 @@ def run(args: argparse.Namespace) -> int:
     overrides = parse_assignments(args.overrides, "--set")
     if args.hours is not None and not args.hours > 0:
         raise TrackingError(f"--hours must be > 0, got {args.hours:g}")
-    case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=args.hours,
+    if args.days is not None and not args.days > 0:
+        raise TrackingError(f"--days must be > 0, got {args.days:g}")
+    if args.days is not None and args.hours is not None:
+        raise TrackingError("give --days or --hours, not both")
+    hours = args.days * 24.0 if args.days is not None else args.hours
+    case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=hours,
                       plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,
                       noise_scale=args.noise_scale)
     if args.json:

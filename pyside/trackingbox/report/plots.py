@@ -70,6 +70,14 @@ def _band(ax: Any, band: tuple[float, float] | None, label: str) -> None:
         ax.axvspan(band[0], band[1], color="0.9", zorder=0, label=label)
 
 
+def shade(ax: Any, intervals: Sequence[tuple[float, float]], label: str = "stoppage",
+          color: str = "#f4d6a0") -> None:
+    """Shade each ``(start, stop)`` interval (x units) on *ax*; one legend entry for all."""
+    for i, (a, b) in enumerate(intervals):
+        if b > a:
+            ax.axvspan(a, b, color=color, alpha=0.6, zorder=0, lw=0, label=label if i == 0 else None)
+
+
 def series(ax: Any, x: npt.ArrayLike, measured: npt.ArrayLike | None, lines: Sequence[Line], *,
            ylabel: str, title: str = "", band: tuple[float, float] | None = None, band_label: str = "",
            xlabel: str | None = "time (h)") -> None:
