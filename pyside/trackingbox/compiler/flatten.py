@@ -1233,6 +1233,20 @@ class FlatTranslator:
         sol = rf(ca.DM(guess), ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
         return [sol[i] for i in range(len(unk))]
 
+    def _declared_at(self, scalar: str) -> str:
+        """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
+        declares its top-level component (and, if elsewhere, where the variable itself is)."""
+        base = scalar.split("[", 1)[0]
+        head = re.split(r"[.\[]", base, maxsplit=1)[0]
+        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True)
+        var = (self.flat.get("variables") or {}).get(base) or {}
+        leaf = base.rsplit(".", 1)[-1]
+        decl = self.location(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", span=var.get("source_span")) if var else []
+        where = [f"{head} declared at {own[0]}"] if own else []
+        if decl and (not own or str(decl[0]) != str(own[0])):
+            where.append(f"{base} at {decl[0]}")
+        return f"{scalar} ({'; '.join(where)})" if where else scalar
+
     def _structural_message(self, exc: StructuralError, residuals: list[tuple[ca.MX, str]], names: list[str]) -> str:
         n_eq, n_unk = len(residuals), len(names)
         head = f"{self.model} is structurally singular: {n_eq} equations for {n_unk} unknowns"
@@ -1240,7 +1254,8 @@ class FlatTranslator:
         unk = [names[j] for j in exc.unknowns][:8]
         parts = [head]
         if unk:
-            parts.append("variables not determined by any equation: " + ", ".join(unk))
+            parts.append("variables not determined by any equation: "
+                         + ", ".join(self._declared_at(u) for u in unk))
         if eqs and n_eq != n_unk or (eqs and unk):
             parts.append("equations with no variable left to solve for, from: " + ", ".join(eqs))
         return "; ".join(parts)
