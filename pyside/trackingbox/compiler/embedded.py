@@ -22,6 +22,7 @@ from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .rewrite import frontend_bytes
+from .semantics import check_source
 from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
 
 log = logging.getLogger(__name__)
@@ -436,6 +437,7 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     class_type = str(flat.get("class_type", "")).lower()
     if class_type in ("package", "function", "connector", "record", "type"):
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
+    check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
     t1 = time.perf_counter()
     translator = FlatTranslator(flat, source, model)
     em = translator.translate()

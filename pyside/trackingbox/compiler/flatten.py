@@ -68,6 +68,7 @@ from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .modifiers import modifier_check
+from .semantics import check_flat
 from .source import (Location, ModelicaSource, locate, model_files, span_location, span_sources,
                      strip_comments)
 
@@ -934,6 +935,7 @@ class FlatTranslator:
     # ------------------------------------------------------------ translate
     def translate(self) -> ExplicitModel:
         self.check_constructs()
+        check_flat(self.flat, self.model, self.location)  # constants: bound, to constant expressions
         self.collect_variables()
         # Real parameters: tunable (value does not depend on other parameters) or calculated.
         params, calculated, calc_eqs = [], [], []
