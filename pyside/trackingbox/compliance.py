@@ -27,8 +27,16 @@ so that their ``assert``\\ s are evaluated. Each model gets one outcome:
     an invalid model (``shouldPass = false``) was refused (compile or
     simulation error) / compiled and simulated without complaint.
 
+Every refusal at compile time (``refused-*`` and ``rejected`` before simulation) is
+also checked for its position (:func:`location_verdict`): the first ``file.mo:line``
+it names must lie inside the model's own class definition in its own file, and where
+the refusal names a construct (``when``, ``algorithm``, ``der(``, ...) that line must
+contain it. The table's ``loc:bad`` column counts the refusals that fail this, and
+lists them below the table.
+
 Results are appended to a JSON-lines file as each model finishes, so an
-interrupted run keeps what it computed (``--resume`` continues it). Run it as
+interrupted run keeps what it computed (``--resume`` continues it; ``--table FILE``
+prints the table of a results file without running anything). Run it as
 ``scripts/compliance`` (see ``--help``).
 """
 from __future__ import annotations
