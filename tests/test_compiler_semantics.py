@@ -187,3 +187,8 @@ def test_front_end_refusal_points_at_the_construct_it_names(tmp_path, name, text
         compile_model(src, name, backend="embedded", output=tmp_path / "x.fmu")
     msg = str(exc.value)
     assert locations_in(msg)[0] == (str(src), line), msg  # the first file:line the message names
+
+
+def test_iterator_named_like_a_conditional_component_is_no_use_of_it(tmp_path):
+    _accepted(tmp_path, "Iter", "model Iter\n  Real x = 1 if false;\n  Real y[2];\nequation\n"
+                                "  for x in 1:2 loop\n    y[x] = x;\n  end for;\nend Iter;\n")

@@ -301,7 +301,11 @@ class _Checker:
                     text = text[: m.start()] + _blank(text[m.start():end]) + text[end:]
             if st.section == "element" and re.match(r"\s*(?:extends|import)\b", text):
                 continue
+            iterators = set(re.findall(r"\bfor\s+([A-Za-z_]\w*)\s+in\b", text))
+            iterators |= set(re.findall(r"[,(]\s*([A-Za-z_]\w*)\s+in\b", text))  # reductions: sum(x for x in v)
             for m in re.finditer(rf"(?<![\w.])({names})\b", text):
+                if m.group(1) in iterators:
+                    continue  # a loop or reduction iterator of the same name
                 before = text[: m.start()].rstrip()
                 after = text[m.end():]
                 # a modifier or named argument `(name = ...)`: not a use of the component
