@@ -117,6 +117,9 @@ def test_location_verdicts(tmp_path):
     assert location_verdict(_record(tmp_path, f"bad thing at {f}:9")) == "outside"  # after `end M;`
     assert location_verdict(_record(tmp_path, f"bad thing at {tmp_path / 'Other.mo'}:3")) == "outside"
     assert location_verdict(_record(tmp_path, "structurally singular")) == "missing"
+    # a refusal naming two constructs is right on a line holding either of them
+    assert location_verdict(_record(tmp_path, f"model algorithm: reinit( of x at {f}:6")) == "ok"
+    assert location_verdict(_record(tmp_path, f"model algorithm: reinit( of x at {f}:4")) == "construct"
     assert location_verdict(_record(tmp_path, "", outcome="pass")) is None
     # a failing assert found while simulating is no compile-time refusal
     assert location_verdict(_record(tmp_path, "assert failed in M.fmu at t = 0 s: x < 0")) is None

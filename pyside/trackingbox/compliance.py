@@ -171,7 +171,7 @@ _CONSTRUCT_TEXT: tuple[tuple[str, str], ...] = (
     (r"\bexternal function", r"\bexternal\b"),
     (r"\bif-equation", r"\bif\b"),
     (r"\barray dimension or for-range\b", r"\bfor\b|\["),
-    (r"\bfor-(?:loop|equation|range)", r"\bfor\b"),
+    (r"\bfor-(?:loop|equation|range)|\bloop index\b|\bexplicit range\b", r"\bfor\b"),
 )
 LOCATION_VERDICTS: tuple[str, ...] = ("ok", "missing", "outside", "construct")
 
@@ -202,12 +202,12 @@ def location_verdict(record: dict) -> str | None:
         return "outside"
     words = message[: message.find(file)]  # the refusal's own words, before the position
     words = words.split("(rumoca:", 1)[0]
-    for named, holds in _CONSTRUCT_TEXT:
-        if re.search(named, words):
-            text = read_text(Path(file)).splitlines()
-            if not re.search(holds, text[line - 1] if line <= len(text) else ""):
-                return "construct"
-            break
+    expected = [holds for named, holds in _CONSTRUCT_TEXT if re.search(named, words)]
+    if expected:  # the line holds (one of) the construct(s) the refusal names
+        text = read_text(Path(file)).splitlines()
+        here = text[line - 1] if line <= len(text) else ""
+        if not any(re.search(holds, here) for holds in expected):
+            return "construct"
     return "ok"
 
 
