@@ -143,6 +143,19 @@ def test_structurally_singular_model_names_the_undetermined_variables_declaratio
 
 
 @pytest.mark.compile
+def test_structurally_singular_model_names_the_connect_of_the_unsolvable_equation(tmp_path):
+    text = ("model Conn\n  connector C\n    Real e;\n    flow Real f;\n  end C;\n  model A\n    C c;\n"
+            "  equation\n    c.e = 1;\n  end A;\n  A a1;\n  A a2;\nequation\n  // connect(a2.c, a1.c) was meant\n"
+            "  connect(a1.c, a2.c);\nend Conn;\n")
+    src = _write(tmp_path, "Conn", text)
+    with pytest.raises(CompileError) as exc:
+        compile_model(src, "Conn", backend="embedded", output=tmp_path / "c.fmu")
+    msg = str(exc.value)
+    assert f"a2.c.f (a2 declared at {src}:12; a2.c.f at {src}:4)" in msg
+    assert f"connect(a1.c.e, a2.c.e) at {src}:15" in msg  # not the comment on line 14
+
+
+@pytest.mark.compile
 def test_front_end_failure_without_position_names_the_quoted_name_in_the_own_class(tmp_path):
     # the package declares `type x` (line 2) and so does nothing else; rumoca fails on `x x`
     # without a position: the refusal points at line 5 inside the model, not at the package's line 2

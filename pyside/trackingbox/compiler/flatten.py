@@ -69,8 +69,8 @@ from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .modifiers import modifier_check
 from .semantics import check_flat
-from .source import (Location, ModelicaSource, locate, model_files, span_location, span_sources,
-                     strip_comments)
+from .source import (Location, ModelicaSource, class_extent, locate, model_files, read_text, span_location,
+                     span_sources, strip_comments)
 
 log = logging.getLogger(__name__)
 
@@ -1249,6 +1249,27 @@ class FlatTranslator:
             where.append(f"{base} at {decl[0]}")
         return f"{scalar} ({'; '.join(where)})" if where else scalar
 
+    def _equation_at(self, origin: str) -> str:
+        """An equation's origin text, with the line of the ``connect`` of the model's own class it
+        comes from (``connect(a.c.e, b.c.e)`` comes from ``connect(a.c, b.c)``)."""
+        conn = re.fullmatch(r"connect\((.+), (.+)\)", origin)
+        extent = class_extent(self.source, self.model) if conn else None
+        if conn is None or extent is None:
+            return origin
+        file, first, last = extent
+
+        def within(full: str, part: str) -> bool:
+            return full == part or full.startswith(part + ".") or full.startswith(part + "[")
+
+        lines = strip_comments(read_text(file)).splitlines()
+        code = "\n".join(lines[first - 1:last])
+        for m in re.finditer(r"\bconnect\s*\(\s*([\w.\[\], ]+?)\s*,\s*([\w.\[\]]+)\s*\)", code):
+            a, b = (re.sub(r"\s+", "", g) for g in m.groups())
+            lhs, rhs = conn.groups()
+            if (within(lhs, a) and within(rhs, b)) or (within(lhs, b) and within(rhs, a)):
+                return f"{origin} at {file}:{first + code.count(chr(10), 0, m.start())}"
+        return origin
+
     def _structural_message(self, exc: StructuralError, residuals: list[tuple[ca.MX, str]], names: list[str]) -> str:
         n_eq, n_unk = len(residuals), len(names)
         head = f"{self.model} is structurally singular: {n_eq} equations for {n_unk} unknowns"
@@ -1259,7 +1280,8 @@ class FlatTranslator:
             parts.append("variables not determined by any equation: "
                          + ", ".join(self._declared_at(u) for u in unk))
         if eqs and n_eq != n_unk or (eqs and unk):
-            parts.append("equations with no variable left to solve for, from: " + ", ".join(eqs))
+            parts.append("equations with no variable left to solve for, from: "
+                         + ", ".join(self._equation_at(e) for e in eqs))
         return "; ".join(parts)
 
 
