@@ -182,8 +182,10 @@ def test_constant_rules_on_the_flat_model(tmp_path, name, text, rule, line):
 
 @pytest.mark.compile
 def test_constant_bound_to_a_constant_expression_compiles(tmp_path):
-    src = _write(tmp_path, "ConstOK", "model ConstOK\n  constant Real a = 2;\n  constant Real b = 3 * a;\n"
-                                      "  Real z = b;\nend ConstOK;\n")
+    # r.y is a parameter of the record, made constant by the prefix on r (MLS 4.4.4.1)
+    src = _write(tmp_path, "ConstOK", "model ConstOK\n  record R\n    parameter Real y = 2;\n  end R;\n"
+                                      "  constant R r;\n  constant Real a = 2;\n  constant Real b = 3 * a;\n"
+                                      "  constant Real c = r.y;\n  Real z = b;\nend ConstOK;\n")
     res = compile_model(src, "ConstOK", backend="embedded", output=tmp_path / "ok.fmu")
     assert res.fmu.is_file()
 

@@ -17,7 +17,8 @@ section), the file and the line. What is checked:
 * an array with an enumeration dimension (``x[E]``) is not indexed by an Integer literal
   (MLS 10.1);
 * every constant has a declaration equation, and it is a constant expression: no
-  parameters or variables in it (MLS 3.8.1; on the flat model).
+  parameters or variables of the model's top level in it (MLS 3.8.1; on the flat model;
+  a field ``r.y`` may be made constant by a prefix on ``r``, which the flat model does not show).
 """
 from __future__ import annotations
 
@@ -399,6 +400,10 @@ def check_flat(flat: dict, model: str, where: Callable[[str | None, dict | None]
                                     f"(MLS 3.8.1){at}: constant {name} has no value")
         for ref in _refs(binding):
             base = re.sub(r"\[[^\]]*\]", "", ref)
+            if "." in base:
+                # a field of a component: a `constant` on the enclosing component makes it constant
+                # (MLS 4.4.4.1), which the flat model does not show (r.y of `constant R r` stays a parameter)
+                continue
             other = variables.get(base)
             if isinstance(other, dict) and kind(other) != "Constant":
                 locs = where(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", v.get("source_span"))
