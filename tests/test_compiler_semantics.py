@@ -10,7 +10,7 @@ import pytest
 from trackingbox.compiler import compile_model
 from trackingbox.compiler.semantics import InvalidModelError, check_source
 from trackingbox.compiler.source import class_lines, resolve_source
-from trackingbox.compliance import location_verdict, locations_in
+from trackingbox.compliance import default_suite, discover, location_verdict, locations_in
 from trackingbox.errors import CompileError
 
 
@@ -117,6 +117,8 @@ def test_location_verdicts(tmp_path):
     assert location_verdict(_record(tmp_path, f"bad thing at {f}:9")) == "outside"  # after `end M;`
     assert location_verdict(_record(tmp_path, f"bad thing at {tmp_path / 'Other.mo'}:3")) == "outside"
     assert location_verdict(_record(tmp_path, "structurally singular")) == "missing"
+    # "when" as a plain English word names no construct
+    assert location_verdict(_record(tmp_path, f"x must be a parameter when y is omitted at {f}:3")) == "ok"
     # a refusal naming two constructs is right on a line holding either of them
     assert location_verdict(_record(tmp_path, f"model algorithm: reinit( of x at {f}:6")) == "ok"
     assert location_verdict(_record(tmp_path, f"model algorithm: reinit( of x at {f}:4")) == "construct"
@@ -210,3 +212,27 @@ def test_front_end_refusal_points_at_the_construct_it_names(tmp_path, name, text
 def test_iterator_named_like_a_conditional_component_is_no_use_of_it(tmp_path):
     _accepted(tmp_path, "Iter", "model Iter\n  Real x = 1 if false;\n  Real y[2];\nequation\n"
                                 "  for x in 1:2 loop\n    y[x] = x;\n  end for;\nend Iter;\n")
+
+
+_SUITE = default_suite()
+
+
+@pytest.mark.skipif(not (_SUITE / "package.mo").is_file(),
+                    reason=f"the compliance suite is not at {_SUITE} (../shared/modelica-compliance)")
+def test_source_checks_on_the_compliance_suite():
+    # no valid test model of the suite is rejected; the invalid ones the front end accepted
+    # (last session's run) and a source check covers are
+    src = resolve_source(_SUITE)
+    flagged, wrong = set(), []
+    for m in discover(_SUITE):
+        try:
+            check_source(src, m.name)
+        except InvalidModelError as exc:
+            (wrong.append(f"{m.name}: {exc}") if m.should_pass else flagged.add(m.name.split(".", 2)[2]))
+    assert wrong == []
+    expected = {"Arrays.Indexing.EnumArrayInvalidIndexing", "Equations.For.ScalarRange",
+                "Operators.Arithmetic.ExponentIntegers", "Components.Time.TimeConnector", "Components.Time.TimeRecord",
+                "Components.Prefixes.PrefixConflictStream"}
+    expected |= {f"Components.Conditional.InvalidUsage{k}" for k in ("Equation", "FunCall", "Lookup", "Modifier")}
+    expected |= {f"Components.Prefixes.{k}InvalidClassType" for k in ("Constant", "Input", "Output", "Parameter")}
+    assert expected <= flagged

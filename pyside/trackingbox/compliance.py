@@ -159,7 +159,7 @@ def locations_in(message: str) -> tuple[tuple[str, int], ...]:
 
 _CONSTRUCT_TEXT: tuple[tuple[str, str], ...] = (
     # (what the refusal's own words name, what the text of the line it points at must then hold)
-    (r"when-clause|\bwhen\b", r"\bwhen\b"),
+    (r"\bwhen-clause|\bwhen[- ](?:equation|statement)|`when`", r"\bwhen\b"),
     (r"\balgorithm\b", r"\balgorithm\b"),
     (r"\bpre\(", r"\bpre\s*\("),
     (r"\bedge\(", r"\bedge\s*\("),
