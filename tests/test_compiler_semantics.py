@@ -90,6 +90,8 @@ def test_invalid_model_is_rejected_at_its_line(tmp_path, name):
     assert rule in msg
     assert f"{tmp_path / (name + '.mo')}:{line}:" in msg
     assert "(MLS " in msg  # the rule names its section of the specification
+    if name == "CondModifier":  # and the line of the conditional declaration
+        assert f"declared with a condition at {tmp_path / (name + '.mo')}:5" in msg
 
 
 @pytest.mark.parametrize("name", sorted(VALID))

@@ -114,7 +114,8 @@ def _split(text: str, base: int) -> list[_Statement]:
                     section = m.group(2)
                 piece = _blank(piece[: m.end()]) + piece[m.end():]
             if piece.strip():
-                found.append(_Statement(piece, base + start, section))
+                lead = len(piece) - len(piece.lstrip())  # a statement starts at its first word
+                found.append(_Statement(piece[lead:], base + start + lead, section))
             start, depth = k + 1, 0
     return found
 
