@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from trackingbox.compiler.source import model_files, resolve_source
-from trackingbox.compliance import default_suite, discover, main
+from trackingbox.compliance import default_suite, discover, location_verdict, main
 
 pytestmark = pytest.mark.compile
 
@@ -67,12 +67,19 @@ def test_runner_on_a_sample_keeps_the_invariants(tmp_path, capsys):
             for file, line in r["locations"]:
                 assert file in allowed, (r["model"], file)
                 assert 1 <= line <= len(Path(file).read_text().splitlines())
+        # every compile-time refusal names a line inside the model's own class (and the construct's line)
+        assert location_verdict(r) in (None, "ok"), r
+    assert "loc:bad" in table
+    assert location_verdict(by_model[SAMPLE[4]]) == "ok"  # rumoca gives no position: the runner's own search
     assert by_model[SAMPLE[0]]["outcome"] == "pass"
     when = by_model[SAMPLE[1]]
     assert when["outcome"] == "refused-construct"
     own = Path(when["file"]).read_text().splitlines()
     file, line = when["locations"][0]
     assert file == when["file"] and re.search(r"\bwhen\b", own[line - 1])
+    # --table prints the same table from the results file alone
+    assert main(["--table", str(out)]) == 0
+    assert capsys.readouterr().out.strip() == table.strip().rsplit("\n", 1)[0].strip()
     # --resume computes nothing again and keeps what is there
     before = out.read_text()
     assert main(args + ["--resume"]) == 0

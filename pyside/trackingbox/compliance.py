@@ -27,8 +27,16 @@ so that their ``assert``\\ s are evaluated. Each model gets one outcome:
     an invalid model (``shouldPass = false``) was refused (compile or
     simulation error) / compiled and simulated without complaint.
 
+Every refusal at compile time (``refused-*`` and ``rejected`` before simulation) is
+also checked for its position (:func:`location_verdict`): the first ``file.mo:line``
+it names must lie inside the model's own class definition in its own file, and where
+the refusal names a construct (``when``, ``algorithm``, ``der(``, ...) that line must
+contain it. The table's ``loc:bad`` column counts the refusals that fail this, and
+lists them below the table.
+
 Results are appended to a JSON-lines file as each model finishes, so an
-interrupted run keeps what it computed (``--resume`` continues it). Run it as
+interrupted run keeps what it computed (``--resume`` continues it; ``--table FILE``
+prints the table of a results file without running anything). Run it as
 ``scripts/compliance`` (see ``--help``).
 """
 from __future__ import annotations
@@ -93,6 +101,7 @@ class ModelResult:
     seconds: float
     file: str
     locations: tuple[tuple[str, int], ...] = ()
+    stage: str = "compile"  # where the outcome was decided: "compile" or "simulate"
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -148,12 +157,66 @@ def locations_in(message: str) -> tuple[tuple[str, int], ...]:
     return tuple((f, int(n)) for f, n in _LOCATION.findall(message))
 
 
+_CONSTRUCT_TEXT: tuple[tuple[str, str], ...] = (
+    # (what the refusal's own words name, what the text of the line it points at must then hold)
+    (r"\bwhen-clause|\bwhen[- ](?:equation|statement)|`when`", r"\bwhen\b"),
+    (r"\balgorithm\b", r"\balgorithm\b"),
+    (r"\bpre\(", r"\bpre\s*\("),
+    (r"\bedge\(", r"\bedge\s*\("),
+    (r"\bsample\(", r"\bsample\s*\("),
+    (r"\breinit\(", r"\breinit\s*\("),
+    (r"\binitial\(\)", r"\binitial\s*\("),
+    (r"\bterminal\(\)", r"\bterminal\s*\("),
+    (r"\bder\(", r"\bder\s*\("),
+    (r"\bexternal function", r"\bexternal\b"),
+    (r"\bif-equation", r"\bif\b"),
+    (r"\barray dimension or for-range\b", r"\bfor\b|\["),
+    (r"\bfor-(?:loop|equation|range)|\bloop index\b|\bexplicit range\b", r"\bfor\b"),
+)
+LOCATION_VERDICTS: tuple[str, ...] = ("ok", "missing", "outside", "construct")
+
+
+def location_verdict(record: dict) -> str | None:
+    """Whether a compile-time refusal names the model's own class and the right line.
+
+    ``None`` for outcomes that are not refusals at compile time (passes, simulation
+    failures, crashes); else ``"ok"``; ``"missing"`` (no ``file.mo:line`` in the
+    message); ``"outside"`` (the first position named is not inside the model's own
+    class definition in its own file); ``"construct"`` (the message names a construct
+    such as ``when`` or ``der(`` and the line pointed at does not contain it).
+    """
+    from .compiler.source import class_lines, read_text
+
+    if record["outcome"] not in ("refused-construct", "refused-other", "rejected"):
+        return None
+    message = record.get("message", "")
+    stage = record.get("stage") or ("simulate" if re.search(r"\.fmu\b", message) else "compile")
+    if stage != "compile":
+        return None
+    locs = locations_in(message)
+    if not locs:
+        return "missing"
+    file, line = locs[0]
+    lines = class_lines(Path(record["file"]), record["model"])
+    if file != record["file"] or lines is None or not lines[0] <= line <= lines[1]:
+        return "outside"
+    words = message[: message.find(file)]  # the refusal's own words, before the position
+    words = words.split("(rumoca:", 1)[0]
+    expected = [holds for named, holds in _CONSTRUCT_TEXT if re.search(named, words)]
+    if expected:  # the line holds (one of) the construct(s) the refusal names
+        text = read_text(Path(file)).splitlines()
+        here = text[line - 1] if line <= len(text) else ""
+        if not any(re.search(holds, here) for holds in expected):
+            return "construct"
+    return "ok"
+
+
 def _assert_failure(message: str) -> bool:
     return "assert" in message.lower()
 
 
-def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
-    """Compile (and simulate, for a valid model) *model* in this process: (outcome, message)."""
+def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str, str]:
+    """Compile (and simulate, for a valid model) *model* in this process: (outcome, message, stage)."""
     from .compiler import InternalCompileError, compile_model
     from .compiler.source import experiment_settings, resolve_source
     from .errors import CompileError, SimulationError, TrackingError, UnsupportedConstructError
@@ -163,18 +226,18 @@ def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
     try:
         compile_model(suite, model.name, backend="embedded", output=fmu)
     except InternalCompileError as exc:  # a clean message for the user, but a bug of ours: count it
-        return "crashed", str(exc)
+        return "crashed", str(exc), "compile"
     except UnsupportedConstructError as exc:
-        return ("refused-construct" if model.should_pass else "rejected"), str(exc)
+        return ("refused-construct" if model.should_pass else "rejected"), str(exc), "compile"
     except CompileError as exc:
         text = str(exc)
         if "front end crashed" in text:
-            return "crashed", text
+            return "crashed", text, "compile"
         if "front end did not finish" in text:
-            return "hang", text
-        return ("refused-other" if model.should_pass else "rejected"), text
+            return "hang", text, "compile"
+        return ("refused-other" if model.should_pass else "rejected"), text, "compile"
     except TrackingError as exc:
-        return ("refused-other" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}"
+        return ("refused-other" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}", "compile"
     settings = experiment_settings(resolve_source(suite), model.name)
     start = settings.get("StartTime", 0.0)
     stop = settings.get("StopTime", 1.0)
@@ -187,11 +250,11 @@ def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str]:
     except SimulationError as exc:
         text = str(exc)
         if not model.should_pass:
-            return "rejected", text
-        return ("wrong-values" if _assert_failure(text) else "sim-failed"), text
+            return "rejected", text, "simulate"
+        return ("wrong-values" if _assert_failure(text) else "sim-failed"), text, "simulate"
     except TrackingError as exc:
-        return ("sim-failed" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}"
-    return ("pass" if model.should_pass else "accepted"), ""
+        return ("sim-failed" if model.should_pass else "rejected"), f"{type(exc).__name__}: {exc}", "simulate"
+    return ("pass" if model.should_pass else "accepted"), "", "simulate"
 
 
 def _worker_main(argv: list[str]) -> int:
@@ -201,13 +264,14 @@ def _worker_main(argv: list[str]) -> int:
     logging.basicConfig(level=logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="tbx-compliance-") as tmp:
         try:
-            outcome, message = run_one(model, Path(suite), Path(tmp))
+            outcome, message, stage = run_one(model, Path(suite), Path(tmp))
         except BaseException as exc:  # noqa: BLE001 - the point is to classify everything
             import traceback
 
-            outcome = "crashed"
+            outcome, stage = "crashed", "compile"
             message = f"{type(exc).__name__}: {exc}\n" + "".join(traceback.format_exc(limit=-3))
-    sys.stdout.write("\n@@RESULT@@" + json.dumps({"outcome": outcome, "message": message}) + "\n")
+    sys.stdout.write("\n@@RESULT@@" + json.dumps({"outcome": outcome, "message": message, "stage": stage})
+                     + "\n")
     sys.stdout.flush()
     return 0
 
@@ -232,6 +296,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     cmd = [sys.executable, "-m", "trackingbox.compliance", "--one", model.name, str(model.file),
            "true" if model.should_pass else "false", str(suite)]
     t0 = time.perf_counter()
+    stage = "compile"
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, errors="replace")
     _LIVE.add(proc)
@@ -249,7 +314,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
         marker = out.rfind("@@RESULT@@")
         if marker >= 0:
             data = json.loads(out[marker + len("@@RESULT@@"):].strip())
-            outcome, message = data["outcome"], data["message"]
+            outcome, message, stage = data["outcome"], data["message"], data.get("stage", "compile")
         elif proc.returncode < 0:
             outcome = "crashed"
             message = f"worker killed by signal {signal.Signals(-proc.returncode).name}: {err.strip()[-500:]}"
@@ -259,7 +324,7 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
     seconds = time.perf_counter() - t0
     message = message.strip()
     return ModelResult(model.name, model.section, model.should_pass, outcome, message[:4000],
-                       round(seconds, 2), str(model.file), locations_in(message))
+                       round(seconds, 2), str(model.file), locations_in(message), stage)
 
 
 def load_results(path: Path) -> dict[str, dict]:
@@ -285,15 +350,23 @@ def table(results: list[dict]) -> str:
             ("refused-other", "ref:other", True), ("crashed", "crashed", None), ("hang", "hang", None),
             ("wrong-values", "wrong", True), ("sim-failed", "sim-fail", True),
             ("rejected", "inv:rejected", False), ("accepted", "inv:accepted", False)]
-    head = f"{'section':12s} {'valid':>5s} " + " ".join(f"{c[1]:>13s}" for c in cols) + f" {'invalid':>7s}"
+    head = (f"{'section':12s} {'valid':>5s} " + " ".join(f"{c[1]:>13s}" for c in cols) + f" {'invalid':>7s}"
+            + f" {'loc:bad':>7s}")
     lines = [head, "-" * len(head)]
+    verdicts = {r["model"]: location_verdict(r) for r in results}
     for sec in sections + ["TOTAL"]:
         rows = results if sec == "TOTAL" else [r for r in results if r["section"] == sec]
         count = Counter(r["outcome"] for r in rows)
         valid = sum(1 for r in rows if r["should_pass"])
         invalid = len(rows) - valid
+        bad = sum(1 for r in rows if verdicts[r["model"]] not in (None, "ok"))
         lines.append(f"{sec:12s} {valid:5d} " + " ".join(f"{count.get(c[0], 0):13d}" for c in cols)
-                     + f" {invalid:7d}")
+                     + f" {invalid:7d} {bad:7d}")
+    refusals = sum(1 for v in verdicts.values() if v is not None)
+    wrong = sorted((m, v) for m, v in verdicts.items() if v not in (None, "ok"))
+    lines.append(f"loc:bad = compile-time refusals (of {refusals}) whose first position is missing, not inside "
+                 "the model's own class in its own file, or on a line without the construct named")
+    lines += [f"  {v:9s} {m}" for m, v in wrong]
     return "\n".join(lines)
 
 
@@ -327,8 +400,19 @@ def main(argv: list[str] | None = None) -> int:
                    "(repeatable)")
     p.add_argument("--limit", type=int, default=None, help="at most this many models")
     p.add_argument("--resume", action="store_true", help="skip models already in --out")
+    p.add_argument("--table", type=Path, default=None, metavar="RESULTS",
+                   help="only print the table of an existing results file (JSON lines) and exit")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.table is not None:
+        if not args.table.is_file():
+            print(f"error: results file {args.table} not found", file=sys.stderr)
+            return 2
+        results = list(load_results(args.table).values())
+        if args.match:
+            results = [r for r in results if any(m in r["model"] for m in args.match)]
+        print(table(results))
+        return 0
     suite = (args.suite or default_suite()).resolve()
     if not (suite / "package.mo").is_file():
         print(f"error: compliance suite package {suite} not found (no package.mo); give --suite",

@@ -22,6 +22,7 @@ from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .rewrite import frontend_bytes
+from .semantics import check_source
 from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
 
 log = logging.getLogger(__name__)
@@ -95,6 +96,7 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
                    else r"\bfor\s+\w+\s*(?:[),]|in\s*\{)" if "comprehension" in detail
                    else r"\bfor\b" if "for-equation" in detail
                    else r"\bif\b" if "if-equation" in detail
+                   else r"\bfor\s+\w+\s+in\b" if re.search(r"\brange\b", detail)
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
@@ -117,6 +119,39 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
     return UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: {construct}{at}. The embedded backend cannot compile "
         "it; use --backend openmodelica where omc is installed, or rewrite the model")
+
+
+def _own_position(first: str, source: ModelicaSource, model: str) -> str:
+    """For a front-end message without a position: where the first name it quotes (`x`) stands
+    in the model's own class, else the line that declares the model (`` (... at file:line)``)."""
+    for name in re.findall(r"`([A-Za-z_]\w*)`", first):
+        found = locate(source, model, rf"(?<![\w.]){re.escape(name)}\b", limit=1, own=True)
+        if found:
+            return f" (`{name}` at {found[0]} in {model}; the front end gave no position)"
+    decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, own=True)
+    return f" ({model} is declared at {decl[0]}; the front end gave no position)" if decl else ""
+
+
+_NAMED_IN_MESSAGE = (
+    # (what rumoca's message names, where that stands in the code)
+    (r"\binitial algorithm", r"\binitial\s+algorithm\b"),
+    (r"\balgorithm sections?\b", r"(?<!initial )\balgorithm\b"),
+    (r"\b([A-Za-z_]\w*)\(\)", r"\b{0}\s*\("),
+)
+
+
+def _named_position(first: str, source: ModelicaSource, model: str) -> str:
+    """Where the construct rumoca's message names (``initial algorithm``, ``delay()``, ...) stands
+    in the model's own class (its own file), or "" when the message names none or it is not there."""
+    for said, where in _NAMED_IN_MESSAGE:
+        found = re.search(said, first)
+        if found is None:
+            continue
+        pattern = where.format(*(re.escape(g) for g in found.groups()))
+        locs = locate(source, model, pattern, limit=3, own=True)
+        if locs:
+            return ", ".join(dict.fromkeys(str(loc) for loc in locs))
+    return ""
 
 
 def _frontend_version() -> str:
@@ -377,16 +412,18 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                 raise CompileError(f"class {model!r} not found in {source.entry}"
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
-            raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}")
+            raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}"
+                               f"{_own_position(first, source, model)}")
     construct = (_mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
                  or _frontend_gap(message, source, model))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
-    if not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
-        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
-        if decl:
-            detail = f" ({model} is declared at {decl[0]}; the front end gave no position)"
+    named = _named_position(first, source, model)
+    if named:  # the construct rumoca names, where it stands in the model's own class, comes first
+        detail = f" (at {named}){detail}"
+    elif not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
+        detail = _own_position(first, source, model)
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
@@ -400,6 +437,7 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     class_type = str(flat.get("class_type", "")).lower()
     if class_type in ("package", "function", "connector", "record", "type"):
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
+    check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
     t1 = time.perf_counter()
     translator = FlatTranslator(flat, source, model)
     em = translator.translate()

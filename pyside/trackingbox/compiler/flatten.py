@@ -68,8 +68,9 @@ from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .modifiers import modifier_check
-from .source import (Location, ModelicaSource, locate, model_files, span_location, span_sources,
-                     strip_comments)
+from .semantics import check_flat
+from .source import (Location, ModelicaSource, class_extent, locate, model_files, read_text, span_location,
+                     span_sources, strip_comments)
 
 log = logging.getLogger(__name__)
 
@@ -934,6 +935,7 @@ class FlatTranslator:
     # ------------------------------------------------------------ translate
     def translate(self) -> ExplicitModel:
         self.check_constructs()
+        check_flat(self.flat, self.model, self.location)  # constants: bound, to constant expressions
         self.collect_variables()
         # Real parameters: tunable (value does not depend on other parameters) or calculated.
         params, calculated, calc_eqs = [], [], []
@@ -1233,6 +1235,41 @@ class FlatTranslator:
         sol = rf(ca.DM(guess), ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
         return [sol[i] for i in range(len(unk))]
 
+    def _declared_at(self, scalar: str) -> str:
+        """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
+        declares its top-level component (and, if elsewhere, where the variable itself is)."""
+        base = scalar.split("[", 1)[0]
+        head = re.split(r"[.\[]", base, maxsplit=1)[0]
+        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True)
+        var = (self.flat.get("variables") or {}).get(base) or {}
+        leaf = base.rsplit(".", 1)[-1]
+        decl = self.location(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", span=var.get("source_span")) if var else []
+        where = [f"{head} declared at {own[0]}"] if own else []
+        if decl and (not own or str(decl[0]) != str(own[0])):
+            where.append(f"{base} at {decl[0]}")
+        return f"{scalar} ({'; '.join(where)})" if where else scalar
+
+    def _equation_at(self, origin: str) -> str:
+        """An equation's origin text, with the line of the ``connect`` of the model's own class it
+        comes from (``connect(a.c.e, b.c.e)`` comes from ``connect(a.c, b.c)``)."""
+        conn = re.fullmatch(r"connect\((.+), (.+)\)", origin)
+        extent = class_extent(self.source, self.model) if conn else None
+        if conn is None or extent is None:
+            return origin
+        file, first, last = extent
+
+        def within(full: str, part: str) -> bool:
+            return full == part or full.startswith(part + ".") or full.startswith(part + "[")
+
+        lines = strip_comments(read_text(file)).splitlines()
+        code = "\n".join(lines[first - 1:last])
+        for m in re.finditer(r"\bconnect\s*\(\s*([\w.\[\], ]+?)\s*,\s*([\w.\[\]]+)\s*\)", code):
+            a, b = (re.sub(r"\s+", "", g) for g in m.groups())
+            lhs, rhs = conn.groups()
+            if (within(lhs, a) and within(rhs, b)) or (within(lhs, b) and within(rhs, a)):
+                return f"{origin} at {file}:{first + code.count(chr(10), 0, m.start())}"
+        return origin
+
     def _structural_message(self, exc: StructuralError, residuals: list[tuple[ca.MX, str]], names: list[str]) -> str:
         n_eq, n_unk = len(residuals), len(names)
         head = f"{self.model} is structurally singular: {n_eq} equations for {n_unk} unknowns"
@@ -1240,9 +1277,11 @@ class FlatTranslator:
         unk = [names[j] for j in exc.unknowns][:8]
         parts = [head]
         if unk:
-            parts.append("variables not determined by any equation: " + ", ".join(unk))
+            parts.append("variables not determined by any equation: "
+                         + ", ".join(self._declared_at(u) for u in unk))
         if eqs and n_eq != n_unk or (eqs and unk):
-            parts.append("equations with no variable left to solve for, from: " + ", ".join(eqs))
+            parts.append("equations with no variable left to solve for, from: "
+                         + ", ".join(self._equation_at(e) for e in eqs))
         return "; ".join(parts)
 
 

@@ -157,13 +157,69 @@ def _declares(text: str, name: str) -> re.Match[str] | None:
     return re.search(_DECL_OF.format(name=re.escape(name)), text)
 
 
-def _class_range(code: str, name: str) -> tuple[int, int] | None:
-    """Character range of the declaration of class *name* in comment-free *code* (first one)."""
-    start = _declares(code, name)
-    if start is None:
+_CLASS_HEAD = re.compile(
+    r"\b(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator|pure|impure|inner|outer)\s+)*"
+    r"(?:model|block|class|package|connector|record|function|type)\s+(?:extends\s+)?([A-Za-z_]\w*)")
+_CLASS_END = re.compile(r"\bend\s+([A-Za-z_]\w*)\s*;")
+
+
+@functools.lru_cache(maxsize=1024)
+def class_ranges(code: str) -> tuple[tuple[tuple[str, ...], int, int], ...]:
+    """Every long class definition of comment-free *code*: (nested path, start, end) in characters.
+
+    The path holds the names of the enclosing classes of the file and the class's own name
+    (``("Pkg", "Model")`` for a model inside a package of the same file). Short class
+    definitions (``type T = Real;``) and partial applications (``function f(x = 1)``) enclose
+    nothing and are left out; ``end name;`` closes the innermost open class of that name.
+    """
+    events = sorted([(m.start(), 0, m.group(1), m.end()) for m in _CLASS_HEAD.finditer(code)
+                     if not re.match(r"\s*[=(]", code[m.end():])]
+                    + [(m.start(), 1, m.group(1), m.end()) for m in _CLASS_END.finditer(code)])
+    stack: list[tuple[str, int]] = []
+    found: list[tuple[tuple[str, ...], int, int]] = []
+    for pos, kind, name, end in events:
+        if kind == 0:
+            stack.append((name, pos))
+            continue
+        names = [n for n, _ in stack]
+        if name not in names:
+            continue  # end for; end if; end when; ...
+        k = len(names) - 1 - names[::-1].index(name)
+        found.append((tuple(names[: k + 1]), stack[k][1], end))
+        del stack[k:]
+    for k, (name, pos) in enumerate(stack):  # unterminated: to the end of the text
+        found.append((tuple(n for n, _ in stack[: k + 1]), pos, len(code)))
+    return tuple(sorted(found, key=lambda r: r[1]))
+
+
+def _class_range(code: str, dotted: str) -> tuple[int, int] | None:
+    """Character range of the class *dotted* (``Pkg.Sub.Model``, or a suffix of it) in comment-free
+    *code*: the definition whose nested path is the longest suffix of *dotted* (the first such one)."""
+    parts = tuple(dotted.split("."))
+    best: tuple[int, int] | None = None
+    depth = 0
+    for path, start, end in class_ranges(code):
+        if len(path) > depth and parts[-len(path):] == path:
+            best, depth = (start, end), len(path)
+    return best
+
+
+def class_lines(file: Path, dotted: str) -> tuple[int, int] | None:
+    """First and last line of the definition of class *dotted* (or a suffix of it) in *file*."""
+    code = _code(Path(file))
+    rng = _class_range(code, dotted)
+    if rng is None:
         return None
-    end = re.compile(rf"\bend\s+{re.escape(name)}\s*;").search(code, start.end())
-    return start.start(), (end.end() if end else len(code))
+    return code.count("\n", 0, rng[0]) + 1, code.count("\n", 0, rng[1]) + 1
+
+
+def class_extent(source: ModelicaSource, model: str) -> tuple[Path, int, int] | None:
+    """The file of class *model* and the first and last line of its definition there."""
+    file = _file_of(source, model)
+    if file is None:
+        return None
+    lines = class_lines(file, model)
+    return None if lines is None else (file, *lines)
 
 
 def _file_of(source: ModelicaSource, dotted: str) -> Path | None:
@@ -212,7 +268,7 @@ def model_files(source: ModelicaSource, model: str, limit: int = 40) -> tuple[Pa
     while queue and len(found) < limit:
         file, cls = queue.pop(0)
         code = _code(file)
-        rng = _class_range(code, cls.rsplit(".", 1)[-1])
+        rng = _class_range(code, cls)
         body = code[rng[0]:rng[1]] if rng else code
         scopes = cls.split(".")
         for name in dict.fromkeys(_NAME.findall(body)):
@@ -233,21 +289,23 @@ def model_files(source: ModelicaSource, model: str, limit: int = 40) -> tuple[Pa
     return tuple(found[:limit])
 
 
-def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5) -> list[Location]:
+def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5, *,
+           own: bool = False) -> list[Location]:
     """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
 
     Unlike :func:`find_construct` over every file, only the model's own class file and the
     files of the classes it uses are searched (its own file first), and in each only the
     text of the class concerned, so an occurrence elsewhere in the package is never named.
+    With *own*, only the model's own class definition is searched.
     """
     regex = re.compile(pattern)
-    files = model_files(source, model)
+    files = model_files(source, model)[:1] if own else model_files(source, model)
     found: list[Location] = []
     for k, file in enumerate(files):
         code = _code(file)
         lo, hi = 0, len(code)
         if k == 0:
-            rng = _class_range(code, model.rsplit(".", 1)[-1])
+            rng = _class_range(code, model)
             if rng:
                 lo, hi = rng
         for match in regex.finditer(code, lo, hi):
