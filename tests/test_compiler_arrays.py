@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import fmpy
+from fmpy import read_model_description
 import numpy as np
 import pytest
 import scipy.linalg
@@ -393,6 +394,17 @@ package Mods
   model Outer2
     extends Outer(i(a = 20));
   end Outer2;
+  model LostValueWithBounds "rumoca drops a = 30 and the bounds: i.a would stay 10"
+    extends Outer(i(a(min = 0, max = 100) = 30));
+  end LostValueWithBounds;
+  model LostValueShort = Inner(a(start = 2) = 5) "rumoca drops a = 5: a would stay 1";
+  model LostValueDeclaration "rumoca drops o.i.a = 40: it would stay 10"
+    Outer o(i(a(max = 50) = 40));
+  end LostValueDeclaration;
+  model KeptValueWithBounds "a declaration's own elements keep value and bounds"
+    Inner c(a(min = 0, max = 100) = 30);
+    Real y = c.b*(1 + time);
+  end KeptValueWithBounds;
 end Mods;
 """
 
@@ -400,6 +412,9 @@ LOST = [
     ("LostNested", "o1.i", "package.mo:15"),
     ("LostRedeclare", "class redeclaration with a modification", "package.mo:25"),
     ("MixedMedia", "package Medium2 extends Medium", "package.mo:31"),
+    ("LostValueWithBounds", "the modification of i.a in 'extends Outer(...)'", "package.mo:47"),
+    ("LostValueShort", "the modification of a in 'LostValueShort = Inner(...)'", "package.mo:49"),
+    ("LostValueDeclaration", "the modification of i.a in the declaration of o", "package.mo:51"),
 ]
 
 
@@ -470,6 +485,16 @@ def test_vector_subscripts_pick_rows_and_columns_like_modelica():
     picked = arrays.subscript(M, [_obj([2, 1]), _obj([3, 1])], "'M'")
     assert picked.tolist() == [[6, 4], [3, 1]]
     assert arrays.subscript(M, [None, 2], "'M'").tolist() == [2, 5]
+
+
+def test_a_value_with_bounds_in_a_declaration_is_kept(mods_package, tmp_path):
+    """``Inner c(a(min = 0, max = 100) = 30)``: rumoca keeps both here (only nested or extends
+    modifications lose them), so it is not refused: b = 2a = 60."""
+    res = compile_model(mods_package, "Mods.KeptValueWithBounds", backend="embedded", output=tmp_path / "k.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
+    assert np.allclose(out["y"], 60 * (1 + out["time"]))
+    a = next(v for v in read_model_description(str(res.fmu)).modelVariables if v.name == "c.a")
+    assert (float(a.min), float(a.max)) == (0.0, 100.0)
 
 
 def test_modification_parser_reads_nesting_values_and_skips_redeclarations():

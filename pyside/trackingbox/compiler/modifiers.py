@@ -1,6 +1,6 @@
 """Find the modifications that rumoca 0.10.2 loses, before they give wrong numbers.
 
-rumoca flattens most modifications right, but in three situations it silently
+rumoca flattens most modifications right, but in four situations it silently
 drops or mixes up values (each found by flattening small models; see
 ``tests/test_compiler_arrays.py``):
 
@@ -11,6 +11,11 @@ drops or mixes up values (each found by flattening small models; see
   given there is lost, and so are bounds.
 * **A class redeclaration with a modification**
   (``redeclare model M = Base(k = 5)``): the modification is dropped.
+* **A value given together with attributes, inside a nested modification.** In
+  ``extends Base(k(max = 5) = 3)``, ``model D = C(k(min = 1) = 3)`` or
+  ``A a(c(k(max = 5) = 3))`` the value 3 and the attributes are both dropped
+  (``k`` keeps its default), while ``C c(k(max = 5) = 3)`` (a declaration's own
+  elements) and ``extends Base(k = 3)`` are kept.
 * **A package that extends another with a modified constant**
   (``package Water2 extends Water(cp = 1000)``): when a model uses both, the
   base package's constant takes the modified value too.
@@ -41,6 +46,24 @@ _CLASS_START = re.compile(
 )
 _IDENT = re.compile(r"[A-Za-z_]\w*")
 _KEYWORDS = {"each", "final", "redeclare", "replaceable"}
+
+
+def _values_with_attributes(mods: list[Mod], depth: int, first: int, path: str = "") -> list[tuple[str, Mod]]:
+    """Elements ``name(sub...) = value`` at nesting *depth* >= *first* (1 = the clause's own elements)."""
+    found = []
+    for m in mods:
+        name = f"{path}.{m.name}" if path else m.name
+        if depth >= first and m.has_value and m.subs:
+            found.append((name, m))
+        found.extend(_values_with_attributes(m.subs, depth + 1, first, name))
+    return found
+
+
+_SHORT_CLASS = re.compile(rf"\b{_KINDS}\s+([A-Za-z_]\w*)\s*=\s*(?:(?:input|output)\s+)?([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\(")
+_DECLARATION = re.compile(r"(?<![.\w])([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\[[^\]]*\]\s*)?\(")
+_NOT_TYPES = {"extends", "end", "import", "within", "if", "then", "else", "elseif", "and", "or", "not", "in",
+              "loop", "annotation", "return", "der", "equation", "algorithm", "connect", "assert", "when",
+              "while", "for", "redeclare", "replaceable", "constrainedby"} | set(_KINDS[3:-1].split("|"))
 
 
 _CACHE: dict[Path, tuple[tuple[object, ...], ModifierCheck]] = {}
@@ -310,6 +333,7 @@ class ModifierCheck:
                         if harmless:
                             warnings.append(f"{path}: {', '.join(sorted(harmless))} declared for it are not "
                                             f"kept through 'extends {m.group(1)}(...)' at {where}")
+            self._check_values_with_attributes(model, c, text)
             for m in re.finditer(rf"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*{_KINDS}\s+\w+\s*=\s*[\w.]+\s*\(",
                                  text):
                 raise UnsupportedConstructError(
@@ -318,6 +342,30 @@ class ModifierCheck:
                     "short class with the modification and redeclare to it"
                 )
         return warnings
+
+    def _check_values_with_attributes(self, model: str, c: ClassText, text: str) -> None:
+        """Refuse ``name(attributes) = value`` where rumoca drops both (see the module docstring)."""
+        clauses: list[tuple[str, int, int]] = []  # (what, offset of the clause, first depth that loses)
+        for m in re.finditer(r"\bextends\s+([\w.]+)\s*\(", text):
+            clauses.append((f"'extends {m.group(1)}(...)'", m.start(), 1))
+        for m in _SHORT_CLASS.finditer(text):
+            clauses.append((f"'{m.group(1)} = {m.group(2)}(...)'", m.start(), 1))
+        for m in _DECLARATION.finditer(text):
+            if m.group(1) in _NOT_TYPES or m.group(2) in _NOT_TYPES:
+                continue
+            clauses.append((f"the declaration of {m.group(2)}", m.start(), 2))
+        for what, start, first in clauses:
+            paren = text.index("(", start)
+            mods, _ = parse_modification(text, paren)
+            for name, mod in _values_with_attributes(mods, 1, first):
+                leaf = name.rsplit(".", 1)[-1]
+                raise UnsupportedConstructError(
+                    f"unsupported Modelica construct in {model}: the modification of {name} in {what} at "
+                    f"{self._location(c, mod.offset)} gives {leaf} a value together with modifications of its "
+                    f"own ({', '.join(sub.name for sub in mod.subs)}); rumoca 0.10.2 drops both there, so {leaf} "
+                    f"would silently keep its default. Give the value alone there ({leaf} = ...) and put "
+                    f"bounds, units or start where {leaf} is declared"
+                )
 
     def _used_directly(self, used: list[ClassText], base: str, extender: ClassText) -> bool:
         """Whether *base* is named by a used class other than through *extender*'s extends clause."""
