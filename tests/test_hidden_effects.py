@@ -188,5 +188,6 @@ def test_hidden_sensor_drift_named_end_to_end(fmu_cache, tmp_path):
     top = doc["findings"][0]
     assert (top["effect"], top["target"]) == ("sensor-drift", "TI-102")
     before, after = top["validation"]["nrmse_before"]["TI-102"], top["validation"]["nrmse_after"]["TI-102"]
-    assert after < before  # measured: 0.0397 -> 0.0340 (seed 2, 4 h; the 70 % criterion is the suite's, scripts/bench_diagnose)
+    # measured 0.0397 -> 0.0340 (seed 2, 4 h); the 70 % criterion is the suite's (scripts/bench_diagnose)
+    assert after < before
     assert doc["patch"]["fmu"] and Path(doc["patch"]["fmu"]).is_file()
