@@ -9,8 +9,6 @@ keep the runs short.
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
