@@ -120,6 +120,22 @@ def _check_time_order(t: npt.NDArray[np.float64], where: str, problems: list[str
                         f"{_fmt(t[j])} on line {_line(j)} ({_n(back.size, 'decrease')} in all)")
 
 
+def _numeric(col: pd.Series, what: str, problems: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The empty cells and the float values of one column; non-numeric and infinite
+    values are added to *problems* with their lines (*what* names the column and file)."""
+    na = col.isna().to_numpy()
+    values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
+    bad = np.flatnonzero(~na & np.isnan(values))
+    if bad.size:
+        cells = ", ".join(f"{col.iloc[i]!r} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
+        more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
+        problems.append(f"{what} has non-numeric values: {cells}{more}")
+    infinite = np.flatnonzero(np.isinf(values))
+    if infinite.size:
+        problems.append(f"{what} has infinite values, first on line {_line(int(infinite[0]))}")
+    return na, values
+
+
 def _header(path: Path) -> list[str] | None:
     with path.open(newline="", encoding="utf-8") as fh:
         for row in csv.reader(fh):
@@ -217,16 +233,7 @@ def read_table(
         if c == "time":
             continue
         col = raw[c]
-        na = col.isna().to_numpy()
-        values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
-        bad = np.flatnonzero(~na & np.isnan(values))
-        if bad.size:
-            cells = ", ".join(f"{col.iloc[i]!r} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
-            more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
-            problems.append(f"{kind} {c!r} in {where} has non-numeric values: {cells}{more}")
-        infinite = np.flatnonzero(np.isinf(values))
-        if infinite.size:
-            problems.append(f"{kind} {c!r} in {where} has infinite values, first on line {_line(int(infinite[0]))}")
+        na, values = _numeric(col, f"{kind} {c!r} in {where}", problems)
         if not allow_nan and na.any():
             rows = np.flatnonzero(na)
             if t is not None and not np.all(np.isnan(t[rows])):
@@ -266,17 +273,7 @@ def _read_long(raw: pd.DataFrame, path: Path, *, required: Iterable[str], allow_
         problems.append(f"column 'tag' in {where} has {_n(empty_tag.size, 'empty value')}, "
                         f"first on line {_line(int(empty_tag[0]))}")
     t, t0 = _parse_time(raw["time"], where, problems)
-    col = raw["value"]
-    na = col.isna().to_numpy()
-    values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
-    bad = np.flatnonzero(~na & np.isnan(values))
-    if bad.size:
-        cells = ", ".join(f"{col.iloc[i]!r} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
-        more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
-        problems.append(f"column 'value' in {where} has non-numeric values: {cells}{more}")
-    infinite = np.flatnonzero(np.isinf(values))
-    if infinite.size:
-        problems.append(f"column 'value' in {where} has infinite values, first on line {_line(int(infinite[0]))}")
+    na, values = _numeric(raw["value"], f"column 'value' in {where}", problems)
     names = list(dict.fromkeys(tags[tags != ""]))
     for c in required:
         if c not in names:

@@ -311,13 +311,14 @@ def close_models() -> None:
     _MODELS.clear()
 
 
-def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
-    """Simulate the twin over *window* with parameter vector *x*.
+def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
+                 ) -> tuple[dict[str, float], float, np.ndarray, pd.DataFrame | None]:
+    """What a run of the twin over *window* with parameter vector *x* starts from.
 
-    Runs the held-input pre-run first (inputs held at their first values, for
-    the part of ``problem.warmup`` the window's lead-in does not cover), then
-    the lead-in and the window; returns output tag -> simulated values on the
-    window's grid (lead-in included).
+    Returns the parameter values (the fixed ones and *x*), the length of the
+    held-input pre-run (the part of ``problem.warmup`` the window's lead-in does
+    not cover, in whole sample times), the window's grid from its first sample,
+    and the input table (inputs held at their first values over the pre-run).
     """
     values = np.asarray(x, dtype=float)
     parameters = dict(problem.fixed)
@@ -330,6 +331,18 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> d
     for name, series in window.inputs.items():
         frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
     inputs = pd.DataFrame(frame) if window.inputs else None
+    return parameters, offset, grid, inputs
+
+
+def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
+    """Simulate the twin over *window* with parameter vector *x*.
+
+    Runs the held-input pre-run first (inputs held at their first values, for
+    the part of ``problem.warmup`` the window's lead-in does not cover), then
+    the lead-in and the window; returns output tag -> simulated values on the
+    window's grid (lead-in included).
+    """
+    parameters, offset, grid, inputs = window_setup(problem, window, x)
     stop = offset + float(grid[-1])
     model = _model(problem.twin)
     result = model.simulate(

@@ -452,22 +452,10 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
     first, with the parameter at its value at the window's first grid point.
     Returns output tag -> values on the window's grid (lead-in cut off).
     """
-    import pandas as pd
-
-    from ..estimation import _model
+    from ..estimation import _model, window_setup
 
     problem = where.problem
-    values = np.asarray(x, dtype=float)
-    parameters = dict(problem.fixed)
-    parameters.update({n: float(v) for n, v in zip(problem.names, values)})
-    lead_in = float(window.start - window.time[0])
-    offset = max(0.0, problem.warmup - lead_in)
-    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
-    grid = window.time - window.time[0]
-    frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
-    for n, series in window.inputs.items():
-        frame[n] = np.concatenate(([series[0]], series)) if offset > 0 else series
-    inputs = pd.DataFrame(frame) if window.inputs else None
+    parameters, offset, grid, inputs = window_setup(problem, window, x)
 
     def value_at(t_abs: float) -> float:
         return base * (1.0 - rate * (t_abs - t_mid))
