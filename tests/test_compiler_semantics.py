@@ -224,17 +224,44 @@ _SUITE = default_suite()
 def test_source_checks_on_the_compliance_suite():
     # no valid test model of the suite is rejected; the invalid ones the front end accepted
     # (last session's run) and a source check covers are
+    # (a valid model may be refused for a construct the README lists: initial()/terminal() only)
+    from trackingbox.errors import UnsupportedConstructError
+
     src = resolve_source(_SUITE)
-    flagged, wrong = set(), []
+    flagged, wrong, refused = set(), [], []
     for m in discover(_SUITE):
         try:
             check_source(src, m.name)
         except InvalidModelError as exc:
             (wrong.append(f"{m.name}: {exc}") if m.should_pass else flagged.add(m.name.split(".", 1)[1]))
+        except UnsupportedConstructError as exc:
+            refused.append(str(exc))
     assert wrong == []
+    assert refused and all("built-in initial()" in r or "built-in terminal()" in r for r in refused), refused
     expected = {"Arrays.Indexing.EnumArrayInvalidIndexing", "Equations.For.ScalarRange",
                 "Operators.Arithmetic.ExponentIntegers", "Components.Time.TimeConnector", "Components.Time.TimeRecord",
                 "Components.Prefixes.PrefixConflictStream"}
     expected |= {f"Components.Conditional.InvalidUsage{k}" for k in ("Equation", "FunCall", "Lookup", "Modifier")}
     expected |= {f"Components.Prefixes.{k}InvalidClassType" for k in ("Constant", "Input", "Output", "Parameter")}
     assert expected <= flagged
+
+
+@pytest.mark.parametrize("name,text,line", [
+    ("GuardedAssert", "model GuardedAssert\n  Real x(start = 0, fixed = true);\nequation\n  der(x) = 1;\n"
+                      "  if initial() then\n    assert(time > 1, \"must fail at t = 0\");\n  end if;\n"
+                      "end GuardedAssert;\n", 5),
+    ("Terminal", "model Terminal\n  Real x(start = 0, fixed = true);\nalgorithm\n  x := 1;\n"
+                 "  if terminal() then\n    x := 2;\n  end if;\nend Terminal;\n", 5),
+])
+def test_initial_and_terminal_are_refused_at_their_line(tmp_path, name, text, line):
+    """rumoca 0.10.2 drops ``if initial() then assert(...) end if`` from the flat model without a
+    word (the assert above, false at t = 0, would never be checked): refused, as the README says."""
+    from trackingbox.errors import UnsupportedConstructError
+
+    src = tmp_path / f"{name}.mo"
+    src.write_text(text)
+    with pytest.raises(UnsupportedConstructError) as info:
+        compile_model(src, name, backend="embedded", output=tmp_path / "m.fmu")
+    assert f"{src}:{line}" in str(info.value)
+    assert "initial()" in str(info.value) or "terminal()" in str(info.value)
+    assert not (tmp_path / "m.fmu").exists()

@@ -19,6 +19,11 @@ section), the file and the line. What is checked:
 * every constant has a declaration equation, and it is a constant expression: no
   parameters or variables of the model's top level in it (MLS 3.8.1; on the flat model;
   a field ``r.y`` may be made constant by a prefix on ``r``, which the flat model does not show).
+
+One check is about valid Modelica instead: ``initial()`` and ``terminal()`` in an equation
+or algorithm of the model's own class are refused (:class:`UnsupportedConstructError`, as the
+README lists), because rumoca 0.10.2 drops an ``if initial() then ... end if`` equation
+(an ``assert`` in it included) from the flat model without a word.
 """
 from __future__ import annotations
 
@@ -28,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import CompileError
+from ..errors import CompileError, UnsupportedConstructError
 from .source import Location, ModelicaSource, _class_range, _code, _file_of, class_ranges
 
 _HEAD = re.compile(
@@ -215,6 +220,7 @@ class _Checker:
     def run(self) -> None:
         for scope in self.scopes:
             for st in scope.statements:
+                self.event_operators(st)
                 self.scalar_range(st)
                 if st.section == "element":
                     decl = _DECL.match(st.text)
@@ -226,6 +232,17 @@ class _Checker:
             self.enum_index(scope)
 
     # ---------------------------------------------------------------- checks
+    def event_operators(self, st: _Statement) -> None:
+        if st.section == "element":
+            return
+        m = re.search(r"\b(initial|terminal)\s*\(\s*\)", st.text)
+        if m:
+            raise UnsupportedConstructError(
+                f"unsupported Modelica construct in {self.model}: built-in {m.group(1)}() at "
+                f"{self.file}:{_line(self.code, st.start + m.start())}. The embedded backend cannot compile it "
+                "(rumoca 0.10.2 drops an if-equation guarded by it without a word); use --backend openmodelica "
+                "where omc is installed, or rewrite the model")
+
     def scalar_range(self, st: _Statement) -> None:
         if st.section == "element":
             return
