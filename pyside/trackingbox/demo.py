@@ -166,7 +166,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             summary["estimate"] = est.to_json()
             run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
     if step("pair", "steady-state step tests → gain matrix → RGA pairing"):
-        res = pair(spec, _pair_settings(spec), progress=progress)
+        res = pair(spec, _pair_settings(spec, run.bench), progress=progress)
         summary["pair"] = res.to_json()
         run.reports["pair"] = write_pair_report(spec, res, out / "pair")
         if not res.pairing.pairs:
@@ -194,14 +194,21 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-def _pair_settings(spec: Spec) -> Any:
-    """Pairing settings: step tests with the twin's controllers frozen where it has ``holdControllers``."""
+#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``). Not yet
+#: heat production: with its controllers frozen, ``pair`` finds no pair there (issue 15).
+FREEZE_CONTROLLERS = frozenset({"evaporator"})
+
+
+def _pair_settings(spec: Spec, bench: str) -> Any:
+    """Pairing settings: step tests with the twin's controllers frozen on the benches of
+    :data:`FREEZE_CONTROLLERS` (where the twin has ``holdControllers``)."""
     from .analysis.pair_stage import PairSettings
     from .fmu import read_info
 
     inputs = read_info(spec.twin).inputs
     names = {getattr(v, "name", v) for v in inputs}
-    return PairSettings(freeze=(("holdControllers", 1.0),) if "holdControllers" in names else ())
+    freeze = bench in FREEZE_CONTROLLERS and "holdControllers" in names
+    return PairSettings(freeze=(("holdControllers", 1.0),) if freeze else ())
 
 
 def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
