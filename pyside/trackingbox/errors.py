@@ -55,6 +55,14 @@ class AssertionFailed(SimulationError):
         super().__init__(f"assert failed{' in ' + where if where else ''} at t = {self.time:g} s: {message}")
 
 
+class CheckpointError(TrackingError, ValueError):
+    """A checkpoint or journal to resume from is unreadable, corrupt, truncated or belongs to another run."""
+
+
+class LiveError(TrackingError, RuntimeError):
+    """The online mode cannot connect, authenticate or read its tags (OPC UA)."""
+
+
 class EstimationError(TrackingError, RuntimeError):
     """Parameter estimation could not run or failed."""
 
