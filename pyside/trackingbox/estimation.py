@@ -84,6 +84,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from .checkpoint import Journal
 from .errors import DataError, EstimationError, SimulationError, SpecError, TrackingError, unknown_name
 from .io import write_text_atomic
 
@@ -685,6 +686,7 @@ def estimate(
     progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
     global_grid: float | None = None,
+    resume: bool = False,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -715,9 +717,18 @@ def estimate(
     checkpoint
         If given, the best point so far is written there as JSON after every
         generation and refinement step (atomically), so an interrupted run keeps what it found.
+        Beside it, ``<checkpoint stem>.journal`` records every evaluation
+        (:class:`trackingbox.checkpoint.Journal`), so that *resume* continues.
     global_grid
         Grid step (s) of the global search's cost; default :data:`DEFAULT_GLOBAL_GRID`
         (``sample_time`` or less: the full grid).
+    resume
+        Continue an interrupted run from the journal beside *checkpoint*: the
+        search is run again with the recorded evaluations served from the
+        journal (no simulation is repeated), so it takes the same path and the
+        result is bit-identical to an uninterrupted run's. A journal of another
+        spec, data, twin or settings, or a corrupt one, is refused
+        (:class:`~trackingbox.errors.CheckpointError`).
 
     Returns
     -------
@@ -725,14 +736,16 @@ def estimate(
 
     Raises
     ------
-    SpecError, DataError, FMUError, EstimationError
+    SpecError, DataError, FMUError, EstimationError, CheckpointError
     """
+    if resume and checkpoint is None:
+        raise EstimationError("resume needs a checkpoint (trackingbox estimate --resume needs --report DIR)")
     if maxiter is None:
         maxiter = default_maxiter(len(list(spec.parameters)), popsize)
     try:
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
-                         checkpoint=checkpoint, global_grid=global_grid)
+                         checkpoint=checkpoint, global_grid=global_grid, resume=resume)
     finally:
         close_models()
 
@@ -756,7 +769,7 @@ def _population(n: int, popsize: int | None) -> int:
     return max(popsize or max(2, math.ceil(DEFAULT_POPULATION / n)), math.ceil(5 / n))
 
 
-def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: Any, *, seed: int,
+def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: Any, journal: Journal, *, seed: int,
                    maxiter: int, popsize: int | None, start_cost: float, history: list[float],
                    best: tuple[np.ndarray, float], progress: ProgressCallback | None,
                    checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
@@ -765,6 +778,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
     The first population is a Latin hypercube with the start values in it. After
     each generation the population's best point is scored once on the full grid
     (*train*), so the best-so-far and the history are in the cost the report uses.
+    Every evaluation goes through *journal* (served from it when recorded).
     """
     from scipy.optimize import differential_evolution
 
@@ -784,7 +798,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
             cost = math.inf  # already scored
         else:
             scored.append(x)
-            cost = train(x)
+            cost = journal.call("train", train, x)
         if cost < best_cost:
             best_x, best_cost = x, cost
         history.append(best_cost)
@@ -792,8 +806,14 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
         if progress is not None:
             progress("global", generation, maxiter, best_cost)
 
+    def func(x: np.ndarray) -> float:
+        return journal.call("coarse", coarse, x)
+
+    def mapper(f: Callable[[Any], Any], xs: Any) -> list[Any]:
+        return journal.map("coarse", f, xs, pool.map)
+
     de = differential_evolution(
-        coarse,
+        coarse if pool is not None else func,
         list(zip(problem.lower, problem.upper)),
         maxiter=maxiter,
         popsize=per_parameter,
@@ -802,7 +822,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
         init="latinhypercube" if n > 1 else "random",
         x0=problem.start if start_cost < FAILED_COST else None,
         updating="deferred" if pool is not None else "immediate",
-        workers=pool.map if pool is not None else 1,
+        workers=mapper if pool is not None else 1,
         callback=on_generation,
         tol=1e-3,
     )
@@ -811,7 +831,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
         best_x, best_cost = x, float(de.fun)
     elif coarse is not train and not any(np.array_equal(x, y) for y in scored):
         scored.append(x)
-        cost = train(x)
+        cost = journal.call("train", train, x)
         if cost < best_cost:
             best_x, best_cost = x, cost
     log.info("global search: %d generations, %d evaluations (+%d on the full grid), cost %.6g (%s)",
@@ -819,7 +839,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
     return best_x, best_cost, int(de.nfev) + len(scored)
 
 
-def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.ndarray, float], iterations: int,
+def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, best: tuple[np.ndarray, float], iterations: int,
             progress: ProgressCallback | None,
             checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
     """Bounded least squares (trust-region reflective) from *best*; returns best x, cost, evaluations.
@@ -843,7 +863,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
         weights: dict[str, float] | None = None
         if k > 0:
             try:
-                per_tag = train.nrmse(best_x)
+                per_tag = journal.call("nrmse", train.nrmse, best_x)
             except TrackingError as exc:
                 log.warning("no reweighted refinement: the twin failed at the estimate (%s)", exc)
                 break
@@ -864,7 +884,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
                 progress("refine", evaluations, total, rms)
 
         def fun(x: np.ndarray) -> np.ndarray:
-            r = task(x)
+            r = journal.call(f"residuals{k}", task, x)
             last["x"], last["r"] = np.array(x, dtype=float), r
             record(x, r)
             return r
@@ -875,7 +895,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
             else:
                 r0 = fun(x)
             points, h = jacobian_points(x, problem.lower, problem.upper)
-            rows = pool.map(task, list(points)) if pool is not None else [task(p) for p in points]
+            rows = journal.map(f"residuals{k}", task, list(points), pool.map if pool is not None else None)
             for p, r in zip(points, rows):
                 record(p, r)
             return np.stack([(r - r0) / hj for r, hj in zip(rows, h)], axis=1)
@@ -888,7 +908,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
             log.warning("refinement pass %d failed (%s); keeping the estimate so far", k + 1, exc)
             continue
         refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
-        refined_cost = train(refined)
+        refined_cost = journal.call("train", train, refined)
         evaluations += 1
         log.info("refinement pass %d: %d iterations, cost %.6g -> %.6g", k + 1, ls.nfev, best_cost, refined_cost)
         if refined_cost <= best_cost:
@@ -900,17 +920,48 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
 def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
-              checkpoint: str | Path | None, global_grid: float | None) -> EstimationResult:
+              checkpoint: str | Path | None, global_grid: float | None, resume: bool = False) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
+    journal = Journal(journal_path(ckpt) if ckpt is not None else None,
+                      _identity(spec, problem, seed=seed, maxiter=maxiter, popsize=popsize, refine=refine,
+                                refine_iterations=refine_iterations, global_grid=global_grid,
+                                parallel=int(workers or 1) > 1), resume=resume)
+    try:
+        return _run(spec, problem, journal, t_start=t_start, ckpt=ckpt, seed=seed, workers=workers,
+                    maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
+                    progress=progress, global_grid=global_grid)
+    finally:
+        journal.close()
+
+
+def journal_path(checkpoint: str | Path) -> Path:
+    """The evaluation journal kept beside an estimation checkpoint (``checkpoint.journal``)."""
+    return Path(checkpoint).with_suffix(".journal")
+
+
+def _identity(spec: Any, problem: Problem, **settings: Any) -> dict[str, Any]:
+    """What makes two estimation runs the same search: the inputs' bytes and the settings."""
+    from .checkpoint import file_digest
+
+    files = {"spec": spec.path, "measurements": spec.measurements, "twin": problem.twin}
+    return {**{name: file_digest(path) for name, path in files.items()},
+            "parameters": list(problem.names), "lower": [float(v).hex() for v in problem.lower],
+            "upper": [float(v).hex() for v in problem.upper], "start": [float(v).hex() for v in problem.start],
+            "warmup": float(problem.warmup), **settings}
+
+
+def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt: Path | None, seed: int,
+         workers: int | None, maxiter: int, popsize: int | None, refine: bool, refine_iterations: int,
+         progress: ProgressCallback | None, global_grid: float | None) -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
     history: list[float] = []
     evaluations = 0
 
-    start_cost = train(problem.start)
+    start_cost = journal.call("train", train, problem.start)
     evaluations += 1
     if start_cost >= FAILED_COST:
         log.warning("the twin fails at the start values; the global search starts without them")
@@ -930,7 +981,8 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                 coarse = Objective(replace(problem, sample_time=problem.sample_time * stride),
                                    coarsen(training, stride))
             best_x, best_cost, n_global = _global_search(
-                train, coarse, problem, pool, seed=seed, maxiter=maxiter, popsize=popsize, start_cost=start_cost,
+                train, coarse, problem, pool, journal, seed=seed, maxiter=maxiter, popsize=popsize,
+                start_cost=start_cost,
                 history=history, best=(best_x, best_cost), progress=progress,
                 checkpoint=lambda g, x, c, e: _write_checkpoint(ckpt, {
                     "stage": "global", "iteration": g, "best_cost": c,
@@ -939,7 +991,7 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
             evaluations += n_global
         if refine:
             best_x, best_cost, n_local = _refine(
-                train, problem, pool, best=(best_x, best_cost), iterations=refine_iterations,
+                train, problem, pool, journal, best=(best_x, best_cost), iterations=refine_iterations,
                 progress=progress,
                 checkpoint=lambda k, x, c, e: _write_checkpoint(ckpt, {
                     "stage": "refine", "iteration": k, "best_cost": best_cost,

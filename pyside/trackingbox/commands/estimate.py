@@ -15,12 +15,15 @@ examples:
   trackingbox estimate case1/spec.toml --report case1/estimate --seed 3 --workers 2
   trackingbox estimate case1/spec.toml --maxiter 10 --popsize 8 --json
   trackingbox estimate case1/spec.toml --write      # estimates become the [[parameters]] start values
+  trackingbox estimate case1/spec.toml --report case1/estimate --resume   # continue after an interruption
   trackingbox estimate hp/spec.toml --workers 2 --maxiter 8 --refine-iterations 6   # ~3-4 min budget
 
 The cost is the NRMSE (RMSE / measured range) per output tag, averaged over the
 tags, on the training window; the validation window reports the NRMSE at the
 estimate and at the start values. With --report DIR a checkpoint
-(DIR/checkpoint.json, best point so far) is kept up to date during the run.
+(DIR/checkpoint.json, best point so far) is kept up to date during the run and
+DIR/checkpoint.journal records every evaluation: --resume continues a killed
+run from it and gives the uninterrupted run's result, bit for bit.
 
 Budget: the global search (differential evolution, scored on a --global-grid
 grid) runs --maxiter generations of max(2, ceil(15 / n)) * n individuals; by
@@ -66,6 +69,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--refine-iterations", type=int, default=MAX_REFINE_ITERATIONS, metavar="N",
                    help=f"most least-squares iterations (default {MAX_REFINE_ITERATIONS}; "
                         "each costs 1 + n_parameters simulations)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",
                    help="write the estimates back as the [[parameters]] start values of SPEC")
     p.set_defaults(func=run)
@@ -78,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
     from ..spec import check_against_fmu, load_spec
     from ._progress import Progress
 
+    from ..errors import EstimationError
+
+    if args.resume and not args.report:
+        raise EstimationError("--resume needs --report DIR: the checkpoint and its journal live there")
     spec = load_spec(args.spec)
     check_against_fmu(spec)
     checkpoint = args.report / "checkpoint.json" if args.report else None
@@ -94,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         progress=progress.estimation,
         checkpoint=checkpoint,
         global_grid=args.global_grid,
+        resume=args.resume,
     )
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
