@@ -66,6 +66,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from ..checkpoint import CheckpointFile
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
@@ -707,6 +708,7 @@ class TrackingLoop:
         self.csv_path = self.out_dir / CSV_NAME
         self.ckpt_path = self.out_dir / CHECKPOINT_NAME
         self.checkpoint_every = int(checkpoint_every)
+        self._ckpt = CheckpointFile(self.ckpt_path, self.csv_path)
         check_against_fmu(spec)
         self.plan = plan = _plan(spec, window, untracked, view)
         self.view = plan.view
@@ -819,8 +821,9 @@ class TrackingLoop:
     def begin(self, *, resume: bool = False) -> None:
         """Start fresh, or from ``checkpoint.json`` when *resume* and there is one."""
         assert self.twin is not None
-        if resume and self.ckpt_path.exists() and self.csv_path.exists():
-            self.load_state_dict(_unjsonify(json.loads(self.ckpt_path.read_text(encoding="utf-8"))))
+        if resume and self.ckpt_path.exists():
+            # sealed: a corrupt or truncated checkpoint, or a CSV that is not the one it vouches for, is refused
+            self.load_state_dict(_unjsonify(self._ckpt.read()))
             return
         if resume:
             log.info("no checkpoint in %s; starting from the beginning", self.out_dir)
@@ -832,7 +835,7 @@ class TrackingLoop:
 
     def checkpoint(self) -> None:
         """Write :meth:`state_dict` to ``checkpoint.json``, atomically."""
-        write_text_atomic(self.ckpt_path, json.dumps(_jsonify(self.state_dict()), indent=1))
+        self._ckpt.write(_jsonify(self.state_dict()))
 
     def event(self, t: float, kind: str, message: str, level: int = logging.WARNING) -> None:
         log.log(level, "t = %g s: %s", t, message)
