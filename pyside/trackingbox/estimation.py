@@ -933,6 +933,8 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                     maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
                     progress=progress, global_grid=global_grid)
     finally:
+        if resume:
+            log.info("%d evaluations served from the journal %s", journal.served, journal.path)
         journal.close()
 
 
