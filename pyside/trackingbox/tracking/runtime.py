@@ -833,6 +833,33 @@ class TrackingLoop:
             self.plain.start(0.0, dict(corrections))
         self.output.open()
 
+    def extend(self, view: MeasurementView) -> None:
+        """Go on over a longer measurement view: data that arrived while the loop ran (the online mode).
+
+        *view* must have the current grid as its prefix (same start and
+        ``sample_time``; built as in :func:`track`). The rows still to run read
+        their samples from it, and the twins restart at the current row from
+        their states (or a replay), as at a checkpoint, with *view*'s longer
+        input table. Drive the loop sample by sample with ``extend`` then
+        ``run(max_steps=...)`` over the rows whose next sample has arrived.
+        """
+        n = self.n_rows
+        if view.grid.size < n or not np.array_equal(view.grid[:n], self.grid) or view.skip != self.view.skip:
+            raise DataError(f"the measurement view given to extend() does not continue the grid of "
+                            f"{self.view.source.name} ({n} rows of {self.ts:g} s from 0)")
+        self.output.flush()
+        self.plan.view = self.view = view
+        self.grid, self.n_rows = view.grid, view.grid.size
+        t_k = float(self.grid[min(self.k, self.n_rows - 1)])
+        for tw in (self.twin, self.plain):
+            if tw is None:
+                continue
+            tw.inputs = view.inputs
+            if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
+                tw.start(t_k, dict(tw.applied), tw.x)
+            else:
+                tw.replay_csv(self.csv_path, self.k, self.grid)
+
     def checkpoint(self) -> None:
         """Write :meth:`state_dict` to ``checkpoint.json``, atomically."""
         self._ckpt.write(_jsonify(self.state_dict()))
