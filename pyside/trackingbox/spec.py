@@ -180,6 +180,30 @@ class TrackingSettings:
 
 
 @dataclass(frozen=True)
+class LiveSpec:
+    """The online mode (``[live]``): where each tag is on the OPC UA server and how to connect.
+
+    Credentials are never in the spec: a user name and password come from the
+    environment (``TRACKINGBOX_OPCUA_USER``, ``TRACKINGBOX_OPCUA_PASSWORD``) or
+    a credentials file (see :mod:`trackingbox.online`).
+    """
+
+    nodes: dict[str, str] = field(default_factory=dict)   # tag -> node id; default "ns=2;s=<tag>"
+    auth: str = "anonymous"                               # "anonymous" | "user"
+    security: str | None = None                           # "Basic256Sha256" or None
+    mode: str = "SignAndEncrypt"                          # "SignAndEncrypt" | "Sign"
+    certificate: Path | None = None                       # the client's certificate (DER or PEM)
+    private_key: Path | None = None                       # its private key (PEM)
+    server_certificate: Path | None = None                # the server's certificate to trust
+    stale_after: float | None = None                      # s; default 3 x sample_time
+    publish: str | None = None                            # endpoint of the results server
+
+    def node(self, tag: str) -> str:
+        """The node id of *tag* (``ns=2;s=<tag>`` unless ``[live.nodes]`` says otherwise)."""
+        return self.nodes.get(tag, f"ns=2;s={tag}")
+
+
+@dataclass(frozen=True)
 class Spec:
     """A loaded and validated tracking specification.
 
@@ -202,6 +226,7 @@ class Spec:
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
     balances: tuple[BalanceSpec, ...] = ()
     diagnose: DiagnoseSpec = field(default_factory=DiagnoseSpec)
+    live: LiveSpec = field(default_factory=LiveSpec)
 
     def parameter(self, name: str) -> ParameterSpec:
         """Return the candidate parameter *name*; :class:`SpecError` with did-you-mean if absent."""
@@ -230,7 +255,7 @@ class Spec:
 
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
              "fixed", "windows", "data", "pairs", "states", "tracking",
-             "balances", "diagnose")
+             "balances", "diagnose", "live")
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
 
@@ -565,6 +590,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
 
     balances = _parse_balances(raw, problems)
     diagnose = _parse_diagnose(raw, base, problems, check_files=check_files)
+    live = _parse_live(raw, base, problems, [*inputs, *outputs, *(s.tag for s in states)])
 
     # tags against the measurement file header --------------------------------
     meas = files.get("measurements")
@@ -588,7 +614,60 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
                 sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
                 parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
                 pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances,
-                diagnose=diagnose)
+                diagnose=diagnose, live=live)
+
+
+_LIVE_KEYS = ("nodes", "auth", "security", "mode", "certificate", "private_key", "server_certificate",
+              "stale_after", "publish")
+
+
+def _parse_live(raw: Mapping[str, Any], base: Path, problems: _Problems, tags: Sequence[str]) -> LiveSpec:
+    table = _table(raw, "live", problems)
+    if table is None:
+        return LiveSpec()
+    for secret in ("user", "username", "password", "credentials"):
+        if secret in table:
+            problems.add(f"{secret!r} in [live]: credentials are never kept in the spec; give them in the "
+                         "environment (TRACKINGBOX_OPCUA_USER, TRACKINGBOX_OPCUA_PASSWORD) or a file "
+                         "(trackingbox track --credentials FILE)")
+    _check_keys({k: v for k, v in table.items() if k not in ("user", "username", "password", "credentials")},
+                _LIVE_KEYS, (), "[live]", problems)
+    nodes: dict[str, str] = {}
+    raw_nodes = table.get("nodes", {})
+    if not isinstance(raw_nodes, dict):
+        problems.add(f"'nodes' in [live] must be a table tag = \"node id\", got {_type_name(raw_nodes)}")
+        raw_nodes = {}
+    for tag, node in raw_nodes.items():
+        if not isinstance(node, str) or not node:
+            problems.add(f"{tag!r} in [live.nodes] must be an OPC UA node id (e.g. \"ns=2;s={tag}\"), "
+                         f"got {_type_name(node)} {node!r}")
+        else:
+            nodes[tag] = node
+    for tag in nodes:
+        if tag not in tags:
+            problems.add(f"unknown tag {tag!r} in [live.nodes]{did_you_mean(tag, tags)}")
+    auth = _string(table, "auth", "[live]", problems) or "anonymous"
+    if auth not in ("anonymous", "user"):
+        problems.add(f"'auth' in [live] must be \"anonymous\" or \"user\", got {auth!r}")
+    security = _string(table, "security", "[live]", problems)
+    if security is not None and security not in ("Basic256Sha256", "None"):
+        problems.add(f"'security' in [live] must be \"Basic256Sha256\" or \"None\", got {security!r}")
+    mode = _string(table, "mode", "[live]", problems) or "SignAndEncrypt"
+    if mode not in ("SignAndEncrypt", "Sign"):
+        problems.add(f"'mode' in [live] must be \"SignAndEncrypt\" or \"Sign\", got {mode!r}")
+    paths: dict[str, Path | None] = {}
+    for key in ("certificate", "private_key", "server_certificate"):
+        value = _string(table, key, "[live]", problems)
+        paths[key] = _resolve(base, value) if value is not None else None
+    if security == "Basic256Sha256" and (paths["certificate"] is None or paths["private_key"] is None):
+        problems.add("[live] security = \"Basic256Sha256\" needs 'certificate' and 'private_key' (the client's)")
+    stale = _number(table, "stale_after", "[live]", problems, positive=True)
+    publish = _string(table, "publish", "[live]", problems)
+    if publish is not None and not publish.startswith("opc.tcp://"):
+        problems.add(f"'publish' in [live] must be an opc.tcp:// endpoint, got {publish!r}")
+    return LiveSpec(nodes=nodes, auth=auth, security=None if security == "None" else security, mode=mode,
+                    certificate=paths["certificate"], private_key=paths["private_key"],
+                    server_certificate=paths["server_certificate"], stale_after=stale, publish=publish)
 
 
 def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
