@@ -24,6 +24,7 @@ COMMANDS = (
     "pair",
     "estimate",
     "track",
+    "replay",
     "generate",
     "validate",
     "diagnose",

@@ -15,6 +15,7 @@ examples:
   trackingbox track case1/spec.toml --report case1/track --window validation
   trackingbox track case1/spec.toml --out case1/run --json
   trackingbox track case1/spec.toml --out case1/run --resume     # continue after an interruption
+  trackingbox track case1/spec.toml --live opc.tcp://dcs:4840 --out case1/live   # online, over OPC UA
 
 One parameter controller per [[pairs]] entry (setpoint: the measured tag; process
 value: the twin's variable; output: the parameter, scaled 0-100 % onto its
@@ -23,6 +24,13 @@ compensation per [[states]] entry, start-up hold until [tracking] hold_until.
 The run streams OUT/tracking.csv (measured, tracked and untracked values,
 parameters, corrections, controller modes) and checkpoints OUT/checkpoint.json.
 NRMSE = RMSE / measured range over the chosen window after the start-up hold.
+
+--live subscribes to the spec's tags on an OPC UA server ([live] section: node
+ids, auth, security; credentials from TRACKINGBOX_OPCUA_USER/_PASSWORD or
+--credentials FILE, never from the spec), runs the twin one sample behind the
+plant and writes the same files, plus OUT/live_measurements.csv (every sample
+received); it reconnects after losing the server and reads back what it missed.
+See docs/online.md.
 """
 
 
@@ -48,6 +56,16 @@ def register(subparsers: Any) -> None:
                         "goes from the first sample to the window's end (default: all)")
     p.add_argument("--checkpoint-every", type=int, default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
+    live = p.add_argument_group("online mode (OPC UA)")
+    live.add_argument("--live", metavar="URL", help="track live: subscribe to the tags at opc.tcp://HOST:PORT")
+    live.add_argument("--credentials", type=Path, metavar="FILE",
+                      help="file with 'user = ...' and 'password = ...' lines (mode 600) for [live] auth = \"user\"")
+    live.add_argument("--live-from", metavar="ISO",
+                      help="plant time (ISO 8601) to track from; earlier samples are read from the server's history")
+    live.add_argument("--stop-after", type=float, metavar="SECONDS",
+                      help="stop once the row at SECONDS of plant time is done (default: run until interrupted)")
+    live.add_argument("--idle-timeout", type=float, metavar="SECONDS",
+                      help="stop after SECONDS of wall-clock time without a new sample")
     p.set_defaults(func=run)
 
 
@@ -63,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError(f"--checkpoint-every must be >= 1, got {args.checkpoint_every}")
     spec = load_spec(args.spec)
     out = args.out or args.report or Path(spec.path).parent / "track"
+    if args.live:
+        return _run_live(args, spec, out)
     result = track(spec, out_dir=out, resume=args.resume, progress=Progress().counter("tracking", unit="row"),
                    window=args.window, checkpoint_every=args.checkpoint_every)
     if args.report:
@@ -73,6 +93,36 @@ def run(args: argparse.Namespace) -> int:
         _print_summary(result, {p.variable: p.parameter for p in spec.pairs})
         if args.report:
             print(f"report in {args.report}")
+    return 0
+
+
+def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
+    from datetime import datetime
+
+    from ..errors import SpecError
+    from ..online.live import LiveSettings, track_live
+    from ..online.opcua import read_credentials
+    from ..report import write_track_report
+    from ._progress import Progress
+
+    start = None
+    if args.live_from:
+        try:
+            start = datetime.fromisoformat(args.live_from)
+        except ValueError:
+            raise SpecError(f"--live-from {args.live_from!r} is not an ISO 8601 time") from None
+    settings = LiveSettings(args.live, credentials=read_credentials(args.credentials), start=start,
+                            stop_after=args.stop_after, idle_timeout=args.idle_timeout)
+    live = track_live(spec, settings, out_dir=out, resume=args.resume,
+                      progress=Progress().counter("tracking", unit="row"))
+    if args.report:
+        write_track_report(spec, live.tracking, args.report)
+    if args.json:
+        print(json.dumps(live.to_json(), indent=2))
+    else:
+        _print_summary(live.tracking, {p.variable: p.parameter for p in spec.pairs})
+        print(f"live: {live.samples} samples ({live.backfilled} read back from history), "
+              f"{live.connections} connection(s), origin {live.origin.isoformat()}")
     return 0
 
 

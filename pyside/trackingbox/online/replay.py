@@ -1,0 +1,204 @@
+"""A bench case's measurements served over OPC UA as a simulated DCS (``trackingbox replay``).
+
+Every tag of the case's spec (inputs, outputs, state tags) is a Double
+variable ``ns=2;s=<tag>`` under the object ``Plant``. Row ``i`` of the
+measurements (time ``t_i`` s from the first row) is written at wall-clock
+``origin + t_i / speed`` with source timestamp ``origin + t_i`` (plant time:
+the tracker sees the case's own sample spacing at any speed). A missing value
+is written with a bad status. Each variable is historized: a client that lost
+its connection reads the rows it missed back (OPC UA HistoryRead). A server
+restarted with the same *origin* writes the rows that fell due while it was
+down into its history first, as a DCS's historian would have them, then goes
+on live: a restart loses no row.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import SpecError
+from .opcua import PLANT_NAMESPACE, at, check_endpoint, make_server, utc
+
+log = logging.getLogger(__name__)
+
+__all__ = ["ReplaySettings", "ReplayResult", "serve", "replay", "case_spec"]
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """How to serve a case.
+
+    Attributes
+    ----------
+    speed : float
+        Plant seconds per wall-clock second (1: real time).
+    origin : datetime, optional
+        Wall-clock time of the case's first row (default: now). Give the same
+        origin to a restarted server so it continues where the first one was.
+    users : dict, optional
+        ``user -> password``; when given, anonymous sessions are refused.
+    certificate, private_key : Path, optional
+        The server's certificate and key: Basic256Sha256 (sign and encrypt,
+        or sign) endpoints only.
+    stop_after : float, optional
+        Stop after this many plant seconds (default: the end of the case).
+    linger : float
+        Wall-clock seconds to keep serving (history, last values) after the
+        last row (``inf``: until stopped).
+    """
+
+    speed: float = 1.0
+    origin: datetime | None = None
+    users: dict[str, str] | None = None
+    certificate: Path | None = None
+    private_key: Path | None = None
+    stop_after: float | None = None
+    linger: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.speed) and self.speed > 0):
+            raise SpecError(f"--speed must be a finite number > 0, got {self.speed!r}")
+        if self.stop_after is not None and not (math.isfinite(self.stop_after) and self.stop_after >= 0):
+            raise SpecError(f"--stop-after must be a finite number >= 0, got {self.stop_after!r}")
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What a replay served."""
+
+    url: str
+    tags: tuple[str, ...]
+    rows: int
+    history_rows: int
+    origin: datetime
+    seconds: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"url": self.url, "tags": list(self.tags), "rows": self.rows, "history_rows": self.history_rows,
+                "origin": self.origin.isoformat(), "seconds": self.seconds}
+
+
+def case_spec(case: str | Path) -> Path:
+    """The spec of a case: *case* itself (a ``.toml``) or ``CASE/spec.toml``."""
+    p = Path(case)
+    spec = p / "spec.toml" if p.is_dir() else p
+    if not spec.is_file():
+        raise SpecError(f"case {case}: no spec.toml there (give a bench case directory or its spec.toml)")
+    return spec
+
+
+async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySettings(), *,
+                ready: Callable[[ReplayResult], None] | None = None,
+                stop: asyncio.Event | None = None) -> ReplayResult:
+    """Serve *case* at *url* until its last row (or *stop*); see the module docstring.
+
+    Parameters
+    ----------
+    case : path
+        A bench case directory (``spec.toml``, ``measurements.csv``) or a spec.
+    url : str
+        ``opc.tcp://HOST:PORT``.
+    settings : ReplaySettings
+    ready : callable, optional
+        Called once the server listens (with the rows served so far).
+    stop : asyncio.Event, optional
+        Set it to stop early.
+    """
+    from asyncua import ua
+
+    from ..data import read_table
+    from ..spec import load_spec
+
+    check_endpoint(url)
+    spec = load_spec(case_spec(case))
+    tags = list(spec.tags)
+    table = read_table(spec.measurements, required=tags, allow_nan=True)
+    times = table["time"].to_numpy(dtype=float)
+    times = times - times[0]
+    values = {tag: table[tag].to_numpy(dtype=float) for tag in tags}
+    end = float(times[-1]) if settings.stop_after is None else min(float(times[-1]), settings.stop_after)
+    n_rows = int(np.searchsorted(times, end, side="right"))
+    origin = utc(settings.origin) if settings.origin is not None else datetime.now(timezone.utc)
+    server = await make_server(url, name="trackingbox replay", users=settings.users,
+                               certificate=settings.certificate, private_key=settings.private_key)
+    idx = await server.register_namespace(PLANT_NAMESPACE)
+    plant = await server.nodes.objects.add_object(idx, "Plant")
+    nodes = {}
+    # the server's historian keeps every scan, also of an unchanged value (asyncua's own historizing
+    # stores changes only), so the store is written directly beside each write
+    history_store = server.iserver.history_manager.storage
+    for tag in tags:
+        var = await plant.add_variable(ua.NodeId(tag, idx), tag, ua.Variant(math.nan, ua.VariantType.Double))
+        await history_store.new_historized_node(var.nodeid, None, 0)
+        nodes[tag] = var.nodeid
+    if idx != 2:
+        log.warning("the plant namespace has index %d, not 2: node ids are ns=%d;s=<tag>", idx, idx)
+
+    async def write(i: int) -> None:
+        stamp = at(origin, float(times[i]))
+        for tag in tags:
+            v = float(values[tag][i])
+            ok = math.isfinite(v)
+            dv = ua.DataValue(ua.Variant(v if ok else 0.0, ua.VariantType.Double),
+                              StatusCode_=ua.StatusCode(ua.StatusCodes.Good if ok else ua.StatusCodes.Bad),
+                              SourceTimestamp=stamp, ServerTimestamp=datetime.now(timezone.utc))
+            await server.write_attribute_value(nodes[tag], dv)
+            await history_store.save_node_value(nodes[tag], dv)
+
+    t_start = time.perf_counter()
+    served = history = 0
+
+    def due(i: int) -> float:
+        """Wall-clock (epoch s) at which row i falls due."""
+        return origin.timestamp() + float(times[i]) / settings.speed
+
+    async with server:
+        # rows that fell due before this server started (a restart): into the history first
+        while served < n_rows and due(served) <= time.time():
+            await write(served)
+            served += 1
+        history = served
+        if history:
+            log.info("wrote %d rows that fell due before the start into the history", history)
+        if ready is not None:
+            ready(ReplayResult(url, tuple(tags), served, history, origin, 0.0))
+        log.info("serving %d tags of %s at %s from row %d of %d (speed %g)", len(tags), spec.path, url,
+                 served, n_rows, settings.speed)
+        while served < n_rows and not (stop is not None and stop.is_set()):
+            wait = due(served) - time.time()
+            if wait > 0:
+                if stop is not None:
+                    try:
+                        await asyncio.wait_for(stop.wait(), timeout=wait)
+                        break
+                    except asyncio.TimeoutError:
+                        pass
+                else:
+                    await asyncio.sleep(wait)
+            await write(served)
+            served += 1
+        if settings.linger > 0 and not (stop is not None and stop.is_set()):
+            log.info("all %d rows served; serving on for %g s", served, settings.linger)
+            if stop is not None:
+                try:
+                    await asyncio.wait_for(stop.wait(), timeout=None if math.isinf(settings.linger)
+                                           else settings.linger)
+                except asyncio.TimeoutError:
+                    pass
+            else:
+                await asyncio.sleep(1e9 if math.isinf(settings.linger) else settings.linger)
+    return ReplayResult(url, tuple(tags), served, history, origin, time.perf_counter() - t_start)
+
+
+def replay(case: str | Path, url: str, settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
+    """Blocking :func:`serve` (``trackingbox replay``)."""
+    return asyncio.run(serve(case, url, settings))
