@@ -22,13 +22,18 @@ def free_port() -> int:
 
 
 def start_replay(case: Path, url: str, origin: dt.datetime, log: Path, *extra: str,
-                 speed: float = 300.0, timeout: float = 120.0) -> subprocess.Popen[bytes]:
-    """``trackingbox replay CASE --serve URL`` in a subprocess; returns once it serves (its log says so)."""
+                 speed: float = 300.0, timeout: float = 120.0, wait: bool = True) -> subprocess.Popen[bytes]:
+    """``trackingbox replay CASE --serve URL`` in a subprocess; returns once it serves (its log says so).
+
+    With ``wait=False`` it returns at once (the client's reconnection waits for it).
+    """
     args = [sys.executable, "-m", "trackingbox.cli", "-v", "replay", str(case), "--serve", url,
             "--speed", str(speed), "--origin", origin.isoformat(), *extra]
     fh = open(log, "ab")
     proc = subprocess.Popen(args, stdout=fh, stderr=fh)
     fh.close()
+    if not wait:
+        return proc
     t0 = time.monotonic()
     while True:
         text = log.read_text(errors="replace")
@@ -51,8 +56,8 @@ def kill(proc: subprocess.Popen[bytes]) -> None:
 
 @contextlib.contextmanager
 def replay_server(case: Path, url: str, origin: dt.datetime, log: Path, *extra: str,
-                  speed: float = 300.0) -> Iterator[subprocess.Popen[bytes]]:
-    proc = start_replay(case, url, origin, log, *extra, speed=speed)
+                  speed: float = 300.0, wait: bool = True) -> Iterator[subprocess.Popen[bytes]]:
+    proc = start_replay(case, url, origin, log, *extra, speed=speed, wait=wait)
     try:
         yield proc
     finally:

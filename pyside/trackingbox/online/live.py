@@ -74,7 +74,7 @@ class LiveSettings:
         Track from this plant time on (samples before it are read from the
         server's history); default: from the first sample received.
     stop_after : float, optional
-        Stop once the row at this many plant seconds from the start is done.
+        Stop once the rows up to this many plant seconds from the start are done.
     idle_timeout : float, optional
         Stop when no new sample has come for this many wall-clock seconds
         (connected or not); default: run until stopped.
@@ -366,7 +366,7 @@ class _Tracker:
         if n <= 0:
             return 0
         self.loop.run(max_steps=n, progress=self.progress)
-        if self.settings.stop_after is not None and self.loop.k * self.ts > self.settings.stop_after:
+        if self.settings.stop_after is not None and self.loop.k * self.ts >= self.settings.stop_after - 1e-9:
             self.done = True
         return n
 
@@ -422,6 +422,9 @@ class _Tracker:
         class Handler:
             def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
                 queue.append((by_node[node.nodeid], data.monitored_item.Value))
+
+            def status_change_notification(self, status: Any) -> None:
+                log.warning("subscription status from the server: %s", status)
 
         sub = await client.create_subscription(max(10.0, 1000.0 * self.settings.poll), Handler())
         # every write counts, also of an unchanged value (a new timestamp is a new sample);
