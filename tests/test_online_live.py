@@ -56,9 +56,9 @@ def _origin(delay: float = LEAD) -> dt.datetime:
 
 def _with_live(case: Path, directory: Path, live: str) -> Path:
     """A copy of the case's spec with a [live] section (the FMU and data stay where they are)."""
-    text = (case / "spec.toml").read_text()
-    text = text.replace('twin = "twin.fmu"', f'twin = "{case / "twin.fmu"}"')
-    text = text.replace('measurements = "measurements.csv"', f'measurements = "{case / "measurements.csv"}"')
+    text = case.read_text()  # the case fixture is the spec's path
+    text = text.replace('twin = "twin.fmu"', f'twin = "{case.parent / "twin.fmu"}"')
+    text = text.replace('measurements = "measurements.csv"', f'measurements = "{case.parent / "measurements.csv"}"')
     directory.mkdir(parents=True, exist_ok=True)
     spec = directory / "spec.toml"
     spec.write_text(text + "\n[live]\n" + live)

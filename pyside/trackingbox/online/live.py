@@ -498,6 +498,11 @@ class _Tracker:
                                            if self.spec.live.auth == "anonymous" else "")) from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url, exc, wait)
                 except (OSError, asyncio.TimeoutError, ConnectionError, ua.UaError) as exc:
+                    if "No matching endpoints" in str(exc):  # a security mismatch: retrying will not help
+                        raise LiveError(f"{self.settings.url} offers no endpoint with this spec's security "
+                                        f"({self.spec.live.security or 'None'}, {self.spec.live.mode}): set "
+                                        f"[live] security and mode in {self.spec.path} to what the server "
+                                        "offers") from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url,
                                 exc or type(exc).__name__, wait)
                 else:
