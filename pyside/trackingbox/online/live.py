@@ -200,7 +200,7 @@ class _Publisher:
         for c in self.columns:
             kind = ua.VariantType.String if c.startswith("mode:") else ua.VariantType.Double
             init = "" if kind == ua.VariantType.String else math.nan
-            var = await obj.add_variable(ua.NodeId(c, idx), c, ua.Variant(init, kind))
+            var = await obj.add_variable(ua.NodeId(c, idx), ua.QualifiedName(c, idx), ua.Variant(init, kind))
             self.nodes[c] = (var.nodeid, kind)
         await self.server.start()
         log.info("publishing %d result variables at %s", len(self.columns), self.url)

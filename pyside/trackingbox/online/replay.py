@@ -137,7 +137,8 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
     # stores changes only), so the store is written directly beside each write
     history_store = server.iserver.history_manager.storage
     for tag in tags:
-        var = await plant.add_variable(ua.NodeId(tag, idx), tag, ua.Variant(math.nan, ua.VariantType.Double))
+        var = await plant.add_variable(ua.NodeId(tag, idx), ua.QualifiedName(tag, idx),
+                                       ua.Variant(math.nan, ua.VariantType.Double))
         await history_store.new_historized_node(var.nodeid, None, 0)
         nodes[tag] = var.nodeid
     if idx != 2:

@@ -1,0 +1,119 @@
+"""The online mode's settings, credentials and published results (no plant server needed)."""
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import math
+from pathlib import Path
+
+import pytest
+
+from _fixtures_online import free_port
+from _fixtures_tracking import SPEC
+from trackingbox.errors import LiveError, SpecError
+from trackingbox.online.live import LiveSettings, _Publisher, _Record
+from trackingbox.online.opcua import Credentials, check_endpoint, read_credentials, read_users
+from trackingbox.spec import loads_spec
+
+BASE = SPEC.format(k_twin=0.003, data="", controller="pi")
+
+
+def _spec(live: str):
+    return loads_spec(BASE + "\n[live]\n" + live, "/plant/spec.toml", check_files=False)
+
+
+def test_live_section_defaults_and_node_ids() -> None:
+    spec = _spec('nodes = { TI = "ns=3;s=Plant.TI" }\nstale_after = 30\n')
+    assert spec.live.node("TI") == "ns=3;s=Plant.TI"
+    assert spec.live.node("FI") == "ns=2;s=FI"  # the replay server's layout
+    assert spec.live.stale_after == 30.0 and spec.live.auth == "anonymous" and spec.live.security is None
+    secure = _spec('security = "Basic256Sha256"\ncertificate = "pki/client.der"\nprivate_key = "pki/client.pem"\n')
+    assert secure.live.certificate == Path("/plant/pki/client.der")  # relative to the spec
+
+
+def test_live_section_problems_are_reported_together() -> None:
+    with pytest.raises(SpecError) as err:
+        _spec('password = "hunter2"\nauth = "usr"\nnodes = { TX = "ns=2;s=TX" }\nsecurity = "Basic256Sha256"\n'
+              'stale_after = -1\npublish = "http://x"\nbogus = 1\n')
+    text = str(err.value)
+    for expected in ("credentials are never kept in the spec", "'auth' in [live]", "unknown tag 'TX' in [live.nodes]",
+                     "needs 'certificate' and 'private_key'", "'stale_after' in [live] must be > 0",
+                     "'publish' in [live] must be an opc.tcp://", "unknown key 'bogus' in [live]"):
+        assert expected in text
+    assert "hunter2" not in text  # a secret is never echoed
+
+
+def test_credentials_from_a_private_file_or_the_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("TRACKINGBOX_OPCUA_USER", "TRACKINGBOX_OPCUA_PASSWORD", "TRACKINGBOX_OPCUA_CREDENTIALS"):
+        monkeypatch.delenv(name, raising=False)
+    assert read_credentials() is None
+    monkeypatch.setenv("TRACKINGBOX_OPCUA_USER", "op")
+    with pytest.raises(LiveError, match="set both"):
+        read_credentials()
+    monkeypatch.setenv("TRACKINGBOX_OPCUA_PASSWORD", "pw")
+    assert read_credentials() == Credentials("op", "pw")
+    assert "pw" not in repr(read_credentials())
+    f = tmp_path / "cred"
+    f.write_text("# plant login\nuser = alice\npassword = p=w\n")
+    f.chmod(0o644)
+    with pytest.raises(LiveError, match="readable by others"):
+        read_credentials(f)
+    f.chmod(0o600)
+    assert read_credentials(f) == Credentials("alice", "p=w")  # a file wins over the environment
+    f.write_text("user = alice\n")
+    with pytest.raises(LiveError, match="needs both"):
+        read_credentials(f)
+    users = tmp_path / "users"
+    users.write_text("a:1\nb:2\n")
+    users.chmod(0o600)
+    assert read_users(users) == {"a": "1", "b": "2"}
+
+
+@pytest.mark.parametrize("url", ["opc.tcp://h", "http://h:4840", "opc.tcp://h:0", "opc.tcp://h:99999", "h:4840"])
+def test_bad_endpoints_are_refused(url: str) -> None:
+    with pytest.raises(SpecError, match="not an OPC UA endpoint"):
+        check_endpoint(url)
+    with pytest.raises(SpecError):
+        LiveSettings(url)
+
+
+def test_record_keeps_each_sample_once_in_time_order(tmp_path: Path) -> None:
+    rec = _Record(tmp_path / "r.csv", ["A", "B"], resume=False)
+    t0 = dt.datetime(2026, 1, 1, tzinfo=dt.timezone.utc)
+    assert rec.add("A", t0, 1.0) and rec.add("A", t0 + dt.timedelta(seconds=10), 2.0)
+    assert not rec.add("A", t0 + dt.timedelta(seconds=10), 2.0)  # the same sample from history and subscription
+    assert not rec.add("A", t0, 1.0)
+    assert rec.add("B", t0, None)  # bad quality: advances the tag's clock, not recorded
+    rec.close()
+    lines = (tmp_path / "r.csv").read_text().splitlines()
+    assert lines == ["tag,time,value", "A,2026-01-01T00:00:00+00:00,1.0", "A,2026-01-01T00:00:10+00:00,2.0"]
+    again = _Record(tmp_path / "r.csv", ["A", "B"], resume=True)  # a resumed run continues the record
+    assert again.count == 2 and again.last["A"] == t0 + dt.timedelta(seconds=10)
+    again.close()
+
+
+def test_published_results_are_readable_over_opc_ua() -> None:
+    from asyncua import Client
+
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    origin = dt.datetime(2026, 1, 1, tzinfo=dt.timezone.utc)
+
+    async def run() -> tuple[float, str, dt.datetime, float]:
+        pub = _Publisher(url, ["time", "parameter:k", "tracked:TI", "mode:TI"])
+        await pub.start()
+        try:
+            await pub.publish(origin, [{"time": "0.0", "parameter:k": "0.003", "tracked:TI": "38.5",
+                                        "mode:TI": "start-up"},
+                                       {"time": "10.0", "parameter:k": "0.0031", "tracked:TI": "",
+                                        "mode:TI": "tracking"}])
+            async with Client(url) as client:
+                k = await client.get_node("ns=2;s=parameter:k").read_data_value()
+                mode = await client.get_node("ns=2;s=mode:TI").read_value()
+                ti = await client.get_node("ns=2;s=tracked:TI").read_value()
+                return k.Value.Value, mode, k.SourceTimestamp, ti
+        finally:
+            await pub.stop()
+
+    k, mode, stamp, ti = asyncio.run(run())
+    assert k == 0.0031 and mode == "tracking" and math.isnan(ti)
+    assert stamp.replace(tzinfo=dt.timezone.utc) == origin + dt.timedelta(seconds=10)
