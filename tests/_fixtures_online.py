@@ -5,6 +5,7 @@ import contextlib
 import datetime as dt
 import ipaddress
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -21,24 +22,29 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_replay(case: Path, url: str, origin: dt.datetime, log: Path, *extra: str,
-                 speed: float = 300.0, timeout: float = 120.0, wait: bool = True) -> subprocess.Popen[bytes]:
-    """``trackingbox replay CASE --serve URL`` in a subprocess; returns once it serves (its log says so).
+def start_replay(case: Path, url: str, origin: dt.datetime | str, log: Path, *extra: str,
+                 speed: float = 600.0, timeout: float = 120.0,
+                 wait: bool = True) -> tuple[subprocess.Popen[bytes], dt.datetime | None]:
+    """``trackingbox replay CASE --serve URL`` in a subprocess, and the origin it serves with.
 
-    With ``wait=False`` it returns at once (the client's reconnection waits for it).
+    *origin* is a time or ``"+SECONDS"`` (after the server is ready). Returns
+    once the server serves (its log says so, with the origin); with
+    ``wait=False`` at once (origin ``None``: the client's reconnection waits).
     """
+    start = len(log.read_text(errors="replace")) if log.exists() else 0
     args = [sys.executable, "-m", "trackingbox.cli", "-v", "replay", str(case), "--serve", url,
-            "--speed", str(speed), "--origin", origin.isoformat(), *extra]
+            "--speed", str(speed), "--origin", origin if isinstance(origin, str) else origin.isoformat(), *extra]
     fh = open(log, "ab")
     proc = subprocess.Popen(args, stdout=fh, stderr=fh)
     fh.close()
     if not wait:
-        return proc
+        return proc, None
     t0 = time.monotonic()
     while True:
-        text = log.read_text(errors="replace")
-        if "serving " in text:
-            return proc
+        text = log.read_text(errors="replace")[start:]
+        found = re.search(r"serving .* origin (\S+)\)", text)
+        if found:
+            return proc, dt.datetime.fromisoformat(found.group(1))
         if proc.poll() is not None:
             raise AssertionError(f"replay server exited ({proc.returncode}):\n{text[-3000:]}")
         if time.monotonic() - t0 > timeout:
@@ -55,11 +61,13 @@ def kill(proc: subprocess.Popen[bytes]) -> None:
 
 
 @contextlib.contextmanager
-def replay_server(case: Path, url: str, origin: dt.datetime, log: Path, *extra: str,
-                  speed: float = 300.0, wait: bool = True) -> Iterator[subprocess.Popen[bytes]]:
-    proc = start_replay(case, url, origin, log, *extra, speed=speed, wait=wait)
+def replay_server(case: Path, url: str, origin: dt.datetime | str, log: Path, *extra: str,
+                  speed: float = 600.0) -> Iterator[dt.datetime]:
+    """A running replay server (killed at the end); yields its origin."""
+    proc, when = start_replay(case, url, origin, log, *extra, speed=speed)
+    assert when is not None
     try:
-        yield proc
+        yield when
     finally:
         kill(proc)
 

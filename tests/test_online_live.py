@@ -2,8 +2,9 @@
 
 The case is the first-order heat-exchanger case of ``_fixtures_tracking``
 (601 rows of 10 s, a CasADi FMU); ``trackingbox replay`` serves it in a
-subprocess at 300x real time (the 6000 s case in 20 s), one free port per
-test. The expectation is the offline run of ``trackingbox track`` on the same
+subprocess at 600x real time (the 6000 s case in 10 s, starting LEAD s after
+the server is ready, so that the tracker is connected by then and the rows come
+live), one free port per test. The expectation is the offline run of ``trackingbox track`` on the same
 measurements file: live, the twins restart from their states at every batch
 of rows that came together (offline, every 200 rows), so the two agree to the
 solver's tolerance, not bit for bit; the parameter trajectory must agree to
@@ -30,7 +31,7 @@ from trackingbox.tracking.runtime import track
 
 pytestmark = pytest.mark.compile  # builds the CasADi twin once per session; each test serves a case
 
-SPEED = 300.0
+SPEED = 600.0
 K_RANGE = 0.01 - 0.001  # the spec's bounds of k
 TOLERANCE = 1e-4 * K_RANGE
 
@@ -45,13 +46,8 @@ def offline(case: Path, tmp_path_factory: pytest.TempPathFactory) -> pd.DataFram
     return pd.read_csv(track(load_spec(case), out_dir=tmp_path_factory.mktemp("offline")).csv)
 
 
-#: seconds from starting a replay server to its first row: the tracker connects meanwhile, so the rows
-#: come live (a server that takes longer to start puts the rows due by then into its history)
-LEAD = 20.0
-
-
-def _origin(delay: float = LEAD) -> dt.datetime:
-    return (dt.datetime.now(dt.timezone.utc) + dt.timedelta(seconds=delay)).replace(microsecond=0)
+#: seconds from the replay server's readiness to its first row: the tracker connects meanwhile
+LEAD = "+4"
 
 
 def _with_live(case: Path, directory: Path, live: str) -> Path:
@@ -76,8 +72,7 @@ def _assert_same_trajectory(live: pd.DataFrame, offline: pd.DataFrame) -> None:
 def test_live_tracking_of_a_replayed_bench_follows_the_offline_trajectory(case: Path, offline: pd.DataFrame,
                                                                           tmp_path: Path) -> None:
     url = f"opc.tcp://127.0.0.1:{free_port()}"
-    origin = _origin()
-    with replay_server(case, url, origin, tmp_path / "replay.log", "--linger", "60", speed=SPEED, wait=False):
+    with replay_server(case, url, LEAD, tmp_path / "replay.log", "--linger", "60", speed=SPEED) as origin:
         result = track_live(load_spec(case), LiveSettings(url, start=origin, stop_after=6000.0, idle_timeout=120.0,
                                                           poll=0.05, backoff=(0.2, 1.0)), out_dir=tmp_path / "live")
     live = pd.read_csv(result.tracking.csv)
@@ -92,10 +87,10 @@ def test_live_tracking_of_a_replayed_bench_follows_the_offline_trajectory(case: 
 def test_server_killed_and_restarted_mid_run_loses_nothing(case: Path, offline: pd.DataFrame,
                                                            tmp_path: Path) -> None:
     url = f"opc.tcp://127.0.0.1:{free_port()}"
-    origin = _origin()
     log = tmp_path / "replay.log"
     out = tmp_path / "live"
-    server = start_replay(case, url, origin, log, "--linger", "60", speed=SPEED, wait=False)
+    server, origin = start_replay(case, url, LEAD, log, "--linger", "60", speed=SPEED)
+    assert origin is not None
     box: dict[str, object] = {}
     settings = LiveSettings(url, start=origin, stop_after=6000.0, idle_timeout=120.0, poll=0.05,
                             backoff=(0.2, 1.0))
@@ -108,8 +103,9 @@ def test_server_killed_and_restarted_mid_run_loses_nothing(case: Path, offline: 
         kill(server)
         rows_at_kill = len((out / "tracking.csv").read_text().splitlines()) - 1 \
             if (out / "tracking.csv").exists() else 0
-        time.sleep(2.0)  # rows fall due meanwhile: the restarted server has them in its history only
-        server = start_replay(case, url, origin, log, "--linger", "60", speed=SPEED)
+        time.sleep(1.0)  # rows fall due meanwhile: the restarted server has them in its history only
+        server, again = start_replay(case, url, origin, log, "--linger", "60", speed=SPEED)
+        assert again == origin
         worker.join(timeout=180)
         assert not worker.is_alive()
     finally:
@@ -133,9 +129,8 @@ def test_anonymous_access_is_refused_when_a_user_is_required(case: Path, tmp_pat
     users.write_text("operator:s3cret\n")
     users.chmod(0o600)
     url = f"opc.tcp://127.0.0.1:{free_port()}"
-    origin = _origin(1.0)
-    with replay_server(case, url, origin, tmp_path / "replay.log", "--users", str(users), "--linger", "60",
-                       speed=SPEED):
+    with replay_server(case, url, LEAD, tmp_path / "replay.log", "--users", str(users), "--linger", "60",
+                       speed=SPEED) as origin:
         t0 = time.monotonic()
         with pytest.raises(LiveError, match="refused the session"):
             track_live(load_spec(case), LiveSettings(url, start=origin, idle_timeout=30.0), out_dir=tmp_path / "a")
@@ -156,9 +151,8 @@ def test_signed_and_encrypted_connection_with_self_made_certificates(case: Path,
         'security = "Basic256Sha256"\nmode = "SignAndEncrypt"\n'
         f'certificate = "{client_cert}"\nprivate_key = "{client_key}"\nserver_certificate = "{server_cert}"\n')))
     url = f"opc.tcp://127.0.0.1:{free_port()}"
-    origin = _origin(1.0)
-    with replay_server(case, url, origin, tmp_path / "replay.log", "--certificate", str(server_cert),
-                       "--private-key", str(server_key), "--linger", "60", speed=SPEED):
+    with replay_server(case, url, LEAD, tmp_path / "replay.log", "--certificate", str(server_cert),
+                       "--private-key", str(server_key), "--linger", "60", speed=SPEED) as origin:
         # the server offers no unsecured endpoint: a plain client is refused
         with pytest.raises(LiveError):
             track_live(load_spec(case), LiveSettings(url, start=origin, idle_timeout=8.0), out_dir=tmp_path / "p")

@@ -38,7 +38,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("case", type=Path, help="bench case directory (spec.toml, measurements.csv) or its spec.toml")
     p.add_argument("--serve", required=True, metavar="URL", help="endpoint to listen on, opc.tcp://HOST:PORT")
     p.add_argument("--speed", type=float, default=1.0, help="plant seconds per second (default 1: real time)")
-    p.add_argument("--origin", metavar="ISO", help="wall-clock time of the case's first row (default: now)")
+    p.add_argument("--origin", metavar="ISO|+SECONDS",
+                   help="wall-clock time of the case's first row, or +SECONDS after the server is ready "
+                        "(default: now); the log line 'serving ...' gives it, for a restart")
     p.add_argument("--users", type=Path, metavar="FILE", help="'user:password' lines; refuse anonymous sessions")
     p.add_argument("--certificate", type=Path, metavar="FILE", help="server certificate (Basic256Sha256 only)")
     p.add_argument("--private-key", type=Path, metavar="FILE", help="the certificate's private key (PEM)")
@@ -57,12 +59,19 @@ def run(args: argparse.Namespace) -> int:
     from ..online.opcua import read_users
     from ..online.replay import ReplaySettings, replay
 
-    origin = None
-    if args.origin:
+    origin: datetime | float | None = None
+    if args.origin and args.origin.startswith("+"):
+        try:
+            origin = float(args.origin[1:])
+        except ValueError:
+            origin = math.nan
+        if not (math.isfinite(origin) and origin >= 0):
+            raise SpecError(f"--origin {args.origin!r}: +SECONDS must be a finite number >= 0")
+    elif args.origin:
         try:
             origin = datetime.fromisoformat(args.origin)
         except ValueError:
-            raise SpecError(f"--origin {args.origin!r} is not an ISO 8601 time") from None
+            raise SpecError(f"--origin {args.origin!r} is not an ISO 8601 time or +SECONDS") from None
     if (args.certificate is None) != (args.private_key is None):
         raise SpecError("--certificate and --private-key go together")
     if not (args.linger >= 0):

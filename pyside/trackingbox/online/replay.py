@@ -19,7 +19,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
@@ -41,9 +41,11 @@ class ReplaySettings:
     ----------
     speed : float
         Plant seconds per wall-clock second (1: real time).
-    origin : datetime, optional
-        Wall-clock time of the case's first row (default: now). Give the same
-        origin to a restarted server so it continues where the first one was.
+    origin : datetime or float, optional
+        Wall-clock time of the case's first row (default: now), or seconds
+        after the server is ready to serve. Give the same (absolute) origin,
+        which the server logs, to a restarted server so it continues where
+        the first one was.
     users : dict, optional
         ``user -> password``; when given, anonymous sessions are refused.
     certificate, private_key : Path, optional
@@ -57,7 +59,7 @@ class ReplaySettings:
     """
 
     speed: float = 1.0
-    origin: datetime | None = None
+    origin: datetime | float | None = None
     users: dict[str, str] | None = None
     certificate: Path | None = None
     private_key: Path | None = None
@@ -127,7 +129,6 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
     values = {tag: table[tag].to_numpy(dtype=float) for tag in tags}
     end = float(times[-1]) if settings.stop_after is None else min(float(times[-1]), settings.stop_after)
     n_rows = int(np.searchsorted(times, end, side="right"))
-    origin = utc(settings.origin) if settings.origin is not None else datetime.now(timezone.utc)
     server = await make_server(url, name="trackingbox replay", users=settings.users,
                                certificate=settings.certificate, private_key=settings.private_key)
     idx = await server.register_namespace(PLANT_NAMESPACE)
@@ -163,6 +164,10 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
         return origin.timestamp() + float(times[i]) / settings.speed
 
     async with server:
+        if isinstance(settings.origin, (int, float)):
+            origin = datetime.now(timezone.utc) + timedelta(seconds=float(settings.origin))
+        else:
+            origin = utc(settings.origin) if settings.origin is not None else datetime.now(timezone.utc)
         # rows that fell due before this server started (a restart): into the history first
         while served < n_rows and due(served) <= time.time():
             await write(served)
@@ -172,8 +177,8 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
             log.info("wrote %d rows that fell due before the start into the history", history)
         if ready is not None:
             ready(ReplayResult(url, tuple(tags), served, history, origin, 0.0))
-        log.info("serving %d tags of %s at %s from row %d of %d (speed %g)", len(tags), spec.path, url,
-                 served, n_rows, settings.speed)
+        log.info("serving %d tags of %s at %s from row %d of %d (speed %g, origin %s)", len(tags), spec.path,
+                 url, served, n_rows, settings.speed, origin.isoformat())
         while served < n_rows and not (stop is not None and stop.is_set()):
             wait = due(served) - time.time()
             if wait > 0:
