@@ -13,6 +13,7 @@ solver's tolerance, not bit for bit; the parameter trajectory must agree to
 from __future__ import annotations
 
 import datetime as dt
+import json
 import threading
 import time
 from pathlib import Path
@@ -162,3 +163,33 @@ def test_signed_and_encrypted_connection_with_self_made_certificates(case: Path,
     assert len(live) >= 101
     n = len(live)
     assert np.max(np.abs(live["parameter:k"] - offline["parameter:k"][:n])) <= TOLERANCE
+
+
+def test_tracker_killed_and_resumed_loses_nothing(case: Path, offline: pd.DataFrame, tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    out = tmp_path / "live"
+    with replay_server(case, url, LEAD, tmp_path / "replay.log", "--linger", "120", speed=SPEED) as origin:
+        args = [sys.executable, "-m", "trackingbox.cli", "track", str(case), "--live", url, "--live-from",
+                origin.isoformat(), "--out", str(out), "--stop-after", "6000", "--idle-timeout", "120", "--json"]
+        first = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            # SIGKILL the tracker at 2400 s of plant time (or once it has rows, if it started late)
+            time.sleep(max(0.0, (origin - dt.datetime.now(dt.timezone.utc)).total_seconds() + 2400.0 / SPEED))
+            t0 = time.monotonic()
+            while not (out / "checkpoint.json").exists():
+                assert time.monotonic() - t0 < 120 and first.poll() is None, "the tracker wrote no checkpoint"
+                time.sleep(0.05)
+        finally:
+            kill(first)
+        rows_at_kill = len((out / "tracking.csv").read_text().splitlines()) - 1
+        second = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=300)
+    assert second.returncode == 0, second.stderr[-3000:]
+    assert first.returncode == -9 and rows_at_kill < 600
+    doc = json.loads(second.stdout)
+    assert doc["live"]["rows"] == 601
+    _assert_same_trajectory(pd.read_csv(out / "tracking.csv"), offline)
+    record = pd.read_csv(out / "live_measurements.csv")
+    assert len(record) == 2 * 601 and not record.duplicated(["tag", "time"]).any()
