@@ -42,7 +42,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import CheckpointError, DataError, LiveError, SpecError, TrackingError
+from ..errors import CheckpointError, DataError, LiveError, SpecError
 from ..io import write_text_atomic
 from .opcua import CLIENT_URI, RESULTS_NAMESPACE, Credentials, at, check_endpoint, make_server, utc
 
@@ -583,9 +583,6 @@ def track_live(spec: Spec, settings: LiveSettings, *, out_dir: str | Path, resum
     if tracker.loop is None:
         raise DataError(f"no complete sample of every tag came from {settings.url} "
                         f"({tracker.samples_seen} samples): nothing was tracked")
-    try:
-        result = tracker.loop.result()
-    except TrackingError:
-        raise
+    result = tracker.loop.result()
     return LiveResult(result, tracker.origin or datetime.now(), tracker.record.count, tracker.backfilled,
                       tracker.connections, tracker.stale_events)
