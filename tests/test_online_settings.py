@@ -117,3 +117,30 @@ def test_published_results_are_readable_over_opc_ua() -> None:
     k, mode, stamp, ti = asyncio.run(run())
     assert k == 0.0031 and mode == "tracking" and math.isnan(ti)
     assert stamp.replace(tzinfo=dt.timezone.utc) == origin + dt.timedelta(seconds=10)
+
+
+def test_rows_wait_for_every_tag_but_a_stale_one(tmp_path: Path) -> None:
+    from trackingbox.online.live import _Tracker
+
+    spec = loads_spec(BASE + "\n[live]\nstale_after = 30\n", tmp_path / "spec.toml", check_files=False)
+    tracker = _Tracker(spec, LiveSettings("opc.tcp://127.0.0.1:4840"), tmp_path / "out", resume=False, progress=None)
+    t0 = dt.datetime(2026, 1, 1, tzinfo=dt.timezone.utc)
+
+    def sample(tag: str, seconds: float) -> None:
+        tracker.record.add(tag, t0 + dt.timedelta(seconds=seconds), 1.0)
+
+    for s in range(0, 71, 10):
+        sample("FI", s)
+    assert tracker._rows_ready() == 0  # TI has said nothing yet: nothing can run
+    for s in range(0, 51, 10):
+        sample("TI", s)
+    # sample time 10 s: rows 0..4 need t = 10..50, which both tags have reached; row 5 needs TI at 60
+    # (the plant clock is 70 s: TI silent for 20 s, not stale)
+    assert tracker._rows_ready() == 5 and not tracker.stale
+    for s in range(80, 121, 10):
+        sample("FI", s)  # the plant clock is 120 s: TI silent for 70 s > stale_after = 30 s
+    assert tracker._rows_ready() == 12 and tracker.stale == {"TI"} and tracker.stale_events == 1
+    sample("TI", 130)
+    sample("FI", 130)
+    assert tracker._rows_ready() == 13 and not tracker.stale  # TI is back
+    tracker.record.close()
