@@ -193,3 +193,21 @@ def test_tracker_killed_and_resumed_loses_nothing(case: Path, offline: pd.DataFr
     _assert_same_trajectory(pd.read_csv(out / "tracking.csv"), offline)
     record = pd.read_csv(out / "live_measurements.csv")
     assert len(record) == 2 * 601 and not record.duplicated(["tag", "time"]).any()
+
+
+def test_a_tag_with_bad_quality_holds_its_controller_and_resumes_as_offline(first_order_fmu: Path,
+                                                                            tmp_path: Path) -> None:
+    # TI is bad quality (NaN in the case) from 2500 s to 3000 s: live as offline, the controller holds
+    # (mode 'hold') and resumes without a bump, on the same rows
+    gap = make_case(first_order_fmu, tmp_path / "case", nan_span=(2500.0, 3000.0))
+    expected = pd.read_csv(track(load_spec(gap), out_dir=tmp_path / "offline").csv)
+    in_gap = (expected["time"] >= 2500.0) & (expected["time"] < 3000.0)
+    assert (expected.loc[in_gap, "mode:TI"] == "hold").all() and expected["measured:TI"][in_gap].isna().all()
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    with replay_server(gap, url, LEAD, tmp_path / "replay.log", "--linger", "60", speed=SPEED) as origin:
+        result = track_live(load_spec(gap), LiveSettings(url, start=origin, stop_after=6000.0, idle_timeout=120.0,
+                                                         poll=0.05, backoff=(0.2, 1.0)), out_dir=tmp_path / "live")
+    live = pd.read_csv(result.tracking.csv)
+    _assert_same_trajectory(live, expected)
+    k = live.loc[in_gap, "parameter:k"].to_numpy()
+    assert np.all(k == k[0])  # frozen while the tag is bad

@@ -16,7 +16,7 @@ Row ``k`` is run (the twins stepped to ``t_k+1``) once every tag has a sample
 at or after ``t_k+1``, so the twin runs in real time, one sample behind the
 plant. A tag with nothing for ``stale_after`` s of plant time (the newest
 timestamp of any tag) does not hold the others up: its samples are missing
-there and its controller holds (mode ``missing``), resuming bumplessly when it
+there and its controller holds (mode ``hold``), resuming bumplessly when it
 is back. When the server goes away the tracker waits (no row is invented),
 reconnects with exponential back-off, and reads the samples it missed back
 with HistoryRead before going on live, so no row is lost.
