@@ -141,3 +141,20 @@ def test_spec_freeze_name_is_checked_against_the_twin(tmp_path, step_fmu, capsys
     err = capsys.readouterr().err
     assert "[pairing] freeze names freeze input or parameter 'hodl'" in err and "did you mean 'hold'?" in err
     assert spec.read_bytes() == before
+
+
+def test_a_tag_whose_pair_the_data_checks_forbid_is_not_said_to_lack_a_relative_gain():
+    from trackingbox.analysis.offsets import Residuals
+
+    # y2's only parameter b has lambda 1 with it, but b cannot reach y2's offset from inside its bounds
+    t = np.arange(0.0, 2000.0, 10.0)
+    rng = np.random.default_rng(0)
+    measured = np.vstack([1.0 + 0.01 * rng.standard_normal(t.size), 5.0 + 0.01 * rng.standard_normal(t.size)])
+    simulated = np.vstack([np.zeros(t.size), np.zeros(t.size)])
+    res = Residuals(("y1", "y2"), t, measured, simulated, 10.0)
+    p = choose_pairs([[1.0, 0.0], [0.0, 1.0]], ["y1", "y2"], ["a", "b"], residuals=res,
+                     bounds=[(0.0, -2.0, 2.0), (0.0, -0.1, 0.1)])
+    left = dict(explain_left_out(p, ()))
+    assert [(x.variable, x.parameter) for x in p.pairs] == [("y1", "a")]
+    assert "relative gain of at least" not in left["y2"]
+    assert left["y2"].startswith("no candidate parameter can close its offset from inside its bounds")
