@@ -205,6 +205,8 @@ def _pair_settings(spec: Spec, bench: str) -> Any:
     from .analysis.pair_stage import PairSettings
     from .fmu import read_info
 
+    if spec.pairing.freeze:
+        return PairSettings()  # the spec's [pairing] freeze
     inputs = read_info(spec.twin).inputs
     names = {getattr(v, "name", v) for v in inputs}
     freeze = bench in FREEZE_CONTROLLERS and "holdControllers" in names

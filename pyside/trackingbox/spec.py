@@ -204,6 +204,29 @@ class LiveSpec:
 
 
 @dataclass(frozen=True)
+class PairingSettings:
+    """``[pairing]``: how ``pair`` step-tests this twin.
+
+    Attributes
+    ----------
+    freeze : tuple of (str, float)
+        Twin inputs or tunable parameters set after the first settle of the step
+        tests to freeze some of its controllers (``freeze = { holdLevelControllers = 1 }``);
+        ``pair --freeze`` replaces them.
+    scale : tuple of (str, float)
+        Output tag -> the scale of its gains in the relative gain array, in the tag's
+        units, instead of its measured range (``scale = { "PI-6121" = 200.0 }``): the
+        size of a deviation that matters, such as the sensor's accuracy. Scaled by
+        accuracy, a parameter pairs with the tag that shows it most clearly above
+        the noise; scaled by range, with the tag whose operating swing it explains
+        most, which favours tags the inputs hardly move.
+    """
+
+    freeze: tuple[tuple[str, float], ...] = ()
+    scale: tuple[tuple[str, float], ...] = ()
+
+
+@dataclass(frozen=True)
 class Spec:
     """A loaded and validated tracking specification.
 
@@ -227,6 +250,7 @@ class Spec:
     balances: tuple[BalanceSpec, ...] = ()
     diagnose: DiagnoseSpec = field(default_factory=DiagnoseSpec)
     live: LiveSpec = field(default_factory=LiveSpec)
+    pairing: PairingSettings = field(default_factory=PairingSettings)
 
     def parameter(self, name: str) -> ParameterSpec:
         """Return the candidate parameter *name*; :class:`SpecError` with did-you-mean if absent."""
@@ -255,7 +279,7 @@ class Spec:
 
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
              "fixed", "windows", "data", "pairs", "states", "tracking",
-             "balances", "diagnose", "live")
+             "balances", "diagnose", "live", "pairing")
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
 
@@ -591,6 +615,11 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     balances = _parse_balances(raw, problems)
     diagnose = _parse_diagnose(raw, base, problems, check_files=check_files)
     live = _parse_live(raw, base, problems, [*inputs, *outputs, *(s.tag for s in states)])
+    pairing = _parse_pairing(raw, problems)
+    for tag, _ in pairing.scale:
+        if tag not in outputs:
+            problems.add(f"[pairing] scale names tag {tag!r}, which is not an [outputs] tag"
+                         f"{did_you_mean(tag, list(outputs))}")
 
     # tags against the measurement file header --------------------------------
     meas = files.get("measurements")
@@ -614,7 +643,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
                 sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
                 parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
                 pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances,
-                diagnose=diagnose, live=live)
+                diagnose=diagnose, live=live, pairing=pairing)
 
 
 _LIVE_KEYS = ("nodes", "auth", "security", "mode", "certificate", "private_key", "server_certificate",
@@ -668,6 +697,28 @@ def _parse_live(raw: Mapping[str, Any], base: Path, problems: _Problems, tags: S
     return LiveSpec(nodes=nodes, auth=auth, security=None if security == "None" else security, mode=mode,
                     certificate=paths["certificate"], private_key=paths["private_key"],
                     server_certificate=paths["server_certificate"], stale_after=stale, publish=publish)
+
+
+def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettings:
+    """``[pairing]``: ``freeze = { NAME = VALUE, ... }``, ``scale = { TAG = VALUE, ... }`` (numbers)."""
+    table = _table(raw, "pairing", problems)
+    if table is None:
+        return PairingSettings()
+    _check_keys(table, ("freeze", "scale"), (), "[pairing]", problems)
+    out: dict[str, tuple[tuple[str, float], ...]] = {}
+    for key, example, positive in (("freeze", "holdControllers = 1", False), ("scale", '"TI-101" = 0.2', True)):
+        value = table.get(key, {})
+        if not isinstance(value, Mapping):
+            problems.add(f"[pairing] {key} must be a table of NAME = VALUE (e.g. {key} = {{ {example} }}), "
+                         f"got {_type_name(value)}")
+            continue
+        items = []
+        for name, v in value.items():
+            number = _number(value, name, f"[pairing.{key}]", problems, positive=positive)
+            if number is not None:
+                items.append((str(name), float(number)))
+        out[key] = tuple(items)
+    return PairingSettings(**out)
 
 
 def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
@@ -825,6 +876,8 @@ def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
     for s in spec.states:
         need(s.variable, None, "variable", f"[[states]] {s.tag!r}")
         need(s.correction, ("input",), "input", f"[[states]] {s.tag!r} correction")
+    for name, _ in spec.pairing.freeze:
+        need(name, ("input", "parameter"), "freeze input or parameter", "[pairing] freeze")
     problems.raise_if_any()
 
 
@@ -894,6 +947,9 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                           "gain": float(s.gain)} for s in spec.states]
     if spec.tracking != TrackingSettings():
         doc["tracking"] = {"hold_until": float(spec.tracking.hold_until)}
+    if spec.pairing != PairingSettings():
+        doc["pairing"] = {key: {k: float(v) for k, v in getattr(spec.pairing, key)}
+                          for key in ("freeze", "scale") if getattr(spec.pairing, key)}
     if spec.diagnose.effects:
         doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:

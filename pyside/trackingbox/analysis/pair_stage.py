@@ -5,6 +5,7 @@ calls::
 
     from trackingbox import PairSettings, load_spec, pair
     result = pair(load_spec("case1/spec.toml"), PairSettings(freeze=(("holdControllers", 1.0),)))
+    result = pair(load_spec("case2/spec.toml"))   # the spec's [pairing] freeze
     result.pairing.pairs            # the chosen (variable, parameter) pairs
     result.to_json()                # the ``pair --json`` document
 
@@ -15,17 +16,23 @@ This module chains :mod:`~trackingbox.analysis.steptest`,
 The procedure (the options are :class:`PairSettings` fields, named as
 the command's): the twin's inputs are held at an operating point (mean of the first
 hour of the training window, or --at TIME); the twin runs with its controllers
-active until it settles; the --freeze values are set (e.g. holdControllers=1)
-and it settles again; then each [[parameters]] entry is stepped by +/- --step of
+active until it settles; the --freeze values (else the spec's [pairing]
+freeze) are set (e.g. holdControllers=1 freezes every controller,
+holdLevelControllers=1 only some, so that a loop left active shows a parameter
+error in its controller's output) and it settles again; then each [[parameters]] entry is stepped by +/- --step of
 its bound range and the new steady state of every [outputs] tag is recorded.
 Tank levels listed in [[states]] are held by proportional state compensation
 from the freeze on (they are not tracking variables).
 Settled = over --window seconds no output moved more than --tolerance x its
-measured range; responses are measured against an unstepped reference run, so
+measured range (the 0.5-99.5 % quantile span of its scored samples in the
+training window: stoppages and gaps left out); responses are measured against an unstepped reference run, so
 a slow residual drift is not taken for a gain. Gains g_ij = dy_i/dp_j, scaled
 by measured ranges and parameter bound ranges, give the relative gain array
 (after leaving out parameters that cannot be told apart, see --rank-tol); each
-tag gets the unused parameter with a positive relative gain closest to 1.
+tag gets the unused parameter with a positive relative gain closest to 1. The
+spec's [pairing] scale gives a tag's scale instead of its measured range (e.g.
+its sensor accuracy: with more tags than parameters the RGA, and so which tag a
+parameter pairs with, depends on the scaling).
 
 Data checks (off with --no-data-checks): before the assignment the twin runs
 untracked over the training window with the measured inputs (parameters at
@@ -71,12 +78,16 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PairSettings", "PairingResult", "pair", "spec_pairs"]
+__all__ = ["PairSettings", "PairingResult", "explain_left_out", "pair", "spec_pairs"]
 
 #: ``progress(stage, done, total)``: stage ``"step runs"``, ``"step runs (2nd point)"`` or ``"Sobol runs"``.
 StageProgress = Callable[[str, int, int], None]
 
 Method = Literal["rga", "sobol", "both"]
+
+#: Fraction of the scored training samples left out at each end of a tag's range (the scale of its
+#: gains): the restart transients after a stoppage do not set it.
+RANGE_TRIM = 0.005
 
 
 @dataclass(frozen=True)
@@ -91,7 +102,9 @@ class PairSettings:
     step, two_sided
         Parameter step as a fraction of its bound range; also step down (linearity check).
     freeze
-        ``(name, value)`` set after the first settle to freeze the twin's controllers.
+        ``(name, value)`` set after the first settle to freeze the twin's controllers
+        (all or some of them: a loop left active shows a parameter error in its
+        controller's output); ``None``: the spec's ``[pairing] freeze``.
     at
         Operating point time (s from the first sample); ``None``: mean of the
         first hour of the training window.
@@ -115,7 +128,7 @@ class PairSettings:
     method: Method = "rga"
     step: float = 0.05
     two_sided: bool = True
-    freeze: tuple[tuple[str, float], ...] = ()
+    freeze: tuple[tuple[str, float], ...] | None = None
     at: float | None = None
     interval: float | None = None
     window: float | None = None
@@ -184,7 +197,8 @@ class PairingResult:
             "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
             "rga": _matrix(st.variables, st.parameters, pairing.rga),
             "condition_number": _finite(pairing.condition_number),
-            "left_out": [{"name": n, "reason": r} for n, r in pairing.left_out],
+            "left_out": [{"name": n, "kind": "parameter" if n in st.parameters else "variable", "reason": r}
+                         for n, r in pairing.left_out],
             "warnings": list(self.warnings),
             "asymmetry": _matrix(st.variables, st.parameters, st.asymmetry),
             "time_constants": _matrix(st.variables, st.parameters, st.time_constants),
@@ -226,14 +240,15 @@ def _matrix(rows: tuple[str, ...], cols: tuple[str, ...], values: npt.ArrayLike)
             "values": [[_finite(float(x)) for x in row] for row in np.asarray(values, dtype=float)]}
 
 
-def _measured(spec: Spec) -> tuple[pd.DataFrame, npt.NDArray[np.bool_], float, float]:
-    """The measurements on the spec's grid (:class:`~trackingbox.data.MeasurementView`), the training-window
+def _measured(spec: Spec) -> tuple[pd.DataFrame, pd.DataFrame, npt.NDArray[np.bool_], float, float]:
+    """The measurements on the spec's grid (:class:`~trackingbox.data.MeasurementView`), the same with the
+    output tags NaN where they are not scored (stoppages and their settle time, gaps), the training-window
     mask and the window ``[start, stop)`` (all data when the spec has no training window)."""
     from ..data import MeasurementView
 
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
-    frame = view.to_frame()
-    return frame, view.in_window, float(view.window[0]), float(view.window[1])
+    return (view.to_frame(), view.to_frame(scored=True), view.in_window, float(view.window[0]),
+            float(view.window[1]))
 
 
 def second_operating_point(choice: str | float, frame: Any, spec: Spec, op: dict[str, float], start: float,
@@ -293,17 +308,21 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     s = settings or PairSettings()
     if not spec.parameters:
         raise SpecError(f"{spec.path} has no [[parameters]]: nothing to pair")
-    frame, in_window, start, stop = _measured(spec)
+    frame, scored, in_window, start, stop = _measured(spec)
     op = operating_point(frame, spec.inputs, start=start, duration=3600.0, at=s.at)
-    train = frame[in_window]
+    train = scored[in_window]
     state_tags = {st.tag for st in spec.states}
     tags = [t for t in spec.outputs if t not in state_tags]
     if state_tags:
         log.info("state-compensated tags are not tracking variables: %s", ", ".join(sorted(state_tags)))
-    spans = variable_ranges(train[tags].to_numpy(dtype=float)) if len(train) else np.full(len(tags), np.nan)
+    # scale of each tag: its span in operation (stoppages left out: a flow or a valve going to zero in
+    # a stoppage would otherwise make a flow's range several times what it moves in operation, and
+    # shrink its scaled gains against a tag the stoppage hardly moves, such as the product DS)
+    spans = (variable_ranges(train[tags].to_numpy(dtype=float), trim=RANGE_TRIM) if len(train)
+             else np.full(len(tags), np.nan))
     ranges = {tag: float(r) for tag, r in zip(tags, spans) if math.isfinite(r) and r > 0}
     params = [(p.name, p.start, p.min, p.max) for p in spec.parameters]
-    freeze = dict(s.freeze)
+    freeze = dict(spec.pairing.freeze if s.freeze is None else s.freeze)
     problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in tags}, parameters=params,
                            fixed=spec.fixed, operating=op, ranges=ranges, freeze=freeze,
                            compensation=[(st.variable, st.correction, st.gain) for st in spec.states])
@@ -334,8 +353,9 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio)
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
+    scales = dict(spec.pairing.scale)
     pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
-                           variable_ranges=st.ranges,
+                           variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
                            parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]),
                            residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
                            checks=checks, other_gains=None if st2 is None else st2.gains,
@@ -344,12 +364,56 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     agr = agreement(pairing, sob) if sob is not None else None
     if s.method == "sobol" and sob is not None:
         pairing = _sobol_pairs(pairing, sob, st)
+    pairing = replace(pairing, left_out=explain_left_out(pairing, step_settings.freeze))
     warnings = list(pairing.warnings)
     warnings += [f"{v}/{p}: +/- step gains differ by {100 * a:.0f} % (nonlinear response)"
                  for v, p, a in st.nonlinear()]
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
                          agreement=agr, settings=s)
+
+
+#: Left-out reasons that say a parameter shows in no tag, or a tag shows no parameter.
+_UNSEEN = ("negligible gain", "no candidate parameter moves it", "all gains are zero")
+
+
+def explain_left_out(pairing: Pairing, freeze: tuple[tuple[str, float], ...]) -> tuple[tuple[str, str], ...]:
+    """Every variable and parameter of *pairing* that is not paired, with its reason.
+
+    The reasons of :func:`~trackingbox.analysis.pairing.choose_pairs` are kept; a
+    "moves nothing" / "nothing moves it" reason found with controllers frozen by
+    *freeze* says so (what a frozen loop would have shown in its controller's
+    output, or what a loop left active holds at its setpoint, is not observable
+    with that freeze). A name without a reason (none is expected) gets one
+    saying so, and is logged.
+
+    Examples
+    --------
+    >>> from trackingbox.analysis.pairing import choose_pairs
+    >>> p = choose_pairs([[1.0, 0.0], [0.0, 0.0]], ["y1", "y2"], ["a", "b"])
+    >>> for name, why in explain_left_out(p, (("hold", 1.0),)):
+    ...     print(name, "|", why.split(":")[0], "|", "not observable with this freeze" in why)
+    b | negligible gain | True
+    y2 | no candidate parameter moves it | True
+    """
+    paired = {p.variable for p in pairing.pairs} | {p.parameter for p in pairing.pairs}
+    reasons = dict(pairing.left_out)
+    if freeze:
+        frozen = ", ".join(f"{n} = {v:g}" for n, v in freeze)
+        for name, why in reasons.items():
+            if any(key in why for key in _UNSEEN):
+                reasons[name] = (f"{why} (not observable with this freeze, {frozen}: a frozen loop no longer "
+                                 "shows a parameter error in its controller's output, and a loop left active "
+                                 "holds its measurement at the setpoint; another freeze may show it)")
+    out = []
+    for name in (*pairing.parameters, *pairing.variables):
+        if name in paired:
+            continue
+        if name not in reasons:
+            log.warning("%s was left out without a reason", name)
+            reasons[name] = "not paired (no reason was recorded)"
+        out.append((name, reasons[name]))
+    return tuple(out)
 
 
 def _sobol_pairs(pairing: Pairing, sob: SobolResult, st: StepTestResult) -> Pairing:

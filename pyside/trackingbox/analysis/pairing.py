@@ -427,7 +427,11 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         rejected = data.rejection(i) if data is not None else None
         if i in flipped:
             rejected = flipped[i] if rejected is None else f"{flipped[i]}; {rejected}"
-        if not positive and rejected is not None:
+        if not positive and rejected is not None and 1e-9 < lam_sub[a].max() < min_lambda:
+            best = int(np.argmax(lam_sub[a]))
+            reason = (f"no parameter has a relative gain of at least {min_lambda:g} with it (largest: "
+                      f"{parameters[cols[best]]}, {_fmt(lam_sub[a, best])}); {rejected}")
+        elif not positive and rejected is not None:
             reason = rejected
         elif not positive and (lam_sub[a] > 1e-9).any():
             best = int(np.argmax(lam_sub[a]))

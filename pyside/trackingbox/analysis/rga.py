@@ -306,8 +306,9 @@ def parameter_ranges(bounds: Sequence[tuple[float, float]]) -> np.ndarray:
     return arr[:, 1] - arr[:, 0]
 
 
-def variable_ranges(samples: npt.ArrayLike, *, floor: npt.ArrayLike | float = 0.0) -> np.ndarray:
-    """Span (``max - min``, NaNs ignored) of each column of *samples*, at least *floor*.
+def variable_ranges(samples: npt.ArrayLike, *, floor: npt.ArrayLike | float = 0.0,
+                    trim: float = 0.0) -> np.ndarray:
+    """Span of each column of *samples* (NaNs ignored), at least *floor*.
 
     Parameters
     ----------
@@ -315,16 +316,33 @@ def variable_ranges(samples: npt.ArrayLike, *, floor: npt.ArrayLike | float = 0.
         Measurements of the *m* variables (rows: time).
     floor : float or array_like, shape (m,)
         Lower limit, so a flat-lined signal does not give a zero range.
+    trim : float
+        Fraction of the samples left out at each end: the span is from the
+        ``trim`` to the ``1 - trim`` quantile (0: ``max - min``). A few
+        transients (a valve closing in a stoppage's ramp) then do not set the
+        scale of a variable that otherwise moves far less.
 
     Examples
     --------
     >>> variable_ranges([[1.0, 5.0], [3.0, 5.0]], floor=0.5)
     array([2. , 0.5])
+    >>> variable_ranges([0.0, 1.0, 2.0, 3.0, 100.0], trim=0.25)  # the outlier does not set the span
+    array([2.])
     """
     arr = np.asarray(samples, dtype=float)
     if arr.ndim == 1:
         arr = arr[:, None]
+    if not 0.0 <= trim < 0.5:
+        raise AnalysisError(f"variable_ranges: trim must be in [0, 0.5), got {trim!r}")
     with np.errstate(all="ignore"):
-        span = np.nanmax(arr, axis=0) - np.nanmin(arr, axis=0)
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: span 0, then the floor
+            if trim > 0.0:
+                lo, hi = np.nanquantile(arr, [trim, 1.0 - trim], axis=0)
+                span = hi - lo
+            else:
+                span = np.nanmax(arr, axis=0) - np.nanmin(arr, axis=0)
     span = np.where(np.isfinite(span), span, 0.0)
     return np.maximum(span, np.broadcast_to(np.asarray(floor, dtype=float), span.shape))

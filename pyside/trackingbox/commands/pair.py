@@ -6,12 +6,14 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..errors import SpecError
 from ._args import parse_assignments
 
 EPILOG = """\
 examples:
   trackingbox pair case1/spec.toml
   trackingbox pair case2/spec.toml --freeze holdControllers=1 --report case2/pair
+  trackingbox pair ev/spec.toml --freeze holdLevelControllers=1   # flow loop left active
   trackingbox pair case2/spec.toml --method both --samples 64 --workers 2 --json --no-write
   trackingbox pair case2/spec.toml --scheduler tcp://10.0.0.5:8786     # run on a Dask cluster
 
@@ -40,9 +42,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--step", type=float, default=0.05,
                    help="parameter step as a fraction of its bound range (default 0.05)")
     p.add_argument("--one-sided", action="store_true", help="only step up (no -step linearity check)")
-    p.add_argument("--freeze", action="append", default=[], metavar="NAME=VALUE",
+    p.add_argument("--freeze", action="append", default=None, metavar="NAME=VALUE",
                    help="input or tunable parameter that freezes the twin's controllers, set after the first "
-                        "settle (repeatable), e.g. --freeze holdControllers=1")
+                        "settle (repeatable), e.g. --freeze holdControllers=1; replaces the spec's "
+                        "[pairing] freeze (default: that table)")
+    p.add_argument("--no-freeze", action="store_true",
+                   help="freeze nothing, whatever the spec's [pairing] freeze says")
     p.add_argument("--at", type=float, metavar="TIME",
                    help="operating point at TIME (s) instead of the first hour of the training window")
     p.add_argument("--interval", type=float, metavar="SECONDS",
@@ -85,13 +90,22 @@ def settings(args: argparse.Namespace) -> Any:
     from ..analysis.pair_stage import PairSettings
 
     return PairSettings(method=args.method, step=args.step, two_sided=not args.one_sided,
-                        freeze=tuple(parse_assignments(args.freeze, "--freeze").items()), at=args.at,
+                        freeze=_freeze(args), at=args.at,
                         interval=args.interval, window=args.window,
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
                         max_ratio=args.max_ratio, samples=args.samples, seed=args.seed, workers=args.workers,
                         scheduler=args.scheduler)
+
+
+def _freeze(args: argparse.Namespace) -> tuple[tuple[str, float], ...] | None:
+    """--freeze values, () for --no-freeze, None (the spec's [pairing] freeze) when neither is given."""
+    if args.no_freeze and args.freeze:
+        raise SpecError("give --freeze or --no-freeze, not both")
+    if args.no_freeze:
+        return ()
+    return None if args.freeze is None else tuple(parse_assignments(args.freeze, "--freeze").items())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -132,7 +146,8 @@ def _print_summary(result: Any) -> None:
     print(doc.markdown().rstrip() if pairing.pairs else "no pairs found")
     print(f"\ncondition number (scaled gains): {pairing.condition_number:.4g}; {result.runs} simulations")
     for name, reason in pairing.left_out:
-        print(f"left out {name}: {reason}")
+        kind = "parameter" if name in pairing.parameters else "tag"
+        print(f"left out {kind} {name}: {reason}")
     for w in result.warnings:
         print(f"warning: {w}")
     if result.agreement is not None:

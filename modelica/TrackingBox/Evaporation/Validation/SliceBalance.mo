@@ -18,6 +18,11 @@ equation
   slice.steamP = 4e5 + 2e4*sin(time/1200);
   slice.nextP = 1.4e5 - 3e3*sin(time/1500);
   slice.holdControllers = 0;
+  slice.holdFlowController = 0;
+  slice.holdLevelControllers = 0;
+  slice.holdBodyLevelController = 0;
+  slice.holdFlashLevelController = 0;
+  slice.holdCondensateLevelController = 0;
   slice.body_m_flow_corr = 0.02*sin(time/600);
   slice.flash_m_flow_corr = 0.01*cos(time/500);
   slice.cond_m_flow_corr = 0.005*sin(time/400);

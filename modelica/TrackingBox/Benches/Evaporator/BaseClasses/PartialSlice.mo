@@ -14,6 +14,11 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the steam source";
   TrackingBox.Interfaces.RealInput nextP(unit="Pa", start=1.4e5) "Vapour boundary pressure (steam chest of the next effect)";
   TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
+  TrackingBox.Interfaces.RealInput holdFlowController(unit="1", start=0) "> 0.5 freezes the inlet flow loop FIC_feed";
+  TrackingBox.Interfaces.RealInput holdLevelControllers(unit="1", start=0) "> 0.5 freezes the three level loops";
+  TrackingBox.Interfaces.RealInput holdBodyLevelController(unit="1", start=0) "> 0.5 freezes the effect level loop LIC_body";
+  TrackingBox.Interfaces.RealInput holdFlashLevelController(unit="1", start=0) "> 0.5 freezes the flash-tank level loop LIC_flash";
+  TrackingBox.Interfaces.RealInput holdCondensateLevelController(unit="1", start=0) "> 0.5 freezes the condensate level loop LIC_condensate";
   TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Liquor inflow";
   TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow";
   TrackingBox.Interfaces.RealOutput FI_condensate(unit="kg/s") "Condensate flow from the steam chest";
@@ -51,10 +56,10 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   TrackingBox.Evaporation.LevelTransmitter LT_flash(rho_cal=1450) "Flash-tank level transmitter";
   TrackingBox.Evaporation.LevelTransmitter LT_condensate(rho_cal=950) "Condensate-tank level transmitter";
   TrackingBox.Evaporation.DrySolidsMeter DS_product "Product DS meter";
-  TrackingBox.Evaporation.SmoothPI FIC_feed(k=0.1, Ti=10, Tt=10, Tf=1, y_start=0.6, use_hold_in=true) "Inlet flow loop";
-  TrackingBox.Evaporation.SmoothPI LIC_body(k=-5, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true) "Effect level loop";
-  TrackingBox.Evaporation.SmoothPI LIC_flash(k=-3, Ti=1200, Tt=120, Tf=2, y_start=0.45, use_hold_in=true) "Flash-tank level loop";
-  TrackingBox.Evaporation.SmoothPI LIC_condensate(k=-2, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true) "Condensate level loop";
+  TrackingBox.Evaporation.SmoothPI FIC_feed(k=0.1, Ti=10, Tt=10, Tf=1, y_start=0.6, use_hold_in=true, hold=holdControllers + holdFlowController) "Inlet flow loop";
+  TrackingBox.Evaporation.SmoothPI LIC_body(k=-5, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true, hold=holdControllers + holdLevelControllers + holdBodyLevelController) "Effect level loop";
+  TrackingBox.Evaporation.SmoothPI LIC_flash(k=-3, Ti=1200, Tt=120, Tf=2, y_start=0.45, use_hold_in=true, hold=holdControllers + holdLevelControllers + holdFlashLevelController) "Flash-tank level loop";
+  TrackingBox.Evaporation.SmoothPI LIC_condensate(k=-2, Ti=1200, Tt=120, Tf=2, y_start=0.5, use_hold_in=true, hold=holdControllers + holdLevelControllers + holdCondensateLevelController) "Condensate level loop";
 equation
   connect(feedT, feedSource.T_in);
   connect(feedDS, feedSource.x_in);
@@ -80,10 +85,6 @@ equation
   connect(flash.dp_level, LT_flash.dp);
   connect(condTank.dp_level, LT_condensate.dp);
   connect(feedFlowSet, FIC_feed.u_s);
-  connect(holdControllers, FIC_feed.hold);
-  connect(holdControllers, LIC_body.hold);
-  connect(holdControllers, LIC_flash.hold);
-  connect(holdControllers, LIC_condensate.hold);
   FIC_feed.u_m = inletValve.m_flow;
   FIC_feed.y = inletValve.opening;
   LIC_body.u_s = bodyLevelSet;
@@ -126,7 +127,15 @@ pressure <code>feedSourceP</code>; the level loops open their outlet valves on
 high level; the steam valve opens in ratio to the measured feed
 (<code>tanh(steamRatio&middot;FI_feed)</code>), so that in a flow stoppage the
 steam is shut off with the feed and the effect neither boils dry nor floods.
-All controllers are smooth (<code>Evaporation.SmoothPI</code>) and share the
-hold input <code>holdControllers</code>.</p>
+All controllers are smooth (<code>Evaporation.SmoothPI</code>) and can be
+frozen (output held, bumpless release) by group, for step tests that keep some
+loops active: <code>holdControllers</code> freezes all of them,
+<code>holdFlowController</code> the inlet flow loop,
+<code>holdLevelControllers</code> the three level loops, and
+<code>holdBodyLevelController</code>, <code>holdFlashLevelController</code>,
+<code>holdCondensateLevelController</code> one level loop each. A controller is
+held while the sum of the inputs that reach it is above 0.5 (each input 0 or 1).
+Freezing the level loops with the flow loop active (the source's practice)
+lets an inlet-valve capacity error show in the inlet valve position.</p>
 </html>"));
 end PartialSlice;

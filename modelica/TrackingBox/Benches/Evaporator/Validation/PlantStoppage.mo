@@ -8,6 +8,11 @@ equation
   bench.steamP = 4e5;
   bench.nextP = 1.4e5;
   bench.holdControllers = 0;
+  bench.holdFlowController = 0;
+  bench.holdLevelControllers = 0;
+  bench.holdBodyLevelController = 0;
+  bench.holdFlashLevelController = 0;
+  bench.holdCondensateLevelController = 0;
   annotation (experiment(StopTime=14400, Tolerance=1e-6), Documentation(info="<html>
 <p>Constant boundaries at the design point; the feed setpoint goes from 2 to
 0.01 kg/s within a minute at 1 h, stays there for one hour and comes back

@@ -8,6 +8,11 @@ equation
   bench.steamP = 4e5;
   bench.nextP = 1.4e5;
   bench.holdControllers = 0;
+  bench.holdFlowController = 0;
+  bench.holdLevelControllers = 0;
+  bench.holdBodyLevelController = 0;
+  bench.holdFlashLevelController = 0;
+  bench.holdCondensateLevelController = 0;
   bench.body_m_flow_corr = 0;
   bench.flash_m_flow_corr = 0;
   bench.cond_m_flow_corr = 0;
