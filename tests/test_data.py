@@ -462,3 +462,58 @@ def test_spec_checks_the_tags_of_a_long_export(tmp_path):
     (tmp_path / "m.csv").write_text(_long([("FI", 0.0, 5.0), ("TJ", 0.0, 80.0)]))
     with pytest.raises(SpecError, match="tag 'TI' is not a column of m.csv"):
         loads_spec(SPEC_TOML.format(data="heartbeat = 600"), tmp_path / "s.toml")
+
+
+# --------------------------------------------------------------------------- lost tags: held inputs, lost stoppage tag
+
+
+def test_input_gap_is_held_and_masked_with_the_settle_time(tmp_path):
+    # FI is the twin's input and TI the output (10 s rows); FI is lost from 100 to 150 s (empty cells,
+    # beyond max_gap 15 s); the stoppage rule (on TI, never below 0) has a 25 s settle time
+    t = np.arange(0.0, 250.0, 10.0)
+    fi = [None if 100.0 <= s <= 150.0 else 1.0 + s / 100.0 for s in t]
+    spec = _spec(tmp_path, _rows(t, FI=fi, TI=np.full(t.size, 50.0)), max_gap=15.0,
+                 stoppage=StoppageRule("TI", -1.0, 25.0))
+    v = MeasurementView.from_spec(spec)
+    gap = (v.grid >= 100.0) & (v.grid <= 150.0)
+    # held at the last good value (90 s: 1.9), not interpolated towards the next (160 s: 2.6)
+    assert (v.inputs["u"][gap] == 1.9).all()
+    assert v.grid[v.input_gap].tolist() == [100.0, 110.0, 120.0, 130.0, 140.0, 150.0]
+    # masked like a stoppage: the gap and 25 s after it (160 and 170 s)
+    assert v.grid[v.stopped].tolist() == [100.0, 110.0, 120.0, 130.0, 140.0, 150.0, 160.0, 170.0]
+    assert v.grid[~v.scored["TI"]].tolist() == v.grid[v.stopped].tolist()
+    assert not v.stoppage_unknown.any()
+
+
+def test_stoppage_tag_lost_during_a_stoppage_is_masked_through_the_loss(tmp_path):
+    """The feed stops at 1000 s; its flow tag is lost (bad-quality event) from 1500 s until 2500 s,
+    while the feed is still stopped; the feed restarts at 2800 s. Rule: stopped below 0.5, 300 s settle.
+
+    By hand: stopped 1000..1490 s (held 0 records), unknown 1500..2490 s, stopped again 2500..2790 s,
+    then the settle to 2790 + 300 = 3090 s: one stretch 1000..3090 s. Without the loss rule the
+    mask had a hole at 1500..2490 s (only 1500 + 300 = 1790 s were covered by the settle).
+    """
+    records = [("FI", float(s), 5.0) for s in range(0, 1000, 100)]
+    records += [("FI", 1000.0, 0.0), ("FI", 1200.0, 0.0), ("FI", 1400.0, 0.0), ("FI", 1500.0, None),
+                ("FI", 2500.0, 0.0), ("FI", 2700.0, 0.0)]
+    records += [("FI", float(s), 5.0) for s in range(2800, 4000, 100)]
+    records += [("TI", float(s), 80.0) for s in range(0, 4000, 300)]
+    records.sort(key=lambda r: r[1])
+    spec = _history_spec(tmp_path, records, {"*": 600.0}, stoppage=StoppageRule("FI", 0.5, 300.0))
+    v = MeasurementView.from_spec(spec)
+    g = v.grid
+    assert g[v.stoppage_unknown].tolist() == list(np.arange(1500.0, 2500.0, 10.0))
+    assert g[v.stopped].tolist() == list(np.arange(1000.0, 3100.0, 10.0))
+    assert not v.scored["TI"][(g >= 1000.0) & (g <= 3090.0)].any()
+    assert v.scored["TI"][g == 3100.0].all()
+
+
+def test_stoppage_tag_lost_while_running_is_masked_conservatively(tmp_path):
+    # the tag is lost for 200 s while the feed runs: the plant may have stopped unseen, so the loss and
+    # the settle time after it are masked (the outputs there are not scored)
+    t = np.arange(0.0, 1000.0, 10.0)
+    fi = [None if 400.0 <= s < 600.0 else 5.0 for s in t]
+    spec = _spec(tmp_path, _rows(t, FI=fi, TI=np.full(t.size, 50.0)), max_gap=15.0,
+                 stoppage=StoppageRule("FI", 0.5, 100.0))
+    v = MeasurementView.from_spec(spec)
+    assert v.grid[v.stopped].tolist() == list(np.arange(400.0, 700.0, 10.0))

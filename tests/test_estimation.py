@@ -146,12 +146,41 @@ def test_too_little_data(fmu: Path, tmp_path: Path) -> None:
         estimate(load_spec(spec), maxiter=1)
 
 
-def test_input_gap_names_tag_and_span(fmu: Path, tmp_path: Path) -> None:
+def test_communication_loss_of_every_input_is_held_and_masked(fmu: Path, tmp_path: Path) -> None:
+    # a communication loss empties both inputs at 720-3070 s (the evaporator case's 720-3070 s loss);
+    # the plant ran on its real, moving inputs all along and the outlet temperature was still logged
+    table = plant_data(fmu, TRUE_KHT, noise=NOISE, seed=4)
+    gap = (table["time"] >= 720.0) & (table["time"] <= 3070.0)
+    table.loc[gap, ["FI-1", "TI-0"]] = np.nan
+    rules = '\n[data]\nstoppage = { tag = "FI-1", below = 0.05, settle = 300.0 }\nmax_gap = 30.0\n'
+    spec_a = write_case(tmp_path / "a", fmu, table, data=rules)
+    training, _ = load_windows(load_spec(spec_a))
+    # the twin's inputs hold the last good value, the sample at 710 s, through the gap
+    at = (training.time >= 720.0) & (training.time <= 3070.0)
+    last = table.loc[table["time"] == 710.0]
+    assert (training.inputs["m_flow"][at] == float(last["FI-1"].iloc[0])).all()
+    assert (training.inputs["T_in"][at] == float(last["TI-0"].iloc[0])).all()
+    # hand count: training grid 0..7190 s (720 points); the gap 720..3070 s (236 points) and the
+    # stoppage rule's 300 s settle after it (3080..3370 s, 30 points) are not scored: 720 - 266
+    assert training.valid_counts() == {"TI-1": 454}
+    assert np.isnan(training.measured["TI-1"][training.time == 3370.0]).all()
+    assert np.isfinite(training.measured["TI-1"][training.time == 3380.0]).all()
+    # the estimate is the plant's, and the outlet readings in the gap do not enter it: +30 K there
+    # changes nothing
+    a = estimate(load_spec(spec_a), seed=0, maxiter=3, popsize=10)
+    assert abs(a.parameters["kht"] - TRUE_KHT) <= 0.01 * TRUE_KHT
+    corrupt = table.copy()
+    corrupt.loc[(corrupt["time"] >= 720.0) & (corrupt["time"] < 3370.0), "TI-1"] += 30.0
+    b = estimate(load_spec(write_case(tmp_path / "b", fmu, corrupt, data=rules)), seed=0, maxiter=3, popsize=10)
+    assert b.parameters["kht"] == pytest.approx(a.parameters["kht"], rel=1e-9)
+
+
+def test_input_with_no_value_at_all_is_refused(fmu: Path, tmp_path: Path) -> None:
     table = plant_data(fmu, TRUE_KHT, hours=1.0)
-    table.loc[(table["time"] >= 1000.0) & (table["time"] <= 1500.0), "FI-1"] = np.nan
+    table["FI-1"] = np.nan
     spec = write_case(tmp_path, fmu, table, training=(0.0, 1800.0), validation=(1800.0, 3600.0),
                       data="\n[data]\nmax_gap = 60.0\n")
-    with pytest.raises(DataError, match=r"input tag 'FI-1'.*training window at 1000-1500 s"):
+    with pytest.raises(DataError, match=r"input tag 'FI-1' in measurements.csv has no valid value"):
         estimate(load_spec(spec), maxiter=1)
 
 

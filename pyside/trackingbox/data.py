@@ -536,6 +536,41 @@ def fill_nan(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return np.interp(idx, idx[ok], v[ok])
 
 
+def hold_nan(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The last valid value held over NaN (sample-and-hold), the first valid value before it.
+
+    What a process modeller gives a twin's input through a historian gap: the
+    last good value, never a line drawn towards a value that was not known yet.
+    All-NaN or all-valid input is returned as is.
+
+    >>> hold_nan([np.nan, 1.0, np.nan, 3.0, np.nan]).tolist()
+    [1.0, 1.0, 1.0, 3.0, 3.0]
+    """
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    if ok.all() or not ok.any():
+        return v
+    last = np.maximum.accumulate(np.where(ok, np.arange(v.size), -1))
+    last = np.where(last < 0, int(np.flatnonzero(ok)[0]), last)
+    return v[last]
+
+
+def extend_mask(grid: npt.ArrayLike, mask: npt.ArrayLike, settle: float) -> npt.NDArray[np.bool_]:
+    """*mask* and the grid points up to *settle* s after each of its True points.
+
+    >>> extend_mask(np.array([0., 10., 20., 30., 40.]), np.array([False, True, False, False, False]), 15.0).tolist()
+    [False, True, True, False, False]
+    """
+    grid = np.asarray(grid, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    if not mask.any() or settle <= 0.0:
+        return mask.copy()
+    times = grid[mask]
+    idx = np.searchsorted(times, grid, side="right") - 1
+    last = np.where(idx >= 0, times[np.clip(idx, 0, None)], -np.inf)
+    return (grid - last) <= settle + 1e-9
+
+
 #: Default gap limit, in multiples of a tag's own median sampling interval, when the spec sets
 #: no ``[data] max_gap``; see :func:`default_max_gap`.
 GAP_FACTOR = 2.5
@@ -577,8 +612,9 @@ def default_max_gap(time: npt.ArrayLike, values: npt.ArrayLike) -> float:
     straight line drawn across the hole. A fixed limit in seconds cannot do this
     for tags of different rates. (Estimation used 1.5 x, which masks the longer
     intervals of irregularly sampled tags; pairing, tracking and validation used
-    to bridge every gap.) The twin's *inputs* are still filled across any gap
-    (:attr:`MeasurementView.inputs`), because the twin cannot run without them.
+    to bridge every gap.) The twin's *inputs* are still held at their last good
+    value across any gap (:attr:`MeasurementView.inputs`), because the twin
+    cannot run without them; the view masks the gap like a stoppage.
 
     Returns ``inf`` (bridge everything) for a tag with fewer than two valid samples.
 
@@ -633,12 +669,17 @@ class MeasurementView:
         a heartbeat, else the spec's ``[data] max_gap`` if set, else
         :func:`default_max_gap` of the tag.
     stopped : ndarray of bool
-        Grid points inside a stoppage (``[data] stoppage``: its tag below
-        ``below``) or within ``settle`` s after one (:func:`stoppage_mask`);
-        all False without a stoppage rule.
+        Grid points masked like a stoppage: inside a stoppage (``[data]
+        stoppage``: its tag below ``below``) or within ``settle`` s after one
+        (:func:`stoppage_mask`); where the stoppage tag itself is missing
+        (the plant may have stopped unseen: :attr:`stoppage_unknown`) and
+        ``settle`` s after; where any input tag is missing
+        (:attr:`input_gap`) and ``settle`` s after (0 without a stoppage
+        rule). Not scored; the parameter controllers hold there.
     inputs : pandas.DataFrame
         The twin's input table: ``time`` (the grid) and one column per FMU
-        input of ``[inputs]``, filled across gaps (:func:`fill_nan`).
+        input of ``[inputs]``, the last good value held across gaps
+        (:func:`hold_nan`).
     scored : dict of str to ndarray of bool
         Output tag -> grid points where the tag counts in a cost: valid sample,
         inside the window, not before ``skip``, not stopped.
@@ -648,6 +689,10 @@ class MeasurementView:
         The first row's ``time`` as read (added to the grid to index the file).
     method : dict of str to {"linear", "hold"}
         Tag -> the reconstruction used.
+    input_gap : ndarray of bool
+        Grid points where at least one input tag is missing (held in :attr:`inputs`).
+    stoppage_unknown : ndarray of bool
+        Grid points where the stoppage tag is missing.
 
     Examples
     --------
@@ -676,6 +721,8 @@ class MeasurementView:
     skip: float = 0.0
     t0: float = 0.0
     method: dict[str, Method] = field(default_factory=dict)
+    input_gap: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool), repr=False)
+    stoppage_unknown: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool), repr=False)
 
     # ------------------------------------------------------------------ building
 
@@ -761,16 +808,31 @@ class MeasurementView:
                                     method=methods[tag], breaks={tag: breaks.get(tag, ())})[tag] \
                 .to_numpy(dtype=float)
         stopped = np.zeros(grid.size, dtype=bool)
+        unknown = np.zeros(grid.size, dtype=bool)
+        settle = 0.0
         if stoppage is not None:
-            stopped = stoppage_mask(grid, samples[stoppage.tag], float(stoppage.below), float(stoppage.settle))
+            settle = float(stoppage.settle)
+            stopped = stoppage_mask(grid, samples[stoppage.tag], float(stoppage.below), settle)
+            # the stoppage tag lost: the plant may have stopped in the gap, so mask it like a stoppage
+            unknown = ~np.isfinite(samples[stoppage.tag])
+            stopped = stopped | extend_mask(grid, unknown, settle)
+        # an input lost: the twin runs on its last good value (held), and the outputs are not compared
+        # with it there, nor for the stoppage rule's settle time after it
+        input_gap = np.zeros(grid.size, dtype=bool)
         frame: dict[str, npt.NDArray[np.float64]] = {"time": grid}
         for tag, name in spec.inputs.items():
-            frame[name] = fill_nan(samples[tag])
+            input_gap |= ~np.isfinite(samples[tag])
+            frame[name] = hold_nan(samples[tag])
+        stopped = stopped | extend_mask(grid, input_gap, settle)
         counted = in_window & (grid >= float(skip) - 1e-9) & ~stopped
         scored = {tag: counted & np.isfinite(samples[tag]) for tag in spec.outputs}
         view = cls(source=Path(spec.measurements), sample_time=ts, window=(start, stop), grid=grid,
                    samples=samples, max_gap=gaps, stopped=stopped, inputs=pd.DataFrame(frame), scored=scored,
-                   skip=float(skip), t0=t0, method=methods)
+                   skip=float(skip), t0=t0, method=methods, input_gap=input_gap, stoppage_unknown=unknown)
+        if input_gap.any() or unknown.any():
+            log.info("measurement view of %s: %d grid points with an input missing (inputs held), %d with the "
+                     "stoppage tag missing; masked like a stoppage (+%g s settle)", where, int(input_gap.sum()),
+                     int(unknown.sum()), settle)
         log.debug("measurement view of %s: %d grid points from %g s, window [%g, %g) s, gap limits %s",
                   where, grid.size, grid[0], start, stop, gaps)
         return view

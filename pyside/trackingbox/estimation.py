@@ -543,8 +543,10 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
     Raises
     ------
     DataError
-        A tag is missing from the measurements, an input has no valid data over
-        part of a window, or an output tag has too few valid samples.
+        A tag is missing from the measurements, an input has no valid value
+        at all, or an output tag has too few valid samples. An input missing
+        over part of a window is held at its last good value and the outputs
+        are not scored there (the view masks it like a stoppage).
     """
     from .data import MeasurementView
 
@@ -576,14 +578,17 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
         problems = []
         inputs = {}
         for tag, fmu_name in spec.inputs.items():
-            v = view.values(tag)[cut:]
-            bad = ~np.isfinite(v)
-            if bad.any():
-                spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, bad)[:5])
-                problems.append(
-                    f"input tag {tag!r} in {where} has no valid data in the {name} window at {spans} "
-                    f"({int(bad.sum())} of {n_window} samples); the twin cannot be simulated across it"
-                )
+            # through a gap the twin runs on the input's last good value (the view holds it) and the
+            # outputs there are masked like a stoppage; only an input with no value at all is refused
+            v = view.inputs[fmu_name].to_numpy(dtype=float)[cut:]
+            if not np.isfinite(v).all():
+                problems.append(f"input tag {tag!r} in {where} has no valid value in the {name} window "
+                                f"[{start:g}, {stop:g}) s or before it ({n_window} samples); the twin "
+                                f"cannot be simulated without it")
+            elif view.input_gap.size and (gap := view.input_gap[cut:] & ~np.isfinite(view.values(tag)[cut:])).any():
+                spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, gap)[:5])
+                log.info("input tag %r in %s is missing in the %s window at %s: held at its last good value, "
+                         "outputs masked there", tag, where, name, spans)
             inputs[fmu_name] = v
         n_stopped = int((view.stopped & view.in_window).sum())
         measured = {}

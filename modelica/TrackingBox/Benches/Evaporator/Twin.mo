@@ -13,8 +13,11 @@ equation
   connect(cond_m_flow_corr, condTank.m_flow_corr_in);
   annotation (experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
 <p>Clean design values: no fouling (<code>effect.Rf = 0</code>, bounds
-0..6e-4 m2.K/W), no boiling-point offset, no vent, no heat loss, new valves
-and pump. Tunable: <code>effect.Rf</code>, <code>effect.U0</code>,
+0..6e-4 m2.K/W), no boiling-point offset (<code>effect.dBPR = 0</code>, tunable: the
+evaporator notes' &Delta;BPR; tracked on the body temperature it keeps a
+composition offset of the real liquor from being read as fouling), no vent,
+no heat loss, new valves and pump. Tunable: <code>effect.Rf</code>,
+<code>effect.dBPR</code>, <code>effect.U0</code>,
 <code>inletValve.KvMax</code>, <code>outletValve.KvMax</code>,
 <code>pump.dp0</code>, <code>pump.VMax</code>. State compensation: the inputs
 <code>body_m_flow_corr</code>, <code>flash_m_flow_corr</code>,
