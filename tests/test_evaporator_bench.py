@@ -32,11 +32,13 @@ from trackingbox.data import stoppage_mask
 def test_registered() -> None:
     assert "evaporator" in BENCHES
     d = bench_definition("evaporator")
-    # the contract's fixed names: inputs and outputs of Plant and Twin
+    # the contract's fixed names: inputs and outputs of Plant and Twin, plus the steam-chest
+    # pressure (the notes' "PI steam"), added for pairing the heat-transfer parameter
     assert {s.plant for s in d.inputs} == {"feedFlowSet", "feedDS", "feedT", "steamP", "nextP"}
     assert {s.plant for s in d.outputs} == {
         "FI_feed", "FI_product", "FI_condensate", "PI_vapour", "PI_flash", "TI_body", "TI_flash", "LI_body",
-        "LI_flash", "LI_condensate", "DI_product", "ZI_inlet", "ZI_outlet"}
+        "LI_flash", "LI_condensate", "DI_product", "ZI_inlet", "ZI_outlet",
+        "PI_steamChest"}
     assert {(s.variable, s.correction) for s in d.states} == {
         ("LI_body", "body_m_flow_corr"), ("LI_flash", "flash_m_flow_corr"), ("LI_condensate", "cond_m_flow_corr")}
 
