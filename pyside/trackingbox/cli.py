@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from typing import NoReturn
 
@@ -80,6 +81,23 @@ def _setup_logging(verbosity: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``trackingbox`` command; with *argv* None (the console script) the run is supervised.
+
+    Supervised: the command runs in a forked child while this process waits, so
+    that foreign native code (an FMU's binary) that crashes, or calls ``exit()``,
+    after :mod:`trackingbox.fmu`'s canary has passed still ends in one ``error:``
+    line naming the signal and the FMI function, not in a bare exit 139
+    (:func:`supervise`; ``TRACKINGBOX_SUPERVISE=0`` turns it off). Called with a
+    list (tests, scripts), the command runs in this process.
+    """
+    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
+        from .supervise import supervise
+
+        return supervise(_run, sys.argv[1:])
+    return _run(argv)
+
+
+def _run(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -111,8 +129,11 @@ def _short(text: str, limit: int = 160) -> str:
 
 def gen_trackingbox_main(argv: list[str] | None = None) -> int:
     """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    return main(["generate", *argv])
+    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
+        from .supervise import supervise
+
+        return supervise(_run, ["generate", *sys.argv[1:]])
+    return _run(["generate", *argv])
 
 
 if __name__ == "__main__":  # pragma: no cover
