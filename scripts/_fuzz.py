@@ -466,7 +466,9 @@ def csv_case(m: Maker, i: int) -> Case:
     elif variant == "ragged":
         lines = base.csv_text(rows).splitlines()
         k = rng.randrange(1, len(lines))
-        lines[k] = lines[k] + rng.choice([",1", ",1,2,3", ""]) if rng.random() < 0.5 else lines[k].rsplit(",", 1)[0]
+        longer = rng.random() < 0.5
+        lines[k] = lines[k] + rng.choice([",1", ",1,2,3"]) if longer else lines[k].rsplit(",", 1)[0]
+        must = longer  # a short row is a missing value (allowed in measurements)
         text = "\n".join(lines) + "\n"
     elif variant == "semicolon":
         text = base.csv_text(rows).replace(",", ";")
@@ -595,8 +597,10 @@ def spec_case(m: Maker, i: int) -> Case:
         hints += ("sample_time",)
     elif variant == "bigint":
         key = rng.choice(["sample_time", "start", "min", "max", "gain", "hold_until"])
-        text = _replace_line(text, key, "9" * rng.choice([20, 310, 5000]))
+        digits = rng.choice([20, 310, 5000])
+        text = _replace_line(text, key, "9" * digits)
         hints += (key,)
+        must = digits > 20 or key in ("start", "min", "max")  # 1e20 is a number; as a bound it is out of range
     elif variant == "nul":
         raw = text.replace("k", "k\x00", 1).encode()
     elif variant == "dup-key":
@@ -736,15 +740,17 @@ def fmu_case(m: Maker, i: int) -> Case:
         must = False
     else:  # directory
         fmu.mkdir()
+    if variant == "no-binary":
+        must = False  # inspect reads the description only; simulate and track refuse
     r = rng.random()
     out = d / "out"
     if r < 0.3:
         argv = ["inspect", str(fmu)]
         if variant.startswith("crafted") or variant in ("bomb", "many", "symlink", "vr-unknown", "bad-bounds",
                                                           "traversal", "absolute"):
-            argv = ["simulate", str(fmu), "--stop", "5", "--set", "u=1", "-o", str(out / "result.csv")]
+            argv = ["simulate", str(fmu), "--stop", "50", "--set", "u=1", "-o", str(out / "result.csv")]
     elif r < 0.7:
-        argv = ["simulate", str(fmu), "--stop", "5", "--set", "u=1", "-o", str(out / "result.csv")]
+        argv = ["simulate", str(fmu), "--stop", "50", "--set", "u=1", "-o", str(out / "result.csv")]
     else:
         spec = m.spec_with(d, twin=fmu)
         if variant.startswith("crafted"):
@@ -896,7 +902,7 @@ def cli_case(m: Maker, i: int) -> Case:
         if opt != "--popsize":
             argv += ["--popsize", "2"]
         hints = (opt,)
-        must = not (opt == "--maxiter" and value == "0")
+        must = not (value == "0" and opt in ("--maxiter", "--seed", "--refine-iterations"))
     elif variant == "estimate-out":
         target = _bad_output(rng, d, [spec, d / "measurements.csv", base.fmu])
         argv = ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine", "--report", str(target)]
@@ -914,6 +920,7 @@ def cli_case(m: Maker, i: int) -> Case:
         ck.parent.mkdir(parents=True)
         ck.write_bytes(rng.choice([b"", b"{", b"[]", b'{"version": 99}', rng.randbytes(200),
                                    b'{"version": 1, "spec": "x", "rows": -5}', b"null"]))
+        (ck.parent / "tracking.csv").write_text("time\n0\n")  # a run to resume
         argv = ["track", str(spec), "--out", str(ck.parent), "--resume"]
         hints = ("checkpoint",)
     elif variant == "pair-num":
@@ -982,7 +989,9 @@ def _bad_output(rng: random.Random, d: Path, inputs: list[Path]) -> Path:
     ro.chmod(0o555)
     existing = d / "existing_dir"
     existing.mkdir(exist_ok=True)
-    choices = [d / "afile" / "out.csv", ro / "out.csv", ro / "sub" / "x", Path("/proc/trackingbox/x"),
+    # as root a read-only directory is writable: not a bad output there
+    readonly = [ro / "out.csv", ro / "sub" / "x"] if os.geteuid() != 0 else []
+    choices = [d / "afile" / "out.csv", *readonly, Path("/proc/trackingbox/x"),
                Path(""), Path("."), existing, *inputs, Path("/dev/full"), Path("~nosuchuser/x"),
                d / ("y" * 300) / "x"]
     return rng.choice(choices)

@@ -193,7 +193,9 @@ def output_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     missing one down) are deleted with their contents when the body raises, so a
     refused or failed run leaves the output location as it found it. An existing
     directory is never deleted (files the body added to it stay: write them with
-    :func:`atomic_path`).
+    :func:`atomic_path`). Under the console script's supervisor
+    (:mod:`trackingbox.supervise`) the same happens when the process dies in the
+    body (an FMU's binary crashed).
 
     >>> import tempfile
     >>> root = Path(tempfile.mkdtemp())
@@ -213,9 +215,16 @@ def output_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     while not probe.exists() and probe != probe.parent:
         first_missing = probe
         probe = probe.parent
+    from .supervise import note_output
+
+    if first_missing is not None:
+        note_output(first_missing, True)
     try:
         yield path
     except Exception:  # not KeyboardInterrupt: an interrupted run keeps its checkpoint
         if first_missing is not None and first_missing.exists():
             shutil.rmtree(first_missing, ignore_errors=True)
         raise
+    finally:
+        if first_missing is not None:
+            note_output(first_missing, False)

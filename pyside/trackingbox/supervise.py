@@ -20,6 +20,7 @@ import ctypes
 import faulthandler
 import os
 import re
+import shutil
 import signal
 import sys
 import tempfile
@@ -30,6 +31,8 @@ from collections.abc import Callable
 _FMPY_FRAME = re.compile(r'File "[^"]*fmpy[/\\](fmi[123])\.py", line \d+ in (\w+)')
 #: environment variable naming the file where :func:`note_fmu` writes the FMU last opened
 NOTE_ENV = "TRACKINGBOX_SUPERVISOR_NOTE"
+#: environment variable naming the file where :func:`note_output` lists output directories being created
+OUTPUTS_ENV = "TRACKINGBOX_SUPERVISOR_OUTPUTS"
 _ANY_FRAME = re.compile(r'File "([^"]*)", line (\d+) in (\w+)')
 
 
@@ -83,6 +86,8 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
     dump = tempfile.TemporaryFile(prefix="trackingbox-fault-")
     note = tempfile.NamedTemporaryFile(prefix="trackingbox-fmu-", delete=False)
     note.close()
+    outputs = tempfile.NamedTemporaryFile(prefix="trackingbox-out-", delete=False)
+    outputs.close()
     read_fd, write_fd = os.pipe()
     parent = os.getpid()
     pid = os.fork()
@@ -93,6 +98,7 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
             os._exit(1)
         faulthandler.enable(file=dump, all_threads=False)
         os.environ[NOTE_ENV] = note.name
+        os.environ[OUTPUTS_ENV] = outputs.name
         code: int = 1
         try:
             code = int(run(argv) or 0)
@@ -125,14 +131,21 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
             report = fh.read().decode(errors="replace")
         with open(note.name, encoding="utf-8", errors="replace") as fh:
             fmu_path = fh.read().strip()
+        with open(outputs.name, encoding="utf-8", errors="replace") as fh:
+            created = _pending_outputs(fh.read())
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-        try:
-            os.unlink(note.name)
-        except OSError:
-            pass
+        for name in (note.name, outputs.name):
+            try:
+                os.unlink(name)
+            except OSError:
+                pass
     finished = report.startswith("done ")
+    if not finished:
+        # the child died inside an output_dir block: remove what it created (nothing half-written)
+        for path in created:
+            shutil.rmtree(path, ignore_errors=True)
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig == signal.SIGKILL and not finished:
@@ -170,3 +183,33 @@ def note_fmu(path: object) -> None:
             fh.write(str(path))
     except OSError:
         pass
+
+
+def note_output(path: object, created: bool) -> None:
+    """Under :func:`supervise`: *path* (a directory that did not exist) is being created (*created*) or is complete.
+
+    Directories still being created when the child dies are removed by the supervisor.
+    """
+    target = os.environ.get(OUTPUTS_ENV)
+    if not target:
+        return
+    try:
+        with open(target, "a", encoding="utf-8") as fh:
+            fh.write(f"{'+' if created else '-'}{os.path.abspath(str(path))}\n")
+    except OSError:
+        pass
+
+
+def _pending_outputs(text: str) -> list[str]:
+    r"""Directories noted as being created and not noted complete.
+
+    >>> _pending_outputs("+/a\n+/b\n-/a\n")
+    ['/b']
+    """
+    pending: dict[str, None] = {}
+    for line in text.splitlines():
+        if line.startswith("+"):
+            pending[line[1:]] = None
+        elif line.startswith("-"):
+            pending.pop(line[1:], None)
+    return list(pending)
