@@ -660,6 +660,9 @@ def _canary(path: Path, tempdir: str, md: ModelDescription, interface: str) -> N
         code = 0
         try:
             os.close(read_fd)
+            import faulthandler
+
+            faulthandler.disable()  # a crash here is reported by the parent, not dumped on stderr
 
             def phase(name: str) -> None:
                 os.write(write_fd, f"phase {name}\n".encode())
