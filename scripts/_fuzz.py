@@ -62,6 +62,8 @@ WARM = ("trackingbox.spec", "trackingbox.data", "trackingbox.fmu", "trackingbox.
         "trackingbox.tracking.runtime", "trackingbox.report", "trackingbox.analysis.pair_stage",
         "trackingbox.generate.generator", "trackingbox.validate", "trackingbox.compiler", "fmpy.simulation",
         "fmpy.fmi2", "fmpy.fmi3", "fmpy.sundials", "matplotlib.pyplot")
+#: cells read as missing values (trackingbox.data.NA_VALUES)
+NA_CELLS = ("", "NaN", "nan", "NAN", "NA", "N/A", "n/a", "null", "NULL", "None", "#N/A")
 KINDS = ("csv", "spec", "fmu", "modelica", "cli")
 #: share of the cases per kind
 WEIGHTS = {"csv": 0.24, "spec": 0.26, "fmu": 0.15, "modelica": 0.10, "cli": 0.25}
@@ -434,6 +436,8 @@ def csv_case(m: Maker, i: int) -> Case:
         lines = ["time,FI,TI"] + [",".join(cell if (kk == k and j == col) else f"{v:g}"
                                            for j, v in enumerate(r)) for kk, r in enumerate(rows)]
         text = "\n".join(lines) + "\n"
+        if variant == "text-cell" and cell.strip() in NA_CELLS:
+            must = False  # an empty or NA cell is a missing value, allowed in measurements
     elif variant == "dup-times":
         k = rng.randrange(1, len(rows))
         rows[k] = (rows[k - 1][0], *rows[k][1:])
@@ -539,8 +543,7 @@ def spec_case(m: Maker, i: int) -> Case:
     raw: bytes | None = None
     keys = ["twin", "measurements", "sample_time", "name", "start", "min", "max", "variable", "parameter",
             "gain", "time_constant", "training", "validation", "hold_until", "tau"]
-    bad_values = ['"text"', "[1, 2]", "true", "{ a = 1 }", "nan", "inf", "-inf", "-1", "0", "1e308",
-                  "-1e308", "1" * 310, '""', "1979-05-27T07:32:00Z", "[]"]
+    bad_values = ['"text"', "[1, 2]", "true", "{ a = 1 }", '""', "1979-05-27T07:32:00Z", "[]", "[[1.0]]"]
     variant = rng.choice(["missing-key", "wrong-type", "unknown-key", "unknown-name", "range", "window",
                           "not-utf8", "bom", "truncated", "deep", "bigint", "nul", "dup-key", "empty",
                           "garbage", "no-parameters", "twin-path", "fixed-bounds", "huge-string",
@@ -550,9 +553,12 @@ def spec_case(m: Maker, i: int) -> Case:
         key = rng.choice(keys)
         text = _drop_line(text, key)
         hints += (key,)
+        must = key not in ("training", "validation", "hold_until", "tau")  # optional keys
     elif variant == "wrong-type":
         key = rng.choice(keys)
-        text = _replace_line(text, key, rng.choice(bad_values))
+        strings = ("twin", "measurements", "name", "variable", "parameter")
+        value = rng.choice(["1", "2.5", "true", "[1, 2]", "{ a = 1 }"] if key in strings else bad_values)
+        text = _replace_line(text, key, value)
         hints += (key,)
     elif variant == "unknown-key":
         section = rng.choice(["", "[inputs]", "[[parameters]]", "[windows]", "[[pairs]]", "[tracking]"])
@@ -809,6 +815,7 @@ def modelica_case(m: Maker, i: int) -> Case:
         while MODEL[k] not in ";()=\"":
             k = rng.randrange(len(MODEL))
         text = MODEL[:k] + MODEL[k + 1:]
+        must = False  # some deletions leave valid Modelica (a quote pair, a bracket in a string)
     elif variant == "garbage":
         text = rng.randbytes(rng.randint(1, 4000))
     elif variant == "utf16":
@@ -824,6 +831,7 @@ def modelica_case(m: Maker, i: int) -> Case:
         hints = ("Nowhere.mo",)
     elif variant == "deep-expr":
         text = MODEL.replace("y = x;", "y = " + "(" * 5000 + "x" + ")" * 5000 + ";")
+        must = False  # valid Modelica: compiled or refused for its depth, never a crash
     elif variant == "unbalanced":
         text = MODEL.replace("  y = x;\n", "")
     elif variant == "undeclared":
@@ -876,7 +884,7 @@ def cli_case(m: Maker, i: int) -> Case:
         hints = (opt,)
         must = not (opt == "--tolerance" and value in ("1e-300",))
         if (opt, value) in (("--stop", "1e308"), ("--start", "-1"), ("--start", "0"), ("--start", "-0"),
-                            ("--tolerance", "1e-300"), ("--step", "2")):
+                            ("--start", "2"), ("--step", "2"), ("--tolerance", "1e-9")):
             must = False
     elif variant == "simulate-set":
         item = rng.choice(["k=-1", "k=1e9", "k=nan", "tau=0", "zz=1", "k", "=1", "k=1=2", "u=inf", "y=3",
@@ -903,18 +911,23 @@ def cli_case(m: Maker, i: int) -> Case:
             argv += ["--popsize", "2"]
         hints = (opt,)
         must = not (value == "0" and opt in ("--maxiter", "--seed", "--refine-iterations"))
+        must = must and not (value == "999999999999999999999" and opt in ("--seed", "--refine-iterations"))
     elif variant == "estimate-out":
         target = _bad_output(rng, d, [spec, d / "measurements.csv", base.fmu])
         argv = ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine", "--report", str(target)]
         hints = ("--report", target.name or str(target), "report")
+        must = target not in (Path("."), Path(""), d / "existing_dir")  # a writable directory: fine
     elif variant == "track-int":
-        argv = ["track", str(spec), "--out", str(out / "track"), "--checkpoint-every", rng.choice(_BAD_INTS)]
+        value = rng.choice(_BAD_INTS)
+        argv = ["track", str(spec), "--out", str(out / "track"), "--checkpoint-every", value]
         hints = ("--checkpoint-every",)
+        must = value != "999999999999999999999"  # never checkpoint: allowed
     elif variant == "track-out":
         target = _bad_output(rng, d, [spec, d / "measurements.csv", base.fmu])
         opt = rng.choice(["--out", "--report"])
         argv = ["track", str(spec), opt, str(target)]
         hints = (opt, target.name or str(target), "output", "report")
+        must = target not in (Path("."), Path(""), d / "existing_dir")
     elif variant == "track-resume":
         ck = out / "track" / "checkpoint.json"
         ck.parent.mkdir(parents=True)
@@ -930,7 +943,8 @@ def cli_case(m: Maker, i: int) -> Case:
         argv = ["pair", str(spec), "--no-write", "--workers", "1", opt, value]
         hints = (opt,)
         must = not (value == "0" and opt in ("--noise-ratio", "--min-reach", "--at"))
-        must = must and not (value == "1e308" and opt in ("--noise-ratio", "--max-time"))
+        must = must and not (value == "1e308" and opt in ("--noise-ratio", "--max-time", "--max-ratio", "--at",
+                                                          "--baseline-tolerance", "--min-reach"))
         must = must and not (value == "inf" and opt in ("--max-time",))
     elif variant == "pair-int":
         opt = rng.choice(["--workers", "--samples"])
@@ -960,8 +974,10 @@ def cli_case(m: Maker, i: int) -> Case:
         hints = (Path(missing).name, "nope")
     elif variant == "diagnose-int":
         opt = rng.choice(["--fit-best", "--workers", "--maxiter"])
-        argv = ["diagnose", str(spec), opt, rng.choice(_BAD_INTS)]
+        value = rng.choice(_BAD_INTS)
+        argv = ["diagnose", str(spec), opt, value]
         hints = (opt,)
+        must = not (value == "999999999999999999999" and opt in ("--fit-best",))
     elif variant == "inspect-path":
         target = rng.choice([d, Path("/dev/null"), Path("/proc/self/status"), d / "spec.toml"])
         argv = ["inspect", str(target)]
@@ -972,6 +988,7 @@ def cli_case(m: Maker, i: int) -> Case:
         spec.write_text(spec.read_text() + f'\n[source]\npath = "{src.name}"\nmodel = "FuzzTwin"\n')
         target = _bad_output(rng, d, [spec, src])
         argv = ["generate", str(spec), "-o", str(target)]
+        must = target not in (Path("."), Path(""), d / "existing_dir")
         hints = ("-o", target.name or str(target), "output", "spec.toml")
     else:  # weird-path
         weird = rng.choice(["a\x00b.toml", "~nosuchuser/spec.toml", "x" * 5000 + ".toml", "/" + "a/" * 3000,
@@ -1092,6 +1109,8 @@ class Running:
                         import traceback
                         traceback.print_exc()
                         rc = 1
+                    import atexit
+                    atexit._run_exitfuncs()  # what interpreter shutdown runs (weakref finalizers: temp dirs)
                     sys.stdout.flush()
                     sys.stderr.flush()
                     os._exit(int(rc) & 0xFF)

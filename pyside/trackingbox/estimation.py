@@ -776,8 +776,8 @@ def _check_settings(spec: Any, *, seed: int, workers: int | None, maxiter: int |
         n = len(list(spec.parameters))
         evaluations = (maxiter + 1) * _population(n, popsize) * n
         if evaluations > MAX_GLOBAL_EVALUATIONS:
-            problems.append(f"maxiter = {maxiter} with a population of {_population(n, popsize) * n} asks for up to "
-                            f"{evaluations:.3g} simulations (at most {MAX_GLOBAL_EVALUATIONS:g})")
+            problems.append(f"maxiter = {maxiter} and popsize = {popsize} ({_population(n, popsize) * n} individuals) "
+                            f"ask for up to {evaluations:.3g} simulations (at most {MAX_GLOBAL_EVALUATIONS:g})")
     if not problems and warmup is not None and spec.sample_time > 0:
         samples = (float(warmup) + span) / float(spec.sample_time)
         if samples > MAX_WINDOW_SAMPLES:

@@ -562,6 +562,9 @@ def _extract(path: Path) -> str:
                             raise FMUError(f"FMU {path} inflates to more than {limit / 2**20:.0f} MiB "
                                            "(TRACKINGBOX_FMU_MAX_BYTES sets the limit): not extracted")
                         dst.write(chunk)
+        from .supervise import note_output
+
+        note_output(tempdir, True)  # removed by the console script's supervisor if this process dies
         return tempdir
     except FMUError:
         shutil.rmtree(tempdir, ignore_errors=True)
@@ -760,6 +763,9 @@ def _cleanup(holder: dict[str, Any], tempdir: str | None, pid: int) -> None:
             fmu.freeInstance()
     if tempdir:
         shutil.rmtree(tempdir, ignore_errors=True)
+        from .supervise import note_output
+
+        note_output(tempdir, False)
 
 
 class FMUModel:

@@ -88,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
         columns = [c for c in inputs.columns if c != "time"]
         unknown = [c for c in columns if c not in fmu_inputs]
         if unknown:
-            raise FMUError("; ".join(
-                f"column {c!r} of {args.inputs.name} is not an input of {where}{did_you_mean(c, fmu_inputs)}"
-                for c in unknown))
+            listed = "; ".join(f"column {c!r} of {args.inputs.name} is not an input of {where}"
+                               f"{did_you_mean(c, fmu_inputs)}" for c in unknown[:5])
+            more = f" (and {len(unknown) - 5} more columns)" if len(unknown) > 5 else ""
+            raise FMUError(listed + more)
         clash = [c for c in columns if c in settings]
         if clash:
             raise TrackingError(f"input(s) {', '.join(map(repr, clash))} are given both in "
@@ -115,15 +116,16 @@ def run(args: argparse.Namespace) -> int:
         else:
             raise TrackingError(f"no stop time: give --stop (no --inputs and {where} has no default experiment)")
     if not stop > start:
-        raise TrackingError(f"--stop: stop time {stop:g} s must be after the start time {start:g} s"
-                            f"{'' if args.start is not None else ' (--start, default: ' + ('the first input time' if t_in is not None else 'the FMU default') + ')'}")
+        origin = "--start" if args.start is not None else \
+            "the start time (the first input time)" if t_in is not None else "the start time (the FMU's default)"
+        raise TrackingError(f"--stop {stop:g} s must be after {origin} {start:g} s")
     step = args.step
     if step is None:
         step = info.step_size if info.step_size else (stop - start) / 500.0
     if not (step > 0 and math.isfinite(step)):
         raise TrackingError(f"--step must be a positive number of seconds, not {step:g}")
     if step > stop - start:
-        raise TrackingError(f"--step {step:g} s is longer than the run ({start:g} s to {stop:g} s)")
+        raise TrackingError(f"--step {step:g} s is longer than the run (--start {start:g} s to --stop {stop:g} s)")
     rows = (stop - start) / step
     if rows > MAX_ROWS:
         raise TrackingError(f"--stop {stop:g} with --step {step:g} asks for {rows:.3g} result rows "
