@@ -244,7 +244,8 @@ def read_info(path: str | Path) -> FMUInfo:
     seen: set[str] = set()
     for v in md.modelVariables:
         if v.name in seen:
-            raise FMUError(f"FMU {path} has an invalid modelDescription.xml: variable {v.name[:80]!r} is declared twice")
+            raise FMUError(f"FMU {path} has an invalid modelDescription.xml: variable {v.name[:80]!r} "
+                           "is declared twice")
         seen.add(v.name)
     interfaces = tuple(
         name for name, present in (("ModelExchange", md.modelExchange), ("CoSimulation", md.coSimulation))

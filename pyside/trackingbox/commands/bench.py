@@ -51,7 +51,8 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("bench", choices=sorted(BENCHES), help="which bench")
     p.add_argument("--out", "-o", type=Path, required=True, metavar="DIR", help="output directory")
-    p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="seed of the scenario and the noise (default 0)")
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
+                   help="seed of the scenario and the noise (default 0)")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
     p.add_argument("--hours", type=number(gt=0), default=None,

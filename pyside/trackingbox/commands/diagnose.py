@@ -49,8 +49,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
     p.add_argument("--fit-best", type=number(ge=1, integer=True), default=2, metavar="N",
                    help="candidates fitted properly with --compile (default 2)")
-    p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="seed of the null model's estimation (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1, help="processes for the estimations (default 1)")
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
+                   help="seed of the null model's estimation (default 0)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
+                   help="processes for the estimations (default 1)")
     p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help="generations of the null model's global search (default: estimate's)")
     p.add_argument("--warmup", type=number(ge=0), default=None, metavar="SECONDS",

@@ -49,7 +49,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write fit plots, convergence trace, parameter table and a checkpoint to DIR")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="seed of the global search (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1, help="processes evaluating the population (default 1)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
+                   help="processes evaluating the population (default 1)")
     p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help=f"generations of differential evolution (default {DEFAULT_MAXITER}, fewer when the "
                         f"population times generations would exceed {DEFAULT_GLOBAL_EVALUATIONS} simulations; "

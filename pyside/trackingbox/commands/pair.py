@@ -72,7 +72,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--samples", type=number(ge=1, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), metavar="N", help="local worker processes (default: all cores)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), metavar="N",
+                   help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--report", type=Path, metavar="DIR", help="write RGA/gain heatmaps and a Markdown summary")

@@ -55,7 +55,8 @@ def register(subparsers: Any) -> None:
                    help="variable to write (repeatable; default: every output)")
     p.add_argument("--interface", choices=("ModelExchange", "CoSimulation"),
                    help="FMI interface to use (default: model exchange if the FMU has it)")
-    p.add_argument("--tolerance", type=number(ge=1e-12, le=0.5), default=1e-6, help="relative solver tolerance (default 1e-6)")
+    p.add_argument("--tolerance", type=number(ge=1e-12, le=0.5), default=1e-6,
+                   help="relative solver tolerance (default 1e-6)")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="RESULT.csv", help="result CSV to write")
     p.add_argument("--json", action="store_true", help="print one JSON summary document on stdout")
     p.set_defaults(func=run)
