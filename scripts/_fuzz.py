@@ -8,9 +8,10 @@ Its outcome is one of:
 ``refused``       exit 2, exactly one ``error:`` line, bounded, naming the thing
                   and where (the file, option or name the case is about);
 ``refused-vague`` exit 2 and one ``error:`` line, but too long or not naming where;
-``accepted``      exit 0 (the input was bad in a way the command may accept);
+``accepted``      exit 0 (the input was bad in a way the command may accept), or exit 1
+                  without an error line (a documented negative result: pair found no pairs);
 ``accepted-bad``  exit 0 on an input that must be refused;
-``traceback``     a Python traceback reached the user (or exit 1);
+``traceback``     a Python traceback reached the user;
 ``signal``        the process was killed by a signal (a foreign binary crashed);
 ``hang``          the time limit passed;
 ``half-written``  a refusal that left files in the output location or the temp dir;
@@ -978,6 +979,7 @@ def cli_case(m: Maker, i: int) -> Case:
         argv = ["diagnose", str(spec), opt, value]
         hints = (opt,)
         must = not (value == "999999999999999999999" and opt in ("--fit-best",))
+        must = must and not (value == "0" and opt == "--maxiter")  # 0: refinement only
     elif variant == "inspect-path":
         target = rng.choice([d, Path("/dev/null"), Path("/proc/self/status"), d / "spec.toml"])
         argv = ["inspect", str(target)]
@@ -1160,11 +1162,14 @@ def judge(run: Running, status: int | None, hung: bool) -> None:
         case.outcome, case.detail = "signal", f"killed by {sig}"
         return
     code = os.WEXITSTATUS(status)
-    if "Traceback (most recent call last)" in err or code == 1:
+    errors = [ln for ln in err.splitlines() if ln.startswith("error:") or ": error:" in ln[:60]]
+    if "Traceback (most recent call last)" in err:
         last = [ln for ln in err.strip().splitlines() if ln.strip()][-1:] or ["exit 1"]
         case.outcome, case.detail = "traceback", last[0][:300]
         return
-    errors = [ln for ln in err.splitlines() if ln.startswith("error:") or ": error:" in ln[:60]]
+    if code == 1 and not errors:  # a negative result the command documents (pair: no pairs found)
+        case.outcome, case.detail = "accepted", "exit 1 (a documented negative result)"
+        return
     if code == 0:
         case.outcome = "accepted-bad" if case.must_refuse else "accepted"
         case.detail = "exit 0"
@@ -1182,7 +1187,9 @@ def judge(run: Running, status: int | None, hung: bool) -> None:
         return
     line = errors[0]
     case.detail = line[:300]
-    names = any(h and h.lower() in err.lower() for h in case.hints) or not case.hints
+    # an option is named with or without its dashes (a stage names its setting 'popsize')
+    names = any(h and (h.lower() in err.lower() or (h.startswith("--") and f"{h[2:].replace('-', '_')} "
+                                                     in err.lower())) for h in case.hints) or not case.hints
     if len(line) > MAX_ERROR_LINE or len(err) > MAX_STDERR or not names:
         case.outcome = "refused-vague"
         why = "too long" if len(line) > MAX_ERROR_LINE or len(err) > MAX_STDERR else "names none of " + \

@@ -43,17 +43,17 @@ def register(subparsers: Any) -> None:
     p.add_argument("--freeze", action="append", default=[], metavar="NAME=VALUE",
                    help="input or tunable parameter that freezes the twin's controllers, set after the first "
                         "settle (repeatable), e.g. --freeze holdControllers=1")
-    p.add_argument("--at", type=number(ge=0), metavar="TIME",
+    p.add_argument("--at", type=number(ge=0, le=1e9), metavar="TIME",
                    help="operating point at TIME (s) instead of the first hour of the training window")
-    p.add_argument("--interval", type=number(gt=0), metavar="SECONDS",
+    p.add_argument("--interval", type=number(gt=0, le=1e9), metavar="SECONDS",
                    help="communication step of the step tests (default: the spec's sample_time)")
-    p.add_argument("--window", type=number(gt=0), metavar="SECONDS",
+    p.add_argument("--window", type=number(gt=0, le=1e9), metavar="SECONDS",
                    help="settle window (default: 60 intervals)")
     p.add_argument("--tolerance", type=number(gt=0, le=0.5), default=1e-4,
                    help="settled: no output moves more than this fraction of its range in a window (default 1e-4)")
     p.add_argument("--baseline-tolerance", type=number(gt=0), default=1e-3,
                    help="the same for the settle phases before the steps (default 1e-3)")
-    p.add_argument("--max-time", type=number(gt=0), default=86400.0, metavar="SECONDS",
+    p.add_argument("--max-time", type=number(gt=0, le=1e9), default=86400.0, metavar="SECONDS",
                    help="longest a phase may take to settle (default 86400 s)")
     p.add_argument("--rank-tol", type=number(gt=0, le=1), default=None, metavar="RTOL",
                    help="leave out parameters that add less than RTOL x the largest singular value (default 1e-2)")
@@ -69,7 +69,7 @@ def register(subparsers: Any) -> None:
                         "F x its mean untracked offset (default 0.5)")
     p.add_argument("--max-ratio", type=number(gt=0), default=0.25, metavar="R",
                    help="reject pairs predicted to leave more than R of the untracked RMS error (default 0.25)")
-    p.add_argument("--samples", type=number(ge=1, integer=True), default=32,
+    p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
     p.add_argument("--workers", type=number(ge=1, le=256, integer=True), metavar="N",
