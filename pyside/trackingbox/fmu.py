@@ -530,7 +530,7 @@ def _check_archive(path: Path, zf: zipfile.ZipFile) -> list[zipfile.ZipInfo]:
         total += item.file_size
     limit = _max_bytes()
     if total > limit:
-        raise FMUError(f"FMU {path} would inflate to {total / 2**20:.0f} MiB (at most {limit / 2**20:.0f} MiB; "
+        raise FMUError(f"FMU {path} would inflate to {total} bytes (at most {limit} bytes; "
                        "TRACKINGBOX_FMU_MAX_BYTES sets the limit): not extracted")
     return items
 
@@ -560,7 +560,7 @@ def _extract(path: Path) -> str:
                             break
                         written += len(chunk)
                         if written > limit:
-                            raise FMUError(f"FMU {path} inflates to more than {limit / 2**20:.0f} MiB "
+                            raise FMUError(f"FMU {path} inflates to more than {limit} bytes "
                                            "(TRACKINGBOX_FMU_MAX_BYTES sets the limit): not extracted")
                         dst.write(chunk)
         from .supervise import note_output
