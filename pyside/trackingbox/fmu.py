@@ -602,7 +602,7 @@ def _canary_calls(tempdir: str, md: ModelDescription, interface: str,
         from fmpy.fmi2 import FMU2Model as Model, FMU2Slave as Slave  # type: ignore[assignment]
     kind = md.coSimulation if interface == "CoSimulation" else md.modelExchange
     cls = Slave if interface == "CoSimulation" else Model
-    phase("loading its shared library")
+    phase("the loading of its shared library")
     fmu = cls(guid=md.guid, unzipDirectory=tempdir, modelIdentifier=kind.modelIdentifier,
               instanceName="canary")
     phase(f"{p}Instantiate")
