@@ -123,7 +123,8 @@ def test_track_json_reaches_plant_kht(case: Path, tmp_path: Path) -> None:
 def test_track_bad_option_is_one_error_line(case: Path, tmp_path: Path) -> None:
     code, out, err = run_cli(["track", str(case), "--out", str(tmp_path / "run"), "--checkpoint-every", "0"])
     assert code == 2 and out == ""
-    assert error_lines(err) == ["error: --checkpoint-every must be >= 1, got 0"]
+    assert error_lines(err) == ["error: trackingbox track: argument --checkpoint-every: must be an integer >= 1, "
+                                "got '0' (see trackingbox track --help)"]
     assert not (tmp_path / "run").exists()  # nothing half-written
 
 
@@ -181,7 +182,7 @@ def test_validate_json_agrees_with_python(generated: dict[str, Any], case: Path,
 
 @pytest.mark.parametrize(("extra", "expected"), [
     (["--fmu", "missing.fmu"], "missing.fmu does not exist"),
-    (["--fmu", "x.fmu", "--band", "-1"], "--band must be a positive number, got -1.0"),
+    (["--fmu", "x.fmu", "--band", "-1"], "argument --band: must be a finite number > 0, got '-1'"),
 ])
 def test_validate_bad_input_is_one_error_line(case: Path, tmp_path: Path, extra: list[str], expected: str) -> None:
     extra = [str(tmp_path / a) if a.endswith(".fmu") else a for a in extra]

@@ -252,7 +252,7 @@ def test_tracking_holds_through_the_stoppage_and_closes_the_heat_transfer_offset
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--days", "0"], "--days must be > 0"),
+    (["--days", "0"], "argument --days: must be a finite number > 0"),
     (["--days", "1", "--hours", "2"], "give --days or --hours, not both"),
 ])
 def test_bench_command_rejects_bad_periods(tmp_path, capsys, argv, message) -> None:

@@ -217,7 +217,9 @@ def test_states_are_not_accessible_in_co_simulation():
 
 def test_fifty_runs_reuse_one_extraction_and_instance(monkeypatch, fmu_path):
     calls = {"extract": 0, "instantiate": 0}
-    real_extract, real_instantiate = fmpy.extract, fmpy.simulation.instantiate_fmu
+    import trackingbox.fmu as fmu_module
+
+    real_extract, real_instantiate = fmu_module._extract, fmpy.simulation.instantiate_fmu
 
     def counting_extract(*a, **kw):
         calls["extract"] += 1
@@ -227,7 +229,7 @@ def test_fifty_runs_reuse_one_extraction_and_instance(monkeypatch, fmu_path):
         calls["instantiate"] += 1
         return real_instantiate(*a, **kw)
 
-    monkeypatch.setattr(fmpy, "extract", counting_extract)
+    monkeypatch.setattr(fmu_module, "_extract", counting_extract)
     monkeypatch.setattr(fmpy.simulation, "instantiate_fmu", counting_instantiate)
     with FMUModel(fmu_path) as m:
         assert calls == {"extract": 1, "instantiate": 1}

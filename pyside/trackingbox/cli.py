@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
+from typing import NoReturn
 
 from . import __version__
 from .errors import TrackingError
@@ -45,8 +47,19 @@ examples:
 """
 
 
+class UsageError(TrackingError):
+    """A command line argparse refused (unknown option, a value out of range)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its refusals raised (one ``error:`` line from :func:`main`, exit 2), not printed."""
+
+    def error(self, message: str) -> NoReturn:  # type: ignore[override]
+        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="trackingbox",
         description="Turn a Modelica process model (FMU) into a tracking simulator.",
         epilog=EPILOG,
@@ -69,23 +82,59 @@ def _setup_logging(verbosity: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``trackingbox`` command; with *argv* None (the console script) the run is supervised.
+
+    Supervised: the command runs in a forked child while this process waits, so
+    that foreign native code (an FMU's binary) that crashes, or calls ``exit()``,
+    after :mod:`trackingbox.fmu`'s canary has passed still ends in one ``error:``
+    line naming the signal and the FMI function, not in a bare exit 139
+    (:func:`supervise`; ``TRACKINGBOX_SUPERVISE=0`` turns it off). Called with a
+    list (tests, scripts), the command runs in this process.
+    """
+    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
+        from .supervise import supervise
+
+        return supervise(_run, sys.argv[1:])
+    return _run(argv)
+
+
+def _run(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     _setup_logging(args.verbose)
     try:
         return int(args.func(args) or 0)
     except TrackingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the system refused (disk full, permissions changed during the run)
+        where = f"{_short(str(exc.filename))}: " if exc.filename else ""
+        print(f"error: {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"error: {args.command}: out of memory (the run needs more than this machine allows; "
+              "shorten the data or the run)", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
 
 
+def _short(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else f"{text[:limit // 2]}...{text[-(limit // 2):]}"
+
+
 def gen_trackingbox_main(argv: list[str] | None = None) -> int:
     """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    return main(["generate", *argv])
+    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
+        from .supervise import supervise
+
+        return supervise(_run, ["generate", *sys.argv[1:]])
+    return _run(["generate", *argv])
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -85,7 +85,7 @@ def _parse_time(raw: pd.Series, where: str, problems: list[str]) -> tuple[npt.ND
                 try:
                     pd.Timestamp(text)
                 except (ValueError, TypeError):
-                    bad.append(f"{text!r} on line {_line(int(i))}")
+                    bad.append(f"{_cell(text)} on line {_line(int(i))}")
             listed = ", ".join(bad[:_MAX_LISTED]) + (f" (and {len(bad) - _MAX_LISTED} more)"
                                                      if len(bad) > _MAX_LISTED else "")
             problems.append(f"column 'time' in {where} has values that are neither seconds nor ISO 8601 "
@@ -127,13 +127,32 @@ def _numeric(col: pd.Series, what: str, problems: list[str]) -> tuple[np.ndarray
     values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(~na & np.isnan(values))
     if bad.size:
-        cells = ", ".join(f"{col.iloc[i]!r} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
+        cells = ", ".join(f"{_cell(col.iloc[i])} on line {_line(int(i))}" for i in bad[:_MAX_LISTED])
         more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
         problems.append(f"{what} has non-numeric values: {cells}{more}")
     infinite = np.flatnonzero(np.isinf(values))
     if infinite.size:
         problems.append(f"{what} has infinite values, first on line {_line(int(infinite[0]))}")
+    huge = np.flatnonzero(np.isfinite(values) & (np.abs(values) > MAX_MAGNITUDE))
+    if huge.size:
+        i = int(huge[0])
+        problems.append(f"{what} has values beyond +-{MAX_MAGNITUDE:g} (their squares overflow), first "
+                        f"{values[i]:g} on line {_line(i)}")
     return na, values
+
+
+#: largest magnitude of a value in a table: sums of squares of such values stay finite
+MAX_MAGNITUDE = 1e150
+#: longest cell text quoted in a message
+_MAX_CELL = 40
+#: most grid points a measurement view may have (its memory is a few arrays of this length per tag)
+MAX_GRID_POINTS = 20_000_000
+
+
+def _cell(text: object) -> str:
+    """*text* quoted for a message, shortened to :data:`_MAX_CELL` characters."""
+    shown = repr(text)
+    return shown if len(shown) <= _MAX_CELL else f"{shown[:_MAX_CELL - 10]}...' ({len(str(text))} characters)"
 
 
 def _header(path: Path) -> list[str] | None:
@@ -772,6 +791,10 @@ class MeasurementView:
                   *([stoppage.tag] if stoppage is not None else []), *tags]
         needed = list(dict.fromkeys(needed))
         table = read_table(spec.measurements, required=needed, allow_nan=True)
+        empty = [tag for tag in needed if not np.isfinite(table[tag].to_numpy(dtype=float)).any()]
+        if empty:
+            raise DataError(f"{_n(len(empty), 'tag')} of {where} {'has' if len(empty) == 1 else 'have'} no value "
+                            f"at all (every cell empty): {', '.join(map(repr, empty))}")
         t_abs = table["time"].to_numpy(dtype=float)
         t0 = float(t_abs[0])
         end = float(t_abs[-1]) - t0
@@ -785,6 +808,9 @@ class MeasurementView:
         # points before the window's stop and not after the last row
         k_stop = int(math.ceil(min(stop, end + ts) / ts - 1e-9))
         k_stop = min(k_stop, int(math.floor(end / ts + 1e-9)) + 1)
+        if k_stop - k_first > MAX_GRID_POINTS:
+            raise DataError(f"{where} spans {end:g} s: on the sample_time = {ts:g} s grid of {spec.path.name} "
+                            f"that is {k_stop - k_first:.3g} points (at most {MAX_GRID_POINTS:g})")
         grid = ts * np.arange(k_first, k_stop, dtype=float)
         in_window = (grid >= start - 1e-9) & (grid < stop - 1e-9)
         if int(in_window.sum()) < 2:

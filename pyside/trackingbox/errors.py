@@ -22,6 +22,10 @@ class DataError(TrackingError, ValueError):
     """Measurement or input data is malformed (missing columns, NaN, time order)."""
 
 
+class OutputError(TrackingError, ValueError):
+    """An output location cannot or must not be written (not writable, under a file, an input)."""
+
+
 class CompileError(TrackingError, RuntimeError):
     """Modelica source could not be turned into an FMU."""
 

@@ -745,6 +745,8 @@ def estimate(
     """
     if resume and checkpoint is None:
         raise EstimationError("resume needs a checkpoint (trackingbox estimate --resume needs --report DIR)")
+    _check_settings(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
+                    refine_iterations=refine_iterations, global_grid=global_grid)
     if maxiter is None:
         maxiter = default_maxiter(len(list(spec.parameters)), popsize)
     try:
@@ -753,6 +755,54 @@ def estimate(
                          checkpoint=checkpoint, global_grid=global_grid, resume=resume)
     finally:
         close_models()
+
+
+#: most samples one simulated window may have (warm-up included): above it the run is refused
+MAX_WINDOW_SAMPLES = 5_000_000
+#: most simulations the global search may be asked for
+MAX_GLOBAL_EVALUATIONS = 1_000_000
+
+
+def _check_settings(spec: Any, *, seed: int, workers: int | None, maxiter: int | None, popsize: int | None,
+                    warmup: float | None, refine_iterations: int, global_grid: float | None) -> None:
+    """Refuse settings out of range before any work (every problem at once), naming the setting."""
+    problems: list[str] = []
+
+    def integer(name: str, value: Any, low: int) -> None:
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                  or value < low):
+            problems.append(f"{name} must be an integer >= {low}, got {value!r}")
+
+    integer("seed", seed, 0)
+    integer("workers", workers, 1)
+    integer("maxiter", maxiter, 0)
+    integer("popsize", popsize, 1)
+    integer("refine_iterations", refine_iterations, 0)
+    if warmup is not None and not (isinstance(warmup, (int, float)) and math.isfinite(warmup) and warmup >= 0):
+        problems.append(f"warmup must be a finite number of seconds >= 0, got {warmup!r}")
+    if global_grid is not None and not (isinstance(global_grid, (int, float)) and math.isfinite(global_grid)
+                                        and global_grid > 0):
+        problems.append(f"global_grid must be a finite number of seconds > 0, got {global_grid!r}")
+    if not list(spec.parameters):
+        problems.append(f"{spec.path} has no [[parameters]]: there is nothing to estimate")
+    windows = getattr(spec, "windows", {}) or {}
+    span = max((b - a for a, b in windows.values()), default=0.0)
+    if not problems and global_grid is not None and span > 0 and global_grid > span:
+        problems.append(f"global_grid = {global_grid:g} s is longer than the windows of {spec.path.name} "
+                        f"(the longest spans {span:g} s)")
+    if not problems and maxiter is not None:
+        n = len(list(spec.parameters))
+        evaluations = (maxiter + 1) * _population(n, popsize) * n
+        if evaluations > MAX_GLOBAL_EVALUATIONS:
+            problems.append(f"maxiter = {maxiter} and popsize = {popsize} ({_population(n, popsize) * n} individuals) "
+                            f"ask for up to {evaluations:.3g} simulations (at most {MAX_GLOBAL_EVALUATIONS:g})")
+    if not problems and warmup is not None and spec.sample_time > 0:
+        samples = (float(warmup) + span) / float(spec.sample_time)
+        if samples > MAX_WINDOW_SAMPLES:
+            problems.append(f"warmup = {warmup:g} s: a window and its warm-up would take {samples:.3g} samples "
+                            f"of sample_time = {spec.sample_time:g} s (at most {MAX_WINDOW_SAMPLES:g})")
+    if problems:
+        raise EstimationError("estimate: " + "; ".join(problems))
 
 
 def default_maxiter(n_parameters: int, popsize: int | None = None) -> int:

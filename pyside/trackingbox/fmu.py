@@ -189,13 +189,21 @@ def _read_model_description(path: Path) -> ModelDescription:
         raise FMUError(f"FMU {path} is a directory, not an .fmu file")
     if not zipfile.is_zipfile(path):
         raise FMUError(f"FMU {path} is not a valid FMU: it is not a ZIP archive")
+    entries = _zip_entry_count(path)
+    if entries is not None and entries > MAX_ENTRIES:
+        # refused before zipfile parses the directory: 100,000 entries take seconds to list
+        raise FMUError(f"FMU {path} has {entries} archive entries (at most {MAX_ENTRIES}): not read")
     try:
         with zipfile.ZipFile(path) as zf:
             names = set(zf.namelist())
-    except (OSError, zipfile.BadZipFile) as exc:
-        raise FMUError(f"FMU {path} cannot be read: {exc}") from None
+            described = zf.getinfo("modelDescription.xml").file_size if "modelDescription.xml" in names else 0
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError) as exc:
+        raise FMUError(f"FMU {path} cannot be read: {str(exc)[:200]}") from None
     if "modelDescription.xml" not in names:
         raise FMUError(f"FMU {path} is not a valid FMU: it has no modelDescription.xml")
+    if described > MAX_DESCRIPTION_BYTES:
+        raise FMUError(f"FMU {path} has a modelDescription.xml of {described / 2**20:.0f} MiB "
+                       f"(at most {MAX_DESCRIPTION_BYTES / 2**20:.0f} MiB): not read")
     try:
         return read_model_description(str(path), validate=True)
     except ValidationError as exc:
@@ -233,6 +241,12 @@ def read_info(path: str | Path) -> FMUInfo:
     """
     path = Path(path)
     md = _read_model_description(path)
+    seen: set[str] = set()
+    for v in md.modelVariables:
+        if v.name in seen:
+            raise FMUError(f"FMU {path} has an invalid modelDescription.xml: variable {v.name[:80]!r} "
+                           "is declared twice")
+        seen.add(v.name)
     interfaces = tuple(
         name for name, present in (("ModelExchange", md.modelExchange), ("CoSimulation", md.coSimulation))
         if present is not None
@@ -454,6 +468,284 @@ class _FMI3(_FMI):
 
 
 # ---------------------------------------------------------------------------
+# bounded extraction and the canary (foreign native code isolated)
+# ---------------------------------------------------------------------------
+
+#: most entries an FMU archive may have
+MAX_ENTRIES = 20_000
+#: most bytes an FMU may inflate to (``TRACKINGBOX_FMU_MAX_BYTES`` overrides)
+MAX_EXTRACTED_BYTES = 2 << 30
+#: largest modelDescription.xml read (bytes)
+MAX_DESCRIPTION_BYTES = 200 << 20
+
+
+def _zip_entry_count(path: Path) -> int | None:
+    """The number of entries a ZIP archive's end record declares (ZIP64 too), or None if it cannot be read."""
+    import struct
+
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(0, size - (1 << 16) - 22))
+            tail = fh.read()
+            at = tail.rfind(b"PK\x05\x06")
+            if at < 0 or len(tail) < at + 22:
+                return None
+            count = struct.unpack("<H", tail[at + 10:at + 12])[0]
+            locator = tail.rfind(b"PK\x06\x07", 0, at)
+            if count == 0xFFFF and locator >= 0:
+                offset = struct.unpack("<Q", tail[locator + 8:locator + 16])[0]
+                fh.seek(offset)
+                record = fh.read(56)
+                if record[:4] == b"PK\x06\x06":
+                    count = struct.unpack("<Q", record[32:40])[0]
+            return int(count)
+    except (OSError, struct.error):
+        return None
+
+
+def _max_bytes() -> int:
+    try:
+        return int(os.environ.get("TRACKINGBOX_FMU_MAX_BYTES", MAX_EXTRACTED_BYTES))
+    except ValueError:
+        return MAX_EXTRACTED_BYTES
+
+
+def _check_archive(path: Path, zf: zipfile.ZipFile) -> list[zipfile.ZipInfo]:
+    """The archive's entries after the checks that need no extraction: count, names, links, declared size."""
+    items = zf.infolist()
+    if len(items) > MAX_ENTRIES:
+        raise FMUError(f"FMU {path} has {len(items)} archive entries (at most {MAX_ENTRIES}): not extracted")
+    total = 0
+    for item in items:
+        name = item.filename
+        parts = name.replace("\\", "/").split("/")
+        if (name.startswith(("/", "\\")) or "\\" in name or ":" in name or ".." in parts or "\x00" in name):
+            raise FMUError(f"FMU {path} has an archive entry with an unsafe path {name[:120]!r} "
+                           "(absolute, '..' or a drive): not extracted")
+        mode = (item.external_attr >> 16) & 0o170000
+        if mode == 0o120000:
+            raise FMUError(f"FMU {path} has a symbolic link {name[:120]!r} in its archive: not extracted")
+        total += item.file_size
+    limit = _max_bytes()
+    if total > limit:
+        raise FMUError(f"FMU {path} would inflate to {total} bytes (at most {limit} bytes; "
+                       "TRACKINGBOX_FMU_MAX_BYTES sets the limit): not extracted")
+    return items
+
+
+def _extract(path: Path) -> str:
+    """Extract *path* to a new temporary directory, bounded in entries and bytes; nothing left on failure.
+
+    The sizes the archive declares are checked first; while inflating, the bytes
+    actually written are counted too (a forged header cannot get past the limit).
+    """
+    import tempfile
+
+    tempdir = tempfile.mkdtemp(prefix="tbx-fmu-")
+    try:
+        limit, written = _max_bytes(), 0
+        with zipfile.ZipFile(path) as zf:
+            for item in _check_archive(path, zf):
+                target = os.path.join(tempdir, *item.filename.split("/"))
+                if item.is_dir():
+                    os.makedirs(target, exist_ok=True)
+                    continue
+                os.makedirs(os.path.dirname(target), exist_ok=True)
+                with zf.open(item) as src, open(target, "wb") as dst:
+                    while True:
+                        chunk = src.read(1 << 20)
+                        if not chunk:
+                            break
+                        written += len(chunk)
+                        if written > limit:
+                            raise FMUError(f"FMU {path} inflates to more than {limit} bytes "
+                                           "(TRACKINGBOX_FMU_MAX_BYTES sets the limit): not extracted")
+                        dst.write(chunk)
+        from .supervise import note_output
+
+        note_output(tempdir, True)  # removed by the console script's supervisor if this process dies
+        return tempdir
+    except FMUError:
+        shutil.rmtree(tempdir, ignore_errors=True)
+        raise
+    except (OSError, zipfile.BadZipFile, EOFError, RuntimeError, ValueError, NotImplementedError) as exc:
+        shutil.rmtree(tempdir, ignore_errors=True)
+        raise FMUError(f"FMU {path} could not be extracted: {str(exc)[:200] or type(exc).__name__}") from None
+    except BaseException:
+        shutil.rmtree(tempdir, ignore_errors=True)
+        raise
+
+
+#: seconds one FMI call of the canary may take (``TRACKINGBOX_FMU_TIMEOUT`` overrides)
+CANARY_TIMEOUT = 60.0
+_CANARY_PASSED: set[tuple[Any, ...]] = set()
+
+
+def _canary_timeout() -> float:
+    try:
+        value = float(os.environ.get("TRACKINGBOX_FMU_TIMEOUT", CANARY_TIMEOUT))
+    except ValueError:
+        return CANARY_TIMEOUT
+    return value if value > 0 and math.isfinite(value) else CANARY_TIMEOUT
+
+
+def _canary_calls(tempdir: str, md: ModelDescription, interface: str,
+                  phase: Callable[[str], None]) -> None:
+    """In the canary process: load, instantiate, initialise, read the outputs, take one step, free."""
+    v3 = str(md.fmiVersion).startswith("3")
+    p = "fmi3" if v3 else "fmi2"
+    if v3:
+        from fmpy.fmi3 import FMU3Model as Model, FMU3Slave as Slave
+    else:
+        from fmpy.fmi2 import FMU2Model as Model, FMU2Slave as Slave  # type: ignore[assignment]
+    kind = md.coSimulation if interface == "CoSimulation" else md.modelExchange
+    cls = Slave if interface == "CoSimulation" else Model
+    phase("the loading of its shared library")
+    fmu = cls(guid=md.guid, unzipDirectory=tempdir, modelIdentifier=kind.modelIdentifier,
+              instanceName="canary")
+    phase(f"{p}Instantiate")
+    fmu.instantiate()
+    exp = md.defaultExperiment
+    t0 = _float_or_none(exp.startTime) if exp else None
+    t0 = t0 or 0.0
+    if not v3:
+        phase("fmi2SetupExperiment")
+        fmu.setupExperiment(startTime=t0)
+    phase(f"{p}EnterInitializationMode")
+    fmu.enterInitializationMode()
+    phase(f"{p}ExitInitializationMode")
+    fmu.exitInitializationMode()
+    reals = [v.valueReference for v in md.modelVariables
+             if v.causality == "output" and v.type in ("Real", "Float64")]
+    if reals:
+        phase(f"{p}GetFloat64" if v3 else "fmi2GetReal")
+        (fmu.getFloat64 if v3 else fmu.getReal)(reals)
+    if interface == "CoSimulation":
+        step = (_float_or_none(exp.stepSize) if exp else None) or 1e-3
+        phase(f"{p}DoStep")
+        fmu.doStep(currentCommunicationPoint=t0, communicationStepSize=step)
+        if reals:
+            phase(f"{p}GetFloat64" if v3 else "fmi2GetReal")
+            (fmu.getFloat64 if v3 else fmu.getReal)(reals)
+    phase(f"{p}Terminate")
+    fmu.terminate()
+    phase(f"{p}FreeInstance")
+    fmu.freeInstance()
+
+
+def _canary(path: Path, tempdir: str, md: ModelDescription, interface: str) -> None:
+    """Run the FMU's native code once in a forked process before this process loads it.
+
+    A crash (signal), a call to ``exit()`` or a call that does not return within
+    ``TRACKINGBOX_FMU_TIMEOUT`` seconds in loading, instantiation, initialisation,
+    the first output read or the first step becomes an :class:`FMUError` naming
+    the signal and the FMI function. Checked once per file (path, size, mtime) and
+    interface in a process. An FMI call that merely reports an error is left to
+    the normal path, which reports it with the FMU's own message.
+    ``TRACKINGBOX_CANARY=0`` skips it (a trusted FMU; benchmarks of its cost).
+    """
+    import select
+    import signal
+    import time
+
+    try:
+        st = path.stat()
+        key: tuple[Any, ...] = (str(path.resolve()), st.st_size, st.st_mtime_ns, interface)
+    except OSError:
+        key = (str(path), interface)
+    if key in _CANARY_PASSED or not hasattr(os, "fork") or os.environ.get("TRACKINGBOX_CANARY", "1") == "0":
+        return
+    timeout = _canary_timeout()
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child: report each phase, then the end, and leave
+        code = 0
+        try:
+            os.close(read_fd)
+            import faulthandler
+
+            faulthandler.disable()  # a crash here is reported by the parent, not dumped on stderr
+
+            def phase(name: str) -> None:
+                os.write(write_fd, f"phase {name}\n".encode())
+
+            try:
+                _canary_calls(tempdir, md, interface, phase)
+                os.write(write_fd, b"done\n")
+            except Exception as exc:  # an FMI error status or a missing symbol: not a crash
+                os.write(write_fd, f"failed {type(exc).__name__}\n".encode())
+        finally:
+            os._exit(code)
+    os.close(write_fd)
+    phase, ended, buffer = "starting", False, b""
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                raise FMUError(f"FMU {path}: the FMU's binary did not return from {phase} within {timeout:g} s "
+                               "(TRACKINGBOX_FMU_TIMEOUT sets the limit)")
+            ready, _, _ = select.select([read_fd], [], [], min(left, 1.0))
+            if not ready:
+                continue
+            chunk = os.read(read_fd, 4096)
+            if not chunk:
+                break
+            buffer += chunk
+            *lines, rest = buffer.split(b"\n")
+            buffer = rest
+            for line in lines:
+                text = line.decode(errors="replace")
+                if text.startswith("phase "):
+                    phase = text[6:]
+                    deadline = time.monotonic() + timeout
+                elif text == "done" or text.startswith("failed"):
+                    ended = True
+        _, status = os.waitpid(pid, 0)
+    finally:
+        os.close(read_fd)
+    if os.WIFSIGNALED(status):
+        sig = os.WTERMSIG(status)
+        try:
+            name = signal.Signals(sig).name
+        except ValueError:
+            name = f"signal {sig}"
+        raise FMUError(f"FMU {path}: the FMU's binary crashed ({name}) in {phase}")
+    if not ended:
+        raise FMUError(f"FMU {path}: the FMU's binary called exit({os.WEXITSTATUS(status)}) in {phase}")
+    _CANARY_PASSED.add(key)
+
+
+def check_values(info: FMUInfo, values: Mapping[str, float], where: str) -> None:
+    """Refuse values outside the min/max the FMU declares for the variable (every problem at once).
+
+    >>> v = Variable("k", "parameter", "tunable", "Real", 1.0, 0.0, 2.0, None, None, "", 1)
+    >>> info = FMUInfo(Path("t.fmu"), "3.0", "M", ("ModelExchange",), (v,))
+    >>> check_values(info, {"k": 3.0}, "--set")
+    Traceback (most recent call last):
+    ...
+    trackingbox.errors.FMUError: --set: k = 3 is outside [0, 2] that t.fmu declares
+    """
+    problems = []
+    for name, value in values.items():
+        try:
+            v = info.variable(name)
+        except FMUError:
+            continue
+        lo = _float_or_none(v.min)
+        hi = _float_or_none(v.max)
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            problems.append(f"{name} = {value:g} is outside [{'-inf' if lo is None else f'{lo:g}'}, "
+                            f"{'inf' if hi is None else f'{hi:g}'}] that {info.path.name} declares")
+    if problems:
+        raise FMUError(f"{where}: " + "; ".join(problems))
+
+
+# ---------------------------------------------------------------------------
 # FMUModel
 # ---------------------------------------------------------------------------
 
@@ -472,6 +764,9 @@ def _cleanup(holder: dict[str, Any], tempdir: str | None, pid: int) -> None:
             fmu.freeInstance()
     if tempdir:
         shutil.rmtree(tempdir, ignore_errors=True)
+        from .supervise import note_output
+
+        note_output(tempdir, False)
 
 
 class FMUModel:
@@ -528,11 +823,16 @@ class FMUModel:
         #: what the FMU logged (FMI 3), newest last: error reports read failed asserts from it
         self.log_messages: Messages = collections.deque(maxlen=20)
         self._tempdir: str | None = None
-        try:
-            self._tempdir = str(fmpy.extract(str(self.path)))
-        except Exception as exc:
-            raise FMUError(f"FMU {self.path} could not be extracted: {exc}") from None
+        from .supervise import note_fmu
+
+        note_fmu(self.path)
+        self._tempdir = _extract(self.path)
         self._finalizer = weakref.finalize(self, _cleanup, self._holder, self._tempdir, os.getpid())
+        try:
+            _canary(self.path, self._tempdir, md, interface)
+        except BaseException:
+            self._finalizer()
+            raise
         try:
             from fmpy.simulation import instantiate_fmu
 

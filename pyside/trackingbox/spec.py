@@ -283,6 +283,10 @@ _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
 
+#: longest problem message (characters); longer ones are shortened in the middle
+_MAX_MESSAGE = 400
+
+
 class _Problems:
     """Collects problems while a spec is checked; raises them together."""
 
@@ -291,6 +295,10 @@ class _Problems:
         self.items: list[str] = []
 
     def add(self, message: str) -> None:
+        # a value echoed from the file (a 200 kB string) must not make a 200 kB error line
+        if len(message) > _MAX_MESSAGE:
+            half = _MAX_MESSAGE // 2
+            message = f"{message[:half]} ... {message[-half // 2:]}"
         self.items.append(message)
 
     def raise_if_any(self) -> None:
@@ -328,7 +336,11 @@ def _number(table: Mapping[str, Any], key: str, label: str, problems: _Problems,
     if not _is_number(value):
         problems.add(f"{key!r} in {label} must be a number, got {_type_name(value)} {value!r}")
         return default
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        problems.add(f"{key!r} in {label} is out of range: an integer of {len(str(value))} digits")
+        return default
     if not math.isfinite(value):
         problems.add(f"{key!r} in {label} must be finite, got {value!r}")
         return default
@@ -396,8 +408,15 @@ def _string_map(raw: Mapping[str, Any], key: str, problems: _Problems) -> dict[s
 
 
 def _resolve(base: Path, value: str) -> Path:
-    p = Path(value).expanduser()
-    return p if p.is_absolute() else (base / p).resolve()
+    p = Path(value)
+    try:
+        p = p.expanduser()
+    except RuntimeError:  # an unknown ~user: the path then does not exist, which is reported
+        pass
+    try:
+        return p if p.is_absolute() else (base / p).resolve()
+    except (OSError, ValueError):
+        return base / p
 
 
 def _csv_header(path: Path) -> list[str] | None:
@@ -490,7 +509,15 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             continue
         if name in pnames:
             problems.add(f"{name!r} is both a candidate in [[parameters]] and fixed in [fixed]")
-        fixed[name] = float(value)
+        try:
+            number = float(value)
+        except OverflowError:
+            problems.add(f"{name!r} in [fixed] is out of range: an integer of {len(str(value))} digits")
+            continue
+        if not math.isfinite(number):
+            problems.add(f"{name!r} in [fixed] must be finite, got {number!r}")
+            continue
+        fixed[name] = number
 
     # windows ---------------------------------------------------------------
     windows: dict[str, tuple[float, float]] = {}
@@ -505,13 +532,25 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
                     or not all(_is_number(v) for v in value)):
                 problems.add(f"{name!r} in [windows] must be [start, stop] in seconds, got {value!r}")
                 continue
-            lo, hi = float(value[0]), float(value[1])
+            try:
+                lo, hi = float(value[0]), float(value[1])
+            except OverflowError:
+                problems.add(f"window {name!r} in [windows] has a bound out of range")
+                continue
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                problems.add(f"window {name!r} in [windows] must have finite bounds, got [{lo!r}, {hi!r}]")
+                continue
             if lo >= hi:
                 problems.add(f"window {name!r} in [windows] has start {lo!r} >= stop {hi!r}")
                 continue
             if lo < 0:
                 problems.add(f"window {name!r} in [windows] starts before the first sample ({lo!r} < 0)")
             windows[name] = (lo, hi)
+        if len(windows) == 2:
+            (a0, a1), (b0, b1) = windows[WINDOW_NAMES[0]], windows[WINDOW_NAMES[1]]
+            if a0 < b1 and b0 < a1:
+                problems.add(f"windows {WINDOW_NAMES[0]!r} [{a0!r}, {a1!r}] and {WINDOW_NAMES[1]!r} "
+                             f"[{b0!r}, {b1!r}] in [windows] overlap: held-out data must not be trained on")
 
     known_tags = [*inputs, *outputs]
 
@@ -793,14 +832,44 @@ def load_spec(path: str | os.PathLike[str], *, check_files: bool = True) -> Spec
         Listing every problem found (unknown/missing keys, wrong types, bad bounds
         and windows, missing files, pairs naming unknown tags or parameters).
     """
-    path = Path(path).expanduser().resolve()
+    from .errors import TrackingError
+    from .io import user_path
+
     try:
-        text = path.read_text(encoding="utf-8")
+        path = user_path(path, "spec file").resolve()
+    except TrackingError as exc:
+        raise SpecError(str(exc)) from None
+    except (OSError, RuntimeError) as exc:
+        raise SpecError(f"spec file {_short(str(path))}: cannot be resolved ({exc})") from None
+    if path.is_dir():
+        raise SpecError(f"spec file {_short(str(path))} is a directory, not a spec.toml")
+    try:
+        if path.exists() and not path.is_file():
+            raise SpecError(f"spec file {_short(str(path))} is not a regular file")
+        size = path.stat().st_size
+        if size > _MAX_SPEC_BYTES:
+            raise SpecError(f"spec file {_short(str(path))} is {size} bytes; a spec is at most "
+                            f"{_MAX_SPEC_BYTES} bytes")
+        data = path.read_bytes()
     except FileNotFoundError:
-        raise SpecError(f"spec file {path} does not exist") from None
+        raise SpecError(f"spec file {_short(str(path))} does not exist") from None
     except OSError as exc:
-        raise SpecError(f"cannot read spec file {path}: {exc}") from None
-    return loads_spec(text, path, check_files=check_files)
+        raise SpecError(f"cannot read spec file {_short(str(path))}: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise SpecError(f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                        f"{exc.start}); save the spec as UTF-8") from None
+    return loads_spec(text.removeprefix("\ufeff"), path, check_files=check_files)
+
+
+#: largest spec file read (bytes): a spec is a few kB
+_MAX_SPEC_BYTES = 10 << 20
+
+
+def _short(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else f"{text[:limit // 2]}...{text[-(limit // 2):]}"
 
 
 def loads_spec(text: str, path: str | os.PathLike[str], *, check_files: bool = True) -> Spec:
@@ -809,7 +878,11 @@ def loads_spec(text: str, path: str | os.PathLike[str], *, check_files: bool = T
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path}: not valid TOML: {exc}") from None
+        raise SpecError(f"{path}: not valid TOML: {_short(str(exc), 300)}") from None
+    except RecursionError:
+        raise SpecError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
+    except ValueError as exc:  # e.g. an integer beyond Python's digit limit
+        raise SpecError(f"{path}: not valid TOML: {_short(str(exc), 300)}") from None
     spec = _parse(raw, path, check_files=check_files)
     log.debug("loaded spec %s: %d inputs, %d outputs, %d parameters, %d pairs",
               path, len(spec.inputs), len(spec.outputs), len(spec.parameters), len(spec.pairs))
@@ -871,8 +944,20 @@ def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
             if v.max is not None and p.max > float(v.max):
                 problems.add(f"max = {p.max!r} of parameter {p.name!r} is above the max = {v.max!r} "
                              f"{twin} declares")
-    for name in spec.fixed:
+    for p in spec.parameters:
+        v = variables.get(p.name)
+        if v is not None and v.causality == "parameter":
+            if v.min is not None and p.start < float(v.min) or v.max is not None and p.start > float(v.max):
+                problems.add(f"start = {p.start!r} of parameter {p.name!r} is outside [{v.min!r}, {v.max!r}] "
+                             f"that {twin} declares")
+    for name, value in spec.fixed.items():
         need(name, ("parameter",), "parameter", "[fixed]")
+        v = variables.get(name)
+        if v is not None and v.causality == "parameter":
+            if v.min is not None and value < float(v.min):
+                problems.add(f"[fixed] {name} = {value!r} is below the min = {v.min!r} {twin} declares")
+            if v.max is not None and value > float(v.max):
+                problems.add(f"[fixed] {name} = {value!r} is above the max = {v.max!r} {twin} declares")
     for s in spec.states:
         need(s.variable, None, "variable", f"[[states]] {s.tag!r}")
         need(s.correction, ("input",), "input", f"[[states]] {s.tag!r} correction")

@@ -1,8 +1,10 @@
 """Argument parsing shared by the commands: ``NAME=VALUE`` options (``--set``, ``--freeze``)."""
 from __future__ import annotations
 
+import argparse
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from ..errors import TrackingError
 
@@ -34,3 +36,36 @@ def parse_assignments(items: Iterable[str], option: str = "--set") -> dict[str, 
             raise TrackingError(f"{option} {name!r} is given twice")
         values[name] = value
     return values
+
+
+def number(*, gt: float | None = None, ge: float | None = None, le: float | None = None,
+           integer: bool = False) -> Callable[[str], Any]:
+    """An argparse ``type=``: a finite number (an integer with *integer*) in the given range.
+
+    argparse turns the refusal into ``error: argument --step: must be > 0, got '0'`` and exit 2.
+
+    >>> number(gt=0)("2.5"), number(ge=1, integer=True)("3")
+    (2.5, 3)
+    >>> number(gt=0)("nan")
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: must be a finite number > 0, got 'nan'
+    """
+    kind = "an integer" if integer else "a finite number"
+    limits = [f"{op} {v:g}" for op, v in ((">", gt), (">=", ge), ("<=", le)) if v is not None]
+    wanted = kind + (" " + " and ".join(limits) if limits else "")
+
+    def parse(text: str) -> Any:
+        try:
+            value: Any = int(text, 10) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {wanted}, got {text[:40]!r}") from None
+        if not integer and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be {wanted}, got {text[:40]!r}")
+        if ((gt is not None and not value > gt) or (ge is not None and not value >= ge)
+                or (le is not None and not value <= le)):
+            raise argparse.ArgumentTypeError(f"must be {wanted}, got {text[:40]!r}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse

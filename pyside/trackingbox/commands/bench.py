@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import TrackingError
-from ._args import parse_assignments
+from ._args import number, parse_assignments
 
 EPILOG = """\
 examples:
@@ -51,24 +51,29 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("bench", choices=sorted(BENCHES), help="which bench")
     p.add_argument("--out", "-o", type=Path, required=True, metavar="DIR", help="output directory")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scenario and the noise (default 0)")
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
+                   help="seed of the scenario and the noise (default 0)")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
-    p.add_argument("--hours", type=float, default=None,
+    p.add_argument("--hours", type=number(gt=0), default=None,
                    help="measured period in hours (default 8 heat-exchanger, 24 heat-production, "
                         "72 evaporator)")
-    p.add_argument("--days", type=float, default=None,
+    p.add_argument("--days", type=number(gt=0), default=None,
                    help="measured period in days (instead of --hours; default 3 for the evaporator)")
     p.add_argument("--hidden", default=None, metavar="CASE",
                    help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
                         "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift); truth.json says which")
-    p.add_argument("--noise-scale", type=float, default=1.0, metavar="S",
+    p.add_argument("--noise-scale", type=number(ge=0, le=1000), default=1.0, metavar="S",
                    help="factor on every sensor's noise (default 1)")
     p.add_argument("--plant-fmu", type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument("--twin-fmu", type=Path, default=None, help=argparse.SUPPRESS)
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.set_defaults(func=run)
+
+
+#: longest bench case (hours): a year of one-second data
+MAX_HOURS = 24.0 * 366
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,6 +88,12 @@ def run(args: argparse.Namespace) -> int:
     if args.days is not None and args.hours is not None:
         raise TrackingError("give --days or --hours, not both")
     hours = args.days * 24.0 if args.days is not None else args.hours
+    if hours is not None and hours > MAX_HOURS:
+        raise TrackingError(f"--{'days' if args.days is not None else 'hours'}: {hours:g} h is more than the "
+                            f"{MAX_HOURS:g} h a bench case may span")
+    from ..io import check_output
+
+    check_output(args.out, "--out", kind="dir", inputs=[p for p in (args.plant_fmu, args.twin_fmu) if p])
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=hours,
                       plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,
                       noise_scale=args.noise_scale)

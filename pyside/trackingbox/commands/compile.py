@@ -38,6 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..io import check_output, user_path
+
+    source = user_path(args.source, "source")
+    if args.output is not None:
+        check_output(args.output, "-o", inputs=[source])
     expected = None
     if args.spec:
         from ..compiler.omc_interface import ExpectedInterface

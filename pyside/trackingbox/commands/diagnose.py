@@ -7,6 +7,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ._args import number
+
 log = logging.getLogger(__name__)
 
 EPILOG = """\
@@ -45,13 +47,15 @@ def register(subparsers: Any) -> None:
     p.add_argument("--compile", action="store_true",
                    help="fit the best candidates through their patched, compiled twin and build the patch's FMU")
     p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
-    p.add_argument("--fit-best", type=int, default=2, metavar="N",
+    p.add_argument("--fit-best", type=number(ge=1, integer=True), default=2, metavar="N",
                    help="candidates fitted properly with --compile (default 2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the null model's estimation (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="processes for the estimations (default 1)")
-    p.add_argument("--maxiter", type=int, default=None,
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
+                   help="seed of the null model's estimation (default 0)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
+                   help="processes for the estimations (default 1)")
+    p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help="generations of the null model's global search (default: estimate's)")
-    p.add_argument("--warmup", type=float, default=None, metavar="SECONDS",
+    p.add_argument("--warmup", type=number(ge=0), default=None, metavar="SECONDS",
                    help="unscored warm-up before each window (default: estimate's)")
     p.set_defaults(func=run)
 
@@ -62,7 +66,13 @@ def run(args: argparse.Namespace) -> int:
     from ..spec import check_against_fmu, load_spec
     from ._progress import Progress
 
+    from ..io import check_output
+
     spec = load_spec(args.spec)
+    inputs = [spec.path, spec.twin, spec.measurements]
+    for option, value in (("--report", args.report), ("-o", args.output)):
+        if value is not None:
+            check_output(value, option, kind="dir", inputs=inputs)
     check_against_fmu(spec)
     settings = DiagnoseSettings(
         effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()),

@@ -36,6 +36,7 @@ goes to stderr.
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
+    from ._args import number
     from ..estimation import (DEFAULT_GLOBAL_EVALUATIONS, DEFAULT_GLOBAL_GRID, DEFAULT_MAXITER, DEFAULT_POPULATION,
                               DEFAULT_WARMUP, MAX_REFINE_ITERATIONS)
 
@@ -50,23 +51,24 @@ def register(subparsers: Any) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write fit plots, convergence trace, parameter table and a checkpoint to DIR")
-    p.add_argument("--seed", type=int, default=0, help="seed of the global search (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="processes evaluating the population (default 1)")
-    p.add_argument("--maxiter", type=int, default=None,
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="seed of the global search (default 0)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
+                   help="processes evaluating the population (default 1)")
+    p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help=f"generations of differential evolution (default {DEFAULT_MAXITER}, fewer when the "
                         f"population times generations would exceed {DEFAULT_GLOBAL_EVALUATIONS} simulations; "
                         "0: refinement only)")
-    p.add_argument("--global-grid", type=float, default=DEFAULT_GLOBAL_GRID, metavar="SECONDS",
+    p.add_argument("--global-grid", type=number(gt=0), default=DEFAULT_GLOBAL_GRID, metavar="SECONDS",
                    help="grid step of the global search's cost (inputs averaged over it; the refinement and "
                         f"the reported NRMSE use sample_time; default {DEFAULT_GLOBAL_GRID:g} s)")
-    p.add_argument("--popsize", type=int, default=None,
+    p.add_argument("--popsize", type=number(ge=1, integer=True), default=None,
                    help=f"population size per parameter (default max(2, ceil({DEFAULT_POPULATION} / n_parameters)))")
-    p.add_argument("--warmup", type=float, default=DEFAULT_WARMUP, metavar="SECONDS",
+    p.add_argument("--warmup", type=number(ge=0), default=DEFAULT_WARMUP, metavar="SECONDS",
                    help="unscored warm-up before each window: measured history where there is some, "
                         f"else inputs held at their first values (default {DEFAULT_WARMUP:g} s)")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="skip the least-squares refinement")
-    p.add_argument("--refine-iterations", type=int, default=MAX_REFINE_ITERATIONS, metavar="N",
+    p.add_argument("--refine-iterations", type=number(ge=0, integer=True), default=MAX_REFINE_ITERATIONS, metavar="N",
                    help=f"most least-squares iterations (default {MAX_REFINE_ITERATIONS}; "
                         "each costs 1 + n_parameters simulations)")
     p.add_argument("--resume", action="store_true",
@@ -84,13 +86,22 @@ def run(args: argparse.Namespace) -> int:
     from ._progress import Progress
 
     from ..errors import EstimationError
+    from ..io import check_output, output_dir
 
     if args.resume and not args.report:
         raise EstimationError("--resume needs --report DIR: the checkpoint and its journal live there")
     spec = load_spec(args.spec)
+    if args.report:
+        check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements])
     check_against_fmu(spec)
     checkpoint = args.report / "checkpoint.json" if args.report else None
     progress = Progress(every=15.0)
+    with output_dir(args.report or "."):
+        return _run(args, spec, estimate, write_starts, write_estimate_report, checkpoint, progress)
+
+
+def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, write_estimate_report: Any,
+         checkpoint: Any, progress: Any) -> int:
     result = estimate(
         spec,
         seed=args.seed,

@@ -52,8 +52,17 @@ def run(args: argparse.Namespace) -> int:
     from ..generate.generator import compile_generated, generate
     from ..spec import load_spec
 
+    from ..io import check_output, output_dir
+
     spec = load_spec(args.spec, check_files=False)
     out = args.out if args.out is not None else spec.path.parent / "generated"
+    inputs = [spec.path, spec.twin, spec.measurements, *([spec.source.path] if spec.source else [])]
+    out = check_output(out, "-o" if args.out is not None else "the output directory", kind="dir", inputs=inputs)
+    with output_dir(out):
+        return _run(args, spec, out, generate, compile_generated)
+
+
+def _run(args: argparse.Namespace, spec: Any, out: Path, generate: Any, compile_generated: Any) -> int:
     result = generate(spec, out, rewrite=args.rewrite)
     if result.rewrite is not None:
         # The diff is part of what the user asked for; keep stdout clean for --json.

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import SpecError
-from ._args import parse_assignments
+from ._args import number, parse_assignments
 
 EPILOG = """\
 examples:
@@ -39,7 +39,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--method", choices=("rga", "sobol", "both"), default="rga",
                    help="rga: pairs from the relative gain array (default); sobol: pairs from Sobol total "
                         "indices; both: RGA pairs plus Sobol indices and their agreement")
-    p.add_argument("--step", type=float, default=0.05,
+    p.add_argument("--step", type=number(gt=0, le=1), default=0.05,
                    help="parameter step as a fraction of its bound range (default 0.05)")
     p.add_argument("--one-sided", action="store_true", help="only step up (no -step linearity check)")
     p.add_argument("--freeze", action="append", default=None, metavar="NAME=VALUE",
@@ -48,36 +48,37 @@ def register(subparsers: Any) -> None:
                         "[pairing] freeze (default: that table)")
     p.add_argument("--no-freeze", action="store_true",
                    help="freeze nothing, whatever the spec's [pairing] freeze says")
-    p.add_argument("--at", type=float, metavar="TIME",
+    p.add_argument("--at", type=number(ge=0, le=1e9), metavar="TIME",
                    help="operating point at TIME (s) instead of the first hour of the training window")
-    p.add_argument("--interval", type=float, metavar="SECONDS",
+    p.add_argument("--interval", type=number(gt=0, le=1e9), metavar="SECONDS",
                    help="communication step of the step tests (default: the spec's sample_time)")
-    p.add_argument("--window", type=float, metavar="SECONDS",
+    p.add_argument("--window", type=number(gt=0, le=1e9), metavar="SECONDS",
                    help="settle window (default: 60 intervals)")
-    p.add_argument("--tolerance", type=float, default=1e-4,
+    p.add_argument("--tolerance", type=number(gt=0, le=0.5), default=1e-4,
                    help="settled: no output moves more than this fraction of its range in a window (default 1e-4)")
-    p.add_argument("--baseline-tolerance", type=float, default=1e-3,
+    p.add_argument("--baseline-tolerance", type=number(gt=0), default=1e-3,
                    help="the same for the settle phases before the steps (default 1e-3)")
-    p.add_argument("--max-time", type=float, default=86400.0, metavar="SECONDS",
+    p.add_argument("--max-time", type=number(gt=0, le=1e9), default=86400.0, metavar="SECONDS",
                    help="longest a phase may take to settle (default 86400 s)")
-    p.add_argument("--rank-tol", type=float, default=None, metavar="RTOL",
+    p.add_argument("--rank-tol", type=number(gt=0, le=1), default=None, metavar="RTOL",
                    help="leave out parameters that add less than RTOL x the largest singular value (default 1e-2)")
     p.add_argument("--second-point", default="auto", metavar="auto|none|TIME",
                    help="repeat the step tests at a second operating point: auto (default: the hour of the "
                         "training window whose inputs differ most from the first point), TIME, or none")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
-    p.add_argument("--noise-ratio", type=float, default=5.0, metavar="K",
+    p.add_argument("--noise-ratio", type=number(ge=0), default=5.0, metavar="K",
                    help="leave out tags whose untracked RMS error is below K x their noise (default 5)")
-    p.add_argument("--min-reach", type=float, default=0.5, metavar="F",
+    p.add_argument("--min-reach", type=number(ge=0), default=0.5, metavar="F",
                    help="allow a pair only if the parameter's remaining range moves the tag by at least "
                         "F x its mean untracked offset (default 0.5)")
-    p.add_argument("--max-ratio", type=float, default=0.25, metavar="R",
+    p.add_argument("--max-ratio", type=number(gt=0), default=0.25, metavar="R",
                    help="reject pairs predicted to leave more than R of the untracked RMS error (default 0.25)")
-    p.add_argument("--samples", type=int, default=32,
+    p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
-    p.add_argument("--seed", type=int, default=0, help="Sobol sampling seed (default 0)")
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: all cores)")
+    p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), metavar="N",
+                   help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--report", type=Path, metavar="DIR", help="write RGA/gain heatmaps and a Markdown summary")
@@ -115,7 +116,11 @@ def run(args: argparse.Namespace) -> int:
     from ..spec import check_against_fmu, load_spec, write_pairs
     from ._progress import Progress
 
+    from ..io import check_output
+
     spec = load_spec(args.spec)
+    if args.report:
+        check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements])
     check_against_fmu(spec)
     progress = Progress()
     result = pair(spec, settings(args), progress=progress)

@@ -11,9 +11,12 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import FMUError, TrackingError, did_you_mean
-from ._args import parse_assignments
+from ._args import number, parse_assignments
 
 log = logging.getLogger(__name__)
+
+#: most result rows a simulation may write (a row per --step): more is refused before the run
+MAX_ROWS = 10_000_000
 
 EPILOG = """\
 examples:
@@ -45,14 +48,15 @@ def register(subparsers: Any) -> None:
     p.add_argument("--inputs", type=Path, metavar="CSV", help="inputs table: time + one column per FMU input")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="set_values",
                    help="parameter, state start value or constant input (repeatable)")
-    p.add_argument("--start", type=float, metavar="T0", help="start time in s")
-    p.add_argument("--stop", type=float, metavar="T1", help="stop time in s")
-    p.add_argument("--step", type=float, metavar="DT", help="output interval in s")
+    p.add_argument("--start", type=number(), metavar="T0", help="start time in s")
+    p.add_argument("--stop", type=number(), metavar="T1", help="stop time in s")
+    p.add_argument("--step", type=number(gt=0), metavar="DT", help="output interval in s")
     p.add_argument("--output", action="append", metavar="NAME", dest="outputs",
                    help="variable to write (repeatable; default: every output)")
     p.add_argument("--interface", choices=("ModelExchange", "CoSimulation"),
                    help="FMI interface to use (default: model exchange if the FMU has it)")
-    p.add_argument("--tolerance", type=float, default=1e-6, help="relative solver tolerance (default 1e-6)")
+    p.add_argument("--tolerance", type=number(ge=1e-12, le=0.5), default=1e-6,
+                   help="relative solver tolerance (default 1e-6)")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="RESULT.csv", help="result CSV to write")
     p.add_argument("--json", action="store_true", help="print one JSON summary document on stdout")
     p.set_defaults(func=run)
@@ -62,15 +66,18 @@ def run(args: argparse.Namespace) -> int:
     """Validate everything, simulate, write the CSV atomically; 0 on success."""
     from ..data import read_table
     from ..fmu import FMUModel, read_info
-    from ..io import atomic_path
+    from ..fmu import check_values
+    from ..io import atomic_path, check_output
 
     settings = parse_assignments(args.set_values, "--set")
+    check_output(args.out, "-o", inputs=[p for p in (args.fmu, args.inputs) if p is not None])
     info = read_info(args.fmu)
     names = {v.name for v in info.variables}
     where = f"FMU {args.fmu.name}"
     for name in settings:
         if name not in names:
             raise FMUError(f"--set: unknown variable {name!r} in {where}{did_you_mean(name, names)}")
+    check_values(info, settings, "--set")
     for name in args.outputs or ():
         if name not in names:
             raise FMUError(f"--output: unknown variable {name!r} in {where}{did_you_mean(name, names)}")
@@ -82,9 +89,10 @@ def run(args: argparse.Namespace) -> int:
         columns = [c for c in inputs.columns if c != "time"]
         unknown = [c for c in columns if c not in fmu_inputs]
         if unknown:
-            raise FMUError("; ".join(
-                f"column {c!r} of {args.inputs.name} is not an input of {where}{did_you_mean(c, fmu_inputs)}"
-                for c in unknown))
+            listed = "; ".join(f"column {c!r} of {args.inputs.name} is not an input of {where}"
+                               f"{did_you_mean(c, fmu_inputs)}" for c in unknown[:5])
+            more = f" (and {len(unknown) - 5} more columns)" if len(unknown) > 5 else ""
+            raise FMUError(listed + more)
         clash = [c for c in columns if c in settings]
         if clash:
             raise TrackingError(f"input(s) {', '.join(map(repr, clash))} are given both in "
@@ -109,12 +117,20 @@ def run(args: argparse.Namespace) -> int:
         else:
             raise TrackingError(f"no stop time: give --stop (no --inputs and {where} has no default experiment)")
     if not stop > start:
-        raise TrackingError(f"stop time {stop:g} s must be after start time {start:g} s")
+        origin = "--start" if args.start is not None else \
+            "the start time (the first input time)" if t_in is not None else "the start time (the FMU's default)"
+        raise TrackingError(f"--stop {stop:g} s must be after {origin} {start:g} s")
     step = args.step
     if step is None:
         step = info.step_size if info.step_size else (stop - start) / 500.0
     if not (step > 0 and math.isfinite(step)):
         raise TrackingError(f"--step must be a positive number of seconds, not {step:g}")
+    if step > stop - start:
+        raise TrackingError(f"--step {step:g} s is longer than the run (--start {start:g} s to --stop {stop:g} s)")
+    rows = (stop - start) / step
+    if rows > MAX_ROWS:
+        raise TrackingError(f"--stop {stop:g} with --step {step:g} asks for {rows:.3g} result rows "
+                            f"(at most {MAX_ROWS:g}): give a larger --step or a shorter run")
 
     t0 = time.perf_counter()
     with FMUModel(args.fmu, tolerance=args.tolerance, interface=args.interface) as model:

@@ -7,6 +7,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ._args import number
+
 log = logging.getLogger(__name__)
 
 EPILOG = """\
@@ -54,7 +56,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--window", choices=("training", "validation", "all"), default="all",
                    help="window the NRMSE figures are taken over, after the start-up hold; the run "
                         "goes from the first sample to the window's end (default: all)")
-    p.add_argument("--checkpoint-every", type=int, default=200, metavar="N",
+    p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
     live.add_argument("--live", metavar="URL", help="track live: subscribe to the tags at opc.tcp://HOST:PORT")
@@ -79,14 +81,27 @@ def run(args: argparse.Namespace) -> int:
 
     if args.checkpoint_every < 1:
         raise SpecError(f"--checkpoint-every must be >= 1, got {args.checkpoint_every}")
+    from ..io import check_output, output_dir
+    from ..spec import check_against_fmu
+
     spec = load_spec(args.spec)
-    out = args.out or args.report or Path(spec.path).parent / "track"
+    inputs = [spec.path, spec.twin, spec.measurements]
+    out = check_output(args.out or args.report or Path(spec.path).parent / "track",
+                       "--out" if args.out else "--report" if args.report else "the output directory",
+                       kind="dir", inputs=inputs)
     if args.live:
         return _run_live(args, spec, out)
-    result = track(spec, out_dir=out, resume=args.resume, progress=Progress().counter("tracking", unit="row"),
-                   window=args.window, checkpoint_every=args.checkpoint_every)
     if args.report:
-        write_track_report(spec, result, args.report)
+        check_output(args.report, "--report", kind="dir", inputs=inputs)
+    if args.resume:
+        _check_checkpoint(out / "checkpoint.json")
+    check_against_fmu(spec)  # before the output directory exists
+    with output_dir(out), output_dir(args.report or out):
+        result = track(spec, out_dir=out, resume=args.resume,
+                       progress=Progress().counter("tracking", unit="row"),
+                       window=args.window, checkpoint_every=args.checkpoint_every)
+        if args.report:
+            write_track_report(spec, result, args.report)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
     else:
@@ -124,6 +139,22 @@ def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
         print(f"live: {live.samples} samples ({live.backfilled} read back from history), "
               f"{live.connections} connection(s), origin {live.origin.isoformat()}")
     return 0
+
+
+def _check_checkpoint(path: Path) -> None:
+    """Refuse a checkpoint that is not a JSON object with a version (never half-trust it)."""
+    from ..errors import TrackingError
+
+    if not path.exists():
+        return
+    try:
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)[:120] or type(exc).__name__
+        raise TrackingError(f"--resume: checkpoint {path} is corrupt ({reason}); delete it to start afresh") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("version"), int):
+        raise TrackingError(f"--resume: checkpoint {path} is corrupt (not a checkpoint object with a version); "
+                            "delete it to start afresh")
 
 
 def _print_summary(result: Any, paired: dict[str, str] | None = None) -> None:

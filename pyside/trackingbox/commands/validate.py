@@ -7,6 +7,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ._args import number
+
 EPILOG = """\
 examples:
   trackingbox validate case1/spec.toml --fmu case1/generated/TwinTracked.fmu
@@ -35,7 +37,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--fmu", type=Path, required=True, help="the tracked FMU (<Twin>Tracked.fmu)")
     p.add_argument("--report", type=Path, default=None, metavar="DIR",
                    help="write validation.md, PNG plots and validation.csv into DIR")
-    p.add_argument("--band", type=float, default=0.05,
+    p.add_argument("--band", type=number(gt=0), default=0.05,
                    help="convergence band as a fraction of the variable's span (default 0.05)")
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.set_defaults(func=run)
@@ -50,7 +52,16 @@ def run(args: argparse.Namespace) -> int:
 
     if not (args.band > 0.0 and math.isfinite(args.band)):
         raise TrackingError(f"--band must be a positive number, got {args.band}")
+    from ..io import check_output, output_dir
+
     spec = load_spec(args.spec)
+    if args.report is not None:
+        check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements, args.fmu])
+    with output_dir(args.report or "."):
+        return _run(args, spec, validate, write_validate_report)
+
+
+def _run(args: argparse.Namespace, spec: Any, validate: Any, write_validate_report: Any) -> int:
     result = validate(spec, args.fmu, band=args.band)
     report = None
     if args.report is not None:

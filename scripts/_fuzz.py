@@ -1,0 +1,1336 @@
+#!/usr/bin/env python3
+"""Fuzz trackingbox's commands with seeded bad inputs and tabulate what a user meets.
+
+Each case is one bad input (a CSV, a spec, an FMU archive, a Modelica source or
+a set of command-line options) and one command run on it with a time limit.
+Its outcome is one of:
+
+``refused``       exit 2, exactly one ``error:`` line, bounded, naming the thing
+                  and where (the file, option or name the case is about);
+``refused-vague`` exit 2 and one ``error:`` line, but too long or not naming where;
+``accepted``      exit 0 (the input was bad in a way the command may accept), or exit 1
+                  without an error line (a documented negative result: pair found no pairs);
+``accepted-bad``  exit 0 on an input that must be refused;
+``traceback``     a Python traceback reached the user;
+``signal``        the process was killed by a signal (a foreign binary crashed);
+``hang``          the time limit passed;
+``half-written``  a refusal that left files in the output location or the temp dir;
+``other``         any other exit code or a refusal with several ``error:`` lines.
+
+Cases that only exercise Python run in a child forked from this (warm) process,
+which calls ``trackingbox.cli.main`` with stdout/stderr redirected to files: as
+faithful as the console script (same exceptions, exit codes and output) at a
+fraction of its start-up. Cases whose input carries foreign native code (crafted
+FMU binaries, archives, Modelica sources) run through the console script
+``trackingbox`` as real subprocesses. Every child gets its own temp directory
+(checked empty afterwards) and an address-space limit.
+
+Exit status: 0 when there are no tracebacks, signals, hangs or half-written
+outputs; 1 otherwise.
+
+Examples::
+
+    scripts/fuzz                         # 1000 cases, seed 1, two at a time
+    scripts/fuzz --cases 200 --seed 7 -j 1 --kinds spec,csv
+    scripts/fuzz --cases 1000 --seed 1 --keep /tmp/fuzz --show traceback,signal
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import json
+import os
+import random
+import resource
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BIN = Path(sys.executable).parent / "trackingbox"
+
+#: modules the commands import lazily: imported once in this process, before the children fork
+WARM = ("trackingbox.spec", "trackingbox.data", "trackingbox.fmu", "trackingbox.estimation",
+        "trackingbox.tracking.runtime", "trackingbox.report", "trackingbox.analysis.pair_stage",
+        "trackingbox.generate.generator", "trackingbox.validate", "trackingbox.compiler", "fmpy.simulation",
+        "fmpy.fmi2", "fmpy.fmi3", "fmpy.sundials", "matplotlib.pyplot")
+#: cells read as missing values (trackingbox.data.NA_VALUES)
+NA_CELLS = ("", "NaN", "nan", "NAN", "NA", "N/A", "n/a", "null", "NULL", "None", "#N/A")
+KINDS = ("csv", "spec", "fmu", "modelica", "cli")
+#: share of the cases per kind
+WEIGHTS = {"csv": 0.24, "spec": 0.26, "fmu": 0.15, "modelica": 0.10, "cli": 0.25}
+OUTCOMES = ("refused", "refused-vague", "accepted", "accepted-bad", "traceback", "signal", "hang",
+            "half-written", "other")
+FAILING = ("traceback", "signal", "hang", "half-written")
+MAX_ERROR_LINE = 1000       # characters of the error line
+MAX_STDERR = 6000           # characters of the whole stderr on a refusal
+MEMORY_LIMIT = 3 << 30      # address space per case (bytes)
+FMU_TIMEOUT = 10.0          # s an FMI call may take in the canary (TRACKINGBOX_FMU_TIMEOUT)
+FILE_LIMIT = 1 << 30        # largest file a case may write (bytes): a zip bomb cannot fill the disk
+
+
+# --------------------------------------------------------------------------- the base case
+
+MODEL = """\
+model FuzzTwin "First-order twin used by scripts/fuzz"
+  parameter Real k(min = 0, max = 0.1, unit = "1/s") = 0.005 "loss coefficient";
+  parameter Real tau(min = 1, max = 1000, unit = "s") = 60 "time constant";
+  input Real u(start = 50, unit = "K") "inlet temperature";
+  output Real y(unit = "K") "outlet temperature";
+  Real x(start = 38, fixed = true, unit = "K") "state";
+equation
+  der(x) = (u - x) / tau - k * x;
+  y = x;
+  annotation(experiment(StartTime = 0, StopTime = 600, Interval = 10));
+end FuzzTwin;
+"""
+
+SPEC = """\
+twin = "{twin}"
+measurements = "measurements.csv"
+sample_time = 10.0
+
+[inputs]
+"FI" = "u"
+
+[outputs]
+"TI" = "y"
+
+[[parameters]]
+name = "k"
+start = 0.005
+min = 0.001
+max = 0.05
+
+[fixed]
+tau = 60.0
+
+[windows]
+training = [0.0, 600.0]
+validation = [600.0, 1200.0]
+
+[[pairs]]
+variable = "TI"
+parameter = "k"
+gain = -2000.0
+time_constant = 50.0
+
+[tracking]
+hold_until = 50.0
+"""
+
+
+@dataclasses.dataclass
+class Base:
+    """The valid inputs every case mutates."""
+
+    dir: Path
+    fmu: Path
+    model: Path
+    csv_rows: list[tuple[float, float, float]]
+    bomb: Path
+    many: Path
+    crafted: dict[str, Path]
+
+    def csv_text(self, rows: list[tuple[float, float, float]] | None = None) -> str:
+        rows = self.csv_rows if rows is None else rows
+        return "time,FI,TI\n" + "".join(f"{t:g},{u:.6g},{y:.6g}\n" for t, u, y in rows)
+
+    def spec_text(self) -> str:
+        return SPEC.format(twin=self.fmu.as_posix())
+
+
+def _measurements(n: int = 121) -> list[tuple[float, float, float]]:
+    rng = random.Random(0)
+    rows, x = [], 38.0
+    for i in range(n):
+        t = 10.0 * i
+        u = 50.0 + (10.0 if t >= 400 else 0.0)
+        rows.append((t, u, x + rng.gauss(0, 0.02)))
+        for _ in range(10):
+            x += (u - x) / 60.0 - 0.004 * x
+    return rows
+
+
+def build_base(work: Path, log: Callable[[str], None]) -> Base:
+    """Compile the twin, write the measurements, the zip bomb, the many-entry archive, the crafted binaries."""
+    base = work / "base"
+    base.mkdir(parents=True, exist_ok=True)
+    model = base / "FuzzTwin.mo"
+    model.write_text(MODEL)
+    fmu = base / "twin.fmu"
+    if not fmu.exists():
+        from trackingbox.compiler import compile_model
+
+        t0 = time.perf_counter()
+        compile_model(model, "FuzzTwin", backend="embedded", output=fmu)
+        log(f"compiled the base twin in {time.perf_counter() - t0:.0f} s")
+    bomb = base / "bomb.fmu"
+    if not bomb.exists():
+        _write_bomb(fmu, bomb)
+    many = base / "many.fmu"
+    if not many.exists():
+        _write_many(fmu, many)
+    crafted = build_crafted(base / "crafted", log)
+    return Base(dir=base, fmu=fmu, model=model, csv_rows=_measurements(), bomb=bomb, many=many, crafted=crafted)
+
+
+def _write_bomb(fmu: Path, out: Path, size: int = 2 << 30) -> None:
+    """The real FMU plus one entry that inflates to *size* bytes of zeros (a few MB compressed)."""
+    tmp = out.with_suffix(".part")
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as dst:
+        for item in src.infolist():
+            dst.writestr(item, src.read(item))
+        chunk = bytes(1 << 24)
+        with dst.open("resources/zeros.bin", "w", force_zip64=True) as fh:
+            for _ in range(size // len(chunk)):
+                fh.write(chunk)
+    tmp.replace(out)
+
+
+def _write_many(fmu: Path, out: Path, n: int = 120_000) -> None:
+    tmp = out.with_suffix(".part")
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED) as dst:
+        for item in src.infolist():
+            dst.writestr(item, src.read(item))
+        for i in range(n):
+            dst.writestr(f"resources/f{i}.txt", b"")
+    tmp.replace(out)
+
+
+# --------------------------------------------------------------------------- crafted binaries
+
+CRAFTED_C = r"""
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#ifndef WHERE
+#define WHERE 0
+#endif
+#ifndef WHAT
+#define WHAT 0
+#endif
+/* WHAT: 1 segfault, 2 abort, 3 _exit(0), 4 hang, 5 exit(3), 6 bus error */
+static void misbehave(void) {
+    volatile int *p = 0;
+    switch (WHAT) {
+    case 1: *p = 1; break;
+    case 2: abort(); break;
+    case 3: _exit(0); break;
+    case 4: for (;;) pause(); break;
+    case 5: exit(3); break;
+    case 6: raise(SIGBUS); break;
+    }
+}
+#define AT(w) do { if (WHERE == (w)) misbehave(); } while (0)
+/* WHERE: 1 load, 2 instantiate, 3 setup/enter init, 4 exit init, 5 getReal, 6 doStep, 7 freeInstance */
+__attribute__((constructor)) static void on_load(void) { AT(1); }
+typedef void *C;
+static int dummy;
+const char *fmi2GetTypesPlatform(void) { return "default"; }
+const char *fmi2GetVersion(void) { return "2.0"; }
+int fmi2SetDebugLogging(C c, int a, size_t n, const char *const *x) { return 0; }
+C fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) { AT(2); return &dummy; }
+void fmi2FreeInstance(C c) { AT(7); }
+int fmi2SetupExperiment(C c, int a, double tol, double t0, int b, double t1) { AT(3); return 0; }
+int fmi2EnterInitializationMode(C c) { AT(3); return 0; }
+int fmi2ExitInitializationMode(C c) { AT(4); return 0; }
+int fmi2Terminate(C c) { return 0; }
+int fmi2Reset(C c) { return 0; }
+int fmi2GetReal(C c, const unsigned *vr, size_t n, double *v) { static int calls; AT(5); if (WHERE == 8 && ++calls > 3) misbehave(); for (size_t i = 0; i < n; i++) v[i] = 1.0; return 0; }
+int fmi2GetInteger(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
+int fmi2GetBoolean(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
+int fmi2GetString(C c, const unsigned *vr, size_t n, const char **v) { for (size_t i = 0; i < n; i++) v[i] = ""; return 0; }
+int fmi2SetReal(C c, const unsigned *vr, size_t n, const double *v) { return 0; }
+int fmi2SetInteger(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
+int fmi2SetBoolean(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
+int fmi2SetString(C c, const unsigned *vr, size_t n, const char *const *v) { return 0; }
+int fmi2GetFMUstate(C c, void **s) { return 3; }
+int fmi2SetFMUstate(C c, void *s) { return 3; }
+int fmi2FreeFMUstate(C c, void **s) { return 3; }
+int fmi2SerializedFMUstateSize(C c, void *s, size_t *n) { return 3; }
+int fmi2SerializeFMUstate(C c, void *s, char *b, size_t n) { return 3; }
+int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; }
+int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
+int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
+int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
+int fmi2DoStep(C c, double t, double h, int nsp) { AT(6); return 0; }
+int fmi2CancelStep(C c) { return 0; }
+int fmi2GetStatus(C c, int s, int *v) { return 3; }
+int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
+int fmi2GetIntegerStatus(C c, int s, int *v) { return 3; }
+int fmi2GetBooleanStatus(C c, int s, int *v) { return 3; }
+int fmi2GetStringStatus(C c, int s, const char **v) { return 3; }
+"""
+
+CRAFTED_MD = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{fuzz-{name}}}" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true"/>
+  <DefaultExperiment startTime="0" stopTime="10" stepSize="1"/>
+  <ModelVariables>
+    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
+    <ScalarVariable name="k" valueReference="1" causality="parameter" variability="tunable"><Real start="1" min="0" max="10"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous"><Real/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure><Outputs><Unknown index="3"/></Outputs></ModelStructure>
+</fmiModelDescription>
+"""
+
+#: crafted FMU name -> (WHERE, WHAT): see CRAFTED_C
+CRAFTED = {
+    "segv_load": (1, 1), "abort_load": (1, 2), "exit0_load": (1, 3), "hang_load": (1, 4),
+    "segv_instantiate": (2, 1), "abort_instantiate": (2, 2), "exit0_instantiate": (2, 3),
+    "hang_instantiate": (2, 4), "exit3_instantiate": (2, 5), "segv_setup": (3, 1),
+    "segv_exitinit": (4, 1), "segv_getreal": (5, 1), "bus_getreal": (5, 6), "segv_dostep": (6, 1),
+    "hang_dostep": (6, 4), "exit0_dostep": (6, 3), "segv_free": (7, 1), "segv_getreal_late": (8, 1),
+    "well_behaved": (0, 0),
+}
+
+
+def build_crafted(out: Path, log: Callable[[str], None]) -> dict[str, Path]:
+    """One FMI 2 co-simulation FMU per misbehaviour, with a tiny shared library built by gcc."""
+    out.mkdir(parents=True, exist_ok=True)
+    src = out / "crafted.c"
+    src.write_text(CRAFTED_C)
+    made: dict[str, Path] = {}
+    for name, (where, what) in CRAFTED.items():
+        fmu = out / f"{name}.fmu"
+        if not fmu.exists():
+            so = out / f"{name}.so"
+            subprocess.run([os.environ.get("CC", "gcc"), "-shared", "-fPIC", "-O0", f"-DWHERE={where}",
+                            f"-DWHAT={what}", "-o", str(so), str(src)], check=True)
+            with zipfile.ZipFile(fmu.with_suffix(".part"), "w", zipfile.ZIP_DEFLATED) as z:
+                z.writestr("modelDescription.xml", CRAFTED_MD.format(name=name))
+                z.write(so, f"binaries/linux64/{name}.so")
+            fmu.with_suffix(".part").replace(fmu)
+        made[name] = fmu
+    # a truncated shared library: the mapping ends inside the file's declared segments
+    trunc = out / "truncated_so.fmu"
+    if not trunc.exists():
+        data = (out / "well_behaved.so").read_bytes()
+        with zipfile.ZipFile(trunc.with_suffix(".part"), "w") as z:
+            z.writestr("modelDescription.xml", CRAFTED_MD.format(name="truncated_so"))
+            z.writestr("binaries/linux64/truncated_so.so", data[: len(data) // 3])
+        trunc.with_suffix(".part").replace(trunc)
+    made["truncated_so"] = trunc
+    garbage = out / "garbage_so.fmu"
+    if not garbage.exists():
+        with zipfile.ZipFile(garbage.with_suffix(".part"), "w") as z:
+            z.writestr("modelDescription.xml", CRAFTED_MD.format(name="garbage_so"))
+            z.writestr("binaries/linux64/garbage_so.so", random.Random(5).randbytes(5000))
+        garbage.with_suffix(".part").replace(garbage)
+    made["garbage_so"] = garbage
+    log(f"crafted {len(made)} FMUs with misbehaving binaries")
+    return made
+
+
+# --------------------------------------------------------------------------- cases
+
+@dataclasses.dataclass
+class Case:
+    """One bad input and the command run on it."""
+
+    id: int
+    kind: str
+    name: str
+    argv: list[str]
+    hints: tuple[str, ...]          # the error must name one of these (case-insensitive)
+    must_refuse: bool = True
+    subprocess: bool = False        # through the console script (foreign native code)
+    timeout: float = 120.0
+    outcome: str = ""
+    detail: str = ""
+    seconds: float = 0.0
+
+
+class Maker:
+    """Writes each case's files into its own directory and builds its command line."""
+
+    def __init__(self, base: Base, root: Path, rng: random.Random) -> None:
+        self.base = base
+        self.root = root
+        self.rng = rng
+
+    def dir(self, i: int) -> Path:
+        d = self.root / f"{i:05d}"
+        d.mkdir(parents=True, exist_ok=True)
+        return d
+
+    # -- helpers ---------------------------------------------------------------
+    def spec_with(self, d: Path, text: str | None = None, *, csv: str | None = None,
+                  twin: Path | None = None) -> Path:
+        spec = d / "spec.toml"
+        t = self.base.spec_text() if text is None else text
+        if twin is not None:
+            t = t.replace(self.base.fmu.as_posix(), twin.as_posix())
+        spec.write_text(t)
+        (d / "measurements.csv").write_text(self.base.csv_text() if csv is None else csv)
+        return spec
+
+    def command_on_spec(self, d: Path, spec: Path) -> tuple[list[str], tuple[str, ...]]:
+        r = self.rng.random()
+        if r < 0.7:
+            return ["track", str(spec), "--out", str(d / "out" / "track")], ()
+        if r < 0.9:
+            return ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine",
+                    "--report", str(d / "out" / "estimate")], ()
+        return ["generate", str(spec), "-o", str(d / "out" / "generated")], ()
+
+
+def _cell_noise(rng: random.Random) -> str:
+    return rng.choice(["abc", "1,5", "0x10", "--", "1e", "TRUE", "[1]", "1 2", "∞", "NaN", "nan", "inf", "-inf",
+                       "1e400", "-1e308", "1e308", "", " ", "None", "null", "\x00", "１２"])
+
+
+# CSV ------------------------------------------------------------------------------------------
+
+def csv_case(m: Maker, i: int) -> Case:
+    rng, base, d = m.rng, m.base, m.dir(i)
+    rows = list(base.csv_rows)
+    variant = rng.choice([
+        "empty", "header-only", "bom", "utf16", "latin1", "garbage", "nan-stretch", "all-nan", "text-cell",
+        "inf-cell", "huge", "neg-huge", "dup-times", "unsorted", "reversed", "time-text", "no-time",
+        "missing-tag", "dup-column", "ragged", "semicolon", "one-row", "megacell", "nul", "iso-mixed",
+        "negative-time", "time-nan", "quotes", "long-form-bad", "crlf", "time-huge", "many-columns",
+    ])
+    must = variant not in ("bom", "crlf", "huge", "neg-huge", "nan-stretch", "negative-time", "many-columns",
+                           "quotes", "iso-mixed")
+    name = "measurements.csv"
+    text: str | bytes
+    if variant == "empty":
+        text = ""
+    elif variant == "header-only":
+        text = "time,FI,TI\n"
+    elif variant == "bom":
+        text = "\ufeff" + base.csv_text(rows)
+    elif variant == "utf16":
+        text = base.csv_text(rows).encode("utf-16")
+    elif variant == "latin1":
+        text = base.csv_text(rows).replace("TI", "T\xc9").encode("latin-1")
+    elif variant == "garbage":
+        text = rng.randbytes(rng.randint(1, 5000))
+    elif variant == "nul":
+        text = base.csv_text(rows).replace("FI", "F\x00I", 1)
+    elif variant in ("nan-stretch", "all-nan"):
+        a = rng.randrange(len(rows)) if variant == "nan-stretch" else 0
+        b = min(len(rows), a + rng.randint(5, 60)) if variant == "nan-stretch" else len(rows)
+        col = rng.choice([1, 2])
+        lines = ["time,FI,TI"] + [
+            ",".join("" if (a <= k < b and j == col) else f"{v:g}" for j, v in enumerate(r))
+            for k, r in enumerate(rows)]
+        text = "\n".join(lines) + "\n"
+    elif variant in ("text-cell", "inf-cell", "huge", "neg-huge", "quotes"):
+        k = rng.randrange(len(rows))
+        cell = {"text-cell": _cell_noise(rng), "inf-cell": rng.choice(["inf", "-inf", "1e400", "Infinity"]),
+                "huge": "1e308", "neg-huge": "-1e308", "quotes": '"12.5"'}[variant]
+        col = rng.choice([1, 2])
+        lines = ["time,FI,TI"] + [",".join(cell if (kk == k and j == col) else f"{v:g}"
+                                           for j, v in enumerate(r)) for kk, r in enumerate(rows)]
+        text = "\n".join(lines) + "\n"
+        if variant == "text-cell" and cell.strip() in NA_CELLS:
+            must = False  # an empty or NA cell is a missing value, allowed in measurements
+    elif variant == "dup-times":
+        k = rng.randrange(1, len(rows))
+        rows[k] = (rows[k - 1][0], *rows[k][1:])
+        text = base.csv_text(rows)
+    elif variant == "unsorted":
+        k = rng.randrange(1, len(rows) - 1)
+        rows[k], rows[k + 1] = rows[k + 1], rows[k]
+        text = base.csv_text(rows)
+    elif variant == "reversed":
+        text = base.csv_text(rows[::-1])
+    elif variant == "time-text":
+        k = rng.randrange(len(rows))
+        lines = base.csv_text(rows).splitlines()
+        lines[k + 1] = "yesterday" + lines[k + 1][lines[k + 1].index(","):]
+        text = "\n".join(lines) + "\n"
+    elif variant == "time-nan":
+        k = rng.randrange(len(rows))
+        lines = base.csv_text(rows).splitlines()
+        lines[k + 1] = rng.choice(["nan", "", "inf"]) + lines[k + 1][lines[k + 1].index(","):]
+        text = "\n".join(lines) + "\n"
+    elif variant == "time-huge":
+        rows = [(t * 1e300, u, y) for t, u, y in rows]
+        text = base.csv_text(rows)
+    elif variant == "no-time":
+        text = base.csv_text(rows).replace("time", rng.choice(["Time", "t", "tiem", ""]), 1)
+    elif variant == "missing-tag":
+        text = base.csv_text(rows).replace("TI", rng.choice(["TI2", "ti", "T I"]), 1)
+    elif variant == "dup-column":
+        text = base.csv_text(rows).replace("FI", "TI", 1)
+    elif variant == "ragged":
+        lines = base.csv_text(rows).splitlines()
+        k = rng.randrange(1, len(lines))
+        longer = rng.random() < 0.5
+        lines[k] = lines[k] + rng.choice([",1", ",1,2,3"]) if longer else lines[k].rsplit(",", 1)[0]
+        must = longer  # a short row is a missing value (allowed in measurements)
+        text = "\n".join(lines) + "\n"
+    elif variant == "semicolon":
+        text = base.csv_text(rows).replace(",", ";")
+    elif variant == "one-row":
+        text = base.csv_text(rows[:1])
+    elif variant == "megacell":
+        k = rng.randrange(len(rows))
+        lines = base.csv_text(rows).splitlines()
+        lines[k + 1] = lines[k + 1].rsplit(",", 1)[0] + "," + "9" * 500 + "x" * (1 << 20)
+        text = "\n".join(lines) + "\n"
+    elif variant == "iso-mixed":
+        lines = ["time,FI,TI"] + [f"2024-01-01T00:{int(t) // 60:02d}:{int(t) % 60:02d}Z,{u:g},{y:g}"
+                                  if k % 2 else f"{t:g},{u:g},{y:g}" for k, (t, u, y) in enumerate(rows)]
+        text = "\n".join(lines) + "\n"
+    elif variant == "negative-time":
+        rows = [(t - 500.0, u, y) for t, u, y in rows]
+        text = base.csv_text(rows)
+    elif variant == "long-form-bad":
+        text = "tag,time,value\n" + "".join(f"{rng.choice(['FI', 'TI', ''])},{rng.choice(['1', 'x', '', '-5'])},"
+                                            f"{rng.choice(['1', 'x', '', 'inf'])}\n" for _ in range(50))
+    elif variant == "crlf":
+        text = base.csv_text(rows).replace("\n", "\r\n")
+    else:  # many-columns
+        header = "time,FI,TI," + ",".join(f"c{j}" for j in range(2000))
+        text = header + "\n" + "".join(f"{t:g},{u:g},{y:g}," + ",".join("0" for _ in range(2000)) + "\n"
+                                       for t, u, y in rows)
+    if rng.random() < 0.6:
+        spec = m.spec_with(d, csv="")
+        path = d / name
+        (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)  # type: ignore[operator]
+        argv, _ = m.command_on_spec(d, spec)
+    else:
+        name = "inputs.csv"
+        path = d / name
+        data = text.replace("FI", "u") if isinstance(text, str) else text
+        (path.write_bytes if isinstance(data, bytes) else path.write_text)(data)  # type: ignore[operator]
+        # TI is not an input of the twin: drop it where the text is still CSV
+        argv = ["simulate", str(base.fmu), "--inputs", str(path), "--output", "y", "-o",
+                str(d / "out" / "result.csv")]
+        must = True if variant != "bom" else must
+        must = must or "TI" in (data if isinstance(data, str) else "")
+    return Case(i, "csv", f"csv:{variant}:{argv[0]}", argv, (name, "time", "TI", "FI", "'u'"), must)
+
+
+# spec -----------------------------------------------------------------------------------------
+
+def _replace_line(text: str, key: str, value: str) -> str:
+    out = []
+    done = False
+    for line in text.splitlines():
+        if not done and line.split("=")[0].strip().strip('"') == key:
+            line = f"{line.split('=')[0]}= {value}"
+            done = True
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _drop_line(text: str, key: str) -> str:
+    lines = text.splitlines()
+    keep = [ln for ln in lines if ln.split("=")[0].strip().strip('"') != key]
+    return "\n".join(keep) + "\n"
+
+
+def spec_case(m: Maker, i: int) -> Case:
+    rng, base, d = m.rng, m.base, m.dir(i)
+    text = base.spec_text()
+    hints: tuple[str, ...] = ("spec.toml",)
+    raw: bytes | None = None
+    keys = ["twin", "measurements", "sample_time", "name", "start", "min", "max", "variable", "parameter",
+            "gain", "time_constant", "training", "validation", "hold_until", "tau"]
+    bad_values = ['"text"', "[1, 2]", "true", "{ a = 1 }", '""', "1979-05-27T07:32:00Z", "[]", "[[1.0]]"]
+    variant = rng.choice(["missing-key", "wrong-type", "unknown-key", "unknown-name", "range", "window",
+                          "not-utf8", "bom", "truncated", "deep", "bigint", "nul", "dup-key", "empty",
+                          "garbage", "no-parameters", "twin-path", "fixed-bounds", "huge-string",
+                          "min-below-fmu", "hold-nan"])
+    must = True
+    if variant == "missing-key":
+        key = rng.choice(keys)
+        text = _drop_line(text, key)
+        hints += (key,)
+        must = key not in ("training", "validation", "hold_until", "tau")  # optional keys
+    elif variant == "wrong-type":
+        key = rng.choice(keys)
+        strings = ("twin", "measurements", "name", "variable", "parameter")
+        value = rng.choice(["1", "2.5", "true", "[1, 2]", "{ a = 1 }"] if key in strings else bad_values)
+        text = _replace_line(text, key, value)
+        hints += (key,)
+    elif variant == "unknown-key":
+        section = rng.choice(["", "[inputs]", "[[parameters]]", "[windows]", "[[pairs]]", "[tracking]"])
+        key = rng.choice(["smaple_time", "gian", "extra", "windows2", "min_value"])
+        text = text.replace(section, f"{section}\n{key} = 1", 1) if section else f"{key} = 1\n{text}"
+        must = section not in ("[inputs]",)  # a new tag in [inputs] is an unknown column, also refused
+        hints += (key,)
+    elif variant == "unknown-name":
+        which = rng.choice(['"u"', '"y"', '"k"', '"TI"', "tau"])
+        new = {'"u"': '"uu"', '"y"': '"why"', '"k"': '"kk"', '"TI"': '"TI9"', "tau": "tua"}[which]
+        text = text.replace(which, new) if rng.random() < 0.5 else text.replace(which, new, 1)
+        hints += (new.strip('"'),)
+    elif variant == "range":
+        key, value = rng.choice([("sample_time", "0"), ("sample_time", "-10"), ("sample_time", "1e-300"),
+                                 ("min", "0.06"), ("start", "0.5"), ("max", "0.0001"), ("gain", "0"),
+                                 ("time_constant", "-5"), ("hold_until", "-1"), ("max", "5"),
+                                 ("sample_time", "1e300"), ("tau", "-60"), ("tau", "1e9")])
+        text = _replace_line(text, key, value)
+        hints += (key, value, f"{float(value):g}")
+    elif variant == "window":
+        tr, va = rng.choice([("[600.0, 0.0]", None), ("[0.0, 800.0]", None), ("[0.0, nan]", None),
+                             ("[0.0, inf]", None), ("[-100.0, 600.0]", None), ("[0.0, 600.0]", "[300.0, 900.0]"),
+                             ("[0.0, 600.0]", "[1e9, 2e9]"), ("[5000.0, 6000.0]", None), ("[0.0, 0.0]", None),
+                             ("[0.0, 600.0]", "[0.0, 600.0]"), ("[0.0]", None), ("[0.0, 600.0, 900.0]", None)])
+        text = _replace_line(text, "training", tr)
+        if va is not None:
+            text = _replace_line(text, "validation", va)
+        # a window beyond the data is refused by the stage that uses it (track uses none of them)
+        must = va != "[1e9, 2e9]" and tr != "[5000.0, 6000.0]"
+        hints += ("training", "validation", "window")
+    elif variant == "not-utf8":
+        raw = text.replace('"k"', '"k\xe9"').encode("latin-1")
+    elif variant == "bom":
+        raw = b"\xef\xbb\xbf" + text.encode()
+        must = False
+    elif variant == "truncated":
+        raw = text.encode()[: rng.randrange(1, len(text))]
+        must = False  # a cut after a complete table can still be valid TOML (then a missing key)
+    elif variant == "deep":
+        depth = rng.choice([1000, 100_000])
+        text = _replace_line(text, "sample_time", "[" * depth + "]" * depth)
+        hints += ("sample_time",)
+    elif variant == "bigint":
+        key = rng.choice(["sample_time", "start", "min", "max", "gain", "hold_until"])
+        digits = rng.choice([20, 310, 5000])
+        text = _replace_line(text, key, "9" * digits)
+        hints += (key,)
+        must = digits > 20 or key in ("start", "min", "max")  # 1e20 is a number; as a bound it is out of range
+    elif variant == "nul":
+        raw = text.replace("k", "k\x00", 1).encode()
+    elif variant == "dup-key":
+        text = text.replace("sample_time = 10.0", "sample_time = 10.0\nsample_time = 5.0")
+    elif variant == "empty":
+        raw = b""
+    elif variant == "garbage":
+        raw = rng.randbytes(rng.randint(1, 3000))
+    elif variant == "no-parameters":
+        text = text.split("[[parameters]]")[0] + "[windows]" + text.split("[windows]")[1].split("[[pairs]]")[0]
+        must = False  # track without pairs may run untracked
+        hints += ("parameters",)
+    elif variant == "twin-path":
+        target = rng.choice([d / "missing.fmu", d, d / "measurements.csv", d / "spec.toml", Path("/dev/null"),
+                             Path("~nosuchuser/twin.fmu"), Path("/proc/self/mem")])
+        text = text.replace(base.fmu.as_posix(), target.as_posix())
+        hints += ("twin", target.name)
+    elif variant == "fixed-bounds":
+        text = _replace_line(text, "tau", rng.choice(["-1", "0", "1e9", "0.5"]))
+        hints += ("tau",)
+    elif variant == "huge-string":
+        text = _replace_line(text, "variable", '"' + "T" * 200_000 + '"')
+        hints += ("variable",)
+    elif variant == "min-below-fmu":
+        text = _replace_line(text, "min", "-0.01")
+        hints += ("min", "'k'")
+    else:  # hold-nan
+        value = rng.choice(["nan", "inf", "1e308"])
+        text = _replace_line(text, "hold_until", value)
+        must = value != "1e308"  # finite: the start-up hold then covers all the data
+        hints += ("hold_until",)
+    spec = m.spec_with(d, text)
+    if raw is not None:
+        spec.write_bytes(raw)
+    argv, _ = m.command_on_spec(d, spec)
+    if variant == "no-parameters":
+        argv = ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine"]
+        must = True
+    return Case(i, "spec", f"spec:{variant}:{argv[0]}", argv, hints, must)
+
+
+# FMU archives ----------------------------------------------------------------------------------
+
+_MD_VARIANTS = {
+    "xml-malformed": "<fmiModelDescription fmiVersion='2.0'><ModelVariables>",
+    "xml-xxe": ('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY e SYSTEM "file:///etc/passwd">]>'
+                '<fmiModelDescription fmiVersion="2.0" modelName="&e;" guid="g"/>'),
+    "xml-laughs": ('<?xml version="1.0"?><!DOCTYPE l [<!ENTITY a "aaaaaaaaaa">'
+                   + "".join(f'<!ENTITY {chr(98 + j)} "{("&" + chr(97 + j) + ";") * 10}">' for j in range(8))
+                   + ']><fmiModelDescription fmiVersion="2.0" modelName="&i;" guid="g"/>'),
+    "xml-version1": '<fmiModelDescription fmiVersion="1.0" modelName="m" guid="g"/>',
+    "xml-version9": '<fmiModelDescription fmiVersion="9.9" modelName="m" guid="g"/>',
+    "xml-empty": "",
+    "xml-binary": None,
+}
+
+
+def _rezip(src: Path, dst: Path, *, drop: tuple[str, ...] = (), add: dict[str, bytes] | None = None,
+           replace: dict[str, bytes] | None = None) -> None:
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            if item.filename in drop:
+                continue
+            data = (replace or {}).get(item.filename, zin.read(item))
+            zout.writestr(item.filename, data)
+        for name, data in (add or {}).items():
+            zout.writestr(name, data)
+
+
+def fmu_case(m: Maker, i: int) -> Case:
+    rng, base, d = m.rng, m.base, m.dir(i)
+    fmu = d / "twin.fmu"
+    variant = rng.choice(["crafted"] * 6 + ["not-zip", "truncated", "empty", "empty-zip", "no-md", "traversal",
+                                            "absolute", "bomb", "many", "md-variant", "vr-unknown", "dup-names",
+                                            "no-binary", "symlink", "bad-bounds", "directory"])
+    must = True
+    sub = False
+    timeout = 120.0
+    hints: tuple[str, ...] = ("twin.fmu",)
+    if variant == "crafted":
+        which = rng.choice(sorted(base.crafted))
+        shutil.copy(base.crafted[which], fmu)
+        variant = f"crafted-{which}"
+        sub = True
+        must = which != "well_behaved" and which != "segv_free"
+        timeout = 150.0
+    elif variant == "not-zip":
+        fmu.write_bytes(rng.randbytes(rng.randint(1, 20000)))
+    elif variant == "truncated":
+        data = base.fmu.read_bytes()
+        fmu.write_bytes(data[: rng.randrange(1, len(data))])
+    elif variant == "empty":
+        fmu.write_bytes(b"")
+    elif variant == "empty-zip":
+        zipfile.ZipFile(fmu, "w").close()
+    elif variant == "no-md":
+        _rezip(base.fmu, fmu, drop=("modelDescription.xml",))
+    elif variant in ("traversal", "absolute"):
+        name = rng.choice(["../../evil.txt", "../evil.so", "resources/../../x"]) if variant == "traversal" \
+            else rng.choice(["/tmp/evil.txt", "//x", "C:/x"])
+        _rezip(base.fmu, fmu, add={name: b"evil"})
+    elif variant == "bomb":
+        os.link(base.bomb, fmu) if base.bomb.stat().st_dev == d.stat().st_dev else shutil.copy(base.bomb, fmu)
+        timeout = 180.0
+    elif variant == "many":
+        os.link(base.many, fmu) if base.many.stat().st_dev == d.stat().st_dev else shutil.copy(base.many, fmu)
+    elif variant == "md-variant":
+        which = rng.choice(sorted(_MD_VARIANTS))
+        data = _MD_VARIANTS[which]
+        payload = rng.randbytes(3000) if data is None else data.encode()
+        _rezip(base.fmu, fmu, replace={"modelDescription.xml": payload})
+        variant = which
+    elif variant in ("vr-unknown", "dup-names", "bad-bounds"):
+        with zipfile.ZipFile(base.fmu) as z:
+            md = z.read("modelDescription.xml").decode()
+        if variant == "vr-unknown":
+            md = md.replace('valueReference="', 'valueReference="99999', 1)
+            must = False  # a value reference is an opaque number: the FMU's binary judges it
+        elif variant == "dup-names":
+            md = md.replace('name="k"', 'name="y"', 1)
+        else:
+            md = md.replace('name="k"', 'name="k" min="1" max="0"', 1) if 'min=' not in md else \
+                md.replace('min="0"', 'min="5"', 1)
+            must = False
+        _rezip(base.fmu, fmu, replace={"modelDescription.xml": md.encode()})
+    elif variant == "no-binary":
+        with zipfile.ZipFile(base.fmu) as z:
+            bins = [n for n in z.namelist() if n.startswith("binaries/")]
+        _rezip(base.fmu, fmu, drop=tuple(bins))
+    elif variant == "symlink":
+        with zipfile.ZipFile(base.fmu) as zin, zipfile.ZipFile(fmu, "w") as zout:
+            for item in zin.infolist():
+                zout.writestr(item, zin.read(item))
+            info = zipfile.ZipInfo("resources/link")
+            info.external_attr = (stat.S_IFLNK | 0o777) << 16
+            zout.writestr(info, "/etc/passwd")
+        must = False
+    else:  # directory
+        fmu.mkdir()
+    if variant == "no-binary":
+        must = False  # inspect reads the description only; simulate and track refuse
+    r = rng.random()
+    out = d / "out"
+    if r < 0.3:
+        argv = ["inspect", str(fmu)]
+        if variant.startswith("crafted") or variant in ("bomb", "many", "symlink", "vr-unknown", "bad-bounds",
+                                                          "traversal", "absolute"):
+            argv = ["simulate", str(fmu), "--stop", "50", "--set", "u=1", "-o", str(out / "result.csv")]
+    elif r < 0.7:
+        argv = ["simulate", str(fmu), "--stop", "50", "--set", "u=1", "-o", str(out / "result.csv")]
+    else:
+        spec = m.spec_with(d, twin=fmu)
+        if variant.startswith("crafted"):
+            spec.write_text(spec.read_text().replace('"y"', '"y"').replace("tau = 60.0", ""))
+        argv = ["track", str(spec), "--out", str(out / "track")]
+    if variant.startswith("crafted-segv_free") or variant == "crafted-well_behaved":
+        must = False
+    if variant.startswith("crafted") and argv[0] == "track":
+        must = must  # the twin's names differ from the spec's: refused before loading, or by the canary
+    return Case(i, "fmu", f"fmu:{variant}:{argv[0]}", argv, hints + ("FMU",), must, sub, timeout)
+
+
+# Modelica ----------------------------------------------------------------------------------------
+
+_CONSTRUCTS = {
+    "when": "  when x > 40 then\n    reinit(x, 38);\n  end when;\n",
+    "discrete": "  discrete Real d(start = 0);\n",
+    "pre": "  Real p = pre(x);\n",
+    "sample": "  Boolean s = sample(0, 1);\n",
+    "algorithm": "algorithm\n  y2 := x;\n",
+    "external": None,
+    "edge": "  Boolean b = x > 40;\n  Boolean e = edge(b);\n",
+}
+
+
+def modelica_case(m: Maker, i: int) -> Case:
+    rng, base, d = m.rng, m.base, m.dir(i)
+    src = d / "FuzzTwin.mo"
+    text: str | bytes = MODEL
+    model = "FuzzTwin"
+    variant = rng.choice(["construct"] * 4 + ["truncate", "delete-char", "garbage", "utf16", "empty",
+                                              "unknown-model", "missing-file", "deep-expr", "unbalanced",
+                                              "undeclared", "nul", "directory", "long-line"])
+    must = True
+    hints: tuple[str, ...] = ("FuzzTwin", src.name)
+    if variant == "construct":
+        which = rng.choice(sorted(_CONSTRUCTS))
+        snippet = _CONSTRUCTS[which]
+        if which == "external":
+            text = MODEL.replace("model FuzzTwin", 'function f\n  input Real a;\n  output Real b;\n'
+                                 'external "C" b = sin(a);\nend f;\nmodel FuzzTwin').replace(
+                "y = x;", "y = f(x);")
+            text = "package P\n" + text.replace("end FuzzTwin;", "end FuzzTwin;\nend P;")
+            model = "P.FuzzTwin"
+        elif which == "algorithm":
+            text = MODEL.replace("  Real x", "  Real y2;\n  Real x").replace("  annotation", snippet + "  annotation")
+        elif which == "when":
+            text = MODEL.replace("  annotation", snippet + "  annotation")
+        else:
+            text = MODEL.replace("equation", snippet + "equation")
+        variant = f"construct-{which}"
+    elif variant == "truncate":
+        text = MODEL[: rng.randrange(10, len(MODEL) - 5)]
+    elif variant == "delete-char":
+        k = rng.randrange(len(MODEL))
+        while MODEL[k] not in ";()=\"":
+            k = rng.randrange(len(MODEL))
+        text = MODEL[:k] + MODEL[k + 1:]
+        must = False  # some deletions leave valid Modelica (a quote pair, a bracket in a string)
+    elif variant == "garbage":
+        text = rng.randbytes(rng.randint(1, 4000))
+    elif variant == "utf16":
+        text = MODEL.encode("utf-16")
+    elif variant == "empty":
+        text = ""
+    elif variant == "unknown-model":
+        model = rng.choice(["FuzzTwn", "Pkg.FuzzTwin", "", "FuzzTwin.x"])
+        hints += (model or "--model",)
+    elif variant == "missing-file":
+        src = d / "Nowhere.mo"
+        text = ""
+        hints = ("Nowhere.mo",)
+    elif variant == "deep-expr":
+        text = MODEL.replace("y = x;", "y = " + "(" * 5000 + "x" + ")" * 5000 + ";")
+        must = False  # valid Modelica: compiled or refused for its depth, never a crash
+    elif variant == "unbalanced":
+        text = MODEL.replace("  y = x;\n", "")
+    elif variant == "undeclared":
+        text = MODEL.replace("y = x;", "y = x + zz;")
+        hints += ("zz",)
+    elif variant == "nul":
+        text = MODEL.replace("equation", "equ\x00ation")
+    elif variant == "long-line":
+        text = MODEL.replace("y = x;", "y = x" + " + 0" * 50_000 + ";")
+        must = False
+    else:  # directory without package.mo
+        src = d / "pkg"
+        src.mkdir()
+        (src / "FuzzTwin.mo").write_text(MODEL)
+        hints = ("pkg", "package.mo")
+    if variant != "missing-file" and variant != "directory":
+        (src.write_bytes if isinstance(text, bytes) else src.write_text)(text)  # type: ignore[operator]
+    argv = ["compile", str(src), "--model", model, "--backend", "embedded", "-o", str(d / "out" / "m.fmu")]
+    return Case(i, "modelica", f"modelica:{variant}", argv, hints, must, False, 240.0 if not must else 150.0)
+
+
+# command-line options ---------------------------------------------------------------------------
+
+_BAD_NUMBERS = ["nan", "inf", "-inf", "-1", "0", "-0", "1e308", "1e-300", "abc", "", "1e400", "0x10"]
+_BAD_INTS = ["-1", "0", "-5", "nan", "1.5", "abc", "999999999999999999999"]
+
+
+def cli_case(m: Maker, i: int) -> Case:
+    rng, base, d = m.rng, m.base, m.dir(i)
+    spec = m.spec_with(d)
+    out = d / "out"
+    fmu = str(base.fmu)
+    sim = ["simulate", fmu, "--set", "u=50", "--stop", "100", "--step", "10"]
+    variant = rng.choice([
+        "simulate-num", "simulate-set", "simulate-out", "estimate-num", "estimate-int", "estimate-out",
+        "track-int", "track-out", "track-resume", "pair-num", "pair-int", "validate-num", "bench-num",
+        "unknown-flag", "missing-file", "diagnose-int", "inspect-path", "generate-out", "weird-path",
+    ])
+    hints: tuple[str, ...] = ()
+    must = True
+    if variant == "simulate-num":
+        opt = rng.choice(["--step", "--stop", "--start", "--tolerance"])
+        value = rng.choice(_BAD_NUMBERS + ["1e-9", "2", "1e9"])
+        argv = [*sim, "-o", str(out / "r.csv")]
+        k = argv.index(opt) if opt in argv else None
+        if k is not None:
+            argv[k + 1] = value
+        else:
+            argv += [opt, value]
+        hints = (opt,)
+        must = not (opt == "--tolerance" and value in ("1e-300",))
+        if (opt, value) in (("--stop", "1e308"), ("--start", "-1"), ("--start", "0"), ("--start", "-0"),
+                            ("--start", "2"), ("--step", "2"), ("--tolerance", "1e-9")):
+            must = False
+    elif variant == "simulate-set":
+        item = rng.choice(["k=-1", "k=1e9", "k=nan", "tau=0", "zz=1", "k", "=1", "k=1=2", "u=inf", "y=3",
+                           "k=0x1", "k=1e400", "time=5"])
+        argv = [*sim, "--set", item, "-o", str(out / "r.csv")]
+        hints = ("--set", item.split("=")[0] or "NAME")
+    elif variant == "simulate-out":
+        target = _bad_output(rng, d, [base.fmu])
+        argv = [*sim, "-o", str(target)]
+        hints = ("-o", "--out", target.name or str(target), "output")
+    elif variant == "estimate-num":
+        opt = rng.choice(["--warmup", "--global-grid"])
+        value = rng.choice(_BAD_NUMBERS + ["1e9"])
+        argv = ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine", opt, value]
+        hints = (opt,)
+        must = value not in ("0", "-0") or opt != "--warmup"
+    elif variant == "estimate-int":
+        opt = rng.choice(["--seed", "--workers", "--maxiter", "--popsize", "--refine-iterations"])
+        value = rng.choice(_BAD_INTS)
+        argv = ["estimate", str(spec), "--no-refine", opt, value]
+        if opt != "--maxiter":
+            argv += ["--maxiter", "1"]
+        if opt != "--popsize":
+            argv += ["--popsize", "2"]
+        hints = (opt,)
+        must = not (value == "0" and opt in ("--maxiter", "--seed", "--refine-iterations"))
+        must = must and not (value == "999999999999999999999" and opt in ("--seed", "--refine-iterations"))
+    elif variant == "estimate-out":
+        target = _bad_output(rng, d, [spec, d / "measurements.csv", base.fmu])
+        argv = ["estimate", str(spec), "--maxiter", "1", "--popsize", "2", "--no-refine", "--report", str(target)]
+        hints = ("--report", target.name or str(target), "report")
+        must = target not in (Path("."), Path(""), d / "existing_dir")  # a writable directory: fine
+    elif variant == "track-int":
+        value = rng.choice(_BAD_INTS)
+        argv = ["track", str(spec), "--out", str(out / "track"), "--checkpoint-every", value]
+        hints = ("--checkpoint-every",)
+        must = value != "999999999999999999999"  # never checkpoint: allowed
+    elif variant == "track-out":
+        target = _bad_output(rng, d, [spec, d / "measurements.csv", base.fmu])
+        opt = rng.choice(["--out", "--report"])
+        argv = ["track", str(spec), opt, str(target)]
+        hints = (opt, target.name or str(target), "output", "report")
+        must = target not in (Path("."), Path(""), d / "existing_dir")
+    elif variant == "track-resume":
+        ck = out / "track" / "checkpoint.json"
+        ck.parent.mkdir(parents=True)
+        ck.write_bytes(rng.choice([b"", b"{", b"[]", b'{"version": 99}', rng.randbytes(200),
+                                   b'{"version": 1, "spec": "x", "rows": -5}', b"null"]))
+        (ck.parent / "tracking.csv").write_text("time\n0\n")  # a run to resume
+        argv = ["track", str(spec), "--out", str(ck.parent), "--resume"]
+        hints = ("checkpoint",)
+    elif variant == "pair-num":
+        opt = rng.choice(["--step", "--interval", "--window", "--tolerance", "--max-time", "--noise-ratio",
+                          "--min-reach", "--max-ratio", "--at", "--baseline-tolerance", "--rank-tol"])
+        value = rng.choice(["nan", "inf", "-1", "0", "-inf", "1e308"])
+        argv = ["pair", str(spec), "--no-write", "--workers", "1", opt, value]
+        hints = (opt,)
+        must = not (value == "0" and opt in ("--noise-ratio", "--min-reach", "--at"))
+        must = must and not (value == "1e308" and opt in ("--noise-ratio", "--max-time", "--max-ratio", "--at",
+                                                          "--baseline-tolerance", "--min-reach"))
+        must = must and not (value == "inf" and opt in ("--max-time",))
+    elif variant == "pair-int":
+        opt = rng.choice(["--workers", "--samples"])
+        argv = ["pair", str(spec), "--no-write", opt, rng.choice(_BAD_INTS)]
+        hints = (opt,)
+    elif variant == "validate-num":
+        argv = ["validate", str(spec), "--fmu", fmu, "--band", rng.choice(["nan", "-1", "0", "inf", "-inf"])]
+        hints = ("--band", "[source]", "validation", "pairs")
+    elif variant == "bench-num":
+        opt = rng.choice(["--hours", "--days", "--noise-scale"])
+        argv = ["bench", rng.choice(["heat-exchanger", "evaporator"]), "--out", str(out / "bench"), opt,
+                rng.choice(["nan", "-1", "0", "inf", "-inf", "1e308"])]
+        hints = (opt,)
+        if opt == "--noise-scale" and argv[-1] == "0":
+            argv[-1] = "-2"
+    elif variant == "unknown-flag":
+        cmd = rng.choice(["track", "estimate", "simulate", "pair", "inspect", "compile", "validate"])
+        argv = [cmd, str(spec), rng.choice(["--frobnicate", "--sed", "-x", "--stop=", "--json=1"])]
+        hints = ("unrecognized", "usage", "argument", "error")
+    elif variant == "missing-file":
+        missing = str(d / "nope" / rng.choice(["spec.toml", "twin.fmu", "in.csv"]))
+        argv = rng.choice([["track", missing], ["estimate", missing], ["inspect", missing],
+                           ["simulate", missing, "--stop", "1", "-o", str(out / "r.csv")],
+                           ["simulate", fmu, "--inputs", missing, "-o", str(out / "r.csv")],
+                           ["pair", missing], ["validate", str(spec), "--fmu", missing],
+                           ["generate", missing], ["diagnose", missing]])
+        hints = (Path(missing).name, "nope")
+    elif variant == "diagnose-int":
+        opt = rng.choice(["--fit-best", "--workers", "--maxiter"])
+        value = rng.choice(_BAD_INTS)
+        argv = ["diagnose", str(spec), opt, value]
+        hints = (opt,)
+        must = not (value == "999999999999999999999" and opt in ("--fit-best",))
+        must = must and not (value == "0" and opt == "--maxiter")  # 0: refinement only
+    elif variant == "inspect-path":
+        target = rng.choice([d, Path("/dev/null"), Path("/proc/self/status"), d / "spec.toml"])
+        argv = ["inspect", str(target)]
+        hints = (target.name,)
+    elif variant == "generate-out":
+        src = d / "FuzzTwin.mo"
+        src.write_text(MODEL)
+        spec.write_text(spec.read_text() + f'\n[source]\npath = "{src.name}"\nmodel = "FuzzTwin"\n')
+        target = _bad_output(rng, d, [spec, src])
+        argv = ["generate", str(spec), "-o", str(target)]
+        must = target not in (Path("."), Path(""), d / "existing_dir")
+        hints = ("-o", target.name or str(target), "output", "spec.toml")
+    else:  # weird-path
+        weird = rng.choice(["a\x00b.toml", "~nosuchuser/spec.toml", "x" * 5000 + ".toml", "/" + "a/" * 3000,
+                            "-", "/dev/zero"])
+        argv = [rng.choice(["track", "estimate", "inspect", "pair"]), weird]
+        hints = ("spec", "file", "FMU", weird[:20])
+    return Case(i, "cli", f"cli:{variant}:{argv[0]}", argv, hints, must)
+
+
+def _bad_output(rng: random.Random, d: Path, inputs: list[Path]) -> Path:
+    """An output location that cannot or must not be written."""
+    (d / "afile").write_text("x")
+    ro = d / "readonly"
+    ro.mkdir(exist_ok=True)
+    ro.chmod(0o555)
+    existing = d / "existing_dir"
+    existing.mkdir(exist_ok=True)
+    # as root a read-only directory is writable: not a bad output there
+    readonly = [ro / "out.csv", ro / "sub" / "x"] if os.geteuid() != 0 else []
+    choices = [d / "afile" / "out.csv", *readonly, Path("/proc/trackingbox/x"),
+               Path(""), Path("."), existing, *inputs, Path("/dev/full"), Path("~nosuchuser/x"),
+               d / ("y" * 300) / "x"]
+    return rng.choice(choices)
+
+
+MAKERS: dict[str, Callable[[Maker, int], Case]] = {
+    "csv": csv_case, "spec": spec_case, "fmu": fmu_case, "modelica": modelica_case, "cli": cli_case,
+}
+
+
+def plan(n: int, kinds: list[str], rng: random.Random) -> list[str]:
+    """Kinds of the *n* cases, in proportion to WEIGHTS, shuffled."""
+    total = sum(WEIGHTS[k] for k in kinds)
+    counts = {k: int(n * WEIGHTS[k] / total) for k in kinds}
+    k = 0
+    while sum(counts.values()) < n:
+        counts[kinds[k % len(kinds)]] += 1
+        k += 1
+    out = [kind for kind, c in counts.items() for _ in range(c)]
+    rng.shuffle(out)
+    return out
+
+
+# --------------------------------------------------------------------------- running
+
+def _snapshot(paths: list[Path]) -> dict[str, tuple[int, int]]:
+    seen: dict[str, tuple[int, int]] = {}
+    for root in paths:
+        if not root.exists():
+            continue
+        for dirpath, dirnames, filenames in os.walk(root):
+            for name in dirnames + filenames:
+                p = os.path.join(dirpath, name)
+                try:
+                    st = os.lstat(p)
+                except OSError:
+                    continue
+                seen[p] = (st.st_mtime_ns, st.st_size) if not stat.S_ISDIR(st.st_mode) else (0, 0)
+    return seen
+
+
+def _limits() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    resource.setrlimit(resource.RLIMIT_FSIZE, (FILE_LIMIT, FILE_LIMIT))
+
+
+class Running:
+    """One case in flight: a forked child or a subprocess, with its capture files."""
+
+    def __init__(self, case: Case, casedir: Path, logs: Path) -> None:
+        self.case = case
+        self.casedir = casedir
+        self.tmp = logs / f"{case.id:05d}.tmp"
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        self.stdout = logs / f"{case.id:05d}.out"
+        self.stderr = logs / f"{case.id:05d}.err"
+        self.before = _snapshot([casedir, self.tmp])
+        self.t0 = time.monotonic()
+        self.pid = 0
+        self.proc: subprocess.Popen[bytes] | None = None
+        env = dict(os.environ, TMPDIR=str(self.tmp), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
+                   TRACKINGBOX_FMU_TIMEOUT=str(FMU_TIMEOUT))
+        if case.subprocess:
+            with open(self.stdout, "wb") as out, open(self.stderr, "wb") as err:
+                self.proc = subprocess.Popen([str(BIN), *case.argv], stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                                             env=env, cwd=casedir, preexec_fn=_limits, start_new_session=True)
+            self.pid = self.proc.pid
+        else:
+            self.pid = os.fork()
+            if self.pid == 0:  # the child: run the command as the console script would
+                try:
+                    os.setsid()
+                    _limits()
+                    os.environ.update(env)
+                    tempfile.tempdir = None
+                    os.chdir(casedir)
+                    fd_out = os.open(self.stdout, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                    fd_err = os.open(self.stderr, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                    os.dup2(fd_out, 1)
+                    os.dup2(fd_err, 2)
+                    devnull = os.open(os.devnull, os.O_RDONLY)
+                    os.dup2(devnull, 0)
+                    sys.stdout = open(1, "w", closefd=False)
+                    sys.stderr = open(2, "w", closefd=False)
+                    import logging
+                    for h in list(logging.root.handlers):
+                        logging.root.removeHandler(h)
+                    from trackingbox.cli import main
+                    try:
+                        rc = main(case.argv)
+                    except SystemExit as exc:
+                        code = exc.code
+                        rc = code if isinstance(code, int) else (0 if code is None else 1)
+                        if not isinstance(code, int) and code is not None:
+                            print(code, file=sys.stderr)
+                    except BaseException:  # what the interpreter does with an uncaught exception
+                        import traceback
+                        traceback.print_exc()
+                        rc = 1
+                    import atexit
+                    atexit._run_exitfuncs()  # what interpreter shutdown runs (weakref finalizers: temp dirs)
+                    sys.stdout.flush()
+                    sys.stderr.flush()
+                    os._exit(int(rc) & 0xFF)
+                finally:
+                    os._exit(120)
+
+    def poll(self) -> int | None:
+        """The wait status once the case has finished, else None."""
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                return None
+            rc = self.proc.returncode
+            return (-rc) if rc < 0 else (rc << 8)  # as a wait status
+        pid, status = os.waitpid(self.pid, os.WNOHANG)
+        return None if pid == 0 else status
+
+    def kill(self) -> None:
+        with contextlib_suppress():
+            os.killpg(self.pid, signal.SIGKILL)
+        if self.proc is not None:
+            self.proc.wait()
+        else:
+            with contextlib_suppress():
+                os.waitpid(self.pid, 0)
+
+
+class contextlib_suppress:  # noqa: N801 - small local helper, no import in the forked path
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> bool:
+        return exc[0] is not None and issubclass(exc[0], (OSError, ChildProcessError))  # type: ignore[arg-type]
+
+
+def judge(run: Running, status: int | None, hung: bool) -> None:
+    case = run.case
+    case.seconds = time.monotonic() - run.t0
+    err = run.stderr.read_text(errors="replace") if run.stderr.exists() else ""
+    after = _snapshot([run.casedir, run.tmp])
+    changed = sorted(p for p, v in after.items() if run.before.get(p) != v)
+    if hung:
+        case.outcome, case.detail = "hang", f"no end after {case.timeout:g} s"
+        return
+    assert status is not None
+    if os.WIFSIGNALED(status):
+        sig = signal.Signals(os.WTERMSIG(status)).name
+        case.outcome, case.detail = "signal", f"killed by {sig}"
+        return
+    code = os.WEXITSTATUS(status)
+    errors = [ln for ln in err.splitlines() if ln.startswith("error:") or ": error:" in ln[:60]]
+    if "Traceback (most recent call last)" in err:
+        last = [ln for ln in err.strip().splitlines() if ln.strip()][-1:] or ["exit 1"]
+        case.outcome, case.detail = "traceback", last[0][:300]
+        return
+    if code == 1 and not errors:  # a negative result the command documents (pair: no pairs found)
+        case.outcome, case.detail = "accepted", "exit 1 (a documented negative result)"
+        return
+    if code == 0:
+        case.outcome = "accepted-bad" if case.must_refuse else "accepted"
+        case.detail = "exit 0"
+        return
+    if code != 2:
+        case.outcome, case.detail = "other", f"exit {code}: {err.strip()[:300]}"
+        return
+    if changed:
+        case.outcome = "half-written"
+        case.detail = f"{len(changed)} new or changed: " + ", ".join(os.path.relpath(p, run.casedir.parent)
+                                                                      for p in changed[:3])
+        return
+    if len(errors) != 1:
+        case.outcome, case.detail = "other", f"{len(errors)} error lines: {err.strip()[:300]}"
+        return
+    line = errors[0]
+    case.detail = line[:300]
+    # an option is named with or without its dashes (a stage names its setting 'popsize')
+    names = any(h and (h.lower() in err.lower() or (h.startswith("--") and f"{h[2:].replace('-', '_')} "
+                                                     in err.lower())) for h in case.hints) or not case.hints
+    if len(line) > MAX_ERROR_LINE or len(err) > MAX_STDERR or not names:
+        case.outcome = "refused-vague"
+        why = "too long" if len(line) > MAX_ERROR_LINE or len(err) > MAX_STDERR else "names none of " + \
+            ", ".join(repr(h[:30]) for h in case.hints)
+        case.detail = f"{why}: {line[:240]}"
+        return
+    case.outcome = "refused"
+
+
+def run_all(cases: list[Case], root: Path, logs: Path, jobs: int, progress: bool) -> None:
+    pending = collections.deque(cases)
+    running: list[Running] = []
+    done = 0
+    t0 = time.monotonic()
+    while pending or running:
+        while pending and len(running) < jobs:
+            case = pending.popleft()
+            running.append(Running(case, root / f"{case.id:05d}", logs))
+        time.sleep(0.01)
+        for run in list(running):
+            status = run.poll()
+            hung = status is None and time.monotonic() - run.t0 > run.case.timeout
+            if status is None and not hung:
+                continue
+            if hung:
+                run.kill()
+            judge(run, status, hung)
+            running.remove(run)
+            done += 1
+            if progress and (done % 25 == 0 or done == len(cases)):
+                print(f"\r{done}/{len(cases)} cases, {time.monotonic() - t0:.0f} s", end="", file=sys.stderr,
+                      flush=True)
+    if progress:
+        print(file=sys.stderr)
+
+
+# --------------------------------------------------------------------------- report
+
+def table(cases: list[Case]) -> str:
+    kinds = [k for k in KINDS if any(c.kind == k for c in cases)]
+    counts = {k: collections.Counter(c.outcome for c in cases if c.kind == k) for k in kinds}
+    width = max(len(o) for o in OUTCOMES)
+    lines = [f"{'outcome':<{width}} " + " ".join(f"{k:>8}" for k in kinds) + f" {'total':>8}"]
+    for o in OUTCOMES:
+        row = [counts[k][o] for k in kinds]
+        lines.append(f"{o:<{width}} " + " ".join(f"{n:>8}" for n in row) + f" {sum(row):>8}")
+    totals = [sum(counts[k].values()) for k in kinds]
+    lines.append(f"{'cases':<{width}} " + " ".join(f"{n:>8}" for n in totals) + f" {sum(totals):>8}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="fuzz", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 epilog=textwrap.dedent(__doc__.split("Examples::")[1]))
+    ap.add_argument("--cases", type=int, default=1000, help="number of cases (default 1000)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of the case generator (default 1)")
+    ap.add_argument("-j", "--jobs", type=int, default=2, help="cases run at once (default 2)")
+    ap.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated subset of {','.join(KINDS)}")
+    ap.add_argument("--keep", type=Path, default=None, help="work in DIR and keep it (default: a temp dir)")
+    ap.add_argument("--show", default=",".join(FAILING + ("accepted-bad", "refused-vague", "other")),
+                    help="outcomes whose cases are listed after the table")
+    ap.add_argument("--json", type=Path, default=None, help="write every case and its outcome to this file")
+    args = ap.parse_args(argv)
+    if args.cases < 1 or args.jobs < 1:
+        ap.error("--cases and --jobs must be >= 1")
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        ap.error(f"unknown kind(s) {', '.join(unknown)}; choose from {', '.join(KINDS)}")
+    if not BIN.exists():
+        ap.error(f"no console script {BIN}: install trackingbox in this environment")
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    work = args.keep or Path(tempfile.mkdtemp(prefix="trackingbox-fuzz-"))
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        t0 = time.perf_counter()
+        cpu0 = os.times()
+        base = build_base(work, log)
+        import importlib
+
+        import trackingbox.cli  # warm the forked children: what the commands import, imported once
+        trackingbox.cli.build_parser()
+        for module in WARM:
+            importlib.import_module(module)
+
+        rng = random.Random(args.seed)
+        root = work / f"cases-{args.seed}"
+        if root.exists():
+            _rmtree(root)
+        maker = Maker(base, root, rng)
+        cases = [MAKERS[kind](maker, i) for i, kind in enumerate(plan(args.cases, kinds, rng))]
+        logs = work / f"logs-{args.seed}"
+        if logs.exists():
+            _rmtree(logs)
+        logs.mkdir()
+        log(f"{len(cases)} cases in {work} ({sum(c.subprocess for c in cases)} through the console script)")
+        run_all(cases, root, logs, args.jobs, progress=True)
+        wall = time.perf_counter() - t0
+        cpu = os.times()
+        print(table(cases))
+        used = (cpu.children_user + cpu.children_system + cpu.user + cpu.system
+                - cpu0.children_user - cpu0.children_system - cpu0.user - cpu0.system)
+        print(f"\n{len(cases)} cases, seed {args.seed}, -j {args.jobs}: {wall:.0f} s wall, {used:.0f} s CPU")
+        show = {s.strip() for s in args.show.split(",")}
+        listed = [c for c in cases if c.outcome in show]
+        if listed:
+            print()
+            for c in sorted(listed, key=lambda c: (c.outcome, c.name)):
+                print(f"{c.outcome:13s} #{c.id:<5d} {c.name:40s} {c.detail[:200]}")
+                print(f"{'':13s}        trackingbox {' '.join(_quote(a) for a in c.argv)[:300]}")
+        if args.json:
+            args.json.write_text(json.dumps([dataclasses.asdict(c) for c in cases], indent=1))
+        failing = sum(c.outcome in FAILING for c in cases)
+        return 1 if failing else 0
+    finally:
+        if args.keep is None:
+            _rmtree(work)
+
+
+def _quote(a: str) -> str:
+    import shlex
+    a = a if len(a) < 120 else a[:60] + "..." + a[-20:]
+    return shlex.quote(a.replace("\x00", "\\0"))
+
+
+def _rmtree(path: Path) -> None:
+    def onerror(func: Callable[..., object], p: str, exc: object) -> None:
+        with contextlib_suppress():
+            os.chmod(os.path.dirname(p), 0o755)
+            os.chmod(p, 0o755)
+            func(p)
+    for dirpath, dirnames, _ in os.walk(path):
+        for name in dirnames:
+            with contextlib_suppress():
+                os.chmod(os.path.join(dirpath, name), 0o755)
+    shutil.rmtree(path, onerror=onerror)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
