@@ -202,7 +202,7 @@ def test_render_refuses_bad_findings(hp_spec):
 
 
 def _lag(t: np.ndarray, x: np.ndarray, tau: float) -> np.ndarray:
-    _, y, _ = lsim(([1.0], [tau, 1.0]), x, t, X0=[x[0] * tau])
+    _, y, _ = lsim(([1.0], [tau, 1.0]), x, t - t[0], X0=[x[0] * tau])
     return y
 
 
@@ -222,7 +222,9 @@ def _check_sensor_effects(df: pd.DataFrame, patch, spec: Spec, findings: list[Fi
         if f.effect == "sensor-bias":
             np.testing.assert_allclose(y - x, f.values["b"], atol=1e-9 * max(1.0, abs(x).max()))
         elif f.effect == "sensor-drift":
-            np.testing.assert_allclose(y - x, f.values["d"] * t, atol=1e-9 * max(1.0, abs(x).max()))
+            # from zero at the first sample (t = 0 on the data's clock), nothing before
+            np.testing.assert_allclose(y - x, f.values["d"] * np.maximum(t, 0.0),
+                                       atol=1e-9 * max(1.0, abs(x).max()))
         else:
             assert np.max(np.abs(y - _lag(t, x, f.values["tau"]))) < 0.02 * span + 1e-6 * abs(x).max()
 
@@ -256,12 +258,13 @@ def test_hx_patch_effects_act_as_explained(hx_spec, hx_patch):
              *[f"hx.T1[{i}]" for i in range(1, 11)], *_sensor_outputs(findings)]
     model = FMUModel(fmu)
     try:
-        df = model.simulate(stop_time=1800.0, output_interval=5.0, outputs=names)
+        # from -600 s: a run's held pre-run lies before the data's first sample (time 0), where no effect acts
+        df = model.simulate(start_time=-600.0, stop_time=1800.0, output_interval=5.0, outputs=names)
     finally:
         model.close()
     t = df["time"].to_numpy()
-    # fouling: kht(t) = 1000*(1 - r*t)
-    np.testing.assert_allclose(df["hx.kht_internal"], 1000.0 * (1 - 5e-6 * t), rtol=1e-9)
+    # fouling: kht(t) = 1000*(1 - r*max(t, 0))
+    np.testing.assert_allclose(df["hx.kht_internal"], 1000.0 * (1 - 5e-6 * np.maximum(t, 0.0)), rtol=1e-9)
     # heat loss: UA*(mean hot-cell temperature - 293.15 K)
     mean_t1 = df[[f"hx.T1[{i}]" for i in range(1, 11)]].mean(axis=1)
     np.testing.assert_allclose(df["hx.Q_flow_loss_internal"], 200.0 * (mean_t1 - 293.15), rtol=1e-9)
@@ -272,6 +275,30 @@ def test_hx_patch_effects_act_as_explained(hx_spec, hx_patch):
     lost = (df["hx.Q_total"] + df["hx.Q_flow_loss_internal"])[last]
     np.testing.assert_allclose(hot, lost, rtol=0.01)
     _check_sensor_effects(df, patch, hx_spec, findings)
+
+
+@pytest.mark.compile
+def test_a_window_run_keeps_the_data_clock(hx_spec, hx_patch):
+    """Every window of an estimation sees the model time = seconds from the data's first sample.
+
+    A drift d*max(t, 0) added to TI-102 must read d * (data time) on the training window
+    (which starts at the first sample, after a held pre-run) and on a later window
+    (which starts after a lead-in through the history) alike.
+    """
+    from trackingbox.estimation import Problem, WindowData, run_start, simulate_window
+
+    patch, findings, fmu = hx_patch
+    drift = next(f for f in findings if f.effect == "sensor-drift" and f.target == "TI-102")
+    out = f"{prefix_for('sensor-drift', 'TI-102')}_y"
+    problem = Problem(fmu, (), np.zeros(0), np.zeros(0), np.zeros(0), {}, {"y": out, "x": "ThOut"}, 10.0, 1200.0)
+    ins = {"mHot_flow": 1.0, "ThIn": 363.15, "mCold_flow": 2.0, "TcIn": 283.15}
+    for start, first in ((0.0, 0.0), (3000.0, 2400.0)):
+        time = np.arange(first, start + 1800.0, 10.0)
+        window = WindowData("w", start, start + 1800.0, time, {k: np.full(time.size, v) for k, v in ins.items()},
+                            {"y": np.zeros(time.size), "x": np.zeros(time.size)}, int(round((start - first) / 10.0)))
+        assert run_start(problem, window) == start - 1200.0
+        sim = simulate_window(problem, window, np.zeros(0))
+        np.testing.assert_allclose(sim["y"] - sim["x"], drift.values["d"] * time, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.compile

@@ -452,27 +452,28 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
     first, with the parameter at its value at the window's first grid point.
     Returns output tag -> values on the window's grid (lead-in cut off).
     """
-    from ..estimation import _model, window_setup
+    from ..estimation import _model, run_start, window_setup
 
     problem = where.problem
     parameters, offset, grid, inputs = window_setup(problem, window, x)
+    t0 = run_start(problem, window)
 
     def value_at(t_abs: float) -> float:
         return base * (1.0 - rate * (t_abs - t_mid))
 
     parameters[name] = value_at(float(window.time[0]))
     model = _model(problem.twin)
-    stepper = model.stepper(start_time=0.0, parameters=parameters, inputs=inputs)
+    stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs)
     outputs = list(problem.outputs.values())
     if offset > 0:
-        stepper.step(offset)
+        stepper.step(t0 + offset)
     result = np.empty((grid.size, len(outputs)))
     result[0] = stepper.get(outputs)
     every = max(1, int(round(interval / problem.sample_time)))
     for i in range(1, grid.size):
         if (i - 1) % every == 0:
             stepper.set({name: value_at(float(window.time[i - 1]) + 0.5 * every * problem.sample_time)})
-        stepper.step(offset + float(grid[i]))
+        stepper.step(t0 + offset + float(grid[i]))
         result[i] = stepper.get(outputs)
     keep = slice(window.lead, None)
     return {tag: result[keep, j] for j, tag in enumerate(problem.outputs)}
