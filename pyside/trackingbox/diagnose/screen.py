@@ -17,6 +17,12 @@ entry's ``screen``:
     with ``t_mid`` the middle of the training window, set between steps of the
     twin (:meth:`trackingbox.fmu.FMUModel.stepper`); ``rate`` is a bounded scalar
     fit. No compile.
+``levelling-drift`` / ``levelling-ramp``
+    The two-parameter forms that grow from the first sample and level off,
+    ``d t / (1 + c t)`` added to a tag, and ``p(t) = p0 (1 - r t / (1 + c t))``
+    (:func:`levelling`; ``c = 0`` the straight line): ``c`` searched
+    (:func:`search_levelling`) with the rate linear at fixed ``c``; the ramp's
+    rate is then refined through the twin (:func:`screen_levelling_ramp`).
 The spec's candidates are refitted jointly with every screened effect, linearised:
 the null model's output sensitivity ``J`` to the candidates (forward differences,
 computed once) enters each transform's least squares as extra columns (the lag
