@@ -631,7 +631,7 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
 
 
 def coefficient_base(effect: Any, target: str, where: WhereResult) -> tuple[str, float | None]:
-    """``<target>.<coefficient>`` and its null-model value (the fitted candidate, the fixed value or the FMU's start)."""
+    """``<target>.<coefficient>`` and its null-model value (fitted candidate, fixed value or the FMU's start)."""
     problem = where.problem
     name = f"{target}.{effect.coefficient}"
     if name in problem.names:
