@@ -157,6 +157,75 @@ def test_sensor_transforms_recover_bias_drift_and_lag():
     assert abs(tau - 120.0) < 5.0 and abs(np.std(after) - sigma) < 0.1 * sigma
 
 
+def _sensor_where(error, sigma=0.05, seed=3):
+    """A synthetic null model of one tag "T": simulated = a smooth signal, measured = it + *error*(t) + noise.
+
+    Training is [0, 4 h), validation [4 h, 8 h) (time from the first sample, as in the bench cases).
+    """
+    from types import SimpleNamespace as NS
+
+    rng = np.random.default_rng(seed)
+    windows = []
+    for name, lo in (("training", 0.0), ("validation", 4 * 3600.0)):
+        t = np.arange(lo, lo + 4 * 3600.0, 10.0)
+        sim = 320.0 + 3.0 * np.sin(t / 900.0)
+        meas = sim + error(t) + rng.normal(0.0, sigma, t.size)
+        windows.append(rs.WindowResiduals(name, t, {"T": meas}, {"T": sim}, {}))
+    return NS(training=windows[0], validation=windows[1], tags={"T": None}, noise={"T": sigma},
+              jacobian=({}, {}), problem=None, x=None)
+
+
+def _drift_entry():
+    from trackingbox.diagnose.library import load_effects
+
+    return load_effects()["sensor-drift"]
+
+
+def test_levelling_drift_recovers_its_own_rate_and_levelling():
+    # error 5e-5 * t / (1 + 1e-4 t): 5e-5 K/s at the start, half of its 0.5 K limit after 10 000 s
+    where = _sensor_where(lambda t: 5e-5 * t / (1.0 + 1e-4 * t))
+    c = sc.screen_sensor(_drift_entry(), "T", where, relinearise=False)
+    assert c.values["d"] == pytest.approx(5e-5, rel=0.05) and c.values["c"] == pytest.approx(1e-4, rel=0.15)
+    assert not c.pinned and c.validation_gain > 0.8
+    # a straight drift is the nested form c = 0
+    c = sc.screen_sensor(_drift_entry(), "T", _sensor_where(lambda t: 3e-5 * t), relinearise=False)
+    assert c.values["d"] == pytest.approx(3e-5, rel=0.02) and c.values["c"] < 2e-6
+
+
+def test_a_drift_that_levels_off_is_named_a_drift_not_a_bias():
+    """The hidden case's form (an exponential from 1 h on, which the template does not have) against bias."""
+    from trackingbox.diagnose.library import load_effects
+
+    def error(t):
+        return 1.5 * (1.0 - np.exp(-np.maximum(t - 3600.0, 0.0) / 20000.0))
+
+    where = _sensor_where(error, sigma=0.1)
+    where.validation_tags = {"T": _samples(1440)}
+    where.significant = ["T"]
+    bias = sc.screen_sensor(load_effects()["sensor-bias"], "T", where, relinearise=False)
+    drift = sc.screen_sensor(_drift_entry(), "T", where, relinearise=False)
+    assert drift.delta_bic > bias.delta_bic + 10 and drift.validation_gain > bias.validation_gain
+    # the levelled form follows the held-out error: 1.07 K at 8 h; a straight line fitted on training reaches 1.6 K
+    after = drift.validation_residual["T"]
+    assert abs(np.mean(after[-360:])) < 0.15
+    verdict = jd.judge(sc.rank([bias, drift]), where)
+    assert verdict.verdict == "effect" and verdict.named.effect == "sensor-drift"
+    # a constant bias is named a bias: the drift cannot beat it by the BIC's margin, or its levelling is pinned
+    where = _sensor_where(lambda t: 0.8 + 0.0 * t, sigma=0.1)
+    where.validation_tags = {"T": _samples(1440)}
+    where.significant = ["T"]
+    bias = sc.screen_sensor(load_effects()["sensor-bias"], "T", where, relinearise=False)
+    drift = sc.screen_sensor(_drift_entry(), "T", where, relinearise=False)
+    verdict = jd.judge(sc.rank([bias, drift]), where)
+    assert verdict.verdict == "effect" and verdict.named.effect == "sensor-bias"
+
+
+def _samples(n):
+    from types import SimpleNamespace as NS
+
+    return NS(samples=n, periods=())
+
+
 def test_delta_bic_prefers_a_true_bias_and_refuses_a_spurious_one():
     rng = np.random.default_rng(8)
     e = rng.normal(0.0, 0.1, 2000)

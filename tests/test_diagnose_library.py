@@ -3,9 +3,9 @@
 Expectations are hand-derived: which components of the bench twins each entry
 may act on (read from the Modelica source by eye), and what each effect does
 to the simulated twin (a bias of b shifts the reading by b; a drift d gives
-d*t; a lag follows dy/dt = (x - y)/tau, integrated here with scipy; a leak of
+d*t/(1 + c*t) from t = 0; a lag follows dy/dt = (x - y)/tau, integrated here with scipy; a leak of
 k kg/s lowers the tank's mass rate by k in its balance; a heat loss UA takes
-UA*(T - 293.15 K) out of the water; fouling scales kht by 1 - r*t).
+UA*(T - 293.15 K) out of the water; fouling scales kht by 1 - r*t/(1 + c*t)).
 One patch per bench carries every built-in effect on every target it finds,
 so each bench compiles once.
 """
@@ -55,7 +55,7 @@ def test_builtin_entries():
     effects = load_effects()
     assert sorted(effects) == ["fouling", "heat-loss", "leak", "sensor-bias", "sensor-drift", "sensor-lag"]
     assert {e.kind for e in effects.values()} == {"sensor", "process"}
-    assert effects["fouling"].screen == "coefficient-ramp" and effects["fouling"].coefficient == "kht"
+    assert effects["fouling"].screen == "levelling-ramp" and effects["fouling"].coefficient == "kht"
     assert effects["leak"].hook == "use_leak"
     for e in effects.values():
         assert e.explanation and e.parameters
@@ -93,6 +93,8 @@ GOOD = """\
     (GOOD.replace('classes = ["TrackingBox.Fluid.OpenTank"]', "classes = []"), "'classes'"),
     (GOOD.replace('hook = "use_leak"', 'hook = "use_leak"\nscreeen = "bias"'), "'screeen'"),
     (GOOD.replace('id = "{id}"', 'id = "other-name"'), "'id'"),
+    (GOOD.replace('hook = "use_leak"', 'hook = "use_leak"\nscreen = "levelling-ramp"\ncoefficient = "kht"'),
+     "needs exactly two [[parameters]]"),
 ])
 def test_bad_entry_names_file_and_field(tmp_path, text, field):
     folder = _entry(tmp_path, "my-effect", text.replace("{id}", "my-effect"))
@@ -156,7 +158,7 @@ def test_process_effect_needs_source(tmp_path):
 
 def _all_findings(spec: Spec) -> list[Finding]:
     values = {"sensor-bias": {"b": None}, "sensor-drift": {"d": None}, "sensor-lag": {"tau": 40.0},
-              "fouling": {"r": 5e-6}, "heat-loss": {"UA": 200.0}, "leak": {"k": 0.004}}
+              "fouling": {"r": 5e-6, "c": 5e-4}, "heat-loss": {"UA": 200.0}, "leak": {"k": 0.004}}
     found = []
     effects = load_effects()
     units = {"K": (1.5, 5e-5), "m": (0.02, 1e-6), "kg/s": (0.01, 1e-6), "Pa": (3000.0, 0.1)}
@@ -168,7 +170,7 @@ def _all_findings(spec: Spec) -> list[Finding]:
             if effect.kind == "sensor" and None in vals.values():
                 unit = info.variable(spec.outputs[target]).unit
                 b, d = units[unit]
-                vals = {"b": b} if eid == "sensor-bias" else {"d": d}
+                vals = {"b": b} if eid == "sensor-bias" else {"d": d, "c": 2e-4}
             found.append(Finding(eid, target, vals))
     return found
 
@@ -202,7 +204,7 @@ def test_render_refuses_bad_findings(hp_spec):
 
 
 def _lag(t: np.ndarray, x: np.ndarray, tau: float) -> np.ndarray:
-    _, y, _ = lsim(([1.0], [tau, 1.0]), x, t, X0=[x[0] * tau])
+    _, y, _ = lsim(([1.0], [tau, 1.0]), x, t - t[0], X0=[x[0] * tau])
     return y
 
 
@@ -222,7 +224,10 @@ def _check_sensor_effects(df: pd.DataFrame, patch, spec: Spec, findings: list[Fi
         if f.effect == "sensor-bias":
             np.testing.assert_allclose(y - x, f.values["b"], atol=1e-9 * max(1.0, abs(x).max()))
         elif f.effect == "sensor-drift":
-            np.testing.assert_allclose(y - x, f.values["d"] * t, atol=1e-9 * max(1.0, abs(x).max()))
+            # from zero at the first sample (t = 0 on the data's clock), nothing before
+            tt = np.maximum(t, 0.0)
+            np.testing.assert_allclose(y - x, f.values["d"] * tt / (1 + f.values["c"] * tt),
+                                       atol=1e-9 * max(1.0, abs(x).max()))
         else:
             assert np.max(np.abs(y - _lag(t, x, f.values["tau"]))) < 0.02 * span + 1e-6 * abs(x).max()
 
@@ -256,12 +261,14 @@ def test_hx_patch_effects_act_as_explained(hx_spec, hx_patch):
              *[f"hx.T1[{i}]" for i in range(1, 11)], *_sensor_outputs(findings)]
     model = FMUModel(fmu)
     try:
-        df = model.simulate(stop_time=1800.0, output_interval=5.0, outputs=names)
+        # from -600 s: a run's held pre-run lies before the data's first sample (time 0), where no effect acts
+        df = model.simulate(start_time=-600.0, stop_time=1800.0, output_interval=5.0, outputs=names)
     finally:
         model.close()
     t = df["time"].to_numpy()
-    # fouling: kht(t) = 1000*(1 - r*t)
-    np.testing.assert_allclose(df["hx.kht_internal"], 1000.0 * (1 - 5e-6 * t), rtol=1e-9)
+    # fouling: kht(t) = 1000*(1 - r*t/(1 + c*t)), t = max(time, 0)
+    tt = np.maximum(t, 0.0)
+    np.testing.assert_allclose(df["hx.kht_internal"], 1000.0 * (1 - 5e-6 * tt / (1 + 5e-4 * tt)), rtol=1e-9)
     # heat loss: UA*(mean hot-cell temperature - 293.15 K)
     mean_t1 = df[[f"hx.T1[{i}]" for i in range(1, 11)]].mean(axis=1)
     np.testing.assert_allclose(df["hx.Q_flow_loss_internal"], 200.0 * (mean_t1 - 293.15), rtol=1e-9)
@@ -272,6 +279,31 @@ def test_hx_patch_effects_act_as_explained(hx_spec, hx_patch):
     lost = (df["hx.Q_total"] + df["hx.Q_flow_loss_internal"])[last]
     np.testing.assert_allclose(hot, lost, rtol=0.01)
     _check_sensor_effects(df, patch, hx_spec, findings)
+
+
+@pytest.mark.compile
+def test_a_window_run_keeps_the_data_clock(hx_spec, hx_patch):
+    """Every window of an estimation sees the model time = seconds from the data's first sample.
+
+    A drift d*t/(1 + c*t), t = max(time, 0), added to TI-102 must read that at the data time on the window
+    (which starts at the first sample, after a held pre-run) and on a later window
+    (which starts after a lead-in through the history) alike.
+    """
+    from trackingbox.estimation import Problem, WindowData, run_start, simulate_window
+
+    patch, findings, fmu = hx_patch
+    drift = next(f for f in findings if f.effect == "sensor-drift" and f.target == "TI-102")
+    out = f"{prefix_for('sensor-drift', 'TI-102')}_y"
+    problem = Problem(fmu, (), np.zeros(0), np.zeros(0), np.zeros(0), {}, {"y": out, "x": "ThOut"}, 10.0, 1200.0)
+    ins = {"mHot_flow": 1.0, "ThIn": 363.15, "mCold_flow": 2.0, "TcIn": 283.15}
+    for start, first in ((0.0, 0.0), (3000.0, 2400.0)):
+        time = np.arange(first, start + 1800.0, 10.0)
+        window = WindowData("w", start, start + 1800.0, time, {k: np.full(time.size, v) for k, v in ins.items()},
+                            {"y": np.zeros(time.size), "x": np.zeros(time.size)}, int(round((start - first) / 10.0)))
+        assert run_start(problem, window) == start - 1200.0
+        sim = simulate_window(problem, window, np.zeros(0))
+        d, c = drift.values["d"], drift.values["c"]
+        np.testing.assert_allclose(sim["y"] - sim["x"], d * time / (1 + c * time), rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.compile
@@ -296,8 +328,8 @@ def test_hp_patch_effects_act_as_explained(hp_spec, hp_patch):
     inner = slice(5, -5)
     np.testing.assert_allclose(rate[inner], balance[inner], atol=2e-4)
     np.testing.assert_allclose(df["T100.Q_flow_loss_internal"], 200.0 * (df["T100.T"] - 293.15), rtol=1e-9)
-    np.testing.assert_allclose(df["HU300.kht_internal"], 1050.0 * (1 - 5e-6 * t), rtol=1e-9)
-    np.testing.assert_allclose(df["HEX300.kht_internal"], 1000.0 * (1 - 5e-6 * t), rtol=1e-9)
+    np.testing.assert_allclose(df["HU300.kht_internal"], 1050.0 * (1 - 5e-6 * t / (1 + 5e-4 * t)), rtol=1e-9)
+    np.testing.assert_allclose(df["HEX300.kht_internal"], 1000.0 * (1 - 5e-6 * t / (1 + 5e-4 * t)), rtol=1e-9)
     _check_sensor_effects(df, patch, hp_spec, findings)
 
 

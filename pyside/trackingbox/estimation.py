@@ -320,19 +320,35 @@ def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
     held-input pre-run (the part of ``problem.warmup`` the window's lead-in does
     not cover, in whole sample times), the window's grid from its first sample,
     and the input table (inputs held at their first values over the pre-run).
+
+    The run keeps the data's clock: the input table's times, and the model's
+    ``time``, are seconds from the first sample of the data, so the run starts
+    at :func:`run_start` (negative over the pre-run of a window at the first
+    sample). A model whose equations use ``time`` (a drift or a fouling that
+    diagnosis adds) then sees the same time on every window and in tracking.
     """
     values = np.asarray(x, dtype=float)
     parameters = dict(problem.fixed)
     parameters.update({name: float(v) for name, v in zip(problem.names, values)})
-    lead_in = float(window.start - window.time[0])
-    offset = max(0.0, problem.warmup - lead_in)
-    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    t0 = run_start(problem, window)
+    offset = float(window.time[0]) - t0
     grid = window.time - window.time[0]
-    frame: dict[str, np.ndarray] = {"time": np.concatenate(([0.0], offset + grid)) if offset > 0 else grid}
+    frame: dict[str, np.ndarray] = {"time": t0 + (np.concatenate(([0.0], offset + grid)) if offset > 0 else grid)}
     for name, series in window.inputs.items():
         frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
     inputs = pd.DataFrame(frame) if window.inputs else None
     return parameters, offset, grid, inputs
+
+
+def run_start(problem: Problem, window: WindowData) -> float:
+    """Model time at which a run over *window* starts: its first grid time minus the held pre-run.
+
+    Times are the data's clock (s from the first sample), see :func:`window_setup`.
+    """
+    lead_in = float(window.start - window.time[0])
+    offset = max(0.0, problem.warmup - lead_in)
+    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    return float(window.time[0]) - offset
 
 
 def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
@@ -344,10 +360,11 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> d
     window's grid (lead-in included).
     """
     parameters, offset, grid, inputs = window_setup(problem, window, x)
-    stop = offset + float(grid[-1])
+    t0 = run_start(problem, window)
+    stop = t0 + offset + float(grid[-1])
     model = _model(problem.twin)
     result = model.simulate(
-        start_time=0.0,
+        start_time=t0,
         stop_time=stop,
         output_interval=problem.sample_time,
         inputs=inputs,
@@ -360,7 +377,7 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> d
         y = np.asarray(result[name], dtype=float)
         if not np.all(np.isfinite(y)):
             raise SimulationError(f"twin {problem.twin.name} gave non-finite values of {name!r}")
-        out[tag] = np.interp(offset + grid, t, y)
+        out[tag] = np.interp(t0 + offset + grid, t, y)
     return out
 
 

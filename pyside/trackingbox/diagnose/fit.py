@@ -93,7 +93,8 @@ def warm_values(effect: Any, screened: Candidate | None,
 
     A one-parameter ``bias`` entry starts at the screened bias, a one-parameter
     ``lag`` entry at the screened time constant, a one-parameter ``drift`` or
-    ``coefficient-ramp`` entry at the screened rate (per second); the value is clipped to the
+    ``coefficient-ramp`` entry at the screened rate (per second), a multi-parameter entry
+    at the screened values of its parameters' names; the value is clipped to the
     parameter's bounds (*bounds*: short name -> (min, max) as the patch resolved them for
     the target's unit; else the entry's own).
 
@@ -115,6 +116,13 @@ def warm_values(effect: Any, screened: Candidate | None,
         lo, hi = (bounds or {}).get(p.name, (float(p.min), float(p.max)))
         if math.isfinite(v):
             values[p.name] = float(min(max(v, lo), hi))
+    elif screened is not None and len(params) > 1:
+        # a multi-parameter screening reports the entry's own names (levelling-drift, levelling-ramp)
+        for p in params:
+            v = float(screened.values.get(p.name, math.nan))
+            lo, hi = (bounds or {}).get(p.name, (float(p.min), float(p.max)))
+            if math.isfinite(v):
+                values[p.name] = float(min(max(v, lo), hi))
     return values
 
 

@@ -51,9 +51,10 @@ __all__ = ["Effect", "EffectParameter", "Finding", "Patch", "PatchParameter", "l
            "render_patch", "write_patch", "compile_patch", "patched_spec", "builtin_folder"]
 
 EffectKind = Literal["sensor", "process"]
-ScreenKind = Literal["bias", "drift", "lag", "coefficient-ramp", "compile"]
+ScreenKind = Literal["bias", "drift", "levelling-drift", "lag", "coefficient-ramp", "levelling-ramp", "compile"]
 KINDS: tuple[str, ...] = ("sensor", "process")
-SCREENS: tuple[str, ...] = ("bias", "drift", "lag", "coefficient-ramp", "compile")
+SCREENS: tuple[str, ...] = ("bias", "drift", "levelling-drift", "lag", "coefficient-ramp", "levelling-ramp",
+                             "compile")
 #: ``unit`` of an effect parameter may name the unit of the tag's variable: ``{unit}`` or ``{unit}/s``.
 UNIT_OF_VARIABLE = "{unit}"
 
@@ -120,9 +121,10 @@ class Effect:
     hook : str or None
         Process effects: the Boolean parameter of the hook the component offers (set true by the patch).
     screen : str
-        How ``diagnose`` screens it cheaply (``bias``, ``drift``, ``lag``, ``coefficient-ramp``, ``compile``).
+        How ``diagnose`` screens it cheaply (``bias``, ``drift``, ``levelling-drift``, ``lag``,
+        ``coefficient-ramp``, ``levelling-ramp``, ``compile``).
     coefficient : str or None
-        For ``coefficient-ramp``: the target's parameter that changes with time.
+        For ``coefficient-ramp`` and ``levelling-ramp``: the target's parameter that changes with time.
     parameters : tuple of EffectParameter
     template : str
         Text of ``patch.mo.jinja``.
@@ -260,9 +262,12 @@ def read_effect(folder: str | Path) -> Effect:
     coefficient = raw.get("coefficient")
     if coefficient is not None and (not isinstance(coefficient, str) or not _IDENT.match(coefficient)):
         problems.append(f"{where}: field 'coefficient' must be a parameter name, got {coefficient!r}")
-    if screen == "coefficient-ramp" and coefficient is None:
-        problems.append(f"{where}: field 'coefficient' is required with screen = \"coefficient-ramp\"")
-    if kind == "sensor" and screen in ("coefficient-ramp",):
+    if screen in ("coefficient-ramp", "levelling-ramp") and coefficient is None:
+        problems.append(f"{where}: field 'coefficient' is required with screen = {screen!r}")
+    if screen in ("levelling-drift", "levelling-ramp") and len(raw.get("parameters") or []) != 2:
+        problems.append(f"{where}: screen = {screen!r} needs exactly two [[parameters]]: the rate at the start, "
+                        f"then the levelling coefficient c (1/s; 0 = no levelling)")
+    if kind == "sensor" and screen in ("coefficient-ramp", "levelling-ramp"):
         problems.append(f"{where}: field 'screen' = {screen!r} needs a process effect")
     raw_params = raw.get("parameters", [])
     params: list[EffectParameter] = []

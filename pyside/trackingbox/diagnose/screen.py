@@ -17,6 +17,12 @@ entry's ``screen``:
     with ``t_mid`` the middle of the training window, set between steps of the
     twin (:meth:`trackingbox.fmu.FMUModel.stepper`); ``rate`` is a bounded scalar
     fit. No compile.
+``levelling-drift`` / ``levelling-ramp``
+    The two-parameter forms that grow from the first sample and level off,
+    ``d t / (1 + c t)`` added to a tag, and ``p(t) = p0 (1 - r t / (1 + c t))``
+    (:func:`levelling`; ``c = 0`` the straight line): ``c`` searched
+    (:func:`search_levelling`) with the rate linear at fixed ``c``; the ramp's
+    rate is then refined through the twin (:func:`screen_levelling_ramp`).
 The spec's candidates are refitted jointly with every screened effect, linearised:
 the null model's output sensitivity ``J`` to the candidates (forward differences,
 computed once) enters each transform's least squares as extra columns (the lag
@@ -155,6 +161,53 @@ def fit_lag(time: npt.ArrayLike, simulated: npt.ArrayLike, measured: npt.ArrayLi
     if sse(lo) <= res.fun:
         tau = lo
     return tau, m - first_order(t, y, tau)
+
+
+def levelling(time: npt.ArrayLike, c: float) -> np.ndarray:
+    """Shape of an error that grows from the first sample and levels off: ``t / (1 + c t)``, 0 before ``t = 0``.
+
+    Its slope at ``t = 0`` is 1; it reaches half its limit ``1 / c`` at ``t = 1 / c``;
+    ``c = 0`` is the straight line ``t`` (the nested linear form).
+
+    >>> levelling([-5.0, 0.0, 10.0, 100.0], 0.01).tolist()
+    [0.0, 0.0, 9.09090909090909, 50.0]
+    >>> levelling([10.0], 0.0).tolist()
+    [10.0]
+    """
+    t = np.maximum(np.asarray(time, dtype=float), 0.0)
+    return t / (1.0 + c * t)
+
+
+#: Points of the first search over the levelling coefficient ``c`` (besides ``c = 0``): log-spaced over its range.
+LEVELLING_GRID = 24
+
+
+def search_levelling(cost: Callable[[float], float], upper: float, *, lower: float = 0.0) -> float:
+    """The levelling coefficient ``c`` in ``[lower, upper]`` that minimises *cost*.
+
+    *cost* is cheap (a linear fit at fixed ``c``): a grid of ``c = lower`` and
+    :data:`LEVELLING_GRID` log-spaced values up to *upper*, then a bounded scalar
+    search between the best point's neighbours.
+
+    >>> round(search_levelling(lambda c: (c - 3e-4) ** 2, 1e-3) / 3e-4, 4)
+    1.0
+    >>> search_levelling(lambda c: c, 1e-3)
+    0.0
+    """
+    from scipy.optimize import minimize_scalar
+
+    lo_pos = max(lower, upper * 1e-4)
+    grid = np.concatenate(([lower], np.geomspace(lo_pos, upper, LEVELLING_GRID)))
+    costs = np.array([cost(float(c)) for c in grid])
+    i = int(np.nanargmin(costs))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    best, best_cost = float(grid[i]), float(costs[i])
+    if b > a:
+        res = minimize_scalar(cost, bounds=(float(a), float(b)), method="bounded",
+                              options={"xatol": 1e-3 * float(b - a)})
+        if res.fun < best_cost:
+            best = float(res.x)
+    return best
 
 
 def delta_bic(before: Mapping[str, npt.ArrayLike], after: Mapping[str, npt.ArrayLike], k: int) -> float:
@@ -317,6 +370,15 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
                      {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag)
 
 
+def _bounds_of(effect: Any, index: int, default: tuple[float, float]) -> tuple[float, float]:
+    """(min, max) of the entry's parameter number *index* (*default* when it has none)."""
+    params = list(getattr(effect, "parameters", ()) or ())
+    if index < len(params):
+        p = params[index]
+        return float(getattr(p, "min", default[0])), float(getattr(p, "max", default[1]))
+    return default
+
+
 def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
     params = list(getattr(effect, "parameters", ()) or ())
     if len(params) == 1:
@@ -383,6 +445,16 @@ def sensor_fit(effect: Any, tag: str, base: WhereResult) -> tuple[dict[str, floa
             base, rt, rv, {tag: np.column_stack([np.ones(tr.time.size), tr.time - t0])},
             {tag: np.column_stack([np.ones(va.time.size), va.time - t0])})
         return {"offset": float(beta[0]), "rate": float(beta[1])}, after_t, after_v, delta
+    if how == "levelling-drift":
+        # error d * t / (1 + c t) from the first sample: linear in d at fixed c, c searched
+        c_hi = _bounds_of(effect, 1, (0.0, 1.0e-3))[1]
+
+        def fit_at(c: float) -> tuple[Any, ...]:
+            return joint(base, rt, rv, {tag: levelling(tr.time, c)[:, None]}, {tag: levelling(va.time, c)[:, None]})
+
+        c = search_levelling(lambda c: fit_at(c)[3], c_hi)
+        beta, after_t, after_v, _, delta = fit_at(c)
+        return {"rate": float(beta[0]), "levelling": c}, after_t, after_v, delta
     if how == "lag":
         from scipy.optimize import minimize_scalar
 
@@ -440,39 +512,50 @@ def screen_sensor(effect: Any, tag: str, where: WhereResult, *, relinearise: boo
         # a one-parameter entry: report the screened quantity under the entry's own parameter name
         values = {params[0].name: next(iter(values.values()))}
         pinned = [params[0].name] if pinned else []
+    elif effect.screen == "levelling-drift" and len(params) == 2:
+        # (rate, levelling) under the entry's own names; c at its upper bound: a step, not a drift
+        values = {params[0].name: values["rate"], params[1].name: values["levelling"]}
+        c_lo, c_hi = _bounds_of(effect, 1, (0.0, 1.0e-3))
+        if values[params[1].name] >= c_hi - 1e-3 * (c_hi - c_lo):
+            pinned.append(params[1].name)
     return score(effect.id, tag, "sensor", "screen", where, k, after_t, after_v, values, pinned=pinned)
 
 
 def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, base: float, rate: float,
-                  t_mid: float, *, interval: float = 300.0) -> dict[str, np.ndarray]:
+                  t_mid: float, *, interval: float = 300.0,
+                  schedule: Callable[[float], float] | None = None) -> dict[str, np.ndarray]:
     """Simulate *window* with parameter *name* = ``base * (1 - rate * (t - t_mid))``, set between steps.
 
-    Times are seconds from the first sample; *rate* is per second. The
+    Times are seconds from the first sample; *rate* is per second; *schedule*
+    (time -> value), when given, replaces that straight line. The
     held-input pre-run of :func:`trackingbox.estimation.simulate_window` comes
     first, with the parameter at its value at the window's first grid point.
     Returns output tag -> values on the window's grid (lead-in cut off).
     """
-    from ..estimation import _model, window_setup
+    from ..estimation import _model, run_start, window_setup
 
     problem = where.problem
     parameters, offset, grid, inputs = window_setup(problem, window, x)
+    t0 = run_start(problem, window)
 
     def value_at(t_abs: float) -> float:
+        if schedule is not None:
+            return float(schedule(t_abs))
         return base * (1.0 - rate * (t_abs - t_mid))
 
     parameters[name] = value_at(float(window.time[0]))
     model = _model(problem.twin)
-    stepper = model.stepper(start_time=0.0, parameters=parameters, inputs=inputs)
+    stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs)
     outputs = list(problem.outputs.values())
     if offset > 0:
-        stepper.step(offset)
+        stepper.step(t0 + offset)
     result = np.empty((grid.size, len(outputs)))
     result[0] = stepper.get(outputs)
     every = max(1, int(round(interval / problem.sample_time)))
     for i in range(1, grid.size):
         if (i - 1) % every == 0:
             stepper.set({name: value_at(float(window.time[i - 1]) + 0.5 * every * problem.sample_time)})
-        stepper.step(offset + float(grid[i]))
+        stepper.step(t0 + offset + float(grid[i]))
         result[i] = stepper.get(outputs)
     keep = slice(window.lead, None)
     return {tag: result[keep, j] for j, tag in enumerate(problem.outputs)}
@@ -547,6 +630,125 @@ def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float
                  {"rate": rate, name: base}, pinned=pinned)
 
 
+def coefficient_base(effect: Any, target: str, where: WhereResult) -> tuple[str, float | None]:
+    """``<target>.<coefficient>`` and its null-model value (fitted candidate, fixed value or the FMU's start)."""
+    problem = where.problem
+    name = f"{target}.{effect.coefficient}"
+    if name in problem.names:
+        x = where.x if where.x is not None else problem.start
+        return name, float(x[list(problem.names).index(name)])
+    if name in problem.fixed:
+        return name, float(problem.fixed[name])
+    return name, read_info_start(problem.twin, name)
+
+
+def coefficient_sensitivity(where: WhereResult, name: str, base: float) -> tuple[dict[str, np.ndarray], ...]:
+    """Per window, tag -> sensitivity of the simulated output to a constant change of *name* (per unit).
+
+    The null model's Jacobian column where *name* is a candidate, else one forward
+    difference (a step of 1e-3 of *base*) per window.
+    """
+    import dataclasses
+
+    from ..estimation import close_models
+    from .residuals import window_series
+
+    problem = where.problem
+    j_train, j_val = where.jacobian
+    if name in problem.names and j_train:
+        i = list(problem.names).index(name)
+        return {t: j[:, i] for t, j in j_train.items()}, {t: j[:, i] for t, j in j_val.items()}
+    h = 1e-3 * (abs(base) or 1.0)
+    moved = dataclasses.replace(problem, fixed={**problem.fixed, name: base + h})
+    x = where.x if where.x is not None else problem.start
+    out = []
+    try:
+        for window in where.windows:
+            after = window_series(moved, window, x, where.input_tags)
+            plain = window_series(problem, window, x, where.input_tags)
+            out.append({t: (after.simulated[t] - plain.simulated[t]) / h for t in problem.outputs})
+    finally:
+        close_models()
+    return out[0], out[1]
+
+
+def screen_levelling_ramp(effect: Any, target: str, where: WhereResult, *, evaluations: int = 8) -> Candidate:
+    """Screen a coefficient that falls from the first sample and levels off (fouling) on *target*, no compile.
+
+    ``p(t) = p0 * (1 - r * t / (1 + c t))`` (:func:`levelling`; ``c = 0`` the straight
+    line): the levelling ``c`` and a first ``r`` from the quasi-static linearisation
+    (the output moves by ``S(t) * dp(t)``, ``S`` the sensitivity to a constant change,
+    :func:`coefficient_sensitivity`; the coefficient changes over hours, the twin
+    settles in minutes), jointly with the candidates; then ``r`` at that ``c`` by a
+    bounded scalar fit through the twin with ``p(t)`` set between steps
+    (:func:`simulate_ramp`), as the linear ramp is.
+    """
+    from scipy.optimize import minimize_scalar
+
+    from ..estimation import close_models
+
+    problem = where.problem
+    name, base = coefficient_base(effect, target, where)
+    if base is None:
+        return Candidate(effect.id, target, "process", "skipped",
+                         reason=f"the twin has no tunable parameter {name!r} to ramp")
+    params = list(getattr(effect, "parameters", ()) or ())
+    r_lo, r_hi = _bounds_of(effect, 0, (0.0, 1.0e-5))
+    c_lo, c_hi = _bounds_of(effect, 1, (0.0, 1.0e-3))
+    tr, va = where.training, where.validation
+    tags = list(problem.outputs)
+    s_t, s_v = coefficient_sensitivity(where, name, base)
+    rt0 = {t: tr.residual(t) for t in tags}
+    rv0 = {t: va.residual(t) for t in tags}
+
+    def linear_at(c: float) -> tuple[Any, ...]:
+        gt, gv = levelling(tr.time, c), levelling(va.time, c)
+        return joint(where, rt0, rv0, {t: (-base * s_t[t] * gt)[:, None] for t in tags},
+                     {t: (-base * s_v[t] * gv)[:, None] for t in tags})
+
+    c = search_levelling(lambda c: linear_at(c)[3], c_hi, lower=max(c_lo, 0.0))
+    r_lin = float(min(max(linear_at(c)[0][0], r_lo), r_hi))
+    training, validation = where.windows
+    x = where.x if where.x is not None else problem.start
+
+    def schedule(r: float) -> Callable[[float], float]:
+        return lambda t: base * max(1.0 - r * float(levelling([t], c)[0]), 0.05)
+
+    def fitted(r: float, sim_v: Mapping[str, np.ndarray] | None = None) -> tuple[Any, ...]:
+        sim = simulate_ramp(where, training, x, name, base, 0.0, 0.0, schedule=schedule(r))
+        rt = {t: tr.measured[t] - sim[t] for t in tags}
+        rv = rv0 if sim_v is None else {t: va.measured[t] - sim_v[t] for t in tags}
+        return joint(where, rt, rv)
+
+    def sse(r: float) -> float:
+        try:
+            return fitted(r)[3]
+        except Exception as exc:  # noqa: BLE001 - a failing point is a bad point
+            log.debug("levelling ramp %g failed: %s", r, exc)
+            return math.inf
+
+    try:
+        r = r_lin
+        if r_lin > r_lo:
+            lo, hi = max(r_lo, 0.5 * r_lin), min(r_hi, 1.5 * r_lin)
+            res = minimize_scalar(sse, bounds=(lo, hi), method="bounded",
+                                  options={"maxiter": evaluations, "xatol": 1e-3 * (hi - lo)})
+            if res.fun < sse(r_lin):
+                r = float(res.x)
+        sim_v = simulate_ramp(where, validation, x, name, base, 0.0, 0.0, schedule=schedule(r))
+        _, after_t, after_v, _, _ = fitted(r, sim_v)
+    finally:
+        close_models()
+    k = len(params) or 2
+    pinned = []
+    if r >= r_hi - 1e-3 * (r_hi - r_lo):
+        pinned.append(params[0].name if params else "r")
+    if c >= c_hi - 1e-3 * (c_hi - c_lo):
+        pinned.append(params[1].name if len(params) > 1 else "c")
+    values = {(params[0].name if params else "r"): r, (params[1].name if len(params) > 1 else "c"): c, name: base}
+    return score(effect.id, target, "process", "screen", where, k, after_t, after_v, values, pinned=pinned)
+
+
 def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
            fit_compiled: Callable[[Any, str], Candidate] | None = None,
            only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None,
@@ -591,7 +793,7 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
     for i, (effect, target) in enumerate(jobs):
         how = getattr(effect, "screen", "compile")
         try:
-            if how in ("bias", "drift", "lag"):
+            if how in ("bias", "drift", "lag", "levelling-drift"):
                 if target not in where.tags:
                     cand = Candidate(effect.id, target, "sensor", "skipped",
                                      reason=f"tag {target!r} is not an output tag of the spec")
@@ -599,6 +801,8 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
                     cand = screen_sensor(effect, target, where, relinearise=False)
             elif how == "coefficient-ramp":
                 cand = screen_ramp(effect, target, where)
+            elif how == "levelling-ramp":
+                cand = screen_levelling_ramp(effect, target, where)
             elif fit_compiled is not None:
                 cand = fit_compiled(effect, target)
             else:
