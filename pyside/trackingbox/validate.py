@@ -38,7 +38,7 @@ import math
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -200,7 +200,8 @@ def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid
 
 
 def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None, band: float = 0.05,
-             smooth: int = 5, tolerance: float = 1e-6, interpolation: Interpolation = "linear") -> ValidationResult:
+             smooth: int = 5, tolerance: float = 1e-6, interpolation: Interpolation = "linear",
+             substeps: int | Literal["auto"] = "auto") -> ValidationResult:
     """Run the tracked FMU, the untracked twin and the Python runtime; compare on the validation window.
 
     Parameters
@@ -221,6 +222,8 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         The Python runtime's error interpolation (:func:`~trackingbox.tracking.runtime.track`).
         ``"linear"``: its row ``k`` is compared with the box at ``t_k``;
         ``"zoh"``: with the box at ``t_k+1``.
+    substeps : int or "auto"
+        The Python runtime's sub-steps per sample (:func:`~trackingbox.tracking.runtime.track`).
 
     Raises
     ------
@@ -250,7 +253,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         run_dir = Path(work_dir) if work_dir is not None else Path(tmp)
         logger.info("running the Python tracking runtime (and the untracked twin)")
         tr = track(spec, out_dir=run_dir / "python", window="validation", untracked=True, tolerance=tolerance,
-                   view=view, interpolation=interpolation)
+                   view=view, interpolation=interpolation, substeps=substeps)
         py = pd.read_csv(tr.csv)
     window = tuple(float(v) for v in tr.window)
     grid = view.grid
