@@ -139,6 +139,8 @@ class _ErrorMemory:
 
     te: float
     mode: Mode
+    #: name of the output attribute saved with the memory (``u`` or ``m``)
+    _output: str
 
     def _init_memory(self) -> None:
         #: error memory: starts at 0 as in the block; None after a missing error
@@ -170,11 +172,20 @@ class _ErrorMemory:
                 integrate(e0, e, m0)
             self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
         self.e_last, self.hold_last = e, bool(hold)
+        mode: Mode = "hold" if hold or e is None else "auto"
+        if mode != self.mode:
+            logger.debug("%s: %s", type(self).__name__, mode)
+        self.mode = mode
 
-    def _memory_state(self) -> dict[str, Any]:
-        return {"e_mem": self.e_mem, "mode": self.mode, "e_last": self.e_last, "hold_last": self.hold_last}
+    # -- checkpointing -------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """JSON-serialisable state, for the tracking loop's checkpoints."""
+        return {self._output: getattr(self, self._output), "e_mem": self.e_mem, "mode": self.mode,
+                "e_last": self.e_last, "hold_last": self.hold_last}
 
-    def _load_memory_state(self, state: dict[str, Any]) -> None:
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        setattr(self, self._output, float(state[self._output]))
         self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
         self.mode = state["mode"]
         self.e_last = None if state.get("e_last") is None else float(state["e_last"])
@@ -320,6 +331,8 @@ class ScaledPI(_ScaledOutput, _ErrorMemory):
     (5.0, 5.0, 5.5)
     """
 
+    _output = "u"
+
     def __init__(self, scaling: Scaling, *, kp: float, ti: float, ts: float, direction: int, p0: float,
                  te: float | None = None, interpolation: Interpolation = "zoh") -> None:
         super().__init__(scaling, ts=ts, direction=direction, p0=p0)
@@ -391,21 +404,7 @@ class ScaledPI(_ScaledOutput, _ErrorMemory):
             self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
 
         self._advance_linear(e, hold, dt, integrate)
-        mode: Mode = "hold" if hold or e is None else "auto"
-        if mode != self.mode:
-            logger.debug("ScaledPI: %s", mode)
-        self.mode = mode
         return self.value
-
-    # -- checkpointing -------------------------------------------------------
-    def state_dict(self) -> dict[str, Any]:
-        """JSON-serialisable state, for the tracking loop's checkpoints."""
-        return {"u": self.u, **self._memory_state()}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state_dict`."""
-        self.u = float(state["u"])
-        self._load_memory_state(state)
 
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
@@ -580,6 +579,8 @@ class StateCompensator(_ErrorMemory):
     0.999955
     """
 
+    _output = "m"
+
     def __init__(self, gain: float, *, ts: float, te: float | None = None,
                  interpolation: Interpolation = "zoh") -> None:
         if interpolation not in ("zoh", "linear"):
@@ -629,17 +630,7 @@ class StateCompensator(_ErrorMemory):
             self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
 
         self._advance_linear(e, hold, self.ts, integrate)
-        self.mode = "hold" if hold or e is None else "auto"
         return self.m
-
-    def state_dict(self) -> dict[str, Any]:
-        """JSON-serialisable state, for the tracking loop's checkpoints."""
-        return {"m": self.m, **self._memory_state()}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state_dict`."""
-        self.m = float(state["m"])
-        self._load_memory_state(state)
 
 
 def direction_from_gain(gain: float) -> int:

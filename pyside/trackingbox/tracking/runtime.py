@@ -13,7 +13,9 @@
 3. writes one CSV row (so the output is on disk as it is produced and memory
    stays flat);
 4. sets the new parameter values and correction flows and integrates both
-   twins to ``t_{k+1}``.
+   twins to ``t_{k+1}``: with ``substeps`` the tracked twin in parts of the
+   sample, the parameter controllers advancing after each part (see
+   :func:`track`).
 
 The controllers hold (output frozen, no integration) during the start-up hold
 ``t < tracking.hold_until``, while their measured tag or simulated variable is
@@ -1201,6 +1203,21 @@ def track(
         the parameter of row ``k`` is the controller's value at ``t_k``, held
         over ``[t_k, t_k+1]``. ``"zoh"``: the error held over the sample; the
         parameter of row ``k`` is the value at ``t_k+1``, applied from ``t_k``.
+    substeps : int or "auto"
+        ``"linear"`` only: integrate the PI controllers with the tracked twin
+        over this many equal parts of each sample. After each part but the
+        last the controllers read the twin, take the measurement interpolated
+        between the two samples, advance and give the twin their new values,
+        so a pair whose variable answers its parameter within a sample closes
+        its loop within the sample, as in the compiled box (where the loop is
+        continuous). Hold flags, state compensation, the CSV rows and the
+        untracked twin stay per sample. ``"auto"`` (default): one part when
+        every pair's within-sample loop gain (:func:`within_sample_gains`,
+        measured on the twin before the run) is at most
+        :data:`SUBSTEP_GAIN`, else ``ceil(sqrt(g / SUBSTEP_GAIN))`` for the
+        largest, at most :data:`MAX_SUBSTEPS`. Needs a model-exchange twin
+        (``"auto"`` chooses 1 for a co-simulation one). A checkpoint records
+        the count; resuming with another is refused.
 
     Returns
     -------
