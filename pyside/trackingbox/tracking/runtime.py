@@ -576,9 +576,13 @@ class _Controllers:
 
         The setpoint is the measurement interpolated linearly between the two
         samples, as the compiled box sees it (NaN when either is missing).
+        Only the PI controllers (the box's law) move within a sample; a
+        sliding-mode controller steps once a sample.
         """
         dt = self._dt(t)
         for p in self.pairs:
+            if not isinstance(p.controller, ScaledPI):
+                continue
             s = view.samples[p.tag]
             sp = (1.0 - w) * float(s[k]) + w * float(s[k + 1])
             self._advance(p, sp, float(y[ridx[p.fmu_name]]), hold, dt)
