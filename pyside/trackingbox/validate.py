@@ -15,10 +15,14 @@ and the *time to converge*: the first time after which the tracked FMU's error,
 averaged over ``smooth`` samples against measurement noise, stays within
 ``band`` (a fraction of the variable's span ``|gain|·(max - min)``). Per
 tracked parameter: final value, range, whether it stayed within its bounds and
-the **agreement** with the runtime: ``max_k |p_modelica(t_k+1) - p_python[k]| / (max - min)``
-(the runtime's row ``k`` is the value it applies over ``[t_k, t_k+1]``, the exact
-discretisation of the box's law over that sample, so it is compared with the
-box at the end of the sample).
+the **agreement** with the runtime: ``max_k |p_modelica(t_k) - p_python[k]| / (max - min)``
+after the start-up hold (the runtime's row ``k`` is its controller's value at
+``t_k`` with the default linear error interpolation, the exact discretisation of
+the box's law; with ``interpolation="zoh"`` it is the value at ``t_k+1`` and is
+compared with the box there). The runtime integrates its controllers with the
+twin over sub-steps of each sample where a pair's variable answers within a
+sample (``substeps``, see :func:`~trackingbox.tracking.runtime.track`), so that
+the box's loop, which closes continuously, and the runtime's agree.
 
 Both runs start at the first sample because the twin's state at the start of
 the validation window is only known by simulating up to it. Both runs and the

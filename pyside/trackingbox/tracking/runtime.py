@@ -391,9 +391,13 @@ class _Twin:
                 "x": self.x.tolist() if self.x is not None else None}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
-                        grid: npt.NDArray[np.float64]) -> None:
+                        grid: npt.NDArray[np.float64], substeps: int = 1) -> None:
         """Put the twin at *t* as :meth:`state_dict` saved it: from its states, else by replaying the CSV."""
         x = state.get("x")
+        if x is None and substeps > 1:
+            log.warning("%s twin: no states in the checkpoint; the replay applies the recorded values once "
+                        "a sample, not the %d sub-steps of each, so the resumed run is close to, not "
+                        "identical with, an uninterrupted one", self.label, substeps)
         if x is not None and self.me:
             self.start(t, {n: float(v) for n, v in state["applied"].items()}, x)
             self.given = {n: float(v) for n, v in state.get("given", {}).items()}
@@ -862,7 +866,13 @@ class TrackingLoop:
         if substeps == "auto":
             if interpolation != "linear" or not self.twin.me:
                 return 1
-            return substeps_for(within_sample_gains(self))
+            try:
+                gains = within_sample_gains(self)
+            except SimulationError as exc:
+                log.warning("the twin failed in the one-sample probe that chooses the sub-steps (%s); "
+                            "one step per sample", exc)
+                return 1
+            return substeps_for(gains)
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
             raise ValueError(f"substeps must be a positive integer or 'auto', got {substeps!r}")
         n = int(substeps)
@@ -932,7 +942,8 @@ class TrackingLoop:
         for e in state["loop"].get("events", []):
             self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
         t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
-        self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid)
+        self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid,
+                                  substeps=self.substeps)
         if self.plain is not None:
             self.plain.load_state_dict(state["untracked_twin"] or {"x": None}, t=t_k, csv_path=self.csv_path,
                                        rows=self.k0, grid=self.grid)
