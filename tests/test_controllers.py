@@ -425,3 +425,29 @@ def test_linear_step_matches_a_fine_clamped_integration(u0: float, e0: float, e1
     pi.e_mem = mem
     assert pi.update(e1, 0.0) == pytest.approx(u, abs=1e-3)
     assert pi.e_mem == pytest.approx(m, abs=1e-3)
+
+
+@pytest.mark.parametrize("dt, e0, e1, mem", [(2.5, 5.0, -3.0, 40.0), (4.0, -20.0, 25.0, -5.0)])
+def test_linear_step_over_part_of_a_sample_matches_a_fine_integration(dt: float, e0: float, e1: float,
+                                                                     mem: float) -> None:
+    # the runtime's sub-steps: an update dt seconds after the previous one (dt < Ts) integrates the
+    # block's law over dt, not over the sample time; reference: 100 000 explicit Euler steps over dt
+    kp, ti, ts, te, u0 = 2.0, 5.0, 10.0, 1.0, 50.0
+    n = 100_000
+    h = dt / n
+    u, m = u0, mem
+    for i in range(n):
+        e = e0 + (e1 - e0) * (i * h) / dt
+        rate = kp * (e / ti + (e - m) / te)
+        if not ((u >= 100.0 and rate > 0.0) or (u <= 0.0 and rate < 0.0)):
+            u = min(max(u + h * rate, 0.0), 100.0)
+        m += h * (e - m) / te
+    pi = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, te=te, direction=1, p0=u0,
+                  interpolation="linear")
+    pi.update(e0, 0.0)
+    pi.e_mem = mem
+    assert pi.update(e1, 0.0, dt=dt) == pytest.approx(u, abs=1e-3)
+    assert pi.e_mem == pytest.approx(m, abs=1e-3)
+    zoh = ScaledPI(Scaling(0.0, 100.0, span=100.0), kp=kp, ti=ti, ts=ts, direction=1, p0=u0)
+    with pytest.raises(ValueError, match="zoh"):
+        zoh.update(1.0, 0.0, dt=dt)  # the held error steps whole samples only

@@ -116,20 +116,20 @@ def test_resumed_twice_writes_the_same_bytes_as_an_uninterrupted_run(case: Path,
     assert summary == expected
 
 
-def test_resume_without_fmu_states_replays_trajectory(case: Path, baseline: tuple[object, pd.DataFrame],
-                                                      tmp_path: Path) -> None:
+def test_resume_without_fmu_states_replays_trajectory(case: Path, tmp_path: Path) -> None:
     # a co-simulation twin has no accessible states: the checkpoint then has none and the
-    # runtime replays the recorded parameter trajectory
-    _, full = baseline
+    # runtime replays the recorded parameter trajectory (one value per sample: a co-simulation
+    # twin runs without sub-steps, which the CSV does not record)
     spec = load_spec(case)
-    track(spec, out_dir=tmp_path, max_steps=300, checkpoint_every=50)
+    full = pd.read_csv(track(spec, out_dir=tmp_path / "full", substeps=1).csv)
+    track(spec, out_dir=tmp_path, max_steps=300, checkpoint_every=50, substeps=1)
     ck = tmp_path / "checkpoint.json"
     data = json.loads(ck.read_text())
     data.pop("sha256")  # the seal: a hand-edited checkpoint is refused, so the test re-seals it
     data["twin"]["x"] = None
     data["untracked_twin"]["x"] = None
     CheckpointFile(ck, tmp_path / "tracking.csv").write(data)
-    df = pd.read_csv(track(spec, out_dir=tmp_path, resume=True).csv)
+    df = pd.read_csv(track(spec, out_dir=tmp_path, resume=True, substeps=1).csv)
     num = [c for c in full.columns if not c.startswith("mode:")]
     np.testing.assert_allclose(df[num].to_numpy(), full[num].to_numpy(), rtol=1e-5, atol=1e-8)
 
@@ -471,3 +471,59 @@ def test_tracked_twin_gets_the_predicted_mean_of_the_parameter_ramp() -> None:
     assert tw._applied({"k": 0.4})["k"] == pytest.approx(0.1)
     tw.given = {"k": 0.5}
     assert tw._applied({"k": 0.1}) == {"k": 0.0}  # clamped at the lower bound
+
+
+def test_substeps_for_by_hand() -> None:
+    # one step per sample while the within-sample loop gain is at most 0.01; then ceil(sqrt(g/0.01)),
+    # at most 8
+    from trackingbox.tracking.runtime import substeps_for
+
+    assert substeps_for({}) == 1
+    assert substeps_for({"a": 0.01, "b": 0.0}) == 1
+    assert substeps_for({"a": 0.011}) == 2
+    assert substeps_for({"a": 0.05, "b": 0.13}) == 4   # sqrt(13) = 3.6
+    assert substeps_for({"a": 0.62}) == 8               # sqrt(62) = 7.9
+    assert substeps_for({"a": 5.0}) == 8                # capped
+
+
+def test_within_sample_gain_of_the_first_order_twin_by_hand(case: Path, tmp_path: Path) -> None:
+    # x' = (u - x)/tau - k x from x(0) = 38 with u = 50: x(t) = xs + (38 - xs) exp(-(1/tau + k) t),
+    # xs = u/(1 + k tau). The probe moves k from its start 0.003 by a tenth of [0.001, 0.01] towards the
+    # middle (+0.0009) and compares x(10 s); the pair's steady-state answer to that move is 2551 x 0.0009.
+    from trackingbox.tracking.runtime import TrackingLoop, within_sample_gains
+    from trackingbox.tracking.tuning import pair_settings
+
+    def x10(k: float) -> float:
+        xs = 50.0 / (1.0 + k * TAU)
+        return xs + (38.0 - xs) * np.exp(-(1.0 / TAU + k) * 10.0)
+
+    fraction = abs(x10(0.0039) - x10(0.003)) / (2551.0 * 0.0009)
+    assert fraction == pytest.approx(0.1393, abs=1e-3)
+    spec = load_spec(case)
+    kp = pair_settings(spec.pairs[0], 0.001, 0.01, ts=10.0).kp
+    loop = TrackingLoop(spec, out_dir=tmp_path, untracked=False)
+    try:
+        gains = within_sample_gains(loop)
+        assert gains["k"] == pytest.approx(kp * fraction, rel=1e-4)
+        assert loop.substeps == 4  # ceil(sqrt(kp·fraction / 0.01)) with kp·fraction = 0.13
+    finally:
+        loop.close()
+
+
+def test_substeps_resume_writes_the_same_bytes_and_another_count_is_refused(case: Path, tmp_path: Path) -> None:
+    # with sub-steps the controllers move inside a sample; a checkpoint is still a restart point:
+    # stopped at row 150 and resumed, the run writes the uninterrupted run's bytes
+    spec = load_spec(case)
+    full = track(spec, out_dir=tmp_path / "full", checkpoint_every=50, substeps=3, untracked=False)
+    part = tmp_path / "part"
+    assert not track(spec, out_dir=part, max_steps=150, checkpoint_every=50, substeps=3, untracked=False).complete
+    with pytest.raises(SpecError, match="sub-steps"):
+        track(spec, out_dir=part, resume=True, checkpoint_every=50, substeps=1, untracked=False)
+    last = track(spec, out_dir=part, resume=True, checkpoint_every=50, substeps=3, untracked=False)
+    assert last.complete
+    assert last.csv.read_bytes() == full.csv.read_bytes()
+    one = pd.read_csv(track(spec, out_dir=tmp_path / "one", substeps=1, untracked=False).csv)
+    three = pd.read_csv(full.csv)
+    # the same law sampled finer: the same plant value at the end, another trajectory on the way
+    assert _k_end(three) == pytest.approx(K_PLANT, rel=0.01)
+    assert np.abs(three["parameter:k"] - one["parameter:k"]).max() > 1e-6

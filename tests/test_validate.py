@@ -115,7 +115,8 @@ def test_agreement_through_a_parameter_step_and_a_runtime_with_another_gain(step
     # must say so (> 0.01). (The twin is fast here, tau = 40 s for Ts = 10 s: the runtime's twin
     # sees the parameter one sample later than the box's, held over the sample where the box's
     # ramps; before the runtime applied the ramp's predicted mean this left 0.0078 here, and 0.0147
-    # for a 900 -> 1000 step, where kp x 2 gave 0.097 and Ti / 2 gave 0.074.)
+    # for a 900 -> 1000 step, where kp x 2 gave 0.097 and Ti / 2 gave 0.074; the sub-steps, which
+    # integrate the controller with the twin within the sample, take it to 0.0014.)
     import dataclasses
 
     from trackingbox.tracking.tuning import pair_settings
@@ -124,7 +125,11 @@ def test_agreement_through_a_parameter_step_and_a_runtime_with_another_gain(step
     spec = step_case["spec"]
     res = validate(spec, step_case["fmu"])
     assert res.parameters["hx.kht"].final == pytest.approx(950.0, rel=0.005)  # the plant's new value
-    assert res.agreement <= 0.01
+    assert res.agreement <= 0.003  # measured 0.0014 with the automatic sub-steps
+    # one step per sample reads the twin's answer to its own parameter a sample late, where the
+    # box's loop closes within the sample: farther from the box
+    one = validate(spec, step_case["fmu"], substeps=1)
+    assert one.agreement > 2.0 * res.agreement, (one.agreement, res.agreement)  # measured 0.0064
     pair = spec.pairs[0]
     p = spec.parameter(pair.parameter)
     tuned = pair_settings(pair, p.min, p.max, ts=spec.sample_time)

@@ -15,10 +15,14 @@ and the *time to converge*: the first time after which the tracked FMU's error,
 averaged over ``smooth`` samples against measurement noise, stays within
 ``band`` (a fraction of the variable's span ``|gain|·(max - min)``). Per
 tracked parameter: final value, range, whether it stayed within its bounds and
-the **agreement** with the runtime: ``max_k |p_modelica(t_k+1) - p_python[k]| / (max - min)``
-(the runtime's row ``k`` is the value it applies over ``[t_k, t_k+1]``, the exact
-discretisation of the box's law over that sample, so it is compared with the
-box at the end of the sample).
+the **agreement** with the runtime: ``max_k |p_modelica(t_k) - p_python[k]| / (max - min)``
+after the start-up hold (the runtime's row ``k`` is its controller's value at
+``t_k`` with the default linear error interpolation, the exact discretisation of
+the box's law; with ``interpolation="zoh"`` it is the value at ``t_k+1`` and is
+compared with the box there). The runtime integrates its controllers with the
+twin over sub-steps of each sample where a pair's variable answers within a
+sample (``substeps``, see :func:`~trackingbox.tracking.runtime.track`), so that
+the box's loop, which closes continuously, and the runtime's agree.
 
 Both runs start at the first sample because the twin's state at the start of
 the validation window is only known by simulating up to it. Both runs and the
@@ -38,7 +42,7 @@ import math
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -200,7 +204,8 @@ def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid
 
 
 def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None, band: float = 0.05,
-             smooth: int = 5, tolerance: float = 1e-6, interpolation: Interpolation = "linear") -> ValidationResult:
+             smooth: int = 5, tolerance: float = 1e-6, interpolation: Interpolation = "linear",
+             substeps: int | Literal["auto"] = "auto") -> ValidationResult:
     """Run the tracked FMU, the untracked twin and the Python runtime; compare on the validation window.
 
     Parameters
@@ -221,6 +226,8 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         The Python runtime's error interpolation (:func:`~trackingbox.tracking.runtime.track`).
         ``"linear"``: its row ``k`` is compared with the box at ``t_k``;
         ``"zoh"``: with the box at ``t_k+1``.
+    substeps : int or "auto"
+        The Python runtime's sub-steps per sample (:func:`~trackingbox.tracking.runtime.track`).
 
     Raises
     ------
@@ -250,7 +257,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
         run_dir = Path(work_dir) if work_dir is not None else Path(tmp)
         logger.info("running the Python tracking runtime (and the untracked twin)")
         tr = track(spec, out_dir=run_dir / "python", window="validation", untracked=True, tolerance=tolerance,
-                   view=view, interpolation=interpolation)
+                   view=view, interpolation=interpolation, substeps=substeps)
         py = pd.read_csv(tr.csv)
     window = tuple(float(v) for v in tr.window)
     grid = view.grid

@@ -69,10 +69,10 @@ one sample to the next (<code>interpolation=\"linear\"</code>). The second is
 what this block sees in a tracking box: the measurement is interpolated
 linearly between its samples and the twin's output is continuous. The Python
 tracking runtime uses it by default, so the compiled box and the runtime agree
-closely; what remains comes from the twin, which sees the parameter ramp within
-a sample in the box and a predicted mean held over the sample in the runtime
-(it grows with the sample time over the twin's time constant and with the size
-of the parameter's moves). Tests drive both with the same recorded error
+closely. Where the twin answers the parameter partly within a sample, the loop
+closes within the sample in this block, so the runtime integrates the
+controller with the twin over sub-steps of the sample (chosen from the loop
+gain within one sample, measured on the twin). Tests drive both with the same recorded error
 sequence, held and interpolated, and require the same outputs.
 The error memory starts at 0, in the block and in the Python class: without a
 start-up hold the proportional action acts on the whole initial error; start

@@ -68,6 +68,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any, Literal
 
 logger = logging.getLogger(__name__)
@@ -125,6 +126,70 @@ def _clamp(u: float, lo: float = 0.0, hi: float = 100.0) -> float:
 
 def _valid(x: float | None) -> bool:
     return x is not None and math.isfinite(x)
+
+
+class _ErrorMemory:
+    """The error memory of the blocks and the bookkeeping of the ``"linear"`` steps.
+
+    :class:`ScaledPI` and :class:`StateCompensator` both follow the error with
+    ``dm/dt = (e - m)/Te`` and, with an interpolated error, integrate the span
+    since the previous call. This holds that state (memory, previous error and
+    hold flag, mode), advances it and saves it.
+    """
+
+    te: float
+    mode: Mode
+    #: name of the output attribute saved with the memory (``u`` or ``m``)
+    _output: str
+
+    def _init_memory(self) -> None:
+        #: error memory: starts at 0 as in the block; None after a missing error
+        self.e_mem: float | None = 0.0
+        #: "linear" only: the error and the hold flag of the previous call
+        #: (None: no previous call, or its error was missing)
+        self.e_last: float | None = None
+        self.hold_last = True
+
+    def _advance_linear(self, e: float | None, hold: bool, dt: float,
+                        integrate: Callable[[float, float, float], None]) -> None:
+        """Move to the call with error *e*, the error linear since the previous one, *dt* s ago.
+
+        ``integrate(e0, e1, m0)`` advances the output over that span unless it
+        was held. A missing error cannot be followed: the memory restarts at
+        the next valid one, and the span after a missing error is frozen.
+        """
+        e0 = self.e_last
+        if e is None:
+            self.e_mem = None
+        elif e0 is None:
+            # first call (the memory is at its start, 0, as the block's at t = 0) or the first valid
+            # error after a missing one (nothing to interpolate over the sample: frozen, the memory restarts)
+            if self.e_mem is None:
+                self.e_mem = e
+        else:
+            m0 = e0 if self.e_mem is None else self.e_mem
+            if not self.hold_last:
+                integrate(e0, e, m0)
+            self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
+        self.e_last, self.hold_last = e, bool(hold)
+        mode: Mode = "hold" if hold or e is None else "auto"
+        if mode != self.mode:
+            logger.debug("%s: %s", type(self).__name__, mode)
+        self.mode = mode
+
+    # -- checkpointing -------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """JSON-serialisable state, for the tracking loop's checkpoints."""
+        return {self._output: getattr(self, self._output), "e_mem": self.e_mem, "mode": self.mode,
+                "e_last": self.e_last, "hold_last": self.hold_last}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a state produced by :meth:`state_dict`."""
+        setattr(self, self._output, float(state[self._output]))
+        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
+        self.mode = state["mode"]
+        self.e_last = None if state.get("e_last") is None else float(state["e_last"])
+        self.hold_last = bool(state.get("hold_last", True))
 
 
 class _ScaledOutput:
@@ -202,7 +267,7 @@ class _ScaledController(_ScaledOutput):
         self.mode = state["mode"]
 
 
-class ScaledPI(_ScaledOutput):
+class ScaledPI(_ScaledOutput, _ErrorMemory):
     """PI parameter controller on a 0-100 % output: the exact discretisation of ``ParameterController``.
 
     The continuous law of ``TrackingBox.Blocks.ParameterController`` is
@@ -266,6 +331,8 @@ class ScaledPI(_ScaledOutput):
     (5.0, 5.0, 5.5)
     """
 
+    _output = "u"
+
     def __init__(self, scaling: Scaling, *, kp: float, ti: float, ts: float, direction: int, p0: float,
                  te: float | None = None, interpolation: Interpolation = "zoh") -> None:
         super().__init__(scaling, ts=ts, direction=direction, p0=p0)
@@ -280,20 +347,16 @@ class ScaledPI(_ScaledOutput):
         self.ti = float(ti)
         self.te = te
         self.interpolation: Interpolation = interpolation
-        #: error memory (%): starts at 0 as in the block; None after a missing error
-        self.e_mem: float | None = 0.0
-        #: "linear" only: the error (%) and the hold flag of the previous call
-        #: (None: no previous call, or its error was missing)
-        self.e_last: float | None = None
-        self.hold_last = True
+        self._init_memory()  # error memory (%), previous error and hold flag
 
     @property
     def lead(self) -> int:
         """Samples by which :meth:`update`'s value leads its call: 1 (``"zoh"``) or 0 (``"linear"``)."""
         return 1 if self.interpolation == "zoh" else 0
 
-    def update(self, setpoint: float | None, process_value: float | None, *, hold: bool = False) -> float:
-        """Advance one sample with the error held over it; return the parameter value at its end.
+    def update(self, setpoint: float | None, process_value: float | None, *, hold: bool = False,
+               dt: float | None = None) -> float:
+        """Advance one sample and return the parameter value (see *interpolation* for which time).
 
         Parameters
         ----------
@@ -303,9 +366,15 @@ class ScaledPI(_ScaledOutput):
             The twin's simulated sensor; NaN/None puts the controller on hold.
         hold : bool
             Force a hold (start-up, stoppage, flagged data, solver recovery).
+        dt : float, optional
+            ``"linear"`` only: the time (s) since the previous call, when it is
+            not the sample time (the tracking runtime's sub-steps, which
+            integrate the controller with the twin over parts of a sample).
         """
         if self.interpolation == "linear":
-            return self._update_linear(setpoint, process_value, hold)
+            return self._update_linear(setpoint, process_value, hold, self.ts if dt is None else float(dt))
+        if dt is not None and dt != self.ts:
+            raise ValueError(f"interpolation 'zoh' steps one sample time ({self.ts} s), got dt = {dt}")
         if not (_valid(setpoint) and _valid(process_value)):
             if self.mode != "hold":
                 logger.debug("ScaledPI: hold (missing value)")
@@ -324,44 +393,18 @@ class ScaledPI(_ScaledOutput):
         self.e_mem = e + (m - e) * math.exp(-self.ts / self.te)
         return self.value
 
-    def _update_linear(self, setpoint: float | None, process_value: float | None, hold: bool) -> float:
-        """``"linear"``: integrate the sample since the previous call, the error linear between the two."""
+    def _update_linear(self, setpoint: float | None, process_value: float | None, hold: bool, dt: float) -> float:
+        """``"linear"``: integrate the *dt* s since the previous call, the error linear between the two."""
+        if not (dt > 0.0 and math.isfinite(dt)):
+            raise ValueError(f"the time since the previous update must be positive, got dt = {dt}")
         e = self.scaling.error_percent(float(setpoint), float(process_value)) \
             if _valid(setpoint) and _valid(process_value) else None  # type: ignore[arg-type]
-        e0, held = self.e_last, self.hold_last
-        if e is None:
-            self.e_mem = None  # cannot follow a missing error: restart at the next valid one
-        elif e0 is None:
-            # first call (the memory is at its start, 0, as the block's at t = 0) or the first valid
-            # error after a missing one (nothing to interpolate over the sample: frozen, the memory restarts)
-            if self.e_mem is None:
-                self.e_mem = e
-        else:
-            m0 = e0 if self.e_mem is None else self.e_mem
-            if not held:
-                self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e, m0,
-                                                   self.ts, self.te)
-            self.e_mem = _memory_linear(e0, e, m0, self.ts, self.te)
-        self.e_last, self.hold_last = e, bool(hold)
-        mode: Mode = "hold" if hold or e is None else "auto"
-        if mode != self.mode:
-            logger.debug("ScaledPI: %s", mode)
-        self.mode = mode
+
+        def integrate(e0: float, e1: float, m0: float) -> None:
+            self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
+
+        self._advance_linear(e, hold, dt, integrate)
         return self.value
-
-    # -- checkpointing -------------------------------------------------------
-    def state_dict(self) -> dict[str, Any]:
-        """JSON-serialisable state, for the tracking loop's checkpoints."""
-        return {"u": self.u, "e_mem": self.e_mem, "mode": self.mode, "e_last": self.e_last,
-                "hold_last": self.hold_last}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state_dict`."""
-        self.u = float(state["u"])
-        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
-        self.mode = state["mode"]
-        self.e_last = None if state.get("e_last") is None else float(state["e_last"])
-        self.hold_last = bool(state.get("hold_last", True))
 
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
@@ -495,7 +538,7 @@ class SlidingMode(_ScaledController):
         return self.ts * self.eta * _clamp(s / self.phi, -1.0, 1.0)
 
 
-class StateCompensator:
+class StateCompensator(_ErrorMemory):
     """Direct state compensation: the exact discretisation of ``TrackingBox.Blocks.StateCompensation``.
 
     A correction flow that keeps a twin level on the plant's. The block's law
@@ -536,6 +579,8 @@ class StateCompensator:
     0.999955
     """
 
+    _output = "m"
+
     def __init__(self, gain: float, *, ts: float, te: float | None = None,
                  interpolation: Interpolation = "zoh") -> None:
         if interpolation not in ("zoh", "linear"):
@@ -551,11 +596,9 @@ class StateCompensator:
         self.ts = float(ts)
         self.te = te
         self.m = 0.0
-        self.e_mem: float | None = 0.0
         self.mode: Mode = "hold"
         self.interpolation: Interpolation = interpolation
-        self.e_last: float | None = None
-        self.hold_last = True
+        self._init_memory()
 
     def update(self, measured: float | None, simulated: float | None, *, hold: bool = False) -> float:
         """Advance one sample; return the correction (kg/s) at its end (``"zoh"``) or at this call (``"linear"``)."""
@@ -580,35 +623,14 @@ class StateCompensator:
         """The sample since the previous call with the difference linear: ``m += K·(s·Ts + c·(1 - a))``."""
         e = float(measured) - float(simulated) \
             if _valid(measured) and _valid(simulated) else None  # type: ignore[arg-type]
-        e0 = self.e_last
-        if e is None:
-            self.e_mem = None
-        elif e0 is None:
-            if self.e_mem is None:
-                self.e_mem = e
-        else:
-            m0 = e0 if self.e_mem is None else self.e_mem
-            if not self.hold_last:
-                s = (e - e0) / self.ts
-                c = e0 - m0 - s * self.te
-                self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
-            self.e_mem = _memory_linear(e0, e, m0, self.ts, self.te)
-        self.e_last, self.hold_last = e, bool(hold)
-        self.mode = "hold" if hold or e is None else "auto"
+
+        def integrate(e0: float, e1: float, m0: float) -> None:
+            s = (e1 - e0) / self.ts
+            c = e0 - m0 - s * self.te
+            self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
+
+        self._advance_linear(e, hold, self.ts, integrate)
         return self.m
-
-    def state_dict(self) -> dict[str, Any]:
-        """JSON-serialisable state, for the tracking loop's checkpoints."""
-        return {"m": self.m, "e_mem": self.e_mem, "mode": self.mode, "e_last": self.e_last,
-                "hold_last": self.hold_last}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore a state produced by :meth:`state_dict`."""
-        self.m = float(state["m"])
-        self.e_mem = None if state["e_mem"] is None else float(state["e_mem"])
-        self.mode = state["mode"]
-        self.e_last = None if state.get("e_last") is None else float(state["e_last"])
-        self.hold_last = bool(state.get("hold_last", True))
 
 
 def direction_from_gain(gain: float) -> int:

@@ -13,7 +13,9 @@
 3. writes one CSV row (so the output is on disk as it is produced and memory
    stays flat);
 4. sets the new parameter values and correction flows and integrates both
-   twins to ``t_{k+1}``.
+   twins to ``t_{k+1}``: with ``substeps`` the tracked twin in parts of the
+   sample, the parameter controllers advancing after each part (see
+   :func:`track`).
 
 The controllers hold (output frozen, no integration) during the start-up hold
 ``t < tracking.hold_until``, while their measured tag or simulated variable is
@@ -84,7 +86,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 3  # 3: error interpolation in the controllers; 2: one entry per part of the loop
+_CHECKPOINT_VERSION = 4  # 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -390,9 +392,13 @@ class _Twin:
                 "x": self.x.tolist() if self.x is not None else None}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
-                        grid: npt.NDArray[np.float64]) -> None:
+                        grid: npt.NDArray[np.float64], substeps: int = 1) -> None:
         """Put the twin at *t* as :meth:`state_dict` saved it: from its states, else by replaying the CSV."""
         x = state.get("x")
+        if x is None and substeps > 1:
+            log.warning("%s twin: no states in the checkpoint; the replay applies the recorded values once "
+                        "a sample, not the %d sub-steps of each, so the resumed run is close to, not "
+                        "identical with, an uninterrupted one", self.label, substeps)
         if x is not None and self.me:
             self.start(t, {n: float(v) for n, v in state["applied"].items()}, x)
             self.given = {n: float(v) for n, v in state.get("given", {}).items()}
@@ -547,11 +553,45 @@ def _read_rows(path: Path, upto: int, columns: Mapping[str, str], grid: npt.NDAr
 class _Controllers:
     """The parameter controllers of the ``[[pairs]]`` and their missing-data bookkeeping."""
 
-    def __init__(self, pairs: Sequence[_Pair]) -> None:
+    def __init__(self, pairs: Sequence[_Pair], ts: float) -> None:
         self.pairs = list(pairs)
         self.names = [p.parameter for p in self.pairs]
+        self.ts = float(ts)
         #: tag -> time its measurement went missing (None while present)
         self.missing: dict[str, float | None] = {p.tag: None for p in self.pairs}
+        #: time of the last update (a sample or a sub-step); None before the first
+        self.last_time: float | None = None
+
+    def _dt(self, t: float) -> float | None:
+        """Time since the last update, or None when it is the sample time (or there was none)."""
+        if self.last_time is None:
+            return None
+        dt = t - self.last_time
+        return None if math.isclose(dt, self.ts, rel_tol=1e-12) else dt
+
+    def _advance(self, p: _Pair, sp: float, pv: float, hold: bool, dt: float | None) -> None:
+        if dt is not None and isinstance(p.controller, ScaledPI):
+            p.controller.update(sp, pv, hold=hold, dt=dt)
+        else:
+            p.controller.update(sp, pv, hold=hold)
+
+    def substep(self, t: float, w: float, k: int, y: npt.NDArray[np.float64], ridx: Mapping[str, int],
+                view: MeasurementView, hold: bool) -> None:
+        """Advance the controllers to *t* inside the sample ``[t_k, t_k+1]``, a fraction *w* of it.
+
+        The setpoint is the measurement interpolated linearly between the two
+        samples, as the compiled box sees it (NaN when either is missing).
+        Only the PI controllers (the box's law) move within a sample; a
+        sliding-mode controller steps once a sample.
+        """
+        dt = self._dt(t)
+        for p in self.pairs:
+            if not isinstance(p.controller, ScaledPI):
+                continue
+            s = view.samples[p.tag]
+            sp = (1.0 - w) * float(s[k]) + w * float(s[k + 1])
+            self._advance(p, sp, float(y[ridx[p.fmu_name]]), hold, dt)
+        self.last_time = t
 
     def values(self) -> dict[str, float]:
         """Parameter name -> the value its controller outputs."""
@@ -561,6 +601,7 @@ class _Controllers:
                hold: bool, event: Callable[..., None]) -> list[str]:
         """Advance every controller one sample (setpoint: the measured tag); return their modes."""
         modes = []
+        dt = self._dt(t)
         for p in self.pairs:
             sp = float(view.samples[p.tag][k])
             pv = float(y[ridx[p.fmu_name]])
@@ -573,18 +614,20 @@ class _Controllers:
                 event(t, "resumed", f"tag {p.tag!r} back at t = {t:g} s after {t - self.missing[p.tag]:g} s; "
                       f"controller of {p.parameter!r} resumes (bumpless)", logging.INFO)
                 self.missing[p.tag] = None
-            p.controller.update(sp, pv, hold=hold)
+            self._advance(p, sp, pv, hold, dt)
             modes.append(p.controller.mode)
+        self.last_time = t
         return modes
 
     def state_dict(self) -> dict[str, Any]:
         return {"controllers": {p.parameter: p.controller.state_dict() for p in self.pairs},
-                "missing": dict(self.missing)}
+                "missing": dict(self.missing), "last_time": self.last_time}
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         for p in self.pairs:
             p.controller.load_state_dict(state["controllers"][p.parameter])
         self.missing = {k: _from_json_float(v) for k, v in state["missing"].items()}
+        self.last_time = _from_json_float(state["last_time"])
 
 
 class _Compensation:
@@ -672,6 +715,64 @@ class _Output:
         self._writer = csv.writer(self._fh)
 
 
+# --------------------------------------------------------------------------- sub-steps
+
+#: Largest within-sample loop gain the automatic choice leaves to one step per sample ...
+SUBSTEP_GAIN = 0.01
+#: ... and the most sub-steps it chooses.
+MAX_SUBSTEPS = 8
+
+
+def within_sample_gains(loop: TrackingLoop) -> dict[str, float]:
+    """Per PI pair: ``kp`` times the fraction of its steady-state response the twin shows one sample after a step.
+
+    The compiled box's controller sees the twin answer its own parameter
+    moves continuously; a runtime that reads the twin once a sample sees that
+    answer a sample late. How much that matters is the loop gain closed within
+    a sample: the proportional gain times the part of the pair's steady-state
+    gain the variable reaches within one sample time. It is measured on the
+    twin from the first sample (before the run starts): one sample with the
+    start values, and one per pair with its parameter moved by a tenth of its
+    range towards the middle, all else equal.
+    """
+    assert loop.twin is not None
+    pairs = [p for p in loop.controllers.pairs if isinstance(p.controller, ScaledPI)]
+    if not pairs or loop.n_rows < 2:
+        return {}
+    tw = loop.twin
+    t1 = float(loop.grid[1])
+    values = {**loop.controllers.values(), **{c: 0.0 for c in loop.compensation.names}}
+    names = [p.fmu_name for p in pairs]
+
+    def answer(changed: Mapping[str, float]) -> npt.NDArray[np.float64]:
+        run = tw.model.stepper(start_time=0.0, parameters={**tw.base, **values, **changed}, inputs=tw.inputs)
+        run.step(t1)
+        y = np.asarray(run.get(names), dtype=float)
+        run.finish()
+        return y
+
+    y0 = answer({})
+    gains = {}
+    for j, p in enumerate(pairs):
+        ctrl = p.controller
+        lo, hi = p.bounds
+        delta = 0.1 * (hi - lo) * (1.0 if ctrl.u < 50.0 else -1.0)
+        dy = float(answer({p.parameter: ctrl.value + delta})[j] - y0[j])
+        fraction = abs(dy) / (ctrl.scaling.span * abs(delta) / (hi - lo))
+        gains[p.parameter] = ctrl.kp * fraction if math.isfinite(fraction) else 0.0
+        log.info("pair %s -> %s: %.3g of the steady-state answer within one sample; within-sample loop gain %.3g",
+                 p.tag, p.parameter, fraction, gains[p.parameter])
+    return gains
+
+
+def substeps_for(gains: Mapping[str, float]) -> int:
+    """Sub-steps per sample for within-sample loop gains (:func:`within_sample_gains`)."""
+    g = max(gains.values(), default=0.0)
+    if g <= SUBSTEP_GAIN:
+        return 1
+    return min(MAX_SUBSTEPS, math.ceil(math.sqrt(g / SUBSTEP_GAIN)))
+
+
 # --------------------------------------------------------------------------- the loop
 
 class TrackingLoop:
@@ -697,7 +798,8 @@ class TrackingLoop:
     def __init__(self, spec: Spec, *, out_dir: str | Path, window: Window = "all",
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
-                 view: MeasurementView | None = None, interpolation: Interpolation = "linear") -> None:
+                 view: MeasurementView | None = None, interpolation: Interpolation = "linear",
+                 substeps: int | Literal["auto"] = "auto") -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -725,7 +827,7 @@ class TrackingLoop:
         pairs = [_make_controller(spec, p, self.view.samples[p.variable], interpolation) for p in spec.pairs]
         for p in pairs:
             _check_authority(p, self.view.samples[p.tag], self.events)
-        self.controllers = _Controllers(pairs)
+        self.controllers = _Controllers(pairs, ts)
         self.compensation = _Compensation([
             _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts, interpolation=interpolation),
                    StateCompensator(s.gain, ts=ts, interpolation=interpolation))
@@ -756,6 +858,33 @@ class TrackingLoop:
             except BaseException:
                 self.twin.close()
                 raise
+        #: hold flag of the current sample (given at its start, used by its sub-steps)
+        self.hold_k = True
+        self.substeps = self._substeps(substeps, interpolation)
+
+    def _substeps(self, substeps: int | Literal["auto"], interpolation: Interpolation) -> int:
+        """Sub-steps per sample: the given number, or the automatic choice (see :func:`track`)."""
+        assert self.twin is not None
+        if substeps == "auto":
+            if interpolation != "linear" or not self.twin.me:
+                return 1
+            try:
+                gains = within_sample_gains(self)
+            except SimulationError as exc:
+                log.warning("the twin failed in the one-sample probe that chooses the sub-steps (%s); "
+                            "one step per sample", exc)
+                return 1
+            return substeps_for(gains)
+        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+            raise ValueError(f"substeps must be a positive integer or 'auto', got {substeps!r}")
+        n = int(substeps)
+        if n > 1 and interpolation != "linear":
+            raise ValueError("sub-steps integrate the controllers with the twin for an interpolated error: "
+                             f"they need interpolation='linear', not {interpolation!r}")
+        if n > 1 and not self.twin.me:
+            raise ValueError(f"sub-steps need a model-exchange twin (its states restart a resumed run); "
+                             f"{self.spec.twin} is co-simulation only")
+        return n
 
     # ------------------------------------------------------------------ state
 
@@ -772,6 +901,7 @@ class TrackingLoop:
             "rows_total": self.n_rows,
             "window": self.window,
             "interpolation": self.interpolation,
+            "substeps": self.substeps,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
@@ -790,6 +920,10 @@ class TrackingLoop:
                 or not math.isclose(float(state.get("sample_time", -1)), self.ts):
             raise SpecError(f"checkpoint {self.ckpt_path} was written for a different spec or version; "
                             "run without --resume to start over")
+        if state.get("substeps") != self.substeps:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with {state.get('substeps')} sub-steps per "
+                            f"sample, not {self.substeps}; resume with substeps={state.get('substeps')} or run "
+                            "without --resume")
         if state.get("interpolation") != self.interpolation:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with interpolation "
                             f"{state.get('interpolation')!r}, not {self.interpolation!r}; run without --resume")
@@ -810,7 +944,8 @@ class TrackingLoop:
         for e in state["loop"].get("events", []):
             self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
         t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
-        self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid)
+        self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid,
+                                  substeps=self.substeps)
         if self.plain is not None:
             self.plain.load_state_dict(state["untracked_twin"] or {"x": None}, t=t_k, csv_path=self.csv_path,
                                        rows=self.k0, grid=self.grid)
@@ -869,31 +1004,69 @@ class TrackingLoop:
         if len(self.events) < 1000:
             self.events.append(TrackingEvent(float(t), kind, message))
 
-    def _safe_step(self, tw: _Twin, k: int, values: dict[str, float]) -> bool:
-        """Step *tw* from row k to k+1; recover from a solver failure. True if it had to recover."""
+    def _step_tracked(self, k: int, values: dict[str, float]) -> bool:
+        """Step the tracked twin from row k to k+1, with the controllers on it at every sub-step.
+
+        With :attr:`substeps` ``n > 1`` the sample is cut into ``n`` equal
+        parts; after each (but the last, which row k+1 takes) the controllers
+        read the twin and advance with the measurement interpolated, and the
+        twin gets their new values: the box's continuous loop, sampled ``n``
+        times finer. True if the twin had to recover from a solver failure
+        (the controllers then stay as they are for the rest of the sample).
+        """
+        assert self.twin is not None
+        n = self.substeps
+        if n == 1:
+            return self._safe_step(self.twin, k, values)
+        t_k, t_next = float(self.grid[k]), float(self.grid[k + 1])
+        h = (t_next - t_k) / n
+        t_from = t_k
+        recovered = False
+        for j in range(1, n + 1):
+            t_to = t_next if j == n else t_k + j * h
+            recovered = self._safe_step(self.twin, k, values, t_from, t_to) or recovered
+            t_from = t_to
+            if j < n and not recovered:
+                y = self.twin.get(self.read)
+                self.controllers.substep(t_to, j / n, k, y, self.ridx, self.view, self.hold_k)
+                values = {**values, **self.controllers.values()}
+        return recovered
+
+    def _safe_step(self, tw: _Twin, k: int, values: dict[str, float], t_from: float | None = None,
+                   t_to: float | None = None) -> bool:
+        """Step *tw* from row k to k+1 (or *t_from* to *t_to* within); recover from a solver failure.
+
+        True if it had to recover.
+        """
         grid = self.grid
-        t_k, t_next = float(grid[k]), float(grid[k + 1])
+        t_k = float(grid[k])
+        t_from = t_k if t_from is None else t_from
+        t_next = float(grid[k + 1]) if t_to is None else t_to
         try:
             tw.step(t_next, values)
             return False
         except SimulationError as exc:
-            self.event(t_k, "solver-failure", f"{tw.label} twin failed between {t_k:g} s and {t_next:g} s: {exc}")
+            self.event(t_from, "solver-failure",
+                       f"{tw.label} twin failed between {t_from:g} s and {t_next:g} s: {exc}")
         self.output.flush()
         try:
-            if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
-                tw.start(t_k, values, tw.x)
+            if tw.me and tw.x is not None and math.isclose(tw.x_time, t_from, abs_tol=1e-9 * max(1.0, t_from)):
+                tw.start(t_from, values, tw.x)
             else:
                 tw.replay_csv(self.csv_path, k, grid)
                 tw.stepper.set(values)
                 tw.applied.update(values)
+                if t_from > t_k:
+                    tw.step(t_from, values)
             tw.step(t_next, values)
-            self.event(t_k, "recovered", f"{tw.label} twin re-initialised from its state at {t_k:g} s and continued")
+            self.event(t_from, "recovered",
+                       f"{tw.label} twin re-initialised from its state at {t_from:g} s and continued")
             return True
         except SimulationError as exc:
-            self.event(t_k, "solver-failure", f"{tw.label} twin failed again after re-initialisation: {exc}")
-        tw.start(t_k, values)  # cold start: fresh initialisation at t_k
+            self.event(t_from, "solver-failure", f"{tw.label} twin failed again after re-initialisation: {exc}")
+        tw.start(t_from, values)  # cold start: fresh initialisation at t_from
         tw.step(t_next, values)  # a third failure propagates
-        self.event(t_k, "cold-start", f"{tw.label} twin cold-started (fresh initialisation) at {t_k:g} s")
+        self.event(t_from, "cold-start", f"{tw.label} twin cold-started (fresh initialisation) at {t_from:g} s")
         return True
 
     def _row(self, k: int) -> tuple[dict[str, float], dict[str, float]]:
@@ -910,6 +1083,7 @@ class TrackingLoop:
             np.array([plan.untracked_table[n][k] for n in read]) if plan.untracked_table is not None
             else np.full(len(read), np.nan))
         hold_all = t < self.hold_until - 1e-9 or bool(view.stopped[k]) or t < self.recovery_until - 1e-9
+        self.hold_k = hold_all
         modes = self.controllers.update(t, k, y, ridx, view, hold_all, self.event)
         for s in self.compensation.states:
             self.output.sstats[s.tag].add(float(y[ridx[s.variable]]))
@@ -949,7 +1123,7 @@ class TrackingLoop:
             if k == n_rows - 1:
                 self.k += 1
                 break
-            recovered = self._safe_step(self.twin, k, values)
+            recovered = self._step_tracked(k, values)
             if self.plain is not None:
                 try:
                     self._safe_step(self.plain, k, dict(corr_u))
@@ -1033,6 +1207,7 @@ def track(
     tolerance: float = 1e-6,
     view: MeasurementView | None = None,
     interpolation: Interpolation = "linear",
+    substeps: int | Literal["auto"] = "auto",
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -1073,6 +1248,21 @@ def track(
         the parameter of row ``k`` is the controller's value at ``t_k``, held
         over ``[t_k, t_k+1]``. ``"zoh"``: the error held over the sample; the
         parameter of row ``k`` is the value at ``t_k+1``, applied from ``t_k``.
+    substeps : int or "auto"
+        ``"linear"`` only: integrate the PI controllers with the tracked twin
+        over this many equal parts of each sample. After each part but the
+        last the controllers read the twin, take the measurement interpolated
+        between the two samples, advance and give the twin their new values,
+        so a pair whose variable answers its parameter within a sample closes
+        its loop within the sample, as in the compiled box (where the loop is
+        continuous). Hold flags, state compensation, the CSV rows and the
+        untracked twin stay per sample. ``"auto"`` (default): one part when
+        every pair's within-sample loop gain (:func:`within_sample_gains`,
+        measured on the twin before the run) is at most
+        :data:`SUBSTEP_GAIN`, else ``ceil(sqrt(g / SUBSTEP_GAIN))`` for the
+        largest, at most :data:`MAX_SUBSTEPS`. Needs a model-exchange twin
+        (``"auto"`` chooses 1 for a co-simulation one). A checkpoint records
+        the count; resuming with another is refused.
 
     Returns
     -------
@@ -1088,7 +1278,7 @@ def track(
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
-                        view=view, interpolation=interpolation)
+                        view=view, interpolation=interpolation, substeps=substeps)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
