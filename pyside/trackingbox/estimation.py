@@ -685,6 +685,7 @@ def estimate(
     progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
     global_grid: float | None = None,
+    refine_grid: float | None = None,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -718,6 +719,12 @@ def estimate(
     global_grid
         Grid step (s) of the global search's cost; default :data:`DEFAULT_GLOBAL_GRID`
         (``sample_time`` or less: the full grid).
+    refine_grid
+        Grid step (s) of the refinement's cost, built as the global search's
+        (:func:`coarsen`); default: the full grid. A run costs about in proportion
+        to its grid points, so a coarse grid makes the refinement several times
+        cheaper; the result and its cost are then reported on the full grid (and the
+        refinement is dropped if it is worse there than where it started).
 
     Returns
     -------
@@ -732,7 +739,7 @@ def estimate(
     try:
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
-                         checkpoint=checkpoint, global_grid=global_grid)
+                         checkpoint=checkpoint, global_grid=global_grid, refine_grid=refine_grid)
     finally:
         close_models()
 
@@ -900,7 +907,8 @@ def _refine(train: Objective, problem: Problem, pool: Any, *, best: tuple[np.nda
 def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
-              checkpoint: str | Path | None, global_grid: float | None) -> EstimationResult:
+              checkpoint: str | Path | None, global_grid: float | None,
+              refine_grid: float | None = None) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
@@ -938,8 +946,15 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                     "seconds": time.perf_counter() - t_start, "history": history}))
             evaluations += n_global
         if refine:
-            best_x, best_cost, n_local = _refine(
-                train, problem, pool, best=(best_x, best_cost), iterations=refine_iterations,
+            fine, refine_cost = train, best_cost
+            stride = max(1, int(math.floor((refine_grid or problem.sample_time) / problem.sample_time + 1e-9)))
+            if stride > 1:
+                fine = Objective(replace(problem, sample_time=problem.sample_time * stride),
+                                 coarsen(training, stride))
+                refine_cost = fine(best_x)
+                evaluations += 1
+            refined_x, refined_cost, n_local = _refine(
+                fine, problem, pool, best=(best_x, refine_cost), iterations=refine_iterations,
                 progress=progress,
                 checkpoint=lambda k, x, c, e: _write_checkpoint(ckpt, {
                     "stage": "refine", "iteration": k, "best_cost": best_cost,
@@ -948,6 +963,13 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                     "evaluations": evaluations + e, "seconds": time.perf_counter() - t_start,
                     "history": history}))
             evaluations += n_local
+            if stride == 1:
+                best_x, best_cost = refined_x, refined_cost
+            elif not np.array_equal(refined_x, best_x):
+                full_cost = train(refined_x)  # back on the full grid
+                evaluations += 1
+                if full_cost <= best_cost:
+                    best_x, best_cost = refined_x, full_cost
             history.append(best_cost)
             if progress is not None:
                 progress("local", 1, 1, best_cost)

@@ -50,7 +50,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the null model's estimation (default 0)")
     p.add_argument("--workers", type=int, default=1, help="processes for the estimations (default 1)")
     p.add_argument("--maxiter", type=int, default=None,
-                   help="generations of the null model's global search (default: estimate's)")
+                   help="generations of the null model's global search (default 0: least-squares "
+                        "refinement from the spec's starts only; give one when the starts are far off)")
     p.add_argument("--warmup", type=float, default=None, metavar="SECONDS",
                    help="unscored warm-up before each window (default: estimate's)")
     p.set_defaults(func=run)
