@@ -73,7 +73,11 @@ class DiagnoseSettings:
         (:func:`trackingbox.diagnose.residuals.polish`), and a spec's starts are
         normally an estimate already; give a number where they are far off.
     fit_iterations
-        Refinement iterations of each candidate's estimation.
+        Refinement iterations of each candidate's estimation; None: sized to its number of
+        parameters ``n`` (:func:`iterations_for`, :data:`FIT_RUNS` runs a pass, at most 8).
+    null_iterations
+        Refinement iterations of the null estimation; None: sized to the spec's number of
+        candidates (:func:`iterations_for`, :data:`NULL_RUNS` runs a pass).
     grid
         Grid step (s) of the cost the estimations (null and candidates) refine on
         (``refine_grid`` of :func:`trackingbox.estimation.estimate`; a run's cost grows
@@ -84,7 +88,8 @@ class DiagnoseSettings:
     relinearise
         How many of the best sensor candidates are screened again around where their joint
         fit moved the spec's candidates (:func:`trackingbox.diagnose.screen.screen`; each
-        costs ``2 (1 + n)`` runs for ``n`` candidates).
+        costs ``2 (1 + n)`` full-grid runs for ``n`` candidates); None: three, but only one
+        when ``n`` is larger than 3.
     """
 
     effects: tuple[str, ...] = ()
@@ -96,9 +101,25 @@ class DiagnoseSettings:
     workers: int | None = None
     maxiter: int | None = None
     warmup: float | None = None
-    fit_iterations: int = 8
+    fit_iterations: int | None = None
+    null_iterations: int | None = None
     grid: float | None = 60.0
-    relinearise: int = 3
+    relinearise: int | None = None
+
+
+#: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
+NULL_RUNS = 120
+#: Runs a refinement pass of a candidate's estimation may cost about (:func:`iterations_for`).
+FIT_RUNS = 64
+
+
+def iterations_for(n_parameters: int, runs: int, *, least: int = 3, most: int = 20) -> int:
+    """Least-squares iterations that cost about *runs* simulations for *n_parameters* (``1 + n`` each).
+
+    >>> iterations_for(1, 64), iterations_for(15, 64), iterations_for(14, 120), iterations_for(40, 64)
+    (20, 4, 8, 3)
+    """
+    return max(least, min(most, runs // (1 + max(n_parameters, 0))))
 
 
 @dataclass(frozen=True)
@@ -238,9 +259,11 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         raise SpecError("; ".join(f"unknown effect {e!r}{did_you_mean(e, sorted(effects))}" for e in unknown))
     if progress is not None:
         progress("null", 0, 1)
+    n_candidates = len(list(spec.parameters))
     options = {"seed": settings.seed, "workers": settings.workers,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
-               "refine_grid": settings.grid}
+               "refine_grid": settings.grid,
+               "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     found = where(spec, null=null, estimate_options=options)
     if progress is not None:
         progress("null", 1, 1)
@@ -253,7 +276,9 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     try:
         from .fit import FitBudget, fit_candidate, screen_compiled
 
-        budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations, workers=settings.workers,
+        # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
+        budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
+                           or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=settings.workers,
                            warmup=settings.warmup, grid=settings.grid)
         compiled = None
         if settings.compile:
@@ -268,7 +293,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
 
         clock.start("screen")
         screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress,
-                          relinearise=settings.relinearise)
+                          relinearise=(settings.relinearise if settings.relinearise is not None
+                                       else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
             best = [c for c in screened if c.stage != "skipped" and c.fit is None
