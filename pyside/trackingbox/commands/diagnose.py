@@ -48,7 +48,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--fit-best", type=int, default=2, metavar="N",
                    help="candidates fitted properly with --compile (default 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the null model's estimation (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="processes for the estimations (default 1)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes for the estimations (default: 2 when the spec has more than 3 candidates, else 1)")
     p.add_argument("--maxiter", type=int, default=None,
                    help="generations of the null model's global search (default 0: least-squares "
                         "refinement from the spec's starts only; give one when the starts are far off)")

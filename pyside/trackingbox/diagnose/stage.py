@@ -63,8 +63,12 @@ class DiagnoseSettings:
         Where ``<Twin>Diagnosed.mo`` and the patched spec are written (None: not written).
     work_dir
         Folder for patches and FMUs of the fits (None: a temporary folder; ``out_dir/work`` when given).
-    seed, workers, warmup
+    seed, warmup
         The null estimation's options (:func:`trackingbox.estimation.estimate`).
+    workers
+        Processes for the estimations (null and candidates); None: two (at most the
+        machine's cores) when the spec has more than three candidates, whose Jacobians
+        then spread over them, else one (a worker's start-up is not worth it).
     maxiter
         Generations of the null estimation's global search; None (default): 0, the
         least-squares refinement from the spec's starts only, whose cost grows with the
@@ -260,7 +264,10 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     if progress is not None:
         progress("null", 0, 1)
     n_candidates = len(list(spec.parameters))
-    options = {"seed": settings.seed, "workers": settings.workers,
+    workers = settings.workers
+    if workers is None:
+        workers = min(2, os.cpu_count() or 1) if n_candidates > 3 else 1
+    options = {"seed": settings.seed, "workers": workers,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
                "refine_grid": settings.grid,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
@@ -278,7 +285,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
 
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
-                           or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=settings.workers,
+                           or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
                            warmup=settings.warmup, grid=settings.grid)
         compiled = None
         if settings.compile:
