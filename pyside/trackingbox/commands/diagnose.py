@@ -21,9 +21,11 @@ window. Every tag's residual is described against its noise level; every effect
 of the library (built-ins plus the spec's [diagnose] effects folders) is screened
 on every target it applies to; without --compile only the cheap screening runs
 (sensor effects as transforms of the simulated output, fouling as a coefficient
-ramp); with --compile the best candidates are fitted through their patched,
-compiled twin (jointly with the spec's parameters) and the named patch's FMU is
-built. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
+ramp); with --compile the compile-only entries (heat-loss, leak) are compiled
+once each and screened linearised in their parameters, the best candidates are
+fitted through their patched, compiled twin (jointly with the spec's parameters)
+and the named patch's FMU is built. The null model is refined from the spec's
+starts (--maxiter N adds a global search); estimations refine on a 60 s grid. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
 <Twin>Diagnosed.mo, its diff and (when an FMU was built) the patched spec.
 """
 
