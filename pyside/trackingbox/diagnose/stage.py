@@ -79,6 +79,11 @@ class DiagnoseSettings:
     fit_iterations
         Refinement iterations of each candidate's estimation; None: sized to its number of
         parameters ``n`` (:func:`iterations_for`, :data:`FIT_RUNS` runs a pass, at most 8).
+    fit_min_delta_bic
+        Only candidates whose screening beats the null by more than this ΔBIC are fitted
+        (half the naming threshold :data:`trackingbox.diagnose.judge.MIN_DELTA_BIC`, so a
+        fit may still gain; a candidate the screening puts at the null's level costs a fit
+        and cannot be named).
     null_iterations
         Refinement iterations of the null estimation; None: sized to the spec's number of
         candidates (:func:`iterations_for`, :data:`NULL_RUNS` runs a pass).
@@ -106,6 +111,7 @@ class DiagnoseSettings:
     maxiter: int | None = None
     warmup: float | None = None
     fit_iterations: int | None = None
+    fit_min_delta_bic: float = 5.0
     null_iterations: int | None = None
     grid: float | None = 60.0
     relinearise: int | None = None
@@ -305,7 +311,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         ranked = list(screened)
         if settings.compile:
             best = [c for c in screened if c.stage != "skipped" and c.fit is None
-                    and math.isfinite(c.delta_bic) and c.delta_bic > 0][: settings.fit_best]
+                    and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic][: settings.fit_best]
             fitted = {}
             clock.start("fit")
             for i, c in enumerate(best):
