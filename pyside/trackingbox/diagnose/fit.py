@@ -273,6 +273,9 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     full = {_short(p.name, effect): p.name for p in patch.parameters}
     starts = {n: float(v) for n, v in where.null.parameters.items()}
     starts.update({full[s]: v for s, v in start.items() if s in full})
+    if screened is not None and getattr(effect, "screen", "") == "compile":
+        # the linearised screening's candidates (screen_compiled), where it moved them
+        starts.update({n: float(v) for n, v in screened.values.items() if n in where.null.parameters})
     pspec = load_spec(spec_path)
     known = set(pspec.parameter_names)
     write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
@@ -344,7 +347,7 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
             cols.append({t: np.column_stack(c) for t, c in per_tag.items()})
     finally:
         close_models()
-    beta, after_t, after_v, _, _ = joint(where, base[0], base[1], cols[0], cols[1])
+    beta, after_t, after_v, _, step_c = joint(where, base[0], base[1], cols[0], cols[1])
     e0 = x0[idx]
     lo, hi = problem.lower[idx], problem.upper[idx]
     value = e0 + beta
@@ -353,10 +356,15 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
         # outside the bounds: fix the effect at the clipped value, refit the candidates alone
         moved = clipped - e0
         fixed = [{t: r[t] - cols[k][t] @ moved for t in tags} for k, r in enumerate(base)]
-        _, after_t, after_v, _, _ = joint(where, fixed[0], fixed[1])
+        _, after_t, after_v, _, step_c = joint(where, fixed[0], fixed[1])
     pinned = [s for s, v, a, b in zip(shorts, clipped, lo, hi)
               if (v <= a + 1e-3 * (b - a) and a != 0.0) or v >= b - 1e-3 * (b - a)]
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     values = {s: float(v) for s, v in zip(shorts, clipped)}
+    # where the joint fit moved the spec's candidates (from the polished null), inside their bounds: the
+    # warm start of the proper fit (prepare), so that it does not start with the effect counted twice
+    if where.problem is not None and step_c.size == len(cand_names) and where.x is not None:
+        moved = np.clip(np.asarray(where.x, dtype=float) + step_c, where.problem.lower, where.problem.upper)
+        values.update({n: float(v) for n, v in zip(cand_names, moved)})
     return score(effect.id, target, getattr(effect, "kind", "process"), "screen", where, k, after_t, after_v,
                  values, pinned=pinned)
