@@ -25,7 +25,8 @@ ramp); with --compile the compile-only entries (heat-loss, leak) are compiled
 once each and screened linearised in their parameters, the best candidates are
 fitted through their patched, compiled twin (jointly with the spec's parameters)
 and the named patch's FMU is built. The null model is refined from the spec's
-starts (--maxiter N adds a global search); estimations refine on a 60 s grid. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
+starts (--maxiter N adds a global search); with more than 3 candidates the
+estimations refine on a 60 s grid. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
 <Twin>Diagnosed.mo, its diff and (when an FMU was built) the patched spec.
 """
 

@@ -93,7 +93,9 @@ class DiagnoseSettings:
         with its grid points). The null model's residuals, the screening and the scores
         are on the full grid; the null is polished there
         (:func:`trackingbox.diagnose.residuals.polish`) and each fitted candidate levelled
-        (:func:`trackingbox.diagnose.fit.level`). None: the full grid.
+        (:func:`trackingbox.diagnose.fit.level`). None: 60 s when the spec has more than
+        three candidates (each refinement iteration then costs many runs), else the full
+        grid; 0: the full grid.
     relinearise
         How many of the best sensor candidates are screened again around where their joint
         fit moved the spec's candidates (:func:`trackingbox.diagnose.screen.screen`; each
@@ -113,7 +115,7 @@ class DiagnoseSettings:
     fit_iterations: int | None = None
     fit_min_delta_bic: float = 5.0
     null_iterations: int | None = None
-    grid: float | None = 60.0
+    grid: float | None = None
     relinearise: int | None = None
 
 
@@ -273,9 +275,10 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     workers = settings.workers
     if workers is None:
         workers = min(2, os.cpu_count() or 1) if n_candidates > 3 else 1
+    grid = settings.grid if settings.grid is not None else (60.0 if n_candidates > 3 else None)
     options = {"seed": settings.seed, "workers": workers,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
-               "refine_grid": settings.grid,
+               "refine_grid": grid or None,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     found = where(spec, null=null, estimate_options=options)
     if progress is not None:
@@ -292,7 +295,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
-                           warmup=settings.warmup, grid=settings.grid)
+                           warmup=settings.warmup, grid=grid or None)
         compiled = None
         if settings.compile:
             def compiled(effect: Any, target: str) -> Candidate:
