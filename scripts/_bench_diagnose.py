@@ -8,7 +8,8 @@ case ``none``), at each noise scale, this writes the case, runs
 the twin and the measurements) and compares what was named with the case's
 ``truth.json``. It prints one row per case: what was hidden, what was named,
 the verdict, ΔBIC, the median validation NRMSE over the affected tags before and
-after the patch, and the wall time of ``diagnose``; then the criteria of issue 10:
+after the patch, and the wall time of ``diagnose`` (with the wall and CPU time of
+each of its phases, from ``diagnose --json``'s ``timings``); then the criteria of issue 10:
 
 * effect and target named correctly in >= 90 % of the in-library cases;
 * no effect named in any no-effect case;
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
 import subprocess
 import sys
@@ -65,9 +67,12 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
     cmd = [sys.executable, "-m", "trackingbox.cli", "diagnose", str(folder / "spec.toml"), "--json", "--compile",
            "-o", str(folder / "diagnose"), *extra]
     t0 = time.perf_counter()
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     seconds = time.perf_counter() - t0
-    row = {"bench": bench, "case": case, "noise_scale": scale, "seconds": seconds,
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
+    row = {"bench": bench, "case": case, "noise_scale": scale, "seconds": seconds, "cpu_seconds": cpu,
            "hidden": (f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}" if hidden else "none"),
            "expected_effect": hidden["effect"] if hidden else None,
            "expected_target": hidden["target"] if hidden else None,
@@ -89,7 +94,7 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
     row.update(verdict=doc.get("verdict"), named=f"{top['effect']}@{top['target']}" if top else "-",
                named_effect=top["effect"] if top else None, named_target=top["target"] if top else None,
                delta_bic=top.get("delta_bic") if top else None, before=_median(before), after=_median(after),
-               fmu=(doc.get("patch") or {}).get("fmu"))
+               fmu=(doc.get("patch") or {}).get("fmu"), timings=doc.get("timings") or {})
     return row
 
 
@@ -123,7 +128,11 @@ def main(argv: list[str] | None = None) -> int:
                 if not args.json:
                     print(f"{bench:16s} {case:13s} x{scale:<3g} hidden {row['hidden']:24s} named {row['named']:24s} "
                           f"{row['verdict']:12s} dBIC {_fmt(row['delta_bic'], '.1f'):>8s} NRMSE "
-                          f"{_fmt(row['before'])} -> {_fmt(row['after'])} {row['seconds']:7.1f} s", flush=True)
+                          f"{_fmt(row['before'])} -> {_fmt(row['after'])} {row['seconds']:7.1f} s "
+                          f"(CPU {row['cpu_seconds']:.0f} s)", flush=True)
+                    if row.get("timings"):
+                        print("    phases (wall / CPU s): " + ", ".join(
+                            f"{k} {v['wall']:.0f}/{v['cpu']:.0f}" for k, v in row["timings"].items()), flush=True)
     in_lib = [r for r in rows if r["expected_effect"]]
     correct = [r for r in in_lib if r.get("verdict") == "effect" and r.get("named_effect") == r["expected_effect"]
                and r.get("named_target") == r["expected_target"]]

@@ -709,6 +709,7 @@ def estimate(
     checkpoint: str | Path | None = None,
     global_grid: float | None = None,
     resume: bool = False,
+    refine_grid: float | None = None,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -751,6 +752,12 @@ def estimate(
         result is bit-identical to an uninterrupted run's. A journal of another
         spec, data, twin or settings, or a corrupt one, is refused
         (:class:`~trackingbox.errors.CheckpointError`).
+    refine_grid
+        Grid step (s) of the refinement's cost, built as the global search's
+        (:func:`coarsen`); default: the full grid. A run costs about in proportion
+        to its grid points, so a coarse grid makes the refinement several times
+        cheaper; the result and its cost are then reported on the full grid (and the
+        refinement is dropped if it is worse there than where it started).
 
     Returns
     -------
@@ -769,7 +776,8 @@ def estimate(
     try:
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
-                         checkpoint=checkpoint, global_grid=global_grid, resume=resume)
+                         checkpoint=checkpoint, global_grid=global_grid, resume=resume,
+                         refine_grid=refine_grid)
     finally:
         close_models()
 
@@ -912,7 +920,7 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
 
 
 def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, best: tuple[np.ndarray, float], iterations: int,
-            progress: ProgressCallback | None,
+            progress: ProgressCallback | None, label: str = "",
             checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
     """Bounded least squares (trust-region reflective) from *best*; returns best x, cost, evaluations.
 
@@ -935,7 +943,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
         weights: dict[str, float] | None = None
         if k > 0:
             try:
-                per_tag = journal.call("nrmse", train.nrmse, best_x)
+                per_tag = journal.call(label + "nrmse", train.nrmse, best_x)
             except TrackingError as exc:
                 log.warning("no reweighted refinement: the twin failed at the estimate (%s)", exc)
                 break
@@ -956,7 +964,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
                 progress("refine", evaluations, total, rms)
 
         def fun(x: np.ndarray) -> np.ndarray:
-            r = journal.call(f"residuals{k}", task, x)
+            r = journal.call(label + f"residuals{k}", task, x)
             last["x"], last["r"] = np.array(x, dtype=float), r
             record(x, r)
             return r
@@ -967,7 +975,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
             else:
                 r0 = fun(x)
             points, h = jacobian_points(x, problem.lower, problem.upper)
-            rows = journal.map(f"residuals{k}", task, list(points), pool.map if pool is not None else None)
+            rows = journal.map(label + f"residuals{k}", task, list(points), pool.map if pool is not None else None)
             for p, r in zip(points, rows):
                 record(p, r)
             return np.stack([(r - r0) / hj for r, hj in zip(rows, h)], axis=1)
@@ -980,7 +988,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
             log.warning("refinement pass %d failed (%s); keeping the estimate so far", k + 1, exc)
             continue
         refined = np.clip(np.asarray(ls.x, dtype=float), problem.lower, problem.upper)
-        refined_cost = journal.call("train", train, refined)
+        refined_cost = journal.call(label + "train", train, refined)
         evaluations += 1
         log.info("refinement pass %d: %d iterations, cost %.6g -> %.6g", k + 1, ls.nfev, best_cost, refined_cost)
         if refined_cost <= best_cost:
@@ -992,7 +1000,8 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
 def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
-              checkpoint: str | Path | None, global_grid: float | None, resume: bool = False) -> EstimationResult:
+              checkpoint: str | Path | None, global_grid: float | None, resume: bool = False,
+              refine_grid: float | None = None) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
@@ -1064,8 +1073,16 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                     "seconds": time.perf_counter() - t_start, "history": history}))
             evaluations += n_global
         if refine:
-            best_x, best_cost, n_local = _refine(
-                train, problem, pool, journal, best=(best_x, best_cost), iterations=refine_iterations,
+            fine, refine_cost = train, best_cost
+            stride = max(1, int(math.floor((refine_grid or problem.sample_time) / problem.sample_time + 1e-9)))
+            if stride > 1:
+                fine = Objective(replace(problem, sample_time=problem.sample_time * stride),
+                                 coarsen(training, stride))
+                refine_cost = journal.call(f"coarse{stride}", fine, best_x)
+                evaluations += 1
+            refined_x, refined_cost, n_local = _refine(
+                fine, problem, pool, journal, best=(best_x, refine_cost), iterations=refine_iterations,
+                label="" if stride == 1 else f"coarse{stride}:",
                 progress=progress,
                 checkpoint=lambda k, x, c, e: _write_checkpoint(ckpt, {
                     "stage": "refine", "iteration": k, "best_cost": best_cost,
@@ -1074,6 +1091,13 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                     "evaluations": evaluations + e, "seconds": time.perf_counter() - t_start,
                     "history": history}))
             evaluations += n_local
+            if stride == 1:
+                best_x, best_cost = refined_x, refined_cost
+            elif not np.array_equal(refined_x, best_x):
+                full_cost = journal.call("train", train, refined_x)  # back on the full grid
+                evaluations += 1
+                if full_cost <= best_cost:
+                    best_x, best_cost = refined_x, full_cost
             history.append(best_cost)
             if progress is not None:
                 progress("local", 1, 1, best_cost)

@@ -23,9 +23,12 @@ window. Every tag's residual is described against its noise level; every effect
 of the library (built-ins plus the spec's [diagnose] effects folders) is screened
 on every target it applies to; without --compile only the cheap screening runs
 (sensor effects as transforms of the simulated output, fouling as a coefficient
-ramp); with --compile the best candidates are fitted through their patched,
-compiled twin (jointly with the spec's parameters) and the named patch's FMU is
-built. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
+ramp); with --compile the compile-only entries (heat-loss, leak) are compiled
+once each and screened linearised in their parameters, the best candidates are
+fitted through their patched, compiled twin (jointly with the spec's parameters)
+and the named patch's FMU is built. The null model is refined from the spec's
+starts (--maxiter N adds a global search); with more than 3 candidates the
+estimations refine on a 60 s grid. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
 <Twin>Diagnosed.mo, its diff and (when an FMU was built) the patched spec.
 """
 
@@ -51,10 +54,11 @@ def register(subparsers: Any) -> None:
                    help="candidates fitted properly with --compile (default 2)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
                    help="seed of the null model's estimation (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
-                   help="processes for the estimations (default 1)")
+    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=None,
+                   help="processes for the estimations (default: 2 when the spec has more than 3 candidates, else 1)")
     p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
-                   help="generations of the null model's global search (default: estimate's)")
+                   help="generations of the null model's global search (default 0: least-squares "
+                        "refinement from the spec's starts only; give one when the starts are far off)")
     p.add_argument("--warmup", type=number(ge=0), default=None, metavar="SECONDS",
                    help="unscored warm-up before each window (default: estimate's)")
     p.set_defaults(func=run)

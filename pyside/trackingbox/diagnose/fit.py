@@ -46,12 +46,17 @@ class FitBudget:
         Processes for the estimation.
     warmup
         Warm-up before each window (s); None: the estimation's default.
+    grid
+        Grid step (s) of the refinement's cost (``refine_grid`` of
+        :func:`trackingbox.estimation.estimate`); None: the full grid. The candidate is
+        scored on the full grid.
     """
 
     maxiter: int = 0
     refine_iterations: int = 8
     workers: int | None = None
     warmup: float | None = None
+    grid: float | None = None
 
 
 @dataclass(frozen=True)
@@ -180,33 +185,15 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
         With :attr:`Candidate.fit` = :class:`FitOutcome`.
     """
     from ..estimation import close_models, estimate, load_windows, problem_from_spec
-    from ..spec import load_spec, write_starts
-    from . import library
     from .residuals import window_series
 
-    folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
-    folder.mkdir(parents=True, exist_ok=True)
-    patch = render(spec, effect, target, warm_values(effect, screened))
-    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in patch.parameters}
-    start = warm_values(effect, screened, bounds)
-    patch = render(spec, effect, target, start)
-    fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
-    marker = folder / ".compiled"
-    # the effect's parameters are tunable: one FMU per effect and target serves every value
-    if not (fmu.is_file() and marker.is_file() and marker.read_text() == patch.model):
-        fmu = Path(library.compile_patch(patch, folder).fmu)
-        marker.write_text(patch.model)
-    spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
-    full = {_short(p.name, effect): p.name for p in patch.parameters}
-    starts = {n: float(v) for n, v in where.null.parameters.items()}
-    starts.update({full[s]: v for s, v in start.items() if s in full})
-    pspec = load_spec(spec_path)
-    known = set(pspec.parameter_names)
-    write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
-    pspec = load_spec(spec_path)
+    prepared = prepare(spec, where, effect, target, work_dir, screened=screened)
+    patch, fmu, spec_path, full, bounds = (prepared.patch, prepared.fmu, prepared.spec_path, prepared.full,
+                                           prepared.bounds)
+    pspec = prepared.spec
     log.info("fitting %s on %s (%d parameters)", effect.id, target, len(pspec.parameters))
     est = estimate(pspec, maxiter=budget.maxiter, refine=True, refine_iterations=budget.refine_iterations,
-                   workers=budget.workers, warmup=budget.warmup)
+                   workers=budget.workers, warmup=budget.warmup, refine_grid=budget.grid)
     problem = problem_from_spec(pspec, warmup=budget.warmup)
     training, validation = load_windows(pspec, warmup=problem.warmup)
     x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
@@ -231,3 +218,161 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     outcome = FitOutcome(patch, fmu, spec_path, est, full)
     return score(effect.id, target, getattr(effect, "kind", "process"), stage, where, k, after_t, after_v, fitted,
                  pinned=pinned, fit=outcome)
+
+
+# --------------------------------------------------------------------------- patch preparation, linearised screen
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A candidate's patched twin, compiled, with its spec (starts: the null fit and the effect's warm start).
+
+    Attributes
+    ----------
+    patch
+        The rendered patch (:class:`trackingbox.diagnose.library.Patch`).
+    fmu, spec_path, spec
+        Its FMU, the patched spec's path and the loaded patched spec.
+    full
+        Short effect parameter name -> full name in the patched twin.
+    bounds
+        Short effect parameter name -> (min, max) as the patch resolved them.
+    start
+        Short effect parameter name -> start value.
+    """
+
+    patch: Any
+    fmu: Path
+    spec_path: Path
+    spec: Any
+    full: dict[str, str]
+    bounds: dict[str, tuple[float, float]]
+    start: dict[str, float]
+
+
+def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,
+            screened: Candidate | None = None) -> Prepared:
+    """Render, compile (once per effect and target: cached in the work folder) and write the patched spec.
+
+    The effect's parameters are tunable, so one FMU per effect and target serves every
+    value; the patched spec starts at the null fit (the spec's candidates) and at the
+    effect's warm start (:func:`warm_values`).
+    """
+    from ..spec import load_spec, write_starts
+    from . import library
+
+    folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
+    folder.mkdir(parents=True, exist_ok=True)
+    patch = render(spec, effect, target, warm_values(effect, screened))
+    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in patch.parameters}
+    start = warm_values(effect, screened, bounds)
+    if screened is not None and getattr(effect, "screen", "") == "compile":
+        # a linearised screening (screen_compiled) measured the entry's own parameters
+        for short, v in screened.values.items():
+            if short in bounds and math.isfinite(v):
+                start[short] = float(min(max(v, bounds[short][0]), bounds[short][1]))
+    patch = render(spec, effect, target, start)
+    fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
+    marker = folder / ".compiled"
+    if not (fmu.is_file() and marker.is_file() and marker.read_text() == patch.model):
+        fmu = Path(library.compile_patch(patch, folder).fmu)
+        marker.write_text(patch.model)
+    spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
+    full = {_short(p.name, effect): p.name for p in patch.parameters}
+    starts = {n: float(v) for n, v in where.null.parameters.items()}
+    starts.update({full[s]: v for s, v in start.items() if s in full})
+    if screened is not None and getattr(effect, "screen", "") == "compile":
+        # the linearised screening's candidates (screen_compiled), where it moved them
+        starts.update({n: float(v) for n, v in screened.values.items() if n in where.null.parameters})
+    pspec = load_spec(spec_path)
+    known = set(pspec.parameter_names)
+    write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
+    return Prepared(patch, fmu, spec_path, load_spec(spec_path), full, bounds, start)
+
+
+#: Forward-difference step of the linearised screen, as a share of each effect parameter's bound range.
+LINEAR_STEP = 1.0e-2
+
+
+def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,
+                    step: float = LINEAR_STEP) -> Candidate:
+    """Screen a ``compile`` entry cheaply: its patched twin linearised in the effect's parameters.
+
+    The patch is compiled (:func:`prepare`) and simulated on both windows at the
+    null fit with the effect at its start ``e0``, and once more per effect
+    parameter moved by *step* of its bound range: ``1 + k`` runs per window
+    instead of an estimation. The effect's output sensitivity ``D`` enters the
+    joint least squares with the null model's sensitivity to the spec's
+    candidates (:func:`trackingbox.diagnose.screen.joint`), exactly as a sensor
+    transform's columns do. A value outside its bounds is clipped there and the
+    candidates refitted with the effect fixed. The candidate is scored like any
+    screening (``stage = "screen"``, ``fit = None``); the best ones are then fitted
+    properly (:func:`fit_candidate`).
+
+    Parameters
+    ----------
+    spec, where, effect, target, work_dir
+        As :func:`fit_candidate`.
+    step
+        Forward-difference step (share of each effect parameter's range).
+
+    Returns
+    -------
+    Candidate
+    """
+    from ..estimation import close_models, jacobian_points, load_windows, problem_from_spec
+    from .residuals import window_series
+    from .screen import joint
+
+    prepared = prepare(spec, where, effect, target, work_dir)
+    pspec = prepared.spec
+    problem = problem_from_spec(pspec, warmup=where.problem.warmup if where.problem is not None else None)
+    windows = load_windows(pspec, warmup=problem.warmup)
+    names = list(problem.names)
+    x0 = np.array([where.null.parameters.get(n, s) for n, s in zip(names, problem.start)], dtype=float)
+    shorts = [s for s in prepared.full if prepared.full[s] in names]
+    idx = [names.index(prepared.full[s]) for s in shorts]
+    # the polishing step of the null model (residuals.polish) applies to the patched twin as well
+    cand_names = list(where.problem.names) if where.problem is not None else []
+    raw = np.array([where.null.parameters.get(n, s) for n, s in zip(cand_names, where.problem.start)]) \
+        if where.problem is not None else np.zeros(0)
+    delta0 = (np.asarray(where.x, dtype=float) - raw) if where.x is not None and raw.size else np.zeros(0)
+    tags = [t for t in pspec.outputs if t in where.tags]
+    base, cols = [], []
+    try:
+        points, h = jacobian_points(x0[idx], problem.lower[idx], problem.upper[idx], step)
+        for w, jac in zip(windows, where.jacobian):
+            b = window_series(problem, w, x0, pspec.inputs)
+            shift = {t: (jac[t] @ delta0 if t in jac and delta0.size else 0.0) for t in tags}
+            base.append({t: b.measured[t] - b.simulated[t] - shift[t] for t in tags})
+            per_tag: dict[str, list[np.ndarray]] = {t: [] for t in tags}
+            for point, hj in zip(points, h):
+                x = x0.copy()
+                x[idx] = point
+                s = window_series(problem, w, x, pspec.inputs)
+                for t in tags:
+                    per_tag[t].append((s.simulated[t] - b.simulated[t]) / hj)
+            cols.append({t: np.column_stack(c) for t, c in per_tag.items()})
+    finally:
+        close_models()
+    beta, after_t, after_v, _, step_c = joint(where, base[0], base[1], cols[0], cols[1])
+    e0 = x0[idx]
+    lo, hi = problem.lower[idx], problem.upper[idx]
+    value = e0 + beta
+    clipped = np.clip(value, lo, hi)
+    if np.any(clipped != value):
+        # outside the bounds: fix the effect at the clipped value, refit the candidates alone
+        moved = clipped - e0
+        fixed = [{t: r[t] - cols[k][t] @ moved for t in tags} for k, r in enumerate(base)]
+        _, after_t, after_v, _, step_c = joint(where, fixed[0], fixed[1])
+    pinned = [s for s, v, a, b in zip(shorts, clipped, lo, hi)
+              if (v <= a + 1e-3 * (b - a) and a != 0.0) or v >= b - 1e-3 * (b - a)]
+    k = len(getattr(effect, "parameters", ()) or ()) or 1
+    values = {s: float(v) for s, v in zip(shorts, clipped)}
+    # where the joint fit moved the spec's candidates (from the polished null), inside their bounds: the
+    # warm start of the proper fit (prepare), so that it does not start with the effect counted twice
+    if where.problem is not None and step_c.size == len(cand_names) and where.x is not None:
+        moved = np.clip(np.asarray(where.x, dtype=float) + step_c, where.problem.lower, where.problem.upper)
+        values.update({n: float(v) for n, v in zip(cand_names, moved)})
+    return score(effect.id, target, getattr(effect, "kind", "process"), "screen", where, k, after_t, after_v,
+                 values, pinned=pinned)

@@ -1,13 +1,17 @@
 """The diagnosis stage: ``diagnose(spec, settings) -> DiagnosisResult``.
 
 1. **Where** (:mod:`.residuals`): fit the null model (the spec's candidates on
-   the training window) and describe every tag's residual against its noise.
+   the training window; by default the least-squares refinement from the spec's
+   starts, see :attr:`DiagnoseSettings.maxiter`) and describe every tag's
+   residual against its noise.
 2. **Which** (:mod:`.screen`): screen every effect of the library on every
-   target it applies to; rank by the BIC gain on training.
+   target it applies to; rank by the BIC gain on training. With
+   ``settings.compile`` the ``compile``-only entries are compiled once each and
+   linearised in their parameters (:func:`.fit.screen_compiled`).
 3. **Fit** (:mod:`.fit`, with ``settings.compile``): the best
-   ``settings.fit_best`` screened candidates (and the ``compile``-only entries,
-   with a shorter budget) are fitted properly through their patched, compiled
-   twin, jointly with the spec's candidates, warm-started from the null fit.
+   ``settings.fit_best`` screened candidates are fitted properly through their
+   patched, compiled twin, jointly with the spec's candidates, warm-started from
+   the null fit and the screening.
    Without ``compile`` the screening results are judged (a sensor transform is
    the effect itself; the fouling ramp is its time-varying form) and nothing is
    compiled.
@@ -16,12 +20,15 @@
    ``compile``, its FMU); with ``out_dir`` the Modelica file and the patched
    spec are written there.
 
-``diagnose`` reads the spec, the twin and the measurements only.
+``diagnose`` reads the spec, the twin and the measurements only. The wall and
+CPU time of each phase (``null``, ``screen``, ``screen-compiled``, ``fit``,
+``judge``, ``patch``) are in :attr:`DiagnosisResult.timings`.
 """
 from __future__ import annotations
 
 import logging
 import math
+import os
 import tempfile
 import time
 from collections.abc import Callable
@@ -56,10 +63,44 @@ class DiagnoseSettings:
         Where ``<Twin>Diagnosed.mo`` and the patched spec are written (None: not written).
     work_dir
         Folder for patches and FMUs of the fits (None: a temporary folder; ``out_dir/work`` when given).
-    seed, workers, maxiter, warmup
+    seed, warmup
         The null estimation's options (:func:`trackingbox.estimation.estimate`).
+    workers
+        Processes for the estimations (null and candidates); None: two (at most the
+        machine's cores) when the spec has more than three candidates, whose Jacobians
+        then spread over them, else one (a worker's start-up is not worth it).
+    maxiter
+        Generations of the null estimation's global search; None (default): 0, the
+        least-squares refinement from the spec's starts only, whose cost grows with the
+        number of parameters (``1 + n`` runs per iteration) instead of a fixed
+        population budget. The null model is polished afterwards
+        (:func:`trackingbox.diagnose.residuals.polish`), and a spec's starts are
+        normally an estimate already; give a number where they are far off.
     fit_iterations
-        Refinement iterations of each candidate's estimation.
+        Refinement iterations of each candidate's estimation; None: sized to its number of
+        parameters ``n`` (:func:`iterations_for`, :data:`FIT_RUNS` runs a pass, at most 8).
+    fit_min_delta_bic
+        Only candidates whose screening beats the null by more than this ΔBIC are fitted
+        (half the naming threshold :data:`trackingbox.diagnose.judge.MIN_DELTA_BIC`, so a
+        fit may still gain; a candidate the screening puts at the null's level costs a fit
+        and cannot be named).
+    null_iterations
+        Refinement iterations of the null estimation; None: sized to the spec's number of
+        candidates (:func:`iterations_for`, :data:`NULL_RUNS` runs a pass).
+    grid
+        Grid step (s) of the cost the estimations (null and candidates) refine on
+        (``refine_grid`` of :func:`trackingbox.estimation.estimate`; a run's cost grows
+        with its grid points). The null model's residuals, the screening and the scores
+        are on the full grid; the null is polished there
+        (:func:`trackingbox.diagnose.residuals.polish`) and each fitted candidate levelled
+        (:func:`trackingbox.diagnose.fit.level`). None: 60 s when the spec has more than
+        three candidates (each refinement iteration then costs many runs), else the full
+        grid; 0: the full grid.
+    relinearise
+        How many of the best sensor candidates are screened again around where their joint
+        fit moved the spec's candidates (:func:`trackingbox.diagnose.screen.screen`; each
+        costs ``2 (1 + n)`` full-grid runs for ``n`` candidates); None: three, but only one
+        when ``n`` is larger than 3.
     """
 
     effects: tuple[str, ...] = ()
@@ -71,7 +112,64 @@ class DiagnoseSettings:
     workers: int | None = None
     maxiter: int | None = None
     warmup: float | None = None
-    fit_iterations: int = 8
+    fit_iterations: int | None = None
+    fit_min_delta_bic: float = 5.0
+    null_iterations: int | None = None
+    grid: float | None = None
+    relinearise: int | None = None
+
+
+#: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
+NULL_RUNS = 120
+#: Runs a refinement pass of a candidate's estimation may cost about (:func:`iterations_for`).
+FIT_RUNS = 64
+
+
+def iterations_for(n_parameters: int, runs: int, *, least: int = 3, most: int = 20) -> int:
+    """Least-squares iterations that cost about *runs* simulations for *n_parameters* (``1 + n`` each).
+
+    >>> iterations_for(1, 64), iterations_for(15, 64), iterations_for(14, 120), iterations_for(40, 64)
+    (20, 4, 8, 3)
+    """
+    return max(least, min(most, runs // (1 + max(n_parameters, 0))))
+
+
+@dataclass(frozen=True)
+class PhaseTime:
+    """Wall and CPU time of one phase of :func:`diagnose` (CPU: this process and its finished children)."""
+
+    wall: float
+    cpu: float
+
+    def to_json(self) -> dict[str, float]:
+        """``{"wall": s, "cpu": s}``."""
+        return {"wall": round(self.wall, 3), "cpu": round(self.cpu, 3)}
+
+
+class _Clock:
+    """Accumulates :class:`PhaseTime` per phase name."""
+
+    def __init__(self) -> None:
+        self.phases: dict[str, PhaseTime] = {}
+        self._phase: str | None = None
+        self._t = (0.0, 0.0)
+
+    @staticmethod
+    def _now() -> tuple[float, float]:
+        t = os.times()
+        return time.perf_counter(), t.user + t.system + t.children_user + t.children_system
+
+    def start(self, phase: str) -> None:
+        self.stop()
+        self._phase, self._t = phase, self._now()
+
+    def stop(self) -> None:
+        if self._phase is None:
+            return
+        wall, cpu = self._now()
+        old = self.phases.get(self._phase, PhaseTime(0.0, 0.0))
+        self.phases[self._phase] = PhaseTime(old.wall + wall - self._t[0], old.cpu + cpu - self._t[1])
+        self._phase = None
 
 
 @dataclass(frozen=True)
@@ -89,6 +187,7 @@ class DiagnosisResult:
     patch_file: Path | None = None
     seconds: float = 0.0
     effects: dict[str, str] = field(default_factory=dict)
+    timings: dict[str, PhaseTime] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The issue's contract: verdict, findings, candidates, where, patch, seconds."""
@@ -114,6 +213,7 @@ class DiagnosisResult:
                       "fmu": str(self.patch_fmu) if self.patch_fmu else None,
                       "spec": str(self.patch_spec) if self.patch_spec else None},
             "seconds": float(self.seconds),
+            "timings": {k: v.to_json() for k, v in self.timings.items()},
         }
         if self.verdict == "unexplained":
             doc["unexplained"] = {t: [list(p) for p in ps] for t, ps in self.judgement.unexplained.items()}
@@ -161,6 +261,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     from . import library
 
     t0 = time.perf_counter()
+    clock = _Clock()
+    clock.start("null")
     effects = library.load_effects(_effect_folders(spec))
     unknown = [e for e in settings.effects if e not in effects]
     if unknown:
@@ -169,8 +271,15 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         raise SpecError("; ".join(f"unknown effect {e!r}{did_you_mean(e, sorted(effects))}" for e in unknown))
     if progress is not None:
         progress("null", 0, 1)
-    options = {"seed": settings.seed, "workers": settings.workers, "maxiter": settings.maxiter,
-               "warmup": settings.warmup}
+    n_candidates = len(list(spec.parameters))
+    workers = settings.workers
+    if workers is None:
+        workers = min(2, os.cpu_count() or 1) if n_candidates > 3 else 1
+    grid = settings.grid if settings.grid is not None else (60.0 if n_candidates > 3 else None)
+    options = {"seed": settings.seed, "workers": workers,
+               "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
+               "refine_grid": grid or None,
+               "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     found = where(spec, null=null, estimate_options=options)
     if progress is not None:
         progress("null", 1, 1)
@@ -181,24 +290,33 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
         work = Path(tmp.name)
     try:
-        from .fit import FitBudget, fit_candidate
+        from .fit import FitBudget, fit_candidate, screen_compiled
 
-        budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations, workers=settings.workers,
-                           warmup=settings.warmup)
-        short = FitBudget(maxiter=0, refine_iterations=max(2, settings.fit_iterations // 2),
-                          workers=settings.workers, warmup=settings.warmup)
+        # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
+        budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
+                           or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
+                           warmup=settings.warmup, grid=grid or None)
         compiled = None
         if settings.compile:
             def compiled(effect: Any, target: str) -> Candidate:
+                # compiled once, linearised in the effect's parameters; the best are fitted below
                 assert work is not None
-                return fit_candidate(spec, found, effect, target, work, budget=short, stage="screen")
+                clock.start("screen-compiled")
+                try:
+                    return screen_compiled(spec, found, effect, target, work)
+                finally:
+                    clock.start("screen")
 
-        screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress)
+        clock.start("screen")
+        screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress,
+                          relinearise=(settings.relinearise if settings.relinearise is not None
+                                       else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
             best = [c for c in screened if c.stage != "skipped" and c.fit is None
-                    and math.isfinite(c.delta_bic) and c.delta_bic > 0][: settings.fit_best]
+                    and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic][: settings.fit_best]
             fitted = {}
+            clock.start("fit")
             for i, c in enumerate(best):
                 assert work is not None
                 try:
@@ -216,6 +334,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                     progress("fit", i + 1, len(best))
             # a fitted candidate replaces its screening; with compile only fitted candidates can be named
             ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
+        clock.start("judge")
         nameable = [c for c in ranked if c.fit is not None] if settings.compile else ranked
         judgement = judge(nameable, found)
         if settings.compile:
@@ -230,6 +349,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         named = judgement.named
         patch = patch_fmu = patch_spec = patch_file = None
         if named is not None and spec.source is not None:
+            clock.start("patch")
             patch, patch_fmu, patch_spec, patch_file = _patch(spec, effects[named.effect], named, settings, work)
         elif named is not None:
             log.warning("the spec has no [source]: the named effect is not rendered into a patch")
@@ -242,9 +362,12 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
             patch_fmu_alive = True
     if not patch_fmu_alive:
         patch_fmu = patch_spec = None
+    clock.stop()
+    for phase, t in clock.phases.items():
+        log.info("phase %s: %.1f s wall, %.1f s CPU", phase, t.wall, t.cpu)
     return DiagnosisResult(judgement.verdict, named, tuple(ranked), found, judgement, patch, patch_fmu, patch_spec,
                            patch_file, time.perf_counter() - t0,
-                           {k: getattr(v, "explanation", "") for k, v in effects.items()})
+                           {k: getattr(v, "explanation", "") for k, v in effects.items()}, dict(clock.phases))
 
 
 def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
