@@ -52,6 +52,7 @@ class Run:
     out: Path
     bench: str
     seed: int
+    hours: float | None = None  # hours of bench data (None: the bench's default)
     summary: dict[str, Any] = field(default_factory=dict)
     reports: dict[str, StageReport] = field(default_factory=dict)
     truth: dict[str, float] = field(default_factory=dict)
@@ -108,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bench", choices=sorted(BENCHES), default="heat-exchanger")
     p.add_argument("--out", type=Path, default=None, help="output directory (default demo-out/<bench>)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hours", type=float, default=None,
+                   help="hours of bench data (default: the bench's own; a short window for a quick check)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="plant parameter override")
     p.add_argument("--until", choices=STEPS, default=STEPS[-1], help="stop after this step")
@@ -142,7 +145,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         return name in steps
 
     step("bench", f"building the {run.bench} bench case in {out}")
-    case = make_bench(run.bench, out, seed=run.seed, overrides=overrides)
+    case = make_bench(run.bench, out, seed=run.seed, overrides=overrides, hours=run.hours)
     summary["bench_case"] = case.to_json()
     run.truth = dict(case.truth)
     spec = load_spec(case.spec)
@@ -234,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         return diagnose_demo((args.out or Path("demo-out") / "diagnose").resolve(), seed=args.seed,
                              case=args.diagnose_case, bias=args.diagnose_bias)
     out = (args.out or Path("demo-out") / args.bench).resolve()
-    run = Run(out=out, bench=args.bench, seed=args.seed)
+    run = Run(out=out, bench=args.bench, seed=args.seed, hours=args.hours)
     steps = STEPS[: STEPS.index(args.until) + 1]
     progress = Progress()
     t_all = time.perf_counter()

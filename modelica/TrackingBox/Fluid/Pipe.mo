@@ -31,8 +31,11 @@ equation
 With <code>tangent = true</code> the linear law is instead the tangent of the
 quadratic one at nominal flow, <code>dp = dp_ref&middot;k&middot;(2x - 1)</code>:
 the same loss and slope there, so a twin linearised at its operating point. It
-is meant for forward flow near nominal (below half the nominal flow it would
-give a pressure gain).
+is meant for forward flow near nominal: below half the nominal flow it would
+give a pressure gain, and its sensitivity to <code>k</code>,
+<code>dp_ref&middot;(2x - 1)</code>, falls faster than the quadratic law's
+<code>dp_ref&middot;x&sup2;</code>: at <code>x = 0.6</code> it is 0.2&middot;<code>dp_ref</code>,
+against 0.36&middot;<code>dp_ref</code> (quadratic) and 0.6&middot;<code>dp_ref</code> (linear).
 With the default <code>dp_ref = 1 MPa</code>, <code>k = 0.005</code> is a
 5 kPa loss at nominal flow. Both laws agree at nominal flow. No heat loss,
 no storage.</p>

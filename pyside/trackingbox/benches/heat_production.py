@@ -2,9 +2,9 @@
 
 Preheating tank T100, storage tank T200, heating unit HU300, heat exchanger
 HEX300 to an external cold stream, make-up tank T400. The plant has quadratic
-pipe and pump curves and degraded components; the twin linear curves (the
-tangents of the quadratic ones at the design point) and the method notes'
-initial values. A day (24 h) at 10 s sampling of varying heat
+pipe and pump curves and degraded components; the twin linear curves (pipe
+loss proportional to the flow, pump curves the chord from shut-off to the
+design point, as in the source) and the method notes' initial values. A day (24 h) at 10 s sampling of varying heat
 demand (daily profile, noise, steps) and occasional setpoint changes.
 """
 from __future__ import annotations

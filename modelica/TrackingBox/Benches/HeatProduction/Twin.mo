@@ -10,9 +10,19 @@ equation
   connect(T200_m_flow_corr, T200.m_flow_corr_in);
   connect(T400_m_flow_corr, T400.m_flow_corr_in);
   annotation (Documentation(info="<html>
-<p>Linear pipe and pump curves (the tangents of the plant's quadratic curves
-at the design point: same pressure and slope there, wrong by the curvature away
-from it) and the initial parameter values of the method notes. For state
+<p>Linear pipe and pump curves, as the source's twin has them: a pipe's loss
+proportional to its flow (<code>dp = dp_ref&middot;k&middot;x</code>, equal to the
+plant's quadratic loss at zero and at nominal flow), a pump's curve the chord
+from its shut-off point to its design point (equal to the plant's quadratic
+curve at both); and the initial parameter values of the method notes.</p>
+<p>Not the tangents at the design point: the pumps and pipes run at 55-125 %
+of their nominal flow over a day, and at the low-load end a tangent pipe law
+<code>dp_ref&middot;k&middot;(2x - 1)</code> hardly depends on <code>k</code>
+(at <code>x = 0.6</code>, 0.2 MPa per unit of <code>k</code>, against 0.36 MPa for
+the plant and 0.6 MPa for the proportional law), so a step test there found no
+pipe coefficient that could close a pressure offset from inside its bounds.
+The tangents also predict a pressure gain below half the nominal flow.</p>
+<p>For state
 compensation each tank takes a correction flow from a top-level input
 <code>T100_m_flow_corr</code>, <code>T200_m_flow_corr</code>,
 <code>T400_m_flow_corr</code> (kg/s), added to the tunable parameter
