@@ -1008,11 +1008,11 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
     journal = Journal(journal_path(ckpt) if ckpt is not None else None,
                       _identity(spec, problem, seed=seed, maxiter=maxiter, popsize=popsize, refine=refine,
                                 refine_iterations=refine_iterations, global_grid=global_grid,
-                                parallel=int(workers or 1) > 1), resume=resume)
+                                refine_grid=refine_grid, parallel=int(workers or 1) > 1), resume=resume)
     try:
         return _run(spec, problem, journal, t_start=t_start, ckpt=ckpt, seed=seed, workers=workers,
                     maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
-                    progress=progress, global_grid=global_grid)
+                    progress=progress, global_grid=global_grid, refine_grid=refine_grid)
     finally:
         if resume:
             log.info("%d evaluations served from the journal %s", journal.served, journal.path)
@@ -1037,7 +1037,8 @@ def _identity(spec: Any, problem: Problem, **settings: Any) -> dict[str, Any]:
 
 def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt: Path | None, seed: int,
          workers: int | None, maxiter: int, popsize: int | None, refine: bool, refine_iterations: int,
-         progress: ProgressCallback | None, global_grid: float | None) -> EstimationResult:
+         progress: ProgressCallback | None, global_grid: float | None,
+         refine_grid: float | None = None) -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
