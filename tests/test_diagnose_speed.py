@@ -82,3 +82,22 @@ def test_phase_clock_adds_wall_and_cpu_per_phase(monkeypatch) -> None:
     clock.stop()  # a second stop adds nothing
     assert {k: (v.wall, v.cpu) for k, v in clock.phases.items()} == {"null": (3.0, 1.75), "screen": (3.0, 0.5)}
     assert clock.phases["null"].to_json() == {"wall": 3.0, "cpu": 1.75}
+
+
+def test_patched_fmu_cache_key_follows_the_model_not_the_start_values(tmp_path) -> None:
+    # a reused work folder must not hand back an FMU built from an older entry or twin source;
+    # start values are tunable parameters and must not force a recompile
+    from types import SimpleNamespace as NS
+
+    from trackingbox.diagnose.fit import _compile_key
+
+    (tmp_path / "P").mkdir()
+    twin = tmp_path / "P" / "Twin.mo"
+    twin.write_text("model Twin\n  Real x(start = 1);\nequation\n  der(x) = -x;\nend Twin;\n")
+    spec = NS(source=NS(path=tmp_path / "P"))
+    patch = NS(model="P.TwinDiagnosed", source="model TwinDiagnosed\n  extends Twin;\nend TwinDiagnosed;\n")
+    key = _compile_key(spec, patch)
+    assert _compile_key(spec, NS(model=patch.model, source=patch.source)) == key
+    assert _compile_key(spec, NS(model=patch.model, source=patch.source + "// edited\n")) != key
+    twin.write_text(twin.read_text().replace("-x", "-2*x"))
+    assert _compile_key(spec, patch) != key

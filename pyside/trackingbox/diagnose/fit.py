@@ -274,9 +274,10 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     patch = render(spec, effect, target, start)
     fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
     marker = folder / ".compiled"
-    if not (fmu.is_file() and marker.is_file() and marker.read_text() == patch.model):
+    key = _compile_key(spec, render(spec, effect, target, warm_values(effect, None)))
+    if not (fmu.is_file() and marker.is_file() and marker.read_text() == key):
         fmu = Path(library.compile_patch(patch, folder).fmu)
-        marker.write_text(patch.model)
+        marker.write_text(key)
     spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
     full = {_short(p.name, effect): p.name for p in patch.parameters}
     starts = {n: float(v) for n, v in where.null.parameters.items()}
@@ -288,6 +289,26 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     known = set(pspec.parameter_names)
     write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
     return Prepared(patch, fmu, spec_path, load_spec(spec_path), full, bounds, start)
+
+
+def _compile_key(spec: Any, structure: Any) -> str:
+    """What decides a patched twin's FMU: the patch rendered at the entry's own starts, and the twin's source.
+
+    The effect's parameters are tunable, so the start values the patch is rendered with
+    do not change the FMU; an edited entry, template or twin source does (a work folder
+    reused after such an edit must not hand back the old FMU).
+    """
+    import hashlib
+
+    h = hashlib.sha256(structure.model.encode() + b"\0" + structure.source.encode())
+    source = getattr(getattr(spec, "source", None), "path", None)
+    if source is not None:
+        root = Path(source)
+        files = sorted(root.rglob("*.mo")) if root.is_dir() else [root]
+        for f in files:
+            h.update(str(f.relative_to(root) if root.is_dir() else f.name).encode() + b"\0")
+            h.update(f.read_bytes())
+    return h.hexdigest()
 
 
 #: Forward-difference step of the linearised screen, as a share of each effect parameter's bound range.
