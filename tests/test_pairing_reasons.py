@@ -129,7 +129,7 @@ def test_spec_freeze_is_used_and_the_command_line_replaces_it(tmp_path, step_fmu
     assert "left out tag Y1: no candidate parameter moves it" in out
     assert "not observable with this freeze" not in out  # nothing was frozen
     assert main(["pair", str(spec), "--no-freeze", "--freeze", "hold=1"]) == 2
-    assert "give --freeze or --no-freeze, not both" in capsys.readouterr().err
+    assert "argument --freeze: not allowed with argument --no-freeze" in capsys.readouterr().err
 
 
 def test_spec_freeze_name_is_checked_against_the_twin(tmp_path, step_fmu, capsys):

@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..errors import SpecError
 from ._args import number, parse_assignments
 
 EPILOG = """\
@@ -42,11 +41,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--step", type=number(gt=0, le=1), default=0.05,
                    help="parameter step as a fraction of its bound range (default 0.05)")
     p.add_argument("--one-sided", action="store_true", help="only step up (no -step linearity check)")
-    p.add_argument("--freeze", action="append", default=None, metavar="NAME=VALUE",
+    frozen = p.add_mutually_exclusive_group()
+    frozen.add_argument("--freeze", action="append", default=None, metavar="NAME=VALUE",
                    help="input or tunable parameter that freezes the twin's controllers, set after the first "
                         "settle (repeatable), e.g. --freeze holdControllers=1; replaces the spec's "
                         "[pairing] freeze (default: that table)")
-    p.add_argument("--no-freeze", action="store_true",
+    frozen.add_argument("--no-freeze", action="store_true",
                    help="freeze nothing, whatever the spec's [pairing] freeze says")
     p.add_argument("--at", type=number(ge=0, le=1e9), metavar="TIME",
                    help="operating point at TIME (s) instead of the first hour of the training window")
@@ -91,7 +91,8 @@ def settings(args: argparse.Namespace) -> Any:
     from ..analysis.pair_stage import PairSettings
 
     return PairSettings(method=args.method, step=args.step, two_sided=not args.one_sided,
-                        freeze=_freeze(args), at=args.at,
+                        freeze=() if args.no_freeze else None if args.freeze is None
+                        else tuple(parse_assignments(args.freeze, "--freeze").items()), at=args.at,
                         interval=args.interval, window=args.window,
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
@@ -100,23 +101,13 @@ def settings(args: argparse.Namespace) -> Any:
                         scheduler=args.scheduler)
 
 
-def _freeze(args: argparse.Namespace) -> tuple[tuple[str, float], ...] | None:
-    """--freeze values, () for --no-freeze, None (the spec's [pairing] freeze) when neither is given."""
-    if args.no_freeze and args.freeze:
-        raise SpecError("give --freeze or --no-freeze, not both")
-    if args.no_freeze:
-        return ()
-    return None if args.freeze is None else tuple(parse_assignments(args.freeze, "--freeze").items())
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``trackingbox pair``; exit code 0 on success, 1 when no pair was found."""
     from ..analysis.pair_stage import pair, spec_pairs
     from ..report import write_pair_report
+    from ..io import check_output
     from ..spec import check_against_fmu, load_spec, write_pairs
     from ._progress import Progress
-
-    from ..io import check_output
 
     spec = load_spec(args.spec)
     if args.report:

@@ -73,16 +73,12 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the tracking simulator; exit code 0 on success."""
-    from ..errors import SpecError
+    from ..checkpoint import CheckpointFile
+    from ..io import check_output, output_dir
     from ..report import write_track_report
-    from ..spec import load_spec
+    from ..spec import check_against_fmu, load_spec
     from ..tracking.runtime import track
     from ._progress import Progress
-
-    if args.checkpoint_every < 1:
-        raise SpecError(f"--checkpoint-every must be >= 1, got {args.checkpoint_every}")
-    from ..io import check_output, output_dir
-    from ..spec import check_against_fmu
 
     spec = load_spec(args.spec)
     inputs = [spec.path, spec.twin, spec.measurements]
@@ -93,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_live(args, spec, out)
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=inputs)
-    if args.resume:
-        _check_checkpoint(out / "checkpoint.json")
+    if args.resume and (out / "checkpoint.json").exists():  # a damaged one is refused before anything runs
+        CheckpointFile(out / "checkpoint.json", out / "tracking.csv").read()
     check_against_fmu(spec)  # before the output directory exists
     with output_dir(out), output_dir(args.report or out):
         result = track(spec, out_dir=out, resume=args.resume,
@@ -139,22 +135,6 @@ def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
         print(f"live: {live.samples} samples ({live.backfilled} read back from history), "
               f"{live.connections} connection(s), origin {live.origin.isoformat()}")
     return 0
-
-
-def _check_checkpoint(path: Path) -> None:
-    """Refuse a checkpoint that is not a JSON object with a version (never half-trust it)."""
-    from ..errors import TrackingError
-
-    if not path.exists():
-        return
-    try:
-        doc = json.loads(path.read_bytes().decode("utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)[:120] or type(exc).__name__
-        raise TrackingError(f"--resume: checkpoint {path} is corrupt ({reason}); delete it to start afresh") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("version"), int):
-        raise TrackingError(f"--resume: checkpoint {path} is corrupt (not a checkpoint object with a version); "
-                            "delete it to start afresh")
 
 
 def _print_summary(result: Any, paired: dict[str, str] | None = None) -> None:
