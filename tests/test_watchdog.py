@@ -176,10 +176,10 @@ def test_a_hang_on_the_20th_step_is_one_timeout_line_exit_2_and_nothing_left(
 
 
 def test_a_long_run_of_short_calls_is_not_a_timeout(crafted: dict[str, Path], tmp_path: Path) -> None:
-    """150 steps of 30 ms each (4.5 s in all) with a 1 s limit per call: the run completes unchanged."""
+    """150 steps of 30 ms each (4.5 s in all) with a 2 s limit per call: the run completes unchanged."""
     out = tmp_path / "result.csv"
     proc, seconds = _run(["simulate", str(crafted["slow_steps"]), "--set", "u=1", "--stop", "150", "--step", "1",
-                          "-o", str(out)], tmp_path / "tmp", "1")
+                          "-o", str(out)], tmp_path / "tmp", "2")
     assert proc.returncode == 0, proc.stderr
     assert "error" not in proc.stderr
     rows = out.read_text().splitlines()
