@@ -31,7 +31,6 @@ from __future__ import annotations
 import ctypes
 import faulthandler
 import json
-import logging
 import math
 import os
 import re
@@ -44,8 +43,6 @@ import time
 import traceback
 from collections.abc import Callable
 from types import FrameType
-
-log = logging.getLogger(__name__)
 
 #: innermost frame of fmpy's FMI wrappers in a faulthandler dump: (fmi2|fmi3|fmi1 module, method)
 _FMPY_FRAME = re.compile(r'File "[^"]*fmpy[/\\](fmi[123])\.py", line \d+ in (\w+)')
