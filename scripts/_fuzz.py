@@ -74,7 +74,7 @@ FAILING = ("traceback", "signal", "hang", "half-written")
 MAX_ERROR_LINE = 1000       # characters of the error line
 MAX_STDERR = 6000           # characters of the whole stderr on a refusal
 MEMORY_LIMIT = 3 << 30      # address space per case (bytes)
-FMU_TIMEOUT = 10.0          # s an FMI call may take in the canary (TRACKINGBOX_FMU_TIMEOUT)
+FMU_TIMEOUT = 10.0          # s an FMI call may take in the canary and under the watchdog (TRACKINGBOX_FMU_TIMEOUT)
 FILE_LIMIT = 1 << 30        # largest file a case may write (bytes): a zip bomb cannot fill the disk
 
 
@@ -233,7 +233,8 @@ static void misbehave(void) {
     }
 }
 #define AT(w) do { if (WHERE == (w)) misbehave(); } while (0)
-/* WHERE: 1 load, 2 instantiate, 3 setup/enter init, 4 exit init, 5 getReal, 6 doStep, 7 freeInstance */
+/* WHERE: 1 load, 2 instantiate, 3 setup/enter init, 4 exit init, 5 getReal, 6 doStep, 7 freeInstance,
+   8 the fourth and later getReal, 9 the fifth doStep (after the canary's one: the watchdog's case) */
 __attribute__((constructor)) static void on_load(void) { AT(1); }
 typedef void *C;
 static int dummy;
@@ -264,7 +265,7 @@ int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; 
 int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
 int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
 int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
-int fmi2DoStep(C c, double t, double h, int nsp) { AT(6); return 0; }
+int fmi2DoStep(C c, double t, double h, int nsp) { static int steps; AT(6); if (WHERE == 9 && ++steps == 5) misbehave(); return 0; }
 int fmi2CancelStep(C c) { return 0; }
 int fmi2GetStatus(C c, int s, int *v) { return 3; }
 int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
@@ -293,6 +294,7 @@ CRAFTED = {
     "hang_instantiate": (2, 4), "exit3_instantiate": (2, 5), "segv_setup": (3, 1),
     "segv_exitinit": (4, 1), "segv_getreal": (5, 1), "bus_getreal": (5, 6), "segv_dostep": (6, 1),
     "hang_dostep": (6, 4), "exit0_dostep": (6, 3), "segv_free": (7, 1), "segv_getreal_late": (8, 1),
+    "hang_dostep_late": (9, 4),
     "well_behaved": (0, 0),
 }
 

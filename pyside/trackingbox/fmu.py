@@ -578,17 +578,16 @@ def _extract(path: Path) -> str:
         raise
 
 
-#: seconds one FMI call of the canary may take (``TRACKINGBOX_FMU_TIMEOUT`` overrides)
+#: seconds one FMI call of the canary (and, under the supervisor, of the run) may take
+#: (``TRACKINGBOX_FMU_TIMEOUT`` overrides; :func:`trackingbox.supervise.fmu_timeout`)
 CANARY_TIMEOUT = 60.0
 _CANARY_PASSED: set[tuple[Any, ...]] = set()
 
 
 def _canary_timeout() -> float:
-    try:
-        value = float(os.environ.get("TRACKINGBOX_FMU_TIMEOUT", CANARY_TIMEOUT))
-    except ValueError:
-        return CANARY_TIMEOUT
-    return value if value > 0 and math.isfinite(value) else CANARY_TIMEOUT
+    from .supervise import fmu_timeout
+
+    return fmu_timeout()
 
 
 def _canary_calls(tempdir: str, md: ModelDescription, interface: str,
@@ -827,6 +826,7 @@ class FMUModel:
 
         note_fmu(self.path)
         self._tempdir = _extract(self.path)
+        note_fmu(self.path, self._tempdir)  # the watchdog names this FMU if one of its calls hangs
         self._finalizer = weakref.finalize(self, _cleanup, self._holder, self._tempdir, os.getpid())
         try:
             _canary(self.path, self._tempdir, md, interface)

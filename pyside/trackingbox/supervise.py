@@ -1,15 +1,27 @@
-"""Run a command in a forked child so that a crash of foreign native code still gives one error line.
+"""Run a command in a forked child so that a crash or hang of foreign native code still gives one error line.
 
 :mod:`trackingbox.fmu` runs each FMU's native code once in a canary process
 before loading it (loading, instantiation, initialisation, the first output read
 and step). What the canary cannot see (a binary that crashes on its thousandth
-``fmi2GetReal``, or calls ``exit()`` in the middle of a run) would still kill the
-``trackingbox`` process with a bare exit 139. :func:`supervise` runs the whole
-command in a forked child and waits: a child killed by a signal becomes
+``fmi2GetReal``, hangs in its thousandth ``fmi2DoStep`` or calls ``exit()`` in
+the middle of a run) would still kill the ``trackingbox`` process with a bare
+exit 139, or hang it forever. :func:`supervise` runs the whole command in a
+forked child and waits: a child killed by a signal becomes
 ``error: the FMU's binary crashed (SIGSEGV) in fmi2GetReal`` (the FMI function
 read from :mod:`faulthandler`'s dump of the child's Python stack), a child that
 ends without finishing becomes ``error: ... called exit(0) ...``; otherwise the
 child's exit code is returned. The cost is one ``fork`` per command.
+
+In the child a :class:`Watchdog` thread bounds every FMI call: ctypes releases
+the GIL during a foreign call, so the thread can read the main thread's stack
+(``sys._current_frames()``) every :data:`WATCHDOG_POLL` s. When the innermost
+frame of fmpy's FMI wrappers (the same frame object: the same call) has been
+there longer than ``TRACKINGBOX_FMU_TIMEOUT`` s (60, the canary's limit too),
+the child reports it and ends; the supervisor prints
+``error: the FMU's binary (twin.fmu) did not return from fmi2DoStep within 60 s
+(TRACKINGBOX_FMU_TIMEOUT)`` and exits 2. Many short calls never trip it.
+``TRACKINGBOX_WATCHDOG=0`` turns it off. In every such ending, the directories
+the child was creating (:func:`note_output`) are removed.
 
 The child dies with its parent (``PR_SET_PDEATHSIG`` on Linux): ``kill -9`` of
 ``trackingbox`` stops the run as it did before.
@@ -18,14 +30,19 @@ from __future__ import annotations
 
 import ctypes
 import faulthandler
+import json
+import math
 import os
 import re
 import shutil
 import signal
 import sys
 import tempfile
+import threading
+import time
 import traceback
 from collections.abc import Callable
+from types import FrameType
 
 #: innermost frame of fmpy's FMI wrappers in a faulthandler dump: (fmi2|fmi3|fmi1 module, method)
 _FMPY_FRAME = re.compile(r'File "[^"]*fmpy[/\\](fmi[123])\.py", line \d+ in (\w+)')
@@ -34,6 +51,21 @@ NOTE_ENV = "TRACKINGBOX_SUPERVISOR_NOTE"
 #: environment variable naming the file where :func:`note_output` lists output directories being created
 OUTPUTS_ENV = "TRACKINGBOX_SUPERVISOR_OUTPUTS"
 _ANY_FRAME = re.compile(r'File "([^"]*)", line (\d+) in (\w+)')
+#: an fmpy FMI wrapper module's file name, as in a code object's ``co_filename``
+_FMPY_FILE = re.compile(r"fmpy[/\\](fmi[123])\.py$")
+#: seconds one FMI call may take, in the canary and under the watchdog (``TRACKINGBOX_FMU_TIMEOUT`` overrides)
+FMU_TIMEOUT = 60.0
+#: seconds between two looks of the watchdog at the main thread's stack
+WATCHDOG_POLL = 0.5
+
+
+def fmu_timeout() -> float:
+    """``TRACKINGBOX_FMU_TIMEOUT`` in seconds (a positive finite number), else :data:`FMU_TIMEOUT`."""
+    try:
+        value = float(os.environ.get("TRACKINGBOX_FMU_TIMEOUT", FMU_TIMEOUT))
+    except ValueError:
+        return FMU_TIMEOUT
+    return value if value > 0 and math.isfinite(value) else FMU_TIMEOUT
 
 
 def fmi_function(dump: str) -> str | None:
@@ -49,7 +81,12 @@ def fmi_function(dump: str) -> str | None:
     >>> fmi_function('  File "/x/fmpy/fmi1.py", line 90 in __init__') is None
     True
     """
-    for module, method in _FMPY_FRAME.findall(dump):
+    return _fmi_name(_FMPY_FRAME.findall(dump))
+
+
+def _fmi_name(frames: list[tuple[str, str]]) -> str | None:
+    """The FMI function from fmpy frames ``(module, method)``, innermost first, or None."""
+    for module, method in frames:
         if re.fullmatch(r"fmi[123][A-Z]\w*", method):
             return method
         if method.startswith("_") or module == "fmi1" or method == "w":
@@ -79,6 +116,122 @@ def _die_with_parent() -> None:
         pass
 
 
+#: FMU extraction directory -> FMU path, in this process (:func:`note_fmu`): names the FMU of a stuck call
+_FMU_DIRS: dict[str, str] = {}
+
+
+class Watchdog:
+    """A daemon thread that reports an FMI call of one thread that has not returned within *timeout* s.
+
+    Every *poll* s it reads the watched thread's stack (``sys._current_frames()``;
+    ctypes releases the GIL during the foreign call, so the thread runs) and keeps
+    the innermost frame of fmpy's FMI wrappers. When the same frame object (the
+    same call: a frame object belongs to one call, and the reference held here
+    keeps it from being reused) is still there after *timeout* s, it calls
+    ``on_timeout(function, fmu, timeout)`` once for that call: *function* is the
+    FMI function (``"fmi2DoStep"``), *fmu* the FMU's path or ``""``.
+
+    Parameters
+    ----------
+    on_timeout
+        What to do; under :func:`supervise` it reports and ends the process.
+    timeout
+        Seconds; default :func:`fmu_timeout` (``TRACKINGBOX_FMU_TIMEOUT``, 60).
+    poll
+        Seconds between two looks (:data:`WATCHDOG_POLL`): the cost is one stack walk per look.
+    thread_id
+        The watched thread's ident; default the main thread.
+    """
+
+    def __init__(self, on_timeout: Callable[[str, str, float], None], *, timeout: float | None = None,
+                 poll: float = WATCHDOG_POLL, thread_id: int | None = None) -> None:
+        self.timeout = fmu_timeout() if timeout is None else float(timeout)
+        self.poll = float(poll)
+        self.thread_id = threading.main_thread().ident if thread_id is None else thread_id
+        self.fired: list[tuple[str, str, float]] = []
+        self._on_timeout = on_timeout
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="trackingbox-fmu-watchdog", daemon=True)
+
+    def start(self) -> Watchdog:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join()
+
+    def __enter__(self) -> Watchdog:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _look(self) -> tuple[FrameType, str] | None:
+        """The innermost fmpy FMI frame of the watched thread and the FMI function's name, or None."""
+        frame: FrameType | None = sys._current_frames().get(self.thread_id)  # type: ignore[arg-type]
+        watched: FrameType | None = None
+        names: list[tuple[str, str]] = []
+        while frame is not None:
+            match = _FMPY_FILE.search(frame.f_code.co_filename)
+            if match:
+                watched = watched or frame
+                names.append((match.group(1), frame.f_code.co_name))
+            elif watched is not None:  # the wrappers' frames are contiguous: the call is named
+                break
+            frame = frame.f_back
+        if watched is None:
+            return None
+        return watched, _fmi_name(names) or "a call into its shared library"
+
+    def _watch(self) -> None:
+        current: FrameType | None = None
+        reported: FrameType | None = None
+        since = 0.0
+        while not self._stop.wait(self.poll):
+            seen = self._look()
+            if seen is None or seen[0] is not current:
+                current = None if seen is None else seen[0]
+                since = time.monotonic()
+                continue
+            if current is not reported and time.monotonic() - since >= self.timeout:
+                reported = current  # once per call
+                fmu = _fmu_of(current)
+                self.fired.append((seen[1], fmu, self.timeout))
+                self._on_timeout(seen[1], fmu, self.timeout)
+            seen = None
+
+
+def _fmu_of(frame: FrameType | None) -> str:
+    """The FMU whose extraction directory the fmpy object of *frame* (``self``) was loaded from, else the last noted."""
+    try:
+        owner = frame.f_locals.get("self") if frame is not None else None
+        directory = getattr(owner, "unzipDirectory", None)
+        if directory and os.path.realpath(directory) in _FMU_DIRS:
+            return _FMU_DIRS[os.path.realpath(directory)]
+    except Exception:  # noqa: BLE001 - a name for the message only
+        pass
+    target = os.environ.get(NOTE_ENV)
+    if target:
+        try:
+            with open(target, encoding="utf-8", errors="replace") as fh:
+                return fh.read().strip()
+        except OSError:
+            pass
+    return ""
+
+
+def timeout_message(function: str, fmu: str, timeout: float) -> str:
+    """The error line's text for an FMI call that did not return.
+
+    >>> timeout_message("fmi2DoStep", "/data/twin.fmu", 60.0)
+    "the FMU's binary (twin.fmu) did not return from fmi2DoStep within 60 s (TRACKINGBOX_FMU_TIMEOUT)"
+    """
+    who = f"the FMU's binary ({os.path.basename(fmu)})" if fmu else "foreign native code (an FMU's binary)"
+    return f"{who} did not return from {function} within {timeout:g} s (TRACKINGBOX_FMU_TIMEOUT)"
+
+
 def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
     """Run ``run(argv)`` in a forked child; return its exit code or report how it died (exit 2)."""
     sys.stdout.flush()
@@ -99,6 +252,18 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
         faulthandler.enable(file=dump, all_threads=False)
         os.environ[NOTE_ENV] = note.name
         os.environ[OUTPUTS_ENV] = outputs.name
+        report_lock = threading.Lock()
+
+        def hung(function: str, fmu: str, timeout: float) -> None:
+            # the main thread is stuck in foreign code: say where, then end the whole process
+            with report_lock:
+                doc = json.dumps({"function": function, "fmu": fmu, "timeout": timeout})
+                os.write(write_fd, f"timeout {doc}\n".encode())
+                os._exit(2)
+
+        watchdog = Watchdog(hung) if os.environ.get("TRACKINGBOX_WATCHDOG", "1") != "0" else None
+        if watchdog is not None:
+            watchdog.start()
         code: int = 1
         try:
             code = int(run(argv) or 0)
@@ -109,6 +274,9 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
         except BaseException:  # what the interpreter would print
             traceback.print_exc()
             code = 1
+        report_lock.acquire()  # held to the end: a late watchdog report cannot follow "done"
+        if watchdog is not None:
+            watchdog._stop.set()
         os.write(write_fd, f"done {code}\n".encode())
         os.close(write_fd)
         sys.exit(code)
@@ -146,6 +314,14 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
         # the child died inside an output_dir block: remove what it created (nothing half-written)
         for path in created:
             shutil.rmtree(path, ignore_errors=True)
+    if report.startswith("timeout "):
+        try:
+            doc = json.loads(report[len("timeout "):].splitlines()[0])
+            message = timeout_message(str(doc["function"]), str(doc["fmu"]), float(doc["timeout"]))
+        except (ValueError, KeyError, TypeError, IndexError):
+            message = timeout_message("an FMI call", fmu_path, fmu_timeout())
+        print(f"error: {message}", file=sys.stderr)
+        return 2
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig == signal.SIGKILL and not finished:
@@ -173,8 +349,14 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
     return code
 
 
-def note_fmu(path: object) -> None:
-    """Under :func:`supervise`: remember *path* as the FMU whose native code now runs (for the error line)."""
+def note_fmu(path: object, directory: str | None = None) -> None:
+    """Under :func:`supervise`: remember *path* as the FMU whose native code now runs (for the error line).
+
+    With *directory* (where it was extracted), the watchdog can name the FMU of a
+    stuck call even when several are open.
+    """
+    if directory is not None:
+        _FMU_DIRS[os.path.realpath(directory)] = str(path)
     target = os.environ.get(NOTE_ENV)
     if not target:
         return

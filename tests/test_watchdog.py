@@ -1,0 +1,220 @@
+"""The per-call watchdog (issue 13): an FMI call that hangs in the middle of a run becomes one error line.
+
+The canary bounds loading, instantiation, initialisation and the first step; a
+binary that hangs on a later ``fmi2DoStep`` is caught by
+:class:`trackingbox.supervise.Watchdog` in the supervised command. The crafted
+binaries are tiny FMI 2 co-simulation libraries built with gcc (as
+``scripts/_fuzz.py`` builds them) whose ``fmi2DoStep`` hangs, sleeps once, or
+sleeps a little on every call. The expectations are the binaries' own
+behaviour: ``fmi2GetReal`` returns 1.0, the Nth ``fmi2DoStep`` does not return.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from trackingbox.fmu import FMUModel
+from trackingbox.supervise import Watchdog, timeout_message
+
+C_SOURCE = r"""
+#include <string.h>
+#include <unistd.h>
+/* WHAT: 0 well behaved, 1 the NTH fmi2DoStep never returns, 2 every fmi2DoStep sleeps 30 ms,
+   3 the NTH fmi2DoStep sleeps 2 s (then returns) */
+typedef void *C;
+static int dummy, steps;
+const char *fmi2GetTypesPlatform(void) { return "default"; }
+const char *fmi2GetVersion(void) { return "2.0"; }
+int fmi2SetDebugLogging(C c, int a, size_t n, const char *const *x) { return 0; }
+C fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) { return &dummy; }
+void fmi2FreeInstance(C c) {}
+int fmi2SetupExperiment(C c, int a, double tol, double t0, int b, double t1) { return 0; }
+int fmi2EnterInitializationMode(C c) { return 0; }
+int fmi2ExitInitializationMode(C c) { return 0; }
+int fmi2Terminate(C c) { return 0; }
+int fmi2Reset(C c) { return 0; }
+int fmi2GetReal(C c, const unsigned *vr, size_t n, double *v) { for (size_t i = 0; i < n; i++) v[i] = 1.0; return 0; }
+int fmi2GetInteger(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
+int fmi2GetBoolean(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
+int fmi2GetString(C c, const unsigned *vr, size_t n, const char **v) { for (size_t i = 0; i < n; i++) v[i] = ""; return 0; }
+int fmi2SetReal(C c, const unsigned *vr, size_t n, const double *v) { return 0; }
+int fmi2SetInteger(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
+int fmi2SetBoolean(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
+int fmi2SetString(C c, const unsigned *vr, size_t n, const char *const *v) { return 0; }
+int fmi2GetFMUstate(C c, void **s) { return 3; }
+int fmi2SetFMUstate(C c, void *s) { return 3; }
+int fmi2FreeFMUstate(C c, void **s) { return 3; }
+int fmi2SerializedFMUstateSize(C c, void *s, size_t *n) { return 3; }
+int fmi2SerializeFMUstate(C c, void *s, char *b, size_t n) { return 3; }
+int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; }
+int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
+int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
+int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
+int fmi2DoStep(C c, double t, double h, int nsp) {
+    ++steps;
+    if (WHAT == 1 && steps == NTH) for (;;) pause();
+    if (WHAT == 2) usleep(30000);
+    if (WHAT == 3 && steps == NTH) sleep(2);
+    return 0;
+}
+int fmi2CancelStep(C c) { return 0; }
+int fmi2GetStatus(C c, int s, int *v) { return 3; }
+int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
+int fmi2GetIntegerStatus(C c, int s, int *v) { return 3; }
+int fmi2GetBooleanStatus(C c, int s, int *v) { return 3; }
+int fmi2GetStringStatus(C c, int s, const char **v) { return 3; }
+"""
+
+MODEL_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{w-{name}}}" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true"/>
+  <DefaultExperiment startTime="0" stopTime="10" stepSize="1"/>
+  <ModelVariables>
+    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
+    <ScalarVariable name="k" valueReference="1" causality="parameter" variability="tunable"><Real start="1" min="0" max="10"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous"><Real/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure><Outputs><Unknown index="3"/></Outputs></ModelStructure>
+</fmiModelDescription>
+"""
+
+#: name -> (WHAT, NTH): see C_SOURCE
+CRAFTED = {"hang_step20": (1, 20), "slow_steps": (2, 0), "slow_step3": (3, 3), "well_behaved": (0, 0)}
+
+SPEC = """\
+twin = "{twin}"
+measurements = "measurements.csv"
+sample_time = 10.0
+
+[inputs]
+"FI" = "u"
+
+[outputs]
+"TI" = "y"
+
+[[parameters]]
+name = "k"
+start = 1.0
+min = 0.5
+max = 2.0
+
+[windows]
+training = [0.0, 600.0]
+validation = [600.0, 1200.0]
+
+[[pairs]]
+variable = "TI"
+parameter = "k"
+gain = -1.0
+time_constant = 50.0
+"""
+
+EXE = str(Path(sys.executable).parent / "trackingbox")
+
+
+@pytest.fixture(scope="module")
+def crafted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    if shutil.which("gcc") is None or not sys.platform.startswith("linux"):
+        pytest.skip("crafted FMU binaries need gcc on Linux")
+    root = tmp_path_factory.mktemp("watchdog")
+    (root / "w.c").write_text(C_SOURCE)
+    made = {}
+    for name, (what, nth) in CRAFTED.items():
+        so = root / f"{name}.so"
+        subprocess.run(["gcc", "-shared", "-fPIC", f"-DWHAT={what}", f"-DNTH={nth}", "-o", str(so),
+                        str(root / "w.c")], check=True)
+        fmu = root / f"{name}.fmu"
+        with zipfile.ZipFile(fmu, "w") as z:
+            z.writestr("modelDescription.xml", MODEL_DESCRIPTION.format(name=name))
+            z.write(so, f"binaries/linux64/{name}.so")
+        made[name] = fmu
+    return made
+
+
+def _case(root: Path, fmu: Path) -> Path:
+    """A spec for *fmu* with 121 measurement rows every 10 s (the values matter little: y is 1.0)."""
+    root.mkdir(parents=True)
+    (root / "measurements.csv").write_text(
+        "time,FI,TI\n" + "".join(f"{10.0 * i},1.0,1.0\n" for i in range(121)))
+    spec = root / "spec.toml"
+    spec.write_text(SPEC.format(twin=fmu.as_posix()))
+    return spec
+
+
+def _run(argv: list[str], tmp: Path, timeout: str) -> tuple[subprocess.CompletedProcess[str], float]:
+    """The console script (supervised, watchdog on) with its own temp dir."""
+    tmp.mkdir()
+    env = {**os.environ, "TRACKINGBOX_FMU_TIMEOUT": timeout, "TMPDIR": str(tmp)}
+    for name in ("TRACKINGBOX_SUPERVISE", "TRACKINGBOX_WATCHDOG", "TRACKINGBOX_CANARY"):
+        env.pop(name, None)
+    t0 = time.monotonic()
+    proc = subprocess.run([EXE, *argv], capture_output=True, text=True, timeout=120, env=env)
+    return proc, time.monotonic() - t0
+
+
+def test_a_hang_on_the_20th_step_is_one_timeout_line_exit_2_and_nothing_left(
+        crafted: dict[str, Path], tmp_path: Path) -> None:
+    """The canary passes (it takes one step); the 20th fmi2DoStep of the run never returns."""
+    spec = _case(tmp_path / "case", crafted["hang_step20"])
+    out = tmp_path / "run" / "track"
+    proc, seconds = _run(["track", str(spec), "--out", str(out)], tmp_path / "tmp", "2")
+    assert proc.returncode == 2, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert errors == ["error: the FMU's binary (hang_step20.fmu) did not return from fmi2DoStep within 2 s "
+                      "(TRACKINGBOX_FMU_TIMEOUT)"]
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "run").exists()  # the output directory the run was creating is gone
+    assert list((tmp_path / "tmp").iterdir()) == []  # so are the extraction and the supervisor's files
+    assert seconds < 60  # start-up + 2 s + one poll; generous for a loaded machine
+
+
+def test_a_long_run_of_short_calls_is_not_a_timeout(crafted: dict[str, Path], tmp_path: Path) -> None:
+    """150 steps of 30 ms each (4.5 s in all) with a 2 s limit per call: the run completes unchanged."""
+    out = tmp_path / "result.csv"
+    proc, seconds = _run(["simulate", str(crafted["slow_steps"]), "--set", "u=1", "--stop", "150", "--step", "1",
+                          "-o", str(out)], tmp_path / "tmp", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "error" not in proc.stderr
+    rows = out.read_text().splitlines()
+    assert rows[0].split(",")[0] == "time" and len(rows) == 1 + 151  # t = 0 ... 150
+    assert all(float(r.split(",")[-1]) == 1.0 for r in rows[1:])  # the binary's fmi2GetReal returns 1.0
+    assert seconds >= 150 * 0.03  # the calls really took their time (the limit per call, not per run)
+
+
+def test_a_normal_tracking_run_with_the_watchdog_on_is_unaffected(crafted: dict[str, Path], tmp_path: Path) -> None:
+    spec = _case(tmp_path / "case", crafted["well_behaved"])
+    out = tmp_path / "track"
+    proc, _ = _run(["track", str(spec), "--out", str(out)], tmp_path / "tmp", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "error" not in proc.stderr
+    rows = (out / "tracking.csv").read_text().splitlines()
+    assert len(rows) >= 1 + 120  # one row per sample of the 1200 s of measurements (or more with the start)
+
+
+def test_the_watchdog_names_a_stuck_call_once_and_ignores_short_ones(crafted: dict[str, Path]) -> None:
+    """In-process, with a callback that only records: the 3rd fmi2DoStep sleeps 2 s against a 0.5 s limit."""
+    fired: list[tuple[str, str, float]] = []
+    with FMUModel(crafted["slow_step3"]) as model, \
+            Watchdog(lambda *a: fired.append(a), timeout=0.5, poll=0.05):
+        result = model.simulate(stop_time=6.0, output_interval=1.0, parameters={"u": 1.0})
+    assert list(result["y"]) == [1.0] * 7  # the slow call returned and the run went on
+    assert fired == [("fmi2DoStep", str(crafted["slow_step3"]), 0.5)]
+
+    fired.clear()
+    with FMUModel(crafted["slow_steps"]) as model, \
+            Watchdog(lambda *a: fired.append(a), timeout=0.5, poll=0.05):
+        model.simulate(stop_time=40.0, output_interval=1.0, parameters={"u": 1.0})  # 40 calls of 30 ms
+    assert fired == []
+
+
+def test_the_timeout_message() -> None:
+    assert timeout_message("fmi3DoStep", "/a/b/twin.fmu", 60.0) == (
+        "the FMU's binary (twin.fmu) did not return from fmi3DoStep within 60 s (TRACKINGBOX_FMU_TIMEOUT)")
+    assert timeout_message("fmi2GetReal", "", 2.5).startswith("foreign native code (an FMU's binary) did not")
