@@ -318,7 +318,13 @@ def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path, capsys):
     assert abs(value - BIAS) < 2 * noise
     assert finding["delta_bic"] > 10
     before, after = finding["validation"]["nrmse_before"]["TI-102"], finding["validation"]["nrmse_after"]["TI-102"]
-    assert after < 0.5 * before
+    # the bias explained, TI-102 fits as well as the twin fits the same data without the bias (the twin's
+    # constant kht cannot follow the plant's fouling, so neither reaches the noise floor): the reference
+    # is an estimate on the unbiased copy, not diagnose's own output; 10 % for the two fits' budgets
+    from trackingbox.estimation import estimate
+
+    plain = estimate(_copy_case(hx_bench, tmp_path / "plain"), maxiter=SETTINGS["maxiter"])
+    assert after < 1.1 * plain.validation_nrmse["TI-102"] < before
     # the patch: <Twin>Diagnosed.mo written and compiled, naming the effect; a spec for the patched twin
     assert doc["patch"]["model"].endswith("TwinDiagnosed")
     assert (tmp_path / "patched" / "TwinDiagnosed.mo").read_text() == doc["patch"]["source"]
