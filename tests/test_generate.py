@@ -400,13 +400,18 @@ def test_compiled_box_agrees_with_python_runtime_and_would_catch_wrong_gains(tmp
 
     spec_path = write_case(tmp_path / "case", gains="")
     case = spec_path.parent
-    spec_path.write_text(spec_path.read_text().replace("validation = [3600.0, 7200.0]", "validation = [0.0, 7200.0]")
+    # the validation run starts at the first sample (the transient after the hold is what the gains
+    # decide); the training window, unused here, lies after it (windows may not overlap)
+    text = spec_path.read_text()
+    assert "training = [0.0, 3600.0]" in text and "validation = [3600.0, 7200.0]" in text
+    spec_path.write_text(text.replace("training = [0.0, 3600.0]", "training = [7200.0, 9000.0]")
+                         .replace("validation = [3600.0, 7200.0]", "validation = [0.0, 7200.0]")
                          + "\n[tracking]\nhold_until = 600.0\n")
     compile_model(case / "Mini", "Mini.Twin", backend="embedded", output=case / "twin.fmu")
-    grid = np.arange(0.0, 7200.0 + 1e-9, 10.0)
+    grid = np.arange(0.0, 9000.0 + 1e-9, 10.0)
     qin = np.where(grid < 2400.0, 50000.0, np.where(grid < 4800.0, 40000.0, 55000.0))
     with FMUModel(case / "twin.fmu") as plant:  # the plant: the twin with kht = 900
-        y = plant.simulate(stop_time=7200.0, output_interval=10.0, parameters={"hx.kht": 900.0},
+        y = plant.simulate(stop_time=9000.0, output_interval=10.0, parameters={"hx.kht": 900.0},
                            inputs=pd.DataFrame({"time": grid, "Qin": qin}), outputs=["ThOut"])
     pd.DataFrame({"time": grid, "QI-100": qin, "TI-102": y["ThOut"].to_numpy()}).to_csv(
         case / "measurements.csv", index=False)
