@@ -55,6 +55,9 @@ import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
+from trackingbox.testing import crafted
+
+M = crafted.Misbehaviour
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent / "trackingbox"
 
@@ -209,128 +212,31 @@ def _write_many(fmu: Path, out: Path, n: int = 120_000) -> None:
 
 # --------------------------------------------------------------------------- crafted binaries
 
-CRAFTED_C = r"""
-#include <signal.h>
-#include <stdlib.h>
-#include <string.h>
-#include <unistd.h>
-#ifndef WHERE
-#define WHERE 0
-#endif
-#ifndef WHAT
-#define WHAT 0
-#endif
-/* WHAT: 1 segfault, 2 abort, 3 _exit(0), 4 hang, 5 exit(3), 6 bus error */
-static void misbehave(void) {
-    volatile int *p = 0;
-    switch (WHAT) {
-    case 1: *p = 1; break;
-    case 2: abort(); break;
-    case 3: _exit(0); break;
-    case 4: for (;;) pause(); break;
-    case 5: exit(3); break;
-    case 6: raise(SIGBUS); break;
-    }
-}
-#define AT(w) do { if (WHERE == (w)) misbehave(); } while (0)
-/* WHERE: 1 load, 2 instantiate, 3 setup/enter init, 4 exit init, 5 getReal, 6 doStep, 7 freeInstance,
-   8 the fourth and later getReal, 9 the fifth doStep (after the canary's one: the watchdog's case) */
-__attribute__((constructor)) static void on_load(void) { AT(1); }
-typedef void *C;
-static int dummy;
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-int fmi2SetDebugLogging(C c, int a, size_t n, const char *const *x) { return 0; }
-C fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) { AT(2); return &dummy; }
-void fmi2FreeInstance(C c) { AT(7); }
-int fmi2SetupExperiment(C c, int a, double tol, double t0, int b, double t1) { AT(3); return 0; }
-int fmi2EnterInitializationMode(C c) { AT(3); return 0; }
-int fmi2ExitInitializationMode(C c) { AT(4); return 0; }
-int fmi2Terminate(C c) { return 0; }
-int fmi2Reset(C c) { return 0; }
-int fmi2GetReal(C c, const unsigned *vr, size_t n, double *v) { static int calls; AT(5); if (WHERE == 8 && ++calls > 3) misbehave(); for (size_t i = 0; i < n; i++) v[i] = 1.0; return 0; }
-int fmi2GetInteger(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetBoolean(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetString(C c, const unsigned *vr, size_t n, const char **v) { for (size_t i = 0; i < n; i++) v[i] = ""; return 0; }
-int fmi2SetReal(C c, const unsigned *vr, size_t n, const double *v) { return 0; }
-int fmi2SetInteger(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetBoolean(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetString(C c, const unsigned *vr, size_t n, const char *const *v) { return 0; }
-int fmi2GetFMUstate(C c, void **s) { return 3; }
-int fmi2SetFMUstate(C c, void *s) { return 3; }
-int fmi2FreeFMUstate(C c, void **s) { return 3; }
-int fmi2SerializedFMUstateSize(C c, void *s, size_t *n) { return 3; }
-int fmi2SerializeFMUstate(C c, void *s, char *b, size_t n) { return 3; }
-int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; }
-int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
-int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
-int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
-int fmi2DoStep(C c, double t, double h, int nsp) { static int steps; AT(6); if (WHERE == 9 && ++steps == 5) misbehave(); return 0; }
-int fmi2CancelStep(C c) { return 0; }
-int fmi2GetStatus(C c, int s, int *v) { return 3; }
-int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
-int fmi2GetIntegerStatus(C c, int s, int *v) { return 3; }
-int fmi2GetBooleanStatus(C c, int s, int *v) { return 3; }
-int fmi2GetStringStatus(C c, int s, const char **v) { return 3; }
-"""
-
-CRAFTED_MD = """<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{fuzz-{name}}}" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true"/>
-  <DefaultExperiment startTime="0" stopTime="10" stepSize="1"/>
-  <ModelVariables>
-    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
-    <ScalarVariable name="k" valueReference="1" causality="parameter" variability="tunable"><Real start="1" min="0" max="10"/></ScalarVariable>
-    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous"><Real/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure><Outputs><Unknown index="3"/></Outputs></ModelStructure>
-</fmiModelDescription>
-"""
-
-#: crafted FMU name -> (WHERE, WHAT): see CRAFTED_C
+#: crafted FMU name -> its misbehaviour (see trackingbox.testing.crafted)
 CRAFTED = {
-    "segv_load": (1, 1), "abort_load": (1, 2), "exit0_load": (1, 3), "hang_load": (1, 4),
-    "segv_instantiate": (2, 1), "abort_instantiate": (2, 2), "exit0_instantiate": (2, 3),
-    "hang_instantiate": (2, 4), "exit3_instantiate": (2, 5), "segv_setup": (3, 1),
-    "segv_exitinit": (4, 1), "segv_getreal": (5, 1), "bus_getreal": (5, 6), "segv_dostep": (6, 1),
-    "hang_dostep": (6, 4), "exit0_dostep": (6, 3), "segv_free": (7, 1), "segv_getreal_late": (8, 1),
-    "hang_dostep_late": (9, 4),
-    "well_behaved": (0, 0),
+    "segv_load": M(1, 1), "abort_load": M(1, 2), "exit0_load": M(1, 3), "hang_load": M(1, 4),
+    "segv_instantiate": M(2, 1), "abort_instantiate": M(2, 2), "exit0_instantiate": M(2, 3),
+    "hang_instantiate": M(2, 4), "exit3_instantiate": M(2, 5), "segv_setup": M(3, 1),
+    "segv_exitinit": M(4, 1), "segv_getreal": M(5, 1), "bus_getreal": M(5, 6), "segv_dostep": M(6, 1),
+    "hang_dostep": M(6, 4), "exit0_dostep": M(6, 3), "segv_free": M(7, 1),
+    "segv_getreal_late": M(8, 1, nth=4),  # past the canary's reads
+    "hang_dostep_late": M(9, 4, nth=5),   # past the canary's step: the watchdog's case
+    "well_behaved": M(),
 }
 
 
 def build_crafted(out: Path, log: Callable[[str], None]) -> dict[str, Path]:
-    """One FMI 2 co-simulation FMU per misbehaviour, with a tiny shared library built by gcc."""
-    out.mkdir(parents=True, exist_ok=True)
-    src = out / "crafted.c"
-    src.write_text(CRAFTED_C)
-    made: dict[str, Path] = {}
-    for name, (where, what) in CRAFTED.items():
-        fmu = out / f"{name}.fmu"
-        if not fmu.exists():
-            so = out / f"{name}.so"
-            subprocess.run([os.environ.get("CC", "gcc"), "-shared", "-fPIC", "-O0", f"-DWHERE={where}",
-                            f"-DWHAT={what}", "-o", str(so), str(src)], check=True)
-            with zipfile.ZipFile(fmu.with_suffix(".part"), "w", zipfile.ZIP_DEFLATED) as z:
-                z.writestr("modelDescription.xml", CRAFTED_MD.format(name=name))
-                z.write(so, f"binaries/linux64/{name}.so")
-            fmu.with_suffix(".part").replace(fmu)
-        made[name] = fmu
+    """One FMI 2 co-simulation FMU per misbehaviour, plus a truncated and a garbage shared library."""
+    made = crafted.build(out, CRAFTED)
     # a truncated shared library: the mapping ends inside the file's declared segments
     trunc = out / "truncated_so.fmu"
     if not trunc.exists():
         data = (out / "well_behaved.so").read_bytes()
-        with zipfile.ZipFile(trunc.with_suffix(".part"), "w") as z:
-            z.writestr("modelDescription.xml", CRAFTED_MD.format(name="truncated_so"))
-            z.writestr("binaries/linux64/truncated_so.so", data[: len(data) // 3])
-        trunc.with_suffix(".part").replace(trunc)
+        crafted.package(trunc, "truncated_so", data[: len(data) // 3])
     made["truncated_so"] = trunc
     garbage = out / "garbage_so.fmu"
     if not garbage.exists():
-        with zipfile.ZipFile(garbage.with_suffix(".part"), "w") as z:
-            z.writestr("modelDescription.xml", CRAFTED_MD.format(name="garbage_so"))
-            z.writestr("binaries/linux64/garbage_so.so", random.Random(5).randbytes(5000))
-        garbage.with_suffix(".part").replace(garbage)
+        crafted.package(garbage, "garbage_so", random.Random(5).randbytes(5000))
     made["garbage_so"] = garbage
     log(f"crafted {len(made)} FMUs with misbehaving binaries")
     return made
@@ -786,7 +692,7 @@ _CONSTRUCTS = {
 
 
 def modelica_case(m: Maker, i: int) -> Case:
-    rng, base, d = m.rng, m.base, m.dir(i)
+    rng, d = m.rng, m.dir(i)
     src = d / "FuzzTwin.mo"
     text: str | bytes = MODEL
     model = "FuzzTwin"

@@ -21,6 +21,8 @@ from hypothesis import strategies as st
 
 from trackingbox.errors import FMUError
 from trackingbox.fmu import FMUModel, _extract, read_info
+from trackingbox.testing import crafted as crafted_fmus
+from trackingbox.testing.crafted import Misbehaviour
 
 FUZZ = settings(max_examples=40, deadline=10000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
@@ -91,91 +93,18 @@ def test_too_many_entries_is_refused_before_listing(tmp_path: Path) -> None:
 
 # -- crafted binaries ---------------------------------------------------------------------------
 
-C_SOURCE = r"""
-#include <stdlib.h>
-#include <string.h>
-#include <unistd.h>
-typedef void *C;
-static int dummy;
-static void misbehave(void) { volatile int *p = 0;
-#if WHAT == 1
-  *p = 1;
-#elif WHAT == 2
-  for (;;) pause();
-#elif WHAT == 3
-  _exit(0);
-#endif
-}
-#define AT(w) do { if (WHERE == (w)) misbehave(); } while (0)
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-int fmi2SetDebugLogging(C c, int a, size_t n, const char *const *x) { return 0; }
-C fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) { AT(1); return &dummy; }
-void fmi2FreeInstance(C c) {}
-int fmi2SetupExperiment(C c, int a, double tol, double t0, int b, double t1) { return 0; }
-int fmi2EnterInitializationMode(C c) { return 0; }
-int fmi2ExitInitializationMode(C c) { return 0; }
-int fmi2Terminate(C c) { return 0; }
-int fmi2Reset(C c) { return 0; }
-int fmi2GetReal(C c, const unsigned *vr, size_t n, double *v) { static int calls; if (WHERE == 3 && ++calls > 3) misbehave(); for (size_t i = 0; i < n; i++) v[i] = 1.0; return 0; }
-int fmi2GetInteger(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetBoolean(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetString(C c, const unsigned *vr, size_t n, const char **v) { return 0; }
-int fmi2SetReal(C c, const unsigned *vr, size_t n, const double *v) { return 0; }
-int fmi2SetInteger(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetBoolean(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetString(C c, const unsigned *vr, size_t n, const char *const *v) { return 0; }
-int fmi2GetFMUstate(C c, void **s) { return 3; }
-int fmi2SetFMUstate(C c, void *s) { return 3; }
-int fmi2FreeFMUstate(C c, void **s) { return 3; }
-int fmi2SerializedFMUstateSize(C c, void *s, size_t *n) { return 3; }
-int fmi2SerializeFMUstate(C c, void *s, char *b, size_t n) { return 3; }
-int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; }
-int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
-int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
-int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
-int fmi2DoStep(C c, double t, double h, int nsp) { AT(2); return 0; }
-int fmi2CancelStep(C c) { return 0; }
-int fmi2GetStatus(C c, int s, int *v) { return 3; }
-int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
-int fmi2GetIntegerStatus(C c, int s, int *v) { return 3; }
-int fmi2GetBooleanStatus(C c, int s, int *v) { return 3; }
-int fmi2GetStringStatus(C c, int s, const char **v) { return 3; }
-"""
-
-MODEL_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{g-{name}}}" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true"/>
-  <DefaultExperiment startTime="0" stopTime="10" stepSize="1"/>
-  <ModelVariables>
-    <ScalarVariable name="y" valueReference="0" causality="output" variability="continuous"><Real/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure><Outputs><Unknown index="1"/></Outputs></ModelStructure>
-</fmiModelDescription>
-"""
-
-#: name -> (WHERE: 1 fmi2Instantiate, 2 fmi2DoStep, 3 the fourth fmi2GetReal; WHAT: 1 segfault, 2 hang, 3 _exit(0))
-CRAFTED = {"segv_instantiate": (1, 1), "hang_dostep": (2, 2), "exit_instantiate": (1, 3), "segv_late": (3, 1),
-           "well_behaved": (0, 0)}
+#: name -> misbehaviour (trackingbox.testing.crafted): segfault or _exit(0) in fmi2Instantiate, a hang in
+#: fmi2DoStep, a segfault from the fourth fmi2GetReal on (after the canary's reads)
+CRAFTED = {"segv_instantiate": Misbehaviour(2, 1), "hang_dostep": Misbehaviour(6, 4),
+           "exit_instantiate": Misbehaviour(2, 3), "segv_late": Misbehaviour(8, 1, nth=4),
+           "well_behaved": Misbehaviour()}
 
 
 @pytest.fixture(scope="module")
 def crafted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    if shutil.which("gcc") is None or not sys.platform.startswith("linux"):
-        pytest.skip("crafted FMU binaries need gcc on Linux")
-    root = tmp_path_factory.mktemp("crafted")
-    (root / "f.c").write_text(C_SOURCE)
-    made = {}
-    for name, (where, what) in CRAFTED.items():
-        so = root / f"{name}.so"
-        subprocess.run(["gcc", "-shared", "-fPIC", f"-DWHERE={where}", f"-DWHAT={what}", "-o", str(so),
-                        str(root / "f.c")], check=True)
-        fmu = root / f"{name}.fmu"
-        with zipfile.ZipFile(fmu, "w") as z:
-            z.writestr("modelDescription.xml", MODEL_DESCRIPTION.format(name=name))
-            z.write(so, f"binaries/linux64/{name}.so")
-        made[name] = fmu
-    return made
+    if not crafted_fmus.available():
+        pytest.skip("crafted FMU binaries need a C compiler on Linux")
+    return crafted_fmus.build(tmp_path_factory.mktemp("crafted"), CRAFTED)
 
 
 @pytest.mark.parametrize(("name", "message"), [
@@ -200,7 +129,7 @@ def test_a_well_behaved_binary_passes_the_canary_and_runs(crafted: dict[str, Pat
 def test_a_crash_after_the_canary_is_named_by_the_supervisor(crafted: dict[str, Path], tmp_path: Path) -> None:
     """The console script: the fourth fmi2GetReal segfaults (the canary makes two); one error line, exit 2."""
     out = tmp_path / "run" / "result.csv"
-    proc = subprocess.run([str(Path(sys.executable).parent / "trackingbox"), "simulate", str(crafted["segv_late"]),
+    proc = subprocess.run([str(Path(sys.executable).parent / "trackingbox"), "simulate", str(crafted["segv_late"]), "--set", "u=1",
                            "--stop", "5", "--step", "1", "-o", str(out)], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 2

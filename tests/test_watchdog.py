@@ -11,82 +11,22 @@ behaviour: ``fmi2GetReal`` returns 1.0, the Nth ``fmi2DoStep`` does not return.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import time
-import zipfile
 from pathlib import Path
 
 import pytest
 
 from trackingbox.fmu import FMUModel
 from trackingbox.supervise import Watchdog, timeout_message
+from trackingbox.testing import crafted as crafted_fmus
+from trackingbox.testing.crafted import Misbehaviour
 
-C_SOURCE = r"""
-#include <string.h>
-#include <unistd.h>
-/* WHAT: 0 well behaved, 1 the NTH fmi2DoStep never returns, 2 every fmi2DoStep sleeps 30 ms,
-   3 the NTH fmi2DoStep sleeps 2 s (then returns) */
-typedef void *C;
-static int dummy, steps;
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-int fmi2SetDebugLogging(C c, int a, size_t n, const char *const *x) { return 0; }
-C fmi2Instantiate(const char *n, int t, const char *g, const char *r, const void *f, int v, int l) { return &dummy; }
-void fmi2FreeInstance(C c) {}
-int fmi2SetupExperiment(C c, int a, double tol, double t0, int b, double t1) { return 0; }
-int fmi2EnterInitializationMode(C c) { return 0; }
-int fmi2ExitInitializationMode(C c) { return 0; }
-int fmi2Terminate(C c) { return 0; }
-int fmi2Reset(C c) { return 0; }
-int fmi2GetReal(C c, const unsigned *vr, size_t n, double *v) { for (size_t i = 0; i < n; i++) v[i] = 1.0; return 0; }
-int fmi2GetInteger(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetBoolean(C c, const unsigned *vr, size_t n, int *v) { memset(v, 0, n * sizeof *v); return 0; }
-int fmi2GetString(C c, const unsigned *vr, size_t n, const char **v) { for (size_t i = 0; i < n; i++) v[i] = ""; return 0; }
-int fmi2SetReal(C c, const unsigned *vr, size_t n, const double *v) { return 0; }
-int fmi2SetInteger(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetBoolean(C c, const unsigned *vr, size_t n, const int *v) { return 0; }
-int fmi2SetString(C c, const unsigned *vr, size_t n, const char *const *v) { return 0; }
-int fmi2GetFMUstate(C c, void **s) { return 3; }
-int fmi2SetFMUstate(C c, void *s) { return 3; }
-int fmi2FreeFMUstate(C c, void **s) { return 3; }
-int fmi2SerializedFMUstateSize(C c, void *s, size_t *n) { return 3; }
-int fmi2SerializeFMUstate(C c, void *s, char *b, size_t n) { return 3; }
-int fmi2DeSerializeFMUstate(C c, const char *b, size_t n, void **s) { return 3; }
-int fmi2GetDirectionalDerivative(C c, const unsigned *a, size_t na, const unsigned *b, size_t nb, const double *x, double *y) { return 3; }
-int fmi2SetRealInputDerivatives(C c, const unsigned *vr, size_t n, const int *o, const double *v) { return 0; }
-int fmi2GetRealOutputDerivatives(C c, const unsigned *vr, size_t n, const int *o, double *v) { return 0; }
-int fmi2DoStep(C c, double t, double h, int nsp) {
-    ++steps;
-    if (WHAT == 1 && steps == NTH) for (;;) pause();
-    if (WHAT == 2) usleep(30000);
-    if (WHAT == 3 && steps == NTH) sleep(2);
-    return 0;
-}
-int fmi2CancelStep(C c) { return 0; }
-int fmi2GetStatus(C c, int s, int *v) { return 3; }
-int fmi2GetRealStatus(C c, int s, double *v) { return 3; }
-int fmi2GetIntegerStatus(C c, int s, int *v) { return 3; }
-int fmi2GetBooleanStatus(C c, int s, int *v) { return 3; }
-int fmi2GetStringStatus(C c, int s, const char **v) { return 3; }
-"""
-
-MODEL_DESCRIPTION = """<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{w-{name}}}" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true"/>
-  <DefaultExperiment startTime="0" stopTime="10" stepSize="1"/>
-  <ModelVariables>
-    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
-    <ScalarVariable name="k" valueReference="1" causality="parameter" variability="tunable"><Real start="1" min="0" max="10"/></ScalarVariable>
-    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous"><Real/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure><Outputs><Unknown index="3"/></Outputs></ModelStructure>
-</fmiModelDescription>
-"""
-
-#: name -> (WHAT, NTH): see C_SOURCE
-CRAFTED = {"hang_step20": (1, 20), "slow_steps": (2, 0), "slow_step3": (3, 3), "well_behaved": (0, 0)}
+#: name -> misbehaviour (trackingbox.testing.crafted): the 20th fmi2DoStep never returns; every
+#: fmi2DoStep sleeps 30 ms; the 3rd sleeps 2 s and returns
+CRAFTED = {"hang_step20": Misbehaviour(9, 4, nth=20), "slow_steps": Misbehaviour(6, 7),
+           "slow_step3": Misbehaviour(9, 8, nth=3), "well_behaved": Misbehaviour()}
 
 SPEC = """\
 twin = "{twin}"
@@ -121,21 +61,9 @@ EXE = str(Path(sys.executable).parent / "trackingbox")
 
 @pytest.fixture(scope="module")
 def crafted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    if shutil.which("gcc") is None or not sys.platform.startswith("linux"):
-        pytest.skip("crafted FMU binaries need gcc on Linux")
-    root = tmp_path_factory.mktemp("watchdog")
-    (root / "w.c").write_text(C_SOURCE)
-    made = {}
-    for name, (what, nth) in CRAFTED.items():
-        so = root / f"{name}.so"
-        subprocess.run(["gcc", "-shared", "-fPIC", f"-DWHAT={what}", f"-DNTH={nth}", "-o", str(so),
-                        str(root / "w.c")], check=True)
-        fmu = root / f"{name}.fmu"
-        with zipfile.ZipFile(fmu, "w") as z:
-            z.writestr("modelDescription.xml", MODEL_DESCRIPTION.format(name=name))
-            z.write(so, f"binaries/linux64/{name}.so")
-        made[name] = fmu
-    return made
+    if not crafted_fmus.available():
+        pytest.skip("crafted FMU binaries need a C compiler on Linux")
+    return crafted_fmus.build(tmp_path_factory.mktemp("watchdog"), CRAFTED)
 
 
 def _case(root: Path, fmu: Path) -> Path:

@@ -1,0 +1,1 @@
+"""Helpers for testing trackingbox and programs built on it (not used by the stages)."""
