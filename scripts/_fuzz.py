@@ -56,6 +56,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from trackingbox.testing import crafted
+from trackingbox.testing.specs import first_order_spec
 
 M = crafted.Misbehaviour
 ROOT = Path(__file__).resolve().parent.parent
@@ -97,39 +98,6 @@ equation
 end FuzzTwin;
 """
 
-SPEC = """\
-twin = "{twin}"
-measurements = "measurements.csv"
-sample_time = 10.0
-
-[inputs]
-"FI" = "u"
-
-[outputs]
-"TI" = "y"
-
-[[parameters]]
-name = "k"
-start = 0.005
-min = 0.001
-max = 0.05
-
-[fixed]
-tau = 60.0
-
-[windows]
-training = [0.0, 600.0]
-validation = [600.0, 1200.0]
-
-[[pairs]]
-variable = "TI"
-parameter = "k"
-gain = -2000.0
-time_constant = 50.0
-
-[tracking]
-hold_until = 50.0
-"""
 
 
 @dataclasses.dataclass
@@ -149,7 +117,9 @@ class Base:
         return "time,FI,TI\n" + "".join(f"{t:g},{u:.6g},{y:.6g}\n" for t, u, y in rows)
 
     def spec_text(self) -> str:
-        return SPEC.format(twin=self.fmu.as_posix())
+        return first_order_spec(twin=self.fmu.as_posix(), start=0.005, lower=0.001, upper=0.05,
+                                training=(0.0, 600.0), validation=(600.0, 1200.0), fixed={"tau": 60.0},
+                                pair={"gain": -2000.0, "time_constant": 50.0}, hold_until=50.0)
 
 
 def _measurements(n: int = 121) -> list[tuple[float, float, float]]:

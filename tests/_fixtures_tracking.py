@@ -15,6 +15,8 @@ import pandas as pd
 
 from _fixtures_casadi import build_casadi_fmu
 
+from trackingbox.testing.specs import first_order_spec
+
 TAU = 100.0
 K_PLANT = 0.004
 K_TWIN = 0.003
@@ -30,42 +32,18 @@ def make_first_order_fmu(directory: Path) -> Path:
     ], equations=[("der(x)", "(u - x) / TAU - k * x"), ("y", "x")])
 
 
+def spec_text(k_twin: float, data: str = "", controller: str = "pi") -> str:
+    """The case's spec: *data* is TOML placed after the windows (a ``[data]`` section)."""
+    return first_order_spec(start=k_twin, lower=0.001, upper=0.01, training=(0.0, 3000.0),
+                            validation=(3000.0, 6000.0), extra=data, hold_until=200.0,
+                            pair={"gain": -2551.0, "time_constant": 71.0, "lambda": 1.0, "controller": controller})
+
+
 def plant_input(t: np.ndarray) -> np.ndarray:
     """The scenario's input: 50, a step to 60 at 2000 s, to 55 at 4000 s."""
     return 50.0 + 10.0 * (t > 2000.0) - 5.0 * (t > 4000.0)
 
 
-SPEC = '''twin = "twin.fmu"
-measurements = "measurements.csv"
-sample_time = 10.0
-
-[inputs]
-"FI" = "u"
-
-[outputs]
-"TI" = "y"
-
-[[parameters]]
-name = "k"
-start = {k_twin}
-min = 0.001
-max = 0.01
-
-[windows]
-training = [0.0, 3000.0]
-validation = [3000.0, 6000.0]
-{data}
-[[pairs]]
-variable = "TI"
-parameter = "k"
-gain = -2551.0
-time_constant = 71.0
-lambda = 1.0
-controller = "{controller}"
-
-[tracking]
-hold_until = 200.0
-'''
 
 
 def make_case(fmu: Path, out: Path, *, k_plant: float = K_PLANT, noise: float = 0.02, seed: int = 1,
@@ -97,7 +75,7 @@ def make_case(fmu: Path, out: Path, *, k_plant: float = K_PLANT, noise: float = 
         rules.append(f"max_gap = {max_gap}")
     data = "\n[data]\n" + "\n".join(rules) + "\n" if rules else ""
     spec = out / "spec.toml"
-    spec.write_text(SPEC.format(k_twin=K_TWIN, data=data, controller=controller), encoding="utf-8")
+    spec.write_text(spec_text(K_TWIN, data, controller), encoding="utf-8")
     return spec
 
 

@@ -15,31 +15,10 @@ from hypothesis import strategies as st
 
 from trackingbox.errors import SpecError
 from trackingbox.spec import load_spec
+from trackingbox.testing.specs import first_order_spec
 
-VALID = """\
-twin = "twin.fmu"
-measurements = "measurements.csv"
-sample_time = 10.0
-
-[inputs]
-"FI" = "u"
-
-[outputs]
-"TI" = "y"
-
-[[parameters]]
-name = "k"
-start = 0.005
-min = 0.001
-max = 0.05
-
-[windows]
-training = [0.0, 600.0]
-validation = [600.0, 1200.0]
-
-[tracking]
-hold_until = 50.0
-"""
+VALID = first_order_spec(start=0.005, lower=0.001, upper=0.05, training=(0.0, 600.0), validation=(600.0, 1200.0),
+                         hold_until=50.0)
 
 KEYS = ("sample_time", "start", "min", "max", "training", "validation", "hold_until", "twin", "name")
 

@@ -9,13 +9,13 @@ from pathlib import Path
 import pytest
 
 from _fixtures_online import free_port
-from _fixtures_tracking import SPEC
+from _fixtures_tracking import spec_text
 from trackingbox.errors import LiveError, SpecError
 from trackingbox.online.live import LiveSettings, _Publisher, _Record
 from trackingbox.online.opcua import Credentials, check_endpoint, read_credentials, read_users
 from trackingbox.spec import loads_spec
 
-BASE = SPEC.format(k_twin=0.003, data="", controller="pi")
+BASE = spec_text(0.003)
 
 
 def _spec(live: str):

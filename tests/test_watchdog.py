@@ -22,39 +22,13 @@ from trackingbox.fmu import FMUModel
 from trackingbox.supervise import Watchdog, timeout_message
 from trackingbox.testing import crafted as crafted_fmus
 from trackingbox.testing.crafted import Misbehaviour
+from trackingbox.testing.specs import first_order_spec
 
 #: name -> misbehaviour (trackingbox.testing.crafted): the 20th fmi2DoStep never returns; every
 #: fmi2DoStep sleeps 30 ms; the 3rd sleeps 2 s and returns
 CRAFTED = {"hang_step20": Misbehaviour(9, 4, nth=20), "slow_steps": Misbehaviour(6, 7),
            "slow_step3": Misbehaviour(9, 8, nth=3), "well_behaved": Misbehaviour()}
 
-SPEC = """\
-twin = "{twin}"
-measurements = "measurements.csv"
-sample_time = 10.0
-
-[inputs]
-"FI" = "u"
-
-[outputs]
-"TI" = "y"
-
-[[parameters]]
-name = "k"
-start = 1.0
-min = 0.5
-max = 2.0
-
-[windows]
-training = [0.0, 600.0]
-validation = [600.0, 1200.0]
-
-[[pairs]]
-variable = "TI"
-parameter = "k"
-gain = -1.0
-time_constant = 50.0
-"""
 
 EXE = str(Path(sys.executable).parent / "trackingbox")
 
@@ -72,7 +46,8 @@ def _case(root: Path, fmu: Path) -> Path:
     (root / "measurements.csv").write_text(
         "time,FI,TI\n" + "".join(f"{10.0 * i},1.0,1.0\n" for i in range(121)))
     spec = root / "spec.toml"
-    spec.write_text(SPEC.format(twin=fmu.as_posix()))
+    spec.write_text(first_order_spec(twin=fmu.as_posix(), start=1.0, lower=0.5, upper=2.0, training=(0.0, 600.0),
+                                     validation=(600.0, 1200.0), pair={"gain": -1.0, "time_constant": 50.0}))
     return spec
 
 
