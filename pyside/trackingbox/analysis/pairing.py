@@ -189,7 +189,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  rtol: float = RANK_RTOL, residuals: Residuals | None = None,
                  bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None,
                  other_gains: npt.ArrayLike | None = None, other_time_constants: npt.ArrayLike | None = None,
-                 min_lambda: float = MIN_LAMBDA) -> Pairing:
+                 min_lambda: float = MIN_LAMBDA, check_gains: npt.ArrayLike | None = None,
+                 check_time_constants: npt.ArrayLike | None = None) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -231,6 +232,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         tuned for the highest gain seen, the loop stays stable where the gain grows.
     min_lambda : float
         Smallest relative gain a chosen pair may have.
+    check_gains, check_time_constants : array_like, shape (m, n), optional
+        Gains and time constants of the twin run the way the data were recorded
+        (e.g. its controllers active while *gains* come from step tests with
+        them frozen; see :mod:`~trackingbox.analysis.pair_stage`). When given, the data checks
+        (reach, predicted tracking) use these instead of *gains*, the RGA keeps
+        *gains*; a pair whose two gains differ in sign is not chosen, and a
+        chosen pair's gain is the larger in magnitude of all the gain sets
+        (the tracking loop runs on the twin as recorded, and tuned for the
+        highest gain seen it stays stable where the gain grows).
 
     Returns
     -------
@@ -329,7 +339,19 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     # data checks: which variables are worth tracking. The RGA stays that of all the variables
     # the parameters move (the interactions are a property of the model); the checks only
     # restrict which pairs the assignment may choose.
-    data = _DataView(G, variables, parameters, residuals, bounds, checks) if residuals is not None else None
+    Gc = tauc = None
+    if check_gains is not None:
+        Gc = np.asarray(check_gains, dtype=float)
+        tauc = (np.full(G.shape, math.nan) if check_time_constants is None
+                else np.asarray(check_time_constants, dtype=float))
+        if Gc.shape != G.shape or tauc.shape != G.shape:
+            raise AnalysisError(f"the gains for the data checks have shape {Gc.shape}, expected {G.shape}")
+        if not np.isfinite(Gc).all():
+            i, j = np.argwhere(~np.isfinite(Gc))[0]
+            raise AnalysisError(f"data-check gain of {variables[i]!r} to {parameters[j]!r} is not finite")
+    data = (_DataView(G if Gc is None else Gc, variables, parameters, residuals, bounds, checks,
+                      structure=None if Gc is None else G)
+            if residuals is not None else None)
     excluded: set[int] = set()
     if data is not None:
         usable = np.zeros(n, dtype=bool)
@@ -392,7 +414,7 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                 chosen[rows[int(a)]] = cols[int(b)]
         if data is None or not chosen:
             break
-        predicted, worst = data.predict(chosen, tau)
+        predicted, worst = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc))
         if worst is None:
             break
         allowed[rows.index(worst[0]), cols.index(worst[1])] = False
@@ -406,6 +428,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if G2 is not None and tau2 is not None and abs(G2[i, j]) > abs(gain):
                 gain = float(G2[i, j])
                 t63 = float(tau2[i, j]) if math.isfinite(tau2[i, j]) else t63
+            if Gc is not None and tauc is not None and abs(Gc[i, j]) > abs(gain):
+                gain = float(Gc[i, j])
+                t63 = float(tauc[i, j]) if math.isfinite(tauc[i, j]) else t63
             pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound))
             if lam[i, j] > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
@@ -482,6 +507,19 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                    data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
 
 
+def recording_time_constants(structure: npt.ArrayLike, recording: npt.ArrayLike) -> np.ndarray:
+    """Time constants of the twin as recorded where measured, else those of the structure step tests.
+
+    Examples
+    --------
+    >>> recording_time_constants([[10.0, 20.0]], [[30.0, float("nan")]]).tolist()
+    [[30.0, 20.0]]
+    """
+    a = np.asarray(structure, dtype=float)
+    b = np.asarray(recording, dtype=float)
+    return np.where(np.isfinite(b) & (b > 0), b, a)
+
+
 def _best_rejected(col: np.ndarray, allowed: np.ndarray) -> int | None:
     """Row of the positive relative gain closest to 1 in *col* if the data checks forbade it, else None."""
     score = np.where(col > 1e-9, np.abs(col - 1.0), np.inf)
@@ -495,7 +533,8 @@ class _DataView:
     """The data-aware checks of :func:`choose_pairs` (see the module notes)."""
 
     def __init__(self, G: np.ndarray, variables: tuple[str, ...], parameters: tuple[str, ...],
-                 residuals: Residuals, bounds: npt.ArrayLike | None, checks: DataChecks | None) -> None:
+                 residuals: Residuals, bounds: npt.ArrayLike | None, checks: DataChecks | None,
+                 structure: np.ndarray | None = None) -> None:
         m, n = G.shape
         if bounds is None:
             raise AnalysisError("the data checks need the parameter bounds (start, min, max)")
@@ -525,6 +564,15 @@ class _DataView:
                 self.moves[i, j], self.reach[i, j] = mv, frac
                 self.allowed[i, j] = frac >= self.checks.min_reach
         self.rejected: list[tuple[str, str, str]] = []
+        #: (i, j) -> why a pair whose structure gain and data-check gain differ in sign is not allowed
+        self.sign: dict[tuple[int, int], str] = {}
+        if structure is not None:
+            for i, j in np.argwhere(structure * G < 0):
+                self.allowed[i, j] = False
+                self.sign[(int(i), int(j))] = (
+                    f"its gain to {parameters[j]} has one sign in the step tests that set the pairing structure "
+                    f"({_fmt(structure[i, j])}) and the other with the twin run as the data were recorded "
+                    f"({_fmt(G[i, j])}): a loop on it would act the wrong way")
         self._last: dict[int, str] = {}
 
     def row_reason(self, i: int, usable: np.ndarray) -> str | None:
@@ -543,6 +591,10 @@ class _DataView:
         cand = np.flatnonzero(usable)
         if cand.size == 0:
             return None
+        signs = [self.sign[(i, int(j))] for j in cand if (i, int(j)) in self.sign
+                 and self.reach[i, j] >= self.checks.min_reach]
+        if signs:
+            return signs[0]
         j = int(cand[np.argmax(np.nan_to_num(self.reach[i, cand], nan=-1.0))])
         return (f"no candidate parameter can close its offset from inside its bounds: the remaining range of "
                 f"{self.parameters[j]} moves {self.variables[i]} by {_fmt(self.moves[i, j])} toward the "
@@ -589,6 +641,9 @@ class _DataView:
         st = self.stat[i]
         if st is None or st.samples == 0 or self.allowed[i].all():
             return None
+        signs = [why for (a, _), why in self.sign.items() if a == i]
+        if signs and not (self.reach[i] >= self.checks.min_reach).any():
+            return signs[0]
         j = int(np.argmax(np.nan_to_num(np.where(self.allowed[i], -1.0, self.reach[i]), nan=-1.0)))
         return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} "
                 f"toward the measurement, the offset is {_fmt(st.mean)}")
