@@ -229,7 +229,8 @@ class PairingResult:
         doc: dict[str, Any] = {
             "pairs": [{"variable": p.variable, "parameter": p.parameter, "lambda": _finite(p.lambda_),
                        "gain": _finite(p.gain), "time_constant": _finite(p.time_constant),
-                       "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound)}
+                       "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound),
+                       "rga_from": p.rga_from}
                       for p in pairing.pairs],
             "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
             "rga": _matrix(st.variables, st.parameters, pairing.rga),
@@ -414,6 +415,15 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                            check_gains=None if st_rec is None else st_rec.gains,
                            check_time_constants=None if st_rec is None else st_rec.time_constants,
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
+    if st_rec is not None and residuals is not None:
+        from .pairing import complete_with_recording
+
+        pairing = complete_with_recording(
+            pairing, st_rec.gains, time_constants=st_rec.time_constants,
+            variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
+            parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]), residuals=residuals,
+            bounds=[(p.start, p.min, p.max) for p in spec.parameters], checks=checks,
+            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     agr = agreement(pairing, sob) if sob is not None else None
     if s.method == "sobol" and sob is not None:
         pairing = _sobol_pairs(pairing, sob, st)

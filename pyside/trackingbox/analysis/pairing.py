@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -108,6 +108,11 @@ class Pair:
         Expected tracked/untracked RMS ratio (NaN without data checks).
     at_bound : float
         Expected fraction of the time the parameter sits at a bound (NaN without data checks).
+    rga_from : str
+        ``"structure"``: the pair and its relative gain come from the RGA of the
+        step tests that set the structure (with a freeze: frozen);
+        ``"recording"``: from the RGA of the step tests with nothing frozen, for a
+        tag no parameter moves with the freeze (see :func:`complete_with_recording`).
     """
 
     variable: str
@@ -117,6 +122,7 @@ class Pair:
     time_constant: float = math.nan
     predicted_ratio: float = math.nan
     at_bound: float = math.nan
+    rga_from: str = "structure"
 
 
 @dataclass(frozen=True)
@@ -647,3 +653,109 @@ class _DataView:
         j = int(np.argmax(np.nan_to_num(np.where(self.allowed[i], -1.0, self.reach[i]), nan=-1.0)))
         return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} "
                 f"toward the measurement, the offset is {_fmt(st.mean)}")
+
+
+def complete_with_recording(first: Pairing, gains: npt.ArrayLike, *, time_constants: npt.ArrayLike,
+                            variable_ranges: npt.ArrayLike, parameter_ranges: npt.ArrayLike,
+                            residuals: Residuals, bounds: npt.ArrayLike, checks: DataChecks | None = None,
+                            rtol: float = RANK_RTOL, min_lambda: float = MIN_LAMBDA) -> Pairing:
+    """Pair the tags a freeze hides, with the gains of the twin as the data were recorded.
+
+    With the controllers frozen a controller's output (a pump speed, a heating
+    medium's temperature) moves with no parameter, yet with the controllers active,
+    as the data were recorded, that output is where a parameter error shows: the
+    loop holds its measurement at the setpoint and moves its output instead. Those
+    tags (no parameter moves them by more than :data:`NEGLIGIBLE` x the largest
+    scaled gain in *first*) are paired here from the RGA of *gains* (step tests
+    with nothing frozen) over them and the tags *first* paired, with the same data
+    checks; the pairs of *first* are kept, and a hidden tag gets the parameter
+    this RGA gives it unless *first* already uses that parameter. All pairs are
+    then predicted together with *gains*; while a pair added here would leave
+    more than ``max_ratio`` of its error, the worst is dropped.
+
+    Parameters
+    ----------
+    first : Pairing
+        :func:`choose_pairs` on the frozen gains (with ``check_gains``).
+    gains, time_constants : array_like, shape (m, n)
+        Step tests with nothing frozen, same rows and columns as *first*.
+    variable_ranges, parameter_ranges, residuals, bounds, checks, rtol, min_lambda
+        As for :func:`choose_pairs`.
+
+    Returns
+    -------
+    Pairing
+        *first* with the added pairs (``rga_from = "recording"``), the reasons of
+        the hidden tags left out replaced by this pass's, and its rejections added.
+    """
+    G = np.asarray(gains, dtype=float)
+    tau = np.asarray(time_constants, dtype=float)
+    V, P = first.variables, first.parameters
+    if G.shape != (len(V), len(P)) or tau.shape != G.shape:
+        raise AnalysisError(f"recorded gains have shape {G.shape}, expected {(len(V), len(P))}")
+    absS = np.abs(first.scaled_gains)
+    top = float(absS.max()) if absS.size else 0.0
+    hidden = [i for i in range(len(V)) if top > 0 and absS[i].max() < NEGLIGIBLE * top]
+    if not hidden:
+        return first
+    index = {v: i for i, v in enumerate(V)}
+    kept = {index[p.variable]: p for p in first.pairs}
+    rows = sorted(set(kept) | set(hidden))
+    names = [V[i] for i in rows]
+    have = [v for v in names if v in residuals.variables]
+    second = choose_pairs(G[rows], names, P, time_constants=tau[rows],
+                          variable_ranges=np.asarray(variable_ranges, dtype=float)[rows],
+                          parameter_ranges=parameter_ranges, residuals=residuals.subset(have), bounds=bounds,
+                          checks=checks, rtol=rtol, min_lambda=min_lambda)
+    used = {p.parameter for p in first.pairs}
+    added: list[Pair] = []
+    reasons = dict(second.left_out)
+    for p in second.pairs:
+        if index[p.variable] not in hidden:
+            continue
+        if p.parameter in used:
+            taker = next(q.variable for q in first.pairs if q.parameter == p.parameter)
+            reasons[p.variable] = (f"with the controllers active its relative gain points to {p.parameter} "
+                                   f"(lambda {_fmt(p.lambda_)}), which the frozen structure pairs with {taker}")
+            continue
+        added.append(Pair(p.variable, p.parameter, p.lambda_, p.gain, p.time_constant, p.predicted_ratio,
+                          p.at_bound, rga_from="recording"))
+    # every pair together, with the recorded gains: drop the worst added pair while it would fail
+    data = _DataView(G, V, P, residuals, bounds, checks)
+    dropped: list[tuple[str, str, str]] = []
+    warnings = list(first.warnings) + [f"(controllers active) {w}" for w in second.warnings]
+    predicted: dict[int, tuple[float, float]] = {}
+    while True:
+        chosen = {index[p.variable]: P.index(p.parameter) for p in (*first.pairs, *added)}
+        predicted, worst = data.predict(chosen, tau)
+        if worst is None:
+            break
+        why = data.rejected[-1][2]
+        if not any(index[p.variable] == worst[0] for p in added):
+            warnings.append(f"with the pairs added for the tags the freeze hides, {V[worst[0]]}/{P[worst[1]]}: "
+                            f"{why}")
+            break
+        dropped.append((V[worst[0]], P[worst[1]], why))
+        reasons[V[worst[0]]] = why
+        added = [p for p in added if index[p.variable] != worst[0]]
+    hidden_names = {V[i] for i in hidden}
+    paired = {p.variable for p in added} | {p.parameter for p in added}
+    left: list[tuple[str, str]] = []
+    for name, why in first.left_out:
+        if name in paired:
+            continue
+        if name in hidden_names and name in reasons:
+            why = (f"no parameter moves it with the controllers frozen; with them active (as the data were "
+                   f"recorded): {reasons[name]}")
+        left.append((name, why))
+    pairs = tuple(replace_ratio(p, predicted.get(index[p.variable]))
+                  for p in sorted([*first.pairs, *added], key=lambda p: index[p.variable]))
+    return replace(first, pairs=pairs, left_out=tuple(left), warnings=tuple(warnings),
+                   rejected=first.rejected + tuple(second.rejected) + tuple(dropped))
+
+
+def replace_ratio(p: Pair, figures: tuple[float, float] | None) -> Pair:
+    """*p* with the predicted ratio and time at a bound *figures* (unchanged when None)."""
+    if figures is None:
+        return p
+    return replace(p, predicted_ratio=float(figures[0]), at_bound=float(figures[1]))
