@@ -97,3 +97,53 @@ def test_bad_recording_gains_are_named():
 
 def test_recording_time_constants_fall_back_where_unmeasured():
     assert recording_time_constants([[10.0, 20.0]], [[0.0, 30.0]]).tolist() == [[10.0, 30.0]]
+
+
+def _hidden_case(recording):
+    """y is seen with the controllers frozen (a moves it); u, a controller's output, only with them active."""
+    rng = np.random.default_rng(5)
+    res = _residuals({"y": 1.0 + rng.normal(0, 0.01, N), "u": 0.2 + rng.normal(0, 0.002, N)})
+    frozen = np.array([[1.0, 0.5], [0.0, 0.0]])
+    bounds = [(0.0, -5.0, 5.0), (0.0, -5.0, 5.0)]
+    first = choose_pairs(frozen, ["y", "u"], ["a", "b"], time_constants=[[10.0, 10.0]] * 2, residuals=res,
+                         bounds=bounds, checks=DataChecks(), check_gains=recording,
+                         check_time_constants=[[10.0, 10.0]] * 2)
+    return first, res, bounds
+
+
+def test_a_controller_output_the_freeze_hides_is_paired_from_the_recorded_gains():
+    from trackingbox.analysis.pairing import complete_with_recording
+
+    # recorded: a moves y by 0.8, b moves the controller output u by 2 and y not at all (its loop
+    # compensates): the recorded RGA over (y, u) x (a, b) is the identity
+    recording = np.array([[0.8, 0.0], [0.0, 2.0]])
+    first, res, bounds = _hidden_case(recording)
+    assert [(p.variable, p.parameter) for p in first.pairs] == [("y", "a")]
+    assert "no candidate parameter moves it" in dict(first.left_out)["u"]
+    done = complete_with_recording(first, recording, time_constants=[[10.0, 10.0]] * 2,
+                                   variable_ranges=[1.0, 1.0], parameter_ranges=[10.0, 10.0], residuals=res,
+                                   bounds=bounds, checks=DataChecks())
+    assert [(p.variable, p.parameter, p.rga_from) for p in done.pairs] == [("y", "a", "structure"),
+                                                                          ("u", "b", "recording")]
+    u = done.pairs[1]
+    assert u.lambda_ == pytest.approx(1.0) and u.gain == pytest.approx(2.0)
+    # u's offset 0.2 needs b = 0.1 of 5 available; constant offset, loop of 15 s at 10 s samples:
+    # the transient's share by hand as in the test above (q2 = exp(-20/15)) plus noise (0.002/0.2)^2
+    q2 = np.exp(-2 * DT / 15.0)
+    assert u.predicted_ratio == pytest.approx(np.sqrt(q2 / (1 - q2) / N + 0.01**2), rel=0.1)
+    assert {n for n, _ in done.left_out} == set()
+
+
+def test_a_hidden_tag_whose_recorded_partner_the_structure_took_stays_out_with_that_reason():
+    from trackingbox.analysis.pairing import complete_with_recording
+
+    # recorded: u moves mostly with a (2 per unit), y mostly with b: the recorded RGA pairs u with a,
+    # which the frozen structure gave y; the frozen pairs are kept and u is left out, saying so
+    recording = np.array([[0.8, 2.0], [2.0, 0.1]])
+    first, res, bounds = _hidden_case(recording)
+    done = complete_with_recording(first, recording, time_constants=[[10.0, 10.0]] * 2,
+                                   variable_ranges=[1.0, 1.0], parameter_ranges=[10.0, 10.0], residuals=res,
+                                   bounds=bounds, checks=DataChecks())
+    assert [(p.variable, p.parameter) for p in done.pairs] == [("y", "a")]
+    why = dict(done.left_out)["u"]
+    assert why.startswith("no parameter moves it with the controllers frozen") and "pairs with y" in why
