@@ -19,8 +19,10 @@ examples:
 Procedure (in full: the docstring of trackingbox.analysis.pair_stage): settle
 the twin at an operating point, --freeze its controllers, step each parameter by
 +/- --step of its range; scaled steady-state gains -> RGA -> assignment, after
-data checks on an untracked run. The chosen pairs replace the spec's [[pairs]]
-unless --no-write. Exit code 1 when no pair could be chosen.
+data checks on an untracked run (with a freeze, judged with step tests repeated
+with nothing frozen, which also pair the controller outputs the freeze hides;
+see --check-gains). The chosen pairs replace the spec's [[pairs]] unless
+--no-write. Exit code 1 when no pair could be chosen.
 """
 
 
@@ -75,9 +77,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--max-ratio", type=number(gt=0), default=0.25, metavar="R",
                    help="reject pairs predicted to leave more than R of the untracked RMS error (default 0.25)")
     p.add_argument("--check-gains", choices=("recording", "structure"), default="recording",
-                   help="gains the reach and predicted-tracking checks use: recording (default: with a freeze, "
-                        "step tests repeated with nothing frozen, the twin as the data were recorded; the RGA "
-                        "keeps the frozen gains) or structure (the frozen gains)")
+                   help="gains of the reach and prediction checks: recording (default; with a freeze, step tests "
+                        "repeated with nothing frozen, as the data were recorded) or structure (the frozen ones)")
     p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
