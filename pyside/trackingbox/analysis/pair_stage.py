@@ -53,7 +53,12 @@ closed-loop gain. With a freeze, the step tests are therefore run a second time
 at the same operating point with nothing frozen (the twin as the data were
 recorded); the RGA keeps the frozen gains (the structure of the pairing, the
 source's method), while the reach and predicted-tracking checks use the
-recorded-way gains and time constants. A pair whose two gains differ in sign
+recorded-way gains and time constants. Tags no parameter moves with the
+freeze (a controller's output: pump speed, heating-medium temperature) are
+paired from the RGA of the recorded-way gains over them and the tags the frozen
+structure paired, keeping the frozen pairs, and all pairs are predicted
+together (:func:`~trackingbox.analysis.pairing.complete_with_recording`; each
+pair says which RGA chose it). A pair whose two gains differ in sign
 is not chosen, and a pair's written gain is the largest in magnitude of all
 the step tests (the tracking loop runs on the twin as recorded). With
 --check-gains structure, or without a freeze, the checks use the frozen gains.
