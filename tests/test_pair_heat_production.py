@@ -99,8 +99,9 @@ def test_frozen_pairing_keeps_the_hydraulic_pairs(fmu_cache, tmp_path):
     The RGA takes the frozen step tests; the data were recorded with the controllers
     active, so reach and predicted tracking use a second step-test set with nothing
     frozen, and the controller outputs the freeze hides (pump speeds, the heating
-    medium's temperature) are paired from that set. Without either, the frozen path
-    keeps only TI-301/HEX300.kht and at most one pipe (issue 15's starting point).
+    medium's temperature) are paired from that set. Measured on this case with all 14
+    candidates: with neither, the frozen path found FI-101/Pipe101.k only; with the
+    recorded-way checks alone, TI-301/HEX300.kht and PI-200/Pipe200.k.
 
     Hand gains of the twin's linear laws at the step tests' operating point (flow m
     through PU200 = FI-200, speed s = SI-200, read from the run's baseline):
