@@ -85,3 +85,88 @@ def test_pair_then_track_heat_production(fmu_cache, tmp_path, capsys):
     # no twin tank empties or overflows (inlets sit 1.2-1.5 m above the bottoms)
     for tag, level in result.states.items():
         assert 0.3 < level.min and level.max < 1.2, (tag, level)
+
+
+#: Water density (kg/m3) for the hand gains: the loop runs at 45-60 degC (985-990 kg/m3).
+RHO = 985.0
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_frozen_pairing_keeps_the_hydraulic_pairs(fmu_cache, tmp_path):
+    """Controllers frozen (the source's method): the hydraulic pairs stay, with gains worked by hand.
+
+    The RGA takes the frozen step tests; the data were recorded with the controllers
+    active, so reach and predicted tracking use a second step-test set with nothing
+    frozen, and the controller outputs the freeze hides (pump speeds, the heating
+    medium's temperature) are paired from that set. Measured on this case with all 14
+    candidates: with neither, the frozen path found FI-101/Pipe101.k only; with the
+    recorded-way checks alone, TI-301/HEX300.kht and PI-200/Pipe200.k.
+
+    Hand gains of the twin's linear laws at the step tests' operating point (flow m
+    through PU200 = FI-200, speed s = SI-200, read from the run's baseline):
+
+    * PI-200 (PU200's discharge) to Pipe200.k, speed frozen: a larger k adds
+      ``dp_ref·m/m_nom = 2e7·m`` Pa per unit of loss; the flow falls until the pump's
+      extra head, slope ``|a| = uRise·(shutOffRatio - 1)·s/(rho·VFlowDesign)``, and the
+      loop's lower loss, resistance ``R`` (two pipes ``2e7·k`` each, two valves
+      ``2·dp/m``, ``dp = 1e5·(3600·m/(rho·Kv))^2``), share it: the discharge pressure
+      rises by ``2e7·m·|a|/(|a| + R)``, positive (about 1.5e5 Pa per unit at 0.03 kg/s).
+    * the same with the controllers active: TIC302 holds the cold stream's outlet,
+      so it restores the flow by speeding the pump up, and the discharge pressure
+      takes the whole extra loss, ``2e7·m`` (about 6e5: the recorded gain is about
+      four times the frozen one, which is why the frozen gain alone could not close
+      PI-200's offset from inside Pipe200.k's bounds).
+    * SI-200 to PU200.uRise, controllers active: the flow is held, so the pump's
+      rise ``uRise·(1.5·s^2 - 0.5·s·x)`` stays put; ``ds/duRise =
+      -(1.5·s^2 - 0.5·s·x)/(uRise·(3·s - 0.5·x))``, ``x = m/(rho·VFlowDesign)``:
+      negative (a stronger pump needs less speed), about -5.5e-6 per Pa.
+    """
+    from dataclasses import replace
+
+    from trackingbox.analysis.pair_stage import PairSettings, pair
+    from trackingbox.benches import make_bench
+    from trackingbox.spec import load_spec
+
+    hp = "TrackingBox.Benches.HeatProduction"
+    make_bench("heat-production", tmp_path / "case", seed=1, hours=12.0,
+               plant_fmu=fmu_cache(f"{hp}.Plant"), twin_fmu=fmu_cache(f"{hp}.Twin"))
+    spec = load_spec(tmp_path / "case" / "spec.toml")
+    # the exchangers' coefficients and the loop-200 and line-100 pipes and pumps (the valves and design
+    # flows are combinations of these in the gains): fewer step runs, the same physics
+    keep = {"HEX300.kht", "HU300.kht", "Pipe100.k", "Pipe200.k", "Pipe201.k", "PU100.uRise", "PU200.uRise"}
+    spec = replace(spec, parameters=tuple(p for p in spec.parameters if p.name in keep))
+    result = pair(spec, PairSettings(freeze=(("holdControllers", 1.0),), second_point="none", workers=2))
+    doc = result.to_json()
+    pairs = {p.variable: p.parameter for p in result.pairing.pairs}
+    assert sum(_hydraulic(p) for p in pairs.values()) >= 2, (pairs, doc["left_out"])
+    assert all(tag in SENSIBLE[par] for tag, par in pairs.items()), pairs
+    assert pairs.get("PI-200") == "Pipe200.k", (pairs, doc["left_out"])
+    assert pairs.get("SI-200") == "PU200.uRise", (pairs, doc["left_out"])
+    from_rga = {p.variable: p.rga_from for p in result.pairing.pairs}
+    assert from_rga["PI-200"] == "structure" and from_rga["SI-200"] == "recording"
+    assert doc["check_gains"]["source"] == "recording" and doc["check_gains"]["freeze"] == {"holdControllers": 1.0}
+
+    frozen, recorded = result.steptest, result.steptest_recording
+    assert recorded is not None
+    V, P = list(frozen.variables), list(frozen.parameters)
+
+    def gain(st, tag, par):
+        return float(st.gains[V.index(tag), P.index(par)])
+
+    m, s = (float(frozen.baseline[V.index(t)]) for t in ("FI-200", "SI-200"))
+    a = 40000.0 * 0.5 * s / (RHO * 8.3e-5)
+    dp_valve = 1e5 * (3600.0 * m / RHO) ** 2
+    loop = 2 * 2e7 * 0.005 + 2 * 2 * dp_valve / m
+    # 15 %: the density is taken for the whole loop, the valves' regularised square root as a square root
+    assert gain(frozen, "PI-200", "Pipe200.k") == pytest.approx(2e7 * m * a / (a + loop), rel=0.15)
+    # the outlet temperature loop holds the flow to a fraction of a percent: 3 %
+    assert gain(recorded, "PI-200", "Pipe200.k") == pytest.approx(2e7 * m, rel=0.03)
+    x = m / (RHO * 8.3e-5)
+    assert gain(recorded, "SI-200", "PU200.uRise") == pytest.approx(
+        -(1.5 * s**2 - 0.5 * s * x) / (40000.0 * (3 * s - 0.5 * x)), rel=0.03)
+    # frozen, nothing moves a controller's output
+    assert gain(frozen, "SI-200", "PU200.uRise") == 0.0
+    # the written gains are the recorded ones (the larger; the loops run on the twin as recorded)
+    written = {p.variable: p.gain for p in result.pairing.pairs}
+    assert written["PI-200"] == pytest.approx(gain(recorded, "PI-200", "Pipe200.k"))

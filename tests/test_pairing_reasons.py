@@ -158,3 +158,33 @@ def test_a_tag_whose_pair_the_data_checks_forbid_is_not_said_to_lack_a_relative_
     assert [(x.variable, x.parameter) for x in p.pairs] == [("y1", "a")]
     assert "relative gain of at least" not in left["y2"]
     assert left["y2"].startswith("no candidate parameter can close its offset from inside its bounds")
+
+
+def test_frozen_pairing_judges_the_data_with_the_twin_as_recorded(tmp_path, step_fmu, capsys):
+    """``--check-gains``: with a freeze, a second step-test set with nothing frozen judges the data.
+
+    By hand (module docstring): with the integral controller active, ``x1 = r`` whatever
+    ``a`` and ``b`` are, so the recorded-way gains of (Y1, Y2) to (a, b) are
+    ``[[0, 0], [0, 1]]`` (``x2 = b + 0.2·x1``), while the frozen ones stay those of the
+    test above.
+    """
+    from trackingbox.cli import main
+
+    spec = _case(tmp_path, step_fmu)
+    common = ["pair", str(spec), "--json", "--no-write", "--workers", "1", "--second-point", "none"]
+    main([*common, "--freeze", "hold=1"])
+    doc = json.loads(capsys.readouterr().out)
+    assert np.allclose(doc["gain_matrix"]["values"], [[1.5 / 0.9, 0.5 / 0.9], [0.3 / 0.9, 10 / 9]], rtol=1e-4)
+    assert np.allclose(doc["gain_matrix_recording"]["values"], [[0.0, 0.0], [0.0, 1.0]], atol=1e-4)
+    checks = doc["check_gains"]
+    assert checks["source"] == "recording" and checks["freeze"] == {"hold": 1.0}
+    assert checks["recording_freeze"] == {} and "nothing frozen" in checks["rule"]
+    # the frozen gains alone, on request
+    main([*common, "--freeze", "hold=1", "--check-gains", "structure"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["gain_matrix_recording"] is None and doc["check_gains"]["source"] == "structure"
+    assert doc["check_gains"]["recording_freeze"] == {"hold": 1.0}
+    # nothing frozen: one set serves both, and the printout says which gains judged
+    main(["pair", str(spec), "--no-write", "--workers", "1", "--second-point", "none", "--no-freeze"])
+    assert "gains: RGA, reach and predicted tracking all from the step tests with nothing frozen" in \
+        capsys.readouterr().out

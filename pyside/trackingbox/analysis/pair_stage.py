@@ -45,6 +45,23 @@ by at least --min-reach x its mean offset. The chosen set is then simulated as
 first-order loops with the parameters clipped to their bounds; while a pair
 would leave more than --max-ratio of its tag's untracked RMS error, the worst
 one is forbidden and the assignment redone. Reasons go to the left-out list.
+Which gains judge the data checks (--check-gains, default recording): the
+data were recorded with the plant's controllers active, so an offset a
+parameter has to close shows where the controlled loops put it (e.g. on a
+pump's speed when a temperature loop holds its measurement) and with the
+closed-loop gain. With a freeze, the step tests are therefore run a second time
+at the same operating point with nothing frozen (the twin as the data were
+recorded); the RGA keeps the frozen gains (the structure of the pairing, the
+source's method), while the reach and predicted-tracking checks use the
+recorded-way gains and time constants. Tags no parameter moves with the
+freeze (a controller's output: pump speed, heating-medium temperature) are
+paired from the RGA of the recorded-way gains over them and the tags the frozen
+structure paired, keeping the frozen pairs, and all pairs are predicted
+together (:func:`~trackingbox.analysis.pairing.complete_with_recording`; each
+pair says which RGA chose it). A pair whose two gains differ in sign
+is not chosen, and a pair's written gain is the largest in magnitude of all
+the step tests (the tracking loop runs on the twin as recorded). With
+--check-gains structure, or without a freeze, the checks use the frozen gains.
 With --second-point (default auto) the step tests are repeated at the hour of
 the training window whose mean inputs differ most from the first point: a pair
 whose gain changes sign between the points is not chosen, and each pair is
@@ -80,10 +97,13 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PairSettings", "PairingResult", "explain_left_out", "pair", "spec_pairs"]
 
-#: ``progress(stage, done, total)``: stage ``"step runs"``, ``"step runs (2nd point)"`` or ``"Sobol runs"``.
+#: ``progress(stage, done, total)``: stage ``"step runs"``, ``"step runs (2nd point)"``,
+#: ``"step runs (as recorded)"`` or ``"Sobol runs"``.
 StageProgress = Callable[[str, int, int], None]
 
 Method = Literal["rga", "sobol", "both"]
+
+CheckGains = Literal["recording", "structure"]
 
 #: Fraction of the scored training samples left out at each end of a tag's range (the scale of its
 #: gains): the restart transients after a stoppage do not set it.
@@ -119,6 +139,11 @@ class PairSettings:
         ``"auto"``, ``"none"`` or a time (s): the second operating point of the step tests.
     data_checks, noise_ratio, min_reach, max_ratio
         The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks`.
+    check_gains
+        Gains the data checks judge with: ``"recording"`` (default): with a freeze,
+        from a second step-test set with nothing frozen (the twin run as the
+        data were recorded, controllers active); ``"structure"``: the frozen
+        step tests' gains (the RGA's).
     samples, seed
         Sobol base sample size and seed.
     workers, scheduler
@@ -141,6 +166,7 @@ class PairSettings:
     noise_ratio: float = 5.0
     min_reach: float = 0.5
     max_ratio: float = 0.25
+    check_gains: CheckGains = "recording"
     samples: int = 32
     seed: int = 0
     workers: int | None = None
@@ -179,11 +205,27 @@ class PairingResult:
     sobol: SobolResult | None = None
     agreement: Agreement | None = None
     settings: PairSettings = field(default_factory=PairSettings)
+    steptest_recording: StepTestResult | None = None
+
+    @property
+    def check_rule(self) -> str:
+        """Which gains judged the data checks (reach, predicted tracking), in words."""
+        if self.pairing.checks is None:
+            return "no data checks"
+        frozen = ", ".join(f"{n} = {v:g}" for n, v in self.step_settings.freeze)
+        if self.steptest_recording is not None:
+            return (f"RGA from the step tests with the controllers frozen ({frozen}); reach and predicted "
+                    "tracking judged with the gains of step tests with nothing frozen (the twin run as the "
+                    "data were recorded)")
+        if frozen:
+            return f"RGA, reach and predicted tracking all from the step tests with {frozen}"
+        return "RGA, reach and predicted tracking all from the step tests with nothing frozen"
 
     @property
     def runs(self) -> int:
-        """Twin simulations run (step tests at both points, Sobol with its base run)."""
+        """Twin simulations run (step tests at both points and as recorded, Sobol with its base run)."""
         n = self.steptest.runs + (0 if self.steptest_second is None else self.steptest_second.runs)
+        n += 0 if self.steptest_recording is None else self.steptest_recording.runs
         return n + (0 if self.sobol is None else self.sobol.runs + 1)
 
     def to_json(self) -> dict[str, Any]:
@@ -192,7 +234,8 @@ class PairingResult:
         doc: dict[str, Any] = {
             "pairs": [{"variable": p.variable, "parameter": p.parameter, "lambda": _finite(p.lambda_),
                        "gain": _finite(p.gain), "time_constant": _finite(p.time_constant),
-                       "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound)}
+                       "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound),
+                       "rga_from": p.rga_from}
                       for p in pairing.pairs],
             "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
             "rga": _matrix(st.variables, st.parameters, pairing.rga),
@@ -211,6 +254,14 @@ class PairingResult:
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
                 "max_ratio": pairing.checks.max_ratio},
+            "check_gains": None if pairing.checks is None else {
+                "source": "recording" if self.steptest_recording is not None else "structure",
+                "rule": self.check_rule,
+                "freeze": {n: v for n, v in self.step_settings.freeze},
+                "recording_freeze": {} if self.steptest_recording is not None else
+                {n: v for n, v in self.step_settings.freeze}},
+            "gain_matrix_recording": None if self.steptest_recording is None else
+            _matrix(st.variables, st.parameters, self.steptest_recording.gains),
             "offsets": [{"variable": o.variable, "noise": _finite(o.noise), "mean": _finite(o.mean),
                          "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
                         for o in pairing.offsets],
@@ -331,7 +382,9 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                                  interval=interval, window=float(s.window or 60 * interval),
                                  tolerance=s.tolerance, baseline_tolerance=s.baseline_tolerance,
                                  max_time=s.max_time)
-    sob = st2 = None
+    if s.check_gains not in ("recording", "structure"):
+        raise AnalysisError(f"check_gains {s.check_gains!r}: expected 'recording' or 'structure'")
+    sob = st2 = st_rec = None
     with make_executor(s.scheduler, s.workers) as ex:
         log.info("step tests: %d parameters x %d directions, %d variables", len(params),
                  2 if s.two_sided else 1, len(tags))
@@ -343,6 +396,10 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
             fixed2 = tuple((k, v) for k, v in problem.fixed if k not in op2) + tuple(op2.items())
             st2 = step_tests(replace(problem, fixed=fixed2), step_settings, ex,
                              progress=_counter(progress, "step runs (2nd point)"))
+        if s.data_checks and s.check_gains == "recording" and freeze:
+            log.info("step tests with nothing frozen (the twin as the data were recorded) for the data checks")
+            st_rec = step_tests(problem, replace(step_settings, freeze=()), ex,
+                                progress=_counter(progress, "step runs (as recorded)"))
         if s.method in ("sobol", "both"):
             sob = sobol_indices(problem, step_settings, n=s.samples, seed=s.seed, executor=ex,
                                 progress=_counter(progress, "Sobol runs"))
@@ -360,7 +417,18 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                            residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
                            checks=checks, other_gains=None if st2 is None else st2.gains,
                            other_time_constants=None if st2 is None else st2.time_constants,
+                           check_gains=None if st_rec is None else st_rec.gains,
+                           check_time_constants=None if st_rec is None else st_rec.time_constants,
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
+    if st_rec is not None and residuals is not None:
+        from .pairing import complete_with_recording
+
+        pairing = complete_with_recording(
+            pairing, st_rec.gains, time_constants=st_rec.time_constants,
+            variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
+            parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]), residuals=residuals,
+            bounds=[(p.start, p.min, p.max) for p in spec.parameters], checks=checks,
+            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     agr = agreement(pairing, sob) if sob is not None else None
     if s.method == "sobol" and sob is not None:
         pairing = _sobol_pairs(pairing, sob, st)
@@ -370,7 +438,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                  for v, p, a in st.nonlinear()]
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
-                         agreement=agr, settings=s)
+                         agreement=agr, settings=s, steptest_recording=st_rec)
 
 
 #: Left-out reasons that say a parameter shows in no tag, or a tag shows no parameter.

@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -108,6 +108,11 @@ class Pair:
         Expected tracked/untracked RMS ratio (NaN without data checks).
     at_bound : float
         Expected fraction of the time the parameter sits at a bound (NaN without data checks).
+    rga_from : str
+        ``"structure"``: the pair and its relative gain come from the RGA of the
+        step tests that set the structure (with a freeze: frozen);
+        ``"recording"``: from the RGA of the step tests with nothing frozen, for a
+        tag no parameter moves with the freeze (see :func:`complete_with_recording`).
     """
 
     variable: str
@@ -117,6 +122,7 @@ class Pair:
     time_constant: float = math.nan
     predicted_ratio: float = math.nan
     at_bound: float = math.nan
+    rga_from: str = "structure"
 
 
 @dataclass(frozen=True)
@@ -189,7 +195,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  rtol: float = RANK_RTOL, residuals: Residuals | None = None,
                  bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None,
                  other_gains: npt.ArrayLike | None = None, other_time_constants: npt.ArrayLike | None = None,
-                 min_lambda: float = MIN_LAMBDA) -> Pairing:
+                 min_lambda: float = MIN_LAMBDA, check_gains: npt.ArrayLike | None = None,
+                 check_time_constants: npt.ArrayLike | None = None) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -231,6 +238,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         tuned for the highest gain seen, the loop stays stable where the gain grows.
     min_lambda : float
         Smallest relative gain a chosen pair may have.
+    check_gains, check_time_constants : array_like, shape (m, n), optional
+        Gains and time constants of the twin run the way the data were recorded
+        (e.g. its controllers active while *gains* come from step tests with
+        them frozen; see :mod:`~trackingbox.analysis.pair_stage`). When given, the data checks
+        (reach, predicted tracking) use these instead of *gains*, the RGA keeps
+        *gains*; a pair whose two gains differ in sign is not chosen, and a
+        chosen pair's gain is the larger in magnitude of all the gain sets
+        (the tracking loop runs on the twin as recorded, and tuned for the
+        highest gain seen it stays stable where the gain grows).
 
     Returns
     -------
@@ -329,7 +345,19 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     # data checks: which variables are worth tracking. The RGA stays that of all the variables
     # the parameters move (the interactions are a property of the model); the checks only
     # restrict which pairs the assignment may choose.
-    data = _DataView(G, variables, parameters, residuals, bounds, checks) if residuals is not None else None
+    Gc = tauc = None
+    if check_gains is not None:
+        Gc = np.asarray(check_gains, dtype=float)
+        tauc = (np.full(G.shape, math.nan) if check_time_constants is None
+                else np.asarray(check_time_constants, dtype=float))
+        if Gc.shape != G.shape or tauc.shape != G.shape:
+            raise AnalysisError(f"the gains for the data checks have shape {Gc.shape}, expected {G.shape}")
+        if not np.isfinite(Gc).all():
+            i, j = np.argwhere(~np.isfinite(Gc))[0]
+            raise AnalysisError(f"data-check gain of {variables[i]!r} to {parameters[j]!r} is not finite")
+    data = (_DataView(G if Gc is None else Gc, variables, parameters, residuals, bounds, checks,
+                      structure=None if Gc is None else G)
+            if residuals is not None else None)
     excluded: set[int] = set()
     if data is not None:
         usable = np.zeros(n, dtype=bool)
@@ -392,7 +420,7 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                 chosen[rows[int(a)]] = cols[int(b)]
         if data is None or not chosen:
             break
-        predicted, worst = data.predict(chosen, tau)
+        predicted, worst = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc))
         if worst is None:
             break
         allowed[rows.index(worst[0]), cols.index(worst[1])] = False
@@ -406,6 +434,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if G2 is not None and tau2 is not None and abs(G2[i, j]) > abs(gain):
                 gain = float(G2[i, j])
                 t63 = float(tau2[i, j]) if math.isfinite(tau2[i, j]) else t63
+            if Gc is not None and tauc is not None and abs(Gc[i, j]) > abs(gain):
+                gain = float(Gc[i, j])
+                t63 = float(tauc[i, j]) if math.isfinite(tauc[i, j]) else t63
             pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound))
             if lam[i, j] > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
@@ -482,6 +513,19 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                    data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
 
 
+def recording_time_constants(structure: npt.ArrayLike, recording: npt.ArrayLike) -> np.ndarray:
+    """Time constants of the twin as recorded where measured, else those of the structure step tests.
+
+    Examples
+    --------
+    >>> recording_time_constants([[10.0, 20.0]], [[30.0, float("nan")]]).tolist()
+    [[30.0, 20.0]]
+    """
+    a = np.asarray(structure, dtype=float)
+    b = np.asarray(recording, dtype=float)
+    return np.where(np.isfinite(b) & (b > 0), b, a)
+
+
 def _best_rejected(col: np.ndarray, allowed: np.ndarray) -> int | None:
     """Row of the positive relative gain closest to 1 in *col* if the data checks forbade it, else None."""
     score = np.where(col > 1e-9, np.abs(col - 1.0), np.inf)
@@ -495,7 +539,8 @@ class _DataView:
     """The data-aware checks of :func:`choose_pairs` (see the module notes)."""
 
     def __init__(self, G: np.ndarray, variables: tuple[str, ...], parameters: tuple[str, ...],
-                 residuals: Residuals, bounds: npt.ArrayLike | None, checks: DataChecks | None) -> None:
+                 residuals: Residuals, bounds: npt.ArrayLike | None, checks: DataChecks | None,
+                 structure: np.ndarray | None = None) -> None:
         m, n = G.shape
         if bounds is None:
             raise AnalysisError("the data checks need the parameter bounds (start, min, max)")
@@ -525,6 +570,15 @@ class _DataView:
                 self.moves[i, j], self.reach[i, j] = mv, frac
                 self.allowed[i, j] = frac >= self.checks.min_reach
         self.rejected: list[tuple[str, str, str]] = []
+        #: (i, j) -> why a pair whose structure gain and data-check gain differ in sign is not allowed
+        self.sign: dict[tuple[int, int], str] = {}
+        if structure is not None:
+            for i, j in np.argwhere(structure * G < 0):
+                self.allowed[i, j] = False
+                self.sign[(int(i), int(j))] = (
+                    f"its gain to {parameters[j]} has one sign in the step tests that set the pairing structure "
+                    f"({_fmt(structure[i, j])}) and the other with the twin run as the data were recorded "
+                    f"({_fmt(G[i, j])}): a loop on it would act the wrong way")
         self._last: dict[int, str] = {}
 
     def row_reason(self, i: int, usable: np.ndarray) -> str | None:
@@ -543,6 +597,10 @@ class _DataView:
         cand = np.flatnonzero(usable)
         if cand.size == 0:
             return None
+        signs = [self.sign[(i, int(j))] for j in cand if (i, int(j)) in self.sign
+                 and self.reach[i, j] >= self.checks.min_reach]
+        if signs:
+            return signs[0]
         j = int(cand[np.argmax(np.nan_to_num(self.reach[i, cand], nan=-1.0))])
         return (f"no candidate parameter can close its offset from inside its bounds: the remaining range of "
                 f"{self.parameters[j]} moves {self.variables[i]} by {_fmt(self.moves[i, j])} toward the "
@@ -589,6 +647,115 @@ class _DataView:
         st = self.stat[i]
         if st is None or st.samples == 0 or self.allowed[i].all():
             return None
+        signs = [why for (a, _), why in self.sign.items() if a == i]
+        if signs and not (self.reach[i] >= self.checks.min_reach).any():
+            return signs[0]
         j = int(np.argmax(np.nan_to_num(np.where(self.allowed[i], -1.0, self.reach[i]), nan=-1.0)))
         return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} "
                 f"toward the measurement, the offset is {_fmt(st.mean)}")
+
+
+def complete_with_recording(first: Pairing, gains: npt.ArrayLike, *, time_constants: npt.ArrayLike,
+                            variable_ranges: npt.ArrayLike, parameter_ranges: npt.ArrayLike,
+                            residuals: Residuals, bounds: npt.ArrayLike, checks: DataChecks | None = None,
+                            rtol: float = RANK_RTOL, min_lambda: float = MIN_LAMBDA) -> Pairing:
+    """Pair the tags a freeze hides, with the gains of the twin as the data were recorded.
+
+    With the controllers frozen a controller's output (a pump speed, a heating
+    medium's temperature) moves with no parameter, yet with the controllers active,
+    as the data were recorded, that output is where a parameter error shows: the
+    loop holds its measurement at the setpoint and moves its output instead. Those
+    tags (no parameter moves them by more than :data:`NEGLIGIBLE` x the largest
+    scaled gain in *first*) are paired here from the RGA of *gains* (step tests
+    with nothing frozen) over them and the tags *first* paired, with the same data
+    checks; the pairs of *first* are kept, and a hidden tag gets the parameter
+    this RGA gives it unless *first* already uses that parameter. All pairs are
+    then predicted together with *gains*; while a pair added here would leave
+    more than ``max_ratio`` of its error, the worst is dropped.
+
+    Parameters
+    ----------
+    first : Pairing
+        :func:`choose_pairs` on the frozen gains (with ``check_gains``).
+    gains, time_constants : array_like, shape (m, n)
+        Step tests with nothing frozen, same rows and columns as *first*.
+    variable_ranges, parameter_ranges, residuals, bounds, checks, rtol, min_lambda
+        As for :func:`choose_pairs`.
+
+    Returns
+    -------
+    Pairing
+        *first* with the added pairs (``rga_from = "recording"``), the reasons of
+        the hidden tags left out replaced by this pass's, and its rejections added.
+    """
+    G = np.asarray(gains, dtype=float)
+    tau = np.asarray(time_constants, dtype=float)
+    V, P = first.variables, first.parameters
+    if G.shape != (len(V), len(P)) or tau.shape != G.shape:
+        raise AnalysisError(f"recorded gains have shape {G.shape}, expected {(len(V), len(P))}")
+    absS = np.abs(first.scaled_gains)
+    top = float(absS.max()) if absS.size else 0.0
+    hidden = [i for i in range(len(V)) if top > 0 and absS[i].max() < NEGLIGIBLE * top]
+    if not hidden:
+        return first
+    index = {v: i for i, v in enumerate(V)}
+    kept = {index[p.variable]: p for p in first.pairs}
+    rows = sorted(set(kept) | set(hidden))
+    names = [V[i] for i in rows]
+    have = [v for v in names if v in residuals.variables]
+    second = choose_pairs(G[rows], names, P, time_constants=tau[rows],
+                          variable_ranges=np.asarray(variable_ranges, dtype=float)[rows],
+                          parameter_ranges=parameter_ranges, residuals=residuals.subset(have), bounds=bounds,
+                          checks=checks, rtol=rtol, min_lambda=min_lambda)
+    used = {p.parameter for p in first.pairs}
+    added: list[Pair] = []
+    reasons = dict(second.left_out)
+    for p in second.pairs:
+        if index[p.variable] not in hidden:
+            continue
+        if p.parameter in used:
+            taker = next(q.variable for q in first.pairs if q.parameter == p.parameter)
+            reasons[p.variable] = (f"with the controllers active its relative gain points to {p.parameter} "
+                                   f"(lambda {_fmt(p.lambda_)}), which the frozen structure pairs with {taker}")
+            continue
+        added.append(Pair(p.variable, p.parameter, p.lambda_, p.gain, p.time_constant, p.predicted_ratio,
+                          p.at_bound, rga_from="recording"))
+    # every pair together, with the recorded gains: drop the worst added pair while it would fail
+    data = _DataView(G, V, P, residuals, bounds, checks)
+    dropped: list[tuple[str, str, str]] = []
+    warnings = list(first.warnings) + [f"(controllers active) {w}" for w in second.warnings]
+    predicted: dict[int, tuple[float, float]] = {}
+    while True:
+        chosen = {index[p.variable]: P.index(p.parameter) for p in (*first.pairs, *added)}
+        predicted, worst = data.predict(chosen, tau)
+        if worst is None:
+            break
+        why = data.rejected[-1][2]
+        if not any(index[p.variable] == worst[0] for p in added):
+            warnings.append(f"with the pairs added for the tags the freeze hides, {V[worst[0]]}/{P[worst[1]]}: "
+                            f"{why}")
+            break
+        dropped.append((V[worst[0]], P[worst[1]], why))
+        reasons[V[worst[0]]] = why
+        added = [p for p in added if index[p.variable] != worst[0]]
+    hidden_names = {V[i] for i in hidden}
+    paired = {p.variable for p in added} | {p.parameter for p in added}
+    left: list[tuple[str, str]] = []
+    for name, why in first.left_out:
+        if name in paired:
+            continue
+        if name in hidden_names and name in reasons:
+            why = (f"no parameter moves it with the controllers frozen; with them active (as the data were "
+                   f"recorded): {reasons[name]}")
+        left.append((name, why))
+    pairs = tuple(replace_ratio(p, predicted.get(index[p.variable]))
+                  for p in sorted([*first.pairs, *added], key=lambda p: index[p.variable]))
+    return replace(first, pairs=pairs, left_out=tuple(left), warnings=tuple(warnings),
+                   rejected=first.rejected + tuple(second.rejected) + tuple(dropped))
+
+
+def replace_ratio(p: Pair, figures: tuple[float, float] | None) -> Pair:
+    """*p* with the predicted ratio and time at a bound *figures* (unchanged when None)."""
+    if figures is None:
+        return p
+    return replace(p, predicted_ratio=float(figures[0]), at_bound=float(figures[1]))

@@ -19,8 +19,10 @@ examples:
 Procedure (in full: the docstring of trackingbox.analysis.pair_stage): settle
 the twin at an operating point, --freeze its controllers, step each parameter by
 +/- --step of its range; scaled steady-state gains -> RGA -> assignment, after
-data checks on an untracked run. The chosen pairs replace the spec's [[pairs]]
-unless --no-write. Exit code 1 when no pair could be chosen.
+data checks on an untracked run (with a freeze, judged with step tests repeated
+with nothing frozen, which also pair the controller outputs the freeze hides;
+see --check-gains). The chosen pairs replace the spec's [[pairs]] unless
+--no-write. Exit code 1 when no pair could be chosen.
 """
 
 
@@ -74,6 +76,9 @@ def register(subparsers: Any) -> None:
                         "F x its mean untracked offset (default 0.5)")
     p.add_argument("--max-ratio", type=number(gt=0), default=0.25, metavar="R",
                    help="reject pairs predicted to leave more than R of the untracked RMS error (default 0.25)")
+    p.add_argument("--check-gains", choices=("recording", "structure"), default="recording",
+                   help="gains of the reach and prediction checks: recording (default; with a freeze, step tests "
+                        "repeated with nothing frozen, as the data were recorded) or structure (the frozen ones)")
     p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
@@ -97,7 +102,7 @@ def settings(args: argparse.Namespace) -> Any:
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
-                        max_ratio=args.max_ratio, samples=args.samples, seed=args.seed, workers=args.workers,
+                        max_ratio=args.max_ratio, check_gains=args.check_gains, samples=args.samples, seed=args.seed, workers=args.workers,
                         scheduler=args.scheduler)
 
 
@@ -141,6 +146,7 @@ def _print_summary(result: Any) -> None:
                for p in pairing.pairs], align="llrrr")
     print(doc.markdown().rstrip() if pairing.pairs else "no pairs found")
     print(f"\ncondition number (scaled gains): {pairing.condition_number:.4g}; {result.runs} simulations")
+    print(f"gains: {result.check_rule}")
     for name, reason in pairing.left_out:
         kind = "parameter" if name in pairing.parameters else "tag"
         print(f"left out {kind} {name}: {reason}")

@@ -63,7 +63,8 @@ def write_pair_report(spec: Spec, result: PairingResult, out: str | os.PathLike[
                       "standard deviation of the measurement's first differences / sqrt(2). Thresholds: "
                       f"untracked RMS error at least {c.noise_ratio:g} x noise; the parameter's remaining range "
                       f"closes at least {c.min_reach:g} x the mean offset; predicted tracked/untracked RMS ratio "
-                      f"(all pairs together, first-order loops, parameters clipped) at most {c.max_ratio:g}.")
+                      f"(all pairs together, first-order loops, parameters clipped) at most {c.max_ratio:g}. "
+                      f"Gains: {result.check_rule}.")
         doc.table(["variable", "noise", "mean offset", "RMS error", "RMS / noise"],
                   [[o.variable, fmt(o.noise, ".3g"), fmt(o.mean, ".3g"), fmt(o.rms, ".3g"),
                     fmt(o.noise_ratio, ".3g")] for o in pairing.offsets])
