@@ -197,8 +197,9 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``). Not yet
-#: heat production: with its controllers frozen, ``pair`` finds no pair there (issue 15).
+#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``). Heat
+#: production's demo keeps them active: ``pair --freeze holdControllers=1`` finds its hydraulic pairs
+#: too (the data checks use the twin run as the data were recorded), at one more step-test set.
 FREEZE_CONTROLLERS = frozenset({"evaporator"})
 
 
