@@ -89,3 +89,42 @@ def _main(argv: list[str]) -> int:
         return cli.main(argv)
     except SystemExit as exc:
         return int(exc.code)
+
+
+@pytest.mark.compile
+@pytest.mark.slow
+def test_bench_command_writes_a_3_effect_case(tmp_path, capsys):
+    """``bench evaporator-train --effects 3``: compiles the 3-effect wrappers, writes the historian
+    export, the spec (every level compensated, every effect's fouling a candidate) and the truth."""
+    import json
+
+    import pandas as pd
+
+    from trackingbox.fmu import read_info
+    from trackingbox.spec import load_spec
+
+    out = tmp_path / "case"
+    assert _main(["bench", "evaporator-train", "--out", str(out), "--effects", "3", "--hours", "1",
+                  "--seed", "1", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["bench"] == "evaporator-train" and doc["hours"] == 1.0
+    spec = load_spec(out / "spec.toml")
+    assert spec.source is not None and spec.source.path == out / "twin_source.mo"
+    twin = {v.name: v for v in read_info(out / "twin.fmu").variables}
+    # 3 effects x 2 levels + the flash tank: 7 compensated levels, each on its own correction input
+    assert sorted(s.tag for s in spec.states) == sorted(
+        ["LI-7061"] + [f"LI-7{k}11" for k in (1, 2, 3)] + [f"LI-7{k}25" for k in (1, 2, 3)])
+    assert all(twin[s.input].causality == "input" for s in spec.states)
+    names = [p.name for p in spec.parameters]
+    assert [n for n in names if n.endswith(".Rf")] == ["effect[1].Rf", "effect[2].Rf", "effect[3].Rf"]
+    assert all(twin[n].causality == "parameter" for n in names)
+    # 10 common tags + 9 per effect, less the 7 levels
+    assert len(spec.outputs) == 10 + 9 * 3 - 7
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["effects"] == 3 and sorted(truth["trajectories"]) == names[:3]
+    # the plant fouls from clean: every effect's resistance starts at 0 and grows
+    for name in names[:3]:
+        values = truth["trajectories"][name]["value"]
+        assert values[0] >= 0 and values[-1] > values[0]
+    history = pd.read_csv(out / "measurements.csv")  # the historian's long form: tag, time, value
+    assert {"FI-7010", "QI-7060", "TI-7311", "FIC-7010.SP", "PI-7090"} <= set(history["tag"])

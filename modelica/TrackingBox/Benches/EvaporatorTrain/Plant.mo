@@ -10,7 +10,7 @@ model Plant "N-effect evaporator train, plant: fouling and scaling per effect, B
     transferPumpWear=0.95,
     DSbias=0.002,
     DSdrift=2.9e-9);
-  parameter Real RfInf[N](each unit="m2.K/W") = {2.5e-4 - 1.5e-4*(k - 1)/(N - 1) for k in 1:N} "Asymptote of each effect's organic/CaCO3 fouling (highest at the product end)";
+  parameter Real RfInf[N](each unit="m2.K/W") = {1.5e-4 - 1.0e-4*(k - 1)/(N - 1) for k in 1:N} "Asymptote of each effect's organic/CaCO3 fouling (highest at the product end)";
   parameter TrackingBox.Units.Time tauFouling[N] = {86400*(1 + 0.5*(k - 1)/(N - 1)) for k in 1:N} "Time constant of each effect's fouling growth";
   parameter Real Rf0(unit="m2.K/W") = 0 "Fouling resistance of every effect at time 0";
   parameter Real kScale(unit="m2.K/(W.s)") = 1e-9 "Growth rate of the soluble scale at design duty above the onset";
@@ -29,8 +29,8 @@ equation
   end for;
   annotation (experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
 <p>The degradations of the evaporator notes (section 5) in every effect:
-fouling growing asymptotically to <code>RfInf[k]</code> (2.5e-4 m2K/W at the
-product end down to 1e-4 at the feed end) with its own time constant; soluble
+fouling growing asymptotically to <code>RfInf[k]</code> (1.5e-4 m2K/W at the
+product end down to 0.5e-4 at the feed end, 8-10 % of U) with its own time constant; soluble
 scale above about 50 % DS (in practice effects 1 and 2) growing with the duty
 and washed off with <code>tauWash</code>; their sum <code>Rf_true[k]</code>
 drives effect <code>k</code>'s fouling input. Boiling-point offsets from 1 K
