@@ -205,13 +205,14 @@ def states(n: int) -> tuple[StateSpec, ...]:
 
 
 def candidates(n: int) -> dict[str, tuple[float, float]]:
-    """Relative candidates (fractions of the twin's declared start): the feed, outlet and product
-    valves, every transfer valve's capacity and every transfer pump's head."""
-    out: dict[str, tuple[float, float]] = {"inletValve.KvMax": (0.7, 1.3), "outletValve.KvMax": (0.7, 1.3),
+    """Relative candidates (fractions of the twin's declared start, which is 1: as designed): the
+    capacity of the feed valve, of effect 1's level valve and of every transfer valve, the head of
+    every transfer pump, and the product pump's shut-off head."""
+    out: dict[str, tuple[float, float]] = {"inletValveCapacity": (0.7, 1.3), "outletValveCapacity": (0.7, 1.3),
                                            "productPump.dp0": (0.7, 1.3)}
     for k in range(1, n):
-        out[f"transferValve[{k}].KvMax"] = (0.7, 1.3)
-        out[f"transferPump[{k}].dp0"] = (0.7, 1.3)
+        out[f"transferValveCapacity[{k}]"] = (0.7, 1.3)
+        out[f"transferPumpHead[{k}]"] = (0.7, 1.3)
     return out
 
 

@@ -6,8 +6,8 @@ model Plant "N-effect evaporator train, plant: fouling and scaling per effect, B
     ventFractionEffect=fill(0.005, N),
     UA_lossEffect=fill(200, N),
     UA_lossFlash=30,
-    inletValveWear=0.9,
-    transferPumpWear=0.95,
+    inletValveCapacity=0.9,
+    transferPumpHead=fill(0.95, N - 1),
     DSbias=0.002,
     DSdrift=2.9e-9);
   parameter Real RfInf[N](each unit="m2.K/W") = {1.5e-4 - 1.0e-4*(k - 1)/(N - 1) for k in 1:N} "Asymptote of each effect's organic/CaCO3 fouling (highest at the product end)";
