@@ -114,7 +114,7 @@ def test_bench_command_writes_a_3_effect_case(tmp_path, capsys):
     # 3 effects x 2 levels + the flash tank: 7 compensated levels, each on its own correction input
     assert sorted(s.tag for s in spec.states) == sorted(
         ["LI-7061"] + [f"LI-7{k}11" for k in (1, 2, 3)] + [f"LI-7{k}25" for k in (1, 2, 3)])
-    assert all(twin[s.input].causality == "input" for s in spec.states)
+    assert all(twin[s.correction].causality == "input" for s in spec.states)
     names = [p.name for p in spec.parameters]
     assert [n for n in names if n.endswith(".Rf")] == ["effect[1].Rf", "effect[2].Rf", "effect[3].Rf"]
     assert all(twin[n].causality == "parameter" for n in names)

@@ -21,9 +21,11 @@ model Plant "N-effect evaporator train, plant: fouling and scaling per effect, B
   Real Rf_fouling[N](each unit="m2.K/W") "Organic/CaCO3 fouling resistance of each effect";
   Real Rf_true[N](each unit="m2.K/W") "Total fouling resistance of each effect (the truth the twin's effect[k].Rf tracks)";
 equation
+  // (der(...)) in parentheses: rumoca 0.10.2 loses the right-hand side of der(...) = ... in
+  // for-loops, and the shipped library is not rewritten when a wrapper model uses it (--effects N)
   for k in 1:N loop
     Rf_fouling[k] = Rf0 + (RfInf[k] - Rf0)*(1 - exp(-time/tauFouling[k]));
-    der(Rf_scale[k]) = kScale/(1 + exp(-(effect[k].x - xScale)/dxScale))*effect[k].Q/QDesign[k] - Rf_scale[k]/tauWash;
+    (der(Rf_scale[k])) = kScale/(1 + exp(-(effect[k].x - xScale)/dxScale))*effect[k].Q/QDesign[k] - Rf_scale[k]/tauWash;
     Rf_true[k] = Rf_fouling[k] + Rf_scale[k];
     effect[k].Rf_in = Rf_true[k];
   end for;
