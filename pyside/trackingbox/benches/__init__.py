@@ -6,11 +6,12 @@ exchanger, plant ``kht`` differs from the twin's), ``heat-production``
 stream; quadratic pressure losses in the plant, linear in the twin) and
 ``evaporator`` (the last effect of a black-liquor evaporation plant, fouling
 through a multi-day run with flow stoppages, measurements as a historian exports
-them).
+them). ``evaporator-train`` scales the evaporator to a whole train of N effects
+(``--effects``, default 7).
 
 >>> from trackingbox.benches import BENCHES
 >>> sorted(BENCHES)
-['evaporator', 'heat-exchanger', 'heat-production']
+['evaporator', 'evaporator-train', 'heat-exchanger', 'heat-production']
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ BENCHES: dict[str, str] = {
     "heat-exchanger": "heat_exchanger",
     "heat-production": "heat_production",
     "evaporator": "evaporator",
+    "evaporator-train": "evaporator_train",
 }
 
 
@@ -45,12 +47,12 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
                overrides: Mapping[str, float] | None = None, hours: float | None = None, *,
                plant_fmu: str | os.PathLike[str] | None = None,
                twin_fmu: str | os.PathLike[str] | None = None,
-               hidden: str | None = None, noise_scale: float = 1.0) -> BenchCase:
+               hidden: str | None = None, noise_scale: float = 1.0, effects: int | None = None) -> BenchCase:
     """Generate bench case *name* into directory *out*.
 
     Parameters
     ----------
-    name : {"heat-exchanger", "heat-production", "evaporator"}
+    name : {"heat-exchanger", "heat-production", "evaporator", "evaporator-train"}
     out : path-like
         Output directory.
     seed : int
@@ -66,6 +68,8 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
         Hidden-effect case (``BenchDefinition.hidden``): simulate that plant variant.
     noise_scale : float
         Factor on every sensor's noise.
+    effects : int, optional
+        Number of effects (``evaporator-train`` only; default 7).
 
     Returns
     -------
@@ -76,11 +80,15 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
 
     definition = bench_definition(name)
     module = importlib.import_module(f"{__name__}.{BENCHES[name]}")
+    takes_effects = name == "evaporator-train"
+    if effects is not None and not takes_effects:
+        raise TrackingError(f"bench {name!r} has no number of effects (--effects applies to evaporator-train)")
     if hasattr(module, "build"):  # a bench with its own case writer (the evaporator: historian export)
         if hidden is not None or noise_scale != 1.0:
             raise TrackingError(f"bench {name!r} has no hidden-effect cases and no noise scale yet "
                                 f"(--hidden and --noise-scale apply to heat-exchanger and heat-production)")
+        extra = {"effects": effects} if takes_effects and effects is not None else {}
         return module.build(out, seed=seed, overrides=overrides, hours=hours, plant_fmu=plant_fmu,
-                            twin_fmu=twin_fmu)
+                            twin_fmu=twin_fmu, **extra)
     return build_case(definition, out, seed=seed, overrides=overrides, hours=hours,
                       plant_fmu=plant_fmu, twin_fmu=twin_fmu, hidden=hidden, noise_scale=noise_scale)

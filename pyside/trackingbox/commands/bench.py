@@ -17,6 +17,7 @@ examples:
   trackingbox bench heat-production --out hp --json
   trackingbox bench heat-production --out leak --hidden leak-level --noise-scale 2
   trackingbox bench evaporator --out ev --days 3 --seed 1 --set RfInf=2e-4
+  trackingbox bench evaporator-train --out train --effects 7 --days 1
 
 writes into --out:
   plant.fmu, twin.fmu     the "physical" plant and the digital twin (FMUs)
@@ -34,6 +35,8 @@ the whole case could be generated.
 evaporator: measurements.csv is a historian export (ISO 8601 timestamps,
 per-tag sampling, dead-band reporting, communication losses); truth.json also
 holds the plant's fouling resistance over time and the flow stoppages.
+evaporator-train: the same for a train of --effects N effects (2..12, default 7;
+default period 1 day); truth.json holds every effect's fouling over time.
 """
 
 
@@ -57,13 +60,15 @@ def register(subparsers: Any) -> None:
                    metavar="NAME=VALUE", help="plant parameter value (repeatable)")
     p.add_argument("--hours", type=number(gt=0), default=None,
                    help="measured period in hours (default 8 heat-exchanger, 24 heat-production, "
-                        "72 evaporator)")
+                        "72 evaporator, 24 evaporator-train)")
     p.add_argument("--days", type=number(gt=0), default=None,
                    help="measured period in days (instead of --hours; default 3 for the evaporator)")
     p.add_argument("--hidden", default=None, metavar="CASE",
                    help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
                         "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift); truth.json says which")
+    p.add_argument("--effects", type=number(ge=2, le=12, integer=True), default=None, metavar="N",
+                   help="evaporator-train: number of effects (default 7)")
     p.add_argument("--noise-scale", type=number(ge=0, le=1000), default=1.0, metavar="S",
                    help="factor on every sensor's noise (default 1)")
     p.add_argument("--plant-fmu", type=Path, default=None, help=argparse.SUPPRESS)
@@ -96,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", kind="dir", inputs=[p for p in (args.plant_fmu, args.twin_fmu) if p])
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=hours,
                       plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,
-                      noise_scale=args.noise_scale)
+                      noise_scale=args.noise_scale, effects=args.effects)
     if args.json:
         json.dump(case.to_json(), sys.stdout, indent=2)
         sys.stdout.write("\n")
