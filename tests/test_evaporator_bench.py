@@ -33,12 +33,13 @@ def test_registered() -> None:
     assert "evaporator" in BENCHES
     d = bench_definition("evaporator")
     # the contract's fixed names: inputs and outputs of Plant and Twin, plus the steam-chest
-    # pressure (the notes' "PI steam"), added for pairing the heat-transfer parameter
+    # pressure (the notes' "PI steam"), added for pairing the heat-transfer parameter, and the pump's
+    # discharge pressure (the notes' "discharge PI" of the pump's wear)
     assert {s.plant for s in d.inputs} == {"feedFlowSet", "feedDS", "feedT", "steamP", "nextP"}
     assert {s.plant for s in d.outputs} == {
         "FI_feed", "FI_product", "FI_condensate", "PI_vapour", "PI_flash", "TI_body", "TI_flash", "LI_body",
         "LI_flash", "LI_condensate", "DI_product", "ZI_inlet", "ZI_outlet",
-        "PI_steamChest"}
+        "PI_steamChest", "PI_pump"}
     assert {(s.variable, s.correction) for s in d.states} == {
         ("LI_body", "body_m_flow_corr"), ("LI_flash", "flash_m_flow_corr"), ("LI_condensate", "cond_m_flow_corr")}
 
