@@ -197,9 +197,11 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``). Not yet
-#: heat production: with its controllers frozen, ``pair`` finds no pair there (issue 15).
-FREEZE_CONTROLLERS = frozenset({"evaporator"})
+#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``) when their
+#: spec has no ``[pairing] freeze``. Not yet heat production: with its controllers frozen, ``pair``
+#: finds no pair there (issue 15). Not the evaporator: its spec's pairing freezes nothing, as
+#: ``track`` runs the twin (see ``benches.evaporator.PAIRING``).
+FREEZE_CONTROLLERS: frozenset[str] = frozenset()
 
 
 def _pair_settings(spec: Spec, bench: str) -> Any:
