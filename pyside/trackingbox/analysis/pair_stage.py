@@ -46,7 +46,9 @@ first-order loops with the parameters clipped to their bounds; while a pair
 would leave more than --max-ratio of its tag's untracked RMS error, the worst
 one is forbidden and the assignment redone. Reasons go to the left-out list.
 With --second-point (default auto) the step tests are repeated at the hour of
-the training window whose mean inputs differ most from the first point: a pair
+the training window whose mean inputs differ most from the first point (means
+over the running samples: stoppages, their settle time and input gaps are not
+an operating point, :func:`running_inputs`): a pair
 whose gain changes sign between the points is not chosen, and each pair is
 written with the larger of its two gains (and that point's time constant), so
 the loop, tuned for the highest gain seen, stays stable where the gain grows.
