@@ -33,12 +33,13 @@ def test_registered() -> None:
     assert "evaporator" in BENCHES
     d = bench_definition("evaporator")
     # the contract's fixed names: inputs and outputs of Plant and Twin, plus the steam-chest
-    # pressure (the notes' "PI steam"), added for pairing the heat-transfer parameter
+    # pressure (the notes' "PI steam"), added for pairing the heat-transfer parameter, and the pump's
+    # discharge pressure (the notes' "discharge PI" of the pump's wear)
     assert {s.plant for s in d.inputs} == {"feedFlowSet", "feedDS", "feedT", "steamP", "nextP"}
     assert {s.plant for s in d.outputs} == {
         "FI_feed", "FI_product", "FI_condensate", "PI_vapour", "PI_flash", "TI_body", "TI_flash", "LI_body",
         "LI_flash", "LI_condensate", "DI_product", "ZI_inlet", "ZI_outlet",
-        "PI_steamChest"}
+        "PI_steamChest", "PI_pump"}
     assert {(s.variable, s.correction) for s in d.states} == {
         ("LI_body", "body_m_flow_corr"), ("LI_flash", "flash_m_flow_corr"), ("LI_condensate", "cond_m_flow_corr")}
 
@@ -141,7 +142,6 @@ def short_case(fmu_cache, tmp_path_factory):
     """A 10 h evaporator case, seed 1, one known stoppage, fast fouling; pairs from ``pair``."""
     from trackingbox.analysis.pair_stage import PairSettings, pair, spec_pairs
     from trackingbox.benches.evaporator import build, load_truth, slow_pairs
-    from trackingbox.fmu import read_info
     from trackingbox.spec import load_spec, write_pairs
 
     out = tmp_path_factory.mktemp("evcase")
@@ -149,9 +149,7 @@ def short_case(fmu_cache, tmp_path_factory):
     case = build(out, seed=1, hours=10.0, overrides=FAST_FOULING, plant_fmu=fmu_cache(f"{EV}.Plant"),
                  twin_fmu=twin, stoppages=[STOP])
     spec = load_spec(case.spec)
-    freeze = (("holdControllers", 1.0),) if "holdControllers" in {getattr(v, "name", v)
-                                                                  for v in read_info(twin).inputs} else ()
-    result = pair(spec, PairSettings(freeze=freeze, workers=1))
+    result = pair(spec, PairSettings(workers=1))  # the spec's [pairing]: nothing frozen, as track runs the twin
     write_pairs(case.spec, spec_pairs(spec, result))
     # a 20-min closed loop: the demo's 3 h would not settle inside this case's 5 h validation window
     spec = slow_pairs(case.spec, closed_loop=1200.0)
@@ -206,7 +204,7 @@ def test_pairing_is_physical(short_case) -> None:
     # the fouling resistance goes with the condensate flow, the effect's T or p, or the product DS
     assert pairs.get("effect.Rf") in HEAT_TRANSFER_TAGS, pairs
     left = {n for n, _ in result.pairing.left_out}
-    for name in ("effect.Rf", "inletValve.KvMax", "outletValve.KvMax", "pump.dp0", "pump.VMax"):
+    for name in ("effect.Rf", "effect.dBPR", "inletValve.KvMax", "outletValve.KvMax", "pump.dp0", "pump.VMax"):
         assert name in pairs or name in left, f"{name} neither paired nor left out with a reason"
 
 

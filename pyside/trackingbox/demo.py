@@ -197,10 +197,12 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``). Heat
-#: production's demo keeps them active: ``pair --freeze holdControllers=1`` finds its hydraulic pairs
-#: too (the data checks use the twin run as the data were recorded), at one more step-test set.
-FREEZE_CONTROLLERS = frozenset({"evaporator"})
+#: Benches whose step tests run with the twin's controllers frozen (``holdControllers``) when their
+#: spec has no ``[pairing] freeze``. None today. Heat production keeps its controllers active (with
+#: them frozen, ``pair`` finds the same kind of pairs since the data checks use the twin run as the data
+#: were recorded, at one more step-test set); the evaporator's spec freezes nothing, as ``track`` runs
+#: the twin (see ``benches.evaporator.PAIRING``).
+FREEZE_CONTROLLERS: frozenset[str] = frozenset()
 
 
 def _pair_settings(spec: Spec, bench: str) -> Any:

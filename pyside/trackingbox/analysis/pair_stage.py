@@ -63,7 +63,9 @@ is not chosen, and a pair's written gain is the largest in magnitude of all
 the step tests (the tracking loop runs on the twin as recorded). With
 --check-gains structure, or without a freeze, the checks use the frozen gains.
 With --second-point (default auto) the step tests are repeated at the hour of
-the training window whose mean inputs differ most from the first point: a pair
+the training window whose mean inputs differ most from the first point (means
+over the running samples: stoppages, their settle time and input gaps are not
+an operating point, :func:`running_inputs`): a pair
 whose gain changes sign between the points is not chosen, and each pair is
 written with the larger of its two gains (and that point's time constant), so
 the loop, tuned for the highest gain seen, stays stable where the gain grows.
@@ -82,12 +84,11 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+import pandas as pd
 
 from ..errors import AnalysisError, SpecError
 
 if TYPE_CHECKING:
-    import pandas as pd
-
     from ..spec import PairSpec, Spec
     from .pairing import Pairing
     from .sobol import Agreement, SobolResult
@@ -291,15 +292,46 @@ def _matrix(rows: tuple[str, ...], cols: tuple[str, ...], values: npt.ArrayLike)
             "values": [[_finite(float(x)) for x in row] for row in np.asarray(values, dtype=float)]}
 
 
-def _measured(spec: Spec) -> tuple[pd.DataFrame, pd.DataFrame, npt.NDArray[np.bool_], float, float]:
+def _measured(spec: Spec) -> tuple[pd.DataFrame, pd.DataFrame, npt.NDArray[np.bool_], float, float, pd.DataFrame]:
     """The measurements on the spec's grid (:class:`~trackingbox.data.MeasurementView`), the same with the
     output tags NaN where they are not scored (stoppages and their settle time, gaps), the training-window
-    mask and the window ``[start, stop)`` (all data when the spec has no training window)."""
+    mask, the window ``[start, stop)`` (all data when the spec has no training window), and the
+    measurements with the inputs NaN where the plant was not running (:func:`running_inputs`)."""
     from ..data import MeasurementView
 
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
     return (view.to_frame(), view.to_frame(scored=True), view.in_window, float(view.window[0]),
-            float(view.window[1]))
+            float(view.window[1]), running_inputs(view, spec))
+
+
+def running_inputs(view: Any, spec: Spec) -> pd.DataFrame:
+    """The view's table with the input tags NaN where the view is stopped (the second operating point's data).
+
+    An operating point is a state the plant runs in: the hours of a flow stoppage (and the
+    settle time after it, or an input's communication loss) are not one. Without this the
+    second operating point of a case with stoppages is the hour whose mean feed is furthest
+    from the first point's, i.e. a stoppage (the evaporator's 3-day case: 0.35 kg/s of a 2 kg/s
+    feed), and its gains, measured at a feed the twin never tracks at, veto or re-tune the pairs.
+
+    Examples
+    --------
+    >>> import types
+    >>> from pathlib import Path
+    >>> from trackingbox.spec import Spec
+    >>> v = types.SimpleNamespace(stopped=np.array([False, True, False]),
+    ...     to_frame=lambda: pd.DataFrame({"time": [0.0, 10.0, 20.0], "u": [1.0, 0.1, 1.0], "y": [5.0, 6.0, 7.0]}))
+    >>> s = Spec(path=Path("s.toml"), twin=Path("t.fmu"), measurements=Path("m.csv"), sample_time=10.0,
+    ...          inputs={"u": "u_in"}, outputs={"y": "y_out"})
+    >>> running_inputs(v, s)[["u", "y"]].to_numpy().tolist()
+    [[1.0, 5.0], [nan, 6.0], [1.0, 7.0]]
+    """
+    frame = view.to_frame()
+    stopped = np.asarray(view.stopped, dtype=bool)
+    if stopped.any():
+        for tag in spec.inputs:
+            if tag in frame.columns:
+                frame.loc[stopped, tag] = np.nan
+    return frame
 
 
 def second_operating_point(choice: str | float, frame: Any, spec: Spec, op: dict[str, float], start: float,
@@ -359,7 +391,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     s = settings or PairSettings()
     if not spec.parameters:
         raise SpecError(f"{spec.path} has no [[parameters]]: nothing to pair")
-    frame, scored, in_window, start, stop = _measured(spec)
+    frame, scored, in_window, start, stop, running = _measured(spec)
     op = operating_point(frame, spec.inputs, start=start, duration=3600.0, at=s.at)
     train = scored[in_window]
     state_tags = {st.tag for st in spec.states}
@@ -389,7 +421,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         log.info("step tests: %d parameters x %d directions, %d variables", len(params),
                  2 if s.two_sided else 1, len(tags))
         st = step_tests(problem, step_settings, ex, progress=_counter(progress, "step runs"))
-        second = second_operating_point(s.second_point, frame, spec, op, start, stop)
+        second = second_operating_point(s.second_point, running, spec, op, start, stop)
         if second is not None:
             at2, op2 = second
             log.info("second operating point (t = %g s): %s", at2, op2)

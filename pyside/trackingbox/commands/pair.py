@@ -66,7 +66,7 @@ def register(subparsers: Any) -> None:
                    help="leave out parameters that add less than RTOL x the largest singular value (default 1e-2)")
     p.add_argument("--second-point", default="auto", metavar="auto|none|TIME",
                    help="repeat the step tests at a second operating point: auto (default: the hour of the "
-                        "training window whose inputs differ most from the first point), TIME, or none")
+                        "training window whose running inputs differ most from the first point), TIME, or none")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
     p.add_argument("--noise-ratio", type=number(ge=0), default=5.0, metavar="K",

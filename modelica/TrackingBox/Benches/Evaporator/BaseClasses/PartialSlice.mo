@@ -26,6 +26,7 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   TrackingBox.Interfaces.RealOutput PI_vapour(unit="Pa") "Pressure in the effect's vapour space";
   TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the flash tank";
   TrackingBox.Interfaces.RealOutput PI_steamChest(unit="Pa") "Pressure in the steam chest";
+  TrackingBox.Interfaces.RealOutput PI_pump(unit="Pa") "Discharge pressure of the product pump";
   TrackingBox.Interfaces.RealOutput TI_body(unit="K") "Liquor temperature in the effect";
   TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Liquor temperature after the flash tank";
   TrackingBox.Interfaces.RealOutput LI_body(unit="m") "Effect level from the dP transmitter";
@@ -104,6 +105,7 @@ equation
   PI_vapour = effect.p_vap;
   PI_flash = flash.p_vap;
   PI_steamChest = effect.p_s;
+  PI_pump = pump.port_b.p;
   TI_body = effect.T;
   TI_flash = flash.T;
   LI_body = LT_body.y;
@@ -136,6 +138,9 @@ loops active: <code>holdControllers</code> freezes all of them,
 <code>holdCondensateLevelController</code> one level loop each. A controller is
 held while the sum of the inputs that reach it is above 0.5 (each input 0 or 1).
 Freezing the level loops with the flow loop active (the source's practice)
-lets an inlet-valve capacity error show in the inlet valve position.</p>
+lets an inlet-valve capacity error show in the inlet valve position.
+<code>PI_pump</code>, the pump's discharge pressure, is what shows the pump's
+wear when the flash level loop is active (the loop then sets the product
+flow, and a weaker pump only opens the product valve further).</p>
 </html>"));
 end PartialSlice;
