@@ -1710,18 +1710,27 @@ class SensitivityStepper(ModelExchangeStepper):
         S, seed, scales = self._S, self._seed, self._scales
         calls = [self._fmi.directional(self._der_vr, self._state_vr + [vr]) for vr in self._param_vr]
         get_derivatives = self._fmi.get_derivatives
+        views: dict[int, npt.NDArray[np.float64]] = {}
+
+        def view(ptr: Any) -> npt.NDArray[np.float64]:
+            # CVODE passes the same few vectors again and again: one numpy view per address
+            address = ctypes.addressof(ptr.contents)
+            found = views.get(address)
+            if found is None:
+                found = views[address] = np.ctypeslib.as_array(ptr, (n,))
+            return found
 
         def get_x(ptr: Any, size: int) -> None:
             fmu.getContinuousStates(ptr, nx)
-            np.ctypeslib.as_array(ptr, (n,))[nx:] = S.ravel()
+            view(ptr)[nx:] = S.ravel()
 
         def set_x(ptr: Any, size: int) -> None:
             fmu.setContinuousStates(ptr, nx)
-            S[:] = np.ctypeslib.as_array(ptr, (n,))[nx:].reshape(m, nx)
+            S[:] = view(ptr)[nx:].reshape(m, nx)
 
         def get_dx(ptr: Any, size: int) -> None:
             get_derivatives(ptr, nx)
-            out = np.ctypeslib.as_array(ptr, (n,))
+            out = view(ptr)
             for j, call in enumerate(calls):
                 seed[:nx] = S[j]
                 seed[nx] = scales[j]
