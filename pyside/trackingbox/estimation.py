@@ -183,7 +183,8 @@ class EstimationResult:
         was used), ``requested`` (the ``jacobian`` setting), ``reason`` (why not
         exact, when it is not), ``runs`` (twin runs of the refinement; an exact
         run gives residuals and Jacobian together), ``seconds`` and ``cpu_seconds``
-        (wall and process CPU time of the refinement). Empty without refinement.
+        (wall and process CPU time of the refinement; not in :meth:`to_json`, whose
+        document a resumed run reproduces exactly). Empty without refinement.
     """
 
     parameters: dict[str, float]
@@ -210,8 +211,8 @@ class EstimationResult:
             "evaluations": int(self.evaluations),
             "seconds": float(self.seconds),
         }
-        if self.refinement:
-            out["refinement"] = dict(self.refinement)
+        if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's
+            out["refinement"] = {k: v for k, v in self.refinement.items() if k not in ("seconds", "cpu_seconds")}
         return out
 
 
