@@ -77,7 +77,8 @@ def test_estimate_json_finds_plant_kht(case: Path, tmp_path: Path) -> None:
                             "--report", str(report)])
     assert code == 0
     doc = json.loads(out)
-    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds"}
+    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement"}
+    assert doc["refinement"]["jacobian"] == "exact"  # the embedded twin provides directional derivatives
     assert set(doc["validation"]) == {"nrmse", "nrmse_initial"}
     assert doc["parameters"]["hx.kht"] == pytest.approx(KHT_PLANT, rel=0.01)
     assert doc["training"]["nrmse"]["TI-102"] < 1e-3  # noise-free data of the same model

@@ -223,7 +223,8 @@ def test_estimate_command_json_report_write(fmu: Path, tmp_path: Path,
                               "--write"])
     assert args.func(args) == 0
     doc = json.loads(capsys.readouterr().out)  # exactly one JSON document on stdout
-    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds"}
+    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement"}
+    assert doc["refinement"]["jacobian"] == "exact"  # the CasADi-made twin provides directional derivatives
     assert set(doc["validation"]) == {"nrmse", "nrmse_initial"}
     assert abs(doc["parameters"]["kht"] - TRUE_KHT) <= 0.01 * TRUE_KHT
     assert doc["validation"]["nrmse"]["TI-1"] < doc["validation"]["nrmse_initial"]["TI-1"]

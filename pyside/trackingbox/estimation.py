@@ -14,9 +14,13 @@ window and judged on the validation window. Two stages:
    (:func:`default_maxiter`), so many-parameter twins stay affordable.
 2. **Local refinement**: :func:`scipy.optimize.least_squares` (trust-region
    reflective, bounded, ``x_scale`` = the bound ranges) on the residual vector,
-   started from the best point so far. Its Jacobian is a forward difference on
-   all parameters with a step of :data:`DIFF_STEP` times each bound range
-   (:func:`jacobian_points`), the ``n`` simulations spread over the workers. With
+   started from the best point so far. Its Jacobian is either *exact*: the
+   forward sensitivity equations integrated with the twin in the same run that
+   gives the residuals, from the FMU's directional derivatives
+   (:mod:`trackingbox.sensitivity`; ``jacobian="exact"``, or ``"auto"`` where the
+   twin provides them), or a forward difference on all parameters with a step of
+   :data:`DIFF_STEP` times each bound range (:func:`jacobian_points`), the ``n``
+   simulations spread over the workers (``"fd"``, and ``"auto"``'s fallback). With
    several output tags a second pass reweights each tag by ``1 / NRMSE_tag`` at
    the first pass's point (iteratively reweighted least squares), so that its
    steps follow the mean NRMSE itself. A refined point is kept only if it does
@@ -122,6 +126,19 @@ FAILED_COST = 1.0e3
 #: a step lost in solver noise). Forward differences, taken backwards at the upper bound.
 DIFF_STEP = 1.0e-3
 
+#: How the refinement's Jacobian is computed: ``"exact"`` (sensitivity equations from the FMU's
+#: directional derivatives, one run for residuals and Jacobian), ``"fd"`` (forward differences,
+#: ``1 + n`` runs), ``"auto"`` (exact where the twin supports it, else fd; the default).
+JACOBIAN_METHODS = ("auto", "exact", "fd")
+
+#: The refinement stops when the next Gauss-Newton step (from the Jacobian at the accepted point,
+#: projected on the bounds) moves no parameter by more than this fraction of its bound range. The
+#: twin's cost carries the integrator's noise (about 1e-4 of its value at rtol 1e-6 near the
+#: optimum), so least squares' own ``ftol`` of 1e-6 is met only by chance there, and the steps it
+#: keeps taking (measured on the heat-exchanger bench: 2e-6 to 1.5e-5 of the range) move nothing
+#: that matters: the statistical uncertainty of an estimate is orders of magnitude above.
+REFINE_STEP_TOLERANCE = 1.0e-5
+
 #: Refinement budget per pass: least-squares iterations (each costs 1 + n_parameters simulations,
 #: the n of the Jacobian in parallel over the workers).
 MAX_REFINE_ITERATIONS = 20
@@ -161,6 +178,13 @@ class EstimationResult:
         ``(min, max)`` of each parameter.
     warmup
         Length of the steady-state pre-run used before each window (s).
+    refinement
+        How the local refinement ran: ``jacobian`` (``"exact"`` or ``"fd"``, what
+        was used), ``requested`` (the ``jacobian`` setting), ``reason`` (why not
+        exact, when it is not), ``runs`` (twin runs of the refinement; an exact
+        run gives residuals and Jacobian together), ``seconds`` and ``cpu_seconds``
+        (wall and process CPU time of the refinement; not in :meth:`to_json`, whose
+        document a resumed run reproduces exactly). Empty without refinement.
     """
 
     parameters: dict[str, float]
@@ -173,10 +197,11 @@ class EstimationResult:
     initial: dict[str, float] = field(default_factory=dict)
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     warmup: float = DEFAULT_WARMUP
+    refinement: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         """The ``trackingbox estimate --json`` document."""
-        return {
+        out = {
             "parameters": dict(self.parameters),
             "training": {"nrmse": dict(self.training_nrmse)},
             "validation": {
@@ -186,6 +211,9 @@ class EstimationResult:
             "evaluations": int(self.evaluations),
             "seconds": float(self.seconds),
         }
+        if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's
+            out["refinement"] = {k: v for k, v in self.refinement.items() if k not in ("seconds", "cpu_seconds")}
+        return out
 
 
 def nrmse(simulated: npt.ArrayLike, measured: npt.ArrayLike) -> float:
@@ -439,6 +467,99 @@ class Objective:
             w = self._weight[tag] * (math.sqrt(tag_weights[tag]) if tag_weights else 1.0)
             parts.append((y[ok] - self.window.measured[tag][ok]) * w)
         return np.concatenate(parts)
+
+
+def simulate_window_sensitivities(problem: Problem, window: WindowData, x: npt.ArrayLike
+                                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`simulate_window` with the outputs' exact sensitivities w.r.t. the estimated parameters.
+
+    One run of the twin with the forward sensitivity equations
+    (:func:`trackingbox.sensitivity.simulate_sensitivities`, scaled by the bound
+    ranges); returns output tag -> values and output tag -> ``d value / d x``
+    (shape ``(len(grid), n_parameters)``) on the window's grid (lead-in included).
+    """
+    from .sensitivity import simulate_sensitivities
+
+    parameters, offset, grid, inputs = window_setup(problem, window, x)
+    t0 = run_start(problem, window)
+    stop = t0 + offset + float(grid[-1])
+    model = _model(problem.twin)
+    run = simulate_sensitivities(model, wrt=problem.names, scales=problem.upper - problem.lower,
+                                 start_time=t0, stop_time=stop, output_interval=problem.sample_time,
+                                 inputs=inputs, parameters=parameters, outputs=list(problem.outputs.values()))
+    at = t0 + offset + grid
+    values: dict[str, np.ndarray] = {}
+    slopes: dict[str, np.ndarray] = {}
+    for tag, name in problem.outputs.items():
+        values[tag] = np.interp(at, run.time, run.outputs[name])
+        slopes[tag] = np.stack([np.interp(at, run.time, column) for column in run.sensitivities[name].T], axis=1)
+    return values, slopes
+
+
+def _residuals_and_jacobian(objective: Objective, x: npt.ArrayLike,
+                            tag_weights: Mapping[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Objective.residuals` and its exact Jacobian w.r.t. *x* from one sensitivity run.
+
+    A failed run gives the failed residuals (as :meth:`Objective.residuals`) and a zero Jacobian.
+    """
+    problem = objective.problem
+    try:
+        sim, slopes = simulate_window_sensitivities(problem, objective.window, x)
+    except (TrackingError, ArithmeticError) as exc:
+        log.warning("sensitivity run failed at %s: %s", _fmt(problem.names, x), exc)
+        size = objective._size
+        return (np.full(size, FAILED_COST / math.sqrt(max(size, 1))), np.zeros((size, len(problem.names))))
+    parts, rows = [], []
+    for tag, y in sim.items():
+        ok = objective._valid[tag]
+        w = objective._weight[tag] * (math.sqrt(tag_weights[tag]) if tag_weights else 1.0)
+        parts.append((y[ok] - objective.window.measured[tag][ok]) * w)
+        rows.append(slopes[tag][ok] * w)
+    return np.concatenate(parts), np.concatenate(rows, axis=0)
+
+
+class _ExactResiduals:
+    """Picklable ``x -> [residuals, Jacobian.ravel()]`` (one flat array, as the journal records it)."""
+
+    def __init__(self, objective: Objective, weights: Mapping[str, float] | None) -> None:
+        self.objective = objective
+        self.weights = dict(weights) if weights else None
+
+    def __call__(self, x: npt.ArrayLike) -> np.ndarray:
+        r, jac = _residuals_and_jacobian(self.objective, x, self.weights)
+        return np.concatenate([r, jac.ravel()])
+
+    def split(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The residuals and the Jacobian back from :meth:`__call__`'s array."""
+        size = self.objective._size
+        return flat[:size], flat[size:].reshape(size, -1)
+
+
+def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tuple[str, str]:
+    """Which Jacobian the refinement uses: ``(method, reason)`` for the setting *requested*.
+
+    ``"fd"`` gives ``("fd", "requested")``. ``"exact"`` and ``"auto"`` check the
+    twin (:func:`trackingbox.sensitivity.support`, at the start of a run over
+    *window* with the start values): ``("exact", "")`` when it provides usable
+    directional derivatives; otherwise ``"auto"`` falls back to ``("fd", why)``
+    and ``"exact"`` raises :class:`~trackingbox.errors.EstimationError` saying why.
+    """
+    from .sensitivity import support
+
+    if requested not in JACOBIAN_METHODS:
+        raise EstimationError(f"jacobian must be one of {', '.join(JACOBIAN_METHODS)}, not {requested!r}")
+    if requested == "fd":
+        return "fd", "requested"
+    parameters, _, _, inputs = window_setup(problem, window, problem.start)
+    model = _model(problem.twin)
+    found = support(model, problem.names, problem.upper - problem.lower, start_time=run_start(problem, window),
+                    parameters=parameters, inputs=inputs)
+    if found.exact:
+        return "exact", ""
+    if requested == "exact":
+        raise EstimationError(f"jacobian = 'exact' is not possible: {found.reason}; use 'fd' or 'auto'")
+    log.info("refinement Jacobian by finite differences: %s", found.reason)
+    return "fd", found.reason
 
 
 class _Residuals:
@@ -710,6 +831,7 @@ def estimate(
     global_grid: float | None = None,
     resume: bool = False,
     refine_grid: float | None = None,
+    jacobian: str = "auto",
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -758,6 +880,13 @@ def estimate(
         to its grid points, so a coarse grid makes the refinement several times
         cheaper; the result and its cost are then reported on the full grid (and the
         refinement is dropped if it is worse there than where it started).
+    jacobian
+        The refinement's Jacobian: ``"exact"`` (forward sensitivity equations
+        from the twin's directional derivatives: one run per evaluation gives the
+        residuals and their Jacobian; :class:`~trackingbox.errors.EstimationError`
+        if the twin cannot), ``"fd"`` (forward differences: ``1 + n`` runs) or
+        ``"auto"`` (exact where the twin supports it, else fd). What was used,
+        and why not exact, is in the result's ``refinement``.
 
     Returns
     -------
@@ -771,13 +900,16 @@ def estimate(
         raise EstimationError("resume needs a checkpoint (trackingbox estimate --resume needs --report DIR)")
     _check_settings(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                     refine_iterations=refine_iterations, global_grid=global_grid)
+    if jacobian not in JACOBIAN_METHODS:
+        raise EstimationError(f"estimate: jacobian must be one of {', '.join(JACOBIAN_METHODS)}, "
+                              f"not {jacobian!r}")
     if maxiter is None:
         maxiter = default_maxiter(len(list(spec.parameters)), popsize)
     try:
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
                          checkpoint=checkpoint, global_grid=global_grid, resume=resume,
-                         refine_grid=refine_grid)
+                         refine_grid=refine_grid, jacobian=jacobian)
     finally:
         close_models()
 
@@ -921,11 +1053,14 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
 
 def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, best: tuple[np.ndarray, float], iterations: int,
             progress: ProgressCallback | None, label: str = "",
-            checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
+            checkpoint: Callable[[int, np.ndarray, float, int], None],
+            jacobian: str = "fd") -> tuple[np.ndarray, float, int]:
     """Bounded least squares (trust-region reflective) from *best*; returns best x, cost, evaluations.
 
-    The Jacobian is a forward difference on all parameters (:func:`jacobian_points`),
-    its ``n`` simulations spread over *pool*. With several output tags a second pass
+    With *jacobian* ``"fd"`` the Jacobian is a forward difference on all parameters
+    (:func:`jacobian_points`), its ``n`` simulations spread over *pool*; with
+    ``"exact"`` every residual evaluation is a sensitivity run that also gives the
+    Jacobian (:func:`_exact_functions`). With several output tags a second pass
     reweights each tag by ``1 / NRMSE_tag`` at the first pass's point (iteratively
     reweighted least squares), which makes the weighted mean of ``NRMSE**2`` agree with
     the mean NRMSE there in value and gradient. A pass's point is kept only if its mean
@@ -937,7 +1072,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
     n = len(problem.names)
     evaluations = 0
     passes = 2 if len(problem.outputs) > 1 else 1
-    total = passes * iterations * (n + 1)
+    total = passes * iterations * (1 if jacobian == "exact" else n + 1)
     span = problem.upper - problem.lower
     for k in range(passes):
         weights: dict[str, float] | None = None
@@ -969,21 +1104,15 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
             record(x, r)
             return r
 
-        def jac(x: np.ndarray) -> np.ndarray:
-            if last["x"] is not None and np.array_equal(last["x"], x):
-                r0 = last["r"]
-            else:
-                r0 = fun(x)
-            points, h = jacobian_points(x, problem.lower, problem.upper)
-            rows = journal.map(label + f"residuals{k}", task, list(points), pool.map if pool is not None else None)
-            for p, r in zip(points, rows):
-                record(p, r)
-            return np.stack([(r - r0) / hj for r, hj in zip(rows, h)], axis=1)
-
+        if jacobian == "exact":
+            fun, jac = _exact_functions(_ExactResiduals(train, weights), journal, label + f"exact{k}", record)
+        else:
+            jac = _fd_jacobian(fun, last, task, problem, pool, journal, label + f"residuals{k}", record)
+        jac, stop = _step_stop(jac, problem)
         try:
             ls = least_squares(fun, np.clip(best_x, problem.lower, problem.upper), jac=jac,
                                bounds=(problem.lower, problem.upper), x_scale=span, method="trf",
-                               max_nfev=max(1, int(iterations)), ftol=1e-6, xtol=1e-6)
+                               max_nfev=max(1, int(iterations)), ftol=1e-6, xtol=1e-6, callback=stop)
         except (ValueError, np.linalg.LinAlgError) as exc:
             log.warning("refinement pass %d failed (%s); keeping the estimate so far", k + 1, exc)
             continue
@@ -996,23 +1125,102 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
     return best_x, best_cost, evaluations
 
 
+def _step_stop(jac: Callable[[np.ndarray], np.ndarray], problem: Problem
+               ) -> tuple[Callable[[np.ndarray], np.ndarray], Callable[[Any], None]]:
+    """*jac* remembering its last point, and a least-squares callback applying :data:`REFINE_STEP_TOLERANCE`.
+
+    After each iteration the callback takes the Gauss-Newton step from the
+    Jacobian at the accepted point and its residuals, projects it on the bounds,
+    and stops the refinement (``StopIteration``) when no parameter would move by
+    more than :data:`REFINE_STEP_TOLERANCE` of its bound range.
+    """
+    kept: dict[str, Any] = {"x": None, "jac": None}
+    span = problem.upper - problem.lower
+
+    def remembering(x: np.ndarray) -> np.ndarray:
+        out = jac(x)
+        kept["x"], kept["jac"] = np.array(x, dtype=float), np.asarray(out, dtype=float)
+        return out
+
+    def stop(intermediate_result: Any) -> None:
+        x = np.asarray(intermediate_result.x, dtype=float)
+        if kept["x"] is None or not np.array_equal(kept["x"], x):
+            return
+        r = np.asarray(intermediate_result.fun, dtype=float)
+        try:
+            step = np.linalg.lstsq(kept["jac"], -r, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            return
+        moved = np.clip(x + step, problem.lower, problem.upper) - x
+        if np.all(np.isfinite(moved)) and np.max(np.abs(moved) / span) < REFINE_STEP_TOLERANCE:
+            log.debug("refinement: next Gauss-Newton step %s below %g of the ranges: stop",
+                      _fmt(problem.names, moved), REFINE_STEP_TOLERANCE)
+            raise StopIteration
+
+    return remembering, stop
+
+
+def _fd_jacobian(fun: Callable[[np.ndarray], np.ndarray], last: dict[str, Any], task: _Residuals, problem: Problem,
+                 pool: Any, journal: Journal, label: str, record: Callable[[np.ndarray, np.ndarray], None]
+                 ) -> Callable[[np.ndarray], np.ndarray]:
+    """The refinement's forward-difference Jacobian: ``n`` perturbed runs over *pool* (:func:`jacobian_points`)."""
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        if last["x"] is not None and np.array_equal(last["x"], x):
+            r0 = last["r"]
+        else:
+            r0 = fun(x)
+        points, h = jacobian_points(x, problem.lower, problem.upper)
+        rows = journal.map(label, task, list(points), pool.map if pool is not None else None)
+        for p, r in zip(points, rows):
+            record(p, r)
+        return np.stack([(r - r0) / hj for r, hj in zip(rows, h)], axis=1)
+
+    return jac
+
+
+def _exact_functions(task: _ExactResiduals, journal: Journal, label: str,
+                     record: Callable[[np.ndarray, np.ndarray], None]
+                     ) -> tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
+    """``fun, jac`` for least squares from sensitivity runs: each ``fun`` run keeps its Jacobian for ``jac``.
+
+    Trust-region reflective asks for the Jacobian only at the point it last
+    evaluated and accepted, so ``jac`` is served from that run; a point not run
+    yet is run first.
+    """
+    kept: dict[str, Any] = {"x": None, "jac": None}
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        r, jac = task.split(journal.call(label, task, x))
+        kept["x"], kept["jac"] = np.array(x, dtype=float), jac
+        record(x, r)
+        return r
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        if kept["x"] is None or not np.array_equal(kept["x"], x):
+            fun(x)
+        return kept["jac"]
+
+    return fun, jac
+
 
 def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsize: int | None,
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
               checkpoint: str | Path | None, global_grid: float | None, resume: bool = False,
-              refine_grid: float | None = None) -> EstimationResult:
+              refine_grid: float | None = None, jacobian: str = "auto") -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
     journal = Journal(journal_path(ckpt) if ckpt is not None else None,
                       _identity(spec, problem, seed=seed, maxiter=maxiter, popsize=popsize, refine=refine,
                                 refine_iterations=refine_iterations, global_grid=global_grid,
-                                refine_grid=refine_grid, parallel=int(workers or 1) > 1), resume=resume)
+                                refine_grid=refine_grid, parallel=int(workers or 1) > 1,
+                                **({} if jacobian == "fd" else {"jacobian": jacobian})), resume=resume)
     try:
         return _run(spec, problem, journal, t_start=t_start, ckpt=ckpt, seed=seed, workers=workers,
                     maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
-                    progress=progress, global_grid=global_grid, refine_grid=refine_grid)
+                    progress=progress, global_grid=global_grid, refine_grid=refine_grid, jacobian=jacobian)
     finally:
         if resume:
             log.info("%d evaluations served from the journal %s", journal.served, journal.path)
@@ -1038,12 +1246,13 @@ def _identity(spec: Any, problem: Problem, **settings: Any) -> dict[str, Any]:
 def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt: Path | None, seed: int,
          workers: int | None, maxiter: int, popsize: int | None, refine: bool, refine_iterations: int,
          progress: ProgressCallback | None, global_grid: float | None,
-         refine_grid: float | None = None) -> EstimationResult:
+         refine_grid: float | None = None, jacobian: str = "auto") -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
     history: list[float] = []
     evaluations = 0
+    refinement: dict[str, Any] = {}
 
     start_cost = journal.call("train", train, problem.start)
     evaluations += 1
@@ -1081,6 +1290,8 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                                  coarsen(training, stride))
                 refine_cost = journal.call(f"coarse{stride}", fine, best_x)
                 evaluations += 1
+            method, reason = jacobian_support(problem, fine.window, jacobian)
+            wall0, cpu0 = time.perf_counter(), time.process_time()
             refined_x, refined_cost, n_local = _refine(
                 fine, problem, pool, journal, best=(best_x, refine_cost), iterations=refine_iterations,
                 label="" if stride == 1 else f"coarse{stride}:",
@@ -1090,8 +1301,13 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                     "parameters": dict(zip(problem.names, map(float, best_x))),
                     "refine_rms_nrmse": c, "refine_parameters": dict(zip(problem.names, map(float, x))),
                     "evaluations": evaluations + e, "seconds": time.perf_counter() - t_start,
-                    "history": history}))
+                    "history": history}),
+                jacobian=method)
             evaluations += n_local
+            refinement = {"jacobian": method, "requested": jacobian, "reason": reason, "runs": n_local,
+                          "seconds": time.perf_counter() - wall0, "cpu_seconds": time.process_time() - cpu0}
+            log.info("refinement: %s Jacobian%s, %d runs, %.3g s", method, f" ({reason})" if reason else "",
+                     n_local, refinement["seconds"])
             if stride == 1:
                 best_x, best_cost = refined_x, refined_cost
             elif not np.array_equal(refined_x, best_x):
@@ -1134,6 +1350,7 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
         initial={name: float(v) for name, v in zip(problem.names, problem.start)},
         bounds={name: (float(lo), float(hi)) for name, lo, hi in zip(problem.names, problem.lower, problem.upper)},
         warmup=problem.warmup,
+        refinement=refinement,
     )
     _write_checkpoint(ckpt, {"stage": "done", **result.to_json(), "history": list(result.history)})
     return result

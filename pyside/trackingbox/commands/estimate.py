@@ -70,7 +70,10 @@ def register(subparsers: Any) -> None:
                    help="skip the least-squares refinement")
     p.add_argument("--refine-iterations", type=number(ge=0, integer=True), default=MAX_REFINE_ITERATIONS, metavar="N",
                    help=f"most least-squares iterations (default {MAX_REFINE_ITERATIONS}; "
-                        "each costs 1 + n_parameters simulations)")
+                        "each costs 1 + n_parameters simulations, or one sensitivity run)")
+    p.add_argument("--jacobian", choices=("auto", "exact", "fd"), default="auto",
+                   help="refinement Jacobian: exact (sensitivity equations from the twin's directional "
+                        "derivatives), fd (finite differences) or auto (exact where the twin provides them)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",
@@ -115,6 +118,7 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
         checkpoint=checkpoint,
         global_grid=args.global_grid,
         resume=args.resume,
+        jacobian=args.jacobian,
     )
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
@@ -146,3 +150,6 @@ def _print_table(result: Any) -> None:
         print(f"{tag:<{twidth}}  {result.training_nrmse[tag]:>12.4g}  {result.validation_nrmse[tag]:>12.4g}"
               f"  {result.validation_nrmse_initial[tag]:>13.4g}")
     print(f"\n{result.evaluations} simulations in {result.seconds:.1f} s")
+    if result.refinement:
+        why = f" ({result.refinement['reason']})" if result.refinement.get("reason") else ""
+        print(f"refinement Jacobian: {result.refinement['jacobian']}{why}")
