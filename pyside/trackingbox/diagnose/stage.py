@@ -21,7 +21,7 @@
    spec are written there.
 
 ``diagnose`` reads the spec, the twin and the measurements only. The wall and
-CPU time of each phase (``null``, ``screen``, ``screen-compiled``, ``fit``,
+CPU time of each phase (``null``, ``screen`` (with the compiled screens), ``fit``,
 ``judge``, ``patch``) are in :attr:`DiagnosisResult.timings`.
 """
 from __future__ import annotations
@@ -275,12 +275,18 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     workers = settings.workers
     if workers is None:
         workers = min(2, os.cpu_count() or 1) if n_candidates > 3 else 1
+    # the screening's jobs are independent whatever the number of candidates
+    screen_workers = settings.workers if settings.workers is not None else min(2, os.cpu_count() or 1)
     grid = settings.grid if settings.grid is not None else (60.0 if n_candidates > 3 else None)
     options = {"seed": settings.seed, "workers": workers,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
                "refine_grid": grid or None,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
-    found = where(spec, null=null, estimate_options=options)
+    from .parallel import pool
+
+    with pool(workers):
+        # the null's series and output Jacobian: 1 + n independent runs per window
+        found = where(spec, null=null, estimate_options=options)
     if progress is not None:
         progress("null", 1, 1)
 
@@ -290,27 +296,20 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
         work = Path(tmp.name)
     try:
-        from .fit import FitBudget, fit_candidate, screen_compiled
+        from .fit import FitBudget, fit_candidate
 
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
                            warmup=settings.warmup, grid=grid or None)
-        compiled = None
-        if settings.compile:
-            def compiled(effect: Any, target: str) -> Candidate:
-                # compiled once, linearised in the effect's parameters; the best are fitted below
-                assert work is not None
-                clock.start("screen-compiled")
-                try:
-                    return screen_compiled(spec, found, effect, target, work)
-                finally:
-                    clock.start("screen")
-
         clock.start("screen")
-        screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress,
-                          relinearise=(settings.relinearise if settings.relinearise is not None
-                                       else 3 if n_candidates <= 3 else 1))
+        # the ramps' searches and the compiled patches are screening jobs of their own, spread over
+        # screen_workers (they do not depend on each other); the sensor transforms run here meanwhile
+        with pool(screen_workers):
+            screened = screen(effects, spec, found, compiled_in=work if settings.compile else None,
+                              only=settings.effects, progress=progress,
+                              relinearise=(settings.relinearise if settings.relinearise is not None
+                                           else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
             best = [c for c in screened if c.stage != "skipped" and c.fit is None
