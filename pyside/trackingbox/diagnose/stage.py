@@ -66,9 +66,12 @@ class DiagnoseSettings:
     seed, warmup
         The null estimation's options (:func:`trackingbox.estimation.estimate`).
     workers
-        Processes for the estimations (null and candidates); None: two (at most the
-        machine's cores) when the spec has more than three candidates, whose Jacobians
-        then spread over them, else one (a worker's start-up is not worth it).
+        Processes for the estimations (null and candidates) and for the null model's
+        series and output Jacobian; None: two (at most the machine's cores) when the
+        spec has more than three candidates, whose Jacobians then spread over them, else
+        one (a worker's start-up is not worth it). The screening's expensive jobs (ramps,
+        compiled patches; :mod:`trackingbox.diagnose.parallel`) use *workers* when given,
+        else two (at most the machine's cores).
     maxiter
         Generations of the null estimation's global search; None (default): 0, the
         least-squares refinement from the spec's starts only, whose cost grows with the
