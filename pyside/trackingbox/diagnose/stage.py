@@ -32,7 +32,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -299,7 +299,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
         work = Path(tmp.name)
     try:
-        from .fit import FitBudget, fit_candidate
+        from .fit import FitBudget, fit_job
+        from .parallel import submit
 
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
@@ -319,21 +320,18 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                     and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic][: settings.fit_best]
             fitted = {}
             clock.start("fit")
-            for i, c in enumerate(best):
-                assert work is not None
-                try:
-                    fitted[(c.effect, c.target)] = fit_candidate(spec, found, effects[c.effect], c.target, work,
-                                                                 screened=c, budget=budget)
-                except Exception as exc:  # noqa: BLE001 - a failed fit leaves the screening, marked
-                    from ..errors import TrackingError
-
-                    if not isinstance(exc, TrackingError):
-                        raise
-                    log.warning("fitting %s on %s failed: %s", c.effect, c.target, exc)
-                    fitted[(c.effect, c.target)] = Candidate(c.effect, c.target, c.kind, "skipped",
-                                                             delta_bic=c.delta_bic, reason=f"fit failed: {exc}")
-                if progress is not None:
-                    progress("fit", i + 1, len(best))
+            assert work is not None
+            # two or more fits run side by side, one process each (the same runs as one after the other
+            # with their Jacobians spread over the workers, but their serial parts overlap too); a single
+            # fit keeps the workers for its Jacobian
+            side_by_side = len(best) > 1 and screen_workers > 1
+            one = replace(budget, workers=1) if side_by_side else budget
+            with pool(min(screen_workers, len(best)) if side_by_side else 1):
+                results = [submit(fit_job, (spec, found, effects[c.effect], c, work, one)) for c in best]
+                for i, (c, result) in enumerate(zip(best, results)):
+                    fitted[(c.effect, c.target)] = result()
+                    if progress is not None:
+                        progress("fit", i + 1, len(best))
             # a fitted candidate replaces its screening; with compile only fitted candidates can be named
             ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
         clock.start("judge")
