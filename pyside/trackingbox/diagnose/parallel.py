@@ -14,6 +14,11 @@ child, so its CPU time is counted here, unlike a forkserver's). Each keeps the F
 for the next task, and closes them when the pool ends. The pool is joined when
 the ``with`` block ends, so the workers' CPU time counts as this process's
 children's time there (:class:`trackingbox.diagnose.stage` reports it per phase).
+
+As with ``estimate(..., workers=2)``, a script that calls :func:`trackingbox.diagnose.diagnose`
+with more than one worker must guard its top level (``if __name__ == "__main__":``): a
+spawned worker imports the caller's main module. ``DiagnoseSettings(workers=1)`` runs
+everything in the calling process.
 """
 from __future__ import annotations
 
