@@ -101,3 +101,38 @@ def test_patched_fmu_cache_key_follows_the_model_not_the_start_values(tmp_path) 
     assert _compile_key(spec, NS(model=patch.model, source=patch.source + "// edited\n")) != key
     twin.write_text(twin.read_text().replace("-x", "-2*x"))
     assert _compile_key(spec, patch) != key
+
+
+def test_runs_spread_over_workers_give_the_serial_series_and_jacobian(hx_fmu: Path, tmp_path: Path) -> None:
+    """The null's series and output Jacobian from two worker processes equal the serial forward differences.
+
+    The expectation is the serial implementation (``output_jacobian``, one run after the other in
+    this process); the runs are deterministic, so the numbers must agree exactly, and the workers
+    must really have run (their CPU time is this process's children's after the pool is joined).
+    """
+    import os
+
+    from trackingbox.diagnose.parallel import pool
+    from trackingbox.diagnose.residuals import output_jacobian, series_and_jacobian, window_series
+    from trackingbox.estimation import close_models
+
+    table = plant_data(hx_fmu, TRUE_KHT, hours=2.0, noise=0.1, seed=5)
+    spec = load_spec(write_case(tmp_path, hx_fmu, table, training=(0.0, 3600.0), validation=(3600.0, 7200.0)))
+    problem = problem_from_spec(spec)
+    windows = load_windows(spec, warmup=problem.warmup)
+    x = np.array([1100.0])
+    try:
+        serial = [window_series(problem, w, x, spec.inputs) for w in windows]
+        serial_jac = [output_jacobian(problem, w, x, spec.inputs, s) for w, s in zip(windows, serial)]
+    finally:
+        close_models()
+    children = os.times().children_user
+    with pool(2):
+        series, jac = series_and_jacobian(problem, windows, x, spec.inputs)
+    assert os.times().children_user > children
+    for s, s0, j, j0 in zip(series, serial, jac, serial_jac):
+        np.testing.assert_array_equal(s.time, s0.time)
+        assert set(j) == set(j0) == {"TI-1"}
+        np.testing.assert_array_equal(s.simulated["TI-1"], s0.simulated["TI-1"])
+        np.testing.assert_array_equal(j["TI-1"], j0["TI-1"])
+        assert j["TI-1"].shape == (s.time.size, 1) and np.any(j["TI-1"] != 0.0)

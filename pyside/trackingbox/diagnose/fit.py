@@ -220,6 +220,23 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
                  pinned=pinned, fit=outcome)
 
 
+def fit_job(spec: Any, where: WhereResult, effect: Any, screened: Candidate, work_dir: Path,
+            budget: FitBudget) -> Candidate:
+    """:func:`fit_candidate` of a screened candidate (module level, so a worker process can run it).
+
+    A fit that fails on purpose (a :class:`trackingbox.errors.TrackingError`: the twin
+    failed, the patch did not compile) leaves the screening, marked ``skipped`` with the reason.
+    """
+    from ..errors import TrackingError
+
+    try:
+        return fit_candidate(spec, where, effect, screened.target, work_dir, screened=screened, budget=budget)
+    except TrackingError as exc:
+        log.warning("fitting %s on %s failed: %s", screened.effect, screened.target, exc)
+        return Candidate(screened.effect, screened.target, screened.kind, "skipped",
+                         delta_bic=screened.delta_bic, reason=f"fit failed: {exc}")
+
+
 # --------------------------------------------------------------------------- patch preparation, linearised screen
 
 

@@ -513,8 +513,7 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
     noise = {tag: noise_level(view.values(tag)) for tag in spec.outputs}
     after = _after_stoppage(view)
     try:
-        series = [window_series(problem, w, x, spec.inputs) for w in (training, validation)]
-        jac = [output_jacobian(problem, w, x, spec.inputs, s) for w, s in zip((training, validation), series)]
+        series, jac = series_and_jacobian(problem, (training, validation), x, spec.inputs)
     finally:
         close_models()
     series, delta0 = polish(series, jac, noise)
@@ -555,13 +554,38 @@ def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
     problem = result.problem
     x1 = np.clip(np.asarray(result.x, dtype=float) + delta, problem.lower, problem.upper)
     try:
-        series = [window_series(problem, w, x1, result.input_tags) for w in result.windows]
-        jac = [output_jacobian(problem, w, x1, result.input_tags, s) for w, s in zip(result.windows, series)]
+        series, jac = series_and_jacobian(problem, result.windows, x1, result.input_tags)
     finally:
         close_models()
     from dataclasses import replace
 
     return replace(result, training=series[0], validation=series[1], jacobian=(jac[0], jac[1]), x=x1)
+
+
+def series_and_jacobian(problem: Any, windows: Sequence[Any], x: npt.ArrayLike, input_tags: Mapping[str, str],
+                        step: float = 1.0e-3) -> tuple[list[WindowResiduals], list[dict[str, np.ndarray]]]:
+    """The series at *x* on each window and its output Jacobian (:func:`output_jacobian`), in one batch of runs.
+
+    The ``(1 + p)`` runs per window are independent; inside
+    :func:`trackingbox.diagnose.parallel.pool` they spread over its workers. The
+    arithmetic is :func:`output_jacobian`'s, so the result is the same either way.
+    """
+    from ..estimation import jacobian_points
+    from .parallel import map_calls
+
+    x = np.asarray(x, dtype=float)
+    points, h = jacobian_points(x, problem.lower, problem.upper, step)
+    calls = [(problem, w, p, input_tags) for w in windows for p in (x, *points)]
+    runs = map_calls(window_series, calls)
+    series, jac = [], []
+    per = 1 + len(points)
+    for k in range(len(windows)):
+        base, moved = runs[k * per], runs[k * per + 1: (k + 1) * per]
+        series.append(base)
+        jac.append({tag: (np.column_stack([(m.simulated[tag] - base.simulated[tag]) / hj for m, hj in zip(moved, h)])
+                          if len(moved) else np.zeros((base.time.size, 0)))
+                    for tag in base.simulated})
+    return series, jac
 
 
 def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Mapping[str, str],

@@ -752,7 +752,7 @@ def screen_levelling_ramp(effect: Any, target: str, where: WhereResult, *, evalu
 def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
            fit_compiled: Callable[[Any, str], Candidate] | None = None,
            only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None,
-           relinearise: int = 3) -> list[Candidate]:
+           relinearise: int = 3, compiled_in: Any = None) -> list[Candidate]:
     """Screen every effect × target; return the candidates ranked by ``delta_bic`` (best first).
 
     Parameters
@@ -773,8 +773,13 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
     relinearise
         How many of the best sensor candidates are fitted again around their moved candidates
         (:func:`screen_sensor`).
+    compiled_in
+        Work folder (path) for ``compile`` entries screened by
+        :func:`trackingbox.diagnose.fit.screen_compiled` as jobs of their own (on the workers of an
+        active :func:`trackingbox.diagnose.parallel.pool`); when given, *fit_compiled* is not used.
     """
     from . import library
+    from .parallel import submit
 
     from ..errors import SpecError
 
@@ -790,32 +795,21 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
             out.append(Candidate(eid, "", getattr(effect, "kind", "process"), "skipped", reason=str(exc)))
             continue
         jobs.extend((effect, target) for target in found)
+    # the expensive jobs (a ramp's search, a compiled patch) start on the workers of an active
+    # parallel.pool first; the cheap sensor transforms run here meanwhile; results keep the jobs' order
+    heavy = ("coefficient-ramp", "levelling-ramp")
+    pending: dict[int, Callable[[], Candidate]] = {}
     for i, (effect, target) in enumerate(jobs):
         how = getattr(effect, "screen", "compile")
-        try:
-            if how in ("bias", "drift", "lag", "levelling-drift"):
-                if target not in where.tags:
-                    cand = Candidate(effect.id, target, "sensor", "skipped",
-                                     reason=f"tag {target!r} is not an output tag of the spec")
-                else:
-                    cand = screen_sensor(effect, target, where, relinearise=False)
-            elif how == "coefficient-ramp":
-                cand = screen_ramp(effect, target, where)
-            elif how == "levelling-ramp":
-                cand = screen_levelling_ramp(effect, target, where)
-            elif fit_compiled is not None:
-                cand = fit_compiled(effect, target)
-            else:
-                cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
-                                 reason="screened only by compiling its patch, which these settings do not allow")
-        except Exception as exc:  # noqa: BLE001 - one failing candidate does not stop the screening
-            from ..errors import TrackingError
-
-            if not isinstance(exc, (TrackingError, ArithmeticError, ValueError)):
-                raise
-            log.warning("screening %s on %s failed: %s", effect.id, target, exc)
-            cand = Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
-                             reason=f"screening failed: {exc}")
+        if how in heavy or (how not in SENSOR_SCREENS and compiled_in is not None):
+            pending[i] = submit(screen_job, (effect, target, spec, where, compiled_in))
+    for i, (effect, target) in enumerate(jobs):
+        if i in pending:
+            cand = pending[i]()
+        elif (getattr(effect, "screen", "compile") not in SENSOR_SCREENS and fit_compiled is not None):
+            cand = _guarded(effect, target, lambda e, t: fit_compiled(e, t))
+        else:
+            cand = screen_job(effect, target, spec, where, None)
         log.info("screened %s on %s: delta BIC %.4g, validation gain %.3g", cand.effect, cand.target,
                  cand.delta_bic, cand.validation_gain)
         out.append(cand)
@@ -828,6 +822,54 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         again = screen_sensor(effects[c.effect], c.target, where, relinearise=True)
         ranked[ranked.index(c)] = again
     return rank(ranked)
+
+
+#: Screens that transform the null model's output (cheap; no run of the twin).
+SENSOR_SCREENS = ("bias", "drift", "lag", "levelling-drift")
+
+
+def _guarded(effect: Any, target: str, how: Callable[[Any, str], Candidate]) -> Candidate:
+    """``how(effect, target)``; a failure of the twin or of the fit leaves a skipped candidate with the reason."""
+    from ..errors import TrackingError
+
+    try:
+        return how(effect, target)
+    except Exception as exc:  # noqa: BLE001 - one failing candidate does not stop the screening
+        if not isinstance(exc, (TrackingError, ArithmeticError, ValueError)):
+            raise
+        log.warning("screening %s on %s failed: %s", effect.id, target, exc)
+        return Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                         reason=f"screening failed: {exc}")
+
+
+def screen_job(effect: Any, target: str, spec: Any, where: WhereResult, compiled_in: Any) -> Candidate:
+    """Screen one effect on one target (a job of :func:`screen`; module level, so a worker can run it).
+
+    ``compile`` entries are screened through :func:`trackingbox.diagnose.fit.screen_compiled`
+    in the folder *compiled_in*, or skipped with the reason when it is None.
+    """
+    how = getattr(effect, "screen", "compile")
+
+    def run(effect: Any, target: str) -> Candidate:
+        if how in SENSOR_SCREENS:
+            if target not in where.tags:
+                return Candidate(effect.id, target, "sensor", "skipped",
+                                 reason=f"tag {target!r} is not an output tag of the spec")
+            return screen_sensor(effect, target, where, relinearise=False)
+        if how == "coefficient-ramp":
+            return screen_ramp(effect, target, where)
+        if how == "levelling-ramp":
+            return screen_levelling_ramp(effect, target, where)
+        if compiled_in is not None:
+            from pathlib import Path
+
+            from .fit import screen_compiled
+
+            return screen_compiled(spec, where, effect, target, Path(compiled_in))
+        return Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
+                         reason="screened only by compiling its patch, which these settings do not allow")
+
+    return _guarded(effect, target, run)
 
 
 def rank(candidates: Sequence[Candidate]) -> list[Candidate]:

@@ -21,7 +21,7 @@
    spec are written there.
 
 ``diagnose`` reads the spec, the twin and the measurements only. The wall and
-CPU time of each phase (``null``, ``screen``, ``screen-compiled``, ``fit``,
+CPU time of each phase (``null``, ``screen`` (with the compiled screens), ``fit``,
 ``judge``, ``patch``) are in :attr:`DiagnosisResult.timings`.
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -66,9 +66,12 @@ class DiagnoseSettings:
     seed, warmup
         The null estimation's options (:func:`trackingbox.estimation.estimate`).
     workers
-        Processes for the estimations (null and candidates); None: two (at most the
-        machine's cores) when the spec has more than three candidates, whose Jacobians
-        then spread over them, else one (a worker's start-up is not worth it).
+        Processes for the estimations (null and candidates) and for the null model's
+        series and output Jacobian; None: two (at most the machine's cores) when the
+        spec has more than three candidates, whose Jacobians then spread over them, else
+        one (a worker's start-up is not worth it). The screening's expensive jobs (ramps,
+        compiled patches; :mod:`trackingbox.diagnose.parallel`) use *workers* when given,
+        else two (at most the machine's cores).
     maxiter
         Generations of the null estimation's global search; None (default): 0, the
         least-squares refinement from the spec's starts only, whose cost grows with the
@@ -275,12 +278,18 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     workers = settings.workers
     if workers is None:
         workers = min(2, os.cpu_count() or 1) if n_candidates > 3 else 1
+    # the screening's jobs are independent whatever the number of candidates
+    screen_workers = settings.workers if settings.workers is not None else min(2, os.cpu_count() or 1)
     grid = settings.grid if settings.grid is not None else (60.0 if n_candidates > 3 else None)
     options = {"seed": settings.seed, "workers": workers,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
                "refine_grid": grid or None,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
-    found = where(spec, null=null, estimate_options=options)
+    from .parallel import pool
+
+    with pool(workers):
+        # the null's series and output Jacobian: 1 + n independent runs per window
+        found = where(spec, null=null, estimate_options=options)
     if progress is not None:
         progress("null", 1, 1)
 
@@ -290,48 +299,39 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
         work = Path(tmp.name)
     try:
-        from .fit import FitBudget, fit_candidate, screen_compiled
+        from .fit import FitBudget, fit_job
+        from .parallel import submit
 
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
                            warmup=settings.warmup, grid=grid or None)
-        compiled = None
-        if settings.compile:
-            def compiled(effect: Any, target: str) -> Candidate:
-                # compiled once, linearised in the effect's parameters; the best are fitted below
-                assert work is not None
-                clock.start("screen-compiled")
-                try:
-                    return screen_compiled(spec, found, effect, target, work)
-                finally:
-                    clock.start("screen")
-
         clock.start("screen")
-        screened = screen(effects, spec, found, fit_compiled=compiled, only=settings.effects, progress=progress,
-                          relinearise=(settings.relinearise if settings.relinearise is not None
-                                       else 3 if n_candidates <= 3 else 1))
+        # the ramps' searches and the compiled patches are screening jobs of their own, spread over
+        # screen_workers (they do not depend on each other); the sensor transforms run here meanwhile
+        with pool(screen_workers):
+            screened = screen(effects, spec, found, compiled_in=work if settings.compile else None,
+                              only=settings.effects, progress=progress,
+                              relinearise=(settings.relinearise if settings.relinearise is not None
+                                           else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
             best = [c for c in screened if c.stage != "skipped" and c.fit is None
                     and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic][: settings.fit_best]
             fitted = {}
             clock.start("fit")
-            for i, c in enumerate(best):
-                assert work is not None
-                try:
-                    fitted[(c.effect, c.target)] = fit_candidate(spec, found, effects[c.effect], c.target, work,
-                                                                 screened=c, budget=budget)
-                except Exception as exc:  # noqa: BLE001 - a failed fit leaves the screening, marked
-                    from ..errors import TrackingError
-
-                    if not isinstance(exc, TrackingError):
-                        raise
-                    log.warning("fitting %s on %s failed: %s", c.effect, c.target, exc)
-                    fitted[(c.effect, c.target)] = Candidate(c.effect, c.target, c.kind, "skipped",
-                                                             delta_bic=c.delta_bic, reason=f"fit failed: {exc}")
-                if progress is not None:
-                    progress("fit", i + 1, len(best))
+            assert work is not None
+            # two or more fits run side by side, one process each (the same runs as one after the other
+            # with their Jacobians spread over the workers, but their serial parts overlap too); a single
+            # fit keeps the workers for its Jacobian
+            side_by_side = len(best) > 1 and screen_workers > 1
+            one = replace(budget, workers=1) if side_by_side else budget
+            with pool(min(screen_workers, len(best)) if side_by_side else 1):
+                results = [submit(fit_job, (spec, found, effects[c.effect], c, work, one)) for c in best]
+                for i, (c, result) in enumerate(zip(best, results)):
+                    fitted[(c.effect, c.target)] = result()
+                    if progress is not None:
+                        progress("fit", i + 1, len(best))
             # a fitted candidate replaces its screening; with compile only fitted candidates can be named
             ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
         clock.start("judge")
