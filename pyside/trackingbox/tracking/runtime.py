@@ -86,7 +86,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 4  # 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+_CHECKPOINT_VERSION = 5  # 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -165,9 +165,9 @@ class TrackingResult:
         False when ``max_steps`` stopped the run early (resume to continue).
     events : tuple of TrackingEvent
     restarts, carried : int
-        Changes of the tracked twin's parameters and corrections in this call
-        that re-initialised its integrator, and changes it carried (see
-        ``carry`` in :func:`track`).
+        Changes of the tracked twin's parameters and corrections over the run
+        (resumed parts included) that re-initialised its integrator, and
+        changes it carried (see ``carry`` in :func:`track`).
     """
 
     csv: Path
@@ -414,6 +414,7 @@ class _Twin:
         """Rebuild the run from *t0* by re-applying recorded values: ``(t_next, values)`` per step."""
         first = True
         self.given = {}
+        forced, self.force_restart = self.force_restart, False
         for t_next, values in rows:
             if first:
                 self.start(t0, values)
@@ -421,6 +422,7 @@ class _Twin:
             self.step(t_next, values)
         if first:
             self.start(t0, {})
+        self.force_restart = forced
 
     def replay_csv(self, csv_path: Path, rows: int, grid: npt.NDArray[np.float64]) -> None:
         """Rebuild the run from 0 by replaying the values recorded in the first *rows* rows of the CSV."""
@@ -429,12 +431,15 @@ class _Twin:
     def state_dict(self) -> dict[str, Any]:
         """The values applied and, for model exchange, the continuous states after the last step."""
         return {"applied": dict(self.applied), "given": dict(self.given),
-                "x": self.x.tolist() if self.x is not None else None}
+                "x": self.x.tolist() if self.x is not None else None, "force_restart": self.force_restart,
+                "counts": list(self.counts())}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
                         grid: npt.NDArray[np.float64], substeps: int = 1) -> None:
         """Put the twin at *t* as :meth:`state_dict` saved it: from its states, else by replaying the CSV."""
         x = state.get("x")
+        self.force_restart = bool(state.get("force_restart", False))
+        counts = [int(c) for c in state.get("counts", (0, 0))]
         if x is None and substeps > 1:
             log.warning("%s twin: no states in the checkpoint; the replay applies the recorded values once "
                         "a sample, not the %d sub-steps of each, so the resumed run is close to, not "
@@ -444,6 +449,8 @@ class _Twin:
             self.given = {n: float(v) for n, v in state.get("given", {}).items()}
         else:
             self.replay_csv(csv_path, rows, grid)
+        self._count()  # the replay's own changes are not the run's
+        self.restarts, self.carried = counts
 
     def close(self) -> None:
         self.model.close()
@@ -972,10 +979,11 @@ class TrackingLoop:
             "window": self.window,
             "interpolation": self.interpolation,
             "substeps": self.substeps,
+            "carry": self.carry,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
-            "loop": {"recovery_until": self.recovery_until,
+            "loop": {"recovery_until": self.recovery_until, "hold": self.hold_k,
                      "events": [[e.time, e.kind, e.message] for e in self.events]},
             "controllers": self.controllers.state_dict(),
             "compensation": self.compensation.state_dict(),
@@ -994,6 +1002,9 @@ class TrackingLoop:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with {state.get('substeps')} sub-steps per "
                             f"sample, not {self.substeps}; resume with substeps={state.get('substeps')} or run "
                             "without --resume")
+        if state.get("carry") != self.carry:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with carry={state.get('carry')!r}, not "
+                            f"{self.carry!r}; resume with the same carry or run without --resume")
         if state.get("interpolation") != self.interpolation:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with interpolation "
                             f"{state.get('interpolation')!r}, not {self.interpolation!r}; run without --resume")
@@ -1011,6 +1022,7 @@ class TrackingLoop:
         self.controllers.load_state_dict(state["controllers"])
         self.compensation.load_state_dict(state["compensation"])
         self.recovery_until = float(state["loop"]["recovery_until"])
+        self.hold_k = bool(state["loop"]["hold"])
         for e in state["loop"].get("events", []):
             self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
         t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
