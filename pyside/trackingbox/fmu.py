@@ -1058,6 +1058,7 @@ class Stepper(abc.ABC):
         self._in_times: npt.NDArray[np.float64] | None = None
         self._in_table: npt.NDArray[np.float64] | None = None
         self._in_set: Callable[[Any], None] | None = None
+        self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf  # the interval _input_values used last
         self._last_set: dict[str, Any] = {}
         self._prepare_inputs(inputs)
         self._initialize(parameters, max_step)
@@ -1126,8 +1127,14 @@ class Stepper(abc.ABC):
             return table[0]
         if t >= times[-1]:
             return table[-1]
-        i = int(np.searchsorted(times, t, side="right"))
-        t0, t1 = times[i - 1], times[i]
+        # the solver asks for times close to the last one: try the last interval first (a
+        # binary search per right-hand side evaluation was a third of a tracking run's cost)
+        i = self._in_i
+        t0, t1 = self._in_t0, self._in_t1
+        if not t0 <= t < t1:
+            i = int(np.searchsorted(times, t, side="right"))
+            t0, t1 = times[i - 1], times[i]
+            self._in_i, self._in_t0, self._in_t1 = i, t0, t1
         w = (t - t0) / (t1 - t0)
         return table[i - 1] + w * (table[i] - table[i - 1])
 
