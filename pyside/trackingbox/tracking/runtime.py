@@ -15,7 +15,8 @@
 4. sets the new parameter values and correction flows and integrates both
    twins to ``t_{k+1}``: with ``substeps`` the tracked twin in parts of the
    sample, the parameter controllers advancing after each part (see
-   :func:`track`).
+   :func:`track`). A small change is carried by the tracked twin's
+   integrator (no re-initialisation; ``carry`` in :func:`track`).
 
 The controllers hold (output frozen, no integration) during the start-up hold
 ``t < tracking.hold_until``, while their measured tag or simulated variable is
