@@ -1115,6 +1115,20 @@ class Stepper(abc.ABC):
         self._in_table = np.ascontiguousarray(table)
         self._in_set = self._setter(tuple(names))
 
+    def extend_inputs(self, inputs: pd.DataFrame) -> None:
+        """Go on with a longer table of the same inputs, whose first rows are the current table.
+
+        For a run that receives its inputs as they come (the online mode). Only
+        exact when the solver has not looked past the current table's end: a
+        model-exchange stepper made with ``carry=True`` stops at every
+        communication point, so it never has.
+        """
+        self._check_open()
+        names = list(self._in_names)
+        self._prepare_inputs(inputs)
+        self._drop_inputs(set(self._in_names) - set(names))
+        self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf
+
     @property
     def input_times(self) -> npt.NDArray[np.float64] | None:
         """Sample times of the ``inputs`` table of this run (``None`` without one)."""

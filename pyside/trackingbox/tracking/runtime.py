@@ -1074,7 +1074,12 @@ class TrackingLoop:
                 continue
             tw.inputs = view.inputs
             if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
-                tw.start(t_k, dict(tw.applied), tw.x)
+                if tw.carry_limits and tw.stepper is not None and tw.stepper.time == tw.x_time:
+                    # its integrator stopped at t_k and never saw past the old table: it goes on
+                    # (carried), so the run is the one an offline run over the whole view makes
+                    tw.stepper.extend_inputs(view.inputs)
+                else:
+                    tw.start(t_k, dict(tw.applied), tw.x)
             else:
                 tw.replay_csv(self.csv_path, self.k, self.grid)
 
