@@ -1260,8 +1260,16 @@ class Stepper(abc.ABC):
 
     # -- public API -----------------------------------------------------------------
     def finish(self) -> None:
-        """Make this stepper unusable (its model starts a newer run or closes)."""
+        """Make this stepper unusable (its model starts a newer run or closes).
+
+        Its input table goes at once: the solver's callbacks make reference
+        cycles that keep a finished stepper until the cyclic garbage collector
+        runs, and a run restarted every checkpoint would otherwise hold one
+        copy of a whole week's table per restart.
+        """
         self._finished = True
+        self._in_table = self._in_times = None
+        self._in_set = None
 
     def step(self, t_next: float) -> None:
         """Integrate from :attr:`time` to *t_next*.
