@@ -943,6 +943,7 @@ class FMUModel:
         parameters: Mapping[str, float] | None = None,
         inputs: pd.DataFrame | None = None,
         max_step: float | None = None,
+        carry: bool = False,
     ) -> Stepper:
         """Initialise a new run at *start_time* and return its :class:`Stepper`.
 
@@ -964,6 +965,12 @@ class FMUModel:
         max_step
             Largest internal solver step (model exchange); default: the smallest
             spacing of the input samples (so no input feature is stepped over).
+        carry
+            Model exchange: stop CVODE exactly at every communication point
+            (its stop time) instead of letting it step past and interpolate
+            back, so that :meth:`Stepper.set` with ``restart=False`` can carry
+            the integrator across a small change (no re-initialisation).
+            Without it every change restarts the integrator.
         """
         if self.closed:
             raise FMUError(f"FMU {self.path} is closed")
@@ -977,6 +984,8 @@ class FMUModel:
         driver = ModelExchangeStepper if self.interface == "ModelExchange" else CoSimulationStepper
         stepper = driver(self, self._fmi, start_time=float(start_time), parameters=dict(parameters or {}),
                          inputs=inputs, max_step=max_step)
+        if carry and isinstance(stepper, ModelExchangeStepper):
+            stepper.carry()
         self._active = stepper
         return stepper
 
@@ -1116,6 +1125,7 @@ class Stepper(abc.ABC):
         self._in_times: npt.NDArray[np.float64] | None = None
         self._in_table: npt.NDArray[np.float64] | None = None
         self._in_set: Callable[[Any], None] | None = None
+        self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf  # the interval _input_values used last
         self._last_set: dict[str, Any] = {}
         self._prepare_inputs(inputs)
         self._initialize(parameters, max_step)
@@ -1132,7 +1142,7 @@ class Stepper(abc.ABC):
         """Advance from :attr:`time` to *t_next* (> :attr:`time`)."""
 
     @abc.abstractmethod
-    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool, restart: bool = True) -> None:
         """Write *values* between steps (inside the error translation of :meth:`set`)."""
 
     # -- inputs -------------------------------------------------------------
@@ -1172,6 +1182,20 @@ class Stepper(abc.ABC):
         self._in_table = np.ascontiguousarray(table)
         self._in_set = self._setter(tuple(names))
 
+    def extend_inputs(self, inputs: pd.DataFrame) -> None:
+        """Go on with a longer table of the same inputs, whose first rows are the current table.
+
+        For a run that receives its inputs as they come (the online mode). Only
+        exact when the solver has not looked past the current table's end: a
+        model-exchange stepper made with ``carry=True`` stops at every
+        communication point, so it never has.
+        """
+        self._check_open()
+        names = list(self._in_names)
+        self._prepare_inputs(inputs)
+        self._drop_inputs(set(self._in_names) - set(names))
+        self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf
+
     @property
     def input_times(self) -> npt.NDArray[np.float64] | None:
         """Sample times of the ``inputs`` table of this run (``None`` without one)."""
@@ -1184,8 +1208,14 @@ class Stepper(abc.ABC):
             return table[0]
         if t >= times[-1]:
             return table[-1]
-        i = int(np.searchsorted(times, t, side="right"))
-        t0, t1 = times[i - 1], times[i]
+        # the solver asks for times close to the last one: try the last interval first (a
+        # binary search per right-hand side evaluation was a third of a tracking run's cost)
+        i = self._in_i
+        t0, t1 = self._in_t0, self._in_t1
+        if not t0 <= t < t1:
+            i = int(np.searchsorted(times, t, side="right"))
+            t0, t1 = times[i - 1], times[i]
+            self._in_i, self._in_t0, self._in_t1 = i, t0, t1
         w = (t - t0) / (t1 - t0)
         return table[i - 1] + w * (table[i] - table[i - 1])
 
@@ -1297,8 +1327,16 @@ class Stepper(abc.ABC):
 
     # -- public API -----------------------------------------------------------------
     def finish(self) -> None:
-        """Make this stepper unusable (its model starts a newer run or closes)."""
+        """Make this stepper unusable (its model starts a newer run or closes).
+
+        Its input table goes at once: the solver's callbacks make reference
+        cycles that keep a finished stepper until the cyclic garbage collector
+        runs, and a run restarted every checkpoint would otherwise hold one
+        copy of a whole week's table per restart.
+        """
         self._finished = True
+        self._in_table = self._in_times = None
+        self._in_set = None
 
     def step(self, t_next: float) -> None:
         """Integrate from :attr:`time` to *t_next*.
@@ -1318,12 +1356,20 @@ class Stepper(abc.ABC):
             return
         self._advance(t_next)
 
-    def set(self, values: Mapping[str, float]) -> None:
+    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
         """Set tunable parameters and/or inputs before the next step.
 
         An input set here is no longer driven by the ``inputs`` table of this run.
         For model exchange, the change is a discontinuity: tunable parameters are
-        set in event mode and the solver is re-initialised.
+        set in event mode and the solver is re-initialised. With
+        ``restart=False`` on a stepper made with ``carry=True``
+        (:meth:`FMUModel.stepper`), the integrator is not re-initialised
+        when it stands exactly at :attr:`time` and the event left the
+        continuous states unchanged: CVODE goes on with its step size, order
+        and history, and its error test absorbs the jump in the derivatives
+        (for a small change; the caller decides what is small).
+        :attr:`ModelExchangeStepper.restarts` and
+        :attr:`ModelExchangeStepper.carried` count both outcomes.
 
         Raises
         ------
@@ -1349,7 +1395,7 @@ class Stepper(abc.ABC):
         self._drop_inputs(set(values))
         with _fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed",
                         self.model.log_messages):
-            self._apply_set(values, params)
+            self._apply_set(values, params, restart)
         self.model.note_changed(n for n in values if self.model.variable(n).causality == "parameter")
         self._last_set.update(values)
 
@@ -1397,7 +1443,7 @@ class CoSimulationStepper(Stepper):
         self.time = t_next
         self._apply_inputs(self.time)
 
-    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool, restart: bool = True) -> None:
         self._set_values(values)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
@@ -1411,12 +1457,74 @@ class CoSimulationStepper(Stepper):
         raise FMUError(f"{self.model.path.name} runs as co-simulation; its states are not accessible")
 
 
+#: CVODE's return flags (cvode.h): reached the stop time; found a root
+_CV_TSTOP_RETURN = 1
+_CV_ROOT_RETURN = 2
+
+
+def _cvode_functions() -> tuple[Any, Any]:
+    """``CVodeSetStopTime`` and ``CVodeGetCurrentTime`` from the CVODE library FMPy loads.
+
+    FMPy binds only part of CVODE's API; these two are in the same library
+    (SUNDIALS 7, documented in CVODE's user guide, "Optional inputs" and
+    "Optional outputs").
+    """
+    from fmpy.sundials.cvode import sundials_cvode
+    from fmpy.sundials.sundials_types import sunrealtype
+
+    set_stop = getattr(sundials_cvode, "CVodeSetStopTime")
+    set_stop.argtypes = [ctypes.c_void_p, sunrealtype]
+    set_stop.restype = ctypes.c_int
+    current = getattr(sundials_cvode, "CVodeGetCurrentTime")
+    current.argtypes = [ctypes.c_void_p, ctypes.POINTER(sunrealtype)]
+    current.restype = ctypes.c_int
+    return set_stop, current
+
+
 def _cvode_solver_class() -> type:
-    """A CVodeSolver whose callbacks report Python errors to CVODE instead of swallowing them."""
+    """A CVodeSolver whose callbacks report Python errors to CVODE instead of swallowing them.
+
+    Its :meth:`step` can also stop CVODE exactly at the target time (CVODE's
+    stop time) instead of stepping past it and interpolating back, so the
+    integrator's internal time is the communication point: a small change of
+    a parameter or input there can then be carried by the integrator (no
+    re-initialisation; see :meth:`ModelExchangeStepper.set`).
+    """
     from fmpy.sundials import CVodeSolver
+    from fmpy.sundials.cvode import CV_NORMAL, CVode, CVodeGetRootInfo
+    from fmpy.sundials.sundials_types import sunrealtype
+
+    set_stop, current = _cvode_functions()
 
     class _Solver(CVodeSolver):  # type: ignore[misc, valid-type]
         callback_error: BaseException | None = None
+        #: stop exactly at each target time (see the class's docstring)
+        exact = False
+
+        def step(self, t, tNext):  # noqa: N803 - FMPy's signature
+            """Integrate towards *tNext*; ``(root found, roots, time reached)`` as FMPy's ``step``."""
+            if self.exact and set_stop(self.cvode_mem, tNext) != 0:
+                raise RuntimeError(f"CVodeSetStopTime({tNext!r}) failed")
+            if not self.discrete:
+                self.get_x(self.px, self.nx)
+            reached = sunrealtype(0.0)
+            flag = CVode(self.cvode_mem, tNext, self.x, ctypes.byref(reached), CV_NORMAL)
+            if not self.discrete:
+                self.set_x(self.px, self.nx)
+            roots = np.zeros(self.nz, dtype=np.int32)
+            if flag < 0:
+                raise RuntimeError("CVode error (code %s) in module %s, function %s: %s" % self.error_info)
+            if flag == _CV_ROOT_RETURN:
+                if CVodeGetRootInfo(self.cvode_mem, np.ctypeslib.as_ctypes(roots)) != 0:
+                    raise RuntimeError("CVodeGetRootInfo failed")
+            return flag == _CV_ROOT_RETURN, roots, reached.value
+
+        def internal_time(self) -> float:
+            """CVODE's own time: where its next step starts (after a stop-time return, the target)."""
+            t = sunrealtype(0.0)
+            if current(self.cvode_mem, ctypes.byref(t)) != 0:
+                return math.nan
+            return float(t.value)
 
         def f(self, t, y, ydot, user_data):  # noqa: D401 - CVODE right-hand side
             try:
@@ -1447,8 +1555,15 @@ class ModelExchangeStepper(Stepper):
     """The model-exchange driver: CVODE (BDF) integrates the FMU's derivatives.
 
     Parameter changes, input overrides and state overwrites are discontinuities:
-    the integrator is re-initialised after each. Time events and state events
-    trigger FMI event iterations.
+    the integrator is re-initialised after each, unless the stepper carries
+    small changes (:meth:`carry`, ``set(..., restart=False)``). Time events
+    and state events trigger FMI event iterations.
+
+    Attributes
+    ----------
+    restarts, carried : int
+        Changes made through :meth:`set` that re-initialised the integrator,
+        and changes it carried.
     """
 
     def __init__(self, model: FMUModel, fmi: _FMI, *, start_time: float, parameters: dict[str, Any],
@@ -1460,6 +1575,9 @@ class ModelExchangeStepper(Stepper):
         self._nz = int(md.numberOfEventIndicators or 0)
         self._x = np.zeros(max(self._nx, 1))
         self._px = self._x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        self._x_before = np.zeros_like(self._x)
+        self.restarts = 0
+        self.carried = 0
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -1558,7 +1676,20 @@ class ModelExchangeStepper(Stepper):
             self._check_states()
         self.time = t_next
 
-    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool) -> None:
+    def carry(self) -> None:
+        """From now on stop CVODE exactly at every communication point, so small changes can be carried."""
+        self._solver.exact = True
+
+    def _at_time(self) -> bool:
+        """True if CVODE's internal time is :attr:`time` (it stopped there, or was re-initialised there)."""
+        t_int = self._solver.internal_time()
+        return abs(t_int - self.time) <= 1e-12 * max(1.0, abs(self.time))
+
+    def _apply_set(self, values: Mapping[str, Any], parameters_changed: bool, restart: bool = True) -> None:
+        carry = not restart and self._solver.exact and self._nx > 0 and self._at_time()
+        if carry:
+            self._fmu.getContinuousStates(self._px, self._nx)
+            self._x_before[: self._nx] = self._x[: self._nx]
         if parameters_changed:
             self._fmu.enterEventMode()
             self._set_values(values)
@@ -1566,7 +1697,15 @@ class ModelExchangeStepper(Stepper):
             self._fmu.enterContinuousTimeMode()
         else:
             self._set_values(values)
-        self._solver.reset(self.time)
+        if carry:
+            # the event must have left the states where CVODE has them, else it restarts
+            self._fmu.getContinuousStates(self._px, self._nx)
+            carry = bool(np.array_equal(self._x[: self._nx], self._x_before[: self._nx]))
+        if carry:
+            self.carried += 1
+        else:
+            self.restarts += 1
+            self._solver.reset(self.time)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints."""

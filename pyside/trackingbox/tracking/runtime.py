@@ -15,7 +15,8 @@
 4. sets the new parameter values and correction flows and integrates both
    twins to ``t_{k+1}``: with ``substeps`` the tracked twin in parts of the
    sample, the parameter controllers advancing after each part (see
-   :func:`track`).
+   :func:`track`). A small change is carried by the tracked twin's
+   integrator (no re-initialisation; ``carry`` in :func:`track`).
 
 The controllers hold (output frozen, no integration) during the start-up hold
 ``t < tracking.hold_until``, while their measured tag or simulated variable is
@@ -86,7 +87,7 @@ Window = Literal["training", "validation", "all"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 4  # 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+_CHECKPOINT_VERSION = 5  # 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -164,6 +165,10 @@ class TrackingResult:
     complete : bool
         False when ``max_steps`` stopped the run early (resume to continue).
     events : tuple of TrackingEvent
+    restarts, carried : int
+        Changes of the tracked twin's parameters and corrections over the run
+        (resumed parts included) that re-initialised its integrator, and
+        changes it carried (see ``carry`` in :func:`track`).
     """
 
     csv: Path
@@ -178,6 +183,8 @@ class TrackingResult:
     steps: int
     complete: bool
     events: tuple[TrackingEvent, ...] = ()
+    restarts: int = 0
+    carried: int = 0
 
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` document of ``trackingbox track``."""
@@ -322,14 +329,47 @@ class _Twin:
         self.x: npt.NDArray[np.float64] | None = None  # last good continuous states
         self.x_time = math.nan
         self.step_seconds = 0.0
+        #: value name -> the largest change the integrator carries (no restart); empty: restart on every change
+        self.carry_limits: dict[str, float] = {}
+        #: restart the integrator at the next change whatever its size (set after a hold, a recovery)
+        self.force_restart = False
+        #: changes that re-initialised the integrator / that it carried, over all runs of this twin
+        self.restarts = 0
+        self.carried = 0
 
     def start(self, t: float, values: Mapping[str, float], x: Sequence[float] | None = None) -> None:
         """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
-        self.stepper = self.model.stepper(start_time=t, parameters={**self.base, **values}, inputs=self.inputs)
+        self._count()
+        self.stepper = self.model.stepper(start_time=t, parameters={**self.base, **values}, inputs=self.inputs,
+                                          carry=bool(self.carry_limits) and self.me)
         self.applied = dict(values)
         if x is not None:
             self.stepper.set_continuous_states(np.asarray(x, dtype=float))
         self._save()
+
+    def _count(self) -> None:
+        """Add the finished stepper's restarts and carried changes to the twin's counts."""
+        st = self.stepper
+        if st is not None and hasattr(st, "carried"):
+            self.restarts += st.restarts
+            self.carried += st.carried
+            st.restarts = st.carried = 0
+
+    def counts(self) -> tuple[int, int]:
+        """``(restarts, carried)``: changes that re-initialised the integrator and changes it carried."""
+        self._count()
+        return self.restarts, self.carried
+
+    def _small(self, changed: Mapping[str, float]) -> bool:
+        """True if every change is within its carry limit (and none is forced to restart)."""
+        if self.force_restart or not self.carry_limits:
+            return False
+        for name, value in changed.items():
+            limit = self.carry_limits.get(name)
+            old = self.applied.get(name)
+            if limit is None or old is None or not abs(value - old) <= limit:
+                return False
+        return True
 
     def _save(self) -> None:
         if self.me:
@@ -363,7 +403,8 @@ class _Twin:
         changed = {n: v for n, v in values.items() if self.applied.get(n) != v}
         t0 = _time.perf_counter()
         if changed:
-            self.stepper.set(changed)
+            self.stepper.set(changed, restart=not self._small(changed))
+            self.force_restart = False
             self.applied.update(changed)
         self.stepper.step(t_next)
         self.step_seconds += _time.perf_counter() - t0
@@ -374,6 +415,7 @@ class _Twin:
         """Rebuild the run from *t0* by re-applying recorded values: ``(t_next, values)`` per step."""
         first = True
         self.given = {}
+        forced, self.force_restart = self.force_restart, False
         for t_next, values in rows:
             if first:
                 self.start(t0, values)
@@ -381,6 +423,7 @@ class _Twin:
             self.step(t_next, values)
         if first:
             self.start(t0, {})
+        self.force_restart = forced
 
     def replay_csv(self, csv_path: Path, rows: int, grid: npt.NDArray[np.float64]) -> None:
         """Rebuild the run from 0 by replaying the values recorded in the first *rows* rows of the CSV."""
@@ -389,12 +432,15 @@ class _Twin:
     def state_dict(self) -> dict[str, Any]:
         """The values applied and, for model exchange, the continuous states after the last step."""
         return {"applied": dict(self.applied), "given": dict(self.given),
-                "x": self.x.tolist() if self.x is not None else None}
+                "x": self.x.tolist() if self.x is not None else None, "force_restart": self.force_restart,
+                "counts": list(self.counts())}
 
     def load_state_dict(self, state: Mapping[str, Any], *, t: float, csv_path: Path, rows: int,
                         grid: npt.NDArray[np.float64], substeps: int = 1) -> None:
         """Put the twin at *t* as :meth:`state_dict` saved it: from its states, else by replaying the CSV."""
         x = state.get("x")
+        self.force_restart = bool(state.get("force_restart", False))
+        counts = [int(c) for c in state.get("counts", (0, 0))]
         if x is None and substeps > 1:
             log.warning("%s twin: no states in the checkpoint; the replay applies the recorded values once "
                         "a sample, not the %d sub-steps of each, so the resumed run is close to, not "
@@ -404,6 +450,8 @@ class _Twin:
             self.given = {n: float(v) for n, v in state.get("given", {}).items()}
         else:
             self.replay_csv(csv_path, rows, grid)
+        self._count()  # the replay's own changes are not the run's
+        self.restarts, self.carried = counts
 
     def close(self) -> None:
         self.model.close()
@@ -715,6 +763,31 @@ class _Output:
         self._writer = csv.writer(self._fh)
 
 
+# --------------------------------------------------------------------------- carrying the integrator
+
+#: Largest change of a tracked parameter, as a fraction of its bound range, that the tracked twin's
+#: integrator carries without a restart (corrections: of the compensator's gain times its level's range)
+CARRY_FRACTION = 0.02
+
+
+def _carry_limits(fraction: float, pairs: Sequence[_Pair], states: Sequence[Any],
+                  view: MeasurementView) -> dict[str, float]:
+    """Value name -> the largest change the tracked twin's integrator carries (see :func:`track`).
+
+    A parameter: *fraction* of its bound range. A correction flow: *fraction*
+    of its compensator's gain times the measured range of its level (1st to
+    99th percentile), the correction a level error of that size asks for.
+    """
+    limits = {p.parameter: fraction * (p.bounds[1] - p.bounds[0]) for p in pairs}
+    for s in states:
+        level = view.samples[s.tag]
+        ok = level[np.isfinite(level)]
+        if ok.size >= 2:
+            lo, hi = np.percentile(ok, [1.0, 99.0])
+            limits[s.correction] = fraction * abs(float(s.gain)) * float(hi - lo)
+    return limits
+
+
 # --------------------------------------------------------------------------- sub-steps
 
 #: Largest within-sample loop gain the automatic choice leaves to one step per sample ...
@@ -799,7 +872,7 @@ class TrackingLoop:
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
                  view: MeasurementView | None = None, interpolation: Interpolation = "linear",
-                 substeps: int | Literal["auto"] = "auto") -> None:
+                 substeps: int | Literal["auto"] = "auto", carry: float = CARRY_FRACTION) -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -858,6 +931,11 @@ class TrackingLoop:
             except BaseException:
                 self.twin.close()
                 raise
+        if not (isinstance(carry, (int, float)) and math.isfinite(carry) and carry >= 0.0):
+            raise ValueError(f"carry must be a finite fraction >= 0, got {carry!r}")
+        self.carry = float(carry)
+        if self.carry > 0.0 and self.twin.me:
+            self.twin.carry_limits = _carry_limits(self.carry, pairs, spec.states, self.view)
         #: hold flag of the current sample (given at its start, used by its sub-steps)
         self.hold_k = True
         self.substeps = self._substeps(substeps, interpolation)
@@ -902,10 +980,11 @@ class TrackingLoop:
             "window": self.window,
             "interpolation": self.interpolation,
             "substeps": self.substeps,
+            "carry": self.carry,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
-            "loop": {"recovery_until": self.recovery_until,
+            "loop": {"recovery_until": self.recovery_until, "hold": self.hold_k,
                      "events": [[e.time, e.kind, e.message] for e in self.events]},
             "controllers": self.controllers.state_dict(),
             "compensation": self.compensation.state_dict(),
@@ -924,6 +1003,9 @@ class TrackingLoop:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with {state.get('substeps')} sub-steps per "
                             f"sample, not {self.substeps}; resume with substeps={state.get('substeps')} or run "
                             "without --resume")
+        if state.get("carry") != self.carry:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with carry={state.get('carry')!r}, not "
+                            f"{self.carry!r}; resume with the same carry or run without --resume")
         if state.get("interpolation") != self.interpolation:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with interpolation "
                             f"{state.get('interpolation')!r}, not {self.interpolation!r}; run without --resume")
@@ -941,6 +1023,7 @@ class TrackingLoop:
         self.controllers.load_state_dict(state["controllers"])
         self.compensation.load_state_dict(state["compensation"])
         self.recovery_until = float(state["loop"]["recovery_until"])
+        self.hold_k = bool(state["loop"]["hold"])
         for e in state["loop"].get("events", []):
             self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
         t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
@@ -991,7 +1074,12 @@ class TrackingLoop:
                 continue
             tw.inputs = view.inputs
             if tw.me and tw.x is not None and math.isclose(tw.x_time, t_k, abs_tol=1e-9 * max(1.0, t_k)):
-                tw.start(t_k, dict(tw.applied), tw.x)
+                if tw.carry_limits and tw.stepper is not None and tw.stepper.time == tw.x_time:
+                    # its integrator stopped at t_k and never saw past the old table: it goes on
+                    # (carried), so the run is the one an offline run over the whole view makes
+                    tw.stepper.extend_inputs(view.inputs)
+                else:
+                    tw.start(t_k, dict(tw.applied), tw.x)
             else:
                 tw.replay_csv(self.csv_path, self.k, self.grid)
 
@@ -1083,6 +1171,8 @@ class TrackingLoop:
             np.array([plan.untracked_table[n][k] for n in read]) if plan.untracked_table is not None
             else np.full(len(read), np.nan))
         hold_all = t < self.hold_until - 1e-9 or bool(view.stopped[k]) or t < self.recovery_until - 1e-9
+        if hold_all != self.hold_k:
+            self.twin.force_restart = True  # entering or leaving a hold: the integrator restarts
         self.hold_k = hold_all
         modes = self.controllers.update(t, k, y, ridx, view, hold_all, self.event)
         for s in self.compensation.states:
@@ -1165,6 +1255,7 @@ class TrackingLoop:
         grid, k, k0, ts = self.grid, self.k, self.k0, self.ts
         metric = self.view.window
         out = self.output
+        restarts, carried = self.twin.counts() if self.twin is not None else (0, 0)
         result = TrackingResult(
             csv=self.csv_path,
             window=(max(metric[0], self.hold_until), min(metric[1], float(grid[-1]) + ts)),
@@ -1180,6 +1271,8 @@ class TrackingLoop:
             steps=k,
             complete=self.complete,
             events=tuple(self.events),
+            restarts=restarts,
+            carried=carried,
         )
         summary = {**result.to_json(), "complete": self.complete, "steps": k, "csv": str(self.csv_path),
                    "window": list(result.window),
@@ -1188,7 +1281,8 @@ class TrackingLoop:
                                    for n, c in result.corrections.items()},
                    "states": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
                               for n, c in result.states.items()},
-                   "events": [[e.time, e.kind, e.message] for e in self.events]}
+                   "events": [[e.time, e.kind, e.message] for e in self.events],
+                   "integrator": {"restarts": restarts, "carried": carried}}
         write_text_atomic(self.out_dir / RESULT_NAME, json.dumps(summary, indent=1))
         return result
 
@@ -1208,6 +1302,7 @@ def track(
     view: MeasurementView | None = None,
     interpolation: Interpolation = "linear",
     substeps: int | Literal["auto"] = "auto",
+    carry: float = CARRY_FRACTION,
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -1263,6 +1358,17 @@ def track(
         largest, at most :data:`MAX_SUBSTEPS`. Needs a model-exchange twin
         (``"auto"`` chooses 1 for a co-simulation one). A checkpoint records
         the count; resuming with another is refused.
+    carry : float
+        Model exchange: the tracked twin's integrator (CVODE) is carried
+        across a change of its parameters and correction flows instead of
+        being re-initialised, when every change is at most this fraction of
+        the parameter's bound range (a correction: of its compensator's gain
+        times its level's measured range). CVODE then stops exactly at each
+        sample and sub-step (its stop time), and the change becomes a jump of
+        the derivatives that its error test absorbs. Larger changes, the
+        start, entering or leaving a hold, a recovery and a checkpoint's
+        restart point re-initialise it. ``0``: re-initialise at every change
+        (the restart path). Default :data:`CARRY_FRACTION`.
 
     Returns
     -------
@@ -1278,7 +1384,7 @@ def track(
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
-                        view=view, interpolation=interpolation, substeps=substeps)
+                        view=view, interpolation=interpolation, substeps=substeps, carry=carry)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
