@@ -1940,7 +1940,6 @@ class SensitivityStepper(ModelExchangeStepper):
         """
         self._check_open()
         nx = self._nx
-        fmu = self._fmu
         buf = np.zeros(nx)
         pbuf = buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         out: dict[str, float] = {}

@@ -95,8 +95,10 @@ def submit(fn: Callable[..., Any], args: tuple[Any, ...]) -> Callable[[], Any]:
         try:
             value = fn(*args)
         except Exception as exc:  # noqa: BLE001 - raised where the result is asked for, as from a worker
+            error = exc  # the except clause unbinds ``exc`` when it ends
+
             def failed() -> Any:
-                raise exc
+                raise error
             return failed
         return lambda: value
     handle = _ACTIVE[-1].apply_async(_call, ((fn, tuple(args)),))
