@@ -51,18 +51,29 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def pairs_for(spec_path: Path) -> None:
-    """Benches ship without [[pairs]]: pair them the way a user would (``trackingbox pair`` writes them).
+def pairs_for(spec_path: Path, bench: str, freeze_controllers: bool) -> None:
+    """Benches ship without [[pairs]]: pair them the way the demo does (``trackingbox pair`` writes them).
 
-    The spec's ``[pairing] freeze`` when it has one (the evaporator: the level loops of
-    the flash and condensate tanks), else what ``pair`` does by default.
+    The spec's ``[pairing] freeze`` when it has one (the evaporator: the level loops of the
+    flash and condensate tanks); else every controller frozen (``holdControllers=1``, the
+    source's method) on the demo's :data:`~trackingbox.demo.FREEZE_CONTROLLERS` benches or
+    with ``--freeze-controllers``; else closed-loop step tests (the demo's choice for heat
+    production, where a frozen twin leaves most tags unobservable: issue 15).
     """
-    cmd = [sys.executable, "-m", "trackingbox.cli", "pair", str(spec_path), "--workers", "2"]
+    from trackingbox.demo import FREEZE_CONTROLLERS
+    from trackingbox.fmu import read_info
+
+    spec = load_spec(spec_path)
+    names = {getattr(v, "name", v) for v in read_info(spec.twin).inputs}
+    freeze = []
+    if not spec.pairing.freeze and "holdControllers" in names and (freeze_controllers or bench in FREEZE_CONTROLLERS):
+        freeze = ["--freeze", "holdControllers=1"]
+    cmd = [sys.executable, "-m", "trackingbox.cli", "pair", str(spec_path), "--workers", "2", *freeze]
+    log(" ".join(cmd[2:]))
     rc = subprocess.run(cmd, stdout=sys.stderr).returncode
     if rc != 0:
         sys.exit(f"bench_tracking: trackingbox pair found no usable pairs on {spec_path} (exit {rc}); "
-                 f"command: {' '.join(cmd)}")
-    spec = load_spec(spec_path)
+                 f"command: {' '.join(cmd[2:])}")
     if spec.source is not None and "Evaporator" in spec.source.model:
         from trackingbox.benches.evaporator import slow_pairs  # the demo's tuning of this bench
 
@@ -135,6 +146,9 @@ def main() -> int:
     ap.add_argument("--memory-days", default="1,7",
                     help="heat exchanger: run lengths (days) whose peak memory is measured, comma-separated; "
                          "'' to skip (default 1,7)")
+    ap.add_argument("--freeze-controllers", action="store_true",
+                    help="pair with every controller of the twin frozen (holdControllers=1, the source's method) "
+                         "where the spec has no [pairing] freeze; default: as the demo pairs each bench")
     args = ap.parse_args()
     unknown = [b for b in args.benches if b not in BENCHES]
     if unknown:
@@ -151,7 +165,7 @@ def main() -> int:
             log(f"{name}: building the case ...")
             case = make_bench(name, root / name, seed=args.seed, hours=args.hours)
             if not load_spec(case.spec).pairs:
-                pairs_for(case.spec)
+                pairs_for(case.spec, name, args.freeze_controllers)
             log(f"{name}: tracking ...")
             rows.append(track_with_bound(name, case.spec, root / name / "track"))
             if name == "heat-exchanger" and days:
