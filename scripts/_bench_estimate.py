@@ -41,6 +41,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 CACHE = ROOT / ".cache"
 VENV = CACHE / "modestpy-venv"
 MODESTPY_REQUIREMENTS = ["modestpy==0.1.1", "pandas<2", "pyDOE==0.3.8", "numpy<2"]
@@ -74,6 +75,18 @@ import modestpy.estim.scipy.scipy as m3, modestpy.estim.ga.individual as m4
 for module in (m1, m2, m3, m4, error_module):
     module.calc_err = calc_err_after_warmup
 
+import modestpy.fmi.model as model_module
+_simulate = model_module.simulate_fmu
+
+
+def counted_simulate(*a, **k):
+    # one byte per FMU run, appended (GA workers are separate processes)
+    with open(os.path.join(job["workdir"], "fmu_runs.count"), "ab") as fh:
+        fh.write(b"1")
+    return _simulate(*a, **k)
+
+
+model_module.simulate_fmu = counted_simulate
 inp = pd.read_csv(job["inputs"]).set_index("time")
 ideal = pd.read_csv(job["ideal"]).set_index("time")
 est = {k: tuple(v) for k, v in job["est"].items()}
@@ -93,6 +106,8 @@ try:
     out["modestpy_error"] = float(summary["_error_"].iloc[-1])
 except Exception as exc:  # the summary is a nicety
     out["summary_error"] = str(exc)
+count = os.path.join(job["workdir"], "fmu_runs.count")
+out["fmu_runs"] = os.path.getsize(count) if os.path.exists(count) else 0
 json.dump(out, open(job["result"], "w"), indent=2)
 '''
 
@@ -126,19 +141,44 @@ def make_case(bench: str, seed: int, overrides: dict[str, float] | None) -> Path
     return spec
 
 
+def window_table(problem, window, dt: float):
+    """A window as one run from 0: the held-input pre-run then the window (times, inputs dict, offset, n_pre)."""
+    import numpy as np
+
+    lead_in = float(window.start - window.time[0])  # measured history before the window
+    offset = math.ceil(max(0.0, problem.warmup - lead_in) / dt - 1e-9) * dt  # held-input pre-run
+    n_pre = int(round(offset / dt))
+    grid = window.time - window.time[0]
+    t = np.concatenate((np.arange(n_pre) * dt, offset + grid))
+    inputs = {"time": t}
+    for name, values in window.inputs.items():
+        inputs[name] = np.concatenate((np.full(n_pre, values[0]), values))
+    return t, inputs, offset, n_pre, lead_in
+
+
+def bound_run(problem, window, dt: float):
+    """The no-Python lower bound of one twin run over *window* (pre-run included) at the start values."""
+    import pandas as pd
+    from _bound import run_bound
+
+    t, inputs, *_ = window_table(problem, window, dt)
+    params = {**dict(problem.fixed), **dict(zip(problem.names, map(float, problem.start)))}
+    return run_bound(problem.twin, grid=t, outputs=list(dict.fromkeys(problem.outputs.values())),
+                     parameters=params, inputs=pd.DataFrame(inputs))
+
+
+def cpu_now() -> float:
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def modestpy_job(spec, problem, training, workdir: Path, workers: int, generations: int, pop: int) -> dict:
     import numpy as np
     import pandas as pd
 
-    dt = problem.sample_time
-    lead_in = float(training.start - training.time[0])  # measured history before the window
-    offset = math.ceil(max(0.0, problem.warmup - lead_in) / dt - 1e-9) * dt  # held-input pre-run
-    n_pre = int(round(offset / dt))
-    grid = training.time - training.time[0]
-    t = np.concatenate((np.arange(n_pre) * dt, offset + grid))
-    inputs = {"time": t}
-    for name, values in training.inputs.items():
-        inputs[name] = np.concatenate((np.full(n_pre, values[0]), values))
+    t, inputs, offset, n_pre, lead_in = window_table(problem, training, problem.sample_time)
     ideal = {"time": t}
     for tag, name in problem.outputs.items():
         ideal[name] = np.concatenate((np.full(n_pre, np.nan), training.measured[tag]))
@@ -200,12 +240,12 @@ def main() -> int:
     tags = list(problem.outputs)
 
     log(f"trackingbox estimate on {spec_path} ...")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_now()
     ours = estimate(spec, seed=args.seed, workers=args.workers, maxiter=args.maxiter, popsize=args.popsize,
                     refine_iterations=args.refine_iterations)
-    ours_wall = time.perf_counter() - t0
+    ours_wall, ours_cpu = time.perf_counter() - t0, cpu_now() - c0
     rows = {"trackingbox": {
-        "seconds": ours_wall, "evaluations": ours.evaluations, "parameters": ours.parameters,
+        "seconds": ours_wall, "cpu_seconds": ours_cpu, "evaluations": ours.evaluations, "parameters": ours.parameters,
         "training_nrmse": ours.training_nrmse, "validation_nrmse": ours.validation_nrmse}}
     blocked = None
     if not args.skip_modestpy:
@@ -216,24 +256,38 @@ def main() -> int:
             job_file.write_text(json.dumps(job, indent=2))
             runner = work / "modestpy" / "run_modestpy.py"
             runner.write_text(RUNNER)
+            (work / "modestpy" / "fmu_runs.count").unlink(missing_ok=True)
             log(f"ModestPy 0.1.1 (MODESTGA generations={args.generations} pop={args.pop}, then SCIPY) ...")
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), cpu_now()
             proc = subprocess.run([str(python), str(runner), str(job_file)], capture_output=True, text=True,
                                   env={**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": ""})
-            mp_wall = time.perf_counter() - t0
+            mp_wall, mp_cpu = time.perf_counter() - t0, cpu_now() - c0
             if proc.returncode != 0:
                 tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
                 raise RuntimeError(f"ModestPy run failed (exit {proc.returncode}):\n{tail}")
             mp = json.loads(Path(job["result"]).read_text())
             x = np.array([mp["parameters"][n] for n in problem.names])
             rows["modestpy"] = {
-                "seconds": mp_wall, "seconds_inside": mp["seconds"], "iterations": mp.get("iterations"),
+                "seconds": mp_wall, "cpu_seconds": mp_cpu, "evaluations": mp.get("fmu_runs"),
+                "seconds_inside": mp["seconds"], "iterations": mp.get("iterations"),
                 "parameters": mp["parameters"],
                 "training_nrmse": Objective(problem, training).nrmse(x),
                 "validation_nrmse": Objective(problem, validation).nrmse(x)}
         except Exception as exc:  # a benchmark reports what blocked it instead of dying silently
             blocked = f"{type(exc).__name__}: {exc}"
     initial = Objective(problem, validation).nrmse(problem.start)
+    # the no-Python bound: one twin run of the training window on the full grid and on the global
+    # search's coarse grid, by the C driver; the estimator's runs cost at least the coarse one each
+    from trackingbox.estimation import DEFAULT_GLOBAL_GRID, coarsen
+
+    stride = max(1, int(math.floor(DEFAULT_GLOBAL_GRID / problem.sample_time + 1e-9)))
+    full = bound_run(problem, training, problem.sample_time)
+    coarse = bound_run(problem, coarsen(training, stride), problem.sample_time * stride)
+    n = rows["trackingbox"]["evaluations"]
+    rows["bound"] = {"full_run_wall": full.wall, "full_run_cpu": full.cpu,
+                     "coarse_run_wall": coarse.wall, "coarse_run_cpu": coarse.cpu, "stride": stride,
+                     "seconds": n * min(coarse.wall, full.wall), "cpu_seconds": n * min(coarse.cpu, full.cpu),
+                     "evaluations": n}
 
     def mean(d: dict) -> float:
         return float(np.mean(list(d.values())))
@@ -265,10 +319,28 @@ def main() -> int:
               f"{(mp_row['training_nrmse'][t] if mp_row else float('nan')):>14.4g}")
         print(f"{'valid ' + t:<{width}}  {ours.validation_nrmse[t]:>14.4g}  "
               f"{(mp_row['validation_nrmse'][t] if mp_row else float('nan')):>14.4g}")
+    b, o = rows["bound"], rows["trackingbox"]
+    print(f"\n{'':<24}  {'ours':>12}  {'peer':>12}  {'bound':>12}   ours = trackingbox, peer = ModestPy 0.1.1,")
+    print(f"{'wall s':<24}  {o['seconds']:>12.1f}  {(mp_row['seconds'] if mp_row else float('nan')):>12.1f}  "
+          f"{b['seconds']:>12.2f}   bound = ours' FMU runs, each at the")
+    print(f"{'CPU s':<24}  {o['cpu_seconds']:>12.1f}  {(mp_row['cpu_seconds'] if mp_row else float('nan')):>12.1f}  "
+          f"{b['cpu_seconds']:>12.2f}   cost of one no-Python run of the")
+    mp_runs = mp_row.get("evaluations") if mp_row else None
+    print(f"{'FMU runs':<24}  {o['evaluations']:>12d}  {(mp_runs if mp_runs is not None else float('nan')):>12}  "
+          f"{b['evaluations']:>12d}   training window on the coarse grid")
+    print(f"{'CPU s per FMU run':<24}  {o['cpu_seconds'] / max(o['evaluations'], 1):>12.4f}  "
+          f"{(mp_row['cpu_seconds'] / mp_runs if mp_row and mp_runs else float('nan')):>12.4f}  "
+          f"{b['cpu_seconds'] / max(b['evaluations'], 1):>12.4f}   (global search's, {b['stride']}x the sample;")
+    print(f"{'mean validation NRMSE':<24}  {mean(o['validation_nrmse']):>12.4g}  "
+          f"{(mean(mp_row['validation_nrmse']) if mp_row else float('nan')):>12.4g}  {'':>12}   "
+          f"full-grid run: {b['full_run_cpu']:.4f} s CPU)")
     if "ratio" in doc:
         r = doc["ratio"]
-        print(f"\nwall time ratio ModestPy / trackingbox: {r['wall_time_modestpy_over_trackingbox']:.2f}")
-        print(f"validation NRMSE ratio ModestPy / trackingbox: {r['validation_nrmse_modestpy_over_trackingbox']:.3f}")
+        print(f"\npeer/ours wall: {r['wall_time_modestpy_over_trackingbox']:.2f}; "
+              f"peer/ours CPU: {mp_row['cpu_seconds'] / o['cpu_seconds']:.2f}; "
+              f"validation NRMSE peer/ours: {r['validation_nrmse_modestpy_over_trackingbox']:.3f}")
+    print(f"ours/bound wall: {o['seconds'] / b['seconds']:.1f}; ours/bound CPU: {o['cpu_seconds'] / b['cpu_seconds']:.1f}"
+          f" (the bound counts FMU integration only, at ours' number of runs)")
     if blocked:
         print(f"\nModestPy comparison blocked: {blocked}")
         return 1
