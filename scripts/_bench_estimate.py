@@ -304,7 +304,7 @@ def main() -> int:
         print(json.dumps(doc, indent=2))
         return 0 if blocked is None else 1
     print(f"case: {spec_path}")
-    print(f"validation NRMSE at the start values: "
+    print("validation NRMSE at the start values: "
           + ", ".join(f"{t} {v:.4g}" for t, v in initial.items()))
     width = max(12, *(len(n) for n in problem.names))
     print(f"\n{'':<{width}}  {'trackingbox':>14}  {'ModestPy 0.1.1':>14}")

@@ -27,7 +27,6 @@ This is a benchmark, not a test: minutes to tens of minutes.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import resource
 import subprocess
@@ -198,7 +197,7 @@ def main() -> int:
         if r["states"]:
             print(f"note: {r['bench']} has state compensation: the bound runs with its corrections at 0")
     if memory:
-        print(f"\nmemory: peak RSS of one `trackingbox track` child process (heat exchanger, same pairs)")
+        print("\nmemory: peak RSS of one `trackingbox track` child process (heat exchanger, same pairs)")
         print(f"{'days':>5s} {'rows':>7s} {'peak RSS MiB':>12s} {'wall s':>7s}")
         for d, rss, wall, n in memory:
             print(f"{d:5g} {n:7d} {rss / 1024:12.1f} {wall:7.0f}")

@@ -9,7 +9,6 @@ and ``scripts/bench_tracking``.
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +170,6 @@ def test_case_is_a_historian_export_with_the_plants_fouling(short_case) -> None:
     sp = raw[raw["tag"] == "FIC-6110.SP"]
     assert 10 * 3600 / 600 <= sp["value"].notna().sum() < 0.2 * scans
     # the plant fouls: the recorded resistance grows towards RfInf (3 time constants: 95 %)
-    t = np.asarray(truth["trajectories"]["effect.Rf"]["time"])
     rf = np.asarray(truth["trajectories"]["effect.Rf"]["value"])
     assert np.all(np.diff(rf) >= -1e-12) and rf[-1] > 0.5 * FAST_FOULING["RfInf"]
     assert truth["stoppages"] == [STOP.to_json()]

@@ -1098,7 +1098,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
             if progress is not None:
                 progress("refine", evaluations, total, rms)
 
-        def fun(x: np.ndarray) -> np.ndarray:
+        def fd_fun(x: np.ndarray) -> np.ndarray:
             r = journal.call(label + f"residuals{k}", task, x)
             last["x"], last["r"] = np.array(x, dtype=float), r
             record(x, r)
@@ -1107,6 +1107,7 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
         if jacobian == "exact":
             fun, jac = _exact_functions(_ExactResiduals(train, weights), journal, label + f"exact{k}", record)
         else:
+            fun = fd_fun
             jac = _fd_jacobian(fun, last, task, problem, pool, journal, label + f"residuals{k}", record)
         jac, stop = _step_stop(jac, problem)
         try:
