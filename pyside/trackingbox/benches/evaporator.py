@@ -372,7 +372,8 @@ HEARTBEAT = 600.0
 MEASUREMENT_FORM = "long"
 
 
-def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
+def historian_settings(tags: Sequence[Sensor], start: str, seed: int, *, feed: float | None = None,
+                       flow_band: float = 0.01, pressure_band: float = 300.0) -> Any:
     """Per-tag scan, dead band and heartbeat for :func:`~trackingbox.benches.historian.export_history`.
 
     Valve positions and setpoints are scanned every 2 s (dead band 0.2 % / 0.5 % of the
@@ -380,10 +381,26 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
     temperatures every 10 s (0.3 kPa / 0.2 K), the dry-solids analysers every 60 s
     (0.2 %DS); every tag has the heartbeat :data:`HEARTBEAT`. Two communication losses
     a day on average (5-45 min), half of them taking every tag.
+
+    Parameters
+    ----------
+    tags : sequence of Sensor
+        The tags exported.
+    start : str
+        ISO 8601 time of the first sample.
+    seed : int
+        Seed of the scan jitter and the communication losses.
+    feed : float, optional
+        Nominal feed (kg/s) the flow and setpoint dead bands are fractions of; default
+        this bench's ``NOMINAL["feedFlowSet"]``.
+    flow_band : float
+        Flows' dead band as a fraction of *feed* (default 1 %).
+    pressure_band : float
+        Pressures' dead band (Pa; default 300 Pa).
     """
     from .historian import HistorianSettings, TagSettings
 
-    f0 = NOMINAL["feedFlowSet"]
+    f0 = NOMINAL["feedFlowSet"] if feed is None else float(feed)
     out = {}
     for s in tags:
         if s.tag.endswith(".SP"):
@@ -391,11 +408,11 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
         elif s.tag.startswith("ZI"):
             scan, band = 2.0, 0.002
         elif s.kind == "flow":
-            scan, band = 5.0, 0.01 * f0
+            scan, band = 5.0, flow_band * f0
         elif s.kind == "level":
             scan, band = 5.0, 0.005
         elif s.kind == "pressure":
-            scan, band = 10.0, 300.0
+            scan, band = 10.0, pressure_band
         elif s.kind == "temperature":
             scan, band = 10.0, 0.2
         else:  # dry-solids analysers

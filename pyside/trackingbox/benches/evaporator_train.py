@@ -56,7 +56,8 @@ from ..spec import (
 )
 from . import scenario as sc
 from .base import BenchCase, BenchDefinition, Sensor, _library_path, _on_grid, _tunable_parameters, add_noise, check_overrides
-from .evaporator import Stoppage, stoppage_factor, stoppage_schedule
+#: Heartbeat of every tag (s) and the CSV form of the historian export: the single effect's.
+from .evaporator import HEARTBEAT, MEASUREMENT_FORM, Stoppage, stoppage_factor, stoppage_schedule
 
 log = logging.getLogger(__name__)
 
@@ -85,9 +86,6 @@ DEFAULT_HOURS = 24.0
 #: Feed flow below this fraction of nominal is a stoppage; the settle time after one.
 STOPPAGE_BELOW = 0.3
 STOPPAGE_SETTLE = 1800.0
-#: Heartbeat of every tag (s) and the CSV form of the historian export (as the single effect).
-HEARTBEAT = 600.0
-MEASUREMENT_FORM = "long"
 #: Bounds of every effect's fouling resistance (m2.K/W), as the single effect's.
 RF_BOUNDS = (0.0, 6.0e-4)
 
@@ -267,29 +265,12 @@ def pairing_settings(n: int) -> PairingSettings:
 
 
 def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
-    """Per-tag scan, dead band and heartbeat for the historian export (the single effect's rules,
-    with the flows' dead bands at 1 % of the train's feed and the vacuum pressures' at 0.15 kPa)."""
-    from .historian import HistorianSettings, TagSettings
+    """Per-tag scan, dead band and heartbeat for the historian export: the single effect's rules
+    (:func:`trackingbox.benches.evaporator.historian_settings`) on the train's feed, with the flows'
+    dead band at 0.2 % of it and the vacuum pressures' at 0.15 kPa."""
+    from .evaporator import historian_settings as effect_settings
 
-    f0 = NOMINAL["feedFlowSet"]
-    out = {}
-    for s in tags:
-        if s.tag.endswith(".SP"):
-            scan, band = 2.0, 0.005 * f0
-        elif s.tag.startswith("ZI"):
-            scan, band = 2.0, 0.002
-        elif s.kind == "flow":
-            scan, band = 5.0, 0.002 * f0
-        elif s.kind == "level":
-            scan, band = 5.0, 0.005
-        elif s.kind == "pressure":
-            scan, band = 10.0, 150.0
-        elif s.kind == "temperature":
-            scan, band = 10.0, 0.2
-        else:  # dry-solids analysers
-            scan, band = 60.0, 0.002
-        out[s.tag] = TagSettings(scan=scan, jitter=0.2, deadband=band, heartbeat=HEARTBEAT)
-    return HistorianSettings(tags=out, start=start, seed=int(seed))
+    return effect_settings(tags, start, seed, feed=NOMINAL["feedFlowSet"], flow_band=0.002, pressure_band=150.0)
 
 
 def _scenario(t: FloatArray, rng: np.random.Generator, warmup: float) -> dict[str, FloatArray]:
