@@ -42,7 +42,7 @@ import shutil
 import subprocess
 import sys
 import weakref
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -56,7 +56,7 @@ from ..fmu import ModelExchangeStepper, _fmu_calls, _simulation_failure
 if TYPE_CHECKING:
     from ..fmu import FMUModel, _FMI
 
-__all__ = ["NativeStepper", "native_reason", "library", "SOURCE", "ENV"]
+__all__ = ["NativeStepper", "native_reason", "library", "cpu_seconds", "SOURCE", "ENV"]
 
 log = logging.getLogger(__name__)
 
@@ -144,6 +144,8 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_set_parameters.restype = c_int
     lib.tbn_get_states.argtypes = [c_void_p, ctypes.POINTER(c_double)]
     lib.tbn_get_states.restype = c_int
+    lib.tbn_cpu_seconds.argtypes = []
+    lib.tbn_cpu_seconds.restype = c_double
     lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_stats.restype = None
     return lib
@@ -154,6 +156,24 @@ def library() -> ctypes.CDLL:
     if not sys.platform.startswith("linux"):
         raise NativeUnavailable(f"the native stepper is built for Linux only (this is {sys.platform})")
     return _load(library_path())
+
+
+def cpu_seconds() -> float:
+    """CPU seconds this process spent inside native steps and parameter sets (integration and FMU calls).
+
+    What the integrator alone cost in a run that used :class:`NativeStepper`
+    (the difference of two readings): the benchmarks print it beside the run's
+    own CPU time. 0.0 where the library is not loaded.
+    """
+    if not sys.platform.startswith("linux"):
+        return 0.0
+    try:
+        path = library_path()
+    except OSError:
+        return 0.0
+    if _load.cache_info().currsize == 0 or not path.exists():
+        return 0.0
+    return float(_load(path).tbn_cpu_seconds())
 
 
 def native_reason(model: FMUModel) -> str | None:
@@ -377,13 +397,53 @@ class NativeStepper(ModelExchangeStepper):
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints (one C call)."""
-        self._check_open()
-        out = np.empty(self._nx)
-        if self._lib.tbn_get_states(self._handle, out.ctypes.data_as(ctypes.POINTER(ctypes.c_double))) != _OK:
+        if self._finished:
+            self._check_open()
+        if self._lib.tbn_get_states(self._handle, self._px) != _OK:
             status = ctypes.c_int(0)
             call = self._lib.tbn_failed_call(self._handle, ctypes.byref(status))
             raise _fmi_exception(call.decode(), status.value)
-        return out
+        return self._x[: self._nx].copy()
+
+    def _getter(self, names: tuple[str, ...]) -> Callable[[], npt.NDArray[np.float64]]:
+        """As the Python path's, with Real reads calling the FMU's ``fmi3GetFloat64`` directly.
+
+        fmpy's wrapper of that call adds a Python frame and a status check per
+        read; this checks the status itself and raises fmpy's exception.
+        """
+        getter = self._getters.get(names)
+        if getter is not None:
+            return getter
+        variables = [self.model.variable(n) for n in names]
+        if not all(v.type in ("Real", "Float64") for v in variables):
+            return super()._getter(names)
+        n = len(variables)
+        vr = (ctypes.c_uint32 * n)(*(int(v.valueReference) for v in variables))
+        buf = np.zeros(n)
+        pbuf = buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        func = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint32), ctypes.c_size_t,
+                                ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)(
+            ctypes.cast(self._fmu.dll.fmi3GetFloat64, ctypes.c_void_p).value)
+        comp = ctypes.c_void_p(self._fmu.component)
+
+        def getter() -> npt.NDArray[np.float64]:
+            status = func(comp, vr, n, pbuf, n)
+            if status > 1:
+                raise _fmi_exception("fmi3GetFloat64", status)
+            return buf.copy()
+
+        self._getters[names] = getter
+        return getter
+
+    def step(self, t_next: float) -> None:
+        """Integrate from :attr:`time` to *t_next* (as :meth:`Stepper.step <trackingbox.fmu.Stepper.step>`)."""
+        if self._finished:
+            self._check_open()
+        t_next = float(t_next)
+        if t_next > self.time + 1e-12 * max(1.0, abs(t_next)):
+            self._advance(t_next)
+        else:
+            super().step(t_next)  # nothing to do, or the error for a step back in time
 
     def solver_statistics(self) -> Mapping[str, int]:
         """CVODE's counters since the last (re-)initialisation: ``steps`` and ``rhs`` evaluations."""

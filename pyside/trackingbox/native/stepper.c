@@ -36,6 +36,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #define TBN_OK 0
 #define TBN_STEP_EVENT 1
@@ -117,6 +118,17 @@ typedef struct tbn {
     int failed_status;
     char error[1024];
 } tbn;
+
+/* CPU seconds spent inside tbn_step and tbn_set_parameters, all instances of this process (tbn_cpu_seconds) */
+static double cpu_total;
+
+static double thread_cpu(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+double tbn_cpu_seconds(void) { return cpu_total; }
 
 static void *sym(void *handle, const char *name, char *err, size_t errlen, int *missing) {
     void *p = dlsym(handle, name);
@@ -322,7 +334,16 @@ double tbn_internal_time(tbn *h) {
  * reached time with its inputs and the returned states, and call
  * fmi3CompletedIntegratorStep when the FMU needs it. *reached is the time reached.
  */
+static int step(tbn *h, double target, int exact, double *reached);
+
 int tbn_step(tbn *h, double target, int exact, double *reached) {
+    double c0 = thread_cpu();
+    int code = step(h, target, exact, reached);
+    cpu_total += thread_cpu() - c0;
+    return code;
+}
+
+static int step(tbn *h, double target, int exact, double *reached) {
     h->failed_call = NULL;
     h->error[0] = '\0';
     double *py = h->s.nv_data(h->y);
@@ -361,8 +382,19 @@ int tbn_step(tbn *h, double target, int exact, double *reached) {
  * CVODE is re-initialised at time. Returns 1 carried, 0 restarted, TBN_TERMINATE, TBN_FMU_FAILED
  * (tbn_failed_call) or TBN_CVODE_FAILED; *next_defined / *next_time: the FMU's next time event.
  */
+static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
+                          int *next_defined, double *next_time);
+
 int tbn_set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
                        int *next_defined, double *next_time) {
+    double c0 = thread_cpu();
+    int code = set_parameters(h, n, vr, values, carry, time, next_defined, next_time);
+    cpu_total += thread_cpu() - c0;
+    return code;
+}
+
+static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
+                          int *next_defined, double *next_time) {
     h->failed_call = NULL;
     h->error[0] = '\0';
     *next_defined = 0;
