@@ -141,25 +141,29 @@ def test_parameter_set_mid_run_follows_the_closed_form(first_order_fmu: Path, re
         assert (st.carried, st.restarts) == ((0, 2) if restart else (2, 0))
 
 
-def test_inputs_table_and_state_overwrite(first_order_fmu: Path) -> None:
-    # u ramps 50 -> 60 over 0..100 s, then held: the table is interpolated in C; compare with the Python path,
-    # then overwrite the state (the solver restarts from it) and check the closed form from there
+def test_inputs_table_input_override_and_state_overwrite(first_order_fmu: Path) -> None:
+    # u ramps 50 -> 60 over 0..100 s (the table, interpolated in C), then u is set to 60.001 at 150 s (carried: the
+    # table no longer drives it); at 200 s the state is overwritten with 40 (the solver restarts from it):
+    # the Python path step for step, and the closed form over the last 100 s
     times = np.array([0.0, 100.0, 200.0])
     inputs = pd.DataFrame({"time": times, "u": [50.0, 60.0, 60.0]})
-    out = {}
+    out, counts = {}, {}
     for use_native in (True, False):
         with FMUModel(first_order_fmu, tolerance=1e-9) as model:
-            st = model.stepper(inputs=inputs, native=use_native)
+            st = model.stepper(inputs=inputs, native=use_native, carry=True)
             ys = []
             for t in np.arange(5.0, 200.1, 5.0):
+                if t == 155.0:
+                    st.set({"u": 60.001}, restart=False)  # a small change: carried
                 st.step(float(t))
                 ys.append(float(st.get(["y"])[0]))
             st.set_continuous_states([40.0])
             assert st.get_continuous_states().tolist() == [40.0]
             st.step(300.0)
             ys.append(float(st.get(["y"])[0]))
-            out[use_native] = np.array(ys)
-    assert out[True][-1] == pytest.approx(_closed_form(40.0, K_TWIN, 100.0, u=60.0), rel=1e-7)
+            out[use_native], counts[use_native] = np.array(ys), (st.restarts, st.carried)
+    assert counts[True] == counts[False] == (0, 1)
+    assert out[True][-1] == pytest.approx(_closed_form(40.0, K_TWIN, 100.0, u=60.001), rel=1e-7)
     assert np.allclose(out[True], out[False], rtol=1e-7, atol=0.0)
 
 

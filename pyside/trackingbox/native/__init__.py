@@ -44,7 +44,7 @@ import sys
 import weakref
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -140,7 +140,7 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_failed_call.argtypes = [c_void_p, ctypes.POINTER(c_int)]
     lib.tbn_failed_call.restype = ctypes.c_char_p
     lib.tbn_set_parameters.argtypes = [c_void_p, c_size_t, ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_double),
-                                       c_int, c_double, ctypes.POINTER(c_int), ctypes.POINTER(c_double)]
+                                       c_int, c_int, c_double, ctypes.POINTER(c_int), ctypes.POINTER(c_double)]
     lib.tbn_set_parameters.restype = c_int
     lib.tbn_get_states.argtypes = [c_void_p, ctypes.POINTER(c_double)]
     lib.tbn_get_states.restype = c_int
@@ -234,6 +234,17 @@ def _fmi_exception(function: str, status: int) -> Exception:
     return FMICallException(function=function, status=status)
 
 
+class _SetPlan(NamedTuple):
+    """How :meth:`NativeStepper.set` writes one tuple of names in C."""
+
+    n: int
+    vr: Any  # ctypes uint32 array of the value references
+    buffer: npt.NDArray[np.float64]
+    pointer: Any  # the buffer's data pointer
+    parameters: tuple[str, ...]  # the tunable parameters among the names (event mode when any)
+    inputs: frozenset[str]
+
+
 class NativeStepper(ModelExchangeStepper):
     """A :class:`~trackingbox.fmu.ModelExchangeStepper` whose integration runs in C (see the module docstring).
 
@@ -253,7 +264,7 @@ class NativeStepper(ModelExchangeStepper):
         self._reached_ref = ctypes.byref(self._reached)
         self._free: weakref.finalize | None = None
         #: names of a set() -> how to write them in C (None: not all tunable Real parameters, the generic path)
-        self._plans: dict[tuple[str, ...], tuple[int, Any, npt.NDArray[np.float64], Any] | None] = {}
+        self._plans: dict[tuple[str, ...], _SetPlan | None] = {}
         self._next_defined = ctypes.c_int(0)
         self._next_time = ctypes.c_double(0.0)
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
@@ -317,53 +328,63 @@ class NativeStepper(ModelExchangeStepper):
 
     # -- stepping -----------------------------------------------------------------------
     def _advance(self, t_next: float) -> None:
-        handle, step_c, reached = self._handle, self._step_c, self._reached
-        name = self.model.path.name
         while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
             target = t_next
             if self._next_event is not None and self.time < self._next_event < t_next:
                 target = self._next_event
-            code = step_c(handle, target, 1 if self._solver.exact else 0, self._reached_ref)
-            if code == _CVODE_FAILED:
-                raise _simulation_failure(f"solver failed in {name} between t = {self.time:g} s and "
-                                          f"t = {target:g} s", _failure_text(self._lib, handle),
-                                          self.model.log_messages, solver=True) from None
-            self.time = float(reached.value)
-            if code == _FMU_FAILED:
-                raise _simulation_failure(f"simulation of {name} failed at t = {self.time:g} s",
-                                          _failure_text(self._lib, handle), self.model.log_messages)
-            if code == _TERMINATE:
-                raise SimulationError(f"{name} requested termination at t = {self.time:g} s")
-            time_event = self._next_event is not None and math.isclose(self.time, self._next_event)
-            if code == _STEP_EVENT or time_event:
-                with _fmu_calls(f"simulation of {name} failed at t = {self.time:g} s", self.model.log_messages):
-                    self._event_iteration()
-                    self._solver.reset(self.time)
-                self._check_states()
-            elif code == _NONFINITE:
-                self._check_states()  # raises, with the Python path's text
+            code = self._step_c(self._handle, target, 1 if self._solver.exact else 0, self._reached_ref)
+            self._after_step(code, target)
         self.time = t_next
 
+    def _after_step(self, code: int, target: float) -> None:
+        """What the Python path does after a solver step towards *target*, from tbn_step's *code*."""
+        name = self.model.path.name
+        if code == _CVODE_FAILED:
+            raise _simulation_failure(f"solver failed in {name} between t = {self.time:g} s and "
+                                      f"t = {target:g} s", _failure_text(self._lib, self._handle),
+                                      self.model.log_messages, solver=True) from None
+        self.time = float(self._reached.value)
+        if code == _FMU_FAILED:
+            raise _simulation_failure(f"simulation of {name} failed at t = {self.time:g} s",
+                                      _failure_text(self._lib, self._handle), self.model.log_messages)
+        if code == _TERMINATE:
+            raise SimulationError(f"{name} requested termination at t = {self.time:g} s")
+        time_event = self._next_event is not None and math.isclose(self.time, self._next_event)
+        if code == _STEP_EVENT or time_event:
+            with _fmu_calls(f"simulation of {name} failed at t = {self.time:g} s", self.model.log_messages):
+                self._event_iteration()
+                self._solver.reset(self.time)
+            self._check_states()
+        elif code == _NONFINITE:
+            self._check_states()  # raises, with the Python path's text
+
     # -- parameters and states between steps ---------------------------------------------
-    def _plan(self, names: tuple[str, ...]) -> tuple[int, Any, npt.NDArray[np.float64], Any] | None:
-        vrs = []
+    def _plan(self, names: tuple[str, ...]) -> _SetPlan | None:
+        params, inputs, vrs = [], [], []
         for name in names:
             v = self.model.variable(name)
-            if not (v.causality == "parameter" and v.variability == "tunable" and v.type in ("Real", "Float64")):
+            if v.type not in ("Real", "Float64"):
                 return None
+            if v.causality == "parameter" and v.variability == "tunable":
+                params.append(name)
+            elif v.causality == "input":
+                inputs.append(name)
+            else:
+                return None  # the Python path raises its error
             vrs.append(int(v.valueReference))
         buf = np.zeros(len(vrs))
-        return (len(vrs), (ctypes.c_uint32 * len(vrs))(*vrs), buf,
-                buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        return _SetPlan(len(vrs), (ctypes.c_uint32 * len(vrs))(*vrs), buf,
+                        buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), tuple(params), frozenset(inputs))
 
     def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
-        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`; tunable Real parameters in C.
+        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
 
-        The event-mode sequence (enter event mode, write, event iteration,
-        continuous-time mode, then carry or re-initialise) is the Python path's,
-        call for call; inputs and other types take the Python path itself.
+        The sequence (event mode when a parameter changes, write, event
+        iteration, continuous-time mode, then carry or re-initialise) is the
+        Python path's, call for call; other types take the Python path itself.
         """
-        self._check_open()
+        if self._finished:
+            self._check_open()
         last = self._last_set
         changed = {n: v for n, v in values.items() if last.get(n) != v}
         if not changed:
@@ -373,26 +394,30 @@ class NativeStepper(ModelExchangeStepper):
             plan = self._plans[key]
         except KeyError:
             plan = self._plans[key] = self._plan(key)
-        if plan is None or any(isinstance(v, str) for v in changed.values()):
+        vals = list(changed.values())
+        if plan is None or str in map(type, vals):
             super().set(values, restart=restart)
             return
-        n, vr, buf, pbuf = plan
-        buf[:] = list(changed.values())
+        if plan.inputs and self._in_names:
+            self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
+        plan.buffer[:] = vals
         carry = not restart and self._solver.exact
-        code = self._lib.tbn_set_parameters(self._handle, n, vr, pbuf, 1 if carry else 0, self.time,
-                                            self._next_defined, self._next_time)
+        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
+                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
         if code < 0:
             name = self.model.path.name
             raise _simulation_failure(f"setting {', '.join(changed)} in {name} at t = {self.time:g} s failed",
                                       _failure_text(self._lib, self._handle), self.model.log_messages)
         if code == _TERMINATE:
             raise SimulationError(f"{self.model.path.name} requested termination at t = {self.time:g} s")
-        self._next_event = float(self._next_time.value) if self._next_defined.value else None
+        if self._next_defined.value >= 0:
+            self._next_event = float(self._next_time.value) if self._next_defined.value else None
         if code == 1:
             self.carried += 1
         else:
             self.restarts += 1
-        self.model.note_changed(key)
+        if plan.parameters:
+            self.model.note_changed(plan.parameters)
         last.update(changed)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
@@ -440,10 +465,17 @@ class NativeStepper(ModelExchangeStepper):
         if self._finished:
             self._check_open()
         t_next = float(t_next)
-        if t_next > self.time + 1e-12 * max(1.0, abs(t_next)):
-            self._advance(t_next)
-        else:
+        if t_next <= self.time + 1e-12 * max(1.0, abs(t_next)):
             super().step(t_next)  # nothing to do, or the error for a step back in time
+        elif self._next_event is None:
+            # one solver call reaches t_next (CV_NORMAL, no time event before it): _advance's loop, once
+            code = self._step_c(self._handle, t_next, 1 if self._solver.exact else 0, self._reached_ref)
+            if code != _OK:
+                self._after_step(code, t_next)
+                self._advance(t_next)
+            self.time = t_next
+        else:
+            self._advance(t_next)
 
     def solver_statistics(self) -> Mapping[str, int]:
         """CVODE's counters since the last (re-)initialisation: ``steps`` and ``rhs`` evaluations."""

@@ -375,26 +375,27 @@ static int step(tbn *h, double target, int exact, double *reached) {
 }
 
 /*
- * Set n tunable Float64 parameters between steps, as the Python path's ModelExchangeStepper.set does:
- * event mode, the values, the event iteration (fmi3UpdateDiscreteStates until it needs no more),
- * continuous-time mode. The change is carried (CVODE goes on) when carry is asked for, CVODE
+ * Set n Float64 tunable parameters and/or inputs between steps, as the Python path's
+ * ModelExchangeStepper.set does: with event (some are parameters) event mode, the values, the event
+ * iteration (fmi3UpdateDiscreteStates until it needs no more), continuous-time mode; without (inputs
+ * only) just the values, and *next_defined = -1 (the next time event is unchanged). The change is carried (CVODE goes on) when carry is asked for, CVODE
  * stands exactly at time (it stopped there) and the event left the states unchanged; otherwise
  * CVODE is re-initialised at time. Returns 1 carried, 0 restarted, TBN_TERMINATE, TBN_FMU_FAILED
  * (tbn_failed_call) or TBN_CVODE_FAILED; *next_defined / *next_time: the FMU's next time event.
  */
-static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
-                          int *next_defined, double *next_time);
+static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int event, int carry,
+                          double time, int *next_defined, double *next_time);
 
-int tbn_set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
-                       int *next_defined, double *next_time) {
+int tbn_set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int event, int carry,
+                       double time, int *next_defined, double *next_time) {
     double c0 = thread_cpu();
-    int code = set_parameters(h, n, vr, values, carry, time, next_defined, next_time);
+    int code = set_parameters(h, n, vr, values, event, carry, time, next_defined, next_time);
     cpu_total += thread_cpu() - c0;
     return code;
 }
 
-static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int carry, double time,
-                          int *next_defined, double *next_time) {
+static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *values, int event, int carry,
+                          double time, int *next_defined, double *next_time) {
     h->failed_call = NULL;
     h->error[0] = '\0';
     *next_defined = 0;
@@ -408,21 +409,28 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
         st = h->get_states(h->fmu, h->x_before, h->nx);
         if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_FMU_FAILED;
     }
-    st = h->enter_event_mode(h->fmu);
-    if (st > 1) return fail(h, "fmi3EnterEventMode", st), TBN_FMU_FAILED;
+    if (event) {
+        st = h->enter_event_mode(h->fmu);
+        if (st > 1) return fail(h, "fmi3EnterEventMode", st), TBN_FMU_FAILED;
+    }
     st = h->set_f64(h->fmu, vr, n, values, n);
     if (st > 1) return fail(h, "fmi3SetFloat64", st), TBN_FMU_FAILED;
-    bool needed = true, terminate = false, nominals, states_changed, defined = false;
-    double when = 0.0;
-    while (needed && !terminate) {
-        st = h->update_discrete_states(h->fmu, &needed, &terminate, &nominals, &states_changed, &defined, &when);
-        if (st > 1) return fail(h, "fmi3UpdateDiscreteStates", st), TBN_FMU_FAILED;
+    if (event) {
+        bool needed = true, terminate = false, nominals, states_changed, defined = false;
+        double when = 0.0;
+        while (needed && !terminate) {
+            st = h->update_discrete_states(h->fmu, &needed, &terminate, &nominals, &states_changed, &defined,
+                                           &when);
+            if (st > 1) return fail(h, "fmi3UpdateDiscreteStates", st), TBN_FMU_FAILED;
+        }
+        if (terminate) return TBN_TERMINATE;
+        *next_defined = defined;
+        *next_time = when;
+        st = h->enter_continuous_time_mode(h->fmu);
+        if (st > 1) return fail(h, "fmi3EnterContinuousTimeMode", st), TBN_FMU_FAILED;
+    } else {
+        *next_defined = -1;  /* no event iteration: the next time event is unchanged */
     }
-    if (terminate) return TBN_TERMINATE;
-    *next_defined = defined;
-    *next_time = when;
-    st = h->enter_continuous_time_mode(h->fmu);
-    if (st > 1) return fail(h, "fmi3EnterContinuousTimeMode", st), TBN_FMU_FAILED;
     double *py = h->s.nv_data(h->y);
     if (carry) {
         st = h->get_states(h->fmu, py, h->nx);
