@@ -213,7 +213,8 @@ def main() -> int:
         if r["reason"]:
             print(f"  ({r['bench']}: Python path because {r['reason']})")
     print("(integrator CPU = CPU inside the native stepper's C calls over the run, both twins: CVODE, the "
-          "FMU's right-hand side, parameter changes; TRACKINGBOX_NATIVE=0 runs the Python path)")
+          "FMU's right-hand side, parameter changes; the plain twin runs on the same stepper as ours; "
+          "TRACKINGBOX_NATIVE=0 runs both on the Python path)")
     for r in rows:
         if r["states"]:
             print(f"note: {r['bench']} has state compensation: the bound runs with its corrections at 0")
