@@ -167,6 +167,25 @@ def test_inputs_table_input_override_and_state_overwrite(first_order_fmu: Path) 
     assert np.allclose(out[True], out[False], rtol=1e-7, atol=0.0)
 
 
+def test_extended_inputs_table(first_order_fmu: Path) -> None:
+    # the online mode: the run goes on over a longer table whose first rows are the current one; with u held at
+    # 60 after 100 s the state follows the closed form from its value at 100 s, on both paths alike
+    t = np.arange(0.0, 301.0, 10.0)
+    full = pd.DataFrame({"time": t, "u": np.where(t <= 100.0, 50.0 + 0.1 * t, 60.0)})
+    out = {}
+    for use_native in (True, False):
+        with FMUModel(first_order_fmu, tolerance=1e-9) as model:
+            st = model.stepper(inputs=full[full.time <= 100.0], native=use_native, carry=True)
+            st.step(100.0)
+            x100 = float(st.get(["y"])[0])
+            st.extend_inputs(full)
+            st.step(300.0)
+            out[use_native] = (x100, float(st.get(["y"])[0]))
+    x100, x300 = out[True]
+    assert x300 == pytest.approx(_closed_form(x100, K_TWIN, 200.0, u=60.0), rel=1e-7)
+    assert out[True] == pytest.approx(out[False], rel=1e-9)
+
+
 # --------------------------------------------------------------------------- failures: same text as the Python path
 
 @pytest.fixture(scope="module")

@@ -260,6 +260,8 @@ class NativeStepper(ModelExchangeStepper):
                  inputs: pd.DataFrame | None, max_step: float | None) -> None:
         self._lib = library()
         self._handle: int | None = None
+        #: the input table's arrays C reads in place (kept referenced here)
+        self._c_inputs: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
         self._reached = ctypes.c_double(0.0)
         self._reached_ref = ctypes.byref(self._reached)
         self._free: weakref.finalize | None = None
@@ -301,6 +303,7 @@ class NativeStepper(ModelExchangeStepper):
             return
         if self._in_set is None or self._in_times is None or self._in_table is None:
             self._lib.tbn_set_inputs(self._handle, 0, None, 0, None, None)
+            self._c_inputs = None
             return
         vrs = [int(self.model.variable(n).valueReference) for n in self._in_names]
         vr = (ctypes.c_uint32 * len(vrs))(*vrs)
@@ -309,7 +312,9 @@ class NativeStepper(ModelExchangeStepper):
         dp = ctypes.POINTER(ctypes.c_double)
         if self._lib.tbn_set_inputs(self._handle, len(vrs), vr, t.size, t.ctypes.data_as(dp),
                                     u.ctypes.data_as(dp)) != 0:
-            raise MemoryError(f"no memory for the input table of {self.model.path.name} ({t.size} rows)")
+            raise MemoryError(f"no memory for the input table of {self.model.path.name}")
+        # C reads these arrays in place (no copy): they live as long as C may read them
+        self._c_inputs = (t, u)
 
     def _drop_inputs(self, names: set[str]) -> None:
         before = list(self._in_names)
@@ -325,6 +330,7 @@ class NativeStepper(ModelExchangeStepper):
         super().finish()
         if self._free is not None:
             self._free()  # the CVODE instance goes now; the FMU instance stays with its model
+        self._c_inputs = None
 
     # -- stepping -----------------------------------------------------------------------
     def _advance(self, t_next: float) -> None:

@@ -105,7 +105,8 @@ typedef struct tbn {
     /* inputs: nt rows of nin values, row-major */
     size_t nin, nt, cursor;
     uint32_t *in_vr;
-    double *in_t, *in_u, *u;
+    const double *in_t, *in_u;  /* the caller's (see tbn_set_inputs) */
+    double *u;
     /* CVODE */
     SUNContext ctx;
     N_Vector y, abstol;
@@ -202,7 +203,7 @@ void tbn_free(tbn *h) {
     if (h->y) h->s.nv_destroy(h->y);
     if (h->abstol) h->s.nv_destroy(h->abstol);
     if (h->ctx) h->s.context_free(&h->ctx);
-    free(h->in_vr); free(h->in_t); free(h->in_u); free(h->u);
+    free(h->in_vr); free(h->u);
     free(h->x_before);
     free(h);
 }
@@ -299,17 +300,20 @@ failed:
     return NULL;
 }
 
-/* Copy the input table (nt rows: time then nin values, given as separate arrays). */
+/*
+ * Use this input table from now on: nt times t and nt rows of nin values u (row-major). The value
+ * references are copied; t and u are NOT: the caller keeps them alive and unchanged until the next
+ * tbn_set_inputs or tbn_free (one copy of a long table in the process, not two).
+ */
 int tbn_set_inputs(tbn *h, size_t nin, const uint32_t *vr, size_t nt, const double *t, const double *u) {
     uint32_t *nvr = calloc(nin + 1, sizeof *nvr);
-    double *nt_ = calloc(nt + 1, sizeof *nt_), *nu = calloc(nt * nin + 1, sizeof *nu), *row = calloc(nin + 1, sizeof *row);
-    if (!nvr || !nt_ || !nu || !row) { free(nvr); free(nt_); free(nu); free(row); return -1; }
+    double *row = calloc(nin + 1, sizeof *row);
+    if (!nvr || !row) { free(nvr); free(row); return -1; }
     if (nin) memcpy(nvr, vr, nin * sizeof *nvr);
-    if (nt) memcpy(nt_, t, nt * sizeof *nt_);
-    if (nt && nin) memcpy(nu, u, nt * nin * sizeof *nu);
-    free(h->in_vr); free(h->in_t); free(h->in_u); free(h->u);
-    h->in_vr = nvr; h->in_t = nt_; h->in_u = nu; h->u = row;
-    h->nin = nt ? nin : 0;
+    free(h->in_vr); free(h->u);
+    h->in_vr = nvr; h->u = row;
+    h->in_t = t; h->in_u = u;
+    h->nin = nt && t && u ? nin : 0;
     h->nt = nt;
     h->cursor = 0;
     return 0;
