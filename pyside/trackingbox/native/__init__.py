@@ -18,17 +18,24 @@ small C library, ``stepper.c`` beside this file:
   derivatives) and interpolates the input table in C with the formula
   :meth:`~trackingbox.fmu.Stepper._input_values` uses.
 
-Python still sets parameters and inputs through fmpy between steps, runs event
-iterations and reads variables, so only the integration moved. With the same
-arithmetic in the same order, a native run reproduces the Python path's
-trajectory (the tests bound the difference by the integrator's tolerance).
+Between steps, a change of Real tunable parameters and/or inputs (:meth:`NativeStepper.set`)
+runs the Python path's sequence in C call for call (event mode when a parameter
+changes, the values, the event iteration, continuous-time mode, then carry or
+re-initialise CVODE); continuous states and Real values are read with one C
+call each. Python still initialises the FMU through fmpy, runs event
+iterations after a step event, and takes other variable types through fmpy.
+With the same arithmetic in the same order, a native run reproduces the Python
+path's trajectory (bit for bit on the bench twins; the tests bound the
+difference by the integrator's tolerance). :func:`cpu_seconds` is the CPU
+spent inside the C calls, what the integrator alone costs in a run.
 
 The library is built once per source version with the machine's C compiler
 (``$CC``, default ``gcc``) into a per-user cache (``$XDG_CACHE_HOME`` or
 ``~/.cache``, then ``trackingbox/native/stepper-<hash>.so``) and loaded with
-ctypes. :func:`native_reason` says why a model cannot have it: not Linux,
-``TRACKINGBOX_NATIVE=0``, not FMI 3, co-simulation, event indicators, no
-continuous states, no compiler or a failed build.
+ctypes. :func:`native_reason` says why a model cannot have it: not Linux, not
+FMI 3, co-simulation, event indicators, no continuous states, no compiler or a
+failed build; :meth:`FMUModel.stepper <trackingbox.fmu.FMUModel.stepper>` also
+takes the Python path when ``TRACKINGBOX_NATIVE=0``.
 """
 from __future__ import annotations
 
