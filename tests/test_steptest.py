@@ -142,12 +142,3 @@ def test_time_to_63_of_first_order_response():
     y = 3.0 - 2.0 * np.exp(-(t - 100.0) / 12.0)  # from 1 to 3 with tau = 12 s
     assert time_to_63(t, y, 1.0, 3.0) == pytest.approx(12.0, abs=0.01)
 
-
-def test_scheduler_without_dask_is_a_clear_error():
-    try:
-        import dask.distributed  # noqa: F401
-    except ImportError:
-        with pytest.raises(AnalysisError, match="dask"):
-            make_executor(address="tcp://127.0.0.1:1")
-    else:
-        pytest.skip("dask.distributed is installed; the missing-dask message cannot be checked")
