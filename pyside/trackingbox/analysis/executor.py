@@ -295,12 +295,12 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
 
 
 def _local_cluster(workers: int) -> DaskExecutor:
-    """A Dask ``LocalCluster`` of *workers* single-threaded processes on 127.0.0.1 (no dashboard)."""
+    """A Dask ``LocalCluster`` of *workers* one-thread processes on 127.0.0.1 (HTTP on a free local port)."""
     from dask.distributed import Client, LocalCluster
 
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None)
+                               dashboard_address="127.0.0.1:0")
     except Exception as exc:  # noqa: BLE001 - start-up failures come as OSError/TimeoutError/RuntimeError
         raise AnalysisError(f"--scheduler local: cannot start a Dask cluster of {workers} workers on "
                             f"127.0.0.1: {exc}") from None
