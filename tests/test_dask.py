@@ -5,7 +5,8 @@ the whole module (started once per session). The tests compare the Dask path
 with the other executors, which run the same tasks elsewhere: the step tests'
 gain matrix bit for bit against the serial path, an estimate against the
 process pool's (differential evolution with the same generation-wise updates),
-and each worker opens an FMU once however many tasks it runs.
+the diagnosis' parallel runs against the serial ones, and each worker opens an
+FMU once however many tasks it runs.
 """
 from __future__ import annotations
 
@@ -108,6 +109,37 @@ def test_estimate_on_dask_gives_the_process_pool_estimate(hx_fmu, tmp_path, dask
     # the twin (the case's copy) opened once per worker that ran an evaluation
     opens = _opens_per_worker(dask_cluster, spec.twin)
     assert 1 <= sum(opens.values()) <= 2 and all(n <= 1 for n in opens.values()), opens
+
+
+def test_diagnosis_runs_on_dask_give_the_serial_series_and_jacobian(hx_fmu, tmp_path, dask_cluster):
+    # the null model's series and output Jacobian (1 + n runs per window) as jobs on the cluster,
+    # against the serial forward differences run one after the other in this process
+    from _fixtures_estimation import plant_data, write_case
+
+    from trackingbox.diagnose.parallel import pool
+    from trackingbox.diagnose.residuals import output_jacobian, series_and_jacobian, window_series
+    from trackingbox.estimation import close_models, load_windows, problem_from_spec
+    from trackingbox.spec import load_spec
+
+    table = plant_data(hx_fmu, 1250.0, hours=2.0, noise=0.1, seed=5)
+    spec = load_spec(write_case(tmp_path, hx_fmu, table, training=(0.0, 3600.0), validation=(3600.0, 7200.0)))
+    problem = problem_from_spec(spec, warmup=1800.0)
+    windows = load_windows(spec, warmup=problem.warmup)
+    x = np.array([1100.0])
+    try:
+        serial = [window_series(problem, w, x, spec.inputs) for w in windows]
+        serial_jac = [output_jacobian(problem, w, x, spec.inputs, s) for w, s in zip(windows, serial)]
+    finally:
+        close_models()
+    before = _opens_per_worker(dask_cluster, spec.twin)
+    with pool(2, dask_cluster.scheduler_address):
+        series, jac = series_and_jacobian(problem, windows, x, spec.inputs)
+    opened = _opens_per_worker(dask_cluster, spec.twin)
+    assert 1 <= sum(opened.values()) - sum(before.values()) <= 2  # the jobs ran on the workers
+    for s, s0, j, j0 in zip(series, serial, jac, serial_jac):
+        np.testing.assert_array_equal(s.simulated["TI-1"], s0.simulated["TI-1"])
+        np.testing.assert_array_equal(j["TI-1"], j0["TI-1"])
+        assert np.any(j["TI-1"] != 0.0)
 
 
 def test_cached_model_is_keyed_by_content(hx_fmu, step_fmu, tmp_path):

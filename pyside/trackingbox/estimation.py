@@ -1243,15 +1243,16 @@ def _parallel(workers: int | None, scheduler: str | None) -> bool:
 def _open_pool(workers: int | None, scheduler: str | None) -> Any:
     """The executor of the population and the fd Jacobian columns; ``None``: evaluate in this process.
 
-    Local worker processes (*workers* > 1) or a Dask cluster (*scheduler*), from
-    :func:`trackingbox.analysis.executor.make_executor`: its ``map`` keeps the
-    order of the points, so the search takes the same path on either.
+    Local worker processes (*workers* > 1; spawned, so that their CPU time counts
+    as this process's children's, which diagnosis reports) or a Dask cluster
+    (*scheduler*), from :func:`trackingbox.analysis.executor.make_executor`: its
+    ``map`` keeps the order of the points, so the search takes the same path on either.
     """
     if not _parallel(workers, scheduler):
         return None
     from .analysis.executor import make_executor
 
-    return make_executor(scheduler, workers if workers is not None or scheduler else 1)
+    return make_executor(scheduler, workers if workers is not None or scheduler else 1, start_method="spawn")
 
 
 def _close_pool(pool: Any, *, failed: bool = False) -> None:

@@ -238,7 +238,7 @@ def default_workers() -> int:
 
 
 def make_executor(address: str | None = None, workers: int | None = None, *,
-                  timeout: float | None = None) -> Executor:
+                  timeout: float | None = None, start_method: str | None = None) -> Executor:
     """An executor for independent simulation tasks: one way for every parallel stage.
 
     Parameters
@@ -258,6 +258,10 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
     timeout : float, optional
         Seconds to wait for the scheduler to answer (default :data:`CONNECT_TIMEOUT`)
         and, on an existing cluster, for its first worker (default :data:`WORKER_TIMEOUT`).
+    start_method : {"forkserver", "spawn"}, optional
+        How the process pool starts its workers (default: forkserver where there is
+        one). ``"spawn"`` makes them children of this process, so that their CPU time
+        counts as this process's children's once the pool is shut down.
 
     Returns
     -------
@@ -290,7 +294,9 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
     logger.info("running on %d local worker processes", workers)
     # fresh worker processes: an FMU instance (and its extracted files) must not be shared
     # with the parent through fork
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    method = start_method or ("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
+    if method not in ("forkserver", "spawn"):
+        raise AnalysisError(f"start_method must be 'forkserver' or 'spawn' (fresh processes), not {method!r}")
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
 
 
