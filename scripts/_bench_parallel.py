@@ -15,9 +15,11 @@ on each executor:
 Each executor is started (and its workers warmed by trivial tasks) before the
 timing, as a cluster is up before a stage uses it; the start-up is printed apart.
 It prints each run's wall time and CPU time (this process plus its workers), the
-speed-up of 2 workers over 1 for both kinds (target :data:`TARGET`), whether the
-gain matrices are identical bit for bit, and the round trip of a trivial task
-(submit, wait) on each executor. Exit code 1 when a speed-up misses the target.
+speed-up of 2 workers over 1 for both kinds (target :data:`TARGET`), the
+speed-up the one-worker Dask run's task times allow on 2 workers (Amdahl: the
+baseline and the reference run each run alone), whether the gain matrices are
+identical bit for bit, and the round trip of a trivial task (submit, wait) on
+each executor. Exit code 1 when a speed-up misses the target.
 This is a benchmark, not a test: on a loaded machine the wall times (and so the
 speed-ups) are the machine's, read the CPU times beside them.
 
@@ -107,9 +109,10 @@ def _run(spec: Any, kind: str, workers: int, overhead_tasks: int) -> dict[str, A
         list(ex.map(_noop, range(4 * workers)))
         start = time.perf_counter() - t
         cpu_workers0 = _workers_cpu(ex)
-        wall0, cpu0 = time.perf_counter(), time.process_time()
-        result = pair(spec, PairSettings(data_checks=False, second_point="none"), executor=ex)
-        wall = time.perf_counter() - wall0
+        with _task_stream(ex) as stream:
+            wall0, cpu0 = time.perf_counter(), time.process_time()
+            result = pair(spec, PairSettings(data_checks=False, second_point="none"), executor=ex)
+            wall = time.perf_counter() - wall0
         cpu = time.process_time() - cpu0 + _workers_cpu(ex) - cpu_workers0
         trip = _round_trip(ex, overhead_tasks)
     finally:
@@ -117,7 +120,44 @@ def _run(spec: Any, kind: str, workers: int, overhead_tasks: int) -> dict[str, A
     st = result.steptest
     return {"kind": kind, "workers": workers, "start_seconds": start, "wall_seconds": wall, "cpu_seconds": cpu,
             "runs": st.runs, "round_trip_ms": 1e3 * trip, "gains": st.gains,
-            "pairs": [(p.variable, p.parameter) for p in result.pairing.pairs]}
+            "pairs": [(p.variable, p.parameter) for p in result.pairing.pairs],
+            "tasks": _task_times(stream)}
+
+
+def _task_stream(ex: Any) -> Any:
+    """Dask's record of the tasks run (start, stop) while the block runs; nothing for other executors."""
+    from contextlib import nullcontext
+
+    from trackingbox.analysis.executor import DaskExecutor
+
+    if isinstance(ex, DaskExecutor):
+        from dask.distributed import get_task_stream
+
+        return get_task_stream(ex.client)
+    return nullcontext(None)
+
+
+def _task_times(stream: Any) -> list[tuple[float, float]]:
+    """``(start, stop)`` of every task's compute, in start order (s from the first)."""
+    if stream is None:
+        return []
+    spans = sorted((s["start"], s["stop"]) for d in stream.data for s in d["startstops"] if s["action"] == "compute")
+    t0 = spans[0][0] if spans else 0.0
+    return [(a - t0, b - t0) for a, b in spans]
+
+
+def _bound(tasks: list[tuple[float, float]], workers: int = 2) -> float:
+    """Speed-up on *workers* workers that the one-worker task times allow (Amdahl).
+
+    The run submits the baseline, then the reference run, each alone (the first
+    two tasks); the rest run side by side. Re-runs against an extended reference
+    count as parallel work here, so this is an upper bound.
+    """
+    durations = [b - a for a, b in tasks]
+    if len(durations) < 3:
+        return math.nan
+    chain, rest = sum(durations[:2]), sum(durations[2:])
+    return (chain + rest) / (chain + rest / workers)
 
 
 def _case(effects: int, hours: float, seed: int) -> Path:
@@ -162,6 +202,8 @@ def main() -> int:
         speedups["pool"] = by[("serial", 1)]["wall_seconds"] / by[("pool", 2)]["wall_seconds"]
     if "dask" in kinds:
         speedups["dask"] = by[("dask", 1)]["wall_seconds"] / by[("dask", 2)]["wall_seconds"]
+    if ("dask", 1) in by:
+        by[("dask", 1)]["amdahl_bound_2"] = _bound(by[("dask", 1)]["tasks"])
     first = rows[0]
     identical = all(np.array_equal(first["gains"], r["gains"], equal_nan=True) and first["pairs"] == r["pairs"]
                     for r in rows[1:])
@@ -180,6 +222,12 @@ def main() -> int:
         for r in rows:
             print(f"{r['kind']:<10} {r['workers']:>7} {r['start_seconds']:>8.1f} {r['wall_seconds']:>8.1f} "
                   f"{r['cpu_seconds']:>8.1f} {r['round_trip_ms']:>14.2f}")
+        bound = by.get(("dask", 1), {}).get("amdahl_bound_2")
+        if bound is not None:
+            tasks = by[("dask", 1)]["tasks"]
+            print(f"one worker's task times (dask x 1): baseline {tasks[0][1] - tasks[0][0]:.1f} s, reference run "
+                  f"{tasks[1][1] - tasks[1][0]:.1f} s (each alone), {len(tasks) - 2} more tasks "
+                  f"{sum(b - a for a, b in tasks[2:]):.1f} s: at most {bound:.2f}x on 2 workers")
         for kind, s in speedups.items():
             print(f"speed-up of 2 workers over 1 ({kind}): {s:.2f}x (target {TARGET}x){'' if s >= TARGET else ': MISSED'}")
         print(f"gain matrices and pairs identical on every executor: {'yes' if identical else 'NO'}")
