@@ -300,10 +300,17 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
 
 
+def _quiet_dask() -> None:
+    """Dask's own INFO lines (scheduler, nanny, comms) only when trackingbox logs at DEBUG (``-vv``)."""
+    if not logger.isEnabledFor(logging.DEBUG):
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+
+
 def _local_cluster(workers: int) -> DaskExecutor:
     """A Dask ``LocalCluster`` of *workers* one-thread processes on 127.0.0.1 (HTTP on a free local port)."""
     from dask.distributed import Client, LocalCluster
 
+    _quiet_dask()
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0")
@@ -323,6 +330,7 @@ def _connect(address: str, timeout: float | None) -> DaskExecutor:
     """A client of the existing Dask scheduler at *address*, with at least one worker."""
     from dask.distributed import Client
 
+    _quiet_dask()
     wait = CONNECT_TIMEOUT if timeout is None else float(timeout)
     try:
         client = Client(address, timeout=wait)
