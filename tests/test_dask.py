@@ -3,7 +3,7 @@
 One ``LocalCluster`` of two single-threaded worker processes on 127.0.0.1 serves
 the whole module (started once per session). The tests compare the Dask path
 with the other executors, which run the same tasks elsewhere: the step tests'
-gain matrix bit for bit against the serial path, an estimate against the
+gain matrix bit for bit against the serial path, Sobol indices likewise, an estimate against the
 process pool's (differential evolution with the same generation-wise updates),
 the diagnosis' parallel runs against the serial ones, and each worker opens an
 FMU once however many tasks it runs.
@@ -88,6 +88,31 @@ def test_step_tests_on_dask_give_the_serial_gain_matrix_bit_for_bit(hx_case, das
     opened = {w: after[w] - before.get(w, 0) for w in after}
     assert b.runs > len(after) and all(n <= 1 for n in opened.values()), (b.runs, opened)
     assert sum(after.values()) <= len(after)
+
+
+def test_sobol_runs_on_dask_give_the_serial_indices(step_fmu, dask_cluster):
+    # the step-test twin of test_steptest with its integrator frozen: y1 = (1.5 a + z + 0.5 b) / 0.9, so a
+    # explains 2.25 / 3.25 of y1's variance and b the rest, and b most of y2's (test_sobol's hand variances)
+    from dask.distributed import Client
+
+    from trackingbox.analysis.executor import DaskExecutor
+    from trackingbox.analysis.sobol import sobol_indices
+    from trackingbox.analysis.steptest import StepSettings, make_problem
+
+    prob = make_problem(step_fmu, outputs={"Y1": "y1", "Y2": "y2"},
+                        parameters=[("a", 1.0, 0.5, 1.5), ("b", 2.0, 1.0, 3.0)],
+                        operating={"u": 1.5}, ranges={"Y1": 1.0, "Y2": 1.0}, freeze={"hold": 1.0})
+    settings = StepSettings(freeze=(("hold", 1.0),), interval=1.0, window=50.0, tolerance=1e-6, max_time=2000.0)
+    serial = sobol_indices(prob, settings, n=8)
+    ex = DaskExecutor(Client(dask_cluster.scheduler_address))
+    try:
+        dask = sobol_indices(prob, settings, n=8, executor=ex)
+    finally:
+        ex.shutdown()
+    assert dask.runs == serial.runs == 8 * 4
+    np.testing.assert_array_equal(dask.first, serial.first)
+    np.testing.assert_array_equal(dask.total, serial.total)
+    assert dask.total[0, 0] > dask.total[0, 1] and dask.total[1, 1] > dask.total[1, 0]  # n = 8: coarse
 
 
 def test_estimate_on_dask_gives_the_process_pool_estimate(hx_fmu, tmp_path, dask_cluster):
