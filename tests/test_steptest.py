@@ -143,11 +143,25 @@ def test_time_to_63_of_first_order_response():
     assert time_to_63(t, y, 1.0, 3.0) == pytest.approx(12.0, abs=0.01)
 
 
-def test_scheduler_without_dask_is_a_clear_error():
-    try:
-        import dask.distributed  # noqa: F401
-    except ImportError:
-        with pytest.raises(AnalysisError, match="dask"):
-            make_executor(address="tcp://127.0.0.1:1")
-    else:
-        pytest.skip("dask.distributed is installed; the missing-dask message cannot be checked")
+
+def test_a_short_first_reference_run_gives_the_results_of_a_full_one(step_fmu):
+    # the reference run is first recorded over 60 s only: the steps of c (y7 = slow + 3 x3, tau 20 s, drift
+    # corrected) run past it, stop, and run again against references of 240 s and 960 s; every figure must be
+    # what one reference over the whole max_time gives, and the gain the hand-solved dy7/dc = 3
+    from dataclasses import replace
+
+    prob = make_problem(step_fmu, outputs={"Y7": "y7", "Y1": "y1"}, parameters=[("c", 1.0, 0.0, 2.0),
+                                                                                  ("a", 1.0, 0.5, 1.5)],
+                        ranges={"Y7": 1.0, "Y1": 1.0}, operating={"u": U}, freeze={"hold": 1.0})
+    settings = StepSettings(freeze=(("hold", 1.0),), interval=1.0, window=50.0, tolerance=1e-5,
+                            baseline_tolerance=1e-2, max_time=3000.0)
+    full = step_tests(prob, replace(settings, reference_horizon=3000.0))
+    short = step_tests(prob, replace(settings, reference_horizon=60.0))
+    for name in ("gains", "gains_up", "gains_down", "asymmetry", "time_constants", "baseline"):
+        np.testing.assert_array_equal(getattr(short, name), getattr(full, name), err_msg=name)
+    assert full.gains[0, 0] == pytest.approx(3.0, rel=1e-3)
+    assert full.runs == 2 + 2 * 2
+    assert short.runs > full.runs  # the extended references and the steps run again
+    assert StepSettings().first_reference_horizon() == 12000.0  # max(20 windows of 600 s, 86400 s / 8)
+    with pytest.raises(AnalysisError, match="reference_horizon"):
+        StepSettings(reference_horizon=0.0)

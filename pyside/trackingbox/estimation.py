@@ -77,7 +77,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -310,34 +309,32 @@ class Problem:
     warmup: float
 
 
-# One open twin per process and FMU path: worker processes keep theirs across evaluations.
-_MODELS: dict[str, Any] = {}
+# One open twin per process, FMU path and content: worker processes (a pool's or a Dask cluster's)
+# keep theirs across evaluations (trackingbox.analysis.executor.cached_model).
 
 
 def _model(path: Path) -> Any:
-    key = str(path)
-    model = _MODELS.get(key)
-    if model is None:
-        from .fmu import FMUModel
+    from .analysis.executor import cached_model
 
-        model = FMUModel(path)
-        _MODELS[key] = model
-    return model
+    return cached_model(path)
 
 
 def _forget_models() -> None:
     """Pool initializer: a fresh worker owns no FMU yet."""
-    _MODELS.clear()
+    from .analysis import executor
+
+    with executor._LOCK:
+        executor._MODELS.clear()
 
 
 def close_models() -> None:
-    """Close the twins this process has opened for estimation."""
-    for model in _MODELS.values():
-        try:
-            model.close()
-        except Exception:  # noqa: BLE001 - closing is best effort
-            log.debug("closing %s failed", model, exc_info=True)
-    _MODELS.clear()
+    """Close the twins this process has opened (estimation's and the analysis runs' cache)."""
+    from .analysis.executor import clear_model_cache
+
+    try:
+        clear_model_cache()
+    except Exception:  # noqa: BLE001 - closing is best effort
+        log.debug("closing the cached twins failed", exc_info=True)
 
 
 def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
@@ -832,6 +829,7 @@ def estimate(
     resume: bool = False,
     refine_grid: float | None = None,
     jacobian: str = "auto",
+    scheduler: str | None = None,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -842,8 +840,9 @@ def estimate(
     seed
         Seed of the global search: the same seed gives the same result.
     workers
-        Processes evaluating the population in parallel (``None`` or 1: in this
-        process). Each worker opens the twin once.
+        Processes evaluating the population and the finite-difference Jacobian
+        columns in parallel (``None`` or 1: in this process). Each worker opens
+        the twin once.
     maxiter
         Generations of differential evolution (0: only the start values and the
         refinement); default :func:`default_maxiter`.
@@ -887,6 +886,12 @@ def estimate(
         if the twin cannot), ``"fd"`` (forward differences: ``1 + n`` runs) or
         ``"auto"`` (exact where the twin supports it, else fd). What was used,
         and why not exact, is in the result's ``refinement``.
+    scheduler
+        Run the parallel evaluations on a Dask cluster instead of local processes:
+        ``"local"`` (a local cluster of *workers* processes) or a scheduler's
+        address (``tcp://host:8786``); see
+        :func:`trackingbox.analysis.executor.make_executor`. The result is the same
+        as with local worker processes (the same points, evaluated elsewhere).
 
     Returns
     -------
@@ -909,7 +914,7 @@ def estimate(
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
                          checkpoint=checkpoint, global_grid=global_grid, resume=resume,
-                         refine_grid=refine_grid, jacobian=jacobian)
+                         refine_grid=refine_grid, jacobian=jacobian, scheduler=scheduler)
     finally:
         close_models()
 
@@ -1209,23 +1214,53 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
               warmup: float | None,
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
               checkpoint: str | Path | None, global_grid: float | None, resume: bool = False,
-              refine_grid: float | None = None, jacobian: str = "auto") -> EstimationResult:
+              refine_grid: float | None = None, jacobian: str = "auto",
+              scheduler: str | None = None) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
     journal = Journal(journal_path(ckpt) if ckpt is not None else None,
                       _identity(spec, problem, seed=seed, maxiter=maxiter, popsize=popsize, refine=refine,
                                 refine_iterations=refine_iterations, global_grid=global_grid,
-                                refine_grid=refine_grid, parallel=int(workers or 1) > 1,
+                                refine_grid=refine_grid, parallel=_parallel(workers, scheduler),
                                 **({} if jacobian == "fd" else {"jacobian": jacobian})), resume=resume)
     try:
         return _run(spec, problem, journal, t_start=t_start, ckpt=ckpt, seed=seed, workers=workers,
                     maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
-                    progress=progress, global_grid=global_grid, refine_grid=refine_grid, jacobian=jacobian)
+                    progress=progress, global_grid=global_grid, refine_grid=refine_grid, jacobian=jacobian,
+                    scheduler=scheduler)
     finally:
         if resume:
             log.info("%d evaluations served from the journal %s", journal.served, journal.path)
         journal.close()
+
+
+def _parallel(workers: int | None, scheduler: str | None) -> bool:
+    """Whether the evaluations go to an executor (then differential evolution updates generation-wise)."""
+    return scheduler is not None or int(workers or 1) > 1
+
+
+def _open_pool(workers: int | None, scheduler: str | None) -> Any:
+    """The executor of the population and the fd Jacobian columns; ``None``: evaluate in this process.
+
+    Local worker processes (*workers* > 1; spawned, so that their CPU time counts
+    as this process's children's, which diagnosis reports) or a Dask cluster
+    (*scheduler*), from :func:`trackingbox.analysis.executor.make_executor`: its
+    ``map`` keeps the order of the points, so the search takes the same path on either.
+    """
+    if not _parallel(workers, scheduler):
+        return None
+    from .analysis.executor import make_executor
+
+    return make_executor(scheduler, workers if workers is not None or scheduler else 1, start_method="spawn")
+
+
+def _close_pool(pool: Any, *, failed: bool = False) -> None:
+    """Shut the executor down; after a failure or an interrupt without waiting for running evaluations."""
+    if pool is not None:
+        from .analysis.executor import stop_executor
+
+        stop_executor(pool, wait=not failed)
 
 
 def journal_path(checkpoint: str | Path) -> Path:
@@ -1247,7 +1282,8 @@ def _identity(spec: Any, problem: Problem, **settings: Any) -> dict[str, Any]:
 def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt: Path | None, seed: int,
          workers: int | None, maxiter: int, popsize: int | None, refine: bool, refine_iterations: int,
          progress: ProgressCallback | None, global_grid: float | None,
-         refine_grid: float | None = None, jacobian: str = "auto") -> EstimationResult:
+         refine_grid: float | None = None, jacobian: str = "auto",
+         scheduler: str | None = None) -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
@@ -1263,10 +1299,7 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
     history.append(start_cost)
     log.info("start values: cost %.6g (%s)", start_cost, _fmt(problem.names, best_x))
 
-    n_workers = int(workers or 1)
-    pool = None
-    if n_workers > 1 and (maxiter > 0 or refine):
-        pool = multiprocessing.get_context("spawn").Pool(n_workers, initializer=_forget_models)
+    pool = _open_pool(workers, scheduler) if maxiter > 0 or refine else None
     try:
         if maxiter > 0:
             stride = max(1, int(math.floor((global_grid or DEFAULT_GLOBAL_GRID) / problem.sample_time + 1e-9)))
@@ -1320,13 +1353,9 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
             if progress is not None:
                 progress("local", 1, 1, best_cost)
     except BaseException:
-        if pool is not None:  # interrupted or failed: do not wait for running evaluations
-            pool.terminate()
-            pool.join()
+        _close_pool(pool, failed=True)
         raise
-    if pool is not None:
-        pool.close()
-        pool.join()
+    _close_pool(pool)
 
     if best_cost >= FAILED_COST:
         raise EstimationError(

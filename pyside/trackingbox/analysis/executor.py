@@ -1,15 +1,24 @@
-"""Executors for the analysis runs: the machine's cores, or a Dask cluster.
+"""Executors for the parallel stages: the machine's cores, or a Dask cluster.
 
-Step tests and Sobol samples are independent simulations. They are submitted
-to a :class:`concurrent.futures.Executor`; each worker process opens an FMU once
-(:func:`cached_model`) and reuses it for every task it receives.
+Step tests, Sobol samples, estimation's population and its finite-difference
+Jacobian columns are independent simulations. They are submitted to a
+:class:`concurrent.futures.Executor` from :func:`make_executor`: the calling
+process (``workers=1``), a local process pool (the default), a local Dask
+cluster (``address="local"``) or an existing Dask cluster (``address=
+"tcp://host:8786"``). Each worker process extracts and instantiates an FMU once
+(:func:`cached_model`, keyed by the FMU's path and content) and reuses it for
+every task it receives; the tasks do the same arithmetic wherever they run, so
+the results do not depend on the executor.
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import multiprocessing
 import os
+import socket
 import threading
+from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from pathlib import Path
@@ -19,12 +28,69 @@ from ..errors import AnalysisError
 
 logger = logging.getLogger(__name__)
 
-_MODELS: dict[tuple[str, float], Any] = {}
+#: most FMUs one thread keeps open; its least recently used one is closed past it (a long-lived
+#: Dask worker sees the FMUs of many runs)
+MAX_CACHED_MODELS = 8
+#: seconds to wait for a Dask scheduler to answer (``--scheduler tcp://...``)
+CONNECT_TIMEOUT = 10.0
+#: seconds to wait for the first worker of a Dask cluster (a scheduler without workers would hang)
+WORKER_TIMEOUT = 60.0
+#: ``--scheduler`` value that starts a local Dask cluster of ``--workers`` processes on 127.0.0.1
+LOCAL = "local"
+
+_MODELS: OrderedDict[tuple[str, str, float, int], Any] = OrderedDict()
+_DIGESTS: dict[str, tuple[tuple[int, int, int], str]] = {}
+_OPENS: Counter[str] = Counter()
 _LOCK = threading.Lock()
 
 
+def fmu_digest(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of the file at *path*, computed again only when its size, mtime or inode change.
+
+    Parameters
+    ----------
+    path : path-like
+        FMU file.
+
+    Returns
+    -------
+    str
+        Hex digest.
+
+    Raises
+    ------
+    AnalysisError
+        If the file cannot be read here (on a cluster: the FMU must be on a file
+        system every worker sees under the same path).
+    """
+    name = str(Path(path).resolve())
+    try:
+        st = os.stat(name)
+        stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
+        known = _DIGESTS.get(name)
+        if known is not None and known[0] == stamp:
+            return known[1]
+        h = hashlib.sha256()
+        with open(name, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError as exc:
+        raise AnalysisError(f"FMU {name} cannot be read on host {socket.gethostname()} (process {os.getpid()}): "
+                            f"{exc.strerror or exc}; on a cluster every worker must see the FMU under the "
+                            "same path") from None
+    _DIGESTS[name] = (stamp, h.hexdigest())
+    return h.hexdigest()
+
+
 def cached_model(path: str | os.PathLike[str], tolerance: float = 1e-6) -> Any:
-    """The :class:`trackingbox.fmu.FMUModel` for *path*, opened once per process.
+    """The :class:`trackingbox.fmu.FMUModel` for *path*, extracted and instantiated once per process.
+
+    The cache is keyed by the FMU's resolved path, its content (SHA-256,
+    :func:`fmu_digest`), *tolerance* and the calling thread: a worker process
+    that lives longer than one run (a Dask worker) opens a rewritten FMU afresh
+    and never runs a stale one, and two threads of one worker (a Dask worker
+    with ``--nthreads 2``) never share an instance, which is not thread-safe.
+    At most :data:`MAX_CACHED_MODELS` per thread stay open (least recently used closed).
 
     Parameters
     ----------
@@ -39,22 +105,42 @@ def cached_model(path: str | os.PathLike[str], tolerance: float = 1e-6) -> Any:
     """
     from ..fmu import FMUModel
 
-    key = (str(Path(path).resolve()), float(tolerance))
+    name = str(Path(path).resolve())
     with _LOCK:
+        key = (name, fmu_digest(name), float(tolerance), threading.get_ident())
         model = _MODELS.get(key)
         if model is None or model.closed:
-            logger.debug("process %d opens %s", os.getpid(), key[0])
-            model = FMUModel(key[0], tolerance=key[1])
+            logger.debug("process %d opens %s", os.getpid(), name)
+            model = FMUModel(name, tolerance=key[2])
+            _OPENS[name] += 1
             _MODELS[key] = model
+        _MODELS.move_to_end(key)
+        mine = [k for k in _MODELS if k[3] == key[3]]  # another thread's model may be running
+        for old in mine[:max(0, len(mine) - MAX_CACHED_MODELS)]:
+            _MODELS.pop(old).close()
         return model
 
 
-def clear_model_cache() -> None:
-    """Close and forget every cached FMU of this process."""
+def model_opens() -> dict[str, int]:
+    """How many times this process has opened each FMU (path -> count) through :func:`cached_model`.
+
+    On a cluster, ``client.run(model_opens)`` gives every worker's counts: one
+    per FMU and worker, however many tasks each ran.
+    """
     with _LOCK:
-        for model in _MODELS.values():
-            model.close()
+        return dict(_OPENS)
+
+
+def clear_model_cache() -> None:
+    """Close and forget every cached FMU of this process (the open counts stay)."""
+    with _LOCK:
+        models = list(_MODELS.values())
         _MODELS.clear()
+    for model in models:
+        try:
+            model.close()
+        except Exception:  # noqa: BLE001 - closing is best effort
+            logger.debug("closing %s failed", model, exc_info=True)
 
 
 class SerialExecutor(Executor):
@@ -81,12 +167,27 @@ class SerialExecutor(Executor):
         self._shutdown = True
 
 
-class _DaskExecutor(Executor):
-    """A Dask ``Client.get_executor()`` that closes its client on shutdown."""
+class DaskExecutor(Executor):
+    """Tasks on a Dask cluster: ``Client.get_executor(pure=False)``, closing what it started on shutdown.
 
-    def __init__(self, client: Any) -> None:
-        self._client = client
-        self._inner = client.get_executor()
+    Parameters
+    ----------
+    client : distributed.Client
+        Connected client.
+    cluster : distributed.LocalCluster, optional
+        A cluster this executor started (closed on shutdown); ``None`` for an existing one.
+    """
+
+    def __init__(self, client: Any, cluster: Any = None) -> None:
+        self.client = client
+        self.cluster = cluster
+        # pure=False: every submission is a task of its own (no key shared between equal calls)
+        self._inner = client.get_executor(pure=False)
+
+    @property
+    def workers(self) -> int:
+        """Workers connected to the scheduler now."""
+        return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
         return self._inner.submit(fn, *args, **kwargs)
@@ -99,7 +200,33 @@ class _DaskExecutor(Executor):
         try:
             self._inner.shutdown(wait=wait)
         finally:
-            self._client.close()
+            try:
+                self.client.close()
+            finally:
+                if self.cluster is not None:
+                    self.cluster.close()
+
+
+_DaskExecutor = DaskExecutor  # the former private name
+
+
+def stop_executor(executor: Executor, *, wait: bool = True) -> None:
+    """Shut *executor* down; with ``wait=False`` cancel what has not started and stop what runs.
+
+    A local process pool's workers are terminated (an interrupted estimation
+    must not wait for, nor leave behind, a run in progress); a Dask cluster's
+    running tasks are cancelled through their futures.
+    """
+    if wait:
+        executor.shutdown(wait=True)
+        return
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for process in processes:  # ProcessPoolExecutor: no public way to stop a running task before 3.14
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5)
 
 
 def default_workers() -> int:
@@ -110,29 +237,43 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def make_executor(address: str | None = None, workers: int | None = None) -> Executor:
-    """An executor for independent simulation tasks.
+def make_executor(address: str | None = None, workers: int | None = None, *,
+                  timeout: float | None = None, start_method: str | None = None) -> Executor:
+    """An executor for independent simulation tasks: one way for every parallel stage.
 
     Parameters
     ----------
     address : str, optional
-        Address of a Dask distributed scheduler (``tcp://host:8786``). When
-        given, tasks run on that cluster through ``Client(address).get_executor()``
-        (needs ``dask[distributed]``; the FMU path must be readable by the workers).
+        ``None``: local worker processes (a process pool; the default path).
+        ``"local"`` (:data:`LOCAL`): a Dask ``LocalCluster`` of *workers* processes
+        (one thread each) on 127.0.0.1, started here and closed on shutdown.
+        Otherwise the address of an existing Dask distributed scheduler
+        (``tcp://host:8786``): tasks run on its workers, which must see the FMU
+        under the same path (a shared file system) and have trackingbox installed.
     workers : int, optional
-        Number of local worker processes; default: all cores this process may
-        use. ``1`` runs tasks in the calling process (:class:`SerialExecutor`).
+        Number of local worker processes (process pool or local cluster); default:
+        all cores this process may use. ``1`` without *address* runs tasks in the
+        calling process (:class:`SerialExecutor`). Ignored for an existing cluster
+        (its workers are what it has).
+    timeout : float, optional
+        Seconds to wait for the scheduler to answer (default :data:`CONNECT_TIMEOUT`)
+        and, on an existing cluster, for its first worker (default :data:`WORKER_TIMEOUT`).
+    start_method : {"forkserver", "spawn"}, optional
+        How the process pool starts its workers (default: forkserver where there is
+        one). ``"spawn"`` makes them children of this process, so that their CPU time
+        counts as this process's children's once the pool is shut down.
 
     Returns
     -------
     concurrent.futures.Executor
-        Use as a context manager, or call ``shutdown()``.
+        Use as a context manager, or call ``shutdown()``. On every executor each
+        worker process extracts and instantiates an FMU once (:func:`cached_model`).
 
     Raises
     ------
     AnalysisError
-        If *workers* is not positive, dask is not installed, or the scheduler
-        cannot be reached.
+        If *workers* is not positive, the scheduler cannot be reached, or the
+        cluster has no worker.
 
     Examples
     --------
@@ -140,26 +281,69 @@ def make_executor(address: str | None = None, workers: int | None = None) -> Exe
     ...     ex.submit(pow, 2, 10).result()
     1024
     """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise AnalysisError(f"--workers must be an integer >= 1, got {workers!r}")
+    if address == LOCAL:
+        return _local_cluster(workers or default_workers())
     if address:
-        try:
-            from dask.distributed import Client
-        except ImportError:
-            raise AnalysisError(f"--scheduler {address} needs Dask distributed, which is not installed: "
-                                "pip install 'dask[distributed]' (or 'trackingbox[dask]')") from None
-        try:
-            client = Client(address, timeout=30)
-        except Exception as exc:  # noqa: BLE001 - dask raises OSError/TimeoutError variants
-            raise AnalysisError(f"cannot connect to the Dask scheduler at {address}: {exc}") from None
-        logger.info("running on Dask scheduler %s", address)
-        return _DaskExecutor(client)
+        return _connect(address, timeout)
     if workers is None:
         workers = default_workers()
-    if workers < 1:
-        raise AnalysisError(f"--workers must be at least 1, got {workers}")
     if workers == 1:
         return SerialExecutor()
     logger.info("running on %d local worker processes", workers)
     # fresh worker processes: an FMU instance (and its extracted files) must not be shared
     # with the parent through fork
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    method = start_method or ("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
+    if method not in ("forkserver", "spawn"):
+        raise AnalysisError(f"start_method must be 'forkserver' or 'spawn' (fresh processes), not {method!r}")
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
+
+
+def _quiet_dask() -> None:
+    """Dask's own INFO lines (scheduler, nanny, comms) only when trackingbox logs at DEBUG (``-vv``)."""
+    if not logger.isEnabledFor(logging.DEBUG):
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+
+
+def _local_cluster(workers: int) -> DaskExecutor:
+    """A Dask ``LocalCluster`` of *workers* one-thread processes on 127.0.0.1 (HTTP on a free local port)."""
+    from dask.distributed import Client, LocalCluster
+
+    _quiet_dask()
+    try:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0")
+    except Exception as exc:  # noqa: BLE001 - start-up failures come as OSError/TimeoutError/RuntimeError
+        raise AnalysisError(f"--scheduler local: cannot start a Dask cluster of {workers} workers on "
+                            f"127.0.0.1: {exc}") from None
+    try:
+        client = Client(cluster)
+    except BaseException:
+        cluster.close()
+        raise
+    logger.info("running on a local Dask cluster of %d workers (%s)", workers, cluster.scheduler_address)
+    return DaskExecutor(client, cluster)
+
+
+def _connect(address: str, timeout: float | None) -> DaskExecutor:
+    """A client of the existing Dask scheduler at *address*, with at least one worker."""
+    from dask.distributed import Client
+
+    _quiet_dask()
+    wait = CONNECT_TIMEOUT if timeout is None else float(timeout)
+    try:
+        client = Client(address, timeout=wait)
+    except Exception as exc:  # noqa: BLE001 - dask raises OSError/TimeoutError/ValueError variants
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise AnalysisError(f"--scheduler {address}: cannot connect to a Dask scheduler there within "
+                            f"{wait:g} s ({reason})") from None
+    try:
+        client.wait_for_workers(1, timeout=WORKER_TIMEOUT if timeout is None else float(timeout))
+    except Exception:  # noqa: BLE001 - a TimeoutError
+        client.close()
+        raise AnalysisError(f"--scheduler {address}: the scheduler has no worker (waited "
+                            f"{WORKER_TIMEOUT if timeout is None else timeout:g} s)") from None
+    executor = DaskExecutor(client)
+    logger.info("running on the Dask scheduler %s (%d workers)", address, executor.workers)
+    return executor

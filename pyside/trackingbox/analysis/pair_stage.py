@@ -79,6 +79,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -89,6 +90,8 @@ import pandas as pd
 from ..errors import AnalysisError, SpecError
 
 if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
     from ..spec import PairSpec, Spec
     from .pairing import Pairing
     from .sobol import Agreement, SobolResult
@@ -148,7 +151,9 @@ class PairSettings:
     samples, seed
         Sobol base sample size and seed.
     workers, scheduler
-        Local worker processes (``None``: all cores) or a Dask scheduler address.
+        Local worker processes (``None``: all cores), or a Dask cluster: ``"local"``
+        (*workers* processes on 127.0.0.1) or a scheduler address ``tcp://host:8786``
+        (:func:`~trackingbox.analysis.executor.make_executor`).
     """
 
     method: Method = "rga"
@@ -358,7 +363,7 @@ def _counter(progress: StageProgress | None, stage: str) -> Callable[[int, int],
 
 
 def pair(spec: Spec, settings: PairSettings | None = None, *,
-         progress: StageProgress | None = None) -> PairingResult:
+         progress: StageProgress | None = None, executor: Executor | None = None) -> PairingResult:
     """Choose a tracking parameter for each tracking variable of *spec*.
 
     Parameters
@@ -369,6 +374,10 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         Step-test, data-check and assignment settings (defaults: ``PairSettings()``).
     progress : callable, optional
         ``progress(stage, runs_done, runs_total)`` while simulations run.
+    executor : concurrent.futures.Executor, optional
+        Run the simulations there (e.g. a running Dask cluster's, from
+        :func:`~trackingbox.analysis.executor.make_executor`; left running);
+        default: one made from ``settings.workers`` and ``settings.scheduler``.
 
     Returns
     -------
@@ -417,7 +426,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     if s.check_gains not in ("recording", "structure"):
         raise AnalysisError(f"check_gains {s.check_gains!r}: expected 'recording' or 'structure'")
     sob = st2 = st_rec = None
-    with make_executor(s.scheduler, s.workers) as ex:
+    with make_executor(s.scheduler, s.workers) if executor is None else nullcontext(executor) as ex:
         log.info("step tests: %d parameters x %d directions, %d variables", len(params),
                  2 if s.two_sided else 1, len(tags))
         st = step_tests(problem, step_settings, ex, progress=_counter(progress, "step runs"))

@@ -31,8 +31,7 @@ from .steptest import (
     StepSettings,
     baseline,
     default_ranges,
-    reference_run,
-    run_all,
+    run_against_reference,
 )
 
 logger = logging.getLogger(__name__)
@@ -209,13 +208,12 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
     X = sample_parameters(problem.parameters, problem.lower, problem.upper, n, seed=seed)
     logger.info("Sobol: %d runs (N = %d, %d parameters)", X.shape[0], n, len(problem.parameters))
     base = baseline(problem, settings, executor)
-    reference = reference_run(problem, settings, base, executor)
     plans = [RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
                      base.freeze_time, base.step_time, tuple(zip(problem.parameters, map(float, x))),
                      label=f"Sobol sample {k}", states=base.states, compensation=problem.compensation,
-                     levels_ref=base.levels_ref, reference=reference)
+                     levels_ref=base.levels_ref)
              for k, x in enumerate(X)]
-    results = run_all(plans, executor, progress)
+    _, results, _ = run_against_reference(problem, settings, base, plans, executor, progress)
     Y = np.array([r.after for r in results])
     return indices_from_outputs(problem.variables, problem.parameters, problem.lower, problem.upper, Y, n,
                                 seed=seed, seconds=_time.perf_counter() - t_wall)

@@ -75,6 +75,14 @@ class StepSettings:
         Run the baseline on without any step (a reference run) and measure each
         response against it, ``y_step(t) - y_ref(t)``, so a slow residual drift
         (a large tank still warming up) is not mistaken for a gain.
+    reference_horizon : float, optional
+        Length (s after the step time) of the first reference run. The reference
+        run is on every step run's critical path (they are measured against it),
+        so it first covers only this much of ``max_time``; a step run that needs
+        more of it stops, and is run again against a reference four times as long
+        (up to ``max_time``). A reference's values do not depend on how far it
+        runs, so the results are those of a reference over the whole ``max_time``.
+        Default (None): ``max(20 * window, max_time / 8)``, at most ``max_time``.
     """
 
     step: float = 0.05
@@ -88,6 +96,7 @@ class StepSettings:
     solver_tolerance: float = 1e-8
     warm_start: bool = True
     drift_correction: bool = True
+    reference_horizon: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("step", "interval", "window", "tolerance", "baseline_tolerance", "max_time",
@@ -98,6 +107,15 @@ class StepSettings:
         if self.window < self.interval:
             raise AnalysisError(f"step-test window ({self.window:g} s) is shorter than the interval "
                                 f"({self.interval:g} s)")
+        h = self.reference_horizon
+        if h is not None and not (isinstance(h, (int, float)) and math.isfinite(h) and h > 0):
+            raise AnalysisError(f"step-test setting reference_horizon must be a positive number, got {h!r}")
+
+    def first_reference_horizon(self) -> float:
+        """Seconds after the step time the first reference run covers (see ``reference_horizon``)."""
+        h = self.reference_horizon if self.reference_horizon is not None else max(20.0 * self.window,
+                                                                                   self.max_time / 8.0)
+        return float(min(h, self.max_time))
 
 
 @dataclass(frozen=True)
@@ -186,6 +204,7 @@ class RunPlan:
     levels_ref: tuple[float, ...] | None = None
     reference: np.ndarray | None = field(default=None, repr=False, compare=False)
     record: bool = False
+    horizon: float | None = None  # reference run: seconds recorded after the step time (None: max_time)
 
 
 @dataclass(frozen=True)
@@ -202,6 +221,7 @@ class RunResult:
     trajectory: np.ndarray
     states: tuple[float, ...] | None = None
     levels_ref: tuple[float, ...] | None = None
+    short: bool = False  # a step run that needed more of the reference than its plan carried
 
 
 class _Settle:
@@ -319,12 +339,13 @@ def run_plan(plan: RunPlan) -> RunResult:
     k_step = k
     n_max = int(math.ceil(s.max_time / s.interval))
     if plan.record:  # reference run: no change, the whole horizon
+        n_rec = n_max if plan.horizon is None else min(n_max, int(math.ceil(plan.horizon / s.interval - 1e-9)))
         traj_ref = [before]
-        for kk in range(k_step + 1, k_step + n_max + 1):
+        for kk in range(k_step + 1, k_step + n_rec + 1):
             traj_ref.append(advance(kk))
         arr = np.array(traj_ref)
-        return RunResult(plan.label, freeze_time, step_time, before, arr[-1], (k_step + n_max) * s.interval,
-                         s.interval * np.arange(k_step, k_step + n_max + 1), arr)
+        return RunResult(plan.label, freeze_time, step_time, before, arr[-1], (k_step + n_rec) * s.interval,
+                         s.interval * np.arange(k_step, k_step + n_rec + 1), arr)
     if not plan.change:
         states = None
         if s.warm_start:
@@ -349,9 +370,12 @@ def run_plan(plan: RunPlan) -> RunResult:
                 f"step test {plan.label}: the response did not settle within {s.max_time:g} s of the step "
                 f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}")
         k += 1
+        if ref_traj is not None and k - k_step >= len(ref_traj):  # past a shortened reference: run again
+            return RunResult(plan.label, freeze_time, step_time, before, traj[-1], (k - 1) * s.interval,
+                             np.array(times), np.array(traj), short=True)
         y = advance(k)
         if ref_traj is not None:
-            y = before + (y - ref_traj[min(k - k_step, len(ref_traj) - 1)])
+            y = before + (y - ref_traj[k - k_step])
         times.append(k * s.interval)
         traj.append(y)
         if det.push(k * s.interval, y):
@@ -629,19 +653,59 @@ def baseline(problem: StepProblem, settings: StepSettings, executor: Executor | 
 
 
 def reference_run(problem: StepProblem, settings: StepSettings, base: RunResult,
-                  executor: Executor | None = None) -> np.ndarray | None:
-    """Outputs of the unstepped twin from the step time over ``max_time`` (None without drift correction)."""
+                  executor: Executor | None = None, horizon: float | None = None) -> np.ndarray | None:
+    """Outputs of the unstepped twin from the step time over *horizon* s (default ``max_time``; None without
+    drift correction)."""
     if not settings.drift_correction:
         return None
     plan = RunPlan(problem.fmu, problem.start_values(), problem.outputs, problem.ranges, settings,
                    base.freeze_time, base.step_time, (), label="reference run", states=base.states,
-                   compensation=problem.compensation, levels_ref=base.levels_ref, record=True)
+                   compensation=problem.compensation, levels_ref=base.levels_ref, record=True, horizon=horizon)
     res = run_plan(plan) if executor is None else executor.submit(run_plan, plan).result()
     drift = np.abs(res.trajectory - res.trajectory[0]).max(axis=0)
     for i in np.flatnonzero(drift > np.asarray(problem.ranges) * settings.tolerance):
         logger.info("%s drifts by %.3g over %g s without a step: responses are measured against that drift",
-                    problem.outputs[i], drift[i], settings.max_time)
+                    problem.outputs[i], drift[i], res.end_time - res.step_time)
     return res.trajectory
+
+
+def run_against_reference(problem: StepProblem, settings: StepSettings, base: RunResult,
+                          plans: Sequence[RunPlan], executor: Executor | None = None,
+                          progress: Progress | None = None) -> tuple[np.ndarray | None, list[RunResult], int]:
+    """The reference run and *plans* measured against it: ``(reference, results, runs)``.
+
+    The reference is on every plan's critical path, so it first covers
+    :meth:`StepSettings.first_reference_horizon`; the plans that run past it
+    (:attr:`RunResult.short`) are run again against one four times as long, up
+    to ``max_time``. The results are those against a reference over the whole
+    ``max_time`` (a reference's values do not depend on how far it runs);
+    *runs* counts every run made, re-runs included.
+    """
+    if not settings.drift_correction:
+        return None, run_all(plans, executor, progress), len(plans)
+    total = len(plans)
+    results: list[RunResult | None] = [None] * total
+    todo = list(range(total))
+    horizon = settings.first_reference_horizon()
+    finished = runs = 0
+    while True:
+        reference = reference_run(problem, settings, base, executor, horizon=horizon)
+        counted = None if progress is None else (lambda done, _n, f=finished: progress(min(f + done, total), total))
+        batch = run_all([replace(plans[i], reference=reference) for i in todo], executor, counted)
+        runs += 1 + len(todo)
+        short = [i for i, r in zip(todo, batch) if r.short]
+        for i, r in zip(todo, batch):
+            if not r.short:
+                results[i] = r
+        finished = total - len(short)
+        if not short:
+            return reference, [r for r in results if r is not None], runs
+        if horizon >= settings.max_time:  # cannot happen: a full reference covers every step's run
+            raise AnalysisError(f"step test {plans[short[0]].label}: ran past a reference run over max_time")
+        logger.info("%d of %d runs need more than %g s of the reference run: extending it", len(short), total,
+                    horizon)
+        horizon = min(settings.max_time, 4.0 * horizon)
+        todo = short
 
 
 def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
@@ -674,7 +738,6 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
     base = baseline(problem, settings, executor)
     logger.info("baseline settled: controllers frozen at t = %g s, steady at t = %g s",
                 base.freeze_time, base.step_time)
-    reference = reference_run(problem, settings, base, executor)
     plans: list[tuple[int, int, RunPlan]] = []
     n = len(problem.parameters)
     deltas = np.zeros(n)
@@ -690,8 +753,9 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
                                           settings, base.freeze_time, base.step_time, ((name, value),),
                                           label=f"{'+' if sgn > 0 else '-'}{settings.step:g} step of {name}",
                                           states=base.states, compensation=problem.compensation,
-                                          levels_ref=base.levels_ref, reference=reference)))
-    results = run_all([p for _, _, p in plans], executor, progress)
+                                          levels_ref=base.levels_ref)))
+    reference, results, runs = run_against_reference(problem, settings, base, [p for _, _, p in plans], executor,
+                                                     progress)
     m = len(problem.outputs)
     g_up = np.full((m, n), math.nan)
     g_dn = np.full((m, n), math.nan)
@@ -725,7 +789,7 @@ def step_tests(problem: StepProblem, settings: StepSettings = StepSettings(),
         gains=gains, gains_up=g_up, gains_down=g_dn, asymmetry=asym, time_constants=tau, deltas=deltas,
         baseline=base.before, ranges=np.asarray(problem.ranges, dtype=float), freeze_time=base.freeze_time,
         step_time=base.step_time, operating_point=dict(problem.fixed),
-        runs=1 + (reference is not None) + len(plans), seconds=_time.perf_counter() - t_wall)
+        runs=1 + runs, seconds=_time.perf_counter() - t_wall)
     for v, p, a in result.nonlinear():
         logger.warning("response of %s to %s is asymmetric (+/- step gains differ by %.0f %%)", v, p, 100 * a)
     return result

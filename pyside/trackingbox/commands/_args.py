@@ -69,3 +69,48 @@ def number(*, gt: float | None = None, ge: float | None = None, le: float | None
 
     parse.__name__ = "integer" if integer else "number"
     return parse
+
+
+def scheduler_address(text: str) -> str:
+    """An argparse ``type=`` for ``--scheduler``: ``local`` or a Dask scheduler address.
+
+    The address has a host and a port (``tcp://10.0.0.5:8786``, ``tls://host:8786`` or
+    ``host:8786``); anything else is refused before any work (exit 2).
+
+    >>> scheduler_address("tcp://10.0.0.5:8786"), scheduler_address("local")
+    ('tcp://10.0.0.5:8786', 'local')
+    >>> scheduler_address("10.0.0.5")
+    Traceback (most recent call last):
+    ...
+    argparse.ArgumentTypeError: expected 'local' or a Dask scheduler address tcp://HOST:PORT, got '10.0.0.5'
+    """
+    text = text.strip()
+    if text == "local":
+        return text
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    host, colon, port = rest.rpartition(":")
+    if scheme not in ("tcp", "tls", "inproc", "ucx", "ws", "wss") or not colon or not host or not port.isdigit() \
+            or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(
+            f"expected 'local' or a Dask scheduler address tcp://HOST:PORT, got {text[:80]!r}")
+    return text
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser, *, what: str, default: str) -> None:
+    """``--workers N`` and ``--scheduler ADDRESS|local``: where a stage's parallel runs go.
+
+    Without ``--scheduler`` the runs go to N local worker processes (a process pool;
+    1: this process). ``--scheduler local`` starts a Dask cluster of N single-threaded
+    workers on 127.0.0.1 for the command; ``--scheduler tcp://HOST:PORT`` uses an
+    existing Dask cluster (its workers must see the FMU under the same path).
+    See :func:`trackingbox.analysis.executor.make_executor`.
+    """
+    parser.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=None, metavar="N",
+                        help=f"{what} in N local worker processes (default: {default}); with --scheduler "
+                             "local, the Dask cluster's number of workers")
+    parser.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
+                        help="run them on a Dask cluster instead: tcp://HOST:PORT of an existing scheduler "
+                             "(workers must see the FMU under the same path), or 'local' for a Dask "
+                             "cluster of --workers processes on 127.0.0.1")

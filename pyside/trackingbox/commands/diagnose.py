@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from ._args import number
+from ._args import add_executor_arguments, number
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +54,8 @@ def register(subparsers: Any) -> None:
                    help="candidates fitted properly with --compile (default 2)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
                    help="seed of the null model's estimation (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=None,
-                   help="processes for the estimations (default: 2 when the spec has more than 3 candidates, else 1)")
+    add_executor_arguments(p, what="the estimations and the screening jobs",
+                           default="2 when the spec has more than 3 candidates, else 1")
     p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help="generations of the null model's global search (default 0: least-squares "
                         "refinement from the spec's starts only; give one when the starts are far off)")
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     settings = DiagnoseSettings(
         effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()),
         compile=args.compile, fit_best=args.fit_best, out_dir=args.output, seed=args.seed,
-        workers=args.workers, maxiter=args.maxiter, warmup=args.warmup)
+        workers=args.workers, maxiter=args.maxiter, warmup=args.warmup, scheduler=args.scheduler)
     progress = Progress(every=15.0)
     result = diagnose(spec, settings, progress=lambda stage, done, total: progress(stage, done, total))
     if args.report:

@@ -17,6 +17,7 @@ examples:
   trackingbox estimate case1/spec.toml --write      # estimates become the [[parameters]] start values
   trackingbox estimate case1/spec.toml --report case1/estimate --resume   # continue after an interruption
   trackingbox estimate hp/spec.toml --workers 2 --maxiter 8 --refine-iterations 6   # ~3-4 min budget
+  trackingbox estimate hp/spec.toml --scheduler tcp://10.0.0.5:8786   # population on a Dask cluster
 
 The cost is the NRMSE (RMSE / measured range) per output tag, averaged over the
 tags, on the training window; the validation window reports the NRMSE at the
@@ -29,14 +30,15 @@ Budget: the global search (differential evolution, scored on a --global-grid
 grid) runs --maxiter generations of max(2, ceil(15 / n)) * n individuals; by
 default at most 480 simulations. The refinement then takes up to two passes of
 --refine-iterations least-squares iterations, each 1 + n simulations (the n of
-the Jacobian in parallel over --workers). Progress (with the time left at most)
+the Jacobian in parallel over --workers, or over a Dask cluster's workers with
+--scheduler: the same estimate either way). Progress (with the time left at most)
 goes to stderr.
 """
 
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ._args import number
+    from ._args import add_executor_arguments, number
     from ..estimation import (DEFAULT_GLOBAL_EVALUATIONS, DEFAULT_GLOBAL_GRID, DEFAULT_MAXITER, DEFAULT_POPULATION,
                               DEFAULT_WARMUP, MAX_REFINE_ITERATIONS)
 
@@ -52,8 +54,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write fit plots, convergence trace, parameter table and a checkpoint to DIR")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="seed of the global search (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), default=1,
-                   help="processes evaluating the population (default 1)")
+    add_executor_arguments(p, what="the population and the fd Jacobian columns evaluated",
+                           default="1, in this process")
     p.add_argument("--maxiter", type=number(ge=0, integer=True), default=None,
                    help=f"generations of differential evolution (default {DEFAULT_MAXITER}, fewer when the "
                         f"population times generations would exceed {DEFAULT_GLOBAL_EVALUATIONS} simulations; "
@@ -109,6 +111,7 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
         spec,
         seed=args.seed,
         workers=args.workers,
+        scheduler=args.scheduler,
         maxiter=args.maxiter,
         popsize=args.popsize,
         warmup=args.warmup,

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ._args import number, parse_assignments
+from ._args import add_executor_arguments, number, parse_assignments
 
 EPILOG = """\
 examples:
@@ -15,6 +15,7 @@ examples:
   trackingbox pair ev/spec.toml --freeze holdLevelControllers=1   # flow loop left active
   trackingbox pair case2/spec.toml --method both --samples 64 --workers 2 --json --no-write
   trackingbox pair case2/spec.toml --scheduler tcp://10.0.0.5:8786     # run on a Dask cluster
+  trackingbox pair case2/spec.toml --scheduler local --workers 2       # a local Dask cluster of 2 workers
 
 Procedure (in full: the docstring of trackingbox.analysis.pair_stage): settle
 the twin at an operating point, --freeze its controllers, step each parameter by
@@ -82,9 +83,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
-    p.add_argument("--workers", type=number(ge=1, le=256, integer=True), metavar="N",
-                   help="local worker processes (default: all cores)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="Dask distributed scheduler to run on")
+    add_executor_arguments(p, what="step tests and Sobol runs", default="all cores")
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--report", type=Path, metavar="DIR", help="write RGA/gain heatmaps and a Markdown summary")
     p.add_argument("--no-write", dest="write", action="store_false", help="do not write [[pairs]] to SPEC")

@@ -50,6 +50,9 @@ class FitBudget:
         Grid step (s) of the refinement's cost (``refine_grid`` of
         :func:`trackingbox.estimation.estimate`); None: the full grid. The candidate is
         scored on the full grid.
+    scheduler
+        Dask scheduler of the estimation's evaluations (``scheduler`` of
+        :func:`trackingbox.estimation.estimate`); None: local processes.
     """
 
     maxiter: int = 0
@@ -57,6 +60,7 @@ class FitBudget:
     workers: int | None = None
     warmup: float | None = None
     grid: float | None = None
+    scheduler: str | None = None
 
 
 @dataclass(frozen=True)
@@ -193,7 +197,8 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     pspec = prepared.spec
     log.info("fitting %s on %s (%d parameters)", effect.id, target, len(pspec.parameters))
     est = estimate(pspec, maxiter=budget.maxiter, refine=True, refine_iterations=budget.refine_iterations,
-                   workers=budget.workers, warmup=budget.warmup, refine_grid=budget.grid)
+                   workers=budget.workers, warmup=budget.warmup, refine_grid=budget.grid,
+                   scheduler=budget.scheduler)
     problem = problem_from_spec(pspec, warmup=budget.warmup)
     training, validation = load_windows(pspec, warmup=problem.warmup)
     x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])

@@ -49,14 +49,52 @@ def _call(task: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
     return fn(*args)
 
 
+class _ExecutorPool:
+    """A :mod:`concurrent.futures` executor (a Dask cluster's) behind the two calls this module makes of a pool."""
+
+    def __init__(self, executor: Any) -> None:
+        self.executor = executor
+
+    def map(self, fn: Callable[[Any], Any], items: Sequence[Any], chunksize: int = 1) -> Any:
+        return self.executor.map(fn, items)
+
+    def apply_async(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
+        return _Handle(self.executor.submit(fn, *args))
+
+
+class _Handle:
+    def __init__(self, future: Any) -> None:
+        self._future = future
+
+    def get(self) -> Any:
+        return self._future.result()
+
+
 @contextmanager
-def pool(workers: int) -> Iterator[Any]:
+def pool(workers: int, scheduler: str | None = None) -> Iterator[Any]:
     """Spread :func:`map_calls` over *workers* processes inside the ``with`` block (1: run here).
 
-    Nested use keeps the outer pool; a worker never starts a pool of its own.
+    With *scheduler* (a Dask scheduler's address, or ``"local"``:
+    :func:`trackingbox.analysis.executor.make_executor`) the jobs go to that
+    cluster's workers instead of spawned processes, whose CPU time is then not
+    this process's children's. Nested use keeps the outer pool; a worker never
+    starts a pool of its own.
     """
     if workers <= 1 or _ACTIVE or multiprocessing.parent_process() is not None:
         yield None
+        return
+    if scheduler:
+        from ..analysis.executor import make_executor, stop_executor
+
+        ex = make_executor(scheduler, workers)
+        _ACTIVE.append(_ExecutorPool(ex))
+        ok = False
+        try:
+            yield _ACTIVE[-1]
+            ok = True
+        finally:
+            _ACTIVE.pop()
+            stop_executor(ex, wait=ok)
         return
     p = multiprocessing.get_context("spawn").Pool(workers, initializer=_init_worker)
     _ACTIVE.append(p)

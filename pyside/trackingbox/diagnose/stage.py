@@ -104,6 +104,13 @@ class DiagnoseSettings:
         fit moved the spec's candidates (:func:`trackingbox.diagnose.screen.screen`; each
         costs ``2 (1 + n)`` full-grid runs for ``n`` candidates); None: three, but only one
         when ``n`` is larger than 3.
+    scheduler
+        Run the parallel work (the pools' jobs, and the estimations' evaluations where
+        they use more than one worker) on a Dask cluster instead of spawned processes:
+        a scheduler's address (``tcp://host:8786``), or ``"local"`` for one local
+        cluster of *workers* (default 2) processes for the whole diagnosis
+        (:func:`trackingbox.analysis.executor.make_executor`). The phases' CPU times
+        then leave out the cluster's workers.
     """
 
     effects: tuple[str, ...] = ()
@@ -120,6 +127,7 @@ class DiagnoseSettings:
     null_iterations: int | None = None
     grid: float | None = None
     relinearise: int | None = None
+    scheduler: str | None = None
 
 
 #: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
@@ -263,6 +271,15 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     from ..errors import SpecError
     from . import library
 
+    if settings.scheduler == "local":  # one local cluster for every phase, reached through its address
+        from ..analysis.executor import make_executor
+
+        cluster = make_executor("local", settings.workers or 2)
+        try:
+            return diagnose(spec, replace(settings, scheduler=cluster.cluster.scheduler_address),
+                            progress=progress, null=null)
+        finally:
+            cluster.shutdown()
     t0 = time.perf_counter()
     clock = _Clock()
     clock.start("null")
@@ -281,13 +298,14 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     # the screening's jobs are independent whatever the number of candidates
     screen_workers = settings.workers if settings.workers is not None else min(2, os.cpu_count() or 1)
     grid = settings.grid if settings.grid is not None else (60.0 if n_candidates > 3 else None)
-    options = {"seed": settings.seed, "workers": workers,
+    scheduler = settings.scheduler if workers > 1 else None
+    options = {"seed": settings.seed, "workers": workers, "scheduler": scheduler,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
                "refine_grid": grid or None,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     from .parallel import pool
 
-    with pool(workers):
+    with pool(workers, scheduler):
         # the null's series and output Jacobian: 1 + n independent runs per window
         found = where(spec, null=null, estimate_options=options)
     if progress is not None:
@@ -305,11 +323,11 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
-                           warmup=settings.warmup, grid=grid or None)
+                           warmup=settings.warmup, grid=grid or None, scheduler=scheduler)
         clock.start("screen")
         # the ramps' searches and the compiled patches are screening jobs of their own, spread over
         # screen_workers (they do not depend on each other); the sensor transforms run here meanwhile
-        with pool(screen_workers):
+        with pool(screen_workers, settings.scheduler):
             screened = screen(effects, spec, found, compiled_in=work if settings.compile else None,
                               only=settings.effects, progress=progress,
                               relinearise=(settings.relinearise if settings.relinearise is not None
@@ -325,8 +343,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
             # with their Jacobians spread over the workers, but their serial parts overlap too); a single
             # fit keeps the workers for its Jacobian
             side_by_side = len(best) > 1 and screen_workers > 1
-            one = replace(budget, workers=1) if side_by_side else budget
-            with pool(min(screen_workers, len(best)) if side_by_side else 1):
+            one = replace(budget, workers=1, scheduler=None) if side_by_side else budget
+            with pool(min(screen_workers, len(best)) if side_by_side else 1, settings.scheduler):
                 results = [submit(fit_job, (spec, found, effects[c.effect], c, work, one)) for c in best]
                 for i, (c, result) in enumerate(zip(best, results)):
                     fitted[(c.effect, c.target)] = result()
