@@ -49,9 +49,11 @@ from trackingbox.tracking.runtime import TrackingLoop  # noqa: E402
 
 
 #: Most the peak RSS of the longest memory run may exceed the shortest's (MiB). What still grows
-#: with the run's length is the measurement view's float arrays and the twins' input tables, a few
-#: dozen floats per sample (about 1.7 MiB per day of 10 s samples on the heat exchanger); 16 MiB
-#: leaves the 1-day -> 7-day comparison room for that and for the allocator's noise.
+#: with the run's length is the measurement view's float arrays and the twins' input tables, some
+#: twenty floats per sample: measured on the heat exchanger (10 s samples, loaded machine) 90.8 MiB
+#: for 1 day and 103.3 MiB for 7 days, +2.1 MiB per extra day (before the chunked CSV read: 92.6
+#: and 125.6). 16 MiB covers 1 day -> 7 days with room for the allocator's noise; it is not a
+#: bound for much longer runs (a windowed measurement view would be).
 MEMORY_ALLOWANCE_MIB = 16.0
 
 
