@@ -206,6 +206,7 @@ def main() -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("bench_name", nargs="?", metavar="BENCH", help="bench to generate (same as --bench)")
     parser.add_argument("--bench", default="heat-exchanger", help="bench to generate (default heat-exchanger)")
     parser.add_argument("--spec", type=Path, help="use this spec instead of generating a bench case")
     parser.add_argument("--seed", type=int, default=0, help="bench seed and estimator seed (default 0)")
@@ -222,6 +223,8 @@ def main() -> int:
     parser.add_argument("--venv", type=Path, default=VENV, help=f"ModestPy virtual environment (default {VENV})")
     parser.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     args = parser.parse_args()
+    if args.bench_name:
+        args.bench = args.bench_name
 
     import numpy as np
 
@@ -246,7 +249,8 @@ def main() -> int:
     ours_wall, ours_cpu = time.perf_counter() - t0, cpu_now() - c0
     rows = {"trackingbox": {
         "seconds": ours_wall, "cpu_seconds": ours_cpu, "evaluations": ours.evaluations, "parameters": ours.parameters,
-        "training_nrmse": ours.training_nrmse, "validation_nrmse": ours.validation_nrmse}}
+        "training_nrmse": ours.training_nrmse, "validation_nrmse": ours.validation_nrmse,
+        "refinement": ours.refinement}}
     blocked = None
     if not args.skip_modestpy:
         try:
@@ -334,6 +338,12 @@ def main() -> int:
     print(f"{'mean validation NRMSE':<24}  {mean(o['validation_nrmse']):>12.4g}  "
           f"{(mean(mp_row['validation_nrmse']) if mp_row else float('nan')):>12.4g}  {'':>12}   "
           f"full-grid run: {b['full_run_cpu']:.4f} s CPU)")
+    ref = o.get("refinement") or {}
+    if ref:
+        print(f"\nours' stages: refinement ({ref.get('jacobian')} Jacobian) {ref.get('runs')} runs, "
+              f"{ref.get('seconds', float('nan')):.1f} s wall, {ref.get('cpu_seconds', float('nan')):.1f} s CPU; "
+              f"the rest (start, global search, validation) {o['seconds'] - ref.get('seconds', 0.0):.1f} s wall, "
+              f"{o['cpu_seconds'] - ref.get('cpu_seconds', 0.0):.1f} s CPU")
     if "ratio" in doc:
         r = doc["ratio"]
         print(f"\npeer/ours wall: {r['wall_time_modestpy_over_trackingbox']:.2f}; "

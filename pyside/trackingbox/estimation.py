@@ -116,6 +116,14 @@ DEFAULT_POPULATION = 15
 #: each of its many simulations several times cheaper. The refinement and the reported NRMSE
 #: always use the full ``sample_time`` grid.
 DEFAULT_GLOBAL_GRID = 60.0
+#: The global search stops once the better half of its population (by coarse cost) lies within
+#: this fraction of every parameter's bound range: the population agrees on one basin, and the
+#: refinement (Gauss-Newton steps on the exact Jacobian) walks the rest of the way in a few runs,
+#: where differential evolution would spend a population's worth of runs per generation
+#: contracting onto the same point. Not the best point's movement: a best point that no trial
+#: beat for a few generations may still be far from the minimum. 0 (``settle=0``): run every
+#: generation.
+GLOBAL_SETTLE = 0.1
 #: Each output tag needs at least this many valid samples in each window.
 MIN_VALID_SAMPLES = 20
 #: Cost returned for a parameter set whose simulation fails (NRMSE units; a fit is << 1).
@@ -830,6 +838,7 @@ def estimate(
     refine_grid: float | None = None,
     jacobian: str = "auto",
     scheduler: str | None = None,
+    settle: float = GLOBAL_SETTLE,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -892,6 +901,10 @@ def estimate(
         address (``tcp://host:8786``); see
         :func:`trackingbox.analysis.executor.make_executor`. The result is the same
         as with local worker processes (the same points, evaluated elsewhere).
+    settle
+        Stop the global search once the better half of its population lies within
+        this fraction of every parameter's range (default :data:`GLOBAL_SETTLE`);
+        0: run every generation.
 
     Returns
     -------
@@ -905,6 +918,8 @@ def estimate(
         raise EstimationError("resume needs a checkpoint (trackingbox estimate --resume needs --report DIR)")
     _check_settings(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                     refine_iterations=refine_iterations, global_grid=global_grid)
+    if not (isinstance(settle, (int, float)) and not isinstance(settle, bool) and 0.0 <= settle < 1.0):
+        raise EstimationError(f"estimate: settle must be a fraction in [0, 1), not {settle!r}")
     if jacobian not in JACOBIAN_METHODS:
         raise EstimationError(f"estimate: jacobian must be one of {', '.join(JACOBIAN_METHODS)}, "
                               f"not {jacobian!r}")
@@ -914,7 +929,8 @@ def estimate(
         return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
                          refine=refine, refine_iterations=refine_iterations, progress=progress,
                          checkpoint=checkpoint, global_grid=global_grid, resume=resume,
-                         refine_grid=refine_grid, jacobian=jacobian, scheduler=scheduler)
+                         refine_grid=refine_grid, jacobian=jacobian, scheduler=scheduler,
+                         settle=float(settle))
     finally:
         close_models()
 
@@ -989,12 +1005,15 @@ def _population(n: int, popsize: int | None) -> int:
 def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: Any, journal: Journal, *, seed: int,
                    maxiter: int, popsize: int | None, start_cost: float, history: list[float],
                    best: tuple[np.ndarray, float], progress: ProgressCallback | None,
-                   checkpoint: Callable[[int, np.ndarray, float, int], None]) -> tuple[np.ndarray, float, int]:
+                   checkpoint: Callable[[int, np.ndarray, float, int], None],
+                   settle: float = GLOBAL_SETTLE) -> tuple[np.ndarray, float, int]:
     """Differential evolution on the *coarse* cost; returns best x, its *train* cost, evaluations.
 
     The first population is a Latin hypercube with the start values in it. After
     each generation the population's best point is scored once on the full grid
     (*train*), so the best-so-far and the history are in the cost the report uses.
+    The search stops early once the better half of the population lies within
+    *settle* of each parameter's bound range (:data:`GLOBAL_SETTLE`; 0: never).
     Every evaluation goes through *journal* (served from it when recorded).
     """
     from scipy.optimize import differential_evolution
@@ -1004,9 +1023,11 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
     per_parameter = _population(n, popsize)
     generation = 0
     scored: list[np.ndarray] = []
+    span = problem.upper - problem.lower
+    settled = False
 
     def on_generation(intermediate_result: Any) -> None:
-        nonlocal generation, best_x, best_cost
+        nonlocal generation, best_x, best_cost, settled
         generation += 1
         x = np.array(intermediate_result.x, dtype=float)
         if coarse is train:
@@ -1022,6 +1043,15 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
         checkpoint(generation, best_x, best_cost, (generation + 1) * per_parameter * n + len(scored))
         if progress is not None:
             progress("global", generation, maxiter, best_cost)
+        if settle > 0:
+            extent = _better_half_extent(intermediate_result, span)
+            log.debug("generation %d: better half of the population within %.3g of the ranges", generation, extent)
+            if extent <= settle:
+                settled = True
+                log.info("global search settled after %d generations: the better half of its population lies "
+                         "within %.3g of every parameter's range; the refinement goes on from its best point",
+                         generation, extent)
+                raise StopIteration
 
     def func(x: np.ndarray) -> float:
         return journal.call("coarse", coarse, x)
@@ -1051,9 +1081,19 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
         cost = journal.call("train", train, x)
         if cost < best_cost:
             best_x, best_cost = x, cost
-    log.info("global search: %d generations, %d evaluations (+%d on the full grid), cost %.6g (%s)",
-             de.nit, de.nfev, len(scored), best_cost, _fmt(problem.names, best_x))
+    log.info("global search: %d generations%s, %d evaluations (+%d on the full grid), cost %.6g (%s)",
+             de.nit, " (settled)" if settled else "", de.nfev, len(scored), best_cost, _fmt(problem.names, best_x))
     return best_x, best_cost, int(de.nfev) + len(scored)
+
+
+def _better_half_extent(intermediate_result: Any, span: np.ndarray) -> float:
+    """Largest extent, over the parameters, of the better half of a DE population, in parts of the ranges."""
+    population = np.asarray(getattr(intermediate_result, "population", ()), dtype=float)
+    energies = np.asarray(getattr(intermediate_result, "population_energies", ()), dtype=float)
+    if population.ndim != 2 or population.shape[0] != energies.size or energies.size < 2:
+        return math.inf
+    better = population[np.argsort(energies, kind="stable")[:max(2, energies.size // 2)]]
+    return float(np.max((better.max(axis=0) - better.min(axis=0)) / span))
 
 
 def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, best: tuple[np.ndarray, float], iterations: int,
@@ -1215,7 +1255,7 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
               refine: bool, refine_iterations: int, progress: ProgressCallback | None,
               checkpoint: str | Path | None, global_grid: float | None, resume: bool = False,
               refine_grid: float | None = None, jacobian: str = "auto",
-              scheduler: str | None = None) -> EstimationResult:
+              scheduler: str | None = None, settle: float = GLOBAL_SETTLE) -> EstimationResult:
     t_start = time.perf_counter()
     ckpt = Path(checkpoint) if checkpoint is not None else None
     problem = problem_from_spec(spec, warmup=warmup)
@@ -1223,12 +1263,13 @@ def _estimate(spec: Any, *, seed: int, workers: int | None, maxiter: int, popsiz
                       _identity(spec, problem, seed=seed, maxiter=maxiter, popsize=popsize, refine=refine,
                                 refine_iterations=refine_iterations, global_grid=global_grid,
                                 refine_grid=refine_grid, parallel=_parallel(workers, scheduler),
-                                **({} if jacobian == "fd" else {"jacobian": jacobian})), resume=resume)
+                                **({} if jacobian == "fd" else {"jacobian": jacobian}),
+                                **({} if settle == 0 else {"settle": settle})), resume=resume)
     try:
         return _run(spec, problem, journal, t_start=t_start, ckpt=ckpt, seed=seed, workers=workers,
                     maxiter=maxiter, popsize=popsize, refine=refine, refine_iterations=refine_iterations,
                     progress=progress, global_grid=global_grid, refine_grid=refine_grid, jacobian=jacobian,
-                    scheduler=scheduler)
+                    scheduler=scheduler, settle=settle)
     finally:
         if resume:
             log.info("%d evaluations served from the journal %s", journal.served, journal.path)
@@ -1283,7 +1324,7 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
          workers: int | None, maxiter: int, popsize: int | None, refine: bool, refine_iterations: int,
          progress: ProgressCallback | None, global_grid: float | None,
          refine_grid: float | None = None, jacobian: str = "auto",
-         scheduler: str | None = None) -> EstimationResult:
+         scheduler: str | None = None, settle: float = GLOBAL_SETTLE) -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
     train = Objective(problem, training)
     valid = Objective(problem, validation)
@@ -1309,7 +1350,7 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                                    coarsen(training, stride))
             best_x, best_cost, n_global = _global_search(
                 train, coarse, problem, pool, journal, seed=seed, maxiter=maxiter, popsize=popsize,
-                start_cost=start_cost,
+                start_cost=start_cost, settle=settle,
                 history=history, best=(best_x, best_cost), progress=progress,
                 checkpoint=lambda g, x, c, e: _write_checkpoint(ckpt, {
                     "stage": "global", "iteration": g, "best_cost": c,
