@@ -12,7 +12,13 @@ runs it, pairs found by ``trackingbox pair`` the way a user would), it prints:
   grid), wall and CPU seconds of its integration loop, and how far its outputs
   are from the plain twin's column in ``tracking.csv`` (a check that it is the
   same computation);
-* the ratios run/plain, run/bound and plain/bound.
+* the ratios run/plain, run/bound and plain/bound;
+* which stepper ran the twins (``NativeStepper``: CVODE and the right-hand
+  side in C, ``trackingbox.native``; or ``ModelExchangeStepper``, the Python
+  path, with the reason; ``TRACKINGBOX_NATIVE=0`` forces it) and, with the
+  native stepper, the CPU seconds spent inside its C calls over the run (both
+  twins' integration, sub-steps and parameter changes: what the integrator
+  alone cost in *this* run, the floor under ours for this work).
 
 There is no peer for tracking (no other tool runs parameter controllers on an
 FMU twin); the column says so.
@@ -87,8 +93,10 @@ def cpu_now() -> float:
 
 def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
     """One tracking run, its lockstep plain twin, and the bound on the same twin, inputs and grid."""
+    from trackingbox import native
+
     spec = load_spec(spec_path)
-    c0, w0 = cpu_now(), time.perf_counter()
+    c0, w0, n0 = cpu_now(), time.perf_counter(), native.cpu_seconds()
     loop = TrackingLoop(spec, out_dir=out, checkpoint_every=10**9)
     try:
         loop.begin()
@@ -97,11 +105,14 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
         base = dict(plain.base)
         base.update(plain.applied)  # the corrections it starts with (0)
         inputs = plain.inputs
+        stepper = type(loop.twin.stepper).__name__
+        reason = loop.twin.model.native_reason
         loop.run()
     finally:
         loop.close()
     result = loop.result()
     wall, cpu = time.perf_counter() - w0, cpu_now() - c0
+    in_c = native.cpu_seconds() - n0
     grid = np.asarray(loop.grid, dtype=float)
     if grid[0] > 0.0:  # the twins start at 0
         grid = np.concatenate(([0.0], grid))
@@ -120,7 +131,8 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
     return {"bench": name, "rows": result.steps, "sim": result.simulated_seconds, "wall": wall, "cpu": cpu,
             "plain": result.seconds_untracked, "bound_wall": bound.wall, "bound_cpu": bound.cpu,
             "bound_steps": bound.steps, "bound_rhs": bound.rhs, "check": worst,
-            "states": len(spec.states), "pairs": [(p.variable, p.parameter) for p in spec.pairs]}
+            "states": len(spec.states), "pairs": [(p.variable, p.parameter) for p in spec.pairs],
+            "stepper": stepper, "reason": reason, "in_c": in_c, "substeps": loop.substeps}
 
 
 def peak_rss(spec_path: Path, out: Path) -> tuple[int, float, int, int]:
@@ -193,6 +205,16 @@ def main() -> int:
               f"{r['plain'] / r['bound_wall']:11.1f} {r['check']:11.1e}")
     print("(sim s/s of ours = sim s / ours wall; bound check = largest |plain - bound| over the run as a "
           "fraction of the tag's range; the bound times CVODE's integration loop only)")
+    print(f"\n{'bench':16s} {'stepper':20s} {'sub-steps':>9s} {'integrator CPU':>14s} {'ours CPU/integrator':>19s}")
+    for r in rows:
+        integ = f"{r['in_c']:14.3f}" if r["in_c"] > 0 else f"{'-':>14s}"
+        ratio = f"{r['cpu'] / r['in_c']:19.1f}" if r["in_c"] > 0 else f"{'-':>19s}"
+        print(f"{r['bench']:16s} {r['stepper']:20s} {r['substeps']:9d} {integ} {ratio}")
+        if r["reason"]:
+            print(f"  ({r['bench']}: Python path because {r['reason']})")
+    print("(integrator CPU = CPU inside the native stepper's C calls over the run, both twins: CVODE, the "
+          "FMU's right-hand side, parameter changes; the plain twin runs on the same stepper as ours; "
+          "TRACKINGBOX_NATIVE=0 runs both on the Python path)")
     for r in rows:
         if r["states"]:
             print(f"note: {r['bench']} has state compensation: the bound runs with its corrections at 0")

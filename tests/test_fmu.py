@@ -327,7 +327,8 @@ def test_stepper_is_the_driver_of_the_interface_the_fmu_declares(name, driver):
 
     with FMUModel(FMUS[name]()) as m:
         st = m.stepper()
-        assert type(st).__name__ == driver
+        # an event-free FMI 3 model-exchange FMU gets the native stepper, a ModelExchangeStepper too
+        assert isinstance(st, getattr(fmu_module, driver))
         assert isinstance(st, fmu_module.Stepper)
         # the interface is the one in the model description
         declared = zipfile.ZipFile(FMUS[name]()).read("modelDescription.xml").decode()

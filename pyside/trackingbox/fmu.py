@@ -881,6 +881,8 @@ class FMUModel:
         self._used = False
         self._active: Stepper | None = None
         self._changed: set[str] = set()
+        #: why the last model-exchange run is not native (None: it is; see :meth:`stepper`)
+        self.native_reason: str | None = None
         log.debug("opened %s (FMI %s, %s) in %s", self.path, self.info.fmi_version, interface, self._tempdir)
 
     # -- context manager / cleanup ------------------------------------------
@@ -944,6 +946,7 @@ class FMUModel:
         inputs: pd.DataFrame | None = None,
         max_step: float | None = None,
         carry: bool = False,
+        native: bool | None = None,
     ) -> Stepper:
         """Initialise a new run at *start_time* and return its :class:`Stepper`.
 
@@ -971,6 +974,15 @@ class FMUModel:
             back, so that :meth:`Stepper.set` with ``restart=False`` can carry
             the integrator across a small change (no re-initialisation).
             Without it every change restarts the integrator.
+        native
+            Model exchange: integrate with :class:`~trackingbox.native.NativeStepper`
+            (CVODE and the FMU's right-hand side in C, same settings and
+            results). ``None`` (default): where the FMU allows it (event-free
+            FMI 3 with states, a C compiler at hand) unless the environment
+            variable ``TRACKINGBOX_NATIVE`` is ``0``; otherwise the Python path,
+            and the reason is logged at debug level and kept in
+            :attr:`native_reason`. ``True``: native or :class:`FMUError` saying
+            why not. ``False``: the Python path.
         """
         if self.closed:
             raise FMUError(f"FMU {self.path} is closed")
@@ -981,13 +993,36 @@ class FMUModel:
             except Exception as exc:
                 raise FMUError(f"FMU {self.path}: reset failed: {exc}") from None
         self._used = True
-        driver = ModelExchangeStepper if self.interface == "ModelExchange" else CoSimulationStepper
+        driver = self._driver(native)
         stepper = driver(self, self._fmi, start_time=float(start_time), parameters=dict(parameters or {}),
                          inputs=inputs, max_step=max_step)
         if carry and isinstance(stepper, ModelExchangeStepper):
             stepper.carry()
         self._active = stepper
         return stepper
+
+    def _driver(self, native: bool | None) -> type[Stepper]:
+        """The stepper class for a new run (see :meth:`stepper`'s *native*); sets :attr:`native_reason`."""
+        if self.interface != "ModelExchange":
+            self.native_reason = f"{self.path.name} runs as co-simulation"
+            if native:
+                raise FMUError(f"no native stepper for {self.path.name}: {self.native_reason}")
+            return CoSimulationStepper
+        if native is False:
+            self.native_reason = "not asked for (native=False)"
+            return ModelExchangeStepper
+        if native is None and os.environ.get("TRACKINGBOX_NATIVE", "").strip() == "0":
+            self.native_reason = "TRACKINGBOX_NATIVE=0"
+        else:
+            from .native import NativeStepper, native_reason
+
+            self.native_reason = native_reason(self)
+            if self.native_reason is None:
+                return NativeStepper
+        if native:
+            raise FMUError(f"no native stepper for {self.path.name}: {self.native_reason}")
+        log.debug("%s: Python model-exchange stepper (%s)", self.path.name, self.native_reason)
+        return ModelExchangeStepper
 
     def sensitivity_stepper(
         self,

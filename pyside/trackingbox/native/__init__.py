@@ -1,0 +1,498 @@
+"""A native model-exchange stepper: CVODE and the FMU's right-hand side with no Python inside a step.
+
+:class:`~trackingbox.fmu.ModelExchangeStepper` integrates with fmpy's
+``CVodeSolver``, whose right-hand side is a ctypes callback: every derivative
+evaluation (several per solver step, one more per state for each
+difference-quotient Jacobian) runs Python. :class:`NativeStepper` is the same
+stepper (same public API, counters, errors) whose integration is done by a
+small C library, ``stepper.c`` beside this file:
+
+* it owns one CVODE instance from the *same* SUNDIALS libraries fmpy loaded
+  (their symbols looked up on fmpy's own library handles), with fmpy's
+  settings: BDF, dense direct solver with the difference-quotient Jacobian,
+  ``rtol``, ``atol = rtol * nominal`` per state, the same largest step and step
+  budget, and ``CVodeSetStopTime`` at every target when the stepper carries
+  changes (:meth:`~trackingbox.fmu.ModelExchangeStepper.carry`);
+* its right-hand side calls the FMU binary fmpy loaded (``dlsym`` on fmpy's
+  handle, fmpy's instance pointer) in fmpy's order (time, inputs, states,
+  derivatives) and interpolates the input table in C with the formula
+  :meth:`~trackingbox.fmu.Stepper._input_values` uses.
+
+Between steps, a change of Real tunable parameters and/or inputs (:meth:`NativeStepper.set`)
+runs the Python path's sequence in C call for call (event mode when a parameter
+changes, the values, the event iteration, continuous-time mode, then carry or
+re-initialise CVODE); continuous states and Real values are read with one C
+call each. Python still initialises the FMU through fmpy, runs event
+iterations after a step event, and takes other variable types through fmpy.
+With the same arithmetic in the same order, a native run reproduces the Python
+path's trajectory (bit for bit on the bench twins; the tests bound the
+difference by the integrator's tolerance). :func:`cpu_seconds` is the CPU
+spent inside the C calls, what the integrator alone costs in a run.
+
+The library is built once per source version with the machine's C compiler
+(``$CC``, default ``gcc``) into a per-user cache (``$XDG_CACHE_HOME`` or
+``~/.cache``, then ``trackingbox/native/stepper-<hash>.so``) and loaded with
+ctypes. :func:`native_reason` says why a model cannot have it: not Linux, not
+FMI 3, co-simulation, event indicators, no continuous states, no compiler or a
+failed build; :meth:`FMUModel.stepper <trackingbox.fmu.FMUModel.stepper>` also
+takes the Python path when ``TRACKINGBOX_NATIVE=0``.
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import logging
+import math
+import os
+import shutil
+import subprocess
+import sys
+import weakref
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from ..errors import FMUError, SimulationError
+from ..fmu import ModelExchangeStepper, _fmu_calls, _simulation_failure
+
+if TYPE_CHECKING:
+    from ..fmu import FMUModel, _FMI
+
+__all__ = ["NativeStepper", "native_reason", "library", "cpu_seconds", "SOURCE", "ENV"]
+
+log = logging.getLogger(__name__)
+
+SOURCE = Path(__file__).with_name("stepper.c")
+#: environment variable: ``0`` makes ``FMUModel.stepper(native=None)`` take the Python path
+ENV = "TRACKINGBOX_NATIVE"
+#: compiler flags (part of the cache key); no floating-point contraction, so the C arithmetic is Python's
+CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")
+
+# tbn_step's codes (stepper.c)
+_OK, _STEP_EVENT, _TERMINATE, _NONFINITE, _FMU_FAILED, _CVODE_FAILED = 0, 1, 2, 3, -1, -2
+
+
+class NativeUnavailable(Exception):
+    """Internal: the native library cannot be had here (the message says why)."""
+
+
+def _compiler() -> str:
+    return os.environ.get("CC", "gcc")
+
+
+def cache_dir() -> Path:
+    """Where built libraries are kept: ``$XDG_CACHE_HOME/trackingbox/native`` (default ``~/.cache``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "trackingbox" / "native"
+
+
+def library_path() -> Path:
+    """The cache path of the library for the current source, compiler and flags."""
+    key = hashlib.sha256(SOURCE.read_bytes() + repr((_compiler(), CFLAGS)).encode()).hexdigest()[:16]
+    return cache_dir() / f"stepper-{key}.so"
+
+
+def _build(path: Path) -> None:
+    cc = _compiler()
+    if shutil.which(cc) is None:
+        raise NativeUnavailable(f"no C compiler ({cc!r} not on PATH) to build {SOURCE.name}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise NativeUnavailable(f"cannot create the cache directory {path.parent}: {exc}") from None
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    cmd = [cc, *CFLAGS, "-o", str(tmp), str(SOURCE), "-ldl", "-lm"]
+    log.debug("building the native stepper: %s", " ".join(cmd))
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise NativeUnavailable(f"building {SOURCE.name} with {cc} failed: {exc}") from None
+    if proc.returncode != 0:
+        tmp.unlink(missing_ok=True)
+        raise NativeUnavailable(f"building {SOURCE.name} with {cc} failed: {proc.stderr.strip()[:500]}")
+    tmp.replace(path)  # atomic: a concurrent build leaves one whole library
+
+
+@functools.lru_cache(maxsize=None)
+def _load(path: Path) -> ctypes.CDLL:
+    if not path.exists():
+        _build(path)
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError as exc:
+        raise NativeUnavailable(f"loading {path} failed: {exc}") from None
+    c_double, c_int, c_size_t, c_void_p, c_long = (ctypes.c_double, ctypes.c_int, ctypes.c_size_t,
+                                                   ctypes.c_void_p, ctypes.c_long)
+    lib.tbn_new.argtypes = [ctypes.POINTER(c_void_p), c_void_p, c_void_p, c_size_t, c_double, c_double, c_double,
+                            c_long, c_int, ctypes.c_char_p, c_size_t]
+    lib.tbn_new.restype = c_void_p
+    lib.tbn_free.argtypes = [c_void_p]
+    lib.tbn_free.restype = None
+    lib.tbn_set_inputs.argtypes = [c_void_p, c_size_t, ctypes.POINTER(ctypes.c_uint32), c_size_t,
+                                   ctypes.POINTER(c_double), ctypes.POINTER(c_double)]
+    lib.tbn_set_inputs.restype = c_int
+    lib.tbn_reset.argtypes = [c_void_p, c_double]
+    lib.tbn_reset.restype = c_int
+    lib.tbn_internal_time.argtypes = [c_void_p]
+    lib.tbn_internal_time.restype = c_double
+    lib.tbn_step.argtypes = [c_void_p, c_double, c_int, ctypes.POINTER(c_double)]
+    lib.tbn_step.restype = c_int
+    lib.tbn_error.argtypes = [c_void_p]
+    lib.tbn_error.restype = ctypes.c_char_p
+    lib.tbn_failed_call.argtypes = [c_void_p, ctypes.POINTER(c_int)]
+    lib.tbn_failed_call.restype = ctypes.c_char_p
+    lib.tbn_set_parameters.argtypes = [c_void_p, c_size_t, ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_double),
+                                       c_int, c_int, c_double, ctypes.POINTER(c_int), ctypes.POINTER(c_double)]
+    lib.tbn_set_parameters.restype = c_int
+    lib.tbn_get_states.argtypes = [c_void_p, ctypes.POINTER(c_double)]
+    lib.tbn_get_states.restype = c_int
+    lib.tbn_cpu_seconds.argtypes = []
+    lib.tbn_cpu_seconds.restype = c_double
+    lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
+    lib.tbn_stats.restype = None
+    return lib
+
+
+def library() -> ctypes.CDLL:
+    """The native library, built on first use (:class:`NativeUnavailable` says why it cannot be)."""
+    if not sys.platform.startswith("linux"):
+        raise NativeUnavailable(f"the native stepper is built for Linux only (this is {sys.platform})")
+    return _load(library_path())
+
+
+def cpu_seconds() -> float:
+    """CPU seconds this process spent inside native steps and parameter sets (integration and FMU calls).
+
+    What the integrator alone cost in a run that used :class:`NativeStepper`
+    (the difference of two readings): the benchmarks print it beside the run's
+    own CPU time. 0.0 where the library is not loaded.
+    """
+    if not sys.platform.startswith("linux"):
+        return 0.0
+    try:
+        path = library_path()
+    except OSError:
+        return 0.0
+    if _load.cache_info().currsize == 0 or not path.exists():
+        return 0.0
+    return float(_load(path).tbn_cpu_seconds())
+
+
+def native_reason(model: FMUModel) -> str | None:
+    """Why *model* cannot run with :class:`NativeStepper`, or None if it can (builds the library if needed).
+
+    The environment variable ``TRACKINGBOX_NATIVE=0`` is *not* looked at here
+    (:meth:`~trackingbox.fmu.FMUModel.stepper` does, for its automatic choice).
+    """
+    name = model.path.name
+    md = model.info.model_description
+    if model.interface != "ModelExchange":
+        return f"{name} runs as co-simulation"
+    if not model.info.fmi_version.startswith("3"):
+        return f"{name} is FMI {model.info.fmi_version}; the native stepper drives FMI 3 only"
+    assert md is not None
+    if int(md.numberOfEventIndicators or 0) > 0:
+        return f"{name} has {md.numberOfEventIndicators} event indicators (state events)"
+    if int(md.numberOfContinuousStates or 0) == 0:
+        return f"{name} has no continuous states"
+    try:
+        library()
+    except NativeUnavailable as exc:
+        return str(exc)
+    return None
+
+
+class _Solver:
+    """What :class:`~trackingbox.fmu.ModelExchangeStepper` asks of its solver, on the native CVODE."""
+
+    def __init__(self, lib: ctypes.CDLL, handle: int) -> None:
+        self.lib = lib
+        self.handle = handle
+        #: stop exactly at each target time (carry mode)
+        self.exact = False
+
+    def reset(self, time: float) -> None:
+        code = self.lib.tbn_reset(self.handle, time)
+        if code != _OK:
+            raise RuntimeError(f"re-initialising CVODE at t = {time:g} s failed "
+                               f"({_failure_text(self.lib, self.handle)})")
+
+    def internal_time(self) -> float:
+        return float(self.lib.tbn_internal_time(self.handle))
+
+
+def _failure_text(lib: ctypes.CDLL, handle: int) -> str:
+    status = ctypes.c_int(0)
+    call = lib.tbn_failed_call(handle, ctypes.byref(status))
+    if call:
+        return str(_fmi_exception(call.decode(), status.value))
+    return (lib.tbn_error(handle) or b"").decode("utf-8", "replace").strip()
+
+
+def _fmi_exception(function: str, status: int) -> Exception:
+    """The exception fmpy raises for a failed FMI call (the Python path's cause, word for word)."""
+    from fmpy.fmi1 import FMICallException
+
+    return FMICallException(function=function, status=status)
+
+
+class _SetPlan(NamedTuple):
+    """How :meth:`NativeStepper.set` writes one tuple of names in C."""
+
+    n: int
+    vr: Any  # ctypes uint32 array of the value references
+    buffer: npt.NDArray[np.float64]
+    pointer: Any  # the buffer's data pointer
+    parameters: tuple[str, ...]  # the tunable parameters among the names (event mode when any)
+    inputs: frozenset[str]
+
+
+class NativeStepper(ModelExchangeStepper):
+    """A :class:`~trackingbox.fmu.ModelExchangeStepper` whose integration runs in C (see the module docstring).
+
+    Made by :meth:`FMUModel.stepper <trackingbox.fmu.FMUModel.stepper>` for an
+    event-free FMI 3 model-exchange FMU (``native=None`` or ``True``); never
+    constructed directly. Everything but :meth:`step`'s inside is inherited:
+    :meth:`set` (event mode through fmpy, carried or restarted), ``get``,
+    ``reader``, the continuous-state access, ``restarts``/``carried``, and the
+    error texts, which name the same calls and times as the Python path.
+    """
+
+    def __init__(self, model: FMUModel, fmi: _FMI, *, start_time: float, parameters: dict[str, Any],
+                 inputs: pd.DataFrame | None, max_step: float | None) -> None:
+        self._lib = library()
+        self._handle: int | None = None
+        #: the input table's arrays C reads in place (kept referenced here)
+        self._c_inputs: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+        self._reached = ctypes.c_double(0.0)
+        self._reached_ref = ctypes.byref(self._reached)
+        self._free: weakref.finalize | None = None
+        #: names of a set() -> how to write them in C (None: not all tunable Real parameters, the generic path)
+        self._plans: dict[tuple[str, ...], _SetPlan | None] = {}
+        self._next_defined = ctypes.c_int(0)
+        self._next_time = ctypes.c_double(0.0)
+        super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
+                         max_step=max_step)
+
+    def _start(self, max_step: float | None) -> None:
+        if max_step is None:
+            max_step = float("inf")
+            if self._in_times is not None and self._in_times.size > 1:
+                max_step = float(np.min(np.diff(self._in_times)))
+        from fmpy.sundials import libraries as sl
+
+        libs = (ctypes.c_void_p * 5)(*(lib._handle for lib in (
+            sl.sundials_core, sl.sundials_nvecserial, sl.sundials_sunmatrixdense, sl.sundials_sunlinsoldense,
+            sl.sundials_cvode)))
+        fmu = self._fmu
+        err = ctypes.create_string_buffer(512)
+        handle = self._lib.tbn_new(libs, fmu.dll._handle, fmu.component, self._nx, self.time,
+                                   self.model.tolerance, max_step, 100000,
+                                   int(self._fmi.needs_completed_integrator_step()), err, len(err))
+        if not handle:
+            raise FMUError(f"the native stepper could not start on {self.model.path.name}: "
+                           f"{err.value.decode('utf-8', 'replace')}")
+        self._handle = handle
+        self._free = weakref.finalize(self, self._lib.tbn_free, handle)
+        self._solver = _Solver(self._lib, handle)
+        self._push_inputs()
+        self._step_c = self._lib.tbn_step
+        self._check_states()
+
+    # -- the input table lives in C too ------------------------------------------------
+    def _push_inputs(self) -> None:
+        if self._handle is None:
+            return
+        if self._in_set is None or self._in_times is None or self._in_table is None:
+            self._lib.tbn_set_inputs(self._handle, 0, None, 0, None, None)
+            self._c_inputs = None
+            return
+        vrs = [int(self.model.variable(n).valueReference) for n in self._in_names]
+        vr = (ctypes.c_uint32 * len(vrs))(*vrs)
+        t = np.ascontiguousarray(self._in_times, dtype=float)
+        u = np.ascontiguousarray(self._in_table, dtype=float)
+        dp = ctypes.POINTER(ctypes.c_double)
+        if self._lib.tbn_set_inputs(self._handle, len(vrs), vr, t.size, t.ctypes.data_as(dp),
+                                    u.ctypes.data_as(dp)) != 0:
+            raise MemoryError(f"no memory for the input table of {self.model.path.name}")
+        # C reads these arrays in place (no copy): they live as long as C may read them
+        self._c_inputs = (t, u)
+
+    def _drop_inputs(self, names: set[str]) -> None:
+        before = list(self._in_names)
+        super()._drop_inputs(names)
+        if self._in_names != before:
+            self._push_inputs()
+
+    def extend_inputs(self, inputs: pd.DataFrame) -> None:
+        super().extend_inputs(inputs)
+        self._push_inputs()
+
+    def finish(self) -> None:
+        super().finish()
+        if self._free is not None:
+            self._free()  # the CVODE instance goes now; the FMU instance stays with its model
+        self._c_inputs = None
+
+    # -- stepping -----------------------------------------------------------------------
+    def _advance(self, t_next: float) -> None:
+        while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
+            target = t_next
+            if self._next_event is not None and self.time < self._next_event < t_next:
+                target = self._next_event
+            code = self._step_c(self._handle, target, 1 if self._solver.exact else 0, self._reached_ref)
+            self._after_step(code, target)
+        self.time = t_next
+
+    def _after_step(self, code: int, target: float) -> None:
+        """What the Python path does after a solver step towards *target*, from tbn_step's *code*."""
+        name = self.model.path.name
+        if code == _CVODE_FAILED:
+            raise _simulation_failure(f"solver failed in {name} between t = {self.time:g} s and "
+                                      f"t = {target:g} s", _failure_text(self._lib, self._handle),
+                                      self.model.log_messages, solver=True) from None
+        self.time = float(self._reached.value)
+        if code == _FMU_FAILED:
+            raise _simulation_failure(f"simulation of {name} failed at t = {self.time:g} s",
+                                      _failure_text(self._lib, self._handle), self.model.log_messages)
+        if code == _TERMINATE:
+            raise SimulationError(f"{name} requested termination at t = {self.time:g} s")
+        time_event = self._next_event is not None and math.isclose(self.time, self._next_event)
+        if code == _STEP_EVENT or time_event:
+            with _fmu_calls(f"simulation of {name} failed at t = {self.time:g} s", self.model.log_messages):
+                self._event_iteration()
+                self._solver.reset(self.time)
+            self._check_states()
+        elif code == _NONFINITE:
+            self._check_states()  # raises, with the Python path's text
+
+    # -- parameters and states between steps ---------------------------------------------
+    def _plan(self, names: tuple[str, ...]) -> _SetPlan | None:
+        params, inputs, vrs = [], [], []
+        for name in names:
+            v = self.model.variable(name)
+            if v.type not in ("Real", "Float64"):
+                return None
+            if v.causality == "parameter" and v.variability == "tunable":
+                params.append(name)
+            elif v.causality == "input":
+                inputs.append(name)
+            else:
+                return None  # the Python path raises its error
+            vrs.append(int(v.valueReference))
+        buf = np.zeros(len(vrs))
+        return _SetPlan(len(vrs), (ctypes.c_uint32 * len(vrs))(*vrs), buf,
+                        buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), tuple(params), frozenset(inputs))
+
+    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
+        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
+
+        The sequence (event mode when a parameter changes, write, event
+        iteration, continuous-time mode, then carry or re-initialise) is the
+        Python path's, call for call; other types take the Python path itself.
+        """
+        if self._finished:
+            self._check_open()
+        last = self._last_set
+        changed = {n: v for n, v in values.items() if last.get(n) != v}
+        if not changed:
+            return
+        key = tuple(changed)
+        try:
+            plan = self._plans[key]
+        except KeyError:
+            plan = self._plans[key] = self._plan(key)
+        vals = list(changed.values())
+        if plan is None or str in map(type, vals):
+            super().set(values, restart=restart)
+            return
+        if plan.inputs and self._in_names:
+            self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
+        plan.buffer[:] = vals
+        carry = not restart and self._solver.exact
+        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
+                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
+        if code < 0:
+            name = self.model.path.name
+            raise _simulation_failure(f"setting {', '.join(changed)} in {name} at t = {self.time:g} s failed",
+                                      _failure_text(self._lib, self._handle), self.model.log_messages)
+        if code == _TERMINATE:
+            raise SimulationError(f"{self.model.path.name} requested termination at t = {self.time:g} s")
+        if self._next_defined.value >= 0:
+            self._next_event = float(self._next_time.value) if self._next_defined.value else None
+        if code == 1:
+            self.carried += 1
+        else:
+            self.restarts += 1
+        if plan.parameters:
+            self.model.note_changed(plan.parameters)
+        last.update(changed)
+
+    def get_continuous_states(self) -> npt.NDArray[np.float64]:
+        """The continuous state vector, for checkpoints (one C call)."""
+        if self._finished:
+            self._check_open()
+        if self._lib.tbn_get_states(self._handle, self._px) != _OK:
+            status = ctypes.c_int(0)
+            call = self._lib.tbn_failed_call(self._handle, ctypes.byref(status))
+            raise _fmi_exception(call.decode(), status.value)
+        return self._x[: self._nx].copy()
+
+    def _getter(self, names: tuple[str, ...]) -> Callable[[], npt.NDArray[np.float64]]:
+        """As the Python path's, with Real reads calling the FMU's ``fmi3GetFloat64`` directly.
+
+        fmpy's wrapper of that call adds a Python frame and a status check per
+        read; this checks the status itself and raises fmpy's exception.
+        """
+        getter = self._getters.get(names)
+        if getter is not None:
+            return getter
+        variables = [self.model.variable(n) for n in names]
+        if not all(v.type in ("Real", "Float64") for v in variables):
+            return super()._getter(names)
+        n = len(variables)
+        vr = (ctypes.c_uint32 * n)(*(int(v.valueReference) for v in variables))
+        buf = np.zeros(n)
+        pbuf = buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        func = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint32), ctypes.c_size_t,
+                                ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)(
+            ctypes.cast(self._fmu.dll.fmi3GetFloat64, ctypes.c_void_p).value)
+        comp = ctypes.c_void_p(self._fmu.component)
+
+        def getter() -> npt.NDArray[np.float64]:
+            status = func(comp, vr, n, pbuf, n)
+            if status > 1:
+                raise _fmi_exception("fmi3GetFloat64", status)
+            return buf.copy()
+
+        self._getters[names] = getter
+        return getter
+
+    def step(self, t_next: float) -> None:
+        """Integrate from :attr:`time` to *t_next* (as :meth:`Stepper.step <trackingbox.fmu.Stepper.step>`)."""
+        if self._finished:
+            self._check_open()
+        t_next = float(t_next)
+        if t_next <= self.time + 1e-12 * max(1.0, abs(t_next)):
+            super().step(t_next)  # nothing to do, or the error for a step back in time
+        elif self._next_event is None:
+            # one solver call reaches t_next (CV_NORMAL, no time event before it): _advance's loop, once
+            code = self._step_c(self._handle, t_next, 1 if self._solver.exact else 0, self._reached_ref)
+            if code != _OK:
+                self._after_step(code, t_next)
+                self._advance(t_next)
+            self.time = t_next
+        else:
+            self._advance(t_next)
+
+    def solver_statistics(self) -> Mapping[str, int]:
+        """CVODE's counters since the last (re-)initialisation: ``steps`` and ``rhs`` evaluations."""
+        self._check_open()
+        steps, rhs = ctypes.c_long(0), ctypes.c_long(0)
+        self._lib.tbn_stats(self._handle, ctypes.byref(steps), ctypes.byref(rhs))
+        return {"steps": int(steps.value), "rhs": int(rhs.value)}
