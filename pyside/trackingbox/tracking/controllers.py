@@ -445,19 +445,17 @@ def _integrate_clamped_linear(u: float, gain: float, ti: float, e0: float, e1: f
     ``g`` is convex or concave, so it has at most one extremum and two zeros
     in the sample; between zeros the rate keeps its sign and the clamped
     (conditionally integrated) output is the clamped sum. The zeros are found
-    by bisection to machine precision.
+    to machine precision (adjacent floating-point numbers around the sign
+    change) by :func:`_zero_of_rate`: Newton's method from the end of the
+    monotone piece where it converges without overshoot, then a check of the
+    sign on the neighbouring floats.
     """
     s = (e1 - e0) / ts
     a_ = e0 / ti + s
     b_ = s / ti
     c = e0 - m0 - s * te
     k = c / te
-
-    def g(t: float) -> float:
-        return a_ + b_ * t + k * math.exp(-t / te)
-
-    def f(t: float) -> float:
-        return gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - math.exp(-t / te)))
+    exp = math.exp
 
     points = [0.0, ts]
     if k != 0.0:
@@ -467,25 +465,84 @@ def _integrate_clamped_linear(u: float, gain: float, ti: float, e0: float, e1: f
             if 0.0 < t_ext < ts:
                 points.insert(1, t_ext)
     cuts = [0.0]
-    for lo, hi in zip(points[:-1], points[1:]):
-        g_lo, g_hi = g(lo), g(hi)
+    lo = points[0]
+    g_lo = a_ + b_ * lo + k * exp(-lo / te)
+    for hi in points[1:]:
+        g_hi = a_ + b_ * hi + k * exp(-hi / te)
         if g_lo * g_hi < 0.0:  # one zero on this monotone piece
-            for _ in range(200):
-                mid = 0.5 * (lo + hi)
-                if mid <= lo or mid >= hi:
-                    break
-                if (g(mid) < 0.0) == (g_lo < 0.0):
-                    lo = mid
-                else:
-                    hi = mid
-            cuts.append(0.5 * (lo + hi))
+            cuts.append(_zero_of_rate(a_, b_, k, te, lo, hi, g_lo))
+        lo, g_lo = hi, g_hi
     cuts.append(ts)
     f_prev = 0.0
     for t in cuts[1:]:
-        f_t = f(t)
+        f_t = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)))
         u = _clamp(u + (f_t - f_prev))
         f_prev = f_t
     return u
+
+
+def _zero_of_rate(a_: float, b_: float, k: float, te: float, lo: float, hi: float, g_lo: float) -> float:
+    """The zero of ``g(t) = a_ + b_·t + k·exp(-t/te)`` in ``[lo, hi]``, where ``g`` is monotone and changes sign.
+
+    The answer is the bisection's at machine precision: with ``neg(t)`` meaning
+    ``g(t) < 0``, the midpoint of the two adjacent floats ``t0 < t1`` with
+    ``neg(t0) == neg(lo)`` and ``neg(t1) != neg(lo)``. Newton's method starts
+    at the end where ``g·g'' > 0`` (Fourier's condition: ``g`` is convex or
+    concave on the piece, so the iterates approach the zero from that side
+    without overshooting and converge quadratically); the floats next to the
+    last iterate are then searched for the sign change, in steps of 1, 2, 4, ...
+    floats (where the terms of ``g`` cancel, rounding makes its sign ragged
+    over a few floats), and bisection narrows that bracket to adjacent floats.
+    """
+    exp, nextafter = math.exp, math.nextafter
+    neg_lo = g_lo < 0.0
+    # Fourier's condition: g'' = k/te²·exp(-t/te) has the sign of k
+    x = lo if (g_lo > 0.0) == (k > 0.0) else hi
+    ahead = 1.0 if x == lo else -1.0  # the direction of the iterates
+    inv_te = 1.0 / te
+    for _ in range(100):
+        ex = k * exp(-x * inv_te)
+        dg = b_ - ex * inv_te
+        if dg == 0.0:
+            break
+        x_new = x - (a_ + b_ * x + ex) / dg
+        if not (x_new - x) * ahead > 0.0:  # at the zero, or rounding turned it back: stop
+            break
+        x = x_new if lo <= x_new <= hi else min(max(x_new, lo), hi)
+    # bracket the sign change next to x: steps of 1, 2, 4, ... ulps away from x's side (rounding
+    # makes g's sign ragged over a few ulps where its terms cancel), then bisect to adjacent floats
+    if (a_ + b_ * x + k * exp(-x / te) < 0.0) == neg_lo:
+        t0, t1, toward = x, hi, hi
+    else:
+        t0, t1, toward = lo, x, lo
+    d = abs(nextafter(x, toward) - x)
+    while d > 0.0:
+        if toward == hi:
+            y = t0 + d
+            if y >= t1:
+                break
+            if (a_ + b_ * y + k * exp(-y / te) < 0.0) != neg_lo:
+                t1 = y
+                break
+            t0 = y
+        else:
+            y = t1 - d
+            if y <= t0:
+                break
+            if (a_ + b_ * y + k * exp(-y / te) < 0.0) == neg_lo:
+                t0 = y
+                break
+            t1 = y
+        d *= 2.0
+    for _ in range(200):  # bisection for whatever bracket is left (a no-op once t0, t1 are adjacent)
+        mid = 0.5 * (t0 + t1)
+        if mid <= t0 or mid >= t1:
+            break
+        if (a_ + b_ * mid + k * exp(-mid / te) < 0.0) == neg_lo:
+            t0 = mid
+        else:
+            t1 = mid
+    return 0.5 * (t0 + t1)
 
 
 class SlidingMode(_ScaledController):
