@@ -68,7 +68,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from collections.abc import Callable
 from typing import Any, Literal
 
 logger = logging.getLogger(__name__)
@@ -150,13 +149,16 @@ class _ErrorMemory:
         self.e_last: float | None = None
         self.hold_last = True
 
-    def _advance_linear(self, e: float | None, hold: bool, dt: float,
-                        integrate: Callable[[float, float, float], None]) -> None:
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:  # pragma: no cover
+        """Advance the output over *dt* s with the error linear from *e0* to *e1* and the memory at *m0*."""
+        raise NotImplementedError
+
+    def _advance_linear(self, e: float | None, hold: bool, dt: float) -> None:
         """Move to the call with error *e*, the error linear since the previous one, *dt* s ago.
 
-        ``integrate(e0, e1, m0)`` advances the output over that span unless it
-        was held. A missing error cannot be followed: the memory restarts at
-        the next valid one, and the span after a missing error is frozen.
+        :meth:`_integrate_linear` advances the output over that span unless
+        it was held. A missing error cannot be followed: the memory restarts
+        at the next valid one, and the span after a missing error is frozen.
         """
         e0 = self.e_last
         if e is None:
@@ -169,7 +171,7 @@ class _ErrorMemory:
         else:
             m0 = e0 if self.e_mem is None else self.e_mem
             if not self.hold_last:
-                integrate(e0, e, m0)
+                self._integrate_linear(e0, e, m0, dt)
             self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
         self.e_last, self.hold_last = e, bool(hold)
         mode: Mode = "hold" if hold or e is None else "auto"
@@ -399,12 +401,11 @@ class ScaledPI(_ScaledOutput, _ErrorMemory):
             raise ValueError(f"the time since the previous update must be positive, got dt = {dt}")
         e = self.scaling.error_percent(float(setpoint), float(process_value)) \
             if _valid(setpoint) and _valid(process_value) else None  # type: ignore[arg-type]
-
-        def integrate(e0: float, e1: float, m0: float) -> None:
-            self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
-
-        self._advance_linear(e, hold, dt, integrate)
+        self._advance_linear(e, hold, dt)
         return self.value
+
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:
+        self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
 
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
@@ -457,28 +458,35 @@ def _integrate_clamped_linear(u: float, gain: float, ti: float, e0: float, e1: f
     k = c / te
     exp = math.exp
 
-    points = [0.0, ts]
+    t_ext = 0.0  # the extremum of g when it is inside the sample (0: none)
     if k != 0.0:
         r = b_ * te / k  # exp(-t*/te) at the extremum of g
         if 0.0 < r < 1.0:
             t_ext = -te * math.log(r)
-            if 0.0 < t_ext < ts:
-                points.insert(1, t_ext)
-    cuts = [0.0]
-    lo = points[0]
-    g_lo = a_ + b_ * lo + k * exp(-lo / te)
-    for hi in points[1:]:
-        g_hi = a_ + b_ * hi + k * exp(-hi / te)
-        if g_lo * g_hi < 0.0:  # one zero on this monotone piece
-            cuts.append(_zero_of_rate(a_, b_, k, te, lo, hi, g_lo))
-        lo, g_lo = hi, g_hi
-    cuts.append(ts)
+            if not t_ext < ts:
+                t_ext = 0.0
+    # the monotone pieces [0, t_ext], [t_ext, ts] (or [0, ts]); a sign change of g on a piece is a cut
+    g_lo = a_ + b_ * 0.0 + k * exp(-0.0 / te)
+    g_hi = a_ + b_ * ts + k * exp(-ts / te)
     f_prev = 0.0
-    for t in cuts[1:]:
+    lo = 0.0
+    if t_ext > 0.0:
+        g_ext = a_ + b_ * t_ext + k * exp(-t_ext / te)
+        if g_lo * g_ext < 0.0:
+            t = _zero_of_rate(a_, b_, k, te, 0.0, t_ext, g_lo)
+            f_prev = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)))
+            u += f_prev - 0.0
+            u = 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
+        lo, g_lo = t_ext, g_ext
+    if g_lo * g_hi < 0.0:
+        t = _zero_of_rate(a_, b_, k, te, lo, ts, g_lo)
         f_t = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)))
-        u = _clamp(u + (f_t - f_prev))
+        u += f_t - f_prev
+        u = 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
         f_prev = f_t
-    return u
+    f_t = gain * (a_ * ts + 0.5 * b_ * ts * ts + c * (1.0 - exp(-ts / te)))
+    u += f_t - f_prev
+    return 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
 
 
 def _zero_of_rate(a_: float, b_: float, k: float, te: float, lo: float, hi: float, g_lo: float) -> float:
@@ -680,14 +688,13 @@ class StateCompensator(_ErrorMemory):
         """The sample since the previous call with the difference linear: ``m += K·(s·Ts + c·(1 - a))``."""
         e = float(measured) - float(simulated) \
             if _valid(measured) and _valid(simulated) else None  # type: ignore[arg-type]
-
-        def integrate(e0: float, e1: float, m0: float) -> None:
-            s = (e1 - e0) / self.ts
-            c = e0 - m0 - s * self.te
-            self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
-
-        self._advance_linear(e, hold, self.ts, integrate)
+        self._advance_linear(e, hold, self.ts)
         return self.m
+
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:
+        s = (e1 - e0) / self.ts
+        c = e0 - m0 - s * self.te
+        self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
 
 
 def direction_from_gain(gain: float) -> int:
