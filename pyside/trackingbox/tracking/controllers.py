@@ -399,10 +399,14 @@ class ScaledPI(_ScaledOutput, _ErrorMemory):
         """``"linear"``: integrate the *dt* s since the previous call, the error linear between the two."""
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f"the time since the previous update must be positive, got dt = {dt}")
-        e = self.scaling.error_percent(float(setpoint), float(process_value)) \
-            if _valid(setpoint) and _valid(process_value) else None  # type: ignore[arg-type]
+        sc = self.scaling
+        isfinite = math.isfinite
+        # Scaling.error_percent and .to_parameter written out: this runs at every sub-step of every pair
+        e = 100.0 * (float(setpoint) - float(process_value)) / sc.span \
+            if setpoint is not None and process_value is not None and isfinite(setpoint) \
+            and isfinite(process_value) else None  # type: ignore[arg-type]
         self._advance_linear(e, hold, dt)
-        return self.value
+        return sc.p_min + self.u / 100.0 * (sc.p_max - sc.p_min)
 
     def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:
         self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
