@@ -214,8 +214,10 @@ class _Stats:
     def add(self, x: float) -> None:
         if math.isfinite(x):
             self.final = x
-            self.min = min(self.min, x)
-            self.max = max(self.max, x)
+            if x < self.min:  # min() and max() as comparisons: called per sample and signal
+                self.min = x
+            if x > self.max:
+                self.max = x
 
     def state(self) -> list[float]:
         return [self.final, self.min, self.max]
@@ -245,8 +247,10 @@ class _Fit:
             self.n_u += 1
             self.sse_u += (untracked - meas) ** 2
         self.sum += meas
-        self.lo = min(self.lo, meas)
-        self.hi = max(self.hi, meas)
+        if meas < self.lo:
+            self.lo = meas
+        if meas > self.hi:
+            self.hi = meas
 
     def _scale(self) -> float:
         span = self.hi - self.lo
@@ -392,10 +396,12 @@ class _Twin:
         half sample late.
         """
         out = dict(values)
+        given = self.given
         for name, (lo, hi) in self.extrapolate.items():
-            if name in values and name in self.given:
+            if name in values and name in given:
                 p = float(values[name])
-                out[name] = min(max(p + 0.5 * (p - self.given[name]), lo), hi)
+                x = p + 0.5 * (p - given[name])
+                out[name] = lo if x < lo else hi if x > hi else x  # min(max(x, lo), hi), NaN kept
         return out
 
     def step(self, t_next: float, values: Mapping[str, float]) -> None:
