@@ -102,7 +102,7 @@ def _clamped_by_solve_ivp(u0: float, gain: float, ti: float, e0: float, e1: floa
             rate = 0.0
         return [rate, (e - m) / te]
 
-    sol = solve_ivp(rhs, (0.0, ts), [u0, m0], method="RK45", rtol=1e-10, atol=1e-10, max_step=ts / 4000)
+    sol = solve_ivp(rhs, (0.0, ts), [u0, m0], method="RK45", rtol=1e-10, atol=1e-10, max_step=ts / 1000)
     assert sol.success
     return float(np.clip(sol.y[0, -1], 0.0, 100.0))
 

@@ -496,7 +496,7 @@ def _integrate_clamped_linear(u: float, gain: float, ti: float, e0: float, e1: f
 def _zero_of_rate(a_: float, b_: float, k: float, te: float, lo: float, hi: float, g_lo: float) -> float:
     """The zero of ``g(t) = a_ + b_·t + k·exp(-t/te)`` in ``[lo, hi]``, where ``g`` is monotone and changes sign.
 
-    The answer is the bisection's at machine precision: with ``neg(t)`` meaning
+    The answer is what a bisection to machine precision returns: with ``neg(t)`` meaning
     ``g(t) < 0``, the midpoint of the two adjacent floats ``t0 < t1`` with
     ``neg(t0) == neg(lo)`` and ``neg(t1) != neg(lo)``. Newton's method starts
     at the end where ``g·g'' > 0`` (Fourier's condition: ``g`` is convex or
