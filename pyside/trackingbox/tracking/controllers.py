@@ -68,7 +68,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from collections.abc import Callable
 from typing import Any, Literal
 
 logger = logging.getLogger(__name__)
@@ -150,13 +149,16 @@ class _ErrorMemory:
         self.e_last: float | None = None
         self.hold_last = True
 
-    def _advance_linear(self, e: float | None, hold: bool, dt: float,
-                        integrate: Callable[[float, float, float], None]) -> None:
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:  # pragma: no cover
+        """Advance the output over *dt* s with the error linear from *e0* to *e1* and the memory at *m0*."""
+        raise NotImplementedError
+
+    def _advance_linear(self, e: float | None, hold: bool, dt: float) -> None:
         """Move to the call with error *e*, the error linear since the previous one, *dt* s ago.
 
-        ``integrate(e0, e1, m0)`` advances the output over that span unless it
-        was held. A missing error cannot be followed: the memory restarts at
-        the next valid one, and the span after a missing error is frozen.
+        :meth:`_integrate_linear` advances the output over that span unless
+        it was held. A missing error cannot be followed: the memory restarts
+        at the next valid one, and the span after a missing error is frozen.
         """
         e0 = self.e_last
         if e is None:
@@ -169,7 +171,7 @@ class _ErrorMemory:
         else:
             m0 = e0 if self.e_mem is None else self.e_mem
             if not self.hold_last:
-                integrate(e0, e, m0)
+                self._integrate_linear(e0, e, m0, dt)
             self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
         self.e_last, self.hold_last = e, bool(hold)
         mode: Mode = "hold" if hold or e is None else "auto"
@@ -397,14 +399,17 @@ class ScaledPI(_ScaledOutput, _ErrorMemory):
         """``"linear"``: integrate the *dt* s since the previous call, the error linear between the two."""
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f"the time since the previous update must be positive, got dt = {dt}")
-        e = self.scaling.error_percent(float(setpoint), float(process_value)) \
-            if _valid(setpoint) and _valid(process_value) else None  # type: ignore[arg-type]
+        sc = self.scaling
+        isfinite = math.isfinite
+        # Scaling.error_percent and .to_parameter written out: this runs at every sub-step of every pair
+        e = 100.0 * (float(setpoint) - float(process_value)) / sc.span \
+            if setpoint is not None and process_value is not None and isfinite(setpoint) \
+            and isfinite(process_value) else None  # type: ignore[arg-type]
+        self._advance_linear(e, hold, dt)
+        return sc.p_min + self.u / 100.0 * (sc.p_max - sc.p_min)
 
-        def integrate(e0: float, e1: float, m0: float) -> None:
-            self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
-
-        self._advance_linear(e, hold, dt, integrate)
-        return self.value
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:
+        self.u = _integrate_clamped_linear(self.u, self.direction * self.kp, self.ti, e0, e1, m0, dt, self.te)
 
 
 def _integrate_clamped(u: float, gain: float, rate: float, step: float, ts: float, te: float) -> float:
@@ -445,47 +450,111 @@ def _integrate_clamped_linear(u: float, gain: float, ti: float, e0: float, e1: f
     ``g`` is convex or concave, so it has at most one extremum and two zeros
     in the sample; between zeros the rate keeps its sign and the clamped
     (conditionally integrated) output is the clamped sum. The zeros are found
-    by bisection to machine precision.
+    to machine precision (adjacent floating-point numbers around the sign
+    change) by :func:`_zero_of_rate`: Newton's method from the end of the
+    monotone piece where it converges without overshoot, then a check of the
+    sign on the neighbouring floats.
     """
     s = (e1 - e0) / ts
     a_ = e0 / ti + s
     b_ = s / ti
     c = e0 - m0 - s * te
     k = c / te
+    exp = math.exp
 
-    def g(t: float) -> float:
-        return a_ + b_ * t + k * math.exp(-t / te)
-
-    def f(t: float) -> float:
-        return gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - math.exp(-t / te)))
-
-    points = [0.0, ts]
+    t_ext = 0.0  # the extremum of g when it is inside the sample (0: none)
     if k != 0.0:
         r = b_ * te / k  # exp(-t*/te) at the extremum of g
         if 0.0 < r < 1.0:
             t_ext = -te * math.log(r)
-            if 0.0 < t_ext < ts:
-                points.insert(1, t_ext)
-    cuts = [0.0]
-    for lo, hi in zip(points[:-1], points[1:]):
-        g_lo, g_hi = g(lo), g(hi)
-        if g_lo * g_hi < 0.0:  # one zero on this monotone piece
-            for _ in range(200):
-                mid = 0.5 * (lo + hi)
-                if mid <= lo or mid >= hi:
-                    break
-                if (g(mid) < 0.0) == (g_lo < 0.0):
-                    lo = mid
-                else:
-                    hi = mid
-            cuts.append(0.5 * (lo + hi))
-    cuts.append(ts)
+            if not t_ext < ts:
+                t_ext = 0.0
+    # the monotone pieces [0, t_ext], [t_ext, ts] (or [0, ts]); a sign change of g on a piece is a cut
+    g_lo = a_ + b_ * 0.0 + k * exp(-0.0 / te)
+    g_hi = a_ + b_ * ts + k * exp(-ts / te)
     f_prev = 0.0
-    for t in cuts[1:]:
-        f_t = f(t)
-        u = _clamp(u + (f_t - f_prev))
+    lo = 0.0
+    if t_ext > 0.0:
+        g_ext = a_ + b_ * t_ext + k * exp(-t_ext / te)
+        if g_lo * g_ext < 0.0:
+            t = _zero_of_rate(a_, b_, k, te, 0.0, t_ext, g_lo)
+            f_prev = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)))
+            u += f_prev - 0.0
+            u = 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
+        lo, g_lo = t_ext, g_ext
+    if g_lo * g_hi < 0.0:
+        t = _zero_of_rate(a_, b_, k, te, lo, ts, g_lo)
+        f_t = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)))
+        u += f_t - f_prev
+        u = 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
         f_prev = f_t
-    return u
+    f_t = gain * (a_ * ts + 0.5 * b_ * ts * ts + c * (1.0 - exp(-ts / te)))
+    u += f_t - f_prev
+    return 0.0 if u < 0.0 else 100.0 if u > 100.0 else u
+
+
+def _zero_of_rate(a_: float, b_: float, k: float, te: float, lo: float, hi: float, g_lo: float) -> float:
+    """The zero of ``g(t) = a_ + b_·t + k·exp(-t/te)`` in ``[lo, hi]``, where ``g`` is monotone and changes sign.
+
+    The answer is what a bisection to machine precision returns: with ``neg(t)`` meaning
+    ``g(t) < 0``, the midpoint of the two adjacent floats ``t0 < t1`` with
+    ``neg(t0) == neg(lo)`` and ``neg(t1) != neg(lo)``. Newton's method starts
+    at the end where ``g·g'' > 0`` (Fourier's condition: ``g`` is convex or
+    concave on the piece, so the iterates approach the zero from that side
+    without overshooting and converge quadratically); the floats next to the
+    last iterate are then searched for the sign change, in steps of 1, 2, 4, ...
+    floats (where the terms of ``g`` cancel, rounding makes its sign ragged
+    over a few floats), and bisection narrows that bracket to adjacent floats.
+    """
+    exp, nextafter = math.exp, math.nextafter
+    neg_lo = g_lo < 0.0
+    # Fourier's condition: g'' = k/te²·exp(-t/te) has the sign of k
+    x = lo if (g_lo > 0.0) == (k > 0.0) else hi
+    ahead = 1.0 if x == lo else -1.0  # the direction of the iterates
+    inv_te = 1.0 / te
+    for _ in range(100):
+        ex = k * exp(-x * inv_te)
+        dg = b_ - ex * inv_te
+        if dg == 0.0:
+            break
+        x_new = x - (a_ + b_ * x + ex) / dg
+        if not (x_new - x) * ahead > 0.0:  # at the zero, or rounding turned it back: stop
+            break
+        x = x_new if lo <= x_new <= hi else min(max(x_new, lo), hi)
+    # bracket the sign change next to x: steps of 1, 2, 4, ... ulps away from x's side (rounding
+    # makes g's sign ragged over a few ulps where its terms cancel), then bisect to adjacent floats
+    if (a_ + b_ * x + k * exp(-x / te) < 0.0) == neg_lo:
+        t0, t1, toward = x, hi, hi
+    else:
+        t0, t1, toward = lo, x, lo
+    d = abs(nextafter(x, toward) - x)
+    while d > 0.0:
+        if toward == hi:
+            y = t0 + d
+            if y >= t1:
+                break
+            if (a_ + b_ * y + k * exp(-y / te) < 0.0) != neg_lo:
+                t1 = y
+                break
+            t0 = y
+        else:
+            y = t1 - d
+            if y <= t0:
+                break
+            if (a_ + b_ * y + k * exp(-y / te) < 0.0) == neg_lo:
+                t0 = y
+                break
+            t1 = y
+        d *= 2.0
+    for _ in range(200):  # bisection for whatever bracket is left (a no-op once t0, t1 are adjacent)
+        mid = 0.5 * (t0 + t1)
+        if mid <= t0 or mid >= t1:
+            break
+        if (a_ + b_ * mid + k * exp(-mid / te) < 0.0) == neg_lo:
+            t0 = mid
+        else:
+            t1 = mid
+    return 0.5 * (t0 + t1)
 
 
 class SlidingMode(_ScaledController):
@@ -623,14 +692,13 @@ class StateCompensator(_ErrorMemory):
         """The sample since the previous call with the difference linear: ``m += K·(s·Ts + c·(1 - a))``."""
         e = float(measured) - float(simulated) \
             if _valid(measured) and _valid(simulated) else None  # type: ignore[arg-type]
-
-        def integrate(e0: float, e1: float, m0: float) -> None:
-            s = (e1 - e0) / self.ts
-            c = e0 - m0 - s * self.te
-            self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
-
-        self._advance_linear(e, hold, self.ts, integrate)
+        self._advance_linear(e, hold, self.ts)
         return self.m
+
+    def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:
+        s = (e1 - e0) / self.ts
+        c = e0 - m0 - s * self.te
+        self.m += self.gain * (s * self.ts + c * (1.0 - math.exp(-self.ts / self.te)))
 
 
 def direction_from_gain(gain: float) -> int:

@@ -214,8 +214,10 @@ class _Stats:
     def add(self, x: float) -> None:
         if math.isfinite(x):
             self.final = x
-            self.min = min(self.min, x)
-            self.max = max(self.max, x)
+            if x < self.min:  # min() and max() as comparisons: called per sample and signal
+                self.min = x
+            if x > self.max:
+                self.max = x
 
     def state(self) -> list[float]:
         return [self.final, self.min, self.max]
@@ -245,8 +247,10 @@ class _Fit:
             self.n_u += 1
             self.sse_u += (untracked - meas) ** 2
         self.sum += meas
-        self.lo = min(self.lo, meas)
-        self.hi = max(self.hi, meas)
+        if meas < self.lo:
+            self.lo = meas
+        if meas > self.hi:
+            self.hi = meas
 
     def _scale(self) -> float:
         span = self.hi - self.lo
@@ -362,11 +366,13 @@ class _Twin:
 
     def _small(self, changed: Mapping[str, float]) -> bool:
         """True if every change is within its carry limit (and none is forced to restart)."""
-        if self.force_restart or not self.carry_limits:
+        limits = self.carry_limits
+        if self.force_restart or not limits:
             return False
+        applied = self.applied
         for name, value in changed.items():
-            limit = self.carry_limits.get(name)
-            old = self.applied.get(name)
+            limit = limits.get(name)
+            old = applied.get(name)
             if limit is None or old is None or not abs(value - old) <= limit:
                 return False
         return True
@@ -390,26 +396,33 @@ class _Twin:
         half sample late.
         """
         out = dict(values)
+        given = self.given
         for name, (lo, hi) in self.extrapolate.items():
-            if name in values and name in self.given:
+            if name in values and name in given:
                 p = float(values[name])
-                out[name] = min(max(p + 0.5 * (p - self.given[name]), lo), hi)
+                x = p + 0.5 * (p - given[name])
+                out[name] = lo if x < lo else hi if x > hi else x  # min(max(x, lo), hi), NaN kept
         return out
 
     def step(self, t_next: float, values: Mapping[str, float]) -> None:
         """Apply the values that changed and integrate to *t_next*."""
         given = {n: float(v) for n, v in values.items()}
-        values = self._applied(values)
-        changed = {n: v for n, v in values.items() if self.applied.get(n) != v}
+        if self.extrapolate:
+            values = self._applied(values)
+        applied = self.applied
+        changed = {n: v for n, v in values.items() if applied.get(n) != v}
         t0 = _time.perf_counter()
+        stepper = self.stepper
         if changed:
-            self.stepper.set(changed, restart=not self._small(changed))
+            stepper.set(changed, restart=not self._small(changed))
             self.force_restart = False
-            self.applied.update(changed)
-        self.stepper.step(t_next)
+            applied.update(changed)
+        stepper.step(t_next)
         self.step_seconds += _time.perf_counter() - t0
         self.given = given
-        self._save()
+        if self.me:  # _save
+            self.x = stepper.get_continuous_states()
+            self.x_time = float(stepper.time)
 
     def replay(self, t0: float, rows: Iterator[tuple[float, dict[str, float]]]) -> None:
         """Rebuild the run from *t0* by re-applying recorded values: ``(t_next, values)`` per step."""
@@ -604,6 +617,8 @@ class _Controllers:
     def __init__(self, pairs: Sequence[_Pair], ts: float) -> None:
         self.pairs = list(pairs)
         self.names = [p.parameter for p in self.pairs]
+        #: the PI pairs (the box's law, which also moves within a sample)
+        self._pi = [p for p in self.pairs if isinstance(p.controller, ScaledPI)]
         self.ts = float(ts)
         #: tag -> time its measurement went missing (None while present)
         self.missing: dict[str, float | None] = {p.tag: None for p in self.pairs}
@@ -633,12 +648,11 @@ class _Controllers:
         sliding-mode controller steps once a sample.
         """
         dt = self._dt(t)
-        for p in self.pairs:
-            if not isinstance(p.controller, ScaledPI):
-                continue
-            s = view.samples[p.tag]
+        samples = view.samples
+        for p in self._pi:
+            s = samples[p.tag]
             sp = (1.0 - w) * float(s[k]) + w * float(s[k + 1])
-            self._advance(p, sp, float(y[ridx[p.fmu_name]]), hold, dt)
+            p.controller.update(sp, float(y[ridx[p.fmu_name]]), hold=hold, dt=dt)
         self.last_time = t
 
     def values(self) -> dict[str, float]:
