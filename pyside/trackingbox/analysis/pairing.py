@@ -73,15 +73,23 @@ class DataChecks:
         :func:`~trackingbox.analysis.offsets.predict_tracking`).
     max_condition : float
         Warn when the scaled gains of the chosen pairs have a larger condition number.
+    closed_loop : float
+        Shortest closed-loop time constant (s) the prediction gives a loop (0: the
+        pair's step-response time constant, the loop ``lambda = 1`` tunes). A loop
+        tuned slower than its step response (slow fouling and wear, noise kept out
+        of the parameter) follows only the slow part of the error: what changes
+        faster, the sensor noise and the historian's held values included, stays
+        in the tracked error, and the prediction counts it.
     """
 
     noise_ratio: float = 5.0
     min_reach: float = 0.5
     max_ratio: float = 0.25
     max_condition: float = 100.0
+    closed_loop: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("noise_ratio", "min_reach", "max_ratio", "max_condition"):
+        for name in ("noise_ratio", "min_reach", "max_ratio", "max_condition", "closed_loop"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise AnalysisError(f"pairing check {name} must be a non-negative number, got {value!r}")
@@ -614,7 +622,8 @@ class _DataView:
         if not rows:
             return {}, None
         cols = [chosen[i] for i in rows]
-        taus = np.array([tau[i, j] if math.isfinite(tau[i, j]) and tau[i, j] > 0 else self.interval
+        taus = np.array([max(tau[i, j] if math.isfinite(tau[i, j]) and tau[i, j] > 0 else self.interval,
+                             self.checks.closed_loop)
                          for i, j in zip(rows, cols)]) + 0.5 * self.interval
         lo = self.B[cols, 1] - self.B[cols, 0]
         hi = self.B[cols, 2] - self.B[cols, 0]
@@ -630,7 +639,9 @@ class _DataView:
             return out, None
         i, j = rows[a], cols[a]
         reason = (f"paired with {self.parameters[j]} (together with the other pairs) tracking would leave "
-                  f"{100 * ratio[a]:.0f} % of its untracked RMS error (limit {100 * self.checks.max_ratio:.0f} %)")
+                  f"{100 * ratio[a]:.0f} % of its untracked RMS error (limit {100 * self.checks.max_ratio:.0f} %"
+                  + (f"; loops of {self.checks.closed_loop:g} s: what changes faster stays" if self.checks.closed_loop
+                     else "") + ")")
         if pr.at_bound[a] > 0.05:
             reason += f"; {self.parameters[j]} would sit at a bound {100 * pr.at_bound[a]:.0f} % of the time"
         if math.isfinite(pr.need[a]) and pr.need[a] > 1.0:

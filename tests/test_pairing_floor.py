@@ -1,0 +1,99 @@
+"""Pairing's noise floor of exception-reported tags and its prediction with slow closed loops.
+
+Expectations are computed independently: the floor from the known truth of a synthetic
+historian series (sample-and-hold of dead-band records, written out here), the prediction
+from the closed form of a first-order loop on a constant offset with white noise.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trackingbox.analysis.offsets import (Residuals, held_fraction, noise_floor, noise_sigma, offset_stats,
+                                          predict_tracking)
+from trackingbox.analysis.pairing import DataChecks, choose_pairs
+
+
+def _historian(truth: np.ndarray, sigma: float, band: float, heartbeat: int, rng: np.random.Generator) -> np.ndarray:
+    """Dead-band (exception) reporting of ``truth + noise`` scanned every sample, held between records."""
+    noisy = truth + rng.normal(0.0, sigma, truth.size)
+    held = np.empty_like(noisy)
+    last, since = noisy[0], 0
+    for k, x in enumerate(noisy):
+        if abs(x - last) > band or since >= heartbeat:
+            last, since = x, 0
+        since += 1
+        held[k] = last
+    return held
+
+
+@pytest.mark.parametrize(("sigma", "band", "low"), [(0.2, 0.2, 0.85), (200.0, 300.0, 0.85), (0.05, 0.3, 0.6)])
+def test_noise_floor_of_a_held_series_matches_its_distance_from_the_truth(sigma, band, low):
+    # noise near the dead band (the evaporator's temperatures and pressures): within 15 %; a dead band
+    # far above the noise (its flows): the held value lags a moving truth by one sign for as long as it
+    # moves one way, slower than the 30 min average, so the estimate is a lower bound (0.74 here)
+    rng = np.random.default_rng(11)
+    n, dt = 30000, 10.0
+    t = np.arange(n) * dt
+    scale = band / 0.2
+    truth = scale * (3.0 * np.sin(2 * np.pi * t / 86400.0) + 0.5 * np.sin(2 * np.pi * t / 20000.0))
+    held = _historian(truth, sigma, band, heartbeat=60, rng=rng)
+    expected = float(np.sqrt(np.mean((held - truth) ** 2)))   # what no loop following the truth removes
+    assert held_fraction(held) > 0.5
+    assert noise_sigma(held) == pytest.approx(0.0, abs=1e-3 * band)   # the difference-based estimate fails
+    # measured - untracked twin: the twin follows the truth's movement but has an offset
+    simulated = truth - 2.0 * scale
+    assert low * expected <= noise_floor(held - simulated, dt) <= 1.15 * expected
+    s = offset_stats("T", held, simulated, dt)
+    assert s.noise == noise_floor(held - simulated, dt)
+    assert s.rms == pytest.approx(math.sqrt(4.0 * scale ** 2 + expected ** 2), rel=0.02)
+    # without the grid interval (or for a dense noisy series) the difference-based estimate stays
+    assert offset_stats("T", held, simulated).noise == noise_sigma(held)
+
+
+def test_noise_floor_skips_windows_with_gaps_and_needs_a_full_window():
+    rng = np.random.default_rng(2)
+    x = rng.normal(0.0, 0.5, 5000)
+    x[1000:1500] = 1e6            # a stretch that must not count ...
+    x[999] = x[1500] = np.nan     # ... is cut off by NaNs, so no valid window reaches it
+    y = x.copy()
+    y[1000:1500] = np.nan
+    assert noise_floor(y, 10.0) == pytest.approx(0.5, rel=0.05)
+    assert math.isnan(noise_floor(y[:100], 10.0))   # shorter than one 30 min window
+
+
+def test_prediction_with_a_slow_closed_loop_keeps_the_noise_and_the_transient():
+    # constant offset c plus white noise sigma; a first-order loop a = exp(-dt / tau) leaves
+    # x_k - y_k: the noise part has variance a^2 (sigma^2 + sigma^2 (1 - a) / (1 + a)), the offset
+    # part decays as c a^(k+1) (sum of squares c^2 a^2 / (1 - a^2))
+    rng = np.random.default_rng(5)
+    n, dt, c, sigma = 26000, 10.0, 1.0, 0.5
+    r = c + rng.normal(0.0, sigma, n)
+    for tau in (10.0, 10800.0):
+        a = math.exp(-dt / tau)
+        var = a * a * (sigma ** 2 + sigma ** 2 * (1 - a) / (1 + a)) + c * c * a * a / (1 - a * a) / n
+        expected = math.sqrt(var / (c * c + sigma ** 2))
+        p = predict_tracking([[1.0]], [tau], r[None, :], [-10.0], [10.0], dt)
+        assert p.ratio[0] == pytest.approx(expected, rel=0.05)
+    assert expected > 0.25   # the 3 h loop: the noise stays (0.45 of the error) and the start-up transient
+
+
+def test_closed_loop_check_rejects_a_tag_at_its_floor_and_says_why():
+    rng = np.random.default_rng(8)
+    n, dt = 20000, 10.0
+    # y1: offset 0.3 with noise 0.2 (noise 0.55 of its RMS); y2: offset 1 with noise 0.01
+    res = Residuals(("y1", "y2"), dt * np.arange(n),
+                    np.array([0.3 + rng.normal(0, 0.2, n), 1.0 + rng.normal(0, 0.01, n)]), np.zeros((2, n)), dt)
+    kw = dict(time_constants=[[5.0, 5.0]] * 2, residuals=res, bounds=[(0.0, -5.0, 5.0)] * 2)
+    G = [[1.0, 0.0], [0.0, 1.0]]
+    fast = choose_pairs(G, ["y1", "y2"], ["a", "b"], checks=DataChecks(noise_ratio=0.0), **kw)
+    assert {p.variable for p in fast.pairs} == {"y1", "y2"}     # a 5 s loop "tracks" the noise
+    slow = choose_pairs(G, ["y1", "y2"], ["a", "b"], checks=DataChecks(noise_ratio=0.0, closed_loop=10800.0), **kw)
+    assert {(p.variable, p.parameter) for p in slow.pairs} == {("y2", "b")}
+    why = dict(slow.left_out)["y1"]
+    assert "loops of 10800 s" in why and "would leave" in why
+    assert slow.pairs[0].predicted_ratio < 0.25
+    with pytest.raises(Exception, match="closed_loop"):
+        DataChecks(closed_loop=-1.0)
