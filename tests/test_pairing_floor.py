@@ -78,6 +78,13 @@ def test_prediction_with_a_slow_closed_loop_keeps_the_noise_and_the_transient():
         p = predict_tracking([[1.0]], [tau], r[None, :], [-10.0], [10.0], dt)
         assert p.ratio[0] == pytest.approx(expected, rel=0.05)
     assert expected > 0.25   # the 3 h loop: the noise stays (0.45 of the error) and the start-up transient
+    # judged after 3 closed-loop time constants the transient is down to exp(-3) of the offset at most
+    settled = predict_tracking([[1.0]], [tau], r[None, :], [-10.0], [10.0], dt, settle=3 * tau)
+    m = n - int(3 * tau / dt)
+    tail = c * c * a ** (2 * (n - m + 1)) / (1 - a * a) / m
+    noise_only = math.sqrt((a * a * (sigma ** 2 + sigma ** 2 * (1 - a) / (1 + a)) + tail) / (c * c + sigma ** 2))
+    assert settled.ratio[0] == pytest.approx(noise_only, rel=0.05)
+    assert settled.ratio[0] < expected
 
 
 def test_closed_loop_check_rejects_a_tag_at_its_floor_and_says_why():
@@ -97,3 +104,39 @@ def test_closed_loop_check_rejects_a_tag_at_its_floor_and_says_why():
     assert slow.pairs[0].predicted_ratio < 0.25
     with pytest.raises(Exception, match="closed_loop"):
         DataChecks(closed_loop=-1.0)
+
+
+def test_spec_pairing_closed_loop_loads_dumps_and_is_checked(tmp_path):
+    from trackingbox.errors import SpecError
+    from trackingbox.spec import dump_spec, loads_spec
+
+    text = ('twin = "twin.fmu"\nmeasurements = "m.csv"\nsample_time = 10.0\n[inputs]\n"u" = "u_in"\n'
+            '[outputs]\n"y" = "y_out"\n[[parameters]]\nname = "k"\nstart = 1.0\nmin = 0.5\nmax = 2.0\n')
+    spec = loads_spec(text + "[pairing]\nclosed_loop = 10800.0\n", tmp_path / "spec.toml", check_files=False)
+    assert spec.pairing.closed_loop == 10800.0
+    again = loads_spec(dump_spec(spec), tmp_path / "spec.toml", check_files=False)
+    assert again.pairing == spec.pairing
+    assert loads_spec(text, tmp_path / "spec.toml", check_files=False).pairing.closed_loop is None
+    with pytest.raises(SpecError, match=r"'closed_loop' in \[pairing\] must be > 0"):
+        loads_spec(text + "[pairing]\nclosed_loop = -5.0\n", tmp_path / "spec.toml", check_files=False)
+
+
+def test_spec_pairs_tunes_a_new_pair_for_the_closed_loop():
+    from types import SimpleNamespace
+
+    from trackingbox.analysis.pair_stage import PairSettings, spec_pairs
+    from trackingbox.analysis.pairing import Pair, Pairing
+    from trackingbox.spec import PairingSettings, PairSpec
+
+    result = SimpleNamespace(pairing=Pairing((Pair("y", "k", 1.0, 2.0, 120.0), Pair("z", "m", 1.0, 3.0, 4e4)), (), ()),
+                             step_settings=SimpleNamespace(interval=10.0), settings=PairSettings())
+    spec = SimpleNamespace(pairs=(), pairing=PairingSettings(closed_loop=10800.0))
+    out = {p.variable: p.lambda_ for p in spec_pairs(spec, result)}
+    assert out == {"y": pytest.approx(90.0), "z": 1.0}   # 10800 / 120; a slower step response keeps 1
+    plain = SimpleNamespace(pairs=(), pairing=PairingSettings())
+    assert {p.lambda_ for p in spec_pairs(plain, result)} == {1.0}
+    # the settings override the spec's; an existing pair keeps its tuning
+    result.settings = PairSettings(closed_loop=1200.0)
+    assert spec_pairs(spec, result)[0].lambda_ == pytest.approx(10.0)
+    spec.pairs = (PairSpec(variable="y", parameter="k", gain=1.0, time_constant=100.0, lambda_=3.0),)
+    assert spec_pairs(spec, result)[0].lambda_ == 3.0

@@ -421,7 +421,7 @@ class TrackingPrediction:
 
 
 def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residual: npt.ArrayLike,
-                     lower: npt.ArrayLike, upper: npt.ArrayLike, dt: float) -> TrackingPrediction:
+                     lower: npt.ArrayLike, upper: npt.ArrayLike, dt: float, settle: float = 0.0) -> TrackingPrediction:
     """Expected effect of tracking a square set of pairs (linear, first-order loops).
 
     Parameters
@@ -437,6 +437,10 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
         Parameter bounds relative to the start (``min - start <= 0 <= max - start``).
     dt : float
         Sample spacing (s).
+    settle : float
+        s from the first sample before the ratio and the time at a bound count: tracking is
+        judged once its loops settled (the loops start from no correction at the first
+        sample; a slow loop's start-up transient would otherwise decide the figure).
 
     Returns
     -------
@@ -460,6 +464,7 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
     except np.linalg.LinAlgError:
         raise AnalysisError("predict_tracking: the gain matrix of the pairs is singular") from None
     ok = np.all(np.isfinite(R), axis=0)
+    ok[: min(ok.size, int(math.ceil(max(float(settle), 0.0) / dt - 1e-9)))] = False
     if not ok.any():
         nan = np.full(k, math.nan)
         return TrackingPrediction(nan, nan, nan)

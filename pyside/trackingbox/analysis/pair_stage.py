@@ -259,7 +259,7 @@ class PairingResult:
             "pairs_condition_number": _finite(pairing.pairs_condition_number),
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
-                "max_ratio": pairing.checks.max_ratio},
+                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
                 "rule": self.check_rule,

@@ -50,6 +50,10 @@ RANK_RTOL = 1e-2
 #: entirely on the other loops (close to zero: the classic "never pair on lambda near 0").
 MIN_LAMBDA = 0.1
 _FORBIDDEN = 1e6
+#: With a closed-loop time constant (:attr:`DataChecks.closed_loop`), the predicted ratio counts
+#: from this many of them after the window's first sample (95 % settled): tracking is judged on a
+#: window after its start-up (the evaporator's validation window), not on its loops' first hours.
+SETTLE_LOOPS = 3.0
 
 
 @dataclass(frozen=True)
@@ -79,7 +83,8 @@ class DataChecks:
         tuned slower than its step response (slow fouling and wear, noise kept out
         of the parameter) follows only the slow part of the error: what changes
         faster, the sensor noise and the historian's held values included, stays
-        in the tracked error, and the prediction counts it.
+        in the tracked error, and the prediction counts it, from :data:`SETTLE_LOOPS`
+        closed-loop time constants after the window's start.
     """
 
     noise_ratio: float = 5.0
@@ -628,7 +633,8 @@ class _DataView:
         lo = self.B[cols, 1] - self.B[cols, 0]
         hi = self.B[cols, 2] - self.B[cols, 0]
         try:
-            pr = predict_tracking(self.G[np.ix_(rows, cols)], taus, self.R[rows], lo, hi, self.interval)
+            pr = predict_tracking(self.G[np.ix_(rows, cols)], taus, self.R[rows], lo, hi, self.interval,
+                                  settle=SETTLE_LOOPS * self.checks.closed_loop)
         except AnalysisError as exc:
             logger.info("tracking prediction skipped: %s", exc)
             return {}, None
