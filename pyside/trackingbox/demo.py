@@ -36,7 +36,7 @@ ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
     # the evaporator: the least-squares refinement from the spec's starts alone (its twin runs 36 h
     # of training data per simulation; one generation of the global search took 22 min on a loaded
     # machine), on a 60 s grid
-    "evaporator": {"workers": 1, "maxiter": 0, "refine": True, "refine_grid": 60.0},
+    "evaporator": {"workers": 1, "maxiter": 0, "refine": True, "refine_grid": 60.0, "refine_iterations": 5},
 }
 
 #: Benches whose estimates of the constant parameters become the spec's starts before ``pair``
