@@ -440,7 +440,8 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
     settle : float
         s from the first sample before the ratio and the time at a bound count: tracking is
         judged once its loops settled (the loops start from no correction at the first
-        sample; a slow loop's start-up transient would otherwise decide the figure).
+        sample; a slow loop's start-up transient would otherwise decide the figure); at
+        most the first half of the samples are skipped (a short window keeps its second half).
 
     Returns
     -------
@@ -464,7 +465,7 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
     except np.linalg.LinAlgError:
         raise AnalysisError("predict_tracking: the gain matrix of the pairs is singular") from None
     ok = np.all(np.isfinite(R), axis=0)
-    ok[: min(ok.size, int(math.ceil(max(float(settle), 0.0) / dt - 1e-9)))] = False
+    ok[: min(ok.size // 2, int(math.ceil(max(float(settle), 0.0) / dt - 1e-9)))] = False
     if not ok.any():
         nan = np.full(k, math.nan)
         return TrackingPrediction(nan, nan, nan)
