@@ -7,6 +7,7 @@ from the closed form of a first-order loop on a constant offset with white noise
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -100,10 +101,32 @@ def test_closed_loop_check_rejects_a_tag_at_its_floor_and_says_why():
     slow = choose_pairs(G, ["y1", "y2"], ["a", "b"], checks=DataChecks(noise_ratio=0.0, closed_loop=10800.0), **kw)
     assert {(p.variable, p.parameter) for p in slow.pairs} == {("y2", "b")}
     why = dict(slow.left_out)["y1"]
-    assert "loops of 10800 s" in why and "would leave" in why
+    # its floor 0.2 is 0.2 / sqrt(0.3^2 + 0.2^2) = 55 % of its RMS error: no loop gets it under 30 %
+    assert re.search(r"noise floor 0\.2\d* .* is 5[56] % of its untracked RMS error", why) and "loops of 10800 s" in why
     assert slow.pairs[0].predicted_ratio < 0.25
     with pytest.raises(Exception, match="closed_loop"):
         DataChecks(closed_loop=-1.0)
+
+
+def test_closed_loop_check_judges_the_error_above_the_floor():
+    rng = np.random.default_rng(9)
+    n, dt = 20000, 10.0
+    # y1: offset 0.5, noise 0.15: floor 0.29 of its RMS (under 30 %), so a 3 h loop leaves at least
+    # that of the whole error (above the 25 % limit) but almost nothing of the error above the floor
+    res = Residuals(("y1",), dt * np.arange(n), np.array([0.5 + rng.normal(0, 0.15, n)]), np.zeros((1, n)), dt)
+    checks = DataChecks(closed_loop=10800.0)
+    p = choose_pairs([[1.0]], ["y1"], ["a"], time_constants=[[5.0]], residuals=res, bounds=[(0.0, -5.0, 5.0)],
+                     checks=checks)
+    assert [(x.variable, x.parameter) for x in p.pairs] == [("y1", "a")]
+    f = 0.15 / math.hypot(0.5, 0.15)
+    assert f < 0.3 < p.pairs[0].predicted_ratio + 0.05 and p.pairs[0].predicted_ratio > f
+    # the same tag with a 2 h lag of the offset it cannot follow: a step the loop meets only after
+    # 9 h of the window's 55 h, so the error above the floor stays and the pair is refused
+    late = np.where(np.arange(n) < n - 2000, 0.0, 2.0) + 0.5 + rng.normal(0, 0.15, n)
+    res2 = Residuals(("y1",), dt * np.arange(n), late[None, :], np.zeros((1, n)), dt)
+    q = choose_pairs([[1.0]], ["y1"], ["a"], time_constants=[[5.0]], residuals=res2, bounds=[(0.0, -5.0, 5.0)],
+                     checks=checks)
+    assert q.pairs == () and "above its noise floor" in dict(q.left_out)["y1"]
 
 
 def test_spec_pairing_closed_loop_loads_dumps_and_is_checked(tmp_path):
