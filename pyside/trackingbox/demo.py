@@ -181,8 +181,16 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
             if run.bench in WRITE_ESTIMATES:
                 varying = _time_varying(run.bench)
-                starts = {k: float(v) for k, v in est.parameters.items() if k not in varying}
+                held = _estimate_only(run.bench)
+                starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
                 spec = write_starts(spec.path, starts)
+                if held:
+                    from .benches.evaporator import fix_parameters
+
+                    fixed = {k: float(v) for k, v in est.parameters.items() if k in held}
+                    spec = load_spec(fix_parameters(spec.path, fixed).path)
+                    starts.update(fixed)
+                    progress.note("estimated and held (moved to [fixed]): " + ", ".join(sorted(fixed)))
                 summary["estimate_written"] = starts
                 progress.note("estimates written as the spec's starts: "
                               + ", ".join(f"{k} = {v:.4g}" for k, v in starts.items())
@@ -215,6 +223,15 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         val = validate(spec, fmu)
         summary["validate"] = val.to_json()
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
+
+
+def _estimate_only(bench: str) -> frozenset[str]:
+    """Parameters of *bench* held at their estimate (moved to ``[fixed]``), not tracked."""
+    if bench == "evaporator":
+        from .benches.evaporator import ESTIMATE_ONLY
+
+        return frozenset(ESTIMATE_ONLY)
+    return frozenset()
 
 
 def _time_varying(bench: str) -> frozenset[str]:
