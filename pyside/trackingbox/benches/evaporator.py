@@ -250,8 +250,8 @@ OUTPUTS = (
 #: 6 h means are within 0.002 and KvMax sits at 7.23 (plant 7.6). (That was without estimates.)
 #: With the demo's order (estimate the constants first, effect.dBPR held at its estimate 0.941 K: see
 #: ESTIMATE_ONLY) the fouling's unbiased tags are TI-6111 and QI-6150 (the Rf move each tag's training
-#: offset implies: 1.9e-4 and 1.7e-4 m2.K/W, the plant's training mean 1.64e-4), not PI-6121 (5e-5: the
-#: steam chest carries what the twin lacks, vent and heat loss). Hand-set Rf <-> TI-6111, pump.dp0 <->
+#: offset implies: 1.9e-4 and 1.7e-4 m2.K/W, the plant's training mean 1.64e-4), not PI-6121 (5e-5: a
+#: plant difference the twin lacks moves the steam chest's pressure too; which one is not measured). Hand-set Rf <-> TI-6111, pump.dp0 <->
 #: PI-6152, outletValve.KvMax <-> ZI-6150 (3 h loops) met every criterion on the validation window:
 #: tracked/untracked NRMSE 0.227, 0.155, 0.167; fouling within 6.2 % of its range after 12 h (4.8 % in
 #: the stoppages, final 3.0 %), inside its bounds; the three levels inside their vessels.
