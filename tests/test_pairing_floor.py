@@ -163,3 +163,24 @@ def test_spec_pairs_tunes_a_new_pair_for_the_closed_loop():
     assert spec_pairs(spec, result)[0].lambda_ == pytest.approx(10.0)
     spec.pairs = (PairSpec(variable="y", parameter="k", gain=1.0, time_constant=100.0, lambda_=3.0),)
     assert spec_pairs(spec, result)[0].lambda_ == 3.0
+
+
+def test_fix_parameters_moves_estimates_into_fixed(tmp_path):
+    from trackingbox.benches.evaporator import fix_parameters
+    from trackingbox.errors import SpecError
+    from trackingbox.spec import load_spec
+
+    (tmp_path / "twin.fmu").write_bytes(b"")
+    (tmp_path / "m.csv").write_text("time,u,y\n0,1,2\n10,1,2\n")
+    text = ('twin = "twin.fmu"\nmeasurements = "m.csv"\nsample_time = 10.0\n[inputs]\n"u" = "u_in"\n'
+            '[outputs]\n"y" = "y_out"\n[[parameters]]\nname = "k"\nstart = 1.0\nmin = 0.5\nmax = 2.0\n'
+            '[[parameters]]\nname = "dBPR"\nstart = 0.0\nmin = -2.0\nmax = 5.0\n[fixed]\n"A" = 3.0\n')
+    (tmp_path / "spec.toml").write_text(text)
+    spec = fix_parameters(tmp_path / "spec.toml", {"dBPR": 0.94})
+    again = load_spec(tmp_path / "spec.toml", check_files=False)
+    assert [p.name for p in again.parameters] == ["k"] and again.fixed == {"A": 3.0, "dBPR": 0.94}
+    assert spec.fixed == again.fixed
+    before = (tmp_path / "spec.toml").read_text()
+    with pytest.raises(SpecError, match=r"\['nope'\] are not \[\[parameters\]\] entries"):
+        fix_parameters(tmp_path / "spec.toml", {"nope": 1.0})
+    assert (tmp_path / "spec.toml").read_text() == before   # nothing half-written
