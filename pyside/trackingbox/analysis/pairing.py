@@ -394,6 +394,16 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     lam_sub = relative_gain_array(sub, rtol=rtol * 1e-3,
                                   variables=[variables[i] for i in rows],
                                   parameters=[parameters[j] for j in cols])
+    if data is not None and data.checks.closed_loop > 0 and excluded and len(excluded) < len(rows):
+        # floor-aware mode: a tag left out at its noise floor cannot carry a loop, yet in a tall
+        # relative gain array it takes part of a parameter's column (the evaporator's steam-chest
+        # pressure took 0.78 of the fouling's, leaving its usable tags below MIN_LAMBDA): the
+        # relative gains are those of the tags that can be tracked
+        keep = [a for a, i in enumerate(rows) if i not in excluded]
+        lam_sub = np.full(sub.shape, math.nan)
+        lam_sub[keep] = relative_gain_array(sub[keep], rtol=rtol * 1e-3,
+                                            variables=[variables[rows[a]] for a in keep],
+                                            parameters=[parameters[j] for j in cols])
     lam = np.full((m, n), math.nan)
     lam[np.ix_(rows, cols)] = lam_sub
     cond = condition_number(sub)
