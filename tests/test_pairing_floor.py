@@ -184,3 +184,22 @@ def test_fix_parameters_moves_estimates_into_fixed(tmp_path):
     with pytest.raises(SpecError, match=r"\['nope'\] are not \[\[parameters\]\] entries"):
         fix_parameters(tmp_path / "spec.toml", {"nope": 1.0})
     assert (tmp_path / "spec.toml").read_text() == before   # nothing half-written
+
+
+def test_floor_aware_relative_gains_leave_out_the_tags_at_their_floor():
+    rng = np.random.default_rng(4)
+    n, dt = 20000, 10.0
+    # one parameter a, three tags: y1 moves 10 per unit but sits at its floor (offset 0.5, noise 1);
+    # y2 and y3 move 1 and 2 per unit with offsets 0.1 and 0.2 (the same move 0.1 of a) and no noise
+    res = Residuals(("y1", "y2", "y3"), dt * np.arange(n),
+                    np.array([0.5 + rng.normal(0, 1.0, n), np.full(n, 0.1), np.full(n, 0.2)]), np.zeros((3, n)), dt)
+    kw = dict(time_constants=[[5.0]] * 3, residuals=res, bounds=[(0.0, -1.0, 1.0)])
+    G = [[10.0], [1.0], [2.0]]
+    # tall RGA of one column: g_i^2 / sum g^2 = 100/105, 1/105, 4/105: y1 would take the column
+    plain = choose_pairs(G, ["y1", "y2", "y3"], ["a"], checks=DataChecks(noise_ratio=0.0), **kw)
+    assert plain.rga[:, 0] == pytest.approx([100 / 105, 1 / 105, 4 / 105])
+    floor = choose_pairs(G, ["y1", "y2", "y3"], ["a"], checks=DataChecks(closed_loop=10800.0), **kw)
+    assert "noise floor" in dict(floor.left_out)["y1"]
+    # over y2, y3 alone: 1/5 and 4/5; y3 is paired
+    assert math.isnan(floor.rga[0, 0]) and floor.rga[1:, 0] == pytest.approx([0.2, 0.8])
+    assert [(p.variable, p.parameter) for p in floor.pairs] == [("y3", "a")]
