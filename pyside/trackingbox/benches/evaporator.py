@@ -254,7 +254,12 @@ OUTPUTS = (
 #: plant difference the twin lacks moves the steam chest's pressure too; which one is not measured). Hand-set Rf <-> TI-6111, pump.dp0 <->
 #: PI-6152, outletValve.KvMax <-> ZI-6150 (3 h loops) met every criterion on the validation window:
 #: tracked/untracked NRMSE 0.227, 0.155, 0.167; fouling within 6.2 % of its range after 12 h (4.8 % in
-#: the stoppages, final 3.0 %), inside its bounds; the three levels inside their vessels.
+#: the stoppages, final 3.0 %), inside its bounds; the three levels inside their vessels. ``pair``
+#: (floor-aware with this closed_loop; dBPR in [fixed]) now chooses exactly these three by itself, and
+#: the same run gives the same figures; left out with reasons: inletValve.KvMax (ZI-6110 at its floor
+#: once estimated: 89 %), pump.VMax (parallel to pump.dp0), the tags FI-6125, PI-6111, PI-6121, TI-6151,
+#: ZI-6110 (noise floor 50, 62, 32, 31, 89 % of their settled untracked error), FI-6110 and PI-6151
+#: (no candidate moves them), FI-6150 and QI-6150 (offsets out of reach).
 #: Each tag is scaled by its sensor accuracy (the noise above; flows at their design reading, valve
 #: positions at the historian's 0.2 % dead band) rather than by its measured range, which the feed and
 #: steam moves set.
