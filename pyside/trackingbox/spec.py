@@ -220,10 +220,17 @@ class PairingSettings:
         accuracy, a parameter pairs with the tag that shows it most clearly above
         the noise; scaled by range, with the tag whose operating swing it explains
         most, which favours tags the inputs hardly move.
+    closed_loop : float or None
+        Closed-loop time constant (s) the parameter controllers will be tuned for at
+        least (``closed_loop = 10800.0``): ``pair`` predicts each loop's tracking with
+        it (an error faster than the loop stays, noise and the historian's holds
+        included) and writes a new pair's ``lambda`` so that ``lambda x time_constant``
+        reaches it. ``None``: the step tests' time constants (lambda = 1).
     """
 
     freeze: tuple[tuple[str, float], ...] = ()
     scale: tuple[tuple[str, float], ...] = ()
+    closed_loop: float | None = None
 
 
 @dataclass(frozen=True)
@@ -743,8 +750,10 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale"), (), "[pairing]", problems)
-    out: dict[str, tuple[tuple[str, float], ...]] = {}
+    _check_keys(table, ("freeze", "scale", "closed_loop"), (), "[pairing]", problems)
+    out: dict[str, Any] = {}
+    if "closed_loop" in table:
+        out["closed_loop"] = _number(table, "closed_loop", "[pairing]", problems, positive=True)
     for key, example, positive in (("freeze", "holdControllers = 1", False), ("scale", '"TI-101" = 0.2', True)):
         value = table.get(key, {})
         if not isinstance(value, Mapping):
@@ -1035,6 +1044,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     if spec.pairing != PairingSettings():
         doc["pairing"] = {key: {k: float(v) for k, v in getattr(spec.pairing, key)}
                           for key in ("freeze", "scale") if getattr(spec.pairing, key)}
+        if spec.pairing.closed_loop is not None:
+            doc["pairing"]["closed_loop"] = float(spec.pairing.closed_loop)
     if spec.diagnose.effects:
         doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:

@@ -181,14 +181,15 @@ def _hold_signal(spec: Spec, view: MeasurementView, lead: int = 0) -> np.ndarray
 
 
 def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid: np.ndarray,
-             outputs: list[str]) -> pd.DataFrame:
+             outputs: list[str], parameters: dict[str, float] | None = None) -> pd.DataFrame:
     """Run the tracked FMU over *grid*: *inputs* interpolated linearly, *held* held over each sample.
 
     The held inputs (``hold``, and correction flows fed from the Python
     runtime) are values per sample as the runtime applies them, so they are set
     between communication steps instead of being interpolated between samples.
     """
-    run = model.stepper(start_time=float(grid[0]), parameters={n: float(v[0]) for n, v in held.items()},
+    run = model.stepper(start_time=float(grid[0]),
+                        parameters={**(parameters or {}), **{n: float(v[0]) for n, v in held.items()}},
                         inputs=inputs)
     read = run.reader(outputs)
     rows = np.empty((grid.size, len(outputs)))
@@ -293,8 +294,15 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
             if name != "time" and name not in known_inputs:
                 raise FMUError(unknown_name("input", name, sorted(known_inputs), f"tracked FMU {fmu.name}")
                                + " (was it generated from this spec?)")
-        logger.info("running the tracked FMU %s", fmu.name)
-        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs)
+        # the twin's parameters as the runtime runs it: [fixed] values and the starts of the parameters
+        # no pair drives (the box drives the paired ones); names the tracked FMU does not tune are skipped
+        tunable = set(model.info.tunable_parameters) if hasattr(model.info, "tunable_parameters") else set()
+        paired = {p.parameter for p in spec.pairs}
+        given = {**{p.name: float(p.start) for p in spec.parameters if p.name not in paired}, **spec.fixed}
+        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs,
+                       {n: float(v) for n, v in given.items() if n in tunable})
+        logger.info("ran the tracked FMU %s with %d of the spec's fixed values and unpaired starts", fmu.name,
+                    sum(n in tunable for n in given))
     finally:
         model.close()
 

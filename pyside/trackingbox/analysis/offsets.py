@@ -74,6 +74,73 @@ def noise_sigma(values: npt.ArrayLike) -> float:
     return float(_MAD * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
 
 
+#: A series whose consecutive samples are equal this often is a held one (a historian's
+#: exception reporting laid on the grid by sample-and-hold): its first differences are
+#: mostly zero, so :func:`noise_sigma` reads 0 and the noise is taken from :func:`noise_floor`.
+HELD_FRACTION = 0.5
+#: Span (s) of the centred moving average :func:`noise_floor` measures the spread around.
+FLOOR_SPAN = 1800.0
+
+
+def held_fraction(values: npt.ArrayLike) -> float:
+    """Fraction of the first differences of consecutive valid samples that are exactly zero.
+
+    >>> held_fraction([1.0, 1.0, 1.0, 2.0, 2.0])
+    0.75
+    """
+    d = np.diff(np.asarray(values, dtype=float))
+    d = d[np.isfinite(d)]
+    return float(np.mean(d == 0.0)) if d.size else math.nan
+
+
+def noise_floor(values: npt.ArrayLike, interval: float, span: float = FLOOR_SPAN) -> float:
+    """RMS spread of a series around its centred moving average over *span* s.
+
+    For a series that tracking has to follow with loops of hours, what changes
+    faster than *span* is a floor no loop removes: the sensor noise and, for an
+    exception-reported (dead-band) tag laid on the grid by sample-and-hold, the
+    held value's distance from the truth. Only samples whose whole averaging
+    window is valid count (stoppages and gaps are NaN); the spread is scaled by
+    ``sqrt(w / (w - 1))`` for the ``w`` samples of the window (the mean of white
+    noise over them takes ``1/w`` of its variance).
+
+    Parameters
+    ----------
+    values : array_like
+        Equally spaced samples (NaN: missing).
+    interval : float
+        Sample spacing (s).
+    span : float
+        Averaging span (s); at least 3 samples.
+
+    Returns
+    -------
+    float
+        The spread; NaN when no full window is valid.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> x = np.sin(np.arange(20000) * 10.0 / 86400.0) + rng.normal(0.0, 0.1, 20000)
+    >>> round(noise_floor(x, 10.0), 2)
+    0.1
+    """
+    x = np.asarray(values, dtype=float)
+    w = max(3, int(round(span / interval)) | 1)
+    if x.size < w:
+        return math.nan
+    ok = np.isfinite(x)
+    c = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
+    n = np.concatenate([[0], np.cumsum(ok)])
+    full = (n[w:] - n[:-w]) == w
+    mean = (c[w:] - c[:-w]) / w
+    centre = x[w // 2: w // 2 + mean.size]
+    dev = (centre - mean)[full]
+    if dev.size == 0:
+        return math.nan
+    return float(np.sqrt(np.mean(dev ** 2) * w / (w - 1)))
+
+
 @dataclass(frozen=True)
 class OffsetStats:
     """Untracked error of one variable (measured - simulated) over the analysis window.
@@ -82,7 +149,9 @@ class OffsetStats:
     ----------
     variable : str
     noise : float
-        Sensor noise standard deviation (:func:`noise_sigma` of the measurement).
+        Sensor noise standard deviation: :func:`noise_sigma` of the measurement, or, for
+        a held (exception-reported) series, :func:`noise_floor` of measured - simulated
+        (its noise and held values' distance from the truth: what stays with slow loops).
     mean : float
         Mean of ``measured - simulated`` (the offset; its sign says which way to move).
     rms : float
@@ -105,8 +174,13 @@ class OffsetStats:
         return math.inf if self.rms > 0 else math.nan
 
 
-def offset_stats(variable: str, measured: npt.ArrayLike, simulated: npt.ArrayLike) -> OffsetStats:
+def offset_stats(variable: str, measured: npt.ArrayLike, simulated: npt.ArrayLike,
+                 interval: float | None = None) -> OffsetStats:
     """:class:`OffsetStats` of one variable from its measured and untracked simulated series.
+
+    With the grid *interval* (s), a measurement held over more than
+    :data:`HELD_FRACTION` of its samples gets its noise from :func:`noise_floor` of
+    ``measured - simulated`` (the first differences of a held series are mostly zero).
 
     Examples
     --------
@@ -118,9 +192,14 @@ def offset_stats(variable: str, measured: npt.ArrayLike, simulated: npt.ArrayLik
     s = np.asarray(simulated, dtype=float)
     r = m - s
     ok = np.isfinite(r)
+    noise = noise_sigma(m)
+    if interval is not None and held_fraction(m) > HELD_FRACTION:
+        floor = noise_floor(r, interval)
+        if math.isfinite(floor):
+            noise = max(floor, noise) if math.isfinite(noise) else floor
     if not ok.any():
-        return OffsetStats(variable, noise_sigma(m), math.nan, math.nan, 0)
-    return OffsetStats(variable, noise_sigma(m), float(r[ok].mean()), float(np.sqrt(np.mean(r[ok] ** 2))),
+        return OffsetStats(variable, noise, math.nan, math.nan, 0)
+    return OffsetStats(variable, noise, float(r[ok].mean()), float(np.sqrt(np.mean(r[ok] ** 2))),
                        int(ok.sum()))
 
 
@@ -153,7 +232,8 @@ class Residuals:
 
     def stats(self) -> tuple[OffsetStats, ...]:
         """:class:`OffsetStats` per variable."""
-        return tuple(offset_stats(v, self.measured[i], self.simulated[i]) for i, v in enumerate(self.variables))
+        return tuple(offset_stats(v, self.measured[i], self.simulated[i], self.interval)
+                     for i, v in enumerate(self.variables))
 
     def subset(self, variables: Sequence[str]) -> Residuals:
         """The rows of *variables*, in that order."""
@@ -341,7 +421,7 @@ class TrackingPrediction:
 
 
 def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residual: npt.ArrayLike,
-                     lower: npt.ArrayLike, upper: npt.ArrayLike, dt: float) -> TrackingPrediction:
+                     lower: npt.ArrayLike, upper: npt.ArrayLike, dt: float, settle: float = 0.0) -> TrackingPrediction:
     """Expected effect of tracking a square set of pairs (linear, first-order loops).
 
     Parameters
@@ -357,6 +437,11 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
         Parameter bounds relative to the start (``min - start <= 0 <= max - start``).
     dt : float
         Sample spacing (s).
+    settle : float
+        s from the first sample before the ratio and the time at a bound count: tracking is
+        judged once its loops settled (the loops start from no correction at the first
+        sample; a slow loop's start-up transient would otherwise decide the figure); at
+        most the first half of the samples are skipped (a short window keeps its second half).
 
     Returns
     -------
@@ -380,6 +465,7 @@ def predict_tracking(gains: npt.ArrayLike, time_constants: npt.ArrayLike, residu
     except np.linalg.LinAlgError:
         raise AnalysisError("predict_tracking: the gain matrix of the pairs is singular") from None
     ok = np.all(np.isfinite(R), axis=0)
+    ok[: min(ok.size // 2, int(math.ceil(max(float(settle), 0.0) / dt - 1e-9)))] = False
     if not ok.any():
         nan = np.full(k, math.nan)
         return TrackingPrediction(nan, nan, nan)

@@ -148,6 +148,10 @@ class PairSettings:
         from a second step-test set with nothing frozen (the twin run as the
         data were recorded, controllers active); ``"structure"``: the frozen
         step tests' gains (the RGA's).
+    closed_loop
+        Shortest closed-loop time constant (s) of the predicted loops, and of the new
+        pairs' tuning (:class:`~trackingbox.analysis.pairing.DataChecks`); ``None``: the
+        spec's ``[pairing] closed_loop`` (absent: the step-response time constants).
     samples, seed
         Sobol base sample size and seed.
     workers, scheduler
@@ -173,6 +177,7 @@ class PairSettings:
     min_reach: float = 0.5
     max_ratio: float = 0.25
     check_gains: CheckGains = "recording"
+    closed_loop: float | None = None
     samples: int = 32
     seed: int = 0
     workers: int | None = None
@@ -259,7 +264,7 @@ class PairingResult:
             "pairs_condition_number": _finite(pairing.pairs_condition_number),
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
-                "max_ratio": pairing.checks.max_ratio},
+                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
                 "rule": self.check_rule,
@@ -448,7 +453,8 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     if s.data_checks:
         from .offsets import simulate_untracked
 
-        checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio)
+        checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
+                            closed_loop=float(_closed_loop(spec, s) or 0.0))
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
@@ -480,6 +486,16 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
                          agreement=agr, settings=s, steptest_recording=st_rec)
+
+
+def _closed_loop(spec: Spec, settings: PairSettings) -> float | None:
+    """The closed-loop time constant (s) *settings* or the spec's ``[pairing]`` ask for, or None."""
+    value = settings.closed_loop if settings.closed_loop is not None else spec.pairing.closed_loop
+    if value is None:
+        return None
+    if not (math.isfinite(float(value)) and float(value) >= 0):
+        raise AnalysisError(f"closed_loop must be a time >= 0 s, got {value!r}")
+    return float(value) or None
 
 
 #: Left-out reasons that say a parameter shows in no tag, or a tag shows no parameter.
@@ -547,10 +563,14 @@ def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
     """``[[pairs]]`` entries for the chosen pairs; an existing identical pair keeps its tuning settings.
 
     A pair without a measurable time constant gets the step interval (logged as a warning).
+    A new pair gets ``lambda = 1``, or, with a closed-loop time constant (the result's
+    settings or the spec's ``[pairing] closed_loop``), the ``lambda`` that makes
+    ``lambda x time_constant`` reach it: the loop the prediction judged.
     """
     from ..spec import PairSpec
 
     interval = result.step_settings.interval
+    loop = _closed_loop(spec, result.settings)
     old = {(p.variable, p.parameter): p for p in spec.pairs}
     out = []
     for p in result.pairing.pairs:
@@ -564,5 +584,5 @@ def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
             out.append(replace(prev, gain=float(p.gain), time_constant=float(tau)))
         else:
             out.append(PairSpec(variable=p.variable, parameter=p.parameter, gain=float(p.gain),
-                                time_constant=float(tau), lambda_=1.0))
+                                time_constant=float(tau), lambda_=max(1.0, (loop or 0.0) / float(tau))))
     return out

@@ -33,8 +33,9 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Tags the heat-transfer parameter may pair with: condensate flow, body temperature, vapour
 #: pressure (the issue), and the product dry solids (the notes' section 4 table: "otherwise p_v
-#: or product DS").
-HEAT_TRANSFER_TAGS = ("FI-6125", "PI-6121", "TI-6111", "PI-6111", "QI-6150")
+#: or product DS"), read by the DS meter QI-6150 or through its boiling-point rise in the flash
+#: tank's temperature TI-6151 (the flash saturates at its pressure plus the product's BPR).
+HEAT_TRANSFER_TAGS = ("FI-6125", "PI-6121", "TI-6111", "PI-6111", "QI-6150", "TI-6151")
 #: Valve capacity -> tags it moves (closed loop: the valve position; frozen: the flow).
 VALVE_TAGS = {"inletValve.KvMax": ("ZI-6110", "FI-6110"), "outletValve.KvMax": ("ZI-6150", "FI-6150")}
 #: Level tag -> (twin parameter of its vessel's height, the height declared in the library, m);

@@ -80,6 +80,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--check-gains", choices=("recording", "structure"), default="recording",
                    help="gains of the reach and prediction checks: recording (default; with a freeze, step tests "
                         "repeated with nothing frozen, as the data were recorded) or structure (the frozen ones)")
+    p.add_argument("--closed-loop", type=number(ge=0, le=1e9), default=None, metavar="SECONDS",
+                   help="predict each loop at least this slow and tune new pairs for it (default: the spec's "
+                        "[pairing] closed_loop, else the step-response time constants; 0: those)")
     p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
@@ -101,7 +104,8 @@ def settings(args: argparse.Namespace) -> Any:
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
-                        max_ratio=args.max_ratio, check_gains=args.check_gains, samples=args.samples, seed=args.seed, workers=args.workers,
+                        max_ratio=args.max_ratio, check_gains=args.check_gains,
+                        closed_loop=args.closed_loop, samples=args.samples, seed=args.seed, workers=args.workers,
                         scheduler=args.scheduler)
 
 
