@@ -110,14 +110,23 @@ def test_spec_pairs_keeps_tuning_of_existing_pairs(tmp_path: Path) -> None:
     from trackingbox.spec import PairSpec
 
     old = PairSpec(variable="TI", parameter="k", gain=1.0, time_constant=5.0, lambda_=2.5, kp=0.3, ti=40.0)
-    spec = SimpleNamespace(pairs=(old,))
+    spec = SimpleNamespace(pairs=(old,), pairing=SimpleNamespace(closed_loop=None))
     chosen = (SimpleNamespace(variable="TI", parameter="k", gain=-0.02, time_constant=120.0),
               SimpleNamespace(variable="LI", parameter="q", gain=3.0, time_constant=math.nan))
-    result = SimpleNamespace(pairing=SimpleNamespace(pairs=chosen), step_settings=SimpleNamespace(interval=10.0))
+    result = SimpleNamespace(pairing=SimpleNamespace(pairs=chosen), step_settings=SimpleNamespace(interval=10.0),
+                             settings=SimpleNamespace(closed_loop=None))
     kept, new = spec_pairs(spec, result)  # type: ignore[arg-type]
     assert (kept.gain, kept.time_constant, kept.lambda_, kept.kp, kept.ti) == (-0.02, 120.0, 2.5, 0.3, 40.0)
     # a new pair: lambda 1; no measurable time constant -> the step interval
     assert (new.variable, new.parameter, new.gain, new.time_constant, new.lambda_) == ("LI", "q", 3.0, 10.0, 1.0)
+    # a closed-loop time constant (the spec's [pairing] closed_loop) sets a new pair's lambda to reach it:
+    # 600 s over the 10 s interval -> 60; an existing pair keeps its own tuning
+    spec.pairing.closed_loop = 600.0
+    kept, new = spec_pairs(spec, result)  # type: ignore[arg-type]
+    assert (kept.lambda_, new.lambda_) == (2.5, 60.0)
+    # the command's value (the result's settings) wins over the spec's; below the time constant lambda stays 1
+    result.settings.closed_loop = 5.0
+    assert spec_pairs(spec, result)[1].lambda_ == 1.0  # type: ignore[arg-type]
 
 
 def test_demo_overview_puts_plant_truth_beside_tracked_values(tmp_path: Path) -> None:
