@@ -203,3 +203,19 @@ def test_floor_aware_relative_gains_leave_out_the_tags_at_their_floor():
     # over y2, y3 alone: 1/5 and 4/5; y3 is paired
     assert math.isnan(floor.rga[0, 0]) and floor.rga[1:, 0] == pytest.approx([0.2, 0.8])
     assert [(p.variable, p.parameter) for p in floor.pairs] == [("y3", "a")]
+
+
+def test_a_parameter_the_data_checks_refuse_everywhere_names_the_tags_it_could_serve():
+    rng = np.random.default_rng(11)
+    n, dt = 20000, 10.0
+    # y1 needs a to move by 1 (offset 1, gain 1) but a's bounds allow 0.01: it cannot close the offset;
+    # y2 and b are an easy pair. a's relative gain with y1 is 1 (identity gains), with y2 0.
+    res = Residuals(("y1", "y2"), dt * np.arange(n),
+                    np.array([1.0 + rng.normal(0, 0.01, n), 0.5 + rng.normal(0, 0.01, n)]), np.zeros((2, n)), dt)
+    p = choose_pairs([[1.0, 0.0], [0.0, 1.0]], ["y1", "y2"], ["a", "b"], time_constants=[[5.0, 5.0]] * 2,
+                     residuals=res, bounds=[(0.0, -0.01, 0.01), (0.0, -5.0, 5.0)], checks=DataChecks(noise_ratio=0.0))
+    assert [(x.variable, x.parameter) for x in p.pairs] == [("y2", "b")]
+    why = dict(p.left_out)
+    assert "offset" in why["y1"]
+    assert re.search(r"rejected it for every variable it could serve: y1 \(lambda 1\)", why["a"]), why["a"]
+    assert "y2" not in why["a"]   # a does not move y2: not one it could serve

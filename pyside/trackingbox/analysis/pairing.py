@@ -521,9 +521,12 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             reason = "no variable has a positive relative gain with it"
         elif data is not None and not (allowed[:, b] & (col > 1e-9)).any():
             dropped = [v for v, q, _ in data.rejected if q == parameters[j]]
-            reason = ("the data checks rejected it for every variable it could serve"
-                      + (f" (predicted tracking of {', '.join(dict.fromkeys(dropped))} too poor)" if dropped else
-                         " (it cannot close their offsets from inside its bounds, or they are at noise level)"))
+            served = ", ".join(f"{variables[rows[a]]} (lambda {_fmt(col[a])})" for a in np.argsort(-col)
+                               if col[a] > 1e-9)
+            reason = (f"the data checks rejected it for every variable it could serve: {served}"
+                      + (f"; predicted tracking of {', '.join(dict.fromkeys(dropped))} too poor" if dropped else
+                         "; see their reasons (it cannot close their offsets from inside its bounds, or they "
+                         "are at their noise floor)"))
         elif data is not None and _best_rejected(col, allowed[:, b]) is not None:
             a_best = _best_rejected(col, allowed[:, b])
             reason = (f"the data checks rejected its best pair, with {variables[rows[a_best]]} (lambda "
