@@ -49,7 +49,7 @@ import shutil
 import subprocess
 import sys
 import weakref
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -75,6 +75,8 @@ CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")
 
 # tbn_step's codes (stepper.c)
 _OK, _STEP_EVENT, _TERMINATE, _NONFINITE, _FMU_FAILED, _CVODE_FAILED = 0, 1, 2, 3, -1, -2
+# tbn_advance's own codes (stepper.c)
+_NO_SET, _SET_FAILED, _AFTER_SET, _READ_FAILED = -100, 10, 11, 12
 
 
 class NativeUnavailable(Exception):
@@ -155,6 +157,10 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_cpu_seconds.restype = c_double
     lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_stats.restype = None
+    pd_, pu32, pint = ctypes.POINTER(c_double), ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_int)
+    lib.tbn_advance.argtypes = [c_void_p, c_size_t, pu32, pd_, c_int, c_int, c_double, c_double, c_int, c_size_t,
+                                pu32, pd_, pd_, pint, pint, pd_, pd_]
+    lib.tbn_advance.restype = c_int
     return lib
 
 
@@ -276,6 +282,12 @@ class NativeStepper(ModelExchangeStepper):
         self._plans: dict[tuple[str, ...], _SetPlan | None] = {}
         self._next_defined = ctypes.c_int(0)
         self._next_time = ctypes.c_double(0.0)
+        self._next_defined_ref = ctypes.byref(self._next_defined)
+        self._next_time_ref = ctypes.byref(self._next_time)
+        self._set_code = ctypes.c_int(0)
+        self._set_code_ref = ctypes.byref(self._set_code)
+        #: names read by advance() -> (count, value references, buffer, its pointer), None: not all Real
+        self._read_plans: dict[tuple[str, ...], tuple[int, Any, npt.NDArray[np.float64], Any] | None] = {}
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -389,34 +401,29 @@ class NativeStepper(ModelExchangeStepper):
         return _SetPlan(len(vrs), (ctypes.c_uint32 * len(vrs))(*vrs), buf,
                         buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), tuple(params), frozenset(inputs))
 
-    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
-        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
-
-        The sequence (event mode when a parameter changes, write, event
-        iteration, continuous-time mode, then carry or re-initialise) is the
-        Python path's, call for call; other types take the Python path itself.
-        """
-        if self._finished:
-            self._check_open()
+    def _set_plan(self, values: Mapping[str, float]) -> tuple[dict[str, Any], _SetPlan | None] | None:
+        """The changed values of a :meth:`set` and how C writes them (plan None: the Python path); None: no change."""
         last = self._last_set
         changed = {n: v for n, v in values.items() if last.get(n) != v}
         if not changed:
-            return
+            return None
         key = tuple(changed)
         try:
             plan = self._plans[key]
         except KeyError:
             plan = self._plans[key] = self._plan(key)
-        vals = list(changed.values())
-        if plan is None or str in map(type, vals):
-            super().set(values, restart=restart)
-            return
+        if plan is not None and str in map(type, changed.values()):
+            plan = None
+        return changed, plan
+
+    def _load_plan(self, changed: dict[str, Any], plan: _SetPlan) -> None:
+        """Before the C call of a set: drop table inputs that are set explicitly, fill the plan's buffer."""
         if plan.inputs and self._in_names:
             self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
-        plan.buffer[:] = vals
-        carry = not restart and self._solver.exact
-        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
-                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
+        plan.buffer[:] = list(changed.values())
+
+    def _after_set(self, code: int, changed: dict[str, Any], plan: _SetPlan) -> None:
+        """After the C call of a set with tbn_set_parameters's *code*: errors, next time event, counters."""
         if code < 0:
             name = self.model.path.name
             raise _simulation_failure(f"setting {', '.join(changed)} in {name} at t = {self.time:g} s failed",
@@ -431,7 +438,104 @@ class NativeStepper(ModelExchangeStepper):
             self.restarts += 1
         if plan.parameters:
             self.model.note_changed(plan.parameters)
-        last.update(changed)
+        self._last_set.update(changed)
+
+    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
+        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
+
+        The sequence (event mode when a parameter changes, write, event
+        iteration, continuous-time mode, then carry or re-initialise) is the
+        Python path's, call for call; other types take the Python path itself.
+        """
+        if self._finished:
+            self._check_open()
+        planned = self._set_plan(values)
+        if planned is None:
+            return
+        changed, plan = planned
+        if plan is None:
+            super().set(values, restart=restart)
+            return
+        self._load_plan(changed, plan)
+        carry = not restart and self._solver.exact
+        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
+                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
+        self._after_set(code, changed, plan)
+
+    def holds(self, values: Mapping[str, float]) -> bool:
+        """True if *values* are what :meth:`set` last wrote (a set of them would change nothing)."""
+        last = self._last_set
+        return all(n in last and last[n] == v for n, v in values.items())
+
+    def _read_plan(self, names: tuple[str, ...]) -> tuple[int, Any, npt.NDArray[np.float64], Any] | None:
+        """How tbn_advance reads *names* (all Real), or None (the Python path's reader)."""
+        try:
+            return self._read_plans[names]
+        except KeyError:
+            pass
+        variables = [self.model.variable(n) for n in names]
+        plan = None
+        if all(v.type in ("Real", "Float64") for v in variables):
+            n = len(variables)
+            buf = np.zeros(max(n, 1))
+            plan = (n, (ctypes.c_uint32 * max(n, 1))(*(int(v.valueReference) for v in variables)), buf,
+                    buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        self._read_plans[names] = plan
+        return plan
+
+    def advance(self, values: Mapping[str, float], t_next: float, read: Sequence[str], *,
+                restart: bool = True) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """``set(values, restart=restart)``, ``step(t_next)``, then the states and *read*: in one C call.
+
+        Returns ``(get_continuous_states(), get(read))``. The same FMU and
+        CVODE calls in the same order as the four methods one after the other
+        (``tbn_advance``), with the same results and errors; where a part
+        needs Python (a time event, a value that is not a Real, a step event,
+        a failure) it is finished, or raised, by those methods themselves.
+        """
+        if self._finished:
+            self._check_open()
+        names = tuple(read)
+        t_next = float(t_next)
+        rplan = self._read_plan(names)
+        planned = self._set_plan(values)
+        if rplan is None or self._next_event is not None or t_next <= self.time + 1e-12 * max(1.0, abs(t_next)) \
+                or (planned is not None and planned[1] is None):
+            self.set(values, restart=restart)
+            self.step(t_next)
+            return self.get_continuous_states(), self.get(names)
+        if planned is None:
+            n, vr, pointer, event, carry = 0, None, None, 0, 0
+        else:
+            changed, plan = planned
+            self._load_plan(changed, plan)
+            n, vr, pointer = plan.n, plan.vr, plan.pointer
+            event = 1 if plan.parameters else 0
+            carry = 1 if not restart and self._solver.exact else 0
+        set_code = self._set_code
+        nout, out_vr, out, pout = rplan
+        code = self._lib.tbn_advance(self._handle, n, vr, pointer, event, carry, self.time, t_next,
+                                     1 if self._solver.exact else 0, nout, out_vr, pout, self._px,
+                                     self._set_code_ref, self._next_defined_ref, self._next_time_ref,
+                                     self._reached_ref)
+        if planned is not None:
+            self._after_set(set_code.value, changed, plan)  # raises for _SET_FAILED
+        if code == _OK:
+            self.time = t_next
+            return self._x[: self._nx].copy(), out[:nout].copy()
+        if code == _READ_FAILED:
+            self.time = t_next
+            status = ctypes.c_int(0)
+            call = self._lib.tbn_failed_call(self._handle, ctypes.byref(status))
+            raise _fmi_exception(call.decode(), status.value)
+        if code != _AFTER_SET:
+            # the step did not end normally: what step() does after tbn_step's code
+            self._after_step(code, t_next)
+            self._advance(t_next)
+            self.time = t_next
+        else:
+            self.step(t_next)
+        return self.get_continuous_states(), self.get(names)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints (one C call)."""

@@ -57,6 +57,7 @@ typedef int (*fmi_time_fn)(fmi3Instance, double);
 typedef int (*fmi_vec_fn)(fmi3Instance, double *, size_t);
 typedef int (*fmi_cvec_fn)(fmi3Instance, const double *, size_t);
 typedef int (*fmi_setf64_fn)(fmi3Instance, const uint32_t *, size_t, const double *, size_t);
+typedef int (*fmi_getf64_fn)(fmi3Instance, const uint32_t *, size_t, double *, size_t);
 typedef int (*fmi_completed_fn)(fmi3Instance, bool, bool *, bool *);
 typedef int (*fmi_mode_fn)(fmi3Instance);
 typedef int (*fmi_update_fn)(fmi3Instance, bool *, bool *, bool *, bool *, bool *, double *);
@@ -96,6 +97,7 @@ typedef struct tbn {
     fmi_cvec_fn set_states;
     fmi_vec_fn get_states, get_derivatives, get_nominals;
     fmi_setf64_fn set_f64;
+    fmi_getf64_fn get_f64;
     fmi_completed_fn completed;
     fmi_mode_fn enter_event_mode, enter_continuous_time_mode;
     fmi_update_fn update_discrete_states;
@@ -248,6 +250,7 @@ tbn *tbn_new(void *const libs[5], void *binary, void *instance, size_t nx, doubl
     SYM(h->get_derivatives, binary, "fmi3GetContinuousStateDerivatives");
     SYM(h->get_nominals, binary, "fmi3GetNominalsOfContinuousStates");
     SYM(h->set_f64, binary, "fmi3SetFloat64");
+    SYM(h->get_f64, binary, "fmi3GetFloat64");
     SYM(h->completed, binary, "fmi3CompletedIntegratorStep");
     SYM(h->enter_event_mode, binary, "fmi3EnterEventMode");
     SYM(h->enter_continuous_time_mode, binary, "fmi3EnterContinuousTimeMode");
@@ -446,6 +449,45 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
     if (carry) return 1;
     int code = tbn_reset(h, time);
     return code == TBN_OK ? 0 : code;
+}
+
+/*
+ * One call for what the tracking runtime does between two reads of a twin: tbn_set_parameters (when
+ * n > 0), tbn_step to target, then the continuous states into x_out and the nout Float64 variables
+ * out_vr into out (fmi3GetContinuousStates, then fmi3GetFloat64: the calls, in the order, that
+ * NativeStepper.set, .step, .get_continuous_states and a reader make one by one). *set_code is
+ * tbn_set_parameters's code (TBN_NO_SET without a change). Returns TBN_OK when all of it ran;
+ * TBN_SET_FAILED when the set did not succeed (*set_code says how); TBN_AFTER_SET when the set
+ * announced a time event (*next_defined = 1: the caller steps towards it itself, nothing else ran);
+ * a code of tbn_step other than TBN_OK (the caller finishes the step as after tbn_step; the states
+ * and values are not read); TBN_READ_FAILED when a read failed (tbn_failed_call names it).
+ * CPU time counts as in tbn_set_parameters and tbn_step (the reads are not counted).
+ */
+#define TBN_NO_SET -100
+#define TBN_SET_FAILED 10
+#define TBN_AFTER_SET 11
+#define TBN_READ_FAILED 12
+
+int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int event, int carry, double time,
+                double target, int exact, size_t nout, const uint32_t *out_vr, double *out, double *x_out,
+                int *set_code, int *next_defined, double *next_time, double *reached) {
+    *set_code = TBN_NO_SET;
+    *next_defined = -1;
+    if (n > 0) {
+        int sc = tbn_set_parameters(h, n, vr, values, event, carry, time, next_defined, next_time);
+        *set_code = sc;
+        if (sc < 0 || sc == TBN_TERMINATE) return TBN_SET_FAILED;
+        if (*next_defined == 1) return TBN_AFTER_SET;
+    }
+    int code = tbn_step(h, target, exact, reached);
+    if (code != TBN_OK) return code;
+    int st = h->get_states(h->fmu, x_out, h->nx);
+    if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_READ_FAILED;
+    if (nout) {
+        st = h->get_f64(h->fmu, out_vr, nout, out, nout);
+        if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
+    }
+    return TBN_OK;
 }
 
 /* Copy the FMU's continuous states into out (nx values). */
