@@ -75,8 +75,9 @@ CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")
 
 # tbn_step's codes (stepper.c)
 _OK, _STEP_EVENT, _TERMINATE, _NONFINITE, _FMU_FAILED, _CVODE_FAILED = 0, 1, 2, 3, -1, -2
-# tbn_advance's own codes (stepper.c)
+# tbn_advance's own codes and flags (stepper.c)
 _NO_SET, _SET_FAILED, _AFTER_SET, _READ_FAILED = -100, 10, 11, 12
+_EVENT, _CARRY, _EXACT = 1, 2, 4
 
 
 class NativeUnavailable(Exception):
@@ -158,8 +159,9 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_stats.restype = None
     pd_, pu32, pint = ctypes.POINTER(c_double), ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_int)
-    lib.tbn_advance.argtypes = [c_void_p, c_size_t, pu32, pd_, c_int, c_int, c_double, c_double, c_int, c_size_t,
-                                pu32, pd_, pd_, pint, pint, pd_, pd_]
+    lib.tbn_advance_reads.argtypes = [c_void_p, c_size_t, pu32, pd_, pd_, pint, pint, pd_, pd_]
+    lib.tbn_advance_reads.restype = None
+    lib.tbn_advance.argtypes = [c_void_p, c_size_t, pu32, pd_, c_int, c_double, c_double]
     lib.tbn_advance.restype = c_int
     return lib
 
@@ -286,8 +288,11 @@ class NativeStepper(ModelExchangeStepper):
         self._next_time_ref = ctypes.byref(self._next_time)
         self._set_code = ctypes.c_int(0)
         self._set_code_ref = ctypes.byref(self._set_code)
-        #: names read by advance() -> (count, value references, buffer, its pointer), None: not all Real
-        self._read_plans: dict[tuple[str, ...], tuple[int, Any, npt.NDArray[np.float64], Any] | None] = {}
+        #: names read by advance() -> (count, buffer, value references, buffer pointer), None: not all Real
+        self._read_plans: dict[tuple[str, ...], tuple[int, npt.NDArray[np.float64], Any, Any] | None] = {}
+        self._reads_set: Any = None  # the read plan C has (tbn_advance_reads)
+        #: advance()'s last *read* argument, its names and read plan
+        self._last_read: tuple[Any, Any, Any] = (None, None, None)
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -467,74 +472,82 @@ class NativeStepper(ModelExchangeStepper):
         last = self._last_set
         return all(n in last and last[n] == v for n, v in values.items())
 
-    def _read_plan(self, names: tuple[str, ...]) -> tuple[int, Any, npt.NDArray[np.float64], Any] | None:
-        """How tbn_advance reads *names* (all Real), or None (the Python path's reader)."""
+    def _read_plan(self, names: tuple[str, ...]) -> tuple[int, npt.NDArray[np.float64]] | None:
+        """Make tbn_advance read *names* (all Real) into a buffer: ``(count, buffer)``; None: not all Real."""
         try:
-            return self._read_plans[names]
+            plan = self._read_plans[names]
         except KeyError:
-            pass
-        variables = [self.model.variable(n) for n in names]
-        plan = None
-        if all(v.type in ("Real", "Float64") for v in variables):
-            n = len(variables)
-            buf = np.zeros(max(n, 1))
-            plan = (n, (ctypes.c_uint32 * max(n, 1))(*(int(v.valueReference) for v in variables)), buf,
-                    buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
-        self._read_plans[names] = plan
-        return plan
+            variables = [self.model.variable(n) for n in names]
+            plan = None
+            if all(v.type in ("Real", "Float64") for v in variables):
+                n = len(variables)
+                buf = np.zeros(max(n, 1))
+                vr = (ctypes.c_uint32 * max(n, 1))(*(int(v.valueReference) for v in variables))
+                plan = (n, buf, vr, buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+            self._read_plans[names] = plan
+        if plan is None:
+            return None
+        if self._reads_set is not plan:
+            # C keeps these pointers: the plan's arrays live in self._read_plans as long as this stepper
+            self._lib.tbn_advance_reads(self._handle, plan[0], plan[2], plan[3], self._px, self._set_code_ref,
+                                        self._next_defined_ref, self._next_time_ref, self._reached_ref)
+            self._reads_set = plan
+        return plan[0], plan[1]
 
     def advance(self, values: Mapping[str, float], t_next: float, read: Sequence[str], *,
                 restart: bool = True) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """``set(values, restart=restart)``, ``step(t_next)``, then the states and *read*: in one C call.
 
         Returns ``(get_continuous_states(), get(read))``. The same FMU and
-        CVODE calls in the same order as the four methods one after the other
+        CVODE calls in the same order as those methods one after the other
         (``tbn_advance``), with the same results and errors; where a part
         needs Python (a time event, a value that is not a Real, a step event,
         a failure) it is finished, or raised, by those methods themselves.
         """
         if self._finished:
             self._check_open()
-        names = tuple(read)
         t_next = float(t_next)
-        rplan = self._read_plan(names)
-        planned = self._set_plan(values)
+        if read is self._last_read[0]:  # the same tuple as last time: the same plan
+            names, rplan = self._last_read[1], self._last_read[2]
+            if rplan is not None and self._reads_set is not self._read_plans[names]:
+                rplan = self._read_plan(names)
+        else:
+            names = tuple(read)
+            rplan = self._read_plan(names)
+            self._last_read = (read, names, rplan) if type(read) is tuple else (None, None, None)
+        planned = self._set_plan(values) if values else None
         if rplan is None or self._next_event is not None or t_next <= self.time + 1e-12 * max(1.0, abs(t_next)) \
                 or (planned is not None and planned[1] is None):
             self.set(values, restart=restart)
             self.step(t_next)
             return self.get_continuous_states(), self.get(names)
+        exact = self._solver.exact
         if planned is None:
-            n, vr, pointer, event, carry = 0, None, None, 0, 0
+            code = self._lib.tbn_advance(self._handle, 0, None, None, _EXACT if exact else 0, self.time, t_next)
         else:
             changed, plan = planned
-            self._load_plan(changed, plan)
-            n, vr, pointer = plan.n, plan.vr, plan.pointer
-            event = 1 if plan.parameters else 0
-            carry = 1 if not restart and self._solver.exact else 0
-        set_code = self._set_code
-        nout, out_vr, out, pout = rplan
-        code = self._lib.tbn_advance(self._handle, n, vr, pointer, event, carry, self.time, t_next,
-                                     1 if self._solver.exact else 0, nout, out_vr, pout, self._px,
-                                     self._set_code_ref, self._next_defined_ref, self._next_time_ref,
-                                     self._reached_ref)
-        if planned is not None:
-            self._after_set(set_code.value, changed, plan)  # raises for _SET_FAILED
+            if plan.inputs and self._in_names:
+                self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
+            plan.buffer[:] = list(changed.values())
+            flags = (_EVENT if plan.parameters else 0) | (_CARRY if exact and not restart else 0) | \
+                (_EXACT if exact else 0)
+            code = self._lib.tbn_advance(self._handle, plan.n, plan.vr, plan.pointer, flags, self.time, t_next)
+            self._after_set(self._set_code.value, changed, plan)  # raises when the set failed
         if code == _OK:
             self.time = t_next
-            return self._x[: self._nx].copy(), out[:nout].copy()
+            return self._x[: self._nx].copy(), rplan[1][: rplan[0]].copy()
         if code == _READ_FAILED:
             self.time = t_next
             status = ctypes.c_int(0)
             call = self._lib.tbn_failed_call(self._handle, ctypes.byref(status))
             raise _fmi_exception(call.decode(), status.value)
-        if code != _AFTER_SET:
+        if code == _AFTER_SET:
+            self.step(t_next)
+        else:
             # the step did not end normally: what step() does after tbn_step's code
             self._after_step(code, t_next)
             self._advance(t_next)
             self.time = t_next
-        else:
-            self.step(t_next)
         return self.get_continuous_states(), self.get(names)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:

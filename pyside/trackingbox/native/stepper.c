@@ -120,6 +120,13 @@ typedef struct tbn {
     const char *failed_call;
     int failed_status;
     char error[1024];
+    /* tbn_advance's outputs (tbn_advance_reads) */
+    struct advance_io {
+        size_t nout;
+        const uint32_t *out_vr;
+        double *out, *x_out, *next_time, *reached;
+        int *set_code, *next_defined;
+    } adv;
 } tbn;
 
 /* CPU seconds spent inside tbn_step and tbn_set_parameters, all instances of this process (tbn_cpu_seconds) */
@@ -452,42 +459,63 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
 }
 
 /*
- * One call for what the tracking runtime does between two reads of a twin: tbn_set_parameters (when
- * n > 0), tbn_step to target, then the continuous states into x_out and the nout Float64 variables
- * out_vr into out (fmi3GetContinuousStates, then fmi3GetFloat64: the calls, in the order, that
- * NativeStepper.set, .step, .get_continuous_states and a reader make one by one). *set_code is
- * tbn_set_parameters's code (TBN_NO_SET without a change). Returns TBN_OK when all of it ran;
- * TBN_SET_FAILED when the set did not succeed (*set_code says how); TBN_AFTER_SET when the set
- * announced a time event (*next_defined = 1: the caller steps towards it itself, nothing else ran);
- * a code of tbn_step other than TBN_OK (the caller finishes the step as after tbn_step; the states
- * and values are not read); TBN_READ_FAILED when a read failed (tbn_failed_call names it).
- * CPU time counts as in tbn_set_parameters and tbn_step (the reads are not counted).
+ * One call for what the tracking runtime does between two reads of a twin: set n Float64 values as
+ * tbn_set_parameters does (when n > 0; flags: TBN_EVENT, TBN_CARRY), step to target as tbn_step
+ * does (TBN_EXACT), then read the continuous states and the Float64 variables of the last
+ * tbn_advance_reads (fmi3GetContinuousStates, then fmi3GetFloat64: the calls, in that order, that
+ * NativeStepper.set, .step, .get_continuous_states and a reader make one by one).
+ *
+ * Returns TBN_OK when all of it ran; TBN_SET_FAILED when the set did not succeed (*set_code: its
+ * code); TBN_AFTER_SET when the set announced a time event (*next_defined = 1: the caller steps
+ * towards it itself, nothing else ran); a code of tbn_step other than TBN_OK (the caller finishes
+ * the step as after tbn_step; nothing is read); TBN_READ_FAILED when a read failed (tbn_failed_call
+ * names it). *set_code is tbn_set_parameters's code, TBN_NO_SET without values; *next_defined and
+ * *next_time as there (-1: unchanged). The whole call counts as integrator CPU (tbn_cpu_seconds).
  */
 #define TBN_NO_SET -100
 #define TBN_SET_FAILED 10
 #define TBN_AFTER_SET 11
 #define TBN_READ_FAILED 12
+#define TBN_EVENT 1
+#define TBN_CARRY 2
+#define TBN_EXACT 4
 
-int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int event, int carry, double time,
-                double target, int exact, size_t nout, const uint32_t *out_vr, double *out, double *x_out,
-                int *set_code, int *next_defined, double *next_time, double *reached) {
-    *set_code = TBN_NO_SET;
-    *next_defined = -1;
+/* Where tbn_advance puts what it reads and returns (kept by the caller until the next call of this). */
+void tbn_advance_reads(tbn *h, size_t nout, const uint32_t *out_vr, double *out, double *x_out, int *set_code,
+                       int *next_defined, double *next_time, double *reached) {
+    h->adv.nout = nout; h->adv.out_vr = out_vr; h->adv.out = out; h->adv.x_out = x_out;
+    h->adv.set_code = set_code; h->adv.next_defined = next_defined; h->adv.next_time = next_time;
+    h->adv.reached = reached;
+}
+
+static int advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time,
+                   double target) {
+    struct advance_io *io = &h->adv;
+    *io->set_code = TBN_NO_SET;
+    *io->next_defined = -1;
     if (n > 0) {
-        int sc = tbn_set_parameters(h, n, vr, values, event, carry, time, next_defined, next_time);
-        *set_code = sc;
+        int sc = set_parameters(h, n, vr, values, flags & TBN_EVENT, (flags & TBN_CARRY) != 0, time,
+                                io->next_defined, io->next_time);
+        *io->set_code = sc;
         if (sc < 0 || sc == TBN_TERMINATE) return TBN_SET_FAILED;
-        if (*next_defined == 1) return TBN_AFTER_SET;
+        if (*io->next_defined == 1) return TBN_AFTER_SET;
     }
-    int code = tbn_step(h, target, exact, reached);
+    int code = step(h, target, (flags & TBN_EXACT) != 0, io->reached);
     if (code != TBN_OK) return code;
-    int st = h->get_states(h->fmu, x_out, h->nx);
+    int st = h->get_states(h->fmu, io->x_out, h->nx);
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_READ_FAILED;
-    if (nout) {
-        st = h->get_f64(h->fmu, out_vr, nout, out, nout);
+    if (io->nout) {
+        st = h->get_f64(h->fmu, io->out_vr, io->nout, io->out, io->nout);
         if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
     }
     return TBN_OK;
+}
+
+int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time, double target) {
+    double c0 = thread_cpu();
+    int code = advance(h, n, vr, values, flags, time, target);
+    cpu_total += thread_cpu() - c0;
+    return code;
 }
 
 /* Copy the FMU's continuous states into out (nx values). */

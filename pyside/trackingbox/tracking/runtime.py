@@ -358,6 +358,7 @@ class _Twin:
         #: the variables the loop reads after every step (read with the step, :meth:`get`), and their values
         self.read_names: list[str] | None = None
         self.y: npt.NDArray[np.float64] | None = None
+        self._read_key: tuple[str, ...] = ()
 
     def start(self, t: float, values: Mapping[str, float], x: Sequence[float] | None = None) -> None:
         """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
@@ -439,7 +440,7 @@ class _Twin:
         if self.read_names is not None and isinstance(stepper, _native_stepper()):
             # the native stepper sets, steps and reads the states and the read variables in one C call
             try:
-                x, y = stepper.advance(changed, t_next, self.read_names, restart=not changed or not self._small(changed))
+                x, y = stepper.advance(changed, t_next, self._read_key, restart=not changed or not self._small(changed))
             except BaseException:
                 if changed and stepper.holds(changed):  # the set went through, the step failed
                     self.force_restart = False
@@ -986,7 +987,7 @@ class TrackingLoop:
                 raise
         for tw in (self.twin, self.plain):
             if tw is not None:
-                tw.read_names = self.read
+                tw.read_names, tw._read_key = self.read, tuple(self.read)
         if not (isinstance(carry, (int, float)) and math.isfinite(carry) and carry >= 0.0):
             raise ValueError(f"carry must be a finite fraction >= 0, got {carry!r}")
         self.carry = float(carry)
