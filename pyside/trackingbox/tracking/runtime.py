@@ -963,6 +963,8 @@ class TrackingLoop:
                               [s.tag for s in spec.states], list(spec.outputs))
         self.read = plan.read_names
         self.ridx = {name: i for i, name in enumerate(self.read)}
+        #: the view the row plan was made for, and per output tag: (read index, samples, scored or None, fit)
+        self._columns: tuple[Any, list[tuple[int, Any, Any, Any]]] = (None, [])
         self.recovery_until = -math.inf
         self.k = 0
         self.k0 = 0
@@ -1237,13 +1239,18 @@ class TrackingLoop:
         corr, corr_u = self.compensation.update(k, y, yu if self.plain is not None else None, ridx, view)
         params = self.controllers.values()
         row: list[Any] = [t]
-        fits = self.output.fits
-        for tag in plan.out_tags:
-            j = ridx[plan.tag_var[tag]]
-            m = float(view.samples[tag][k])
-            row += [m, float(y[j]), float(yu[j])]
-            if tag in fits and view.scored[tag][k]:
-                fits[tag].add(m, float(y[j]), float(yu[j]))
+        if self._columns[0] is not view:
+            fits = self.output.fits
+            self._columns = (view, [(ridx[plan.tag_var[tag]], view.samples[tag],
+                                     view.scored[tag] if tag in fits else None, fits.get(tag))
+                                    for tag in plan.out_tags])
+        yl, yul = y.tolist(), yu.tolist()  # Python floats, as float() of the elements
+        for j, samples, scored, fit in self._columns[1]:
+            m = float(samples[k])
+            a, b = yl[j], yul[j]
+            row += (m, a, b)
+            if scored is not None and scored[k]:
+                fit.add(m, a, b)
         row += [params[n] for n in self.controllers.names]
         row += [corr[n] for n in self.compensation.names]
         row += [corr_u[n] for n in self.compensation.names]
