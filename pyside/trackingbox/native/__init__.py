@@ -22,7 +22,9 @@ Between steps, a change of Real tunable parameters and/or inputs (:meth:`NativeS
 runs the Python path's sequence in C call for call (event mode when a parameter
 changes, the values, the event iteration, continuous-time mode, then carry or
 re-initialise CVODE); continuous states and Real values are read with one C
-call each. Python still initialises the FMU through fmpy, runs event
+call each. :meth:`NativeStepper.advance` does a set, a step and both reads
+in one C call (``tbn_advance``: the same FMU and CVODE calls in the same
+order), which the tracking runtime's twins use for every step and sub-step. Python still initialises the FMU through fmpy, runs event
 iterations after a step event, and takes other variable types through fmpy.
 With the same arithmetic in the same order, a native run reproduces the Python
 path's trajectory (bit for bit on the bench twins; the tests bound the
