@@ -24,8 +24,9 @@ changes, the values, the event iteration, continuous-time mode, then carry or
 re-initialise CVODE); continuous states and Real values are read with one C
 call each. :meth:`NativeStepper.advance` does a set, a step and both reads
 in one C call (``tbn_advance``: the same FMU and CVODE calls in the same
-order), which the tracking runtime's twins use for every step and sub-step. Python still initialises the FMU through fmpy, runs event
-iterations after a step event, and takes other variable types through fmpy.
+order), which the tracking runtime's twins use for every step and sub-step.
+Python still initialises the FMU through fmpy, runs event iterations after a
+step event, and takes other variable types through fmpy.
 With the same arithmetic in the same order, a native run reproduces the Python
 path's trajectory (bit for bit on the bench twins; the tests bound the
 difference by the integrator's tolerance). :func:`cpu_seconds` is the CPU
