@@ -129,7 +129,8 @@ typedef struct tbn {
     } adv;
 } tbn;
 
-/* CPU seconds spent inside tbn_step and tbn_set_parameters, all instances of this process (tbn_cpu_seconds) */
+/* CPU seconds spent inside tbn_step, tbn_set_parameters and the set and step of tbn_advance, all instances
+ * of this process (tbn_cpu_seconds) */
 static double cpu_total;
 
 static double thread_cpu(void) {
@@ -470,7 +471,8 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
  * towards it itself, nothing else ran); a code of tbn_step other than TBN_OK (the caller finishes
  * the step as after tbn_step; nothing is read); TBN_READ_FAILED when a read failed (tbn_failed_call
  * names it). *set_code is tbn_set_parameters's code, TBN_NO_SET without values; *next_defined and
- * *next_time as there (-1: unchanged). The whole call counts as integrator CPU (tbn_cpu_seconds).
+ * *next_time as there (-1: unchanged). The set and the step count as integrator CPU (tbn_cpu_seconds),
+ * as in tbn_set_parameters and tbn_step; the reads do not.
  */
 #define TBN_NO_SET -100
 #define TBN_SET_FAILED 10
@@ -488,8 +490,9 @@ void tbn_advance_reads(tbn *h, size_t nout, const uint32_t *out_vr, double *out,
     h->adv.reached = reached;
 }
 
-static int advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time,
-                   double target) {
+/* the set and the step of tbn_advance (the part counted as integrator CPU) */
+static int set_and_step(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time,
+                        double target) {
     struct advance_io *io = &h->adv;
     *io->set_code = TBN_NO_SET;
     *io->next_defined = -1;
@@ -500,7 +503,14 @@ static int advance(tbn *h, size_t n, const uint32_t *vr, const double *values, i
         if (sc < 0 || sc == TBN_TERMINATE) return TBN_SET_FAILED;
         if (*io->next_defined == 1) return TBN_AFTER_SET;
     }
-    int code = step(h, target, (flags & TBN_EXACT) != 0, io->reached);
+    return step(h, target, (flags & TBN_EXACT) != 0, io->reached);
+}
+
+int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time, double target) {
+    struct advance_io *io = &h->adv;
+    double c0 = thread_cpu();
+    int code = set_and_step(h, n, vr, values, flags, time, target);
+    cpu_total += thread_cpu() - c0;
     if (code != TBN_OK) return code;
     int st = h->get_states(h->fmu, io->x_out, h->nx);
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_READ_FAILED;
@@ -509,13 +519,6 @@ static int advance(tbn *h, size_t n, const uint32_t *vr, const double *values, i
         if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
     }
     return TBN_OK;
-}
-
-int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time, double target) {
-    double c0 = thread_cpu();
-    int code = advance(h, n, vr, values, flags, time, target);
-    cpu_total += thread_cpu() - c0;
-    return code;
 }
 
 /* Copy the FMU's continuous states into out (nx values). */
