@@ -114,6 +114,78 @@ def test_native_reproduces_the_python_path_on_the_bench_twins(bench_cases, bench
     assert np.all(diff <= bound), (names[worst], diff[worst], bound[worst])
 
 
+def _run_advance(fmu: Path, base: dict, inputs: pd.DataFrame, tunable: list[str]):
+    """_run's schedule through NativeStepper.advance: one C call per step for the set, the step and the reads."""
+    with FMUModel(fmu) as model:
+        st = model.stepper(parameters=base, inputs=inputs, carry=True, native=True)
+        names = tuple(model.info.outputs + st.state_names)
+        rows = [st.reader(names)()]
+        states = []
+        p = tunable[0]
+        value = float(base.get(p, st.get([p])[0]))
+        for k, t in enumerate(np.arange(10.0, 1801.0, 10.0)):
+            change = {}
+            if k % 6 == 5:
+                value *= 1.01
+                change = {p: value}
+            x, y = st.advance(change, float(t), names, restart=(k % 12 == 5))
+            assert st.time == float(t)
+            rows.append(y)
+            states.append(x)
+        return np.array(rows), np.array(states), (st.restarts, st.carried)
+
+
+@pytest.mark.compile
+@pytest.mark.parametrize("bench", sorted(BENCH_TWINS))
+def test_advance_is_set_step_and_reads_in_one_call(bench_cases, bench: str) -> None:
+    # tbn_advance makes the calls set(), step(), get_continuous_states() and a reader make, in their order:
+    # the same run bit for bit as those methods on the native stepper, and the Python path's within _run's bound
+    fmu, base, inputs, tunable = bench_cases(bench)
+    ours, states, counts = _run_advance(fmu, base, inputs, tunable)
+    ref, ref_counts, _ = _run(fmu, base, inputs, tunable, use_native=True)
+    py, py_counts, _ = _run(fmu, base, inputs, tunable, use_native=False)
+    assert counts == ref_counts == py_counts
+    assert np.array_equal(ours, ref)  # same calls, same order: identical
+    nx = states.shape[1]
+    assert np.array_equal(states, ref[1:, -nx:])  # the states read back equal the state variables
+    span = py.max(axis=0) - py.min(axis=0)
+    assert np.all(np.abs(ours - py).max(axis=0) <= RTOL * np.abs(py).max(axis=0) + RTOL * span)
+
+
+def test_advance_follows_the_closed_form_and_takes_the_python_path_where_it_must(first_order_fmu: Path) -> None:
+    # k stepped at 100 s (carried; the names to read given as a list, which advance does not cache), then a set
+    # that changes nothing (no restart, no carry): x by hand, segment by segment, as in the step/set test
+    with FMUModel(first_order_fmu, tolerance=1e-9) as model:
+        st = model.stepper(start_time=0.0, parameters={"k": K_TWIN}, carry=True, native=True)
+        x, y = st.advance({}, 100.0, ("y",))
+        x_ref = _closed_form(38.0, K_TWIN, 100.0)
+        assert y.tolist() == pytest.approx([x_ref], rel=1e-7) and x.tolist() == pytest.approx([x_ref], rel=1e-7)
+        x, y = st.advance({"k": 0.004}, 200.0, ["y", "k"], restart=False)
+        x_ref = _closed_form(x_ref, 0.004, 100.0)
+        assert y.tolist() == pytest.approx([x_ref, 0.004], rel=1e-7)
+        assert (st.carried, st.restarts) == (1, 0)
+        x, y = st.advance({"k": 0.004}, 300.0, ("y",), restart=True)  # equal to the last set: nothing to set
+        assert (st.carried, st.restarts) == (1, 0)
+        assert y.tolist() == pytest.approx([_closed_form(x_ref, 0.004, 100.0)], rel=1e-7)
+        assert st.holds({"k": 0.004}) and not st.holds({"k": 0.005})
+        # a step back in time is step()'s error
+        with pytest.raises(SimulationError, match="back in time"):
+            st.advance({}, 250.0, ("y",))
+
+
+def _blow_up_advance(st) -> None:
+    st.advance({}, 0.5, ("y",))
+    st.advance({"p": 1.0}, 0.6, ("y",), restart=False)
+    for t in np.arange(0.7, 3.0, 0.1):
+        st.advance({}, float(t), ("y",))
+
+
+def test_advance_fails_as_the_python_path(blow_fmu: Path) -> None:
+    ours = _failure(blow_fmu, True, _blow_up_advance)
+    ref = _failure(blow_fmu, False, _blow_up)
+    assert type(ours) is type(ref) and str(ours) == str(ref)
+
+
 # --------------------------------------------------------------------------- closed form, carry and restart
 
 def _closed_form(x0: float, k: float, dt: float, u: float = 50.0) -> float:

@@ -22,8 +22,11 @@ Between steps, a change of Real tunable parameters and/or inputs (:meth:`NativeS
 runs the Python path's sequence in C call for call (event mode when a parameter
 changes, the values, the event iteration, continuous-time mode, then carry or
 re-initialise CVODE); continuous states and Real values are read with one C
-call each. Python still initialises the FMU through fmpy, runs event
-iterations after a step event, and takes other variable types through fmpy.
+call each. :meth:`NativeStepper.advance` does a set, a step and both reads
+in one C call (``tbn_advance``: the same FMU and CVODE calls in the same
+order), which the tracking runtime's twins use for every step and sub-step.
+Python still initialises the FMU through fmpy, runs event iterations after a
+step event, and takes other variable types through fmpy.
 With the same arithmetic in the same order, a native run reproduces the Python
 path's trajectory (bit for bit on the bench twins; the tests bound the
 difference by the integrator's tolerance). :func:`cpu_seconds` is the CPU
@@ -49,7 +52,7 @@ import shutil
 import subprocess
 import sys
 import weakref
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -75,6 +78,9 @@ CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")
 
 # tbn_step's codes (stepper.c)
 _OK, _STEP_EVENT, _TERMINATE, _NONFINITE, _FMU_FAILED, _CVODE_FAILED = 0, 1, 2, 3, -1, -2
+# tbn_advance's own codes and flags (stepper.c)
+_NO_SET, _SET_FAILED, _AFTER_SET, _READ_FAILED = -100, 10, 11, 12
+_EVENT, _CARRY, _EXACT = 1, 2, 4
 
 
 class NativeUnavailable(Exception):
@@ -155,6 +161,11 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_cpu_seconds.restype = c_double
     lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_stats.restype = None
+    pd_, pu32, pint = ctypes.POINTER(c_double), ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_int)
+    lib.tbn_advance_reads.argtypes = [c_void_p, c_size_t, pu32, pd_, pd_, pint, pint, pd_, pd_]
+    lib.tbn_advance_reads.restype = None
+    lib.tbn_advance.argtypes = [c_void_p, c_size_t, pu32, pd_, c_int, c_double, c_double]
+    lib.tbn_advance.restype = c_int
     return lib
 
 
@@ -276,6 +287,15 @@ class NativeStepper(ModelExchangeStepper):
         self._plans: dict[tuple[str, ...], _SetPlan | None] = {}
         self._next_defined = ctypes.c_int(0)
         self._next_time = ctypes.c_double(0.0)
+        self._next_defined_ref = ctypes.byref(self._next_defined)
+        self._next_time_ref = ctypes.byref(self._next_time)
+        self._set_code = ctypes.c_int(0)
+        self._set_code_ref = ctypes.byref(self._set_code)
+        #: names read by advance() -> (count, buffer, value references, buffer pointer), None: not all Real
+        self._read_plans: dict[tuple[str, ...], tuple[int, npt.NDArray[np.float64], Any, Any] | None] = {}
+        self._reads_set: Any = None  # the read plan C has (tbn_advance_reads)
+        #: advance()'s last *read* argument, its names and read plan
+        self._last_read: tuple[Any, Any, Any] = (None, None, None)
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -389,34 +409,29 @@ class NativeStepper(ModelExchangeStepper):
         return _SetPlan(len(vrs), (ctypes.c_uint32 * len(vrs))(*vrs), buf,
                         buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), tuple(params), frozenset(inputs))
 
-    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
-        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
-
-        The sequence (event mode when a parameter changes, write, event
-        iteration, continuous-time mode, then carry or re-initialise) is the
-        Python path's, call for call; other types take the Python path itself.
-        """
-        if self._finished:
-            self._check_open()
+    def _set_plan(self, values: Mapping[str, float]) -> tuple[dict[str, Any], _SetPlan | None] | None:
+        """The changed values of a :meth:`set` and how C writes them (plan None: the Python path); None: no change."""
         last = self._last_set
         changed = {n: v for n, v in values.items() if last.get(n) != v}
         if not changed:
-            return
+            return None
         key = tuple(changed)
         try:
             plan = self._plans[key]
         except KeyError:
             plan = self._plans[key] = self._plan(key)
-        vals = list(changed.values())
-        if plan is None or str in map(type, vals):
-            super().set(values, restart=restart)
-            return
+        if plan is not None and str in map(type, changed.values()):
+            plan = None
+        return changed, plan
+
+    def _load_plan(self, changed: dict[str, Any], plan: _SetPlan) -> None:
+        """Before the C call of a set: drop table inputs that are set explicitly, fill the plan's buffer."""
         if plan.inputs and self._in_names:
             self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
-        plan.buffer[:] = vals
-        carry = not restart and self._solver.exact
-        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
-                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
+        plan.buffer[:] = list(changed.values())
+
+    def _after_set(self, code: int, changed: dict[str, Any], plan: _SetPlan) -> None:
+        """After the C call of a set with tbn_set_parameters's *code*: errors, next time event, counters."""
         if code < 0:
             name = self.model.path.name
             raise _simulation_failure(f"setting {', '.join(changed)} in {name} at t = {self.time:g} s failed",
@@ -431,7 +446,112 @@ class NativeStepper(ModelExchangeStepper):
             self.restarts += 1
         if plan.parameters:
             self.model.note_changed(plan.parameters)
-        last.update(changed)
+        self._last_set.update(changed)
+
+    def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
+        """As :meth:`ModelExchangeStepper.set <trackingbox.fmu.Stepper.set>`, with Real values written in C.
+
+        The sequence (event mode when a parameter changes, write, event
+        iteration, continuous-time mode, then carry or re-initialise) is the
+        Python path's, call for call; other types take the Python path itself.
+        """
+        if self._finished:
+            self._check_open()
+        planned = self._set_plan(values)
+        if planned is None:
+            return
+        changed, plan = planned
+        if plan is None:
+            super().set(values, restart=restart)
+            return
+        self._load_plan(changed, plan)
+        carry = not restart and self._solver.exact
+        code = self._lib.tbn_set_parameters(self._handle, plan.n, plan.vr, plan.pointer, 1 if plan.parameters else 0,
+                                            1 if carry else 0, self.time, self._next_defined, self._next_time)
+        self._after_set(code, changed, plan)
+
+    def holds(self, values: Mapping[str, float]) -> bool:
+        """True if *values* are what :meth:`set` last wrote (a set of them would change nothing)."""
+        last = self._last_set
+        return all(n in last and last[n] == v for n, v in values.items())
+
+    def _read_plan(self, names: tuple[str, ...]) -> tuple[int, npt.NDArray[np.float64]] | None:
+        """Make tbn_advance read *names* (all Real) into a buffer: ``(count, buffer)``; None: not all Real."""
+        try:
+            plan = self._read_plans[names]
+        except KeyError:
+            variables = [self.model.variable(n) for n in names]
+            plan = None
+            if all(v.type in ("Real", "Float64") for v in variables):
+                n = len(variables)
+                buf = np.zeros(max(n, 1))
+                vr = (ctypes.c_uint32 * max(n, 1))(*(int(v.valueReference) for v in variables))
+                plan = (n, buf, vr, buf.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+            self._read_plans[names] = plan
+        if plan is None:
+            return None
+        if self._reads_set is not plan:
+            # C keeps these pointers: the plan's arrays live in self._read_plans as long as this stepper
+            self._lib.tbn_advance_reads(self._handle, plan[0], plan[2], plan[3], self._px, self._set_code_ref,
+                                        self._next_defined_ref, self._next_time_ref, self._reached_ref)
+            self._reads_set = plan
+        return plan[0], plan[1]
+
+    def advance(self, values: Mapping[str, float], t_next: float, read: Sequence[str], *,
+                restart: bool = True) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """``set(values, restart=restart)``, ``step(t_next)``, then the states and *read*: in one C call.
+
+        Returns ``(get_continuous_states(), get(read))``. The same FMU and
+        CVODE calls in the same order as those methods one after the other
+        (``tbn_advance``), with the same results and errors; where a part
+        needs Python (a time event, a value that is not a Real, a step event,
+        a failure) it is finished, or raised, by those methods themselves.
+        """
+        if self._finished:
+            self._check_open()
+        t_next = float(t_next)
+        if read is self._last_read[0]:  # the same tuple as last time: the same plan
+            names, rplan = self._last_read[1], self._last_read[2]
+            if rplan is not None and self._reads_set is not self._read_plans[names]:
+                rplan = self._read_plan(names)
+        else:
+            names = tuple(read)
+            rplan = self._read_plan(names)
+            self._last_read = (read, names, rplan) if type(read) is tuple else (None, None, None)
+        planned = self._set_plan(values) if values else None
+        if rplan is None or self._next_event is not None or t_next <= self.time + 1e-12 * max(1.0, abs(t_next)) \
+                or (planned is not None and planned[1] is None):
+            self.set(values, restart=restart)
+            self.step(t_next)
+            return self.get_continuous_states(), self.get(names)
+        exact = self._solver.exact
+        if planned is None:
+            code = self._lib.tbn_advance(self._handle, 0, None, None, _EXACT if exact else 0, self.time, t_next)
+        else:
+            changed, plan = planned
+            if plan.inputs and self._in_names:
+                self._drop_inputs(set(plan.inputs))  # an input set here is no longer driven by the table
+            plan.buffer[:] = list(changed.values())
+            flags = (_EVENT if plan.parameters else 0) | (_CARRY if exact and not restart else 0) | \
+                (_EXACT if exact else 0)
+            code = self._lib.tbn_advance(self._handle, plan.n, plan.vr, plan.pointer, flags, self.time, t_next)
+            self._after_set(self._set_code.value, changed, plan)  # raises when the set failed
+        if code == _OK:
+            self.time = t_next
+            return self._x[: self._nx].copy(), rplan[1][: rplan[0]].copy()
+        if code == _READ_FAILED:
+            self.time = t_next
+            status = ctypes.c_int(0)
+            call = self._lib.tbn_failed_call(self._handle, ctypes.byref(status))
+            raise _fmi_exception(call.decode(), status.value)
+        if code == _AFTER_SET:
+            self.step(t_next)
+        else:
+            # the step did not end normally: what step() does after tbn_step's code
+            self._after_step(code, t_next)
+            self._advance(t_next)
+            self.time = t_next
+        return self.get_continuous_states(), self.get(names)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints (one C call)."""

@@ -57,6 +57,7 @@ typedef int (*fmi_time_fn)(fmi3Instance, double);
 typedef int (*fmi_vec_fn)(fmi3Instance, double *, size_t);
 typedef int (*fmi_cvec_fn)(fmi3Instance, const double *, size_t);
 typedef int (*fmi_setf64_fn)(fmi3Instance, const uint32_t *, size_t, const double *, size_t);
+typedef int (*fmi_getf64_fn)(fmi3Instance, const uint32_t *, size_t, double *, size_t);
 typedef int (*fmi_completed_fn)(fmi3Instance, bool, bool *, bool *);
 typedef int (*fmi_mode_fn)(fmi3Instance);
 typedef int (*fmi_update_fn)(fmi3Instance, bool *, bool *, bool *, bool *, bool *, double *);
@@ -96,6 +97,7 @@ typedef struct tbn {
     fmi_cvec_fn set_states;
     fmi_vec_fn get_states, get_derivatives, get_nominals;
     fmi_setf64_fn set_f64;
+    fmi_getf64_fn get_f64;
     fmi_completed_fn completed;
     fmi_mode_fn enter_event_mode, enter_continuous_time_mode;
     fmi_update_fn update_discrete_states;
@@ -118,9 +120,17 @@ typedef struct tbn {
     const char *failed_call;
     int failed_status;
     char error[1024];
+    /* tbn_advance's outputs (tbn_advance_reads) */
+    struct advance_io {
+        size_t nout;
+        const uint32_t *out_vr;
+        double *out, *x_out, *next_time, *reached;
+        int *set_code, *next_defined;
+    } adv;
 } tbn;
 
-/* CPU seconds spent inside tbn_step and tbn_set_parameters, all instances of this process (tbn_cpu_seconds) */
+/* CPU seconds spent inside tbn_step, tbn_set_parameters and the set and step of tbn_advance, all instances
+ * of this process (tbn_cpu_seconds) */
 static double cpu_total;
 
 static double thread_cpu(void) {
@@ -248,6 +258,7 @@ tbn *tbn_new(void *const libs[5], void *binary, void *instance, size_t nx, doubl
     SYM(h->get_derivatives, binary, "fmi3GetContinuousStateDerivatives");
     SYM(h->get_nominals, binary, "fmi3GetNominalsOfContinuousStates");
     SYM(h->set_f64, binary, "fmi3SetFloat64");
+    SYM(h->get_f64, binary, "fmi3GetFloat64");
     SYM(h->completed, binary, "fmi3CompletedIntegratorStep");
     SYM(h->enter_event_mode, binary, "fmi3EnterEventMode");
     SYM(h->enter_continuous_time_mode, binary, "fmi3EnterContinuousTimeMode");
@@ -446,6 +457,68 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
     if (carry) return 1;
     int code = tbn_reset(h, time);
     return code == TBN_OK ? 0 : code;
+}
+
+/*
+ * One call for what the tracking runtime does between two reads of a twin: set n Float64 values as
+ * tbn_set_parameters does (when n > 0; flags: TBN_EVENT, TBN_CARRY), step to target as tbn_step
+ * does (TBN_EXACT), then read the continuous states and the Float64 variables of the last
+ * tbn_advance_reads (fmi3GetContinuousStates, then fmi3GetFloat64: the calls, in that order, that
+ * NativeStepper.set, .step, .get_continuous_states and a reader make one by one).
+ *
+ * Returns TBN_OK when all of it ran; TBN_SET_FAILED when the set did not succeed (*set_code: its
+ * code); TBN_AFTER_SET when the set announced a time event (*next_defined = 1: the caller steps
+ * towards it itself, nothing else ran); a code of tbn_step other than TBN_OK (the caller finishes
+ * the step as after tbn_step; nothing is read); TBN_READ_FAILED when a read failed (tbn_failed_call
+ * names it). *set_code is tbn_set_parameters's code, TBN_NO_SET without values; *next_defined and
+ * *next_time as there (-1: unchanged). The set and the step count as integrator CPU (tbn_cpu_seconds),
+ * as in tbn_set_parameters and tbn_step; the reads do not.
+ */
+#define TBN_NO_SET -100
+#define TBN_SET_FAILED 10
+#define TBN_AFTER_SET 11
+#define TBN_READ_FAILED 12
+#define TBN_EVENT 1
+#define TBN_CARRY 2
+#define TBN_EXACT 4
+
+/* Where tbn_advance puts what it reads and returns (kept by the caller until the next call of this). */
+void tbn_advance_reads(tbn *h, size_t nout, const uint32_t *out_vr, double *out, double *x_out, int *set_code,
+                       int *next_defined, double *next_time, double *reached) {
+    h->adv.nout = nout; h->adv.out_vr = out_vr; h->adv.out = out; h->adv.x_out = x_out;
+    h->adv.set_code = set_code; h->adv.next_defined = next_defined; h->adv.next_time = next_time;
+    h->adv.reached = reached;
+}
+
+/* the set and the step of tbn_advance (the part counted as integrator CPU) */
+static int set_and_step(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time,
+                        double target) {
+    struct advance_io *io = &h->adv;
+    *io->set_code = TBN_NO_SET;
+    *io->next_defined = -1;
+    if (n > 0) {
+        int sc = set_parameters(h, n, vr, values, flags & TBN_EVENT, (flags & TBN_CARRY) != 0, time,
+                                io->next_defined, io->next_time);
+        *io->set_code = sc;
+        if (sc < 0 || sc == TBN_TERMINATE) return TBN_SET_FAILED;
+        if (*io->next_defined == 1) return TBN_AFTER_SET;
+    }
+    return step(h, target, (flags & TBN_EXACT) != 0, io->reached);
+}
+
+int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int flags, double time, double target) {
+    struct advance_io *io = &h->adv;
+    double c0 = thread_cpu();
+    int code = set_and_step(h, n, vr, values, flags, time, target);
+    cpu_total += thread_cpu() - c0;
+    if (code != TBN_OK) return code;
+    int st = h->get_states(h->fmu, io->x_out, h->nx);
+    if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_READ_FAILED;
+    if (io->nout) {
+        st = h->get_f64(h->fmu, io->out_vr, io->nout, io->out, io->nout);
+        if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
+    }
+    return TBN_OK;
 }
 
 /* Copy the FMU's continuous states into out (nx values). */

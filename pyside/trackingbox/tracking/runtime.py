@@ -308,6 +308,21 @@ def _unjsonify(obj: Any) -> Any:
 
 # --------------------------------------------------------------------------- the twin
 
+def _native_stepper() -> type:
+    """:class:`~trackingbox.native.NativeStepper` (imported on first use), or a class nothing is an instance of."""
+    global _NATIVE
+    if _NATIVE is None:
+        try:
+            from ..native import NativeStepper
+        except ImportError:  # pragma: no cover - the module is part of the package
+            NativeStepper = type("_NoNative", (), {})
+        _NATIVE = NativeStepper
+    return _NATIVE
+
+
+_NATIVE: type | None = None
+
+
 class _Twin:
     """One FMU run that can be restarted from saved states or a replayed trajectory."""
 
@@ -340,10 +355,15 @@ class _Twin:
         #: changes that re-initialised the integrator / that it carried, over all runs of this twin
         self.restarts = 0
         self.carried = 0
+        #: the variables the loop reads after every step (read with the step, :meth:`get`), and their values
+        self.read_names: list[str] | None = None
+        self.y: npt.NDArray[np.float64] | None = None
+        self._read_key: tuple[str, ...] = ()
 
     def start(self, t: float, values: Mapping[str, float], x: Sequence[float] | None = None) -> None:
         """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
         self._count()
+        self.y = None
         self.stepper = self.model.stepper(start_time=t, parameters={**self.base, **values}, inputs=self.inputs,
                                           carry=bool(self.carry_limits) and self.me)
         self.applied = dict(values)
@@ -383,6 +403,9 @@ class _Twin:
             self.x_time = float(self.stepper.time)
 
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
+        """Current values of *names* (those of :attr:`read_names` as read with the last step)."""
+        if names is self.read_names and self.y is not None:
+            return self.y.copy()
         return self.stepper.get(names)
 
     def _applied(self, values: Mapping[str, float]) -> dict[str, float]:
@@ -413,6 +436,23 @@ class _Twin:
         changed = {n: v for n, v in values.items() if applied.get(n) != v}
         t0 = _time.perf_counter()
         stepper = self.stepper
+        self.y = None
+        if self.read_names is not None and isinstance(stepper, _native_stepper()):
+            # the native stepper sets, steps and reads the states and the read variables in one C call
+            try:
+                x, y = stepper.advance(changed, t_next, self._read_key, restart=not changed or not self._small(changed))
+            except BaseException:
+                if changed and stepper.holds(changed):  # the set went through, the step failed
+                    self.force_restart = False
+                    applied.update(changed)
+                raise
+            if changed:
+                self.force_restart = False
+                applied.update(changed)
+            self.step_seconds += _time.perf_counter() - t0
+            self.given = given
+            self.x, self.x_time, self.y = x, float(stepper.time), y
+            return
         if changed:
             stepper.set(changed, restart=not self._small(changed))
             self.force_restart = False
@@ -923,6 +963,8 @@ class TrackingLoop:
                               [s.tag for s in spec.states], list(spec.outputs))
         self.read = plan.read_names
         self.ridx = {name: i for i, name in enumerate(self.read)}
+        #: the view the row plan was made for, and per output tag: (read index, samples, scored or None, fit)
+        self._columns: tuple[Any, list[tuple[int, Any, Any, Any]]] = (None, [])
         self.recovery_until = -math.inf
         self.k = 0
         self.k0 = 0
@@ -945,6 +987,9 @@ class TrackingLoop:
             except BaseException:
                 self.twin.close()
                 raise
+        for tw in (self.twin, self.plain):
+            if tw is not None:
+                tw.read_names, tw._read_key = self.read, tuple(self.read)
         if not (isinstance(carry, (int, float)) and math.isfinite(carry) and carry >= 0.0):
             raise ValueError(f"carry must be a finite fraction >= 0, got {carry!r}")
         self.carry = float(carry)
@@ -1194,13 +1239,18 @@ class TrackingLoop:
         corr, corr_u = self.compensation.update(k, y, yu if self.plain is not None else None, ridx, view)
         params = self.controllers.values()
         row: list[Any] = [t]
-        fits = self.output.fits
-        for tag in plan.out_tags:
-            j = ridx[plan.tag_var[tag]]
-            m = float(view.samples[tag][k])
-            row += [m, float(y[j]), float(yu[j])]
-            if tag in fits and view.scored[tag][k]:
-                fits[tag].add(m, float(y[j]), float(yu[j]))
+        if self._columns[0] is not view:
+            fits = self.output.fits
+            self._columns = (view, [(ridx[plan.tag_var[tag]], view.samples[tag],
+                                     view.scored[tag] if tag in fits else None, fits.get(tag))
+                                    for tag in plan.out_tags])
+        yl, yul = y.tolist(), yu.tolist()  # Python floats, as float() of the elements
+        for j, samples, scored, fit in self._columns[1]:
+            m = float(samples[k])
+            a, b = yl[j], yul[j]
+            row += (m, a, b)
+            if scored is not None and scored[k]:
+                fit.add(m, a, b)
         row += [params[n] for n in self.controllers.names]
         row += [corr[n] for n in self.compensation.names]
         row += [corr_u[n] for n in self.compensation.names]
