@@ -180,6 +180,8 @@ class GeneratedModel:
     tracked_hold_extent: Points
     tracked_line_hold: Points
     modifier_lines: tuple[str, ...]
+    fill_equations: tuple[str, ...]
+    """``effect[1].Rf_in = effect[1].Rf;``: the elements of a switched component array no pair drives."""
     class_order: tuple[str, ...]
     package_info: str
     box_info: str
@@ -262,10 +264,11 @@ _ELEMENT = re.compile(r"^([A-Za-z_]\w*)\[(\d+)\]$")
 def _modifier_lines(sites: Sequence[ParameterSite], variables: Mapping[str, Any] | None = None) -> tuple[str, ...]:
     """Nested modifiers ``hx(use_kht_in = true)`` merged per component, sorted.
 
-    A site in an element of a component array (``effect[2].Rf``) switches that element only: the
-    array's flag becomes one modifier on the whole array, ``effect(use_Rf_in = {false, true})``
-    (``each use_Rf_in = true`` when every element is switched); the array's size is counted from
-    the twin's flat *variables* (``effect[k].use_Rf_in``).
+    A site in an element of a component array (``effect[2].Rf``) switches the whole array,
+    ``effect(each use_Rf_in = true)`` (rumoca 0.10 refuses a conditional component under an array
+    of flags, ``use_Rf_in = {false, true}``); :func:`_fill_equations` feeds the elements no pair
+    drives from their own parameter. The array's size is counted from the twin's flat *variables*
+    (``effect[k].use_Rf_in``).
     """
     tree: dict[str, Any] = {}
     arrays: dict[str, dict[str, set[int]]] = {}  # array path -> flag -> switched elements
@@ -293,10 +296,7 @@ def _modifier_lines(sites: Sequence[ParameterSite], variables: Mapping[str, Any]
             if size < max(switched):
                 raise SpecError(f"component array {path!r} of the twin has no flag {flag!r} for element "
                                 f"{max(switched)}: cannot switch it to a conditional input")
-            if len(switched) == size:
-                node[f"each {flag}"] = None
-            else:
-                node[flag] = "{" + ", ".join("true" if k in switched else "false" for k in range(1, size + 1)) + "}"
+            node[f"each {flag}"] = None
 
     def fmt(name: str, sub: dict[str, Any]) -> str:
         inner = ", ".join(k + " = true" if v is None else (f"{k} = {v}" if isinstance(v, str) else fmt(k, v))
@@ -305,6 +305,23 @@ def _modifier_lines(sites: Sequence[ParameterSite], variables: Mapping[str, Any]
 
     items = [fmt(k, v) for k, v in sorted(tree.items())]
     return tuple(s + ("," if i < len(items) - 1 else "") for i, s in enumerate(items))
+
+
+def _fill_equations(sites: Sequence[ParameterSite], variables: Mapping[str, Any]) -> tuple[str, ...]:
+    """``effect[1].Rf_in = effect[1].Rf;`` for every element of a component array that
+    :func:`_modifier_lines` switches but no site drives: it keeps its own parameter's value."""
+    switched: dict[tuple[str, str], set[int]] = {}
+    for site in sites:
+        m = _ELEMENT.match(site.component.split(".")[-1])
+        if m is not None:
+            base = ".".join([*site.component.split(".")[:-1], m.group(1)])
+            switched.setdefault((base, site.leaf), set()).add(int(m.group(2)))
+    out = []
+    for (base, leaf), ks in sorted(switched.items()):
+        pattern = re.compile(re.escape(base) + r"\[(\d+)\]\.use_" + re.escape(leaf) + "_in$")
+        size = max((int(mm.group(1)) for n in variables if (mm := pattern.match(n))), default=0)
+        out += [f"{base}[{k}].{leaf}_in = {base}[{k}].{leaf};" for k in range(1, size + 1) if k not in ks]
+    return tuple(out)
 
 
 def _text_attr(variable: dict[str, Any], key: str) -> str:
@@ -482,6 +499,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         tracked_hold_extent=((-140, k * (h - 20) - 10), (-100, k * (h - 20) + 10)),
         tracked_line_hold=((-120, k * (h - 20)), (-120 * k, k * (h - 20))),
         modifier_lines=_modifier_lines(list(sites.values()), src.variables),
+        fill_equations=_fill_equations(list(sites.values()), src.variables),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
 
