@@ -190,7 +190,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
             if run.bench in WRITE_ESTIMATES:
                 varying = _time_varying(run.bench, est.parameters)
-                held = _estimate_only(run.bench)
+                held = _estimate_only(run.bench, est.parameters)
                 starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
                 spec = write_starts(spec.path, starts)
                 if held:
@@ -236,12 +236,17 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-def _estimate_only(bench: str) -> frozenset[str]:
-    """Parameters of *bench* held at their estimate (moved to ``[fixed]``), not tracked."""
+def _estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
+    """Parameters of *bench* (among *names*, for the train) held at their estimate (moved to
+    ``[fixed]``), not tracked."""
     if bench == "evaporator":
         from .benches.evaporator import ESTIMATE_ONLY
 
         return frozenset(ESTIMATE_ONLY)
+    if bench == "evaporator-train":
+        from .benches.evaporator_train import estimate_only
+
+        return frozenset(estimate_only(names))
     return frozenset()
 
 

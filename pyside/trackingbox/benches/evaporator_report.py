@@ -313,10 +313,13 @@ class TrainAssessment:
     """Every effect's fouling paired and passed."""
     levels: tuple[LevelCheck, ...]
     levels_ok: bool
+    unpaired_error: dict[str, float]
+    """``effect[k].Rf`` no pair drives -> largest error after settling of its start value (held)."""
 
     def to_json(self) -> dict[str, Any]:
         return {
             "effects": self.effects,
+            "unpaired_error": dict(self.unpaired_error),
             "pairs": [list(p) for p in self.pairs],
             "left_out": [list(x) for x in self.left_out],
             "nrmse": {t: {"untracked": u, "tracked": k, "ratio": r} for t, (u, k, r) in self.nrmse.items()},
@@ -358,14 +361,17 @@ def assess_train(spec: Any, tracking_csv: str | Path, truth: Mapping[str, Any], 
     paired = {p for _, p in pairs}
     ratios = {tag: (float(u), float(k), float(k / u) if u > 0 else math.inf) for tag, (u, k) in nrmse.items()}
     fouling: dict[str, FoulingCheck | None] = {}
+    unpaired: dict[str, float] = {}
     for k in range(1, n + 1):
         name = f"effect[{k}].Rf"
         truth_rf = truth_on(truth, name, t)
         col = f"parameter:{name}"
-        if name not in paired or truth_rf is None or col not in df.columns:
+        pspec = next((p for p in spec.parameters if p.name == name), None)
+        if name not in paired or truth_rf is None or col not in df.columns or pspec is None:
             fouling[name] = None
+            if truth_rf is not None and pspec is not None and (t >= settle).any():
+                unpaired[name] = float(np.max(np.abs(pspec.start - truth_rf[t >= settle])) / (pspec.max - pspec.min))
             continue
-        pspec = next(p for p in spec.parameters if p.name == name)
         raw = df[col].to_numpy(float)
         fouling[name] = fouling_check(spec, t, raw, raw, truth_rf, truth, name=name,
                                       span=float(pspec.max - pspec.min), settle=settle)
@@ -374,7 +380,7 @@ def assess_train(spec: Any, tracking_csv: str | Path, truth: Mapping[str, Any], 
         effects=n, pairs=pairs, left_out=tuple(left_out), nrmse=ratios,
         nrmse_ok=bool(ratios) and all(r <= 0.3 for _, _, r in ratios.values()), fouling=fouling,
         fouling_ok=bool(fouling) and all(f is not None and f.passed for f in fouling.values()),
-        levels=tuple(levels), levels_ok=all(x.inside for x in levels))
+        levels=tuple(levels), levels_ok=all(x.inside for x in levels), unpaired_error=unpaired)
 
 
 def write_train_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, Any], out: str | Path,
@@ -408,12 +414,16 @@ def write_train_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, 
                         label="tracked")
                 ax.axvline(check.settle / 3600.0, color="0.5", lw=0.8, ls="-.", label="settled")
             pspec = next((p for p in spec.parameters if p.name == name), None)
+            if check is None and pspec is not None:
+                ax.axhline(pspec.start, color=plots.TRACKED, lw=1.2, ls="-", label="twin (held at its start)")
             if pspec is not None:
                 ax.axhline(pspec.min, color="k", ls="--", lw=0.8, label="bounds")
                 ax.axhline(pspec.max, color="k", ls="--", lw=0.8)
             ax.set_ylabel(f"{name} (m2.K/W)", fontsize=8)
             ax.set_title(f"{name}: " + (f"max error after settling {check.max_error:.1%} of the range"
-                                        if check is not None else "no pair drives it (left at its start)"),
+                                        if check is not None else "no pair drives it (held at its start"
+                                        + (f": max error after settling {assessment.unpaired_error[name]:.1%})"
+                                           if name in assessment.unpaired_error else ")")),
                          fontsize=9, loc="left")
             ax.grid(alpha=0.3)
             ax.legend(loc="best", fontsize=7)
@@ -424,7 +434,8 @@ def write_train_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, 
     doc.table(["effect fouling", "max error after settling", "in stoppages", "final", "within bounds", "≤ 10 %"],
               [[n, f"{f.max_error:.1%}", f"{f.max_error_stoppages:.1%}", f"{f.final_error:.1%}",
                 str(f.within_bounds), "pass" if f.passed else "**FAIL**"] if f is not None
-               else [n, "-", "-", "-", "-", "**not paired**"] for n, f in assessment.fouling.items()])
+               else [n, (f"{assessment.unpaired_error[n]:.1%} (held at its start)" if n in assessment.unpaired_error
+                         else "-"), "-", "-", "-", "**not paired**"] for n, f in assessment.fouling.items()])
     doc.table(["tag", "NRMSE untracked", "NRMSE tracked", "ratio", "≤ 0.30"],
               [[t_, f"{u:.4g}", f"{k:.4g}", f"{r:.3g}", "pass" if r <= 0.3 else "**FAIL**"]
                for t_, (u, k, r) in assessment.nrmse.items()])
