@@ -399,6 +399,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         sv = np.linalg.svd(sub_keep, compute_uv=False)
         if sv.size and int(np.sum(sv > rtol * sv[0])) < len(cols):
             kept, dependent = _greedy_independent(sub_keep, rtol, float(sv[0]))
+            logger.info("floor-aware pairing: the %d trackable tags tell apart %d of %d parameters",
+                     len(usable_rows), len(kept), len(cols))
             for k in dependent:
                 coef = np.linalg.lstsq(sub_keep[:, kept], sub_keep[:, k], rcond=None)[0]
                 weight = np.abs(coef) * np.linalg.norm(sub_keep[:, kept], axis=0)
