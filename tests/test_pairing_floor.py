@@ -203,3 +203,21 @@ def test_floor_aware_relative_gains_leave_out_the_tags_at_their_floor():
     # over y2, y3 alone: 1/5 and 4/5; y3 is paired
     assert math.isnan(floor.rga[0, 0]) and floor.rga[1:, 0] == pytest.approx([0.2, 0.8])
     assert [(p.variable, p.parameter) for p in floor.pairs] == [("y3", "a")]
+
+
+def test_floor_aware_pairing_leaves_out_a_parameter_the_trackable_tags_cannot_tell_apart():
+    rng = np.random.default_rng(12)
+    n, dt = 20000, 10.0
+    # y1 sits at its floor (offset 0.3, noise 0.2: 55 % of its RMS) and is the only tag that tells a
+    # from b; on y2 and y3 the columns of a (1, 2) and b (2, 4) are parallel: rank 1, whose relative
+    # gain array does not exist. b, the stronger column (norm sqrt(20) against sqrt(5)), stays;
+    # y2 and y3 have offsets b closes at 0.1 (y2 0.2 = 2 x 0.1, y3 0.4 = 4 x 0.1), without noise
+    res = Residuals(("y1", "y2", "y3"), dt * np.arange(n),
+                    np.array([0.3 + rng.normal(0, 0.2, n), np.full(n, 0.2), np.full(n, 0.4)]), np.zeros((3, n)), dt)
+    G = [[10.0, 0.0], [1.0, 2.0], [2.0, 4.0]]
+    p = choose_pairs(G, ["y1", "y2", "y3"], ["a", "b"], time_constants=[[5.0, 5.0]] * 3, residuals=res,
+                     bounds=[(0.0, -1.0, 1.0)] * 2, checks=DataChecks(noise_ratio=0.0, closed_loop=10800.0))
+    why = dict(p.left_out)
+    assert "noise floor" in why["y1"]
+    assert "on the tags worth tracking" in why["a"] and "linear combination of those of b" in why["a"]
+    assert [x.parameter for x in p.pairs] == ["b"] and p.pairs[0].variable in ("y2", "y3")
