@@ -360,8 +360,13 @@ def summary_document(run: Run, seconds: float) -> Document:
     if "estimate" in s:
         est = s["estimate"]
         doc.heading("Estimation (training window)")
-        doc.paragraph("Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
-                      "so that it shows the parameter controllers finding the plant's value themselves.")
+        if "estimate_written" in s:
+            doc.paragraph("Offline gray-box estimate of the constants, written as the spec's starts (or held in "
+                          "[fixed]) before pairing; the time-varying fouling starts clean, for the parameter "
+                          "controllers to follow.")
+        else:
+            doc.paragraph("Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
+                          "so that it shows the parameter controllers finding the plant's value themselves.")
         doc.table(["parameter", "estimate", "plant truth"],
                   [[k, f"{v:.6g}", _truth(run, k)] for k, v in est["parameters"].items()])
         doc.table(["tag", "validation NRMSE initial", "estimated"],
