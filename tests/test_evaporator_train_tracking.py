@@ -111,3 +111,16 @@ def test_the_compiled_box_agrees_with_the_python_runtime(train):
     assert {c.parameter for c in gen.controllers} == {p.parameter for p in train["spec"].pairs}
     assert len(gen.states) == 5  # every level: 2 effects, 2 condensate tanks, the flash tank
     assert val.agreement <= 0.01
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--bench", "heat-exchanger", "--effects", "3"], "--effects applies to --bench evaporator-train"),
+    (["--bench", "evaporator-train", "--effects", "1"], "--effects must be an integer in 2..12"),
+])
+def test_demo_refuses_a_bad_number_of_effects_and_writes_nothing(tmp_path, capsys, argv, message):
+    from trackingbox.demo import main
+
+    out = tmp_path / "demo"
+    assert main([*argv, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
