@@ -219,3 +219,21 @@ def test_a_parameter_the_data_checks_refuse_everywhere_names_the_tags_it_could_s
     assert "offset" in why["y1"]
     assert re.search(r"rejected it for every variable it could serve: y1 \(lambda 1\)", why["a"]), why["a"]
     assert "y2" not in why["a"]   # a does not move y2: not one it could serve
+
+
+def test_floor_aware_pairing_leaves_out_a_parameter_the_trackable_tags_cannot_tell_apart():
+    rng = np.random.default_rng(12)
+    n, dt = 20000, 10.0
+    # y1 sits at its floor (offset 0.3, noise 0.2: 55 % of its RMS) and is the only tag that tells a
+    # from b; on y2 and y3 the columns of a (1, 2) and b (2, 4) are parallel: rank 1, whose relative
+    # gain array does not exist. b, the stronger column (norm sqrt(20) against sqrt(5)), stays;
+    # y2 and y3 have offsets b closes at 0.1 (y2 0.2 = 2 x 0.1, y3 0.4 = 4 x 0.1), without noise
+    res = Residuals(("y1", "y2", "y3"), dt * np.arange(n),
+                    np.array([0.3 + rng.normal(0, 0.2, n), np.full(n, 0.2), np.full(n, 0.4)]), np.zeros((3, n)), dt)
+    G = [[10.0, 0.0], [1.0, 2.0], [2.0, 4.0]]
+    p = choose_pairs(G, ["y1", "y2", "y3"], ["a", "b"], time_constants=[[5.0, 5.0]] * 3, residuals=res,
+                     bounds=[(0.0, -1.0, 1.0)] * 2, checks=DataChecks(noise_ratio=0.0, closed_loop=10800.0))
+    why = dict(p.left_out)
+    assert "noise floor" in why["y1"]
+    assert "on the tags worth tracking" in why["a"] and "linear combination of those of b" in why["a"]
+    assert [x.parameter for x in p.pairs] == ["b"] and p.pairs[0].variable in ("y2", "y3")

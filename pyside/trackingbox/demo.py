@@ -37,20 +37,26 @@ ESTIMATE_BUDGET: dict[str, dict[str, Any]] = {
     # of training data per simulation; one generation of the global search took 22 min on a loaded
     # machine), on a 60 s grid
     "evaporator": {"workers": 1, "maxiter": 0, "refine": True, "refine_grid": 60.0, "refine_iterations": 5},
+    # the train: the same recipe (refinement only, 60 s grid), its parameters' columns on 2 workers
+    "evaporator-train": {"workers": 2, "maxiter": 0, "refine": True, "refine_grid": 60.0, "refine_iterations": 5},
 }
+
+#: The evaporator benches (the single effect and the train): estimates written before ``pair``, a
+#: failed estimate skipped, slow pairs, the validation window, the fouling report against the truth.
+EVAPORATORS: frozenset[str] = frozenset({"evaporator", "evaporator-train"})
 
 #: Benches whose estimates of the constant parameters become the spec's starts before ``pair``
 #: (the source's order: estimate, then pair, then track), leaving out the parameters
 #: :func:`_time_varying` names: a constant the tracking loops could not follow (the evaporator's
 #: boiling-point offset: its only tag, the body temperature, is at its noise floor) is then right
 #: when pairing and tracking start, and the fouling the only fouling-like parameter left.
-WRITE_ESTIMATES: frozenset[str] = frozenset({"evaporator"})
+WRITE_ESTIMATES: frozenset[str] = EVAPORATORS
 
 #: Default case of ``--diagnose``.
 DIAGNOSE_CASE = "sensor-lag"
 
 #: Window the tracking stage scores per bench (the evaporator's criteria are on the validation window).
-TRACK_WINDOW: dict[str, str] = {"evaporator": "validation"}
+TRACK_WINDOW: dict[str, str] = {"evaporator": "validation", "evaporator-train": "validation"}
 
 STEPS = ("bench", "offset", "estimate", "pair", "track", "generate", "validate")
 
@@ -63,6 +69,7 @@ class Run:
     bench: str
     seed: int
     hours: float | None = None  # hours of bench data (None: the bench's default)
+    effects: int | None = None  # evaporator-train: number of effects (None: the bench's default)
     summary: dict[str, Any] = field(default_factory=dict)
     reports: dict[str, StageReport] = field(default_factory=dict)
     truth: dict[str, float] = field(default_factory=dict)
@@ -121,6 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--hours", type=float, default=None,
                    help="hours of bench data (default: the bench's own; a short window for a quick check)")
+    p.add_argument("--effects", type=int, default=None, metavar="N",
+                   help="evaporator-train: number of effects (2..12, default 7)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="plant parameter override")
     p.add_argument("--until", choices=STEPS, default=STEPS[-1], help="stop after this step")
@@ -155,7 +164,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         return name in steps
 
     step("bench", f"building the {run.bench} bench case in {out}")
-    case = make_bench(run.bench, out, seed=run.seed, overrides=overrides, hours=run.hours)
+    case = make_bench(run.bench, out, seed=run.seed, overrides=overrides, hours=run.hours, effects=run.effects)
     summary["bench_case"] = case.to_json()
     run.truth = dict(case.truth)
     spec = load_spec(case.spec)
@@ -170,7 +179,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
                            **ESTIMATE_BUDGET.get(run.bench, {}))
         except TrackingError as exc:
-            if run.bench != "evaporator":
+            if run.bench not in EVAPORATORS:
                 raise
             # the historian's communication losses leave the inputs without data in places, which
             # estimation refuses; tracking starts from the spec's values anyway, so go on
@@ -180,8 +189,8 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             summary["estimate"] = est.to_json()
             run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
             if run.bench in WRITE_ESTIMATES:
-                varying = _time_varying(run.bench)
-                held = _estimate_only(run.bench)
+                varying = _time_varying(run.bench, est.parameters)
+                held = _estimate_only(run.bench, est.parameters)
                 starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
                 spec = write_starts(spec.path, starts)
                 if held:
@@ -203,7 +212,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         if not res.pairing.pairs:
             raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
         spec = write_pairs(spec.path, spec_pairs(spec, res))
-        if run.bench == "evaporator":  # fouling and wear are slow: at least a 3 h closed loop (the spec's too)
+        if run.bench in EVAPORATORS:  # fouling and wear are slow: at least a 3 h closed loop (the spec's too)
             from .benches.evaporator import slow_pairs
 
             spec = slow_pairs(spec.path)
@@ -214,6 +223,8 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["track"] = write_track_report(spec, tr, out / "track", truth=run.truth)
         if run.bench == "evaporator":
             _evaporator_report(run, spec, tr, case)
+        elif run.bench == "evaporator-train":
+            _train_report(run, spec, tr, case)
     if step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled"):
         gen = generate(spec, out / "generated")
         compiled = compile_generated(gen)
@@ -225,21 +236,31 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-def _estimate_only(bench: str) -> frozenset[str]:
-    """Parameters of *bench* held at their estimate (moved to ``[fixed]``), not tracked."""
+def _estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
+    """Parameters of *bench* (among *names*, for the train) held at their estimate (moved to
+    ``[fixed]``), not tracked."""
     if bench == "evaporator":
         from .benches.evaporator import ESTIMATE_ONLY
 
         return frozenset(ESTIMATE_ONLY)
+    if bench == "evaporator-train":
+        from .benches.evaporator_train import estimate_only
+
+        return frozenset(estimate_only(names))
     return frozenset()
 
 
-def _time_varying(bench: str) -> frozenset[str]:
-    """Parameters of *bench* that vary in time (their estimate over a window is a mean): not written."""
+def _time_varying(bench: str, names: Any = ()) -> frozenset[str]:
+    """Parameters of *bench* (among *names*, for the train) that vary in time (their estimate over a
+    window is a mean): not written."""
     if bench == "evaporator":
         from .benches.evaporator import TIME_VARYING
 
         return frozenset(TIME_VARYING)
+    if bench == "evaporator-train":
+        from .benches.evaporator_train import time_varying
+
+        return frozenset(time_varying(names))
     return frozenset()
 
 
@@ -280,13 +301,30 @@ def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
     run.reports["evaporator"] = write_evaporator_report(spec, tr.csv, truth, run.out / "evaporator", result)
 
 
+def _train_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
+    """The train's checks: every effect's tracked fouling against the plant's, and its fouling plot."""
+    from .benches.evaporator import load_truth
+    from .benches.evaporator_report import assess_train, write_train_report
+
+    truth = load_truth(case.truth_file)
+    left_out = [(x["name"], x["reason"]) for x in run.summary.get("pair", {}).get("left_out", [])]
+    nrmse = {t: (v.nrmse_untracked, v.nrmse_tracked) for t, v in tr.variables.items()
+             if t in {p.variable for p in spec.pairs}}
+    result = assess_train(spec, tr.csv, truth, nrmse=nrmse, left_out=left_out)
+    run.summary["evaporator_train"] = result.to_json()
+    run.reports["evaporator_train"] = write_train_report(spec, tr.csv, truth, run.out / "evaporator-train", result)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.diagnose:
         return diagnose_demo((args.out or Path("demo-out") / "diagnose").resolve(), seed=args.seed,
                              case=args.diagnose_case, bias=args.diagnose_bias)
     out = (args.out or Path("demo-out") / args.bench).resolve()
-    run = Run(out=out, bench=args.bench, seed=args.seed, hours=args.hours)
+    if args.effects is not None and args.bench != "evaporator-train":
+        print(f"error: --effects applies to --bench evaporator-train, not {args.bench}", file=sys.stderr)
+        return 2
+    run = Run(out=out, bench=args.bench, seed=args.seed, hours=args.hours, effects=args.effects)
     steps = STEPS[: STEPS.index(args.until) + 1]
     progress = Progress()
     t_all = time.perf_counter()
@@ -322,8 +360,13 @@ def summary_document(run: Run, seconds: float) -> Document:
     if "estimate" in s:
         est = s["estimate"]
         doc.heading("Estimation (training window)")
-        doc.paragraph("Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
-                      "so that it shows the parameter controllers finding the plant's value themselves.")
+        if "estimate_written" in s:
+            doc.paragraph("Offline gray-box estimate of the constants, written as the spec's starts (or held in "
+                          "[fixed]) before pairing; the time-varying fouling starts clean, for the parameter "
+                          "controllers to follow.")
+        else:
+            doc.paragraph("Offline gray-box estimate. Tracking below starts from the spec's initial guess instead, "
+                          "so that it shows the parameter controllers finding the plant's value themselves.")
         doc.table(["parameter", "estimate", "plant truth"],
                   [[k, f"{v:.6g}", _truth(run, k)] for k, v in est["parameters"].items()])
         doc.table(["tag", "validation NRMSE initial", "estimated"],

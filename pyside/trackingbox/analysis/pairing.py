@@ -389,12 +389,33 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if reason is not None:
                 excluded.add(i)
                 left_out.append((variables[i], reason))
+    floor_aware = data is not None and data.checks.closed_loop > 0 and excluded and len(excluded) < len(rows)
+    if floor_aware:
+        # the tags that can be tracked may not tell apart every parameter the whole matrix does
+        # (the evaporator train: 8 trackable tags, 6 candidates, rank 3): keep the parameters
+        # whose columns are independent there, strongest first, and say why the others go
+        usable_rows = [i for i in rows if i not in excluded]
+        sub_keep = S[np.ix_(usable_rows, cols)]
+        sv = np.linalg.svd(sub_keep, compute_uv=False)
+        if sv.size and int(np.sum(sv > rtol * sv[0])) < len(cols):
+            kept, dependent = _greedy_independent(sub_keep, rtol, float(sv[0]))
+            logger.info("floor-aware pairing: the %d trackable tags tell apart %d of %d parameters",
+                     len(usable_rows), len(kept), len(cols))
+            for k in dependent:
+                coef = np.linalg.lstsq(sub_keep[:, kept], sub_keep[:, k], rcond=None)[0]
+                weight = np.abs(coef) * np.linalg.norm(sub_keep[:, kept], axis=0)
+                top = [kept[q] for q in np.argsort(-weight)[:3] if weight[q] > 1e-3 * weight.max()]
+                others = ", ".join(parameters[cols[q]] for q in top) or "the others"
+                left_out.append((parameters[cols[k]], "on the tags worth tracking (the others are at their noise "
+                                 f"floor) its gain column is (nearly) a linear combination of those of {others}: "
+                                 "it cannot be told apart from them"))
+            cols = [cols[k] for k in kept]
     sub = S[np.ix_(rows, cols)]
 
     lam_sub = relative_gain_array(sub, rtol=rtol * 1e-3,
                                   variables=[variables[i] for i in rows],
                                   parameters=[parameters[j] for j in cols])
-    if data is not None and data.checks.closed_loop > 0 and excluded and len(excluded) < len(rows):
+    if floor_aware:
         # floor-aware mode: a tag left out at its noise floor cannot carry a loop, yet in a tall
         # relative gain array it takes part of a parameter's column (the evaporator's steam-chest
         # pressure took 0.78 of the fouling's, leaving its usable tags below MIN_LAMBDA): the

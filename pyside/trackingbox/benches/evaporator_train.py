@@ -57,7 +57,7 @@ from ..spec import (
 from . import scenario as sc
 from .base import BenchCase, BenchDefinition, Sensor, _library_path, _on_grid, _tunable_parameters, add_noise, check_overrides
 #: Heartbeat of every tag (s) and the CSV form of the historian export: the single effect's.
-from .evaporator import HEARTBEAT, MEASUREMENT_FORM, Stoppage, stoppage_factor, stoppage_schedule
+from .evaporator import CLOSED_LOOP, HEARTBEAT, MEASUREMENT_FORM, Stoppage, stoppage_factor, stoppage_schedule
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +88,8 @@ STOPPAGE_BELOW = 0.3
 STOPPAGE_SETTLE = 1800.0
 #: Bounds of every effect's fouling resistance (m2.K/W), as the single effect's.
 RF_BOUNDS = (0.0, 6.0e-4)
+#: Bounds of every effect's boiling-point offset (K), as the single effect's.
+DBPR_BOUNDS = (-2.0, 5.0)
 
 
 def train_inputs(t: FloatArray, rng: np.random.Generator, warmup: float, stoppages: Sequence[Stoppage],
@@ -215,8 +217,10 @@ def candidates(n: int) -> dict[str, tuple[float, float]]:
 
 
 def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
-    """Every effect's fouling resistance (absolute bounds :data:`RF_BOUNDS`) and :func:`candidates`
-    around the twin FMU's declared starts (within its declared min/max).
+    """Every effect's fouling resistance (absolute bounds :data:`RF_BOUNDS`), every effect's
+    boiling-point offset ``dBPREffect[k]`` (K, bounds :data:`DBPR_BOUNDS`: a constant of the liquor
+    the demo estimates and holds, :func:`estimate_only`) and :func:`candidates` around the twin FMU's
+    declared starts (within its declared min/max).
 
     Raises
     ------
@@ -230,6 +234,8 @@ def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
     if missing:
         raise FMUError(f"the evaporator-train twin ({PACKAGE}.Twin, N = {n}) lacks the tunable parameters {missing}")
     out = [ParameterSpec(name, 0.0, *RF_BOUNDS) for name in absolute]
+    out += [ParameterSpec(f"dBPREffect[{k}]", 0.0, *DBPR_BOUNDS) for k in range(1, n + 1)
+            if f"dBPREffect[{k}]" in params]
     for name, (lo, hi) in relative.items():
         var = params[name]
         start = float(var.start)
@@ -240,15 +246,18 @@ def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
 
 
 def pairing_settings(n: int) -> PairingSettings:
-    """``[pairing]`` as the single effect's: the flash-tank and condensate level loops frozen (state
-    compensation holds them), the feed loop and the effects' level loops active; every tag scaled by
-    its sensor accuracy (flows at 1 % of their design reading, valve positions at the 0.2 % dead band).
+    """``[pairing]`` as the single effect's (:data:`trackingbox.benches.evaporator.PAIRING`): nothing
+    frozen (the step tests run the twin as ``track`` runs it, every level loop active and every level
+    compensated), each loop predicted and tuned for a 3 h closed loop (fouling, wear and scale change
+    over hours to days), every tag scaled by its sensor accuracy (flows at 1 % of their design reading,
+    valve positions at the 0.2 % dead band).
 
-    Not yet fit for the train, measured: ``trackingbox pair`` on the 7-effect 1-day case (seed 0,
-    ``--workers 1``) ran the first point's 44 step runs (22 candidates) in 32 min at load ~18
-    (325 s CPU), then the twin's solver failed in the second point's baseline (t = 30563 s) with
-    these loops frozen. Not diagnosed; the condensate cascade carries up to ~15 kg/s through tanks
-    of ~1900 kg per m of level, so a frozen condensate loop may empty or flood its tank.
+    Measured before (``freeze`` on the flash-tank and condensate level loops, no closed loop):
+    ``trackingbox pair`` on the 7-effect 1-day case (seed 0, ``--workers 1``) ran the first point's 44
+    step runs (22 candidates) in 32 min at load ~18 (325 s CPU), then the twin's solver failed in the
+    second point's baseline (t = 30563 s) with those loops frozen: the condensate cascade carries up to
+    ~15 kg/s through tanks of ~1900 kg per m of level, so a frozen condensate loop empties or floods
+    its tank.
     """
     f0 = NOMINAL["feedFlowSet"]
     product = f0 * 0.15 / 0.80
@@ -260,8 +269,37 @@ def pairing_settings(n: int) -> PairingSettings:
         scale += [(effect_tag(k, "PI", 11), 100.0), (effect_tag(k, "PI", 21), 100.0), (effect_tag(k, "TI", 11), 0.2),
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
-    return PairingSettings(freeze=(("holdFlashLevelController", 1.0), ("holdCondensateLevelControllers", 1.0)),
-                           scale=tuple(scale))
+    return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, scale=tuple(scale))
+
+
+def estimate_only(names: Any) -> tuple[str, ...]:
+    """The candidates among *names* that the demo estimates and then holds (moves to ``[fixed]``):
+    every effect's boiling-point offset, as the single effect's ``effect.dBPR``
+    (:data:`trackingbox.benches.evaporator.ESTIMATE_ONLY`): a constant of the liquor's composition
+    whose tags (the effect's temperatures) are also the fouling's.
+
+    Measured on the 2-effect case (seed 0; the plant's offsets 1.0 and 0.5 K). Without them, 1 day:
+    ``pair`` gave effect 1's fouling the product flash temperature TI-7061 (its boiling-point rise),
+    the largest error after 12 h was 11.3 % of the bound range, and tracking it pushed effect 1's
+    body temperature TI-7111 from 0.13 to 0.40 NRMSE (its 0.55 K offset is the plant's dBPR, read
+    as fouling). With them: estimated 0.934 / 0.482 K (1 day) and 0.950 / 0.496 K (2 days); on the
+    1-day case no tag passes the 3 h loops' prediction any more (12 h of training data), on the
+    2-day case effect 1's fouling pairs with the product DS QI-7060.
+
+    >>> estimate_only(["effect[1].Rf", "dBPREffect[1]", "dBPREffect[2]"])
+    ('dBPREffect[1]', 'dBPREffect[2]')
+    """
+    return tuple(n for n in names if n.startswith("dBPREffect["))
+
+
+def time_varying(names: Any) -> tuple[str, ...]:
+    """The candidates among *names* that vary in time (every effect's fouling resistance): the demo
+    leaves them at their clean start when it writes the other estimates as the spec's starts.
+
+    >>> time_varying(["effect[1].Rf", "inletValveCapacity", "effect[2].Rf"])
+    ('effect[1].Rf', 'effect[2].Rf')
+    """
+    return tuple(n for n in names if n.startswith("effect[") and n.endswith("].Rf"))
 
 
 def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:

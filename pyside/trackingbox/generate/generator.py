@@ -30,8 +30,9 @@ from __future__ import annotations
 import importlib.resources
 import logging
 import os
+import re
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -179,6 +180,8 @@ class GeneratedModel:
     tracked_hold_extent: Points
     tracked_line_hold: Points
     modifier_lines: tuple[str, ...]
+    fill_equations: tuple[str, ...]
+    """``effect[1].Rf_in = effect[1].Rf;``: the elements of a switched component array no pair drives."""
     class_order: tuple[str, ...]
     package_info: str
     box_info: str
@@ -255,21 +258,70 @@ def _BLOCKS_LIBRARY() -> Path:  # noqa: N802 - reads as the constant it is
     return library_path()
 
 
-def _modifier_lines(sites: Sequence[ParameterSite]) -> tuple[str, ...]:
-    """Nested modifiers ``hx(use_kht_in = true)`` merged per component, sorted."""
+_ELEMENT = re.compile(r"^([A-Za-z_]\w*)\[(\d+)\]$")
+
+
+def _modifier_lines(sites: Sequence[ParameterSite], variables: Mapping[str, Any] | None = None) -> tuple[str, ...]:
+    """Nested modifiers ``hx(use_kht_in = true)`` merged per component, sorted.
+
+    A site in an element of a component array (``effect[2].Rf``) switches the whole array,
+    ``effect(each use_Rf_in = true)`` (rumoca 0.10 refuses a conditional component under an array
+    of flags, ``use_Rf_in = {false, true}``); :func:`_fill_equations` feeds the elements no pair
+    drives from their own parameter. The array's size is counted from the twin's flat *variables*
+    (``effect[k].use_Rf_in``).
+    """
     tree: dict[str, Any] = {}
+    arrays: dict[str, dict[str, set[int]]] = {}  # array path -> flag -> switched elements
     for site in sites:
+        parts = site.component.split(".")
+        m = _ELEMENT.match(parts[-1])
+        if m is not None and not any(_ELEMENT.match(p) for p in parts[:-1]):
+            path = ".".join([*parts[:-1], m.group(1)])
+            arrays.setdefault(path, {}).setdefault(f"use_{site.leaf}_in", set()).add(int(m.group(2)))
+            continue
+        if any("[" in p for p in parts):
+            raise SpecError(f"parameter {site.name!r}: gen-trackingbox switches parameters of elements of "
+                            f"top-level component arrays (e.g. 'effect[2].Rf') only, not of nested arrays")
         node = tree
-        for part in site.component.split("."):
+        for part in parts:
             node = node.setdefault(part, {})
         node[f"use_{site.leaf}_in"] = None
+    for path, flags in arrays.items():
+        node = tree
+        for part in path.split("."):
+            node = node.setdefault(part, {})
+        for flag, switched in flags.items():
+            prefix = re.escape(path) + r"\[(\d+)\]\." + re.escape(flag) + "$"
+            size = max((int(mm.group(1)) for n in (variables or {}) if (mm := re.match(prefix, n))), default=0)
+            if size < max(switched):
+                raise SpecError(f"component array {path!r} of the twin has no flag {flag!r} for element "
+                                f"{max(switched)}: cannot switch it to a conditional input")
+            node[f"each {flag}"] = None
 
     def fmt(name: str, sub: dict[str, Any]) -> str:
-        inner = ", ".join(k + " = true" if v is None else fmt(k, v) for k, v in sorted(sub.items()))
+        inner = ", ".join(k + " = true" if v is None else (f"{k} = {v}" if isinstance(v, str) else fmt(k, v))
+                          for k, v in sorted(sub.items(), key=lambda kv: kv[0].removeprefix("each ")))
         return f"{name}({inner})"
 
     items = [fmt(k, v) for k, v in sorted(tree.items())]
     return tuple(s + ("," if i < len(items) - 1 else "") for i, s in enumerate(items))
+
+
+def _fill_equations(sites: Sequence[ParameterSite], variables: Mapping[str, Any]) -> tuple[str, ...]:
+    """``effect[1].Rf_in = effect[1].Rf;`` for every element of a component array that
+    :func:`_modifier_lines` switches but no site drives: it keeps its own parameter's value."""
+    switched: dict[tuple[str, str], set[int]] = {}
+    for site in sites:
+        m = _ELEMENT.match(site.component.split(".")[-1])
+        if m is not None:
+            base = ".".join([*site.component.split(".")[:-1], m.group(1)])
+            switched.setdefault((base, site.leaf), set()).add(int(m.group(2)))
+    out = []
+    for (base, leaf), ks in sorted(switched.items()):
+        pattern = re.compile(re.escape(base) + r"\[(\d+)\]\.use_" + re.escape(leaf) + "_in$")
+        size = max((int(mm.group(1)) for n in variables if (mm := pattern.match(n))), default=0)
+        out += [f"{base}[{k}].{leaf}_in = {base}[{k}].{leaf};" for k in range(1, size + 1) if k not in ks]
+    return tuple(out)
 
 
 def _text_attr(variable: dict[str, Any], key: str) -> str:
@@ -446,7 +498,8 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         tracked_box_extent=((-100 * k, -h * k), (100 * k, h * k)),
         tracked_hold_extent=((-140, k * (h - 20) - 10), (-100, k * (h - 20) + 10)),
         tracked_line_hold=((-120, k * (h - 20)), (-120 * k, k * (h - 20))),
-        modifier_lines=_modifier_lines(list(sites.values())),
+        modifier_lines=_modifier_lines(list(sites.values()), src.variables),
+        fill_equations=_fill_equations(list(sites.values()), src.variables),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
 

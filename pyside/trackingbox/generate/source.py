@@ -26,6 +26,7 @@ import difflib
 import logging
 import re
 import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -119,6 +120,43 @@ def _rumoca_load(entry: Path, model: str, roots: list[Path]) -> Any:
     return session.load(str(entry), model=model)
 
 
+def _with_elements(variables: dict[str, Any]) -> dict[str, Any]:
+    """*variables* plus an entry per element of every vector variable (``TI_body[2]`` beside
+    ``TI_body``, whose ``dims`` are ``[N]``): specs name elements, as the FMU does."""
+    out = dict(variables)
+    for name, v in variables.items():
+        dims = v.get("dims") or []
+        if len(dims) == 1 and isinstance(dims[0], int) and "[" not in name:
+            for k in range(1, dims[0] + 1):
+                out.setdefault(f"{name}[{k}]", {**v, "name": f"{name}[{k}]", "dims": []})
+    return out
+
+
+def _load_with_library(top: Path, entry: Path, model: str) -> Any:
+    """Load *model* with the shipped ``TrackingBox`` library staged beside the twin's source *top*.
+
+    A twin written against the library (the evaporator train's ``N = 3`` wrapper,
+    ``extends TrackingBox.Benches.EvaporatorTrain.Twin(N = 3)``) loads only with it;
+    the generated box stages it beside the twin's source anyway (its ``Blocks``).
+    """
+    from ..compiler import library_path
+
+    lib = library_path()
+    if top.resolve() == lib.resolve():
+        raise CompileError(f"{model} does not load from the TrackingBox library itself")
+    with tempfile.TemporaryDirectory(prefix="trackingbox-twin-") as tmp:
+        stage = Path(tmp)
+        shutil.copytree(lib, stage / lib.name)
+        if top.is_dir():
+            shutil.copytree(top, stage / top.name)
+            staged_entry = stage / top.name / entry.relative_to(top)
+        else:
+            shutil.copy2(top, stage / top.name)
+            staged_entry = stage / top.name
+        logger.debug("loading %s with the TrackingBox library staged beside %s", model, top)
+        return _rumoca_load(staged_entry, model, [stage])
+
+
 def load_twin(path: str | Path, model: str) -> TwinSource:
     """Load the twin *model* from *path* with rumoca and collect its flat variables.
 
@@ -136,9 +174,12 @@ def load_twin(path: str | Path, model: str) -> TwinSource:
     try:
         loaded = _rumoca_load(entry, model, [])
     except Exception as exc:  # rumoca raises its own CompileError/ParseError types
-        raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
+        try:
+            loaded = _load_with_library(top, entry, model)
+        except Exception:
+            raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
     flat = loaded.to_dict("flat")
-    variables = dict(flat["variables"])
+    variables = _with_elements(dict(flat["variables"]))
     top_inputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Input"))
     top_outputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Output"))
     return TwinSource(path=path.resolve(), model=model, root=root, top=top, files=files,
