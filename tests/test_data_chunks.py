@@ -95,3 +95,13 @@ def test_reading_holds_floats_not_text(tmp_path):
     finally:
         tracemalloc.stop()
     assert peak < 3 * floats, f"peak {peak / 2**20:.1f} MiB for {floats / 2**20:.1f} MiB of floats"
+
+
+@pytest.mark.parametrize("times", [("inf",), ("0", "inf"), ("-inf", "0", "10")])
+def test_an_infinite_time_is_refused_with_its_line(tmp_path: Path, times: tuple[str, ...]) -> None:
+    # found by the CSV fuzz test: a single row (or a last row) at time inf passed the order check
+    path = tmp_path / "m.csv"
+    path.write_text("time,u\n" + "".join(f"{t},1.0\n" for t in times))
+    line = 2 + next(i for i, t in enumerate(times) if "inf" in t)
+    with pytest.raises(DataError, match=rf"column 'time' in m\.csv has 1 infinite value, first on line {line}"):
+        read_table(path, allow_nan=False)

@@ -102,6 +102,11 @@ def _parse_time(raw: pd.Series, where: str, problems: list[str]) -> tuple[npt.ND
 
 
 def _check_time_order(t: npt.NDArray[np.float64], where: str, problems: list[str]) -> None:
+    inf = np.flatnonzero(np.isinf(t))
+    if inf.size:
+        problems.append(f"column 'time' in {where} has {_n(inf.size, 'infinite value')}, first on line "
+                        f"{_line(int(inf[0]))}")
+        t = np.where(np.isinf(t), np.nan, t)
     valid = np.flatnonzero(~np.isnan(t))
     if valid.size < 2:
         return
