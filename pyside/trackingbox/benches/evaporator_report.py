@@ -280,14 +280,7 @@ def write_evaporator_report(spec: Any, tracking_csv: str | Path, truth: Mapping[
                      f"**{'pass' if f.passed else 'FAIL'}** (≤ 10 %)"])
     doc.table(["tag", "NRMSE untracked", "NRMSE tracked", "ratio"],
               [[t_, f"{u:.4g}", f"{k:.4g}", f"{r:.3g}"] for t_, (u, k, r) in assessment.nrmse.items()])
-    doc.table(["level", "min (m)", "max (m)", "vessel height (m)", "inside"],
-              [[x.tag, f"{x.min:.3g}", f"{x.max:.3g}", f"{x.height:.3g}", str(x.inside)] for x in assessment.levels])
-    if assessment.left_out:
-        doc.table(["left out", "reason"], [list(x) for x in assessment.left_out])
-    for f in files:
-        doc.image(f, f.stem)
-    md = doc.write_markdown(out / "evaporator.md")
-    return StageReport(markdown=md, files=(*files, md), document=doc)
+    return _finish(doc, assessment, files, out / "evaporator.md")
 
 
 # --------------------------------------------------------------------------- the train (issue 11)
@@ -439,11 +432,16 @@ def write_train_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, 
     doc.table(["tag", "NRMSE untracked", "NRMSE tracked", "ratio", "≤ 0.30"],
               [[t_, f"{u:.4g}", f"{k:.4g}", f"{r:.3g}", "pass" if r <= 0.3 else "**FAIL**"]
                for t_, (u, k, r) in assessment.nrmse.items()])
+    return _finish(doc, assessment, files, out / "evaporator-train.md")
+
+
+def _finish(doc: Document, assessment: Any, files: list[Path], md_path: Path) -> StageReport:
+    """The levels and left-out tables, the plots, and the Markdown file: the end of both evaporator reports."""
     doc.table(["level", "min (m)", "max (m)", "vessel height (m)", "inside"],
               [[x.tag, f"{x.min:.3g}", f"{x.max:.3g}", f"{x.height:.3g}", str(x.inside)] for x in assessment.levels])
     if assessment.left_out:
         doc.table(["left out", "reason"], [list(x) for x in assessment.left_out])
     for f in files:
         doc.image(f, f.stem)
-    md = doc.write_markdown(out / "evaporator-train.md")
+    md = doc.write_markdown(md_path)
     return StageReport(markdown=md, files=(*files, md), document=doc)

@@ -150,8 +150,13 @@ class _ErrorMemory:
         self.hold_last = True
 
     def _integrate_linear(self, e0: float, e1: float, m0: float, dt: float) -> None:  # pragma: no cover
-        """Advance the output over *dt* s with the error linear from *e0* to *e1* and the memory at *m0*."""
-        raise NotImplementedError
+        """Advance the output over *dt* s with the error linear from *e0* to *e1* and the memory at *m0*.
+
+        The hook each block fills in with its own exact law (:class:`ScaledPI`, :class:`StateCompensator`);
+        this mixin is never used on its own.
+        """
+        raise NotImplementedError(f"{type(self).__name__} does not define _integrate_linear (a block using "
+                                  "_ErrorMemory must)")
 
     def _advance_linear(self, e: float | None, hold: bool, dt: float) -> None:
         """Move to the call with error *e*, the error linear since the previous one, *dt* s ago.
