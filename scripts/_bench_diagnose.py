@@ -9,7 +9,8 @@ the twin and the measurements) and compares what was named with the case's
 ``truth.json``. It prints one row per case: what was hidden, what was named,
 the verdict, ΔBIC, the median validation NRMSE over the affected tags before and
 after the patch, and the wall time of ``diagnose`` (with the wall and CPU time of
-each of its phases, from ``diagnose --json``'s ``timings``); then the criteria of issue 10:
+each of its phases, from ``diagnose --json``'s ``timings``; the whole document is kept as
+``diagnose.json`` in the case's folder); then the criteria of issue 10:
 
 * effect and target named correctly in >= 90 % of the in-library cases;
 * no effect named in any no-effect case;
@@ -82,6 +83,8 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
                    error=proc.stderr.strip().splitlines()[-1:] or ["?"])
         return row
     doc = json.loads(proc.stdout)
+    # kept beside the case: what every candidate scored, to read a miss without a rerun
+    (folder / "diagnose.json").write_text(proc.stdout)
     findings = doc.get("findings") or []
     top = findings[0] if findings else None
     before, after = [], []
