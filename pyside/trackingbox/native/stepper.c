@@ -662,6 +662,7 @@ static void advance_linear(double *c, int pi, int valid, double e, int hold, dou
     int hold_last = pi ? PI_HOLD_LAST : SC_HOLD_LAST, te = pi ? PI_TE : SC_TE;
     if (!valid) {
         c[has_mem] = 0.0;
+        c[mem] = 0.0;  /* (unused while has_mem is 0) */
     } else if (c[has_last] == 0.0) {
         if (c[has_mem] == 0.0) { c[mem] = e; c[has_mem] = 1.0; }
     } else {
