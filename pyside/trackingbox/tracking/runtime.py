@@ -1309,6 +1309,8 @@ class TrackingLoop:
         #: the rows in C (:class:`_NativeRows`), made on first use where usable
         self._fast: _NativeRows | None = None
         self._fast_checked = False
+        #: rows this loop ran in C (its :meth:`run` calls)
+        self.native_rows = 0
         self.substeps = self._substeps(substeps, interpolation)
 
     def _substeps(self, substeps: int | Literal["auto"], interpolation: Interpolation) -> int:
@@ -1614,6 +1616,7 @@ class TrackingLoop:
                     for j in range(written):
                         progress(k + j + 1, n_rows)
                 rows_this_call += written
+                self.native_rows += written
                 if pending is not None:  # a twin's step inside the last row written needs Python
                     self._step_row(self.k, *pending)
                 elif written and self.k % every == 0:
