@@ -306,3 +306,28 @@ def test_rows_in_c_on_the_benches(bench: str, twin: str, fmu_cache, tmp_path: Pa
     assert c_rows > 0.9 * c.steps
     _same_outputs(tmp_path / "py", tmp_path / "c")
     assert (py.restarts, py.carried) == (c.restarts, c.carried)
+
+
+def test_the_untracked_twin_failing_inside_a_row_is_dropped_as_on_the_python_path(
+        fmu: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # a derivative that is NaN in the stoppage (input 0) while k < 0.0035: the untracked twin (k = 0.003)
+    # fails there for good, the tracked one (k near the plant's 0.004 by then) does not. The untracked
+    # twin's step inside C's row is finished in Python, fails again, is dropped, and the rows go on in C
+    # without it: the same bytes and events as the Python path
+    failing = build_casadi_fmu(tmp_path / "fmu", "hx1nank", constants={"TAU": TAU}, variables=[
+        ("k", ("parameter", "tunable"), {"start": K_TWIN, "min": 0.0, "max": 0.1}),
+        ("u", ("input",), {"start": 50.0}),
+        ("x", ("local", "continuous"), {"start": 38.0, "initial": "exact"}),
+        ("y", ("output",), {}),
+    ], equations=[("der(x)", "(u - x) / TAU - k * x + 1e-9 * ((u - 1.0) + 1e4 * (k - 0.0035)) ** 0.5"),
+                  ("y", "x")])
+    spec = make_case(fmu, tmp_path / "case", stoppage=(2000.0, 2500.0))
+    (spec.parent / "twin.fmu").write_bytes(failing.read_bytes())
+    py, _, py_error = _run(spec, tmp_path / "py", monkeypatch, False, substeps=2)
+    c, c_rows, c_error = _run(spec, tmp_path / "c", monkeypatch, True, substeps=2)
+    assert py_error is None and c_error is None
+    assert "untracked-abandoned" in [e.kind for e in c.events]
+    assert INTERRUPTED and INTERRUPTED[0][0] == 1  # the untracked twin's step, inside C's rows
+    assert c_rows > 0.8 * c.steps
+    _same_outputs(tmp_path / "py", tmp_path / "c")
+    assert [(e.time, e.kind, e.message) for e in py.events] == [(e.time, e.kind, e.message) for e in c.events]
