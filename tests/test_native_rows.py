@@ -331,3 +331,24 @@ def test_the_untracked_twin_failing_inside_a_row_is_dropped_as_on_the_python_pat
     assert c_rows > 0.8 * c.steps
     _same_outputs(tmp_path / "py", tmp_path / "c")
     assert [(e.time, e.kind, e.message) for e in py.events] == [(e.time, e.kind, e.message) for e in c.events]
+
+
+def test_rows_are_formatted_as_the_csv_module_writes_them() -> None:
+    # random bit patterns (every exponent, subnormals), values near the repr's switch to exponents,
+    # integers, signed zeros, infinities, NaN, and mode flags: the text csv.writer makes, byte for byte
+    import csv
+    import io
+
+    rng = np.random.default_rng(5)
+    bits = rng.integers(0, 2**63, size=(400, 7), dtype=np.int64).view(np.float64)
+    special = np.array([0.0, -0.0, math.inf, -math.inf, math.nan, 1.0, 1e16, 1e15, 1e-5, 1e-4, 0.1, 5e-324,
+                        2.0**60, 123456789.0, -1.5, 2.0**51 + 0.25, 1.7976931348623157e308])
+    cols = [bits, rng.normal(0.0, 1e3, size=(400, 3)), np.round(rng.normal(0.0, 100.0, size=(400, 2))),
+            rng.choice(special, size=(400, 4)), rng.integers(0, 2, size=(400, 2)).astype(float)]
+    values = np.concatenate(cols, axis=1)
+    want = io.StringIO(newline="")
+    writer = csv.writer(want)
+    for row in values.tolist():
+        writer.writerow(row[:-2] + ["hold" if m else "auto" for m in row[-2:]])
+    got = native.format_rows(values, 2)
+    assert got is not None and got == want.getvalue()

@@ -224,6 +224,46 @@ def library() -> ctypes.CDLL:
     return _load(library_path())
 
 
+@functools.lru_cache(maxsize=None)
+def _row_formatter() -> tuple[Any, int, int] | None:
+    """``tbn_format_rows`` called holding the GIL, and Python's own float repr and ``PyMem_Free``; None if not to be had."""
+    try:
+        library()
+        fn = ctypes.PyDLL(str(library_path())).tbn_format_rows
+        repr_fn = ctypes.cast(ctypes.pythonapi.PyOS_double_to_string, ctypes.c_void_p).value
+        free_fn = ctypes.cast(ctypes.pythonapi.PyMem_Free, ctypes.c_void_p).value
+    except (NativeUnavailable, OSError, AttributeError) as exc:
+        log.debug("rows are formatted by the csv module: %s", exc)
+        return None
+    if not repr_fn or not free_fn:
+        return None
+    fn.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.c_size_t, ctypes.c_size_t, ctypes.c_size_t,
+                   ctypes.c_char_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
+    fn.restype = ctypes.c_long
+    return fn, repr_fn, free_fn
+
+
+def format_rows(rows: npt.NDArray[np.float64], modes: int) -> str | None:
+    """*rows* as ``csv.writer(...).writerows`` writes them, the last *modes* columns as "hold"/"auto"; None: not here.
+
+    Every value is written with Python's own float repr (``PyOS_double_to_string``,
+    what ``float.__repr__`` and so the csv module use), called from C
+    (``tbn_format_rows``), so the text is the csv module's, byte for byte.
+    """
+    fmt = _row_formatter()
+    if fmt is None:
+        return None
+    fn, repr_fn, free_fn = fmt
+    rows = np.ascontiguousarray(rows, dtype=float)
+    n, ncols = rows.shape
+    cap = n * (ncols * 32 + 2) + 1
+    buf = ctypes.create_string_buffer(cap)
+    got = fn(rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n, ncols, modes, buf, cap, repr_fn, free_fn)
+    if got < 0:
+        return None
+    return buf.raw[:got].decode("ascii")
+
+
 def cpu_seconds() -> float:
     """CPU seconds this process spent inside native steps and parameter sets (integration and FMU calls).
 

@@ -937,3 +937,46 @@ int tbn_track_rows(tbn_batch *b) {
     }
     return 0;
 }
+
+/*
+ * The rows of tbn_track_rows as the csv module writes them (csv.writer, default dialect): every value
+ * by *repr*, Python's own float repr (PyOS_double_to_string(v, 'r', 0, Py_DTSF_ADD_DOT_0, NULL), which
+ * float.__repr__ calls and the csv module writes a float with; the caller passes it and PyMem_Free,
+ * and calls this holding the GIL), the last nmodes columns as "hold" (non-zero) or "auto", fields
+ * joined by ',' and every row ended by "\r\n". Returns the bytes written to out, -1 if cap is too
+ * small, -2 if repr failed (out of memory).
+ */
+typedef char *(*py_repr_fn)(double, char, int, int, int *);
+typedef void (*py_free_fn)(void *);
+
+long tbn_format_rows(const double *rows, size_t n, size_t ncols, size_t nmodes, char *out, size_t cap,
+                     void *repr_fn, void *free_fn) {
+    py_repr_fn repr;
+    py_free_fn pfree;
+    *(void **)&repr = repr_fn;
+    *(void **)&pfree = free_fn;
+    size_t at = 0;
+    for (size_t r = 0; r < n; r++) {
+        const double *row = rows + r * ncols;
+        for (size_t c = 0; c < ncols; c++) {
+            const char *s;
+            char *owned = NULL;
+            if (c >= ncols - nmodes) s = row[c] != 0.0 ? "hold" : "auto";
+            else {
+                owned = repr(row[c], 'r', 0, 0x02 /* Py_DTSF_ADD_DOT_0 */, NULL);
+                if (!owned) return -2;
+                s = owned;
+            }
+            size_t len = strlen(s);
+            if (at + len + 2 > cap) { if (owned) pfree(owned); return -1; }
+            memcpy(out + at, s, len);
+            at += len;
+            if (owned) pfree(owned);
+            if (c + 1 < ncols) out[at++] = ',';
+        }
+        if (at + 2 > cap) return -1;
+        out[at++] = '\r';
+        out[at++] = '\n';
+    }
+    return (long)at;
+}

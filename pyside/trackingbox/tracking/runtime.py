@@ -795,6 +795,10 @@ class _Output:
     def writerows(self, rows: Sequence[Sequence[Any]]) -> None:
         self._writer.writerows(rows)
 
+    def write_text(self, text: str) -> None:
+        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`)."""
+        self._fh.write(text)
+
     def flush(self) -> None:
         if self._fh is not None:
             self._fh.flush()
@@ -1189,15 +1193,19 @@ class _NativeRows:
         interrupted = b.status == self.native.ROWS_INTERRUPTED
         written = done + (1 if interrupted else 0)
         if written:
-            rows = self.rows[:written].tolist()
-            for row in rows:
-                for c in self.mode_cols:
-                    row[c] = "hold" if row[c] else "auto"
-            loop.output.writerows(rows)
+            text = self.native.format_rows(self.rows[:written], self.npairs)
+            if text is not None:
+                loop.output.write_text(text)
+            else:
+                rows = self.rows[:written].tolist()
+                for row in rows:
+                    for c in self.mode_cols:
+                        row[c] = "hold" if row[c] else "auto"
+                loop.output.writerows(rows)
         loop.k = k + done
         pending = None
         if interrupted:
-            row = rows[-1]
+            row = self.rows[written - 1].tolist()
             np_, ns = self.npairs, self.nstates
             first = self.ncols - np_ - 2 * ns - np_
             params = row[first: first + np_]
