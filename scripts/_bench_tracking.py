@@ -137,7 +137,7 @@ def plain_run(spec_path: Path, grid: np.ndarray, read: list[str]) -> tuple[float
 
 
 def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
-    """The tracking run alone, the plain twin run and the bound on the same twin, inputs and grid; then `track`'s run."""
+    """The tracking run alone, the plain twin run and the bound (same twin, inputs and grid), then `track`'s run."""
     from trackingbox import native
 
     spec = load_spec(spec_path)

@@ -226,7 +226,7 @@ def library() -> ctypes.CDLL:
 
 @functools.lru_cache(maxsize=None)
 def _row_formatter() -> tuple[Any, int, int] | None:
-    """``tbn_format_rows`` called holding the GIL, and Python's own float repr and ``PyMem_Free``; None if not to be had."""
+    """``tbn_format_rows`` (called holding the GIL), Python's float repr and ``PyMem_Free``; None if not to be had."""
     try:
         library()
         fn = ctypes.PyDLL(str(library_path())).tbn_format_rows
