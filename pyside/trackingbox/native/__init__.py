@@ -83,6 +83,48 @@ _NO_SET, _SET_FAILED, _AFTER_SET, _READ_FAILED = -100, 10, 11, 12
 _EVENT, _CARRY, _EXACT = 1, 2, 4
 
 
+#: the layouts of a PI controller's and a state compensator's state in tbn_track_rows (stepper.c)
+PI_FIELDS = ("u", "e_mem", "has_mem", "e_last", "has_last", "hold_last", "gain", "ti", "te", "span", "p_min",
+             "p_max", "mode_hold")
+SC_FIELDS = ("m", "e_mem", "has_mem", "e_last", "has_last", "hold_last", "gain", "ts", "te", "mode_hold")
+#: tbn_track_rows's outcomes: it reached the batch's end; the next row needs Python; a twin's advance
+#: inside the row it wrote last did not end normally
+ROWS_STOPPED, ROWS_PYTHON, ROWS_INTERRUPTED = 0, 1, 2
+
+_pd, _pu32, _pint = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(ctypes.c_int)
+
+
+class TwinIO(ctypes.Structure):
+    """``tbn_twin_io`` of stepper.c: one twin a batch of tracking rows steps."""
+
+    _fields_ = [("h", ctypes.c_void_p), ("nv", ctypes.c_size_t), ("vr", _pu32), ("is_param", _pint),
+                ("applied", _pd), ("given", _pd), ("given_ok", _pint), ("ever_set", _pint), ("limit", _pd),
+                ("carry_any", ctypes.c_int), ("extrap", _pint), ("lo", _pd), ("hi", _pd),
+                ("force_restart", ctypes.c_int), ("exact", ctypes.c_int), ("time", ctypes.c_double),
+                ("carried", ctypes.c_long), ("restarts", ctypes.c_long), ("seconds", ctypes.c_double),
+                ("y", _pd), ("out", _pd), ("val", _pd), ("sub", _pd), ("sub_vr", _pu32),
+                ("sub_idx", ctypes.POINTER(ctypes.c_size_t))]
+
+
+class TrackBatch(ctypes.Structure):
+    """``tbn_batch`` of stepper.c: a batch of tracking rows (see ``tbn_track_rows``)."""
+
+    _fields_ = [("grid", _pd), ("k0", ctypes.c_size_t), ("k_stop", ctypes.c_size_t), ("substeps", ctypes.c_int),
+                ("ts", ctypes.c_double), ("hold_until", ctypes.c_double), ("recovery_until", ctypes.c_double),
+                ("stopped", ctypes.POINTER(ctypes.c_ubyte)), ("hold_k", ctypes.c_int),
+                ("last_time", ctypes.c_double), ("has_last_time", ctypes.c_int),
+                ("npairs", ctypes.c_size_t), ("pi", _pd), ("psamples", ctypes.POINTER(_pd)),
+                ("pidx", ctypes.POINTER(ctypes.c_size_t)), ("missing", _pint),
+                ("nstates", ctypes.c_size_t), ("comp_t", _pd), ("comp_u", _pd), ("ssamples", ctypes.POINTER(_pd)),
+                ("sidx", ctypes.POINTER(ctypes.c_size_t)),
+                ("ntags", ctypes.c_size_t), ("tidx", ctypes.POINTER(ctypes.c_size_t)),
+                ("tsamples", ctypes.POINTER(_pd)), ("scored", ctypes.POINTER(ctypes.POINTER(ctypes.c_ubyte))),
+                ("fits", _pd), ("pstats", _pd), ("cstats", _pd), ("sstats", _pd), ("nread", ctypes.c_size_t),
+                ("tw", TwinIO * 2), ("rows", _pd), ("ncols", ctypes.c_size_t), ("cap", ctypes.c_size_t),
+                ("done", ctypes.c_size_t), ("status", ctypes.c_int), ("which", ctypes.c_int), ("sub", ctypes.c_int),
+                ("code", ctypes.c_int)]
+
+
 class NativeUnavailable(Exception):
     """Internal: the native library cannot be had here (the message says why)."""
 
@@ -166,6 +208,12 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_advance_reads.restype = None
     lib.tbn_advance.argtypes = [c_void_p, c_size_t, pu32, pd_, c_int, c_double, c_double]
     lib.tbn_advance.restype = c_int
+    lib.tbn_pi_linear.argtypes = [pd_, c_double, c_double, c_int, c_double]
+    lib.tbn_pi_linear.restype = c_double
+    lib.tbn_comp_linear.argtypes = [pd_, c_double, c_double, c_int]
+    lib.tbn_comp_linear.restype = c_double
+    lib.tbn_track_rows.argtypes = [ctypes.POINTER(TrackBatch)]
+    lib.tbn_track_rows.restype = c_int
     return lib
 
 
@@ -174,6 +222,46 @@ def library() -> ctypes.CDLL:
     if not sys.platform.startswith("linux"):
         raise NativeUnavailable(f"the native stepper is built for Linux only (this is {sys.platform})")
     return _load(library_path())
+
+
+@functools.lru_cache(maxsize=None)
+def _row_formatter() -> tuple[Any, int, int] | None:
+    """``tbn_format_rows`` (called holding the GIL), Python's float repr and ``PyMem_Free``; None if not to be had."""
+    try:
+        library()
+        fn = ctypes.PyDLL(str(library_path())).tbn_format_rows
+        repr_fn = ctypes.cast(ctypes.pythonapi.PyOS_double_to_string, ctypes.c_void_p).value
+        free_fn = ctypes.cast(ctypes.pythonapi.PyMem_Free, ctypes.c_void_p).value
+    except (NativeUnavailable, OSError, AttributeError) as exc:
+        log.debug("rows are formatted by the csv module: %s", exc)
+        return None
+    if not repr_fn or not free_fn:
+        return None
+    fn.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.c_size_t, ctypes.c_size_t, ctypes.c_size_t,
+                   ctypes.c_char_p, ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
+    fn.restype = ctypes.c_long
+    return fn, repr_fn, free_fn
+
+
+def format_rows(rows: npt.NDArray[np.float64], modes: int) -> str | None:
+    """*rows* as ``csv.writer(...).writerows`` writes them, the last *modes* columns as "hold"/"auto"; None: not here.
+
+    Every value is written with Python's own float repr (``PyOS_double_to_string``,
+    what ``float.__repr__`` and so the csv module use), called from C
+    (``tbn_format_rows``), so the text is the csv module's, byte for byte.
+    """
+    fmt = _row_formatter()
+    if fmt is None:
+        return None
+    fn, repr_fn, free_fn = fmt
+    rows = np.ascontiguousarray(rows, dtype=float)
+    n, ncols = rows.shape
+    cap = n * (ncols * 32 + 2) + 1
+    buf = ctypes.create_string_buffer(cap)
+    got = fn(rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n, ncols, modes, buf, cap, repr_fn, free_fn)
+    if got < 0:
+        return None
+    return buf.raw[:got].decode("ascii")
 
 
 def cpu_seconds() -> float:
@@ -535,7 +623,14 @@ class NativeStepper(ModelExchangeStepper):
             flags = (_EVENT if plan.parameters else 0) | (_CARRY if exact and not restart else 0) | \
                 (_EXACT if exact else 0)
             code = self._lib.tbn_advance(self._handle, plan.n, plan.vr, plan.pointer, flags, self.time, t_next)
-            self._after_set(self._set_code.value, changed, plan)  # raises when the set failed
+        return self._advance_end(code, planned, t_next, names, rplan)
+
+    def _advance_end(self, code: int, planned: tuple[dict[str, Any], Any] | None, t_next: float,
+                     names: tuple[str, ...], rplan: tuple[int, npt.NDArray[np.float64]]
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """What :meth:`advance` does after its ``tbn_advance`` call returned *code*."""
+        if planned is not None:
+            self._after_set(self._set_code.value, *planned)  # raises when the set failed
         if code == _OK:
             self.time = t_next
             return self._x[: self._nx].copy(), rplan[1][: rplan[0]].copy()
@@ -552,6 +647,56 @@ class NativeStepper(ModelExchangeStepper):
             self._advance(t_next)
             self.time = t_next
         return self.get_continuous_states(), self.get(names)
+
+    # -- batches of tracking rows (tbn_track_rows, TrackingLoop's fast path) ---------------------
+    def rows_ready(self, names: Sequence[str], read: Sequence[str]) -> tuple[npt.NDArray[np.float64], list[int],
+                                                                             list[int]] | None:
+        """Ready for ``tbn_track_rows`` to advance this stepper with *names* set and *read* read, or None.
+
+        Returns the buffer ``tbn_advance`` reads *read* into, the value
+        references of *names* and whether each is a parameter (event mode).
+        None where the batch cannot do what :meth:`advance` would: a time
+        event ahead, a read or a value that is not a Real tunable parameter or
+        input, an input still driven by the table.
+        """
+        if self._finished or self._next_event is not None:
+            return None
+        rplan = self._read_plan(tuple(read))
+        if rplan is None:
+            return None
+        key = tuple(names)
+        if key:
+            plan = self._plans.get(key)
+            if plan is None:
+                plan = self._plans[key] = self._plan(key)
+            if plan is None or (plan.inputs and set(plan.inputs) & set(self._in_names)):
+                return None
+        params = set(self._plans[key].parameters) if key else set()
+        vrs = [int(self.model.variable(n).valueReference) for n in key]
+        return self._read_plans[tuple(read)][1], vrs, [1 if n in params else 0 for n in key]
+
+    def rows_done(self, time: float, carried: int, restarts: int, set_values: Mapping[str, float]) -> None:
+        """After ``tbn_track_rows``: its time, the outcomes of its sets and the values it set last."""
+        self.time = float(time)
+        self.carried += int(carried)
+        self.restarts += int(restarts)
+        if set_values:
+            self._last_set.update(set_values)
+            self.model.note_changed(n for n in set_values
+                                    if self.model.variable(n).causality == "parameter")
+
+    def finish_advance(self, code: int, values: Mapping[str, float], t_next: float, read: Sequence[str]
+                       ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """End an :meth:`advance` of *values* to *t_next* whose ``tbn_advance`` (in ``tbn_track_rows``) returned *code*.
+
+        What :meth:`advance` does after its C call: the set's outcome (or its
+        error), then the step's (a step event, a failure), the reads.
+        """
+        names = tuple(read)
+        rplan = self._read_plan(names)
+        assert rplan is not None
+        planned = self._set_plan(values) if values else None
+        return self._advance_end(int(code), planned, float(t_next), names, rplan)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints (one C call)."""

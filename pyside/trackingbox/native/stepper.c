@@ -538,3 +538,445 @@ void tbn_stats(tbn *h, long *steps, long *rhs_evals) {
     h->s.get_num_steps(h->mem, steps);
     h->s.get_num_rhs_evals(h->mem, rhs_evals);
 }
+
+/* ===================================================================================================
+ * The tracking loop's fast path (tracking/runtime.py, TrackingLoop._native_rows; issue 12).
+ *
+ * The parameter controllers (ScaledPI with interpolation "linear") and the state compensators
+ * (StateCompensator "linear") of tracking/controllers.py, written out with the same floating-point
+ * operations in the same order (the library is built with -ffp-contract=off; exp, log, pow and
+ * nextafter are the C library's, which Python's math module calls), and the loop of
+ * TrackingLoop._row, _step_tracked and _Twin.step over a batch of rows, with the twins advanced by
+ * tbn_advance. It returns to Python at the first row that needs Python (a tag going missing or
+ * coming back, a time that is not after the last), or inside a row when a twin's tbn_advance did not
+ * end with TBN_OK (an event, a failure): the caller then finishes that advance as
+ * NativeStepper.advance does and goes on in Python.
+ * =================================================================================================== */
+
+/* a PI controller's state (doubles): ScaledPI's u, e_mem (has_mem: not None), e_last (has_last),
+ * hold_last; its constants direction*kp, ti, te, span, p_min, p_max; mode_hold (out: mode "hold") */
+enum { PI_U, PI_MEM, PI_HAS_MEM, PI_LAST, PI_HAS_LAST, PI_HOLD_LAST, PI_GAIN, PI_TI, PI_TE, PI_SPAN, PI_PMIN,
+       PI_PMAX, PI_MODE_HOLD, PI_SIZE };
+/* a state compensator's state: m, e_mem, has_mem, e_last, has_last, hold_last; gain, ts, te; mode_hold */
+enum { SC_M, SC_MEM, SC_HAS_MEM, SC_LAST, SC_HAS_LAST, SC_HOLD_LAST, SC_GAIN, SC_TS, SC_TE, SC_MODE_HOLD,
+       SC_SIZE };
+
+static double clamp100(double u) { return u < 0.0 ? 0.0 : u > 100.0 ? 100.0 : u; }
+
+/* controllers._memory_linear */
+static double memory_linear(double e0, double e1, double m0, double ts, double te) {
+    double s = (e1 - e0) / ts;
+    return e1 - s * te + (m0 - e0 + s * te) * exp(-ts / te);
+}
+
+/* controllers._zero_of_rate */
+static double zero_of_rate(double a_, double b_, double k, double te, double lo, double hi, double g_lo) {
+    int neg_lo = g_lo < 0.0;
+    double x = ((g_lo > 0.0) == (k > 0.0)) ? lo : hi;
+    double ahead = x == lo ? 1.0 : -1.0;
+    double inv_te = 1.0 / te;
+    for (int i = 0; i < 100; i++) {
+        double ex = k * exp(-x * inv_te);
+        double dg = b_ - ex * inv_te;
+        if (dg == 0.0) break;
+        double x_new = x - (a_ + b_ * x + ex) / dg;
+        if (!((x_new - x) * ahead > 0.0)) break;
+        if (lo <= x_new && x_new <= hi) x = x_new;
+        else {
+            double m = lo > x_new ? lo : x_new;  /* Python's max(x_new, lo) */
+            x = hi < m ? hi : m;                 /* min(m, hi) */
+        }
+    }
+    double t0, t1, toward;
+    if ((a_ + b_ * x + k * exp(-x / te) < 0.0) == neg_lo) { t0 = x; t1 = hi; toward = hi; }
+    else { t0 = lo; t1 = x; toward = lo; }
+    double d = fabs(nextafter(x, toward) - x);
+    while (d > 0.0) {
+        if (toward == hi) {
+            double y = t0 + d;
+            if (y >= t1) break;
+            if ((a_ + b_ * y + k * exp(-y / te) < 0.0) != neg_lo) { t1 = y; break; }
+            t0 = y;
+        } else {
+            double y = t1 - d;
+            if (y <= t0) break;
+            if ((a_ + b_ * y + k * exp(-y / te) < 0.0) == neg_lo) { t0 = y; break; }
+            t1 = y;
+        }
+        d *= 2.0;
+    }
+    for (int i = 0; i < 200; i++) {
+        double mid = 0.5 * (t0 + t1);
+        if (mid <= t0 || mid >= t1) break;
+        if ((a_ + b_ * mid + k * exp(-mid / te) < 0.0) == neg_lo) t0 = mid;
+        else t1 = mid;
+    }
+    return 0.5 * (t0 + t1);
+}
+
+/* controllers._integrate_clamped_linear */
+static double integrate_clamped_linear(double u, double gain, double ti, double e0, double e1, double m0,
+                                       double ts, double te) {
+    double s = (e1 - e0) / ts;
+    double a_ = e0 / ti + s;
+    double b_ = s / ti;
+    double c = e0 - m0 - s * te;
+    double k = c / te;
+    double t_ext = 0.0;
+    if (k != 0.0) {
+        double r = b_ * te / k;
+        if (0.0 < r && r < 1.0) {
+            t_ext = -te * log(r);
+            if (!(t_ext < ts)) t_ext = 0.0;
+        }
+    }
+    double g_lo = a_ + b_ * 0.0 + k * exp(-0.0 / te);
+    double g_hi = a_ + b_ * ts + k * exp(-ts / te);
+    double f_prev = 0.0, lo = 0.0;
+    if (t_ext > 0.0) {
+        double g_ext = a_ + b_ * t_ext + k * exp(-t_ext / te);
+        if (g_lo * g_ext < 0.0) {
+            double t = zero_of_rate(a_, b_, k, te, 0.0, t_ext, g_lo);
+            f_prev = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)));
+            u += f_prev - 0.0;
+            u = clamp100(u);
+        }
+        lo = t_ext; g_lo = g_ext;
+    }
+    if (g_lo * g_hi < 0.0) {
+        double t = zero_of_rate(a_, b_, k, te, lo, ts, g_lo);
+        double f_t = gain * (a_ * t + 0.5 * b_ * t * t + c * (1.0 - exp(-t / te)));
+        u += f_t - f_prev;
+        u = clamp100(u);
+        f_prev = f_t;
+    }
+    double f_t = gain * (a_ * ts + 0.5 * b_ * ts * ts + c * (1.0 - exp(-ts / te)));
+    u += f_t - f_prev;
+    return clamp100(u);
+}
+
+/* _ErrorMemory._advance_linear with the block's _integrate_linear (pi: ScaledPI, else StateCompensator) */
+static void advance_linear(double *c, int pi, int valid, double e, int hold, double dt) {
+    int mem = pi ? PI_MEM : SC_MEM, has_mem = pi ? PI_HAS_MEM : SC_HAS_MEM;
+    int last = pi ? PI_LAST : SC_LAST, has_last = pi ? PI_HAS_LAST : SC_HAS_LAST;
+    int hold_last = pi ? PI_HOLD_LAST : SC_HOLD_LAST, te = pi ? PI_TE : SC_TE;
+    if (!valid) {
+        c[has_mem] = 0.0;
+        c[mem] = 0.0;  /* (unused while has_mem is 0) */
+    } else if (c[has_last] == 0.0) {
+        if (c[has_mem] == 0.0) { c[mem] = e; c[has_mem] = 1.0; }
+    } else {
+        double e0 = c[last];
+        double m0 = c[has_mem] == 0.0 ? e0 : c[mem];
+        if (c[hold_last] == 0.0) {
+            if (pi) {
+                c[PI_U] = integrate_clamped_linear(c[PI_U], c[PI_GAIN], c[PI_TI], e0, e, m0, dt, c[PI_TE]);
+            } else {
+                double s = (e - e0) / c[SC_TS];
+                double cc = e0 - m0 - s * c[SC_TE];
+                c[SC_M] += c[SC_GAIN] * (s * c[SC_TS] + cc * (1.0 - exp(-c[SC_TS] / c[SC_TE])));
+            }
+        }
+        c[mem] = memory_linear(e0, e, m0, dt, c[te]);
+        c[has_mem] = 1.0;
+    }
+    c[last] = valid ? e : 0.0;
+    c[has_last] = valid ? 1.0 : 0.0;
+    c[hold_last] = hold ? 1.0 : 0.0;
+    c[pi ? PI_MODE_HOLD : SC_MODE_HOLD] = (hold || !valid) ? 1.0 : 0.0;
+}
+
+/* ScaledPI.update(setpoint, process_value, hold=hold, dt=dt) with interpolation "linear": the parameter value */
+static double pi_linear(double *c, double sp, double pv, int hold, double dt) {
+    int valid = isfinite(sp) && isfinite(pv);
+    double e = valid ? 100.0 * (sp - pv) / c[PI_SPAN] : 0.0;
+    advance_linear(c, 1, valid, e, hold, dt);
+    return c[PI_PMIN] + c[PI_U] / 100.0 * (c[PI_PMAX] - c[PI_PMIN]);
+}
+
+/* StateCompensator.update(measured, simulated, hold=hold) with interpolation "linear": the correction */
+static double comp_linear(double *c, double meas, double sim, int hold) {
+    int valid = isfinite(meas) && isfinite(sim);
+    advance_linear(c, 0, valid, valid ? meas - sim : 0.0, hold, c[SC_TS]);
+    return c[SC_M];
+}
+
+/* the two laws on their own, for the tests against the Python classes */
+double tbn_pi_linear(double *state, double setpoint, double process_value, int hold, double dt) {
+    return pi_linear(state, setpoint, process_value, hold, dt);
+}
+
+double tbn_comp_linear(double *state, double measured, double simulated, int hold) {
+    return comp_linear(state, measured, simulated, hold);
+}
+
+/* One twin the batch steps (runtime._Twin with its NativeStepper): the values it is given (the
+ * tracked twin: the pairs' parameters then the corrections; the untracked twin: the corrections) */
+typedef struct tbn_twin_io {
+    tbn *h;                    /* NULL: no such twin */
+    size_t nv;
+    const uint32_t *vr;        /* the values' references */
+    const int *is_param;       /* 1: a tunable parameter (event mode), 0: an input */
+    double *applied;           /* _Twin.applied (in/out) */
+    double *given;             /* _Twin.given (in/out), given_ok: present */
+    int *given_ok;
+    int *ever_set;             /* out: set by the batch (NativeStepper._last_set and note_changed) */
+    const double *limit;       /* carry limits (NaN: none); carry_any: _Twin.carry_limits not empty */
+    int carry_any;
+    const int *extrap;         /* _Twin.extrapolate: extrapolated, with bounds lo, hi */
+    const double *lo, *hi;
+    int force_restart;         /* in/out */
+    int exact;                 /* the stepper stops exactly at targets (carry mode) */
+    double time;               /* NativeStepper.time (in/out) */
+    long carried, restarts;    /* out: the set outcomes of the batch's successful advances */
+    double seconds;            /* out: wall seconds of the batch's advances (_Twin.step_seconds) */
+    double *y;                 /* the read variables after the last advance (in/out), nread values */
+    const double *out;         /* where tbn_advance reads them to (tbn_advance_reads's buffer) */
+    /* scratch, nv each */
+    double *val, *sub;
+    uint32_t *sub_vr;
+    size_t *sub_idx;
+} tbn_twin_io;
+
+typedef struct tbn_batch {
+    const double *grid;
+    size_t k0, k_stop;         /* rows k0 .. k_stop-1, each written and stepped to the next */
+    int substeps;
+    double ts, hold_until, recovery_until;
+    const unsigned char *stopped;
+    int hold_k;                /* in/out: the hold flag of the current row */
+    double last_time;          /* in/out: the controllers' last update; has_last_time: not None */
+    int has_last_time;
+    size_t npairs;
+    double *pi;                /* npairs * PI_SIZE */
+    const double *const *psamples;
+    const size_t *pidx;        /* read index of each pair's variable */
+    const int *missing;        /* the pair's tag is missing (runtime: missing[tag] is not None) */
+    size_t nstates;
+    double *comp_t, *comp_u;   /* nstates * SC_SIZE: tracked and untracked compensators */
+    const double *const *ssamples;
+    const size_t *sidx;        /* read index of each state's level */
+    size_t ntags;
+    const size_t *tidx;
+    const double *const *tsamples;
+    const unsigned char *const *scored;  /* NULL entry: the tag is not fitted */
+    double *fits;              /* ntags * 7: _Fit's n, sse_t, sse_u, n_u, sum, lo, hi */
+    double *pstats, *cstats, *sstats;    /* 3 each: _Stats's final, min, max */
+    size_t nread;
+    tbn_twin_io tw[2];         /* tracked, untracked (h NULL: none; its columns NaN) */
+    double *rows;              /* cap rows of ncols */
+    size_t ncols, cap;
+    /* out */
+    size_t done;               /* rows written and stepped */
+    int status;                /* TBB_* */
+    int which, sub, code;      /* TBB_INTERRUPTED: the twin (0 tracked, 1 untracked), sub-step (1..), code */
+} tbn_batch;
+
+#define TBB_STOPPED 0      /* reached k_stop or the buffer's end */
+#define TBB_PYTHON 1       /* row k0 + done needs Python; nothing of it was done */
+#define TBB_INTERRUPTED 2  /* row k0 + done is written (rows[done]); a twin's advance returned code */
+
+static double wall_now(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static void stats_add(double *s, double x) {
+    if (isfinite(x)) {
+        s[0] = x;
+        if (x < s[1]) s[1] = x;
+        if (x > s[2]) s[2] = x;
+    }
+}
+
+static void fit_add(double *f, double meas, double tracked, double untracked) {
+    if (!(isfinite(meas) && isfinite(tracked))) return;
+    f[0] += 1.0;
+    f[1] += pow(tracked - meas, 2.0);
+    if (isfinite(untracked)) {
+        f[3] += 1.0;
+        f[2] += pow(untracked - meas, 2.0);
+    }
+    f[4] += meas;
+    if (meas < f[5]) f[5] = meas;
+    if (meas > f[6]) f[6] = meas;
+}
+
+/* _Twin.step(t_next, values) on the native path, values = tw->val: TBN_OK, or tbn_advance's code (then
+ * nothing of the twin's bookkeeping changed) */
+static int twin_step(tbn_twin_io *tw, size_t nread, double t_next) {
+    size_t n = 0;
+    int any_param = 0, small = !tw->force_restart && tw->carry_any;
+    for (size_t i = 0; i < tw->nv; i++) {
+        double v = tw->val[i];
+        if (tw->extrap && tw->extrap[i] && tw->given_ok[i]) {  /* _Twin._applied */
+            double x = v + 0.5 * (v - tw->given[i]);
+            v = x < tw->lo[i] ? tw->lo[i] : x > tw->hi[i] ? tw->hi[i] : x;
+        }
+        if (tw->applied[i] != v) {
+            if (small && !(fabs(v - tw->applied[i]) <= tw->limit[i])) small = 0;
+            any_param |= tw->is_param[i];
+            tw->sub[n] = v;
+            tw->sub_vr[n] = tw->vr[i];
+            tw->sub_idx[n] = i;
+            n++;
+        }
+    }
+    int restart = n == 0 || !small;
+    int flags = (any_param ? TBN_EVENT : 0) | (tw->exact && !restart ? TBN_CARRY : 0) | (tw->exact ? TBN_EXACT : 0);
+    double w0 = wall_now();
+    int code = tbn_advance(tw->h, n, n ? tw->sub_vr : NULL, n ? tw->sub : NULL, flags, tw->time, t_next);
+    if (code != TBN_OK) return code;
+    if (n) {
+        if (*tw->h->adv.set_code == 1) tw->carried++; else tw->restarts++;
+        for (size_t j = 0; j < n; j++) {
+            tw->applied[tw->sub_idx[j]] = tw->sub[j];
+            tw->ever_set[tw->sub_idx[j]] = 1;
+        }
+        tw->force_restart = 0;
+    }
+    tw->seconds += wall_now() - w0;
+    for (size_t i = 0; i < tw->nv; i++) { tw->given[i] = tw->val[i]; tw->given_ok[i] = 1; }
+    tw->time = t_next;
+    memcpy(tw->y, tw->out, nread * sizeof(double));
+    return TBN_OK;
+}
+
+static int close_to(double a, double b, double rel) {  /* math.isclose(a, b, rel_tol=rel) */
+    if (a == b) return 1;
+    if (isinf(a) || isinf(b)) return 0;
+    double diff = fabs(b - a);
+    return diff <= fabs(rel * b) || diff <= fabs(rel * a);
+}
+
+/* _Controllers._dt: the time since the last update, or ts when it is the sample time (or there was none) */
+static double since_last(tbn_batch *b, double t) {
+    if (!b->has_last_time) return b->ts;
+    double dt = t - b->last_time;
+    return close_to(dt, b->ts, 1e-12) ? b->ts : dt;
+}
+
+int tbn_track_rows(tbn_batch *b) {
+    b->done = 0;
+    b->status = TBB_STOPPED;
+    b->which = b->sub = b->code = 0;
+    tbn_twin_io *tw = &b->tw[0], *pl = &b->tw[1];
+    size_t np = b->npairs, ns = b->nstates;
+    for (size_t k = b->k0; k < b->k_stop && b->done < b->cap; k++) {
+        double t = b->grid[k], t_next = b->grid[k + 1];
+        /* what needs Python: a tag going missing or coming back (events), a time not after the last */
+        int python = b->has_last_time && !(t - b->last_time > 0.0);
+        for (size_t i = 0; i < np && !python; i++)
+            python = (isfinite(b->psamples[i][k]) != 0) == (b->missing[i] != 0);
+        int n = b->substeps;
+        double h = (t_next - t) / n, t_from = t;
+        for (int j = 1; j <= n && !python; j++) {
+            double t_to = j == n ? t_next : t + j * h;
+            python = t_to <= t_from + 1e-12 * fmax(1.0, fabs(t_to));
+            t_from = t_to;
+        }
+        if (python) { b->status = TBB_PYTHON; return 0; }
+
+        /* TrackingLoop._row */
+        const double *y = tw->y;
+        int hold_all = t < b->hold_until - 1e-9 || b->stopped[k] || t < b->recovery_until - 1e-9;
+        if (hold_all != b->hold_k) tw->force_restart = 1;
+        b->hold_k = hold_all;
+        double dt = since_last(b, t);
+        for (size_t i = 0; i < np; i++)
+            tw->val[i] = pi_linear(b->pi + i * PI_SIZE, b->psamples[i][k], y[b->pidx[i]], hold_all, dt);
+        b->last_time = t; b->has_last_time = 1;
+        for (size_t i = 0; i < ns; i++) stats_add(b->sstats + 3 * i, y[b->sidx[i]]);
+        double *row = b->rows + b->done * b->ncols;
+        size_t c = 0;
+        row[c++] = t;
+        for (size_t i = 0; i < ns; i++) {
+            double meas = b->ssamples[i][k];
+            tw->val[np + i] = comp_linear(b->comp_t + i * SC_SIZE, meas, y[b->sidx[i]], 0);
+            pl->val[i] = pl->h ? comp_linear(b->comp_u + i * SC_SIZE, meas, pl->y[b->sidx[i]], 0) : NAN;
+        }
+        for (size_t i = 0; i < b->ntags; i++) {
+            double m = b->tsamples[i][k], a = y[b->tidx[i]], u = pl->h ? pl->y[b->tidx[i]] : NAN;
+            row[c++] = m; row[c++] = a; row[c++] = u;
+            if (b->scored[i] && b->scored[i][k]) fit_add(b->fits + 7 * i, m, a, u);
+        }
+        for (size_t i = 0; i < np; i++) row[c++] = tw->val[i];
+        for (size_t i = 0; i < ns; i++) row[c++] = tw->val[np + i];
+        for (size_t i = 0; i < ns; i++) row[c++] = pl->val[i];
+        for (size_t i = 0; i < np; i++) row[c++] = b->pi[i * PI_SIZE + PI_MODE_HOLD];
+        for (size_t i = 0; i < np; i++) stats_add(b->pstats + 3 * i, tw->val[i]);
+        for (size_t i = 0; i < ns; i++) stats_add(b->cstats + 3 * i, tw->val[np + i]);
+
+        /* TrackingLoop._step_tracked */
+        t_from = t;
+        for (int j = 1; j <= n; j++) {
+            double t_to = j == n ? t_next : t + j * h;
+            int code = twin_step(tw, b->nread, t_to);
+            if (code != TBN_OK) {
+                b->status = TBB_INTERRUPTED; b->which = 0; b->sub = j; b->code = code;
+                return 0;
+            }
+            if (j < n) {  /* _Controllers.substep */
+                double dts = since_last(b, t_to), wj = (double)j / (double)n;
+                for (size_t i = 0; i < np; i++) {
+                    double sp = (1.0 - wj) * b->psamples[i][k] + wj * b->psamples[i][k + 1];
+                    tw->val[i] = pi_linear(b->pi + i * PI_SIZE, sp, tw->y[b->pidx[i]], b->hold_k, dts);
+                }
+                b->last_time = t_to;
+            }
+        }
+        if (pl->h) {
+            int code = twin_step(pl, b->nread, t_next);
+            if (code != TBN_OK) {
+                b->status = TBB_INTERRUPTED; b->which = 1; b->sub = 1; b->code = code;
+                return 0;
+            }
+        }
+        b->done++;
+    }
+    return 0;
+}
+
+/*
+ * The rows of tbn_track_rows as the csv module writes them (csv.writer, default dialect): every value
+ * by *repr*, Python's own float repr (PyOS_double_to_string(v, 'r', 0, Py_DTSF_ADD_DOT_0, NULL), which
+ * float.__repr__ calls and the csv module writes a float with; the caller passes it and PyMem_Free,
+ * and calls this holding the GIL), the last nmodes columns as "hold" (non-zero) or "auto", fields
+ * joined by ',' and every row ended by "\r\n". Returns the bytes written to out, -1 if cap is too
+ * small, -2 if repr failed (out of memory).
+ */
+typedef char *(*py_repr_fn)(double, char, int, int, int *);
+typedef void (*py_free_fn)(void *);
+
+long tbn_format_rows(const double *rows, size_t n, size_t ncols, size_t nmodes, char *out, size_t cap,
+                     void *repr_fn, void *free_fn) {
+    py_repr_fn repr;
+    py_free_fn pfree;
+    *(void **)&repr = repr_fn;
+    *(void **)&pfree = free_fn;
+    size_t at = 0;
+    for (size_t r = 0; r < n; r++) {
+        const double *row = rows + r * ncols;
+        for (size_t c = 0; c < ncols; c++) {
+            const char *s;
+            char *owned = NULL;
+            if (c >= ncols - nmodes) s = row[c] != 0.0 ? "hold" : "auto";
+            else {
+                owned = repr(row[c], 'r', 0, 0x02 /* Py_DTSF_ADD_DOT_0 */, NULL);
+                if (!owned) return -2;
+                s = owned;
+            }
+            size_t len = strlen(s);
+            if (at + len + 2 > cap) { if (owned) pfree(owned); return -1; }
+            memcpy(out + at, s, len);
+            at += len;
+            if (owned) pfree(owned);
+            if (c + 1 < ncols) out[at++] = ',';
+        }
+        if (at + 2 > cap) return -1;
+        out[at++] = '\r';
+        out[at++] = '\n';
+    }
+    return (long)at;
+}

@@ -56,6 +56,7 @@ recorded in the last checkpoint, and the summary files (``checkpoint.json``,
 from __future__ import annotations
 
 import csv
+import ctypes
 import json
 import logging
 import math
@@ -427,8 +428,12 @@ class _Twin:
                 out[name] = lo if x < lo else hi if x > hi else x  # min(max(x, lo), hi), NaN kept
         return out
 
-    def step(self, t_next: float, values: Mapping[str, float]) -> None:
-        """Apply the values that changed and integrate to *t_next*."""
+    def step(self, t_next: float, values: Mapping[str, float], code: int | None = None) -> None:
+        """Apply the values that changed and integrate to *t_next*.
+
+        *code*: the native stepper's ``tbn_advance`` for this step already ran
+        (in a batch of rows, :class:`_NativeRows`) and returned *code*; finish it.
+        """
         given = {n: float(v) for n, v in values.items()}
         if self.extrapolate:
             values = self._applied(values)
@@ -437,10 +442,14 @@ class _Twin:
         t0 = _time.perf_counter()
         stepper = self.stepper
         self.y = None
-        if self.read_names is not None and isinstance(stepper, _native_stepper()):
+        if code is not None or (self.read_names is not None and isinstance(stepper, _native_stepper())):
             # the native stepper sets, steps and reads the states and the read variables in one C call
             try:
-                x, y = stepper.advance(changed, t_next, self._read_key, restart=not changed or not self._small(changed))
+                if code is not None:
+                    x, y = stepper.finish_advance(code, changed, t_next, self._read_key)
+                else:
+                    x, y = stepper.advance(changed, t_next, self._read_key,
+                                           restart=not changed or not self._small(changed))
             except BaseException:
                 if changed and stepper.holds(changed):  # the set went through, the step failed
                     self.force_restart = False
@@ -783,6 +792,13 @@ class _Output:
     def write(self, row: Sequence[Any]) -> None:
         self._writer.writerow(row)
 
+    def writerows(self, rows: Sequence[Sequence[Any]]) -> None:
+        self._writer.writerows(rows)
+
+    def write_text(self, text: str) -> None:
+        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`)."""
+        self._fh.write(text)
+
     def flush(self) -> None:
         if self._fh is not None:
             self._fh.flush()
@@ -900,6 +916,307 @@ def substeps_for(gains: Mapping[str, float]) -> int:
     return min(MAX_SUBSTEPS, math.ceil(math.sqrt(g / SUBSTEP_GAIN)))
 
 
+# --------------------------------------------------------------------------- the loop's fast path
+
+#: environment variable: ``0`` keeps the tracking loop on its Python path (no :class:`_NativeRows`)
+NATIVE_ROWS_ENV = "TRACKINGBOX_NATIVE_ROWS"
+
+
+def _pointers(arrays: Sequence[Any], ctype: Any) -> Any:
+    """A C array of the data pointers of *arrays* (None: a null pointer)."""
+    ptr = ctypes.POINTER(ctype)
+    return (ptr * max(len(arrays), 1))(*(a.ctypes.data_as(ptr) if a is not None else ptr() for a in arrays))
+
+
+class _NativeRows:
+    """The loop's rows in C: ``tbn_track_rows`` of the native stepper's library (issue 12).
+
+    Over a batch of rows it does what :meth:`TrackingLoop._row`,
+    :meth:`~TrackingLoop._step_tracked` and :meth:`_Twin.step` do (the PI
+    laws with their clamped integration, the sub-steps, the state
+    compensation, the CSV row's values, the summaries, both twins' sets,
+    steps and reads through ``tbn_advance``), with the same arithmetic in the
+    same order, so the rows are the Python path's, byte for byte. It hands
+    back to the Python path at the first row that needs it (a tag going
+    missing or coming back), inside a row whose twin step did not end
+    normally (an event, a failure: :meth:`TrackingLoop._step_row` finishes
+    that step as the Python path would have), at a checkpoint, at the batch's
+    row limit and before the last row.
+
+    Usable (:meth:`usable`) when every pair is a :class:`ScaledPI` on the
+    ``"linear"`` error, both twins run on :class:`~trackingbox.native.NativeStepper`
+    (or there is no untracked twin and no untracked table) and
+    ``TRACKINGBOX_NATIVE_ROWS`` is not ``0``. Every batch first checks its
+    twins (:meth:`NativeStepper.rows_ready <trackingbox.native.NativeStepper.rows_ready>`).
+    """
+
+    #: rows per batch at most (the row buffer)
+    CAP = 512
+
+    def __init__(self, loop: TrackingLoop) -> None:
+        from .. import native
+
+        self.native = native
+        self.lib = native.library()
+        self.b = native.TrackBatch()
+        self.view: Any = None
+        ctl, comp, plan = loop.controllers, loop.compensation, loop.plan
+        self.npairs, self.nstates = len(ctl.pairs), len(comp.states)
+        self.names = [list(ctl.names) + list(comp.names), list(comp.names)]
+        ridx = loop.ridx
+        self.pidx = (ctypes.c_size_t * max(self.npairs, 1))(*(ridx[p.fmu_name] for p in ctl.pairs))
+        self.sidx = (ctypes.c_size_t * max(self.nstates, 1))(*(ridx[s.variable] for s in comp.states))
+        self.tidx = (ctypes.c_size_t * max(len(plan.out_tags), 1))(*(ridx[plan.tag_var[t]] for t in plan.out_tags))
+        self.ncols = len(plan.columns)
+        self.rows = np.zeros((self.CAP, self.ncols))
+        self.mode_cols = list(range(self.ncols - self.npairs, self.ncols))
+        self.pi = np.zeros((max(self.npairs, 1), len(native.PI_FIELDS)))
+        self.comp = np.zeros((2, max(self.nstates, 1), len(native.SC_FIELDS)))
+        self.fits = np.zeros((max(len(plan.out_tags), 1), 7))
+        self.stats = [np.zeros((max(n, 1), 3)) for n in (self.npairs, self.nstates, self.nstates)]
+        self.missing = np.zeros(max(self.npairs, 1), dtype=np.intc)
+        self.io: list[dict[str, Any]] = []
+        b = self.b
+        b.substeps, b.ts = loop.substeps, loop.ts
+        b.hold_until = loop.hold_until
+        b.npairs, b.nstates, b.ntags, b.nread = self.npairs, self.nstates, len(plan.out_tags), len(loop.read)
+        b.pidx, b.sidx, b.tidx = self.pidx, self.sidx, self.tidx
+        b.pi = self.pi.ctypes.data_as(native._pd)
+        b.comp_t = self.comp[0].ctypes.data_as(native._pd)
+        b.comp_u = self.comp[1].ctypes.data_as(native._pd)
+        b.fits = self.fits.ctypes.data_as(native._pd)
+        b.pstats, b.cstats, b.sstats = (a.ctypes.data_as(native._pd) for a in self.stats)
+        b.missing = self.missing.ctypes.data_as(native._pint)
+        b.rows, b.ncols, b.cap = self.rows.ctypes.data_as(native._pd), self.ncols, self.CAP
+        for which in (0, 1):
+            nv = len(self.names[which])
+            io = {"applied": np.zeros(max(nv, 1)), "given": np.zeros(max(nv, 1)),
+                  "given_ok": np.zeros(max(nv, 1), dtype=np.intc), "ever_set": np.zeros(max(nv, 1), dtype=np.intc),
+                  "limit": np.full(max(nv, 1), math.nan), "extrap": np.zeros(max(nv, 1), dtype=np.intc),
+                  "lo": np.zeros(max(nv, 1)), "hi": np.zeros(max(nv, 1)), "y": np.zeros(max(len(loop.read), 1)),
+                  "val": np.zeros(max(nv, 1)), "sub": np.zeros(max(nv, 1)),
+                  "sub_vr": (ctypes.c_uint32 * max(nv, 1))(), "sub_idx": (ctypes.c_size_t * max(nv, 1))()}
+            t = b.tw[which]
+            t.nv = nv
+            for name in ("applied", "given", "limit", "lo", "hi", "y", "val", "sub"):
+                setattr(t, name, io[name].ctypes.data_as(native._pd))
+            for name in ("given_ok", "ever_set", "extrap"):
+                setattr(t, name, io[name].ctypes.data_as(native._pint))
+            t.sub_vr, t.sub_idx = io["sub_vr"], io["sub_idx"]
+            self.io.append(io)
+
+    @staticmethod
+    def usable(loop: TrackingLoop) -> bool:
+        """True if the loop's rows can run in C (see the class docstring)."""
+        import os
+
+        if os.environ.get(NATIVE_ROWS_ENV, "").strip() == "0" or loop.interpolation != "linear":
+            return False
+        if not all(isinstance(p.controller, ScaledPI) for p in loop.controllers.pairs):
+            return False
+        native = _native_stepper()
+        if not isinstance(loop.twin.stepper if loop.twin is not None else None, native):
+            return False
+        if loop.plain is None:
+            return loop.plan.untracked_table is None
+        return isinstance(loop.plain.stepper, native)
+
+    def _set_view(self, loop: TrackingLoop) -> None:
+        """The measurement view's arrays (again after :meth:`TrackingLoop.extend`)."""
+        view, plan, b = loop.view, loop.plan, self.b
+        fits = loop.output.fits
+        self.grid = np.ascontiguousarray(view.grid, dtype=float)
+        self.stopped = np.ascontiguousarray(view.stopped, dtype=np.uint8)
+        samples = {t: np.ascontiguousarray(view.samples[t], dtype=float) for t in
+                   {*(p.tag for p in loop.controllers.pairs), *(s.tag for s in loop.compensation.states),
+                    *plan.out_tags}}
+        self.samples = samples
+        self.scored = [np.ascontiguousarray(view.scored[t], dtype=np.uint8) if t in fits else None
+                       for t in plan.out_tags]
+        b.grid = self.grid.ctypes.data_as(self.native._pd)
+        b.stopped = self.stopped.ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte))
+        self.psamples = _pointers([samples[p.tag] for p in loop.controllers.pairs], ctypes.c_double)
+        self.ssamples = _pointers([samples[s.tag] for s in loop.compensation.states], ctypes.c_double)
+        self.tsamples = _pointers([samples[t] for t in plan.out_tags], ctypes.c_double)
+        self.pscored = _pointers(self.scored, ctypes.c_ubyte)
+        b.psamples, b.ssamples, b.tsamples, b.scored = self.psamples, self.ssamples, self.tsamples, self.pscored
+        self.view = view
+
+    # ------------------------------------------------------------------ state to C and back
+
+    def _twin_in(self, which: int, tw: _Twin | None, read: list[str]) -> bool:
+        """The twin's state into ``tw[which]``; False if its stepper cannot take a batch now."""
+        t = self.b.tw[which]
+        if tw is None:
+            t.h = None
+            return True
+        st = tw.stepper
+        names = self.names[which]
+        if not tw.me or tw.read_names is None or any(n not in tw.applied for n in names):
+            return False
+        ready = st.rows_ready(names, read)
+        if ready is None:
+            return False
+        out, vrs, is_param = ready
+        io = self.io[which]
+        nv = len(names)
+        io["vr"] = (ctypes.c_uint32 * max(nv, 1))(*vrs)
+        io["is_param"] = (ctypes.c_int * max(nv, 1))(*is_param)
+        t.vr, t.is_param = io["vr"], io["is_param"]
+        t.out = out.ctypes.data_as(self.native._pd)
+        io["out"] = out
+        for i, n in enumerate(names):
+            io["applied"][i] = tw.applied[n]
+            g = tw.given.get(n)
+            io["given_ok"][i] = g is not None
+            io["given"][i] = g if g is not None else 0.0
+            io["limit"][i] = tw.carry_limits.get(n, math.nan)
+            bounds = tw.extrapolate.get(n)
+            io["extrap"][i] = bounds is not None
+            if bounds is not None:
+                io["lo"][i], io["hi"][i] = bounds
+        io["ever_set"][:] = 0
+        t.carry_any = 1 if tw.carry_limits else 0
+        t.force_restart = 1 if tw.force_restart else 0
+        t.exact = 1 if st._solver.exact else 0
+        t.time = st.time
+        t.carried = t.restarts = 0
+        t.seconds = 0.0
+        y = tw.y if tw.y is not None else st.get(read)
+        io["y"][: len(read)] = y
+        io["time0"] = st.time
+        t.h = st._handle
+        return True
+
+    def _twin_out(self, which: int, tw: _Twin | None) -> None:
+        """``tw[which]``'s state back into the twin and its stepper."""
+        if tw is None:
+            return
+        t, io, st = self.b.tw[which], self.io[which], tw.stepper
+        names = self.names[which]
+        applied, given = io["applied"].tolist(), io["given"].tolist()
+        for i, n in enumerate(names):
+            tw.applied[n] = applied[i]
+        if names and io["given_ok"][0]:
+            tw.given = {n: given[i] for i, n in enumerate(names)}
+        tw.force_restart = bool(t.force_restart)
+        tw.step_seconds += t.seconds
+        moved = t.time != io["time0"]
+        st.rows_done(t.time, t.carried, t.restarts,
+                     {n: applied[i] for i, n in enumerate(names) if io["ever_set"][i]})
+        if moved:
+            tw.x = st._x[: st._nx].copy()
+            tw.x_time = float(t.time)
+            tw.y = io["y"][: self.b.nread].copy()
+
+    def _state_in(self, loop: TrackingLoop) -> None:
+        for i, p in enumerate(loop.controllers.pairs):
+            c = p.controller
+            sc = c.scaling
+            self.pi[i] = (c.u, c.e_mem if c.e_mem is not None else 0.0, c.e_mem is not None,
+                          c.e_last if c.e_last is not None else 0.0, c.e_last is not None, c.hold_last,
+                          c.direction * c.kp, c.ti, c.te, sc.span, sc.p_min, sc.p_max, c.mode == "hold")
+            self.missing[i] = loop.controllers.missing[p.tag] is not None
+        for i, s in enumerate(loop.compensation.states):
+            for j, c in enumerate((s.tracked, s.untracked)):
+                self.comp[j, i] = (c.m, c.e_mem if c.e_mem is not None else 0.0, c.e_mem is not None,
+                                   c.e_last if c.e_last is not None else 0.0, c.e_last is not None, c.hold_last,
+                                   c.gain, c.ts, c.te, c.mode == "hold")
+        out = loop.output
+        for i, tag in enumerate(loop.plan.out_tags):
+            fit = out.fits.get(tag)
+            if fit is not None:
+                self.fits[i] = fit.state()
+        for arr, stats in zip(self.stats, (out.pstats, out.cstats, out.sstats)):
+            for i, st in enumerate(stats.values()):
+                arr[i] = st.state()
+        b = self.b
+        b.hold_k = 1 if loop.hold_k else 0
+        last = loop.controllers.last_time
+        b.has_last_time = last is not None
+        b.last_time = last if last is not None else 0.0
+        b.recovery_until = loop.recovery_until
+
+    def _state_out(self, loop: TrackingLoop) -> None:
+        def memory(row: Any, c: Any) -> None:
+            c.e_mem = row[1] if row[2] else None
+            c.e_last = row[3] if row[4] else None
+            c.hold_last = bool(row[5])
+            c.mode = "hold" if row[-1] else "auto"
+
+        for p, row in zip(loop.controllers.pairs, self.pi.tolist()):
+            p.controller.u = row[0]
+            memory(row, p.controller)
+        for i, s in enumerate(loop.compensation.states):
+            for j, c in enumerate((s.tracked, s.untracked)):
+                row = self.comp[j, i].tolist()
+                c.m = row[0]
+                memory(row, c)
+        out = loop.output
+        for i, tag in enumerate(loop.plan.out_tags):
+            fit = out.fits.get(tag)
+            if fit is not None:
+                fit.restore(self.fits[i].tolist())
+        for arr, stats in zip(self.stats, (out.pstats, out.cstats, out.sstats)):
+            for i, st in enumerate(stats.values()):
+                st.restore(arr[i].tolist())
+        b = self.b
+        loop.hold_k = bool(b.hold_k)
+        if b.has_last_time:
+            loop.controllers.last_time = b.last_time
+
+    # ------------------------------------------------------------------ a batch
+
+    def run(self, loop: TrackingLoop, k: int, k_stop: int
+            ) -> tuple[int, tuple[dict[str, float], dict[str, float], tuple[int, int, int]] | None, bool]:
+        """Rows *k* .. at most *k_stop* - 1 in C: ``(rows written, pending, python)``.
+
+        :attr:`TrackingLoop.k` moves past the rows that were written and
+        stepped. *pending*: the last row written was not stepped to its end:
+        ``(values, corrections of the untracked twin, (twin, sub-step, code))``
+        for :meth:`TrackingLoop._step_row`. *python*: the row at
+        :attr:`TrackingLoop.k` needs the Python path.
+        """
+        if self.view is not loop.view:
+            self._set_view(loop)
+        read = loop.read
+        if not (self._twin_in(0, loop.twin, read) and self._twin_in(1, loop.plain, read)):
+            return 0, None, True
+        self._state_in(loop)
+        b = self.b
+        b.k0, b.k_stop = k, k_stop
+        self.lib.tbn_track_rows(ctypes.byref(b))
+        self._twin_out(0, loop.twin)
+        self._twin_out(1, loop.plain)
+        self._state_out(loop)
+        done = int(b.done)
+        interrupted = b.status == self.native.ROWS_INTERRUPTED
+        written = done + (1 if interrupted else 0)
+        if written:
+            text = self.native.format_rows(self.rows[:written], self.npairs)
+            if text is not None:
+                loop.output.write_text(text)
+            else:
+                rows = self.rows[:written].tolist()
+                for row in rows:
+                    for c in self.mode_cols:
+                        row[c] = "hold" if row[c] else "auto"
+                loop.output.writerows(rows)
+        loop.k = k + done
+        pending = None
+        if interrupted:
+            row = self.rows[written - 1].tolist()
+            np_, ns = self.npairs, self.nstates
+            first = self.ncols - np_ - 2 * ns - np_
+            params = row[first: first + np_]
+            corr = row[first + np_: first + np_ + ns]
+            corr_u = row[first + np_ + ns: first + np_ + 2 * ns]
+            names = self.names[0]
+            values = dict(zip(names, params + corr))
+            pending = (values, dict(zip(self.names[1], corr_u)), (int(b.which), int(b.sub), int(b.code)))
+        return written, pending, b.status == self.native.ROWS_PYTHON
+
+
 # --------------------------------------------------------------------------- the loop
 
 class TrackingLoop:
@@ -997,6 +1314,11 @@ class TrackingLoop:
             self.twin.carry_limits = _carry_limits(self.carry, pairs, spec.states, self.view)
         #: hold flag of the current sample (given at its start, used by its sub-steps)
         self.hold_k = True
+        #: the rows in C (:class:`_NativeRows`), made on first use where usable
+        self._fast: _NativeRows | None = None
+        self._fast_checked = False
+        #: rows this loop ran in C (its :meth:`run` calls)
+        self.native_rows = 0
         self.substeps = self._substeps(substeps, interpolation)
 
     def _substeps(self, substeps: int | Literal["auto"], interpolation: Interpolation) -> int:
@@ -1022,6 +1344,18 @@ class TrackingLoop:
             raise ValueError(f"sub-steps need a model-exchange twin (its states restart a resumed run); "
                              f"{self.spec.twin} is co-simulation only")
         return n
+
+    def _native_rows(self) -> _NativeRows | None:
+        """The fast path for the next rows (made on first use), or None where the rows run in Python."""
+        fast = self._fast
+        if fast is None:
+            if self._fast_checked or not _NativeRows.usable(self):
+                self._fast_checked = True
+                return None
+            fast = self._fast = _NativeRows(self)
+        elif not _NativeRows.usable(self):  # the untracked twin was dropped, a twin restarted on the Python path
+            return None
+        return fast
 
     # ------------------------------------------------------------------ state
 
@@ -1151,7 +1485,7 @@ class TrackingLoop:
         if len(self.events) < 1000:
             self.events.append(TrackingEvent(float(t), kind, message))
 
-    def _step_tracked(self, k: int, values: dict[str, float]) -> bool:
+    def _step_tracked(self, k: int, values: dict[str, float], resume: tuple[int, int] | None = None) -> bool:
         """Step the tracked twin from row k to k+1, with the controllers on it at every sub-step.
 
         With :attr:`substeps` ``n > 1`` the sample is cut into ``n`` equal
@@ -1160,18 +1494,26 @@ class TrackingLoop:
         twin gets their new values: the box's continuous loop, sampled ``n``
         times finer. True if the twin had to recover from a solver failure
         (the controllers then stay as they are for the rest of the sample).
+
+        *resume* ``(j, code)``: a batch of rows (:class:`_NativeRows`) stepped
+        the sub-steps before ``j`` and the ``tbn_advance`` of sub-step ``j``
+        returned *code*; go on from there.
         """
         assert self.twin is not None
         n = self.substeps
+        j0, code = resume if resume is not None else (1, None)
         if n == 1:
-            return self._safe_step(self.twin, k, values)
+            return self._safe_step(self.twin, k, values, code=code)
         t_k, t_next = float(self.grid[k]), float(self.grid[k + 1])
         h = (t_next - t_k) / n
-        t_from = t_k
+        t_from = t_k if j0 == 1 else t_k + (j0 - 1) * h
+        if j0 > 1:
+            values = {**values, **self.controllers.values()}
         recovered = False
-        for j in range(1, n + 1):
+        for j in range(j0, n + 1):
             t_to = t_next if j == n else t_k + j * h
-            recovered = self._safe_step(self.twin, k, values, t_from, t_to) or recovered
+            recovered = self._safe_step(self.twin, k, values, t_from, t_to, code=code) or recovered
+            code = None
             t_from = t_to
             if j < n and not recovered:
                 y = self.twin.get(self.read)
@@ -1180,17 +1522,18 @@ class TrackingLoop:
         return recovered
 
     def _safe_step(self, tw: _Twin, k: int, values: dict[str, float], t_from: float | None = None,
-                   t_to: float | None = None) -> bool:
+                   t_to: float | None = None, code: int | None = None) -> bool:
         """Step *tw* from row k to k+1 (or *t_from* to *t_to* within); recover from a solver failure.
 
-        True if it had to recover.
+        True if it had to recover. *code*: the step's ``tbn_advance`` already
+        returned it (see :meth:`_Twin.step`).
         """
         grid = self.grid
         t_k = float(grid[k])
         t_from = t_k if t_from is None else t_from
         t_next = float(grid[k + 1]) if t_to is None else t_to
         try:
-            tw.step(t_next, values)
+            tw.step(t_next, values, code)
             return False
         except SimulationError as exc:
             self.event(t_from, "solver-failure",
@@ -1268,8 +1611,30 @@ class TrackingLoop:
         n_rows = self.n_rows
         rows_this_call = 0
         self.complete = True
+        every = self.checkpoint_every
         while self.k < n_rows:
             k = self.k
+            fast = self._native_rows() if k < n_rows - 1 else None
+            if fast is not None:
+                k_stop = min(n_rows - 1, (k // every + 1) * every)
+                if max_steps is not None:
+                    k_stop = min(k_stop, k + max_steps - rows_this_call)
+                written, pending, python = fast.run(self, k, k_stop)
+                if progress is not None:
+                    for j in range(written):
+                        progress(k + j + 1, n_rows)
+                rows_this_call += written
+                self.native_rows += written
+                if pending is not None:  # a twin's step inside the last row written needs Python
+                    self._step_row(self.k, *pending)
+                elif written and self.k % every == 0:
+                    self._restart_point()
+                if max_steps is not None and rows_this_call >= max_steps and self.k < n_rows:
+                    self.complete = False
+                    break
+                if not python:
+                    continue
+                k = self.k  # the row that needs Python (a tag going missing or coming back, ...)
             values, corr_u = self._row(k)
             rows_this_call += 1
             if progress is not None:
@@ -1277,33 +1642,50 @@ class TrackingLoop:
             if k == n_rows - 1:
                 self.k += 1
                 break
-            recovered = self._step_tracked(k, values)
-            if self.plain is not None:
-                try:
-                    self._safe_step(self.plain, k, dict(corr_u))
-                except SimulationError as exc:
-                    # the comparison run is not worth stopping the tracking for
-                    self.event(float(self.grid[k]), "untracked-abandoned", f"untracked twin failed for good and "
-                               f"is dropped (its columns are empty from here on): {exc}")
-                    self.plain.close()
-                    self.plain = None
-            if recovered:
-                self.recovery_until = float(self.grid[k + 1]) + self.recovery_hold
-                self.event(float(self.grid[k]), "hold",
-                           f"controllers on hold until t = {self.recovery_until:g} s after the recovery")
-            self.k += 1
-            if self.k % self.checkpoint_every == 0:
-                self.checkpoint()
-                # a checkpoint is a restart point: re-initialise from the saved states, exactly
-                # as a resume would, so a resumed run is identical to an uninterrupted one
-                for tw in (self.twin, self.plain):
-                    if tw is not None and tw.me and tw.x is not None:
-                        tw.start(float(self.grid[self.k]), dict(tw.applied), tw.x)
+            self._step_row(k, values, corr_u)
             if max_steps is not None and rows_this_call >= max_steps and self.k < n_rows:
                 self.complete = False
                 break
         self.checkpoint()
         return self.complete
+
+    def _step_row(self, k: int, values: dict[str, float], corr_u: dict[str, float],
+                  resume: tuple[int, int, int] | None = None) -> None:
+        """Step both twins from row k to k+1 (row k written) and move on to row k+1 (checkpoint on the way).
+
+        *resume* ``(twin, j, code)``: a batch of rows stepped part of this row
+        and the ``tbn_advance`` of the tracked (``twin`` 0, sub-step ``j``) or
+        the untracked twin (1) returned *code*: go on from there.
+        """
+        which, j, code = resume if resume is not None else (-1, 1, None)
+        recovered = False
+        if which != 1:
+            recovered = self._step_tracked(k, values, (j, code) if which == 0 else None)
+        if self.plain is not None:
+            try:
+                self._safe_step(self.plain, k, dict(corr_u), code=code if which == 1 else None)
+            except SimulationError as exc:
+                # the comparison run is not worth stopping the tracking for
+                self.event(float(self.grid[k]), "untracked-abandoned", f"untracked twin failed for good and "
+                           f"is dropped (its columns are empty from here on): {exc}")
+                self.plain.close()
+                self.plain = None
+        if recovered:
+            self.recovery_until = float(self.grid[k + 1]) + self.recovery_hold
+            self.event(float(self.grid[k]), "hold",
+                       f"controllers on hold until t = {self.recovery_until:g} s after the recovery")
+        self.k += 1
+        if self.k % self.checkpoint_every == 0:
+            self._restart_point()
+
+    def _restart_point(self) -> None:
+        """Checkpoint at row :attr:`k` and restart the twins there from their saved states."""
+        self.checkpoint()
+        # a checkpoint is a restart point: re-initialise from the saved states, exactly
+        # as a resume would, so a resumed run is identical to an uninterrupted one
+        for tw in (self.twin, self.plain):
+            if tw is not None and tw.me and tw.x is not None:
+                tw.start(float(self.grid[self.k]), dict(tw.applied), tw.x)
 
     def close(self) -> None:
         """Close the CSV and both twins."""
