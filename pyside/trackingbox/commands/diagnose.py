@@ -51,7 +51,9 @@ def register(subparsers: Any) -> None:
                    help="fit the best candidates through their patched, compiled twin and build the patch's FMU")
     p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
     p.add_argument("--fit-best", type=number(ge=1, integer=True), default=2, metavar="N",
-                   help="candidates fitted properly with --compile (default 2)")
+                   help="candidates fitted properly with --compile in a round (default 2)")
+    p.add_argument("--fit-rounds", type=number(ge=1, integer=True), default=3, metavar="N",
+                   help="rounds of fits at most: another round while no fitted candidate passes (default 3)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0,
                    help="seed of the null model's estimation (default 0)")
     add_executor_arguments(p, what="the estimations and the screening jobs",
@@ -80,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     check_against_fmu(spec)
     settings = DiagnoseSettings(
         effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()),
-        compile=args.compile, fit_best=args.fit_best, out_dir=args.output, seed=args.seed,
+        compile=args.compile, fit_best=args.fit_best, fit_rounds=args.fit_rounds, out_dir=args.output, seed=args.seed,
         workers=args.workers, maxiter=args.maxiter, warmup=args.warmup, scheduler=args.scheduler)
     progress = Progress(every=15.0)
     result = diagnose(spec, settings, progress=lambda stage, done, total: progress(stage, done, total))

@@ -120,19 +120,33 @@ def between(a: Candidate, b: Candidate) -> float:
     return delta_bic({t: b.training_residual[t] for t in tags}, {t: a.training_residual[t] for t in tags}, 0)
 
 
+def validation_samples(where: WhereResult) -> int:
+    """Validation samples per tag the noise threshold counts with (the fewest of any tag)."""
+    return min((res.samples for res in where.validation_tags.values()), default=0)
+
+
+def objections(c: Candidate, where: WhereResult, samples: int | None = None) -> list[str]:
+    """Why *c* cannot be named (empty when it passes): :func:`reasons_against` and the gap it must explain.
+
+    The same test serves a screened candidate (is it worth a fit?) and a fitted one (may it be named?).
+    """
+    why = reasons_against(c, validation_samples(where) if samples is None else samples)
+    if c.stage != "skipped":
+        significant = set(where.significant)
+        if c.kind == "sensor" and c.target not in significant:
+            why.append(f"the residual of its tag {c.target} is within noise (nothing there to explain)")
+        elif c.kind != "sensor" and not significant & set(c.tags):
+            why.append("none of the tags it changes has a residual beyond noise (nothing there to explain)")
+    return why
+
+
 def judge(candidates: Sequence[Candidate], where: WhereResult) -> Judgement:
     """Give the verdict over ranked *candidates* (best first)."""
-    samples = min((res.samples for res in where.validation_tags.values()), default=0)
-    significant = set(where.significant)
+    samples = validation_samples(where)
     reasons: dict[str, list[str]] = {}
     passing = []
     for c in candidates:
-        why = reasons_against(c, samples)
-        if c.stage != "skipped":
-            if c.kind == "sensor" and c.target not in significant:
-                why.append(f"the residual of its tag {c.target} is within noise (nothing there to explain)")
-            elif c.kind != "sensor" and not significant & set(c.tags):
-                why.append("none of the tags it changes has a residual beyond noise (nothing there to explain)")
+        why = objections(c, where, samples)
         if why:
             reasons[f"{c.effect}@{c.target}"] = why
         else:

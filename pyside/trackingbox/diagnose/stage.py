@@ -31,7 +31,7 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -58,7 +58,12 @@ class DiagnoseSettings:
         Fit the best candidates through their patched, compiled twins and build
         the named patch's FMU; without it only the cheap screening runs.
     fit_best
-        How many of the best screened candidates are fitted properly (with ``compile``).
+        How many screened candidates are fitted properly in a round (with ``compile``): those whose
+        screening passes the judge's tests first (:func:`trackingbox.diagnose.judge.objections`),
+        each group by ΔBIC.
+    fit_rounds
+        Rounds of fits at most: after the first, another round fits the next candidates whose
+        screening passes, as long as no fitted candidate passes.
     out_dir
         Where ``<Twin>Diagnosed.mo`` and the patched spec are written (None: not written).
     work_dir
@@ -116,6 +121,7 @@ class DiagnoseSettings:
     effects: tuple[str, ...] = ()
     compile: bool = False
     fit_best: int = 2
+    fit_rounds: int = 3
     out_dir: Path | None = None
     work_dir: Path | None = None
     seed: int = 0
@@ -334,22 +340,37 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                                            else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
-            best = [c for c in screened if c.stage != "skipped" and c.fit is None
-                    and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic][: settings.fit_best]
-            fitted = {}
+            from .judge import objections, validation_samples
+
+            samples = validation_samples(found)
+            eligible = [c for c in screened if c.stage != "skipped" and c.fit is None
+                        and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic]
+            # a candidate whose screening already passes the judge's tests is fitted before one whose
+            # screening does not (stable: each group keeps its ΔBIC order); on a twin that misses more
+            # than the hidden effect (heat production's linear laws) a sensor effect on a tag the
+            # mismatch also moves can out-score the one that passes on validation
+            passes = {id(c): not objections(c, found, samples) for c in eligible}
+            fitted: dict[tuple[str, str], Candidate] = {}
             clock.start("fit")
             assert work is not None
-            # two or more fits run side by side, one process each (the same runs as one after the other
-            # with their Jacobians spread over the workers, but their serial parts overlap too); a single
-            # fit keeps the workers for its Jacobian
-            side_by_side = len(best) > 1 and screen_workers > 1
-            one = replace(budget, workers=1, scheduler=None) if side_by_side else budget
-            with pool(min(screen_workers, len(best)) if side_by_side else 1, settings.scheduler):
-                results = [submit(fit_job, (spec, found, effects[c.effect], c, work, one)) for c in best]
-                for i, (c, result) in enumerate(zip(best, results)):
-                    fitted[(c.effect, c.target)] = result()
-                    if progress is not None:
-                        progress("fit", i + 1, len(best))
+            for _ in range(max(settings.fit_rounds, 1)):
+                done = [(c, not objections(f, found, samples)) for c in eligible
+                        if (f := fitted.get((c.effect, c.target))) is not None]
+                best = next_fits(eligible, passes, done, settings.fit_best)
+                if not best:
+                    break
+                # two or more fits run side by side, one process each (the same runs as one after the other
+                # with their Jacobians spread over the workers, but their serial parts overlap too); a single
+                # fit keeps the workers for its Jacobian
+                side_by_side = len(best) > 1 and screen_workers > 1
+                one = replace(budget, workers=1, scheduler=None) if side_by_side else budget
+                total = len(fitted) + len(best)
+                with pool(min(screen_workers, len(best)) if side_by_side else 1, settings.scheduler):
+                    results = [submit(fit_job, (spec, found, effects[c.effect], c, work, one)) for c in best]
+                    for c, result in zip(best, results):
+                        fitted[(c.effect, c.target)] = result()
+                        if progress is not None:
+                            progress("fit", len(fitted), total)
             # a fitted candidate replaces its screening; with compile only fitted candidates can be named
             ranked = rank([fitted.get((c.effect, c.target), c) for c in screened])
         clock.start("judge")
@@ -386,6 +407,49 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     return DiagnosisResult(judgement.verdict, named, tuple(ranked), found, judgement, patch, patch_fmu, patch_spec,
                            patch_file, time.perf_counter() - t0,
                            {k: getattr(v, "explanation", "") for k, v in effects.items()}, dict(clock.phases))
+
+
+def next_fits(eligible: Sequence[Candidate], passes: Mapping[int, bool],
+              done: Sequence[tuple[Candidate, bool]], fit_best: int) -> list[Candidate]:
+    """The screened candidates to fit in the next round (empty: stop fitting).
+
+    Parameters
+    ----------
+    eligible
+        Screened candidates worth a fit, best ΔBIC first.
+    passes
+        ``id(candidate)`` -> whether its screening passes the judge's tests.
+    done
+        The candidates fitted so far, each with whether its fit passes.
+    fit_best
+        Fits a round.
+
+    The first round takes the *fit_best* first candidates, those whose screening passes
+    before the others (each group keeps its order). Another round is worth it only while
+    no fit passes, and takes only candidates whose screening passes.
+
+    Examples
+    --------
+    >>> a, b, c, d = "abcd"   # any objects stand for candidates here
+    >>> ok = {id(a): False, id(b): True, id(c): True, id(d): False}
+    >>> next_fits([a, b, c, d], ok, [], 2)
+    ['b', 'c']
+    >>> next_fits([a, b, c, d], {id(a): False, id(b): True, id(c): False, id(d): False}, [], 2)
+    ['b', 'a']
+    >>> next_fits([a, b, c, d], {**ok, id(d): True}, [(b, False), (c, False)], 2)
+    ['d']
+    >>> next_fits([a, b, c, d], {**ok, id(d): True}, [(b, True), (c, False)], 2)
+    []
+    >>> next_fits([a, b, c, d], ok, [(b, False), (c, False)], 2)
+    []
+    """
+    fitted = {id(c) for c, _ in done}
+    if not done:
+        first = [c for c in eligible if passes.get(id(c), False)]
+        return (first + [c for c in eligible if not passes.get(id(c), False)])[:fit_best]
+    if any(ok for _, ok in done):
+        return []
+    return [c for c in eligible if passes.get(id(c), False) and id(c) not in fitted][:fit_best]
 
 
 def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
