@@ -141,8 +141,9 @@ class PairSettings:
         (``None``: :func:`~trackingbox.analysis.pairing.choose_pairs`' default).
     second_point
         ``"auto"``, ``"none"`` or a time (s): the second operating point of the step tests.
-    data_checks, noise_ratio, min_reach, max_ratio
-        The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks`.
+    data_checks, noise_ratio, min_reach, max_ratio, max_leak
+        The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks` (*max_leak*: the
+        separation of a paired parameter from the candidates left unpaired).
     check_gains
         Gains the data checks judge with: ``"recording"`` (default): with a freeze,
         from a second step-test set with nothing frozen (the twin run as the
@@ -176,6 +177,7 @@ class PairSettings:
     noise_ratio: float = 5.0
     min_reach: float = 0.5
     max_ratio: float = 0.25
+    max_leak: float = 0.5
     check_gains: CheckGains = "recording"
     closed_loop: float | None = None
     samples: int = 32
@@ -264,7 +266,8 @@ class PairingResult:
             "pairs_condition_number": _finite(pairing.pairs_condition_number),
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
-                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None},
+                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None,
+                "max_leak": _finite(pairing.checks.max_leak)},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
                 "rule": self.check_rule,
@@ -454,7 +457,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         from .offsets import simulate_untracked
 
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
-                            closed_loop=float(_closed_loop(spec, s) or 0.0))
+                            closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=s.max_leak)
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
