@@ -77,12 +77,14 @@ def test_separation_moves_a_parameter_to_the_tag_that_tells_it_apart():
     gains, variables, parameters = kw.pop("gains"), kw.pop("variables"), kw.pop("parameters")
     off = choose_pairs(gains, variables, parameters, checks=DataChecks(noise_ratio=0.0, max_leak=math.inf), **kw)
     assert _pairs(off) == {"y1": "a"}          # the relative gain alone
-    on = choose_pairs(gains, variables, parameters, checks=DataChecks(noise_ratio=0.0), **kw)
+    on = choose_pairs(gains, variables, parameters, checks=DataChecks(noise_ratio=0.0, max_leak=0.5), **kw)
     assert _pairs(on) == {"y3": "a"}
     assert [(v, q) for v, q, _ in on.rejected] == [("y1", "a")]
     why = dict(on.left_out)["y1"]
     assert "cannot be told apart from c" in why and "by 2.5 of its own (limit 0.5)" in why
-    # y3's leakage, 0.25, is inside the default limit; a limit below it leaves a unpaired, saying why
+    # without the limit (the default) the relative gain decides
+    assert _pairs(choose_pairs(gains, variables, parameters, checks=DataChecks(noise_ratio=0.0), **kw)) == {"y1": "a"}
+    # y3's leakage, 0.25, is inside 0.5; a limit below it leaves a unpaired, saying why
     strict = choose_pairs(gains, variables, parameters, checks=DataChecks(noise_ratio=0.0, max_leak=0.2), **kw)
     assert strict.pairs == ()
     assert {(v, q) for v, q, _ in strict.rejected} == {("y1", "a"), ("y3", "a")}
@@ -95,3 +97,33 @@ def test_separation_limit_must_be_a_non_negative_number_or_inf():
     for bad in (-0.1, math.nan, "0.5", True):
         with pytest.raises(AnalysisError, match="max_leak"):
             DataChecks(max_leak=bad)
+
+
+def _spec(pairing: str):
+    from pathlib import Path
+
+    from trackingbox.spec import loads_spec
+
+    text = ('twin = "t.fmu"\nmeasurements = "m.csv"\nsample_time = 10.0\n[inputs]\nu = "u"\n[outputs]\ny = "y"\n'
+            f"[pairing]\n{pairing}\n")
+    return loads_spec(text, Path("/nonexistent/spec.toml"), check_files=False)
+
+
+def test_the_spec_asks_for_the_separation_check_and_pair_settings_override_it():
+    from trackingbox.analysis.pair_stage import PairSettings, _max_leak
+    from trackingbox.spec import dump_spec
+
+    spec = _spec("max_leak = 0.5")
+    assert spec.pairing.max_leak == 0.5
+    assert "max_leak = 0.5" in dump_spec(spec)
+    assert _max_leak(spec, PairSettings()) == 0.5
+    assert _max_leak(spec, PairSettings(max_leak=2.0)) == 2.0
+    assert _max_leak(_spec("closed_loop = 3600.0"), PairSettings()) == math.inf   # absent: no check
+
+
+@pytest.mark.parametrize("value", ["-0.5", "0", '"half"'])
+def test_a_bad_separation_limit_in_the_spec_is_named(value):
+    from trackingbox.errors import SpecError
+
+    with pytest.raises(SpecError, match=r"max_leak"):
+        _spec(f"max_leak = {value}")

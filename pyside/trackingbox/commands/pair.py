@@ -77,10 +77,10 @@ def register(subparsers: Any) -> None:
                         "F x its mean untracked offset (default 0.5)")
     p.add_argument("--max-ratio", type=number(gt=0), default=0.25, metavar="R",
                    help="reject pairs predicted to leave more than R of the untracked RMS error (default 0.25)")
-    p.add_argument("--max-leak", type=number(ge=0), default=0.5, metavar="L",
+    p.add_argument("--max-leak", type=number(ge=0), default=None, metavar="L",
                    help="separation: reject a pair whose parameter a candidate left unpaired moves by more than L "
                         "of its bound range per bound range of that candidate, at the loops' steady state "
-                        "(default 0.5)")
+                        "(default: the spec's [pairing] max_leak, else no such check)")
     p.add_argument("--check-gains", choices=("recording", "structure"), default="recording",
                    help="gains of the reach and prediction checks: recording (default; with a freeze, step tests "
                         "repeated with nothing frozen, as the data were recorded) or structure (the frozen ones)")
