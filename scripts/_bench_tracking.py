@@ -104,9 +104,9 @@ def pairs_for(spec_path: Path, bench: str, freeze_controllers: bool) -> None:
         sys.exit(f"bench_tracking: trackingbox pair found no usable pairs on {spec_path} (exit {rc}); "
                  f"command: {' '.join(cmd[2:])}")
     if spec.source is not None and "Evaporator" in spec.source.model:
-        from trackingbox.benches.evaporator import slow_pairs  # the demo's tuning of this bench
+        from trackingbox.benches.evaporator import CLOSED_LOOP, slow_pairs  # the demo's tuning of this bench
 
-        slow_pairs(spec_path)
+        slow_pairs(spec_path, spec.pairing.closed_loop or CLOSED_LOOP)
 
 
 def cpu_now() -> float:

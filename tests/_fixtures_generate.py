@@ -190,12 +190,14 @@ def write_case(root: Path, *, library: str = "Mini", pairs: bool = True, source:
     return spec
 
 
-def harness(stage: Path, package: str, tracked: str, *, meas: float, hold: float = 0.0) -> Path:
-    """A package ``Harness`` beside the generated one that binds the tracked model's inputs."""
+def harness(stage: Path, package: str, tracked: str, *, meas: float, hold: float = 0.0, own_hold: float = 0.0) -> Path:
+    """A package ``Harness`` beside the generated one that binds the tracked model's inputs (*own_hold*:
+    the pair's own hold, ``TI_102_hold``)."""
     h = stage / "Harness"
     h.mkdir(exist_ok=True)
     (h / "package.mo").write_text(
         "within;\npackage Harness\n  model Run\n"
-        f"    {package}.{tracked} tracked(Qin = 50000.0, TI_102_meas = {meas!r}, hold = {hold!r});\n"
+        f"    {package}.{tracked} tracked(Qin = 50000.0, TI_102_meas = {meas!r}, hold = {hold!r}, "
+        f"TI_102_hold = {own_hold!r});\n"
         "  end Run;\nend Harness;\n")
     return h / "package.mo"

@@ -124,3 +124,38 @@ def test_demo_refuses_a_bad_number_of_effects_and_writes_nothing(tmp_path, capsy
     assert main([*argv, "--out", str(out)]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_every_train_candidate_is_a_component_parameter_with_its_conditional_input(tmp_path):
+    """gen-trackingbox drives a tracked parameter through its component's ``use_<leaf>_in`` flag and
+    ``<leaf>_in`` input; a parameter of the twin itself cannot be driven (issue 11: the train's valve
+    and pump factors and boiling-point offsets were top-level). Names written out by hand."""
+    from trackingbox.benches.evaporator_train import candidates, train_models
+    from trackingbox.generate.source import load_twin, parameter_site
+
+    models = train_models(2)
+    source = tmp_path / "twin_source.mo"
+    source.write_text(models.wrapper)
+    twin = load_twin(source, models.twin)
+    names = ["effect[1].Rf", "effect[2].Rf", "effect[1].dBPR", "effect[2].dBPR", *candidates(2)]
+    assert sorted(candidates(2)) == sorted(["inletValve.capacity", "outletValve.capacity", "productPump.dp0",
+                                            "transferValve[1].capacity", "transferPump[1].head"])
+    expected = {
+        "effect[1].Rf": ("effect[1].use_Rf_in", "effect[1].Rf_in"),
+        "effect[2].Rf": ("effect[2].use_Rf_in", "effect[2].Rf_in"),
+        "effect[1].dBPR": ("effect[1].use_dBPR_in", "effect[1].dBPR_in"),
+        "effect[2].dBPR": ("effect[2].use_dBPR_in", "effect[2].dBPR_in"),
+        "inletValve.capacity": ("inletValve.use_capacity_in", "inletValve.capacity_in"),
+        "outletValve.capacity": ("outletValve.use_capacity_in", "outletValve.capacity_in"),
+        "productPump.dp0": ("productPump.use_dp0_in", "productPump.dp0_in"),
+        "transferValve[1].capacity": ("transferValve[1].use_capacity_in", "transferValve[1].capacity_in"),
+        "transferPump[1].head": ("transferPump[1].use_head_in", "transferPump[1].head_in"),
+    }
+    for name in names:
+        site = parameter_site(twin, name, "test")
+        assert site.has_pattern, name
+        assert (site.flag, site.input) == expected[name]
+    # the former top-level factors are gone from the twin
+    for gone in ("inletValveCapacity", "outletValveCapacity", "transferValveCapacity[1]", "transferPumpHead[1]",
+                 "dBPREffect[1]"):
+        assert gone not in twin.variables

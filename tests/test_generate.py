@@ -197,7 +197,11 @@ def test_tracked_model_structure(case: Path):
     assert "der(" not in box and "der(" not in text
     for t in (box, text):
         assert t.count("connect(") == t.count("annotation (Line(points = ")
-    assert box.count("Placement(transformation(") == 6  # hold, meas, sim, output, controller, holdAll
+    # hold, the pair's own hold, meas, sim, output, controller, holdAll
+    assert box.count("Placement(transformation(") == 7
+    # the pair's own hold (its tag missing) holds its controller alone, or-ed with the box's hold
+    assert "hx_kht_controller.hold = holdAll + TI_102_hold - holdAll*TI_102_hold;" in box
+    assert "box.TI_102_hold = TI_102_hold;" in text
     assert "Icon(coordinateSystem(" in box
 
 
@@ -272,13 +276,15 @@ def test_rewrite_patches_a_copy_and_the_result_tracks(tmp_path: Path):
 # ---------------------------------------------------------------- meaning (rumoca)
 
 
-def _simulate_tracked(stage: Path, result, *, meas: float, hold: float = 0.0, stop: float = 3000.0) -> float:
+def _simulate_tracked(stage: Path, result, *, meas: float, hold: float = 0.0, own_hold: float = 0.0,
+                      stop: float = 3000.0) -> float:
     """Simulate the tracked model with constant inputs in rumoca; the final tracked kht."""
     stage.mkdir(parents=True, exist_ok=True)
     shutil.copytree(result.library, stage / result.library.name, dirs_exist_ok=True)
     shutil.copytree(result.package_dir, stage / result.package, dirs_exist_ok=True)
     shutil.copytree(library_path(), stage / "TrackingBox", dirs_exist_ok=True)  # the box's Blocks
-    entry = harness(stage, result.package, result.tracked_model.rsplit(".", 1)[1], meas=meas, hold=hold)
+    entry = harness(stage, result.package, result.tracked_model.rsplit(".", 1)[1], meas=meas, hold=hold,
+                    own_hold=own_hold)
     model = rumoca.Session(roots=[str(stage)]).load(str(entry), model="Harness.Run")
     df = model.simulate((0.0, stop), dt=10.0).to_dataframe()
     assert df["tracked.hx_kht"].between(800.0 - 1e-9, 1200.0 + 1e-9).all()  # always within bounds
@@ -297,9 +303,12 @@ def test_box_saturates_at_bound_without_windup(case: Path, tmp_path: Path):
     assert _simulate_tracked(tmp_path / "s2", result, meas=310.0) == pytest.approx(800.0, abs=0.5)
 
 
-def test_hold_freezes_the_parameter(case: Path, tmp_path: Path):
+@pytest.mark.parametrize("hold, own_hold", [(1.0, 0.0), (0.0, 1.0), (1.0, 1.0)])
+def test_hold_freezes_the_parameter(case: Path, tmp_path: Path, hold: float, own_hold: float):
+    # the box's hold (every controller) and the pair's own hold (its tag missing) each freeze kht at its start
     result = _generate(case, tmp_path / "out")
-    assert _simulate_tracked(tmp_path / "s3", result, meas=305.5, hold=1.0) == pytest.approx(1000.0, abs=1e-9)
+    assert _simulate_tracked(tmp_path / "s3", result, meas=305.5, hold=hold,
+                             own_hold=own_hold) == pytest.approx(1000.0, abs=1e-9)
 
 
 def test_start_up_hold_from_the_spec(tmp_path: Path):
@@ -332,6 +341,7 @@ def test_generated_package_compiles_and_tracks(case: Path, tmp_path: Path):
     cr = compile_generated(result, backend="embedded")
     names = {v.name: v.causality for v in __import__("fmpy").read_model_description(str(cr.fmu)).modelVariables}
     assert names["TI_102_meas"] == "input" and names["Qin"] == "input" and names["hold"] == "input"
+    assert names["TI_102_hold"] == "input"   # the pair's own hold (start 0: tracking)
     assert names["hx_kht"] == "output" and names["ThOut"] == "output"
     res = _fmu_kht(cr.fmu, 305.5)
     assert res["hx_kht"][-1] == pytest.approx(909.0909090909, rel=1e-4)

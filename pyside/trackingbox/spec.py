@@ -226,11 +226,17 @@ class PairingSettings:
         it (an error faster than the loop stays, noise and the historian's holds
         included) and writes a new pair's ``lambda`` so that ``lambda x time_constant``
         reaches it. ``None``: the step tests' time constants (lambda = 1).
+    max_leak : float or None
+        Separation check of ``pair`` (``max_leak = 0.5``; see
+        :func:`trackingbox.analysis.pairing.leakage`): a pair is refused when a candidate
+        left unpaired moves its parameter by more than this many of its bound range per
+        bound range of that candidate, at the loops' steady state. ``None``: no check.
     """
 
     freeze: tuple[tuple[str, float], ...] = ()
     scale: tuple[tuple[str, float], ...] = ()
     closed_loop: float | None = None
+    max_leak: float | None = None
 
 
 @dataclass(frozen=True)
@@ -750,10 +756,12 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale", "closed_loop"), (), "[pairing]", problems)
+    _check_keys(table, ("freeze", "scale", "closed_loop", "max_leak"), (), "[pairing]", problems)
     out: dict[str, Any] = {}
     if "closed_loop" in table:
         out["closed_loop"] = _number(table, "closed_loop", "[pairing]", problems, positive=True)
+    if "max_leak" in table:
+        out["max_leak"] = _number(table, "max_leak", "[pairing]", problems, positive=True)
     for key, example, positive in (("freeze", "holdControllers = 1", False), ("scale", '"TI-101" = 0.2', True)):
         value = table.get(key, {})
         if not isinstance(value, Mapping):
@@ -1046,6 +1054,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                           for key in ("freeze", "scale") if getattr(spec.pairing, key)}
         if spec.pairing.closed_loop is not None:
             doc["pairing"]["closed_loop"] = float(spec.pairing.closed_loop)
+        if spec.pairing.max_leak is not None:
+            doc["pairing"]["max_leak"] = float(spec.pairing.max_leak)
     if spec.diagnose.effects:
         doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:

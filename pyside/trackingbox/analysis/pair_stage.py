@@ -141,8 +141,10 @@ class PairSettings:
         (``None``: :func:`~trackingbox.analysis.pairing.choose_pairs`' default).
     second_point
         ``"auto"``, ``"none"`` or a time (s): the second operating point of the step tests.
-    data_checks, noise_ratio, min_reach, max_ratio
-        The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks`.
+    data_checks, noise_ratio, min_reach, max_ratio, max_leak
+        The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks` (*max_leak*: the
+        separation of a paired parameter from the candidates left unpaired; ``None``: the spec's
+        ``[pairing] max_leak``, absent: no separation check).
     check_gains
         Gains the data checks judge with: ``"recording"`` (default): with a freeze,
         from a second step-test set with nothing frozen (the twin run as the
@@ -176,6 +178,7 @@ class PairSettings:
     noise_ratio: float = 5.0
     min_reach: float = 0.5
     max_ratio: float = 0.25
+    max_leak: float | None = None
     check_gains: CheckGains = "recording"
     closed_loop: float | None = None
     samples: int = 32
@@ -264,7 +267,8 @@ class PairingResult:
             "pairs_condition_number": _finite(pairing.pairs_condition_number),
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
-                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None},
+                "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None,
+                "max_leak": _finite(pairing.checks.max_leak)},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
                 "rule": self.check_rule,
@@ -454,7 +458,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         from .offsets import simulate_untracked
 
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
-                            closed_loop=float(_closed_loop(spec, s) or 0.0))
+                            closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=_max_leak(spec, s))
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
@@ -486,6 +490,16 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
                          agreement=agr, settings=s, steptest_recording=st_rec)
+
+
+def _max_leak(spec: Spec, settings: PairSettings) -> float:
+    """The separation limit *settings* or the spec's ``[pairing] max_leak`` ask for (``inf``: no check)."""
+    value = settings.max_leak if settings.max_leak is not None else spec.pairing.max_leak
+    if value is None:
+        return math.inf
+    if not (math.isfinite(float(value)) and float(value) >= 0):
+        raise AnalysisError(f"max_leak must be a number >= 0, got {value!r}")
+    return float(value)
 
 
 def _closed_loop(spec: Spec, settings: PairSettings) -> float | None:

@@ -107,6 +107,7 @@ class ControllerModel:
     y_unit: str = ""         # unit of the tracking variable in the twin
     p_description: str = ""  # the parameter's description in the twin
     instance: str = ""       # the ParameterController instance in the box, e.g. "hx_kht_controller"
+    hold_in: str = ""        # box/model input that holds this controller alone, e.g. "TI_102_hold"
     layout: Layout | None = None
 
 
@@ -149,9 +150,10 @@ class Layout:
     block_extent: Points
     line_meas: Points
     line_sim: Points
-    line_hold: Points
+    hold_extent: Points
     line_out: Points
     tracked_meas_extent: Points
+    tracked_hold_extent: Points
     tracked_out_extent: Points
     tracked_line_meas: Points
     tracked_line_out: Points
@@ -229,8 +231,9 @@ def _half_height(rows: int) -> float:
     return _PITCH / 2.0 * rows + 40.0
 
 
-def _row_layout(i: int, rows: int, *, with_hold: bool) -> Layout:
-    """Geometry of row *i*: inputs left, the library block in the middle, the output right."""
+def _row_layout(i: int, rows: int) -> Layout:
+    """Geometry of row *i*: inputs left (a pair's own hold above its measurement), the library block in
+    the middle, the output right."""
     h = _half_height(rows)
     yc = h - _PITCH - _PITCH * i
     k = _SCALE
@@ -241,9 +244,10 @@ def _row_layout(i: int, rows: int, *, with_hold: bool) -> Layout:
         block_extent=((-20, yc - 20), (20, yc + 20)),
         line_meas=((-120, yc + 15), (-40, yc + 15), (-40, yc), (-24, yc)),
         line_sim=((-120, yc - 15), (-50, yc - 15), (-50, yc - 34), (0, yc - 34), (0, yc - 24)),
-        line_hold=((-60, h - 20), (-30, h - 20), (-30, yc + 34), (-12, yc + 34), (-12, yc + 24)) if with_hold else (),
+        hold_extent=((-140, yc + 30), (-100, yc + 50)),
         line_out=((22, yc), (110, yc)),
         tracked_meas_extent=((-140, k * (yc + 15) - 10), (-100, k * (yc + 15) + 10)),
+        tracked_hold_extent=((-140, k * yc - 15), (-100, k * yc - 5)),
         tracked_out_extent=((100, k * yc - 10), (120, k * yc + 10)),
         tracked_line_meas=((-120, k * (yc + 15)), (-120 * k, k * (yc + 15))),
         tracked_line_out=((110 * k, k * yc), (110, k * yc)),
@@ -385,10 +389,10 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         span, kp, ti, how = settings.scaling.span, settings.kp, settings.ti, settings.tuning
         ident = filters.modelica_name(pair.variable)
         out = filters.modelica_name(pair.parameter)
-        names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out}
-        for kind in ("meas", "out"):
+        names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out, "hold": f"{ident}_hold"}
+        for kind in ("meas", "hold", "out"):
             if names[kind] in taken:
-                raise SpecError(f"name {names[kind]!r} for {pair.variable if kind == 'meas' else pair.parameter} "
+                raise SpecError(f"name {names[kind]!r} for {pair.parameter if kind == 'out' else pair.variable} "
                                 f"clashes with the {taken[names[kind]]} of that name in {src.model}")
             taken[names[kind]] = f"generated {kind}"
         controllers.append(ControllerModel(
@@ -400,7 +404,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             p_unit=_text_attr(src.variables[pair.parameter], "unit"),
             y_unit=_text_attr(src.variables[twin_var], "unit"),
             p_description=_text_attr(src.variables[pair.parameter], "description"),
-            instance=f"{out}_controller"))
+            instance=f"{out}_controller", hold_in=names["hold"]))
     states: list[StateModel] = []
     for st in sorted(spec.states, key=lambda x: x.correction):
         label = f"[[states]] {st.tag!r} in {where}"
@@ -435,9 +439,8 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             target=target, level_unit=level_unit, flow_unit=flow_unit,
             gain_unit=filters.unit_quotient(flow_unit, level_unit)))
     rows = len(controllers) + len(states)
-    controllers = [replace(c, layout=_row_layout(i, rows, with_hold=True)) for i, c in enumerate(controllers)]
-    states = [replace(x, layout=_row_layout(len(controllers) + i, rows, with_hold=False))
-              for i, x in enumerate(states)]
+    controllers = [replace(c, layout=_row_layout(i, rows)) for i, c in enumerate(controllers)]
+    states = [replace(x, layout=_row_layout(len(controllers) + i, rows)) for i, x in enumerate(states)]
     h = _half_height(rows)
     stop = spec.windows.get("validation", spec.windows.get("training", (0.0, 3600.0)))[1]
     header_lines = [
@@ -469,7 +472,9 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         "per state (correction = k (measured - simulated level)). The law and its hold are documented "
         "in those blocks; the Python runtime implements the same law. <code>hold = 1</code>, and any "
         "time before <code>holdUntil</code> (the start-up hold), freezes every parameter controller: "
-        "nothing integrates and tracking resumes without a bump. State compensation keeps running "
+        "nothing integrates and tracking resumes without a bump; a pair's own "
+        "<code>&lt;tag&gt;_hold = 1</code> (its measurement missing) freezes that controller alone, as the "
+        "Python runtime holds only the loop whose tag is missing. State compensation keeps running "
         "through holds, as in the Python runtime.</p></html>")
     tracked_info = (
         f"<html><p><code>{src.model}</code> with "
@@ -481,7 +486,8 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
                   f"extends the twin cannot drive: the box's correction is the output <code>{x.exposed}</code>; "
                   f"feed it to <code>{x.correction}</code> each sample, as the Python runtime does"
                   for x in states if not x.target)
-        + ". Inputs: the twin's own inputs, the measurements (<code>*_meas</code>) and <code>hold</code>; "
+        + ". Inputs: the twin's own inputs, the measurements (<code>*_meas</code>), <code>hold</code> (every "
+        "controller) and per pair <code>*_hold</code> (that controller alone: its measurement missing); "
         "the box also holds until <code>holdUntil</code> (the spec's start-up hold). Outputs: the twin's "
         "own outputs and the tracked parameter values. Twin variables that are not connectors (the "
         "simulated sensors) reach the box through equations; everything else is connected.</p></html>")

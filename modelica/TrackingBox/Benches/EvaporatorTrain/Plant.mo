@@ -2,12 +2,12 @@ within TrackingBox.Benches.EvaporatorTrain;
 model Plant "N-effect evaporator train, plant: fouling and scaling per effect, BPR offsets, vents, heat losses, wear, DS-meter drift"
   extends TrackingBox.Benches.EvaporatorTrain.BaseClasses.PartialTrain(
     useRfInput=true,
-    dBPREffect={0.5 + 0.5*(N - k)/(N - 1) for k in 1:N},
+    effect(dBPR={0.5 + 0.5*(N - k)/(N - 1) for k in 1:N}),
     ventFractionEffect=fill(0.005, N),
     UA_lossEffect=fill(200, N),
     UA_lossFlash=30,
-    inletValveCapacity=0.9,
-    transferPumpHead=fill(0.95, N - 1),
+    inletValve(capacity=0.9),
+    transferPump(each head=0.95),
     DSbias=0.002,
     DSdrift=2.9e-9);
   parameter Real RfInf[N](each unit="m2.K/W") = {1.5e-4 - 1.0e-4*(k - 1)/(N - 1) for k in 1:N} "Asymptote of each effect's organic/CaCO3 fouling (highest at the product end)";

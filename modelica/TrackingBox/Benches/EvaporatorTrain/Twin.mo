@@ -14,8 +14,10 @@ equation
 <p>Clean design values: no fouling (<code>effect[k].Rf = 0</code>, bounds
 0..6e-4 m2.K/W), no boiling-point offsets, vents or heat losses, new valves
 and pumps. Tunable per effect: <code>effect[k].Rf</code>,
-<code>effect[k].dBPR</code>, <code>effect[k].U0</code>, the valves'
-<code>KvMax</code> and the pumps' <code>dp0</code>, <code>VMax</code>. State
+<code>effect[k].dBPR</code>, <code>effect[k].U0</code>; the valves' wear
+<code>capacity</code> and the pumps' <code>head</code> (1: as designed) and the
+product pump's <code>dp0</code>, <code>VMax</code>; each with its component's
+conditional input for a generated TrackingBox. State
 compensation: <code>body_m_flow_corr[k]</code>, <code>flash_m_flow_corr</code>,
 <code>cond_m_flow_corr[k]</code> (kg/s, default 0) add liquid at the vessel's
 own composition and temperature.</p>

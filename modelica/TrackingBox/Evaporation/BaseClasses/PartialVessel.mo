@@ -15,7 +15,8 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
   parameter TrackingBox.Units.PressureDifference dp_vap_small = 100 "Regularisation of the vapour-line square-root law";
   parameter Real K_ev(unit="kg/(s.K)") = 5 "Evaporation per kelvin of liquid temperature above the boiling point";
   parameter TrackingBox.Units.TemperatureDifference dT_smooth = 0.01 "Smoothing width of the evaporation law";
-  parameter TrackingBox.Units.TemperatureDifference dBPR = 0 "Offset added to the boiling point (plant: composition effects)";
+  parameter TrackingBox.Units.TemperatureDifference dBPR = 0 "Offset added to the boiling point (plant: composition effects), used when use_dBPR_in = false";
+  parameter Boolean use_dBPR_in = false "= true to take the boiling-point offset from the input dBPR_in";
   parameter Real epsBPR(unit="1") = 0 "Relative error of the boiling-point rise (plant)";
   parameter TrackingBox.Units.ThermalConductance UA_loss = 0 "Heat-loss conductance of the liquid to ambient";
   parameter TrackingBox.Units.Temperature T_amb = 293.15 "Ambient temperature";
@@ -32,6 +33,7 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
   TrackingBox.Evaporation.LiquorPort_b port_b "Liquid outlet at the bottom";
   TrackingBox.Interfaces.FluidPort_b port_v "Vapour outlet";
   TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside";
+  TrackingBox.Interfaces.RealInput dBPR_in(unit="K") if use_dBPR_in "Boiling-point offset from outside";
   TrackingBox.Interfaces.RealOutput dp_level(unit="Pa") "Hydrostatic pressure of the liquid above the level's zero (what a dP transmitter sees)";
   TrackingBox.Units.Mass M(start=M_start, fixed=true) "Liquid mass";
   TrackingBox.Units.Mass M_s(start=x_start*M_start, fixed=true) "Dry-solids mass";
@@ -61,8 +63,13 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
   Real dxdt(unit="1/s") "Rate of change of the dry-solids fraction";
 protected
   TrackingBox.Interfaces.RealInput m_flow_corr_internal(unit="kg/s") "Correction flow from outside (0 without input)";
+  TrackingBox.Interfaces.RealInput dBPR_internal(unit="K") "Used boiling-point offset";
 equation
   connect(m_flow_corr_in, m_flow_corr_internal);
+  connect(dBPR_in, dBPR_internal);
+  if not use_dBPR_in then
+    dBPR_internal = dBPR;
+  end if;
   if not use_m_flow_corr_in then
     m_flow_corr_internal = 0;
   end if;
@@ -81,7 +88,7 @@ equation
   T_vap = Saturation.TSat(p_vap);
   h_vap = Saturation.hVapour(T_vap);
   BPR = BlackLiquor.boilingPointRise(x, p_vap);
-  T_b = T_vap + dBPR + (1 + epsBPR)*BPR;
+  T_b = T_vap + dBPR_internal + (1 + epsBPR)*BPR;
   m_ev = K_ev*Functions.splus(T - T_b, dT_smooth);
   m_vap_out = m_flow_vap_nominal*Functions.regRoot(p_vap - port_v.p, dp_vap_small)/sqrt(dp_vap_nominal);
   der(M_vap) = m_ev - m_vap_out;

@@ -21,14 +21,9 @@ partial model PartialTrain "N-effect backward-feed train: effects, vapour header
   // what plant and twin set differently (structural flags and per-effect values)
   parameter Boolean useRfInput = false "= true: every effect takes its fouling resistance from its input Rf_in (plant)";
   parameter Boolean useCorrectionInputs = false "= true: every vessel has a correction-flow input (twin)";
-  parameter TrackingBox.Units.TemperatureDifference dBPREffect[N] = zeros(N) "Boiling-point offset of each effect";
   parameter TrackingBox.Units.Fraction ventFractionEffect[N] = zeros(N) "Steam vented from each chest (fraction of its condensate)";
   parameter TrackingBox.Units.ThermalConductance UA_lossEffect[N] = zeros(N) "Heat-loss conductance of each effect";
   parameter TrackingBox.Units.ThermalConductance UA_lossFlash = 0 "Heat-loss conductance of the product flash tank";
-  parameter Real inletValveCapacity(unit="1", min=0.1) = 1 "Feed valve's KvMax as a fraction of its design";
-  parameter Real outletValveCapacity(unit="1", min=0.1) = 1 "KvMax of effect 1's level valve as a fraction of its design";
-  parameter Real transferValveCapacity[N - 1](each unit="1", each min=0.1) = fill(1, N - 1) "KvMax of each transfer (level) valve as a fraction of its design";
-  parameter Real transferPumpHead[N - 1](each unit="1", each min=0.1) = fill(1, N - 1) "Shut-off head of each transfer pump as a fraction of its design";
   parameter TrackingBox.Units.Fraction DSbias = 0 "Bias of the product DS meter";
   parameter Real DSdrift(unit="1/s") = 0 "Drift of the product DS meter";
   // derived design (backward feed, equal evaporation and equal driving temperature difference per effect)
@@ -89,7 +84,7 @@ partial model PartialTrain "N-effect backward-feed train: effects, vapour header
   TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash-tank level loop)";
   TrackingBox.Interfaces.RealOutput ZI_condensate[N](each unit="1") "Position of each condensate valve";
   TrackingBox.Evaporation.Sources.LiquorSource feedSource(p=feedSourceP, use_T_in=true, use_x_in=true) "Weak liquor from the storage tank";
-  TrackingBox.Evaporation.LiquorValve inletValve(KvMax=inletValveCapacity*feedFlowDesign*3600/(0.2121*sqrt(rhoDesign[N]*(feedSourceP - pVapDesign[N])/100)), equalPercentage=true) "Feed valve (flow loop) into effect N";
+  TrackingBox.Evaporation.LiquorValve inletValve(KvMax=feedFlowDesign*3600/(0.2121*sqrt(rhoDesign[N]*(feedSourceP - pVapDesign[N])/100)), equalPercentage=true) "Feed valve (flow loop) into effect N";
   TrackingBox.Evaporation.Effect effect[N](
     each use_Rf_in=useRfInput, each use_m_flow_corr_in=useCorrectionInputs,
     A=ADesign, U0=UDesign, nu_ref=nuDesign, each A_sump=4, each V_hold=1, each H=3, each z_out=5,
@@ -99,13 +94,13 @@ partial model PartialTrain "N-effect backward-feed train: effects, vapour header
     m_flow_steam_nominal={if k == 1 then 1.5*steamDesign else 1.1*evapDesign for k in 1:N},
     dp_steam_nominal={if k == 1 then 5e4 else 0.02*pSteamDesign[k] for k in 1:N},
     dp_steam_small={if k == 1 then 1000 else 0.005*pSteamDesign[k] for k in 1:N},
-    dBPR=dBPREffect, ventFraction=ventFractionEffect, UA_loss=UA_lossEffect,
+    ventFraction=ventFractionEffect, UA_loss=UA_lossEffect,
     x_start=xDesign, T_start=TLiqDesign, each L_start=bodyLevelSet, p_start=pVapDesign, p_steam_start=pSteamDesign) "The effects (1: live steam, product; N: feed, condenser)";
   TrackingBox.Evaporation.LiquorPump transferPump[N - 1](
-    dp0={transferPumpHead[k]*transferPumpDp0 for k in 1:N - 1}, VMax={2*evapDesign*(b_x + k + 1)/rhoDesign[k + 1] for k in 1:N - 1}) "transferPump[k] moves the liquor of effect k+1 towards effect k";
+    each dp0=transferPumpDp0, VMax={2*evapDesign*(b_x + k + 1)/rhoDesign[k + 1] for k in 1:N - 1}) "transferPump[k] moves the liquor of effect k+1 towards effect k";
   TrackingBox.Evaporation.LiquorValve transferValve[N - 1](
-    KvMax={transferValveCapacity[k]*evapDesign*(b_x + k + 1)*3600/(0.5*sqrt(rhoDesign[k + 1]*dpTransferDesign[k]/100)) for k in 1:N - 1}) "transferValve[k]: level valve of effect k+1";
-  TrackingBox.Evaporation.LiquorValve outletValve(KvMax=outletValveCapacity*productFlowDesign*3600/(0.5*sqrt(rhoDesign[1]*dpOutletDesign/100))) "Level valve of effect 1 (to the product flash tank)";
+    KvMax={evapDesign*(b_x + k + 1)*3600/(0.5*sqrt(rhoDesign[k + 1]*dpTransferDesign[k]/100)) for k in 1:N - 1}) "transferValve[k]: level valve of effect k+1";
+  TrackingBox.Evaporation.LiquorValve outletValve(KvMax=productFlowDesign*3600/(0.5*sqrt(rhoDesign[1]*dpOutletDesign/100))) "Level valve of effect 1 (to the product flash tank)";
   TrackingBox.Evaporation.FlashTank flash(
     A_sump=2, V_hold=0.3, H=3, z_out=2, V_vap=5, T_ref_vap=TVapDesign[2], m_flow_vap_nominal=0.3, dp_vap_nominal=3000, K_ev=2,
     UA_loss=UA_lossFlash, use_m_flow_corr_in=useCorrectionInputs,
@@ -265,10 +260,13 @@ measured feed; every controller can be frozen by group
 <code>holdFlashLevelController</code>,
 <code>holdCondensateLevelControllers</code>). Effects 2..N have their steam
 valve fully open (it acts as the vapour line's inlet resistance).</p>
-<p>The valves' and pumps' sizes are calculated parameters (they follow the
-design); what wears is set by the tunable factors <code>inletValveCapacity</code>,
-<code>outletValveCapacity</code>, <code>transferValveCapacity[k]</code> and
-<code>transferPumpHead[k]</code> (1 = as designed), which are also what a twin
-tracks.</p>
+<p>The valves' and pumps' sizes (<code>KvMax</code>, <code>dp0</code>) are
+calculated parameters (they follow the design); what wears is each component's own
+tunable factor, <code>inletValve.capacity</code>, <code>outletValve.capacity</code>,
+<code>transferValve[k].capacity</code>, <code>transferPump[k].head</code> (1 = as
+designed), and each effect's boiling-point offset is its own <code>effect[k].dBPR</code>
+(0 here): the plant sets them by modifiers, and a generated TrackingBox drives them
+through the components' conditional inputs (<code>use_capacity_in</code>,
+<code>use_head_in</code>, <code>use_dBPR_in</code>), as it drives <code>effect[k].Rf</code>.</p>
 </html>"));
 end PartialTrain;
