@@ -1,9 +1,12 @@
 """Carrying the integrator across small parameter changes (issue 12, item 2).
 
 Independent expectations: the closed-form solution of the first-order twin
-``dx/dt = (u - x)/tau - k·x`` with ``k`` piecewise constant, and, on the heat
+``dx/dt = (u - x)/tau - k·x`` with ``k`` piecewise constant; on the heat
 exchanger bench, the restart path (the integrator re-initialised after every
-change), which the carried run must reproduce within 1e-4 of each tag's range.
+change), which the carried run must reproduce within 1e-4 of each tag's range;
+on the heat-production bench, a restart-path run at a tolerance of 1e-10, which
+the restart path (and, once carrying is accurate there, the carried run) at 1e-8
+must reproduce within 1e-4 of each tag's and tracked parameter's range.
 """
 from __future__ import annotations
 
@@ -103,3 +106,82 @@ def test_extended_inputs_continue_the_carried_run_exactly(first_order_fmu: Path)
         assert ys[0] == ys[1]
         model.stepper(start_time=0.0, parameters={"k": K_TWIN})
         assert first._in_table is None
+
+
+# The heat-production bench, 2 h, seed 0, with the eight pairs `trackingbox pair` (defaults: closed-loop
+# step tests) writes for it: (tag, parameter, gain, time constant). Sub-steps as chosen automatically.
+HEAT_PRODUCTION_PAIRS = (
+    ("TI-301", "HEX300.kht", -0.010779, 81.84),
+    ("TI-310", "HU300.kht", -0.021426, 148.8),
+    ("PI-100", "Pipe100.k", 616297.4, 175.0),
+    ("PI-200", "Pipe200.k", 616297.9, 88.15),
+    ("PI-300", "Pipe201.k", 616298.2, 12.32),
+    ("SI-100", "PU100.uRise", -5.2957e-06, 1175.1),
+    ("SI-200", "PU200.uRise", -5.6662e-06, 114.16),
+    ("ZI-400", "Pipe101.k", 13.6387, 1545.7),
+)
+#: Solver tolerance of the compared runs, and of the reference (the restart path): 1e-10 is within 9e-7 of
+#: each range of the restart path at 1e-12 on this case (measured), so it stands for the exact trajectory
+TOLERANCE, REFERENCE_TOLERANCE = 1e-8, 1e-10
+#: Issue 12's yardstick, in units of each tag's range (1st to 99th percentile of its measurements) and of
+#: each tracked parameter's bound range
+WITHIN = 1e-4
+
+
+@pytest.fixture(scope="module")
+def heat_production_reference(fmu_cache, tmp_path_factory: pytest.TempPathFactory):
+    """The case's spec, its ranges by CSV column, and the reference run's table (restart path, 1e-10)."""
+    from trackingbox.benches import make_bench
+
+    root = tmp_path_factory.mktemp("hp-carry")
+    case = make_bench("heat-production", root / "case", seed=0, hours=2.0,
+                      plant_fmu=fmu_cache("TrackingBox.Benches.HeatProduction.Plant"),
+                      twin_fmu=fmu_cache("TrackingBox.Benches.HeatProduction.Twin"))
+    spec = write_pairs(case.spec, [PairSpec(v, p, gain=g, time_constant=t, lambda_=1.0)
+                                   for v, p, g, t in HEAT_PRODUCTION_PAIRS])
+    ref = track(spec, out_dir=root / "reference", untracked=False, checkpoint_every=10**9, carry=0.0,
+                tolerance=REFERENCE_TOLERANCE)
+    c = pd.read_csv(ref.csv)
+    spec = load_spec(spec.path)
+    spans = {}
+    for tag in spec.outputs:
+        m = c[f"measured:{tag}"]
+        spans[f"tracked:{tag}"] = float(m.quantile(0.99) - m.quantile(0.01))
+    for _, name, *_ in HEAT_PRODUCTION_PAIRS:
+        par = spec.parameter(name)
+        spans[f"parameter:{name}"] = par.max - par.min
+    return spec, spans, c
+
+
+def _worst(run: pd.DataFrame, reference: pd.DataFrame, spans: dict[str, float]) -> tuple[float, str]:
+    assert len(run) == len(reference) == 721
+    return max((float(np.abs(run[col] - reference[col]).max()) / span, col) for col, span in spans.items())
+
+
+@pytest.mark.compile
+def test_restart_path_is_within_1e4_of_the_reference_on_heat_production(heat_production_reference,
+                                                                          tmp_path: Path) -> None:
+    # measured at 1e-8: at most 1.7e-5 of a range (FI-200), every tag and tracked parameter; at the
+    # default 1e-6 it is 8.5e-4 (FI-200): the issue's 1e-4 needs the tighter tolerance on this closed loop.
+    # A run that carries every change, the large jumps too (carry=1e9), is 2.2e-3 away at 1e-8: it fails
+    spec, spans, reference = heat_production_reference
+    run = track(spec, out_dir=tmp_path / "restarted", untracked=False, checkpoint_every=10**9, carry=0.0,
+                tolerance=TOLERANCE)
+    assert run.carried == 0 and run.restarts > 3000
+    worst, col = _worst(pd.read_csv(run.csv), reference, spans)
+    assert worst <= WITHIN, (col, worst)
+
+
+@pytest.mark.compile
+@pytest.mark.xfail(strict=True, reason=(
+    "carrying CVODE across the tracked parameters' changes (the jump in the right-hand side integrated with the "
+    "step size and BDF history from before it) is measured 2.3e-3 of FI-200's range from the reference at 1e-8 (the restart path "
+    "1.7e-5), 7.6e-3 at 1e-6 (the restart path 8.5e-4): on this bench the carried run is the less accurate; "
+    "carrying even the large jumps (carry=1e9) is 2.2e-3 at 1e-8, so the bound tells them apart"))
+def test_carried_run_is_within_1e4_of_the_reference_on_heat_production(heat_production_reference,
+                                                                        tmp_path: Path) -> None:
+    spec, spans, reference = heat_production_reference
+    run = track(spec, out_dir=tmp_path / "carried", untracked=False, checkpoint_every=10**9, tolerance=TOLERANCE)
+    assert run.carried > 2000
+    worst, col = _worst(pd.read_csv(run.csv), reference, spans)
+    assert worst <= WITHIN, (col, worst)
