@@ -174,10 +174,11 @@ def test_restart_path_is_within_1e4_of_the_reference_on_heat_production(heat_pro
 
 @pytest.mark.compile
 @pytest.mark.xfail(strict=True, reason=(
-    "carrying CVODE across the tracked parameters' changes (the jump in the right-hand side integrated with the "
-    "step size and BDF history from before it) is measured 2.3e-3 of FI-200's range from the reference at 1e-8 (the restart path "
-    "1.7e-5), 7.6e-3 at 1e-6 (the restart path 8.5e-4): on this bench the carried run is the less accurate; "
-    "carrying even the large jumps (carry=1e9) is 2.2e-3 at 1e-8, so the bound tells them apart"))
+    "carrying CVODE across the tracked parameters' changes (the jump in the right-hand side integrated "
+    "with the step size and BDF history from before it) is measured 2.3e-3 of FI-200's range from the "
+    "reference at 1e-8 (the restart path 1.7e-5), 7.6e-3 at 1e-6 (the restart path 8.5e-4): on this bench "
+    "the carried run is the less accurate; carrying even the large jumps (carry=1e9) is 2.2e-3 at 1e-8, "
+    "so the bound tells them apart"))
 def test_carried_run_is_within_1e4_of_the_reference_on_heat_production(heat_production_reference,
                                                                         tmp_path: Path) -> None:
     spec, spans, reference = heat_production_reference
