@@ -140,7 +140,8 @@ def _safe(name: str) -> str:
 
 
 def level(where: WhereResult, after_t: dict[str, np.ndarray],
-          after_v: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+          after_v: dict[str, np.ndarray], x: np.ndarray | None = None,
+          ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Move a fitted candidate's residuals to the noise-weighted optimum of the spec's candidates.
 
     The estimation minimises the mean NRMSE, the null model was moved to the
@@ -149,12 +150,14 @@ def level(where: WhereResult, after_t: dict[str, np.ndarray],
     candidate on the same footing, so that a mere shift along the trade-off between
     tags is not credited to the effect.
     """
-    from .residuals import joint_lstsq
+    from .residuals import joint_lstsq, step_bounds
 
     j_train, j_val = where.jacobian
     if not j_train or not all(t in j_train for t in after_t):
         return after_t, after_v
-    delta = joint_lstsq(after_t, {t: j_train[t] for t in after_t}, where.noise)
+    # the step keeps the spec's candidates (fitted at *x*) inside their bounds, as the null's polish does
+    bounds = step_bounds(where.problem, x) if x is not None else None
+    delta = joint_lstsq(after_t, {t: j_train[t] for t in after_t}, where.noise, bounds)
     if delta.size == 0:
         return after_t, after_v
     return ({t: r - j_train[t] @ delta for t, r in after_t.items()},
@@ -209,7 +212,9 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     tags = [t for t in pspec.outputs if t in where.tags]
     after_t = {t: series[0].residual(t) for t in tags}
     after_v = {t: series[1].residual(t) for t in tags}
-    after_t, after_v = level(where, after_t, after_v)
+    fitted_x = np.array([float(est.parameters.get(n, xn)) for n, xn in zip(where.problem.names, where.x)]) \
+        if where.x is not None else None
+    after_t, after_v = level(where, after_t, after_v, fitted_x)
     fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
     pinned = []
     for short, v in fitted.items():

@@ -516,7 +516,7 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
         series, jac = series_and_jacobian(problem, (training, validation), x, spec.inputs)
     finally:
         close_models()
-    series, delta0 = polish(series, jac, noise)
+    series, delta0 = polish(series, jac, noise, step_bounds(problem, x))
     described = []
     for s in series:
         idx = np.searchsorted(view.grid, s.time)
@@ -607,14 +607,19 @@ def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Map
 
 
 def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.ndarray],
-                noise: Mapping[str, float]) -> np.ndarray:
+                noise: Mapping[str, float], bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None) -> np.ndarray:
     """Coefficients ``c`` minimising ``sum_tag sum_k ((r - A c) / sigma_tag)**2`` over valid samples.
 
     *columns*: tag -> ``(n, m)`` matrix ``A`` of that tag (same ``m`` for all tags).
+    *bounds*: ``(lower, upper)``, each of length ``m`` (``-inf``/``inf`` where free): the
+    bounded least-squares solution where the free one leaves them (the free one otherwise,
+    unchanged to the bit).
 
     >>> A = {"y": np.array([[1.0], [2.0], [3.0]])}
     >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).tolist()
     [2.0]
+    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}, bounds=([-1.0], [1.5])).round(9).tolist()
+    [1.5]
     """
     rows, rhs = [], []
     for tag, r in residual.items():
@@ -627,22 +632,50 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
     a_all = np.vstack(rows)
     if a_all.shape[1] == 0:
         return np.zeros(0)
-    coef, *_ = np.linalg.lstsq(a_all, np.concatenate(rhs), rcond=None)
+    b_all = np.concatenate(rhs)
+    coef, *_ = np.linalg.lstsq(a_all, b_all, rcond=None)
+    if bounds is not None:
+        lo = np.asarray(bounds[0], dtype=float)
+        hi = np.asarray(bounds[1], dtype=float)
+        if np.any(coef < lo) or np.any(coef > hi):
+            from scipy.optimize import lsq_linear
+
+            coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
     return coef
 
 
+def step_bounds(problem: Any, x: npt.ArrayLike, extra: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a linearised step of the spec's candidates from *x* (the step keeps them inside
+    their bounds), followed by *extra* free coefficients.
+
+    >>> from types import SimpleNamespace
+    >>> lo, hi = step_bounds(SimpleNamespace(lower=[0.0, 1.0], upper=[2.0, 3.0]), [0.5, 3.0], extra=1)
+    >>> lo.tolist(), hi.tolist()
+    ([-0.5, -2.0, -inf], [1.5, 0.0, inf])
+    """
+    x = np.asarray(x, dtype=float)
+    lo = np.concatenate([np.asarray(problem.lower, dtype=float) - x, np.full(extra, -np.inf)])
+    hi = np.concatenate([np.asarray(problem.upper, dtype=float) - x, np.full(extra, np.inf)])
+    return lo, hi
+
+
 def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndarray]],
-           noise: Mapping[str, float]) -> tuple[list[WindowResiduals], np.ndarray]:
+           noise: Mapping[str, float], bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+           ) -> tuple[list[WindowResiduals], np.ndarray]:
     """The null model (and the step taken) moved by one linearised step to the noise-weighted least-squares optimum.
 
     The estimate minimises the mean NRMSE (tags weighted by their range); the
     screening scores candidates by residuals weighted by the noise. Moving the
     null to the noise-weighted optimum first (one Gauss-Newton step with the
     training Jacobian, applied to both windows) means a candidate's gain is never
-    just that reweighting.
+    just that reweighting. *bounds* (:func:`step_bounds`) keep the step inside the candidates'
+    bounds: the null model is the twin with its parameters where the spec allows them (a twin
+    that misses more than a parameter error, heat production's linear laws against a quadratic
+    plant, pins candidates at their bounds, and a free step took HEX300.kht from its lower bound
+    850 to 690, where the ramps of the screening were then simulated).
     """
     train, valid = series
-    delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise)
+    delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise, bounds)
     if delta.size == 0:
         return list(series), delta
     out = []

@@ -398,9 +398,12 @@ def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[
     columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
     Returns ``beta``, the residuals after on training and on validation (the
     same coefficients with the validation window's ``J`` and ``T``), the
-    weighted training cost and the candidates' step ``delta``.
+    weighted training cost and the candidates' step ``delta``. The step keeps the
+    candidates inside their bounds (:func:`trackingbox.diagnose.residuals.step_bounds`), as
+    the null model's polish does: an effect is never credited with what a candidate
+    outside its bounds would explain.
     """
-    from .residuals import joint_lstsq
+    from .residuals import joint_lstsq, step_bounds
 
     j_train, j_val = jac if jac is not None else where.jacobian
     tags = list(r_train)
@@ -413,7 +416,11 @@ def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[
         return np.hstack([a, e])
 
     ct = {t: cols(j_train, extra_train, t, len(r_train[t])) for t in tags}
-    coef = joint_lstsq(r_train, ct, where.noise)
+    bounds = None
+    problem = getattr(where, "problem", None)
+    if problem is not None and where.x is not None and len(problem.names) == p:
+        bounds = step_bounds(problem, where.x, extra=m)
+    coef = joint_lstsq(r_train, ct, where.noise, bounds)
     after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
     after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
     cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
