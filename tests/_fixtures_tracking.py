@@ -97,3 +97,42 @@ def make_tank_fmu(directory: Path, *, leak: float) -> Path:
         ("level", ("output",), {}),
     ], equations=[("der(x)", "(u - x) / TAU - k * x"), ("der(h)", "(q - leak * h + m_corr) / 200.0"),
                   ("y", "x"), ("level", "h")])
+
+
+#: spec of the tank case (:func:`make_tank_fmu`): TI -> k paired, LI compensated through m_corr
+TANK_SPEC = '''twin = "twin.fmu"
+measurements = "measurements.csv"
+sample_time = 10.0
+[inputs]
+"FI" = "u"
+"QI" = "q"
+[outputs]
+"TI" = "y"
+[[parameters]]
+name = "k"
+start = 0.003
+min = 0.001
+max = 0.01
+[[pairs]]
+variable = "TI"
+parameter = "k"
+gain = -2551.0
+time_constant = 71.0
+lambda = 1.0
+[[states]]
+tag = "LI"
+variable = "level"
+correction = "m_corr"
+gain = 5.0
+'''
+
+
+def native_unavailable() -> str | None:
+    """Why the native stepper cannot be built or loaded here (None: it can): the reason of a skip."""
+    from trackingbox import native
+
+    try:
+        native.library()
+    except native.NativeUnavailable as exc:
+        return str(exc)
+    return None

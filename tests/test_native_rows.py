@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 
 from _fixtures_casadi import build_casadi_fmu
-from _fixtures_tracking import K_TWIN, TAU, make_case
+from _fixtures_tracking import K_TWIN, TANK_SPEC, TAU, make_case, native_unavailable
 from test_controllers_roots import CASES, _clamped_by_solve_ivp, _law_from_zeros
 from trackingbox.errors import SimulationError
 from trackingbox.spec import load_spec
@@ -32,16 +32,8 @@ from trackingbox.tracking.controllers import Scaling, ScaledPI, StateCompensator
 native = pytest.importorskip("trackingbox.native")
 
 
-def _native_or_reason() -> str | None:
-    try:
-        native.library()
-    except native.NativeUnavailable as exc:
-        return str(exc)
-    return None
-
-
-pytestmark = pytest.mark.skipif(_native_or_reason() is not None,
-                                reason=f"no native stepper on this machine: {_native_or_reason()}")
+pytestmark = pytest.mark.skipif(native_unavailable() is not None,
+                                reason=f"no native stepper on this machine: {native_unavailable()}")
 
 
 # --------------------------------------------------------------------------- the laws
@@ -228,33 +220,7 @@ def test_rows_in_c_with_state_compensation(tank_fmu, tmp_path: Path, monkeypatch
                   "TI": sim["y"] + rng.normal(0.0, 0.02, t.size),
                   "LI": sim["level"] + rng.normal(0.0, 0.002, t.size)}).to_csv(case / "measurements.csv", index=False)
     (case / "twin.fmu").write_bytes(tank_fmu(1.2).read_bytes())
-    (case / "spec.toml").write_text('''twin = "twin.fmu"
-measurements = "measurements.csv"
-sample_time = 10.0
-[inputs]
-"FI" = "u"
-"QI" = "q"
-[outputs]
-"TI" = "y"
-[[parameters]]
-name = "k"
-start = 0.003
-min = 0.001
-max = 0.01
-[[pairs]]
-variable = "TI"
-parameter = "k"
-gain = -2551.0
-time_constant = 71.0
-lambda = 1.0
-[[states]]
-tag = "LI"
-variable = "level"
-correction = "m_corr"
-gain = 5.0
-[tracking]
-hold_until = 200.0
-''')
+    (case / "spec.toml").write_text(TANK_SPEC + "[tracking]\nhold_until = 200.0\n")
     py, _, _ = _run(case / "spec.toml", tmp_path / "py", monkeypatch, False, substeps=2, checkpoint_every=40)
     c, c_rows, _ = _run(case / "spec.toml", tmp_path / "c", monkeypatch, True, substeps=2, checkpoint_every=40)
     assert c_rows > 250

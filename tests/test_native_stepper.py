@@ -24,7 +24,7 @@ import pandas as pd
 import pytest
 
 from _fixtures_casadi import build_casadi_fmu
-from _fixtures_tracking import K_TWIN, TAU
+from _fixtures_tracking import K_TWIN, TAU, native_unavailable
 from trackingbox.errors import AssertionFailed, FMUError, SimulationError
 from trackingbox.fmu import FMUModel, ModelExchangeStepper
 
@@ -34,16 +34,8 @@ NativeStepper = native.NativeStepper
 RTOL = 1e-6
 
 
-def _native_or_reason() -> str | None:
-    try:
-        native.library()
-    except native.NativeUnavailable as exc:
-        return str(exc)
-    return None
-
-
-pytestmark = pytest.mark.skipif(_native_or_reason() is not None,
-                                reason=f"no native stepper on this machine: {_native_or_reason()}")
+pytestmark = pytest.mark.skipif(native_unavailable() is not None,
+                                reason=f"no native stepper on this machine: {native_unavailable()}")
 
 
 # --------------------------------------------------------------------------- bench twins

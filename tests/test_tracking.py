@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from _fixtures_tracking import K_PLANT, K_TWIN, TAU, make_case
+from _fixtures_tracking import K_PLANT, K_TWIN, TANK_SPEC, TAU, make_case
 from trackingbox.checkpoint import CheckpointFile
 from trackingbox.errors import SimulationError, SpecError
 from trackingbox.spec import load_spec
@@ -299,31 +299,7 @@ def test_state_compensation_keeps_twin_tank_on_plant_level(tmp_path: Path, tank_
     pd.DataFrame({"time": t, "FI": 50.0, "QI": 1.0, "TI": sim["y"], "LI": sim["level"]}).to_csv(
         case / "measurements.csv", index=False)
     (case / "twin.fmu").write_bytes(twin.read_bytes())
-    (case / "spec.toml").write_text('''twin = "twin.fmu"
-measurements = "measurements.csv"
-sample_time = 10.0
-[inputs]
-"FI" = "u"
-"QI" = "q"
-[outputs]
-"TI" = "y"
-[[parameters]]
-name = "k"
-start = 0.003
-min = 0.001
-max = 0.01
-[[pairs]]
-variable = "TI"
-parameter = "k"
-gain = -2551.0
-time_constant = 71.0
-lambda = 1.0
-[[states]]
-tag = "LI"
-variable = "level"
-correction = "m_corr"
-gain = 5.0
-''')
+    (case / "spec.toml").write_text(TANK_SPEC)
     result = track(load_spec(case / "spec.toml"), out_dir=tmp_path / "out")
     df = pd.read_csv(result.csv)
     # plant level stays at q/leak = 1.0; without compensation the twin would drain to 1/1.2 = 0.833.
