@@ -347,8 +347,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                         and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic]
             # a candidate whose screening already passes the judge's tests is fitted before one whose
             # screening does not (stable: each group keeps its ΔBIC order); on a twin that misses more
-            # than the hidden effect (heat production's linear laws) a sensor effect on a tag the
-            # mismatch also moves can out-score the one that passes on validation
+            # than the hidden effect (heat production's linear laws) candidates that absorb the mismatch
+            # on training (fouling ramps there) out-score the one that passes on validation
             passes = {id(c): not objections(c, found, samples) for c in eligible}
             fitted: dict[tuple[str, str], Candidate] = {}
             clock.start("fit")
