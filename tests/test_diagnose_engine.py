@@ -311,6 +311,10 @@ def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path, capsys):
     assert doc["verdict"] == "effect", doc["candidates"]
     (finding,) = doc["findings"]
     assert (finding["effect"], finding["target"]) == ("sensor-bias", "TI-102")
+    # every candidate says why it was not named; the named one says nothing
+    entries = {(c["effect"], c["target"]): c["not_named"] for c in doc["candidates"]}
+    assert entries.pop(("sensor-bias", "TI-102")) == []
+    assert entries and all(isinstance(why, list) and why for why in entries.values()), entries
     # the bias added, within two noise standard deviations of the thermometer (estimated from the data)
     noise = doc["where"]["TI-102"]["noise"]
     assert abs(noise - 0.1) < 0.02                      # the bench's thermometer noise

@@ -224,7 +224,9 @@ class DiagnosisResult:
         doc: dict[str, Any] = {
             "verdict": self.verdict,
             "findings": findings,
-            "candidates": [c.to_json() for c in self.candidates],
+            # each with why it was not named (the judge's reasons; none for the named one)
+            "candidates": [{**c.to_json(), "not_named": self.judgement.reasons.get(f"{c.effect}@{c.target}", [])}
+                           for c in self.candidates],
             "where": self.where.to_json(),
             "patch": {"source": getattr(self.patch, "source", None), "model": getattr(self.patch, "model", None),
                       "fmu": str(self.patch_fmu) if self.patch_fmu else None,
