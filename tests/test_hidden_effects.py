@@ -165,3 +165,50 @@ def test_bench_hidden_case_and_noise_scale(fmu_cache, tmp_path):
     with pytest.raises(Exception, match=r"unknown hidden-effect case 'leak' of bench 'heat-exchanger'"):
         make_bench("heat-exchanger", tmp_path / "bad", hidden="leak", **fmus)
     assert not (tmp_path / "bad").exists()
+
+
+def test_hp_suite_twin_lacks_only_the_plant_values(fmu_cache):
+    """The heat-production suite twin at the plant's parameter values is the plain plant; the bench's own
+    (linear-curve) twin at the same values is not, by far more than the sensors' noise."""
+    from fmpy import read_model_description
+
+    from trackingbox.benches.heat_production import DEFINITION
+
+    plant_fmu = fmu_cache(f"{HP}.Plant")
+    starts = {v.name: float(v.start) for v in read_model_description(plant_fmu).modelVariables
+              if v.causality == "parameter" and v.type in ("Real", "Float64") and v.start is not None}
+    values = {p.name: starts[p.name] for p in DEFINITION.parameters}
+    assert values["HEX300.kht"] == 920.0 and values["PU100.VFlowDesign"] == 6.3e-5  # Plant.mo's degraded values
+    tags = {s.plant: s for s in DEFINITION.outputs}
+    plant = _run(plant_fmu, 3600.0, list(tags))
+    suite = _run(fmu_cache(DEFINITION.suite_twin_model), 3600.0, list(tags), parameters=values)
+    own = _run(fmu_cache(DEFINITION.twin_model), 3600.0, list(tags), parameters=values)
+
+    def sigma(name):  # the sensor's noise standard deviation at the plant's mean reading
+        s, relative = tags[name].noise
+        return s * abs(plant[name]).mean() if relative else s
+
+    for name in tags:
+        np.testing.assert_allclose(suite[name], plant[name], atol=max(0.01 * sigma(name), 1e-9), err_msg=name)
+    worst = max(np.max(np.abs(own[n] - plant[n])) / sigma(n) for n in tags if sigma(n) > 0)
+    assert worst > 5.0  # linear curves: several noise standard deviations off on some tag
+
+
+def test_hp_hidden_cases_are_written_against_the_suite_twin(fmu_cache, tmp_path):
+    import json
+
+    from trackingbox.benches import make_bench
+    from trackingbox.benches.heat_production import DEFINITION
+    from trackingbox.spec import load_spec
+
+    plant = fmu_cache(f"{HP}.Hidden.LeakLevel")
+    suite = make_bench("heat-production", tmp_path / "suite", hours=0.5, hidden="leak-level", plant_fmu=plant,
+                       twin_fmu=fmu_cache(DEFINITION.suite_twin_model))
+    own = make_bench("heat-production", tmp_path / "own", hours=0.5, hidden="leak-level", plant_fmu=plant,
+                     twin_fmu=fmu_cache(DEFINITION.twin_model), suite_twin=False)
+    for case, model in ((suite, DEFINITION.suite_twin_model), (own, DEFINITION.twin_model)):
+        assert load_spec(case.spec).source.model == model
+        assert json.loads(case.truth_file.read_text())["twin_model"] == model
+    assert "--no-suite-twin" in own.spec.read_text() and "--suite-twin" not in suite.spec.read_text()
+    # the same plant and seed: the measurements do not depend on the twin
+    pd.testing.assert_frame_equal(pd.read_csv(suite.measurements), pd.read_csv(own.measurements))

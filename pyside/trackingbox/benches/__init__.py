@@ -47,7 +47,8 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
                overrides: Mapping[str, float] | None = None, hours: float | None = None, *,
                plant_fmu: str | os.PathLike[str] | None = None,
                twin_fmu: str | os.PathLike[str] | None = None,
-               hidden: str | None = None, noise_scale: float = 1.0, effects: int | None = None) -> BenchCase:
+               hidden: str | None = None, noise_scale: float = 1.0, effects: int | None = None,
+               suite_twin: bool | None = None) -> BenchCase:
     """Generate bench case *name* into directory *out*.
 
     Parameters
@@ -70,6 +71,9 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
         Factor on every sensor's noise.
     effects : int, optional
         Number of effects (``evaporator-train`` only; default 7).
+    suite_twin : bool, optional
+        Write the case against the bench's suite twin (``BenchDefinition.suite_twin_model``);
+        default: for hidden-effect cases only.
 
     Returns
     -------
@@ -84,11 +88,13 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
     if effects is not None and not takes_effects:
         raise TrackingError(f"bench {name!r} has no number of effects (--effects applies to evaporator-train)")
     if hasattr(module, "build"):  # a bench with its own case writer (the evaporator: historian export)
-        if hidden is not None or noise_scale != 1.0:
-            raise TrackingError(f"bench {name!r} has no hidden-effect cases and no noise scale yet "
-                                f"(--hidden and --noise-scale apply to heat-exchanger and heat-production)")
+        if hidden is not None or noise_scale != 1.0 or suite_twin:
+            raise TrackingError(f"bench {name!r} has no hidden-effect cases, no suite twin and no noise scale yet "
+                                f"(--hidden, --suite-twin and --noise-scale apply to heat-exchanger and "
+                                f"heat-production)")
         extra = {"effects": effects} if takes_effects and effects is not None else {}
         return module.build(out, seed=seed, overrides=overrides, hours=hours, plant_fmu=plant_fmu,
                             twin_fmu=twin_fmu, **extra)
     return build_case(definition, out, seed=seed, overrides=overrides, hours=hours,
-                      plant_fmu=plant_fmu, twin_fmu=twin_fmu, hidden=hidden, noise_scale=noise_scale)
+                      plant_fmu=plant_fmu, twin_fmu=twin_fmu, hidden=hidden, noise_scale=noise_scale,
+                      suite_twin=suite_twin)

@@ -67,6 +67,10 @@ def register(subparsers: Any) -> None:
                    help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
                         "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift); truth.json says which")
+    p.add_argument("--suite-twin", action=argparse.BooleanOptionalAction, default=None,
+                   help="write the case against the bench's suite twin, the twin the hidden-effect suite "
+                        "diagnoses against (heat-production: the twin with the plant's quadratic curves); "
+                        "default: for --hidden cases only")
     p.add_argument("--effects", type=number(ge=2, le=12, integer=True), default=None, metavar="N",
                    help="evaporator-train: number of effects (default 7)")
     p.add_argument("--noise-scale", type=number(ge=0, le=1000), default=1.0, metavar="S",
@@ -101,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", kind="dir", inputs=[p for p in (args.plant_fmu, args.twin_fmu) if p])
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=hours,
                       plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,
-                      noise_scale=args.noise_scale, effects=args.effects)
+                      noise_scale=args.noise_scale, effects=args.effects, suite_twin=args.suite_twin)
     if args.json:
         json.dump(case.to_json(), sys.stdout, indent=2)
         sys.stdout.write("\n")
