@@ -108,6 +108,14 @@ DBPR_BOUNDS = (-2.0, 5.0)
 #: off every tag effect 3 dominates (only effect 2 pairs, on ZI-7125: 1.5 %); with 1 h every effect
 #: pairs (effects 2 and 3 within 2.5 % and 2.0 %) but effect 1 goes to FI-7150 and is 33.9 % off.
 CLOSED_LOOP = 7200.0
+#: ``[pairing] closed_loop_min``: the loop speed per pair. Every pair is predicted with
+#: :data:`CLOSED_LOOP` first; a pair whose own tag's error that loop lags (a fouling ramp in the pressure
+#: before the effect) is predicted again with its own loop faster, down to this, and tuned for the slowest
+#: loop that passes, while the others keep 2 h (and the product DS meter's noise out of effect 1's
+#: fouling). 30 min is the span of the noise floor's moving average
+#: (:data:`trackingbox.analysis.offsets.FLOOR_SPAN`): a faster loop would follow part of what the pairing
+#: counts as each tag's noise.
+CLOSED_LOOP_MIN = 1800.0
 #: ``[pairing] max_leak``: the separation check (:func:`trackingbox.analysis.pairing.leakage`). Every
 #: effect's fouling moves the pressures and the product of every other effect, and by different
 #: amounts (on the 2-effect train effect 2's moves the product DS QI-7060 2.5 x and its steam-chest
@@ -274,8 +282,9 @@ def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
 def pairing_settings(n: int) -> PairingSettings:
     """``[pairing]`` as the single effect's (:data:`trackingbox.benches.evaporator.PAIRING`): nothing
     frozen (the step tests run the twin as ``track`` runs it, every level loop active and every level
-    compensated), each loop predicted and tuned for a 3 h closed loop (fouling, wear and scale change
-    over hours to days), every tag scaled by its sensor accuracy (flows at 1 % of their design reading,
+    compensated), each loop predicted and tuned for a 2 h closed loop (:data:`CLOSED_LOOP`; fouling, wear
+    and scale change over hours to days) unless its own tag needs a faster one, down to 30 min
+    (:data:`CLOSED_LOOP_MIN`), every tag scaled by its sensor accuracy (flows at 1 % of their design reading,
     valve positions at the 0.2 % dead band).
 
     Measured before (``freeze`` on the flash-tank and condensate level loops, no closed loop):
@@ -295,7 +304,8 @@ def pairing_settings(n: int) -> PairingSettings:
         scale += [(effect_tag(k, "PI", 11), 100.0), (effect_tag(k, "PI", 21), 100.0), (effect_tag(k, "TI", 11), 0.2),
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
-    return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, scale=tuple(scale), max_leak=MAX_LEAK)
+    return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, closed_loop_min=CLOSED_LOOP_MIN, scale=tuple(scale),
+                           max_leak=MAX_LEAK)
 
 
 def estimate_only(names: Any) -> tuple[str, ...]:
