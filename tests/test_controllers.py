@@ -170,15 +170,30 @@ def test_state_compensator_default_memory_lags_by_exp_minus_ten() -> None:
     assert sc.update(2.0, 1.8) == pytest.approx(1.0 * (1.0 - math.exp(-10.0)), rel=1e-12)
 
 
-def test_state_compensator_hold_and_bumpless_resume() -> None:
+def test_state_compensator_hold_and_resume_to_k_times_e() -> None:
+    # a proportional law: held or missing, the correction is frozen; afterwards it is K*e again, with
+    # no memory of the hold (re-basing there would keep K*(e_hold - e_release) as a permanent flow)
     sc = StateCompensator(5.0, ts=10.0, te=0.1)
     assert sc.update(2.0, 1.8) == pytest.approx(1.0)
-    assert sc.update(2.0, 1.5, hold=True) == pytest.approx(1.0)  # frozen; memory follows e = 0.5
+    assert sc.update(2.0, 1.5, hold=True) == pytest.approx(1.0)  # frozen
     assert sc.mode == "hold"
-    assert sc.update(2.0, 1.4) == pytest.approx(1.5)  # resumes from 1.0: + 5*(0.6 - 0.5)
-    assert sc.update(math.nan, 1.4) == pytest.approx(1.5)  # missing: frozen
-    assert sc.update(2.0, 1.0) == pytest.approx(1.5)  # memory restarts at the first valid e: no step
-    assert sc.update(2.0, 1.2) == pytest.approx(0.5)  # then K*(e - e_prev) again
+    assert sc.update(2.0, 1.4) == pytest.approx(3.0)  # 5 kg/s/m * 0.6 m
+    assert sc.update(math.nan, 1.4) == pytest.approx(3.0)  # missing: frozen
+    assert sc.update(2.0, 1.0) == pytest.approx(5.0)  # 5 * 1.0
+    assert sc.update(2.0, 1.2) == pytest.approx(4.0)  # 5 * 0.8
+
+
+def test_state_compensator_missing_first_sample_leaves_no_offset() -> None:
+    # a historian export starts without a value: the correction must still be K*e from then on
+    for interpolation in ("zoh", "linear"):
+        sc = StateCompensator(7.0, ts=10.0, te=1.0, interpolation=interpolation)
+        sc.update(math.nan, 1.22)
+        for _ in range(5):
+            m = sc.update(1.20, 1.22)
+        assert m == pytest.approx(7.0 * -0.02, rel=1e-6), interpolation
+        for _ in range(5):
+            m = sc.update(1.20, 1.20)
+        assert m == pytest.approx(0.0, abs=1e-9), interpolation   # level on the plant's: no flow left
 
 
 def test_state_compensator_holds_level_with_proportional_offset() -> None:

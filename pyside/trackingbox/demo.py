@@ -212,10 +212,12 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         if not res.pairing.pairs:
             raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
         spec = write_pairs(spec.path, spec_pairs(spec, res))
-        if run.bench in EVAPORATORS:  # fouling and wear are slow: at least the spec's closed loop (3 h, the train 1 h)
+        if run.bench in EVAPORATORS:  # fouling and wear are slow: at least the spec's closed loop (3 h, the train 2 h)
             from .benches.evaporator import CLOSED_LOOP, slow_pairs
 
-            spec = slow_pairs(spec.path, spec.pairing.closed_loop or CLOSED_LOOP)
+            # with a loop speed per pair ([pairing] closed_loop_min) `pair` tuned each pair for its own loop:
+            # only its floor is enforced here
+            spec = slow_pairs(spec.path, spec.pairing.closed_loop_min or spec.pairing.closed_loop or CLOSED_LOOP)
     if step("track", "tracking with parameter controllers in Python"):
         tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"),
                    window=TRACK_WINDOW.get(run.bench, "all"))

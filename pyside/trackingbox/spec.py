@@ -226,6 +226,13 @@ class PairingSettings:
         it (an error faster than the loop stays, noise and the historian's holds
         included) and writes a new pair's ``lambda`` so that ``lambda x time_constant``
         reaches it. ``None``: the step tests' time constants (lambda = 1).
+    closed_loop_min : float or None
+        Loop speed per pair (``closed_loop_min = 1800.0``, with *closed_loop*): a pair whose
+        tracking ``pair`` predicts to fail with a loop of *closed_loop* is predicted again with
+        its own loop faster, in steps of sqrt 2 down to this, before it is refused; each pair is
+        written with the slowest loop that passes (its ``lambda``), the others keep
+        *closed_loop* (:class:`trackingbox.analysis.pairing.DataChecks`). ``None``: every loop
+        at *closed_loop*.
     max_leak : float or None
         Separation check of ``pair`` (``max_leak = 0.5``; see
         :func:`trackingbox.analysis.pairing.leakage`): a pair is refused when a candidate
@@ -237,6 +244,7 @@ class PairingSettings:
     scale: tuple[tuple[str, float], ...] = ()
     closed_loop: float | None = None
     max_leak: float | None = None
+    closed_loop_min: float | None = None
 
 
 @dataclass(frozen=True)
@@ -756,10 +764,17 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale", "closed_loop", "max_leak"), (), "[pairing]", problems)
+    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak"), (), "[pairing]", problems)
     out: dict[str, Any] = {}
     if "closed_loop" in table:
         out["closed_loop"] = _number(table, "closed_loop", "[pairing]", problems, positive=True)
+    if "closed_loop_min" in table:
+        out["closed_loop_min"] = _number(table, "closed_loop_min", "[pairing]", problems, positive=True)
+        slowest = out.get("closed_loop")
+        if out["closed_loop_min"] is not None and (slowest is None or out["closed_loop_min"] > slowest):
+            problems.add(f"'closed_loop_min' in [pairing] ({out['closed_loop_min']:g} s) needs a 'closed_loop' "
+                         "at least as long (the loop every pair is tried with first)"
+                         + (f", got {slowest:g} s" if slowest is not None else ""))
     if "max_leak" in table:
         out["max_leak"] = _number(table, "max_leak", "[pairing]", problems, positive=True)
     for key, example, positive in (("freeze", "holdControllers = 1", False), ("scale", '"TI-101" = 0.2', True)):
@@ -1054,6 +1069,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                           for key in ("freeze", "scale") if getattr(spec.pairing, key)}
         if spec.pairing.closed_loop is not None:
             doc["pairing"]["closed_loop"] = float(spec.pairing.closed_loop)
+        if spec.pairing.closed_loop_min is not None:
+            doc["pairing"]["closed_loop_min"] = float(spec.pairing.closed_loop_min)
         if spec.pairing.max_leak is not None:
             doc["pairing"]["max_leak"] = float(spec.pairing.max_leak)
     if spec.diagnose.effects:

@@ -23,7 +23,7 @@ equation
     hold_internal = 0;
   end if;
   e = u_s - u_m;
-  der(eMem) = (e - eMem)/Te;
+  der(eMem) = noEvent(if hold_internal > 0.5 then 0 else (e - eMem)/Te);
   der(m) = noEvent(if hold_internal > 0.5 then 0 else k*(e - eMem)/Te);
   y = m;
   annotation (
@@ -44,8 +44,11 @@ correction follows <code>k (u_s - u_m)</code> (lagged by <code>Te</code>):
 A proportional law, because a purely integral correction of an integrating
 level would oscillate without damping.</p>
 <p><b>Hold</b> (<code>hold &gt; 0.5</code>, only with <code>use_hold_in</code>):
-the correction is frozen and the error memory keeps following the difference,
-so on release the correction continues from the held value without a step.</p>
+the correction and the error memory are frozen together, so <code>m = k eMem</code>
+at every time, and on release the correction follows <code>k (u_s - u_m)</code>
+again (within <code>Te</code>). A memory that kept following the difference
+through a hold would re-base the law there: the correction would keep the
+difference at the release as a permanent flow into the twin.</p>
 <p><code>trackingbox.tracking.controllers.StateCompensator</code> is the exact
 discretisation of this law for a difference held constant over each sample
 period (<code>interpolation=\"zoh\"</code>) or linear between samples

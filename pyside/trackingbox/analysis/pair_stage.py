@@ -154,6 +154,10 @@ class PairSettings:
         Shortest closed-loop time constant (s) of the predicted loops, and of the new
         pairs' tuning (:class:`~trackingbox.analysis.pairing.DataChecks`); ``None``: the
         spec's ``[pairing] closed_loop`` (absent: the step-response time constants).
+    closed_loop_min
+        Loop speed per pair: the fastest loop (s) a pair whose prediction fails with
+        *closed_loop* may get instead (``DataChecks.closed_loop_min``); ``None``: the spec's
+        ``[pairing] closed_loop_min`` (absent: every loop at *closed_loop*); 0: off.
     samples, seed
         Sobol base sample size and seed.
     workers, scheduler
@@ -181,6 +185,7 @@ class PairSettings:
     max_leak: float | None = None
     check_gains: CheckGains = "recording"
     closed_loop: float | None = None
+    closed_loop_min: float | None = None
     samples: int = 32
     seed: int = 0
     workers: int | None = None
@@ -249,7 +254,7 @@ class PairingResult:
             "pairs": [{"variable": p.variable, "parameter": p.parameter, "lambda": _finite(p.lambda_),
                        "gain": _finite(p.gain), "time_constant": _finite(p.time_constant),
                        "predicted_ratio": _finite(p.predicted_ratio), "at_bound": _finite(p.at_bound),
-                       "rga_from": p.rga_from}
+                       "closed_loop": _finite(p.closed_loop), "rga_from": p.rga_from}
                       for p in pairing.pairs],
             "gain_matrix": _matrix(st.variables, st.parameters, st.gains),
             "rga": _matrix(st.variables, st.parameters, pairing.rga),
@@ -268,6 +273,7 @@ class PairingResult:
             "data_checks": None if pairing.checks is None else {
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
                 "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None,
+                "closed_loop_min": pairing.checks.closed_loop_min or None,
                 "max_leak": _finite(pairing.checks.max_leak)},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
@@ -458,7 +464,8 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         from .offsets import simulate_untracked
 
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
-                            closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=_max_leak(spec, s))
+                            closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=_max_leak(spec, s),
+                            closed_loop_min=_closed_loop_min(spec, s))
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
@@ -510,6 +517,17 @@ def _closed_loop(spec: Spec, settings: PairSettings) -> float | None:
     if not (math.isfinite(float(value)) and float(value) >= 0):
         raise AnalysisError(f"closed_loop must be a time >= 0 s, got {value!r}")
     return float(value) or None
+
+
+def _closed_loop_min(spec: Spec, settings: PairSettings) -> float:
+    """The fastest loop per pair (s) *settings* or the spec's ``[pairing] closed_loop_min`` ask for
+    (0: every loop at the closed loop)."""
+    value = settings.closed_loop_min if settings.closed_loop_min is not None else spec.pairing.closed_loop_min
+    if value is None:
+        return 0.0
+    if not (math.isfinite(float(value)) and float(value) >= 0):
+        raise AnalysisError(f"closed_loop_min must be a time >= 0 s, got {value!r}")
+    return float(value)
 
 
 #: Left-out reasons that say a parameter shows in no tag, or a tag shows no parameter.
@@ -577,9 +595,10 @@ def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
     """``[[pairs]]`` entries for the chosen pairs; an existing identical pair keeps its tuning settings.
 
     A pair without a measurable time constant gets the step interval (logged as a warning).
-    A new pair gets ``lambda = 1``, or, with a closed-loop time constant (the result's
-    settings or the spec's ``[pairing] closed_loop``), the ``lambda`` that makes
-    ``lambda x time_constant`` reach it: the loop the prediction judged.
+    A new pair gets ``lambda = 1``, or, with a closed-loop time constant (the pair's own,
+    :attr:`~trackingbox.analysis.pairing.Pair.closed_loop`, chosen with ``closed_loop_min``;
+    else the result's settings or the spec's ``[pairing] closed_loop``), the ``lambda`` that
+    makes ``lambda x time_constant`` reach it: the loop the prediction judged.
     """
     from ..spec import PairSpec
 
@@ -597,6 +616,8 @@ def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
         if prev is not None:
             out.append(replace(prev, gain=float(p.gain), time_constant=float(tau)))
         else:
+            own = getattr(p, "closed_loop", math.nan)
+            target = float(own) if math.isfinite(own) and own > 0 else (loop or 0.0)
             out.append(PairSpec(variable=p.variable, parameter=p.parameter, gain=float(p.gain),
-                                time_constant=float(tau), lambda_=max(1.0, (loop or 0.0) / float(tau))))
+                                time_constant=float(tau), lambda_=max(1.0, target / float(tau))))
     return out

@@ -27,6 +27,12 @@ With data (``residuals``: the untracked twin beside the measurements, see
    parameter: its trajectory would show the other's degradation), the worst such
    pair is forbidden and the assignment redone, so the parameter goes to a tag
    that identifies it apart from the others, or stays unpaired with that reason.
+
+With a closed-loop time constant (``closed_loop``) every loop is predicted that slow; with
+``closed_loop_min`` as well, each pair gets its own loop speed: a pair whose prediction at
+``closed_loop`` leaves more than ``max_ratio`` is predicted again with its own loop faster
+(:func:`loop_ladder`: steps of sqrt 2 down to ``closed_loop_min``) before it is refused, so
+each pair keeps the slowest loop its own error allows (:attr:`Pair.closed_loop`).
 """
 from __future__ import annotations
 
@@ -63,6 +69,8 @@ _FORBIDDEN = 1e6
 #: from this many of them after the window's first sample (95 % settled): tracking is judged on a
 #: window after its start-up (the evaporator's validation window), not on its loops' first hours.
 SETTLE_LOOPS = 3.0
+#: Ratio of consecutive loop time constants :func:`loop_ladder` tries for one pair.
+LADDER_STEP = math.sqrt(2.0)
 
 
 @dataclass(frozen=True)
@@ -102,6 +110,17 @@ class DataChecks:
         predicted ratio ``r`` and the floor's ratio ``f``, against ``max_ratio``.
     max_floor : float
         See *closed_loop*: the tracked/untracked ratio asked for (the issue's 30 %).
+    closed_loop_min : float
+        Loop speed per pair (0, the default: every loop at *closed_loop*). With it (and
+        ``0 < closed_loop_min <= closed_loop``) a pair the prediction finds above ``max_ratio``
+        with a loop of *closed_loop* is predicted again with its own loop one step of
+        :func:`loop_ladder` faster, down to *closed_loop_min*, before it is refused; the other
+        pairs keep theirs. So each pair gets the slowest loop its own tag's error allows (a
+        fouling ramp the loop lags by slope x time constant), and every other loop stays as slow
+        as *closed_loop* keeps the noise out of its parameter. The start-up skipped and the
+        noise floor stay those of *closed_loop*. A floor-aware lower limit: a loop faster than the
+        30 min span of :func:`~trackingbox.analysis.offsets.noise_floor` follows part of what the
+        floor counts as noise.
     max_leak : float
         Separation (:func:`leakage`): largest steady-state move of a paired parameter, in
         fractions of its bound range, per bound range of a candidate left unpaired. 0.5: an
@@ -120,16 +139,51 @@ class DataChecks:
     closed_loop: float = 0.0
     max_floor: float = 0.3
     max_leak: float = math.inf
+    closed_loop_min: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("noise_ratio", "min_reach", "max_ratio", "max_condition", "closed_loop", "max_floor",
-                     "max_leak"):
+                     "max_leak", "closed_loop_min"):
             value = getattr(self, name)
             finite = math.isfinite(value) if isinstance(value, (int, float)) else False
             if not (isinstance(value, (int, float)) and not isinstance(value, bool)
                     and (finite or (name == "max_leak" and value == math.inf)) and value >= 0):
                 raise AnalysisError(f"pairing check {name} must be a non-negative number"
                                     f"{' (or inf)' if name == 'max_leak' else ''}, got {value!r}")
+        if self.closed_loop_min > 0 and not (self.closed_loop > 0 and self.closed_loop_min <= self.closed_loop):
+            raise AnalysisError(f"pairing check closed_loop_min = {self.closed_loop_min:g} s needs a closed_loop at "
+                                f"least as long (the slowest loop, tried first), got closed_loop = "
+                                f"{self.closed_loop:g} s")
+
+    def ladder(self) -> tuple[float, ...]:
+        """The loop time constants a pair may get, slowest first (:func:`loop_ladder`; one, or none
+        without *closed_loop*)."""
+        if not self.closed_loop > 0:
+            return ()
+        return loop_ladder(self.closed_loop, self.closed_loop_min or self.closed_loop)
+
+
+def loop_ladder(slowest: float, fastest: float, step: float = LADDER_STEP) -> tuple[float, ...]:
+    """Closed-loop time constants from *slowest* down to *fastest*, each *step* times the next.
+
+    The last one is *fastest* itself (the step before it may be shorter than *step*).
+
+    Examples
+    --------
+    >>> [round(t) for t in loop_ladder(7200.0, 1800.0)]
+    [7200, 5091, 3600, 2546, 1800]
+    >>> loop_ladder(3600.0, 3600.0), loop_ladder(3600.0, 3000.0)
+    ((3600.0,), (3600.0, 3000.0))
+    """
+    if not (0 < fastest <= slowest and math.isfinite(slowest) and step > 1):
+        raise AnalysisError(f"loop ladder: need 0 < fastest <= slowest and step > 1, got {fastest!r}, "
+                            f"{slowest!r}, {step!r}")
+    out = [float(slowest)]
+    while out[-1] / step > fastest * (1.0 + 1e-9):
+        out.append(out[-1] / step)
+    if out[-1] > fastest * (1.0 + 1e-9):
+        out.append(float(fastest))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -153,6 +207,10 @@ class Pair:
         Expected tracked/untracked RMS ratio (NaN without data checks).
     at_bound : float
         Expected fraction of the time the parameter sits at a bound (NaN without data checks).
+    closed_loop : float
+        Closed-loop time constant (s) the prediction judged the pair with: the spec's
+        ``closed_loop``, or with ``closed_loop_min`` the pair's own (see :class:`DataChecks`);
+        NaN without one. :func:`~trackingbox.analysis.pair_stage.spec_pairs` tunes the pair for it.
     rga_from : str
         ``"structure"``: the pair and its relative gain come from the RGA of the
         step tests that set the structure (with a freeze: frozen);
@@ -168,6 +226,7 @@ class Pair:
     predicted_ratio: float = math.nan
     at_bound: float = math.nan
     rga_from: str = "structure"
+    closed_loop: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -492,6 +551,10 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                     flipped[i] = (f"its gain to {parameters[j]} changes sign between the operating points "
                                   f"({_fmt(G[i, j])} and {_fmt(G2[i, j])}): a loop on it would turn unstable")
     predicted: dict[int, tuple[float, float]] = {}
+    # loop speed per pair (DataChecks.closed_loop_min): (variable, parameter) -> its rung of the ladder
+    ladder = data.checks.ladder() if data is not None else ()
+    rung: dict[tuple[int, int], int] = {}
+    speeds: dict[int, float] = {}
     while True:
         cost = np.where((lam_sub >= min_lambda) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
         r_idx, c_idx = linear_sum_assignment(cost)
@@ -501,8 +564,20 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                 chosen[rows[int(a)]] = cols[int(b)]
         if data is None or not chosen:
             break
-        predicted, worst = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc))
-        if worst is None:
+        speeds = {i: ladder[rung.get((i, j), 0)] for i, j in chosen.items()} if ladder else {}
+        predicted, failure = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc),
+                                          speeds)
+        worst: tuple[int, int] | None = None
+        if failure is not None:
+            i, j, why = failure
+            if rung.get((i, j), 0) + 1 < len(ladder):   # its own loop faster before refusing the pair
+                rung[(i, j)] = rung.get((i, j), 0) + 1
+                logger.info("pair %s/%s: %s; predicted again with its own loop of %.0f s", variables[i],
+                            parameters[j], why, ladder[rung[(i, j)]])
+                continue
+            data.refuse(i, j, why)
+            worst = (i, j)
+        else:
             worst = data.separate(chosen, [j for j in cols if j not in chosen.values()], S)
         if worst is None:
             break
@@ -520,7 +595,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if Gc is not None and tauc is not None and abs(Gc[i, j]) > abs(gain):
                 gain = float(Gc[i, j])
                 t63 = float(tauc[i, j]) if math.isfinite(tauc[i, j]) else t63
-            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound))
+            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound,
+                              closed_loop=speeds.get(i, math.nan)))
             if lam[i, j] > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
                                 f"{_fmt(lam[i, j])}")
@@ -743,16 +819,19 @@ class _DataView:
                 f"measurement, the offset is {_fmt(st.mean)} (mean of measured - untracked; needs "
                 f"{self.checks.min_reach:g} x)")
 
-    def predict(self, chosen: dict[int, int], tau: np.ndarray) -> tuple[dict[int, tuple[float, float]],
-                                                                          tuple[int, int] | None]:
-        """Predicted ratio and time at a bound per chosen pair; the worst pair above ``max_ratio`` (or None)."""
+    def predict(self, chosen: dict[int, int], tau: np.ndarray, loops: dict[int, float] | None = None
+                ) -> tuple[dict[int, tuple[float, float]], tuple[int, int, str] | None]:
+        """Predicted ratio and time at a bound per chosen pair, and the worst pair above ``max_ratio``
+        with its reason (or None; :meth:`refuse` records a refusal). *loops*: variable -> its loop's
+        closed-loop time constant (s), default ``closed_loop``."""
         rows = [i for i in sorted(chosen) if self.stat[i] is not None and self.stat[i].samples > 0]
         if not rows:
             return {}, None
         cols = [chosen[i] for i in rows]
-        taus = np.array([max(tau[i, j] if math.isfinite(tau[i, j]) and tau[i, j] > 0 else self.interval,
-                             self.checks.closed_loop)
-                         for i, j in zip(rows, cols)]) + 0.5 * self.interval
+        loops = loops or {}
+        speed = [float(loops.get(i, self.checks.closed_loop)) for i in rows]
+        taus = np.array([max(tau[i, j] if math.isfinite(tau[i, j]) and tau[i, j] > 0 else self.interval, c)
+                         for i, j, c in zip(rows, cols, speed)]) + 0.5 * self.interval
         lo = self.B[cols, 1] - self.B[cols, 0]
         hi = self.B[cols, 2] - self.B[cols, 0]
         try:
@@ -772,10 +851,13 @@ class _DataView:
             return out, None
         i, j = rows[a], cols[a]
         if floor:
+            own = speed[a] != self.checks.closed_loop
+            loop = (f"its own loop of {speed[a]:.0f} s, the fastest allowed (the others' up to "
+                    f"{self.checks.closed_loop:g} s)" if own else f"loops of {self.checks.closed_loop:g} s")
             reason = (f"paired with {self.parameters[j]} (together with the other pairs) tracking would leave "
                       f"{100 * ratio[a]:.0f} % of its untracked RMS error above its noise floor (limit "
-                      f"{100 * self.checks.max_ratio:.0f} %; {100 * pr.ratio[a]:.0f} % of the whole error; loops of "
-                      f"{self.checks.closed_loop:g} s: what changes faster stays)")
+                      f"{100 * self.checks.max_ratio:.0f} %; {100 * pr.ratio[a]:.0f} % of the whole error; {loop}: "
+                      "what changes faster stays)")
         else:
             reason = (f"paired with {self.parameters[j]} (together with the other pairs) tracking would leave "
                       f"{100 * ratio[a]:.0f} % of its untracked RMS error (limit {100 * self.checks.max_ratio:.0f} %)")
@@ -783,10 +865,13 @@ class _DataView:
             reason += f"; {self.parameters[j]} would sit at a bound {100 * pr.at_bound[a]:.0f} % of the time"
         if math.isfinite(pr.need[a]) and pr.need[a] > 1.0:
             reason += (f" (closing the mean offsets needs {pr.need[a]:.2g} x its remaining range)")
+        return out, (i, j, reason)
+
+    def refuse(self, i: int, j: int, reason: str) -> None:
+        """Record that the prediction refused the pair of variable *i* with parameter *j*."""
         self.rejected.append((self.variables[i], self.parameters[j], reason))
         self._last[i] = reason
         logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
-        return out, (i, j)
 
     def rejection(self, i: int) -> str | None:
         """The last prediction-based rejection of a pair of variable *i*, or a reach reason, or None."""
@@ -919,7 +1004,7 @@ def complete_with_recording(first: Pairing, gains: npt.ArrayLike, *, time_consta
                                    f"(lambda {_fmt(p.lambda_)}), which the frozen structure pairs with {taker}")
             continue
         added.append(Pair(p.variable, p.parameter, p.lambda_, p.gain, p.time_constant, p.predicted_ratio,
-                          p.at_bound, rga_from="recording"))
+                          p.at_bound, rga_from="recording", closed_loop=p.closed_loop))
     # every pair together, with the recorded gains: drop the worst added pair while it would fail
     data = _DataView(G, V, P, residuals, bounds, checks)
     dropped: list[tuple[str, str, str]] = []
@@ -927,10 +1012,13 @@ def complete_with_recording(first: Pairing, gains: npt.ArrayLike, *, time_consta
     predicted: dict[int, tuple[float, float]] = {}
     while True:
         chosen = {index[p.variable]: P.index(p.parameter) for p in (*first.pairs, *added)}
-        predicted, worst = data.predict(chosen, tau)
-        if worst is None:
+        # each pass's own loops where it chose them (closed_loop_min), else the spec's closed_loop
+        loops = {index[p.variable]: p.closed_loop for p in (*first.pairs, *added) if math.isfinite(p.closed_loop)}
+        predicted, failure = data.predict(chosen, tau, loops)
+        if failure is None:
             break
-        why = data.rejected[-1][2]
+        data.refuse(*failure)
+        worst, why = failure[:2], failure[2]
         if not any(index[p.variable] == worst[0] for p in added):
             warnings.append(f"with the pairs added for the tags the freeze hides, {V[worst[0]]}/{P[worst[1]]}: "
                             f"{why}")

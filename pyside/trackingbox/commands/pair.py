@@ -87,6 +87,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--closed-loop", type=number(ge=0, le=1e9), default=None, metavar="SECONDS",
                    help="predict each loop at least this slow and tune new pairs for it (default: the spec's "
                         "[pairing] closed_loop, else the step-response time constants; 0: those)")
+    p.add_argument("--closed-loop-min", type=number(ge=0, le=1e9), default=None, metavar="SECONDS",
+                   help="loop speed per pair: a pair whose prediction fails with the closed loop is predicted "
+                        "again with its own loop faster (steps of sqrt 2) down to this before it is refused, and "
+                        "is tuned for the slowest loop that passes (default: the spec's [pairing] "
+                        "closed_loop_min, else every loop at the closed loop; 0: that)")
     p.add_argument("--samples", type=number(ge=1, le=1_000_000, integer=True), default=32,
                    help="Sobol base sample size N, a power of two; N*(D+2) runs (default 32)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0, help="Sobol sampling seed (default 0)")
@@ -109,7 +114,7 @@ def settings(args: argparse.Namespace) -> Any:
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
                         max_ratio=args.max_ratio, max_leak=args.max_leak, check_gains=args.check_gains,
-                        closed_loop=args.closed_loop, samples=args.samples, seed=args.seed, workers=args.workers,
+                        closed_loop=args.closed_loop, closed_loop_min=args.closed_loop_min, samples=args.samples, seed=args.seed, workers=args.workers,
                         scheduler=args.scheduler)
 
 

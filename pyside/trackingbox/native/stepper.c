@@ -661,8 +661,10 @@ static void advance_linear(double *c, int pi, int valid, double e, int hold, dou
     int last = pi ? PI_LAST : SC_LAST, has_last = pi ? PI_HAS_LAST : SC_HAS_LAST;
     int hold_last = pi ? PI_HOLD_LAST : SC_HOLD_LAST, te = pi ? PI_TE : SC_TE;
     if (!valid) {
-        c[has_mem] = 0.0;
-        c[mem] = 0.0;  /* (unused while has_mem is 0) */
+        if (pi) {  /* the state compensator keeps its memory (StateCompensator._memory_holds) */
+            c[has_mem] = 0.0;
+            c[mem] = 0.0;  /* (unused while has_mem is 0) */
+        }
     } else if (c[has_last] == 0.0) {
         if (c[has_mem] == 0.0) { c[mem] = e; c[has_mem] = 1.0; }
     } else {
@@ -676,9 +678,12 @@ static void advance_linear(double *c, int pi, int valid, double e, int hold, dou
                 double cc = e0 - m0 - s * c[SC_TE];
                 c[SC_M] += c[SC_GAIN] * (s * c[SC_TS] + cc * (1.0 - exp(-c[SC_TS] / c[SC_TE])));
             }
+            c[mem] = memory_linear(e0, e, m0, dt, c[te]);
+            c[has_mem] = 1.0;
+        } else if (pi) {  /* held: the PI's memory follows the error, the compensator's is frozen */
+            c[mem] = memory_linear(e0, e, m0, dt, c[te]);
+            c[has_mem] = 1.0;
         }
-        c[mem] = memory_linear(e0, e, m0, dt, c[te]);
-        c[has_mem] = 1.0;
     }
     c[last] = valid ? e : 0.0;
     c[has_last] = valid ? 1.0 : 0.0;

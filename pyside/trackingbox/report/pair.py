@@ -68,9 +68,9 @@ def write_pair_report(spec: Spec, result: PairingResult, out: str | os.PathLike[
         doc.table(["variable", "noise", "mean offset", "RMS error", "RMS / noise"],
                   [[o.variable, fmt(o.noise, ".3g"), fmt(o.mean, ".3g"), fmt(o.rms, ".3g"),
                     fmt(o.noise_ratio, ".3g")] for o in pairing.offsets])
-        doc.table(["pair", "predicted ratio", "time at a bound"],
+        doc.table(["pair", "predicted ratio", "time at a bound", "closed loop (s)"],
                   [[f"{p.variable} / {p.parameter}", fmt(p.predicted_ratio, ".2f"), fmt(100 * p.at_bound, ".0f")
-                    + " %"] for p in pairing.pairs])
+                    + " %", fmt(p.closed_loop, ".0f")] for p in pairing.pairs])
         if pairing.rejected:
             doc.paragraph("Pairs rejected by the prediction:")
             doc.bullets([f"{v} / {p}: {r}" for v, p, r in pairing.rejected])

@@ -57,7 +57,8 @@ at 0 in both (the embedded path has no initial equations to start it at the
 first error): without a start-up hold the first sample gets the proportional
 action on the whole initial error; with a start-up hold of a few samples
 (``[tracking] hold_until``) the memory settles first and tracking starts
-without a kick.
+without a kick. The state compensator is the exception: a proportional law
+``m = K·eMem``, its memory is frozen with its output (see :class:`StateCompensator`).
 
 Clamp and anti-windup: the output stops at 0 and 100 % while its rate points
 out of the range (conditional integration). A saturated controller stores no
@@ -140,6 +141,9 @@ class _ErrorMemory:
     mode: Mode
     #: name of the output attribute saved with the memory (``u`` or ``m``)
     _output: str
+    #: True: the memory is frozen with the output while held or missing (a proportional law, whose
+    #: output must stay its gain times the memory); False: it follows the error (bumpless PI)
+    _memory_holds: bool = False
 
     def _init_memory(self) -> None:
         #: error memory: starts at 0 as in the block; None after a missing error
@@ -167,7 +171,8 @@ class _ErrorMemory:
         """
         e0 = self.e_last
         if e is None:
-            self.e_mem = None
+            if not self._memory_holds:
+                self.e_mem = None
         elif e0 is None:
             # first call (the memory is at its start, 0, as the block's at t = 0) or the first valid
             # error after a missing one (nothing to interpolate over the sample: frozen, the memory restarts)
@@ -177,7 +182,9 @@ class _ErrorMemory:
             m0 = e0 if self.e_mem is None else self.e_mem
             if not self.hold_last:
                 self._integrate_linear(e0, e, m0, dt)
-            self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
+                self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
+            elif not self._memory_holds:
+                self.e_mem = _memory_linear(e0, e, m0, dt, self.te)
         self.e_last, self.hold_last = e, bool(hold)
         mode: Mode = "hold" if hold or e is None else "auto"
         if mode != self.mode:
@@ -628,9 +635,15 @@ class StateCompensator(_ErrorMemory):
     signal, never a parameter change. Both memories start at zero, as in the
     block.
 
-    Hold: the correction is frozen and the memory keeps following the
-    difference (bumpless resume). While a value is missing (NaN) it is held
-    too and the memory restarts at the first valid difference.
+    Hold: the correction and the memory are frozen together, so that
+    ``m = K·eMem`` holds at every time; on release the correction follows
+    ``K·e`` again (within ``Te``). While a value is missing (NaN) it is held
+    the same way. (A bumpless resume, the memory following the difference
+    while the correction is frozen, re-bases the law at every hold: ``m`` stays
+    ``K·(e - e_release) + m_held``, a permanent correction flow, a mass source
+    in the twin. A missing first sample of a historian export did that on the
+    evaporator train: 0.18 kg/s into effect 3 from the first 10 s for the whole
+    run, which moved the product flow the fouling of effect 1 was paired on.)
 
     Parameters
     ----------
@@ -654,6 +667,7 @@ class StateCompensator(_ErrorMemory):
     """
 
     _output = "m"
+    _memory_holds = True
 
     def __init__(self, gain: float, *, ts: float, te: float | None = None,
                  interpolation: Interpolation = "zoh") -> None:
@@ -680,17 +694,17 @@ class StateCompensator(_ErrorMemory):
             return self._update_linear(measured, simulated, hold)
         if not (_valid(measured) and _valid(simulated)):
             self.mode = "hold"
-            self.e_mem = None
             return self.m
         e = float(measured) - float(simulated)  # type: ignore[arg-type]
         mem = e if self.e_mem is None else self.e_mem
         a = math.exp(-self.ts / self.te)
         if hold:
             self.mode = "hold"
+            self.e_mem = mem
         else:
             self.mode = "auto"
             self.m += self.gain * (e - mem) * (1.0 - a)
-        self.e_mem = e + (mem - e) * a
+            self.e_mem = e + (mem - e) * a
         return self.m
 
     def _update_linear(self, measured: float | None, simulated: float | None, hold: bool) -> float:
