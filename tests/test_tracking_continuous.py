@@ -267,3 +267,22 @@ def test_continuous_mode_agrees_with_the_compiled_box_on_the_heat_exchanger(fmu_
     assert worst_c <= worst_d, agreement  # at least as accurate against the box as the discrete path
     a, b = (pd.read_csv(r.csv)["parameter:hx.kht"].to_numpy() for r in runs.values())
     assert float(np.max(np.abs(a - b))) / 1000.0 <= 5e-4
+
+
+def test_cli_runs_the_continuous_mode_and_refuses_it_live(case, tmp_path: Path, monkeypatch, capsys) -> None:
+    import json
+
+    from trackingbox.cli import main
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))  # the inputs twin is compiled into it
+    spec = case["spec"]
+    assert main(["track", str(spec.path), "--controllers", "continuous", "--out", str(tmp_path / "run"),
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["variables"]["TI-102"]["nrmse_tracked"] < doc["variables"]["TI-102"]["nrmse_untracked"]
+    assert len(pd.read_csv(tmp_path / "run" / "tracking.csv")) == case["grid"].size
+    assert list((tmp_path / "xdg" / "trackingbox" / "inputs-twins").glob("TwinInputs-*.fmu"))
+    code = main(["track", str(spec.path), "--controllers", "continuous", "--live", "opc.tcp://127.0.0.1:4840",
+                 "--out", str(tmp_path / "live")])
+    assert code == 2
+    assert "not available with --live" in capsys.readouterr().err
