@@ -1240,13 +1240,18 @@ class _NativeRows:
         return written, pending, b.status == self.native.ROWS_PYTHON
 
 
-#: Nominal value (%) of a PI controller's output and error memory in the continuous mode: their
-#: absolute tolerance is the twin's rtol times this. Measured on the heat exchanger (3 h, rtol 1e-6,
-#: against the same mode at rtol 1e-10): 100 % gives 6.8e-6 of the parameter's range and 1.2e-5 /
-#: 4.5e-5 of the tags' ranges at 1.7x the integrator CPU of 1000 %, which gives 4.3e-5 and 4.2e-5 /
-#: 6.8e-5 (the discrete path: 2.4e-4 and 2.1e-4 / 3.5e-4 from the same reference); 10000 % went to
-#: 5.1e-4 of the parameter's range (without stops at the samples).
-CLOSED_NOMINAL = 1000.0
+#: Nominal values of the controllers' states in the continuous mode, as a multiple of their range:
+#: a PI controller's output and error memory get ``CLOSED_RANGE_FACTOR * 100 %`` (the output's full
+#: range), a compensator's error memory the factor times its level's measured range and its
+#: correction the factor times the gain times that range; their absolute tolerance is the twin's
+#: rtol times these. Measured against the same mode at rtol 1e-10 (rtol 1e-6): heat exchanger (3 h)
+#: factor 1 gives 6.8e-6 of the parameter's range and 1.2e-5 / 4.5e-5 of the tags' ranges at 1.7x
+#: the integrator CPU of factor 10, which gives 4.3e-5 and 4.2e-5 / 6.8e-5 (the discrete path: 2.4e-4
+#: and 2.1e-4 / 3.5e-4 from the same reference); factor 100 went to 5.1e-4 of the parameter's range
+#: (without stops at the samples). Heat production (2 h, three pairs, three levels): factor 10 on the
+#: compensators too takes 30 % less integrator CPU than 1 and keeps every tag, parameter and
+#: correction within 6.1e-5 of its range (LI-400; factor 1: 1e-5).
+CLOSED_RANGE_FACTOR = 10.0
 
 
 class _ClosedRows(_NativeRows):
@@ -1281,12 +1286,12 @@ class _ClosedRows(_NativeRows):
             ok = loop.view.samples[s_.tag]
             ok = ok[np.isfinite(ok)]
             rng = float(np.ptp(np.percentile(ok, [1.0, 99.0]))) if ok.size >= 2 else 0.0
-            rng = rng if rng > 0.0 else 1.0
+            rng = CLOSED_RANGE_FACTOR * (rng if rng > 0.0 else 1.0)
             level_nominal += [rng, max(abs(float(s_.tracked.gain)) * rng, 1e-12)]
-        #: nominal values of the controllers' states (absolute tolerance: the twin's rtol times these): a
-        #: PI's error memory and output, in %, :data:`CLOSED_NOMINAL`; a compensator's memory (its level's
-        #: measured range) and correction (gain times that range)
-        self.nominal = [[CLOSED_NOMINAL, CLOSED_NOMINAL] * len(ctl.pairs) + level_nominal, level_nominal]
+        #: nominal values of the controllers' states (absolute tolerance: the twin's rtol times these),
+        #: see :data:`CLOSED_RANGE_FACTOR`
+        pi_nominal = CLOSED_RANGE_FACTOR * 100.0
+        self.nominal = [[pi_nominal, pi_nominal] * len(ctl.pairs) + level_nominal, level_nominal]
 
     def _rows(self, loop: TrackingLoop) -> None:
         handles = []
