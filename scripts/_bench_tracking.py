@@ -36,7 +36,12 @@ Per bench (pairs found by ``trackingbox pair`` the way a user would), from one p
 There is no peer for tracking (no other tool runs parameter controllers on an
 FMU twin); the output says so.
 
-Memory (``--memory-days``, default ``1,7``, heat exchanger only): the peak
+Both controller modes: the tracking run alone is also run with
+``controllers="continuous"`` (the box's laws integrated with the twin by CVODE,
+on the inputs twin, built before the clock starts), and its ratios to the same
+plain and bound runs are printed beside the discrete (default) mode's.
+
+Memory (``--memory-days``, default ``1,7``; ``--memory-benches``, default the heat exchanger): the peak
 resident set (``ru_maxrss`` from ``wait4``) of one ``trackingbox track`` child
 process per run length, with the same pairs; the growth from the shortest to
 the longest run is printed beside it, and the script exits 1 when that growth
@@ -136,8 +141,41 @@ def plain_run(spec_path: Path, grid: np.ndarray, read: list[str]) -> tuple[float
     return time.perf_counter() - w0, cpu_now() - c0, native.cpu_seconds() - n0, out
 
 
+def continuous_run(spec_path: Path, out: Path) -> dict:
+    """The tracking run alone with ``controllers="continuous"``: wall, CPU, integrator CPU and counts.
+
+    The inputs twin (the twin compiled with its tracked parameters as inputs) is built before the
+    clock starts, once per spec and cached as a user's first run caches it; its compile time is
+    reported beside. A spec the mode cannot run gives the reason instead.
+    """
+    from trackingbox import native
+    from trackingbox.errors import TrackingError
+    from trackingbox.generate.inputs_twin import inputs_twin
+
+    spec = load_spec(spec_path)
+    w0 = time.perf_counter()
+    try:
+        inputs_twin(spec)
+    except TrackingError as exc:
+        return {"reason": str(exc).splitlines()[0]}
+    compile_wall = time.perf_counter() - w0
+    c0, w0, n0 = cpu_now(), time.perf_counter(), native.cpu_seconds()
+    loop = TrackingLoop(spec, out_dir=out / "continuous", checkpoint_every=10**9, untracked=False,
+                        controllers="continuous")
+    try:
+        loop.begin()
+        loop.run()
+    finally:
+        loop.close()
+    result = loop.result()
+    return {"wall": time.perf_counter() - w0, "cpu": cpu_now() - c0, "in_c": native.cpu_seconds() - n0,
+            "rows": result.steps, "native_rows": loop.native_rows, "restarts": result.restarts,
+            "compile_wall": compile_wall, "reason": ""}
+
+
 def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
-    """The tracking run alone, the plain twin run and the bound (same twin, inputs and grid), then `track`'s run."""
+    """The tracking run alone (both modes), the plain twin run and the bound (same twin, inputs and grid),
+    then `track`'s run."""
     from trackingbox import native
 
     spec = load_spec(spec_path)
@@ -156,6 +194,7 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
     result = loop.result()
     wall, cpu = time.perf_counter() - w0, cpu_now() - c0
     in_c = native.cpu_seconds() - n0
+    cont = continuous_run(spec_path, out)
     grid = np.asarray(loop.grid, dtype=float)
     if grid[0] > 0.0:  # the twins start at 0
         grid = np.concatenate(([0.0], grid))
@@ -185,7 +224,7 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
             "states": len(spec.states), "pairs": [(p.variable, p.parameter) for p in spec.pairs],
             "stepper": stepper, "reason": reason, "in_c": in_c, "substeps": loop.substeps,
             "native_rows": loop.native_rows, "restarts": result.restarts, "carried": result.carried,
-            "track_wall": t_wall, "track_lockstep": full_result.seconds_untracked}
+            "track_wall": t_wall, "track_lockstep": full_result.seconds_untracked, "continuous": cont}
 
 
 #: Starts the measured command and prints its ``ru_maxrss`` (kB) and exit code: a small process, so
@@ -223,6 +262,9 @@ def main() -> int:
     ap.add_argument("--memory-days", default="1,7",
                     help="heat exchanger: run lengths (days) whose peak memory is measured, comma-separated; "
                          "'' to skip (default 1,7)")
+    ap.add_argument("--memory-benches", default="heat-exchanger",
+                    help="benches (of those run) whose peak memory is measured at --memory-days, comma-separated "
+                         "(default heat-exchanger)")
     ap.add_argument("--memory-allowance", type=float, default=MEMORY_ALLOWANCE_MIB, metavar="MIB",
                     help="exit 1 when the longest memory run's peak exceeds the shortest's by more than this "
                          f"(MiB, default {MEMORY_ALLOWANCE_MIB:g})")
@@ -237,6 +279,10 @@ def main() -> int:
         days = [float(d) for d in args.memory_days.split(",") if d.strip()]
     except ValueError:
         ap.error(f"--memory-days {args.memory_days!r}: expected numbers separated by commas")
+    mem_benches = [b.strip() for b in args.memory_benches.split(",") if b.strip()]
+    unknown = [b for b in mem_benches if b not in BENCHES]
+    if unknown:
+        ap.error(f"--memory-benches: unknown bench {unknown}; known: {list(BENCHES)}")
 
     rows, memory = [], []
     with tempfile.TemporaryDirectory() as tmp:
@@ -248,7 +294,7 @@ def main() -> int:
                 pairs_for(case.spec, name, args.freeze_controllers)
             log(f"{name}: tracking ...")
             rows.append(track_with_bound(name, case.spec, root / name / "track"))
-            if name == "heat-exchanger" and days:
+            if name in mem_benches and days:
                 pairs = load_spec(case.spec).pairs
                 for d in days:
                     log(f"{name}: {d:g}-day case for the memory figure ...")
@@ -258,7 +304,7 @@ def main() -> int:
                     rss, wall, rc, n = peak_rss(long.spec, root / f"{name}-{d:g}d" / "track")
                     if rc != 0:
                         sys.exit(f"bench_tracking: trackingbox track failed on {long.spec} (exit {rc})")
-                    memory.append((d, rss, wall, n))
+                    memory.append((name, d, rss, wall, n))
 
     print("tracking (issue 12's figures): ours = the tracking run alone (the tracked twin, its controllers, "
           "sub-steps and state compensation, the CSV; set-up included); plain = the plain twin run over the same "
@@ -301,24 +347,49 @@ def main() -> int:
           "parameter changes; plain integrator CPU = the same over the plain run; rows in C = rows the loop ran in "
           "tbn_track_rows; restarts/carried = the tracked twin's integrator re-initialisations and carried "
           "changes; TRACKINGBOX_NATIVE=0 runs the twins on the Python path)")
+    print("\nboth controller modes, from this run (same plain and bound): discrete = the default (the controllers' "
+          "exact discretisation, updated every sample and sub-step); continuous = controllers='continuous' (the box's "
+          "laws integrated with the twin by CVODE in C, on the inputs twin)")
+    print(f"{'bench':16s} {'mode':10s} {'ours wall':>9s} {'ours CPU':>8s} {'ours/plain':>10s} {'ours/bound':>10s} "
+          f"{'CPU ours/plain':>14s} {'CPU ours/bound':>14s} {'integrator CPU':>14s} {'restarts':>8s}")
+    for r in rows:
+        c = r["continuous"]
+        modes = [("discrete", r["wall"], r["cpu"], r["in_c"], r["restarts"])]
+        if not c.get("reason"):
+            modes.append(("continuous", c["wall"], c["cpu"], c["in_c"], c["restarts"]))
+        for mode, wall, cpu, in_c, restarts in modes:
+            print(f"{r['bench']:16s} {mode:10s} {wall:9.2f} {cpu:8.2f} {wall / r['plain_wall']:10.2f} "
+                  f"{wall / r['bound_wall']:10.2f} {cpu / r['plain_cpu']:14.2f} {cpu / r['bound_cpu']:14.2f} "
+                  f"{in_c:14.3f} {restarts:8d}")
+        if c.get("reason"):
+            print(f"  ({r['bench']}: no continuous run: {c['reason']})")
+        else:
+            print(f"  ({r['bench']}: inputs twin ready in {c['compile_wall']:.1f} s before the continuous run: a "
+                  "compile on a cold cache, a lookup on a warm one)")
+    print("(targets: ours/plain <= 1.5, ours/bound <= 2; integrator CPU = CPU inside the native C calls; restarts "
+          "= CVODE (re-)initialisations of the tracked twin)")
     for r in rows:
         if r["states"]:
             print(f"note: {r['bench']} has state compensation: plain and bound run with its corrections at 0")
+    failed = False
     if memory:
-        print("\nmemory: peak RSS of one `trackingbox track` child process (heat exchanger, same pairs)")
-        print(f"{'days':>5s} {'rows':>7s} {'peak RSS MiB':>12s} {'wall s':>7s}")
-        for d, rss, wall, n in memory:
-            print(f"{d:5g} {n:7d} {rss / 1024:12.1f} {wall:7.0f}")
-        if len(memory) > 1:
-            (d0, r0, *_), (d1, r1, *_) = min(memory), max(memory)
+        print("\nmemory: peak RSS of one `trackingbox track` child process per run length (same pairs)")
+        print(f"{'bench':16s} {'days':>5s} {'rows':>7s} {'peak RSS MiB':>12s} {'wall s':>7s}")
+        for name, d, rss, wall, n in memory:
+            print(f"{name:16s} {d:5g} {n:7d} {rss / 1024:12.1f} {wall:7.0f}")
+        for name in mem_benches:
+            runs = sorted((d, rss) for b, d, rss, *_ in memory if b == name)
+            if len(runs) < 2:
+                continue
+            (d0, r0), (d1, r1) = runs[0], runs[-1]
             growth = (r1 - r0) / 1024
-            print(f"growth {d0:g} d -> {d1:g} d: {growth:+.1f} MiB "
+            print(f"{name}: growth {d0:g} d -> {d1:g} d: {growth:+.1f} MiB "
                   f"({growth / (d1 - d0):+.2f} MiB per extra day); allowed: +{args.memory_allowance:g} MiB")
             if growth > args.memory_allowance:
-                print(f"FAIL: the {d1:g}-day run's peak ({r1 / 1024:.1f} MiB) exceeds the {d0:g}-day run's "
+                print(f"FAIL: {name}: the {d1:g}-day run's peak ({r1 / 1024:.1f} MiB) exceeds the {d0:g}-day run's "
                       f"({r0 / 1024:.1f} MiB) by more than {args.memory_allowance:g} MiB")
-                return 1
-    return 0
+                failed = True
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ examples:
   trackingbox track case1/spec.toml --report case1/track --window validation
   trackingbox track case1/spec.toml --out case1/run --json
   trackingbox track case1/spec.toml --out case1/run --resume     # continue after an interruption
+  trackingbox track case1/spec.toml --controllers continuous     # the box's laws inside the integrator
   trackingbox track case1/spec.toml --live opc.tcp://dcs:4840 --out case1/live   # online, over OPC UA
 
 One parameter controller per [[pairs]] entry (setpoint: the measured tag; process
@@ -56,6 +57,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--window", choices=("training", "validation", "all"), default="all",
                    help="window the NRMSE figures are taken over, after the start-up hold; the run "
                         "goes from the first sample to the window's end (default: all)")
+    p.add_argument("--controllers", choices=("discrete", "continuous"), default="discrete",
+                   help="discrete (default): the controllers' exact discretisation, updated every sample; "
+                        "continuous: the box's laws integrated with the twin by CVODE (needs [source]; "
+                        "compiles the twin with its tracked parameters as inputs once, cached)")
     p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
@@ -86,6 +91,11 @@ def run(args: argparse.Namespace) -> int:
                        "--out" if args.out else "--report" if args.report else "the output directory",
                        kind="dir", inputs=inputs)
     if args.live:
+        if args.controllers != "discrete":
+            from ..errors import SpecError
+
+            raise SpecError("--controllers continuous is not available with --live (the online mode steps the "
+                            "discrete controllers sample by sample as the data arrive)")
         return _run_live(args, spec, out)
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=inputs)
@@ -95,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
     with output_dir(out), output_dir(args.report or out):
         result = track(spec, out_dir=out, resume=args.resume,
                        progress=Progress().counter("tracking", unit="row"),
-                       window=args.window, checkpoint_every=args.checkpoint_every)
+                       window=args.window, checkpoint_every=args.checkpoint_every,
+                       controllers=args.controllers)
         if args.report:
             write_track_report(spec, result, args.report)
     if args.json:

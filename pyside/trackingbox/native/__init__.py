@@ -214,6 +214,15 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_comp_linear.restype = c_double
     lib.tbn_track_rows.argtypes = [ctypes.POINTER(TrackBatch)]
     lib.tbn_track_rows.restype = c_int
+    lib.tbn_closed_new.argtypes = [c_void_p, c_size_t, c_size_t, pu32, pu32, pd_, c_double, c_long, ctypes.c_char_p,
+                                   c_size_t]
+    lib.tbn_closed_new.restype = c_void_p
+    lib.tbn_closed_free.argtypes = [c_void_p]
+    lib.tbn_closed_free.restype = None
+    lib.tbn_closed_rows.argtypes = [ctypes.POINTER(TrackBatch), c_size_t, c_void_p, c_void_p]
+    lib.tbn_closed_rows.restype = c_int
+    lib.tbn_closed_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
+    lib.tbn_closed_stats.restype = None
     return lib
 
 
@@ -384,6 +393,8 @@ class NativeStepper(ModelExchangeStepper):
         self._reads_set: Any = None  # the read plan C has (tbn_advance_reads)
         #: advance()'s last *read* argument, its names and read plan
         self._last_read: tuple[Any, Any, Any] = (None, None, None)
+        #: closed-loop integrators (:meth:`closed`): key -> (handle, the arrays C keeps, finaliser)
+        self._closed: dict[tuple[Any, ...], tuple[Any, ...]] = {}
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -441,7 +452,44 @@ class NativeStepper(ModelExchangeStepper):
         super().extend_inputs(inputs)
         self._push_inputs()
 
+    def closed(self, n_pairs: int, set_names: Sequence[str], sim_names: Sequence[str],
+               nominal: Sequence[float]) -> int:
+        """The closed-loop integrator of this twin for ``tbn_closed_rows`` (made once per stepper and names).
+
+        *set_names*: the Real inputs the loop drives (*n_pairs* parameters, then
+        the corrections); *sim_names*: the variable each of them reads;
+        *nominal*: the nominal values of the controllers' ``2 len(set_names)``
+        states (absolute tolerance ``rtol * nominal``, as for the FMU's states).
+        """
+        key = (n_pairs, tuple(set_names), tuple(sim_names), tuple(nominal))
+        got = self._closed.get(key)
+        if got is not None:
+            return got[0]
+        for name in set_names:
+            v = self.model.variable(name)
+            if v.causality != "input" or v.type not in ("Real", "Float64"):
+                raise FMUError(f"{name!r} of {self.model.path.name} is not a Real input (causality "
+                               f"{v.causality!r}): the closed loop sets it inside the right-hand side")
+        n = len(set_names)
+        vr_set = (ctypes.c_uint32 * max(n, 1))(*(int(self.model.variable(x).valueReference) for x in set_names))
+        vr_sim = (ctypes.c_uint32 * max(n, 1))(*(int(self.model.variable(x).valueReference) for x in sim_names))
+        nom = np.ascontiguousarray(nominal, dtype=float)
+        err = ctypes.create_string_buffer(512)
+        max_step = float("inf")
+        if self._in_times is not None and self._in_times.size > 1:
+            max_step = float(np.min(np.diff(self._in_times)))
+        handle = self._lib.tbn_closed_new(self._handle, n_pairs, n - n_pairs, vr_set, vr_sim,
+                                          nom.ctypes.data_as(_pd), max_step, 100000, err, len(err))
+        if not handle:
+            raise FMUError(f"the closed-loop integrator could not start on {self.model.path.name}: "
+                           f"{err.value.decode('utf-8', 'replace')}")
+        self._closed[key] = (handle, vr_set, vr_sim, nom, weakref.finalize(self, self._lib.tbn_closed_free, handle))
+        return handle
+
     def finish(self) -> None:
+        for got in self._closed.values():
+            got[-1]()
+        self._closed = {}
         super().finish()
         if self._free is not None:
             self._free()  # the CVODE instance goes now; the FMU instance stays with its model

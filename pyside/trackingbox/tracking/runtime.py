@@ -60,6 +60,7 @@ import ctypes
 import json
 import logging
 import math
+import os
 import time as _time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -83,12 +84,14 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 Window = Literal["training", "validation", "all"]
+#: How the parameter controllers and compensators are integrated with the twin (see :func:`track`)
+ControllerMode = Literal["discrete", "continuous"]
 
 #: Output files written into ``out_dir``.
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 5  # 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+_CHECKPOINT_VERSION = 6  # 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -329,10 +332,14 @@ class _Twin:
 
     def __init__(self, path: Path, *, label: str, base: Mapping[str, float], inputs: pd.DataFrame | None,
                  tolerance: float, recorded: Mapping[str, str],
-                 extrapolate: Mapping[str, tuple[float, float]] | None = None) -> None:
+                 extrapolate: Mapping[str, tuple[float, float]] | None = None,
+                 rename: Mapping[str, str] | None = None) -> None:
         from ..fmu import FMUModel
 
         self.label = label
+        #: value name -> the FMU's variable that takes it (the tracked parameters' inputs of an inputs twin,
+        #: :func:`~trackingbox.generate.inputs_twin.inputs_twin`); names not in it are the FMU's own
+        self.rename = dict(rename or {})
         #: parameter -> bounds: applied over [t_k, t_k+1] as the mean of the controller's ramp over
         #: that sample, predicted from the last one (see :meth:`_applied`)
         self.extrapolate = dict(extrapolate or {})
@@ -365,7 +372,8 @@ class _Twin:
         """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
         self._count()
         self.y = None
-        self.stepper = self.model.stepper(start_time=t, parameters={**self.base, **values}, inputs=self.inputs,
+        self.stepper = self.model.stepper(start_time=t, parameters=self.fmu_values({**self.base, **values}),
+                                          inputs=self.inputs,
                                           carry=bool(self.carry_limits) and self.me)
         self.applied = dict(values)
         if x is not None:
@@ -397,6 +405,16 @@ class _Twin:
             if limit is None or old is None or not abs(value - old) <= limit:
                 return False
         return True
+
+    def fmu_name(self, name: str) -> str:
+        """The FMU variable that takes the value *name* (see :attr:`rename`)."""
+        return self.rename.get(name, name)
+
+    def fmu_values(self, values: Mapping[str, float]) -> dict[str, float]:
+        """*values* under the FMU's names (see :attr:`rename`)."""
+        if not self.rename:
+            return dict(values)
+        return {self.rename.get(n, n): v for n, v in values.items()}
 
     def _save(self) -> None:
         if self.me:
@@ -444,14 +462,15 @@ class _Twin:
         self.y = None
         if code is not None or (self.read_names is not None and isinstance(stepper, _native_stepper())):
             # the native stepper sets, steps and reads the states and the read variables in one C call
+            fchanged = self.fmu_values(changed) if self.rename else changed
             try:
                 if code is not None:
-                    x, y = stepper.finish_advance(code, changed, t_next, self._read_key)
+                    x, y = stepper.finish_advance(code, fchanged, t_next, self._read_key)
                 else:
-                    x, y = stepper.advance(changed, t_next, self._read_key,
+                    x, y = stepper.advance(fchanged, t_next, self._read_key,
                                            restart=not changed or not self._small(changed))
             except BaseException:
-                if changed and stepper.holds(changed):  # the set went through, the step failed
+                if changed and stepper.holds(fchanged):  # the set went through, the step failed
                     self.force_restart = False
                     applied.update(changed)
                 raise
@@ -463,7 +482,7 @@ class _Twin:
             self.x, self.x_time, self.y = x, float(stepper.time), y
             return
         if changed:
-            stepper.set(changed, restart=not self._small(changed))
+            stepper.set(self.fmu_values(changed), restart=not self._small(changed))
             self.force_restart = False
             applied.update(changed)
         stepper.step(t_next)
@@ -1054,7 +1073,7 @@ class _NativeRows:
         names = self.names[which]
         if not tw.me or tw.read_names is None or any(n not in tw.applied for n in names):
             return False
-        ready = st.rows_ready(names, read)
+        ready = st.rows_ready([tw.fmu_name(n) for n in names], read)
         if ready is None:
             return False
         out, vrs, is_param = ready
@@ -1103,7 +1122,7 @@ class _NativeRows:
         tw.step_seconds += t.seconds
         moved = t.time != io["time0"]
         st.rows_done(t.time, t.carried, t.restarts,
-                     {n: applied[i] for i, n in enumerate(names) if io["ever_set"][i]})
+                     {tw.fmu_name(n): applied[i] for i, n in enumerate(names) if io["ever_set"][i]})
         if moved:
             tw.x = st._x[: st._nx].copy()
             tw.x_time = float(t.time)
@@ -1167,6 +1186,10 @@ class _NativeRows:
 
     # ------------------------------------------------------------------ a batch
 
+    def _rows(self, loop: TrackingLoop) -> None:
+        """The C call of a batch (its state is in :attr:`b`)."""
+        self.lib.tbn_track_rows(ctypes.byref(self.b))
+
     def run(self, loop: TrackingLoop, k: int, k_stop: int
             ) -> tuple[int, tuple[dict[str, float], dict[str, float], tuple[int, int, int]] | None, bool]:
         """Rows *k* .. at most *k_stop* - 1 in C: ``(rows written, pending, python)``.
@@ -1185,7 +1208,7 @@ class _NativeRows:
         self._state_in(loop)
         b = self.b
         b.k0, b.k_stop = k, k_stop
-        self.lib.tbn_track_rows(ctypes.byref(b))
+        self._rows(loop)
         self._twin_out(0, loop.twin)
         self._twin_out(1, loop.plain)
         self._state_out(loop)
@@ -1217,6 +1240,76 @@ class _NativeRows:
         return written, pending, b.status == self.native.ROWS_PYTHON
 
 
+#: Nominal values of the controllers' states in the continuous mode, as a multiple of their range:
+#: a PI controller's output and error memory get ``CLOSED_RANGE_FACTOR * 100 %`` (the output's full
+#: range), a compensator's error memory the factor times its level's measured range and its
+#: correction the factor times the gain times that range; their absolute tolerance is the twin's
+#: rtol times these. Measured against the same mode at rtol 1e-10 (rtol 1e-6): heat exchanger (3 h)
+#: factor 1 gives 6.8e-6 of the parameter's range and 1.2e-5 / 4.5e-5 of the tags' ranges at 1.7x
+#: the integrator CPU of factor 10, which gives 4.3e-5 and 4.2e-5 / 6.8e-5 (the discrete path: 2.4e-4
+#: and 2.1e-4 / 3.5e-4 from the same reference); factor 100 went to 5.1e-4 of the parameter's range
+#: (without stops at the samples). Heat production (2 h, three pairs, three levels): factor 10 on the
+#: compensators too takes 30 % less integrator CPU than 1 and keeps every tag, parameter and
+#: correction within 6.1e-5 of its range (LI-400; factor 1: 1e-5).
+CLOSED_RANGE_FACTOR = 10.0
+
+
+class _ClosedRows(_NativeRows):
+    """The loop's rows with the controllers inside the integrated system: ``tbn_closed_rows`` (issue 12).
+
+    Each pair's PI law (:class:`~trackingbox.tracking.controllers.ScaledPI`'s
+    continuous form, the compiled box's ``Blocks.ParameterController``) and
+    each level's compensator (``Blocks.StateCompensation``) are continuous
+    states that CVODE integrates with the twin's states in one right-hand side,
+    which reads the measurement interpolated linearly between samples and
+    sets the parameters and corrections as the twin's Real *inputs*. The
+    untracked twin runs the same way with its compensators. CVODE stops at
+    every sample (its stop time, where the interpolated data have their kinks;
+    no re-initialisation) and is re-initialised only at the start of a batch
+    (a checkpoint, the row buffer's end) and where a hold starts or ends or a
+    tag goes missing or comes back. Between batches the controllers are
+    handed to and from their discrete form (``u``, the error memory), so a row
+    that needs Python (a tag going missing or coming back, a solver failure)
+    runs on the discrete path and the next batch goes on from it.
+    """
+
+    def __init__(self, loop: TrackingLoop) -> None:
+        super().__init__(loop)
+        ctl, comp = loop.controllers, loop.compensation
+        tw = loop.twin
+        assert tw is not None
+        self.set_names = [[tw.fmu_name(n) for n in ctl.names] + list(comp.names), list(comp.names)]
+        self.sim_names = [[p.fmu_name for p in ctl.pairs] + [s.variable for s in comp.states],
+                          [s.variable for s in comp.states]]
+        level_nominal = []
+        for s_ in comp.states:
+            ok = loop.view.samples[s_.tag]
+            ok = ok[np.isfinite(ok)]
+            rng = float(np.ptp(np.percentile(ok, [1.0, 99.0]))) if ok.size >= 2 else 0.0
+            rng = CLOSED_RANGE_FACTOR * (rng if rng > 0.0 else 1.0)
+            level_nominal += [rng, max(abs(float(s_.tracked.gain)) * rng, 1e-12)]
+        #: nominal values of the controllers' states (absolute tolerance: the twin's rtol times these),
+        #: see :data:`CLOSED_RANGE_FACTOR`
+        pi_nominal = CLOSED_RANGE_FACTOR * 100.0
+        self.nominal = [[pi_nominal, pi_nominal] * len(ctl.pairs) + level_nominal, level_nominal]
+
+    def _rows(self, loop: TrackingLoop) -> None:
+        handles = []
+        for which, tw in enumerate((loop.twin, loop.plain)):
+            if tw is None:
+                handles.append(None)
+                continue
+            handles.append(tw.stepper.closed(len(loop.controllers.pairs) if which == 0 else 0,
+                                             self.set_names[which], self.sim_names[which], self.nominal[which]))
+        self.lib.tbn_closed_rows(ctypes.byref(self.b), self.grid.size, handles[0], handles[1])
+        for io in self.io:
+            io["ever_set"][:] = 1  # the inputs hold the values at the twin's time
+
+    def _state_out(self, loop: TrackingLoop) -> None:
+        super()._state_out(loop)
+        loop.controllers.last_time = None  # nothing is left to integrate up to the twin's time
+
+
 # --------------------------------------------------------------------------- the loop
 
 class TrackingLoop:
@@ -1243,7 +1336,8 @@ class TrackingLoop:
                  untracked: bool | pd.DataFrame = True, checkpoint_every: int = 200,
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
                  view: MeasurementView | None = None, interpolation: Interpolation = "linear",
-                 substeps: int | Literal["auto"] = "auto", carry: float = CARRY_FRACTION) -> None:
+                 substeps: int | Literal["auto"] = "auto", carry: float = CARRY_FRACTION,
+                 controllers: ControllerMode = "discrete", inputs_twin: Any = None) -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -1267,6 +1361,25 @@ class TrackingLoop:
 
         if interpolation not in ("zoh", "linear"):
             raise ValueError(f"interpolation must be 'zoh' or 'linear', got {interpolation!r}")
+        if controllers not in ("discrete", "continuous"):
+            raise ValueError(f"controllers must be 'discrete' or 'continuous', got {controllers!r}")
+        self.mode: ControllerMode = controllers
+        continuous = controllers == "continuous"
+        if continuous:
+            if interpolation != "linear":
+                raise ValueError("controllers='continuous' integrates the box's law on the interpolated "
+                                 f"measurement: it needs interpolation='linear', not {interpolation!r}")
+            if substeps not in ("auto", 1):
+                raise ValueError(f"controllers='continuous' integrates the controllers with the twin: there are "
+                                 f"no sub-steps to choose (got substeps={substeps!r})")
+            if any(getattr(p, "controller", "pi") != "pi" for p in spec.pairs):
+                raise SpecError(f"controllers='continuous' runs PI pairs only; {spec.path} has a sliding-mode pair")
+            if inputs_twin is None:
+                from ..generate.inputs_twin import inputs_twin as make_inputs_twin
+
+                inputs_twin = make_inputs_twin(spec)
+        #: the twin with its tracked parameters as inputs (continuous mode), else None
+        self.inputs_twin = inputs_twin
         self.interpolation = interpolation
         pairs = [_make_controller(spec, p, self.view.samples[p.variable], interpolation) for p in spec.pairs]
         for p in pairs:
@@ -1293,9 +1406,10 @@ class TrackingLoop:
         self.twin: _Twin | None = None
         self.plain: _Twin | None = None
         extrapolate = {p.parameter: p.bounds for p in pairs if isinstance(p.controller, ScaledPI)} \
-            if interpolation == "linear" else {}
-        self.twin = _Twin(spec.twin, label="tracked", base=base, inputs=self.view.inputs, tolerance=tolerance,
-                          recorded=recorded, extrapolate=extrapolate)
+            if interpolation == "linear" and not continuous else {}
+        self.twin = _Twin(inputs_twin.fmu if continuous else spec.twin, label="tracked", base=base,
+                          inputs=self.view.inputs, tolerance=tolerance, recorded=recorded, extrapolate=extrapolate,
+                          rename=inputs_twin.inputs if continuous else None)
         if untracked is True:
             try:
                 self.plain = _Twin(spec.twin, label="untracked", base=base, inputs=self.view.inputs,
@@ -1310,7 +1424,7 @@ class TrackingLoop:
         if not (isinstance(carry, (int, float)) and math.isfinite(carry) and carry >= 0.0):
             raise ValueError(f"carry must be a finite fraction >= 0, got {carry!r}")
         self.carry = float(carry)
-        if self.carry > 0.0 and self.twin.me:
+        if self.carry > 0.0 and self.twin.me and not continuous:
             self.twin.carry_limits = _carry_limits(self.carry, pairs, spec.states, self.view)
         #: hold flag of the current sample (given at its start, used by its sub-steps)
         self.hold_k = True
@@ -1319,7 +1433,7 @@ class TrackingLoop:
         self._fast_checked = False
         #: rows this loop ran in C (its :meth:`run` calls)
         self.native_rows = 0
-        self.substeps = self._substeps(substeps, interpolation)
+        self.substeps = 1 if continuous else self._substeps(substeps, interpolation)
 
     def _substeps(self, substeps: int | Literal["auto"], interpolation: Interpolation) -> int:
         """Sub-steps per sample: the given number, or the automatic choice (see :func:`track`)."""
@@ -1352,7 +1466,7 @@ class TrackingLoop:
             if self._fast_checked or not _NativeRows.usable(self):
                 self._fast_checked = True
                 return None
-            fast = self._fast = _NativeRows(self)
+            fast = self._fast = _ClosedRows(self) if self.mode == "continuous" else _NativeRows(self)
         elif not _NativeRows.usable(self):  # the untracked twin was dropped, a twin restarted on the Python path
             return None
         return fast
@@ -1374,6 +1488,7 @@ class TrackingLoop:
             "interpolation": self.interpolation,
             "substeps": self.substeps,
             "carry": self.carry,
+            "controllers_mode": self.mode,
             "time": float(self.grid[min(rows, self.n_rows - 1)]),
             "complete": rows >= self.n_rows,
             "parameters": self.controllers.values(),
@@ -1392,6 +1507,10 @@ class TrackingLoop:
                 or not math.isclose(float(state.get("sample_time", -1)), self.ts):
             raise SpecError(f"checkpoint {self.ckpt_path} was written for a different spec or version; "
                             "run without --resume to start over")
+        if state.get("controllers_mode") != self.mode:
+            raise SpecError(f"checkpoint {self.ckpt_path} was written with controllers="
+                            f"{state.get('controllers_mode')!r}, not {self.mode!r}; resume with the same mode or "
+                            "run without --resume")
         if state.get("substeps") != self.substeps:
             raise SpecError(f"checkpoint {self.ckpt_path} was written with {state.get('substeps')} sub-steps per "
                             f"sample, not {self.substeps}; resume with substeps={state.get('substeps')} or run "
@@ -1431,6 +1550,16 @@ class TrackingLoop:
 
     def begin(self, *, resume: bool = False) -> None:
         """Start fresh, or from ``checkpoint.json`` when *resume* and there is one."""
+        assert self.twin is not None
+        self._begin(resume)
+        if self.mode == "continuous" and not _ClosedRows.usable(self):
+            reason = self.twin.model.native_reason or (
+                f"{NATIVE_ROWS_ENV}=0" if os.environ.get(NATIVE_ROWS_ENV, "").strip() == "0"
+                else "the twins do not run on the native stepper")
+            raise SimulationError(f"controllers='continuous' integrates the controllers in the native stepper's "
+                                  f"right-hand side, which is not to be had here: {reason}")
+
+    def _begin(self, resume: bool) -> None:
         assert self.twin is not None
         if resume and self.ckpt_path.exists():
             # sealed: a corrupt or truncated checkpoint, or a CSV that is not the one it vouches for, is refused
@@ -1544,7 +1673,7 @@ class TrackingLoop:
                 tw.start(t_from, values, tw.x)
             else:
                 tw.replay_csv(self.csv_path, k, grid)
-                tw.stepper.set(values)
+                tw.stepper.set(tw.fmu_values(values))
                 tw.applied.update(values)
                 if t_from > t_k:
                     tw.step(t_from, values)
@@ -1749,6 +1878,8 @@ def track(
     interpolation: Interpolation = "linear",
     substeps: int | Literal["auto"] = "auto",
     carry: float = CARRY_FRACTION,
+    controllers: ControllerMode = "discrete",
+    inputs_twin: Any = None,
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -1815,6 +1946,27 @@ def track(
         start, entering or leaving a hold, a recovery and a checkpoint's
         restart point re-initialise it. ``0``: re-initialise at every change
         (the restart path). Default :data:`CARRY_FRACTION`.
+    controllers : {"discrete", "continuous"}
+        ``"discrete"`` (default): the controllers are the exact
+        discretisations of the box's laws (:class:`ScaledPI`,
+        :class:`StateCompensator`), updated at every sample (and sub-step);
+        the twin's integrator stops at each. ``"continuous"``: the box's laws
+        themselves, as continuous states integrated by CVODE together with
+        the twin's states in the native right-hand side (``tbn_closed_rows``,
+        see :class:`_ClosedRows`), the measurement interpolated linearly
+        between samples as the compiled box sees it; CVODE returns at every
+        sample (its stop time: the data's kinks) and is re-initialised only
+        where a hold starts or ends or a tag goes missing or comes back, and
+        at a checkpoint. It runs on the *inputs twin*
+        (:func:`~trackingbox.generate.inputs_twin.inputs_twin`: the twin
+        compiled with its tracked parameters switched to their conditional
+        inputs), which it builds from the spec's ``[source]`` unless
+        *inputs_twin* is given; it needs the native stepper, PI pairs and
+        ``interpolation="linear"``; *substeps* and *carry* do not apply.
+        Rows that need Python (a tag going missing or coming back, a solver
+        failure) run on the discrete path.
+    inputs_twin : trackingbox.generate.inputs_twin.InputsTwin, optional
+        The compiled inputs twin for ``controllers="continuous"``.
 
     Returns
     -------
@@ -1830,7 +1982,8 @@ def track(
     """
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
-                        view=view, interpolation=interpolation, substeps=substeps, carry=carry)
+                        view=view, interpolation=interpolation, substeps=substeps, carry=carry,
+                        controllers=controllers, inputs_twin=inputs_twin)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
