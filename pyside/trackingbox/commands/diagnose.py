@@ -51,7 +51,7 @@ def register(subparsers: Any) -> None:
                    help="fit the best candidates through their patched, compiled twin and build the patch's FMU")
     p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
     p.add_argument("--fit-best", type=number(ge=1, integer=True), default=2, metavar="N",
-                   help="candidates fitted properly with --compile in a round (default 2)")
+                   help="candidates fitted properly with --compile in a round (default 2; the first round adds the best-scored one on training where it is not among them)")
     p.add_argument("--fit-rounds", type=number(ge=1, integer=True), default=3, metavar="N",
                    help="rounds of fits at most: another round while no fitted candidate passes (default 3)")
     p.add_argument("--seed", type=number(ge=0, integer=True), default=0,

@@ -60,7 +60,8 @@ class DiagnoseSettings:
     fit_best
         How many screened candidates are fitted properly in a round (with ``compile``): those whose
         screening passes the judge's tests first (:func:`trackingbox.diagnose.judge.objections`),
-        each group by ΔBIC.
+        each group by ΔBIC; the first round adds the candidate with the largest ΔBIC where it is not
+        among them (:func:`next_fits`).
     fit_rounds
         Rounds of fits at most: after the first, another round fits the next candidates whose
         screening passes, as long as no fitted candidate passes.
@@ -424,21 +425,27 @@ def next_fits(eligible: Sequence[Candidate], passes: Mapping[int, bool],
     done
         The candidates fitted so far, each with whether its fit passes.
     fit_best
-        Fits a round.
+        Fits a round (the first round may add one, below).
 
     The first round takes the *fit_best* first candidates, those whose screening passes
-    before the others (each group keeps its order). Another round is worth it only while
-    no fit passes, and takes only candidates whose screening passes.
+    before the others (each group keeps its order), and the candidate the training data
+    favour most (the first of *eligible*) where it is not among them: a screening is a
+    linearised or ramped approximation, and one that fails the judge's tests on a detail
+    (a tag made slightly worse, a ramp that overshoots on validation) may pass when fitted
+    properly. Another round is worth it only while no fit passes, and takes only
+    candidates whose screening passes.
 
     Examples
     --------
     >>> a, b, c, d = "abcd"   # any objects stand for candidates here
     >>> ok = {id(a): False, id(b): True, id(c): True, id(d): False}
     >>> next_fits([a, b, c, d], ok, [], 2)
+    ['b', 'c', 'a']
+    >>> next_fits([b, c, a, d], ok, [], 2)
     ['b', 'c']
     >>> next_fits([a, b, c, d], {id(a): False, id(b): True, id(c): False, id(d): False}, [], 2)
     ['b', 'a']
-    >>> next_fits([a, b, c, d], {**ok, id(d): True}, [(b, False), (c, False)], 2)
+    >>> next_fits([a, b, c, d], {**ok, id(d): True}, [(b, False), (c, False), (a, False)], 2)
     ['d']
     >>> next_fits([a, b, c, d], {**ok, id(d): True}, [(b, True), (c, False)], 2)
     []
@@ -448,7 +455,10 @@ def next_fits(eligible: Sequence[Candidate], passes: Mapping[int, bool],
     fitted = {id(c) for c, _ in done}
     if not done:
         first = [c for c in eligible if passes.get(id(c), False)]
-        return (first + [c for c in eligible if not passes.get(id(c), False)])[:fit_best]
+        picked = (first + [c for c in eligible if not passes.get(id(c), False)])[:fit_best]
+        if eligible and fit_best > 0 and all(c is not eligible[0] for c in picked):
+            picked.append(eligible[0])
+        return picked
     if any(ok for _, ok in done):
         return []
     return [c for c in eligible if passes.get(id(c), False) and id(c) not in fitted][:fit_best]
