@@ -972,7 +972,6 @@ class MeasurementView:
         start, stop, k_first, k_stop = grid_rows(spec, window, end, lead)
         grid = ts * np.arange(k_first, k_stop, dtype=float)
         in_window = (grid >= start - 1e-9) & (grid < stop - 1e-9)
-        stoppage = spec.data.stoppage
         rule = spec.data.max_gap
         breaks = table.attrs.get("breaks") or {}
         samples: dict[str, npt.NDArray[np.float64]] = {}
