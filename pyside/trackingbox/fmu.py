@@ -947,6 +947,7 @@ class FMUModel:
         max_step: float | None = None,
         carry: bool = False,
         native: bool | None = None,
+        keep_jacobian: bool = False,
     ) -> Stepper:
         """Initialise a new run at *start_time* and return its :class:`Stepper`.
 
@@ -983,6 +984,13 @@ class FMUModel:
             and the reason is logged at debug level and kept in
             :attr:`native_reason`. ``True``: native or :class:`FMUError` saying
             why not. ``False``: the Python path.
+        keep_jacobian
+            :class:`~trackingbox.native.NativeStepper` only: the first step
+            after a change that re-initialises CVODE reuses CVODE's last
+            Jacobian instead of evaluating a new one (see
+            :meth:`~trackingbox.native.NativeStepper.keep_jacobian`); the
+            trajectory stays within the solver's tolerance of the one without
+            it, not bit for bit. Ignored on the Python path.
         """
         if self.closed:
             raise FMUError(f"FMU {self.path} is closed")
@@ -998,6 +1006,8 @@ class FMUModel:
                          inputs=inputs, max_step=max_step)
         if carry and isinstance(stepper, ModelExchangeStepper):
             stepper.carry()
+        if keep_jacobian and hasattr(stepper, "keep_jacobian"):
+            stepper.keep_jacobian()
         self._active = stepper
         return stepper
 

@@ -201,6 +201,14 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_get_states.restype = c_int
     lib.tbn_cpu_seconds.argtypes = []
     lib.tbn_cpu_seconds.restype = c_double
+    lib.tbn_rhs_evaluations.argtypes = []
+    lib.tbn_rhs_evaluations.restype = ctypes.c_long
+    lib.tbn_keep_jacobian.argtypes = [c_void_p, c_int]
+    lib.tbn_keep_jacobian.restype = c_int
+    lib.tbn_jacobians.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
+    lib.tbn_jacobians.restype = None
+    lib.tbn_forget_jacobian.argtypes = [c_void_p]
+    lib.tbn_forget_jacobian.restype = None
     lib.tbn_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_stats.restype = None
     pd_, pu32, pint = ctypes.POINTER(c_double), ctypes.POINTER(ctypes.c_uint32), ctypes.POINTER(c_int)
@@ -289,6 +297,24 @@ def cpu_seconds() -> float:
     if _load.cache_info().currsize == 0 or not path.exists():
         return 0.0
     return float(_load(path).tbn_cpu_seconds())
+
+
+def rhs_evaluations() -> int:
+    """Right-hand-side evaluations this process's native integrations made (CVODE's steps, Newton
+    iterations and difference-quotient Jacobians; both steppers and the closed-loop integrators).
+
+    The integrator's work counted in FMU derivative calls, steadier than :func:`cpu_seconds` on a
+    loaded machine (the difference of two readings); 0 where the library is not loaded.
+    """
+    if not sys.platform.startswith("linux"):
+        return 0
+    try:
+        path = library_path()
+    except OSError:
+        return 0
+    if _load.cache_info().currsize == 0 or not path.exists():
+        return 0
+    return int(_load(path).tbn_rhs_evaluations())
 
 
 def native_reason(model: FMUModel) -> str | None:
@@ -802,6 +828,40 @@ class NativeStepper(ModelExchangeStepper):
             self.time = t_next
         else:
             self._advance(t_next)
+
+    def keep_jacobian(self, on: bool = True) -> None:
+        """Reuse CVODE's last Jacobian for the first step after a change that re-initialises it (*on*).
+
+        ``CVodeReInit`` makes CVODE evaluate a new difference-quotient Jacobian
+        (one right-hand side per state) at its first step. After a small change
+        of parameters or inputs the last one is still a good Newton matrix: the
+        Jacobian only steers the Newton iteration, not the error test, and when
+        the iteration fails to converge CVODE asks again and gets a fresh one.
+        Every other evaluation is CVODE's own difference quotient
+        (``cvLsDQJac``, called as CVODE calls it: the same values). Restarts of
+        :meth:`set` (and :meth:`advance`) only; a new stepper starts with none,
+        and :meth:`forget_jacobian` drops it before a large change.
+        On the tracking loop's restart path (heat production, one day) this
+        halves the right-hand-side evaluations; the trajectory moves within the
+        solver's tolerance (the Newton iterates change), so it is not the
+        Python path's bit for bit.
+        """
+        self._check_open()
+        if self._lib.tbn_keep_jacobian(self._handle, 1 if on else 0) != 0:
+            raise FMUError(f"the native stepper on {self.model.path.name} could not keep its Jacobian "
+                           "(out of memory, or CVODE refused its Jacobian function)")
+
+    def forget_jacobian(self) -> None:
+        """The next restart evaluates a new Jacobian (:meth:`keep_jacobian`): before a large change."""
+        self._check_open()
+        self._lib.tbn_forget_jacobian(self._handle)
+
+    def jacobians(self) -> tuple[int, int]:
+        """``(reused, computed)``: Jacobians kept across a restart (:meth:`keep_jacobian`) and evaluated since it."""
+        self._check_open()
+        reused, computed = ctypes.c_long(0), ctypes.c_long(0)
+        self._lib.tbn_jacobians(self._handle, ctypes.byref(reused), ctypes.byref(computed))
+        return int(reused.value), int(computed.value)
 
     def solver_statistics(self) -> Mapping[str, int]:
         """CVODE's counters since the last (re-)initialisation: ``steps`` and ``rhs`` evaluations."""

@@ -50,6 +50,8 @@ typedef void *SUNMatrix;
 typedef void *SUNLinearSolver;
 typedef void *SUNContext;
 typedef int (*CVRhsFn)(double t, N_Vector y, N_Vector ydot, void *user);
+typedef int (*CVLsJacFn)(double t, N_Vector y, N_Vector fy, SUNMatrix J, void *user, N_Vector t1, N_Vector t2,
+                         N_Vector t3);
 typedef void (*SUNErrHandlerFn)(int line, const char *func, const char *file, const char *msg, int code,
                                 void *data, SUNContext ctx);
 typedef void *fmi3Instance;
@@ -88,6 +90,10 @@ struct sundials {
     int (*get_num_steps)(void *, long *);
     int (*get_num_rhs_evals)(void *, long *);
     int (*cvode)(void *, double, N_Vector, double *, int);
+    /* the Jacobian kept across a restart (tbn_keep_jacobian) */
+    int (*set_jac_fn)(void *, CVLsJacFn);
+    int (*dq_jac)(double, N_Vector, N_Vector, SUNMatrix, void *, N_Vector, N_Vector, N_Vector);
+    double *(*dense_data)(SUNMatrix);
 };
 
 typedef struct tbn {
@@ -117,6 +123,11 @@ typedef struct tbn {
     SUNLinearSolver LS;
     void *mem;
     double rtol;
+    /* tbn_keep_jacobian: keep (1) the last difference-quotient Jacobian for the first step after a restart
+     * of set_parameters; reuse_next: the next Jacobian evaluation takes it; saved: nx*nx values (valid) */
+    int keep_jac, reuse_next, saved_ok;
+    double *saved;
+    long jac_reused, jac_computed;
     /* the first failure */
     const char *failed_call;
     int failed_status;
@@ -141,6 +152,11 @@ static double thread_cpu(void) {
 }
 
 double tbn_cpu_seconds(void) { return cpu_total; }
+
+/* right-hand-side evaluations of all instances of this process (CVODE's steps, Newton iterations and
+ * difference-quotient Jacobians: the integrator's work in FMU calls), for the benchmarks */
+static long rhs_total;
+long tbn_rhs_evaluations(void) { return rhs_total; }
 
 static void *sym(void *handle, const char *name, char *err, size_t errlen, int *missing) {
     void *p = dlsym(handle, name);
@@ -198,6 +214,7 @@ static int at_time(tbn *h, double t) {
 
 static int rhs(double t, N_Vector y, N_Vector ydot, void *user) {
     tbn *h = user;
+    rhs_total++;
     if (at_time(h, t)) return -1;
     int st = h->set_states(h->fmu, h->s.nv_data(y), h->nx);
     if (st > 1) return fail(h, "fmi3SetContinuousStates", st);
@@ -216,6 +233,7 @@ void tbn_free(tbn *h) {
     if (h->ctx) h->s.context_free(&h->ctx);
     free(h->in_vr); free(h->u);
     free(h->x_before);
+    free(h->saved);
     free(h);
 }
 
@@ -254,6 +272,9 @@ tbn *tbn_new(void *const libs[5], void *binary, void *instance, size_t nx, doubl
     SYM(s->get_num_steps, libs[4], "CVodeGetNumSteps");
     SYM(s->get_num_rhs_evals, libs[4], "CVodeGetNumRhsEvals");
     SYM(s->cvode, libs[4], "CVode");
+    SYM(s->set_jac_fn, libs[4], "CVodeSetJacFn");
+    SYM(s->dq_jac, libs[4], "cvLsDQJac");
+    SYM(s->dense_data, libs[2], "SUNDenseMatrix_Data");
     SYM(h->set_time, binary, "fmi3SetTime");
     SYM(h->set_states, binary, "fmi3SetContinuousStates");
     SYM(h->get_states, binary, "fmi3GetContinuousStates");
@@ -338,6 +359,54 @@ int tbn_reset(tbn *h, double t) {
     int st = h->get_states(h->fmu, h->s.nv_data(h->y), h->nx);
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_FMU_FAILED;
     return h->s.reinit(h->mem, t, h->y) ? TBN_CVODE_FAILED : TBN_OK;
+}
+
+/*
+ * The Jacobian CVODE asks for (it asks only when it finds its saved one bad: the first step after an
+ * initialisation, every 20 steps, a convergence failure): CVODE's own difference quotient (cvLsDQJac,
+ * the function it uses without a user Jacobian, called with its own memory as it calls it, so the
+ * values are the same bits), except for the first request after a restart of set_parameters
+ * (reuse_next), which gets the last one computed. The Jacobian only steers the Newton iteration, not
+ * the error test: a stale one costs iterations, and when the iteration fails CVODE asks again
+ * (reuse_next is cleared by then) and gets a fresh one.
+ */
+static int jacobian(double t, N_Vector y, N_Vector fy, SUNMatrix J, void *user, N_Vector t1, N_Vector t2,
+                    N_Vector t3) {
+    tbn *h = user;
+    size_t n = h->nx * h->nx;
+    if (h->reuse_next && h->saved_ok) {
+        h->reuse_next = 0;
+        memcpy(h->s.dense_data(J), h->saved, n * sizeof(double));
+        h->jac_reused++;
+        return 0;
+    }
+    h->reuse_next = 0;
+    int r = h->s.dq_jac(t, y, fy, J, h->mem, t1, t2, t3);
+    h->saved_ok = r == 0;
+    if (r == 0) memcpy(h->saved, h->s.dense_data(J), n * sizeof(double));
+    h->jac_computed++;
+    return r;
+}
+
+/* Keep (on != 0) the last Jacobian across the restarts of set_parameters (see jacobian), or CVODE's own
+ * difference quotient throughout (on == 0, the default). Returns 0, or -1 (out of memory, CVODE refused). */
+int tbn_keep_jacobian(tbn *h, int on) {
+    if (on && !h->saved) {
+        h->saved = calloc(h->nx * h->nx + 1, sizeof(double));
+        if (!h->saved) return -1;
+    }
+    h->keep_jac = on != 0;
+    h->reuse_next = h->saved_ok = 0;
+    return h->s.set_jac_fn(h->mem, on ? jacobian : NULL) ? -1 : 0;
+}
+
+/* Forget the kept Jacobian: the next restart's first step evaluates a new one (before a large change) */
+void tbn_forget_jacobian(tbn *h) { h->saved_ok = 0; }
+
+/* Jacobians kept across a restart and computed, since the start */
+void tbn_jacobians(tbn *h, long *reused, long *computed) {
+    *reused = h->jac_reused;
+    *computed = h->jac_computed;
 }
 
 /* CVODE's internal time (after a stop-time return: the target), NaN if it cannot say. */
@@ -458,6 +527,7 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
     }
     if (carry) return 1;
     int code = tbn_reset(h, time);
+    h->reuse_next = h->keep_jac && code == TBN_OK;
     return code == TBN_OK ? 0 : code;
 }
 
@@ -831,6 +901,7 @@ static int twin_step(tbn_twin_io *tw, size_t nread, double t_next) {
         }
     }
     int restart = n == 0 || !small;
+    if (n && tw->force_restart) tbn_forget_jacobian(tw->h);  /* _Twin.step: a large change, a new Jacobian */
     int flags = (any_param ? TBN_EVENT : 0) | (tw->exact && !restart ? TBN_CARRY : 0) | (tw->exact ? TBN_EXACT : 0);
     double w0 = wall_now();
     int code = tbn_advance(tw->h, n, n ? tw->sub_vr : NULL, n ? tw->sub : NULL, flags, tw->time, t_next);
@@ -1076,6 +1147,7 @@ static int closed_apply(tbn_closed *c, double t, const double *z) {
 static int closed_rhs(double t, N_Vector y, N_Vector ydot, void *user) {
     tbn_closed *c = user;
     tbn *h = c->h;
+    rhs_total++;
     const double *z = h->s.nv_data(y);
     double *dz = h->s.nv_data(ydot);
     size_t nx = h->nx, np = c->np, ns = c->ns, nv = np + ns;
