@@ -31,7 +31,9 @@ Per bench (pairs found by ``trackingbox pair`` the way a user would), from one p
   ``TRACKINGBOX_NATIVE_ROWS=0`` keeps them in Python), the tracked twin's
   integrator restarts and carried changes, and the CPU seconds spent inside the
   native stepper's integration over ours (what the integrator alone cost in
-  *this* run: the floor under ours for this work) beside the plain run's.
+  *this* run: the floor under ours for this work) beside the plain run's, and
+  the right-hand-side evaluations of both (``native.rhs_evaluations``: the
+  integrator's work in FMU calls, which machine load does not change).
 
 There is no peer for tracking (no other tool runs parameter controllers on an
 FMU twin); the output says so.
@@ -164,7 +166,7 @@ def continuous_run(spec_path: Path, out: Path) -> dict:
     except TrackingError as exc:
         return {"reason": str(exc).splitlines()[0]}
     compile_wall = time.perf_counter() - w0
-    c0, w0, n0 = cpu_now(), time.perf_counter(), native.cpu_seconds()
+    c0, w0, n0, r0 = cpu_now(), time.perf_counter(), native.cpu_seconds(), native.rhs_evaluations()
     loop = TrackingLoop(spec, out_dir=out / "continuous", checkpoint_every=10**9, untracked=False,
                         controllers="continuous")
     try:
@@ -174,7 +176,7 @@ def continuous_run(spec_path: Path, out: Path) -> dict:
         loop.close()
     result = loop.result()
     return {"wall": time.perf_counter() - w0, "cpu": cpu_now() - c0, "in_c": native.cpu_seconds() - n0,
-            "rows": result.steps, "native_rows": loop.native_rows, "restarts": result.restarts,
+            "rhs": native.rhs_evaluations() - r0, "rows": result.steps, "native_rows": loop.native_rows, "restarts": result.restarts,
             "compile_wall": compile_wall, "reason": ""}
 
 
@@ -184,7 +186,7 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
     from trackingbox import native
 
     spec = load_spec(spec_path)
-    c0, w0, n0 = cpu_now(), time.perf_counter(), native.cpu_seconds()
+    c0, w0, n0, r0 = cpu_now(), time.perf_counter(), native.cpu_seconds(), native.rhs_evaluations()
     loop = TrackingLoop(spec, out_dir=out / "alone", checkpoint_every=10**9, untracked=False)
     try:
         loop.begin()
@@ -197,13 +199,15 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
         loop.close()
     result = loop.result()
     wall, cpu = time.perf_counter() - w0, cpu_now() - c0
-    in_c = native.cpu_seconds() - n0
+    in_c, rhs = native.cpu_seconds() - n0, native.rhs_evaluations() - r0
     cont = continuous_run(spec_path, out)
     grid = np.asarray(loop.grid, dtype=float)
     if grid[0] > 0.0:  # the twins start at 0
         grid = np.concatenate(([0.0], grid))
     read = list(loop.read)
+    r1 = native.rhs_evaluations()
     p_wall, p_cpu, p_in_c, p_out, inputs = plain_run(spec_path, grid, read)
+    p_rhs = native.rhs_evaluations() - r1
     bound = run_bound(spec.twin, grid=grid, outputs=read, parameters=base, inputs=inputs)
     worst = 0.0
     for tag in loop.plan.out_tags:
@@ -227,6 +231,7 @@ def track_with_bound(name: str, spec_path: Path, out: Path) -> dict:
             "bound_steps": bound.steps, "bound_rhs": bound.rhs, "check": worst,
             "states": len(spec.states), "pairs": [(p.variable, p.parameter) for p in spec.pairs],
             "stepper": stepper, "reason": reason, "in_c": in_c, "substeps": loop.substeps,
+            "rhs": rhs, "plain_rhs": p_rhs,
             "native_rows": loop.native_rows, "restarts": result.restarts, "carried": result.carried,
             "track_wall": t_wall, "track_lockstep": full_result.seconds_untracked, "continuous": cont}
 
@@ -339,33 +344,37 @@ def main() -> int:
           "CSV's untracked columns, a second twin run with its own state compensation; lockstep twin wall = that "
           "twin's steps inside it, which this benchmark called 'plain' before)")
     print(f"\n{'bench':16s} {'stepper':20s} {'sub-steps':>9s} {'rows in C':>9s} {'restarts':>8s} {'carried':>8s} "
-          f"{'integrator CPU':>14s} {'plain integrator CPU':>20s} {'ours CPU/integrator':>19s}")
+          f"{'integrator CPU':>14s} {'plain integrator CPU':>20s} {'ours CPU/integrator':>19s} {'RHS':>9s} "
+          f"{'plain RHS':>9s} {'RHS ours/plain':>14s}")
     for r in rows:
         integ = f"{r['in_c']:14.3f}" if r["in_c"] > 0 else f"{'-':>14s}"
         pinteg = f"{r['plain_in_c']:20.3f}" if r["plain_in_c"] > 0 else f"{'-':>20s}"
         ratio = f"{r['cpu'] / r['in_c']:19.2f}" if r["in_c"] > 0 else f"{'-':>19s}"
+        rhs_ratio = f"{r['rhs'] / r['plain_rhs']:14.2f}" if r["plain_rhs"] > 0 else f"{'-':>14s}"
         print(f"{r['bench']:16s} {r['stepper']:20s} {r['substeps']:9d} {r['native_rows']:9d} {r['restarts']:8d} "
-              f"{r['carried']:8d} {integ} {pinteg} {ratio}")
+              f"{r['carried']:8d} {integ} {pinteg} {ratio} {r['rhs']:9d} {r['plain_rhs']:9d} {rhs_ratio}")
         if r["reason"]:
             print(f"  ({r['bench']}: Python path because {r['reason']})")
     print("(integrator CPU = CPU inside the native stepper's C calls over ours: CVODE, the FMU's right-hand side, "
-          "parameter changes; plain integrator CPU = the same over the plain run; rows in C = rows the loop ran in "
+          "parameter changes; plain integrator CPU = the same over the plain run; RHS = right-hand-side evaluations "
+          "(FMU derivative calls: steps, Newton iterations, Jacobians) of ours and of the plain run, load-independent; "
+          "rows in C = rows the loop ran in "
           "tbn_track_rows; restarts/carried = the tracked twin's integrator re-initialisations and carried "
           "changes; TRACKINGBOX_NATIVE=0 runs the twins on the Python path)")
     print("\nboth controller modes, from this run (same plain and bound): discrete = the default (the controllers' "
           "exact discretisation, updated every sample and sub-step); continuous = controllers='continuous' (the box's "
           "laws integrated with the twin by CVODE in C, on the inputs twin)")
     print(f"{'bench':16s} {'mode':10s} {'ours wall':>9s} {'ours CPU':>8s} {'ours/plain':>10s} {'ours/bound':>10s} "
-          f"{'CPU ours/plain':>14s} {'CPU ours/bound':>14s} {'integrator CPU':>14s} {'restarts':>8s}")
+          f"{'CPU ours/plain':>14s} {'CPU ours/bound':>14s} {'integrator CPU':>14s} {'restarts':>8s} {'RHS':>9s}")
     for r in rows:
         c = r["continuous"]
-        modes = [("discrete", r["wall"], r["cpu"], r["in_c"], r["restarts"])]
+        modes = [("discrete", r["wall"], r["cpu"], r["in_c"], r["restarts"], r["rhs"])]
         if not c.get("reason"):
-            modes.append(("continuous", c["wall"], c["cpu"], c["in_c"], c["restarts"]))
-        for mode, wall, cpu, in_c, restarts in modes:
+            modes.append(("continuous", c["wall"], c["cpu"], c["in_c"], c["restarts"], c["rhs"]))
+        for mode, wall, cpu, in_c, restarts, rhs in modes:
             print(f"{r['bench']:16s} {mode:10s} {wall:9.2f} {cpu:8.2f} {wall / r['plain_wall']:10.2f} "
                   f"{wall / r['bound_wall']:10.2f} {cpu / r['plain_cpu']:14.2f} {cpu / r['bound_cpu']:14.2f} "
-                  f"{in_c:14.3f} {restarts:8d}")
+                  f"{in_c:14.3f} {restarts:8d} {rhs:9d}")
         if c.get("reason"):
             print(f"  ({r['bench']}: no continuous run: {c['reason']})")
         else:
