@@ -459,3 +459,11 @@ def test_restarts_keeping_the_jacobian_follow_the_closed_form(first_order_fmu: P
             st.set({"k": k})
         assert st.restarts == 6
         assert st.jacobians()[0] == 5  # every restart whose first step came reused the last Jacobian
+        # before a large change the kept one is forgotten: that restart's first step evaluates a new one
+        st.forget_jacobian()
+        computed = st.jacobians()[1]
+        st.step(t + 100.0)
+        x = _closed_form(x, k, 100.0)
+        assert float(st.get(["y"])[0]) == pytest.approx(x, rel=1e-7)
+        reused, computed_after = st.jacobians()
+        assert reused == 5 and computed_after > computed
