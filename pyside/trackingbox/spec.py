@@ -238,6 +238,12 @@ class PairingSettings:
         :func:`trackingbox.analysis.pairing.leakage`): a pair is refused when a candidate
         left unpaired moves its parameter by more than this many of its bound range per
         bound range of that candidate, at the loops' steady state. ``None``: no check.
+    units : tuple of str
+        Pairing per unit (``units = ["effect"]``; see :mod:`trackingbox.analysis.blocks`): a
+        parameter of a unit of these component arrays (``effect[3].Rf``) pairs only with a tag of
+        the same unit (a twin output ending in ``[3]``), the tags chosen so that the square relative
+        gain array of the unit parameters is closest to the identity. Empty: the whole matrix's
+        relative gains for every parameter.
     """
 
     freeze: tuple[tuple[str, float], ...] = ()
@@ -245,6 +251,7 @@ class PairingSettings:
     closed_loop: float | None = None
     max_leak: float | None = None
     closed_loop_min: float | None = None
+    units: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -764,8 +771,17 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak"), (), "[pairing]", problems)
+    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak", "units"), (), "[pairing]",
+                problems)
     out: dict[str, Any] = {}
+    if "units" in table:
+        units = table["units"]
+        if (not isinstance(units, list)
+                or not all(isinstance(u, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", u) for u in units)):
+            problems.add(f"[pairing] units must be a list of component array names (e.g. units = [\"effect\"]), "
+                         f"got {units!r}")
+        else:
+            out["units"] = tuple(dict.fromkeys(units))
     if "closed_loop" in table:
         out["closed_loop"] = _number(table, "closed_loop", "[pairing]", problems, positive=True)
     if "closed_loop_min" in table:
@@ -1073,6 +1089,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
             doc["pairing"]["closed_loop_min"] = float(spec.pairing.closed_loop_min)
         if spec.pairing.max_leak is not None:
             doc["pairing"]["max_leak"] = float(spec.pairing.max_leak)
+        if spec.pairing.units:
+            doc["pairing"]["units"] = list(spec.pairing.units)
     if spec.diagnose.effects:
         doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:

@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
@@ -477,6 +477,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                            other_time_constants=None if st2 is None else st2.time_constants,
                            check_gains=None if st_rec is None else st_rec.gains,
                            check_time_constants=None if st_rec is None else st_rec.time_constants,
+                           units=spec_units(spec, st.variables, st.parameters),
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     if st_rec is not None and residuals is not None:
         from .pairing import complete_with_recording
@@ -497,6 +498,19 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
                          agreement=agr, settings=s, steptest_recording=st_rec)
+
+
+def spec_units(spec: Spec, variables: Sequence[str], parameters: Sequence[str]
+               ) -> tuple[list[int | None], list[int | None]] | None:
+    """The unit index of each tag (its twin output's trailing ``[k]``) and of each parameter of the
+    spec's ``[pairing] units`` (``effect[k].Rf``), for :func:`~trackingbox.analysis.pairing.choose_pairs`'
+    pairing per unit; None when the spec names no units."""
+    from .blocks import output_unit, parameter_unit
+
+    if not spec.pairing.units:
+        return None
+    return ([output_unit(spec.outputs.get(v, v)) for v in variables],
+            [parameter_unit(p, spec.pairing.units) for p in parameters])
 
 
 def _max_leak(spec: Spec, settings: PairSettings) -> float:

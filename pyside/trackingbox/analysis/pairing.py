@@ -46,6 +46,7 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
+from .blocks import Block, choose_block, square_rga
 from .offsets import OffsetStats, Residuals, predict_tracking, reach
 from .rga import _greedy_independent, condition_number, relative_gain_array, scale_gains
 
@@ -262,6 +263,10 @@ class Pairing:
         Condition number of the scaled gains of the chosen pairs.
     rejected : tuple of (variable, parameter, reason)
         Pairs the tracking prediction forbade, in the order they were tried.
+    block : Block or None
+        With ``units``: the unit parameters' pairs on their own tags and the relative gain array
+        of that square block (:func:`~trackingbox.analysis.blocks.choose_block`), the pairs'
+        ``lambda_`` taken from it.
     """
 
     pairs: tuple[Pair, ...]
@@ -278,6 +283,7 @@ class Pairing:
     checks: DataChecks | None = None
     pairs_condition_number: float = math.nan
     rejected: tuple[tuple[str, str, str], ...] = ()
+    block: Block | None = field(default=None, compare=False)
 
     def parameter_for(self, variable: str) -> str | None:
         """The parameter paired with *variable*, or None."""
@@ -300,7 +306,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None,
                  other_gains: npt.ArrayLike | None = None, other_time_constants: npt.ArrayLike | None = None,
                  min_lambda: float = MIN_LAMBDA, check_gains: npt.ArrayLike | None = None,
-                 check_time_constants: npt.ArrayLike | None = None) -> Pairing:
+                 check_time_constants: npt.ArrayLike | None = None,
+                 units: tuple[Sequence[int | None], Sequence[int | None]] | None = None) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -351,6 +358,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         chosen pair's gain is the larger in magnitude of all the gain sets
         (the tracking loop runs on the twin as recorded, and tuned for the
         highest gain seen it stays stable where the gain grows).
+    units : (sequence of int or None, sequence of int or None), optional
+        Pairing per unit (:mod:`~trackingbox.analysis.blocks`): the unit index of each variable
+        and of each parameter (None: not a unit's). A parameter of unit ``k`` pairs only with a
+        variable of unit ``k``, one per parameter, chosen so that the square relative gain array
+        of those parameters and variables is closest to the identity
+        (:func:`~trackingbox.analysis.blocks.choose_block`), each pair's relative gain there at
+        least *min_lambda*; the other parameters pair on the relative gains of the whole matrix
+        over the variables the block leaves, the most pairs in all first. The data checks apply
+        to every pair as before.
 
     Returns
     -------
@@ -537,6 +553,7 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         allowed = data.allowed[np.ix_(rows, cols)].copy()
         allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
     G2 = tau2 = None
+    var_unit, par_unit = _unit_lists(units, m, n)
     flipped: dict[int, str] = {}
     if other_gains is not None:
         G2 = np.asarray(other_gains, dtype=float)
@@ -546,7 +563,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             raise AnalysisError(f"gains at the second operating point have shape {G2.shape}, expected {G.shape}")
         for a, i in enumerate(rows):
             for b, j in enumerate(cols):
-                if G[i, j] * G2[i, j] < 0 and lam_sub[a, b] >= min_lambda:
+                own = par_unit[j] is not None and var_unit[i] == par_unit[j]  # a candidate of the block
+                if G[i, j] * G2[i, j] < 0 and (lam_sub[a, b] >= min_lambda or own):
                     allowed[a, b] = False
                     flipped[i] = (f"its gain to {parameters[j]} changes sign between the operating points "
                                   f"({_fmt(G[i, j])} and {_fmt(G2[i, j])}): a loop on it would turn unstable")
@@ -555,10 +573,21 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     ladder = data.checks.ladder() if data is not None else ()
     rung: dict[tuple[int, int], int] = {}
     speeds: dict[int, float] = {}
+    # pairing per unit (units): the unit parameters on their own tags, as a square block
+    block_cols = [b for b, j in enumerate(cols) if par_unit[j] is not None]
+    block: Block | None = None
     while True:
         cost = np.where((lam_sub >= min_lambda) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
-        r_idx, c_idx = linear_sum_assignment(cost)
         chosen: dict[int, int] = {}
+        if block_cols:
+            cost[:, block_cols] = _FORBIDDEN
+            candidates = {cols[b]: [rows[a] for a in range(len(rows))
+                                    if var_unit[rows[a]] == par_unit[cols[b]] and allowed[a, b]]
+                          for b in block_cols}
+            block = choose_block(S, candidates, min_lambda=min_lambda, rest=_rest_of(cost, rows))
+            chosen.update(zip(block.tags, block.parameters))
+            cost[[rows.index(i) for i in block.tags], :] = _FORBIDDEN
+        r_idx, c_idx = linear_sum_assignment(cost)
         for a, b in zip(r_idx, c_idx):
             if cost[a, b] < _FORBIDDEN:
                 chosen[rows[int(a)]] = cols[int(b)]
@@ -595,11 +624,12 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if Gc is not None and tauc is not None and abs(Gc[i, j]) > abs(gain):
                 gain = float(Gc[i, j])
                 t63 = float(tauc[i, j]) if math.isfinite(tauc[i, j]) else t63
-            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound,
+            lam_ij = (block.lambda_of(j) if block is not None and j in block.parameters else float(lam[i, j]))
+            pairs.append(Pair(variables[i], parameters[j], lam_ij, gain, t63, ratio, at_bound,
                               closed_loop=speeds.get(i, math.nan)))
-            if lam[i, j] > large:
+            if lam_ij > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
-                                f"{_fmt(lam[i, j])}")
+                                f"{_fmt(lam_ij)}")
     pairs_cond = math.nan
     if chosen:
         order_i = sorted(chosen)
@@ -637,11 +667,21 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                       "fewer usable parameters than variables")
             if rejected is not None:
                 reason = f"{rejected}; {reason}"
+        if var_unit[i] is not None and block_cols:
+            reason = _unit_tag_reason(i, block, S, variables, parameters, var_unit, par_unit,
+                                      [cols[b] for b in block_cols], allowed[a, block_cols], rejected) + (
+                "" if reason == rejected else f"; among the other parameters: {reason}")
         left_out.append((variables[i], reason))
     for b, j in enumerate(cols):
         if j in used:
             continue
         col = lam_sub[:, b]
+        if par_unit[j] is not None:
+            own = [rows[a] for a in range(len(rows)) if var_unit[rows[a]] == par_unit[j]]
+            left_out.append((parameters[j], _unit_parameter_reason(j, own, block, variables, parameters,
+                                                                   par_unit, allowed[:, b], rows, excluded,
+                                                                   min_lambda)))
+            continue
         if excluded and len(excluded) == len(rows):
             reason = "no tracking variable is worth tracking (see the variables' reasons)"
         elif np.all(col <= 1e-9):
@@ -674,9 +714,89 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         logger.info(msg)
     if data is None:
         return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
-                       pairs_condition_number=pairs_cond)
+                       pairs_condition_number=pairs_cond, block=block)
     return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
-                   data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
+                   data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected), block=block)
+
+
+def _unit_lists(units: tuple[Sequence[int | None], Sequence[int | None]] | None, m: int, n: int
+                ) -> tuple[list[int | None], list[int | None]]:
+    """The unit index per variable and per parameter (all None without *units*)."""
+    if units is None:
+        return [None] * m, [None] * n
+    var_unit, par_unit = (list(units[0]), list(units[1]))
+    if len(var_unit) != m or len(par_unit) != n:
+        raise AnalysisError(f"units: {len(var_unit)} variable and {len(par_unit)} parameter entries for "
+                            f"{m} variables and {n} parameters")
+    return var_unit, par_unit
+
+
+def _rest_of(cost: np.ndarray, rows: Sequence[int]):  # type: ignore[no-untyped-def]
+    """``rest(taken) -> (pairs, cost)`` of :func:`~trackingbox.analysis.blocks.choose_block`: the
+    assignment of the other parameters on *cost* (rows: *rows*) without the rows the block takes."""
+    where = {i: a for a, i in enumerate(rows)}
+
+    def rest(taken: frozenset[int]) -> tuple[int, float]:
+        c = cost.copy()
+        c[[where[i] for i in taken], :] = _FORBIDDEN
+        r, k = linear_sum_assignment(c)
+        ok = c[r, k] < _FORBIDDEN
+        return int(ok.sum()), float(c[r, k][ok].sum())
+
+    return rest
+
+
+def _unit_tag_reason(i: int, block: Block | None, S: np.ndarray, variables: Sequence[str],
+                     parameters: Sequence[str], var_unit: Sequence[int | None], par_unit: Sequence[int | None],
+                     block_cols: Sequence[int], allowed: np.ndarray, rejected: str | None) -> str:
+    """Why variable *i*, a tag of a unit, carries none of its unit's parameters."""
+    mine = [j for j in block_cols if par_unit[j] == var_unit[i]]
+    if not mine:
+        return f"a tag of unit [{var_unit[i]}], which has no candidate parameter paired per unit"
+    parts = []
+    for j in mine:
+        k = list(block_cols).index(j)
+        if not allowed[k]:
+            parts.append(f"the data checks do not allow it for {parameters[j]}"
+                         + (f" ({rejected})" if rejected else ""))
+            continue
+        if block is None or j not in block.parameters:
+            parts.append(f"{parameters[j]} stays unpaired (see its reason)")
+            continue
+        a = block.parameters.index(j)
+        taker = block.tags[a]
+        trial = list(block.tags)
+        trial[a] = i
+        L = square_rga(S[np.ix_(trial, list(block.parameters))]) if i not in block.tags else None
+        if L is None:
+            alt = "the block would be singular" if i not in block.tags else "it is taken in the block"
+        else:
+            alt = (f"with it {parameters[j]}'s relative gain in the block would be {_fmt(L[a, a])} "
+                   f"and the block's RGA number {_fmt(float(np.abs(L - np.eye(len(trial))).sum()))}")
+        parts.append(f"{parameters[j]} pairs with {variables[taker]} (relative gain {_fmt(block.rga[a, a])} in "
+                     f"the block of unit parameters, RGA number {_fmt(block.number)}); {alt}")
+    return f"a tag of unit [{var_unit[i]}]: " + "; ".join(parts)
+
+
+def _unit_parameter_reason(j: int, own: Sequence[int], block: Block | None, variables: Sequence[str],
+                           parameters: Sequence[str], par_unit: Sequence[int | None], allowed: np.ndarray,
+                           rows: Sequence[int], excluded: set[int], min_lambda: float) -> str:
+    """Why parameter *j* of a unit is left unpaired."""
+    unit = par_unit[j]
+    if not own:
+        return f"paired per unit, and no tracking variable belongs to its unit [{unit}] (twin outputs ending in [{unit}])"
+    names = ", ".join(variables[i] for i in own)
+    usable = [i for i in own if i not in excluded and allowed[list(rows).index(i)]]
+    if not usable:
+        return (f"paired per unit, and none of its unit's tags ({names}) is usable: they are at their noise "
+                "floor, out of its reach or refused by the predicted tracking (see their reasons)")
+    if block is not None:
+        for col, best in block.dropped:
+            if col == j:
+                return (f"paired per unit: with every choice among its unit's tags ({', '.join(variables[i] for i in usable)}) "
+                        f"its relative gain in the block of unit parameters stays below the {min_lambda:g} a pair needs "
+                        f"(at best {_fmt(best)}): its loop would depend on the others'")
+    return f"paired per unit; its unit's usable tags ({', '.join(variables[i] for i in usable)}) are taken"
 
 
 def recording_time_constants(structure: npt.ArrayLike, recording: npt.ArrayLike) -> np.ndarray:
