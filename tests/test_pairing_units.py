@@ -15,6 +15,7 @@ import pytest
 
 from trackingbox.analysis.blocks import choose_block, output_unit, parameter_unit, rga_number, square_rga
 from trackingbox.analysis.offsets import Residuals
+from trackingbox.analysis.pair_stage import spec_units
 from trackingbox.analysis.pairing import DataChecks, choose_pairs
 from trackingbox.errors import SpecError
 from trackingbox.spec import PairingSettings, dump_spec, loads_spec
@@ -63,13 +64,26 @@ def test_choose_block_takes_the_tags_whose_block_is_closest_to_the_identity():
 
 
 def test_choose_block_leaves_out_a_parameter_no_tag_gives_a_usable_relative_gain():
-    # [[1, 2], [1, 1]]: lambda_11 = 1 x 1 / (1 x 1 - 2 x 1) = -1 for both pairs: no valid block of two;
-    # the first (the smaller relative gain; a tie, the first) is left out, the other alone has lambda 1
-    b = choose_block([[1.0, 2.0], [1.0, 1.0]], {0: [0], 1: [1]})
-    assert b.dropped == ((0, pytest.approx(-1.0, rel=1e-12)),)
+    # [[1, 2], [1, 1.5]]: lambda_11 = 1 x 1.5 / (1 x 1.5 - 2 x 1) = -3 for both pairs: no valid block of
+    # two. Alone each has lambda 1; the second's gain is the larger (1.5): it stays, the first is left
+    # out with its relative gain beside it, -3
+    b = choose_block([[1.0, 2.0], [1.0, 1.5]], {0: [0], 1: [1]})
     assert (b.parameters, b.tags) == ((1,), (1,))
+    assert b.dropped == ((0, pytest.approx(-3.0, rel=1e-12)),)
     assert b.rga == pytest.approx(np.ones((1, 1)))
     assert choose_block([[1.0]], {0: []}).parameters == ()
+
+
+def test_choose_block_leaves_a_parameter_unpaired_rather_than_entangle_a_pair():
+    # rest() says: the pair (row 1, column 1) fails the separation check (say row 1 is the level
+    # controller output of a valve that would be left unpaired). Column 1 has no other tag: it stays
+    # unpaired, column 0 pairs.
+    def rest(pairs):
+        return 0, 0.0, int((1, 1) in pairs)
+
+    b = choose_block([[1.0, 0.0], [0.0, 1.0]], {0: [0], 1: [1]}, rest=rest)
+    assert (b.parameters, b.tags) == ((0,), (0,))
+    assert b.dropped == ((1, pytest.approx(1.0)),)
 
 
 def test_coordinate_descent_finds_the_triangular_block():
@@ -178,10 +192,57 @@ def test_a_block_the_loops_cannot_hold_together_is_refused_with_reasons():
 
 def test_spec_units_round_trip(tmp_path):
     base = ('twin = "t.fmu"\nmeasurements = "m.csv"\nsample_time = 10.0\n[outputs]\nT = "TI_body[1]"\n'
-            '[[parameters]]\nname = "effect[1].Rf"\nstart = 0.0\nmin = 0.0\nmax = 1.0\n')
-    spec = loads_spec(base + '[pairing]\nunits = ["effect"]\n', tmp_path / "s.toml", check_files=False)
-    assert spec.pairing.units == ("effect",)
-    assert 'units = [' in dump_spec(spec) and '"effect"' in dump_spec(spec)
+            'Z = "ZI_body[1]"\nQ = "DI_product"\n'
+            '[[parameters]]\nname = "effect[1].Rf"\nstart = 0.0\nmin = 0.0\nmax = 1.0\n'
+            '[[parameters]]\nname = "valve.capacity"\nstart = 1.0\nmin = 0.5\nmax = 1.5\n')
+    every = loads_spec(base + '[pairing]\nunits = ["effect"]\n', tmp_path / "s.toml", check_files=False)
+    assert every.pairing.units == (("effect", ()),)
+    assert spec_units(every, ["T", "Z", "Q"], ["effect[1].Rf", "valve.capacity"]) == ([1, 1, None], [1, None])
+    listed = loads_spec(base + '[pairing]\nunits = { effect = ["TI_body"] }\n', tmp_path / "s.toml",
+                        check_files=False)
+    assert listed.pairing.units == (("effect", ("TI_body",)),)
+    # the level controller's output ZI_body[1] is not listed: not a candidate of effect 1's parameters
+    assert spec_units(listed, ["T", "Z", "Q"], ["effect[1].Rf", "valve.capacity"]) == ([1, None, None], [1, None])
+    again = loads_spec(dump_spec(listed), tmp_path / "s.toml", check_files=False)
+    assert again.pairing.units == listed.pairing.units
     assert loads_spec(base, tmp_path / "s.toml", check_files=False).pairing == PairingSettings()
-    with pytest.raises(SpecError, match="units must be a list"):
-        loads_spec(base + '[pairing]\nunits = "effect"\n', tmp_path / "s.toml", check_files=False)
+    assert spec_units(loads_spec(base, tmp_path / "s.toml", check_files=False), ["T"], ["effect[1].Rf"]) is None
+    for bad in ('units = "effect"', 'units = { effect = "TI_body" }', 'units = [1]'):
+        with pytest.raises(SpecError, match="units must be"):
+            loads_spec(base + f"[pairing]\n{bad}\n", tmp_path / "s.toml", check_files=False)
+
+
+def _feed_end_case(p2_offset: float) -> dict:
+    """Effect 2 upstream of effect 1's tag: P1 = Rf1 + 2 Rf2 (effect 1's steam chest sees effect 2's
+    fouling through the chain), P2 = Rf2. P1 shows Rf1 = 0.5; P2 shows *p2_offset* (noise 0.01)."""
+    rng = np.random.default_rng(7)
+    n, dt = 600, 10.0
+    meas = np.array([0.5 + rng.normal(0.0, 0.01, n), p2_offset + rng.normal(0.0, 0.01, n)])
+    res = Residuals(("P1", "P2"), dt * np.arange(n), meas, np.zeros_like(meas), dt)
+    return dict(gains=[[1.0, 2.0], [0.0, 1.0]], variables=["P1", "P2"], parameters=["effect[1].Rf", "effect[2].Rf"],
+                residuals=res, bounds=[(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)], time_constants=[[10.0, 10.0]] * 2,
+                checks=DataChecks(max_leak=0.5))
+
+
+def test_separation_per_unit_takes_the_move_the_data_allow():
+    # P2 at its noise (RMS 0.01 < 5 x noise): effect 2 cannot be paired. Its leak into Rf1 on P1 is
+    # S_pp^-1 S_pu = 2 / 1 = 2 ranges per range: the plain check (limit 0.5) refuses P1/Rf1. But had
+    # Rf2 moved by m, P2 would show m (gain 1, range 1): its RMS 0.01 bounds m to ~0.01, a bias of
+    # ~0.02 on Rf1, i.e. 2 x 0.01 / SEPARATION_MOVE (0.2) = 0.1 < 0.5 on the check's scale.
+    kw = _feed_end_case(0.0)
+    plain = choose_pairs(**kw)
+    assert _pairs(plain) == {}
+    assert "cannot be told apart from effect[2].Rf" in _reasons(plain)["P1"]
+    units = choose_pairs(**kw, units=([1, 2], [1, 2]))
+    assert _pairs(units) == {"P1": "effect[1].Rf"}
+    assert "P2" in _reasons(units)["effect[2].Rf"]
+
+
+def test_separation_per_unit_still_refuses_what_the_data_do_not_bound():
+    # P2 shows -0.15 (needs Rf2 below its lower bound: out of reach, so effect 2 stays unpaired), which
+    # bounds Rf2's move only to 0.15: weight 0.15 / 0.2 = 0.75, leak 2 x 0.75 = 1.5 > 0.5: refused
+    units = choose_pairs(**_feed_end_case(-0.15), units=([1, 2], [1, 2]))
+    assert _pairs(units) == {}
+    why = _reasons(units)["effect[1].Rf"]
+    assert "with it on P1" in why and "cannot be told apart from effect[2].Rf" in why
+    assert "the data allow effect[2].Rf a move of 0.15" in why

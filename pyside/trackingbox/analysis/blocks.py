@@ -109,8 +109,9 @@ class Block:
     rga : ndarray, shape (k, k)
         Relative gain array of the square block (rows: *tags*, columns: *parameters*).
     dropped : tuple of (int, float)
-        Parameters (columns) left out because no choice of tags gave them a relative gain of at
-        least ``min_lambda`` with the others paired, each with its largest relative gain then.
+        Parameters (columns) with candidates that the choice leaves unpaired, each with its largest
+        relative gain in the block on any of its candidates free, beside the chosen pairs (NaN: none,
+        or the block singular).
     """
 
     parameters: tuple[int, ...]
@@ -129,29 +130,42 @@ class Block:
         return float(self.rga[a, a])
 
 
-Rest = Callable[[frozenset[int]], tuple[int, float]]
+#: ``rest(block_pairs) -> (pairs, cost, entangled)``, see :func:`choose_block`.
+Rest = Callable[[frozenset[tuple[int, int]]], tuple[int, float, int]]
+#: Sort key of a choice: (invalid, entangled, -pairs, cost, -strength); smaller is better.
+Key = tuple[int, int, int, float, float]
+Cache = dict[frozenset[tuple[int, int]], tuple[int, float, int]]
 
 
-def _score(S: np.ndarray, cols: Sequence[int], rows: Sequence[int], min_lambda: float,
-           rest: Rest | None, cache: dict[frozenset[int], tuple[int, float]]) -> tuple[tuple[int, int, float], np.ndarray | None]:
-    """Sort key of a choice (smaller is better): (invalid, -pairs, RGA number + the rest's cost)."""
-    L = square_rga(S[np.ix_(rows, cols)])
-    taken = frozenset(rows)
+def _score(S: np.ndarray, cols: Sequence[int], rows: Sequence[int | None], min_lambda: float,
+           rest: Rest | None, cache: Cache) -> tuple[Key, np.ndarray | None]:
+    """Sort key of a choice (*rows*: a row per column, None: the column left unpaired) and its block's
+    relative gain array: (any relative gain below *min_lambda*, pairs that fail the separation check,
+    -pairs in all, RGA number + the rest's cost, -the pairs' scaled gains)."""
+    pairs = [(r, c) for r, c in zip(rows, cols) if r is not None]
+    taken = frozenset(pairs)
     if rest is not None and taken not in cache:
         cache[taken] = rest(taken)
-    n_rest, c_rest = cache[taken] if rest is not None else (0, 0.0)
+    n_rest, c_rest, entangled = cache[taken] if rest is not None else (0, 0.0, 0)
+    strength = float(sum(abs(S[r, c]) for r, c in pairs))
+    if not pairs:
+        return (0, entangled, -n_rest, c_rest, 0.0), np.zeros((0, 0))
+    L = square_rga(S[np.ix_([r for r, _ in pairs], [c for _, c in pairs])])
     if L is None:
-        return (1, -n_rest, math.inf), None
+        return (1, entangled, -(len(pairs) + n_rest), math.inf, -strength), None
     diag = np.diag(L)
     invalid = int(not (diag >= min_lambda).all())
-    # an invalid choice is ranked by how far its worst pair is from min_lambda (descent walks out of it)
-    cost = rga_number(L) + c_rest + (invalid * 1e3 * float(np.clip(min_lambda - diag, 0.0, None).sum()))
-    return (invalid, -(len(cols) + n_rest), cost), L
+    return (invalid, entangled, -(len(pairs) + n_rest), rga_number(L) + c_rest, -strength), L
 
 
 def choose_block(scaled: npt.ArrayLike, candidates: Mapping[int, Sequence[int]], *, min_lambda: float = 0.1,
                  rest: Rest | None = None, exhaustive: int = EXHAUSTIVE) -> Block:
     """One tag per parameter, from its *candidates*, so that the block's loops interact least.
+
+    Every parameter may also stay unpaired. Of all choices the best is, in this order: every pair's
+    relative gain in the block at least *min_lambda*; the fewest pairs that fail the separation
+    check (see *rest*); the most pairs in all; the smallest RGA number of the block (plus the
+    rest's cost); the largest scaled gains of the pairs (the clearest indicators).
 
     Parameters
     ----------
@@ -159,13 +173,17 @@ def choose_block(scaled: npt.ArrayLike, candidates: Mapping[int, Sequence[int]],
         Scaled gain matrix (the square block's relative gains do not depend on the scaling).
     candidates : mapping int -> sequence of int
         Column (parameter) -> the rows (tags) it may pair with: its unit's own tags that the data
-        checks allow. A column without candidates is left out (not in the result).
+        checks allow. A column without candidates is left out.
     min_lambda : float
         Smallest relative gain of a pair in the block.
     rest : callable, optional
-        ``rest(rows_taken) -> (pairs, cost)``: how many pairs the other parameters get, and the sum
-        of their ``|lambda - 1|``, when the block takes *rows_taken*. A choice with more pairs in
-        all wins; among equals the smallest RGA number plus that cost.
+        ``rest(block_pairs) -> (pairs, cost, entangled)`` for the block's ``(row, column)`` pairs:
+        how many pairs the other parameters get on the rows the block leaves, the sum of their
+        ``|lambda - 1|``, and how many of all those pairs would fail the separation check
+        (:func:`~trackingbox.analysis.pairing.leakage`: a pair whose parameter follows a candidate
+        left unpaired; 0 without the check). So a unit parameter does not take the tag another
+        candidate is told apart on (the level controller's output of a valve whose capacity is a
+        candidate), which would leave that candidate unpaired and followed by the loops that see it.
     exhaustive : int
         Every combination is tried up to this many; above it a coordinate descent from each
         parameter's strongest own tag (by scaled gain).
@@ -173,9 +191,8 @@ def choose_block(scaled: npt.ArrayLike, candidates: Mapping[int, Sequence[int]],
     Returns
     -------
     Block
-        Empty (no parameters) when no candidate is left. While no choice gives every pair a
-        relative gain of at least *min_lambda*, the parameter with the smallest one in the best
-        choice is left out (in :attr:`Block.dropped`) and the rest chosen again.
+        The pairs chosen; :attr:`Block.dropped` the parameters with candidates left unpaired, each
+        with its largest relative gain in the block on any of its candidates (NaN: singular).
 
     Examples
     --------
@@ -190,53 +207,58 @@ def choose_block(scaled: npt.ArrayLike, candidates: Mapping[int, Sequence[int]],
     """
     S = np.asarray(scaled, dtype=float)
     cand = {int(j): [int(i) for i in dict.fromkeys(rows)] for j, rows in candidates.items() if len(rows)}
-    dropped: list[tuple[int, float]] = []
-    cache: dict[frozenset[int], tuple[int, float]] = {}
-    while cand:
-        cols = sorted(cand)
-        best_key, best_rows, best_L = _search(S, cols, cand, min_lambda, rest, cache, exhaustive)
-        if best_rows is not None and best_key[0] == 0:
-            return Block(tuple(cols), tuple(best_rows), best_L, tuple(dropped))
-        # no valid choice: leave out the parameter with the smallest relative gain in the best one
-        if best_L is not None:
-            a = int(np.argmin(np.diag(best_L)))
-            dropped.append((cols[a], float(best_L[a, a])))
-        else:  # singular in every choice tried: the parameter whose strongest own gain is weakest
-            a = int(np.argmin([max(abs(S[i, j]) for i in cand[j]) for j in cols]))
-            dropped.append((cols[a], math.nan))
-        del cand[cols[a]]
-    return Block((), (), np.zeros((0, 0)), tuple(dropped))
+    cols = sorted(cand)
+    if not cols:
+        return Block((), (), np.zeros((0, 0)))
+    cache: Cache = {}
+    key, rows, L = _search(S, cols, cand, min_lambda, rest, cache, exhaustive)
+    pairs = [(r, c) for r, c in zip(rows, cols) if r is not None]
+    dropped = []
+    for c, r in zip(cols, rows):
+        if r is not None:
+            continue
+        best = math.nan
+        for i in cand[c]:
+            if i in {p for p, _ in pairs}:
+                continue
+            trial = pairs + [(i, c)]
+            Lt = square_rga(S[np.ix_([p for p, _ in trial], [q for _, q in trial])])
+            if Lt is not None and not (Lt[-1, -1] <= best):
+                best = float(Lt[-1, -1])
+        dropped.append((c, best))
+    return Block(tuple(c for _, c in pairs), tuple(r for r, _ in pairs),
+                 L if L is not None else np.zeros((0, 0)), tuple(dropped))
 
 
 def _search(S: np.ndarray, cols: list[int], cand: dict[int, list[int]], min_lambda: float, rest: Rest | None,
-            cache: dict[frozenset[int], tuple[int, float]], exhaustive: int
-            ) -> tuple[tuple[int, int, float], list[int] | None, np.ndarray | None]:
-    """Best choice of distinct rows for *cols*: every combination, or a coordinate descent."""
-    size = math.prod(len(cand[j]) for j in cols)
-    best: tuple[tuple[int, int, float], list[int] | None, np.ndarray | None] = ((2, 0, math.inf), None, None)
+            cache: Cache, exhaustive: int) -> tuple[Key, list[int | None], np.ndarray | None]:
+    """Best choice (a row or None per column, rows distinct): every combination, or a coordinate descent."""
+    options = {j: [*cand[j], None] for j in cols}
+    size = math.prod(len(options[j]) for j in cols)
+    best: tuple[Key, list[int | None], np.ndarray | None]
     if size <= exhaustive:
-        for combo in itertools.product(*(cand[j] for j in cols)):
-            if len(set(combo)) < len(combo):
+        best = ((2, 0, 0, math.inf, 0.0), [None] * len(cols), None)
+        for combo in itertools.product(*(options[j] for j in cols)):
+            taken = [r for r in combo if r is not None]
+            if len(set(taken)) < len(taken):
                 continue
             key, L = _score(S, cols, combo, min_lambda, rest, cache)
             if key < best[0]:
                 best = (key, list(combo), L)
         return best
     # coordinate descent from each parameter's strongest own tag not yet taken
-    rows: list[int] = []
+    rows: list[int | None] = []
     for j in cols:
         free = [i for i in sorted(cand[j], key=lambda i: -abs(S[i, j])) if i not in rows]
-        if not free:
-            return best
-        rows.append(free[0])
+        rows.append(free[0] if free else None)
     key, L = _score(S, cols, rows, min_lambda, rest, cache)
     best = (key, list(rows), L)
     improved = True
     while improved:
         improved = False
         for a, j in enumerate(cols):
-            for i in cand[j]:
-                if i in best[1]:
+            for i in options[j]:
+                if i == best[1][a] or (i is not None and i in best[1]):
                     continue
                 trial = list(best[1])
                 trial[a] = i

@@ -502,15 +502,24 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
 
 def spec_units(spec: Spec, variables: Sequence[str], parameters: Sequence[str]
                ) -> tuple[list[int | None], list[int | None]] | None:
-    """The unit index of each tag (its twin output's trailing ``[k]``) and of each parameter of the
-    spec's ``[pairing] units`` (``effect[k].Rf``), for :func:`~trackingbox.analysis.pairing.choose_pairs`'
-    pairing per unit; None when the spec names no units."""
+    """The unit index of each tag (its twin output's trailing ``[k]``, for the outputs the spec's
+    ``[pairing] units`` lists; all of them for a unit listed without outputs) and of each parameter of
+    those units (``effect[k].Rf``), for :func:`~trackingbox.analysis.pairing.choose_pairs`' pairing per
+    unit; None when the spec names no units. With several arrays a tag listed for any of them belongs
+    to that index's units."""
     from .blocks import output_unit, parameter_unit
 
     if not spec.pairing.units:
         return None
-    return ([output_unit(spec.outputs.get(v, v)) for v in variables],
-            [parameter_unit(p, spec.pairing.units) for p in parameters])
+    listed = {t for _, tags in spec.pairing.units for t in tags}
+    anything = any(not tags for _, tags in spec.pairing.units)
+
+    def unit(variable: str) -> int | None:
+        name = spec.outputs.get(variable, variable)
+        k = output_unit(name)
+        return k if k is not None and (anything or name[: name.rindex("[")] in listed) else None
+
+    return ([unit(v) for v in variables], [parameter_unit(p, [u for u, _ in spec.pairing.units]) for p in parameters])
 
 
 def _max_leak(spec: Spec, settings: PairSettings) -> float:

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -72,6 +72,11 @@ _FORBIDDEN = 1e6
 SETTLE_LOOPS = 3.0
 #: Ratio of consecutive loop time constants :func:`loop_ladder` tries for one pair.
 LADDER_STEP = math.sqrt(2.0)
+#: The move of an unpaired candidate (a fraction of its bound range) ``max_leak`` is set for: at 0.5
+#: a fifth of its range biases a paired parameter by at most a tenth of its own (see
+#: :class:`DataChecks`). With pairing per unit the check takes the smaller move the data allow
+#: (:meth:`_DataView.moved_at_most`) when they bound it below this.
+SEPARATION_MOVE = 0.2
 
 
 @dataclass(frozen=True)
@@ -575,6 +580,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     speeds: dict[int, float] = {}
     # pairing per unit (units): the unit parameters on their own tags, as a square block
     block_cols = [b for b, j in enumerate(cols) if par_unit[j] is not None]
+    if data is not None and block_cols:
+        data.bounded = True
     block: Block | None = None
     while True:
         cost = np.where((lam_sub >= min_lambda) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
@@ -584,7 +591,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             candidates = {cols[b]: [rows[a] for a in range(len(rows))
                                     if var_unit[rows[a]] == par_unit[cols[b]] and allowed[a, b]]
                           for b in block_cols}
-            block = choose_block(S, candidates, min_lambda=min_lambda, rest=_rest_of(cost, rows))
+            block = choose_block(S, candidates, min_lambda=min_lambda,
+                                 rest=_rest_of(cost, rows, cols, S, data.checks.max_leak if data else math.inf,
+                                               data.leak_weights if data else None))
             chosen.update(zip(block.tags, block.parameters))
             cost[[rows.index(i) for i in block.tags], :] = _FORBIDDEN
         r_idx, c_idx = linear_sum_assignment(cost)
@@ -594,6 +603,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         if data is None or not chosen:
             break
         speeds = {i: ladder[rung.get((i, j), 0)] for i, j in chosen.items()} if ladder else {}
+        if block_cols:
+            # per unit, the structural check first: a unit parameter on another candidate's indicator
+            # (an effect's fouling on the level controller's output, which its valve's capacity moves
+            # as much) gets a loop that follows that candidate, and in a chain that loop distorts the
+            # predicted tracking of every loop upstream, which would then be refused for it
+            worst = data.separate(chosen, [j for j in cols if j not in chosen.values()], S)
+            if worst is not None:
+                allowed[rows.index(worst[0]), cols.index(worst[1])] = False
+                continue
         predicted, failure = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc),
                                           speeds)
         worst: tuple[int, int] | None = None
@@ -678,9 +696,18 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         col = lam_sub[:, b]
         if par_unit[j] is not None:
             own = [rows[a] for a in range(len(rows)) if var_unit[rows[a]] == par_unit[j]]
-            left_out.append((parameters[j], _unit_parameter_reason(j, own, block, variables, parameters,
-                                                                   par_unit, allowed[:, b], rows, excluded,
-                                                                   min_lambda)))
+            why = _unit_parameter_reason(j, own, block, variables, parameters, par_unit, allowed[:, b], rows,
+                                         excluded, min_lambda)
+            if data is not None and block is not None and any(c == j for c, _ in block.dropped):
+                # what the separation check would say with it on its strongest usable tag
+                free = [i for i in own if i not in chosen and i not in excluded and allowed[rows.index(i), b]]
+                if free:
+                    i = max(free, key=lambda r: abs(S[r, j]))
+                    trial = {**chosen, i: j}
+                    found = data.entangled(trial, [q for q in cols if q not in trial.values()], S)
+                    if found is not None:
+                        why += f"; with it on {variables[i]}, {variables[found[0]]}: {found[2]}"
+            left_out.append((parameters[j], why))
             continue
         if excluded and len(excluded) == len(rows):
             reason = "no tracking variable is worth tracking (see the variables' reasons)"
@@ -731,17 +758,33 @@ def _unit_lists(units: tuple[Sequence[int | None], Sequence[int | None]] | None,
     return var_unit, par_unit
 
 
-def _rest_of(cost: np.ndarray, rows: Sequence[int]):  # type: ignore[no-untyped-def]
-    """``rest(taken) -> (pairs, cost)`` of :func:`~trackingbox.analysis.blocks.choose_block`: the
-    assignment of the other parameters on *cost* (rows: *rows*) without the rows the block takes."""
+def _rest_of(cost: np.ndarray, rows: Sequence[int], cols: Sequence[int], S: np.ndarray, max_leak: float,
+             weights: Callable[[Sequence[int]], np.ndarray] | None = None
+             ) -> Callable[[frozenset[tuple[int, int]]], tuple[int, float, int]]:
+    """``rest(block_pairs) -> (pairs, cost, entangled)`` of :func:`~trackingbox.analysis.blocks.choose_block`:
+    the assignment of the other parameters on *cost* (rows: *rows*, columns: *cols*) without the rows
+    the block takes, and how many of all the pairs a parameter left unpaired moves by more than
+    *max_leak* of its range per range (:func:`leakage` on the scaled gains *S*; 0 when it is inf)."""
     where = {i: a for a, i in enumerate(rows)}
 
-    def rest(taken: frozenset[int]) -> tuple[int, float]:
+    def rest(taken: frozenset[tuple[int, int]]) -> tuple[int, float, int]:
         c = cost.copy()
-        c[[where[i] for i in taken], :] = _FORBIDDEN
+        c[[where[i] for i, _ in taken], :] = _FORBIDDEN
         r, k = linear_sum_assignment(c)
         ok = c[r, k] < _FORBIDDEN
-        return int(ok.sum()), float(c[r, k][ok].sum())
+        entangled = 0
+        if math.isfinite(max_leak):
+            pairs = sorted(taken) + [(rows[int(a)], cols[int(b)]) for a, b in zip(r[ok], k[ok])]
+            used = {j for _, j in pairs}
+            unpaired = [j for j in cols if j not in used]
+            try:
+                L = np.abs(leakage(S, [i for i, _ in pairs], [j for _, j in pairs], unpaired))
+                if weights is not None and L.size:
+                    L = L * weights(unpaired)[None, :]
+                entangled = int((L.max(axis=1) > max_leak).sum()) if L.size else 0
+            except AnalysisError:   # singular pairs: as bad as every pair entangled
+                entangled = len(pairs)
+        return int(ok.sum()), float(c[r, k][ok].sum()), entangled
 
     return rest
 
@@ -792,10 +835,16 @@ def _unit_parameter_reason(j: int, own: Sequence[int], block: Block | None, vari
                 "floor, out of its reach or refused by the predicted tracking (see their reasons)")
     if block is not None:
         for col, best in block.dropped:
-            if col == j:
-                return (f"paired per unit: with every choice among its unit's tags ({', '.join(variables[i] for i in usable)}) "
-                        f"its relative gain in the block of unit parameters stays below the {min_lambda:g} a pair needs "
-                        f"(at best {_fmt(best)}): its loop would depend on the others'")
+            if col != j:
+                continue
+            tags = ", ".join(variables[i] for i in usable)
+            if not best >= min_lambda:
+                return (f"paired per unit: on its unit's usable tags ({tags}) its relative gain in the block of "
+                        f"unit parameters stays below the {min_lambda:g} a pair needs (at best {_fmt(best)}, the "
+                        "block singular if nan): its loop would depend on the others'")
+            return (f"paired per unit: on its unit's usable tags ({tags}) a pair (its own or one it displaces) could "
+                    "not be told apart from a candidate left unpaired (the separation check), or it would take "
+                    f"the only tag of another candidate (relative gain in the block at best {_fmt(best)})")
     return f"paired per unit; its unit's usable tags ({', '.join(variables[i] for i in usable)}) are taken"
 
 
@@ -879,10 +928,51 @@ class _DataView:
         self._last: dict[int, str] = {}
         #: (variable, parameter) of the pairs :meth:`separate` forbade
         self.apart: set[tuple[str, str]] = set()
+        #: separation per move the data allow (pairing per unit): see :meth:`leak_weights`
+        self.bounded = False
+
+    def moved_at_most(self, j: int) -> float:
+        """Largest move of candidate *j*, in fractions of its bound range (at most 1), that the untracked
+        errors allow: moved by ``m``, it would move tag ``i`` by ``|g_ij| x m x range``, and no tag's
+        untracked RMS error (noise included) is smaller than what it shows (a candidate that moved more
+        would show in some tag, unless others cancelled it there)."""
+        span = float(self.B[j, 2] - self.B[j, 1])
+        best = math.inf
+        for i, st in enumerate(self.stat):
+            if st is None or st.samples == 0 or not math.isfinite(st.rms):
+                continue
+            moved = abs(float(self.G[i, j])) * span
+            if moved > 0:
+                best = min(best, st.rms / moved)
+        return min(1.0, best)
+
+    def leak_weights(self, unpaired: Sequence[int]) -> np.ndarray:
+        """Per unpaired candidate, the factor on its leakage the separation check compares with
+        ``max_leak``: 1, or with :attr:`bounded` (pairing per unit) ``m / SEPARATION_MOVE`` when the data
+        bound its move ``m`` (:meth:`moved_at_most`) below :data:`SEPARATION_MOVE`. In a chain every
+        effect's fouling moves every pressure upstream of it; an effect whose tags show its fouling under
+        their noise (the feed end of a young train) cannot be paired, yet what it moved is as small as
+        that: its bias on the paired effects is bounded by it."""
+        if not self.bounded:
+            return np.ones(len(unpaired))
+        return np.array([min(1.0, self.moved_at_most(k) / SEPARATION_MOVE) for k in unpaired])
 
     def separate(self, chosen: dict[int, int], unpaired: Sequence[int], scaled: np.ndarray) -> tuple[int, int] | None:
         """The chosen pair whose parameter is worst told apart from a candidate left unpaired, if its
         leakage (:func:`leakage` of the *scaled* gains) exceeds ``max_leak``; else None."""
+        found = self.entangled(chosen, unpaired, scaled)
+        if found is None:
+            return None
+        i, j, reason = found
+        self.rejected.append((self.variables[i], self.parameters[j], reason))
+        self.apart.add((self.variables[i], self.parameters[j]))
+        self._last[i] = reason
+        logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
+        return i, j
+
+    def entangled(self, chosen: dict[int, int], unpaired: Sequence[int], scaled: np.ndarray
+                  ) -> tuple[int, int, str] | None:
+        """:meth:`separate`'s finding (variable, parameter, reason), not recorded; None when every pair passes."""
         limit = self.checks.max_leak
         if not chosen or not len(unpaired) or not math.isfinite(limit):
             return None
@@ -893,19 +983,18 @@ class _DataView:
         except AnalysisError as exc:
             logger.info("separation check skipped: %s", exc)
             return None
-        a, b = np.unravel_index(int(np.argmax(L)), L.shape)
-        if not L[a, b] > limit:
+        weight = self.leak_weights(unpaired)
+        a, b = np.unravel_index(int(np.argmax(L * weight)), L.shape)
+        if not L[a, b] * weight[b] > limit:
             return None
         i, j, k = rows[a], cols[a], unpaired[b]
         reason = (f"paired with {self.parameters[j]} it cannot be told apart from {self.parameters[k]}, which no "
                   f"loop tracks: at steady state a move of {self.parameters[k]} by its bound range moves "
-                  f"{self.parameters[j]} by {_fmt(float(L[a, b]))} of its own (limit {limit:g}), so "
-                  f"{self.parameters[j]}'s trajectory would show {self.parameters[k]}'s changes")
-        self.rejected.append((self.variables[i], self.parameters[j], reason))
-        self.apart.add((self.variables[i], self.parameters[j]))
-        self._last[i] = reason
-        logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
-        return i, j
+                  f"{self.parameters[j]} by {_fmt(float(L[a, b]))} of its own (limit {limit:g}"
+                  + (f"; the data allow {self.parameters[k]} a move of {_fmt(self.moved_at_most(k))} of its range, "
+                     f"so the limit applies to {_fmt(float(L[a, b] * weight[b]))}" if weight[b] < 1.0 else "")
+                  + f"), so {self.parameters[j]}'s trajectory would show {self.parameters[k]}'s changes")
+        return i, j, reason
 
     def row_reason(self, i: int, usable: np.ndarray) -> str | None:
         """Why variable *i* is left out before the RGA (noise level, no reachable parameter), or None."""

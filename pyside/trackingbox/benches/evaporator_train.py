@@ -131,6 +131,21 @@ CLOSED_LOOP_MIN = 1800.0
 #: pressure PI-7221 47 x as much as effect 1's, scaled by their common bound range): a fouling paired on
 #: a tag that an untracked fouling dominates tracks that one.
 MAX_LEAK = 0.5
+#: ``[pairing] units``: every effect's parameters (its fouling) pair per effect
+#: (:mod:`trackingbox.analysis.blocks`), on one of the effect's thermal instruments: its vapour and
+#: steam-chest pressures, body temperature, liquor and condensate flows (the duty, the driving
+#: temperature difference and the evaporation; notes section 4: fouling pairs with the steam or
+#: condensate flow, the vapour pressure or the product DS). Not its level controllers' outputs
+#: (``ZI_body``, ``ZI_condensate``): those are where a valve's capacity shows (notes: outlet Kv_max
+#: with the level-controller output), and a fouling paired there follows the valve.
+#: Why per effect: the vapour of effect k is the steam of effect k+1, so every effect's fouling moves
+#: every steam chest upstream of it by similar amounts, and the whole matrix's relative gain array
+#: (pseudo-inverse over ~50 tags with near-parallel rows) is ill-conditioned. Measured on the 7-effect
+#: 24 h case at the plant's constants (seed 0): relative gains up to 143 (effect 6's fouling on effect
+#: 2's steam chest), every pair refused by the data checks, no pairs; the square block of the effects'
+#: own steam-chest pressures is nearly triangular, relative gains 0.81-0.87 on effects 2-4.
+UNITS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("effect", ("PI_vapour", "PI_steamChest", "TI_body", "FI_liquor", "FI_condensate")),)
 
 
 def train_inputs(t: FloatArray, rng: np.random.Generator, warmup: float, stoppages: Sequence[Stoppage],
@@ -314,7 +329,7 @@ def pairing_settings(n: int) -> PairingSettings:
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
     return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, closed_loop_min=CLOSED_LOOP_MIN, scale=tuple(scale),
-                           max_leak=MAX_LEAK)
+                           max_leak=MAX_LEAK, units=UNITS)
 
 
 def estimate_only(names: Any) -> tuple[str, ...]:
