@@ -287,6 +287,13 @@ class PairingResult:
                          "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
                         for o in pairing.offsets],
             "rejected_pairs": [{"variable": v, "parameter": p, "reason": r} for v, p, r in pairing.rejected],
+            "unit_block": None if pairing.block is None else {
+                "variables": [st.variables[i] for i in pairing.block.tags],
+                "parameters": [st.parameters[j] for j in pairing.block.parameters],
+                "rga": [[_finite(x) for x in row] for row in pairing.block.rga.tolist()],
+                "rga_number": _finite(pairing.block.number),
+                "left_unpaired": [{"parameter": st.parameters[j], "best_lambda": _finite(lam)}
+                                  for j, lam in pairing.block.dropped]},
             "second_operating_point": None if self.second_point is None else
             {"time": self.second_point[0], "inputs": dict(self.second_point[1])},
             "gain_matrix_second": None if self.steptest_second is None else
