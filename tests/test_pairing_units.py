@@ -246,3 +246,28 @@ def test_separation_per_unit_still_refuses_what_the_data_do_not_bound():
     why = _reasons(units)["effect[1].Rf"]
     assert "with it on P1" in why and "cannot be told apart from effect[2].Rf" in why
     assert "the data allow effect[2].Rf a move of 0.15" in why
+
+
+def test_the_train_pairs_every_effects_fouling_on_its_own_thermal_tags():
+    from types import SimpleNamespace
+
+    from trackingbox.benches.evaporator_train import effect_outputs, pairing_settings, states
+
+    n = 4
+    settings = pairing_settings(n)
+    (family, listed), = settings.units
+    assert family == "effect"
+    compensated = {s.tag for s in states(n)}
+    outputs = {s.tag: s.twin for k in range(1, n + 1) for s in effect_outputs(k) if s.tag not in compensated}
+    spec = SimpleNamespace(pairing=settings, outputs=outputs)
+    tags = list(outputs)
+    var_unit, par_unit = spec_units(spec, tags, [f"effect[{k}].Rf" for k in range(1, n + 1)] + ["outletValve.capacity"])
+    assert par_unit == [1, 2, 3, 4, None]
+    for tag, unit in zip(tags, var_unit):
+        twin = outputs[tag]
+        if twin.startswith("ZI_"):      # a level controller's output: where a valve's capacity shows
+            assert unit is None, tag
+        else:                           # pressures, body temperature, liquor and condensate flows
+            assert unit == int(twin[twin.index("[") + 1:-1]), tag
+    # five per effect: vapour and chest pressure, body temperature, liquor and condensate flow
+    assert sum(u is not None for u in var_unit) == 5 * n
