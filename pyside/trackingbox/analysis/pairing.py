@@ -33,6 +33,13 @@ With a closed-loop time constant (``closed_loop``) every loop is predicted that 
 ``closed_loop`` leaves more than ``max_ratio`` is predicted again with its own loop faster
 (:func:`loop_ladder`: steps of sqrt 2 down to ``closed_loop_min``) before it is refused, so
 each pair keeps the slowest loop its own error allows (:attr:`Pair.closed_loop`).
+
+With ``units`` (pairing per unit, :mod:`.blocks`; the spec's ``[pairing] units``) the parameters of
+indexed units (an evaporator train's ``effect[k].Rf``) pair only with their own unit's tags, chosen
+on the relative gain array of the square block they form rather than on the whole tall matrix's
+(which a chain of effects makes ill-conditioned); the separation check then runs before the
+prediction, and it takes the move the data allow a candidate left unpaired
+(:meth:`_DataView.leak_weights`).
 """
 from __future__ import annotations
 
