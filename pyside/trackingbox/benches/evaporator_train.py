@@ -141,9 +141,15 @@ MAX_LEAK = 0.5
 #: Why per effect: the vapour of effect k is the steam of effect k+1, so every effect's fouling moves
 #: every steam chest upstream of it by similar amounts, and the whole matrix's relative gain array
 #: (pseudo-inverse over ~50 tags with near-parallel rows) is ill-conditioned. Measured on the 7-effect
-#: 24 h case at the plant's constants (seed 0): relative gains up to 143 (effect 6's fouling on effect
-#: 2's steam chest), every pair refused by the data checks, no pairs; the square block of the effects'
-#: own steam-chest pressures is nearly triangular, relative gains 0.81-0.87 on effects 2-4.
+#: 24 h case at the plant's constants (seed 0, dBPR held at the truth): relative gains up to 143 (effect
+#: 6's fouling on effect 2's steam chest), every pair refused by the data checks, no pairs. Per effect:
+#: effects 2-4 on their steam-chest pressures PI-7221/7321/7421 (block relative gains 0.82/0.81/0.87, a
+#: nearly triangular block), the outlet valve and transfer valves 1-4 on their level controllers'
+#: outputs, 8 pairs; effects 5-7 (the feed end, fouled to 4-8 % of the range in a day) show under their
+#: tags' noise floor and the plant's vents and heat losses, which the twin lacks, move their pressures
+#: the other way; effect 1's tags sit at 30-31 % noise floors. Tracked: tags 0.07-0.21 of untracked;
+#: fouling of effects 3, 4 within 5.9 and 9.2 % of the range, effect 2 13.9 % (effect 1's fouling,
+#: unpaired, 28.5 % of the range by the end, shows in PI-7221); 249x real time (wall, load ~6).
 UNITS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("effect", ("PI_vapour", "PI_steamChest", "TI_body", "FI_liquor", "FI_condensate")),)
 
