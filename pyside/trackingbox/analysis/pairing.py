@@ -694,7 +694,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                 reason = f"{rejected}; {reason}"
         if var_unit[i] is not None and block_cols:
             reason = _unit_tag_reason(i, block, S, variables, parameters, var_unit, par_unit,
-                                      [cols[b] for b in block_cols], allowed[a, block_cols], rejected) + (
+                                      [cols[b] for b in block_cols], allowed[a, block_cols],
+                                      data.pair_reason if data is not None else None) + (
                 "" if reason == rejected else f"; among the other parameters: {reason}")
         left_out.append((variables[i], reason))
     for b, j in enumerate(cols):
@@ -798,8 +799,10 @@ def _rest_of(cost: np.ndarray, rows: Sequence[int], cols: Sequence[int], S: np.n
 
 def _unit_tag_reason(i: int, block: Block | None, S: np.ndarray, variables: Sequence[str],
                      parameters: Sequence[str], var_unit: Sequence[int | None], par_unit: Sequence[int | None],
-                     block_cols: Sequence[int], allowed: np.ndarray, rejected: str | None) -> str:
-    """Why variable *i*, a tag of a unit, carries none of its unit's parameters."""
+                     block_cols: Sequence[int], allowed: np.ndarray,
+                     why_not: Callable[[int, int], str | None] | None) -> str:
+    """Why variable *i*, a tag of a unit, carries none of its unit's parameters (*why_not(i, j)*: the
+    data checks' reason against the pair of variable *i* and parameter *j*)."""
     mine = [j for j in block_cols if par_unit[j] == var_unit[i]]
     if not mine:
         return f"a tag of unit [{var_unit[i]}], which has no candidate parameter paired per unit"
@@ -807,8 +810,8 @@ def _unit_tag_reason(i: int, block: Block | None, S: np.ndarray, variables: Sequ
     for j in mine:
         k = list(block_cols).index(j)
         if not allowed[k]:
-            parts.append(f"the data checks do not allow it for {parameters[j]}"
-                         + (f" ({rejected})" if rejected else ""))
+            why = why_not(i, j) if why_not is not None else None
+            parts.append(f"the data checks do not allow it for {parameters[j]}" + (f" ({why})" if why else ""))
             continue
         if block is None or j not in block.parameters:
             parts.append(f"{parameters[j]} stays unpaired (see its reason)")
@@ -1088,6 +1091,20 @@ class _DataView:
         self.rejected.append((self.variables[i], self.parameters[j], reason))
         self._last[i] = reason
         logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
+
+    def pair_reason(self, i: int, j: int) -> str | None:
+        """Why the data checks do not allow the pair of variable *i* and parameter *j*: the last refusal of
+        that pair, a sign change, or the parameter's reach; None when none applies."""
+        for v, q, why in reversed(self.rejected):
+            if (v, q) == (self.variables[i], self.parameters[j]):
+                return why
+        if (i, j) in self.sign:
+            return self.sign[(i, j)]
+        st = self.stat[i]
+        if st is not None and st.samples and self.reach[i, j] < self.checks.min_reach:
+            return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} toward "
+                    f"the measurement, the offset is {_fmt(st.mean)}")
+        return None
 
     def rejection(self, i: int) -> str | None:
         """The last prediction-based rejection of a pair of variable *i*, or a reach reason, or None."""
