@@ -265,9 +265,9 @@ def test_the_train_pairs_every_effects_fouling_on_its_own_thermal_tags():
     assert par_unit == [1, 2, 3, 4, None]
     for tag, unit in zip(tags, var_unit):
         twin = outputs[tag]
-        if twin.startswith(("ZI_", "TI_")):   # a valve's or the boiling-point rise's indicator
+        if twin.startswith("ZI_"):      # a level controller's output: where a valve's capacity shows
             assert unit is None, tag
-        else:                                 # pressures, liquor and condensate flows
+        else:                           # pressures, body temperature, liquor and condensate flows
             assert unit == int(twin[twin.index("[") + 1:-1]), tag
-    # four per effect: vapour and chest pressure, liquor and condensate flow
-    assert sum(u is not None for u in var_unit) == 4 * n
+    # five per effect: vapour and chest pressure, body temperature, liquor and condensate flow
+    assert sum(u is not None for u in var_unit) == 5 * n
