@@ -238,6 +238,14 @@ class PairingSettings:
         :func:`trackingbox.analysis.pairing.leakage`): a pair is refused when a candidate
         left unpaired moves its parameter by more than this many of its bound range per
         bound range of that candidate, at the loops' steady state. ``None``: no check.
+    units : tuple of (str, tuple of str)
+        Pairing per unit (see :mod:`trackingbox.analysis.blocks`): component array -> the twin
+        outputs (array names) its parameters may pair with, ``units = { effect = ["PI_steamChest",
+        "TI_body"] }`` (or ``units = ["effect"]``: any output of the unit). A parameter of unit ``k``
+        of these arrays (``effect[3].Rf``) pairs only with a tag of the same unit (a listed twin output
+        ending in ``[3]``), the tags chosen so that the square relative gain array of the unit
+        parameters is closest to the identity. Empty: the whole matrix's relative gains for every
+        parameter.
     """
 
     freeze: tuple[tuple[str, float], ...] = ()
@@ -245,6 +253,7 @@ class PairingSettings:
     closed_loop: float | None = None
     max_leak: float | None = None
     closed_loop_min: float | None = None
+    units: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -764,8 +773,23 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak"), (), "[pairing]", problems)
+    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak", "units"), (), "[pairing]",
+                problems)
     out: dict[str, Any] = {}
+    if "units" in table:
+        units = table["units"]
+        ident = re.compile(r"[A-Za-z_][A-Za-z0-9_.]*")
+        if isinstance(units, list):
+            units = {u: [] for u in units} if all(isinstance(u, str) for u in units) else None
+        if (not isinstance(units, Mapping)
+                or not all(isinstance(u, str) and ident.fullmatch(u) and isinstance(tags, list)
+                           and all(isinstance(t, str) and ident.fullmatch(t) for t in tags)
+                           for u, tags in units.items())):
+            problems.add("[pairing] units must be a list of component array names (units = [\"effect\"]) or a table "
+                         "of array name = [twin output array names] (units = { effect = [\"PI_steamChest\"] }), got "
+                         f"{table['units']!r}")
+        else:
+            out["units"] = tuple((str(u), tuple(dict.fromkeys(tags))) for u, tags in units.items())
     if "closed_loop" in table:
         out["closed_loop"] = _number(table, "closed_loop", "[pairing]", problems, positive=True)
     if "closed_loop_min" in table:
@@ -1073,6 +1097,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
             doc["pairing"]["closed_loop_min"] = float(spec.pairing.closed_loop_min)
         if spec.pairing.max_leak is not None:
             doc["pairing"]["max_leak"] = float(spec.pairing.max_leak)
+        if spec.pairing.units:
+            doc["pairing"]["units"] = {u: list(tags) for u, tags in spec.pairing.units}
     if spec.diagnose.effects:
         doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
     if spec.balances:

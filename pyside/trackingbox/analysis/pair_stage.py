@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
@@ -287,6 +287,13 @@ class PairingResult:
                          "rms": _finite(o.rms), "noise_ratio": _finite(o.noise_ratio), "samples": o.samples}
                         for o in pairing.offsets],
             "rejected_pairs": [{"variable": v, "parameter": p, "reason": r} for v, p, r in pairing.rejected],
+            "unit_block": None if pairing.block is None else {
+                "variables": [st.variables[i] for i in pairing.block.tags],
+                "parameters": [st.parameters[j] for j in pairing.block.parameters],
+                "rga": [[_finite(x) for x in row] for row in pairing.block.rga.tolist()],
+                "rga_number": _finite(pairing.block.number),
+                "left_unpaired": [{"parameter": st.parameters[j], "best_lambda": _finite(lam)}
+                                  for j, lam in pairing.block.dropped]},
             "second_operating_point": None if self.second_point is None else
             {"time": self.second_point[0], "inputs": dict(self.second_point[1])},
             "gain_matrix_second": None if self.steptest_second is None else
@@ -477,6 +484,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                            other_time_constants=None if st2 is None else st2.time_constants,
                            check_gains=None if st_rec is None else st_rec.gains,
                            check_time_constants=None if st_rec is None else st_rec.time_constants,
+                           units=spec_units(spec, st.variables, st.parameters),
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     if st_rec is not None and residuals is not None:
         from .pairing import complete_with_recording
@@ -497,6 +505,28 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     return PairingResult(pairing=pairing, steptest=st, step_settings=step_settings, operating_point=op,
                          warnings=tuple(warnings), steptest_second=st2, second_point=second, sobol=sob,
                          agreement=agr, settings=s, steptest_recording=st_rec)
+
+
+def spec_units(spec: Spec, variables: Sequence[str], parameters: Sequence[str]
+               ) -> tuple[list[int | None], list[int | None]] | None:
+    """The unit index of each tag (its twin output's trailing ``[k]``, for the outputs the spec's
+    ``[pairing] units`` lists; all of them for a unit listed without outputs) and of each parameter of
+    those units (``effect[k].Rf``), for :func:`~trackingbox.analysis.pairing.choose_pairs`' pairing per
+    unit; None when the spec names no units. With several arrays a tag listed for any of them belongs
+    to that index's units."""
+    from .blocks import output_unit, parameter_unit
+
+    if not spec.pairing.units:
+        return None
+    listed = {t for _, tags in spec.pairing.units for t in tags}
+    anything = any(not tags for _, tags in spec.pairing.units)
+
+    def unit(variable: str) -> int | None:
+        name = spec.outputs.get(variable, variable)
+        k = output_unit(name)
+        return k if k is not None and (anything or name[: name.rindex("[")] in listed) else None
+
+    return ([unit(v) for v in variables], [parameter_unit(p, [u for u, _ in spec.pairing.units]) for p in parameters])
 
 
 def _max_leak(spec: Spec, settings: PairSettings) -> float:

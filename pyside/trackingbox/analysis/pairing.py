@@ -33,12 +33,19 @@ With a closed-loop time constant (``closed_loop``) every loop is predicted that 
 ``closed_loop`` leaves more than ``max_ratio`` is predicted again with its own loop faster
 (:func:`loop_ladder`: steps of sqrt 2 down to ``closed_loop_min``) before it is refused, so
 each pair keeps the slowest loop its own error allows (:attr:`Pair.closed_loop`).
+
+With ``units`` (pairing per unit, :mod:`.blocks`; the spec's ``[pairing] units``) the parameters of
+indexed units (an evaporator train's ``effect[k].Rf``) pair only with their own unit's tags, chosen
+on the relative gain array of the square block they form rather than on the whole tall matrix's
+(which a chain of effects makes ill-conditioned); the separation check then runs before the
+prediction, and it takes the move the data allow a candidate left unpaired
+(:meth:`_DataView.leak_weights`).
 """
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -46,6 +53,7 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
+from .blocks import Block, choose_block, square_rga
 from .offsets import OffsetStats, Residuals, predict_tracking, reach
 from .rga import _greedy_independent, condition_number, relative_gain_array, scale_gains
 
@@ -71,6 +79,11 @@ _FORBIDDEN = 1e6
 SETTLE_LOOPS = 3.0
 #: Ratio of consecutive loop time constants :func:`loop_ladder` tries for one pair.
 LADDER_STEP = math.sqrt(2.0)
+#: The move of an unpaired candidate (a fraction of its bound range) ``max_leak`` is set for: at 0.5
+#: a fifth of its range biases a paired parameter by at most a tenth of its own (see
+#: :class:`DataChecks`). With pairing per unit the check takes the smaller move the data allow
+#: (:meth:`_DataView.moved_at_most`) when they bound it below this.
+SEPARATION_MOVE = 0.2
 
 
 @dataclass(frozen=True)
@@ -262,6 +275,10 @@ class Pairing:
         Condition number of the scaled gains of the chosen pairs.
     rejected : tuple of (variable, parameter, reason)
         Pairs the tracking prediction forbade, in the order they were tried.
+    block : Block or None
+        With ``units``: the unit parameters' pairs on their own tags and the relative gain array
+        of that square block (:func:`~trackingbox.analysis.blocks.choose_block`), the pairs'
+        ``lambda_`` taken from it.
     """
 
     pairs: tuple[Pair, ...]
@@ -278,6 +295,7 @@ class Pairing:
     checks: DataChecks | None = None
     pairs_condition_number: float = math.nan
     rejected: tuple[tuple[str, str, str], ...] = ()
+    block: Block | None = field(default=None, compare=False)
 
     def parameter_for(self, variable: str) -> str | None:
         """The parameter paired with *variable*, or None."""
@@ -300,7 +318,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                  bounds: npt.ArrayLike | None = None, checks: DataChecks | None = None,
                  other_gains: npt.ArrayLike | None = None, other_time_constants: npt.ArrayLike | None = None,
                  min_lambda: float = MIN_LAMBDA, check_gains: npt.ArrayLike | None = None,
-                 check_time_constants: npt.ArrayLike | None = None) -> Pairing:
+                 check_time_constants: npt.ArrayLike | None = None,
+                 units: tuple[Sequence[int | None], Sequence[int | None]] | None = None) -> Pairing:
     """Pair tracking variables with tracking parameters by relative gain.
 
     Steps: scale the gains (``scale_gains``); leave out parameters and
@@ -351,6 +370,15 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         chosen pair's gain is the larger in magnitude of all the gain sets
         (the tracking loop runs on the twin as recorded, and tuned for the
         highest gain seen it stays stable where the gain grows).
+    units : (sequence of int or None, sequence of int or None), optional
+        Pairing per unit (:mod:`~trackingbox.analysis.blocks`): the unit index of each variable
+        and of each parameter (None: not a unit's). A parameter of unit ``k`` pairs only with a
+        variable of unit ``k``, one per parameter, chosen so that the square relative gain array
+        of those parameters and variables is closest to the identity
+        (:func:`~trackingbox.analysis.blocks.choose_block`), each pair's relative gain there at
+        least *min_lambda*; the other parameters pair on the relative gains of the whole matrix
+        over the variables the block leaves, the most pairs in all first. The data checks apply
+        to every pair as before.
 
     Returns
     -------
@@ -537,6 +565,7 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         allowed = data.allowed[np.ix_(rows, cols)].copy()
         allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
     G2 = tau2 = None
+    var_unit, par_unit = _unit_lists(units, m, n)
     flipped: dict[int, str] = {}
     if other_gains is not None:
         G2 = np.asarray(other_gains, dtype=float)
@@ -546,7 +575,8 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             raise AnalysisError(f"gains at the second operating point have shape {G2.shape}, expected {G.shape}")
         for a, i in enumerate(rows):
             for b, j in enumerate(cols):
-                if G[i, j] * G2[i, j] < 0 and lam_sub[a, b] >= min_lambda:
+                own = par_unit[j] is not None and var_unit[i] == par_unit[j]  # a candidate of the block
+                if G[i, j] * G2[i, j] < 0 and (lam_sub[a, b] >= min_lambda or own):
                     allowed[a, b] = False
                     flipped[i] = (f"its gain to {parameters[j]} changes sign between the operating points "
                                   f"({_fmt(G[i, j])} and {_fmt(G2[i, j])}): a loop on it would turn unstable")
@@ -555,16 +585,40 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     ladder = data.checks.ladder() if data is not None else ()
     rung: dict[tuple[int, int], int] = {}
     speeds: dict[int, float] = {}
+    # pairing per unit (units): the unit parameters on their own tags, as a square block
+    block_cols = [b for b, j in enumerate(cols) if par_unit[j] is not None]
+    if data is not None and block_cols:
+        data.bounded = True
+    block: Block | None = None
     while True:
         cost = np.where((lam_sub >= min_lambda) & allowed, np.abs(lam_sub - 1.0), _FORBIDDEN)
-        r_idx, c_idx = linear_sum_assignment(cost)
         chosen: dict[int, int] = {}
+        if block_cols:
+            cost[:, block_cols] = _FORBIDDEN
+            candidates = {cols[b]: [rows[a] for a in range(len(rows))
+                                    if var_unit[rows[a]] == par_unit[cols[b]] and allowed[a, b]]
+                          for b in block_cols}
+            block = choose_block(S, candidates, min_lambda=min_lambda,
+                                 rest=_rest_of(cost, rows, cols, S, data.checks.max_leak if data else math.inf,
+                                               data.leak_weights if data else None))
+            chosen.update(zip(block.tags, block.parameters))
+            cost[[rows.index(i) for i in block.tags], :] = _FORBIDDEN
+        r_idx, c_idx = linear_sum_assignment(cost)
         for a, b in zip(r_idx, c_idx):
             if cost[a, b] < _FORBIDDEN:
                 chosen[rows[int(a)]] = cols[int(b)]
         if data is None or not chosen:
             break
         speeds = {i: ladder[rung.get((i, j), 0)] for i, j in chosen.items()} if ladder else {}
+        if block_cols:
+            # per unit, the structural check first: a unit parameter on another candidate's indicator
+            # (an effect's fouling on the level controller's output, which its valve's capacity moves
+            # as much) gets a loop that follows that candidate, and in a chain that loop distorts the
+            # predicted tracking of every loop upstream, which would then be refused for it
+            worst = data.separate(chosen, [j for j in cols if j not in chosen.values()], S)
+            if worst is not None:
+                allowed[rows.index(worst[0]), cols.index(worst[1])] = False
+                continue
         predicted, failure = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc),
                                           speeds)
         worst: tuple[int, int] | None = None
@@ -595,11 +649,12 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
             if Gc is not None and tauc is not None and abs(Gc[i, j]) > abs(gain):
                 gain = float(Gc[i, j])
                 t63 = float(tauc[i, j]) if math.isfinite(tauc[i, j]) else t63
-            pairs.append(Pair(variables[i], parameters[j], float(lam[i, j]), gain, t63, ratio, at_bound,
+            lam_ij = (block.lambda_of(j) if block is not None and j in block.parameters else float(lam[i, j]))
+            pairs.append(Pair(variables[i], parameters[j], lam_ij, gain, t63, ratio, at_bound,
                               closed_loop=speeds.get(i, math.nan)))
-            if lam[i, j] > large:
+            if lam_ij > large:
                 warnings.append(f"pair {variables[i]}/{parameters[j]} has a large relative gain "
-                                f"{_fmt(lam[i, j])}")
+                                f"{_fmt(lam_ij)}")
     pairs_cond = math.nan
     if chosen:
         order_i = sorted(chosen)
@@ -637,11 +692,31 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                       "fewer usable parameters than variables")
             if rejected is not None:
                 reason = f"{rejected}; {reason}"
+        if var_unit[i] is not None and block_cols:
+            reason = _unit_tag_reason(i, block, S, variables, parameters, var_unit, par_unit,
+                                      [cols[b] for b in block_cols], allowed[a, block_cols],
+                                      data.pair_reason if data is not None else None) + (
+                "" if reason == rejected else f"; among the other parameters: {reason}")
         left_out.append((variables[i], reason))
     for b, j in enumerate(cols):
         if j in used:
             continue
         col = lam_sub[:, b]
+        if par_unit[j] is not None:
+            own = [rows[a] for a in range(len(rows)) if var_unit[rows[a]] == par_unit[j]]
+            why = _unit_parameter_reason(j, own, block, variables, parameters, par_unit, allowed[:, b], rows,
+                                         excluded, min_lambda)
+            if data is not None and block is not None and any(c == j for c, _ in block.dropped):
+                # what the separation check would say with it on its strongest usable tag
+                free = [i for i in own if i not in chosen and i not in excluded and allowed[rows.index(i), b]]
+                if free:
+                    i = max(free, key=lambda r: abs(S[r, j]))
+                    trial = {**chosen, i: j}
+                    found = data.entangled(trial, [q for q in cols if q not in trial.values()], S)
+                    if found is not None:
+                        why += f"; with it on {variables[i]}, {variables[found[0]]}: {found[2]}"
+            left_out.append((parameters[j], why))
+            continue
         if excluded and len(excluded) == len(rows):
             reason = "no tracking variable is worth tracking (see the variables' reasons)"
         elif np.all(col <= 1e-9):
@@ -674,9 +749,113 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         logger.info(msg)
     if data is None:
         return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
-                       pairs_condition_number=pairs_cond)
+                       pairs_condition_number=pairs_cond, block=block)
     return Pairing(tuple(pairs), tuple(left_out), tuple(warnings), variables, parameters, G, S, lam, cond,
-                   data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected))
+                   data.stats, data.reach, data.checks, pairs_cond, tuple(data.rejected), block=block)
+
+
+def _unit_lists(units: tuple[Sequence[int | None], Sequence[int | None]] | None, m: int, n: int
+                ) -> tuple[list[int | None], list[int | None]]:
+    """The unit index per variable and per parameter (all None without *units*)."""
+    if units is None:
+        return [None] * m, [None] * n
+    var_unit, par_unit = (list(units[0]), list(units[1]))
+    if len(var_unit) != m or len(par_unit) != n:
+        raise AnalysisError(f"units: {len(var_unit)} variable and {len(par_unit)} parameter entries for "
+                            f"{m} variables and {n} parameters")
+    return var_unit, par_unit
+
+
+def _rest_of(cost: np.ndarray, rows: Sequence[int], cols: Sequence[int], S: np.ndarray, max_leak: float,
+             weights: Callable[[Sequence[int]], np.ndarray] | None = None
+             ) -> Callable[[frozenset[tuple[int, int]]], tuple[int, float, int]]:
+    """``rest(block_pairs) -> (pairs, cost, entangled)`` of :func:`~trackingbox.analysis.blocks.choose_block`:
+    the assignment of the other parameters on *cost* (rows: *rows*, columns: *cols*) without the rows
+    the block takes, and how many of all the pairs a parameter left unpaired moves by more than
+    *max_leak* of its range per range (:func:`leakage` on the scaled gains *S*; 0 when it is inf)."""
+    where = {i: a for a, i in enumerate(rows)}
+
+    def rest(taken: frozenset[tuple[int, int]]) -> tuple[int, float, int]:
+        c = cost.copy()
+        c[[where[i] for i, _ in taken], :] = _FORBIDDEN
+        r, k = linear_sum_assignment(c)
+        ok = c[r, k] < _FORBIDDEN
+        entangled = 0
+        if math.isfinite(max_leak):
+            pairs = sorted(taken) + [(rows[int(a)], cols[int(b)]) for a, b in zip(r[ok], k[ok])]
+            used = {j for _, j in pairs}
+            unpaired = [j for j in cols if j not in used]
+            try:
+                L = np.abs(leakage(S, [i for i, _ in pairs], [j for _, j in pairs], unpaired))
+                if weights is not None and L.size:
+                    L = L * weights(unpaired)[None, :]
+                entangled = int((L.max(axis=1) > max_leak).sum()) if L.size else 0
+            except AnalysisError:   # singular pairs: as bad as every pair entangled
+                entangled = len(pairs)
+        return int(ok.sum()), float(c[r, k][ok].sum()), entangled
+
+    return rest
+
+
+def _unit_tag_reason(i: int, block: Block | None, S: np.ndarray, variables: Sequence[str],
+                     parameters: Sequence[str], var_unit: Sequence[int | None], par_unit: Sequence[int | None],
+                     block_cols: Sequence[int], allowed: np.ndarray,
+                     why_not: Callable[[int, int], str | None] | None) -> str:
+    """Why variable *i*, a tag of a unit, carries none of its unit's parameters (*why_not(i, j)*: the
+    data checks' reason against the pair of variable *i* and parameter *j*)."""
+    mine = [j for j in block_cols if par_unit[j] == var_unit[i]]
+    if not mine:
+        return f"a tag of unit [{var_unit[i]}], which has no candidate parameter paired per unit"
+    parts = []
+    for j in mine:
+        k = list(block_cols).index(j)
+        if not allowed[k]:
+            why = why_not(i, j) if why_not is not None else None
+            parts.append(f"the data checks do not allow it for {parameters[j]}" + (f" ({why})" if why else ""))
+            continue
+        if block is None or j not in block.parameters:
+            parts.append(f"{parameters[j]} stays unpaired (see its reason)")
+            continue
+        a = block.parameters.index(j)
+        taker = block.tags[a]
+        trial = list(block.tags)
+        trial[a] = i
+        L = square_rga(S[np.ix_(trial, list(block.parameters))]) if i not in block.tags else None
+        if L is None:
+            alt = "the block would be singular" if i not in block.tags else "it is taken in the block"
+        else:
+            alt = (f"with it {parameters[j]}'s relative gain in the block would be {_fmt(L[a, a])} "
+                   f"and the block's RGA number {_fmt(float(np.abs(L - np.eye(len(trial))).sum()))}")
+        parts.append(f"{parameters[j]} pairs with {variables[taker]} (relative gain {_fmt(block.rga[a, a])} in "
+                     f"the block of unit parameters, RGA number {_fmt(block.number)}); {alt}")
+    return f"a tag of unit [{var_unit[i]}]: " + "; ".join(parts)
+
+
+def _unit_parameter_reason(j: int, own: Sequence[int], block: Block | None, variables: Sequence[str],
+                           parameters: Sequence[str], par_unit: Sequence[int | None], allowed: np.ndarray,
+                           rows: Sequence[int], excluded: set[int], min_lambda: float) -> str:
+    """Why parameter *j* of a unit is left unpaired."""
+    unit = par_unit[j]
+    if not own:
+        return f"paired per unit, and no tracking variable belongs to its unit [{unit}] (twin outputs ending in [{unit}])"
+    names = ", ".join(variables[i] for i in own)
+    usable = [i for i in own if i not in excluded and allowed[list(rows).index(i)]]
+    if not usable:
+        return (f"paired per unit, and none of its unit's tags ({names}) is usable: they are at their noise "
+                "floor, out of its reach or refused by the predicted tracking (see their reasons)")
+    if block is not None:
+        for col, best in block.dropped:
+            if col != j:
+                continue
+            tags = ", ".join(variables[i] for i in usable)
+            if not best >= min_lambda:
+                return (f"paired per unit: on its unit's usable tags ({tags}) its relative gain in the block of "
+                        f"unit parameters stays below the {min_lambda:g} a pair needs (at best {_fmt(best)}, the "
+                        "block singular if nan): its loop would depend on the others'")
+            return (f"paired per unit: on its unit's usable tags ({tags}) a pair (its own or one it displaces) could "
+                    "not be told apart from a candidate left unpaired (the separation check), or it would take "
+                    f"the only tag of another candidate (relative gain in the block at best {_fmt(best)})")
+    return f"paired per unit; its unit's usable tags ({', '.join(variables[i] for i in usable)}) are taken"
 
 
 def recording_time_constants(structure: npt.ArrayLike, recording: npt.ArrayLike) -> np.ndarray:
@@ -759,10 +938,51 @@ class _DataView:
         self._last: dict[int, str] = {}
         #: (variable, parameter) of the pairs :meth:`separate` forbade
         self.apart: set[tuple[str, str]] = set()
+        #: separation per move the data allow (pairing per unit): see :meth:`leak_weights`
+        self.bounded = False
+
+    def moved_at_most(self, j: int) -> float:
+        """Largest move of candidate *j*, in fractions of its bound range (at most 1), that the untracked
+        errors allow: moved by ``m``, it would move tag ``i`` by ``|g_ij| x m x range``, and no tag's
+        untracked RMS error (noise included) is smaller than what it shows (a candidate that moved more
+        would show in some tag, unless others cancelled it there)."""
+        span = float(self.B[j, 2] - self.B[j, 1])
+        best = math.inf
+        for i, st in enumerate(self.stat):
+            if st is None or st.samples == 0 or not math.isfinite(st.rms):
+                continue
+            moved = abs(float(self.G[i, j])) * span
+            if moved > 0:
+                best = min(best, st.rms / moved)
+        return min(1.0, best)
+
+    def leak_weights(self, unpaired: Sequence[int]) -> np.ndarray:
+        """Per unpaired candidate, the factor on its leakage the separation check compares with
+        ``max_leak``: 1, or with :attr:`bounded` (pairing per unit) ``m / SEPARATION_MOVE`` when the data
+        bound its move ``m`` (:meth:`moved_at_most`) below :data:`SEPARATION_MOVE`. In a chain every
+        effect's fouling moves every pressure upstream of it; an effect whose tags show its fouling under
+        their noise (the feed end of a young train) cannot be paired, yet what it moved is as small as
+        that: its bias on the paired effects is bounded by it."""
+        if not self.bounded:
+            return np.ones(len(unpaired))
+        return np.array([min(1.0, self.moved_at_most(k) / SEPARATION_MOVE) for k in unpaired])
 
     def separate(self, chosen: dict[int, int], unpaired: Sequence[int], scaled: np.ndarray) -> tuple[int, int] | None:
         """The chosen pair whose parameter is worst told apart from a candidate left unpaired, if its
         leakage (:func:`leakage` of the *scaled* gains) exceeds ``max_leak``; else None."""
+        found = self.entangled(chosen, unpaired, scaled)
+        if found is None:
+            return None
+        i, j, reason = found
+        self.rejected.append((self.variables[i], self.parameters[j], reason))
+        self.apart.add((self.variables[i], self.parameters[j]))
+        self._last[i] = reason
+        logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
+        return i, j
+
+    def entangled(self, chosen: dict[int, int], unpaired: Sequence[int], scaled: np.ndarray
+                  ) -> tuple[int, int, str] | None:
+        """:meth:`separate`'s finding (variable, parameter, reason), not recorded; None when every pair passes."""
         limit = self.checks.max_leak
         if not chosen or not len(unpaired) or not math.isfinite(limit):
             return None
@@ -773,19 +993,18 @@ class _DataView:
         except AnalysisError as exc:
             logger.info("separation check skipped: %s", exc)
             return None
-        a, b = np.unravel_index(int(np.argmax(L)), L.shape)
-        if not L[a, b] > limit:
+        weight = self.leak_weights(unpaired)
+        a, b = np.unravel_index(int(np.argmax(L * weight)), L.shape)
+        if not L[a, b] * weight[b] > limit:
             return None
         i, j, k = rows[a], cols[a], unpaired[b]
         reason = (f"paired with {self.parameters[j]} it cannot be told apart from {self.parameters[k]}, which no "
                   f"loop tracks: at steady state a move of {self.parameters[k]} by its bound range moves "
-                  f"{self.parameters[j]} by {_fmt(float(L[a, b]))} of its own (limit {limit:g}), so "
-                  f"{self.parameters[j]}'s trajectory would show {self.parameters[k]}'s changes")
-        self.rejected.append((self.variables[i], self.parameters[j], reason))
-        self.apart.add((self.variables[i], self.parameters[j]))
-        self._last[i] = reason
-        logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
-        return i, j
+                  f"{self.parameters[j]} by {_fmt(float(L[a, b]))} of its own (limit {limit:g}"
+                  + (f"; the data allow {self.parameters[k]} a move of {_fmt(self.moved_at_most(k))} of its range, "
+                     f"so the limit applies to {_fmt(float(L[a, b] * weight[b]))}" if weight[b] < 1.0 else "")
+                  + f"), so {self.parameters[j]}'s trajectory would show {self.parameters[k]}'s changes")
+        return i, j, reason
 
     def row_reason(self, i: int, usable: np.ndarray) -> str | None:
         """Why variable *i* is left out before the RGA (noise level, no reachable parameter), or None."""
@@ -872,6 +1091,20 @@ class _DataView:
         self.rejected.append((self.variables[i], self.parameters[j], reason))
         self._last[i] = reason
         logger.info("pair %s/%s rejected: %s", self.variables[i], self.parameters[j], reason)
+
+    def pair_reason(self, i: int, j: int) -> str | None:
+        """Why the data checks do not allow the pair of variable *i* and parameter *j*: the last refusal of
+        that pair, a sign change, or the parameter's reach; None when none applies."""
+        for v, q, why in reversed(self.rejected):
+            if (v, q) == (self.variables[i], self.parameters[j]):
+                return why
+        if (i, j) in self.sign:
+            return self.sign[(i, j)]
+        st = self.stat[i]
+        if st is not None and st.samples and self.reach[i, j] < self.checks.min_reach:
+            return (f"the remaining range of {self.parameters[j]} moves it by only {_fmt(self.moves[i, j])} toward "
+                    f"the measurement, the offset is {_fmt(st.mean)}")
+        return None
 
     def rejection(self, i: int) -> str | None:
         """The last prediction-based rejection of a pair of variable *i*, or a reach reason, or None."""

@@ -131,6 +131,35 @@ CLOSED_LOOP_MIN = 1800.0
 #: pressure PI-7221 47 x as much as effect 1's, scaled by their common bound range): a fouling paired on
 #: a tag that an untracked fouling dominates tracks that one.
 MAX_LEAK = 0.5
+#: ``[pairing] units``: every effect's parameters (its fouling) pair per effect
+#: (:mod:`trackingbox.analysis.blocks`), on one of the effect's thermal instruments: its vapour and
+#: steam-chest pressures, body temperature, liquor and condensate flows (the driving pressure and
+#: temperature, the evaporation and the duty; notes section 4: fouling pairs with the steam or
+#: condensate flow, the vapour pressure or the product DS). Not its level controllers' outputs
+#: (``ZI_body``, ``ZI_condensate``): those are where a valve's capacity shows (notes: outlet Kv_max
+#: with the level-controller output), and a fouling paired there follows the valve.
+#: The body temperature is also the indicator of the effect's dBPR (notes: dBPR with TI liquor -
+#: T_sat(PI vapour)), which the demo estimates and holds first. Measured on the 7-effect 48 h case at
+#: the plant's constants (seed 0): with TI_body listed effect 1 pairs on TI-7111 (block relative gain
+#: 1.11) and ends 16-18 % of its range above the plant's fouling (it takes up what the twin lacks:
+#: heat losses, vents), effects 2-5 on their steam chests within 4.0, 2.3, 1.8 and 12.3 %; without it
+#: effect 1 stays unpaired (FI-7150 predicted at 26 % above its floor, limit 25 %), its fouling
+#: (39 % of the range by the end) shows in PI-7221 and effect 2 is 12.4 % off (effects 3-5: 6.3, 4.6,
+#: 9.1 %). Listed: the effect that fouls most keeps a loop of its own.
+#: Why per effect: the vapour of effect k is the steam of effect k+1, so every effect's fouling moves
+#: every steam chest upstream of it by similar amounts, and the whole matrix's relative gain array
+#: (pseudo-inverse over ~50 tags with near-parallel rows) is ill-conditioned. On the 7-effect 24 h case
+#: at the plant's constants (seed 0, dBPR held at the truth) it gave relative gains up to 143 (effect
+#: 6's fouling on effect 2's steam chest) and no pairs. Per effect: effects 2-4 on their steam chests
+#: PI-7221/7321/7421 (block relative gains 0.82/0.81/0.87, a nearly triangular block), the outlet and
+#: transfer valves 1-4 on their level controllers' outputs, 8 pairs; effects 5-7 (the feed end, fouled
+#: to 4-8 % of the range in a day) show under their tags' noise floor, and the plant's vents and heat
+#: losses, which the twin lacks, move their pressures the other way; effect 1's tags sit at 30-31 %
+#: noise floors. Tracked: tags 0.07-0.21 of untracked; fouling of effects 3, 4 within 5.9 and 9.2 % of
+#: the range, effect 2 13.9 % (effect 1's fouling, unpaired, 28.5 % of the range by the end, shows in
+#: PI-7221); 249x real time (wall, load ~6). On 48 h effects 1-5 pair (figures above).
+UNITS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("effect", ("PI_vapour", "PI_steamChest", "TI_body", "FI_liquor", "FI_condensate")),)
 
 
 def train_inputs(t: FloatArray, rng: np.random.Generator, warmup: float, stoppages: Sequence[Stoppage],
@@ -314,7 +343,7 @@ def pairing_settings(n: int) -> PairingSettings:
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
     return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, closed_loop_min=CLOSED_LOOP_MIN, scale=tuple(scale),
-                           max_leak=MAX_LEAK)
+                           max_leak=MAX_LEAK, units=UNITS)
 
 
 def estimate_only(names: Any) -> tuple[str, ...]:

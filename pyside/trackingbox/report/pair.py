@@ -74,6 +74,14 @@ def write_pair_report(spec: Spec, result: PairingResult, out: str | os.PathLike[
         if pairing.rejected:
             doc.paragraph("Pairs rejected by the prediction:")
             doc.bullets([f"{v} / {p}: {r}" for v, p, r in pairing.rejected])
+    if pairing.block is not None and pairing.block.parameters:
+        b = pairing.block
+        doc.heading("Pairing per unit")
+        doc.paragraph("The parameters of the spec's `[pairing] units` pair with their own unit's tags, chosen so "
+                      "that the relative gain array of this square block is closest to the identity (RGA number "
+                      f"sum |Lambda - I| = {b.number:.3g}); the other parameters pair on the whole matrix's.")
+        doc.table(["", *(st.parameters[j] for j in b.parameters)],
+                  [[st.variables[i], *(f"{x:.3g}" for x in row)] for i, row in zip(b.tags, b.rga)])
     if pairing.left_out:
         doc.heading("Left out")
         doc.bullets([f"`{n}`: {r}" for n, r in pairing.left_out])
