@@ -152,7 +152,7 @@ def _without_directional_derivatives(src: Path, dst: Path) -> Path:
 
 def test_exact_and_fd_refinements_reach_the_same_estimate(case: Path) -> None:
     spec = load_spec(case)
-    exact = estimate(spec, seed=0, maxiter=0, jacobian="auto")
+    exact = estimate(spec, seed=0, maxiter=0, jacobian="exact")
     fd = estimate(spec, seed=0, maxiter=0, jacobian="fd")
     assert exact.refinement["jacobian"] == "exact" and exact.refinement["reason"] == ""
     assert exact.to_json()["refinement"]["jacobian"] == "exact"
@@ -166,7 +166,25 @@ def test_exact_and_fd_refinements_reach_the_same_estimate(case: Path) -> None:
     assert exact.refinement["runs"] < fd.refinement["runs"]
 
 
-def test_twin_without_directional_derivatives_falls_back_to_fd(case: Path, tmp_path: Path) -> None:
+def test_auto_takes_fd_where_the_runs_are_native_and_exact_on_the_python_path(case: Path, monkeypatch) -> None:
+    from trackingbox.native import native_reason
+    from trackingbox.fmu import FMUModel
+
+    spec = load_spec(case)
+    with FMUModel(spec.twin) as model:
+        if native_reason(model) is not None:
+            pytest.skip(f"no native stepper here: {native_reason(model)}")
+    native = estimate(spec, seed=0, maxiter=0, jacobian="auto")
+    assert native.refinement["jacobian"] == "fd"
+    assert "runs on the native stepper" in native.refinement["reason"]
+    monkeypatch.setenv("TRACKINGBOX_NATIVE", "0")
+    python = estimate(spec, seed=0, maxiter=0, jacobian="auto")
+    assert python.refinement["jacobian"] == "exact" and python.refinement["reason"] == ""
+    assert abs(native.parameters["kht"] - python.parameters["kht"]) <= 0.3
+
+
+def test_twin_without_directional_derivatives_falls_back_to_fd(case: Path, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("TRACKINGBOX_NATIVE", "0")  # where the runs are native, "auto" takes fd anyway
     directory = tmp_path / "case"
     shutil.copytree(case.parent, directory)
     _without_directional_derivatives(case.parent / "hx1.fmu", directory / "hx1.fmu")

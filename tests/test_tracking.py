@@ -523,3 +523,19 @@ def test_substeps_resume_writes_the_same_bytes_and_another_count_is_refused(case
     # the same law sampled finer: the same plant value at the end, another trajectory on the way
     assert _k_end(three) == pytest.approx(K_PLANT, rel=0.01)
     assert np.abs(three["parameter:k"] - one["parameter:k"]).max() > 1e-6
+
+
+def test_windows_of_a_few_rows_write_the_bytes_of_the_whole_view(fmu: Path, tmp_path: Path) -> None:
+    # the run reads its measurements window by window (trackingbox.stream); the expectation is the
+    # run over the whole measurement view (window_rows=0), through a gap of the tracked tag (rows
+    # on the Python path), a stoppage with its settle time and a resume inside a window
+    spec = load_spec(make_case(fmu, tmp_path / "case", nan_span=(2500.0, 2800.0), stoppage=(4200.0, 4500.0)))
+    whole = track(spec, out_dir=tmp_path / "whole", window_rows=0, checkpoint_every=50)
+    expected = whole.csv.read_bytes()
+    for rows in (7, 64):
+        assert track(spec, out_dir=tmp_path / f"w{rows}", window_rows=rows, checkpoint_every=50) \
+            .csv.read_bytes() == expected, rows
+    track(spec, out_dir=tmp_path / "resumed", window_rows=7, checkpoint_every=50, max_steps=350)
+    resumed = track(spec, out_dir=tmp_path / "resumed", window_rows=7, checkpoint_every=50, resume=True)
+    assert resumed.csv.read_bytes() == expected
+    assert resumed.parameters == whole.parameters

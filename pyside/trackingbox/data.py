@@ -25,7 +25,7 @@ import csv
 import logging
 import os
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Union
@@ -192,14 +192,11 @@ def _read_clean(path: Path, header: list[str], *, required: Iterable[str], allow
             or any(c not in columns for c in required)):
         return None
     parts: dict[str, list[np.ndarray]] = {c: [] for c in columns}
-    try:
-        with pd.read_csv(path, dtype=str, na_values=list(NA_VALUES), keep_default_na=False,
-                         skipinitialspace=True, chunksize=CHUNK_ROWS) as reader:
-            for chunk in reader:
-                if not _clean_chunk(chunk, columns, parts, allow_nan):
-                    return None
-    except ValueError:  # not parseable as CSV, not UTF-8: the whole-file read words it
-        return None
+    for converted in clean_chunks(path, columns, allow_nan=allow_nan):
+        if converted is None:
+            return None
+        for name, values in converted.items():
+            parts[name].append(values)
     if not parts["time"]:
         return None
     ends = [(p[0], p[-1]) for p in parts["time"]]
@@ -213,11 +210,32 @@ def _read_clean(path: Path, header: list[str], *, required: Iterable[str], allow
     return out
 
 
-def _clean_chunk(chunk: pd.DataFrame, columns: list[str], parts: dict[str, list[np.ndarray]],
-                 allow_nan: bool) -> bool:
-    """Convert one chunk of :func:`_read_clean` into *parts*; False if it holds anything to report."""
+def clean_chunks(path: Path, columns: list[str], *, allow_nan: bool,
+                 chunk_rows: int | None = None) -> Iterator[dict[str, np.ndarray] | None]:
+    """The chunks of :func:`_read_clean` one by one: column -> floats, ``None`` once anything would be a problem.
+
+    For a reader that keeps only what it needs of each chunk (the windowed
+    measurements of a long tracking run, :mod:`trackingbox.stream`); *columns*
+    is the file's header. A ``None`` ends the iteration: :func:`read_table`
+    then words the problem. Time increasing across chunk boundaries is the
+    caller's to check.
+    """
+    try:
+        with pd.read_csv(path, dtype=str, na_values=list(NA_VALUES), keep_default_na=False,
+                         skipinitialspace=True, chunksize=chunk_rows or CHUNK_ROWS) as reader:
+            for chunk in reader:
+                converted = _clean_chunk(chunk, columns, allow_nan)
+                yield converted
+                if converted is None:
+                    return
+    except ValueError:  # not parseable as CSV, not UTF-8: the whole-file read words it
+        yield None
+
+
+def _clean_chunk(chunk: pd.DataFrame, columns: list[str], allow_nan: bool) -> dict[str, np.ndarray] | None:
+    """Convert one chunk of :func:`_read_clean`; None if it holds anything to report."""
     if len(chunk) == 0 or [str(c).strip() for c in chunk.columns] != columns:
-        return False
+        return None
     converted = {}
     for c, name in zip(chunk.columns, columns):
         cells = chunk[c]
@@ -226,17 +244,15 @@ def _clean_chunk(chunk: pd.DataFrame, columns: list[str], parts: dict[str, list[
         finite = np.isfinite(values)
         if name == "time":
             if na.any() or not finite.all():
-                return False
+                return None
             with np.errstate(over="ignore"):  # times near the float limits: their difference is +-inf
                 if np.any(np.diff(values) <= 0):
-                    return False
+                    return None
         elif (not finite[~na].all() or np.any(np.abs(values[finite]) > MAX_MAGNITUDE)
               or (not allow_nan and na.any())):
-            return False  # a non-numeric, infinite or huge cell, or an empty one where none may be
+            return None  # a non-numeric, infinite or huge cell, or an empty one where none may be
         converted[name] = values
-    for name, values in converted.items():
-        parts[name].append(values)
-    return True
+    return converted
 
 
 def read_table(
@@ -735,6 +751,92 @@ WindowName = Literal["training", "validation", "all"]
 WindowArg = Union[WindowName, tuple[float, float]]
 
 
+def view_tags(spec: Spec, tags: Iterable[str] = ()) -> list[str]:
+    """The tags a :class:`MeasurementView` lays on its grid: inputs, outputs, levels, the stoppage tag, *tags*."""
+    stoppage = spec.data.stoppage
+    needed = [*spec.inputs, *spec.outputs, *(s.tag for s in spec.states),
+              *([stoppage.tag] if stoppage is not None else []), *tags]
+    return list(dict.fromkeys(needed))
+
+
+def grid_rows(spec: Spec, window: WindowArg, end: float, lead: float | None) -> tuple[float, float, int, int]:
+    """``(start, stop, k_first, k_stop)``: the scored window and the grid's points ``k * sample_time``.
+
+    *end*: the last row's time from the first (s). See :meth:`MeasurementView.from_spec`.
+    """
+    ts = float(spec.sample_time)
+    where = Path(spec.measurements).name
+    if isinstance(window, str):
+        if window == "all":
+            bounds: tuple[float, float] | None = None
+        elif window in spec.windows:
+            bounds = (float(spec.windows[window][0]), float(spec.windows[window][1]))
+        else:
+            have = f" (it has: {', '.join(spec.windows)})" if spec.windows else ""
+            raise SpecError(f"spec {spec.path} has no [windows] {window} = [start, stop]{have}")
+    else:
+        bounds = (float(window[0]), float(window[1]))
+    if bounds is None:
+        bounds = (0.0, end + ts)
+    start, stop = bounds
+    if stop <= start:
+        raise DataError(f"window [{start:g}, {stop:g}) s of {where} ends before it starts")
+    first = 0.0 if lead is None else max(0.0, start - float(lead))
+    k_first = int(math.ceil(first / ts - 1e-9))
+    # points before the window's stop and not after the last row
+    k_stop = int(math.ceil(min(stop, end + ts) / ts - 1e-9))
+    k_stop = min(k_stop, int(math.floor(end / ts + 1e-9)) + 1)
+    if k_stop - k_first > MAX_GRID_POINTS:
+        raise DataError(f"{where} spans {end:g} s: on the sample_time = {ts:g} s grid of {spec.path.name} "
+                        f"that is {k_stop - k_first:.3g} points (at most {MAX_GRID_POINTS:g})")
+    # the points inside [start, stop), counted without building the grid: k * ts in it
+    inside, k = 0, max(k_first, int(math.floor((start - 1e-9) / ts)) - 1)
+    while k < k_stop and inside < 2 and ts * float(k) < stop - 1e-9:
+        inside += ts * float(k) >= start - 1e-9
+        k += 1
+    if inside < 2:
+        raise DataError(f"window [{start:g}, {stop:g}) s of {where} holds {inside} grid "
+                        f"point(s) of {ts:g} s between the first sample and the last ({end:g} s)")
+    return start, stop, k_first, k_stop
+
+
+def lay_masks(spec: Spec, grid: npt.NDArray[np.float64], samples: Mapping[str, npt.NDArray[np.float64]],
+              in_window: npt.NDArray[np.bool_], skip: float, before: Mapping[str, float] | None = None,
+              ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_], npt.NDArray[np.bool_], pd.DataFrame,
+                         dict[str, npt.NDArray[np.bool_]], float]:
+    """What :meth:`MeasurementView.from_spec` derives from the samples on the grid.
+
+    ``(stopped, stoppage_unknown, input_gap, inputs, scored, settle)``: see the
+    attributes of :class:`MeasurementView`. *before*: input tag -> the value its
+    hold starts from before the grid's first point (a window of a longer grid,
+    :mod:`trackingbox.stream`); without it a leading gap takes the first valid value.
+    """
+    stoppage = spec.data.stoppage
+    stopped = np.zeros(grid.size, dtype=bool)
+    unknown = np.zeros(grid.size, dtype=bool)
+    settle = 0.0
+    if stoppage is not None:
+        settle = float(stoppage.settle)
+        stopped = stoppage_mask(grid, samples[stoppage.tag], float(stoppage.below), settle)
+        # the stoppage tag lost: the plant may have stopped in the gap, so mask it like a stoppage
+        unknown = ~np.isfinite(samples[stoppage.tag])
+        stopped = stopped | extend_mask(grid, unknown, settle)
+    # an input lost: the twin runs on its last good value (held), and the outputs are not compared
+    # with it there, nor for the stoppage rule's settle time after it
+    input_gap = np.zeros(grid.size, dtype=bool)
+    frame: dict[str, npt.NDArray[np.float64]] = {"time": grid}
+    for tag, name in spec.inputs.items():
+        input_gap |= ~np.isfinite(samples[tag])
+        if before is not None and tag in before:
+            frame[name] = hold_nan(np.concatenate(([before[tag]], samples[tag])))[1:]
+        else:
+            frame[name] = hold_nan(samples[tag])
+    stopped = stopped | extend_mask(grid, input_gap, settle)
+    counted = in_window & (grid >= float(skip) - 1e-9) & ~stopped
+    scored = {tag: counted & np.isfinite(samples[tag]) for tag in spec.outputs}
+    return stopped, unknown, input_gap, pd.DataFrame(frame), scored, settle
+
+
 @dataclass(frozen=True)
 class MeasurementView:
     """The spec's measurements on the simulation grid, as every stage sees them.
@@ -858,20 +960,7 @@ class MeasurementView:
         """
         ts = float(spec.sample_time)
         where = Path(spec.measurements).name
-        if isinstance(window, str):
-            if window == "all":
-                bounds: tuple[float, float] | None = None
-            elif window in spec.windows:
-                bounds = (float(spec.windows[window][0]), float(spec.windows[window][1]))
-            else:
-                have = f" (it has: {', '.join(spec.windows)})" if spec.windows else ""
-                raise SpecError(f"spec {spec.path} has no [windows] {window} = [start, stop]{have}")
-        else:
-            bounds = (float(window[0]), float(window[1]))
-        stoppage = spec.data.stoppage
-        needed = [*spec.inputs, *spec.outputs, *(s.tag for s in spec.states),
-                  *([stoppage.tag] if stoppage is not None else []), *tags]
-        needed = list(dict.fromkeys(needed))
+        needed = view_tags(spec, tags)
         table = read_table(spec.measurements, required=needed, allow_nan=True)
         empty = [tag for tag in needed if not np.isfinite(table[tag].to_numpy(dtype=float)).any()]
         if empty:
@@ -880,24 +969,9 @@ class MeasurementView:
         t_abs = table["time"].to_numpy(dtype=float)
         t0 = float(t_abs[0])
         end = float(t_abs[-1]) - t0
-        if bounds is None:
-            bounds = (0.0, end + ts)
-        start, stop = bounds
-        if stop <= start:
-            raise DataError(f"window [{start:g}, {stop:g}) s of {where} ends before it starts")
-        first = 0.0 if lead is None else max(0.0, start - float(lead))
-        k_first = int(math.ceil(first / ts - 1e-9))
-        # points before the window's stop and not after the last row
-        k_stop = int(math.ceil(min(stop, end + ts) / ts - 1e-9))
-        k_stop = min(k_stop, int(math.floor(end / ts + 1e-9)) + 1)
-        if k_stop - k_first > MAX_GRID_POINTS:
-            raise DataError(f"{where} spans {end:g} s: on the sample_time = {ts:g} s grid of {spec.path.name} "
-                            f"that is {k_stop - k_first:.3g} points (at most {MAX_GRID_POINTS:g})")
+        start, stop, k_first, k_stop = grid_rows(spec, window, end, lead)
         grid = ts * np.arange(k_first, k_stop, dtype=float)
         in_window = (grid >= start - 1e-9) & (grid < stop - 1e-9)
-        if int(in_window.sum()) < 2:
-            raise DataError(f"window [{start:g}, {stop:g}) s of {where} holds {int(in_window.sum())} grid "
-                            f"point(s) of {ts:g} s between the first sample and the last ({end:g} s)")
         rule = spec.data.max_gap
         breaks = table.attrs.get("breaks") or {}
         samples: dict[str, npt.NDArray[np.float64]] = {}
@@ -916,27 +990,9 @@ class MeasurementView:
             samples[tag] = resample(column, t0 + grid, max_gap=None if math.isinf(gap) else gap,
                                     method=methods[tag], breaks={tag: breaks.get(tag, ())})[tag] \
                 .to_numpy(dtype=float, copy=True)
-        stopped = np.zeros(grid.size, dtype=bool)
-        unknown = np.zeros(grid.size, dtype=bool)
-        settle = 0.0
-        if stoppage is not None:
-            settle = float(stoppage.settle)
-            stopped = stoppage_mask(grid, samples[stoppage.tag], float(stoppage.below), settle)
-            # the stoppage tag lost: the plant may have stopped in the gap, so mask it like a stoppage
-            unknown = ~np.isfinite(samples[stoppage.tag])
-            stopped = stopped | extend_mask(grid, unknown, settle)
-        # an input lost: the twin runs on its last good value (held), and the outputs are not compared
-        # with it there, nor for the stoppage rule's settle time after it
-        input_gap = np.zeros(grid.size, dtype=bool)
-        frame: dict[str, npt.NDArray[np.float64]] = {"time": grid}
-        for tag, name in spec.inputs.items():
-            input_gap |= ~np.isfinite(samples[tag])
-            frame[name] = hold_nan(samples[tag])
-        stopped = stopped | extend_mask(grid, input_gap, settle)
-        counted = in_window & (grid >= float(skip) - 1e-9) & ~stopped
-        scored = {tag: counted & np.isfinite(samples[tag]) for tag in spec.outputs}
+        stopped, unknown, input_gap, frame, scored, settle = lay_masks(spec, grid, samples, in_window, skip)
         view = cls(source=Path(spec.measurements), sample_time=ts, window=(start, stop), grid=grid,
-                   samples=samples, max_gap=gaps, stopped=stopped, inputs=pd.DataFrame(frame), scored=scored,
+                   samples=samples, max_gap=gaps, stopped=stopped, inputs=frame, scored=scored,
                    skip=float(skip), t0=t0, method=methods, input_gap=input_gap, stoppage_unknown=unknown)
         if input_gap.any() or unknown.any():
             log.info("measurement view of %s: %d grid points with an input missing (inputs held), %d with the "

@@ -135,7 +135,8 @@ DIFF_STEP = 1.0e-3
 
 #: How the refinement's Jacobian is computed: ``"exact"`` (sensitivity equations from the FMU's
 #: directional derivatives, one run for residuals and Jacobian), ``"fd"`` (forward differences,
-#: ``1 + n`` runs), ``"auto"`` (exact where the twin supports it, else fd; the default).
+#: ``1 + n`` runs), ``"auto"`` (the default: fd where the twin's runs are native, see
+#: :func:`jacobian_support`; else exact where the twin supports it, else fd).
 JACOBIAN_METHODS = ("auto", "exact", "fd")
 
 #: The refinement stops when the next Gauss-Newton step (from the Jacobian at the accepted point,
@@ -540,11 +541,38 @@ class _ExactResiduals:
         return flat[:size], flat[size:].reshape(size, -1)
 
 
+def _runs_native(model: Any) -> bool:
+    """True if *model*'s runs go through the native stepper (what :meth:`FMUModel.stepper` chooses by default)."""
+    import os
+
+    if os.environ.get("TRACKINGBOX_NATIVE", "").strip() == "0":
+        return False
+    try:
+        from .native import NativeUnavailable, native_reason
+    except ImportError:  # pragma: no cover - the module is part of the package
+        return False
+    try:
+        return native_reason(model) is None
+    except NativeUnavailable:
+        return False
+
+
 def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tuple[str, str]:
     """Which Jacobian the refinement uses: ``(method, reason)`` for the setting *requested*.
 
-    ``"fd"`` gives ``("fd", "requested")``. ``"exact"`` and ``"auto"`` check the
-    twin (:func:`trackingbox.sensitivity.support`, at the start of a run over
+    ``"fd"`` gives ``("fd", "requested")``. ``"auto"`` gives ``("fd", why)`` when
+    the twin's runs go through the native stepper (:mod:`trackingbox.native`:
+    CVODE and the right-hand side in C), because the sensitivity equations run
+    on the Python path (:class:`trackingbox.fmu.SensitivityStepper`) and the
+    ``1 + n`` native runs were measured cheaper (``scripts/bench_jacobian --methods
+    exact,fd,auto``, three refinement iterations from the start values,
+    2026-11-27 on the 2-core machine at a load of 4-5 from other work: heat
+    exchanger fd 19 runs 0.6 CPU s against exact 9 runs 2.5 CPU s, the same cost
+    and estimate; heat production, 4 h, 14 parameters, fd 93 runs 8.6 CPU s
+    against exact 9 runs 23.1 CPU s, training cost 0.1123 against 0.1111: fd
+    costs a little accuracy there, ``jacobian="exact"`` keeps it).
+    Otherwise ``"exact"`` and ``"auto"`` check the twin
+    (:func:`trackingbox.sensitivity.support`, at the start of a run over
     *window* with the start values): ``("exact", "")`` when it provides usable
     directional derivatives; otherwise ``"auto"`` falls back to ``("fd", why)``
     and ``"exact"`` raises :class:`~trackingbox.errors.EstimationError` saying why.
@@ -555,8 +583,13 @@ def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tu
         raise EstimationError(f"jacobian must be one of {', '.join(JACOBIAN_METHODS)}, not {requested!r}")
     if requested == "fd":
         return "fd", "requested"
-    parameters, _, _, inputs = window_setup(problem, window, problem.start)
     model = _model(problem.twin)
+    if requested == "auto" and _runs_native(model):
+        why = (f"{Path(problem.twin).name} runs on the native stepper, the sensitivity equations do not: "
+               "1 + n native runs are the cheaper Jacobian")
+        log.info("refinement Jacobian by finite differences: %s", why)
+        return "fd", why
+    parameters, _, _, inputs = window_setup(problem, window, problem.start)
     found = support(model, problem.names, problem.upper - problem.lower, start_time=run_start(problem, window),
                     parameters=parameters, inputs=inputs)
     if found.exact:
@@ -893,8 +926,10 @@ def estimate(
         from the twin's directional derivatives: one run per evaluation gives the
         residuals and their Jacobian; :class:`~trackingbox.errors.EstimationError`
         if the twin cannot), ``"fd"`` (forward differences: ``1 + n`` runs) or
-        ``"auto"`` (exact where the twin supports it, else fd). What was used,
-        and why not exact, is in the result's ``refinement``.
+        ``"auto"`` (fd where the twin's runs are native, measured cheaper than
+        the Python-path sensitivity run; else exact where the twin supports it,
+        else fd: :func:`jacobian_support`). What was used, and why not exact, is
+        in the result's ``refinement``.
     scheduler
         Run the parallel evaluations on a Dask cluster instead of local processes:
         ``"local"`` (a local cluster of *workers* processes) or a scheduler's

@@ -1162,6 +1162,8 @@ class Stepper(abc.ABC):
         self._in_set: Callable[[Any], None] | None = None
         self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf  # the interval _input_values used last
         self._last_set: dict[str, Any] = {}
+        #: the maximum step given (None: the input table's smallest interval)
+        self.max_step_given = max_step
         self._prepare_inputs(inputs)
         self._initialize(parameters, max_step)
 
@@ -1224,6 +1226,18 @@ class Stepper(abc.ABC):
         exact when the solver has not looked past the current table's end: a
         model-exchange stepper made with ``carry=True`` stops at every
         communication point, so it never has.
+        """
+        self.replace_inputs(inputs)
+
+    def replace_inputs(self, inputs: pd.DataFrame) -> None:
+        """Go on with another table of the same inputs (no restart).
+
+        The run is the one the old table would have given when the new one holds
+        the same rows over every time the solver still asks for: from the
+        current time (its first row at or before it) to past the next stop,
+        by more than one step of the solver (:mod:`trackingbox.stream`: a long
+        run's input table, window by window). Inputs the run set explicitly
+        stay off the table.
         """
         self._check_open()
         names = list(self._in_names)

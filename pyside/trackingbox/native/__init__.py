@@ -448,8 +448,8 @@ class NativeStepper(ModelExchangeStepper):
         if self._in_names != before:
             self._push_inputs()
 
-    def extend_inputs(self, inputs: pd.DataFrame) -> None:
-        super().extend_inputs(inputs)
+    def replace_inputs(self, inputs: pd.DataFrame) -> None:
+        super().replace_inputs(inputs)
         self._push_inputs()
 
     def closed(self, n_pairs: int, set_names: Sequence[str], sim_names: Sequence[str],
@@ -475,8 +475,8 @@ class NativeStepper(ModelExchangeStepper):
         vr_sim = (ctypes.c_uint32 * max(n, 1))(*(int(self.model.variable(x).valueReference) for x in sim_names))
         nom = np.ascontiguousarray(nominal, dtype=float)
         err = ctypes.create_string_buffer(512)
-        max_step = float("inf")
-        if self._in_times is not None and self._in_times.size > 1:
+        max_step = self.max_step_given if self.max_step_given is not None else float("inf")
+        if self.max_step_given is None and self._in_times is not None and self._in_times.size > 1:
             max_step = float(np.min(np.diff(self._in_times)))
         handle = self._lib.tbn_closed_new(self._handle, n_pairs, n - n_pairs, vr_set, vr_sim,
                                           nom.ctypes.data_as(_pd), max_step, 100000, err, len(err))

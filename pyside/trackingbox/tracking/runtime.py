@@ -75,6 +75,7 @@ from ..checkpoint import CheckpointFile
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError, unknown_name
 from ..io import write_text_atomic
+from ..stream import MARGIN_ROWS, WINDOW_ROWS, WindowedMeasurements, percentile_range
 from .controllers import Interpolation, ScaledPI, SlidingMode, StateCompensator
 from .tuning import pair_settings
 
@@ -367,13 +368,19 @@ class _Twin:
         self.read_names: list[str] | None = None
         self.y: npt.NDArray[np.float64] | None = None
         self._read_key: tuple[str, ...] = ()
+        #: the solver's maximum step (None: the input table's smallest interval); a windowed run gives
+        #: the whole grid's, which its input table, one window of it, may not show
+        self.max_step: float | None = None
+        #: rows -> an input table from the first row past row *rows* (a windowed run's replay from 0),
+        #: None: :attr:`inputs` covers the run
+        self.replay_inputs: Callable[[int], pd.DataFrame] | None = None
 
     def start(self, t: float, values: Mapping[str, float], x: Sequence[float] | None = None) -> None:
         """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
         self._count()
         self.y = None
         self.stepper = self.model.stepper(start_time=t, parameters=self.fmu_values({**self.base, **values}),
-                                          inputs=self.inputs,
+                                          inputs=self.inputs, max_step=self.max_step,
                                           carry=bool(self.carry_limits) and self.me)
         self.applied = dict(values)
         if x is not None:
@@ -508,7 +515,16 @@ class _Twin:
 
     def replay_csv(self, csv_path: Path, rows: int, grid: npt.NDArray[np.float64]) -> None:
         """Rebuild the run from 0 by replaying the values recorded in the first *rows* rows of the CSV."""
-        self.replay(0.0, _read_rows(csv_path, rows, self.recorded, grid))
+        if self.replay_inputs is None:
+            self.replay(0.0, _read_rows(csv_path, rows, self.recorded, grid))
+            return
+        current = self.inputs
+        self.inputs = self.replay_inputs(rows)  # from row 0: the one place a windowed run holds that much
+        try:
+            self.replay(0.0, _read_rows(csv_path, rows, self.recorded, grid))
+        finally:
+            self.inputs = current
+        self.stepper.replace_inputs(current)
 
     def state_dict(self) -> dict[str, Any]:
         """The values applied and, for model exchange, the continuous states after the last step."""
@@ -588,17 +604,16 @@ def _make_controller(spec: Any, pair: Any, measured: npt.NDArray[np.float64],
     return _Pair(pair.variable, spec.outputs[pair.variable], pair.parameter, ctrl, (p.min, p.max))
 
 
-def _check_authority(pair: _Pair, measured: npt.NDArray[np.float64], events: list[TrackingEvent]) -> None:
+def _check_authority(pair: _Pair, measured: tuple[int, float, float], events: list[TrackingEvent]) -> None:
     """Warn when the parameter's whole range moves the variable by little compared with the data.
 
     ``|gain|·(p_max - p_min)`` (the controller's span) below 5 % of the measured
     range (1st-99th percentile) means the controller can only correct a small
     part of the error and will sit at a bound: a pairing problem, not a tuning one.
     """
-    ok = measured[np.isfinite(measured)]
-    if ok.size < 10:
+    n, lo, hi = measured  # percentile_range of the variable's samples
+    if n < 10:
         return
-    lo, hi = np.percentile(ok, [1.0, 99.0])
     rng = float(hi - lo)
     span = pair.controller.scaling.span
     if rng > 0.0 and span < 0.05 * rng:
@@ -610,7 +625,8 @@ def _check_authority(pair: _Pair, measured: npt.NDArray[np.float64], events: lis
         events.append(TrackingEvent(0.0, "weak-pair", msg))
 
 
-def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: MeasurementView | None = None) -> _Plan:
+def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: MeasurementView | None = None,
+          stream: WindowedMeasurements | None = None) -> _Plan:
     if not spec.pairs:
         raise SpecError(f"spec {spec.path} has no [[pairs]]; run `trackingbox pair` first or add them")
     problems = []
@@ -628,12 +644,16 @@ def _plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: Meas
     where = view.source.name
     grid = view.grid
     for tag in spec.inputs:
-        bad = ~np.isfinite(view.values(tag))
-        if bad.all():
-            raise DataError(f"input tag {tag!r} in {where} has no valid value between 0 and {grid[-1]:g} s")
-        if bad.any():
+        if stream is not None:
+            missing, size, last = stream.input_missing[tag], stream.n_rows, stream.grid[-1]
+        else:
+            bad = ~np.isfinite(view.values(tag))
+            missing, size, last = int(bad.sum()), bad.size, grid[-1]
+        if missing == size:
+            raise DataError(f"input tag {tag!r} in {where} has no valid value between 0 and {last:g} s")
+        if missing:
             log.warning("input tag %r in %s is missing at %d of %d samples; interpolated/held for the twin",
-                        tag, where, int(bad.sum()), bad.size)
+                        tag, where, missing, size)
 
     out_tags: list[str] = list(spec.outputs)
     tag_var = dict(spec.outputs)
@@ -860,7 +880,7 @@ CARRY_FRACTION = 0.02
 
 
 def _carry_limits(fraction: float, pairs: Sequence[_Pair], states: Sequence[Any],
-                  view: MeasurementView) -> dict[str, float]:
+                  ranges: Mapping[str, tuple[int, float, float]]) -> dict[str, float]:
     """Value name -> the largest change the tracked twin's integrator carries (see :func:`track`).
 
     A parameter: *fraction* of its bound range. A correction flow: *fraction*
@@ -869,10 +889,8 @@ def _carry_limits(fraction: float, pairs: Sequence[_Pair], states: Sequence[Any]
     """
     limits = {p.parameter: fraction * (p.bounds[1] - p.bounds[0]) for p in pairs}
     for s in states:
-        level = view.samples[s.tag]
-        ok = level[np.isfinite(level)]
-        if ok.size >= 2:
-            lo, hi = np.percentile(ok, [1.0, 99.0])
+        n, lo, hi = ranges[s.tag]  # percentile_range of the level's samples
+        if n >= 2:
             limits[s.correction] = fraction * abs(float(s.gain)) * float(hi - lo)
     return limits
 
@@ -907,7 +925,8 @@ def within_sample_gains(loop: TrackingLoop) -> dict[str, float]:
     names = [p.fmu_name for p in pairs]
 
     def answer(changed: Mapping[str, float]) -> npt.NDArray[np.float64]:
-        run = tw.model.stepper(start_time=0.0, parameters={**tw.base, **values, **changed}, inputs=tw.inputs)
+        run = tw.model.stepper(start_time=0.0, parameters={**tw.base, **values, **changed}, inputs=tw.inputs,
+                               max_step=tw.max_step)
         run.step(t1)
         y = np.asarray(run.get(names), dtype=float)
         run.finish()
@@ -1207,7 +1226,7 @@ class _NativeRows:
             return 0, None, True
         self._state_in(loop)
         b = self.b
-        b.k0, b.k_stop = k, k_stop
+        b.k0, b.k_stop = k - loop.off, k_stop - loop.off  # rows of the current window
         self._rows(loop)
         self._twin_out(0, loop.twin)
         self._twin_out(1, loop.plain)
@@ -1283,9 +1302,8 @@ class _ClosedRows(_NativeRows):
                           [s.variable for s in comp.states]]
         level_nominal = []
         for s_ in comp.states:
-            ok = loop.view.samples[s_.tag]
-            ok = ok[np.isfinite(ok)]
-            rng = float(np.ptp(np.percentile(ok, [1.0, 99.0]))) if ok.size >= 2 else 0.0
+            n, lo, hi = loop.ranges[s_.tag]
+            rng = float(hi - lo) if n >= 2 else 0.0
             rng = CLOSED_RANGE_FACTOR * (rng if rng > 0.0 else 1.0)
             level_nominal += [rng, max(abs(float(s_.tracked.gain)) * rng, 1e-12)]
         #: nominal values of the controllers' states (absolute tolerance: the twin's rtol times these),
@@ -1337,7 +1355,8 @@ class TrackingLoop:
                  recovery_hold: float | None = None, tolerance: float = 1e-6,
                  view: MeasurementView | None = None, interpolation: Interpolation = "linear",
                  substeps: int | Literal["auto"] = "auto", carry: float = CARRY_FRACTION,
-                 controllers: ControllerMode = "discrete", inputs_twin: Any = None) -> None:
+                 controllers: ControllerMode = "discrete", inputs_twin: Any = None,
+                 window_rows: int | None = None) -> None:
         from ..spec import check_against_fmu
 
         self.wall0 = _time.perf_counter()
@@ -1350,10 +1369,40 @@ class TrackingLoop:
         self.checkpoint_every = int(checkpoint_every)
         self._ckpt = CheckpointFile(self.ckpt_path, self.csv_path)
         check_against_fmu(spec)
-        self.plan = plan = _plan(spec, window, untracked, view)
+        #: the run's measurements window by window (:mod:`trackingbox.stream`); None: the whole view
+        #: (given, or where windows are not exact), with :attr:`view` that view
+        self.stream: WindowedMeasurements | None = None
+        rows = WINDOW_ROWS if window_rows is None else int(window_rows)
+        if rows > 0 and controllers == "continuous":  # a window holds a whole batch (see _window_for)
+            rows = max(rows, _NativeRows.CAP + MARGIN_ROWS + 2)
+        stat_tags = list(dict.fromkeys([*(p.variable for p in spec.pairs if p.variable in spec.outputs),
+                                        *(s.tag for s in spec.states)]))
+        if view is None and rows > 0 and spec.pairs and not isinstance(untracked, pd.DataFrame):
+            self.stream = WindowedMeasurements.open(spec, window, skip=float(spec.tracking.hold_until),
+                                                    directory=self.out_dir, stats_tags=stat_tags,
+                                                    rows_per_window=rows)
+            if self.stream is not None:
+                if all(self.stream.input_missing[t] < self.stream.n_rows for t in spec.inputs):
+                    view = self.stream.view(0, min(self.stream.n_rows, rows + MARGIN_ROWS))
+                else:  # an input with no value: the whole view's checks word it
+                    self.stream.close()
+                    self.stream = None
+        try:
+            self.plan = plan = _plan(spec, window, untracked, view, self.stream)
+        except BaseException:
+            if self.stream is not None:
+                self.stream.close()
+            raise
+        #: the current window (the whole view without :attr:`stream`) and the row of the run its first row is
         self.view = plan.view
-        self.grid = plan.view.grid
-        self.n_rows = self.grid.size
+        self.off = 0
+        self.grid: Any = self.stream.grid if self.stream is not None else plan.view.grid
+        self.n_rows = int(self.grid.size)
+        #: tag -> (valid samples, 1st, 99th percentile) over the run, of each pair's variable and each level
+        self.ranges = {tag: self.stream.percentiles(tag) if self.stream is not None
+                       else percentile_range(self.view.samples[tag]) for tag in stat_tags}
+        #: the twins' steppers run (their input tables follow the windows)
+        self._running = False
         self.ts = ts = float(spec.sample_time)
         self.hold_until = float(spec.tracking.hold_until)
         self.recovery_hold = 10.0 * ts if recovery_hold is None else float(recovery_hold)
@@ -1383,7 +1432,7 @@ class TrackingLoop:
         self.interpolation = interpolation
         pairs = [_make_controller(spec, p, self.view.samples[p.variable], interpolation) for p in spec.pairs]
         for p in pairs:
-            _check_authority(p, self.view.samples[p.tag], self.events)
+            _check_authority(p, self.ranges[p.tag], self.events)
         self.controllers = _Controllers(pairs, ts)
         self.compensation = _Compensation([
             _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts, interpolation=interpolation),
@@ -1421,11 +1470,13 @@ class TrackingLoop:
         for tw in (self.twin, self.plain):
             if tw is not None:
                 tw.read_names, tw._read_key = self.read, tuple(self.read)
+                if self.stream is not None:
+                    tw.max_step, tw.replay_inputs = self.stream.max_step, self._replay_inputs
         if not (isinstance(carry, (int, float)) and math.isfinite(carry) and carry >= 0.0):
             raise ValueError(f"carry must be a finite fraction >= 0, got {carry!r}")
         self.carry = float(carry)
         if self.carry > 0.0 and self.twin.me and not continuous:
-            self.twin.carry_limits = _carry_limits(self.carry, pairs, spec.states, self.view)
+            self.twin.carry_limits = _carry_limits(self.carry, pairs, spec.states, self.ranges)
         #: hold flag of the current sample (given at its start, used by its sub-steps)
         self.hold_k = True
         #: the rows in C (:class:`_NativeRows`), made on first use where usable
@@ -1470,6 +1521,46 @@ class TrackingLoop:
         elif not _NativeRows.usable(self):  # the untracked twin was dropped, a twin restarted on the Python path
             return None
         return fast
+
+    # ------------------------------------------------------------------ windows
+
+    def _limit(self) -> int:
+        """Rows below this run in the current window: it reaches :data:`MARGIN_ROWS` past them, or to the end."""
+        end = self.off + int(self.view.grid.size)
+        return end if end >= self.n_rows else end - MARGIN_ROWS
+
+    def _window_for(self, k: int, stop: int | None = None) -> None:
+        """Make the current window hold rows *k* .. *stop* - 1 (default: row *k*) to run (a windowed run).
+
+        Else the next window starts at the row before *k*, and the twins' tables with it: a running
+        stepper goes on with the new table (:meth:`~trackingbox.fmu.Stepper.replace_inputs`), which
+        holds the same rows from the one before *k* to :data:`MARGIN_ROWS` past the window's last row
+        run; the solver does not look further than one step (one sample) past a row. A batch of rows
+        in C (*stop*: where it would end anyway, at a checkpoint or its row buffer's end) is not cut
+        by a window: the continuous mode re-initialises its integrator at every batch.
+        """
+        stream = self.stream
+        if stream is None:
+            return
+        k = min(max(int(k), 0), self.n_rows - 1)
+        stop = k + 1 if stop is None else max(int(stop), k + 1)
+        if self.off <= k and stop <= self._limit():
+            return
+        a = max(0, k - 1)
+        view = stream.view(a, min(self.n_rows, a + stream.rows_per_window + MARGIN_ROWS))
+        self.plan.view = self.view = view
+        self.off = a
+        for tw in (self.twin, self.plain):
+            if tw is None:
+                continue
+            tw.inputs = view.inputs
+            if self._running and tw.stepper is not None:
+                tw.stepper.replace_inputs(view.inputs)
+
+    def _replay_inputs(self, rows: int) -> pd.DataFrame:
+        """The twins' input table from row 0 past row *rows* (a replay of a windowed run from the start)."""
+        assert self.stream is not None
+        return self.stream.view(0, min(self.n_rows, rows + 1 + MARGIN_ROWS)).inputs
 
     # ------------------------------------------------------------------ state
 
@@ -1539,11 +1630,13 @@ class TrackingLoop:
         for e in state["loop"].get("events", []):
             self.events.append(TrackingEvent(float(e[0]), str(e[1]), str(e[2])))
         t_k = float(self.grid[self.k0]) if self.k0 < self.n_rows else float(self.grid[-1])
+        self._window_for(self.k0)
         self.twin.load_state_dict(state["twin"], t=t_k, csv_path=self.csv_path, rows=self.k0, grid=self.grid,
                                   substeps=self.substeps)
         if self.plain is not None:
             self.plain.load_state_dict(state["untracked_twin"] or {"x": None}, t=t_k, csv_path=self.csv_path,
                                        rows=self.k0, grid=self.grid)
+        self._running = True
         log.info("resumed at row %d (t = %g s) from %s", self.k0, t_k, self.ckpt_path)
 
     # ------------------------------------------------------------------ running
@@ -1571,6 +1664,7 @@ class TrackingLoop:
         self.twin.start(0.0, {**self.controllers.values(), **corrections})
         if self.plain is not None:
             self.plain.start(0.0, dict(corrections))
+        self._running = True
         self.output.open()
 
     def extend(self, view: MeasurementView) -> None:
@@ -1583,6 +1677,9 @@ class TrackingLoop:
         input table. Drive the loop sample by sample with ``extend`` then
         ``run(max_steps=...)`` over the rows whose next sample has arrived.
         """
+        if self.stream is not None:
+            raise DataError("extend() goes on over a longer measurement view: start the loop with view= "
+                            "(the whole view), not from the spec's file window by window")
         n = self.n_rows
         if view.grid.size < n or not np.array_equal(view.grid[:n], self.grid) or view.skip != self.view.skip:
             raise DataError(f"the measurement view given to extend() does not continue the grid of "
@@ -1646,7 +1743,7 @@ class TrackingLoop:
             t_from = t_to
             if j < n and not recovered:
                 y = self.twin.get(self.read)
-                self.controllers.substep(t_to, j / n, k, y, self.ridx, self.view, self.hold_k)
+                self.controllers.substep(t_to, j / n, k - self.off, y, self.ridx, self.view, self.hold_k)
                 values = {**values, **self.controllers.values()}
         return recovered
 
@@ -1701,14 +1798,15 @@ class TrackingLoop:
         yu = self.plain.get(read) if self.plain is not None else (
             np.array([plan.untracked_table[n][k] for n in read]) if plan.untracked_table is not None
             else np.full(len(read), np.nan))
-        hold_all = t < self.hold_until - 1e-9 or bool(view.stopped[k]) or t < self.recovery_until - 1e-9
+        i = k - self.off  # row k in the current window
+        hold_all = t < self.hold_until - 1e-9 or bool(view.stopped[i]) or t < self.recovery_until - 1e-9
         if hold_all != self.hold_k:
             self.twin.force_restart = True  # entering or leaving a hold: the integrator restarts
         self.hold_k = hold_all
-        modes = self.controllers.update(t, k, y, ridx, view, hold_all, self.event)
+        modes = self.controllers.update(t, i, y, ridx, view, hold_all, self.event)
         for s in self.compensation.states:
             self.output.sstats[s.tag].add(float(y[ridx[s.variable]]))
-        corr, corr_u = self.compensation.update(k, y, yu if self.plain is not None else None, ridx, view)
+        corr, corr_u = self.compensation.update(i, y, yu if self.plain is not None else None, ridx, view)
         params = self.controllers.values()
         row: list[Any] = [t]
         if self._columns[0] is not view:
@@ -1718,10 +1816,10 @@ class TrackingLoop:
                                     for tag in plan.out_tags])
         yl, yul = y.tolist(), yu.tolist()  # Python floats, as float() of the elements
         for j, samples, scored, fit in self._columns[1]:
-            m = float(samples[k])
+            m = float(samples[i])
             a, b = yl[j], yul[j]
             row += (m, a, b)
-            if scored is not None and scored[k]:
+            if scored is not None and scored[i]:
                 fit.add(m, a, b)
         row += [params[n] for n in self.controllers.names]
         row += [corr[n] for n in self.compensation.names]
@@ -1743,11 +1841,14 @@ class TrackingLoop:
         every = self.checkpoint_every
         while self.k < n_rows:
             k = self.k
+            self._window_for(k)
             fast = self._native_rows() if k < n_rows - 1 else None
             if fast is not None:
                 k_stop = min(n_rows - 1, (k // every + 1) * every)
                 if max_steps is not None:
                     k_stop = min(k_stop, k + max_steps - rows_this_call)
+                self._window_for(k, min(k_stop, k + fast.CAP))
+                k_stop = min(k_stop, self._limit())
                 written, pending, python = fast.run(self, k, k_stop)
                 if progress is not None:
                     for j in range(written):
@@ -1764,6 +1865,7 @@ class TrackingLoop:
                 if not python:
                     continue
                 k = self.k  # the row that needs Python (a tag going missing or coming back, ...)
+                self._window_for(k)
             values, corr_u = self._row(k)
             rows_this_call += 1
             if progress is not None:
@@ -1822,6 +1924,8 @@ class TrackingLoop:
         for tw in (self.twin, self.plain):
             if tw is not None:
                 tw.close()
+        if self.stream is not None:
+            self.stream.close()
 
     # ------------------------------------------------------------------ result
 
@@ -1880,6 +1984,7 @@ def track(
     carry: float = CARRY_FRACTION,
     controllers: ControllerMode = "discrete",
     inputs_twin: Any = None,
+    window_rows: int | None = None,
 ) -> TrackingResult:
     """Run the tracking simulator over the spec's measurements.
 
@@ -1967,6 +2072,15 @@ def track(
         failure) run on the discrete path.
     inputs_twin : trackingbox.generate.inputs_twin.InputsTwin, optional
         The compiled inputs twin for ``controllers="continuous"``.
+    window_rows : int, optional
+        Without *view*: the measurements are read once into a temporary file
+        in *out_dir* and the run holds this many grid rows of them at a time
+        (:class:`~trackingbox.stream.WindowedMeasurements`; default
+        :data:`~trackingbox.stream.WINDOW_ROWS`), the twins' input tables
+        too, so its memory does not grow with its length; the rows are the
+        same as from the whole view. ``0``: the whole view. Data the windows
+        cannot give exactly (a historian's long export, heartbeat tags, a tag
+        bridging every gap) and a given *untracked* table take the whole view.
 
     Returns
     -------
@@ -1983,7 +2097,7 @@ def track(
     loop = TrackingLoop(spec, out_dir=out_dir, window=window, untracked=untracked,
                         checkpoint_every=checkpoint_every, recovery_hold=recovery_hold, tolerance=tolerance,
                         view=view, interpolation=interpolation, substeps=substeps, carry=carry,
-                        controllers=controllers, inputs_twin=inputs_twin)
+                        controllers=controllers, inputs_twin=inputs_twin, window_rows=window_rows)
     try:
         loop.begin(resume=resume)
         loop.run(max_steps=max_steps, progress=progress)
