@@ -233,6 +233,73 @@ def test_delta_bic_prefers_a_true_bias_and_refuses_a_spurious_one():
     assert sc.delta_bic({"T": e}, {"T": e - e.mean()}, 1) < 0     # fitting the noise's mean costs ln(n)
 
 
+def test_propagated_input_noise_matches_the_first_order_filter_variance(monkeypatch):
+    """A first-order lag sampled every dt, fed a noisy input: the output's spread from the input noise.
+
+    ``y[k+1] = a y[k] + (1 - a) u[k]`` with ``a = exp(-dt / tau)`` passes white input
+    noise of variance ``s**2`` as output variance ``s**2 (1 - a) / (1 + a)`` (the
+    filter's noise gain, a standard result). That is the spread a second, independent
+    draw of the input noise must add to the simulated output.
+    """
+    from types import SimpleNamespace as NS
+
+    dt, tau, s = 10.0, 60.0, 0.4
+    a = math.exp(-dt / tau)
+
+    def lag(problem, window, x, input_tags):
+        u = window.inputs["u"]
+        y = np.empty_like(u)
+        y[0] = u[0]
+        for k in range(1, u.size):
+            y[k] = a * y[k - 1] + (1.0 - a) * u[k - 1]
+        return rs.WindowResiduals(window.name, window.time, window.measured, {"Y": y}, {"u": u})
+
+    monkeypatch.setattr(rs, "window_series", lag)
+    rng = np.random.default_rng(11)
+    windows = []
+    for name in ("training", "validation"):
+        t = np.arange(0.0, 20000 * dt, dt)
+        u = 3.0 + np.where(t > t[-1] / 2, 1.0, 0.0) + rng.normal(0.0, s, t.size)   # a step and the noise
+        windows.append(NS(name=name, time=t, inputs={"u": u, "sp": np.full(t.size, 5.0)},
+                          measured={"Y": np.where(t < 600.0, np.nan, 0.0)}, lead=0))
+    # dataclasses.replace needs a dataclass: the windows are the estimation's WindowData
+    from trackingbox.estimation import WindowData
+
+    windows = [WindowData(w.name, 0.0, float(w.time[-1]), w.time, w.inputs, w.measured) for w in windows]
+    series = [lag(None, w, None, {}) for w in windows]
+    spread = rs.propagated_noise(None, windows, None, {}, series)
+    expected = s * math.sqrt((1.0 - a) / (1.0 + a))
+    assert spread["Y"] == pytest.approx(expected, rel=0.05)
+    # a noise-free input (a set point) is not perturbed; without any noisy input nothing propagates
+    assert rs.input_noise(windows[0])["sp"] == 0.0
+    quiet = [WindowData(w.name, w.start, w.stop, w.time, {"u": np.full(w.time.size, 3.0)}, w.measured)
+             for w in windows]
+    assert rs.propagated_noise(None, quiet, None, {}, [lag(None, w, None, {}) for w in quiet]) == {"Y": 0.0}
+
+
+def test_validation_gain_counts_the_tags_an_effect_materially_moves():
+    """A process effect that closes the gap on one tag and nudges nine others by a tenth of their noise."""
+    from types import SimpleNamespace as NS
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 4 * 3600.0, 10.0)
+    tags = ["T"] + [f"F{i}" for i in range(9)]
+    gap = {"T": 2.0}
+    windows, after = [], []
+    for name in ("training", "validation"):
+        meas = {g: 10.0 + 0.5 * np.sin(t / 900.0) + gap.get(g, 0.0) + rng.normal(0.0, 0.1, t.size) for g in tags}
+        sim = {g: 10.0 + 0.5 * np.sin(t / 900.0) for g in tags}
+        windows.append(rs.WindowResiduals(name, t, meas, sim, {}))
+        # the effect: T's gap closed, every other tag moved by 0.01 (a tenth of its noise)
+        after.append({g: meas[g] - sim[g] - (gap["T"] if g == "T" else 0.01) for g in tags})
+    where = NS(training=windows[0], validation=windows[1], noise={g: 0.1 for g in tags})
+    c = sc.score("heat-loss", "X", "process", "fit", where, 1, after[0], after[1], {})
+    assert set(c.tags) == set(tags)                                   # all ten are affected (enter ΔBIC, "worse")
+    nb, na = c.nrmse_before["T"], c.nrmse_after["T"]
+    assert c.validation_gain == pytest.approx(1.0 - na / nb)          # the gain is T's alone
+    assert c.validation_gain > 0.9
+
+
 # --------------------------------------------------------------------------- judging (fast)
 
 from trackingbox.diagnose import judge as jd  # noqa: E402

@@ -177,6 +177,9 @@ def test_auto_takes_fd_where_the_runs_are_native_and_exact_on_the_python_path(ca
     native = estimate(spec, seed=0, maxiter=0, jacobian="auto")
     assert native.refinement["jacobian"] == "fd"
     assert "runs on the native stepper" in native.refinement["reason"]
+    # "prefer-exact" (diagnosis's setting) keeps the sensitivity equations on a native twin
+    prefer = estimate(spec, seed=0, maxiter=0, jacobian="prefer-exact")
+    assert prefer.refinement["jacobian"] == "exact" and prefer.refinement["reason"] == ""
     monkeypatch.setenv("TRACKINGBOX_NATIVE", "0")
     python = estimate(spec, seed=0, maxiter=0, jacobian="auto")
     assert python.refinement["jacobian"] == "exact" and python.refinement["reason"] == ""
@@ -194,6 +197,8 @@ def test_twin_without_directional_derivatives_falls_back_to_fd(case: Path, tmp_p
     assert "does not declare providesDirectionalDerivatives" in result.refinement["reason"]
     assert result.to_json()["refinement"]["reason"] == result.refinement["reason"]
     assert abs(result.parameters["kht"] - 900.0) <= 10.0
+    prefer = estimate(spec, seed=0, maxiter=0, jacobian="prefer-exact")
+    assert prefer.refinement["jacobian"] == "fd" and prefer.refinement["reason"] == result.refinement["reason"]
     with pytest.raises(EstimationError, match="jacobian = 'exact' is not possible: hx1.fmu does not declare"):
         estimate(spec, seed=0, maxiter=0, jacobian="exact")
     with pytest.raises(EstimationError, match="jacobian must be one of auto, exact, fd"):

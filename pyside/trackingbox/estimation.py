@@ -136,8 +136,10 @@ DIFF_STEP = 1.0e-3
 #: How the refinement's Jacobian is computed: ``"exact"`` (sensitivity equations from the FMU's
 #: directional derivatives, one run for residuals and Jacobian), ``"fd"`` (forward differences,
 #: ``1 + n`` runs), ``"auto"`` (the default: fd where the twin's runs are native, see
-#: :func:`jacobian_support`; else exact where the twin supports it, else fd).
-JACOBIAN_METHODS = ("auto", "exact", "fd")
+#: :func:`jacobian_support`; else exact where the twin supports it, else fd),
+#: ``"prefer-exact"`` (exact where the twin supports it, else fd: for a caller that wants the
+#: more accurate refinement whatever it costs, such as diagnosis's null model).
+JACOBIAN_METHODS = ("auto", "exact", "fd", "prefer-exact")
 
 #: The refinement stops when the next Gauss-Newton step (from the Jacobian at the accepted point,
 #: projected on the bounds) moves no parameter by more than this fraction of its bound range. The
@@ -576,6 +578,8 @@ def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tu
     *window* with the start values): ``("exact", "")`` when it provides usable
     directional derivatives; otherwise ``"auto"`` falls back to ``("fd", why)``
     and ``"exact"`` raises :class:`~trackingbox.errors.EstimationError` saying why.
+    ``"prefer-exact"`` skips the native check: exact where the twin supports it,
+    else ``("fd", why)``.
     """
     from .sensitivity import support
 
@@ -928,7 +932,8 @@ def estimate(
         if the twin cannot), ``"fd"`` (forward differences: ``1 + n`` runs) or
         ``"auto"`` (fd where the twin's runs are native, measured cheaper than
         the Python-path sensitivity run; else exact where the twin supports it,
-        else fd: :func:`jacobian_support`). What was used, and why not exact, is
+        else fd: :func:`jacobian_support`) or ``"prefer-exact"`` (exact where the
+        twin supports it, else fd). What was used, and why not exact, is
         in the result's ``refinement``.
     scheduler
         Run the parallel evaluations on a Dask cluster instead of local processes:

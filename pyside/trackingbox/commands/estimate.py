@@ -73,9 +73,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--refine-iterations", type=number(ge=0, integer=True), default=MAX_REFINE_ITERATIONS, metavar="N",
                    help=f"most least-squares iterations (default {MAX_REFINE_ITERATIONS}; "
                         "each costs 1 + n_parameters simulations, or one sensitivity run)")
-    p.add_argument("--jacobian", choices=("auto", "exact", "fd"), default="auto",
+    p.add_argument("--jacobian", choices=("auto", "exact", "fd", "prefer-exact"), default="auto",
                    help="refinement Jacobian: exact (sensitivity equations from the twin's directional "
-                        "derivatives), fd (finite differences) or auto (exact where the twin provides them)")
+                        "derivatives), fd (finite differences), auto (fd where the twin runs on the native "
+                        "stepper, measured cheaper; else exact where the twin provides them) or prefer-exact "
+                        "(exact where the twin provides them, else fd)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",

@@ -53,6 +53,8 @@ class FitBudget:
     scheduler
         Dask scheduler of the estimation's evaluations (``scheduler`` of
         :func:`trackingbox.estimation.estimate`); None: local processes.
+    jacobian
+        The refinement's Jacobian (``jacobian`` of :func:`trackingbox.estimation.estimate`).
     """
 
     maxiter: int = 0
@@ -61,6 +63,7 @@ class FitBudget:
     warmup: float | None = None
     grid: float | None = None
     scheduler: str | None = None
+    jacobian: str = "prefer-exact"
 
 
 @dataclass(frozen=True)
@@ -201,7 +204,7 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     log.info("fitting %s on %s (%d parameters)", effect.id, target, len(pspec.parameters))
     est = estimate(pspec, maxiter=budget.maxiter, refine=True, refine_iterations=budget.refine_iterations,
                    workers=budget.workers, warmup=budget.warmup, refine_grid=budget.grid,
-                   scheduler=budget.scheduler)
+                   scheduler=budget.scheduler, jacobian=budget.jacobian)
     problem = problem_from_spec(pspec, warmup=budget.warmup)
     training, validation = load_windows(pspec, warmup=problem.warmup)
     x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])

@@ -8,12 +8,15 @@ A candidate *passes* when all of these hold:
   noise variances (``n``: validation samples per tag; the second term is four
   standard deviations of the change a mean square of ``n`` white-noise samples
   shows by chance), and its NRMSE falls by at least :data:`MIN_VALIDATION_GAIN`
-  (10 %, mean over the affected tags); a sensor
+  (10 %, mean over the tags it materially moves, :func:`~trackingbox.diagnose.screen.score`); a sensor
   effect must pass that gain on its own tag, and no tag may get worse by more
   than the same margin;
 * it explains a gap step 1 found: a sensor effect's tag, or one of the tags a
   process effect changes, is significant (:attr:`WhereResult.significant`);
 * no fitted parameter is pinned at a bound.
+
+"Noise" is each tag's sensor noise and the spread the inputs' noise causes in the
+simulated output, in quadrature (:func:`~trackingbox.diagnose.residuals.propagated_noise`).
 
 Verdict: ``effect`` when a candidate passes. One is named: among the passing
 candidates that the training data do not strongly separate from the best-ranked

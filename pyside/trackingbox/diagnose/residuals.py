@@ -20,6 +20,16 @@ against the tag's noise level ``sigma`` estimated from the measurements themselv
 * ``periods``: the window cut into blocks; a block whose mean residual exceeds
   :data:`PERIOD_THRESHOLD` noise standard deviations is a significant period.
 
+The noise a tag is judged against has two parts: the sensor's own noise, and the
+spread that the noise of the measured *inputs* causes in the simulated output
+(:func:`propagated_noise`). The twin is driven by the measured inputs, noise
+included, while the plant ran on the true ones; a controller output with no
+sensor noise of its own (a pump speed, a valve position) still differs from the
+plant's by what its controller made of the noisy input it was fed. That spread is
+measured, not assumed: the null model is simulated once more with every input
+perturbed by an independent draw of that input's own noise, and the RMS change of
+each output is its propagated noise. The two add in quadrature.
+
 A tag is *significant* when its residual is larger than its noise allows:
 ``rms(r) > RMS_THRESHOLD * sigma``, or ``|offset| > OFFSET_THRESHOLD * sigma``, or
 a trend moving the residual by more than ``OFFSET_THRESHOLD * sigma`` over the
@@ -54,6 +64,8 @@ RMS_THRESHOLD = 1.5
 OFFSET_THRESHOLD = 1.0
 #: A period (block of the window) is significant when its mean residual exceeds this many sigmas.
 PERIOD_THRESHOLD = 1.0
+#: Seed of the input-noise draw :func:`propagated_noise` simulates with (fixed: the same data give the same verdict).
+PROPAGATION_SEED = 7
 #: Number of blocks the heat map and the periods cut a window into.
 DEFAULT_BLOCKS = 12
 #: Smallest noise level a tag is given, as a fraction of its measured range over the record: a
@@ -425,7 +437,13 @@ class WhereResult:
     training, validation
         The null model's series per window.
     noise
-        Output tag -> noise sigma (from the whole measured series).
+        Output tag -> the noise its residual is judged against: the sensor noise
+        and the propagated input noise in quadrature.
+    sensor_noise
+        Output tag -> noise sigma of the measured series (:func:`noise_level`).
+    propagated
+        Output tag -> RMS change of the null model's output when the inputs carry a
+        second, independent draw of their noise (:func:`propagated_noise`).
     """
 
     null: EstimationResult
@@ -441,6 +459,8 @@ class WhereResult:
     jacobian: tuple[dict[str, np.ndarray], dict[str, np.ndarray]] = field(default=({}, {}), repr=False)
     x: np.ndarray | None = field(default=None, repr=False)
     input_tags: dict[str, str] = field(default_factory=dict, repr=False)
+    sensor_noise: dict[str, float] = field(default_factory=dict)
+    propagated: dict[str, float] = field(default_factory=dict)
 
     @property
     def significant(self) -> list[str]:
@@ -456,6 +476,9 @@ class WhereResult:
             doc["significant"] = bool(res.significant or val.significant)
             doc["validation"] = {"offset": _num(val.offset), "trend": _num(val.trend), "rms": _num(val.rms),
                                  "significant": bool(val.significant)}
+            if tag in self.sensor_noise:
+                doc["sensor_noise"] = _num(self.sensor_noise[tag])
+                doc["input_noise"] = _num(self.propagated.get(tag, 0.0))
             if tag in self.corrections:
                 doc["correction"] = _num(self.corrections[tag])
             out[tag] = doc
@@ -510,12 +533,14 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
     x = np.array([null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
     balance_tags = [t for b in getattr(spec, "balances", ()) or () for t in b.terms]
     view = MeasurementView.from_spec(spec, "all", tags=balance_tags)
-    noise = {tag: noise_level(view.values(tag)) for tag in spec.outputs}
+    sensor = {tag: noise_level(view.values(tag)) for tag in spec.outputs}
     after = _after_stoppage(view)
     try:
         series, jac = series_and_jacobian(problem, (training, validation), x, spec.inputs)
+        propagated = propagated_noise(problem, (training, validation), x, spec.inputs, series)
     finally:
         close_models()
+    noise = {tag: math.hypot(sensor[tag], propagated.get(tag, 0.0)) for tag in spec.outputs}
     series, delta0 = polish(series, jac, noise, step_bounds(problem, x))
     described = []
     for s in series:
@@ -535,11 +560,12 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
             r = series[0].residual(state.tag)
             corrections[state.tag] = float(state.gain * np.nanmean(r))
     for tag, res in described[0].items():
-        log.info("%s: noise %.3g, rms %.3g, offset %.3g, trend %.3g/h%s", tag, res.noise, res.rms, res.offset,
-                 res.trend, " (significant)" if res.significant else "")
+        log.info("%s: noise %.3g (sensor %.3g, inputs %.3g), rms %.3g, offset %.3g, trend %.3g/h%s", tag,
+                 res.noise, sensor[tag], propagated.get(tag, 0.0), res.rms, res.offset, res.trend,
+                 " (significant)" if res.significant else "")
     return WhereResult(null, described[0], described[1], balances, series[0], series[1], noise, problem,
                        (training, validation), corrections, (jac[0], jac[1]), x + delta0 if delta0.size else x,
-                       dict(spec.inputs))
+                       dict(spec.inputs), sensor, propagated)
 
 
 def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
@@ -560,6 +586,72 @@ def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
     from dataclasses import replace
 
     return replace(result, training=series[0], validation=series[1], jacobian=(jac[0], jac[1]), x=x1)
+
+
+def input_noise(window: Any) -> dict[str, float]:
+    """FMU input -> noise sigma of its values on *window* (:func:`noise_sigma`; 0 where it cannot be told).
+
+    No resolution floor here (unlike :func:`noise_level`): an input that carries no
+    noise (a set point, a held valve position) is not perturbed.
+
+    >>> from types import SimpleNamespace
+    >>> rng = np.random.default_rng(1)
+    >>> w = SimpleNamespace(inputs={"u": 5.0 + rng.normal(0.0, 0.3, 4000), "sp": np.full(4000, 2.0)})
+    >>> {k: round(v, 1) for k, v in input_noise(w).items()}
+    {'u': 0.3, 'sp': 0.0}
+    """
+    out = {}
+    for name, values in window.inputs.items():
+        sigma = noise_sigma(values)
+        out[name] = sigma if math.isfinite(sigma) and sigma > 0 else 0.0
+    return out
+
+
+def perturbed(window: Any, sigma: Mapping[str, float], seed: int = PROPAGATION_SEED) -> Any:
+    """*window* with every input moved by an independent normal draw of standard deviation ``sigma[input]``."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    inputs = {}
+    for name in sorted(window.inputs):
+        v = np.asarray(window.inputs[name], dtype=float)
+        s = float(sigma.get(name, 0.0))
+        inputs[name] = v + rng.normal(0.0, s, v.shape) if s > 0 else v
+    return replace(window, inputs=inputs)
+
+
+def propagated_noise(problem: Any, windows: Sequence[Any], x: npt.ArrayLike, input_tags: Mapping[str, str],
+                     series: Sequence[WindowResiduals]) -> dict[str, float]:
+    """Output tag -> the spread the inputs' own noise causes in the null model's output.
+
+    The twin runs on the measured inputs, noise included; the plant ran on the true
+    ones. Running the twin again with the inputs moved by a second, independent draw
+    of their noise (each input's sigma estimated on the training window,
+    :func:`input_noise`) changes every output by about what the first draw did:
+    the RMS of that change over the scored samples of all *windows* (pooled) is the
+    tag's propagated noise. One run per window, in one batch (:mod:`.parallel`).
+    """
+    from .parallel import map_calls
+
+    if not windows:
+        return {}
+    sigma = input_noise(windows[0])
+    if not any(s > 0 for s in sigma.values()):
+        return {tag: 0.0 for tag in series[0].simulated}
+    calls = [(problem, perturbed(w, sigma, PROPAGATION_SEED + k), x, input_tags) for k, w in enumerate(windows)]
+    runs = map_calls(window_series, calls)
+    out = {}
+    for tag in series[0].simulated:
+        sq, n = 0.0, 0
+        for base, moved in zip(series, runs):
+            d = moved.simulated[tag] - base.simulated[tag]
+            d = d[np.isfinite(base.measured[tag]) & np.isfinite(d)]
+            sq += float(np.dot(d, d))
+            n += d.size
+        out[tag] = math.sqrt(sq / n) if n else 0.0
+    for tag, value in out.items():
+        log.debug("%s: propagated input noise %.3g", tag, value)
+    return out
 
 
 def series_and_jacobian(problem: Any, windows: Sequence[Any], x: npt.ArrayLike, input_tags: Mapping[str, str],

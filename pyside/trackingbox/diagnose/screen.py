@@ -266,6 +266,11 @@ def nrmse_of(residual: npt.ArrayLike, measured: npt.ArrayLike) -> float:
 # --------------------------------------------------------------------------- candidates
 
 
+#: A candidate *materially* moves a tag when it changes the tag's training residual by more than this
+#: many noise sigmas RMS; its validation NRMSE gain is averaged over those tags (:func:`score`).
+MATERIAL_MOVE = 0.5
+
+
 @dataclass(frozen=True)
 class Candidate:
     """One effect on one target, screened (and maybe fitted).
@@ -281,8 +286,8 @@ class Candidate:
     delta_bic
         BIC gain over the null on the training window (positive favours the candidate).
     validation_gain
-        Relative fall of the NRMSE of the affected tags on the validation window
-        (mean over the tags; 0.7 = 70 % smaller).
+        Relative fall of the NRMSE on the validation window, mean over the tags the
+        candidate materially moves (:func:`score`; 0.7 = 70 % smaller).
     noise_gain
         Drop of the validation mean square residual of the affected tags, in noise variances (summed).
     noise_gains
@@ -340,18 +345,29 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
     """Score a candidate from its residuals on both windows (same grids as the null model's).
 
     A tag counts as affected when the candidate changes its training residual by
-    more than a hundredth of its noise sigma RMS.
+    more than a hundredth of its noise sigma RMS: those tags enter the ΔBIC, the
+    noise gains and the check that no tag gets worse. The validation NRMSE gain
+    (``validation_gain``) is the mean over the tags the candidate *materially*
+    moves, by more than :data:`MATERIAL_MOVE` noise sigmas RMS (all affected tags
+    when it moves none that far): a process effect reaches most tags of a plant
+    through its controllers, and averaging the gain on the tags it is about with
+    the near-zero changes of the rest would measure how many tags the plant has,
+    not how much of the gap the effect closes.
     """
     tr, va = where.training, where.validation
     before_t = {t: tr.residual(t) for t in training_after}
-    tags = []
+    tags, material = [], []
     for t, r1 in training_after.items():
         d = np.asarray(r1) - before_t[t]
         d = d[np.isfinite(d)]
-        if d.size and float(np.sqrt(np.mean(d * d))) > 0.01 * where.noise[t]:
+        move = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
+        if move > 0.01 * where.noise[t]:
             tags.append(t)
+        if move > MATERIAL_MOVE * where.noise[t]:
+            material.append(t)
     if not tags:
         tags = list(training_after)
+    material = material or tags
     dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
     nb, na, gains, ng, white, per_tag = {}, {}, [], 0.0, {}, {}
     for t in tags:
@@ -359,7 +375,7 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
         r1 = np.asarray(validation_after[t], dtype=float)
         nb[t] = nrmse_of(r0, va.measured[t])
         na[t] = nrmse_of(r1, va.measured[t])
-        if nb[t] > 0:
+        if nb[t] > 0 and t in material:
             gains.append(1.0 - na[t] / nb[t])
         per_tag[t] = noise_gain(r0, r1, where.noise[t])
         ng += per_tag[t]

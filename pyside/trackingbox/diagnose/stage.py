@@ -117,6 +117,15 @@ class DiagnoseSettings:
         cluster of *workers* (default 2) processes for the whole diagnosis
         (:func:`trackingbox.analysis.executor.make_executor`). The phases' CPU times
         then leave out the cluster's workers.
+    jacobian
+        The estimations' refinement Jacobian (``jacobian`` of
+        :func:`trackingbox.estimation.estimate`). Default ``"prefer-exact"``: the
+        exact sensitivities where the twin supports them, even where finite
+        differences on the native stepper cost less (``estimate``'s ``"auto"``).
+        Diagnosis must not take a parameter error for a missing effect, so its null
+        model is fitted as accurately as the twin allows (on heat production fd
+        reached a 1 % higher training cost in the same iterations,
+        ``scripts/bench_jacobian``), and the hidden-effect suite was measured so.
     """
 
     effects: tuple[str, ...] = ()
@@ -135,6 +144,7 @@ class DiagnoseSettings:
     grid: float | None = None
     relinearise: int | None = None
     scheduler: str | None = None
+    jacobian: str = "prefer-exact"
 
 
 #: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
@@ -310,7 +320,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     scheduler = settings.scheduler if workers > 1 else None
     options = {"seed": settings.seed, "workers": workers, "scheduler": scheduler,
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
-               "refine_grid": grid or None,
+               "refine_grid": grid or None, "jacobian": settings.jacobian,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     from .parallel import pool
 
@@ -332,7 +342,8 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
-                           warmup=settings.warmup, grid=grid or None, scheduler=scheduler)
+                           warmup=settings.warmup, grid=grid or None, scheduler=scheduler,
+                           jacobian=settings.jacobian)
         clock.start("screen")
         # the ramps' searches and the compiled patches are screening jobs of their own, spread over
         # screen_workers (they do not depend on each other); the sensor transforms run here meanwhile

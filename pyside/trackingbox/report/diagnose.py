@@ -49,17 +49,22 @@ def write_diagnose_report(spec: Spec, result: DiagnosisResult, out: str | os.Pat
                   + ", ".join(f"`{k}` = {v:.6g}" for k, v in w.null.parameters.items()) + ").")
 
     doc.heading("Where the twin and the measurements disagree")
-    doc.paragraph("Residual = measured - simulated on the scored samples; noise = the tag's white-noise standard "
-                  "deviation estimated from the measured series' second differences. Trend in tag units per hour; "
-                  "lag = the first-order sensor lag the residual's correlation with the output's rate indicates.")
+    doc.paragraph("Residual = measured - simulated on the scored samples; noise = what the residual is judged "
+                  "against: the sensor's white-noise standard deviation (estimated from the measured series' "
+                  "second differences) and the spread the measured inputs' own noise causes in the simulated "
+                  "output (the null model run again with an independent draw of that noise), in quadrature. "
+                  "Trend in tag units per hour; lag = the first-order sensor lag the residual's correlation with "
+                  "the output's rate indicates.")
     rows = []
     for tag, res in w.tags.items():
         val = w.validation_tags[tag]
-        rows.append([f"`{tag}`", fmt(res.noise), fmt(res.rms), fmt(res.offset), fmt(res.trend),
-                     fmt(res.lag_seconds, ".3g"), fmt(res.conditions_r2, ".2f"), fmt(val.rms),
+        sensor = getattr(w, "sensor_noise", {}).get(tag, math.nan)
+        inputs = getattr(w, "propagated", {}).get(tag, math.nan)
+        rows.append([f"`{tag}`", fmt(res.noise), fmt(sensor), fmt(inputs), fmt(res.rms), fmt(res.offset),
+                     fmt(res.trend), fmt(res.lag_seconds, ".3g"), fmt(res.conditions_r2, ".2f"), fmt(val.rms),
                      "yes" if tag in w.significant else "no", _hours(res.periods + val.periods)])
-    doc.table(["tag", "noise", "rms", "offset", "trend /h", "lag s", "inputs R²", "valid rms", "significant",
-               "periods"], rows, align="lrrrrrrrll")
+    doc.table(["tag", "noise", "sensor", "from inputs", "rms", "offset", "trend /h", "lag s", "inputs R²",
+               "valid rms", "significant", "periods"], rows, align="lrrrrrrrrrll")
     if w.corrections:
         doc.paragraph("State compensation: the mean correction flow the null residual would demand "
                       "(gain × mean level residual): "
