@@ -383,8 +383,12 @@ def test_injected_sensor_bias_is_named_on_its_tag(hx_bench, tmp_path, capsys):
     assert entries.pop(("sensor-bias", "TI-102")) == []
     assert entries and all(isinstance(why, list) and why for why in entries.values()), entries
     # the bias added, within two noise standard deviations of the thermometer (estimated from the data)
-    noise = doc["where"]["TI-102"]["noise"]
-    assert abs(noise - 0.1) < 0.02                      # the bench's thermometer noise
+    where = doc["where"]["TI-102"]
+    assert abs(where["sensor_noise"] - 0.1) < 0.02       # the bench's thermometer noise
+    # the inlet thermometers' noise reaches the outlet temperature through the twin: judged on both parts
+    assert where["input_noise"] > 0 and where["noise"] == pytest.approx(math.hypot(where["sensor_noise"],
+                                                                                   where["input_noise"]))
+    noise = where["noise"]
     (value,) = finding["parameters"].values()
     assert abs(value - BIAS) < 2 * noise
     assert finding["delta_bic"] > 10
