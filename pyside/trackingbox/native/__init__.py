@@ -288,15 +288,21 @@ def cpu_seconds() -> float:
     (the difference of two readings): the benchmarks print it beside the run's
     own CPU time. 0.0 where the library is not loaded.
     """
+    lib = _loaded()
+    return 0.0 if lib is None else float(lib.tbn_cpu_seconds())
+
+
+def _loaded() -> Any:
+    """The native library if this process has loaded it (else None: nothing to read)."""
     if not sys.platform.startswith("linux"):
-        return 0.0
+        return None
     try:
         path = library_path()
     except OSError:
-        return 0.0
+        return None
     if _load.cache_info().currsize == 0 or not path.exists():
-        return 0.0
-    return float(_load(path).tbn_cpu_seconds())
+        return None
+    return _load(path)
 
 
 def rhs_evaluations() -> int:
@@ -306,15 +312,8 @@ def rhs_evaluations() -> int:
     The integrator's work counted in FMU derivative calls, steadier than :func:`cpu_seconds` on a
     loaded machine (the difference of two readings); 0 where the library is not loaded.
     """
-    if not sys.platform.startswith("linux"):
-        return 0
-    try:
-        path = library_path()
-    except OSError:
-        return 0
-    if _load.cache_info().currsize == 0 or not path.exists():
-        return 0
-    return int(_load(path).tbn_rhs_evaluations())
+    lib = _loaded()
+    return 0 if lib is None else int(lib.tbn_rhs_evaluations())
 
 
 def native_reason(model: FMUModel) -> str | None:
