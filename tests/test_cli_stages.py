@@ -132,6 +132,34 @@ def test_track_bad_option_is_one_error_line(case: Path, tmp_path: Path) -> None:
     assert not (tmp_path / "run").exists()  # nothing half-written
 
 
+def test_track_carry_zero_is_the_restart_path(case: Path, tmp_path: Path) -> None:
+    # --carry 0 re-initialises the integrator at every parameter change, the default carries the
+    # controller's small moves; both reach the plant's kht (the independent expectation)
+    finals, integrator = {}, {}
+    for label, extra in (("default", []), ("restart", ["--carry", "0"])):
+        code, out, _ = run_cli(["track", str(case), "--json", "--out", str(tmp_path / label), *extra])
+        assert code == 0
+        finals[label] = json.loads(out)["parameters"]["hx.kht"]["final"]
+        integrator[label] = json.loads((tmp_path / label / "result.json").read_text())["integrator"]
+    assert integrator["restart"]["carried"] == 0 and integrator["restart"]["restarts"] > 100
+    assert integrator["default"]["carried"] > 100
+    for label in finals:
+        assert finals[label] == pytest.approx(KHT_PLANT, rel=0.01), label
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--carry", "-0.1"], "error: trackingbox track: argument --carry: must be a finite number >= 0, got '-0.1' "
+                          "(see trackingbox track --help)"),
+    (["--carry", "0", "--controllers", "continuous"], "error: --carry applies to the discrete controllers"),
+])
+def test_track_bad_carry_is_one_error_line(case: Path, tmp_path: Path, extra: list[str], message: str) -> None:
+    code, out, err = run_cli(["track", str(case), "--out", str(tmp_path / "run"), *extra])
+    assert code == 2 and out == ""
+    [line] = error_lines(err)
+    assert line.startswith(message)
+    assert not (tmp_path / "run").exists()  # nothing half-written
+
+
 def test_track_without_pairs_names_the_spec(case: Path, tmp_path: Path) -> None:
     spec = write_case(tmp_path / "c", pairs=False)
     for name in ("twin.fmu", "measurements.csv"):

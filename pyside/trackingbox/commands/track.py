@@ -18,6 +18,7 @@ examples:
   trackingbox track case1/spec.toml --out case1/run --json
   trackingbox track case1/spec.toml --out case1/run --resume     # continue after an interruption
   trackingbox track case1/spec.toml --controllers continuous     # the box's laws inside the integrator
+  trackingbox track case1/spec.toml --carry 0                    # re-initialise the integrator at every change
   trackingbox track case1/spec.toml --live opc.tcp://dcs:4840 --out case1/live   # online, over OPC UA
 
 One parameter controller per [[pairs]] entry (setpoint: the measured tag; process
@@ -61,6 +62,12 @@ def register(subparsers: Any) -> None:
                    help="discrete (default): the controllers' exact discretisation, updated every sample; "
                         "continuous: the box's laws integrated with the twin by CVODE (needs [source]; "
                         "compiles the twin with its tracked parameters as inputs once, cached)")
+    p.add_argument("--carry", type=number(ge=0), default=None, metavar="FRACTION",
+                   help="discrete controllers on a model-exchange twin: carry the twin's integrator across a "
+                        "change of a tracked parameter of at most FRACTION of its bound range (a correction "
+                        "flow: of its compensator's gain times its level's range) instead of re-initialising "
+                        "it (default 0.02); 0: re-initialise at every change, the restart path, closer to "
+                        "the exact closed loop where the twin's parameters change often (see docs/architecture.md)")
     p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
@@ -91,12 +98,20 @@ def run(args: argparse.Namespace) -> int:
                        "--out" if args.out else "--report" if args.report else "the output directory",
                        kind="dir", inputs=inputs)
     if args.live:
-        if args.controllers != "discrete":
+        if args.controllers != "discrete" or args.carry is not None:
             from ..errors import SpecError
 
+            if args.carry is not None:
+                raise SpecError("--carry is not available with --live (the online mode steps its twins "
+                                "with the default carry)")
             raise SpecError("--controllers continuous is not available with --live (the online mode steps the "
                             "discrete controllers sample by sample as the data arrive)")
         return _run_live(args, spec, out)
+    if args.carry is not None and args.controllers != "discrete":
+        from ..errors import SpecError
+
+        raise SpecError("--carry applies to the discrete controllers: with --controllers continuous the "
+                        "parameters move inside the integrator and there is nothing to carry")
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=inputs)
     if args.resume and (out / "checkpoint.json").exists():  # a damaged one is refused before anything runs
@@ -106,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
         result = track(spec, out_dir=out, resume=args.resume,
                        progress=Progress().counter("tracking", unit="row"),
                        window=args.window, checkpoint_every=args.checkpoint_every,
-                       controllers=args.controllers)
+                       controllers=args.controllers,
+                       **({} if args.carry is None else {"carry": args.carry}))
         if args.report:
             write_track_report(spec, result, args.report)
     if args.json:
