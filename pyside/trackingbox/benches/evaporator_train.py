@@ -168,6 +168,11 @@ MAX_LEAK = 0.5
 #: effect 1 stays unpaired (FI-7150 predicted at 26 % above its floor, limit 25 %), its fouling
 #: (39 % of the range by the end) shows in PI-7221 and effect 2 is 12.4 % off (effects 3-5: 6.3, 4.6,
 #: 9.1 %). Listed: the effect that fouls most keeps a loop of its own.
+#: With the train's vents and heat losses held at the plant's values (:data:`LOSSES`; same case) effect
+#: 1's chest and body temperature are at their noise floors (its fouling moves PI-7121 by +0.07 kPa in
+#: the first day), it pairs on FI-7150 (own loop 30 min) and ends within 5.7 % (2 h means within 7 %,
+#: transients up to 22.7 %); effects 2-5 within 2.2, 1.4, 0.9, 1.3 %; effect 6 pairs on PI-7621 and
+#: takes up effect 7's unpaired fouling (10.6 %; effect 7's moves PI-7621 1.6 x as much as its own).
 #: Why per effect: the vapour of effect k is the steam of effect k+1, so every effect's fouling moves
 #: every steam chest upstream of it by similar amounts, and the whole matrix's relative gain array
 #: (pseudo-inverse over ~50 tags with near-parallel rows) is ill-conditioned. On the 7-effect 24 h case
