@@ -173,6 +173,9 @@ MAX_LEAK = 0.5
 #: the first day), it pairs on FI-7150 (own loop 30 min) and ends within 5.7 % (2 h means within 7 %,
 #: transients up to 22.7 %); effects 2-5 within 2.2, 1.4, 0.9, 1.3 %; effect 6 pairs on PI-7621 and
 #: takes up effect 7's unpaired fouling (10.6 %; effect 7's moves PI-7621 1.6 x as much as its own).
+#: With the demo's estimates instead (one worker; vents 0.0072 and 104 W/K against the plant's 0.005 and
+#: 200, dBPRs 0.01-0.07 K high) FI-7150 is refused at the limit (25 %) and effect 1 stays unpaired (39 %);
+#: effects 2-6 within 9.7, 5.4, 4.0, 3.3 and 8.0 % (effect 2 takes up part of effect 1's fouling).
 #: Why per effect: the vapour of effect k is the steam of effect k+1, so every effect's fouling moves
 #: every steam chest upstream of it by similar amounts, and the whole matrix's relative gain array
 #: (pseudo-inverse over ~50 tags with near-parallel rows) is ill-conditioned. On the 7-effect 24 h case
