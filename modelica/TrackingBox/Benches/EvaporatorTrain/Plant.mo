@@ -3,8 +3,8 @@ model Plant "N-effect evaporator train, plant: fouling and scaling per effect, B
   extends TrackingBox.Benches.EvaporatorTrain.BaseClasses.PartialTrain(
     useRfInput=true,
     effect(dBPR={0.5 + 0.5*(N - k)/(N - 1) for k in 1:N}),
-    ventFractionEffect=fill(0.005, N),
-    UA_lossEffect=fill(200, N),
+    ventFractionAll=0.005,
+    UA_lossAll=200,
     UA_lossFlash=30,
     inletValve(capacity=0.9),
     transferPump(each head=0.95),

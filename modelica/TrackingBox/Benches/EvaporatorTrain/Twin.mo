@@ -14,7 +14,10 @@ equation
 <p>Clean design values: no fouling (<code>effect[k].Rf = 0</code>, bounds
 0..6e-4 m2.K/W), no boiling-point offsets, vents or heat losses, new valves
 and pumps. Tunable per effect: <code>effect[k].Rf</code>,
-<code>effect[k].dBPR</code>, <code>effect[k].U0</code>; the valves' wear
+<code>effect[k].dBPR</code>, <code>effect[k].U0</code>; for the whole train the
+steam economy's losses <code>ventFractionAll</code> (steam vented from every chest,
+fraction of its condensate) and <code>UA_lossAll</code> (every effect's heat-loss
+conductance), constants a modeller calibrates on the data; the valves' wear
 <code>capacity</code> and the pumps' <code>head</code> (1: as designed) and the
 product pump's <code>dp0</code>, <code>VMax</code>; each with its component's
 conditional input for a generated TrackingBox. State

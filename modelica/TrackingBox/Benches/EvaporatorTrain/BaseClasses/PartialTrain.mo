@@ -21,8 +21,10 @@ partial model PartialTrain "N-effect backward-feed train: effects, vapour header
   // what plant and twin set differently (structural flags and per-effect values)
   parameter Boolean useRfInput = false "= true: every effect takes its fouling resistance from its input Rf_in (plant)";
   parameter Boolean useCorrectionInputs = false "= true: every vessel has a correction-flow input (twin)";
-  parameter TrackingBox.Units.Fraction ventFractionEffect[N] = zeros(N) "Steam vented from each chest (fraction of its condensate)";
-  parameter TrackingBox.Units.ThermalConductance UA_lossEffect[N] = zeros(N) "Heat-loss conductance of each effect";
+  parameter TrackingBox.Units.Fraction ventFractionAll(min=0, max=0.02) = 0 "Steam vented from every chest (fraction of its condensate; the default of ventFractionEffect)";
+  parameter TrackingBox.Units.ThermalConductance UA_lossAll(min=0, max=1000) = 0 "Heat-loss conductance of every effect's liquor to ambient (the default of UA_lossEffect)";
+  parameter TrackingBox.Units.Fraction ventFractionEffect[N] = fill(ventFractionAll, N) "Steam vented from each chest (fraction of its condensate)";
+  parameter TrackingBox.Units.ThermalConductance UA_lossEffect[N] = fill(UA_lossAll, N) "Heat-loss conductance of each effect";
   parameter TrackingBox.Units.ThermalConductance UA_lossFlash = 0 "Heat-loss conductance of the product flash tank";
   parameter TrackingBox.Units.Fraction DSbias = 0 "Bias of the product DS meter";
   parameter Real DSdrift(unit="1/s") = 0 "Drift of the product DS meter";
@@ -268,5 +270,13 @@ designed), and each effect's boiling-point offset is its own <code>effect[k].dBP
 (0 here): the plant sets them by modifiers, and a generated TrackingBox drives them
 through the components' conditional inputs (<code>use_capacity_in</code>,
 <code>use_head_in</code>, <code>use_dBPR_in</code>), as it drives <code>effect[k].Rf</code>.</p>
+<p>Steam economy: every chest vents <code>ventFractionAll</code> of its condensate as
+steam and every effect's liquor loses <code>UA_lossAll&middot;(T - T_amb)</code> to ambient
+(0 by default; the per-effect arrays <code>ventFractionEffect</code>,
+<code>UA_lossEffect</code> follow them). Both make the train draw more steam and vapour per
+kilogram evaporated, which lowers every steam-chest and vapour pressure (on the 7-effect bench,
+0.5 % vents and 200 W/K per effect: effect 1's chest 1.7 and 1.2 kPa lower); fouling, the only
+time-varying parameter, can only raise them. The twin therefore has them as constants to estimate
+and hold, like the boiling-point offsets.</p>
 </html>"));
 end PartialTrain;
