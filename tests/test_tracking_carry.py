@@ -191,3 +191,14 @@ def test_carried_run_is_within_1e4_of_the_reference_on_heat_production(heat_prod
     assert run.carried > 2000
     worst, col = _worst(pd.read_csv(run.csv), reference, spans)
     assert worst <= WITHIN, (col, worst)
+
+
+def test_track_help_states_the_runtime_default_carry() -> None:
+    # `trackingbox track --help` writes the default carry as a literal (importing the runtime would
+    # slow every command's start): it must be the runtime's CARRY_FRACTION
+    from trackingbox.cli import build_parser
+
+    parser = build_parser()
+    track_parser = next(a for a in parser._subparsers._group_actions if a.dest == "command").choices["track"]
+    [carry] = [a for a in track_parser._actions if "--carry" in a.option_strings]
+    assert f"(default {runtime.CARRY_FRACTION:g})" in carry.help
