@@ -153,6 +153,19 @@ CLOSED_LOOP_MIN = 1800.0
 #: pressure PI-7221 47 x as much as effect 1's, scaled by their common bound range): a fouling paired on
 #: a tag that an untracked fouling dominates tracks that one.
 MAX_LEAK = 0.5
+#: ``[pairing] max_jitter``: the loop noise a pair may put into its parameter (a standard deviation, in
+#: fractions of its bound range; :func:`trackingbox.analysis.offsets.loop_jitter`). A quarter of the
+#: 10 % a tracked fouling is held to: its excursions over a day (3-4 standard deviations) stay inside
+#: it. It binds where an effect's fouling shows weakly on its tag: effect 1's on its liquor flow
+#: FI-7150 (a tenth of the range moves it by a third of its noise floor, against 10-16 x for effects 2-6
+#: on their steam chests), whose fast error is correlated over about a minute (the level loop's swings),
+#: so that a 30 min loop, which the ladder chose for the tag's sake, moves the fouling by 4.5 % of its
+#: range (standard deviation, from the training window's untracked error of the 7-effect 48 h case at the
+#: plant's constants, seed 0), a 1 h loop by 3.2 %, an 85 min loop by 2.7 % and a 2 h loop by 2.3 %. Tracked
+#: on that case with effect 1's loop alone changed (its tag's tracked/untracked ratio 0.157, 0.154, 0.153),
+#: effect 1's fouling was at most 22.7 % of its range off the truth after settling with 30 min, 14.7 % with
+#: 1 h and 10.0 % with 2 h.
+MAX_JITTER = 0.025
 #: ``[pairing] units``: every effect's parameters (its fouling) pair per effect
 #: (:mod:`trackingbox.analysis.blocks`), on one of the effect's thermal instruments: its vapour and
 #: steam-chest pressures, body temperature, liquor and condensate flows (the driving pressure and
@@ -375,7 +388,7 @@ def pairing_settings(n: int) -> PairingSettings:
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
     return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, closed_loop_min=CLOSED_LOOP_MIN, scale=tuple(scale),
-                           max_leak=MAX_LEAK, units=UNITS)
+                           max_leak=MAX_LEAK, max_jitter=MAX_JITTER, units=UNITS)
 
 
 def estimate_only(names: Any) -> tuple[str, ...]:
