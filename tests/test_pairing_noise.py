@@ -1,4 +1,4 @@
-"""Loop noise (``[pairing] max_jitter``).
+"""Loop noise (``[pairing] max_jitter``) and tags that identify their unit's parameter at their floor.
 
 The expectations are textbook ones, not the code's: a first-order filter ``1 / (T s + 1)`` (the closed
 loop between a tag's error and its parameter's move) passes ``sigma^2 tau / (2 T)`` of the variance of
@@ -106,3 +106,40 @@ def test_max_jitter_is_checked_and_round_trips_through_the_spec(tmp_path):
     assert _max_jitter(loads_spec(text, tmp_path / "s.toml", check_files=False), PairSettings()) == math.inf
     with pytest.raises(Exception, match="max_jitter"):
         loads_spec(text + "[pairing]\nmax_jitter = -1\n", tmp_path / "s.toml", check_files=False)
+
+
+def _chain_at_floor(p2_gain: float) -> dict:
+    """Two effects of a chain: P1 = Rf1 + 2 Rf2 (effect 1's steam chest sees effect 2's fouling), P2 = g Rf2.
+    Rf2 = 0.017 / g so far: P2's offset 0.017 is under twice its noise 0.01 (its floor about half its RMS
+    error), P1 shows Rf1 = 0.5 plus Rf2's share."""
+    rng = np.random.default_rng(11)
+    n = 2000
+    rf2 = 0.017 / p2_gain
+    meas = np.array([0.5 + 2 * rf2 + rng.normal(0.0, 0.01, n), 0.017 + rng.normal(0.0, 0.01, n)])
+    res = Residuals(("P1", "P2"), DT * np.arange(n), meas, np.zeros_like(meas), DT)
+    return dict(gains=[[1.0, 2.0], [0.0, p2_gain]], variables=["P1", "P2"],
+                parameters=["effect[1].Rf", "effect[2].Rf"], residuals=res,
+                bounds=[(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)], time_constants=[[10.0, 10.0]] * 2,
+                checks=DataChecks(closed_loop=600.0, max_leak=0.5), units=([1, 2], [1, 2]))
+
+
+def test_a_tag_at_its_floor_still_carries_the_parameter_it_identifies(monkeypatch):
+    # gain 1: a tenth of Rf2's range moves P2 by 0.1, ten times its floor (0.01): it identifies Rf2, so it
+    # stays a candidate for it (and for it alone), and both effects pair; the block is triangular
+    p = choose_pairs(**_chain_at_floor(1.0))
+    assert {x.variable: x.parameter for x in p.pairs} == {"P1": "effect[1].Rf", "P2": "effect[2].Rf"}
+    # gain 0.3: a tenth moves it by 0.03, three times its floor (under 5): left out at its floor, effect 2
+    # stays unpaired, and the separation check (as before) refuses P1 as well: Rf2 leaks into Rf1 by 2 per
+    # range (P1 = Rf1 + 2 Rf2), and P2's RMS error (0.0197) bounds Rf2's move only to 0.0197 / 0.3 = 0.066,
+    # weight 0.066 / 0.2 (SEPARATION_MOVE): 2 x 0.33 = 0.66 > 0.5
+    q = choose_pairs(**_chain_at_floor(0.3))
+    assert q.pairs == ()
+    why = dict(q.left_out)
+    assert "noise floor" in why["P2"]
+    assert "cannot be told apart from effect[2].Rf" in why["effect[1].Rf"]
+    # the threshold is what decides: asking for 11 x the floor, the 10 x of gain 1 no longer identifies Rf2
+    import trackingbox.analysis.pairing as pairing
+
+    monkeypatch.setattr(pairing, "IDENTIFY_FLOOR", 11.0)
+    r = choose_pairs(**_chain_at_floor(1.0))
+    assert "P2" not in {x.variable for x in r.pairs} and "noise floor" in dict(r.left_out)["P2"]

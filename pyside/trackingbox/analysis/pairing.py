@@ -84,6 +84,14 @@ LADDER_STEP = math.sqrt(2.0)
 #: :class:`DataChecks`). With pairing per unit the check takes the smaller move the data allow
 #: (:meth:`_DataView.moved_at_most`) when they bound it below this.
 SEPARATION_MOVE = 0.2
+#: Pairing per unit: a unit's tag at its noise floor stays a candidate for its own unit's parameter when
+#: a move of ``IDENTIFY_MOVE`` of that parameter's bound range (the done-criterion's tolerance, 10 %)
+#: shows on it as at least ``IDENTIFY_FLOOR`` times its noise floor (:meth:`_DataView.identifies`). On the
+#: 7-effect train (48 h, seed 0) the steam-chest pressures the pairing takes for effects 2-6 show their
+#: effect's fouling at 10.5-15.6 x their floor, effect 1's liquor flow FI-7150 at 0.32 x, and the last
+#: effect's steam chest PI-7721, left out at its floor, at 12.7 x.
+IDENTIFY_MOVE = 0.1
+IDENTIFY_FLOOR = 5.0
 
 
 @dataclass(frozen=True)
@@ -508,12 +516,22 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                       structure=None if Gc is None else G)
             if residuals is not None else None)
     excluded: set[int] = set()
+    var_unit, par_unit = _unit_lists(units, m, n)
+    #: unit tags at their noise floor kept for their own unit's parameters (:meth:`_DataView.identifies`)
+    identifying: dict[int, list[int]] = {}
     if data is not None:
         usable = np.zeros(n, dtype=bool)
         usable[cols] = True
         for i in rows:
             reason = data.row_reason(i, usable & (absS[i] >= floor))
             if reason is not None:
+                own = [j for j in cols if par_unit[j] is not None and par_unit[j] == var_unit[i]]
+                named = data.identifies(i, own) if data.at_floor(i) else []
+                if named:
+                    identifying[i] = named
+                    logger.info("%s kept for %s: %s", variables[i], ", ".join(parameters[j] for j in named),
+                                data.identify_reason(i, named))
+                    continue
                 excluded.add(i)
                 left_out.append((variables[i], reason))
     floor_aware = data is not None and data.checks.closed_loop > 0 and excluded and len(excluded) < len(rows)
@@ -581,8 +599,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     if data is not None:
         allowed = data.allowed[np.ix_(rows, cols)].copy()
         allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
+        for i, named in identifying.items():  # only for the parameters it identifies
+            allowed[rows.index(i), [b for b, j in enumerate(cols) if j not in named]] = False
     G2 = tau2 = None
-    var_unit, par_unit = _unit_lists(units, m, n)
     flipped: dict[int, str] = {}
     if other_gains is not None:
         G2 = np.asarray(other_gains, dtype=float)
@@ -1018,6 +1037,38 @@ class _DataView:
                 break
             out = float(loop)
         return out
+
+    def at_floor(self, i: int) -> bool:
+        """Whether variable *i* is left out for its noise floor (``closed_loop`` set, its floor more than
+        ``max_floor`` of its settled untracked RMS error)."""
+        f = self.floor_ratio[i]
+        return self.checks.closed_loop > 0 and math.isfinite(f) and f > self.checks.max_floor
+
+    def identifies(self, i: int, candidates: Sequence[int]) -> list[int]:
+        """Those of *candidates* (its own unit's parameters) that variable *i* identifies: a move of
+        :data:`IDENTIFY_MOVE` of the parameter's bound range (the tolerance a tracked parameter is held
+        to) shows on it as at least :data:`IDENTIFY_FLOOR` times its noise floor. A tag at its floor has a
+        small untracked error in the data (the parameter has moved little so far, or other candidates
+        cancel there); that says nothing about what the parameter will do to it. Left out, the
+        parameter stays unpaired, and in a chain its changes go into its neighbours' loops (the
+        evaporator train's last effect: its fouling moved the effect before it's steam chest 1.6 times
+        as much as that effect's own, so that effect's tracked fouling carried the last one's)."""
+        st = self.stat[i]
+        if st is None or not st.samples or not (math.isfinite(st.noise) and st.noise > 0):
+            return []
+        return [j for j in candidates
+                if abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE
+                >= IDENTIFY_FLOOR * st.noise]
+
+    def identify_reason(self, i: int, named: Sequence[int]) -> str:
+        """Why the floor check does not leave variable *i* out (see :meth:`identifies`)."""
+        st = self.stat[i]
+        shows = ", ".join(f"{self.parameters[j]} by {IDENTIFY_MOVE:g} of its range moves it by "
+                          f"{_fmt(abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE)}"
+                          for j in named)
+        return (f"its noise floor {_fmt(st.noise)} is {100 * self.floor_ratio[i]:.0f} % of its untracked RMS error, "
+                f"but {shows} (at least {IDENTIFY_FLOOR:g} x the floor): it identifies its unit's parameter, "
+                "so it stays a candidate for it alone")
 
     def leak_weights(self, unpaired: Sequence[int]) -> np.ndarray:
         """Per unpaired candidate, the factor on its leakage the separation check compares with
