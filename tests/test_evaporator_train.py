@@ -166,3 +166,20 @@ def _twin_at_the_plants_constants_is_the_plant(case, constants: dict) -> None:
     lossless = last(case / "twin.fmu", {**constants, "ventFractionAll": 0.0, "UA_lossAll": 0.0})
     assert np.max(np.abs(twin - plant)) < 1.0, (twin, plant)
     assert lossless[0] - plant[0] > 300.0, (lossless, plant)
+
+
+@pytest.mark.compile
+def test_stoppage_settle_is_the_liquor_transit_time_of_the_compiled_train(fmu_cache):
+    # the settle after a stoppage is each effect's liquor hold-up over the liquor flow leaving it, summed
+    # (benches.evaporator_train.stoppage_settle, from the design formulas); the compiled 3-effect train
+    # at its start gives both from its own medium (masses at the start levels, flows of its valves)
+    from trackingbox.benches.evaporator_train import STOPPAGE_SETTLE, stoppage_settle
+
+    names = [f"train.effect[{k}].M" for k in range(1, N + 1)] + [f"train.FI_liquor[{k}]" for k in range(1, N + 1)]
+    with FMUModel(fmu_cache(BALANCE), tolerance=1e-8) as model:
+        r = model.simulate(stop_time=20.0, output_interval=10.0, outputs=names)
+    transit = sum(float(r[f"train.effect[{k}].M"].iloc[0]) / float(r[f"train.FI_liquor[{k}]"].iloc[0])
+                  for k in range(1, N + 1))
+    assert stoppage_settle(N) == pytest.approx(transit, rel=0.05)
+    assert stoppage_settle(N) > STOPPAGE_SETTLE          # longer than the single effect's 30 min
+    assert stoppage_settle(7) > stoppage_settle(N)        # and it grows with the effects

@@ -73,7 +73,8 @@ def test_pair_then_track_heat_production(fmu_cache, tmp_path, capsys):
     # every variable has data figures; the thresholds are reported
     assert {o["variable"] for o in doc["offsets"]} == set(doc["gain_matrix"]["variables"])
     assert doc["data_checks"] == {"noise_ratio": 5.0, "min_reach": 0.5, "max_ratio": 0.25,
-                                  "closed_loop": None, "closed_loop_min": None, "max_leak": None}
+                                  "closed_loop": None, "closed_loop_min": None, "max_leak": None,
+                                  "max_jitter": None}
 
     spec = load_spec(spec_path)
     assert {(p.variable, p.parameter) for p in spec.pairs} == set(pairs.items())

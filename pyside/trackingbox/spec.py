@@ -238,6 +238,11 @@ class PairingSettings:
         :func:`trackingbox.analysis.pairing.leakage`): a pair is refused when a candidate
         left unpaired moves its parameter by more than this many of its bound range per
         bound range of that candidate, at the loops' steady state. ``None``: no check.
+    max_jitter : float or None
+        Loop noise limit of ``pair`` (``max_jitter = 0.025``; see
+        :func:`trackingbox.analysis.offsets.loop_jitter`): a pair's loop is made no faster than
+        the one whose tag noise, as the data show it, moves its parameter by this standard
+        deviation in fractions of its bound range. ``None``: no limit.
     units : tuple of (str, tuple of str)
         Pairing per unit (see :mod:`trackingbox.analysis.blocks`): component array -> the twin
         outputs (array names) its parameters may pair with, ``units = { effect = ["PI_steamChest",
@@ -254,6 +259,7 @@ class PairingSettings:
     max_leak: float | None = None
     closed_loop_min: float | None = None
     units: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    max_jitter: float | None = None
 
 
 @dataclass(frozen=True)
@@ -773,7 +779,7 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
     table = _table(raw, "pairing", problems)
     if table is None:
         return PairingSettings()
-    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak", "units"), (), "[pairing]",
+    _check_keys(table, ("freeze", "scale", "closed_loop", "closed_loop_min", "max_leak", "max_jitter", "units"), (), "[pairing]",
                 problems)
     out: dict[str, Any] = {}
     if "units" in table:
@@ -801,6 +807,8 @@ def _parse_pairing(raw: Mapping[str, Any], problems: _Problems) -> PairingSettin
                          + (f", got {slowest:g} s" if slowest is not None else ""))
     if "max_leak" in table:
         out["max_leak"] = _number(table, "max_leak", "[pairing]", problems, positive=True)
+    if "max_jitter" in table:
+        out["max_jitter"] = _number(table, "max_jitter", "[pairing]", problems, positive=True)
     for key, example, positive in (("freeze", "holdControllers = 1", False), ("scale", '"TI-101" = 0.2', True)):
         value = table.get(key, {})
         if not isinstance(value, Mapping):
@@ -1097,6 +1105,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
             doc["pairing"]["closed_loop_min"] = float(spec.pairing.closed_loop_min)
         if spec.pairing.max_leak is not None:
             doc["pairing"]["max_leak"] = float(spec.pairing.max_leak)
+        if spec.pairing.max_jitter is not None:
+            doc["pairing"]["max_jitter"] = float(spec.pairing.max_jitter)
         if spec.pairing.units:
             doc["pairing"]["units"] = {u: list(tags) for u, tags in spec.pairing.units}
     if spec.diagnose.effects:

@@ -141,10 +141,12 @@ class PairSettings:
         (``None``: :func:`~trackingbox.analysis.pairing.choose_pairs`' default).
     second_point
         ``"auto"``, ``"none"`` or a time (s): the second operating point of the step tests.
-    data_checks, noise_ratio, min_reach, max_ratio, max_leak
+    data_checks, noise_ratio, min_reach, max_ratio, max_leak, max_jitter
         The untracked-run checks of :class:`~trackingbox.analysis.pairing.DataChecks` (*max_leak*: the
         separation of a paired parameter from the candidates left unpaired; ``None``: the spec's
-        ``[pairing] max_leak``, absent: no separation check).
+        ``[pairing] max_leak``, absent: no separation check; *max_jitter*: the noise a pair's loop may
+        put into its parameter, a fraction of its bound range; ``None``: the spec's ``[pairing]
+        max_jitter``, absent: no such limit).
     check_gains
         Gains the data checks judge with: ``"recording"`` (default): with a freeze,
         from a second step-test set with nothing frozen (the twin run as the
@@ -183,6 +185,7 @@ class PairSettings:
     min_reach: float = 0.5
     max_ratio: float = 0.25
     max_leak: float | None = None
+    max_jitter: float | None = None
     check_gains: CheckGains = "recording"
     closed_loop: float | None = None
     closed_loop_min: float | None = None
@@ -274,7 +277,8 @@ class PairingResult:
                 "noise_ratio": pairing.checks.noise_ratio, "min_reach": pairing.checks.min_reach,
                 "max_ratio": pairing.checks.max_ratio, "closed_loop": pairing.checks.closed_loop or None,
                 "closed_loop_min": pairing.checks.closed_loop_min or None,
-                "max_leak": _finite(pairing.checks.max_leak)},
+                "max_leak": _finite(pairing.checks.max_leak),
+                "max_jitter": _finite(pairing.checks.max_jitter)},
             "check_gains": None if pairing.checks is None else {
                 "source": "recording" if self.steptest_recording is not None else "structure",
                 "rule": self.check_rule,
@@ -472,7 +476,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
 
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
                             closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=_max_leak(spec, s),
-                            closed_loop_min=_closed_loop_min(spec, s))
+                            closed_loop_min=_closed_loop_min(spec, s), max_jitter=_max_jitter(spec, s))
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
@@ -536,6 +540,16 @@ def _max_leak(spec: Spec, settings: PairSettings) -> float:
         return math.inf
     if not (math.isfinite(float(value)) and float(value) >= 0):
         raise AnalysisError(f"max_leak must be a number >= 0, got {value!r}")
+    return float(value)
+
+
+def _max_jitter(spec: Spec, settings: PairSettings) -> float:
+    """The loop-noise limit *settings* or the spec's ``[pairing] max_jitter`` ask for (``inf``: none)."""
+    value = settings.max_jitter if settings.max_jitter is not None else spec.pairing.max_jitter
+    if value is None:
+        return math.inf
+    if not (math.isfinite(float(value)) and float(value) > 0):
+        raise AnalysisError(f"max_jitter must be a number > 0, got {value!r}")
     return float(value)
 
 

@@ -54,7 +54,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import AnalysisError
 from .blocks import Block, choose_block, square_rga
-from .offsets import OffsetStats, Residuals, predict_tracking, reach
+from .offsets import OffsetStats, Residuals, loop_jitter, predict_tracking, reach
 from .rga import _greedy_independent, condition_number, relative_gain_array, scale_gains
 
 logger = logging.getLogger(__name__)
@@ -84,6 +84,14 @@ LADDER_STEP = math.sqrt(2.0)
 #: :class:`DataChecks`). With pairing per unit the check takes the smaller move the data allow
 #: (:meth:`_DataView.moved_at_most`) when they bound it below this.
 SEPARATION_MOVE = 0.2
+#: Pairing per unit: a unit's tag at its noise floor stays a candidate for its own unit's parameter when
+#: a move of ``IDENTIFY_MOVE`` of that parameter's bound range (the done-criterion's tolerance, 10 %)
+#: shows on it as at least ``IDENTIFY_FLOOR`` times its noise floor (:meth:`_DataView.identifies`). On the
+#: 7-effect train (48 h, seed 0) the steam-chest pressures the pairing takes for effects 2-6 show their
+#: effect's fouling at 10.5-15.6 x their floor, effect 1's liquor flow FI-7150 at 0.32 x, and the last
+#: effect's steam chest PI-7721, left out at its floor, at 12.7 x.
+IDENTIFY_MOVE = 0.1
+IDENTIFY_FLOOR = 5.0
 
 
 @dataclass(frozen=True)
@@ -143,6 +151,19 @@ class DataChecks:
         inseparable by design (a pipe's loss in series with its valve, heat production) the loop on
         one stands for both, and the check would refuse it. A spec asks for it with
         ``[pairing] max_leak`` (the evaporator train: 0.5).
+    max_jitter : float
+        Loop noise (with ``closed_loop``): the largest standard deviation, in fractions of its bound
+        range, that a pair's loop may put into its parameter from its tag's fast error
+        (:func:`~trackingbox.analysis.offsets.loop_jitter` of the untracked error over the gain).
+        Once the other checks have chosen the pairs and their loops, a pair whose loop is faster
+        than the fastest rung of :func:`loop_ladder` within this limit (the slowest rung if none
+        is) is slowed to it: the ladder makes a loop faster to cut its tag's error, and where
+        that error is mostly the tag's noise a faster loop buys the tag little and puts the noise
+        into the parameter (the evaporator train's effect 1 on its liquor flow FI-7150, whose
+        noise floor a tenth of the fouling's range moves by a third: at 30 min the tracked fouling
+        swung by 23 % of its range, at 1 h by 15 %, while the tag's tracked/untracked ratio stayed
+        0.16 and 0.15). The pair's predicted ratio is then that of its slower loop, and a pair so
+        slowed is not refused for it (a warning says so). ``math.inf`` (the default): no limit.
     """
 
     noise_ratio: float = 5.0
@@ -153,16 +174,20 @@ class DataChecks:
     max_floor: float = 0.3
     max_leak: float = math.inf
     closed_loop_min: float = 0.0
+    max_jitter: float = math.inf
 
     def __post_init__(self) -> None:
         for name in ("noise_ratio", "min_reach", "max_ratio", "max_condition", "closed_loop", "max_floor",
-                     "max_leak", "closed_loop_min"):
+                     "max_leak", "closed_loop_min", "max_jitter"):
             value = getattr(self, name)
             finite = math.isfinite(value) if isinstance(value, (int, float)) else False
+            unbounded = name in ("max_leak", "max_jitter")
             if not (isinstance(value, (int, float)) and not isinstance(value, bool)
-                    and (finite or (name == "max_leak" and value == math.inf)) and value >= 0):
+                    and (finite or (unbounded and value == math.inf)) and value >= 0):
                 raise AnalysisError(f"pairing check {name} must be a non-negative number"
-                                    f"{' (or inf)' if name == 'max_leak' else ''}, got {value!r}")
+                                    f"{' (or inf)' if unbounded else ''}, got {value!r}")
+        if not self.max_jitter > 0:
+            raise AnalysisError(f"pairing check max_jitter must be > 0, got {self.max_jitter!r}")
         if self.closed_loop_min > 0 and not (self.closed_loop > 0 and self.closed_loop_min <= self.closed_loop):
             raise AnalysisError(f"pairing check closed_loop_min = {self.closed_loop_min:g} s needs a closed_loop at "
                                 f"least as long (the slowest loop, tried first), got closed_loop = "
@@ -491,12 +516,22 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
                       structure=None if Gc is None else G)
             if residuals is not None else None)
     excluded: set[int] = set()
+    var_unit, par_unit = _unit_lists(units, m, n)
+    #: unit tags at their noise floor kept for their own unit's parameters (:meth:`_DataView.identifies`)
+    identifying: dict[int, list[int]] = {}
     if data is not None:
         usable = np.zeros(n, dtype=bool)
         usable[cols] = True
         for i in rows:
             reason = data.row_reason(i, usable & (absS[i] >= floor))
             if reason is not None:
+                own = [j for j in cols if par_unit[j] is not None and par_unit[j] == var_unit[i]]
+                named = data.identifies(i, own) if data.at_floor(i) else []
+                if named:
+                    identifying[i] = named
+                    logger.info("%s kept for %s: %s", variables[i], ", ".join(parameters[j] for j in named),
+                                data.identify_reason(i, named))
+                    continue
                 excluded.add(i)
                 left_out.append((variables[i], reason))
     floor_aware = data is not None and data.checks.closed_loop > 0 and excluded and len(excluded) < len(rows)
@@ -564,8 +599,9 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
     if data is not None:
         allowed = data.allowed[np.ix_(rows, cols)].copy()
         allowed[[a for a, i in enumerate(rows) if i in excluded], :] = False
+        for i, named in identifying.items():  # only for the parameters it identifies
+            allowed[rows.index(i), [b for b, j in enumerate(cols) if j not in named]] = False
     G2 = tau2 = None
-    var_unit, par_unit = _unit_lists(units, m, n)
     flipped: dict[int, str] = {}
     if other_gains is not None:
         G2 = np.asarray(other_gains, dtype=float)
@@ -636,6 +672,29 @@ def choose_pairs(gains: npt.ArrayLike, variables: Sequence[str], parameters: Seq
         if worst is None:
             break
         allowed[rows.index(worst[0]), cols.index(worst[1])] = False
+
+    if data is not None and chosen and ladder and math.isfinite(data.checks.max_jitter):
+        # loop noise (DataChecks.max_jitter): no loop faster than its tag's noise allows its parameter
+        slowed = {}
+        for i, j in chosen.items():
+            quiet = data.quiet_loop(i, j, ladder)
+            if quiet > speeds.get(i, ladder[0]) * (1.0 + 1e-9):
+                slowed[i] = (speeds.get(i, ladder[0]), quiet)
+                speeds[i] = quiet
+            elif quiet == ladder[0] and data.jitter(i, j, quiet) > data.checks.max_jitter:
+                warnings.append(f"pair {variables[i]}/{parameters[j]}: even with a loop of {quiet:g} s its tag's "
+                                f"noise moves {parameters[j]} by {_fmt(data.jitter(i, j, quiet))} of its range "
+                                f"(standard deviation; limit {data.checks.max_jitter:g})")
+        if slowed:
+            predicted, _ = data.predict(chosen, tau if tauc is None else recording_time_constants(tau, tauc), speeds)
+            for i, (fast, slow) in slowed.items():
+                j = chosen[i]
+                ratio = predicted.get(i, (math.nan, math.nan))[0]
+                warnings.append(f"pair {variables[i]}/{parameters[j]}: loop slowed from {fast:.0f} s to {slow:.0f} s "
+                                f"(its tag's noise would move {parameters[j]} by {_fmt(data.jitter(i, j, fast))} of its "
+                                f"range, {_fmt(data.jitter(i, j, slow))} with the slower loop; limit "
+                                f"{data.checks.max_jitter:g}); predicted ratio {_fmt(ratio)}")
+                logger.info(warnings[-1])
 
     pairs = []
     for i in range(m):
@@ -940,6 +999,8 @@ class _DataView:
         self.apart: set[tuple[str, str]] = set()
         #: separation per move the data allow (pairing per unit): see :meth:`leak_weights`
         self.bounded = False
+        #: (variable, loop) -> loop_jitter of its untracked error (see :meth:`jitter`)
+        self._jitter: dict[tuple[int, float], float] = {}
 
     def moved_at_most(self, j: int) -> float:
         """Largest move of candidate *j*, in fractions of its bound range (at most 1), that the untracked
@@ -955,6 +1016,59 @@ class _DataView:
             if moved > 0:
                 best = min(best, st.rms / moved)
         return min(1.0, best)
+
+    def jitter(self, i: int, j: int, loop: float) -> float:
+        """Standard deviation of parameter *j*'s move, in fractions of its bound range, that a loop of
+        *loop* s on variable *i* makes from the variable's fast error (:func:`~.offsets.loop_jitter` of
+        the untracked error over the gain); inf without a gain, NaN without data."""
+        key = (i, round(float(loop), 6))
+        if key not in self._jitter:
+            self._jitter[key] = loop_jitter(self.R[i], self.interval, float(loop))
+        g = abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1])
+        return self._jitter[key] / g if g > 0 else math.inf
+
+    def quiet_loop(self, i: int, j: int, ladder: Sequence[float]) -> float:
+        """The fastest loop of *ladder* (slowest first) whose :meth:`jitter` is within ``max_jitter`` and no
+        faster one above it; the slowest when none is (or when the data give no figure)."""
+        out = float(ladder[0])
+        for loop in ladder:
+            x = self.jitter(i, j, loop)
+            if not (math.isfinite(x) and x <= self.checks.max_jitter):
+                break
+            out = float(loop)
+        return out
+
+    def at_floor(self, i: int) -> bool:
+        """Whether variable *i* is left out for its noise floor (``closed_loop`` set, its floor more than
+        ``max_floor`` of its settled untracked RMS error)."""
+        f = self.floor_ratio[i]
+        return self.checks.closed_loop > 0 and math.isfinite(f) and f > self.checks.max_floor
+
+    def identifies(self, i: int, candidates: Sequence[int]) -> list[int]:
+        """Those of *candidates* (its own unit's parameters) that variable *i* identifies: a move of
+        :data:`IDENTIFY_MOVE` of the parameter's bound range (the tolerance a tracked parameter is held
+        to) shows on it as at least :data:`IDENTIFY_FLOOR` times its noise floor. A tag at its floor has a
+        small untracked error in the data (the parameter has moved little so far, or other candidates
+        cancel there); that says nothing about what the parameter will do to it. Left out, the
+        parameter stays unpaired, and in a chain its changes go into its neighbours' loops (the
+        evaporator train's last effect: its fouling moved the effect before it's steam chest 1.6 times
+        as much as that effect's own, so that effect's tracked fouling carried the last one's)."""
+        st = self.stat[i]
+        if st is None or not st.samples or not (math.isfinite(st.noise) and st.noise > 0):
+            return []
+        return [j for j in candidates
+                if abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE
+                >= IDENTIFY_FLOOR * st.noise]
+
+    def identify_reason(self, i: int, named: Sequence[int]) -> str:
+        """Why the floor check does not leave variable *i* out (see :meth:`identifies`)."""
+        st = self.stat[i]
+        shows = ", ".join(f"{self.parameters[j]} by {IDENTIFY_MOVE:g} of its range moves it by "
+                          f"{_fmt(abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE)}"
+                          for j in named)
+        return (f"its noise floor {_fmt(st.noise)} is {100 * self.floor_ratio[i]:.0f} % of its untracked RMS error, "
+                f"but {shows} (at least {IDENTIFY_FLOOR:g} x the floor): it identifies its unit's parameter, "
+                "so it stays a candidate for it alone")
 
     def leak_weights(self, unpaired: Sequence[int]) -> np.ndarray:
         """Per unpaired candidate, the factor on its leakage the separation check compares with

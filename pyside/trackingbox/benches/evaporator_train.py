@@ -83,9 +83,45 @@ STOPPED_FRACTION = 0.01
 SAMPLE_TIME = 10.0
 WARMUP = 3 * 3600.0
 DEFAULT_HOURS = 24.0
-#: Feed flow below this fraction of nominal is a stoppage; the settle time after one.
+#: Feed flow below this fraction of nominal is a stoppage; the shortest settle time after one (the single
+#: effect's; the train's is :func:`stoppage_settle`).
 STOPPAGE_BELOW = 0.3
 STOPPAGE_SETTLE = 1800.0
+#: ``BaseClasses.PartialTrain``'s design: product dry solids, each effect's liquor hold-up at its level
+#: setpoint (m3: ``V_hold`` 1 below the level's zero plus ``A_sump`` 4 m2 x ``bodyLevelSet`` 1.2 m) and
+#: the design density ``0.97 (997 + 649 x)`` (kg/m3) at dry solids ``x``.
+PRODUCT_DS_DESIGN = 0.80
+HOLDUP_VOLUME = 1.0 + 4.0 * 1.2
+
+
+def stoppage_settle(n: int, nominal: dict[str, float] | None = None) -> float:
+    """The settle time after a stoppage (s) for a train of *n* effects: the liquor's transit time through
+    it at the design point (each effect's hold-up mass over the liquor flow leaving it, summed), at least
+    :data:`STOPPAGE_SETTLE`.
+
+    In backward feed the feed enters effect N and leaves effect 1 as product: after a restart the
+    liquor fed since reaches effect 1 only after it has passed every effect, and until then effect 1's
+    flows and concentrations recover from the stoppage in ways the twin follows only roughly (its level
+    compensation restores the masses, not the concentration profile). A loop resumed before that tracks
+    the recovery's error instead of the fouling: on the 7-effect 48 h case at the plant's constants
+    (seed 1) effect 1's fouling (2 h loop on its liquor flow FI-7150) ran 33.6 % of its range off the truth
+    in the hour after a restart with the single effect's 30 min, 9.5 % with 1 h and 7.1 % with 1.5 h (the
+    rest of the run unchanged). Seven effects: 6886 s (1.9 h); three 3837 s; two 3139 s.
+
+    >>> round(stoppage_settle(7)), round(stoppage_settle(3))
+    (6886, 3837)
+    """
+    nominal = NOMINAL if nominal is None else nominal
+    f0, x0 = nominal["feedFlowSet"], nominal["feedDS"]
+    product = f0 * x0 / PRODUCT_DS_DESIGN
+    evap = (f0 - product) / n
+    a_x, b_x = f0 * x0 / evap, product / evap - 1.0
+    transit = 0.0
+    for k in range(1, n + 1):
+        x = a_x / (b_x + k)                      # dry solids leaving effect k
+        rho = 0.97 * (997.0 + 649.0 * x)
+        transit += rho * HOLDUP_VOLUME / (evap * (b_x + k))
+    return max(STOPPAGE_SETTLE, float(transit))
 #: Bounds of every effect's fouling resistance (m2.K/W), as the single effect's.
 RF_BOUNDS = (0.0, 6.0e-4)
 #: Bounds of every effect's boiling-point offset (K), as the single effect's.
@@ -153,6 +189,19 @@ CLOSED_LOOP_MIN = 1800.0
 #: pressure PI-7221 47 x as much as effect 1's, scaled by their common bound range): a fouling paired on
 #: a tag that an untracked fouling dominates tracks that one.
 MAX_LEAK = 0.5
+#: ``[pairing] max_jitter``: the loop noise a pair may put into its parameter (a standard deviation, in
+#: fractions of its bound range; :func:`trackingbox.analysis.offsets.loop_jitter`). A quarter of the
+#: 10 % a tracked fouling is held to: its excursions over a day (3-4 standard deviations) stay inside
+#: it. It binds where an effect's fouling shows weakly on its tag: effect 1's on its liquor flow
+#: FI-7150 (a tenth of the range moves it by a third of its noise floor, against 10-16 x for effects 2-6
+#: on their steam chests), whose fast error is correlated over about a minute (the level loop's swings),
+#: so that a 30 min loop, which the ladder chose for the tag's sake, moves the fouling by 4.5 % of its
+#: range (standard deviation, from the training window's untracked error of the 7-effect 48 h case at the
+#: plant's constants, seed 0), a 1 h loop by 3.2 %, an 85 min loop by 2.7 % and a 2 h loop by 2.3 %. Tracked
+#: on that case with effect 1's loop alone changed (its tag's tracked/untracked ratio 0.157, 0.154, 0.153),
+#: effect 1's fouling was at most 22.7 % of its range off the truth after settling with 30 min, 14.7 % with
+#: 1 h and 10.0 % with 2 h.
+MAX_JITTER = 0.025
 #: ``[pairing] units``: every effect's parameters (its fouling) pair per effect
 #: (:mod:`trackingbox.analysis.blocks`), on one of the effect's thermal instruments: its vapour and
 #: steam-chest pressures, body temperature, liquor and condensate flows (the driving pressure and
@@ -375,7 +424,7 @@ def pairing_settings(n: int) -> PairingSettings:
                   (effect_tag(k, "FI", 50), 0.01 * (product + (k - 1) * evap)), (effect_tag(k, "ZI", 50), 0.002),
                   (effect_tag(k, "FI", 25), 0.01 * (1.2 * evap + (k - 1) * evap)), (effect_tag(k, "ZI", 25), 0.002)]
     return PairingSettings(freeze=(), closed_loop=CLOSED_LOOP, closed_loop_min=CLOSED_LOOP_MIN, scale=tuple(scale),
-                           max_leak=MAX_LEAK, units=UNITS)
+                           max_leak=MAX_LEAK, max_jitter=MAX_JITTER, units=UNITS)
 
 
 def estimate_only(names: Any) -> tuple[str, ...]:
@@ -440,7 +489,8 @@ DEFINITION = BenchDefinition(
     parameters=tuple(ParameterSpec(f"effect[{k}].Rf", 0.0, *RF_BOUNDS) for k in range(1, DEFAULT_EFFECTS + 1)),
     scenario=_scenario,
     states=states(DEFAULT_EFFECTS),
-    data=DataRules(stoppage=StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE),
+    data=DataRules(stoppage=StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"],
+                                         stoppage_settle(DEFAULT_EFFECTS)),
                    heartbeat={"*": HEARTBEAT}),
     tracking=TrackingSettings(hold_until=3600.0),
 )
@@ -644,7 +694,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         else:
             source = SourceSpec(path=out / models.twin_class_file, model=models.twin)
         half, end = round(n_meas / 2) * dt, n_meas * dt
-        stoppage = StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE)
+        stoppage = StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], stoppage_settle(n))
         data = (DataRules(stoppage=stoppage, heartbeat={"*": HEARTBEAT}) if history is not None
                 else DataRules(stoppage=stoppage))
         level_tags = {st.tag for st in state_specs}

@@ -81,6 +81,10 @@ def register(subparsers: Any) -> None:
                    help="separation: reject a pair whose parameter a candidate left unpaired moves by more than L "
                         "of its bound range per bound range of that candidate, at the loops' steady state "
                         "(default: the spec's [pairing] max_leak, else no such check)")
+    p.add_argument("--max-jitter", type=number(gt=0), default=None, metavar="J",
+                   help="loop noise: make no pair's loop faster than the one whose tag noise (as the data show it) "
+                        "moves its parameter by a standard deviation of J of its bound range (default: the spec's "
+                        "[pairing] max_jitter, else no such limit)")
     p.add_argument("--check-gains", choices=("recording", "structure"), default="recording",
                    help="gains of the reach and prediction checks: recording (default; with a freeze, step tests "
                         "repeated with nothing frozen, as the data were recorded) or structure (the frozen ones)")
@@ -113,7 +117,8 @@ def settings(args: argparse.Namespace) -> Any:
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
                         data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
-                        max_ratio=args.max_ratio, max_leak=args.max_leak, check_gains=args.check_gains,
+                        max_ratio=args.max_ratio, max_leak=args.max_leak, max_jitter=args.max_jitter,
+                        check_gains=args.check_gains,
                         closed_loop=args.closed_loop, closed_loop_min=args.closed_loop_min, samples=args.samples, seed=args.seed, workers=args.workers,
                         scheduler=args.scheduler)
 
