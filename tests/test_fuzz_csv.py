@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -42,6 +43,7 @@ def _expected_ok(rows: list[tuple[float, float]]) -> bool:
 
 
 @FUZZ
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # times near the float limits: no overflow warning either
 @given(rows=st.lists(st.tuples(NUMBERS, NUMBERS), max_size=12))
 def test_read_table_accepts_exactly_the_valid_tables(tmp_path: Path, rows: list[tuple[float, float]]) -> None:
     path = tmp_path / "in.csv"

@@ -111,7 +111,8 @@ def _check_time_order(t: npt.NDArray[np.float64], where: str, problems: list[str
     if valid.size < 2:
         return
     tv = t[valid]
-    d = np.diff(tv)
+    with np.errstate(over="ignore"):  # times near the float limits: their difference is +-inf, its sign right
+        d = np.diff(tv)
     dup = np.flatnonzero(d == 0)
     back = np.flatnonzero(d < 0)
     if dup.size:
