@@ -58,7 +58,7 @@ DIAGNOSE_CASE = "sensor-lag"
 #: Hours of bench data the demo runs per bench when ``--hours`` is not given (else the bench's own
 #: default). The train: two days. On its one-day default (7 effects, seed 0, a fresh clone) every
 #: effect's fouling was within 7.3 % of its range, but the last effect's steam chest PI-7721, which
-#: identifies that effect's fouling, tracked at 0.345 of its untracked NRMSE, at its noise floor (its
+#: identifies that effect's fouling, tracked at 0.345 of its untracked NRMSE, at its noise floor (over the day its
 #: tracked RMS error 278 Pa, the floor 381 Pa): in one day the last effect fouls too little for its tag's
 #: error to stand above the noise. On two days every criterion held (worst fouling 8.4 %, worst ratio
 #: PI-7721 0.235; 50 min on a loaded 2-core machine, against 27 for one day).

@@ -212,7 +212,7 @@ def sobol_indices(problem: StepProblem, settings: StepSettings = StepSettings(),
         # every parameter at once, anywhere in its bounds, and settles more slowly than a 5 % step; a
         # sample that runs past the reference is run again from the start. On the 7-effect evaporator
         # train (22 candidates, N = 32) every one of the 768 samples ran past the 3 h first reference,
-        # and all were run again (50 min of a loaded 2-core machine), where the longer reference costs
+        # and all were run again (47 min of a loaded 2-core machine lost), where the longer reference costs
         # one simulated day of the twin.
         settings = replace(settings, reference_horizon=settings.max_time)
     base = baseline(problem, settings, executor)
