@@ -98,12 +98,11 @@ def hold_constants(case, bench: str) -> None:
     boiling-point offsets, the train's vents and heat losses) at the plant's values, as the demo's
     pairing sees them after its estimate (which takes the 7-effect train about 40 min: not this
     benchmark's subject, so the truth stands in for it)."""
-    from trackingbox.benches.evaporator import ESTIMATE_ONLY, fix_parameters
-    from trackingbox.benches.evaporator_train import estimate_only
+    from trackingbox.benches.evaporator import fix_parameters
+    from trackingbox.demo import _estimate_only
 
     names = [p.name for p in load_spec(case.spec).parameters]
-    held = ESTIMATE_ONLY if bench == "evaporator" else estimate_only(names) if bench == "evaporator-train" else ()
-    values = {n: float(case.truth[n]) for n in held if n in names and n in case.truth}
+    values = {n: float(case.truth[n]) for n in _estimate_only(bench, names) if n in names and n in case.truth}
     if values:
         fix_parameters(case.spec, values)
         log(f"{bench}: held at the plant's values (the demo estimates and holds them): " + ", ".join(sorted(values)))
@@ -144,19 +143,27 @@ def cpu_now() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
+def plain_setup(spec_path: Path) -> tuple:
+    """The plain twin run's spec, measurement view and start values (parameters at their starts,
+    corrections 0)."""
+    from trackingbox.data import MeasurementView
+
+    spec = load_spec(spec_path)
+    view = MeasurementView.from_spec(spec, "all", skip=float(spec.tracking.hold_until))
+    start = {p.name: p.start for p in spec.parameters} | dict(spec.fixed) | {s.correction: 0.0 for s in spec.states}
+    return spec, view, start
+
+
 def plain_run(spec_path: Path, grid: np.ndarray, read: list[str]
               ) -> tuple[float, float, float, np.ndarray, pd.DataFrame]:
     """The plain twin run: (wall, CPU, integrator CPU, outputs on the grid, its input table), reading the data and
     the FMU included."""
     from trackingbox import native
-    from trackingbox.data import MeasurementView
     from trackingbox.fmu import FMUModel
 
     out = np.empty((grid.size, len(read)))
     c0, w0, n0 = cpu_now(), time.perf_counter(), native.cpu_seconds()
-    spec = load_spec(spec_path)
-    view = MeasurementView.from_spec(spec, "all", skip=float(spec.tracking.hold_until))
-    start = {p.name: p.start for p in spec.parameters} | dict(spec.fixed) | {s.correction: 0.0 for s in spec.states}
+    spec, view, start = plain_setup(spec_path)
     with FMUModel(spec.twin) as model:
         st = model.stepper(start_time=float(grid[0]), parameters=start, inputs=view.inputs)
         get = st.reader(read) if hasattr(st, "reader") else (lambda: st.get(read))
@@ -177,12 +184,9 @@ def stops_run(spec_path: Path, grid: np.ndarray, substeps: int) -> tuple[int, fl
     before any move is made.
     """
     from trackingbox import native
-    from trackingbox.data import MeasurementView
     from trackingbox.fmu import FMUModel
 
-    spec = load_spec(spec_path)
-    view = MeasurementView.from_spec(spec, "all", skip=float(spec.tracking.hold_until))
-    start = {p.name: p.start for p in spec.parameters} | dict(spec.fixed) | {s.correction: 0.0 for s in spec.states}
+    spec, view, start = plain_setup(spec_path)
     n = max(int(substeps), 1)
     targets = np.concatenate([np.linspace(grid[i], grid[i + 1], n + 1)[1:] for i in range(grid.size - 1)])
     r0, n0 = native.rhs_evaluations(), native.cpu_seconds()

@@ -132,13 +132,8 @@ def noise_floor(values: npt.ArrayLike, interval: float, span: float = FLOOR_SPAN
     w = max(3, int(round(span / interval)) | 1)
     if x.size < w:
         return math.nan
-    ok = np.isfinite(x)
-    c = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
-    n = np.concatenate([[0], np.cumsum(ok)])
-    full = (n[w:] - n[:-w]) == w
-    mean = (c[w:] - c[:-w]) / w
-    centre = x[w // 2: w // 2 + mean.size]
-    dev = (centre - mean)[full]
+    h = _centred_deviation(x, w)
+    dev = h[np.isfinite(h)]
     if dev.size == 0:
         return math.nan
     return float(np.sqrt(np.mean(dev ** 2) * w / (w - 1)))

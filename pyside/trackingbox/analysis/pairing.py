@@ -1024,8 +1024,12 @@ class _DataView:
         key = (i, round(float(loop), 6))
         if key not in self._jitter:
             self._jitter[key] = loop_jitter(self.R[i], self.interval, float(loop))
-        g = abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1])
+        g = self.full_move(i, j)
         return self._jitter[key] / g if g > 0 else math.inf
+
+    def full_move(self, i: int, j: int) -> float:
+        """How far variable *i* moves (its units, magnitude) when candidate *j* moves by its whole bound range."""
+        return abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1])
 
     def quiet_loop(self, i: int, j: int, ladder: Sequence[float]) -> float:
         """The fastest loop of *ladder* (slowest first) whose :meth:`jitter` is within ``max_jitter`` and no
@@ -1057,14 +1061,14 @@ class _DataView:
         if st is None or not st.samples or not (math.isfinite(st.noise) and st.noise > 0):
             return []
         return [j for j in candidates
-                if abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE
+                if self.full_move(i, j) * IDENTIFY_MOVE
                 >= IDENTIFY_FLOOR * st.noise]
 
     def identify_reason(self, i: int, named: Sequence[int]) -> str:
         """Why the floor check does not leave variable *i* out (see :meth:`identifies`)."""
         st = self.stat[i]
         shows = ", ".join(f"{self.parameters[j]} by {IDENTIFY_MOVE:g} of its range moves it by "
-                          f"{_fmt(abs(float(self.G[i, j])) * float(self.B[j, 2] - self.B[j, 1]) * IDENTIFY_MOVE)}"
+                          f"{_fmt(self.full_move(i, j) * IDENTIFY_MOVE)}"
                           for j in named)
         return (f"its noise floor {_fmt(st.noise)} is {100 * self.floor_ratio[i]:.0f} % of its untracked RMS error, "
                 f"but {shows} (at least {IDENTIFY_FLOOR:g} x the floor): it identifies its unit's parameter, "
