@@ -18,6 +18,7 @@ import multiprocessing
 import os
 import socket
 import threading
+import time
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
@@ -37,6 +38,8 @@ CONNECT_TIMEOUT = 10.0
 WORKER_TIMEOUT = 60.0
 #: ``--scheduler`` value that starts a local Dask cluster of ``--workers`` processes on 127.0.0.1
 LOCAL = "local"
+#: seconds between a pool worker's checks that the process it works for still runs (:func:`exit_with_parent`)
+PARENT_POLL = 0.5
 
 _MODELS: OrderedDict[tuple[str, str, float, int], Any] = OrderedDict()
 _DIGESTS: dict[str, tuple[tuple[int, int, int], str]] = {}
@@ -297,7 +300,42 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
     method = start_method or ("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
     if method not in ("forkserver", "spawn"):
         raise AnalysisError(f"start_method must be 'forkserver' or 'spawn' (fresh processes), not {method!r}")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
+                               initializer=exit_with_parent, initargs=(os.getpid(),))
+
+
+def _alive(pid: int) -> bool:
+    """Whether process *pid* still runs (a zombie, dead but not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
+            state = fh.read().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True  # no /proc (macOS): the signal test is all there is
+    return state not in ("Z", "X")
+
+
+def exit_with_parent(parent: int) -> None:
+    """Pool worker initializer: end this worker as soon as process *parent* is gone.
+
+    A process pool's workers are the forkserver's children, not those of the
+    process that submits to them, and nothing stops them when that process dies
+    without shutting its pool down (SIGTERM, SIGKILL, a crash): each would run
+    its current simulation to the end (tens of CPU minutes on the evaporator
+    train) for nobody. A daemon thread checks every :data:`PARENT_POLL` seconds
+    and leaves through ``os._exit`` once *parent* no longer runs.
+    """
+    def watch() -> None:
+        while _alive(parent):
+            time.sleep(PARENT_POLL)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="trackingbox-parent-watch", daemon=True).start()
 
 
 def _quiet_dask() -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
@@ -33,13 +34,15 @@ log = logging.getLogger(__name__)
 _ACTIVE: list[Any] = []
 
 
-def _init_worker() -> None:
-    """A fresh worker owns no FMU yet; it closes the ones it opens when it exits."""
+def _init_worker(parent: int) -> None:
+    """A fresh worker owns no FMU yet; it closes the ones it opens when it exits, and ends with *parent*."""
     from multiprocessing.util import Finalize
 
+    from ..analysis.executor import exit_with_parent
     from ..estimation import _forget_models, close_models
 
     _forget_models()
+    exit_with_parent(parent)
     # run by the worker's own exit (a forkserver child leaves through os._exit, past atexit)
     Finalize(None, close_models, exitpriority=10)
 
@@ -96,7 +99,7 @@ def pool(workers: int, scheduler: str | None = None) -> Iterator[Any]:
             _ACTIVE.pop()
             stop_executor(ex, wait=ok)
         return
-    p = multiprocessing.get_context("spawn").Pool(workers, initializer=_init_worker)
+    p = multiprocessing.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(os.getpid(),))
     _ACTIVE.append(p)
     ok = False
     try:
