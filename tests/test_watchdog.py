@@ -121,3 +121,86 @@ def test_the_timeout_message() -> None:
     assert timeout_message("fmi3DoStep", "/a/b/twin.fmu", 60.0) == (
         "the FMU's binary (twin.fmu) did not return from fmi3DoStep within 60 s (TRACKINGBOX_FMU_TIMEOUT)")
     assert timeout_message("fmi2GetReal", "", 2.5).startswith("foreign native code (an FMU's binary) did not")
+
+
+# --------------------------------------------------------------------------- the native stepper's calls
+
+#: fmi3GetContinuousStateDerivatives calls after which the hanging twin's never returns: past the
+#: canary's first step, inside the tracking run's rows (which call the FMU from C, under no fmpy frame)
+HANG_AFTER = 400
+
+
+def _hanging_twin(fmu: Path, out: Path, after: int) -> Path:
+    """*fmu* (a CasADi-made FMI 3 model exchange FMU with its sources) rebuilt so that its
+    fmi3GetContinuousStateDerivatives never returns after *after* calls."""
+    import shutil
+    import zipfile
+
+    import fmpy
+
+    work = out.with_suffix(".d")
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(work)
+    [wrap] = (work / "sources").glob("*_wrap.c")
+    text = wrap.read_text()
+    head = "fmi3Status fmi3GetContinuousStateDerivatives("
+    at = text.index("{", text.index(head)) + 1
+    wrap.write_text("#include <unistd.h>\n" + text[:at]
+                    + f"\n  {{ static long calls; if (++calls > {after}) for (;;) pause(); }}" + text[at:])
+    [lib] = (work / "binaries").rglob("*.so")
+    sources = sorted(str(p) for p in (work / "sources").glob("*.c"))
+    subprocess.run([os.environ.get("CC", "gcc"), "-O1", "-shared", "-fPIC", "-I",
+                    str(Path(fmpy.__file__).parent / "c-code"), "-I", str(work / "sources"), "-o", str(lib),
+                    *sources, "-lm"], check=True, capture_output=True, text=True)
+    with zipfile.ZipFile(out, "w") as z:
+        for path in sorted(work.rglob("*")):
+            if path.is_file():
+                z.write(path, path.relative_to(work).as_posix())
+    shutil.rmtree(work)
+    return out
+
+
+def test_a_hang_inside_the_native_stepper_is_one_timeout_line_exit_2(first_order_fmu: Path, tmp_path: Path) -> None:
+    """The tracking rows run in C (trackingbox.native) and call the FMU from there: no fmpy frame is on
+    the stack while they do. The twin's 400th fmi3GetContinuousStateDerivatives never returns."""
+    from _fixtures_tracking import make_case
+
+    from trackingbox import native
+
+    if not crafted_fmus.available():
+        pytest.skip("the hanging twin is rebuilt with a C compiler on Linux")
+    try:
+        native.library()
+    except native.NativeUnavailable as exc:
+        pytest.skip(f"the native stepper cannot be built here: {exc}")
+    spec = make_case(first_order_fmu, tmp_path / "case", stop=3000.0)
+    _hanging_twin(first_order_fmu, tmp_path / "case" / "twin.fmu", HANG_AFTER)
+    out = tmp_path / "run" / "track"
+    proc, seconds = _run(["track", str(spec), "--out", str(out)], tmp_path / "tmp", "2")
+    assert proc.returncode == 2, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert errors == ["error: the FMU's binary (twin.fmu) did not return from fmi3GetContinuousStateDerivatives "
+                      "within 2 s (TRACKINGBOX_FMU_TIMEOUT)"], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "run").exists()
+    assert seconds < 60
+
+
+def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(first_order_fmu: Path) -> None:
+    """What the watchdog reads: an even count after a stepper's calls returned, moved on by them."""
+    from trackingbox import native
+
+    try:
+        native.library()
+    except native.NativeUnavailable as exc:
+        pytest.skip(f"the native stepper cannot be built here: {exc}")
+    with FMUModel(first_order_fmu) as model:
+        st = model.stepper(start_time=0.0, parameters={"k": 0.003})
+        assert isinstance(st, native.NativeStepper)
+        seq0, _ = native.fmi_call()
+        st.step(100.0)
+        seq1, name = native.fmi_call()
+    assert seq0 % 2 == 0 and seq1 % 2 == 0
+    # at least a set of the states and a derivative per right-hand side, each counted twice (in, out)
+    assert seq1 - seq0 >= 4
+    assert name.startswith("fmi3")

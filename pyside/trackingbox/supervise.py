@@ -17,7 +17,9 @@ the GIL during a foreign call, so the thread can read the main thread's stack
 (``sys._current_frames()``) every :data:`WATCHDOG_POLL` s. When the innermost
 frame of fmpy's FMI wrappers (the same frame object: the same call) has been
 there longer than ``TRACKINGBOX_FMU_TIMEOUT`` s (60, the canary's limit too),
-the child reports it and ends; the supervisor prints
+or one call of the native stepper into the FMU (:mod:`trackingbox.native`,
+which calls it from C and counts its calls: the same count is the same call)
+has run that long, the child reports it and ends; the supervisor prints
 ``error: the FMU's binary (twin.fmu) did not return from fmi2DoStep within 60 s
 (TRACKINGBOX_FMU_TIMEOUT)`` and exits 2. Many short calls never trip it.
 ``TRACKINGBOX_WATCHDOG=0`` turns it off. In every such ending, the directories
@@ -129,7 +131,14 @@ class Watchdog:
     same call: a frame object belongs to one call, and the reference held here
     keeps it from being reused) is still there after *timeout* s, it calls
     ``on_timeout(function, fmu, timeout)`` once for that call: *function* is the
-    FMI function (``"fmi2DoStep"``), *fmu* the FMU's path or ``""``.
+    FMI function (``"fmi2DoStep"``), *fmu* the FMU's path or ``""``. The FMU
+    calls that :mod:`trackingbox.native` makes from C have no such frame; for
+    them it reads the library's count of its FMI calls
+    (:func:`trackingbox.native.fmi_call`): one call in progress whose count has
+    not moved for *timeout* s is reported the same way, naming the FMU last
+    opened. (With native steppers running in several threads of one process
+    the count is shared: a hang in one is then seen only once the others stop
+    calling.)
 
     Parameters
     ----------
@@ -185,21 +194,47 @@ class Watchdog:
             return None
         return watched, _fmi_name(names) or "a call into its shared library"
 
+    @staticmethod
+    def _native_call() -> tuple[int, str] | None:
+        """The native library's FMI call in progress (``(seq, name)``, seq odd), else None.
+
+        The steppers and the tracking rows in C (:mod:`trackingbox.native`)
+        call the FMU from C, under no fmpy frame; the library counts its FMI
+        calls (:func:`trackingbox.native.fmi_call`), and the same call is the
+        same odd count.
+        """
+        native = sys.modules.get("trackingbox.native")
+        call = native.fmi_call() if native is not None else None
+        return call if call is not None and call[0] % 2 == 1 else None
+
+    def _fire(self, function: str, fmu: str) -> None:
+        self.fired.append((function, fmu, self.timeout))
+        self._on_timeout(function, fmu, self.timeout)
+
     def _watch(self) -> None:
         current: FrameType | None = None
         reported: FrameType | None = None
         since = 0.0
+        native: tuple[int, float] | None = None  # (seq, since) of the native FMI call in progress
+        native_reported: int | None = None
         while not self._stop.wait(self.poll):
+            now = time.monotonic()
+            call = self._native_call()
+            if call is None:
+                native = None
+            elif native is None or call[0] != native[0]:
+                native = (call[0], now)
+            elif call[0] != native_reported and now - native[1] >= self.timeout:
+                native_reported = call[0]  # once per call
+                self._fire(call[1], _fmu_of(None))
             seen = self._look()
             if seen is None or seen[0] is not current:
                 current = None if seen is None else seen[0]
-                since = time.monotonic()
+                since = now
                 continue
-            if current is not reported and time.monotonic() - since >= self.timeout:
+            if current is not reported and now - since >= self.timeout:
                 reported = current  # once per call
-                fmu = _fmu_of(current)
-                self.fired.append((seen[1], fmu, self.timeout))
-                self._on_timeout(seen[1], fmu, self.timeout)
+                self._fire(seen[1], _fmu_of(current))
             seen = None
 
 

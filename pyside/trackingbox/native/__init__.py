@@ -166,6 +166,10 @@ def _build(path: Path) -> None:
     tmp.replace(path)  # atomic: a concurrent build leaves one whole library
 
 
+#: the library once this process has loaded it (:func:`fmi_call` reads it; it never loads it)
+_LOADED_LIB: ctypes.CDLL | None = None
+
+
 @functools.lru_cache(maxsize=None)
 def _load(path: Path) -> ctypes.CDLL:
     if not path.exists():
@@ -231,6 +235,10 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_closed_rows.restype = c_int
     lib.tbn_closed_stats.argtypes = [c_void_p, ctypes.POINTER(c_long), ctypes.POINTER(c_long)]
     lib.tbn_closed_stats.restype = None
+    lib.tbn_fmi_call.argtypes = [ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(ctypes.c_char_p)]
+    lib.tbn_fmi_call.restype = None
+    global _LOADED_LIB
+    _LOADED_LIB = lib
     return lib
 
 
@@ -303,6 +311,23 @@ def _loaded() -> Any:
     if _load.cache_info().currsize == 0 or not path.exists():
         return None
     return _load(path)
+
+
+def fmi_call() -> tuple[int, str] | None:
+    """``(seq, name)`` of the library's calls into FMUs, None where this process has not loaded it.
+
+    *seq* is odd while one of them runs and moves on with each call; *name* is
+    the FMI function of the latest (``"fmi3GetContinuousStateDerivatives"``).
+    :class:`trackingbox.supervise.Watchdog` reads it from its own thread: the
+    FMU calls made from C (the steppers, the rows in C) have no fmpy frame on
+    the Python stack for it to see.
+    """
+    lib = _LOADED_LIB
+    if lib is None:
+        return None
+    seq, name = ctypes.c_ulong(), ctypes.c_char_p()
+    lib.tbn_fmi_call(ctypes.byref(seq), ctypes.byref(name))
+    return int(seq.value), (name.value or b"").decode("ascii", "replace")
 
 
 def rhs_evaluations() -> int:

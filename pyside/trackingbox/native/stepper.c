@@ -158,6 +158,16 @@ double tbn_cpu_seconds(void) { return cpu_total; }
 static long rhs_total;
 long tbn_rhs_evaluations(void) { return rhs_total; }
 
+/* The FMI call in progress, for the watchdog (trackingbox.supervise.Watchdog, through native.fmi_call):
+ * every call of the FMU's C functions from this library goes through FMI(name, call), so fmi_seq is odd
+ * while one runs and even between them, and fmi_name names the latest. A call that hangs leaves both
+ * unchanged; a long run of calls that return moves fmi_seq on. Written by the stepping thread, read by
+ * the watchdog's: a stale read can only delay a report by one look. */
+static volatile unsigned long fmi_seq;
+static const char *volatile fmi_name = "";
+#define FMI(name, call) __extension__ ({ fmi_name = (name); fmi_seq++; int st_ = (call); fmi_seq++; st_; })
+void tbn_fmi_call(unsigned long *seq, const char **name) { *seq = fmi_seq; *name = (const char *)fmi_name; }
+
 static void *sym(void *handle, const char *name, char *err, size_t errlen, int *missing) {
     void *p = dlsym(handle, name);
     if (!p && !*missing) {
@@ -202,12 +212,12 @@ static int set_inputs(tbn *h, double t) {
         for (size_t j = 0; j < h->nin; j++) h->u[j] = a[j] + w * (b[j] - a[j]);
         row = h->u;
     }
-    int st = h->set_f64(h->fmu, h->in_vr, h->nin, row, h->nin);
+    int st = FMI("fmi3SetFloat64", h->set_f64(h->fmu, h->in_vr, h->nin, row, h->nin));
     return st > 1 ? fail(h, "fmi3SetFloat64", st) : 0;
 }
 
 static int at_time(tbn *h, double t) {
-    int st = h->set_time(h->fmu, t);
+    int st = FMI("fmi3SetTime", h->set_time(h->fmu, t));
     if (st > 1) return fail(h, "fmi3SetTime", st);
     return set_inputs(h, t);
 }
@@ -216,9 +226,9 @@ static int rhs(double t, N_Vector y, N_Vector ydot, void *user) {
     tbn *h = user;
     rhs_total++;
     if (at_time(h, t)) return -1;
-    int st = h->set_states(h->fmu, h->s.nv_data(y), h->nx);
+    int st = FMI("fmi3SetContinuousStates", h->set_states(h->fmu, h->s.nv_data(y), h->nx));
     if (st > 1) return fail(h, "fmi3SetContinuousStates", st);
-    st = h->get_derivatives(h->fmu, h->s.nv_data(ydot), h->nx);
+    st = FMI("fmi3GetContinuousStateDerivatives", h->get_derivatives(h->fmu, h->s.nv_data(ydot), h->nx));
     if (st > 1) return fail(h, "fmi3GetContinuousStateDerivatives", st);
     return 0;
 }
@@ -301,9 +311,9 @@ tbn *tbn_new(void *const libs[5], void *binary, void *instance, size_t nx, doubl
     h->abstol = s->nv_new((int64_t)nx, h->ctx);
     if (!h->y || !h->abstol) goto failed;
     double *py = s->nv_data(h->y), *pa = s->nv_data(h->abstol);
-    int st = h->get_states(h->fmu, py, nx);
+    int st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, py, nx));
     if (st > 1) { snprintf(err, errlen, "fmi3GetContinuousStates failed with status %d", st); tbn_free(h); return NULL; }
-    st = h->get_nominals(h->fmu, pa, nx);
+    st = FMI("fmi3GetNominalsOfContinuousStates", h->get_nominals(h->fmu, pa, nx));
     if (st > 1) { snprintf(err, errlen, "fmi3GetNominalsOfContinuousStates failed with status %d", st); tbn_free(h); return NULL; }
     for (size_t i = 0; i < nx; i++) pa[i] *= rtol;
     step = "CVodeCreate";
@@ -356,7 +366,7 @@ int tbn_set_inputs(tbn *h, size_t nin, const uint32_t *vr, size_t nt, const doub
 /* Re-initialise CVODE at t from the FMU's current states (fmpy's CVodeSolver.reset). */
 int tbn_reset(tbn *h, double t) {
     h->failed_call = NULL;
-    int st = h->get_states(h->fmu, h->s.nv_data(h->y), h->nx);
+    int st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, h->s.nv_data(h->y), h->nx));
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_FMU_FAILED;
     return h->s.reinit(h->mem, t, h->y) ? TBN_CVODE_FAILED : TBN_OK;
 }
@@ -433,7 +443,7 @@ static int step(tbn *h, double target, int exact, double *reached) {
     h->failed_call = NULL;
     h->error[0] = '\0';
     double *py = h->s.nv_data(h->y);
-    int st = h->get_states(h->fmu, py, h->nx);
+    int st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, py, h->nx));
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_CVODE_FAILED;
     if (exact && h->s.set_stop_time(h->mem, target)) {
         snprintf(h->error, sizeof h->error, "CVodeSetStopTime(%.17g) failed", target);
@@ -442,14 +452,14 @@ static int step(tbn *h, double target, int exact, double *reached) {
     double tret = target;
     int flag = h->s.cvode(h->mem, target, h->y, &tret, 1 /* CV_NORMAL */);
     *reached = tret;
-    st = h->set_states(h->fmu, py, h->nx);
+    st = FMI("fmi3SetContinuousStates", h->set_states(h->fmu, py, h->nx));
     if (flag < 0) return TBN_CVODE_FAILED;
     if (st > 1) return fail(h, "fmi3SetContinuousStates", st), TBN_CVODE_FAILED;
     if (at_time(h, tret)) return TBN_FMU_FAILED;
     int code = TBN_OK;
     if (h->needs_completed) {
         bool event = false, terminate = false;
-        st = h->completed(h->fmu, true, &event, &terminate);
+        st = FMI("fmi3CompletedIntegratorStep", h->completed(h->fmu, true, &event, &terminate));
         if (st > 1) return fail(h, "fmi3CompletedIntegratorStep", st), TBN_FMU_FAILED;
         if (terminate) return TBN_TERMINATE;
         if (event) code = TBN_STEP_EVENT;
@@ -492,34 +502,35 @@ static int set_parameters(tbn *h, size_t n, const uint32_t *vr, const double *va
                 fabs(t_int - time) <= 1e-12 * fmax(1.0, fabs(time));
     }
     if (carry) {
-        st = h->get_states(h->fmu, h->x_before, h->nx);
+        st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, h->x_before, h->nx));
         if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_FMU_FAILED;
     }
     if (event) {
-        st = h->enter_event_mode(h->fmu);
+        st = FMI("fmi3EnterEventMode", h->enter_event_mode(h->fmu));
         if (st > 1) return fail(h, "fmi3EnterEventMode", st), TBN_FMU_FAILED;
     }
-    st = h->set_f64(h->fmu, vr, n, values, n);
+    st = FMI("fmi3SetFloat64", h->set_f64(h->fmu, vr, n, values, n));
     if (st > 1) return fail(h, "fmi3SetFloat64", st), TBN_FMU_FAILED;
     if (event) {
         bool needed = true, terminate = false, nominals, states_changed, defined = false;
         double when = 0.0;
         while (needed && !terminate) {
-            st = h->update_discrete_states(h->fmu, &needed, &terminate, &nominals, &states_changed, &defined,
-                                           &when);
+            st = FMI("fmi3UpdateDiscreteStates",
+                     h->update_discrete_states(h->fmu, &needed, &terminate, &nominals, &states_changed, &defined,
+                                               &when));
             if (st > 1) return fail(h, "fmi3UpdateDiscreteStates", st), TBN_FMU_FAILED;
         }
         if (terminate) return TBN_TERMINATE;
         *next_defined = defined;
         *next_time = when;
-        st = h->enter_continuous_time_mode(h->fmu);
+        st = FMI("fmi3EnterContinuousTimeMode", h->enter_continuous_time_mode(h->fmu));
         if (st > 1) return fail(h, "fmi3EnterContinuousTimeMode", st), TBN_FMU_FAILED;
     } else {
         *next_defined = -1;  /* no event iteration: the next time event is unchanged */
     }
     double *py = h->s.nv_data(h->y);
     if (carry) {
-        st = h->get_states(h->fmu, py, h->nx);
+        st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, py, h->nx));
         if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_FMU_FAILED;
         /* the event must have left the states where CVODE has them (equal values, as the
          * Python path's numpy.array_equal asks), else it restarts */
@@ -584,10 +595,10 @@ int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int 
     int code = set_and_step(h, n, vr, values, flags, time, target);
     cpu_total += thread_cpu() - c0;
     if (code != TBN_OK) return code;
-    int st = h->get_states(h->fmu, io->x_out, h->nx);
+    int st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, io->x_out, h->nx));
     if (st > 1) return fail(h, "fmi3GetContinuousStates", st), TBN_READ_FAILED;
     if (io->nout) {
-        st = h->get_f64(h->fmu, io->out_vr, io->nout, io->out, io->nout);
+        st = FMI("fmi3GetFloat64", h->get_f64(h->fmu, io->out_vr, io->nout, io->out, io->nout));
         if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
     }
     return TBN_OK;
@@ -595,7 +606,7 @@ int tbn_advance(tbn *h, size_t n, const uint32_t *vr, const double *values, int 
 
 /* Copy the FMU's continuous states into out (nx values). */
 int tbn_get_states(tbn *h, double *out) {
-    int st = h->get_states(h->fmu, out, h->nx);
+    int st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, out, h->nx));
     return st > 1 ? (h->failed_call = "fmi3GetContinuousStates", h->failed_status = st, TBN_FMU_FAILED) : TBN_OK;
 }
 
@@ -1136,10 +1147,10 @@ static int closed_apply(tbn_closed *c, double t, const double *z) {
     size_t nv = c->np + c->ns;
     int st;
     if (nv) {
-        st = h->set_f64(h->fmu, c->vr_set, nv, c->val, nv);
+        st = FMI("fmi3SetFloat64", h->set_f64(h->fmu, c->vr_set, nv, c->val, nv));
         if (st > 1) return fail(h, "fmi3SetFloat64", st);
     }
-    st = h->set_states(h->fmu, z, nx);
+    st = FMI("fmi3SetContinuousStates", h->set_states(h->fmu, z, nx));
     if (st > 1) return fail(h, "fmi3SetContinuousStates", st);
     return 0;
 }
@@ -1152,10 +1163,10 @@ static int closed_rhs(double t, N_Vector y, N_Vector ydot, void *user) {
     double *dz = h->s.nv_data(ydot);
     size_t nx = h->nx, np = c->np, ns = c->ns, nv = np + ns;
     if (closed_apply(c, t, z)) return -1;
-    int st = h->get_derivatives(h->fmu, dz, nx);
+    int st = FMI("fmi3GetContinuousStateDerivatives", h->get_derivatives(h->fmu, dz, nx));
     if (st > 1) return fail(h, "fmi3GetContinuousStateDerivatives", st);
     if (nv) {
-        st = h->get_f64(h->fmu, c->vr_sim, nv, c->sim, nv);
+        st = FMI("fmi3GetFloat64", h->get_f64(h->fmu, c->vr_sim, nv, c->sim, nv));
         if (st > 1) return fail(h, "fmi3GetFloat64", st);
     }
     for (size_t i = 0; i < np; i++) {
@@ -1221,9 +1232,9 @@ tbn_closed *tbn_closed_new(tbn *h, size_t np, size_t ns, const uint32_t *vr_set,
     c->abstol = s->nv_new((int64_t)c->n, c->ctx);
     if (!c->y || !c->abstol) goto failed;
     double *pa = s->nv_data(c->abstol), *py = s->nv_data(c->y);
-    int st = h->get_nominals(h->fmu, pa, h->nx);
+    int st = FMI("fmi3GetNominalsOfContinuousStates", h->get_nominals(h->fmu, pa, h->nx));
     if (st > 1) { step = "fmi3GetNominalsOfContinuousStates"; goto failed; }
-    st = h->get_states(h->fmu, py, h->nx);
+    st = FMI("fmi3GetContinuousStates", h->get_states(h->fmu, py, h->nx));
     if (st > 1) { step = "fmi3GetContinuousStates"; goto failed; }
     for (size_t i = 0; i < 2 * nv; i++) { pa[h->nx + i] = nominal[i]; py[h->nx + i] = 0.0; }
     for (size_t i = 0; i < c->n; i++) pa[i] *= h->rtol;
@@ -1329,13 +1340,13 @@ static int closed_read(tbn_closed *c, tbn_twin_io *tw, size_t nread, double t, c
     if (closed_apply(c, t, z)) return TBN_READ_FAILED;
     int st;
     if (h->adv.nout) {
-        st = h->get_f64(h->fmu, h->adv.out_vr, h->adv.nout, h->adv.out, h->adv.nout);
+        st = FMI("fmi3GetFloat64", h->get_f64(h->fmu, h->adv.out_vr, h->adv.nout, h->adv.out, h->adv.nout));
         if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
     }
     memcpy(tw->y, tw->out, nread * sizeof(double));
     size_t nv = c->np + c->ns;
     if (nv) {
-        st = h->get_f64(h->fmu, c->vr_sim, nv, c->sim, nv);
+        st = FMI("fmi3GetFloat64", h->get_f64(h->fmu, c->vr_sim, nv, c->sim, nv));
         if (st > 1) return fail(h, "fmi3GetFloat64", st), TBN_READ_FAILED;
     }
     memcpy(h->adv.x_out, z, h->nx * sizeof(double));
@@ -1401,7 +1412,7 @@ int tbn_closed_rows(tbn_batch *b, size_t ngrid, tbn_closed *ct, tbn_closed *cu) 
         c->cursor = k < ngrid ? k : 0;
         closed_holds(c, b, k, hold_all);
         double *z = c->h->s.nv_data(c->y);
-        int st = c->h->get_states(c->h->fmu, z, c->h->nx);
+        int st = FMI("fmi3GetContinuousStates", c->h->get_states(c->h->fmu, z, c->h->nx));
         if (st > 1) { fail(c->h, "fmi3GetContinuousStates", st); failed = 1; b->which = w; b->code = TBN_READ_FAILED;
                       break; }
         /* the variables the controllers read, at the twin's present state (read with its last step) */
