@@ -105,6 +105,51 @@ def test_progress_lines_on_a_log_stream(monkeypatch: pytest.MonkeyPatch) -> None
     ]
 
 
+def test_progress_rate_leaves_out_the_start_up_and_restarts_with_a_count(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the demo's estimate read "at most ~7 h 56 min left" after the first two runs of a parallel batch
+    # (their time held the workers' start-up), and pair's Sobol re-run "~50 h 44 min" (its count began
+    # again under the same stage name, against the whole stage's time): worked out by hand below
+    from trackingbox.commands import _progress
+
+    clock = iter([0.0, 0.0, 60.0, 70.0, 80.0, 90.0, 100.0, 110.0])
+    monkeypatch.setattr(_progress.time, "perf_counter", lambda: next(clock))
+    stream = io.StringIO()
+    p = _progress.Progress(every=5.0, stream=stream)     # t0 = 0
+    count = p.counter("runs")
+    count(0, 100)   # t = 0: the batch starts
+    count(2, 100)   # t = 60: the first two runs, after 60 s of start-up: no rate yet
+    count(4, 100)   # t = 70: two runs in 10 s since then -> 96 left ~ 480 s (not 96 x 60/4 = 24 min)
+    count(6, 100)   # t = 80: 4 in 20 s -> 94 left ~ 470 s
+    count(1, 100)   # t = 90: the count starts again: a new stage line, no rate
+    count(3, 100)   # t = 100: 2 in 10 s since the restart -> 97 left ~ 485 s
+    count(100, 100)  # t = 110
+    assert stream.getvalue().splitlines() == [
+        "runs: 0/100 (0 s elapsed)",
+        "runs: 2/100 (1 min 00 s elapsed)",
+        "runs: 4/100 (1 min 10 s elapsed, at most ~8 min 00 s left)",
+        "runs: 6/100 (1 min 20 s elapsed, at most ~7 min 50 s left)",
+        "runs: 1/100 (1 min 30 s elapsed)",
+        "runs: 3/100 (1 min 40 s elapsed, at most ~8 min 05 s left)",
+        "runs: 100/100 (1 min 50 s elapsed)",
+    ]
+
+    # the demo's refinement: one serial run, then parallel batches of 32; a budget's last runs past it
+    clock = iter([0.0, 0.0, 90.0, 170.0, 260.0])
+    stream = io.StringIO()
+    p = _progress.Progress(every=5.0, stream=stream)
+    count = p.counter("refinement")
+    count(1, 320)    # t = 0
+    count(2, 320)    # t = 90: 1 run since the first line, under 2 % of the 319 left: no estimate
+    count(34, 320)   # t = 170: 33 in 170 s -> 286 left ~ 1473 s
+    count(322, 320)  # t = 260: past the budget: shown as done, not "322/320"
+    assert stream.getvalue().splitlines() == [
+        "refinement: 1/320 (0 s elapsed)",
+        "refinement: 2/320 (1 min 30 s elapsed)",
+        "refinement: 34/320 (2 min 50 s elapsed, at most ~24 min 33 s left)",
+        "refinement: 322/322 (4 min 20 s elapsed)",
+    ]
+
+
 def test_spec_pairs_keeps_tuning_of_existing_pairs(tmp_path: Path) -> None:
     from trackingbox.analysis.pair_stage import spec_pairs
     from trackingbox.spec import PairSpec

@@ -4,13 +4,21 @@ On a terminal the line is rewritten in place (at most five times a second);
 elsewhere (a log file, CI) a line is written when the stage changes, at the end
 of a stage, and otherwise at most every *every* seconds. Each line carries the
 elapsed time and, once a stage has made progress, an estimate of the time left
-in it (at most: a stage may stop before its budget).
+in it (at most: a stage may stop before its budget). The rate behind it is
+measured from the stage's first finished item when the stage starts from
+nothing (the first items of a parallel batch carry the workers' start-up), and
+from where a count starts again (a stage run a second time under the same name).
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import TextIO
+
+
+#: fraction of a stage's items done (since its rate's start) before a line estimates the time left
+ETA_FRACTION = 0.02
 
 
 def duration(seconds: float) -> str:
@@ -46,20 +54,32 @@ class Progress:
         self.stage = ""
         self.stage_t0 = self.t0
         self.stage_done0 = 0
+        self.prev_done = 0
+        self.rebase = False
         self.last = -1.0e9
 
     def __call__(self, stage: str, done: int, total: int, detail: str = "", unit: str = "") -> None:
         now = time.perf_counter()
-        new_stage = stage != self.stage
+        new_stage = stage != self.stage or done < self.prev_done  # a count going back starts again
         if new_stage:
             self.stage, self.stage_t0, self.stage_done0 = stage, now, done
+            self.rebase = done == 0
+        elif self.rebase and done > self.stage_done0:
+            # the first finished items of a stage begun from nothing: their time holds the start-up
+            # (workers starting, FMUs extracted, two at once in a parallel batch); the rate starts here
+            self.stage_t0, self.stage_done0, self.rebase = now, done, False
+        self.prev_done = done
+        total = max(total, done)  # a budget's last evaluations may run past it: never "321/320"
         finished = done >= total
         if not (new_stage or finished) and now - self.last < (0.2 if self.tty else self.every):
             return
         self.last = now
-        rate = (now - self.stage_t0) / max(done - self.stage_done0, 1)
-        left = f", at most ~{duration(rate * (total - done))} left" if 0 < done - self.stage_done0 and \
-            not finished else ""
+        since = done - self.stage_done0
+        rate = (now - self.stage_t0) / max(since, 1)
+        # no estimate from the first few items: one slow serial run before a parallel batch of 32
+        # made the demo's refinement read "at most ~7 h 56 min left" (it took 17 min)
+        enough = since >= max(2, math.ceil(ETA_FRACTION * (total - self.stage_done0)))
+        left = f", at most ~{duration(rate * (total - done))} left" if enough and not finished else ""
         text = f"{stage}: {unit + ' ' if unit else ''}{done}/{total}{', ' + detail if detail else ''} " \
                f"({duration(now - self.t0)} elapsed{left})"
         if self.tty:
