@@ -166,8 +166,9 @@ def _build(path: Path) -> None:
     tmp.replace(path)  # atomic: a concurrent build leaves one whole library
 
 
-#: the library once this process has loaded it (:func:`fmi_call` reads it; it never loads it)
-_LOADED_LIB: ctypes.CDLL | None = None
+#: the libraries this process has loaded (:func:`fmi_call` reads them; it never loads one). Usually one;
+#: another cache directory (``XDG_CACHE_HOME``) or compiler in the same process loads a second
+_LOADED_LIBS: list[ctypes.CDLL] = []
 
 
 @functools.lru_cache(maxsize=None)
@@ -237,8 +238,7 @@ def _load(path: Path) -> ctypes.CDLL:
     lib.tbn_closed_stats.restype = None
     lib.tbn_fmi_call.argtypes = [ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(ctypes.c_char_p)]
     lib.tbn_fmi_call.restype = None
-    global _LOADED_LIB
-    _LOADED_LIB = lib
+    _LOADED_LIBS.append(lib)
     return lib
 
 
@@ -322,12 +322,16 @@ def fmi_call() -> tuple[int, str] | None:
     FMU calls made from C (the steppers, the rows in C) have no fmpy frame on
     the Python stack for it to see.
     """
-    lib = _LOADED_LIB
-    if lib is None:
+    if not _LOADED_LIBS:
         return None
+    total, current = 0, ""
     seq, name = ctypes.c_ulong(), ctypes.c_char_p()
-    lib.tbn_fmi_call(ctypes.byref(seq), ctypes.byref(name))
-    return int(seq.value), (name.value or b"").decode("ascii", "replace")
+    for lib in list(_LOADED_LIBS):  # the sum: odd while a call of any of them runs (one thread steps)
+        lib.tbn_fmi_call(ctypes.byref(seq), ctypes.byref(name))
+        total += int(seq.value)
+        if seq.value % 2 or not current:
+            current = (name.value or b"").decode("ascii", "replace")
+    return total, current
 
 
 def rhs_evaluations() -> int:
