@@ -11,6 +11,7 @@ Examples::
 
     scripts/bench_jacobian                                    # heat-exchanger bench, seed 0
     scripts/bench_jacobian --bench heat-production --hours 4 --refine-iterations 3
+    scripts/bench_jacobian case/spec.toml                     # the README's form: a spec of yours
     scripts/bench_jacobian --spec case/spec.toml --json
 """
 from __future__ import annotations
@@ -32,13 +33,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--bench", default="heat-exchanger", help="bench to generate (default heat-exchanger)")
     parser.add_argument("--hours", type=float, default=None, help="length of the generated bench case")
+    parser.add_argument("spec_arg", nargs="?", type=Path, metavar="SPEC",
+                        help="use this spec instead of generating a bench case (as --spec)")
     parser.add_argument("--spec", type=Path, help="use this spec instead of generating a bench case")
     parser.add_argument("--seed", type=int, default=0, help="bench seed (default 0)")
     parser.add_argument("--refine-iterations", type=int, default=MAX_REFINE_ITERATIONS)
     parser.add_argument("--methods", default="exact,fd", help="comma-separated jacobian settings (default exact,fd)")
     parser.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     args = parser.parse_args()
-    spec_path = args.spec
+    if args.spec_arg is not None and args.spec is not None and args.spec_arg != args.spec:
+        parser.error(f"two specs given: {args.spec_arg} and --spec {args.spec}")
+    spec_path = args.spec or args.spec_arg
     if spec_path is None:
         from trackingbox.benches import make_bench
 
