@@ -314,10 +314,11 @@ def _loaded() -> Any:
 
 
 def fmi_call() -> tuple[int, str] | None:
-    """``(seq, name)`` of the library's calls into FMUs, None where this process has not loaded it.
+    """``(seq, name)`` of the native library's calls into FMUs, None where this process has loaded none.
 
-    *seq* is odd while one of them runs and moves on with each call; *name* is
-    the FMI function of the latest (``"fmi3GetContinuousStateDerivatives"``).
+    *seq* (summed over every library loaded here) is odd while one of the
+    calls runs and moves on with each; *name* is the FMI function of the one
+    running, else of a latest (``"fmi3GetContinuousStateDerivatives"``).
     :class:`trackingbox.supervise.Watchdog` reads it from its own thread: the
     FMU calls made from C (the steppers, the rows in C) have no fmpy frame on
     the Python stack for it to see.
