@@ -160,19 +160,25 @@ def _hanging_twin(fmu: Path, out: Path, after: int) -> Path:
     return out
 
 
-def test_a_hang_inside_the_native_stepper_is_one_timeout_line_exit_2(first_order_fmu: Path, tmp_path: Path) -> None:
-    """The tracking rows run in C (trackingbox.native) and call the FMU from there: no fmpy frame is on
-    the stack while they do. The twin's 400th fmi3GetContinuousStateDerivatives never returns."""
-    from _fixtures_tracking import make_case
-
+@pytest.fixture
+def native_library() -> None:
+    """Skip (saying why) where the native stepper cannot be built: nothing then calls FMUs from C."""
     from trackingbox import native
 
-    if not crafted_fmus.available():
-        pytest.skip("the hanging twin is rebuilt with a C compiler on Linux")
     try:
         native.library()
     except native.NativeUnavailable as exc:
         pytest.skip(f"the native stepper cannot be built here: {exc}")
+
+
+def test_a_hang_inside_the_native_stepper_is_one_timeout_line_exit_2(first_order_fmu: Path, tmp_path: Path,
+                                                                    native_library: None) -> None:
+    """The tracking rows run in C (trackingbox.native) and call the FMU from there: no fmpy frame is on
+    the stack while they do. The twin's 400th fmi3GetContinuousStateDerivatives never returns."""
+    from _fixtures_tracking import make_case
+
+    if not crafted_fmus.available():
+        pytest.skip("the hanging twin is rebuilt with a C compiler on Linux")
     spec = make_case(first_order_fmu, tmp_path / "case", stop=3000.0)
     _hanging_twin(first_order_fmu, tmp_path / "case" / "twin.fmu", HANG_AFTER)
     out = tmp_path / "run" / "track"
@@ -186,14 +192,11 @@ def test_a_hang_inside_the_native_stepper_is_one_timeout_line_exit_2(first_order
     assert seconds < 60
 
 
-def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(first_order_fmu: Path) -> None:
+def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(first_order_fmu: Path,
+                                                                            native_library: None) -> None:
     """What the watchdog reads: an even count after a stepper's calls returned, moved on by them."""
     from trackingbox import native
 
-    try:
-        native.library()
-    except native.NativeUnavailable as exc:
-        pytest.skip(f"the native stepper cannot be built here: {exc}")
     with FMUModel(first_order_fmu) as model:
         st = model.stepper(start_time=0.0, parameters={"k": 0.003})
         assert isinstance(st, native.NativeStepper)
