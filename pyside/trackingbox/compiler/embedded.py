@@ -52,13 +52,14 @@ _MENTIONED = (
 )
 
 
-def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+def _mentioned_construct(message: str, source: ModelicaSource, model: str,
+                         libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a construct the embedded path does not support either: say where it is
     (in the model's own file or a class it uses, never elsewhere in the package)."""
     low = message.lower()
     for needle, construct, pattern in _MENTIONED:
         if needle in low:
-            locs = locate(source, model, pattern)
+            locs = locate(source, model, pattern, libraries=libraries)
             if locs:
                 where = ", ".join(str(loc) for loc in locs)
                 return UnsupportedConstructError(
@@ -74,7 +75,7 @@ _IMPLICIT_RANGE = "indices require an explicit range"
 
 
 def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
-                    model: str) -> UnsupportedConstructError | None:
+                    model: str, libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca said it does not support something (not that the model is wrong): refuse naming
     the construct in rumoca's words and where it stands in the model's own files."""
     low = message.lower()
@@ -100,20 +101,20 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
-    allowed = {str(f) for f in model_files(source, model)}
+    allowed = {str(f) for f in model_files(source, model, libraries=libraries)}
     where = [f"{f}:{n}" for f, n in _POSITION.findall(message) if f in allowed]
     where += [d.split(": ", 1)[0].rsplit(":", 1)[0] for d in diags
               if d.split(":", 1)[0] in allowed and ("indices require" in d or "unsupported" in d.lower())]
     if not where and pattern:
-        where = [str(loc) for loc in locate(source, model, pattern)]
+        where = [str(loc) for loc in locate(source, model, pattern, libraries=libraries)]
     if not where:  # the first occurrence of a name rumoca quotes (`f`, `findValue`) in the model's own code
         for name in re.findall(r"`([A-Za-z_]\w*)`", first):
-            found = locate(source, model, rf"\b{re.escape(name)}\b", limit=1)
+            found = locate(source, model, rf"\b{re.escape(name)}\b", limit=1, libraries=libraries)
             if found:
                 where = [str(found[0])]
                 break
     if not where:  # nothing to point at: at least the line that declares the model
-        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
+        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, libraries=libraries)
         where = [f"{decl[0]} (the model's declaration; the front end gave no position)"] if decl else []
     at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
     return UnsupportedConstructError(
@@ -121,14 +122,14 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
         "it; use --backend openmodelica where omc is installed, or rewrite the model")
 
 
-def _own_position(first: str, source: ModelicaSource, model: str) -> str:
+def _own_position(first: str, source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> str:
     """For a front-end message without a position: where the first name it quotes (`x`) stands
     in the model's own class, else the line that declares the model (`` (... at file:line)``)."""
     for name in re.findall(r"`([A-Za-z_]\w*)`", first):
-        found = locate(source, model, rf"(?<![\w.]){re.escape(name)}\b", limit=1, own=True)
+        found = locate(source, model, rf"(?<![\w.]){re.escape(name)}\b", limit=1, own=True, libraries=libraries)
         if found:
             return f" (`{name}` at {found[0]} in {model}; the front end gave no position)"
-    decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, own=True)
+    decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, own=True, libraries=libraries)
     return f" ({model} is declared at {decl[0]}; the front end gave no position)" if decl else ""
 
 
@@ -140,7 +141,7 @@ _NAMED_IN_MESSAGE = (
 )
 
 
-def _named_position(first: str, source: ModelicaSource, model: str) -> str:
+def _named_position(first: str, source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> str:
     """Where the construct rumoca's message names (``initial algorithm``, ``delay()``, ...) stands
     in the model's own class (its own file), or "" when the message names none or it is not there."""
     for said, where in _NAMED_IN_MESSAGE:
@@ -148,7 +149,7 @@ def _named_position(first: str, source: ModelicaSource, model: str) -> str:
         if found is None:
             continue
         pattern = where.format(*(re.escape(g) for g in found.groups()))
-        locs = locate(source, model, pattern, limit=3, own=True)
+        locs = locate(source, model, pattern, limit=3, own=True, libraries=libraries)
         if locs:
             return ", ".join(dict.fromkeys(str(loc) for loc in locs))
     return ""
@@ -268,7 +269,8 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
 Modelica compliance suite); each is listed in the README's compile section."""
 
 
-def _frontend_gap(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+def _frontend_gap(message: str, source: ModelicaSource, model: str,
+                  libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a valid construct with a type or shape error: name the construct and the
     line where it stands in the model's own code, saying that the front end does not support it."""
     for gap in FRONTEND_GAPS:
@@ -282,9 +284,9 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str) -> Unsupport
                 template = template.replace("{" + key + "}", value)
             return template
 
-        if gap.requires and not locate(source, model, fill(gap.requires), limit=1):
+        if gap.requires and not locate(source, model, fill(gap.requires), limit=1, libraries=libraries):
             continue
-        locs = locate(source, model, fill(gap.where), limit=3)
+        locs = locate(source, model, fill(gap.where), limit=3, libraries=libraries)
         if not locs:
             continue
         where = ", ".join(dict.fromkeys(str(loc) for loc in locs))
@@ -400,7 +402,7 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
         raise CompileError(f"rumoca failed on {model!r} from {source.entry}: {message}")
     first = message.splitlines()[0] if message else "rumoca error"
     try:  # diagnostics of the model's own files (and of every file for a syntax error elsewhere)
-        raw = run_frontend(source, model, libraries, validate=model_files(source, model),
+        raw = run_frontend(source, model, libraries, validate=model_files(source, model, libraries=libraries),
                            parse_error="parse" in message.lower())["diagnostics"]
     except CompileError:
         raw = []
@@ -413,17 +415,18 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}"
-                               f"{_own_position(first, source, model)}")
-    construct = (_mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
-                 or _frontend_gap(message, source, model))
+                               f"{_own_position(first, source, model, libraries)}")
+    construct = (_mentioned_construct(message, source, model, libraries)
+                 or _frontend_limit(message, diags, source, model, libraries)
+                 or _frontend_gap(message, source, model, libraries))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
-    named = _named_position(first, source, model)
+    named = _named_position(first, source, model, libraries)
     if named:  # the construct rumoca names, where it stands in the model's own class, comes first
         detail = f" (at {named}){detail}"
     elif not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
-        detail = _own_position(first, source, model)
+        detail = _own_position(first, source, model, libraries)
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
@@ -439,7 +442,7 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
     check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
     t1 = time.perf_counter()
-    translator = FlatTranslator(flat, source, model)
+    translator = FlatTranslator(flat, source, model, libraries)
     em = translator.translate()
     t2 = time.perf_counter()
     settings = experiment_settings(source, model)

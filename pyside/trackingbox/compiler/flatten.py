@@ -192,10 +192,12 @@ def _num(x: Value) -> bool:
 class FlatTranslator:
     """Translate one rumoca flat model into an :class:`ExplicitModel`."""
 
-    def __init__(self, flat: dict[str, Any], source: ModelicaSource, model: str):
+    def __init__(self, flat: dict[str, Any], source: ModelicaSource, model: str,
+                 libraries: tuple[Path, ...] = ()):
         self.flat = flat
         self.source = source
         self.model = model
+        self.libraries = tuple(libraries)
         self.types = flat.get("effective_types", {})
         self.functions = flat.get("functions", {}) or {}
         self.vars: dict[str, list[ScalarVar]] = {}
@@ -221,7 +223,7 @@ class FlatTranslator:
         the classes the model uses (:func:`.source.locate`), never other files of the package.
         """
         if self._files is None:
-            self._files = model_files(self.source, self.model)
+            self._files = model_files(self.source, self.model, libraries=self.libraries)
             self._sources = span_sources(self.flat, self._files)
         span = span if span is not None else self._span
         if span is not None:
@@ -231,7 +233,7 @@ class FlatTranslator:
             if loc is not None:
                 return [loc]
         if pattern:
-            locs = locate(self.source, self.model, pattern)
+            locs = locate(self.source, self.model, pattern, libraries=self.libraries)
             if locs:
                 return locs
         if span is not None and pattern:
@@ -273,7 +275,7 @@ class FlatTranslator:
 
     def check_modifiers(self) -> None:
         """Refuse models whose modifications rumoca 0.10.2 loses (see :mod:`.modifiers`)."""
-        lost = modifier_check(self.source).check(self.model)
+        lost = modifier_check(self.source, self.libraries).check(self.model)
         if lost:
             log.warning("%s: bounds or units lost by the front end (no effect on values): %s",
                         self.model, "; ".join(lost))
@@ -966,7 +968,7 @@ class FlatTranslator:
         for sv in params:
             self.parameter_start(sv)
         residuals: list[tuple[ca.MX, str]] = list(calc_eqs)
-        check_lost_der_equations(self.flat, self.source, self.model)
+        check_lost_der_equations(self.flat, self.source, self.model, self.libraries)
         for eq in self.flat.get("equations", []):
             origin = _origin_text(eq.get("origin"))
             val = self.expr(eq["residual"])
@@ -1240,7 +1242,8 @@ class FlatTranslator:
         declares its top-level component (and, if elsewhere, where the variable itself is)."""
         base = scalar.split("[", 1)[0]
         head = re.split(r"[.\[]", base, maxsplit=1)[0]
-        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True)
+        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True,
+                     libraries=self.libraries)
         var = (self.flat.get("variables") or {}).get(base) or {}
         leaf = base.rsplit(".", 1)[-1]
         decl = self.location(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", span=var.get("source_span")) if var else []
@@ -1617,7 +1620,8 @@ def _ref_text(node: Any) -> str:
     return str(body["name"]["name"]) + (f"[{','.join(subs)}]" if subs else "")
 
 
-def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model: str) -> None:
+def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model: str,
+                             libraries: tuple[Path, ...] = ()) -> None:
     """Refuse a flat model in which the front end lost the right-hand side of a ``der`` equation.
 
     rumoca 0.10.2 flattens ``der(x[i]) = a[i] - x[i]`` in a for-loop into
@@ -1651,7 +1655,7 @@ def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model
         return
     from .source import BOM
 
-    files = model_files(source, model)
+    files = model_files(source, model, libraries=libraries)
     known = span_sources(flat, files)
     lost = []
     for var, lit, span in suspects:

@@ -59,6 +59,7 @@ _EXPERIMENT = re.compile(r"(?<![\w.])experiment\s*\(")
 _SHORT_BASE = re.compile(r"\s*=\s*(?:(?:input|output|flow|stream|discrete|parameter|constant)\s+)*"
                          r"(\.?[A-Za-z_][\w.]*)")
 _WORD = re.compile(r"[A-Za-z_]\w*")
+_BLANK = re.compile(r"[^\n]")
 
 KEYWORDS = frozenset({
     "algorithm", "and", "annotation", "block", "break", "class", "connect", "connector", "constant",
@@ -299,8 +300,9 @@ def _tree_cache_path(root: Path) -> Path:
     return cache_dir() / "index" / f"{digest}.pickle"
 
 
-def index_tree(root: Path, files: list[Path] | None = None) -> list[ClassInfo]:
-    """The classes of every ``.mo`` file under the package directory or file *root*.
+def index_tree(root: Path, files: list[Path] | None = None) -> tuple[list[ClassInfo], str]:
+    """The classes of every ``.mo`` file under the package directory or file *root*, and a
+    fingerprint of the files read (their names, sizes and modification times).
 
     Per-file results are reused while a file's size and modification time are unchanged,
     in memory and on disk; a file that cannot be read is skipped.
@@ -338,7 +340,7 @@ def index_tree(root: Path, files: list[Path] | None = None) -> list[ClassInfo]:
             out.extend(classes)
         if changed or (disk is not None and set(disk) != set(fresh)):
             _write_disk(disk_path, fresh)
-        return out
+        return out, hashlib.sha256("\n".join(fresh).encode()).hexdigest()
 
 
 def _read_disk(path: Path) -> dict[str, list[ClassInfo]]:
@@ -361,6 +363,45 @@ def _write_disk(path: Path, data: dict[str, list[ClassInfo]]) -> None:
         log.debug("class index not cached at %s: %s", path, exc)
 
 
+_NEWLINES: dict[Path, tuple[int, list[int]]] = {}
+
+
+def line_of(file: Path, offset: int) -> int:
+    """The line of the character *offset* of *file*'s (comment-free) text."""
+    from .source import _code
+
+    code = _code(file)
+    cached = _NEWLINES.get(file)
+    if cached is None or cached[0] != len(code):
+        cached = (len(code), [m.start() for m in re.finditer("\n", code)])
+        _NEWLINES[file] = cached
+    return bisect.bisect_left(cached[1], offset) + 1
+
+
+_INDEXES: dict[tuple[Path, ...], LibraryIndex] = {}
+
+
+def index_for(source, libraries: tuple[Path, ...] | list[Path] = ()) -> LibraryIndex:
+    """The index of a :class:`~.source.ModelicaSource` and the libraries it is compiled with
+    (reused in this process while no file changed)."""
+    roots = (source_root(source), *(Path(p) for p in libraries))
+    roots = tuple(dict.fromkeys(roots))
+    fresh = LibraryIndex.build(roots) if roots not in _INDEXES else None
+    if fresh is None:
+        old = _INDEXES[roots]
+        prints = [index_tree(r)[1] for r in roots]
+        if old.fingerprint == hashlib.sha256("|".join(prints).encode()).hexdigest():
+            return old
+        fresh = LibraryIndex.build(roots)
+    _INDEXES[roots] = fresh
+    return fresh
+
+
+def source_root(source) -> Path:
+    """The package directory of a package source, or the file of a single-file source."""
+    return source.entry.parent if source.entry.name == "package.mo" else source.entry
+
+
 # ----------------------------------------------------------------------------------- the index
 @dataclass
 class LibraryIndex:
@@ -371,14 +412,18 @@ class LibraryIndex:
     children: dict[str, dict[str, str]] = field(default_factory=dict)
     by_simple: dict[str, list[str]] = field(default_factory=dict)
     duplicates: list[tuple[str, Path, Path]] = field(default_factory=list)
+    fingerprint: str = ""
 
     @classmethod
     def build(cls, roots: tuple[Path, ...] | list[Path]) -> LibraryIndex:
         """Index the package directories or ``.mo`` files *roots*; the first definition of a
         full name wins (later ones are listed in ``duplicates``)."""
         idx = cls(tuple(Path(r) for r in roots))
+        prints = []
         for root in idx.roots:
-            for c in index_tree(root):
+            classes, fingerprint = index_tree(root)
+            prints.append(fingerprint)
+            for c in classes:
                 if c.name in idx.classes:
                     if idx.classes[c.name].file != c.file or idx.classes[c.name].start != c.start:
                         idx.duplicates.append((c.name, idx.classes[c.name].file, c.file))
@@ -390,6 +435,7 @@ class LibraryIndex:
             idx.by_simple.setdefault(simple, []).append(name)
         idx._members: dict[tuple[str, str], str | None] = {}
         idx._bases: dict[str, tuple[str, ...]] = {}
+        idx.fingerprint = hashlib.sha256("|".join(prints).encode()).hexdigest()
         return idx
 
     # ------------------------------------------------------------------ lookup
@@ -613,6 +659,26 @@ class LibraryIndex:
         from .source import _code
 
         return _code(info.file)[info.start:info.end]
+
+    def own_code(self, info: ClassInfo, *, annotations: bool = True) -> str:
+        """The comment-free text of a class definition with its nested classes (and, unless
+        *annotations*, the contents of its annotations) blanked: offsets and lines are kept."""
+        text = self.code(info)
+        spans = []
+        for child in self.children.get(info.name, {}).values():
+            c = self.classes[child]
+            if c.file == info.file and info.start < c.start and c.end <= info.end:
+                spans.append((c.start - info.start, c.end - info.start))
+        if not annotations:
+            for m in _ANNOTATION.finditer(text):
+                spans.append((m.end(), _paren_end(text, m.end() - 1) - 1))
+        for s, e in sorted(spans):
+            text = text[:s] + _BLANK.sub(" ", text[s:e]) + text[e:]
+        return text
+
+    def location(self, info: ClassInfo, offset: int) -> tuple[Path, int]:
+        """File and line of the character *offset* of the text of class *info*."""
+        return info.file, line_of(info.file, info.start + offset)
 
     def examples(self, package: str) -> list[str]:
         """Classes under *package* (itself included) that can be simulated as they stand: models and
