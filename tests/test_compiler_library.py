@@ -147,3 +147,29 @@ def test_locate_searches_only_the_classes_the_model_uses(tmp_path):
     assert locate(source, "Lib.M", r"\bwhen\b") == []
     hits = locate(source, "Lib.M", r":=")
     assert [(h.file.name, h.line) for h in hits] == [("Util.mo", 7)]
+
+
+def test_placing_a_refusal_reads_only_the_files_of_the_used_classes(tmp_path, monkeypatch):
+    """A refusal in a model that sits beside a large library file it does not use: the search for
+    the construct's line reads the model's own files only, never the large one (on the MSL the
+    old whole-file searches took minutes: issue 35)."""
+    from trackingbox.compiler import source as source_mod
+
+    big = "".join(f"  model M{k}\n    Real x{k};\n  equation\n    x{k} = {k};\n  end M{k};\n" for k in range(20000))
+    write(tmp_path / "Lib", {
+        "package.mo": "package Lib\nend Lib;\n",
+        "Big.mo": f"within Lib;\npackage Big\n{big}end Big;\n",
+        "Plant.mo": ("within Lib;\nmodel Plant\n  Real x(start = 0, fixed = true);\n  Real y;\nequation\n"
+                     "  der(x) = 1;\n  y = delay(x, 0.5);\nend Plant;\n"),
+    })
+    read: list[str] = []
+    original = source_mod._code
+
+    def spy(file):
+        read.append(Path(file).name)
+        return original(file)
+
+    monkeypatch.setattr(source_mod, "_code", spy)
+    with pytest.raises(UnsupportedConstructError, match=r"delay.*Plant.mo:7"):
+        compile_model(tmp_path / "Lib", "Lib.Plant", backend="embedded", output=tmp_path / "p.fmu")
+    assert "Plant.mo" in read and "Big.mo" not in read
