@@ -21,6 +21,8 @@ from pathlib import Path
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
+from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
+from .library import index_for
 from .rewrite import frontend_bytes
 from .semantics import check_source
 from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
@@ -314,57 +316,70 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
     """Run rumoca's load + flatten (or, given *validate*, its diagnostics of those files)
     in a worker process and return the worker's answer.
 
+    rumoca reads a front-end tree (:mod:`.frontend`): a copy of the files the model can reach,
+    as rumoca should read them; should the flatten fail on a name the copy may have left out,
+    it is repeated on the whole source and libraries. A flattened model is kept in the flat
+    cache and reused while every file of its tree is unchanged (``"cached": True`` in the answer).
+
     A worker that dies (segmentation fault, abort, stack overflow) or outlives
     :data:`FRONTEND_TIMEOUT` raises :class:`CompileError` naming the model and
     the signal; the tool itself never goes down with it.
     """
-    request = {
-        "mode": "flatten" if validate is None else "validate",
-        "parse_error": parse_error,
-        "entry": str(source.entry),
-        "model": model,
-        "roots": ([str(source.root)] + [str(p) for p in libraries]) if libraries else None,
-        "validate": [str(f) for f in validate or ()],
-        "validate_all": [str(f) for f in source.files],
-    }
     timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
-        # rumoca refuses a byte-order mark and loses some der() equations in for-loops: give it a copy
-        # without the mark and with those equations protected (.rewrite; lines and offsets unchanged)
-        if any(frontend_bytes(f) is not None for f in source.files):
+        if validate is not None:
+            return _validate(source, model, validate, parse_error, Path(tmp), req, res, timeout)
+        cache = FlatCache() if FlatCache.enabled() else None
+        index = index_for(source, libraries)
+        for prune in (True, False):
+            tree = build_tree(source, model, libraries, Path(tmp) / ("pruned" if prune else "full"), prune=prune,
+                              index=index)
+            key = tree.cache_key(model)
+            if cache is not None:
+                flat = cache.get(key)
+                if flat is not None:
+                    log.debug("front end: %s from the flat cache (%s)", model, key[:12])
+                    return {"ok": True, "flat": flat, "cached": True}
+            request = {"mode": "flatten", "entry": str(tree.entry), "model": model,
+                       "roots": [str(r) for r in tree.roots] if tree.roots else None}
+            answer = tree.rename(_run_worker(request, req, res, source, model, timeout))
+            if answer["ok"]:
+                if cache is not None:
+                    cache.put(key, answer["flat"])
+                return answer
+            if not (tree.pruned and answer.get("kind") == "rumoca" and may_be_pruned(answer["message"], index, tree)):
+                return answer
+            log.info("front end: %s failed on the files its lookup reaches (%s); again on the whole "
+                     "libraries", model, answer["message"].splitlines()[0][:200])
+        return answer
 
-            copy = _without_bom(source, Path(tmp) / "src")
-            request["entry"] = str(copy / source.entry.relative_to(source.root))
-            if request["roots"]:
-                request["roots"] = [str(copy), *request["roots"][1:]]
-            for key in ("validate", "validate_all"):
-                request[key] = [str(copy / Path(f).relative_to(source.root)) for f in request[key]]
-            answer = _run_worker(request, req, res, source, model, timeout)
-            return _rename(answer, str(copy), str(source.root))
-        return _run_worker(request, req, res, source, model, timeout)
 
+def _validate(source: ModelicaSource, model: str, validate: tuple[Path, ...], parse_error: bool, tmp: Path,
+              req: Path, res: Path, timeout: float) -> dict:
+    """rumoca's diagnostics of *validate* (and of every file of the source after a parse error), each
+    read as rumoca reads it in a compile (a rewritten copy where :mod:`.rewrite` changes it)."""
+    renames: list[tuple[str, str]] = []
 
-def _without_bom(source: ModelicaSource, dest: Path) -> Path:
-    """A copy of the package's files under *dest* as rumoca should read them (same relative
-    paths; byte-order marks removed, der() equations in for-loops protected: :mod:`.rewrite`)."""
-    for file in source.files:
-        target = dest / file.relative_to(source.root)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        data = frontend_bytes(file)
-        target.write_bytes(file.read_bytes() if data is None else data)
-    return dest
+    def readable(files) -> list[str]:
+        out = []
+        for f in files:
+            f = Path(f)
+            data = frontend_bytes(f)
+            if data is None:
+                out.append(str(f))
+                continue
+            copy = tmp / "validate" / str(len(renames)) / f.name
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            copy.write_bytes(data)
+            renames.append((str(copy), str(f)))
+            out.append(str(copy))
+        return out
 
-
-def _rename(obj: object, old: str, new: str) -> object:
-    """*obj* with the path prefix *old* replaced by *new* in every string of messages and diagnostics."""
-    if isinstance(obj, dict):
-        return {k: (v if k == "flat" else _rename(v, old, new)) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return type(obj)(_rename(v, old, new) for v in obj)
-    if isinstance(obj, str):
-        return obj.replace(old, new)
-    return obj
+    request = {"mode": "validate", "parse_error": parse_error, "model": model,
+               "validate": readable(validate), "validate_all": readable(source.files) if parse_error else []}
+    answer = _run_worker(request, req, res, source, model, timeout)
+    return FrontendTree(entry=tmp, roots=None, renames=sorted(renames, key=lambda r: -len(r[0]))).rename(answer)
 
 
 def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, model: str,
@@ -372,8 +387,10 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
     req.write_bytes(pickle.dumps(request))
     cmd = [sys.executable, str(Path(__file__).with_name("_frontend.py")), str(req), str(res)]
     log.debug("front end: %s", " ".join(cmd))
+    # rumoca would load every library on MODELICAPATH itself: the tree already holds what is needed
+    env = {k: v for k, v in os.environ.items() if k != "MODELICAPATH"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True)
+                            start_new_session=True, env=env)
     try:
         out, _ = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
