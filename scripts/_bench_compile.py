@@ -136,14 +136,13 @@ def msl(models: list[str]) -> int:
     import os
     import statistics
 
-    from trackingbox.compiler.msl_harness import default_msl, siblings
+    from trackingbox.compiler.msl_harness import default_msl
 
     root = default_msl()
     if not (root / "package.mo").is_file():
         print(f"error: the Modelica Standard Library is not at {root} (set TRACKINGBOX_MSL)", file=sys.stderr)
         return 2
     tb = str(Path(sys.executable).with_name("trackingbox"))
-    libs = [str(p) for p in siblings(root)]
     print(f"MSL {root}; each figure one fresh process: wall s / peak MB of its largest process")
     print(f"{'model':58s} {'cold':>13s} {'library cached':>15s} {'model cached':>13s} {'full library':>13s} "
           f"{'full/lib':>8s}")
@@ -167,7 +166,7 @@ def msl(models: list[str]) -> int:
             cache = Path(tmp) / f"cache{k}"  # this model's own caches, empty before its cold run
             base = {**os.environ, "XDG_CACHE_HOME": str(cache), "TRACKINGBOX_CACHE_DIR": str(cache / "tbx")}
             cmd = [tb, "compile", source, "--model", model, "--backend", "embedded", "-o", str(Path(tmp) / "m.fmu"),
-                   *extra, *[a for lib in libs for a in ("--library", lib)]]
+                   *extra]
             cold = _run_measured(cmd, base)
             # a new model against the cached library: no flat model kept
             warm = _run_measured(cmd, {**base, "TRACKINGBOX_FRONTEND_CACHE": "0"})

@@ -22,7 +22,7 @@ from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
-from .library import index_for
+from .library import index_for, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
 from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
@@ -409,12 +409,34 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
     return pickle.loads(res.read_bytes())
 
 
-def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> dict:
-    """Run rumoca on *model*; raise :class:`CompileError` with file:line diagnostics."""
+def _missing_library(message: str, missing: dict[str, str], model: str) -> CompileError | None:
+    """The front end failed while a top-level package the model's classes use is in no library: say
+    which (the package the front end's message names, else the first one missing)."""
+    if not missing:
+        return None
+    names = [(q[0] or q[1]).split(".", 1)[0] for q in re.findall(r"'([A-Za-z_][\w.]*)'|`([A-Za-z_][\w.]*)`", message)]
+    first = next((n for n in names if n in missing), next(iter(missing)))
+    others = [n for n in missing if n != first]
+    also = f" (also not found: {', '.join(others)})" if others else ""
+    return CompileError(
+        f"`{first}` is used by {missing[first]} but not found: pass --library DIR (the {first} package "
+        f"directory, or the directory that holds it) or set MODELICAPATH{also}")
+
+
+def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = (),
+            missing: dict[str, str] | None = None) -> dict:
+    """Run rumoca on *model*; raise :class:`CompileError` with file:line diagnostics.
+
+    *missing*: top-level packages the model uses that no library holds (name -> where it is
+    used, :func:`.library.resolve_libraries`); a failure on one of them names the library."""
     answer = run_frontend(source, model, libraries)
     if answer["ok"]:
         return answer["flat"]
     message = answer["message"]
+    if missing:
+        lost = _missing_library(message, missing, model)
+        if lost is not None:
+            raise lost
     if answer["kind"] != "rumoca":
         raise CompileError(f"rumoca failed on {model!r} from {source.entry}: {message}")
     first = message.splitlines()[0] if message else "rumoca error"
@@ -451,7 +473,8 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
                      libraries: tuple[Path, ...] = ()) -> tuple[str, int, int]:
     """Compile with the embedded toolchain; returns (log, n_states, n_parameters)."""
     t0 = time.perf_counter()
-    flat = flatten(source, model, libraries)
+    libraries, missing = resolve_libraries(source, model, libraries)
+    flat = flatten(source, model, libraries, missing)
     if flat.get("is_partial"):
         raise CompileError(f"{model!r} is a partial class and cannot be compiled")
     class_type = str(flat.get("class_type", "")).lower()

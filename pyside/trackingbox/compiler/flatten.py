@@ -263,7 +263,8 @@ class FlatTranslator:
         if flat.get("initial_algorithms"):
             raise self.unsupported("initial algorithm section", r"\binitial\s+algorithm\b")
         for fname, fn in self.functions.items():
-            if fn.get("external"):
+            ext = fn.get("external")
+            if ext and _builtin_external(ext) is None:
                 raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
 
     # ------------------------------------------------------------ variables
@@ -732,6 +733,10 @@ class FlatTranslator:
 
     # ------------------------------------------------------------ functions
     def inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        ext = fn.get("external")
+        builtin = _builtin_external(ext) if ext else None
+        if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
+            return self._builtin_external(fname, fn, ext, builtin, args)
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
@@ -757,6 +762,26 @@ class FlatTranslator:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _builtin_external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], builtin: str,
+                          args: list[Value]) -> list[Value]:
+        """``external "builtin" y = sin(u)``: the built-in on the external call's arguments, which
+        name the function's inputs (given, or their defaults)."""
+        env: dict[str, Value] = {}
+        for i, inp in enumerate(fn.get("inputs") or []):
+            if i < len(args):
+                env[inp["name"]] = args[i]
+            elif inp.get("default") is not None:
+                env[inp["name"]] = self.expr(inp["default"], env)
+            else:
+                raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+        call_args = [self.expr(a, env) for a in ext.get("args") or []]
+        value = _builtin(builtin, call_args, self)
+        outs = [o["name"] for o in fn.get("outputs") or []]
+        if len(outs) != 1 or (ext.get("output_name") not in (None, outs[0])):
+            raise self.unsupported(f"external \"builtin\" function {fname!r} with other than one output "
+                                   "returned by the call", r"\bexternal\b")
+        return [value]
 
     def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
         for st in stmts:
@@ -1334,6 +1359,22 @@ _ARRAY_BUILTINS = {
     "size", "ndims", "scalar", "vector", "matrix", "identity", "diagonal", "zeros", "ones", "fill",
     "linspace", "cat", "transpose", "outerproduct", "symmetric", "cross", "skew",
 }
+
+
+_BUILTIN_EXTERNALS = {
+    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp", "log", "log10",
+    "sqrt", "abs", "sign", "floor", "ceil",
+}
+"""Functions an ``external "builtin"`` declaration may name (MLS 12.9: the built-ins of the language,
+as Modelica.Math declares its elementary functions)."""
+
+
+def _builtin_external(ext: Any) -> str | None:
+    """The built-in an ``external "builtin"`` clause calls, or None (another language, or unknown)."""
+    if not isinstance(ext, dict) or str(ext.get("language", "")).lower() != "builtin":
+        return None
+    name = str(ext.get("function_name") or "")
+    return name if name in _BUILTIN_EXTERNALS else None
 
 
 def _not(a: Any) -> Any:

@@ -61,6 +61,12 @@ _SHORT_BASE = re.compile(r"\s*=\s*(?:(?:input|output|flow|stream|discrete|parame
 _WORD = re.compile(r"[A-Za-z_]\w*")
 _BLANK = re.compile(r"[^\n]")
 
+BUILTIN_CLASSES = frozenset({
+    "Real", "Integer", "Boolean", "String", "StateSelect", "AssertionLevel", "Connections", "ExternalObject",
+    "Clock", "Subtask", "ModelicaServicesDummy",
+})
+"""Predefined classes and enumerations of the language (MLS 4.9, 8.3.7, 9.4, 16): never a library."""
+
 KEYWORDS = frozenset({
     "algorithm", "and", "annotation", "block", "break", "class", "connect", "connector", "constant",
     "constrainedby", "der", "discrete", "each", "else", "elseif", "elsewhen", "encapsulated", "end",
@@ -551,7 +557,7 @@ class LibraryIndex:
     # ------------------------------------------------------------------ closures
     def used_classes(self, model: str) -> list[str]:
         """The classes *model* uses, in the order found: the model's class first, then every class a
-        name in a used class resolves to (with its bases), followed transitively."""
+        name in a used class resolves to, its bases and its enclosing class, followed transitively."""
         if model not in self.classes:
             return []
         order = [model]
@@ -566,6 +572,11 @@ class LibraryIndex:
                 target = self.lookup(name, cls)
                 if target is not None:
                     targets.append(target)
+            # the enclosing packages: their constants and imports are in scope (a name such as `k`
+            # in Heat.Capacity may be the constant Heat.k, whose binding uses other classes)
+            parent = info.parent
+            if parent is not None and parent in self.classes:
+                targets.append(parent)
             for target in targets:
                 if target not in seen:
                     seen.add(target)
@@ -622,7 +633,7 @@ class LibraryIndex:
                         take(name)
         return {self.classes[n].file for n in taken}
 
-    def unresolved_top(self, model: str) -> dict[str, str]:
+    def unresolved_top(self, model: str) -> dict[str, str]:  # noqa: C901
         """First parts of names used in the classes of *model* that look like library packages
         (``Modelica.Blocks...``: a dotted name whose first part resolves nowhere) but are not
         among the indexed top-level classes: name -> where it is used (``file:line`` of the class)."""
@@ -633,17 +644,21 @@ class LibraryIndex:
                 if "." not in name:
                     continue
                 first = name.split(".", 1)[0]
-                if first in missing or not first[:1].isupper():
+                if first in missing or not first[:1].isupper() or first in BUILTIN_CLASSES:
                     continue
                 if self.lookup(first, cls) is None and not self._is_component(first, cls):
-                    missing[first] = f"{info.name} at {info.file}:{info.line}"
+                    use = re.search(rf"(?<![\w.]){re.escape(first)}\s*\.", self.own_code(info, annotations=False))
+                    line = line_of(info.file, info.start + use.start()) if use else info.line
+                    missing[first] = f"{info.name} (at {info.file}:{line})"
         return missing
 
     def _is_component(self, name: str, cls: str) -> bool:
         """Whether *name* is declared as a component (or a loop variable) in *cls*, an enclosing
         class or one of their bases: a rough textual test, used only before naming a library missing."""
-        pattern = re.compile(rf"(?<![\w.])[A-Za-z_][\w.]*\s*(?:\[[^\]]*\]\s*)?\s+{re.escape(name)}\b"
-                             rf"|\bfor\s+{re.escape(name)}\b")
+        pattern = re.compile(
+            r"(?<![\w.])(?!(?:model|block|class|connector|record|package|function|type|end|within|extends|import|"
+            r"partial|encapsulated|operator|expandable|equation|algorithm)\b)[A-Za-z_][\w.]*\s*(?:\[[^\]]*\]\s*)?"
+            rf"\s+{re.escape(name)}\s*(?:[\[(=;,\"]|\bif\b)|\bfor\s+{re.escape(name)}\b")
         cur: str | None = cls
         while cur:
             for c in (cur, *self.bases(cur)):
@@ -689,4 +704,80 @@ class LibraryIndex:
                       and c.kind in ("model", "block", "class"))
 
 
-__all__ = ["ClassInfo", "LibraryIndex", "cache_dir", "index_tree", "scan_file"]
+# ----------------------------------------------------------------------------------- libraries
+def library_candidates(paths: list[Path] | tuple[Path, ...]) -> dict[str, Path]:
+    """Top-level packages a directory of libraries offers (a MODELICAPATH entry, or the directory
+    beside a package): ``Name/package.mo``, ``Name.mo``, or versioned ``Name 4.0.0/package.mo``;
+    the first of each name wins."""
+    found: dict[str, Path] = {}
+    for directory in paths:
+        directory = Path(directory)
+        try:
+            entries = sorted(directory.iterdir())
+        except OSError:
+            continue
+        for p in entries:
+            name = p.stem if p.suffix == ".mo" else p.name
+            name = name.split(" ", 1)[0]
+            if not re.fullmatch(r"[A-Za-z_]\w*", name) or name in found:
+                continue
+            if (p.is_dir() and (p / "package.mo").is_file()) or (p.is_file() and p.suffix == ".mo"):
+                found[name] = p
+    return found
+
+
+def modelicapath() -> list[Path]:
+    """The directories of ``$MODELICAPATH`` (separated by the platform's path separator)."""
+    raw = os.environ.get("MODELICAPATH", "")
+    return [Path(p).expanduser() for p in raw.split(os.pathsep) if p.strip()]
+
+
+def normalize_libraries(libraries) -> list[Path]:
+    """``--library`` arguments as package roots: a package directory or ``.mo`` file as it is; a
+    directory of packages (a MODELICAPATH-like directory, e.g. the one holding ``Modelica``) as each
+    of its packages. A path that is neither is a :class:`~trackingbox.errors.CompileError`."""
+    from ..errors import CompileError
+
+    out: list[Path] = []
+    for lib in libraries:
+        path = Path(lib).expanduser()
+        if not path.exists():
+            raise CompileError(f"library {str(lib)!r} does not exist")
+        path = path.resolve()
+        if (path.is_dir() and (path / "package.mo").is_file()) or (path.is_file() and path.suffix == ".mo"):
+            out.append(path)
+            continue
+        if path.is_dir():
+            offered = library_candidates([path])
+            if offered:
+                out.extend(offered.values())
+                continue
+        raise CompileError(f"library {str(lib)!r} is not a Modelica package (a directory with package.mo, or "
+                           "a .mo file) nor a directory of packages")
+    return list(dict.fromkeys(out))
+
+
+def resolve_libraries(source, model: str, libraries=()) -> tuple[tuple[Path, ...], dict[str, str]]:
+    """The libraries *model* needs: the given ones, then, for each top-level package the model's
+    classes use but none of those holds, the package of that name beside the source's package or
+    beside a given library, else on ``MODELICAPATH``. Returns the libraries and the packages still
+    not found (name -> the class that uses it and where)."""
+    libs = normalize_libraries(libraries)
+    own = source_root(source)
+    beside = [p.parent for p in (own, *libs)]
+    places = list(dict.fromkeys([*beside, *modelicapath()]))
+    offered = library_candidates(places)
+    missing: dict[str, str] = {}
+    for _ in range(20):  # each round may add a library that uses another
+        index = index_for(source, libs)
+        missing = index.unresolved_top(model) if model in index.classes else {}
+        added = [offered[n] for n in missing if n in offered and offered[n] not in libs and offered[n] != own]
+        if not added:
+            break
+        log.info("libraries found for %s: %s", model, ", ".join(str(p) for p in added))
+        libs.extend(added)
+    return tuple(libs), missing
+
+
+__all__ = ["ClassInfo", "LibraryIndex", "cache_dir", "index_tree", "library_candidates", "modelicapath",
+           "normalize_libraries", "resolve_libraries", "scan_file"]

@@ -5,8 +5,8 @@ model or block, not partial, with an ``experiment`` annotation), in its own work
 time limit:
 
 1. compile it with the embedded backend from the library's package directory, as a user does
-   (``trackingbox compile <MSL>/Modelica --model ... --backend embedded``, the library's sibling
-   top-level packages such as ``ModelicaServices`` given as ``--library``);
+   (``trackingbox compile <MSL>/Modelica --model ... --backend embedded``; the compiler finds
+   ``ModelicaServices`` beside ``Modelica`` itself; ``--library`` adds libraries);
 2. simulate the FMU over its ``experiment`` (start, stop; the output grid of the reference where
    there is one, else the experiment's interval; relative tolerance the smaller of the experiment's
    and 1e-6) with fmpy's CVODE;
@@ -443,9 +443,9 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--msl", type=Path, default=None,
                    help="the library's package directory (default: ../shared/msl/Modelica)")
-    p.add_argument("--library", action="append", type=Path, default=None, metavar="DIR",
-                   help="further library given to the compiler (repeatable; default: the top-level packages "
-                        "beside --msl, e.g. ModelicaServices)")
+    p.add_argument("--library", action="append", type=Path, default=[], metavar="DIR",
+                   help="further library given to the compiler (repeatable; the packages beside --msl, e.g. "
+                        "ModelicaServices, are found without it)")
     p.add_argument("--reference", type=Path, default=None,
                    help="reference results root (default: ../shared/msl-reference)")
     p.add_argument("--package", action="append", default=[],
@@ -478,14 +478,14 @@ def main(argv: list[str] | None = None) -> int:
     if not (msl / "package.mo").is_file():
         print(f"error: library package {msl} not found (no package.mo); give --msl", file=sys.stderr)
         return 2
-    libraries = [p.resolve() for p in args.library] if args.library is not None else siblings(msl)
+    libraries = [p.resolve() for p in args.library]
     reference = (args.reference or default_reference()).resolve()
     if not reference.is_dir():
         log.info("no reference results at %s: examples are only simulated", reference)
         reference = None
     from .library import LibraryIndex
 
-    index = LibraryIndex.build([msl, *libraries])
+    index = LibraryIndex.build([msl, *libraries, *siblings(msl)])
     todo_all: list[dict] = []
     for pkg in packages:
         if pkg not in index.classes:
