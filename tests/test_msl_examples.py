@@ -54,3 +54,9 @@ def test_a_model_on_the_msl_finds_modelica_services_beside_it(tmp_path):
                             relative_tolerance=1e-9)
     # C dT/dt = -G (T - 290): T = 290 + 60 exp(-t G / C)
     assert np.allclose(out["c.T"], 290 + 60 * np.exp(-out["time"] * 10 / 1000), rtol=1e-7)
+
+
+def test_fluid_heat_flow_one_mass_matches_its_reference(tmp_path):
+    """FluidHeatFlow's pipes compute a fixed = false parameter in an initial algorithm."""
+    res = run("Modelica.Thermal.FluidHeatFlow.Examples.OneMass", tmp_path)
+    assert res["outcome"] == "match", res["message"]

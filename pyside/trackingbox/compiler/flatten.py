@@ -258,10 +258,6 @@ class FlatTranslator:
         flat = self.flat
         if flat.get("when_chains"):
             raise self.unsupported("when-clause", r"\bwhen\b")
-        if flat.get("algorithms"):
-            raise self.unsupported("algorithm section in a model", r"\balgorithm\b")
-        if flat.get("initial_algorithms"):
-            raise self.unsupported("initial algorithm section", r"\binitial\s+algorithm\b")
         for fname, fn in self.functions.items():
             ext = fn.get("external")
             if ext and _builtin_external(ext) is None:
@@ -789,17 +785,17 @@ class FlatTranslator:
             if kind == "Assignment":
                 value = self.expr(body["value"], env)
                 parts = body["comp"]["parts"]
-                if len(parts) != 1:
-                    raise self.unsupported(f"record field assignment in function {fname!r}")
-                ident = parts[0]["ident"]
-                subs = parts[0].get("subs") or []
+                if len(parts) != 1 and not _is_algorithm(fname):
+                    raise self.unsupported(f"record field assignment {_in(fname)}")
+                ident = self._flat_target(parts, env)
+                subs = parts[-1].get("subs") or []
                 if subs:
                     target = env.get(ident)
                     if not isinstance(target, np.ndarray):
-                        raise self.unsupported(f"indexed assignment to {ident!r} in function {fname!r}")
+                        raise self.unsupported(f"indexed assignment to {ident!r} {_in(fname)}")
                     picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
                     if len(picks) != target.ndim:
-                        raise CompileError(f"assignment to {ident!r} in function {fname!r} with {len(picks)} "
+                        raise CompileError(f"assignment to {ident!r} {_in(fname)} with {len(picks)} "
                                            f"subscripts for an array of size {arr.size_text(target.shape)}")
                     index = tuple(
                         slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
@@ -810,7 +806,7 @@ class FlatTranslator:
                                and not 1 <= int(i) <= target.shape[k]]
                         if bad:
                             raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
-                                               f"to {ident!r} in function {fname!r}")
+                                               f"to {ident!r} {_in(fname)}")
                     target = target.copy()
                     try:
                         target[np.ix_(*[range(target.shape[k]) if p is None else
@@ -822,7 +818,7 @@ class FlatTranslator:
                             if arr.is_array(value) else value)
                     except ValueError:
                         raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
-                                           f"to a part of {ident!r} in function {fname!r} that does not "
+                                           f"to a part of {ident!r} {_in(fname)} that does not "
                                            "have that size") from None
                     env[ident] = target
                 else:
@@ -832,10 +828,30 @@ class FlatTranslator:
             elif kind == "For":
                 self._for_statement(body, env, fname)
             elif kind == "Assert":
-                self.add_assert(body, env, f"function {fname}")
+                self.add_assert(body, env, fname if _is_algorithm(fname) else f"function {fname}")
             else:
                 pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
-                raise self.unsupported(f"{kind.lower()} statement in function {fname!r}", pattern)
+                raise self.unsupported(f"{kind.lower()} statement {_in(fname)}", pattern)
+
+    def _flat_target(self, parts: list[dict[str, Any]], env: dict[str, Value]) -> str:
+        """The name an assignment's target ``a[2].b.c[i]`` has in the environment: the flat name
+        ``a[2].b.c`` (subscripts of the enclosing components must be constant; those of the last
+        part index into the value)."""
+        names = []
+        for k, part in enumerate(parts):
+            subs = part.get("subs") or []
+            if subs and k < len(parts) - 1:
+                picks = []
+                for sub in subs:
+                    val = self._subscript(sub, None, 0, env)
+                    if not isinstance(val, int):
+                        raise self.unsupported(f"assignment to an element of a component array with a "
+                                               f"subscript that is not a constant ({part['ident']}[...])")
+                    picks.append(str(val))
+                names.append(f"{part['ident']}[{','.join(picks)}]")
+            else:
+                names.append(part["ident"])
+        return ".".join(names)
 
     def _if_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
         blocks = body.get("cond_blocks") or body.get("branches") or []
@@ -951,7 +967,7 @@ class FlatTranslator:
     def _for_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
         indices = body.get("indices") or []
         if len(indices) != 1:
-            raise self.unsupported(f"for-loop with {len(indices)} indices in function {fname!r}")
+            raise self.unsupported(f"for-loop with {len(indices)} indices {_in(fname)}")
         ident = indices[0].get("ident")
         name = ident.get("text") if isinstance(ident, dict) else ident
         rng = self.expr(indices[0]["range"], env)
@@ -1007,6 +1023,8 @@ class FlatTranslator:
         for sv in self.scalars.values():
             if sv.kind == "continuous" and sv.binding_node is not None:
                 residuals.append((sv.sym - self._element(sv, sv.binding_node), f"binding of {sv.name}"))
+        for section in self.flat.get("algorithms") or []:
+            residuals.extend(self.algorithm_residuals(section, initial=False))
 
         for a in self.flat.get("assert_equations") or []:
             self.add_assert(a, None, f"equation {self._where(a.get('origin'))}")
@@ -1024,6 +1042,8 @@ class FlatTranslator:
                         raise CompileError(f"{origin} in {self.model} reduces to {r} = 0")
                     continue
                 init_residuals.append((r, origin))
+        for section in self.flat.get("initial_algorithms") or []:
+            init_residuals.extend(self.algorithm_residuals(section, initial=True))
         extra = [n for n in self.der_placeholders if n not in state_names]
         if extra:
             raise self.unsupported(
@@ -1093,6 +1113,60 @@ class FlatTranslator:
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
         )
+
+    def algorithm_residuals(self, section: dict[str, Any], initial: bool) -> list[tuple[ca.MX, str]]:
+        """An (initial) algorithm section as equations: ``v = value`` for each variable it assigns.
+
+        The statements are executed symbolically, as a function body is inlined (assignments,
+        if, for, assert): each assigned variable starts from its start value (MLS 11.1.2: a value
+        read before the section assigns it) and ends as an expression in the other variables.
+        A section is one vector equation whose unknowns are the variables it assigns: an initial
+        algorithm determines them at initialisation (e.g. a ``fixed = false`` parameter), an
+        algorithm for all time.
+        """
+        origin = section.get("origin")
+        owner = str(origin).removeprefix("algorithm from ").strip() if isinstance(origin, str) else ""
+        owner = owner if owner and owner != "(top level)" else self.model
+        context = f"{'initial ' if initial else ''}algorithm of {owner}"
+        env: dict[str, Value] = {}
+        assigned: list[str] = []
+        for out in section.get("outputs") or []:
+            name = str(out.get("name") or "")
+            base = name if name in self.vars else re.sub(r"\[[^\]]*\]$", "", name)
+            if base not in self.vars:
+                raise CompileError(f"the {context} in {self.model} assigns {name!r}, which is not a variable")
+            if base in env:
+                continue
+            scalars = self.vars[base]
+            if any(sv.sym is None for sv in scalars):
+                raise CompileError(f"the {context} in {self.model} assigns {base!r}, which is a constant or "
+                                   "a structural parameter")
+            starts = [self._start_of(sv) for sv in scalars]
+            env[base] = arr.from_list(starts).reshape(self.dims[base]) if self.dims[base] else starts[0]
+            assigned.append(base)
+        self._statements(section.get("statements") or [], env, context)
+        out: list[tuple[ca.MX, str]] = []
+        for base in assigned:
+            value = env[base]
+            for sv in self.vars[base]:
+                v = value[tuple(i - 1 for i in sv.index)] if sv.index else value
+                if arr.is_array(v):
+                    raise CompileError(f"the {context} in {self.model} gives {sv.name} a value of size "
+                                       f"{arr.size_text(arr.shape(v))}")
+                out.append((sv.sym - v, f"{context} ({sv.name})"))
+        return out
+
+    def _start_of(self, sv: ScalarVar) -> float:
+        """The start value of a variable (0 when it has none), with parameters at their start values."""
+        if sv.kind == "parameter" and sv.value is not None and sv.fixed is not False:
+            return float(sv.value)
+        node = sv.start_node
+        if node is None:
+            return 0.0
+        try:
+            return self.numeric(self._element(sv, node), f"start value of {sv.name!r}")
+        except CompileError:
+            return 0.0
 
     def _where(self, origin: Any) -> str:
         text = _origin_text(origin)
@@ -1375,6 +1449,16 @@ def _builtin_external(ext: Any) -> str | None:
         return None
     name = str(ext.get("function_name") or "")
     return name if name in _BUILTIN_EXTERNALS else None
+
+
+def _is_algorithm(context: str) -> bool:
+    """Whether a statement context names an algorithm section of the model (not a function)."""
+    return context.startswith(("algorithm ", "initial algorithm "))
+
+
+def _in(context: str) -> str:
+    """``in function 'f'`` or ``in the initial algorithm of pipe`` for messages."""
+    return f"in the {context}" if _is_algorithm(context) else f"in function {context!r}"
 
 
 def _not(a: Any) -> Any:
