@@ -223,7 +223,7 @@ def test_unknown_class(tmp_path):
         ("  Real x(start=0, fixed=true);\nequation\n  der(x) = 1;\n  when x > 1 then\n    reinit(x, 0);\n  end when;\n",
          "when-clause", 5),
         ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = pre(x);\n", "pre", 6),
-        ("  Real x(start=0, fixed=true);\nalgorithm\n  x := 1;\n", "algorithm", 3),
+        ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = delay(x, 1.0);\n", "delay", 6),
     ],
 )
 def test_unsupported_construct_is_refused_with_location(tmp_path, body, construct, line):

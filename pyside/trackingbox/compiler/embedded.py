@@ -42,6 +42,13 @@ def _diagnostics(raw: list[tuple[str, str, int | None]]) -> list[str]:
     return found
 
 
+def _without_paths(text: str) -> str:
+    """*text* without file positions (``[/a/b.mo:3:4]``, ``/a/b.mo:3``): words in a directory name
+    (``test_when_...``) are not what the message says."""
+    text = re.sub(r"\[[^\]\[]*?\.mo(?::\d+)*\]", " ", text)
+    return re.sub(r"(?:/[^\s:,()\[\]]+)+\.mo(?::\d+)*", " ", text)
+
+
 _MENTIONED = (
     ("when", "when-clause", r"\bwhen\b"),
     ("pre(", "pre()", r"\bpre\s*\("),
@@ -58,7 +65,7 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str,
                          libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a construct the embedded path does not support either: say where it is
     (in the model's own file or a class it uses, never elsewhere in the package)."""
-    low = message.lower()
+    low = _without_paths(message).lower()
     for needle, construct, pattern in _MENTIONED:
         if needle in low:
             locs = locate(source, model, pattern, libraries=libraries)
@@ -80,8 +87,8 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
                     model: str, libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca said it does not support something (not that the model is wrong): refuse naming
     the construct in rumoca's words and where it stands in the model's own files."""
-    low = message.lower()
-    first = message.splitlines()[0]
+    low = _without_paths(message).lower()
+    first = _without_paths(message.splitlines()[0])
     nested = re.search(r"unresolved import: '([\w.]+)'", first)
     if _IMPLICIT_RANGE in low:
         construct = "for-loop without an explicit range (for i loop ...)"
