@@ -220,9 +220,10 @@ def test_unknown_class(tmp_path):
 @pytest.mark.parametrize(
     "body, construct, line",
     [
-        ("  Real x(start=0, fixed=true);\nequation\n  der(x) = 1;\n  when x > 1 then\n    reinit(x, 0);\n  end when;\n",
-         "when-clause", 5),
-        ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = pre(x);\n", "pre", 6),
+        ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = x;\n  when x > 1 then\n"
+         "    reinit(y, 0);\n  end when;\n", "reinit()", 8),
+        ("  Real x(start=0, fixed=true);\n  Boolean b;\nequation\n  der(x) = 1;\n  b = sample(0, 0.1);\n",
+         "sample() outside the condition of a when-clause", 6),
         ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = delay(x, 1.0);\n", "delay", 6),
     ],
 )

@@ -297,16 +297,36 @@ def test_assert_in_an_inlined_function(tmp_path):
 
 
 @pytest.mark.parametrize("construct", ["initial", "terminal"])
-def test_initial_and_terminal_are_refused(tmp_path, construct):
+def test_initial_and_terminal_in_an_assert(tmp_path, construct):
+    """initial() is true only during initialisation, terminal() never during a run: the assert fails
+    where x falls below 0.5, at t = ln 2."""
     text = f"""
 model UsesIt
   Real x(start = 1, fixed = true);
 equation
   der(x) = -x;
-  assert({construct}() or x > 0, "x positive");
+  assert({construct}() or x > 0.5, "x above 0.5");
 end UsesIt;
 """
-    with pytest.raises(UnsupportedConstructError, match=rf"{construct}\(\).*UsesIt\.mo:6"):
+    fmu = build(tmp_path, "UsesIt", text)
+    with FMUModel(fmu) as model, pytest.raises(AssertionFailed, match="x above 0.5") as exc:
+        model.simulate(stop_time=2, output_interval=0.05)
+    assert abs(exc.value.time - math.log(2)) <= 0.05
+
+
+def test_an_if_equation_on_initial_without_else_is_refused(tmp_path):
+    """rumoca 0.10.2 drops `if initial() then assert(...); end if;` without a word: refused."""
+    text = """
+model UsesIt
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -x;
+  if initial() then
+    assert(x > 0, "x positive");
+  end if;
+end UsesIt;
+"""
+    with pytest.raises(UnsupportedConstructError, match=r"initial\(\).*UsesIt\.mo:6"):
         build(tmp_path, "UsesIt", text)
 
 

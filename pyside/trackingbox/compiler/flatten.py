@@ -67,6 +67,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
+from .events import Condition, EventSystem, Sample, WhenCondition
 from .modifiers import modifier_check
 from .semantics import check_flat
 from .source import (Location, ModelicaSource, class_extent, locate, model_files, read_text, span_location,
@@ -151,6 +152,8 @@ class ExplicitModel:
     torn_sizes: list[tuple[int, int]] = field(default_factory=list)
     asserts: list[Assertion] = field(default_factory=list)
     initial: InitialSystem | None = None
+    events: EventSystem | None = None
+    discrete: list[ScalarVar] = field(default_factory=list)
 
 
 def _kind_of(node: Any) -> tuple[str, Any]:
@@ -161,14 +164,8 @@ def _kind_of(node: Any) -> tuple[str, Any]:
 
 
 _UNSUPPORTED_BUILTINS = {
-    "pre": r"\bpre\s*\(",
-    "edge": r"\bedge\s*\(",
-    "change": r"\bchange\s*\(",
-    "sample": r"\bsample\s*\(",
     "reinit": r"\breinit\s*\(",
     "delay": r"\bdelay\s*\(",
-    "initial": r"\binitial\s*\(\s*\)",
-    "terminal": r"\bterminal\s*\(\s*\)",
     "spatialdistribution": r"\bspatialDistribution\s*\(",
     "cardinality": r"\bcardinality\s*\(",
     "assert": r"\bassert\s*\(",
@@ -185,8 +182,63 @@ _UNSUPPORTED_BUILTINS = {
 }
 
 
+_EVENT_BUILTINS = {"pre", "edge", "change", "initial", "terminal", "sample"}
+HYSTERESIS = 1e-10
+"""Relative shift of event indicators past the switching point (see FlatTranslator.relation)."""
+
+
 def _num(x: Value) -> bool:
     return isinstance(x, (int, float, bool, np.integer, np.floating, np.bool_))
+
+
+def _if(cond: Value, a: Value, b: Value) -> Value:
+    """``if cond then a else b`` for scalars (a constant condition picks a branch)."""
+    if _num(cond):
+        return a if bool(cond) else b
+    if a is b:
+        return a
+    return ca.if_else(cond, a, b)
+
+
+def _when_targets(flat: dict[str, Any]) -> set[str]:
+    """Variables (their flat names, subscripts of the last part removed) that when-clauses and
+    when-statements assign: they are discrete (MLS 4.5: a Real assigned in a when-clause)."""
+    found: set[str] = set()
+    for chain in flat.get("when_chains") or []:
+        for br in [chain.get("first") or {}, *(chain.get("else_when") or [])]:
+            for eq in br.get("equations") or []:
+                kind, body = _kind_of(eq)
+                if kind == "Assign" and isinstance(body, dict):
+                    found.add(re.sub(r"\[[^\]]*\]$", "", str(body.get("target"))))
+
+    def statements(stmts: list[Any], inside: bool) -> None:
+        for st in stmts or []:
+            kind, body = _kind_of(st)
+            if not isinstance(body, dict):
+                continue
+            if kind == "Assignment" and inside:
+                parts = (body.get("comp") or {}).get("parts") or []
+                names = []
+                for k, part in enumerate(parts):
+                    subs = part.get("subs") or [] if k < len(parts) - 1 else []
+                    idx = [str(_kind_of(sb)[1].get("value")) for sb in subs
+                           if _kind_of(sb)[0] == "Index" and isinstance(_kind_of(sb)[1], dict)]
+                    names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
+                found.add(".".join(names))
+            elif kind == "When":
+                for blk in body.get("blocks") or []:
+                    statements(blk.get("stmts") or [], True)
+            for key in ("cond_blocks", "branches", "blocks"):
+                for blk in body.get(key) or []:
+                    if isinstance(blk, dict) and kind != "When":
+                        statements(blk.get("stmts") or blk.get("body") or [], inside)
+            for key in ("else_block", "else_branch", "equations", "stmts", "body"):
+                if isinstance(body.get(key), list):
+                    statements(body[key], inside)
+
+    for section in (flat.get("algorithms") or []) + (flat.get("initial_algorithms") or []):
+        statements(section.get("statements") or [], False)
+    return found
 
 
 class FlatTranslator:
@@ -213,6 +265,15 @@ class FlatTranslator:
         self._files: tuple[Path, ...] | None = None
         self._sources: dict[int, Path] | None = None
         self._text_cache: dict[Path, str] = {}
+        # events (.events): relations and roundings frozen between events, when conditions, pre()
+        self.events = EventSystem(initial=ca.MX.sym("_tbx_initial"))
+        self.quiet = ca.MX.sym("_tbx_quiet")  # 1 when sample() instants are over (see fmi_export)
+        self._freeze = True
+        self._frozen: dict[str, ca.MX] = {}
+        self._pre: dict[str, ca.MX] = {}
+        self._in_when_condition = False
+        self._when_targets: set[str] = set()
+        self._uses_initial = False
 
     # ------------------------------------------------------------------ errors
     def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
@@ -256,8 +317,6 @@ class FlatTranslator:
     # --------------------------------------------------------------- checks
     def check_constructs(self) -> None:
         flat = self.flat
-        if flat.get("when_chains"):
-            raise self.unsupported("when-clause", r"\bwhen\b")
         for fname, fn in self.functions.items():
             ext = fn.get("external")
             if ext and _builtin_external(ext) is None:
@@ -281,6 +340,7 @@ class FlatTranslator:
         # values are only as good as the modifications the front end kept
         self.check_modifiers()
         top_inputs = set(self.flat.get("top_level_input_components") or [])
+        self._when_targets = _when_targets(self.flat)
         for name, v in self.flat["variables"].items():
             vtype = self._type_of(v)
             var_kind, _ = _kind_of(v.get("variability"))
@@ -299,14 +359,10 @@ class FlatTranslator:
                 kind = "constant"
             elif var_kind == "Parameter":
                 kind = "parameter" if vtype == REAL else "structural"
-            elif var_kind == "Discrete" or vtype != REAL:
-                short = name.rsplit(".", 1)[-1]
-                raise self.unsupported(
-                    f"discrete variable {name!r}", rf"\b(?:discrete|Integer|Boolean)\b[^;]*\b{short}\b",
-                    "only Real variables are supported; make it a parameter or a Real",
-                )
             elif caus_kind == "Input" and (name in top_inputs or top):
                 kind = "input"
+            elif var_kind == "Discrete" or vtype != REAL or name in self._when_targets:
+                kind = "discrete"  # held between events (.events)
             else:
                 kind = "continuous"
             dims = self._dims(v.get("dims") or [], name)
@@ -323,7 +379,7 @@ class FlatTranslator:
                     binding_node=v.get("binding"), index=idx, attrs=attrs, description=desc,
                     fixed=self._fixed(fixed_raw),
                 )
-                if kind in ("parameter", "input", "continuous"):
+                if kind in ("parameter", "input", "continuous", "discrete"):
                     sv.sym = ca.MX.sym(sname)
                 scalars.append(sv)
                 self.scalars[sname] = sv
@@ -695,8 +751,197 @@ class FlatTranslator:
             return self._der(args_nodes[0], env)
         if lname in _UNSUPPORTED_BUILTINS:
             raise self.unsupported(f"built-in {lname}()", _UNSUPPORTED_BUILTINS[lname])
+        if lname in _EVENT_BUILTINS:
+            return self._event_builtin(lname, args_nodes, env)
+        if lname in ("noevent", "smooth"):  # relations inside generate no events
+            saved, self._freeze = self._freeze, False
+            try:
+                args = [self.expr(a, env) for a in args_nodes]
+            finally:
+                self._freeze = saved
+            return _builtin(lname, args, self)
         args = [self.expr(a, env) for a in args_nodes]
         return _builtin(lname, args, self)
+
+    # --------------------------------------------------------------- events
+    def _is_continuous(self, value: Value) -> bool:
+        """Whether *value* depends on a continuous-time variable (or time): a relation on it switches
+        between events and must be frozen (.events)."""
+        if _num(value) or not isinstance(value, ca.MX):
+            return False
+        for s in ca.symvar(value):
+            name = s.name()
+            if name == "time" or name.startswith("der("):
+                return True
+            sv = self.scalars.get(name)
+            if sv is not None and sv.kind in ("continuous", "input"):
+                return True
+        return False
+
+    def relation(self, op: str, a: Value, b: Value) -> Value:
+        """``a op b`` with its Modelica meaning: a relation on continuous-time values outside
+        ``noEvent`` is frozen between events, with the event indicator ``a - b``."""
+        if _num(a) and _num(b):
+            return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b, "==": a == b, "!=": a != b}[op]
+        x, y = (ca.MX(a) if _num(a) else a), (ca.MX(b) if _num(b) else b)
+        value = {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[op]
+        if op in ("==", "!=") or not self._freeze or not self._is_continuous(x - y):
+            return value
+        key = f"rel|{value}"  # the same relation in several equations is one condition
+        if key in self._frozen:
+            return self._frozen[key]
+        sym = ca.MX.sym(f"_tbx_c{len(self.events.conditions) + 1}")
+        # indicator: positive where the relation holds, shifted by a hysteresis so that at the located
+        # crossing the relation has clearly changed (else an event found a hair early changes nothing
+        # and the crossing is never seen again)
+        towards = x - y if op in (">", ">=") else y - x
+        eps = HYSTERESIS * (1 + ca.fabs(x) + ca.fabs(y))
+        indicator = towards + ca.if_else(sym, eps, -eps)
+        self.events.conditions.append(Condition(sym, "rel", value, [indicator], f"{x} {op} {y}"[:200]))
+        self._frozen[key] = sym
+        return sym
+
+    def rounding(self, kind: str, a: Value) -> Value:
+        """``floor``/``integer``/``ceil`` of a continuous-time value: held between events, with event
+        indicators at the next integers either side (MLS 3.7.2: these functions generate events)."""
+        value = ca.ceil(a) if kind == "ceil" else ca.floor(a)
+        if not self._freeze or not self._is_continuous(a):
+            return value
+        sym = ca.MX.sym(f"_tbx_c{len(self.events.conditions) + 1}")
+        lower, upper = (sym - 1, sym) if kind == "ceil" else (sym, sym + 1)
+        eps = HYSTERESIS * (1 + ca.fabs(a))  # crossings are located just past the next integer (see relation)
+        self.events.conditions.append(Condition(sym, kind, value, [a - lower + eps, upper + eps - a],
+                                                f"{kind}({a})"[:200]))
+        return sym
+
+    def pre_sym(self, sv: ScalarVar) -> ca.MX:
+        """The symbol of ``pre(v)`` for a discrete variable."""
+        if sv.name not in self._pre:
+            self._pre[sv.name] = ca.MX.sym(f"pre({sv.name})")
+        return self._pre[sv.name]
+
+    def _pre_value(self, node: Any) -> Value:
+        """``pre(v)``: the value of *v* before the current event-iteration step; for a continuous-time
+        variable its value at the event (its left limit)."""
+        value = self.expr(node, None)
+
+        def one(x: Value) -> Value:
+            if _num(x) or not isinstance(x, ca.MX):
+                return x
+            syms = [s for s in ca.symvar(x) if (sv := self.scalars.get(s.name())) is not None and sv.kind == "discrete"]
+            if not syms:
+                return x
+            return ca.substitute([x], syms, [self.pre_sym(self.scalars[s.name()]) for s in syms])[0]
+
+        return arr.map1(one, value)
+
+    def _event_builtin(self, name: str, nodes: list[Any], env: Any) -> Value:
+        if name == "pre":
+            return self._pre_value(nodes[0])
+        if name == "edge":
+            b, p = self.expr(nodes[0], env), self._pre_value(nodes[0])
+            return arr.map2(lambda x, y: _and(x, _not(y)), b, p, "edge()", broadcast=False)
+        if name == "change":
+            v, p = self.expr(nodes[0], env), self._pre_value(nodes[0])
+            return arr.map2(lambda x, y: x != y, v, p, "change()", broadcast=False)
+        if name == "initial":
+            self._uses_initial = True
+            return self.events.initial
+        if name == "terminal":
+            return False
+        if name == "sample":
+            if not self._in_when_condition:
+                raise self.unsupported("sample() outside the condition of a when-clause", r"\bsample\s*\(")
+            start, interval = (self.expr(n, env) for n in nodes[:2])
+            if arr.is_array(start) or arr.is_array(interval):
+                raise CompileError(f"sample() with an array argument in {self.model}")
+            sym = ca.MX.sym(f"_tbx_s{len(self.events.samples) + 1}")
+            self.events.samples.append(Sample(sym, ca.MX(start) if _num(start) else start,
+                                              ca.MX(interval) if _num(interval) else interval))
+            return sym
+        raise self.unsupported(f"built-in {name}()")  # pragma: no cover - _EVENT_BUILTINS lists the above
+
+    def when_fire(self, node: Any, env: Any) -> Value:
+        """The firing of a when condition (``c and not pre(c)`` for each element of it); each element
+        becomes a held when condition of the event iteration."""
+        self._in_when_condition = True
+        try:
+            cond = self.expr(node, env)
+        finally:
+            self._in_when_condition = False
+        fire: Value = False
+        for el in (list(cond.ravel()) if arr.is_array(cond) else [cond]):
+            if _num(el):
+                continue  # a constant condition never becomes true
+            k = len(self.events.whens) + 1
+            sym, pre = ca.MX.sym(f"_tbx_w{k}"), ca.MX.sym(f"pre(_tbx_w{k})")
+            initial = bool(ca.depends_on(el, self.events.initial))
+            self.events.whens.append(WhenCondition(sym, pre, el, initial))
+            edge = ca.logic_and(sym, ca.logic_not(pre))
+            if not initial:  # a when-clause fires at initialisation only by initial()
+                edge = ca.logic_and(edge, ca.logic_not(self.events.initial))
+            fire = _or(fire, edge)
+        return fire
+
+    def when_chain(self, chain: dict[str, Any]) -> list[tuple[ca.MX, str]]:
+        """A when-equation with its elsewhen branches: ``v = (if fire1 then e1 elseif ... else pre(v))``
+        for each variable assigned, and the re-initialisations of states."""
+        branches = [chain.get("first") or {}, *(chain.get("else_when") or [])]
+        fires = [self.when_fire(br.get("condition"), None) for br in branches]
+        assigns: dict[str, dict[int, Value]] = {}
+        reinits: dict[str, dict[int, Value]] = {}
+        for bi, br in enumerate(branches):
+            for eq in br.get("equations") or []:
+                kind, body = _kind_of(eq)
+                if kind in ("Assign", "Reinit"):
+                    target = str(body.get("target") if kind == "Assign" else body.get("state"))
+                    value = self.expr(body.get("value"))
+                    for sv, v in self._scalar_targets(target, value, "when-clause"):
+                        (assigns if kind == "Assign" else reinits).setdefault(sv.name, {})[bi] = v
+                elif kind == "Assert":
+                    self._guards.append(fires[bi])
+                    try:
+                        self.add_assert(body, None, f"when-clause of {self.model}")
+                    finally:
+                        self._guards.pop()
+                else:
+                    raise self.unsupported(f"{kind} in a when-clause", r"\bwhen\b")
+        out: list[tuple[ca.MX, str]] = []
+        for name, by_branch in assigns.items():
+            sv = self.scalars[name]
+            if sv.kind != "discrete":  # pragma: no cover - targets of when-clauses are made discrete
+                raise CompileError(f"when-clause assigns {name!r}, which is not a discrete variable")
+            expr: Value = self.pre_sym(sv)
+            for bi in reversed(range(len(branches))):
+                expr = _if(fires[bi], by_branch.get(bi, self.pre_sym(sv)), expr)
+            out.append((sv.sym - expr, f"when-clause assignment to {name}"))
+        for name, by_branch in reinits.items():
+            sv = self.scalars[name]
+            if sv.kind != "continuous":
+                raise self.unsupported(f"reinit({name}) of a variable that is not a state", r"\breinit\s*\(")
+            expr = sv.sym
+            for bi in reversed(range(len(branches))):
+                expr = _if(fires[bi], by_branch.get(bi, sv.sym), expr)
+            self.events.reinits.append((sv.sym, expr))
+        return out
+
+    def _scalar_targets(self, target: str, value: Value, what: str) -> list[tuple[ScalarVar, Value]]:
+        """The scalars of an assignment's target (a variable, an array, or one element) with their values."""
+        if target in self.scalars:
+            if arr.is_array(value):
+                raise CompileError(f"{what} in {self.model} gives {target} a value of size "
+                                   f"{arr.size_text(arr.shape(value))}")
+            return [(self.scalars[target], value)]
+        if target in self.vars:
+            scalars = self.vars[target]
+            dims = self.dims[target]
+            if not dims:
+                return [(scalars[0], value)]
+            if not arr.is_array(value) or arr.shape(value) != dims:
+                raise CompileError(f"{what} in {self.model} gives {target} of size {arr.size_text(dims)} a value "
+                                   f"of size {arr.size_text(arr.shape(value))}")
+            return [(sv, value[tuple(i - 1 for i in sv.index)]) for sv in scalars]
+        raise CompileError(f"{what} in {self.model} assigns {target!r}, which is not a variable of the model")
 
     def _x_FunctionCall(self, body: Any, env: Any) -> Value:
         fname = body["name"]["name"]
@@ -749,7 +994,11 @@ class FlatTranslator:
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     env[loc["name"]] = self.expr(loc["default"], env)
-            self._statements(fn.get("body") or [], env, fname)
+            saved, self._freeze = self._freeze, False  # relations in functions generate no events
+            try:
+                self._statements(fn.get("body") or [], env, fname)
+            finally:
+                self._freeze = saved
             outs = []
             for out in fn.get("outputs") or []:
                 if out["name"] not in env:
@@ -825,6 +1074,11 @@ class FlatTranslator:
                     env[ident] = value
             elif kind == "If":
                 self._if_statement(body, env, fname)
+            elif kind == "When" and _is_algorithm(fname):
+                blocks = body.get("blocks") or []
+                fires = [self.when_fire(blk.get("cond"), env) for blk in blocks]
+                self._if_statement({"cond_blocks": [{"cond": None, "stmts": blk.get("stmts") or []} for blk in blocks],
+                                    "else_block": []}, env, fname, conds=fires)
             elif kind == "For":
                 self._for_statement(body, env, fname)
             elif kind == "Assert":
@@ -853,17 +1107,18 @@ class FlatTranslator:
                 names.append(part["ident"])
         return ".".join(names)
 
-    def _if_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
+    def _if_statement(self, body: Any, env: dict[str, Value], fname: str, conds: list[Value] | None = None) -> None:
+        """An if-statement (or, given *conds*, the branches of a when-statement with their firings)."""
         blocks = body.get("cond_blocks") or body.get("branches") or []
         else_block = body.get("else_block") or body.get("else_branch") or []
         conds_and_envs = []
         prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
-        for blk in blocks:
+        for k, blk in enumerate(blocks):
             if isinstance(blk, dict):
                 cond_node, stmts = blk.get("cond"), blk.get("stmts", blk.get("body", []))
             else:
                 cond_node, stmts = blk
-            cond = self.expr(cond_node, env)
+            cond = conds[k] if conds is not None else self.expr(cond_node, env)
             if _num(cond):
                 if bool(cond):
                     branch_env = dict(env)
@@ -909,7 +1164,11 @@ class FlatTranslator:
     def add_assert(self, body: dict[str, Any], env: dict[str, Value] | None, origin: str) -> None:
         """Record ``assert(condition, message, level)``; *env* is a function's environment."""
         message = self._message_text(body.get("message"), env)
-        cond = self.expr(body["condition"], env)
+        saved, self._freeze = self._freeze, False  # an assert is checked as its condition stands (no events)
+        try:
+            cond = self.expr(body["condition"], env)
+        finally:
+            self._freeze = saved
         if isinstance(cond, np.ndarray):
             raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is an array")
         if _num(cond) and not isinstance(cond, (bool, np.bool_)):
@@ -1025,6 +1284,8 @@ class FlatTranslator:
                 residuals.append((sv.sym - self._element(sv, sv.binding_node), f"binding of {sv.name}"))
         for section in self.flat.get("algorithms") or []:
             residuals.extend(self.algorithm_residuals(section, initial=False))
+        for chain in self.flat.get("when_chains") or []:
+            residuals.extend(self.when_chain(chain))
 
         for a in self.flat.get("assert_equations") or []:
             self.add_assert(a, None, f"equation {self._where(a.get('origin'))}")
@@ -1054,6 +1315,12 @@ class FlatTranslator:
         unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
         unknown_names = [u.name() for u in unknowns]
         position = {n: i for i, n in enumerate(unknown_names)}
+        # events: the equations of discrete variables are solved at events only (.events); between
+        # events the continuous equations see them (and pre(v) = v) held
+        discrete = [sv for sv in self.scalars.values() if sv.kind == "discrete"]
+        residuals, discrete_residuals = self._split_discrete(residuals, set(unknown_names), discrete)
+        init_residuals, discrete_initial = self._split_discrete(init_residuals, set(unknown_names), discrete,
+                                                                initial=True)
         incidence = []
         for r, _origin in residuals:
             incidence.append(sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}))
@@ -1095,6 +1362,7 @@ class FlatTranslator:
         # A parameter that no equation uses (e.g. one that only sets start values) would be a
         # tunable parameter with no effect: the FMU's states start from fixed numbers, so it is
         # not exported; set the state's own start value instead.
+        events = self._event_system(discrete, discrete_residuals, discrete_initial)
         initial = None
         if init_residuals or computed:
             initial = self._initial_system(init_residuals, states, computed, assignments)
@@ -1102,17 +1370,109 @@ class FlatTranslator:
         exprs = [e for _, e in assignments] + [a.condition for a in asserts]
         if initial is not None:
             exprs += initial.residual
+        if events is not None:
+            exprs += [e for _, e in events.updates] + [e for _, e in events.reinits] + events.indicators
+            exprs += [x for smp in events.samples for x in (smp.start, smp.interval)]
         used = {s.name() for s in ca.symvar(ca.vertcat(*exprs))} if exprs else set()
         used |= {sv.name for sv in computed}
         unused = [sv.name for sv in params if sv.name not in used]
         params = [sv for sv in params if sv.name in used]
         return ExplicitModel(
-            asserts=asserts, initial=initial,
+            asserts=asserts, initial=initial, events=events, discrete=discrete,
             name=self.model, time=self.time, parameters=params, calculated=calculated, unused_parameters=unused,
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
         )
+
+    def _split_discrete(self, residuals: list[tuple[ca.MX, str]], continuous: set[str], discrete: list[ScalarVar],
+                        initial: bool = False) -> tuple[list[tuple[ca.MX, str]], list[tuple[ca.MX, str]]]:
+        """(continuous equations, equations of discrete variables). An equation belongs to a discrete
+        variable when no continuous unknown is in it and a discrete variable is (in an initial equation,
+        also pre(v), which is v there). In the continuous equations pre(v) is v (between events)."""
+        names = {sv.name for sv in discrete}
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        cont, disc = [], []
+        for r, origin in residuals:
+            held = ca.substitute([r], [a for a, _ in pres], [b for _, b in pres])[0] if pres else r
+            used = {sym.name() for sym in ca.symvar(held)}
+            if used & names and not used & continuous and not (initial and used & set(self.der_placeholders)):
+                # at an event pre(v) is the value before the step; at initialisation it is v
+                disc.append((held if initial else r, origin))
+            else:
+                cont.append((held, origin))
+        return cont, disc
+
+    def _event_system(self, discrete: list[ScalarVar], residuals: list[tuple[ca.MX, str]],
+                      initial: list[tuple[ca.MX, str]]) -> EventSystem | None:
+        """The event iteration's assignments (.events): conditions and samples first, then the when
+        conditions and the discrete variables in dependency order; an initial equation or initial
+        algorithm of a discrete variable gives its value at initialisation."""
+        ev = self.events
+        if not (discrete or ev.conditions or ev.samples or ev.whens or ev.reinits or self._uses_initial):
+            return None
+        unknowns = [sv.sym for sv in discrete] + [w.sym for w in ev.whens]
+        eqs = list(residuals) + [(w.sym - w.value, f"when condition {w.sym.name()}") for w in ev.whens]
+        assigned = self._discrete_order(eqs, unknowns, "equations of discrete variables")
+        at_start = dict(self._discrete_order(initial, [sv.sym for sv in discrete], "initial equations of discrete "
+                                             "variables", partial=True)) if initial else {}
+        t = self.time
+        updates: list[tuple[ca.MX, ca.MX]] = [(c.sym, c.value) for c in ev.conditions]
+        for smp in ev.samples:
+            eps = 1e-9 * ca.fmax(1, ca.fabs(t))
+            k = ca.floor((t - smp.start) / smp.interval + 0.5)
+            at = ca.logic_and(t >= smp.start - eps, ca.fabs(t - smp.start - k * smp.interval) <= eps)
+            quiet = ca.logic_or(self.quiet, ev.initial)  # sample() is never true at initialisation
+            updates.append((smp.sym, ca.logic_and(at, ca.logic_not(quiet))))
+        for sym, expr in assigned:
+            if sym.name() in {k.name() for k in at_start}:
+                expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
+            updates.append((sym, expr))
+        ev.updates = updates
+        ev.discrete = [(sv.name, sv.sym, self._start_of(sv)) for sv in discrete]
+        ev.pre = dict(self._pre)
+        return ev
+
+    def _discrete_order(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX], what: str,
+                        partial: bool = False) -> list[tuple[ca.MX, ca.MX]]:
+        """Solve equations of discrete variables one at a time, each for its variable, in dependency
+        order (a loop of discrete variables is refused, naming them)."""
+        names = [u.name() for u in unknowns]
+        position = {n: i for i, n in enumerate(names)}
+        incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
+        if partial:  # initial equations of some discrete variables: match each to the one it has
+            out = []
+            for (r, origin), inc in zip(eqs, incidence):
+                if len(inc) != 1:
+                    raise self.unsupported(f"initial equation of several discrete variables ({origin})")
+                sol = _solve_scalar_linear(r, unknowns[inc[0]])
+                if sol is None:
+                    raise self.unsupported(f"initial equation of discrete variable {names[inc[0]]} that is not "
+                                           f"explicit in it ({origin})")
+                out.append((unknowns[inc[0]], sol))
+            return out
+        try:
+            blocks = blt(incidence, len(unknowns))
+        except StructuralError as exc:
+            und = [names[j] for j in exc.unknowns][:8]
+            eq = sorted({eqs[i][1] for i in exc.equations})[:8]
+            raise CompileError(
+                f"the {what} of {self.model} do not determine them: {len(eqs)} equations for {len(unknowns)} "
+                f"variables" + (f"; not determined: {', '.join(und)}" if und else "")
+                + (f"; equations with no variable left: {', '.join(eq)}" if eq else "")) from None
+        out: list[tuple[ca.MX, ca.MX]] = []
+        for block in blocks:
+            if len(block.unknowns) != 1:
+                loop = ", ".join(names[j] for j in block.unknowns[:8])
+                raise self.unsupported(f"algebraic loop among discrete variables ({loop})")
+            r, origin = eqs[block.equations[0]]
+            u = unknowns[block.unknowns[0]]
+            sol = _solve_scalar_linear(r, u)
+            if sol is None:
+                raise self.unsupported(f"equation of discrete variable {u.name()} that is not explicit in it "
+                                       f"({origin})")
+            out.append((u, sol))
+        return out
 
     def algorithm_residuals(self, section: dict[str, Any], initial: bool) -> list[tuple[ca.MX, str]]:
         """An (initial) algorithm section as equations: ``v = value`` for each variable it assigns.
@@ -1141,7 +1501,8 @@ class FlatTranslator:
             if any(sv.sym is None for sv in scalars):
                 raise CompileError(f"the {context} in {self.model} assigns {base!r}, which is a constant or "
                                    "a structural parameter")
-            starts = [self._start_of(sv) for sv in scalars]
+            # a discrete variable starts from pre(v), any other from its start value (MLS 11.1.2)
+            starts = [self.pre_sym(sv) if sv.kind == "discrete" else self._start_of(sv) for sv in scalars]
             env[base] = arr.from_list(starts).reshape(self.dims[base]) if self.dims[base] else starts[0]
             assigned.append(base)
         self._statements(section.get("statements") or [], env, context)
@@ -1497,8 +1858,7 @@ def _binary(op: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
         if arr.is_array(a) or arr.is_array(b):
             raise ArrayError(f"relational operator {cmp[o]} on arrays (sizes {arr.size_text(arr.shape(a))} "
                              f"and {arr.size_text(arr.shape(b))}); Modelica compares scalars only")
-        x, y = a, b
-        return {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[cmp[o]]
+        return tr.relation(cmp[o], a, b)
     if o in ("and", "or"):
         return arr.map2(_and if o == "and" else _or, a, b, f"'{o}'", broadcast=False)
     raise tr.unsupported(f"binary operator {op!r}")
@@ -1543,6 +1903,10 @@ def _arity(name: str, args: list[Value], *allowed: int) -> None:
 
 def _builtin(name: str, args: list[Value], tr: FlatTranslator) -> Value:
     n = name.lower()
+    if n in ("floor", "ceil", "integer"):
+        _arity(n, args, 1)
+        f_num = _SIMPLE[n][0]
+        return arr.map1(lambda a: arr.fold_math(n, f_num, a) if _num(a) else tr.rounding(n, a), args[0])
     if n in _SIMPLE:
         _arity(n, args, 1)
         f_num, f_sym = _SIMPLE[n]
