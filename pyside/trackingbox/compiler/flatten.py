@@ -125,6 +125,11 @@ class InitialSystem:
     free_states: list[str]
     computed_parameters: list[str]
     origins: list[str]
+    guesses: list[ca.MX] = field(default_factory=list)
+    solution: list[ca.MX] = field(default_factory=list)
+    """The unknowns solved block by block (a scalar equation linear in its unknown explicitly, a loop by
+    Newton from ``guesses``, the unknowns' values when the FMU leaves initialisation mode), as
+    expressions in ``guesses`` and ``knowns``; empty: one Newton solve of all ``residual``."""
 
 
 @dataclass
@@ -1311,6 +1316,10 @@ class FlatTranslator:
                 f"der({extra[0]}) in an initial equation, where {extra[0]} is not a state "
                 "(no equation of the model differentiates it)", r"\binitial\s+equation\b")
         algebraics = [sv for sv in self.scalars.values() if sv.kind == "continuous" and sv.name not in state_names]
+        for sv in algebraics:  # fixed = true on a variable that is not a state: an initial equation v = start
+            if sv.fixed is True and sv.start_node is not None:
+                init_residuals.append((sv.sym - self._element(sv, sv.start_node), f"start value of {sv.name} "
+                                       "(fixed = true)"))
         unknowns: list[ca.MX] = [self.der_placeholders[s.name] for s in states]
         unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
         unknown_names = [u.name() for u in unknowns]
@@ -1593,7 +1602,7 @@ class FlatTranslator:
                     knowns.setdefault(sym.name(), sym)
         incidence = [sorted({position[s.name()] for s in ca.symvar(e) if s.name() in position}) for e in exprs]
         try:
-            blt(incidence, len(unknowns))
+            blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
             eqs = sorted({residuals[i][1] for i in exc.equations})[:8]
             unk = [unknown_names[j] for j in exc.unknowns][:8]
@@ -1602,10 +1611,31 @@ class FlatTranslator:
                 + (f"; not determined by the initial equations: {', '.join(unk)}" if unk else "")
                 + (f"; equations with no unknown left, from: {', '.join(eqs)}" if eqs else "")
             ) from None
+        # solve block by block: an explicit assignment where a scalar block is linear in its unknown
+        # (so e.g. a mass is found from a level before a temperature divides by it), Newton for loops
+        guesses = [ca.MX.sym(f"guess({u.name()})") for u in unknowns]
+        done_syms: list[ca.MX] = []
+        done_vals: list[ca.MX] = []
+        solution: dict[int, ca.MX] = {}
+        for k, block in enumerate(blocks):
+            res = [exprs[i] for i in block.equations]
+            if done_syms:
+                res = ca.substitute(res, done_syms, done_vals)
+            unk = [unknowns[j] for j in block.unknowns]
+            sols = None
+            if len(unk) == 1:
+                sol = _solve_scalar_linear(res[0], unk[0])
+                sols = [sol] if sol is not None else None
+            if sols is None:
+                sols = self._rootfinder(f"init{k}", res, unk, [guesses[j] for j in block.unknowns])
+            for j, sol in zip(block.unknowns, sols):
+                solution[j] = sol
+                done_syms.append(unknowns[j])
+                done_vals.append(sol)
         return InitialSystem(
             unknowns=unknowns, knowns=[knowns[n] for n in sorted(knowns)], residual=list(exprs),
             free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
-            origins=[o for _, o in residuals],
+            origins=[o for _, o in residuals], guesses=guesses, solution=[solution[j] for j in range(len(unknowns))],
         )
 
     def _tear(self, res: list[ca.MX], unk: list[ca.MX]) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
@@ -1676,7 +1706,7 @@ class FlatTranslator:
             inner = ca.substitute(inner, [var], [expr])
         return self._rootfinder(k, inner, tears, guess)
 
-    def _rootfinder(self, k: int, res: list[ca.MX], unk: list[ca.MX], guess: list[float]) -> list[ca.MX]:
+    def _rootfinder(self, k: int | str, res: list[ca.MX], unk: list[ca.MX], guess: list[Any]) -> list[ca.MX]:
         others: dict[str, ca.MX] = {}
         unk_names = {u.name() for u in unk}
         for r in res:
@@ -1694,7 +1724,8 @@ class FlatTranslator:
             f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
             {"abstol": 1e-10, "max_iter": 100},
         )
-        sol = rf(ca.DM(guess), ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
+        start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
+        sol = rf(start, ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
         return [sol[i] for i in range(len(unk))]
 
     def _declared_at(self, scalar: str) -> str:

@@ -737,11 +737,15 @@ def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX
         wk = ca.MX.sym("wk", nk)
         g = ca.substitute([ca.vertcat(*init.residual)], init.unknowns + known_syms,
                           [z[i] for i in range(nz)] + [wk[i] for i in range(nk)])[0]
-        newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
-                               {"abstol": 1e-12, "max_iter": 100})
         residual = ca.Function("tbx_init_residual", [z, wk], [g])
         z0 = ca.MX.sym("z0", nz)
-        zsol = newton(z0, wk)
+        if init.solution:  # block by block (FlatTranslator._initial_system)
+            zsol = ca.substitute([ca.vertcat(*init.solution)], init.guesses + known_syms,
+                                 [z0[i] for i in range(nz)] + [wk[i] for i in range(nk)])[0]
+        else:
+            newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
+                                   {"abstol": 1e-12, "max_iter": 100})
+            zsol = newton(z0, wk)
         functions.append(ca.Function("tbx_init", [z0, wk], [zsol, residual(zsol, wk)]))
     return functions, assert_syms, known_syms
 
