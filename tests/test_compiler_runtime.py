@@ -368,7 +368,7 @@ def test_assert_failing_inside_a_step_the_solver_cannot_finish_is_reported(tmp_p
     assert abs(exc.value.time - t_empty) <= 0.05  # a trial point of the failed step
 
 
-TANK = """
+LEVEL_TANK = """
 model Tank "the level is not a state: level(fixed = true) is an initial equation for the mass"
   parameter Real rho = 1000;
   parameter Real A = 2;
@@ -393,7 +393,7 @@ end Tank;
 def test_fixed_start_of_an_algebraic_variable_is_an_initial_equation(tmp_path):
     """level(fixed = true) sets the state m through m = rho A level; the initial equations are solved
     one block at a time, m before T = H/(m cp), so the start value m = 0 divides by nothing."""
-    fmu = build(tmp_path, "Tank", TANK)
+    fmu = build(tmp_path, "Tank", LEVEL_TANK)
     with FMUModel(fmu, tolerance=1e-10) as model:
         df = model.simulate(stop_time=4, output_interval=1, outputs=["level", "T", "m"])
     assert np.allclose(df["level"], 0.9 * np.exp(-500 * df["time"] / 2000), rtol=1e-6)

@@ -65,6 +65,7 @@ import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
+from . import tables
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .events import Condition, EventSystem, Sample, WhenCondition
@@ -196,6 +197,13 @@ def _num(x: Value) -> bool:
     return isinstance(x, (int, float, bool, np.integer, np.floating, np.bool_))
 
 
+def _plain_ge(a: Value, b: Value) -> Value:
+    """``a >= b`` evaluated as it stands (no event)."""
+    if _num(a) and _num(b):
+        return a >= b
+    return (ca.MX(a) if _num(a) else a) >= b
+
+
 def _if(cond: Value, a: Value, b: Value) -> Value:
     """``if cond then a else b`` for scalars (a constant condition picks a branch)."""
     if _num(cond):
@@ -279,6 +287,7 @@ class FlatTranslator:
         self._in_when_condition = False
         self._when_targets: set[str] = set()
         self._uses_initial = False
+        self._discrete_defs: list[tuple[ca.MX, str]] = []  # when-equations, discrete outputs of algorithms
 
     # ------------------------------------------------------------------ errors
     def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
@@ -322,13 +331,12 @@ class FlatTranslator:
     # --------------------------------------------------------------- checks
     def check_constructs(self) -> None:
         flat = self.flat
-        for fname, fn in self.functions.items():
-            ext = fn.get("external")
-            if ext and _builtin_external(ext) is None:
-                raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
+
 
     # ------------------------------------------------------------ variables
     def _type_of(self, v: dict[str, Any]) -> int:
+        if v.get("type_id") in (self.flat.get("enumeration_types") or []):
+            return INTEGER  # an enumeration value is its ordinal (MLS 4.9.5)
         t = self.types.get(str(v.get("type_id")))
         if t is None:
             return REAL
@@ -592,6 +600,8 @@ class FlatTranslator:
         if _kind_of(body["lhs"])[0] == "Tuple":
             return self._tuple_equation(body, env)
         lhs = self.expr(body["lhs"], env)
+        if str(op).lower() in ("and", "or") and _num(lhs) and bool(lhs) == (str(op).lower() == "or"):
+            return bool(lhs)  # false and ..., true or ...: the other operand is not evaluated
         rhs = self.expr(body["rhs"], env)
         return _binary(str(op), lhs, rhs, self)
 
@@ -786,7 +796,7 @@ class FlatTranslator:
     def relation(self, op: str, a: Value, b: Value) -> Value:
         """``a op b`` with its Modelica meaning: a relation on continuous-time values outside
         ``noEvent`` is frozen between events, with the event indicator ``a - b``."""
-        if _num(a) and _num(b):
+        if (_num(a) and _num(b)) or (isinstance(a, str) and isinstance(b, str)):
             return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b, "==": a == b, "!=": a != b}[op]
         x, y = (ca.MX(a) if _num(a) else a), (ca.MX(b) if _num(b) else b)
         value = {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[op]
@@ -919,7 +929,7 @@ class FlatTranslator:
             expr: Value = self.pre_sym(sv)
             for bi in reversed(range(len(branches))):
                 expr = _if(fires[bi], by_branch.get(bi, self.pre_sym(sv)), expr)
-            out.append((sv.sym - expr, f"when-clause assignment to {name}"))
+            self._discrete_defs.append((sv.sym - expr, f"when-clause assignment to {name}"))
         for name, by_branch in reinits.items():
             sv = self.scalars[name]
             if sv.kind != "continuous":
@@ -950,6 +960,8 @@ class FlatTranslator:
 
     def _x_FunctionCall(self, body: Any, env: Any) -> Value:
         fname = body["name"]["name"]
+        if fname in tables.FUNCTIONS:
+            return self._table_call(fname, body.get("args") or [], env)
         args = [self.expr(a, env) for a in (body.get("args") or [])]
         if fname in _BUILTIN_NAMES or (fname.lower() in _ARRAY_BUILTINS and fname not in self.functions):
             return _builtin(fname.lower(), args, self)
@@ -958,6 +970,67 @@ class FlatTranslator:
             raise CompileError(f"call of unknown function {fname!r} in {self.model}")
         outs = self.inline(fname, fn, args)
         return outs[0]
+
+    # --------------------------------------------------------------- tables
+    def _table_call(self, fname: str, nodes: list[Any], env: Any) -> Value:
+        """A call of the MSL's table functions on a table object (.tables)."""
+        kind, ref = _kind_of(nodes[0]) if nodes else ("", None)
+        if kind != "VarRef":
+            raise self.unsupported(f"call of {fname} on a table object that is not a parameter")
+        tab = self._table(ref["name"]["name"])
+        args = [self.expr(a, env) for a in nodes[1:]]
+        try:
+            if fname in tables.TIME_VALUE | tables.ONE_D_VALUE:
+                icol = int(self.numeric(args[0], f"column of table {tab.name}"))
+                if tab.kind == "time":
+                    def ge(a: Value, b: Value) -> Value:
+                        # table points are time events (MSL timeEvents); otherwise plain comparisons
+                        events = tab.smoothness == tables.CONSTANT or tab.time_events != tables.NO_TIME_EVENTS
+                        return self.relation(">=", a, b) if events else _plain_ge(a, b)
+                else:
+                    ge = _plain_ge
+                return tables.value(tab, icol, args[1], ge, self._table_range_assert(tab),
+                                    floor=lambda e: self.rounding("floor", e) if self._freeze else ca.floor(e))
+            if fname == tables.TIME_NEXT:
+                return tables.next_event(tab, args[0])
+            if fname in (tables.TIME_MIN, tables.ONE_D_MIN):
+                return tab.grid[0]
+            if fname in (tables.TIME_MAX, tables.ONE_D_MAX):
+                return tab.grid[-1]
+        except tables.TableError as exc:
+            raise self.unsupported(str(exc), r"\bCombi(?:Time)?Table") from None
+        raise self.unsupported(f"table function {fname}")  # pragma: no cover - FUNCTIONS lists the above
+
+    def _table_range_assert(self, tab: tables.Table) -> Callable[[Value, Value], None]:
+        def check(lo: Value, hi: Value) -> None:
+            self._record_assert(_and(lo, hi), f"extrapolation error: the abscissa is outside the table {tab.name} "
+                                f"[{tab.grid[0]:g}, {tab.grid[-1]:g}] (NoExtrapolation)", "error", tab.name)
+        return check
+
+    def _table(self, name: str) -> tables.Table:
+        """The table object bound to the parameter *name* (its constructor call's arguments evaluated)."""
+        cache = self.__dict__.setdefault("_tables", {})
+        if name in cache:
+            return cache[name]
+        var = (self.flat.get("variables") or {}).get(name) or {}
+        kind, call = _kind_of(var.get("binding"))
+        cname = (call.get("name") or {}).get("name") if kind == "FunctionCall" and isinstance(call, dict) else None
+        if cname not in (tables.TIME_CONSTRUCTOR, tables.ONE_D_CONSTRUCTOR,
+                         tables.TIME_CONSTRUCTOR + ".constructor", tables.ONE_D_CONSTRUCTOR + ".constructor"):
+            raise self.unsupported(f"table object {name} not built by the MSL's table constructor")
+        saved, self._freeze = self._freeze, False
+        try:
+            args = [self.expr(a) for a in call.get("args") or []]
+        finally:
+            self._freeze = saved
+        owner = name.rsplit(".", 1)[0] if "." in name else name
+        try:
+            tab = tables.from_constructor("time" if cname.startswith(tables.TIME_CONSTRUCTOR) else "1d", owner, args,
+                                          lambda v, what: self.numeric(v, what))
+        except tables.TableError as exc:
+            raise self.unsupported(str(exc), r"\bCombi(?:Time)?Table") from None
+        cache[name] = tab
+        return tab
 
     def _der(self, node: Any, env: Any) -> Value:
         kind, body = _kind_of(node)
@@ -983,6 +1056,8 @@ class FlatTranslator:
         builtin = _builtin_external(ext) if ext else None
         if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
             return self._builtin_external(fname, fn, ext, builtin, args)
+        if ext:
+            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
@@ -1328,6 +1403,7 @@ class FlatTranslator:
         # events the continuous equations see them (and pre(v) = v) held
         discrete = [sv for sv in self.scalars.values() if sv.kind == "discrete"]
         residuals, discrete_residuals = self._split_discrete(residuals, set(unknown_names), discrete)
+        discrete_residuals += self._discrete_defs
         init_residuals, discrete_initial = self._split_discrete(init_residuals, set(unknown_names), discrete,
                                                                 initial=True)
         incidence = []
@@ -1438,6 +1514,10 @@ class FlatTranslator:
                 expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
             updates.append((sym, expr))
         ev.updates = updates
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        if pres:  # between events (where indicators are evaluated) pre(v) is v
+            for cond in ev.conditions:
+                cond.indicators = ca.substitute(cond.indicators, [a for a, _ in pres], [b for _, b in pres])
         ev.discrete = [(sv.name, sv.sym, self._start_of(sv)) for sv in discrete]
         ev.pre = dict(self._pre)
         return ev
@@ -1523,7 +1603,10 @@ class FlatTranslator:
                 if arr.is_array(v):
                     raise CompileError(f"the {context} in {self.model} gives {sv.name} a value of size "
                                        f"{arr.size_text(arr.shape(v))}")
-                out.append((sv.sym - v, f"{context} ({sv.name})"))
+                if sv.kind == "discrete" and not initial:  # defined at events (a when-statement, pre(v))
+                    self._discrete_defs.append((sv.sym - v, f"{context} ({sv.name})"))
+                else:
+                    out.append((sv.sym - v, f"{context} ({sv.name})"))
         return out
 
     def _start_of(self, sv: ScalarVar) -> float:
