@@ -60,3 +60,13 @@ def test_fluid_heat_flow_one_mass_matches_its_reference(tmp_path):
     """FluidHeatFlow's pipes compute a fixed = false parameter in an initial algorithm."""
     res = run("Modelica.Thermal.FluidHeatFlow.Examples.OneMass", tmp_path)
     assert res["outcome"] == "match", res["message"]
+
+
+@pytest.mark.parametrize("model", [
+    "Modelica.Thermal.HeatTransfer.Examples.ControlledTemperature",  # a Boolean switch with pre()
+    "Modelica.Thermal.FluidHeatFlow.Examples.TestOpenTank",  # CombiTimeTable
+    "Modelica.Thermal.FluidHeatFlow.Examples.WaterPump",  # index reduction (a prescribed speed)
+])
+def test_thermal_examples_with_events_tables_and_higher_index_match(model, tmp_path):
+    res = run(model, tmp_path)
+    assert res["outcome"] == "match", res["message"]

@@ -1409,10 +1409,28 @@ class FlatTranslator:
         incidence = []
         for r, _origin in residuals:
             incidence.append(sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}))
+        optional_init: list[tuple[ca.MX, str]] = []
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
-            raise CompileError(self._structural_message(exc, residuals, unknown_names)) from None
+            # a DAE of higher index: differentiate the constraints and choose the states (.index)
+            reduced = self._reduce_index(residuals, states, algebraics, calculated, calc_eqs)
+            if reduced is None:
+                raise CompileError(self._structural_message(exc, residuals, unknown_names)) from None
+            residuals, states, optional_init = reduced
+            state_names = {s.name for s in states}
+            algebraics = [sv for sv in self.scalars.values()
+                          if sv.kind == "continuous" and sv.name not in state_names]
+            unknowns = [self.der_placeholders[s.name] for s in states]
+            unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
+            unknown_names = [u.name() for u in unknowns]
+            position = {n: i for i, n in enumerate(unknown_names)}
+            incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position})
+                         for r, _origin in residuals]
+            try:
+                blocks = blt(incidence, len(unknowns))
+            except StructuralError as exc2:
+                raise CompileError(self._structural_message(exc2, residuals, unknown_names)) from None
 
         guess = {}
         for sv in algebraics + calculated:
@@ -1449,8 +1467,10 @@ class FlatTranslator:
         # not exported; set the state's own start value instead.
         events = self._event_system(discrete, discrete_residuals, discrete_initial)
         initial = None
-        if init_residuals or computed:
-            initial = self._initial_system(init_residuals, states, computed, assignments)
+        if init_residuals or computed or optional_init:
+            initial = self._initial_system(init_residuals, states, computed, assignments, optional_init)
+            if not initial.unknowns:
+                initial = None
         asserts = self._unique_asserts()
         exprs = [e for _, e in assignments] + [a.condition for a in asserts]
         if initial is not None:
@@ -1636,9 +1656,83 @@ class FlatTranslator:
                 out.append(a)
         return out
 
+    def _needed_optional(self, residuals: list[tuple[ca.MX, str]], optional: list[tuple[ca.MX, str]],
+                         states: list[ScalarVar], computed: list[ScalarVar],
+                         assignments: list[tuple[ca.MX, ca.MX]]) -> list[tuple[ca.MX, str]]:
+        """Those of *optional* initial equations that determine an unknown of the initialisation problem
+        (free states, fixed = false parameters) that the others leave undetermined (by structural rank)."""
+        from .index import max_matching
+
+        free = [s for s in states if s.fixed is not True] + list(computed)
+        position = {s.sym.name(): i for i, s in enumerate(free)}
+        exprs = [r for r, _ in residuals] + [r for r, _ in optional]
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        incid = [sorted({position[v.name()] for v in ca.symvar(e) if v.name() in position}) for e in exprs]
+        kept = incid[:len(residuals)]
+        rank = max_matching(kept)
+        out = []
+        for k, (r, origin) in enumerate(optional):
+            trial = kept + [incid[len(residuals) + k]]
+            if rank < len(free) and max_matching(trial) > rank:
+                kept, rank = trial, rank + 1
+                out.append((r, origin))
+        return out
+
+    def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
+                      calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
+                      ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
+        """Index reduction (.index) of the continuous equations; None when it cannot help. Returns the
+        equations (the parameters' bindings, then the original and differentiated ones), the states
+        chosen, and the initial equations v = start of former states with fixed = true, which hold
+        where they are needed (a position prescribed elsewhere makes its own start redundant)."""
+        from .index import IndexError_, reduce_index
+
+        calc_names = {sv.name for sv in calculated}
+        eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
+        preference = {}
+        for name, v in (self.flat.get("variables") or {}).items():
+            select = v.get("state_select") if isinstance(v, dict) else None
+            if select:
+                for sv in self.vars.get(name, []):
+                    preference[sv.name] = str(select)
+        try:
+            red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
+                                                                      for s in states},
+                               {a.name: a.sym for a in algebraics if a.name not in calc_names}, self.time,
+                               {sv.name for sv in self.scalars.values() if sv.kind == "input"}, preference)
+        except IndexError_ as exc:
+            log.info("%s: index reduction not possible: %s", self.model, exc)
+            return None
+        chosen = set(red.states)
+        for name, sym in red.created:  # derivatives that are algebraic unknowns (dummy derivatives)
+            if name in self.scalars or any(sym is d for d in red.derivative.values()):
+                continue
+            self.scalars[name] = ScalarVar(name=name, kind="continuous", type=REAL, top_level=False, output=False,
+                                           start_node=None, binding_node=None, index=(), attrs={},
+                                           description="derivative (index reduction)", sym=sym)
+        for s in states:  # a former state's derivative symbol is now an algebraic unknown
+            if s.name not in chosen and s.name in self.der_placeholders:
+                d = self.der_placeholders[s.name]
+                self.scalars.setdefault(d.name(), ScalarVar(
+                    name=d.name(), kind="continuous", type=REAL, top_level=False, output=False, start_node=None,
+                    binding_node=None, index=(), attrs={}, description=f"derivative of {s.name} (dummy)", sym=d))
+        self.der_placeholders = dict(red.derivative)
+        new_states = [self.scalars[n] for n in red.states]
+        optional = [(s.sym - self._element(s, s.start_node), f"start value of {s.name} (fixed = true)")
+                    for s in states if s.name not in chosen and s.fixed is True and s.start_node is not None]
+        log.info("%s: index reduction differentiated %d equations; states %s", self.model,
+                 len(red.differentiated), ", ".join(red.states))
+        return list(calc_eqs) + red.residuals, new_states, optional
+
     def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
-                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]]) -> InitialSystem:
-        """Build the initialisation problem (see the module docstring)."""
+                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
+                        optional: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
+        """Build the initialisation problem (see the module docstring). *optional* initial equations
+        are added where they determine an unknown the others leave free."""
+        if optional:
+            residuals = list(residuals) + self._needed_optional(residuals, optional, states, computed, assignments)
         mentioned: set[str] = set()
         for r, _ in residuals:
             for sym in ca.symvar(r):
