@@ -222,8 +222,8 @@ def test_unknown_class(tmp_path):
     [
         ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = x;\n  when x > 1 then\n"
          "    reinit(y, 0);\n  end when;\n", "reinit()", 8),
-        ("  Real x(start=0, fixed=true);\n  Boolean b;\nequation\n  der(x) = 1;\n  b = sample(0, 0.1);\n",
-         "sample() outside the condition of a when-clause", 6),
+        ("  Real x(start=0, fixed=true);\nequation\n  der(x) = 1;\n  when x > 1 then\n    terminate(\"done\");\n"
+         "  end when;\n", "terminate() in a when-clause", 6),
         ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = delay(x, 1.0);\n", "delay", 6),
     ],
 )

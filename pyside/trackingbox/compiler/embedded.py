@@ -419,7 +419,7 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
 def _missing_library(message: str, missing: dict[str, str], model: str) -> CompileError | None:
     """The front end failed while a top-level package the model's classes use is in no library: say
     which (the package the front end's message names, else the first one missing)."""
-    if not missing:
+    if not missing or not re.search(r"unresolved|not found|unknown", _without_paths(message), re.I):
         return None
     names = [(q[0] or q[1]).split(".", 1)[0] for q in re.findall(r"'([A-Za-z_][\w.]*)'|`([A-Za-z_][\w.]*)`", message)]
     first = next((n for n in names if n in missing), next(iter(missing)))

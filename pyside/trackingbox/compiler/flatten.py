@@ -189,6 +189,7 @@ _UNSUPPORTED_BUILTINS = {
 
 
 _EVENT_BUILTINS = {"pre", "edge", "change", "initial", "terminal", "sample"}
+_RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
 HYSTERESIS = 1e-10
 """Relative shift of event indicators past the switching point (see FlatTranslator.relation)."""
 
@@ -301,9 +302,11 @@ class FlatTranslator:
             self._files = model_files(self.source, self.model, libraries=self.libraries)
             self._sources = span_sources(self.flat, self._files)
         span = span if span is not None else self._span
+        known = None
         if span is not None:
             known = self._sources.get(span.get("source")) if self._sources else None
-            files = (known,) if known is not None else self._files
+            # without the span's file known, only a file whose text there matches the construct counts
+            files = (known,) if known is not None else (self._files if pattern or len(self._files) == 1 else ())
             loc = span_location(span, files, pattern)
             if loc is not None:
                 return [loc]
@@ -311,8 +314,8 @@ class FlatTranslator:
             locs = locate(self.source, self.model, pattern, libraries=self.libraries)
             if locs:
                 return locs
-        if span is not None and pattern:
-            loc = span_location(span, files, None)
+        if span is not None and pattern and (known is not None or len(self._files) == 1):
+            loc = span_location(span, (known,) if known is not None else self._files, None)
             if loc is not None:
                 return [loc]
         return []
@@ -321,6 +324,10 @@ class FlatTranslator:
                     span: dict[str, Any] | None = None) -> UnsupportedConstructError:
         locs = self.location(pattern, span)
         where = (" at " + ", ".join(str(loc) for loc in locs)) if locs else ""
+        if not locs:  # at least the model's declaration
+            decl = locate(self.source, self.model, rf"\b(?:model|block|class)\s+{re.escape(self.model.rsplit('.', 1)[-1])}\b",
+                          limit=1, own=True, libraries=self.libraries)
+            where = f" ({self.model} is declared at {decl[0]}; the construct's own line is not known)" if decl else ""
         msg = (
             f"unsupported Modelica construct in {self.model}: {construct}{where}"
             f"{': ' + detail if detail else ''}. The embedded backend cannot compile it; "
@@ -864,9 +871,7 @@ class FlatTranslator:
             return self.events.initial
         if name == "terminal":
             return False
-        if name == "sample":
-            if not self._in_when_condition:
-                raise self.unsupported("sample() outside the condition of a when-clause", r"\bsample\s*\(")
+        if name == "sample":  # true at its instants only (the FMU's event iteration, .events)
             start, interval = (self.expr(n, env) for n in nodes[:2])
             if arr.is_array(start) or arr.is_array(interval):
                 raise CompileError(f"sample() with an array argument in {self.model}")
@@ -920,7 +925,8 @@ class FlatTranslator:
                     finally:
                         self._guards.pop()
                 else:
-                    raise self.unsupported(f"{kind} in a when-clause", r"\bwhen\b")
+                    word = kind[:1].lower() + kind[1:]
+                    raise self.unsupported(f"{word}() in a when-clause", rf"\b{word}\s*\(")
         out: list[tuple[ca.MX, str]] = []
         for name, by_branch in assigns.items():
             sv = self.scalars[name]
@@ -1074,7 +1080,12 @@ class FlatTranslator:
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     env[loc["name"]] = self.expr(loc["default"], env)
+                elif loc.get("dims"):  # an array declared with its sizes: its elements can be assigned
+                    dims = self._local_dims(loc, env, fname)
+                    if dims is not None:
+                        env[loc["name"]] = arr.fill(0.0, list(dims))
             saved, self._freeze = self._freeze, False  # relations in functions generate no events
+            env[_RETURNED] = False
             try:
                 self._statements(fn.get("body") or [], env, fname)
             finally:
@@ -1087,6 +1098,21 @@ class FlatTranslator:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
+        """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
+        out = []
+        for d in loc.get("dims") or []:
+            if isinstance(d, int):
+                out.append(d)
+                continue
+            if _kind_of(d)[0] in ("Colon", "Empty") or d is None:
+                return None
+            val = self.expr(d, env)
+            if not _num(val):
+                return None
+            out.append(int(val))
+        return tuple(out)
 
     def _builtin_external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], builtin: str,
                           args: list[Value]) -> list[Value]:
@@ -1110,48 +1136,30 @@ class FlatTranslator:
 
     def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
         for st in stmts:
+            if _RETURNED in env and _num(env[_RETURNED]) and bool(env[_RETURNED]):
+                return  # after a return taken on every path, nothing more happens
             kind, body = _kind_of(st)
             if kind == "Assignment":
                 value = self.expr(body["value"], env)
-                parts = body["comp"]["parts"]
-                if len(parts) != 1 and not _is_algorithm(fname):
-                    raise self.unsupported(f"record field assignment {_in(fname)}")
-                ident = self._flat_target(parts, env)
-                subs = parts[-1].get("subs") or []
-                if subs:
-                    target = env.get(ident)
-                    if not isinstance(target, np.ndarray):
-                        raise self.unsupported(f"indexed assignment to {ident!r} {_in(fname)}")
-                    picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
-                    if len(picks) != target.ndim:
-                        raise CompileError(f"assignment to {ident!r} {_in(fname)} with {len(picks)} "
-                                           f"subscripts for an array of size {arr.size_text(target.shape)}")
-                    index = tuple(
-                        slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
-                        for p in picks
-                    )
-                    for k, p in enumerate(picks):
-                        bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
-                               and not 1 <= int(i) <= target.shape[k]]
-                        if bad:
-                            raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
-                                               f"to {ident!r} {_in(fname)}")
-                    target = target.copy()
-                    try:
-                        target[np.ix_(*[range(target.shape[k]) if p is None else
-                                        ([i] if isinstance(i, int) else i) for k, (p, i) in
-                                        enumerate(zip(picks, index))])] = (
-                            np.asarray(value, dtype=object).reshape(
-                                [target.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
-                                 for k, (p, i) in enumerate(zip(picks, index))])
-                            if arr.is_array(value) else value)
-                    except ValueError:
-                        raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
-                                           f"to a part of {ident!r} {_in(fname)} that does not "
-                                           "have that size") from None
-                    env[ident] = target
-                else:
-                    env[ident] = value
+                self._assign(body["comp"]["parts"], value, env, fname)
+            elif kind == "FunctionCall":  # (a, b, ...) := f(...), or a call of a function for nothing
+                cname = (body.get("comp") or {}).get("name") or ""
+                args = [self.expr(a, env) for a in body.get("args") or []]
+                fn = self.functions.get(cname)
+                if fn is None:
+                    raise CompileError(f"call of unknown function {cname!r} {_in(fname)} in {self.model}")
+                outs = self.inline(cname, fn, args)
+                targets = body.get("outputs") or []
+                if len(targets) > len(outs):
+                    raise CompileError(f"{len(targets)} results taken from {cname!r}, which has {len(outs)} "
+                                       f"outputs, {_in(fname)}")
+                for target, value in zip(targets, outs):
+                    parts = (target or {}).get("parts") if isinstance(target, dict) else None
+                    if parts:
+                        self._assign(parts, value, env, fname)
+            elif kind == "Return" and not _is_algorithm(fname):
+                # in this branch's environment; merging the branches makes it the branch's condition
+                env[_RETURNED] = True
             elif kind == "If":
                 self._if_statement(body, env, fname)
             elif kind == "When" and _is_algorithm(fname):
@@ -1166,6 +1174,54 @@ class FlatTranslator:
             else:
                 pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
                 raise self.unsupported(f"{kind.lower()} statement {_in(fname)}", pattern)
+
+    def _assign(self, parts: list[dict[str, Any]], value: Value, env: dict[str, Value], fname: str) -> None:
+        """``target := value`` in a function or algorithm (a whole variable, array elements or slices);
+        after a possible return, only where the function has not returned."""
+        if len(parts) != 1 and not _is_algorithm(fname):
+            raise self.unsupported(f"record field assignment {_in(fname)}")
+        ident = self._flat_target(parts, env)
+        subs = parts[-1].get("subs") or []
+        returned = env.get(_RETURNED, False)
+        if subs:
+            target = env.get(ident)
+            if not isinstance(target, np.ndarray):
+                raise self.unsupported(f"indexed assignment to {ident!r} {_in(fname)}")
+            picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
+            if len(picks) != target.ndim:
+                raise CompileError(f"assignment to {ident!r} {_in(fname)} with {len(picks)} "
+                                   f"subscripts for an array of size {arr.size_text(target.shape)}")
+            index = tuple(
+                slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
+                for p in picks
+            )
+            for k, p in enumerate(picks):
+                bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
+                       and not 1 <= int(i) <= target.shape[k]]
+                if bad:
+                    raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
+                                       f"to {ident!r} {_in(fname)}")
+            new = target.copy()
+            try:
+                new[np.ix_(*[range(new.shape[k]) if p is None else
+                             ([i] if isinstance(i, int) else i) for k, (p, i) in
+                             enumerate(zip(picks, index))])] = (
+                    np.asarray(value, dtype=object).reshape(
+                        [new.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
+                         for k, (p, i) in enumerate(zip(picks, index))])
+                    if arr.is_array(value) else value)
+            except ValueError:
+                raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
+                                   f"to a part of {ident!r} {_in(fname)} that does not "
+                                   "have that size") from None
+            value = new
+            old = target
+        else:
+            old = env.get(ident)
+        if not (_num(returned) and not bool(returned)) and old is not None:
+            value = arr.map2(lambda a, b: _if(returned, a, b), old, value, f"assignment to {ident!r}",
+                             broadcast=False)
+        env[ident] = value
 
     def _flat_target(self, parts: list[dict[str, Any]], env: dict[str, Value]) -> str:
         """The name an assignment's target ``a[2].b.c[i]`` has in the environment: the flat name
