@@ -1458,9 +1458,11 @@ class FlatTranslator:
         # events: the equations of discrete variables are solved at events only (.events); between
         # events the continuous equations see them (and pre(v) = v) held
         discrete = [sv for sv in self.scalars.values() if sv.kind == "discrete"]
-        residuals, discrete_residuals = self._split_discrete(residuals, set(unknown_names), discrete)
+        # (calculated parameters are unknowns of the continuous equations but known at events)
+        time_varying = set(unknown_names) - {sv.name for sv in calculated}
+        residuals, discrete_residuals = self._split_discrete(residuals, time_varying, discrete)
         discrete_residuals += self._discrete_defs
-        init_residuals, discrete_initial = self._split_discrete(init_residuals, set(unknown_names), discrete,
+        init_residuals, discrete_initial = self._split_discrete(init_residuals, time_varying, discrete,
                                                                 initial=True)
         incidence = []
         for r, _origin in residuals:
@@ -1507,7 +1509,7 @@ class FlatTranslator:
                 if sol is not None:
                     assignments.append((unk[0], sol))
                     continue
-            tears, solved, residual = self._tear(res, unk)
+            tears, solved, residual = self._tear(res, unk, guess)
             loop_sizes.append(len(tears))
             torn_sizes.append((len(unk), len(tears)))
             if not tears:  # every equation solved explicitly in turn (cannot happen for an SCC, kept safe)
@@ -1871,13 +1873,16 @@ class FlatTranslator:
             origins=[o for _, o in residuals], guesses=guesses, solution=[solution[j] for j in range(len(unknowns))],
         )
 
-    def _tear(self, res: list[ca.MX], unk: list[ca.MX]) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
+    def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None
+              ) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
         """Greedy tearing of an algebraic loop.
 
         Repeatedly solve an equation that has one unknown left and is linear in
         it with a coefficient that depends on parameters only (never zero at run
-        time by surprise); when none is left, make the unknown that appears in
-        the most remaining equations a tearing variable. Returns the tearing
+        time by surprise); when none is left, make a tearing variable of an
+        unknown with a start value (Newton's first guess; one without may be a
+        divisor, e.g. a resistance with no start) that appears in the most
+        remaining equations, else of the unknown that appears in the most. Returns the tearing
         variables, the explicit assignments in order, and the residual
         equations (as many as tearing variables) that the rootfinder solves.
         """
@@ -1908,7 +1913,9 @@ class FlatTranslator:
             if not unknown:
                 break
             counts = {v: sum(1 for e in remaining if v in eq_vars[e]) for v in unknown}
-            tear = max(unknown, key=lambda v: (counts[v], -v))
+            # a variable with a start value (a guess for Newton) before one without, then the most used
+            informed = {v: bool(guess) and abs((guess or {}).get(names[v], 0.0)) > 0 for v in unknown}
+            tear = max(unknown, key=lambda v: (informed[v], counts[v], -v))
             tears.append(tear)
             known.add(tear)
         if len(remaining) != len(tears):  # pragma: no cover - counting argument guarantees equality
