@@ -104,7 +104,7 @@ MSL_EXAMPLES = (
     "Modelica.Electrical.Analog.Examples.ChuaCircuit",
     "Modelica.Mechanics.Rotational.Examples.First",
     "Modelica.Mechanics.Translational.Examples.Damper",
-    "Modelica.Fluid.Examples.Tanks.EmptyTanks",
+    "Modelica.Thermal.FluidHeatFlow.Examples.PumpAndValve",
 )
 
 
