@@ -1,7 +1,7 @@
 within TrackingBox.Evaporation;
 model DrySolidsMeter "Dry-solids meter on a liquor line, with bias and drift"
   parameter TrackingBox.Units.Fraction bias = 0 "Constant bias";
-  parameter Real drift(unit="1/s") = 0 "Drift rate of the bias (plant)";
+  parameter TrackingBox.Units.FractionRate drift = 0 "Drift rate of the bias (plant)";
   TrackingBox.Evaporation.LiquorPort_a port "Measuring point (no flow)";
   TrackingBox.Interfaces.RealOutput y(unit="1") "Dry-solids reading";
 equation

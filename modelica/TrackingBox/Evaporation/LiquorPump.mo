@@ -1,8 +1,8 @@
 within TrackingBox.Evaporation;
 model LiquorPump "Centrifugal liquor pump with a quadratic curve"
-  parameter TrackingBox.Units.PressureDifference dp0(min=0) = 4e5 "Pressure rise at zero flow";
-  parameter TrackingBox.Units.VolumeFlowRate VMax(min=1e-6) = 3e-3 "Volume flow at zero pressure rise";
-  parameter Real head(unit="1", min=0) = 1 "Shut-off pressure rise as a fraction of dp0 (wear; 1: as rated), used when use_head_in = false";
+  parameter TrackingBox.Units.PressureRise dp0 = 4e5 "Pressure rise at zero flow";
+  parameter TrackingBox.Units.PositiveVolumeFlowRate VMax = 3e-3 "Volume flow at zero pressure rise";
+  parameter TrackingBox.Units.Factor head = 1 "Shut-off pressure rise as a fraction of dp0 (wear; 1: as rated), used when use_head_in = false";
   parameter Boolean use_dp0_in = false "= true to take dp0 from the input dp0_in";
   parameter Boolean use_head_in = false "= true to take the head fraction from the input head_in";
   parameter Boolean use_VMax_in = false "= true to take VMax from the input VMax_in";

@@ -1,9 +1,9 @@
 within TrackingBox.Evaporation;
 model LiquorValve "Liquor valve: regularised square-root law, linear or equal-percentage characteristic, leakage"
   import TrackingBox.Evaporation.Functions;
-  parameter TrackingBox.Units.ValveCoefficient KvMax(min=0) = 10 "Flow coefficient at full opening (m3/h of water at 1 bar)";
+  parameter TrackingBox.Units.ValveCoefficient KvMax = 10 "Flow coefficient at full opening (m3/h of water at 1 bar)";
   parameter Boolean use_KvMax_in = false "= true to take KvMax from the input KvMax_in";
-  parameter Real capacity(unit="1", min=0) = 1 "Flow capacity as a fraction of KvMax (wear or deposits; 1: as rated), used when use_capacity_in = false";
+  parameter TrackingBox.Units.Factor capacity = 1 "Flow capacity as a fraction of KvMax (wear or deposits; 1: as rated), used when use_capacity_in = false";
   parameter Boolean use_capacity_in = false "= true to take the capacity from the input capacity_in";
   parameter Boolean equalPercentage = false "= true for the equal-percentage characteristic (R^y - 1)/(R - 1), else linear";
   parameter Real R(unit="1", min=2) = 30 "Rangeability of the equal-percentage characteristic";

@@ -3,7 +3,7 @@ model Pipe "Pipe with a quadratic (plant) or linear (twin) pressure loss"
   extends TrackingBox.Interfaces.PartialTwoPort;
   parameter Boolean quadratic = true "= true: pressure loss quadratic in the flow; false: linear";
   parameter Boolean tangent = false "Linear law only: = true: tangent of the quadratic law at m_flow_nominal (forward flow near nominal); false: secant through zero flow";
-  parameter Real k(unit="1", min=0) = 0.005 "Dynamic pressure-drop coefficient: pressure loss at m_flow_nominal divided by dp_ref";
+  parameter TrackingBox.Units.Factor k = 0.005 "Dynamic pressure-drop coefficient: pressure loss at m_flow_nominal divided by dp_ref";
   parameter TrackingBox.Units.MassFlowRate m_flow_nominal(min=1e-6) = 0.07 "Nominal mass flow rate";
   parameter TrackingBox.Units.PressureDifference dp_ref = 1e6 "Reference pressure difference of k";
   parameter Boolean use_k_in = false "= true to take k from the input k_in";

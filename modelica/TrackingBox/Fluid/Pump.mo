@@ -3,8 +3,8 @@ model Pump "Centrifugal pump with speed input and a quadratic (plant) or linear 
   extends TrackingBox.Interfaces.PartialTwoPort;
   parameter Boolean quadratic = true "= true: quadratic pump curve; false: linear";
   parameter Boolean tangent = false "Linear curve only: = true: tangent of the quadratic curve at x = s; false: secant through the shut-off point";
-  parameter TrackingBox.Units.VolumeFlowRate VFlowDesign(min=1e-9) = 6.6e-5 "Design volume flow rate at nominal speed";
-  parameter TrackingBox.Units.PressureDifference uRise(min=0) = 40000 "Pressure rise at design flow and nominal speed";
+  parameter TrackingBox.Units.PositiveVolumeFlowRate VFlowDesign = 6.6e-5 "Design volume flow rate at nominal speed";
+  parameter TrackingBox.Units.PressureRise uRise = 40000 "Pressure rise at design flow and nominal speed";
   parameter Real shutOffRatio(unit="1", min=1.01) = 1.5 "Pressure rise at zero flow divided by uRise";
   parameter TrackingBox.Units.Fraction speedMinLinear = 0.1 "Lowest speed used in the flow term of the linear curve";
   parameter Boolean use_VFlowDesign_in = false "= true to take VFlowDesign from the input VFlowDesign_in";

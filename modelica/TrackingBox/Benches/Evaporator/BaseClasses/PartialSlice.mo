@@ -39,11 +39,11 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   TrackingBox.Interfaces.RealOutput ZI_condensate(unit="1") "Condensate valve position (condensate level loop)";
   TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Steam valve position";
   TrackingBox.Evaporation.Sources.LiquorSource feedSource(p=feedSourceP, use_T_in=true, use_x_in=true) "Liquor from the previous effect";
-  TrackingBox.Evaporation.LiquorValve inletValve(KvMax(min=8, max=26)=17, equalPercentage=true) "Inlet valve (flow loop)";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedInletValve inletValve(KvMax=17, equalPercentage=true) "Inlet valve (flow loop)";
   TrackingBox.Evaporation.Effect effect "The last effect";
-  TrackingBox.Evaporation.LiquorValve outletValve(KvMax(min=3.5, max=10.5)=7) "Outlet valve (effect level loop)";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedOutletValve outletValve(KvMax=7) "Outlet valve (effect level loop)";
   TrackingBox.Evaporation.FlashTank flash "Product flash tank";
-  TrackingBox.Evaporation.LiquorPump pump(dp0(min=2e5, max=5e5)=4e5, VMax(min=1.5e-3, max=4.5e-3)=3e-3) "Product pump";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedProductPump pump(dp0=4e5, VMax=3e-3) "Product pump";
   TrackingBox.Evaporation.LiquorValve productValve(KvMax=6) "Product valve (flash level loop)";
   TrackingBox.Evaporation.Sources.LiquorSink productSink(p=productSinkP) "Product line";
   TrackingBox.Evaporation.CondensateTank condTank "Condensate tank";

@@ -6,8 +6,8 @@ partial model PartialBench "Heat-exchanger bench: boundaries, exchanger, inputs 
   TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=2.0) "Cold mass flow rate";
   TrackingBox.Interfaces.RealOutput ThOut(unit="K") "Hot outlet temperature";
   TrackingBox.Interfaces.RealOutput TcOut(unit="K") "Cold outlet temperature";
-  TrackingBox.Fluid.HeatExchanger hx(n=10, kht(min=500, max=1500) = 1000, A=4.2, V1=0.12, V2=0.12,
-    T1_start=333.15, T2_start=308.15) "Counter-flow heat exchanger (side 1 hot, side 2 cold)";
+  TrackingBox.Benches.HeatExchanger.BaseClasses.TrackedHeatExchanger hx(n=10, kht=1000, A=4.2, V1=0.12, V2=0.12,
+    T1_start=333.15, T2_start=308.15) "Counter-flow heat exchanger (side 1 hot, side 2 cold); kht bounded 500..1500";
   TrackingBox.Fluid.Sources.MassFlowSource hotIn(use_m_flow_in=true, use_T_in=true) "Hot stream source";
   TrackingBox.Fluid.Sources.MassFlowSource coldIn(use_m_flow_in=true, use_T_in=true) "Cold stream source";
   TrackingBox.Fluid.Sources.PressureSink hotOut "Hot stream sink";
@@ -25,9 +25,10 @@ equation
   TcOut = hx.port_b2.T;
   annotation (Documentation(info="<html>
 <p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
-twin's parameter values and the tracking bounds. <code>Twin</code> extends it
-unmodified; <code>Plant</code> overrides values with plain modifiers
-(rumoca 0.10.2 drops attribute modifiers such as <code>kht(min=...)</code>
-given in an <code>extends</code> clause, so bounds live here only).</p>
+twin's parameter values. <code>Twin</code> extends it unmodified;
+<code>Plant</code> overrides values with plain modifiers
+(<code>hx(kht=910)</code>). The tracking bounds of <code>hx.kht</code>
+(500..1500 W/(m2.K)) come with the exchanger's class,
+<code>TrackedHeatExchanger</code>, so that both keep them.</p>
 </html>"));
 end PartialBench;

@@ -48,23 +48,21 @@ partial model PartialProcess "Heat-production process: components, controllers, 
   TrackingBox.Fluid.OpenTank T400(nPorts_a=1, A=0.3, zBottom=2.0, zInlet=3.2, level_start=0.6, T_start=288.15,
     UA=5, use_TAmb_in=true) "Elevated make-up tank";
   // Line T100 -> T200
-  TrackingBox.Fluid.Pump PU100(quadratic=quadratic, VFlowDesign(min=6.0e-5, max=7.3e-5) = 6.6e-5,
-    uRise(min=36000, max=44000) = 40000) "Pump T100 to T200";
-  TrackingBox.Fluid.Pipe Pipe100(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Pipe T100 to T200";
-  TrackingBox.Fluid.Valve V100(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedTransferPump PU100(quadratic=quadratic, VFlowDesign=6.6e-5, uRise=40000) "Pump T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe100(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Pipe T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V100(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve T100 to T200";
   // Line T200 -> HU300 -> HEX300 -> T100
-  TrackingBox.Fluid.Pump PU200(quadratic=quadratic, VFlowDesign(min=7.5e-5, max=9.16e-5) = 8.3e-5,
-    uRise(min=36000, max=44000) = 40000) "Pump T200 to HU300";
-  TrackingBox.Fluid.Pipe Pipe200(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Pipe T200 to HU300";
-  TrackingBox.Fluid.Valve V200(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve before HU300";
-  TrackingBox.Fluid.HeatingUnit HU300(kht(min=945, max=1155) = 1050, A=0.2, V=0.03, T_start=363.15) "Pressurised heating unit";
-  TrackingBox.Fluid.HeatExchanger HEX300(n=5, kht(min=850, max=1150) = 1000, A=0.6, V1=0.008, V2=0.008,
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedCirculationPump PU200(quadratic=quadratic, VFlowDesign=8.3e-5, uRise=40000) "Pump T200 to HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe200(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Pipe T200 to HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V200(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve before HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedHeatingUnit HU300(kht=1050, A=0.2, V=0.03, T_start=363.15) "Pressurised heating unit";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedHeatExchanger HEX300(n=5, kht=1000, A=0.6, V1=0.008, V2=0.008,
     T1_start=348.15, T2_start=328.15) "Heat exchanger to the external cold stream (side 1 hot, side 2 cold)";
-  TrackingBox.Fluid.Pipe Pipe201(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Return pipe HEX300 to T100";
-  TrackingBox.Fluid.Valve V300(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve in the return";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe201(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Return pipe HEX300 to T100";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V300(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve in the return";
   // Make-up line T400 -> T100
-  TrackingBox.Fluid.Pipe Pipe101(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.02) "Pipe T400 to T100";
-  TrackingBox.Fluid.Valve V400(KvMax(min=0.9, max=1.1) = 1.0) "Control valve T400 to T100 (LIC100)";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe101(quadratic=quadratic, k=0.005, m_flow_nominal=0.02) "Pipe T400 to T100";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V400(KvMax=1.0) "Control valve T400 to T100 (LIC100)";
   // Boundaries
   TrackingBox.Fluid.Sources.MassFlowSource makeUp(use_m_flow_in=true, use_T_in=true) "Make-up water into T400";
   TrackingBox.Fluid.Sources.MassFlowSink bleed(m_flow=mBleed_flow) "Bleed of excess water from T100";
@@ -154,11 +152,13 @@ equation
   QI_100 = T100.Q_flow_in;
   annotation (Documentation(info="<html>
 <p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
-twin's parameter values (the method notes' initial values) and the tracking
-bounds on the declarations. <code>Twin</code> extends it; <code>Plant</code>
-overrides values with plain modifiers (rumoca 0.10.2 drops attribute
-modifiers such as <code>kht(min=...)</code> in an <code>extends</code> clause,
-so the bounds are declared here only).</p>
+twin's parameter values (the method notes' initial values). <code>Twin</code>
+extends it; <code>Plant</code> overrides values with plain modifiers. The
+tracking bounds of the trackable parameters come with the components'
+classes (<code>TrackedHeatingUnit</code>, <code>TrackedHeatExchanger</code>,
+<code>TrackedPipe</code>, <code>TrackedValve</code>,
+<code>TrackedTransferPump</code>, <code>TrackedCirculationPump</code>), so
+plant and twin both keep them.</p>
 <p>Pressures are absolute and piezometric (reference: bottom of T100/T200).
 All controllers share the hold input <code>holdControllers</code>.</p>
 </html>"));
