@@ -10,36 +10,65 @@ partial model PartialProcess "Heat-production process: components, controllers, 
   parameter TrackingBox.Units.Temperature THeatMin = 373.15 "Heating-medium temperature of HU300 at TIC300 output 0";
   parameter TrackingBox.Units.Temperature THeatMax = 443.15 "Heating-medium temperature of HU300 at TIC300 output 1";
   // Inputs
-  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=0.07) "Heat demand: mass flow of the external cold stream";
-  TrackingBox.Interfaces.RealInput TColdIn(unit="K", start=313.15) "Heat demand: inlet temperature of the cold stream";
-  TrackingBox.Interfaces.RealInput TColdOut_set(unit="K", start=338.15) "Setpoint of the cold-stream outlet temperature (TIC302)";
-  TrackingBox.Interfaces.RealInput THU300_set(unit="K", start=363.15) "Setpoint of the HU300 outlet temperature (TIC300)";
-  TrackingBox.Interfaces.RealInput TPre_set(unit="K", start=328.15) "Setpoint of the T100 temperature (TIC100)";
-  TrackingBox.Interfaces.RealInput TMakeUp(unit="K", start=288.15) "Make-up water temperature";
-  TrackingBox.Interfaces.RealInput TAmb(unit="K", start=293.15) "Ambient temperature (tank heat losses)";
-  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
+  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=0.07) "Heat demand: mass flow of the external cold stream"
+    annotation (Placement(transformation(extent={{-118,75},{-100,93}})));
+  TrackingBox.Interfaces.RealInput TColdIn(unit="K", start=313.15) "Heat demand: inlet temperature of the cold stream"
+    annotation (Placement(transformation(extent={{-118,51},{-100,69}})));
+  TrackingBox.Interfaces.RealInput TColdOut_set(unit="K", start=338.15) "Setpoint of the cold-stream outlet temperature (TIC302)"
+    annotation (Placement(transformation(extent={{-118,27},{-100,45}})));
+  TrackingBox.Interfaces.RealInput THU300_set(unit="K", start=363.15) "Setpoint of the HU300 outlet temperature (TIC300)"
+    annotation (Placement(transformation(extent={{-118,3},{-100,21}})));
+  TrackingBox.Interfaces.RealInput TPre_set(unit="K", start=328.15) "Setpoint of the T100 temperature (TIC100)"
+    annotation (Placement(transformation(extent={{-118,-21},{-100,-3}})));
+  TrackingBox.Interfaces.RealInput TMakeUp(unit="K", start=288.15) "Make-up water temperature"
+    annotation (Placement(transformation(extent={{-118,-45},{-100,-27}})));
+  TrackingBox.Interfaces.RealInput TAmb(unit="K", start=293.15) "Ambient temperature (tank heat losses)"
+    annotation (Placement(transformation(extent={{-118,-69},{-100,-51}})));
+  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)"
+    annotation (Placement(transformation(extent={{-118,-93},{-100,-75}})));
   // Sensor outputs
-  TrackingBox.Interfaces.RealOutput LI_100(unit="m") "Level T100";
-  TrackingBox.Interfaces.RealOutput LI_200(unit="m") "Level T200";
-  TrackingBox.Interfaces.RealOutput LI_400(unit="m") "Level T400";
-  TrackingBox.Interfaces.RealOutput TI_100(unit="K") "Temperature T100";
-  TrackingBox.Interfaces.RealOutput TI_200(unit="K") "Temperature T200";
-  TrackingBox.Interfaces.RealOutput TI_300(unit="K") "Temperature HU300 outlet";
-  TrackingBox.Interfaces.RealOutput TI_301(unit="K") "Temperature HEX300 hot-side outlet";
-  TrackingBox.Interfaces.RealOutput TI_302(unit="K") "Temperature cold-stream outlet";
-  TrackingBox.Interfaces.RealOutput TI_310(unit="K") "Temperature of the HU300 heating medium";
-  TrackingBox.Interfaces.RealOutput TI_400(unit="K") "Temperature T400";
-  TrackingBox.Interfaces.RealOutput FI_100(unit="kg/s") "Flow PU100 (T100 to T200)";
-  TrackingBox.Interfaces.RealOutput FI_101(unit="kg/s") "Flow V400 (T400 to T100)";
-  TrackingBox.Interfaces.RealOutput FI_200(unit="kg/s") "Flow PU200 (through HU300 and HEX300)";
-  TrackingBox.Interfaces.RealOutput FI_400(unit="kg/s") "Make-up flow into T400";
-  TrackingBox.Interfaces.RealOutput PI_100(unit="Pa") "Pressure at the PU100 discharge";
-  TrackingBox.Interfaces.RealOutput PI_200(unit="Pa") "Pressure at the PU200 discharge";
-  TrackingBox.Interfaces.RealOutput PI_300(unit="Pa") "Pressure in HU300";
-  TrackingBox.Interfaces.RealOutput SI_100(unit="1") "Relative speed PU100";
-  TrackingBox.Interfaces.RealOutput SI_200(unit="1") "Relative speed PU200";
-  TrackingBox.Interfaces.RealOutput ZI_400(unit="1") "Opening V400";
-  TrackingBox.Interfaces.RealOutput QI_100(unit="W") "Preheater power T100";
+  TrackingBox.Interfaces.RealOutput LI_100(unit="m") "Level T100"
+    annotation (Placement(transformation(extent={{100,77},{106,83}})));
+  TrackingBox.Interfaces.RealOutput LI_200(unit="m") "Level T200"
+    annotation (Placement(transformation(extent={{100,69},{106,75}})));
+  TrackingBox.Interfaces.RealOutput LI_400(unit="m") "Level T400"
+    annotation (Placement(transformation(extent={{100,61},{106,67}})));
+  TrackingBox.Interfaces.RealOutput TI_100(unit="K") "Temperature T100"
+    annotation (Placement(transformation(extent={{100,53},{106,59}})));
+  TrackingBox.Interfaces.RealOutput TI_200(unit="K") "Temperature T200"
+    annotation (Placement(transformation(extent={{100,45},{106,51}})));
+  TrackingBox.Interfaces.RealOutput TI_300(unit="K") "Temperature HU300 outlet"
+    annotation (Placement(transformation(extent={{100,37},{106,43}})));
+  TrackingBox.Interfaces.RealOutput TI_301(unit="K") "Temperature HEX300 hot-side outlet"
+    annotation (Placement(transformation(extent={{100,29},{106,35}})));
+  TrackingBox.Interfaces.RealOutput TI_302(unit="K") "Temperature cold-stream outlet"
+    annotation (Placement(transformation(extent={{100,21},{106,27}})));
+  TrackingBox.Interfaces.RealOutput TI_310(unit="K") "Temperature of the HU300 heating medium"
+    annotation (Placement(transformation(extent={{100,13},{106,19}})));
+  TrackingBox.Interfaces.RealOutput TI_400(unit="K") "Temperature T400"
+    annotation (Placement(transformation(extent={{100,5},{106,11}})));
+  TrackingBox.Interfaces.RealOutput FI_100(unit="kg/s") "Flow PU100 (T100 to T200)"
+    annotation (Placement(transformation(extent={{100,-3},{106,3}})));
+  TrackingBox.Interfaces.RealOutput FI_101(unit="kg/s") "Flow V400 (T400 to T100)"
+    annotation (Placement(transformation(extent={{100,-11},{106,-5}})));
+  TrackingBox.Interfaces.RealOutput FI_200(unit="kg/s") "Flow PU200 (through HU300 and HEX300)"
+    annotation (Placement(transformation(extent={{100,-19},{106,-13}})));
+  TrackingBox.Interfaces.RealOutput FI_400(unit="kg/s") "Make-up flow into T400"
+    annotation (Placement(transformation(extent={{100,-27},{106,-21}})));
+  TrackingBox.Interfaces.RealOutput PI_100(unit="Pa") "Pressure at the PU100 discharge"
+    annotation (Placement(transformation(extent={{100,-35},{106,-29}})));
+  TrackingBox.Interfaces.RealOutput PI_200(unit="Pa") "Pressure at the PU200 discharge"
+    annotation (Placement(transformation(extent={{100,-43},{106,-37}})));
+  TrackingBox.Interfaces.RealOutput PI_300(unit="Pa") "Pressure in HU300"
+    annotation (Placement(transformation(extent={{100,-51},{106,-45}})));
+  TrackingBox.Interfaces.RealOutput SI_100(unit="1") "Relative speed PU100"
+    annotation (Placement(transformation(extent={{100,-59},{106,-53}})));
+  TrackingBox.Interfaces.RealOutput SI_200(unit="1") "Relative speed PU200"
+    annotation (Placement(transformation(extent={{100,-67},{106,-61}})));
+  TrackingBox.Interfaces.RealOutput ZI_400(unit="1") "Opening V400"
+    annotation (Placement(transformation(extent={{100,-75},{106,-69}})));
+  TrackingBox.Interfaces.RealOutput QI_100(unit="W") "Preheater power T100"
+    annotation (Placement(transformation(extent={{100,-83},{106,-77}})));
   // Tanks
   TrackingBox.Fluid.OpenTank T100(nPorts_a=2, A=0.3, zBottom=0, zInlet=1.2, level_start=0.8, T_start=328.15,
     UA=5, use_Q_flow_in=true, use_TAmb_in=true) "Preheating tank";
@@ -150,7 +179,17 @@ equation
   SI_200 = PU200.speed;
   ZI_400 = V400.opening;
   QI_100 = T100.Q_flow_in;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,0}, fillColor={245,245,245}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-70,60},{-40,10}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-15,60},{15,10}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{40,40},{70,-10}}, lineColor={0,0,0}, fillColor={238,46,47}, fillPattern=FillPattern.Solid),
+      Line(points={{-55,10},{-55,-30},{55,-30},{55,-10}}, color={0,127,255}, thickness=0.5),
+      Line(points={{-40,35},{-15,35}}, color={0,127,255}, thickness=0.5),
+      Line(points={{15,35},{40,35}}, color={0,127,255}, thickness=0.5),
+      Text(extent={{-150,145},{150,105}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
 twin's parameter values (the method notes' initial values). <code>Twin</code>
 extends it; <code>Plant</code> overrides values with plain modifiers. The
