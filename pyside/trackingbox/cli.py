@@ -14,7 +14,7 @@ import os
 import sys
 from typing import NoReturn
 
-from . import __version__
+from .version import __version__
 from .errors import TrackingError
 
 #: Subcommand modules, in the order ``--help`` lists them.

@@ -670,7 +670,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         values = ", ".join(f"{p['name']} = {p['value']:.6g} {p['unit']}".rstrip() for p in params.values())
         header.append(f"//   {effect.id} on {f.target}: {values}")
 
-    from .. import __version__
+    from ..version import __version__
     from ..generate.filters import modelica_string
 
     mods = ", ".join(f"{t}({', '.join(sorted(set(m)))})" for t, m in sorted(modifiers.items()))

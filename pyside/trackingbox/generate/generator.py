@@ -39,7 +39,7 @@ from typing import Any
 
 import jinja2
 
-from .. import __version__
+from ..version import __version__
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
 from ..tracking.controllers import MEMORY_FRACTION
