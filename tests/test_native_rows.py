@@ -245,7 +245,7 @@ def test_a_twin_failing_inside_a_row_ends_as_on_the_python_path(fmu: Path, tmp_p
     _, c_rows, c_error = _run(spec, tmp_path / "c", monkeypatch, True, substeps=2)
     assert py_error is not None and c_error == py_error
     assert c_rows > 150
-    assert INTERRUPTED and INTERRUPTED[0][2] == native._CVODE_FAILED  # the failure happened inside C's rows
+    assert INTERRUPTED and INTERRUPTED[0][2] == native.CVODE_FAILED  # the failure happened inside C's rows
     assert (tmp_path / "py" / "tracking.csv").read_bytes() == (tmp_path / "c" / "tracking.csv").read_bytes()
 
 

@@ -196,10 +196,11 @@ def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(fi
                                                                             native_library: None) -> None:
     """What the watchdog reads: an even count after a stepper's calls returned, moved on by them."""
     from trackingbox import native
+    from trackingbox.fmu import NativeStepper
 
     with FMUModel(first_order_fmu) as model:
         st = model.stepper(start_time=0.0, parameters={"k": 0.003})
-        assert isinstance(st, native.NativeStepper)
+        assert isinstance(st, NativeStepper)
         seq0, _ = native.fmi_call()
         st.step(100.0)
         seq1, name = native.fmi_call()

@@ -73,7 +73,9 @@ import pandas as pd
 
 from ..checkpoint import CheckpointFile
 from ..data import MeasurementView
+from .. import native
 from ..errors import DataError, SimulationError, SpecError, unknown_name
+from ..fmu import NativeStepper
 from ..io import write_text_atomic
 from ..stream import MARGIN_ROWS, WINDOW_ROWS, WindowedMeasurements, percentile_range
 from .controllers import Interpolation, ScaledPI, SlidingMode, StateCompensator
@@ -325,19 +327,6 @@ def _unjsonify(obj: Any) -> Any:
 #: restart path moves by 7e-6 of a range. The Python path (``TRACKINGBOX_NATIVE=0``) cannot.
 KEEP_JACOBIAN = True
 
-def _native_stepper() -> type:
-    """:class:`~trackingbox.native.NativeStepper` (imported on first use), or a class nothing is an instance of."""
-    global _NATIVE
-    if _NATIVE is None:
-        try:
-            from ..native import NativeStepper
-        except ImportError:  # pragma: no cover - the module is part of the package
-            NativeStepper = type("_NoNative", (), {})
-        _NATIVE = NativeStepper
-    return _NATIVE
-
-
-_NATIVE: type | None = None
 
 
 class _Twin:
@@ -481,7 +470,7 @@ class _Twin:
         self.y = None
         if changed and self.force_restart and code is None and hasattr(stepper, "forget_jacobian"):
             stepper.forget_jacobian()  # a large change (start-up hold's end, a hold, a recovery): a new Jacobian
-        if code is not None or (self.read_names is not None and isinstance(stepper, _native_stepper())):
+        if code is not None or (self.read_names is not None and isinstance(stepper, NativeStepper)):
             # the native stepper sets, steps and reads the states and the read variables in one C call
             fchanged = self.fmu_values(changed) if self.rename else changed
             try:
@@ -1006,8 +995,6 @@ class _NativeRows:
     CAP = 512
 
     def __init__(self, loop: TrackingLoop) -> None:
-        from .. import native
-
         self.native = native
         self.lib = native.library()
         self.b = native.TrackBatch()
@@ -1033,13 +1020,13 @@ class _NativeRows:
         b.hold_until = loop.hold_until
         b.npairs, b.nstates, b.ntags, b.nread = self.npairs, self.nstates, len(plan.out_tags), len(loop.read)
         b.pidx, b.sidx, b.tidx = self.pidx, self.sidx, self.tidx
-        b.pi = self.pi.ctypes.data_as(native._pd)
-        b.comp_t = self.comp[0].ctypes.data_as(native._pd)
-        b.comp_u = self.comp[1].ctypes.data_as(native._pd)
-        b.fits = self.fits.ctypes.data_as(native._pd)
-        b.pstats, b.cstats, b.sstats = (a.ctypes.data_as(native._pd) for a in self.stats)
-        b.missing = self.missing.ctypes.data_as(native._pint)
-        b.rows, b.ncols, b.cap = self.rows.ctypes.data_as(native._pd), self.ncols, self.CAP
+        b.pi = self.pi.ctypes.data_as(native.PD)
+        b.comp_t = self.comp[0].ctypes.data_as(native.PD)
+        b.comp_u = self.comp[1].ctypes.data_as(native.PD)
+        b.fits = self.fits.ctypes.data_as(native.PD)
+        b.pstats, b.cstats, b.sstats = (a.ctypes.data_as(native.PD) for a in self.stats)
+        b.missing = self.missing.ctypes.data_as(native.PINT)
+        b.rows, b.ncols, b.cap = self.rows.ctypes.data_as(native.PD), self.ncols, self.CAP
         for which in (0, 1):
             nv = len(self.names[which])
             io = {"applied": np.zeros(max(nv, 1)), "given": np.zeros(max(nv, 1)),
@@ -1051,9 +1038,9 @@ class _NativeRows:
             t = b.tw[which]
             t.nv = nv
             for name in ("applied", "given", "limit", "lo", "hi", "y", "val", "sub"):
-                setattr(t, name, io[name].ctypes.data_as(native._pd))
+                setattr(t, name, io[name].ctypes.data_as(native.PD))
             for name in ("given_ok", "ever_set", "extrap"):
-                setattr(t, name, io[name].ctypes.data_as(native._pint))
+                setattr(t, name, io[name].ctypes.data_as(native.PINT))
             t.sub_vr, t.sub_idx = io["sub_vr"], io["sub_idx"]
             self.io.append(io)
 
@@ -1066,12 +1053,11 @@ class _NativeRows:
             return False
         if not all(isinstance(p.controller, ScaledPI) for p in loop.controllers.pairs):
             return False
-        native = _native_stepper()
-        if not isinstance(loop.twin.stepper if loop.twin is not None else None, native):
+        if not isinstance(loop.twin.stepper if loop.twin is not None else None, NativeStepper):
             return False
         if loop.plain is None:
             return loop.plan.untracked_table is None
-        return isinstance(loop.plain.stepper, native)
+        return isinstance(loop.plain.stepper, NativeStepper)
 
     def _set_view(self, loop: TrackingLoop) -> None:
         """The measurement view's arrays (again after :meth:`TrackingLoop.extend`)."""
@@ -1085,7 +1071,7 @@ class _NativeRows:
         self.samples = samples
         self.scored = [np.ascontiguousarray(view.scored[t], dtype=np.uint8) if t in fits else None
                        for t in plan.out_tags]
-        b.grid = self.grid.ctypes.data_as(self.native._pd)
+        b.grid = self.grid.ctypes.data_as(self.native.PD)
         b.stopped = self.stopped.ctypes.data_as(ctypes.POINTER(ctypes.c_ubyte))
         self.psamples = _pointers([samples[p.tag] for p in loop.controllers.pairs], ctypes.c_double)
         self.ssamples = _pointers([samples[s.tag] for s in loop.compensation.states], ctypes.c_double)
@@ -1115,7 +1101,7 @@ class _NativeRows:
         io["vr"] = (ctypes.c_uint32 * max(nv, 1))(*vrs)
         io["is_param"] = (ctypes.c_int * max(nv, 1))(*is_param)
         t.vr, t.is_param = io["vr"], io["is_param"]
-        t.out = out.ctypes.data_as(self.native._pd)
+        t.out = out.ctypes.data_as(self.native.PD)
         io["out"] = out
         for i, n in enumerate(names):
             io["applied"][i] = tw.applied[n]
