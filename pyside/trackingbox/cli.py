@@ -8,14 +8,27 @@ printed as one line on stderr with a non-zero exit and no traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import os
 import sys
 from typing import NoReturn
 
-from .version import __version__
+from .commands import (
+    bench,
+    diagnose,
+    estimate,
+    generate,
+    inspect,
+    pair,
+    replay,
+    simulate,
+    track,
+    validate,
+)
+from .commands import compile as compile_command
 from .errors import TrackingError
+from .supervise import supervise
+from .version import __version__
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -31,6 +44,11 @@ COMMANDS = (
     "validate",
     "diagnose",
 )
+
+#: Subcommand name -> its module.
+MODULES = {"compile": compile_command, "inspect": inspect, "simulate": simulate, "bench": bench, "pair": pair,
+           "estimate": estimate, "track": track, "replay": replay, "generate": generate, "validate": validate,
+           "diagnose": diagnose}
 
 EPILOG = """\
 examples:
@@ -71,8 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
-        module = importlib.import_module(f"trackingbox.commands.{name}")
-        module.register(sub)
+        MODULES[name].register(sub)
     return parser
 
 
@@ -92,8 +109,6 @@ def main(argv: list[str] | None = None) -> int:
     list (tests, scripts), the command runs in this process.
     """
     if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
-        from .supervise import supervise
-
         return supervise(_run, sys.argv[1:])
     return _run(argv)
 
@@ -131,8 +146,6 @@ def _short(text: str, limit: int = 160) -> str:
 def gen_trackingbox_main(argv: list[str] | None = None) -> int:
     """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
     if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
-        from .supervise import supervise
-
         return supervise(_run, ["generate", *sys.argv[1:]])
     return _run(["generate", *argv])
 

@@ -31,8 +31,9 @@ import tomli_w
 import tomlkit
 from tomlkit.items import AoT, Comment, Table, Whitespace
 
-from .errors import SpecError, did_you_mean, unknown_name
-from .io import write_text_atomic
+from .errors import SpecError, TrackingError, did_you_mean, unknown_name
+from .fmu import read_info
+from .io import user_path, write_text_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
     from .fmu import FMUInfo
@@ -896,9 +897,6 @@ def load_spec(path: str | os.PathLike[str], *, check_files: bool = True) -> Spec
         Listing every problem found (unknown/missing keys, wrong types, bad bounds
         and windows, missing files, pairs naming unknown tags or parameters).
     """
-    from .errors import TrackingError
-    from .io import user_path
-
     try:
         path = user_path(path, "spec file").resolve()
     except TrackingError as exc:
@@ -972,8 +970,6 @@ def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
         outside the bounds the FMU declares.
     """
     if info is None:
-        from .fmu import read_info  # lazy: fmu pulls in fmpy
-
         info = read_info(spec.twin)
     variables = {v.name: v for v in info.variables}
     names = list(variables)
