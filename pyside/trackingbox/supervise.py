@@ -46,6 +46,8 @@ import traceback
 from collections.abc import Callable
 from types import FrameType
 
+from . import native
+
 #: innermost frame of fmpy's FMI wrappers in a faulthandler dump: (fmi2|fmi3|fmi1 module, method)
 _FMPY_FRAME = re.compile(r'File "[^"]*fmpy[/\\](fmi[123])\.py", line \d+ in (\w+)')
 #: environment variable naming the file where :func:`note_fmu` writes the FMU last opened
@@ -203,8 +205,7 @@ class Watchdog:
         calls (:func:`trackingbox.native.fmi_call`), and the same call is the
         same odd count.
         """
-        native = sys.modules.get("trackingbox.native")
-        call = native.fmi_call() if native is not None else None
+        call = native.fmi_call()  # the library imported with this module: never seen half-initialised
         return call if call is not None and call[0] % 2 == 1 else None
 
     def _fire(self, function: str, fmu: str) -> None:
