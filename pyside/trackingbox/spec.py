@@ -13,6 +13,7 @@ the table and the file.
 from __future__ import annotations
 
 import csv
+import errno
 import logging
 import math
 import os
@@ -452,8 +453,20 @@ def _resolve(base: Path, value: str) -> Path:
         pass
     try:
         return p if p.is_absolute() else (base / p).resolve()
-    except (OSError, ValueError):
+    except (OSError, ValueError, RuntimeError):  # RuntimeError: a symlink loop (Python < 3.13), then reported
         return base / p
+
+
+def _absent(path: Path) -> str:
+    """Why *path* cannot be used as a file or folder: it does not exist, or it is a loop of symbolic links."""
+    try:
+        path.resolve(strict=True)
+    except RuntimeError:  # Python < 3.13
+        return "is a loop of symbolic links"
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "is a loop of symbolic links"
+    return "does not exist"
 
 
 def _csv_header(path: Path) -> list[str] | None:
@@ -497,7 +510,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         resolved = _resolve(base, value)
         files[key] = resolved
         if check_files and not resolved.is_file():
-            problems.add(f"{key} file {value!r} does not exist (looked for {resolved})")
+            problems.add(f"{key} file {value!r} {_absent(resolved)} (looked for {resolved})")
     sample_time = _number(raw, "sample_time", "the top level", problems, positive=True)
 
     source = None
@@ -509,7 +522,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         if spath is not None and smodel is not None:
             resolved = _resolve(base, spath)
             if check_files and not resolved.exists():
-                problems.add(f"path {spath!r} in [source] does not exist (looked for {resolved})")
+                problems.add(f"path {spath!r} in [source] {_absent(resolved)} (looked for {resolved})")
             source = SourceSpec(path=resolved, model=smodel)
 
     inputs = _string_map(raw, "inputs", problems)
@@ -840,7 +853,7 @@ def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
     for item in value:
         resolved = _resolve(base, item)
         if check_files and not resolved.is_dir():
-            problems.add(f"effects folder {item!r} in [diagnose] does not exist (looked for {resolved})")
+            problems.add(f"effects folder {item!r} in [diagnose] {_absent(resolved)} (looked for {resolved})")
         folders.append(resolved)
     return DiagnoseSpec(effects=tuple(folders))
 
