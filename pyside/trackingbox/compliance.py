@@ -59,6 +59,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
+from . import config
 from .compiler import InternalCompileError, compile_model
 from .compiler.source import (
     class_lines,
@@ -378,7 +379,7 @@ def table(results: list[dict]) -> str:
 
 def default_suite() -> Path:
     """``../shared/modelica-compliance/ModelicaCompliance`` beside the repository, or $TRACKINGBOX_COMPLIANCE."""
-    env = os.environ.get("TRACKINGBOX_COMPLIANCE")
+    env = config.get("compliance")
     if env:
         return Path(env)
     repo = Path(__file__).resolve().parents[2]

@@ -77,7 +77,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -89,6 +88,7 @@ import numpy.typing as npt
 import pandas as pd
 from scipy.optimize import differential_evolution, least_squares
 
+from . import config
 from .analysis import executor
 from .analysis.executor import (
     cached_model,
@@ -558,7 +558,7 @@ class _ExactResiduals:
 
 def _runs_native(model: Any) -> bool:
     """True if *model*'s runs go through the native stepper (what :meth:`FMUModel.stepper` chooses by default)."""
-    if os.environ.get("TRACKINGBOX_NATIVE", "").strip() == "0":
+    if not config.get("native"):
         return False
     try:
         return native_reason(model) is None

@@ -21,6 +21,7 @@ from fmpy.model_description import (
     read_model_description,
 )
 
+from .. import config
 from ..errors import FMUError, unknown_name
 
 log = logging.getLogger(__name__)
@@ -153,7 +154,7 @@ def _to_variable(v: ModelVariable) -> Variable:
 #: most entries an FMU archive may have
 MAX_ENTRIES = 20_000
 #: most bytes an FMU may inflate to (``TRACKINGBOX_FMU_MAX_BYTES`` overrides)
-MAX_EXTRACTED_BYTES = 2 << 30
+MAX_EXTRACTED_BYTES = config.setting("fmu_max_bytes").default
 #: largest modelDescription.xml read (bytes)
 MAX_DESCRIPTION_BYTES = 200 << 20
 

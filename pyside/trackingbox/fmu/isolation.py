@@ -23,9 +23,10 @@ from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.model_description import ModelDescription
 
+from .. import config
 from ..errors import FMUError
 from ..supervise import fmu_timeout, note_output
-from .info import MAX_ENTRIES, MAX_EXTRACTED_BYTES, float_or_none
+from .info import MAX_ENTRIES, float_or_none
 
 log = logging.getLogger(__name__)
 
@@ -34,10 +35,7 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------
 
 def _max_bytes() -> int:
-    try:
-        return int(os.environ.get("TRACKINGBOX_FMU_MAX_BYTES", MAX_EXTRACTED_BYTES))
-    except ValueError:
-        return MAX_EXTRACTED_BYTES
+    return int(config.get("fmu_max_bytes"))
 
 
 def _check_archive(path: Path, zf: zipfile.ZipFile) -> list[zipfile.ZipInfo]:
@@ -104,7 +102,7 @@ def extract(path: Path) -> str:
 
 #: seconds one FMI call of the canary (and, under the supervisor, of the run) may take
 #: (``TRACKINGBOX_FMU_TIMEOUT`` overrides; :func:`trackingbox.supervise.fmu_timeout`)
-CANARY_TIMEOUT = 60.0
+CANARY_TIMEOUT = config.setting("fmu_timeout").default
 _CANARY_PASSED: set[tuple[Any, ...]] = set()
 
 
@@ -169,7 +167,7 @@ def canary(path: Path, tempdir: str, md: ModelDescription, interface: str) -> No
         key: tuple[Any, ...] = (str(path.resolve()), st.st_size, st.st_mtime_ns, interface)
     except OSError:
         key = (str(path), interface)
-    if key in _CANARY_PASSED or not hasattr(os, "fork") or os.environ.get("TRACKINGBOX_CANARY", "1") == "0":
+    if key in _CANARY_PASSED or not hasattr(os, "fork") or not config.get("canary"):
         return
     timeout = _canary_timeout()
     read_fd, write_fd = os.pipe()

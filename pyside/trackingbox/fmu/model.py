@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 from fmpy.model_description import ModelVariable
 
+from .. import config
 from ..errors import FMUError, SimulationError, unknown_name
 from ..native import native_reason
 from ..supervise import note_fmu, note_output
@@ -276,7 +277,7 @@ class FMUModel:
         if native is False:
             self.native_reason = "not asked for (native=False)"
             return ModelExchangeStepper
-        if native is None and os.environ.get("TRACKINGBOX_NATIVE", "").strip() == "0":
+        if native is None and not config.get("native"):
             self.native_reason = "TRACKINGBOX_NATIVE=0"
         else:
             self.native_reason = native_reason(self)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time as _time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 import pandas as pd
 
+from .. import config
 from ..checkpoint import CheckpointFile
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError
@@ -382,7 +382,7 @@ class TrackingLoop:
         self._begin(resume)
         if self.mode == "continuous" and not ClosedRows.usable(self):
             reason = self.twin.model.native_reason or (
-                f"{NATIVE_ROWS_ENV}=0" if os.environ.get(NATIVE_ROWS_ENV, "").strip() == "0"
+                f"{NATIVE_ROWS_ENV}=0" if not config.get("native_rows")
                 else "the twins do not run on the native stepper")
             raise SimulationError(f"controllers='continuous' integrates the controllers in the native stepper's "
                                   f"right-hand side, which is not to be had here: {reason}")

@@ -10,13 +10,12 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
-import os
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import native
+from .. import config, native
 from ..fmu import NativeStepper
 from .controllers import ScaledPI
 from .twin import Twin
@@ -31,7 +30,7 @@ log = logging.getLogger(__name__)
 # --------------------------------------------------------------------------- the loop's fast path
 
 #: environment variable: ``0`` keeps the tracking loop on its Python path (no :class:`NativeRows`)
-NATIVE_ROWS_ENV = "TRACKINGBOX_NATIVE_ROWS"
+NATIVE_ROWS_ENV = config.setting("native_rows").env
 
 
 def pointers(arrays: Sequence[Any], ctype: Any) -> Any:
@@ -118,7 +117,7 @@ class NativeRows:
     @staticmethod
     def usable(loop: TrackingLoop) -> bool:
         """True if the loop's rows can run in C (see the class docstring)."""
-        if os.environ.get(NATIVE_ROWS_ENV, "").strip() == "0" or loop.interpolation != "linear":
+        if not config.get("native_rows") or loop.interpolation != "linear":
             return False
         if not all(isinstance(p.controller, ScaledPI) for p in loop.controllers.pairs):
             return False
