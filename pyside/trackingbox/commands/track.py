@@ -16,7 +16,8 @@ from ..online.opcua import read_credentials
 from ..report import write_track_report
 from ..report.track import summary_tables
 from ..spec import check_against_fmu, load_spec
-from ..tracking.runtime import track
+from ..stages import track as stage
+from ..stages.contract import settings_from_args
 from ._args import number
 from ._progress import Progress
 
@@ -118,11 +119,9 @@ def run(args: argparse.Namespace) -> int:
         CheckpointFile(out / "checkpoint.json", out / "tracking.csv").read()
     check_against_fmu(spec)  # before the output directory exists
     with output_dir(out), output_dir(args.report or out):
-        result = track(spec, out_dir=out, resume=args.resume,
-                       progress=Progress().counter("tracking", unit="row"),
-                       window=args.window, checkpoint_every=args.checkpoint_every,
-                       controllers=args.controllers,
-                       **({} if args.carry is None else {"carry": args.carry}))
+        settings = settings_from_args(stage.TrackSettings, args, out_dir=out,
+                                      carry=stage.CARRY_FRACTION if args.carry is None else args.carry)
+        result = stage.run(spec, settings, progress=Progress())
         if args.report:
             write_track_report(spec, result, args.report)
     if args.json:
