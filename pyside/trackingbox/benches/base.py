@@ -44,8 +44,9 @@ from ..compiler import (
     library_path,
 )
 from ..errors import FMUError, SimulationError, TrackingError, did_you_mean
-from ..fmu import FMUModel, read_info
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
+from ..simulation.models import open_model
 from ..spec import (
     DataRules,
     ParameterSpec,
@@ -382,7 +383,7 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         plant_vars = [s.plant for s in definition.outputs]
         log.info("simulating the %s plant for %.1f h (+%.1f h warm-up)", definition.name, hours, warmup / 3600)
         t0 = _time.perf_counter()
-        model = FMUModel(staged_plant)
+        model = open_model(staged_plant)
         try:
             result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
                                     parameters=overrides, outputs=plant_vars)

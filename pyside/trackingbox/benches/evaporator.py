@@ -38,8 +38,9 @@ import numpy.typing as npt
 import pandas as pd
 
 from ..errors import FMUError, SpecError, TrackingError
-from ..fmu import FMUModel, read_info
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
+from ..simulation.models import open_model
 from ..spec import (
     DataRules,
     PairingSettings,
@@ -551,7 +552,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         plant_vars = list(dict.fromkeys([s.plant for s in d.outputs] + list(recorded.values())))
         log.info("simulating the evaporator plant for %.1f h (+%.1f h warm-up)", hours, warmup / 3600)
         t0 = _time.perf_counter()
-        model = FMUModel(staged["plant"])
+        model = open_model(staged["plant"])
         try:
             result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
                                     parameters=overrides, outputs=plant_vars)

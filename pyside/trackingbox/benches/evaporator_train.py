@@ -43,8 +43,9 @@ from ..compiler import (
     library_path,
 )
 from ..errors import FMUError, TrackingError
-from ..fmu import FMUModel, read_info
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
+from ..simulation.models import open_model
 from ..spec import (
     DataRules,
     PairingSettings,
@@ -662,7 +663,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         plant_vars = list(dict.fromkeys([s.plant for s in tag_outputs] + list(trajectories_map.values())))
         log.info("simulating the %d-effect plant for %.1f h (+%.1f h warm-up)", n, hours, warmup / 3600)
         t0, c0 = _time.perf_counter(), _time.process_time()
-        model = FMUModel(staged["plant"])
+        model = open_model(staged["plant"])
         try:
             result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
                                     parameters=overrides, outputs=plant_vars)
