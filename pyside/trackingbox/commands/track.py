@@ -79,7 +79,7 @@ def register(subparsers: Any) -> None:
                         "change of a tracked parameter of at most FRACTION of its bound range (a correction "
                         "flow: of its compensator's gain times its level's range) instead of re-initialising "
                         "it (default 0.02); 0: re-initialise at every change, the restart path, closer to "
-                        "the exact closed loop where the twin's parameters change often (see docs/architecture.md)")
+                        "the exact closed loop where the twin's parameters change often (scripts/bench_carry measures both)")
     p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
