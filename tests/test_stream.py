@@ -12,7 +12,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import trackingbox.data as data
 import trackingbox.data.table as data_table
 import trackingbox.stream as stream
 from trackingbox.data import MeasurementView
