@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from trackingbox import cli, config
-from trackingbox.estimation import _runs_native
+from trackingbox.estimation.objective import runs_native as _runs_native
 from trackingbox.fmu import FMUModel
 
 ROOT = Path(__file__).resolve().parents[1]
