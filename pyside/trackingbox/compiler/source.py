@@ -248,68 +248,57 @@ def _file_of(source: ModelicaSource, dotted: str) -> Path | None:
     return holder
 
 
-_NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)")
-
-
-def model_files(source: ModelicaSource, model: str, limit: int = 40) -> tuple[Path, ...]:
+def model_files(source: ModelicaSource, model: str, limit: int = 40,
+                libraries: tuple[Path, ...] | list[Path] = ()) -> tuple[Path, ...]:
     """The files of the classes *model* uses: its own class file first, then the files of the
-    classes its text names (extends, component types, functions), followed transitively.
+    classes it uses (extends, component types, functions, packages of constants), followed
+    transitively, as Modelica's lookup resolves their names in the model's scope
+    (:meth:`.library.LibraryIndex.used_classes`); at most *limit* files."""
+    from .library import index_for
 
-    Names are looked up from the innermost enclosing package outwards, as Modelica
-    does; names that resolve to no file of *source* (built-ins, variables) are skipped.
-    """
-    own = _file_of(source, model)
-    if own is None:
-        return ()
-    found: list[Path] = [own]
-    queue: list[tuple[Path, str]] = [(own, model)]
-    seen_names: set[str] = {model}
-    seen_classes: set[tuple[Path, str]] = {(own, model.rsplit(".", 1)[-1])}
-    while queue and len(found) < limit:
-        file, cls = queue.pop(0)
-        code = _code(file)
-        rng = _class_range(code, cls)
-        body = code[rng[0]:rng[1]] if rng else code
-        scopes = cls.split(".")
-        for name in dict.fromkeys(_NAME.findall(body)):
-            for depth in range(len(scopes), -1, -1):
-                full = ".".join([*scopes[:depth], name])
-                if full in seen_names:
-                    break
-                target = _file_of(source, full)
-                if target is not None:
-                    seen_names.add(full)
-                    key = (target, full.rsplit(".", 1)[-1])
-                    if key not in seen_classes:
-                        seen_classes.add(key)
-                        if target not in found:
-                            found.append(target)
-                        queue.append((target, full))
-                    break
-    return tuple(found[:limit])
+    index = index_for(source, libraries)
+    found: list[Path] = []
+    for name in index.used_classes(model):
+        file = index.classes[name].file
+        if file not in found:
+            found.append(file)
+            if len(found) >= limit:
+                break
+    return tuple(found)
 
 
 def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5, *,
-           own: bool = False) -> list[Location]:
+           own: bool = False, libraries: tuple[Path, ...] | list[Path] = ()) -> list[Location]:
     """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
 
-    Unlike :func:`find_construct` over every file, only the model's own class file and the
-    files of the classes it uses are searched (its own file first), and in each only the
-    text of the class concerned, so an occurrence elsewhere in the package is never named.
-    With *own*, only the model's own class definition is searched.
+    Only the text of the model's own class and of the classes it uses (in the order Modelica's
+    lookup finds them, :meth:`.library.LibraryIndex.used_classes`) is searched, each class's own
+    text without its nested classes, so an occurrence elsewhere in the package or in a library is
+    never named, and a large library file is never searched as a whole. With *own*, only the
+    model's own class definition (its nested classes included) is searched.
     """
+    from .library import index_for
+
     regex = re.compile(pattern)
-    files = model_files(source, model)[:1] if own else model_files(source, model)
+    index = index_for(source, libraries)
+    info = index.classes.get(model)
+    if info is None:
+        return []
     found: list[Location] = []
-    for k, file in enumerate(files):
-        code = _code(file)
-        lo, hi = 0, len(code)
-        if k == 0:
-            rng = _class_range(code, model)
-            if rng:
-                lo, hi = rng
-        for match in regex.finditer(code, lo, hi):
-            found.append(Location(file, code.count("\n", 0, match.start()) + 1))
+    if own:
+        text = index.code(info)
+        for match in regex.finditer(text):
+            found.append(Location(*index.location(info, match.start())))
+            if len(found) >= limit:
+                break
+        return found
+    for name in index.used_classes(model):
+        cls = index.classes[name]
+        text = index.own_code(cls) if name != model else index.code(cls)
+        for match in regex.finditer(text):
+            loc = Location(*index.location(cls, match.start()))
+            if loc not in found:
+                found.append(loc)
             if len(found) >= limit:
                 return found
     return found
