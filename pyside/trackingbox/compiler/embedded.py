@@ -23,10 +23,10 @@ from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
-from .library import index_for, resolve_libraries
+from .library import index_for, locate, model_files, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
-from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
+from .source import ModelicaSource, class_names, experiment_settings
 
 log = logging.getLogger(__name__)
 
