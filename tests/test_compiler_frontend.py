@@ -13,7 +13,8 @@ import pytest
 from trackingbox.cli import main
 from trackingbox.compiler import compile_model
 from trackingbox.compiler.embedded import FRONTEND_GAPS
-from trackingbox.compiler.source import locate, model_files, resolve_source
+from trackingbox.compiler.library import locate, model_files
+from trackingbox.compiler.source import resolve_source
 from trackingbox.errors import CompileError, UnsupportedConstructError
 
 pytestmark = pytest.mark.compile

@@ -12,7 +12,8 @@ import pytest
 
 from trackingbox.compiler import compile_model
 from trackingbox.compiler.library import LibraryIndex, scan_file
-from trackingbox.compiler.source import locate, resolve_source, strip_comments
+from trackingbox.compiler.library import locate
+from trackingbox.compiler.source import resolve_source, strip_comments
 from trackingbox.errors import UnsupportedConstructError
 
 

@@ -18,14 +18,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
-from .library import index_for, resolve_libraries
+from .library import index_for, locate, model_files, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
-from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
+from .source import ModelicaSource, class_names, experiment_settings
 
 log = logging.getLogger(__name__)
 
@@ -305,7 +306,7 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str,
     return None
 
 
-FRONTEND_TIMEOUT = 600.0
+FRONTEND_TIMEOUT = config.setting("frontend_timeout").default
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
 
@@ -331,7 +332,7 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
     :data:`FRONTEND_TIMEOUT` raises :class:`CompileError` naming the model and
     the signal; the tool itself never goes down with it.
     """
-    timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
+    timeout = float(config.get("frontend_timeout"))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
         if validate is not None:
@@ -348,6 +349,7 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
                     log.debug("front end: %s from the flat cache (%s)", model, key[:12])
                     return {"ok": True, "flat": flat, "cached": True}
             request = {"mode": "flatten", "entry": str(tree.entry), "model": model,
+                       "stack_mb": config.get("frontend_stack_mb"),
                        "roots": [str(r) for r in tree.roots] if tree.roots else None}
             answer = tree.rename(_run_worker(request, req, res, source, model, timeout))
             if answer["ok"]:
@@ -383,6 +385,7 @@ def _validate(source: ModelicaSource, model: str, validate: tuple[Path, ...], pa
         return out
 
     request = {"mode": "validate", "parse_error": parse_error, "model": model,
+               "stack_mb": config.get("frontend_stack_mb"),
                "validate": readable(validate), "validate_all": readable(source.files) if parse_error else []}
     answer = _run_worker(request, req, res, source, model, timeout)
     return FrontendTree(entry=tmp, roots=None, renames=sorted(renames, key=lambda r: -len(r[0]))).rename(answer)

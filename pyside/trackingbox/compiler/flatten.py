@@ -71,7 +71,8 @@ from .causalize import StructuralError, blt
 from .events import Condition, EventSystem, Sample, WhenCondition
 from .modifiers import modifier_check
 from .semantics import check_flat
-from .source import (Location, ModelicaSource, class_extent, locate, model_files, read_text, span_location,
+from .library import locate, model_files
+from .source import (Location, ModelicaSource, class_extent, read_text, span_location,
                      span_sources, strip_comments)
 
 log = logging.getLogger(__name__)

@@ -34,6 +34,7 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .. import config
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .rewrite import frontend_bytes
 from .source import ModelicaSource
@@ -221,7 +222,7 @@ class FlatCache:
 
     @staticmethod
     def enabled() -> bool:
-        return os.environ.get("TRACKINGBOX_FRONTEND_CACHE", "1").strip() not in ("0", "no", "off", "false")
+        return bool(config.get("frontend_cache"))
 
     def path(self, key: str) -> Path:
         return self.root / key[:2] / f"{key}.pickle.gz"

@@ -34,7 +34,8 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .source import strip_comments
+from .. import config
+from .source import Location, ModelicaSource, _code, strip_comments
 
 log = logging.getLogger(__name__)
 
@@ -286,7 +287,7 @@ def _names(text: str) -> tuple[tuple[str, ...], bool]:
 def cache_dir() -> Path:
     """Where trackingbox keeps what it computed from Modelica sources (the class index, flattened
     models): ``$TRACKINGBOX_CACHE_DIR``, else ``$XDG_CACHE_HOME/trackingbox`` (``~/.cache/trackingbox``)."""
-    env = os.environ.get("TRACKINGBOX_CACHE_DIR")
+    env = config.get("cache_dir")
     if env:
         return Path(env)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
@@ -374,8 +375,6 @@ _NEWLINES: dict[Path, tuple[int, list[int]]] = {}
 
 def line_of(file: Path, offset: int) -> int:
     """The line of the character *offset* of *file*'s (comment-free) text."""
-    from .source import _code
-
     code = _code(file)
     cached = _NEWLINES.get(file)
     if cached is None or cached[0] != len(code):
@@ -671,8 +670,6 @@ class LibraryIndex:
     # ------------------------------------------------------------------ text
     def code(self, info: ClassInfo) -> str:
         """The comment-free text of a class definition."""
-        from .source import _code
-
         return _code(info.file)[info.start:info.end]
 
     def own_code(self, info: ClassInfo, *, annotations: bool = True) -> str:
@@ -781,3 +778,55 @@ def resolve_libraries(source, model: str, libraries=()) -> tuple[tuple[Path, ...
 
 __all__ = ["ClassInfo", "LibraryIndex", "cache_dir", "index_tree", "library_candidates", "modelicapath",
            "normalize_libraries", "resolve_libraries", "scan_file"]
+
+
+def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5, *,
+           own: bool = False, libraries: tuple[Path, ...] | list[Path] = ()) -> list[Location]:
+    """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
+
+    Only the text of the model's own class and of the classes it uses (in the order Modelica's
+    lookup finds them, :meth:`.library.LibraryIndex.used_classes`) is searched, each class's own
+    text without its nested classes, so an occurrence elsewhere in the package or in a library is
+    never named, and a large library file is never searched as a whole. With *own*, only the
+    model's own class definition (its nested classes included) is searched.
+    """
+    regex = re.compile(pattern)
+    index = index_for(source, libraries)
+    info = index.classes.get(model)
+    if info is None:
+        return []
+    found: list[Location] = []
+    if own:
+        text = index.code(info)
+        for match in regex.finditer(text):
+            found.append(Location(*index.location(info, match.start())))
+            if len(found) >= limit:
+                break
+        return found
+    for name in index.used_classes(model):
+        cls = index.classes[name]
+        text = index.own_code(cls) if name != model else index.code(cls)
+        for match in regex.finditer(text):
+            loc = Location(*index.location(cls, match.start()))
+            if loc not in found:
+                found.append(loc)
+            if len(found) >= limit:
+                return found
+    return found
+
+
+def model_files(source: ModelicaSource, model: str, limit: int = 40,
+                libraries: tuple[Path, ...] | list[Path] = ()) -> tuple[Path, ...]:
+    """The files of the classes *model* uses: its own class file first, then the files of the
+    classes it uses (extends, component types, functions, packages of constants), followed
+    transitively, as Modelica's lookup resolves their names in the model's scope
+    (:meth:`.library.LibraryIndex.used_classes`); at most *limit* files."""
+    index = index_for(source, libraries)
+    found: list[Path] = []
+    for name in index.used_classes(model):
+        file = index.classes[name].file
+        if file not in found:
+            found.append(file)
+            if len(found) >= limit:
+                break
+    return tuple(found)

@@ -49,6 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import config
+
 log = logging.getLogger(__name__)
 
 DEFAULT_PACKAGES = (
@@ -405,7 +407,7 @@ def table(results: list[dict], packages: list[str] | None = None) -> str:
 
 def default_msl() -> Path:
     """``../shared/msl/Modelica`` beside the repository, or ``$TRACKINGBOX_MSL``."""
-    env = os.environ.get("TRACKINGBOX_MSL")
+    env = config.get("msl")
     if env:
         return Path(env)
     return Path(__file__).resolve().parents[3].parent / "shared" / "msl" / "Modelica"
@@ -413,7 +415,7 @@ def default_msl() -> Path:
 
 def default_reference() -> Path:
     """``../shared/msl-reference`` beside the repository, or ``$TRACKINGBOX_MSL_REFERENCE``."""
-    env = os.environ.get("TRACKINGBOX_MSL_REFERENCE")
+    env = config.get("msl_reference")
     if env:
         return Path(env)
     return Path(__file__).resolve().parents[3].parent / "shared" / "msl-reference"

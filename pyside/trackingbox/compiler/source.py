@@ -248,67 +248,11 @@ def _file_of(source: ModelicaSource, dotted: str) -> Path | None:
     return holder
 
 
-def model_files(source: ModelicaSource, model: str, limit: int = 40,
-                libraries: tuple[Path, ...] | list[Path] = ()) -> tuple[Path, ...]:
-    """The files of the classes *model* uses: its own class file first, then the files of the
-    classes it uses (extends, component types, functions, packages of constants), followed
-    transitively, as Modelica's lookup resolves their names in the model's scope
-    (:meth:`.library.LibraryIndex.used_classes`); at most *limit* files."""
-    from .library import index_for
-
-    index = index_for(source, libraries)
-    found: list[Path] = []
-    for name in index.used_classes(model):
-        file = index.classes[name].file
-        if file not in found:
-            found.append(file)
-            if len(found) >= limit:
-                break
-    return tuple(found)
-
-
-def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5, *,
-           own: bool = False, libraries: tuple[Path, ...] | list[Path] = ()) -> list[Location]:
-    """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
-
-    Only the text of the model's own class and of the classes it uses (in the order Modelica's
-    lookup finds them, :meth:`.library.LibraryIndex.used_classes`) is searched, each class's own
-    text without its nested classes, so an occurrence elsewhere in the package or in a library is
-    never named, and a large library file is never searched as a whole. With *own*, only the
-    model's own class definition (its nested classes included) is searched.
-    """
-    from .library import index_for
-
-    regex = re.compile(pattern)
-    index = index_for(source, libraries)
-    info = index.classes.get(model)
-    if info is None:
-        return []
-    found: list[Location] = []
-    if own:
-        text = index.code(info)
-        for match in regex.finditer(text):
-            found.append(Location(*index.location(info, match.start())))
-            if len(found) >= limit:
-                break
-        return found
-    for name in index.used_classes(model):
-        cls = index.classes[name]
-        text = index.own_code(cls) if name != model else index.code(cls)
-        for match in regex.finditer(text):
-            loc = Location(*index.location(cls, match.start()))
-            if loc not in found:
-                found.append(loc)
-            if len(found) >= limit:
-                return found
-    return found
-
-
 def span_location(span: dict | None, files: tuple[Path, ...], expect: str | None = None) -> Location | None:
     """The file and line of a rumoca ``span`` (``{"source", "start", "end"}``, byte offsets).
 
     rumoca names a span's file by an opaque number, so the file is the first of *files*
-    (the model's own files, see :func:`model_files`) whose text at the span matches the
+    (the model's own files, see :func:`.library.model_files`) whose text at the span matches the
     regular expression *expect* (or is merely long enough when *expect* is None).
     """
     if not isinstance(span, dict) or not isinstance(span.get("start"), int):
