@@ -69,6 +69,7 @@ from . import tables
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .events import Condition, EventSystem, Sample, WhenCondition
+from .index import IndexError_, max_matching, reduce_index
 from .modifiers import modifier_check
 from .semantics import check_flat
 from .library import locate, model_files
@@ -1720,8 +1721,6 @@ class FlatTranslator:
                          assignments: list[tuple[ca.MX, ca.MX]]) -> list[tuple[ca.MX, str]]:
         """Those of *optional* initial equations that determine an unknown of the initialisation problem
         (free states, fixed = false parameters) that the others leave undetermined (by structural rank)."""
-        from .index import max_matching
-
         free = [s for s in states if s.fixed is not True] + list(computed)
         position = {s.sym.name(): i for i, s in enumerate(free)}
         exprs = [r for r, _ in residuals] + [r for r, _ in optional]
@@ -1746,8 +1745,6 @@ class FlatTranslator:
         equations (the parameters' bindings, then the original and differentiated ones), the states
         chosen, and the initial equations v = start of former states with fixed = true, which hold
         where they are needed (a position prescribed elsewhere makes its own start redundant)."""
-        from .index import IndexError_, reduce_index
-
         calc_names = {sv.name for sv in calculated}
         eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
         preference = {}
