@@ -1418,7 +1418,7 @@ class FlatTranslator:
                 residuals.append((r, origin))
         # bound continuous variables (binding equations in declarations)
         for sv in self.scalars.values():
-            if sv.kind == "continuous" and sv.binding_node is not None:
+            if sv.kind in ("continuous", "discrete") and sv.binding_node is not None:
                 residuals.append((sv.sym - self._element(sv, sv.binding_node), f"binding of {sv.name}"))
         for section in self.flat.get("algorithms") or []:
             residuals.extend(self.algorithm_residuals(section, initial=False))
