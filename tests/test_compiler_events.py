@@ -61,6 +61,12 @@ package Ev
     end when;
     y = if x > 1.1 then 1 else 0;
   end Clock;
+  model Bound "discrete variables given by their declaration's binding"
+    parameter Boolean on = true;
+    Boolean late = time > 0.5;
+    Boolean both = late and on;
+    Integer n = if both then 2 else 1;
+  end Bound;
   model Latch "a when-statement in an algorithm keeps x where it passed 1"
     Real x(start = 0, fixed = true);
     discrete Real m(start = 0);
@@ -165,3 +171,12 @@ def test_the_trackingbox_stepper_runs_an_fmu_with_events(ev, tmp_path):
     x = np.asarray(res["x"])
     phase = np.mod(t - 0.5, 2.0)
     assert np.allclose(x, np.where(t < 0.5, 1.5 + t, np.where(phase < 1.0, 2.0 - phase, phase)), atol=1e-6)
+
+
+def test_discrete_variables_bound_in_their_declaration(ev, tmp_path):
+    fmu = fmu_of(ev, tmp_path, "Bound")
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.1, output=["late", "both", "n"],
+                            record_events=False)
+    late = (out["time"] > 0.5 + 1e-9).astype(float)
+    assert np.array_equal(out["late"], late) and np.array_equal(out["both"], late)
+    assert np.array_equal(out["n"], 1 + late)
