@@ -104,12 +104,13 @@ MSL_EXAMPLES = (
     "Modelica.Electrical.Analog.Examples.ChuaCircuit",
     "Modelica.Mechanics.Rotational.Examples.First",
     "Modelica.Mechanics.Translational.Examples.Damper",
-    "Modelica.Fluid.Examples.Tanks.EmptyTanks",
+    "Modelica.Thermal.FluidHeatFlow.Examples.PumpAndValve",
 )
 
 
-def _run_measured(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int, str]:
-    """(wall s, peak MB of the largest process of the tree, exit status, last line of output) of *cmd*."""
+def _run_measured(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int, str, float]:
+    """(wall s, peak MB of the largest process of the tree, exit status, last line of output, CPU s of the
+    tree) of *cmd*."""
     import os
     import subprocess
 
@@ -120,7 +121,8 @@ def _run_measured(cmd: list[str], env: dict[str, str]) -> tuple[float, float, in
     proc.returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - t0
     lines = out.decode("utf-8", "replace").strip().splitlines()
-    return wall, usage.ru_maxrss / 1024, proc.returncode, (lines[-1] if lines else "")
+    return wall, usage.ru_maxrss / 1024, proc.returncode, (lines[-1] if lines else ""), \
+        usage.ru_utime + usage.ru_stime
 
 
 _FULL_LIBRARY = """
@@ -143,9 +145,12 @@ def msl(models: list[str]) -> int:
         print(f"error: the Modelica Standard Library is not at {root} (set TRACKINGBOX_MSL)", file=sys.stderr)
         return 2
     tb = str(Path(sys.executable).with_name("trackingbox"))
-    print(f"MSL {root}; each figure one fresh process: wall s / peak MB of its largest process")
-    print(f"{'model':58s} {'cold':>13s} {'library cached':>15s} {'model cached':>13s} {'full library':>13s} "
-          f"{'full/lib':>8s}")
+    import os as _os
+
+    print(f"MSL {root}; each figure one fresh process: wall s / CPU s / peak MB of its largest process "
+          f"(load average at start {_os.getloadavg()[0]:.1f} on {_os.cpu_count()} cores)", flush=True)
+    print(f"{'model':58s} {'cold':>18s} {'library cached':>18s} {'model cached':>18s} {'full library':>18s} "
+          f"{'full/lib':>8s}", flush=True)
     lib_cached: list[float] = []
     failures = 0
     with tempfile.TemporaryDirectory(prefix="tbx-bench-msl-") as tmp:
@@ -175,14 +180,15 @@ def msl(models: list[str]) -> int:
             bad = [r for r in (cold, warm, again, full) if r[2] != 0]
             if bad:
                 failures += 1
-                print(f"{model:58s} failed: {bad[0][3][:150]}")
+                print(f"{model:58s} failed: {bad[0][3][:150]}", flush=True)
                 continue
             lib_cached.append(warm[0])
-            cell = lambda r: f"{r[0]:6.1f}/{r[1]:6.0f}"  # noqa: E731
-            print(f"{model:58s} {cell(cold):>13s} {cell(warm):>15s} {cell(again):>13s} {cell(full):>13s} "
-                  f"{full[0] / warm[0]:8.1f}")
+            cell = lambda r: f"{r[0]:5.1f}/{r[4]:5.1f}/{r[1]:5.0f}"  # noqa: E731
+            print(f"{model:58s} {cell(cold):>18s} {cell(warm):>18s} {cell(again):>18s} {cell(full):>18s} "
+                  f"{full[0] / warm[0]:8.1f}", flush=True)
+    print(f"(load average at the end {_os.getloadavg()[0]:.1f})")
     if lib_cached:
-        print(f"median compile with the library cached: {statistics.median(lib_cached):.1f} s over "
+        print(f"median compile with the library cached: {statistics.median(lib_cached):.1f} s wall over "
               f"{len(lib_cached)} models (targets: one-state model <= 5 s and <= 400 MB; median <= 15 s)")
     print("(cold: first compile on an empty cache; library cached: rumoca's parsed files and the class index "
           "kept, the flat model not (a new model); model cached: the same model again; full library: rumoca "

@@ -220,10 +220,9 @@ def test_unknown_class(tmp_path):
 @pytest.mark.parametrize(
     "body, construct, line",
     [
-        ("  Real x(start=0, fixed=true);\nequation\n  der(x) = 1;\n  when x > 1 then\n    reinit(x, 0);\n  end when;\n",
-         "when-clause", 5),
-        ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = pre(x);\n", "pre", 6),
-        ("  Real x(start=0, fixed=true);\nalgorithm\n  x := 1;\n", "algorithm", 3),
+        ("  Real x(start=0, fixed=true);\nequation\n  der(x) = 1;\n  when x > 1 then\n    terminate(\"done\");\n"
+         "  end when;\n", "terminate() in a when-clause", 6),
+        ("  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n  y = delay(x, 1.0);\n", "delay", 6),
     ],
 )
 def test_unsupported_construct_is_refused_with_location(tmp_path, body, construct, line):
@@ -233,6 +232,14 @@ def test_unsupported_construct_is_refused_with_location(tmp_path, body, construc
     msg = str(exc.value)
     assert construct in msg and f"U.mo:{line}" in msg
     assert not (tmp_path / "u.fmu").exists()
+
+
+def test_reinit_of_a_variable_that_is_not_a_state_is_an_error_at_its_line(tmp_path):
+    src = write(tmp_path, "R.mo", "model R\n  Real x(start=0, fixed=true);\n  Real y;\nequation\n  der(x) = 1;\n"
+                "  y = x;\n  when x > 1 then\n    reinit(y, 0);\n  end when;\nend R;\n")
+    with pytest.raises(CompileError, match=r"reinit\(\) can only be applied to state variables.*R\.mo:8"):
+        compile_model(src, "R", backend="embedded", output=tmp_path / "r.fmu")
+    assert not (tmp_path / "r.fmu").exists()
 
 
 def test_structurally_singular_model(tmp_path):

@@ -297,16 +297,36 @@ def test_assert_in_an_inlined_function(tmp_path):
 
 
 @pytest.mark.parametrize("construct", ["initial", "terminal"])
-def test_initial_and_terminal_are_refused(tmp_path, construct):
+def test_initial_and_terminal_in_an_assert(tmp_path, construct):
+    """initial() is true only during initialisation, terminal() never during a run: the assert fails
+    where x falls below 0.5, at t = ln 2."""
     text = f"""
 model UsesIt
   Real x(start = 1, fixed = true);
 equation
   der(x) = -x;
-  assert({construct}() or x > 0, "x positive");
+  assert({construct}() or x > 0.5, "x above 0.5");
 end UsesIt;
 """
-    with pytest.raises(UnsupportedConstructError, match=rf"{construct}\(\).*UsesIt\.mo:6"):
+    fmu = build(tmp_path, "UsesIt", text)
+    with FMUModel(fmu) as model, pytest.raises(AssertionFailed, match="x above 0.5") as exc:
+        model.simulate(stop_time=2, output_interval=0.05)
+    assert abs(exc.value.time - math.log(2)) <= 0.05
+
+
+def test_an_if_equation_on_initial_without_else_is_refused(tmp_path):
+    """rumoca 0.10.2 drops `if initial() then assert(...); end if;` without a word: refused."""
+    text = """
+model UsesIt
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -x;
+  if initial() then
+    assert(x > 0, "x positive");
+  end if;
+end UsesIt;
+"""
+    with pytest.raises(UnsupportedConstructError, match=r"initial\(\).*UsesIt\.mo:6"):
         build(tmp_path, "UsesIt", text)
 
 
@@ -346,3 +366,36 @@ def test_assert_failing_inside_a_step_the_solver_cannot_finish_is_reported(tmp_p
         model.simulate(stop_time=20, output_interval=10)  # the assert fails long before the first point
     assert exc.value.message == "tank empty"
     assert abs(exc.value.time - t_empty) <= 0.05  # a trial point of the failed step
+
+
+LEVEL_TANK = """
+model Tank "the level is not a state: level(fixed = true) is an initial equation for the mass"
+  parameter Real rho = 1000;
+  parameter Real A = 2;
+  parameter Real k = 500;
+  parameter Real cp = 4;
+  parameter Real T0 = 300;
+  Real m "state: mass";
+  Real H "state: enthalpy";
+  Real level(start = 0.9, fixed = true);
+  Real T;
+initial equation
+  T = T0;
+equation
+  m = rho*A*level;
+  der(m) = -k*level;
+  H = m*cp*T;
+  der(H) = -k*level*cp*T;
+end Tank;
+"""
+
+
+def test_fixed_start_of_an_algebraic_variable_is_an_initial_equation(tmp_path):
+    """level(fixed = true) sets the state m through m = rho A level; the initial equations are solved
+    one block at a time, m before T = H/(m cp), so the start value m = 0 divides by nothing."""
+    fmu = build(tmp_path, "Tank", LEVEL_TANK)
+    with FMUModel(fmu, tolerance=1e-10) as model:
+        df = model.simulate(stop_time=4, output_interval=1, outputs=["level", "T", "m"])
+    assert np.allclose(df["level"], 0.9 * np.exp(-500 * df["time"] / 2000), rtol=1e-6)
+    assert np.allclose(df["T"], 300.0, rtol=1e-8)
+    assert np.allclose(df["m"], 2000 * df["level"], rtol=1e-9)

@@ -20,7 +20,7 @@ needs_suite = pytest.mark.skipif(not (SUITE / "package.mo").is_file(),
 
 SAMPLE = [
     "ModelicaCompliance.Arrays.Functions.Algebra.Transpose1",     # valid, in the supported subset
-    "ModelicaCompliance.Algorithms.When.WhenPriority",            # valid, when-clause (refused)
+    "ModelicaCompliance.Algorithms.When.WhenPriority",            # valid, algorithm of when-statements (rumoca refuses)
     "ModelicaCompliance.Algorithms.Assert.AssertNoEval",          # valid, algorithm section (refused)
     "ModelicaCompliance.Algorithms.Assert.AssertError",           # invalid
     "ModelicaCompliance.Components.Declarations.TypeNameAsComponentName.TypeNameAsComponentName",  # nested, invalid
@@ -77,7 +77,9 @@ def test_runner_on_a_sample_keeps_the_invariants(tmp_path, capsys):
     assert when["outcome"] == "refused-construct"
     own = Path(when["file"]).read_text().splitlines()
     file, line = when["locations"][0]
-    assert file == when["file"] and re.search(r"\bwhen\b", own[line - 1])
+    # rumoca's own limit (the algorithm reads x, which a when-statement in it assigns), at the section's line
+    assert "not supported by the rumoca front end" in when["message"]
+    assert file == when["file"] and re.search(r"\balgorithm\b", own[line - 1])
     # --table prints the same table from the results file alone
     assert main(["--table", str(out)]) == 0
     assert capsys.readouterr().out.strip() == table.strip().rsplit("\n", 1)[0].strip()

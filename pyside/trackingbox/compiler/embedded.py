@@ -43,13 +43,14 @@ def _diagnostics(raw: list[tuple[str, str, int | None]]) -> list[str]:
     return found
 
 
-_MENTIONED = (
-    ("when", "when-clause", r"\bwhen\b"),
-    ("pre(", "pre()", r"\bpre\s*\("),
-    ("pre expression", "pre()", r"\bpre\s*\("),
-    ("edge(", "edge()", r"\bedge\s*\("),
-    ("sample(", "sample()", r"\bsample\s*\("),
-    ("reinit", "reinit()", r"\breinit\s*\("),
+def _without_paths(text: str) -> str:
+    """*text* without file positions (``[/a/b.mo:3:4]``, ``/a/b.mo:3``): words in a directory name
+    (``test_when_...``) are not what the message says."""
+    text = re.sub(r"\[[^\]\[]*?\.mo(?::\d+)*\]", " ", text)
+    return re.sub(r"(?:/[^\s:,()\[\]]+)+\.mo(?::\d+)*", " ", text)
+
+
+_MENTIONED = (  # (the embedded path compiles when, pre, edge, sample, reinit: a refusal naming them is rumoca's)
     ("external", "external function", r"\bexternal\b"),
     ("clock", "clocked equations", r"\bClock\b"),
 )
@@ -59,7 +60,7 @@ def _mentioned_construct(message: str, source: ModelicaSource, model: str,
                          libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a construct the embedded path does not support either: say where it is
     (in the model's own file or a class it uses, never elsewhere in the package)."""
-    low = message.lower()
+    low = _without_paths(message).lower()
     for needle, construct, pattern in _MENTIONED:
         if needle in low:
             locs = locate(source, model, pattern, libraries=libraries)
@@ -81,8 +82,8 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
                     model: str, libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca said it does not support something (not that the model is wrong): refuse naming
     the construct in rumoca's words and where it stands in the model's own files."""
-    low = message.lower()
-    first = message.splitlines()[0]
+    low = _without_paths(message).lower()
+    first = _without_paths(message.splitlines()[0])
     nested = re.search(r"unresolved import: '([\w.]+)'", first)
     if _IMPLICIT_RANGE in low:
         construct = "for-loop without an explicit range (for i loop ...)"
@@ -264,9 +265,14 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
                 r"\bString\s*\(",
                 readme="`String()` of an enumeration"),
     FrontendGap("`cardinality()`",
-                r"unresolved Flat reference|cardinality\(\) may only be used",
+                r"unresolved Flat reference `[^`]*cardinality|cardinality\(\) may only be used",
                 r"\bcardinality\s*\(",
                 readme="`cardinality()`"),
+    FrontendGap("a constant or function of a package reached through a component or a replaceable package "
+                "(`Medium.…`) that the front end leaves unresolved",
+                r"unresolved Flat reference `(?:[\w]+\.)*(?P<leaf>\w+)`",
+                r"(?<![\w])(?:\w+\.)*{leaf}\b",
+                readme="constants and functions of packages reached through replaceable packages"),
 )
 """Valid constructs the front end refuses without saying it does not support them (found on the
 Modelica compliance suite); each is listed in the README's compile section."""
@@ -415,7 +421,7 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
 def _missing_library(message: str, missing: dict[str, str], model: str) -> CompileError | None:
     """The front end failed while a top-level package the model's classes use is in no library: say
     which (the package the front end's message names, else the first one missing)."""
-    if not missing:
+    if not missing or not re.search(r"unresolved|not found|unknown", _without_paths(message), re.I):
         return None
     names = [(q[0] or q[1]).split(".", 1)[0] for q in re.findall(r"'([A-Za-z_][\w.]*)'|`([A-Za-z_][\w.]*)`", message)]
     first = next((n for n in names if n in missing), next(iter(missing)))

@@ -65,8 +65,11 @@ import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
+from . import tables
 from .arrays import ArrayError
 from .causalize import StructuralError, blt
+from .events import Condition, EventSystem, Sample, WhenCondition
+from .index import IndexError_, max_matching, reduce_index
 from .modifiers import modifier_check
 from .semantics import check_flat
 from .library import locate, model_files
@@ -125,6 +128,11 @@ class InitialSystem:
     free_states: list[str]
     computed_parameters: list[str]
     origins: list[str]
+    guesses: list[ca.MX] = field(default_factory=list)
+    solution: list[ca.MX] = field(default_factory=list)
+    """The unknowns solved block by block (a scalar equation linear in its unknown explicitly, a loop by
+    Newton from ``guesses``, the unknowns' values when the FMU leaves initialisation mode), as
+    expressions in ``guesses`` and ``knowns``; empty: one Newton solve of all ``residual``."""
 
 
 @dataclass
@@ -152,6 +160,8 @@ class ExplicitModel:
     torn_sizes: list[tuple[int, int]] = field(default_factory=list)
     asserts: list[Assertion] = field(default_factory=list)
     initial: InitialSystem | None = None
+    events: EventSystem | None = None
+    discrete: list[ScalarVar] = field(default_factory=list)
 
 
 def _kind_of(node: Any) -> tuple[str, Any]:
@@ -162,14 +172,8 @@ def _kind_of(node: Any) -> tuple[str, Any]:
 
 
 _UNSUPPORTED_BUILTINS = {
-    "pre": r"\bpre\s*\(",
-    "edge": r"\bedge\s*\(",
-    "change": r"\bchange\s*\(",
-    "sample": r"\bsample\s*\(",
     "reinit": r"\breinit\s*\(",
     "delay": r"\bdelay\s*\(",
-    "initial": r"\binitial\s*\(\s*\)",
-    "terminal": r"\bterminal\s*\(\s*\)",
     "spatialdistribution": r"\bspatialDistribution\s*\(",
     "cardinality": r"\bcardinality\s*\(",
     "assert": r"\bassert\s*\(",
@@ -186,8 +190,71 @@ _UNSUPPORTED_BUILTINS = {
 }
 
 
+_EVENT_BUILTINS = {"pre", "edge", "change", "initial", "terminal", "sample"}
+_RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
+HYSTERESIS = 1e-10
+"""Relative shift of event indicators past the switching point (see FlatTranslator.relation)."""
+
+
 def _num(x: Value) -> bool:
     return isinstance(x, (int, float, bool, np.integer, np.floating, np.bool_))
+
+
+def _plain_ge(a: Value, b: Value) -> Value:
+    """``a >= b`` evaluated as it stands (no event)."""
+    if _num(a) and _num(b):
+        return a >= b
+    return (ca.MX(a) if _num(a) else a) >= b
+
+
+def _if(cond: Value, a: Value, b: Value) -> Value:
+    """``if cond then a else b`` for scalars (a constant condition picks a branch)."""
+    if _num(cond):
+        return a if bool(cond) else b
+    if a is b:
+        return a
+    return ca.if_else(cond, a, b)
+
+
+def _when_targets(flat: dict[str, Any]) -> set[str]:
+    """Variables (their flat names, subscripts of the last part removed) that when-clauses and
+    when-statements assign: they are discrete (MLS 4.5: a Real assigned in a when-clause)."""
+    found: set[str] = set()
+    for chain in flat.get("when_chains") or []:
+        for br in [chain.get("first") or {}, *(chain.get("else_when") or [])]:
+            for eq in br.get("equations") or []:
+                kind, body = _kind_of(eq)
+                if kind == "Assign" and isinstance(body, dict):
+                    found.add(re.sub(r"\[[^\]]*\]$", "", str(body.get("target"))))
+
+    def statements(stmts: list[Any], inside: bool) -> None:
+        for st in stmts or []:
+            kind, body = _kind_of(st)
+            if not isinstance(body, dict):
+                continue
+            if kind == "Assignment" and inside:
+                parts = (body.get("comp") or {}).get("parts") or []
+                names = []
+                for k, part in enumerate(parts):
+                    subs = part.get("subs") or [] if k < len(parts) - 1 else []
+                    idx = [str(_kind_of(sb)[1].get("value")) for sb in subs
+                           if _kind_of(sb)[0] == "Index" and isinstance(_kind_of(sb)[1], dict)]
+                    names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
+                found.add(".".join(names))
+            elif kind == "When":
+                for blk in body.get("blocks") or []:
+                    statements(blk.get("stmts") or [], True)
+            for key in ("cond_blocks", "branches", "blocks"):
+                for blk in body.get(key) or []:
+                    if isinstance(blk, dict) and kind != "When":
+                        statements(blk.get("stmts") or blk.get("body") or [], inside)
+            for key in ("else_block", "else_branch", "equations", "stmts", "body"):
+                if isinstance(body.get(key), list):
+                    statements(body[key], inside)
+
+    for section in (flat.get("algorithms") or []) + (flat.get("initial_algorithms") or []):
+        statements(section.get("statements") or [], False)
+    return found
 
 
 class FlatTranslator:
@@ -214,6 +281,16 @@ class FlatTranslator:
         self._files: tuple[Path, ...] | None = None
         self._sources: dict[int, Path] | None = None
         self._text_cache: dict[Path, str] = {}
+        # events (.events): relations and roundings frozen between events, when conditions, pre()
+        self.events = EventSystem(initial=ca.MX.sym("_tbx_initial"))
+        self.quiet = ca.MX.sym("_tbx_quiet")  # 1 when sample() instants are over (see fmi_export)
+        self._freeze = True
+        self._frozen: dict[str, ca.MX] = {}
+        self._pre: dict[str, ca.MX] = {}
+        self._in_when_condition = False
+        self._when_targets: set[str] = set()
+        self._uses_initial = False
+        self._discrete_defs: list[tuple[ca.MX, str]] = []  # when-equations, discrete outputs of algorithms
 
     # ------------------------------------------------------------------ errors
     def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
@@ -227,9 +304,11 @@ class FlatTranslator:
             self._files = model_files(self.source, self.model, libraries=self.libraries)
             self._sources = span_sources(self.flat, self._files)
         span = span if span is not None else self._span
+        known = None
         if span is not None:
             known = self._sources.get(span.get("source")) if self._sources else None
-            files = (known,) if known is not None else self._files
+            # without the span's file known, only a file whose text there matches the construct counts
+            files = (known,) if known is not None else (self._files if pattern or len(self._files) == 1 else ())
             loc = span_location(span, files, pattern)
             if loc is not None:
                 return [loc]
@@ -237,8 +316,8 @@ class FlatTranslator:
             locs = locate(self.source, self.model, pattern, libraries=self.libraries)
             if locs:
                 return locs
-        if span is not None and pattern:
-            loc = span_location(span, files, None)
+        if span is not None and pattern and (known is not None or len(self._files) == 1):
+            loc = span_location(span, (known,) if known is not None else self._files, None)
             if loc is not None:
                 return [loc]
         return []
@@ -247,6 +326,10 @@ class FlatTranslator:
                     span: dict[str, Any] | None = None) -> UnsupportedConstructError:
         locs = self.location(pattern, span)
         where = (" at " + ", ".join(str(loc) for loc in locs)) if locs else ""
+        if not locs:  # at least the model's declaration
+            decl = locate(self.source, self.model, rf"\b(?:model|block|class)\s+{re.escape(self.model.rsplit('.', 1)[-1])}\b",
+                          limit=1, own=True, libraries=self.libraries)
+            where = f" ({self.model} is declared at {decl[0]}; the construct's own line is not known)" if decl else ""
         msg = (
             f"unsupported Modelica construct in {self.model}: {construct}{where}"
             f"{': ' + detail if detail else ''}. The embedded backend cannot compile it; "
@@ -257,19 +340,12 @@ class FlatTranslator:
     # --------------------------------------------------------------- checks
     def check_constructs(self) -> None:
         flat = self.flat
-        if flat.get("when_chains"):
-            raise self.unsupported("when-clause", r"\bwhen\b")
-        if flat.get("algorithms"):
-            raise self.unsupported("algorithm section in a model", r"\balgorithm\b")
-        if flat.get("initial_algorithms"):
-            raise self.unsupported("initial algorithm section", r"\binitial\s+algorithm\b")
-        for fname, fn in self.functions.items():
-            ext = fn.get("external")
-            if ext and _builtin_external(ext) is None:
-                raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
+
 
     # ------------------------------------------------------------ variables
     def _type_of(self, v: dict[str, Any]) -> int:
+        if v.get("type_id") in (self.flat.get("enumeration_types") or []):
+            return INTEGER  # an enumeration value is its ordinal (MLS 4.9.5)
         t = self.types.get(str(v.get("type_id")))
         if t is None:
             return REAL
@@ -286,6 +362,7 @@ class FlatTranslator:
         # values are only as good as the modifications the front end kept
         self.check_modifiers()
         top_inputs = set(self.flat.get("top_level_input_components") or [])
+        self._when_targets = _when_targets(self.flat)
         for name, v in self.flat["variables"].items():
             vtype = self._type_of(v)
             var_kind, _ = _kind_of(v.get("variability"))
@@ -304,14 +381,10 @@ class FlatTranslator:
                 kind = "constant"
             elif var_kind == "Parameter":
                 kind = "parameter" if vtype == REAL else "structural"
-            elif var_kind == "Discrete" or vtype != REAL:
-                short = name.rsplit(".", 1)[-1]
-                raise self.unsupported(
-                    f"discrete variable {name!r}", rf"\b(?:discrete|Integer|Boolean)\b[^;]*\b{short}\b",
-                    "only Real variables are supported; make it a parameter or a Real",
-                )
             elif caus_kind == "Input" and (name in top_inputs or top):
                 kind = "input"
+            elif var_kind == "Discrete" or vtype != REAL or name in self._when_targets:
+                kind = "discrete"  # held between events (.events)
             else:
                 kind = "continuous"
             dims = self._dims(v.get("dims") or [], name)
@@ -328,7 +401,7 @@ class FlatTranslator:
                     binding_node=v.get("binding"), index=idx, attrs=attrs, description=desc,
                     fixed=self._fixed(fixed_raw),
                 )
-                if kind in ("parameter", "input", "continuous"):
+                if kind in ("parameter", "input", "continuous", "discrete"):
                     sv.sym = ca.MX.sym(sname)
                 scalars.append(sv)
                 self.scalars[sname] = sv
@@ -536,6 +609,8 @@ class FlatTranslator:
         if _kind_of(body["lhs"])[0] == "Tuple":
             return self._tuple_equation(body, env)
         lhs = self.expr(body["lhs"], env)
+        if str(op).lower() in ("and", "or") and _num(lhs) and bool(lhs) == (str(op).lower() == "or"):
+            return bool(lhs)  # false and ..., true or ...: the other operand is not evaluated
         rhs = self.expr(body["rhs"], env)
         return _binary(str(op), lhs, rhs, self)
 
@@ -700,11 +775,201 @@ class FlatTranslator:
             return self._der(args_nodes[0], env)
         if lname in _UNSUPPORTED_BUILTINS:
             raise self.unsupported(f"built-in {lname}()", _UNSUPPORTED_BUILTINS[lname])
+        if lname in _EVENT_BUILTINS:
+            return self._event_builtin(lname, args_nodes, env)
+        if lname in ("noevent", "smooth"):  # relations inside generate no events
+            saved, self._freeze = self._freeze, False
+            try:
+                args = [self.expr(a, env) for a in args_nodes]
+            finally:
+                self._freeze = saved
+            return _builtin(lname, args, self)
         args = [self.expr(a, env) for a in args_nodes]
         return _builtin(lname, args, self)
 
+    # --------------------------------------------------------------- events
+    def _is_continuous(self, value: Value) -> bool:
+        """Whether *value* depends on a continuous-time variable (or time): a relation on it switches
+        between events and must be frozen (.events)."""
+        if _num(value) or not isinstance(value, ca.MX):
+            return False
+        for s in ca.symvar(value):
+            name = s.name()
+            if name == "time" or name.startswith("der("):
+                return True
+            sv = self.scalars.get(name)
+            if sv is not None and sv.kind in ("continuous", "input"):
+                return True
+        return False
+
+    def relation(self, op: str, a: Value, b: Value) -> Value:
+        """``a op b`` with its Modelica meaning: a relation on continuous-time values outside
+        ``noEvent`` is frozen between events, with the event indicator ``a - b``."""
+        if (_num(a) and _num(b)) or (isinstance(a, str) and isinstance(b, str)):
+            return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b, "==": a == b, "!=": a != b}[op]
+        x, y = (ca.MX(a) if _num(a) else a), (ca.MX(b) if _num(b) else b)
+        value = {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[op]
+        if op in ("==", "!=") or not self._freeze or not self._is_continuous(x - y):
+            return value
+        key = f"rel|{value}"  # the same relation in several equations is one condition
+        if key in self._frozen:
+            return self._frozen[key]
+        sym = ca.MX.sym(f"_tbx_c{len(self.events.conditions) + 1}")
+        # indicator: positive where the relation holds, shifted by a hysteresis so that at the located
+        # crossing the relation has clearly changed (else an event found a hair early changes nothing
+        # and the crossing is never seen again)
+        towards = x - y if op in (">", ">=") else y - x
+        eps = HYSTERESIS * (1 + ca.fabs(x) + ca.fabs(y))
+        indicator = towards + ca.if_else(sym, eps, -eps)
+        self.events.conditions.append(Condition(sym, "rel", value, [indicator], f"{x} {op} {y}"[:200]))
+        self._frozen[key] = sym
+        return sym
+
+    def rounding(self, kind: str, a: Value) -> Value:
+        """``floor``/``integer``/``ceil`` of a continuous-time value: held between events, with event
+        indicators at the next integers either side (MLS 3.7.2: these functions generate events)."""
+        value = ca.ceil(a) if kind == "ceil" else ca.floor(a)
+        if not self._freeze or not self._is_continuous(a):
+            return value
+        sym = ca.MX.sym(f"_tbx_c{len(self.events.conditions) + 1}")
+        lower, upper = (sym - 1, sym) if kind == "ceil" else (sym, sym + 1)
+        eps = HYSTERESIS * (1 + ca.fabs(a))  # crossings are located just past the next integer (see relation)
+        self.events.conditions.append(Condition(sym, kind, value, [a - lower + eps, upper + eps - a],
+                                                f"{kind}({a})"[:200]))
+        return sym
+
+    def pre_sym(self, sv: ScalarVar) -> ca.MX:
+        """The symbol of ``pre(v)`` for a discrete variable."""
+        if sv.name not in self._pre:
+            self._pre[sv.name] = ca.MX.sym(f"pre({sv.name})")
+        return self._pre[sv.name]
+
+    def _pre_value(self, node: Any) -> Value:
+        """``pre(v)``: the value of *v* before the current event-iteration step; for a continuous-time
+        variable its value at the event (its left limit)."""
+        value = self.expr(node, None)
+
+        def one(x: Value) -> Value:
+            if _num(x) or not isinstance(x, ca.MX):
+                return x
+            syms = [s for s in ca.symvar(x) if (sv := self.scalars.get(s.name())) is not None and sv.kind == "discrete"]
+            if not syms:
+                return x
+            return ca.substitute([x], syms, [self.pre_sym(self.scalars[s.name()]) for s in syms])[0]
+
+        return arr.map1(one, value)
+
+    def _event_builtin(self, name: str, nodes: list[Any], env: Any) -> Value:
+        if name == "pre":
+            return self._pre_value(nodes[0])
+        if name == "edge":
+            b, p = self.expr(nodes[0], env), self._pre_value(nodes[0])
+            return arr.map2(lambda x, y: _and(x, _not(y)), b, p, "edge()", broadcast=False)
+        if name == "change":
+            v, p = self.expr(nodes[0], env), self._pre_value(nodes[0])
+            return arr.map2(lambda x, y: x != y, v, p, "change()", broadcast=False)
+        if name == "initial":
+            self._uses_initial = True
+            return self.events.initial
+        if name == "terminal":
+            return False
+        if name == "sample":  # true at its instants only (the FMU's event iteration, .events)
+            start, interval = (self.expr(n, env) for n in nodes[:2])
+            if arr.is_array(start) or arr.is_array(interval):
+                raise CompileError(f"sample() with an array argument in {self.model}")
+            sym = ca.MX.sym(f"_tbx_s{len(self.events.samples) + 1}")
+            self.events.samples.append(Sample(sym, ca.MX(start) if _num(start) else start,
+                                              ca.MX(interval) if _num(interval) else interval))
+            return sym
+        raise self.unsupported(f"built-in {name}()")  # pragma: no cover - _EVENT_BUILTINS lists the above
+
+    def when_fire(self, node: Any, env: Any) -> Value:
+        """The firing of a when condition (``c and not pre(c)`` for each element of it); each element
+        becomes a held when condition of the event iteration."""
+        self._in_when_condition = True
+        try:
+            cond = self.expr(node, env)
+        finally:
+            self._in_when_condition = False
+        fire: Value = False
+        for el in (list(cond.ravel()) if arr.is_array(cond) else [cond]):
+            if _num(el):
+                continue  # a constant condition never becomes true
+            k = len(self.events.whens) + 1
+            sym, pre = ca.MX.sym(f"_tbx_w{k}"), ca.MX.sym(f"pre(_tbx_w{k})")
+            initial = bool(ca.depends_on(el, self.events.initial))
+            self.events.whens.append(WhenCondition(sym, pre, el, initial))
+            edge = ca.logic_and(sym, ca.logic_not(pre))
+            if not initial:  # a when-clause fires at initialisation only by initial()
+                edge = ca.logic_and(edge, ca.logic_not(self.events.initial))
+            fire = _or(fire, edge)
+        return fire
+
+    def when_chain(self, chain: dict[str, Any]) -> list[tuple[ca.MX, str]]:
+        """A when-equation with its elsewhen branches: ``v = (if fire1 then e1 elseif ... else pre(v))``
+        for each variable assigned, and the re-initialisations of states."""
+        branches = [chain.get("first") or {}, *(chain.get("else_when") or [])]
+        fires = [self.when_fire(br.get("condition"), None) for br in branches]
+        assigns: dict[str, dict[int, Value]] = {}
+        reinits: dict[str, dict[int, Value]] = {}
+        for bi, br in enumerate(branches):
+            for eq in br.get("equations") or []:
+                kind, body = _kind_of(eq)
+                if kind in ("Assign", "Reinit"):
+                    target = str(body.get("target") if kind == "Assign" else body.get("state"))
+                    value = self.expr(body.get("value"))
+                    for sv, v in self._scalar_targets(target, value, "when-clause"):
+                        (assigns if kind == "Assign" else reinits).setdefault(sv.name, {})[bi] = v
+                elif kind == "Assert":
+                    self._guards.append(fires[bi])
+                    try:
+                        self.add_assert(body, None, f"when-clause of {self.model}")
+                    finally:
+                        self._guards.pop()
+                else:
+                    word = kind[:1].lower() + kind[1:]
+                    raise self.unsupported(f"{word}() in a when-clause", rf"\b{word}\s*\(")
+        out: list[tuple[ca.MX, str]] = []
+        for name, by_branch in assigns.items():
+            sv = self.scalars[name]
+            if sv.kind != "discrete":  # pragma: no cover - targets of when-clauses are made discrete
+                raise CompileError(f"when-clause assigns {name!r}, which is not a discrete variable")
+            expr: Value = self.pre_sym(sv)
+            for bi in reversed(range(len(branches))):
+                expr = _if(fires[bi], by_branch.get(bi, self.pre_sym(sv)), expr)
+            self._discrete_defs.append((sv.sym - expr, f"when-clause assignment to {name}"))
+        for name, by_branch in reinits.items():
+            sv = self.scalars[name]
+            if sv.kind != "continuous":
+                raise self.unsupported(f"reinit({name}) of a variable that is not a state", r"\breinit\s*\(")
+            expr = sv.sym
+            for bi in reversed(range(len(branches))):
+                expr = _if(fires[bi], by_branch.get(bi, sv.sym), expr)
+            self.events.reinits.append((sv.sym, expr))
+        return out
+
+    def _scalar_targets(self, target: str, value: Value, what: str) -> list[tuple[ScalarVar, Value]]:
+        """The scalars of an assignment's target (a variable, an array, or one element) with their values."""
+        if target in self.scalars:
+            if arr.is_array(value):
+                raise CompileError(f"{what} in {self.model} gives {target} a value of size "
+                                   f"{arr.size_text(arr.shape(value))}")
+            return [(self.scalars[target], value)]
+        if target in self.vars:
+            scalars = self.vars[target]
+            dims = self.dims[target]
+            if not dims:
+                return [(scalars[0], value)]
+            if not arr.is_array(value) or arr.shape(value) != dims:
+                raise CompileError(f"{what} in {self.model} gives {target} of size {arr.size_text(dims)} a value "
+                                   f"of size {arr.size_text(arr.shape(value))}")
+            return [(sv, value[tuple(i - 1 for i in sv.index)]) for sv in scalars]
+        raise CompileError(f"{what} in {self.model} assigns {target!r}, which is not a variable of the model")
+
     def _x_FunctionCall(self, body: Any, env: Any) -> Value:
         fname = body["name"]["name"]
+        if fname in tables.FUNCTIONS:
+            return self._table_call(fname, body.get("args") or [], env)
         args = [self.expr(a, env) for a in (body.get("args") or [])]
         if fname in _BUILTIN_NAMES or (fname.lower() in _ARRAY_BUILTINS and fname not in self.functions):
             return _builtin(fname.lower(), args, self)
@@ -713,6 +978,67 @@ class FlatTranslator:
             raise CompileError(f"call of unknown function {fname!r} in {self.model}")
         outs = self.inline(fname, fn, args)
         return outs[0]
+
+    # --------------------------------------------------------------- tables
+    def _table_call(self, fname: str, nodes: list[Any], env: Any) -> Value:
+        """A call of the MSL's table functions on a table object (.tables)."""
+        kind, ref = _kind_of(nodes[0]) if nodes else ("", None)
+        if kind != "VarRef":
+            raise self.unsupported(f"call of {fname} on a table object that is not a parameter")
+        tab = self._table(ref["name"]["name"])
+        args = [self.expr(a, env) for a in nodes[1:]]
+        try:
+            if fname in tables.TIME_VALUE | tables.ONE_D_VALUE:
+                icol = int(self.numeric(args[0], f"column of table {tab.name}"))
+                if tab.kind == "time":
+                    def ge(a: Value, b: Value) -> Value:
+                        # table points are time events (MSL timeEvents); otherwise plain comparisons
+                        events = tab.smoothness == tables.CONSTANT or tab.time_events != tables.NO_TIME_EVENTS
+                        return self.relation(">=", a, b) if events else _plain_ge(a, b)
+                else:
+                    ge = _plain_ge
+                return tables.value(tab, icol, args[1], ge, self._table_range_assert(tab),
+                                    floor=lambda e: self.rounding("floor", e) if self._freeze else ca.floor(e))
+            if fname == tables.TIME_NEXT:
+                return tables.next_event(tab, args[0])
+            if fname in (tables.TIME_MIN, tables.ONE_D_MIN):
+                return tab.grid[0]
+            if fname in (tables.TIME_MAX, tables.ONE_D_MAX):
+                return tab.grid[-1]
+        except tables.TableError as exc:
+            raise self.unsupported(str(exc), r"\bCombi(?:Time)?Table") from None
+        raise self.unsupported(f"table function {fname}")  # pragma: no cover - FUNCTIONS lists the above
+
+    def _table_range_assert(self, tab: tables.Table) -> Callable[[Value, Value], None]:
+        def check(lo: Value, hi: Value) -> None:
+            self._record_assert(_and(lo, hi), f"extrapolation error: the abscissa is outside the table {tab.name} "
+                                f"[{tab.grid[0]:g}, {tab.grid[-1]:g}] (NoExtrapolation)", "error", tab.name)
+        return check
+
+    def _table(self, name: str) -> tables.Table:
+        """The table object bound to the parameter *name* (its constructor call's arguments evaluated)."""
+        cache = self.__dict__.setdefault("_tables", {})
+        if name in cache:
+            return cache[name]
+        var = (self.flat.get("variables") or {}).get(name) or {}
+        kind, call = _kind_of(var.get("binding"))
+        cname = (call.get("name") or {}).get("name") if kind == "FunctionCall" and isinstance(call, dict) else None
+        if cname not in (tables.TIME_CONSTRUCTOR, tables.ONE_D_CONSTRUCTOR,
+                         tables.TIME_CONSTRUCTOR + ".constructor", tables.ONE_D_CONSTRUCTOR + ".constructor"):
+            raise self.unsupported(f"table object {name} not built by the MSL's table constructor")
+        saved, self._freeze = self._freeze, False
+        try:
+            args = [self.expr(a) for a in call.get("args") or []]
+        finally:
+            self._freeze = saved
+        owner = name.rsplit(".", 1)[0] if "." in name else name
+        try:
+            tab = tables.from_constructor("time" if cname.startswith(tables.TIME_CONSTRUCTOR) else "1d", owner, args,
+                                          lambda v, what: self.numeric(v, what))
+        except tables.TableError as exc:
+            raise self.unsupported(str(exc), r"\bCombi(?:Time)?Table") from None
+        cache[name] = tab
+        return tab
 
     def _der(self, node: Any, env: Any) -> Value:
         kind, body = _kind_of(node)
@@ -738,6 +1064,8 @@ class FlatTranslator:
         builtin = _builtin_external(ext) if ext else None
         if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
             return self._builtin_external(fname, fn, ext, builtin, args)
+        if ext:
+            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
@@ -754,7 +1082,16 @@ class FlatTranslator:
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     env[loc["name"]] = self.expr(loc["default"], env)
-            self._statements(fn.get("body") or [], env, fname)
+                elif loc.get("dims"):  # an array declared with its sizes: its elements can be assigned
+                    dims = self._local_dims(loc, env, fname)
+                    if dims is not None:
+                        env[loc["name"]] = arr.fill(0.0, list(dims))
+            saved, self._freeze = self._freeze, False  # relations in functions generate no events
+            env[_RETURNED] = False
+            try:
+                self._statements(fn.get("body") or [], env, fname)
+            finally:
+                self._freeze = saved
             outs = []
             for out in fn.get("outputs") or []:
                 if out["name"] not in env:
@@ -763,6 +1100,21 @@ class FlatTranslator:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
+        """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
+        out = []
+        for d in loc.get("dims") or []:
+            if isinstance(d, int):
+                out.append(d)
+                continue
+            if _kind_of(d)[0] in ("Colon", "Empty") or d is None:
+                return None
+            val = self.expr(d, env)
+            if not _num(val):
+                return None
+            out.append(int(val))
+        return tuple(out)
 
     def _builtin_external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], builtin: str,
                           args: list[Value]) -> list[Value]:
@@ -786,69 +1138,125 @@ class FlatTranslator:
 
     def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
         for st in stmts:
+            if _RETURNED in env and _num(env[_RETURNED]) and bool(env[_RETURNED]):
+                return  # after a return taken on every path, nothing more happens
             kind, body = _kind_of(st)
             if kind == "Assignment":
                 value = self.expr(body["value"], env)
-                parts = body["comp"]["parts"]
-                if len(parts) != 1:
-                    raise self.unsupported(f"record field assignment in function {fname!r}")
-                ident = parts[0]["ident"]
-                subs = parts[0].get("subs") or []
-                if subs:
-                    target = env.get(ident)
-                    if not isinstance(target, np.ndarray):
-                        raise self.unsupported(f"indexed assignment to {ident!r} in function {fname!r}")
-                    picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
-                    if len(picks) != target.ndim:
-                        raise CompileError(f"assignment to {ident!r} in function {fname!r} with {len(picks)} "
-                                           f"subscripts for an array of size {arr.size_text(target.shape)}")
-                    index = tuple(
-                        slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
-                        for p in picks
-                    )
-                    for k, p in enumerate(picks):
-                        bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
-                               and not 1 <= int(i) <= target.shape[k]]
-                        if bad:
-                            raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
-                                               f"to {ident!r} in function {fname!r}")
-                    target = target.copy()
-                    try:
-                        target[np.ix_(*[range(target.shape[k]) if p is None else
-                                        ([i] if isinstance(i, int) else i) for k, (p, i) in
-                                        enumerate(zip(picks, index))])] = (
-                            np.asarray(value, dtype=object).reshape(
-                                [target.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
-                                 for k, (p, i) in enumerate(zip(picks, index))])
-                            if arr.is_array(value) else value)
-                    except ValueError:
-                        raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
-                                           f"to a part of {ident!r} in function {fname!r} that does not "
-                                           "have that size") from None
-                    env[ident] = target
-                else:
-                    env[ident] = value
+                self._assign(body["comp"]["parts"], value, env, fname)
+            elif kind == "FunctionCall":  # (a, b, ...) := f(...), or a call of a function for nothing
+                cname = (body.get("comp") or {}).get("name") or ""
+                args = [self.expr(a, env) for a in body.get("args") or []]
+                fn = self.functions.get(cname)
+                if fn is None:
+                    raise CompileError(f"call of unknown function {cname!r} {_in(fname)} in {self.model}")
+                outs = self.inline(cname, fn, args)
+                targets = body.get("outputs") or []
+                if len(targets) > len(outs):
+                    raise CompileError(f"{len(targets)} results taken from {cname!r}, which has {len(outs)} "
+                                       f"outputs, {_in(fname)}")
+                for target, value in zip(targets, outs):
+                    parts = (target or {}).get("parts") if isinstance(target, dict) else None
+                    if parts:
+                        self._assign(parts, value, env, fname)
+            elif kind == "Return" and not _is_algorithm(fname):
+                # in this branch's environment; merging the branches makes it the branch's condition
+                env[_RETURNED] = True
             elif kind == "If":
                 self._if_statement(body, env, fname)
+            elif kind == "When" and _is_algorithm(fname):
+                blocks = body.get("blocks") or []
+                fires = [self.when_fire(blk.get("cond"), env) for blk in blocks]
+                self._if_statement({"cond_blocks": [{"cond": None, "stmts": blk.get("stmts") or []} for blk in blocks],
+                                    "else_block": []}, env, fname, conds=fires)
             elif kind == "For":
                 self._for_statement(body, env, fname)
             elif kind == "Assert":
-                self.add_assert(body, env, f"function {fname}")
+                self.add_assert(body, env, fname if _is_algorithm(fname) else f"function {fname}")
             else:
                 pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
-                raise self.unsupported(f"{kind.lower()} statement in function {fname!r}", pattern)
+                raise self.unsupported(f"{kind.lower()} statement {_in(fname)}", pattern)
 
-    def _if_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
+    def _assign(self, parts: list[dict[str, Any]], value: Value, env: dict[str, Value], fname: str) -> None:
+        """``target := value`` in a function or algorithm (a whole variable, array elements or slices);
+        after a possible return, only where the function has not returned."""
+        if len(parts) != 1 and not _is_algorithm(fname):
+            raise self.unsupported(f"record field assignment {_in(fname)}")
+        ident = self._flat_target(parts, env)
+        subs = parts[-1].get("subs") or []
+        returned = env.get(_RETURNED, False)
+        if subs:
+            target = env.get(ident)
+            if not isinstance(target, np.ndarray):
+                raise self.unsupported(f"indexed assignment to {ident!r} {_in(fname)}")
+            picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
+            if len(picks) != target.ndim:
+                raise CompileError(f"assignment to {ident!r} {_in(fname)} with {len(picks)} "
+                                   f"subscripts for an array of size {arr.size_text(target.shape)}")
+            index = tuple(
+                slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
+                for p in picks
+            )
+            for k, p in enumerate(picks):
+                bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
+                       and not 1 <= int(i) <= target.shape[k]]
+                if bad:
+                    raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
+                                       f"to {ident!r} {_in(fname)}")
+            new = target.copy()
+            try:
+                new[np.ix_(*[range(new.shape[k]) if p is None else
+                             ([i] if isinstance(i, int) else i) for k, (p, i) in
+                             enumerate(zip(picks, index))])] = (
+                    np.asarray(value, dtype=object).reshape(
+                        [new.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
+                         for k, (p, i) in enumerate(zip(picks, index))])
+                    if arr.is_array(value) else value)
+            except ValueError:
+                raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
+                                   f"to a part of {ident!r} {_in(fname)} that does not "
+                                   "have that size") from None
+            value = new
+            old = target
+        else:
+            old = env.get(ident)
+        if not (_num(returned) and not bool(returned)) and old is not None:
+            value = arr.map2(lambda a, b: _if(returned, a, b), old, value, f"assignment to {ident!r}",
+                             broadcast=False)
+        env[ident] = value
+
+    def _flat_target(self, parts: list[dict[str, Any]], env: dict[str, Value]) -> str:
+        """The name an assignment's target ``a[2].b.c[i]`` has in the environment: the flat name
+        ``a[2].b.c`` (subscripts of the enclosing components must be constant; those of the last
+        part index into the value)."""
+        names = []
+        for k, part in enumerate(parts):
+            subs = part.get("subs") or []
+            if subs and k < len(parts) - 1:
+                picks = []
+                for sub in subs:
+                    val = self._subscript(sub, None, 0, env)
+                    if not isinstance(val, int):
+                        raise self.unsupported(f"assignment to an element of a component array with a "
+                                               f"subscript that is not a constant ({part['ident']}[...])")
+                    picks.append(str(val))
+                names.append(f"{part['ident']}[{','.join(picks)}]")
+            else:
+                names.append(part["ident"])
+        return ".".join(names)
+
+    def _if_statement(self, body: Any, env: dict[str, Value], fname: str, conds: list[Value] | None = None) -> None:
+        """An if-statement (or, given *conds*, the branches of a when-statement with their firings)."""
         blocks = body.get("cond_blocks") or body.get("branches") or []
         else_block = body.get("else_block") or body.get("else_branch") or []
         conds_and_envs = []
         prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
-        for blk in blocks:
+        for k, blk in enumerate(blocks):
             if isinstance(blk, dict):
                 cond_node, stmts = blk.get("cond"), blk.get("stmts", blk.get("body", []))
             else:
                 cond_node, stmts = blk
-            cond = self.expr(cond_node, env)
+            cond = conds[k] if conds is not None else self.expr(cond_node, env)
             if _num(cond):
                 if bool(cond):
                     branch_env = dict(env)
@@ -894,7 +1302,11 @@ class FlatTranslator:
     def add_assert(self, body: dict[str, Any], env: dict[str, Value] | None, origin: str) -> None:
         """Record ``assert(condition, message, level)``; *env* is a function's environment."""
         message = self._message_text(body.get("message"), env)
-        cond = self.expr(body["condition"], env)
+        saved, self._freeze = self._freeze, False  # an assert is checked as its condition stands (no events)
+        try:
+            cond = self.expr(body["condition"], env)
+        finally:
+            self._freeze = saved
         if isinstance(cond, np.ndarray):
             raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is an array")
         if _num(cond) and not isinstance(cond, (bool, np.bool_)):
@@ -952,7 +1364,7 @@ class FlatTranslator:
     def _for_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
         indices = body.get("indices") or []
         if len(indices) != 1:
-            raise self.unsupported(f"for-loop with {len(indices)} indices in function {fname!r}")
+            raise self.unsupported(f"for-loop with {len(indices)} indices {_in(fname)}")
         ident = indices[0].get("ident")
         name = ident.get("text") if isinstance(ident, dict) else ident
         rng = self.expr(indices[0]["range"], env)
@@ -1006,8 +1418,12 @@ class FlatTranslator:
                 residuals.append((r, origin))
         # bound continuous variables (binding equations in declarations)
         for sv in self.scalars.values():
-            if sv.kind == "continuous" and sv.binding_node is not None:
+            if sv.kind in ("continuous", "discrete") and sv.binding_node is not None:
                 residuals.append((sv.sym - self._element(sv, sv.binding_node), f"binding of {sv.name}"))
+        for section in self.flat.get("algorithms") or []:
+            residuals.extend(self.algorithm_residuals(section, initial=False))
+        for chain in self.flat.get("when_chains") or []:
+            residuals.extend(self.when_chain(chain))
 
         for a in self.flat.get("assert_equations") or []:
             self.add_assert(a, None, f"equation {self._where(a.get('origin'))}")
@@ -1025,23 +1441,56 @@ class FlatTranslator:
                         raise CompileError(f"{origin} in {self.model} reduces to {r} = 0")
                     continue
                 init_residuals.append((r, origin))
+        for section in self.flat.get("initial_algorithms") or []:
+            init_residuals.extend(self.algorithm_residuals(section, initial=True))
         extra = [n for n in self.der_placeholders if n not in state_names]
         if extra:
             raise self.unsupported(
                 f"der({extra[0]}) in an initial equation, where {extra[0]} is not a state "
                 "(no equation of the model differentiates it)", r"\binitial\s+equation\b")
         algebraics = [sv for sv in self.scalars.values() if sv.kind == "continuous" and sv.name not in state_names]
+        for sv in algebraics:  # fixed = true on a variable that is not a state: an initial equation v = start
+            if sv.fixed is True and sv.start_node is not None:
+                init_residuals.append((sv.sym - self._element(sv, sv.start_node), f"start value of {sv.name} "
+                                       "(fixed = true)"))
         unknowns: list[ca.MX] = [self.der_placeholders[s.name] for s in states]
         unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
         unknown_names = [u.name() for u in unknowns]
         position = {n: i for i, n in enumerate(unknown_names)}
+        # events: the equations of discrete variables are solved at events only (.events); between
+        # events the continuous equations see them (and pre(v) = v) held
+        discrete = [sv for sv in self.scalars.values() if sv.kind == "discrete"]
+        # (calculated parameters are unknowns of the continuous equations but known at events)
+        time_varying = set(unknown_names) - {sv.name for sv in calculated}
+        residuals, discrete_residuals = self._split_discrete(residuals, time_varying, discrete)
+        discrete_residuals += self._discrete_defs
+        init_residuals, discrete_initial = self._split_discrete(init_residuals, time_varying, discrete,
+                                                                initial=True)
         incidence = []
         for r, _origin in residuals:
             incidence.append(sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}))
+        optional_init: list[tuple[ca.MX, str]] = []
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
-            raise CompileError(self._structural_message(exc, residuals, unknown_names)) from None
+            # a DAE of higher index: differentiate the constraints and choose the states (.index)
+            reduced = self._reduce_index(residuals, states, algebraics, calculated, calc_eqs)
+            if reduced is None:
+                raise CompileError(self._structural_message(exc, residuals, unknown_names)) from None
+            residuals, states, optional_init = reduced
+            state_names = {s.name for s in states}
+            algebraics = [sv for sv in self.scalars.values()
+                          if sv.kind == "continuous" and sv.name not in state_names]
+            unknowns = [self.der_placeholders[s.name] for s in states]
+            unknowns += [sv.sym for sv in algebraics] + [sv.sym for sv in calculated]
+            unknown_names = [u.name() for u in unknowns]
+            position = {n: i for i, n in enumerate(unknown_names)}
+            incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position})
+                         for r, _origin in residuals]
+            try:
+                blocks = blt(incidence, len(unknowns))
+            except StructuralError as exc2:
+                raise CompileError(self._structural_message(exc2, residuals, unknown_names)) from None
 
         guess = {}
         for sv in algebraics + calculated:
@@ -1062,7 +1511,7 @@ class FlatTranslator:
                 if sol is not None:
                     assignments.append((unk[0], sol))
                     continue
-            tears, solved, residual = self._tear(res, unk)
+            tears, solved, residual = self._tear(res, unk, guess)
             loop_sizes.append(len(tears))
             torn_sizes.append((len(unk), len(tears)))
             if not tears:  # every equation solved explicitly in turn (cannot happen for an SCC, kept safe)
@@ -1076,24 +1525,181 @@ class FlatTranslator:
         # A parameter that no equation uses (e.g. one that only sets start values) would be a
         # tunable parameter with no effect: the FMU's states start from fixed numbers, so it is
         # not exported; set the state's own start value instead.
+        events = self._event_system(discrete, discrete_residuals, discrete_initial)
         initial = None
-        if init_residuals or computed:
-            initial = self._initial_system(init_residuals, states, computed, assignments)
+        if init_residuals or computed or optional_init:
+            initial = self._initial_system(init_residuals, states, computed, assignments, optional_init)
+            if not initial.unknowns:
+                initial = None
         asserts = self._unique_asserts()
         exprs = [e for _, e in assignments] + [a.condition for a in asserts]
         if initial is not None:
             exprs += initial.residual
+        if events is not None:
+            exprs += [e for _, e in events.updates] + [e for _, e in events.reinits] + events.indicators
+            exprs += [x for smp in events.samples for x in (smp.start, smp.interval)]
         used = {s.name() for s in ca.symvar(ca.vertcat(*exprs))} if exprs else set()
         used |= {sv.name for sv in computed}
         unused = [sv.name for sv in params if sv.name not in used]
         params = [sv for sv in params if sv.name in used]
         return ExplicitModel(
-            asserts=asserts, initial=initial,
+            asserts=asserts, initial=initial, events=events, discrete=discrete,
             name=self.model, time=self.time, parameters=params, calculated=calculated, unused_parameters=unused,
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
         )
+
+    def _split_discrete(self, residuals: list[tuple[ca.MX, str]], continuous: set[str], discrete: list[ScalarVar],
+                        initial: bool = False) -> tuple[list[tuple[ca.MX, str]], list[tuple[ca.MX, str]]]:
+        """(continuous equations, equations of discrete variables). An equation belongs to a discrete
+        variable when no continuous unknown is in it and a discrete variable is (in an initial equation,
+        also pre(v), which is v there). In the continuous equations pre(v) is v (between events)."""
+        names = {sv.name for sv in discrete}
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        cont, disc = [], []
+        for r, origin in residuals:
+            held = ca.substitute([r], [a for a, _ in pres], [b for _, b in pres])[0] if pres else r
+            used = {sym.name() for sym in ca.symvar(held)}
+            if used & names and not used & continuous and not (initial and used & set(self.der_placeholders)):
+                # at an event pre(v) is the value before the step; at initialisation it is v
+                disc.append((held if initial else r, origin))
+            else:
+                cont.append((held, origin))
+        return cont, disc
+
+    def _event_system(self, discrete: list[ScalarVar], residuals: list[tuple[ca.MX, str]],
+                      initial: list[tuple[ca.MX, str]]) -> EventSystem | None:
+        """The event iteration's assignments (.events): conditions and samples first, then the when
+        conditions and the discrete variables in dependency order; an initial equation or initial
+        algorithm of a discrete variable gives its value at initialisation."""
+        ev = self.events
+        if not (discrete or ev.conditions or ev.samples or ev.whens or ev.reinits or self._uses_initial):
+            return None
+        unknowns = [sv.sym for sv in discrete] + [w.sym for w in ev.whens]
+        eqs = list(residuals) + [(w.sym - w.value, f"when condition {w.sym.name()}") for w in ev.whens]
+        assigned = self._discrete_order(eqs, unknowns, "equations of discrete variables")
+        at_start = dict(self._discrete_order(initial, [sv.sym for sv in discrete], "initial equations of discrete "
+                                             "variables", partial=True)) if initial else {}
+        t = self.time
+        updates: list[tuple[ca.MX, ca.MX]] = [(c.sym, c.value) for c in ev.conditions]
+        for smp in ev.samples:
+            eps = 1e-9 * ca.fmax(1, ca.fabs(t))
+            k = ca.floor((t - smp.start) / smp.interval + 0.5)
+            at = ca.logic_and(t >= smp.start - eps, ca.fabs(t - smp.start - k * smp.interval) <= eps)
+            quiet = ca.logic_or(self.quiet, ev.initial)  # sample() is never true at initialisation
+            updates.append((smp.sym, ca.logic_and(at, ca.logic_not(quiet))))
+        for sym, expr in assigned:
+            if sym.name() in {k.name() for k in at_start}:
+                expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
+            updates.append((sym, expr))
+        ev.updates = updates
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        if pres:  # between events (where indicators are evaluated) pre(v) is v
+            for cond in ev.conditions:
+                cond.indicators = ca.substitute(cond.indicators, [a for a, _ in pres], [b for _, b in pres])
+        ev.discrete = [(sv.name, sv.sym, self._start_of(sv)) for sv in discrete]
+        ev.pre = dict(self._pre)
+        return ev
+
+    def _discrete_order(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX], what: str,
+                        partial: bool = False) -> list[tuple[ca.MX, ca.MX]]:
+        """Solve equations of discrete variables one at a time, each for its variable, in dependency
+        order (a loop of discrete variables is refused, naming them)."""
+        names = [u.name() for u in unknowns]
+        position = {n: i for i, n in enumerate(names)}
+        incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
+        if partial:  # initial equations of some discrete variables: match each to the one it has
+            out = []
+            for (r, origin), inc in zip(eqs, incidence):
+                if len(inc) != 1:
+                    raise self.unsupported(f"initial equation of several discrete variables ({origin})")
+                sol = _solve_scalar_linear(r, unknowns[inc[0]])
+                if sol is None:
+                    raise self.unsupported(f"initial equation of discrete variable {names[inc[0]]} that is not "
+                                           f"explicit in it ({origin})")
+                out.append((unknowns[inc[0]], sol))
+            return out
+        try:
+            blocks = blt(incidence, len(unknowns))
+        except StructuralError as exc:
+            und = [names[j] for j in exc.unknowns][:8]
+            eq = sorted({eqs[i][1] for i in exc.equations})[:8]
+            raise CompileError(
+                f"the {what} of {self.model} do not determine them: {len(eqs)} equations for {len(unknowns)} "
+                f"variables" + (f"; not determined: {', '.join(und)}" if und else "")
+                + (f"; equations with no variable left: {', '.join(eq)}" if eq else "")) from None
+        out: list[tuple[ca.MX, ca.MX]] = []
+        for block in blocks:
+            if len(block.unknowns) != 1:
+                loop = ", ".join(names[j] for j in block.unknowns[:8])
+                raise self.unsupported(f"algebraic loop among discrete variables ({loop})")
+            r, origin = eqs[block.equations[0]]
+            u = unknowns[block.unknowns[0]]
+            sol = _solve_scalar_linear(r, u)
+            if sol is None:
+                raise self.unsupported(f"equation of discrete variable {u.name()} that is not explicit in it "
+                                       f"({origin})")
+            out.append((u, sol))
+        return out
+
+    def algorithm_residuals(self, section: dict[str, Any], initial: bool) -> list[tuple[ca.MX, str]]:
+        """An (initial) algorithm section as equations: ``v = value`` for each variable it assigns.
+
+        The statements are executed symbolically, as a function body is inlined (assignments,
+        if, for, assert): each assigned variable starts from its start value (MLS 11.1.2: a value
+        read before the section assigns it) and ends as an expression in the other variables.
+        A section is one vector equation whose unknowns are the variables it assigns: an initial
+        algorithm determines them at initialisation (e.g. a ``fixed = false`` parameter), an
+        algorithm for all time.
+        """
+        origin = section.get("origin")
+        owner = str(origin).removeprefix("algorithm from ").strip() if isinstance(origin, str) else ""
+        owner = owner if owner and owner != "(top level)" else self.model
+        context = f"{'initial ' if initial else ''}algorithm of {owner}"
+        env: dict[str, Value] = {}
+        assigned: list[str] = []
+        for out in section.get("outputs") or []:
+            name = str(out.get("name") or "")
+            base = name if name in self.vars else re.sub(r"\[[^\]]*\]$", "", name)
+            if base not in self.vars:
+                raise CompileError(f"the {context} in {self.model} assigns {name!r}, which is not a variable")
+            if base in env:
+                continue
+            scalars = self.vars[base]
+            if any(sv.sym is None for sv in scalars):
+                raise CompileError(f"the {context} in {self.model} assigns {base!r}, which is a constant or "
+                                   "a structural parameter")
+            # a discrete variable starts from pre(v), any other from its start value (MLS 11.1.2)
+            starts = [self.pre_sym(sv) if sv.kind == "discrete" else self._start_of(sv) for sv in scalars]
+            env[base] = arr.from_list(starts).reshape(self.dims[base]) if self.dims[base] else starts[0]
+            assigned.append(base)
+        self._statements(section.get("statements") or [], env, context)
+        out: list[tuple[ca.MX, str]] = []
+        for base in assigned:
+            value = env[base]
+            for sv in self.vars[base]:
+                v = value[tuple(i - 1 for i in sv.index)] if sv.index else value
+                if arr.is_array(v):
+                    raise CompileError(f"the {context} in {self.model} gives {sv.name} a value of size "
+                                       f"{arr.size_text(arr.shape(v))}")
+                if sv.kind == "discrete" and not initial:  # defined at events (a when-statement, pre(v))
+                    self._discrete_defs.append((sv.sym - v, f"{context} ({sv.name})"))
+                else:
+                    out.append((sv.sym - v, f"{context} ({sv.name})"))
+        return out
+
+    def _start_of(self, sv: ScalarVar) -> float:
+        """The start value of a variable (0 when it has none), with parameters at their start values."""
+        if sv.kind == "parameter" and sv.value is not None and sv.fixed is not False:
+            return float(sv.value)
+        node = sv.start_node
+        if node is None:
+            return 0.0
+        try:
+            return self.numeric(self._element(sv, node), f"start value of {sv.name!r}")
+        except CompileError:
+            return 0.0
 
     def _where(self, origin: Any) -> str:
         text = _origin_text(origin)
@@ -1110,9 +1716,79 @@ class FlatTranslator:
                 out.append(a)
         return out
 
+    def _needed_optional(self, residuals: list[tuple[ca.MX, str]], optional: list[tuple[ca.MX, str]],
+                         states: list[ScalarVar], computed: list[ScalarVar],
+                         assignments: list[tuple[ca.MX, ca.MX]]) -> list[tuple[ca.MX, str]]:
+        """Those of *optional* initial equations that determine an unknown of the initialisation problem
+        (free states, fixed = false parameters) that the others leave undetermined (by structural rank)."""
+        free = [s for s in states if s.fixed is not True] + list(computed)
+        position = {s.sym.name(): i for i, s in enumerate(free)}
+        exprs = [r for r, _ in residuals] + [r for r, _ in optional]
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        incid = [sorted({position[v.name()] for v in ca.symvar(e) if v.name() in position}) for e in exprs]
+        kept = incid[:len(residuals)]
+        rank = max_matching(kept)
+        out = []
+        for k, (r, origin) in enumerate(optional):
+            trial = kept + [incid[len(residuals) + k]]
+            if rank < len(free) and max_matching(trial) > rank:
+                kept, rank = trial, rank + 1
+                out.append((r, origin))
+        return out
+
+    def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
+                      calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
+                      ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
+        """Index reduction (.index) of the continuous equations; None when it cannot help. Returns the
+        equations (the parameters' bindings, then the original and differentiated ones), the states
+        chosen, and the initial equations v = start of former states with fixed = true, which hold
+        where they are needed (a position prescribed elsewhere makes its own start redundant)."""
+        calc_names = {sv.name for sv in calculated}
+        eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
+        preference = {}
+        for name, v in (self.flat.get("variables") or {}).items():
+            select = v.get("state_select") if isinstance(v, dict) else None
+            if select:
+                for sv in self.vars.get(name, []):
+                    preference[sv.name] = str(select)
+        try:
+            red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
+                                                                      for s in states},
+                               {a.name: a.sym for a in algebraics if a.name not in calc_names}, self.time,
+                               {sv.name for sv in self.scalars.values() if sv.kind == "input"}, preference)
+        except IndexError_ as exc:
+            log.info("%s: index reduction not possible: %s", self.model, exc)
+            return None
+        chosen = set(red.states)
+        for name, sym in red.created:  # derivatives that are algebraic unknowns (dummy derivatives)
+            if name in self.scalars or any(sym is d for d in red.derivative.values()):
+                continue
+            self.scalars[name] = ScalarVar(name=name, kind="continuous", type=REAL, top_level=False, output=False,
+                                           start_node=None, binding_node=None, index=(), attrs={},
+                                           description="derivative (index reduction)", sym=sym)
+        for s in states:  # a former state's derivative symbol is now an algebraic unknown
+            if s.name not in chosen and s.name in self.der_placeholders:
+                d = self.der_placeholders[s.name]
+                self.scalars.setdefault(d.name(), ScalarVar(
+                    name=d.name(), kind="continuous", type=REAL, top_level=False, output=False, start_node=None,
+                    binding_node=None, index=(), attrs={}, description=f"derivative of {s.name} (dummy)", sym=d))
+        self.der_placeholders = dict(red.derivative)
+        new_states = [self.scalars[n] for n in red.states]
+        optional = [(s.sym - self._element(s, s.start_node), f"start value of {s.name} (fixed = true)")
+                    for s in states if s.name not in chosen and s.fixed is True and s.start_node is not None]
+        log.info("%s: index reduction differentiated %d equations; states %s", self.model,
+                 len(red.differentiated), ", ".join(red.states))
+        return list(calc_eqs) + red.residuals, new_states, optional
+
     def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
-                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]]) -> InitialSystem:
-        """Build the initialisation problem (see the module docstring)."""
+                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
+                        optional: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
+        """Build the initialisation problem (see the module docstring). *optional* initial equations
+        are added where they determine an unknown the others leave free."""
+        if optional:
+            residuals = list(residuals) + self._needed_optional(residuals, optional, states, computed, assignments)
         mentioned: set[str] = set()
         for r, _ in residuals:
             for sym in ca.symvar(r):
@@ -1159,7 +1835,7 @@ class FlatTranslator:
                     knowns.setdefault(sym.name(), sym)
         incidence = [sorted({position[s.name()] for s in ca.symvar(e) if s.name() in position}) for e in exprs]
         try:
-            blt(incidence, len(unknowns))
+            blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
             eqs = sorted({residuals[i][1] for i in exc.equations})[:8]
             unk = [unknown_names[j] for j in exc.unknowns][:8]
@@ -1168,19 +1844,43 @@ class FlatTranslator:
                 + (f"; not determined by the initial equations: {', '.join(unk)}" if unk else "")
                 + (f"; equations with no unknown left, from: {', '.join(eqs)}" if eqs else "")
             ) from None
+        # solve block by block: an explicit assignment where a scalar block is linear in its unknown
+        # (so e.g. a mass is found from a level before a temperature divides by it), Newton for loops
+        guesses = [ca.MX.sym(f"guess({u.name()})") for u in unknowns]
+        done_syms: list[ca.MX] = []
+        done_vals: list[ca.MX] = []
+        solution: dict[int, ca.MX] = {}
+        for k, block in enumerate(blocks):
+            res = [exprs[i] for i in block.equations]
+            if done_syms:
+                res = ca.substitute(res, done_syms, done_vals)
+            unk = [unknowns[j] for j in block.unknowns]
+            sols = None
+            if len(unk) == 1:
+                sol = _solve_scalar_linear(res[0], unk[0])
+                sols = [sol] if sol is not None else None
+            if sols is None:
+                sols = self._rootfinder(f"init{k}", res, unk, [guesses[j] for j in block.unknowns])
+            for j, sol in zip(block.unknowns, sols):
+                solution[j] = sol
+                done_syms.append(unknowns[j])
+                done_vals.append(sol)
         return InitialSystem(
             unknowns=unknowns, knowns=[knowns[n] for n in sorted(knowns)], residual=list(exprs),
             free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
-            origins=[o for _, o in residuals],
+            origins=[o for _, o in residuals], guesses=guesses, solution=[solution[j] for j in range(len(unknowns))],
         )
 
-    def _tear(self, res: list[ca.MX], unk: list[ca.MX]) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
+    def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None
+              ) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
         """Greedy tearing of an algebraic loop.
 
         Repeatedly solve an equation that has one unknown left and is linear in
         it with a coefficient that depends on parameters only (never zero at run
-        time by surprise); when none is left, make the unknown that appears in
-        the most remaining equations a tearing variable. Returns the tearing
+        time by surprise); when none is left, make a tearing variable of an
+        unknown with a start value (Newton's first guess; one without may be a
+        divisor, e.g. a resistance with no start) that appears in the most
+        remaining equations, else of the unknown that appears in the most. Returns the tearing
         variables, the explicit assignments in order, and the residual
         equations (as many as tearing variables) that the rootfinder solves.
         """
@@ -1211,7 +1911,9 @@ class FlatTranslator:
             if not unknown:
                 break
             counts = {v: sum(1 for e in remaining if v in eq_vars[e]) for v in unknown}
-            tear = max(unknown, key=lambda v: (counts[v], -v))
+            # a variable with a start value (a guess for Newton) before one without, then the most used
+            informed = {v: bool(guess) and abs((guess or {}).get(names[v], 0.0)) > 0 for v in unknown}
+            tear = max(unknown, key=lambda v: (informed[v], counts[v], -v))
             tears.append(tear)
             known.add(tear)
         if len(remaining) != len(tears):  # pragma: no cover - counting argument guarantees equality
@@ -1242,7 +1944,7 @@ class FlatTranslator:
             inner = ca.substitute(inner, [var], [expr])
         return self._rootfinder(k, inner, tears, guess)
 
-    def _rootfinder(self, k: int, res: list[ca.MX], unk: list[ca.MX], guess: list[float]) -> list[ca.MX]:
+    def _rootfinder(self, k: int | str, res: list[ca.MX], unk: list[ca.MX], guess: list[Any]) -> list[ca.MX]:
         others: dict[str, ca.MX] = {}
         unk_names = {u.name() for u in unk}
         for r in res:
@@ -1260,7 +1962,8 @@ class FlatTranslator:
             f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
             {"abstol": 1e-10, "max_iter": 100},
         )
-        sol = rf(ca.DM(guess), ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
+        start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
+        sol = rf(start, ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
         return [sol[i] for i in range(len(unk))]
 
     def _declared_at(self, scalar: str) -> str:
@@ -1378,6 +2081,16 @@ def _builtin_external(ext: Any) -> str | None:
     return name if name in _BUILTIN_EXTERNALS else None
 
 
+def _is_algorithm(context: str) -> bool:
+    """Whether a statement context names an algorithm section of the model (not a function)."""
+    return context.startswith(("algorithm ", "initial algorithm "))
+
+
+def _in(context: str) -> str:
+    """``in function 'f'`` or ``in the initial algorithm of pipe`` for messages."""
+    return f"in the {context}" if _is_algorithm(context) else f"in function {context!r}"
+
+
 def _not(a: Any) -> Any:
     return (not a) if _num(a) else ca.logic_not(a)
 
@@ -1414,8 +2127,7 @@ def _binary(op: str, a: Value, b: Value, tr: FlatTranslator) -> Value:
         if arr.is_array(a) or arr.is_array(b):
             raise ArrayError(f"relational operator {cmp[o]} on arrays (sizes {arr.size_text(arr.shape(a))} "
                              f"and {arr.size_text(arr.shape(b))}); Modelica compares scalars only")
-        x, y = a, b
-        return {"<": x < y, "<=": x <= y, ">": x > y, ">=": x >= y, "==": x == y, "!=": x != y}[cmp[o]]
+        return tr.relation(cmp[o], a, b)
     if o in ("and", "or"):
         return arr.map2(_and if o == "and" else _or, a, b, f"'{o}'", broadcast=False)
     raise tr.unsupported(f"binary operator {op!r}")
@@ -1460,6 +2172,10 @@ def _arity(name: str, args: list[Value], *allowed: int) -> None:
 
 def _builtin(name: str, args: list[Value], tr: FlatTranslator) -> Value:
     n = name.lower()
+    if n in ("floor", "ceil", "integer"):
+        _arity(n, args, 1)
+        f_num = _SIMPLE[n][0]
+        return arr.map1(lambda a: arr.fold_math(n, f_num, a) if _num(a) else tr.rounding(n, a), args[0])
     if n in _SIMPLE:
         _arity(n, args, 1)
         f_num, f_sym = _SIMPLE[n]

@@ -52,6 +52,7 @@ import casadi as ca
 
 from .. import config
 from ..errors import CompileError
+from .events import MAX_EVENT_ITERATIONS, EventSystem
 from .flatten import ExplicitModel, InitialSystem, ScalarVar
 
 log = logging.getLogger(__name__)
@@ -118,6 +119,14 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
 
     for sv in em.parameters:
         dae.add(sv.name, "parameter", "tunable", sv.sym, _opts(sv, attr, {"start": float(sv.value)}))
+    ev = em.events
+    if ev is not None:
+        # held between events: CasADi reads them like parameters; the event iteration writes them
+        starts = {name: start for name, _, start in ev.discrete}
+        for sv in em.discrete:
+            dae.add(sv.name, "parameter", "tunable", sv.sym, _opts(sv, attr, {"start": float(starts[sv.name])}))
+        for name, sym, start in ev.internal():
+            dae.add(name, "parameter", "tunable", sym, {"start": float(start)})
     for sv in em.inputs:
         start = 0.0
         if sv.start_node is not None:
@@ -149,6 +158,14 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
             dae.eq(is_der[target.name()], expr)
         else:
             dae.eq(target, expr)
+    if ev is not None:
+        for k, z in enumerate(ev.indicators):
+            name = f"_tbx_z{k + 1}"
+            sym = ca.MX.sym(name)
+            dae.add(name, "local", "continuous", sym, {"description": "event indicator"})
+            dae.eq(sym, ca.substitute([z], placeholders, ders)[0] if placeholders else z)
+            causality[name] = "local"
+            exposed.append(name)
     if exposed:
         dae.set_all("y", exposed)
     return dae, exposed, causality
@@ -210,7 +227,7 @@ def export_fmu(
             if name.endswith("_wrap.c"):
                 _patch_set_time(tmpdir / name)
         extra_sources: list[str] = []
-        if em.asserts or em.initial is not None:
+        if em.asserts or em.initial is not None or em.events is not None:
             wrapper = next(tmpdir / name for name in sources if name.endswith("_wrap.c"))
             refs = _value_references((tmpdir / "modelDescription.xml").read_text())
             runtime = _add_runtime(em, wrapper, tmpdir, refs)
@@ -239,7 +256,7 @@ def export_fmu(
         md_path = tmpdir / "modelDescription.xml"
         md_path.write_text(
             _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
-                                    initial=em.initial)
+                                    initial=em.initial, events=em.events)
         )
         output.parent.mkdir(parents=True, exist_ok=True)
         fd, part = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part", dir=output.parent)
@@ -285,6 +302,7 @@ def _tidy_model_description(
     experiment: dict[str, float] | None,
     description: str | None,
     initial: InitialSystem | None = None,
+    events: EventSystem | None = None,
 ) -> str:
     root = ET.fromstring(xml)
     root.set("modelName", model)
@@ -318,6 +336,20 @@ def _tidy_model_description(
     for elem in list(structure):
         if elem.tag in ("Output", "InitialUnknown") and elem.get("valueReference") in demoted:
             structure.remove(elem)
+    if events is not None:
+        held = {name for name, _, _ in events.discrete} | {name for name, _, _ in events.internal()}
+        indicators = [f"_tbx_z{k + 1}" for k in range(len(events.indicators))]
+        by_name = {var.get("name", ""): var for var in variables}
+        for name in held:
+            var = by_name.get(name)
+            if var is not None:  # a discrete variable: set by the event iteration, not by the user
+                var.set("causality", "local")
+                var.set("variability", "discrete")
+                var.set("initial", "exact")
+        for name in indicators:
+            var = by_name.get(name)
+            if var is not None:
+                ET.SubElement(structure, "EventIndicator", {"valueReference": var.get("valueReference", "")})
     if initial is not None:
         # the initial equations make the free states and fixed = false parameters initial unknowns;
         # every initial unknown may then depend on every known (no dependencies attribute)
@@ -400,6 +432,8 @@ def _vrs(syms: list[ca.MX], refs: dict[str, int], model: str, what: str) -> list
     out = []
     for sym in syms:
         name = sym.name()
+        if name.startswith("pre(") and name.endswith(")") and name[4:-1] in refs:
+            name = name[4:-1]  # pre(v) in a runtime function: v's value when it is called
         if name == "time":
             out.append(str(_TIME_VR))
         elif name in refs:
@@ -536,6 +570,145 @@ static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
 """
 
 
+_EVENTS = """
+static int tbx_event_step(casadi_fmi_memory* m, int quiet, casadi_real* out) {
+  casadi_real win[TBX_E_NW + 1];
+  casadi_real q = quiet ? 1 : 0;
+  const casadi_real* arg[TBX_E_SZ_ARG + 1];
+  casadi_real* res[TBX_E_SZ_RES + 1];
+  size_t i;
+  if (!m->up_to_date) {
+    if (evaluate(m)) return 1;
+    m->up_to_date = 1;
+  }
+  for (i = 0; i < TBX_E_NW; ++i) win[i] = tbx_value(m, tbx_e_vr[i]);
+  arg[0] = win;
+  arg[1] = &q;
+  res[0] = out;
+  return tbx_call_tbx_event(arg, res);
+}
+/* The event iteration (trackingbox.compiler.events): repeat the step until no held value changes;
+   re-initialised states are written too. Then the next sample() instant, if any. */
+static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* states_changed) {
+  casadi_real out[TBX_E_NOUT + 1];
+  char text[300];
+  int it, changed;
+  size_t k, j;
+  for (it = 0; it < TBX_E_MAXIT; ++it) {
+    if (tbx_event_step(m, quiet, out)) {
+      snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
+      tbx_log(m, fmi3Error, "event", text);
+      return fmi3Error;
+    }
+    changed = 0;
+    for (k = 0; k < TBX_E_NU; ++k) {
+      casadi_real* v = &m->v[var_offset[tbx_e_upd_vr[k]]];
+      if (*v != out[k]) {
+        *v = out[k];
+        changed = 1;
+      }
+    }
+    for (k = 0; k < TBX_E_NR; ++k) {
+      casadi_real* v = &m->v[var_offset[tbx_e_reinit_vr[k]]];
+      if (*v != out[TBX_E_NU + k]) {
+        *v = out[TBX_E_NU + k];
+        changed = 1;
+        *states_changed = 1;
+      }
+    }
+    m->up_to_date = 0;
+    if (!changed) {
+      m->tbx_next_defined = 0;
+      for (j = 0; j < TBX_E_NS; ++j) {
+        casadi_real start = out[TBX_E_NU + TBX_E_NR + j];
+        casadi_real interval = out[TBX_E_NU + TBX_E_NR + TBX_E_NS + j];
+        casadi_real eps = 1e-9 * fmax(1.0, fabs(m->t)), n, tn;
+        if (!(interval > 0)) continue;
+        n = ceil((m->t - start) / interval);
+        if (n < 0) n = 0;
+        tn = start + n * interval;
+        if (tn <= m->t + eps) tn = start + (n + 1) * interval;
+        if (!m->tbx_next_defined || tn < m->tbx_next) {
+          m->tbx_next = tn;
+          m->tbx_next_defined = 1;
+        }
+      }
+      return fmi3OK;
+    }
+  }
+  snprintf(text, sizeof text, "event iteration at t = %.17g s did not converge after %d steps", m->t, TBX_E_MAXIT);
+  tbx_log(m, fmi3Error, "event", text);
+  return fmi3Error;
+}
+static int tbx_samples_on(casadi_fmi_memory* m) {
+  size_t j;
+  for (j = 0; j < TBX_E_NS; ++j) {
+    if (m->v[var_offset[tbx_e_sample_vr[j]]] != 0) return 1;
+  }
+  return 0;
+}
+/* Initialisation with events: initial() is true; the initial equations and the event iteration are
+   repeated until the held values no longer change (the continuous part depends on them). */
+static fmi3Status tbx_initialize_events(casadi_fmi_memory* m) {
+  casadi_real held[TBX_E_NU + 1];
+  int round, changed = 0;
+  size_t k;
+  m->v[var_offset[TBX_E_INIT_VR]] = 1;
+  m->up_to_date = 0;
+  for (round = 0; round < 20; ++round) {
+#ifdef TBX_I_NZ
+    if (tbx_initialize(m) != fmi3OK) return fmi3Error;
+#endif
+    for (k = 0; k < TBX_E_NU; ++k) held[k] = m->v[var_offset[tbx_e_upd_vr[k]]];
+    if (tbx_event_iteration(m, 0, &changed) != fmi3OK) return fmi3Error;
+#ifndef TBX_I_NZ
+    break;
+#endif
+    changed = 0;
+    for (k = 0; k < TBX_E_NU; ++k) {
+      if (held[k] != m->v[var_offset[tbx_e_upd_vr[k]]]) changed = 1;
+    }
+    if (!changed) break;
+  }
+  m->v[var_offset[TBX_E_INIT_VR]] = 0;
+  m->up_to_date = 0;
+  return fmi3OK;
+}
+"""
+
+_UPDATE_DISCRETE = """FMI3_Export fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance,
+    fmi3Boolean* discreteStatesNeedUpdate,
+    fmi3Boolean* terminateSimulation,
+    fmi3Boolean* nominalsOfContinuousStatesChanged,
+    fmi3Boolean* valuesOfContinuousStatesChanged,
+    fmi3Boolean* nextEventTimeDefined,
+    fmi3Float64* nextEventTime) {
+  // trackingbox runtime: the event iteration (trackingbox.compiler.events)
+  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;
+  int states_changed = 0;
+  fmi3Status status = tbx_event_iteration(m, 0, &states_changed);
+  *discreteStatesNeedUpdate = fmi3False;
+  *terminateSimulation = fmi3False;
+  *nominalsOfContinuousStatesChanged = fmi3False;
+  *valuesOfContinuousStatesChanged = (states_changed || m->continuous_states_changed) ? fmi3True : fmi3False;
+  *nextEventTimeDefined = m->tbx_next_defined ? fmi3True : fmi3False;
+  if (m->tbx_next_defined) *nextEventTime = m->tbx_next;
+  m->continuous_states_changed = 0;
+  return status;
+}
+"""
+
+_EVENT_INDICATORS = """FMI3_Export fmi3Status fmi3GetEventIndicators(fmi3Instance instance,
+    fmi3Float64 eventIndicators[],
+    size_t nEventIndicators) {
+  // trackingbox runtime: the indicators of the frozen relations (trackingbox.compiler.events)
+  (void)nEventIndicators;
+  if (TBX_NZ == 0) return fmi3OK;
+  return fmi3GetFloat64(instance, tbx_z_vr, TBX_NZ, eventIndicators, TBX_NZ);
+}
+"""
+
+
 def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX], list[ca.MX]]:
     """CasADi functions ``tbx_asserts(w) -> c`` and ``tbx_init(z0, wk) -> (z, r)``; their input symbols."""
     functions: list[ca.Function] = []
@@ -561,18 +734,56 @@ def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX
         wk = ca.MX.sym("wk", nk)
         g = ca.substitute([ca.vertcat(*init.residual)], init.unknowns + known_syms,
                           [z[i] for i in range(nz)] + [wk[i] for i in range(nk)])[0]
-        newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
-                               {"abstol": 1e-12, "max_iter": 100})
         residual = ca.Function("tbx_init_residual", [z, wk], [g])
         z0 = ca.MX.sym("z0", nz)
-        zsol = newton(z0, wk)
+        if init.solution:  # block by block (FlatTranslator._initial_system)
+            zsol = ca.substitute([ca.vertcat(*init.solution)], init.guesses + known_syms,
+                                 [z0[i] for i in range(nz)] + [wk[i] for i in range(nk)])[0]
+        else:
+            newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
+                                   {"abstol": 1e-12, "max_iter": 100})
+            zsol = newton(z0, wk)
         functions.append(ca.Function("tbx_init", [z0, wk], [zsol, residual(zsol, wk)]))
     return functions, assert_syms, known_syms
+
+
+def _event_function(em: ExplicitModel, quiet: ca.MX) -> tuple[ca.Function, list[ca.MX], int]:
+    """``tbx_event(w, quiet) -> out``: one step of the event iteration (.events). *w* are the values
+    of the symbols it reads (as the FMU holds them: pre(v) is v's value), *out* the new values of
+    ``events.updates`` in order, then of the re-initialised states, then each sample's start and
+    interval. Returns the function, its input symbols and the number of updates."""
+    ev = em.events
+    olds: list[ca.MX] = []
+    news: list[ca.MX] = []
+    for lhs, expr in ev.updates:
+        value = ca.substitute([expr], olds, news)[0] if olds else expr
+        olds.append(lhs)
+        news.append(value)
+    reinit = [ca.substitute([e], olds, news)[0] if olds else e for _, e in ev.reinits]
+    timing = [x for smp in ev.samples for x in (smp.start,)] + [x for smp in ev.samples for x in (smp.interval,)]
+    outs = news + reinit + timing
+    body = ca.vertcat(*outs) if outs else ca.MX(0, 1)
+    seen: dict[str, ca.MX] = {}
+    for sym in ca.symvar(body):
+        if sym.name() != quiet.name():
+            seen.setdefault(sym.name(), sym)
+    syms = [seen[n] for n in sorted(seen)]
+    w = ca.MX.sym("w", len(syms))
+    q = ca.MX.sym("q")
+    args = syms + [s for s in ca.symvar(body) if s.name() == quiet.name()]
+    vals = [w[i] for i in range(len(syms))] + [q] * (len(args) - len(syms))
+    body = ca.substitute([body], args, vals)[0] if args else body
+    return ca.Function("tbx_event", [w, q], [body]), syms, len(news)
 
 
 def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, int]) -> str:
     """Generate ``tbx_runtime.c`` and patch the wrapper to call it; return the new source's name."""
     functions, assert_syms, known_syms = _runtime_functions(em)
+    ev = em.events
+    if ev is not None:
+        quiet = ca.MX.sym("_tbx_quiet")
+        event_fn, event_syms, n_updates = _event_function(em, quiet)
+        functions.append(event_fn)
     name = "tbx_runtime.c"
     gen = ca.CodeGenerator(name, {"with_header": False})
     for fn in functions:
@@ -607,24 +818,55 @@ def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str,
         glue.append(_CALL % {"fn": "tbx_init", "P": "TBX_I"})
         glue.append(_INIT)
 
+    n_z = len(ev.indicators) if ev is not None else 0
+    if ev is not None:
+        fn = by_name["tbx_event"]
+        n_out = fn.size1_out(0)
+        glue.append(f"#define TBX_E_NW {len(event_syms)}\n#define TBX_E_NU {n_updates}\n"
+                    f"#define TBX_E_NR {len(ev.reinits)}\n#define TBX_E_NS {len(ev.samples)}\n"
+                    f"#define TBX_E_NOUT {max(n_out, 1)}\n#define TBX_E_MAXIT {MAX_EVENT_ITERATIONS}\n"
+                    f"#define TBX_E_INIT_VR {refs[ev.initial.name()]}\n#define TBX_NZ {n_z}\n")
+        glue.append(_work_defines("TBX_E", fn))
+        glue.append("int tbx_event(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
+                    "int mem);\nint tbx_event_checkout(void);\nvoid tbx_event_release(int mem);\n")
+        glue.append(_c_array("long", "tbx_e_vr", _vrs(event_syms, refs, em.name, "the event iteration")))
+        glue.append(_c_array("long", "tbx_e_upd_vr", _vrs([lhs for lhs, _ in ev.updates], refs, em.name,
+                                                          "the event iteration")))
+        glue.append(_c_array("long", "tbx_e_reinit_vr", _vrs([x for x, _ in ev.reinits], refs, em.name, "reinit")))
+        glue.append(_c_array("long", "tbx_e_sample_vr", _vrs([smp.sym for smp in ev.samples], refs, em.name,
+                                                             "sample()")))
+        glue.append(_c_array("fmi3ValueReference", "tbx_z_vr",
+                             [str(refs[f"_tbx_z{k + 1}"]) for k in range(n_z)]))
+        glue.append(_CALL % {"fn": "tbx_event", "P": "TBX_E"})
+        glue.append(_EVENTS)
+
     exit_body = ["  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n"]
-    if em.initial is not None:
+    if ev is not None:
+        exit_body.append("  if (tbx_initialize_events(m) != fmi3OK) return fmi3Error;\n")
+    elif em.initial is not None:
         exit_body.append("  if (tbx_initialize(m) != fmi3OK) return fmi3Error;\n")
     exit_body.append("  return tbx_check_asserts(m);\n" if em.asserts else "  (void)m;\n  return fmi3OK;\n")
     check = "  return tbx_check_asserts((casadi_fmi_memory*)instance);\n" if em.asserts else \
             "  (void)instance;\n  return fmi3OK;\n"
+    enter_ct = check
+    if ev is not None and ev.samples:  # a sample() instant is over: its conditions fall (no when fires)
+        enter_ct = ("  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n  int changed = 0;\n"
+                    "  if (tbx_samples_on(m) && tbx_event_iteration(m, 1, &changed) != fmi3OK) return fmi3Error;\n"
+                    + ("  return tbx_check_asserts(m);\n" if em.asserts else "  return fmi3OK;\n"))
 
     text = wrapper.read_text()
     patches = [
         ("  const char* instance_name;\n",
          "  const char* instance_name;\n  // trackingbox runtime: FMI logger and assert warning flags\n"
          "  fmi3LogMessageCallback tbx_logger;\n  fmi3InstanceEnvironment tbx_env;\n"
-         f"  int tbx_warned[{max(n_assert, 1)}];\n  int tbx_pending;\n"),
+         f"  int tbx_warned[{max(n_assert, 1)}];\n  int tbx_pending;\n"
+         "  double tbx_next;\n  int tbx_next_defined;\n"),
         ("    m->instance_name = instanceName;\n",
          "    m->instance_name = instanceName;\n    m->tbx_logger = logMessage;\n"
          "    m->tbx_env = instanceEnvironment;\n"),
         ("  // Zero index is negative: No event\n",
          f"  for (i = 0; i < {max(n_assert, 1)}; ++i) m->tbx_warned[i] = 0;\n  m->tbx_pending = -1;\n"
+         "  m->tbx_next = 0;\n  m->tbx_next_defined = 0;\n"
          "  // Zero index is negative: No event\n"),
         ("FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n",
          "".join(glue) + "FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n"),
@@ -634,7 +876,7 @@ def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str,
          + "".join(exit_body) + "}\n"),
         ("FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n  // Unused variables\n"
          "  (void)instance;  // unused\n  // Always successful return\n  return fmi3OK;\n}\n",
-         "FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n" + check + "}\n"),
+         "FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n" + enter_ct + "}\n"),
         ("  // We should not need this as there are no internal iterations\n  return fmi3OK;\n",
          "  (void)noSetFMUStatePriorToCurrentPoint;\n  if (enterEventMode) *enterEventMode = fmi3False;\n"
          "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + check),
@@ -644,6 +886,16 @@ def _add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str,
             "  return fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n",
             "  fmi3Status status = fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n"
             "  if (status == fmi3OK) tbx_note_asserts((casadi_fmi_memory*)instance);\n  return status;\n"))
+    if ev is not None:
+        patches.append(("  if (nEventIndicators) *nEventIndicators = N_ZERO;\n",
+                        "  if (nEventIndicators) *nEventIndicators = TBX_NZ;\n"))
+        for func, replacement in (("fmi3GetEventIndicators", _EVENT_INDICATORS),
+                                  ("fmi3UpdateDiscreteStates", _UPDATE_DISCRETE)):
+            found = re.search(rf"FMI3_Export fmi3Status {func}\(.*?\n}}\n", text, re.S)
+            if found is None:
+                raise CompileError(f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): {func} "
+                                   "not found; the embedded path is pinned to casadi 3.8.2")
+            text = text[:found.start()] + replacement + text[found.end():]
     for old, new in patches:
         if text.count(old) != 1:
             raise CompileError(

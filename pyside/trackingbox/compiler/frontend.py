@@ -201,7 +201,13 @@ def may_be_pruned(message: str, index: LibraryIndex, tree: FrontendTree) -> bool
         return False
     copied = set(tree.originals.values())
     for m in _QUOTED.finditer(message):
-        for part in (m.group(1) or m.group(2)).split("."):
+        quoted = m.group(1) or m.group(2)
+        found = index.lookup_global(quoted) if "." in quoted else None
+        if found is not None:  # a full name: its class was copied or not
+            if index.classes[found].file not in copied:
+                return True
+            continue
+        for part in quoted.split("."):
             for name in index.by_simple.get(part, ()):
                 if index.classes[name].file not in copied:
                     return True

@@ -657,7 +657,7 @@ class LibraryIndex:
         pattern = re.compile(
             r"(?<![\w.])(?!(?:model|block|class|connector|record|package|function|type|end|within|extends|import|"
             r"partial|encapsulated|operator|expandable|equation|algorithm)\b)[A-Za-z_][\w.]*\s*(?:\[[^\]]*\]\s*)?"
-            rf"\s+{re.escape(name)}\s*(?:[\[(=;,\"]|\bif\b)|\bfor\s+{re.escape(name)}\b")
+            rf"\s+{re.escape(name)}\s*(?:[\[(=;,\"]|\bif\b|\bannotation\b)|\bfor\s+{re.escape(name)}\b")
         cur: str | None = cls
         while cur:
             for c in (cur, *self.bases(cur)):

@@ -229,13 +229,15 @@ def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np
     tol = min(tol, 1e-6)
     names = {v.name for v in md.modelVariables}
     if ref is not None and ref.time.size > 1:
+        # the reference's output grid (its typical step: points at events are a hair apart)
         steps = np.diff(ref.time)
         steps = steps[steps > 0]
-        interval = float(np.min(steps)) if steps.size else (stop - start) / 500
+        interval = float(np.median(steps)) if steps.size else (stop - start) / 500
     elif exp is not None and exp.stepSize is not None:
         interval = float(exp.stepSize)
     else:
         interval = (stop - start) / 500
+    interval = max(interval, (stop - start) / 200_000)
     wanted = [s for s in (ref.signals if ref is not None else ()) if s in names]
     result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, relative_tolerance=tol,
                                output_interval=interval, output=wanted or None, fmi_type="ModelExchange")

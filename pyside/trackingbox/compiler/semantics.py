@@ -20,10 +20,10 @@ section), the file and the line. What is checked:
   parameters or variables of the model's top level in it (MLS 3.8.1; on the flat model;
   a field ``r.y`` may be made constant by a prefix on ``r``, which the flat model does not show).
 
-One check is about valid Modelica instead: ``initial()`` and ``terminal()`` in an equation
-or algorithm of the model's own class are refused (:class:`UnsupportedConstructError`, as the
-README lists), because rumoca 0.10.2 drops an ``if initial() then ... end if`` equation
-(an ``assert`` in it included) from the flat model without a word.
+One check is about valid Modelica instead: an if-equation guarded by ``initial()`` or
+``terminal()`` without an else branch (``if initial() then assert(...); end if;``) in the model's
+own class is refused (:class:`UnsupportedConstructError`, as the README lists), because
+rumoca 0.10.2 drops it (the ``assert`` in it included) from the flat model without a word.
 """
 from __future__ import annotations
 
@@ -235,8 +235,12 @@ class _Checker:
     def event_operators(self, st: _Statement) -> None:
         if st.section == "element":
             return
-        m = re.search(r"\b(initial|terminal)\s*\(\s*\)", st.text)
-        if m:
+        m = re.search(r"\bif\s+(initial|terminal)\s*\(\s*\)\s*then\b", st.text)
+        if m:  # rumoca keeps `if initial() then ... else ... end if` and initial() elsewhere
+            rest = self.code[st.start + m.end():]
+            end = re.search(r"\bend\s+if\s*;", rest)
+            if end is not None and re.search(r"\belse(?:if)?\b", rest[:end.start()]):
+                return
             raise UnsupportedConstructError(
                 f"unsupported Modelica construct in {self.model}: built-in {m.group(1)}() at "
                 f"{self.file}:{_line(self.code, st.start + m.start())}. The embedded backend cannot compile it "

@@ -1,0 +1,115 @@
+"""Events: discrete variables, when-clauses, relations that switch, time events.
+
+The embedded backend gives a hybrid Modelica model its meaning (MLS 8.5, 8.6) with the
+usual machinery of model-exchange FMUs:
+
+* every **relation** on continuous-time values outside ``noEvent`` (``x > 0``, ``time >= t0``,
+  ``if v < vmin then ...``) and every ``integer``/``floor``/``ceil`` of a continuous-time value
+  is *frozen*: between events the equations see a held value (a hidden discrete variable), and
+  an **event indicator** (``x - 0``; for ``floor(e)``: ``e - n`` and ``n + 1 - e``) tells the
+  integrator where it changes, so it stops there (a state event);
+* **discrete variables** (``discrete`` Reals, Integers, Booleans, Reals assigned in a
+  when-clause) hold their values between events; ``pre(v)`` is the value before the event
+  iteration's current step;
+* a **when-clause** fires when its condition becomes true (``c and not pre(c)``; for a vector of
+  conditions, any element); its equations ``v = e`` then define ``v`` (else ``v = pre(v)``),
+  ``elsewhen`` branches in order, its ``reinit(x, e)`` sets a state; ``when initial()`` fires at
+  initialisation, any other when-clause never does;
+* ``sample(start, interval)`` is true at the instants ``start + k*interval`` (time events that
+  the FMU announces as its next event time) and is allowed in when conditions;
+* at an event (and at the end of initialisation) the FMU runs the **event iteration**: with the
+  continuous-time values at that instant, it recomputes the relations, the when conditions and
+  the discrete variables (in dependency order; ``pre`` = the values of the previous step), applies
+  the re-initialisations, and repeats until nothing changes (at most 100 steps).
+
+:class:`EventSystem` is that structure for :mod:`.fmi_export`; it is built by
+:class:`.flatten.FlatTranslator`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+
+MAX_EVENT_ITERATIONS = 100
+"""Steps of an event iteration before the FMU reports that it does not converge."""
+
+
+@dataclass
+class Condition:
+    """A frozen relation or rounding: ``sym`` holds its value between events.
+
+    ``kind`` is ``"rel"`` (``value`` = the relation, evaluated anew at events) or
+    ``"floor"``/``"ceil"``/``"integer"`` (``value`` = the rounded value); ``indicators`` are the
+    event indicators whose sign change marks a change of the value.
+    """
+
+    sym: ca.MX
+    kind: str
+    value: ca.MX
+    indicators: list[ca.MX]
+    text: str
+
+
+@dataclass
+class Sample:
+    """``sample(start, interval)``: ``sym`` is true at the instants ``start + k*interval``."""
+
+    sym: ca.MX
+    start: ca.MX
+    interval: ca.MX
+
+
+@dataclass
+class WhenCondition:
+    """One (scalar) condition of a when-clause: ``sym`` holds its value; it fires on a rising edge."""
+
+    sym: ca.MX
+    pre: ca.MX
+    value: ca.MX
+    initial: bool  # the condition is initial(): it fires at initialisation
+
+
+@dataclass
+class EventSystem:
+    """What the FMU's event iteration computes (see the module docstring).
+
+    ``discrete`` are the model's discrete variables (name, symbol, start value); ``updates``
+    are the assignments of one event-iteration step in order: first every condition's and
+    sample's new value (from the continuous-time values), then the when conditions and the
+    discrete variables; ``pre`` maps each discrete symbol's name to its ``pre`` symbol;
+    ``reinits`` give a state's value after the step.
+    """
+
+    initial: ca.MX
+    discrete: list[tuple[str, ca.MX, float]] = field(default_factory=list)
+    conditions: list[Condition] = field(default_factory=list)
+    samples: list[Sample] = field(default_factory=list)
+    whens: list[WhenCondition] = field(default_factory=list)
+    updates: list[tuple[ca.MX, ca.MX]] = field(default_factory=list)
+    pre: dict[str, ca.MX] = field(default_factory=dict)
+    reinits: list[tuple[ca.MX, ca.MX]] = field(default_factory=list)
+
+    @property
+    def indicators(self) -> list[ca.MX]:
+        return [z for c in self.conditions for z in c.indicators]
+
+    @property
+    def held(self) -> list[ca.MX]:
+        """Every symbol the event iteration updates (its discrete state), in ``updates`` order."""
+        return [lhs for lhs, _ in self.updates]
+
+    def internal(self) -> list[tuple[str, ca.MX, float]]:
+        """The hidden discrete variables (name, symbol, start): conditions, samples, when conditions,
+        the flag of initial() (1 from instantiation until the end of initialisation)."""
+        out = [(c.sym.name(), c.sym, 0.0) for c in self.conditions]
+        out += [(s.sym.name(), s.sym, 0.0) for s in self.samples]
+        out += [(w.sym.name(), w.sym, 0.0) for w in self.whens]
+        out.append((self.initial.name(), self.initial, 1.0))  # true until initialisation ends
+        return out
+
+    def empty(self) -> bool:
+        return not (self.discrete or self.conditions or self.samples or self.whens or self.reinits)
+
+
+__all__ = ["Condition", "EventSystem", "MAX_EVENT_ITERATIONS", "Sample", "WhenCondition"]
