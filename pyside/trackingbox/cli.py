@@ -129,12 +129,17 @@ def _short(text: str, limit: int = 160) -> str:
 
 
 def gen_trackingbox_main(argv: list[str] | None = None) -> int:
-    """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
+    """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``.
+
+    With *argv* None (the console script) the arguments are the command line's, supervised
+    as :func:`main` supervises them unless ``TRACKINGBOX_SUPERVISE=0``.
+    """
+    args = ["generate", *(sys.argv[1:] if argv is None else argv)]
     if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
         from .supervise import supervise
 
-        return supervise(_run, ["generate", *sys.argv[1:]])
-    return _run(["generate", *argv])
+        return supervise(_run, args)
+    return _run(args)
 
 
 if __name__ == "__main__":  # pragma: no cover
