@@ -23,7 +23,7 @@ from trackingbox.generate import filters
 from trackingbox.generate.generator import environment, generate
 from trackingbox.spec import load_spec
 
-from _fixtures_generate import harness, write_case
+from _fixtures_generate import BENCH_PAIRS, box_against_runtime, harness, write_case
 
 # ---------------------------------------------------------------- filters
 
@@ -555,93 +555,6 @@ def test_compiled_box_agrees_with_python_runtime_and_would_catch_wrong_gains(tmp
 # ---------------------------------------------------------------- both benches (slow)
 
 
-def _box_against_runtime(spec, fmu: Path, runtime_csv: Path) -> dict[str, tuple[float, float]]:
-    """Drive the tracked FMU with the samples the Python runtime used; aligned agreement per parameter.
-
-    Returns ``{parameter: (max, 95th percentile)}`` of ``|p_box - p_python| / (max - min)``.
-
-    The twin's inputs come from the same table as in the runtime; the
-    measurements, the hold (the runtime's ``mode`` column) and the corrections
-    of top-level correction inputs are set once per sample and held over it,
-    as the runtime holds them; the measurements are interpolated linearly
-    between samples (as ``validate`` feeds them and the runtime's default
-    ``"linear"`` error interpolation assumes). The box's value at ``t_k`` is
-    compared with the runtime's row ``k`` (see :func:`_aligned_agreement`),
-    after the start-up hold.
-    """
-    import pandas as pd
-
-    from trackingbox import data
-    from trackingbox.fmu import FMUModel
-    from trackingbox.generate.filters import modelica_name
-
-    py = pd.read_csv(runtime_csv)
-    grid = py["time"].to_numpy(dtype=float)
-    table = data.read_table(spec.measurements, allow_nan=True)
-    sampled = data.resample(table[["time", *spec.inputs]], float(table["time"].iloc[0]) + grid,
-                            max_gap=spec.data.max_gap)
-    tags = [p.variable for p in spec.pairs] + [s.tag for s in spec.states]
-    measured = py[[f"measured:{t}" for t in tags]].interpolate().ffill().bfill().to_numpy()
-    inputs = pd.DataFrame({"time": grid, **{name: np.asarray(sampled[tag], dtype=float)
-                                            for tag, name in spec.inputs.items()},
-                           **{f"{modelica_name(t)}_meas": measured[:, j] for j, t in enumerate(tags)}})
-    inputs = inputs.ffill().bfill()
-    names = [modelica_name(p.parameter) for p in spec.pairs]
-    box = np.full((grid.size, len(names)), np.nan)
-    held = (py[[f"mode:{p.variable}" for p in spec.pairs]] == "hold").any(axis=1).to_numpy()
-    with FMUModel(fmu) as model:
-        run = model.stepper(start_time=float(grid[0]), inputs=inputs)
-        for k in range(grid.size):
-            box[k] = run.get(names)
-            if k == grid.size - 1:
-                break
-            values = {"hold": 1.0 if held[k] else 0.0}
-            for st in spec.states:
-                if st.correction in model.info.inputs:  # a top-level twin input: fed as the runtime fed it
-                    values[st.correction] = float(py[f"correction:{st.correction}"].iloc[k])
-            run.set(values)
-            run.step(float(grid[k + 1]))
-    after = grid >= float(spec.tracking.hold_until) - 1e-9
-    out = {}
-    for j, p in enumerate(spec.pairs):
-        par = spec.parameter(p.parameter)
-        d = np.abs(box[:, j] - py[f"parameter:{p.parameter}"].to_numpy()) / (par.max - par.min)
-        out[p.parameter] = (float(np.nanmax(d[after])), float(np.nanpercentile(d[after], 95.0)))
-    return out
-
-
-# gains measured on the benches' twins (a 50-unit step of the parameter, steady change of the
-# variable after an hour); time constants rounded from the step responses
-BENCH_PAIRS = {
-    "heat-exchanger": '''
-[[pairs]]
-variable = "TI-102"
-parameter = "hx.kht"
-gain = -0.0226
-time_constant = 70.0
-''',
-    "heat-production": '''
-[[pairs]]
-variable = "TI-301"
-parameter = "HEX300.kht"
-gain = -0.00998
-time_constant = 300.0
-
-[[pairs]]
-variable = "TI-310"
-parameter = "HU300.kht"
-gain = -0.0196
-time_constant = 300.0
-
-[[pairs]]
-variable = "PI-200"
-parameter = "Pipe200.k"
-gain = 1177460.8
-time_constant = 147.7
-''',
-}
-
-
 @pytest.mark.slow
 @pytest.mark.compile
 @pytest.mark.parametrize("bench, hours, max_allowed", [("heat-exchanger", 3.0, 0.01), ("heat-production", 2.0, 0.01)])
@@ -681,5 +594,5 @@ def test_bench_box_compiles_and_agrees_with_runtime(bench: str, hours: float, ma
     assert box.count("TrackingBox.Blocks.ParameterController ") == len(spec.pairs)
     assert box.count("TrackingBox.Blocks.StateCompensation ") == len(spec.states)
     runtime = track(spec, out_dir=tmp_path / "track", window="validation")
-    agreement = _box_against_runtime(spec, fmu, runtime.csv)
+    agreement = box_against_runtime(spec, fmu, runtime.csv)
     assert all(p95 <= 0.01 and worst <= max_allowed for worst, p95 in agreement.values()), agreement
