@@ -45,10 +45,6 @@ def _by_generate(case: Path, out: Path) -> dict[str, bytes]:
     return _tree(out)
 
 
-def test_the_console_script_is_installed() -> None:
-    assert GEN.is_file() and os.access(GEN, os.X_OK)
-
-
 @pytest.mark.parametrize("supervise", [True, False], ids=["supervised", "TRACKINGBOX_SUPERVISE=0"])
 def test_gen_trackingbox_writes_the_box_of_the_spec(case: Path, supervise: bool, tmp_path: Path) -> None:
     proc = _run([str(GEN), str(case), "-o", str(tmp_path / "out")], tmp_path, supervise)
