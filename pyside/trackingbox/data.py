@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import csv
 import logging
-import os
 import math
+import os
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path

@@ -86,10 +86,31 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+from scipy.optimize import differential_evolution, least_squares
 
-from .checkpoint import Journal
-from .errors import DataError, EstimationError, SimulationError, SpecError, TrackingError, unknown_name
+from . import config
+from .analysis import executor
+from .analysis.executor import (
+    cached_model,
+    clear_model_cache,
+    make_executor,
+    stop_executor,
+)
+from .checkpoint import Journal, file_digest
+from .data import MeasurementView
+from .errors import (
+    DataError,
+    EstimationError,
+    SimulationError,
+    SpecError,
+    TrackingError,
+    unknown_name,
+)
+from .fmu import read_info
 from .io import write_text_atomic
+from .native import NativeUnavailable, native_reason
+from .sensitivity import simulate_sensitivities, support
+from .spec import write_starts as _write_starts
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -325,23 +346,17 @@ class Problem:
 
 
 def _model(path: Path) -> Any:
-    from .analysis.executor import cached_model
-
     return cached_model(path)
 
 
 def _forget_models() -> None:
     """Pool initializer: a fresh worker owns no FMU yet."""
-    from .analysis import executor
-
     with executor._LOCK:
         executor._MODELS.clear()
 
 
 def close_models() -> None:
     """Close the twins this process has opened (estimation's and the analysis runs' cache)."""
-    from .analysis.executor import clear_model_cache
-
     try:
         clear_model_cache()
     except Exception:  # noqa: BLE001 - closing is best effort
@@ -486,8 +501,6 @@ def simulate_window_sensitivities(problem: Problem, window: WindowData, x: npt.A
     ranges); returns output tag -> values and output tag -> ``d value / d x``
     (shape ``(len(grid), n_parameters)``) on the window's grid (lead-in included).
     """
-    from .sensitivity import simulate_sensitivities
-
     parameters, offset, grid, inputs = window_setup(problem, window, x)
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
@@ -545,13 +558,7 @@ class _ExactResiduals:
 
 def _runs_native(model: Any) -> bool:
     """True if *model*'s runs go through the native stepper (what :meth:`FMUModel.stepper` chooses by default)."""
-    import os
-
-    if os.environ.get("TRACKINGBOX_NATIVE", "").strip() == "0":
-        return False
-    try:
-        from .native import NativeUnavailable, native_reason
-    except ImportError:  # pragma: no cover - the module is part of the package
+    if not config.get("native"):
         return False
     try:
         return native_reason(model) is None
@@ -581,8 +588,6 @@ def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tu
     ``"prefer-exact"`` skips the native check: exact where the twin supports it,
     else ``("fd", why)``.
     """
-    from .sensitivity import support
-
     if requested not in JACOBIAN_METHODS:
         raise EstimationError(f"jacobian must be one of {', '.join(JACOBIAN_METHODS)}, not {requested!r}")
     if requested == "fd":
@@ -728,8 +733,6 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
         over part of a window is held at its last good value and the outputs
         are not scored there (the view masks it like a stoppage).
     """
-    from .data import MeasurementView
-
     where = Path(spec.measurements).name
     windows = _get(spec, "windows")
     lead_s = DEFAULT_WARMUP if warmup is None else float(warmup)
@@ -795,8 +798,6 @@ def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
     Checks that every estimated and fixed parameter and every input/output name
     exists in the twin (did-you-mean on a miss) and that ``min <= start <= max``.
     """
-    from .fmu import read_info
-
     info = read_info(spec.twin)
     variables = {v.name: v for v in info.variables}
     where = f"twin {Path(spec.twin).name}"
@@ -1056,8 +1057,6 @@ def _global_search(train: Objective, coarse: Objective, problem: Problem, pool: 
     *settle* of each parameter's bound range (:data:`GLOBAL_SETTLE`; 0: never).
     Every evaluation goes through *journal* (served from it when recorded).
     """
-    from scipy.optimize import differential_evolution
-
     n = len(problem.names)
     best_x, best_cost = best
     per_parameter = _population(n, popsize)
@@ -1151,8 +1150,6 @@ def _refine(train: Objective, problem: Problem, pool: Any, journal: Journal, *, 
     the mean NRMSE there in value and gradient. A pass's point is kept only if its mean
     NRMSE is not above the best so far.
     """
-    from scipy.optimize import least_squares
-
     best_x, best_cost = best
     n = len(problem.names)
     evaluations = 0
@@ -1331,16 +1328,12 @@ def _open_pool(workers: int | None, scheduler: str | None) -> Any:
     """
     if not _parallel(workers, scheduler):
         return None
-    from .analysis.executor import make_executor
-
     return make_executor(scheduler, workers if workers is not None or scheduler else 1, start_method="spawn")
 
 
 def _close_pool(pool: Any, *, failed: bool = False) -> None:
     """Shut the executor down; after a failure or an interrupt without waiting for running evaluations."""
     if pool is not None:
-        from .analysis.executor import stop_executor
-
         stop_executor(pool, wait=not failed)
 
 
@@ -1351,8 +1344,6 @@ def journal_path(checkpoint: str | Path) -> Path:
 
 def _identity(spec: Any, problem: Problem, **settings: Any) -> dict[str, Any]:
     """What makes two estimation runs the same search: the inputs' bytes and the settings."""
-    from .checkpoint import file_digest
-
     files = {"spec": spec.path, "measurements": spec.measurements, "twin": problem.twin}
     return {**{name: file_digest(path) for name, path in files.items()},
             "parameters": list(problem.names), "lower": [float(v).hex() for v in problem.lower],
@@ -1520,6 +1511,4 @@ def write_starts(path: str | Path, values: Mapping[str, float]) -> Any:
     Delegates to :func:`trackingbox.spec.write_starts` (one writer for the spec,
     keeping comments and layout); kept here for existing callers.
     """
-    from .spec import write_starts as _write_starts
-
     return _write_starts(path, values)

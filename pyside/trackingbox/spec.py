@@ -13,6 +13,7 @@ the table and the file.
 from __future__ import annotations
 
 import csv
+import errno
 import logging
 import math
 import os
@@ -31,8 +32,9 @@ import tomli_w
 import tomlkit
 from tomlkit.items import AoT, Comment, Table, Whitespace
 
-from .errors import SpecError, did_you_mean, unknown_name
-from .io import write_text_atomic
+from .errors import SpecError, TrackingError, did_you_mean, unknown_name
+from .fmu import read_info
+from .io import user_path, write_text_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
     from .fmu import FMUInfo
@@ -451,8 +453,20 @@ def _resolve(base: Path, value: str) -> Path:
         pass
     try:
         return p if p.is_absolute() else (base / p).resolve()
-    except (OSError, ValueError):
+    except (OSError, ValueError, RuntimeError):  # RuntimeError: a symlink loop (Python < 3.13), then reported
         return base / p
+
+
+def _absent(path: Path) -> str:
+    """Why *path* cannot be used as a file or folder: it does not exist, or it is a loop of symbolic links."""
+    try:
+        path.resolve(strict=True)
+    except RuntimeError:  # Python < 3.13
+        return "is a loop of symbolic links"
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "is a loop of symbolic links"
+    return "does not exist"
 
 
 def _csv_header(path: Path) -> list[str] | None:
@@ -496,7 +510,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         resolved = _resolve(base, value)
         files[key] = resolved
         if check_files and not resolved.is_file():
-            problems.add(f"{key} file {value!r} does not exist (looked for {resolved})")
+            problems.add(f"{key} file {value!r} {_absent(resolved)} (looked for {resolved})")
     sample_time = _number(raw, "sample_time", "the top level", problems, positive=True)
 
     source = None
@@ -508,7 +522,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         if spath is not None and smodel is not None:
             resolved = _resolve(base, spath)
             if check_files and not resolved.exists():
-                problems.add(f"path {spath!r} in [source] does not exist (looked for {resolved})")
+                problems.add(f"path {spath!r} in [source] {_absent(resolved)} (looked for {resolved})")
             source = SourceSpec(path=resolved, model=smodel)
 
     inputs = _string_map(raw, "inputs", problems)
@@ -839,7 +853,7 @@ def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: _Problems, *,
     for item in value:
         resolved = _resolve(base, item)
         if check_files and not resolved.is_dir():
-            problems.add(f"effects folder {item!r} in [diagnose] does not exist (looked for {resolved})")
+            problems.add(f"effects folder {item!r} in [diagnose] {_absent(resolved)} (looked for {resolved})")
         folders.append(resolved)
     return DiagnoseSpec(effects=tuple(folders))
 
@@ -896,9 +910,6 @@ def load_spec(path: str | os.PathLike[str], *, check_files: bool = True) -> Spec
         Listing every problem found (unknown/missing keys, wrong types, bad bounds
         and windows, missing files, pairs naming unknown tags or parameters).
     """
-    from .errors import TrackingError
-    from .io import user_path
-
     try:
         path = user_path(path, "spec file").resolve()
     except TrackingError as exc:
@@ -972,8 +983,6 @@ def check_against_fmu(spec: Spec, info: FMUInfo | None = None) -> None:
         outside the bounds the FMU declares.
     """
     if info is None:
-        from .fmu import read_info  # lazy: fmu pulls in fmpy
-
         info = read_info(spec.twin)
     variables = {v.name: v for v in info.variables}
     names = list(variables)

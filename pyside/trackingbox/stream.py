@@ -53,8 +53,19 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from .data import (GAP_FACTOR, LONG_COLUMNS, MeasurementView, Method, WindowArg, _header, clean_chunks, grid_rows,
-                   lay_masks, resample, view_tags)
+from .data import (
+    GAP_FACTOR,
+    LONG_COLUMNS,
+    MeasurementView,
+    Method,
+    WindowArg,
+    _header,
+    clean_chunks,
+    grid_rows,
+    lay_masks,
+    resample,
+    view_tags,
+)
 
 if TYPE_CHECKING:
     from .spec import Spec

@@ -39,7 +39,12 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from ..compiler import (
+    compile_model,
+    library_path,
+)
 from ..errors import FMUError, SimulationError, TrackingError, did_you_mean
+from ..fmu import FMUModel, read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -209,8 +214,6 @@ class BenchCase:
 # --------------------------------------------------------------------------- helpers
 
 def _compile(model: str, output: Path) -> Path:
-    from ..compiler import compile_model, library_path  # lazy: the compiler pulls in rumoca/casadi
-
     t0 = _time.perf_counter()
     result = compile_model(library_path(), model, output=output)
     log.info("compiled %s -> %s in %.1f s", model, result.fmu, _time.perf_counter() - t0)
@@ -219,8 +222,6 @@ def _compile(model: str, output: Path) -> Path:
 
 def _library_path() -> Path | None:
     try:
-        from ..compiler import library_path
-
         return Path(library_path())
     except (ImportError, AttributeError):  # pragma: no cover - compiler not installed
         return None
@@ -322,8 +323,6 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
     CompileError, SimulationError
         Compiling or simulating the plant failed.
     """
-    from ..fmu import FMUModel, read_info  # lazy: fmpy
-
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise TrackingError(f"output directory {out} of bench {definition.name!r} exists and is not a directory")

@@ -29,7 +29,7 @@ import shutil
 import tempfile
 import time as _time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +37,8 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from ..errors import FMUError, TrackingError
+from ..errors import FMUError, SpecError, TrackingError
+from ..fmu import FMUModel, read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -52,6 +53,7 @@ from ..spec import (
     dump_spec,
     load_spec,
     loads_spec,
+    write_pairs,
 )
 from . import scenario as sc
 from .base import (
@@ -65,6 +67,7 @@ from .base import (
     add_noise,
     check_overrides,
 )
+from .historian import HistorianSettings, TagSettings, export_history
 
 log = logging.getLogger(__name__)
 
@@ -354,10 +357,6 @@ def fix_parameters(spec_path: str | os.PathLike[str], values: Mapping[str, float
     SpecError
         A name that is not a ``[[parameters]]`` entry of the spec (named, with the file).
     """
-    from dataclasses import replace
-
-    from ..errors import SpecError
-
     path = Path(spec_path)
     spec = load_spec(path)
     names = {p.name for p in spec.parameters}
@@ -459,8 +458,6 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int, *, feed: f
     pressure_band : float
         Pressures' dead band (Pa; default 300 Pa).
     """
-    from .historian import HistorianSettings, TagSettings
-
     f0 = NOMINAL["feedFlowSet"] if feed is None else float(feed)
     out = {}
     for s in tags:
@@ -516,8 +513,6 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     -------
     BenchCase
     """
-    from ..fmu import FMUModel, read_info
-
     d = DEFINITION
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
@@ -579,8 +574,6 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         dense_frame = pd.DataFrame(dense)
         history = None
         if historian_export:
-            from .historian import export_history
-
             history = export_history(dense_frame, historian_settings((*d.inputs, *d.outputs), start, seed))
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas
@@ -656,10 +649,6 @@ def slow_pairs(spec_path: str | os.PathLike[str], closed_loop: float = CLOSED_LO
     measurement noise out of the parameter. Pairs that already have a larger
     ``lambda`` (or explicit ``kp``/``ti``) keep them.
     """
-    from dataclasses import replace
-
-    from ..spec import write_pairs
-
     spec = load_spec(spec_path)
     pairs = [p if (p.kp is not None or p.ti is not None or p.lambda_ * p.time_constant >= closed_loop)
              else replace(p, lambda_=closed_loop / p.time_constant) for p in spec.pairs]

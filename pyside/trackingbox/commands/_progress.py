@@ -16,7 +16,6 @@ import sys
 import time
 from typing import TextIO
 
-
 #: fraction of a stage's items done (since its rate's start) before a line estimates the time left
 ETA_FRACTION = 0.02
 

@@ -7,7 +7,12 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ..diagnose import DiagnoseSettings, diagnose
+from ..io import check_output
+from ..report.diagnose import write_diagnose_report
+from ..spec import check_against_fmu, load_spec
 from ._args import add_executor_arguments, number
+from ._progress import Progress
 
 log = logging.getLogger(__name__)
 
@@ -68,12 +73,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the diagnosis; exit code 0 for every verdict."""
-    from ..diagnose import DiagnoseSettings, diagnose
-    from ..spec import check_against_fmu, load_spec
-    from ._progress import Progress
-
-    from ..io import check_output
-
     spec = load_spec(args.spec)
     inputs = [spec.path, spec.twin, spec.measurements]
     for option, value in (("--report", args.report), ("-o", args.output)):
@@ -87,8 +86,6 @@ def run(args: argparse.Namespace) -> int:
     progress = Progress(every=15.0)
     result = diagnose(spec, settings, progress=lambda stage, done, total: progress(stage, done, total))
     if args.report:
-        from ..report.diagnose import write_diagnose_report
-
         write_diagnose_report(spec, result, args.report)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))

@@ -7,6 +7,23 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ..errors import EstimationError
+from ..estimation import (
+    DEFAULT_GLOBAL_EVALUATIONS,
+    DEFAULT_GLOBAL_GRID,
+    DEFAULT_MAXITER,
+    DEFAULT_POPULATION,
+    DEFAULT_WARMUP,
+    MAX_REFINE_ITERATIONS,
+    estimate,
+    write_starts,
+)
+from ..io import check_output, output_dir
+from ..report import write_estimate_report
+from ..spec import check_against_fmu, load_spec
+from ._args import add_executor_arguments, number
+from ._progress import Progress
+
 log = logging.getLogger(__name__)
 
 EPILOG = """\
@@ -38,10 +55,6 @@ goes to stderr.
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ._args import add_executor_arguments, number
-    from ..estimation import (DEFAULT_GLOBAL_EVALUATIONS, DEFAULT_GLOBAL_GRID, DEFAULT_MAXITER, DEFAULT_POPULATION,
-                              DEFAULT_WARMUP, MAX_REFINE_ITERATIONS)
-
     p = subparsers.add_parser(
         "estimate",
         help="estimate the spec's [[parameters]] from the measurements (training/validation windows)",
@@ -87,14 +100,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the estimation; exit code 0 on success."""
-    from ..estimation import estimate, write_starts
-    from ..report import write_estimate_report
-    from ..spec import check_against_fmu, load_spec
-    from ._progress import Progress
-
-    from ..errors import EstimationError
-    from ..io import check_output, output_dir
-
     if args.resume and not args.report:
         raise EstimationError("--resume needs --report DIR: the checkpoint and its journal live there")
     spec = load_spec(args.spec)

@@ -7,6 +7,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..generate.generator import compile_generated, generate
+from ..io import check_output, output_dir
+from ..spec import load_spec
+
 EPILOG = """\
 examples:
   gen-trackingbox case1/spec.toml -o case1/generated
@@ -49,11 +53,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate (and optionally compile); print a summary or JSON."""
-    from ..generate.generator import compile_generated, generate
-    from ..spec import load_spec
-
-    from ..io import check_output, output_dir
-
     spec = load_spec(args.spec, check_files=False)
     out = args.out if args.out is not None else spec.path.parent / "generated"
     inputs = [spec.path, spec.twin, spec.measurements, *([spec.source.path] if spec.source else [])]

@@ -6,7 +6,12 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..analysis.pair_stage import PairSettings, pair, spec_pairs
+from ..io import check_output
+from ..report import Document, write_pair_report
+from ..spec import check_against_fmu, load_spec, write_pairs
 from ._args import add_executor_arguments, number, parse_assignments
+from ._progress import Progress
 
 EPILOG = """\
 examples:
@@ -108,8 +113,6 @@ def register(subparsers: Any) -> None:
 
 def settings(args: argparse.Namespace) -> Any:
     """The :class:`~trackingbox.analysis.pair_stage.PairSettings` the arguments ask for."""
-    from ..analysis.pair_stage import PairSettings
-
     return PairSettings(method=args.method, step=args.step, two_sided=not args.one_sided,
                         freeze=() if args.no_freeze else None if args.freeze is None
                         else tuple(parse_assignments(args.freeze, "--freeze").items()), at=args.at,
@@ -125,12 +128,6 @@ def settings(args: argparse.Namespace) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trackingbox pair``; exit code 0 on success, 1 when no pair was found."""
-    from ..analysis.pair_stage import pair, spec_pairs
-    from ..report import write_pair_report
-    from ..io import check_output
-    from ..spec import check_against_fmu, load_spec, write_pairs
-    from ._progress import Progress
-
     spec = load_spec(args.spec)
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements])
@@ -155,8 +152,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(result: Any) -> None:
-    from ..report import Document
-
     pairing, doc = result.pairing, Document("")
     doc.table(["variable", "parameter", "lambda", "gain", "tau (s)"],
               [[p.variable, p.parameter, f"{p.lambda_:.3f}", f"{p.gain:.4g}", f"{p.time_constant:.4g}"]

@@ -10,7 +10,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..data import read_table
 from ..errors import FMUError, TrackingError, did_you_mean
+from ..fmu import FMUModel, check_values, read_info
+from ..io import atomic_path, check_output
 from ._args import number, parse_assignments
 
 log = logging.getLogger(__name__)
@@ -64,11 +67,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Validate everything, simulate, write the CSV atomically; 0 on success."""
-    from ..data import read_table
-    from ..fmu import FMUModel, read_info
-    from ..fmu import check_values
-    from ..io import atomic_path, check_output
-
     settings = parse_assignments(args.set_values, "--set")
     check_output(args.out, "-o", inputs=[p for p in (args.fmu, args.inputs) if p is not None])
     info = read_info(args.fmu)

@@ -4,10 +4,21 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from ..checkpoint import CheckpointFile
+from ..errors import SpecError
+from ..io import check_output, output_dir
+from ..online.live import LiveSettings, track_live
+from ..online.opcua import read_credentials
+from ..report import write_track_report
+from ..report.track import summary_tables
+from ..spec import check_against_fmu, load_spec
+from ..tracking.runtime import track
 from ._args import number
+from ._progress import Progress
 
 log = logging.getLogger(__name__)
 
@@ -85,13 +96,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the tracking simulator; exit code 0 on success."""
-    from ..checkpoint import CheckpointFile
-    from ..io import check_output, output_dir
-    from ..report import write_track_report
-    from ..spec import check_against_fmu, load_spec
-    from ..tracking.runtime import track
-    from ._progress import Progress
-
     spec = load_spec(args.spec)
     inputs = [spec.path, spec.twin, spec.measurements]
     out = check_output(args.out or args.report or Path(spec.path).parent / "track",
@@ -99,8 +103,6 @@ def run(args: argparse.Namespace) -> int:
                        kind="dir", inputs=inputs)
     if args.live:
         if args.controllers != "discrete" or args.carry is not None:
-            from ..errors import SpecError
-
             if args.carry is not None:
                 raise SpecError("--carry is not available with --live (the online mode steps its twins "
                                 "with the default carry)")
@@ -108,8 +110,6 @@ def run(args: argparse.Namespace) -> int:
                             "discrete controllers sample by sample as the data arrive)")
         return _run_live(args, spec, out)
     if args.carry is not None and args.controllers != "discrete":
-        from ..errors import SpecError
-
         raise SpecError("--carry applies to the discrete controllers: with --controllers continuous the "
                         "parameters move inside the integrator and there is nothing to carry")
     if args.report:
@@ -135,14 +135,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
-    from datetime import datetime
-
-    from ..errors import SpecError
-    from ..online.live import LiveSettings, track_live
-    from ..online.opcua import read_credentials
-    from ..report import write_track_report
-    from ._progress import Progress
-
     start = None
     if args.live_from:
         try:
@@ -165,8 +157,6 @@ def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
 
 
 def _print_summary(result: Any, paired: dict[str, str] | None = None) -> None:
-    from ..report.track import summary_tables
-
     print(summary_tables(result, paired).markdown())
     state = "complete" if result.complete else "stopped early (resume to continue)"
     print(f"{result.steps} rows, {result.simulated_seconds:g} s simulated in {result.seconds:.1f} s; {state}")

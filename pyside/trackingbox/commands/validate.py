@@ -7,6 +7,11 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..errors import TrackingError
+from ..io import check_output, output_dir
+from ..report import write_validate_report
+from ..spec import load_spec
+from ..validate import validate
 from ._args import number
 
 EPILOG = """\
@@ -45,15 +50,8 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Validate; print a summary (or JSON)."""
-    from ..errors import TrackingError
-    from ..spec import load_spec
-    from ..report import write_validate_report
-    from ..validate import validate
-
     if not (args.band > 0.0 and math.isfinite(args.band)):
         raise TrackingError(f"--band must be a positive number, got {args.band}")
-    from ..io import check_output, output_dir
-
     spec = load_spec(args.spec)
     if args.report is not None:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements, args.fmu])

@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
@@ -295,7 +296,7 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str) -> Unsupport
     return None
 
 
-FRONTEND_TIMEOUT = 600.0
+FRONTEND_TIMEOUT = config.setting("frontend_timeout").default
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
 
@@ -324,8 +325,9 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
         "roots": ([str(source.root)] + [str(p) for p in libraries]) if libraries else None,
         "validate": [str(f) for f in validate or ()],
         "validate_all": [str(f) for f in source.files],
+        "stack_mb": config.get("frontend_stack_mb"),
     }
-    timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
+    timeout = float(config.get("frontend_timeout"))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
         # rumoca refuses a byte-order mark and loses some der() equations in for-loops: give it a copy

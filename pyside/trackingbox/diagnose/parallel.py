@@ -27,7 +27,11 @@ import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from multiprocessing.util import Finalize
 from typing import Any
+
+from ..analysis.executor import exit_with_parent, make_executor, stop_executor
+from ..estimation import _forget_models, close_models
 
 log = logging.getLogger(__name__)
 
@@ -36,11 +40,6 @@ _ACTIVE: list[Any] = []
 
 def _init_worker(parent: int) -> None:
     """A fresh worker owns no FMU yet; it closes the ones it opens when it exits, and ends with *parent*."""
-    from multiprocessing.util import Finalize
-
-    from ..analysis.executor import exit_with_parent
-    from ..estimation import _forget_models, close_models
-
     _forget_models()
     exit_with_parent(parent)
     # run by the worker's own exit (a forkserver child leaves through os._exit, past atexit)
@@ -87,8 +86,6 @@ def pool(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         yield None
         return
     if scheduler:
-        from ..analysis.executor import make_executor, stop_executor
-
         ex = make_executor(scheduler, workers)
         _ACTIVE.append(_ExecutorPool(ex))
         ok = False

@@ -39,14 +39,24 @@ from typing import Any
 
 import jinja2
 
-from .. import __version__
+from ..compiler import compile_model, library_path
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
 from ..tracking.controllers import MEMORY_FRACTION
 from ..tracking.tuning import pair_settings, variable_span
+from ..version import __version__
 from . import filters
-from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin, parameter_site,
-                     refusal_message, rewrite_source, stage_packages)
+from .source import (
+    ParameterSite,
+    Rewrite,
+    TwinSource,
+    check_loads,
+    load_twin,
+    parameter_site,
+    refusal_message,
+    rewrite_source,
+    stage_packages,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -257,8 +267,6 @@ def _row_layout(i: int, rows: int) -> Layout:
 
 def _BLOCKS_LIBRARY() -> Path:  # noqa: N802 - reads as the constant it is
     """The shipped library whose ``Blocks`` the generated box instantiates."""
-    from ..compiler import library_path
-
     return library_path()
 
 
@@ -347,8 +355,6 @@ def _where(library: Path, spec_dir: Path, pkg_dir: Path) -> str:
         except ValueError:
             pass
     try:
-        from ..compiler import library_path
-
         if lib == library_path().resolve():
             return f"{lib.name} (the library shipped with trackingbox)"
     except ImportError:  # pragma: no cover - the compiler is part of the package
@@ -611,8 +617,6 @@ def compile_generated(result: GenerateResult, *, backend: str = "auto", output: 
     -------
     trackingbox.compiler.CompileResult
     """
-    from ..compiler import compile_model
-
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
     # The generated package, the twin's library and TrackingBox (whose Blocks the box
     # instantiates) are staged side by side under one root: rumoca resolves a
