@@ -18,6 +18,11 @@ commands and ``scripts/demo`` call these, and so can a notebook::
     val = tb.validate(spec, fmu)                        # ValidationResult
     dia = tb.diagnose(spec, tb.DiagnoseSettings())      # DiagnosisResult
 
+The same stages with one contract each (a settings dataclass, ``run(spec, settings, *,
+progress=None)``), as the commands and the demo call them: :mod:`trackingbox.stages`::
+
+    est = tb.stages.estimate.run(spec, tb.stages.EstimateSettings(workers=2))
+
 The names are bound here from the modules that define them. Three of them are
 also the names of a subpackage or module (``generate``, ``validate``,
 ``diagnose``): each is bound after its module is loaded, so the function wins.
@@ -25,6 +30,7 @@ Modules of the package import from the defining module, never from here.
 """
 from __future__ import annotations
 
+from . import stages
 from .analysis.pair_stage import PairingResult, PairSettings, pair, spec_pairs
 from .data import MeasurementView
 from .diagnose.stage import DiagnoseSettings, DiagnosisResult, diagnose
@@ -38,5 +44,5 @@ from .version import __version__
 __all__ = [
     "__version__", "Spec", "load_spec", "estimate", "EstimationResult", "pair", "PairSettings", "PairingResult",
     "spec_pairs", "track", "TrackingResult", "generate", "compile_generated", "GenerateResult", "validate",
-    "ValidationResult", "MeasurementView", "diagnose", "DiagnoseSettings", "DiagnosisResult",
+    "ValidationResult", "MeasurementView", "diagnose", "DiagnoseSettings", "DiagnosisResult", "stages",
 ]

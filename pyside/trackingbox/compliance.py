@@ -74,7 +74,7 @@ from .errors import (
     TrackingError,
     UnsupportedConstructError,
 )
-from .fmu import FMUModel
+from .simulation.models import open_model
 
 log = logging.getLogger(__name__)
 
@@ -254,7 +254,7 @@ def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str, str
         stop = start + 1e-6
     interval = settings.get("Interval", (stop - start) / 100)
     try:
-        with FMUModel(fmu, tolerance=settings.get("Tolerance", 1e-6)) as fm:
+        with open_model(fmu, tolerance=settings.get("Tolerance", 1e-6)) as fm:
             fm.simulate(start_time=start, stop_time=stop, output_interval=interval)
     except SimulationError as exc:
         text = str(exc)

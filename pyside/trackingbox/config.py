@@ -119,6 +119,17 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("frontend_stack_mb", "int", 64,
             "native stack (MiB) of the thread the embedded compiler's front end runs on",
             takes="a number of MiB >= 1", check=lambda x: x >= 1),
+    Setting("frontend_cache", "bool", True,
+            "keep flattened models on disk under the cache folder, keyed by the content of every file "
+            "the model reaches (false: flatten every time)"),
+    Setting("cache_dir", "path", "",
+            "folder of trackingbox's caches (empty: $XDG_CACHE_HOME/trackingbox or ~/.cache/trackingbox)"),
+    Setting("msl", "path", "",
+            "the Modelica Standard Library package scripts/msl compiles (empty: ../shared/msl/Modelica beside the "
+            "repository)"),
+    Setting("msl_reference", "path", "",
+            "the MSL reference results scripts/msl compares with (empty: ../shared/msl-reference beside "
+            "the repository)"),
     Setting("cc_opt", "str", "",
             "gcc optimisation flag for an FMU's generated C (empty: -O1, and -O0 for very large sources)",
             takes="a gcc optimisation flag (-O0 .. -O3, -Os, -Og)",

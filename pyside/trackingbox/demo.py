@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from . import stages
 from .analysis.offsets import simulate_untracked
-from .analysis.pair_stage import PairSettings, pair, spec_pairs
 from .benches import BENCHES, make_bench
 from .benches.evaporator import (
     CLOSED_LOOP,
@@ -44,11 +44,8 @@ from .benches.evaporator_report import (
 from .benches.evaporator_train import estimate_only, time_varying
 from .commands._args import parse_assignments
 from .commands._progress import Progress
-from .diagnose import DiagnoseSettings, diagnose
 from .errors import TrackingError
-from .estimation import estimate
 from .fmu import read_info
-from .generate.generator import compile_generated, generate
 from .io import atomic_path, write_text_atomic
 from .report import (
     Document,
@@ -62,8 +59,6 @@ from .report import (
 )
 from .report.diagnose import write_diagnose_report
 from .spec import check_against_fmu, load_spec, write_pairs, write_starts
-from .tracking.runtime import track
-from .validate import validate
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -210,8 +205,9 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         # then starts from the modeller's guess, which shows the parameter controllers closing the
         # offset on their own.
         try:
-            est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
-                           **ESTIMATE_BUDGET.get(run.bench, {}))
+            est = stages.estimate.run(spec, stages.EstimateSettings(checkpoint=out / "estimate" / "checkpoint.json",
+                                                                    **ESTIMATE_BUDGET.get(run.bench, {})),
+                                      progress=progress)
         except TrackingError as exc:
             if run.bench not in EVAPORATORS:
                 raise
@@ -238,19 +234,19 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
                               + (f" ({', '.join(sorted(varying))} left at its start: it varies in time)"
                                  if varying else ""))
     if step("pair", "steady-state step tests → gain matrix → RGA pairing"):
-        res = pair(spec, _pair_settings(spec, run.bench), progress=progress)
+        res = stages.pair.run(spec, _pair_settings(spec, run.bench), progress=progress)
         summary["pair"] = res.to_json()
         run.reports["pair"] = write_pair_report(spec, res, out / "pair")
         if not res.pairing.pairs:
             raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
-        spec = write_pairs(spec.path, spec_pairs(spec, res))
+        spec = write_pairs(spec.path, stages.pair.spec_pairs(spec, res))
         if run.bench in EVAPORATORS:  # fouling and wear are slow: at least the spec's closed loop (3 h, the train 2 h)
             # with a loop speed per pair ([pairing] closed_loop_min) `pair` tuned each pair for its own loop:
             # only its floor is enforced here
             spec = slow_pairs(spec.path, spec.pairing.closed_loop_min or spec.pairing.closed_loop or CLOSED_LOOP)
     if step("track", "tracking with parameter controllers in Python"):
-        tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"),
-                   window=TRACK_WINDOW.get(run.bench, "all"))
+        tr = stages.track.run(spec, stages.TrackSettings(out_dir=out / "track", window=TRACK_WINDOW.get(run.bench, "all")),
+                              progress=progress)
         summary["track"] = tr.to_json()
         run.reports["track"] = write_track_report(spec, tr, out / "track", truth=run.truth)
         if run.bench == "evaporator":
@@ -258,12 +254,12 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         elif run.bench == "evaporator-train":
             _train_report(run, spec, tr, case)
     if step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled"):
-        gen = generate(spec, out / "generated")
-        compiled = compile_generated(gen)
+        gen = stages.generate.run(spec, stages.GenerateSettings(out_dir=out / "generated"))
+        compiled = stages.generate.compile_generated(gen)
         summary["generate"] = {**gen.to_json(), "compile": compiled.to_json()}
     if step("validate", "validating the compiled TrackingBox on the held-out window"):
         fmu = Path(summary["generate"]["compile"]["fmu"])
-        val = validate(spec, fmu)
+        val = stages.validate.run(spec, stages.ValidateSettings(fmu=fmu))
         summary["validate"] = val.to_json()
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
@@ -300,11 +296,11 @@ def _pair_settings(spec: Spec, bench: str) -> Any:
     """Pairing settings: step tests with the twin's controllers frozen on the benches of
     :data:`FREEZE_CONTROLLERS` (where the twin has ``holdControllers``)."""
     if spec.pairing.freeze:
-        return PairSettings()  # the spec's [pairing] freeze
+        return stages.PairSettings()  # the spec's [pairing] freeze
     inputs = read_info(spec.twin).inputs
     names = {getattr(v, "name", v) for v in inputs}
     freeze = bench in FREEZE_CONTROLLERS and "holdControllers" in names
-    return PairSettings(freeze=(("holdControllers", 1.0),) if freeze else ())
+    return stages.PairSettings(freeze=(("holdControllers", 1.0),) if freeze else ())
 
 
 def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
@@ -467,8 +463,8 @@ def diagnose_demo(out: Path, *, seed: int = 0, case: str = "bias", bias: float =
         spec = load_spec(hidden / "spec.toml")
         check_against_fmu(spec)
         progress.note("[2/3] diagnose: null model, screening, fit of the best candidates (patched twins compiled)")
-        result = diagnose(spec, DiagnoseSettings(compile=True, out_dir=out / "patched", workers=2),
-                          progress=lambda stage, done, total: progress(stage, done, total))
+        result = stages.diagnose.run(spec, stages.DiagnoseSettings(compile=True, out_dir=out / "patched", workers=2),
+                                     progress=progress)
         progress.note("[3/3] writing the report")
         report = write_diagnose_report(spec, result, out / "diagnose")
     except TrackingError as exc:

@@ -53,8 +53,8 @@ import pandas as pd
 from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
 from .estimation import nrmse
-from .fmu import FMUModel
 from .generate.filters import modelica_name
+from .simulation.models import open_model
 from .tracking.runtime import track
 
 if TYPE_CHECKING:
@@ -287,7 +287,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
                    for st in spec.states if f"correction:{st.correction}" in py}
     outputs = list(dict.fromkeys([*(spec.outputs[p.variable] for p in spec.pairs), *pair_names.values()]))
 
-    model = FMUModel(fmu, tolerance=tolerance)
+    model = open_model(fmu, tolerance=tolerance)
     try:
         known_inputs = set(model.info.inputs)
         # the runtime applies its corrections per sample (held over [t_k, t_k+1]): so does the box's twin

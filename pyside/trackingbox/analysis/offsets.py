@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from ..data import MeasurementView
 from ..errors import AnalysisError, DataError, TrackingError, unknown_name
-from ..fmu import FMUModel
+from ..simulation.models import open_model
 from ..tracking.controllers import StateCompensator
 
 if TYPE_CHECKING:
@@ -364,7 +364,7 @@ def simulate_untracked(spec: Spec, variables: Sequence[str], *, start: float, st
     comps = [StateCompensator(s.gain, ts=ts) for s in spec.states]
     level_meas = [view.values(s.tag) for s in spec.states]
     sim = np.full((len(outs), n), math.nan)
-    model = FMUModel(spec.twin, tolerance=tolerance)
+    model = open_model(spec.twin, tolerance=tolerance)
     try:
         stepper = model.stepper(start_time=0.0, parameters={**base, **{s.correction: 0.0 for s in spec.states}},
                                 inputs=view.inputs)

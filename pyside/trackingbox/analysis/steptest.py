@@ -35,7 +35,7 @@ import pandas as pd
 
 from ..errors import AnalysisError, FMUError, TrackingError, unknown_name
 from ..fmu import read_info
-from .executor import cached_model
+from ..simulation.models import cached_model
 
 logger = logging.getLogger(__name__)
 

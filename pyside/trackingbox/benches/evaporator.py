@@ -27,7 +27,6 @@ import math
 import os
 import shutil
 import tempfile
-import time as _time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,7 +37,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from ..errors import FMUError, SpecError, TrackingError
-from ..fmu import FMUModel, read_info
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -62,10 +61,10 @@ from .base import (
     Sensor,
     _compile,
     _library_path,
-    _on_grid,
     _tunable_parameters,
-    add_noise,
     check_overrides,
+    noisy_measurements,
+    simulate_plant,
 )
 from .historian import HistorianSettings, TagSettings, export_history
 
@@ -550,28 +549,12 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         recorded = {tw: pv for tw, pv in TRAJECTORIES.items() if pv in names}
         plant_vars = list(dict.fromkeys([s.plant for s in d.outputs] + list(recorded.values())))
         log.info("simulating the evaporator plant for %.1f h (+%.1f h warm-up)", hours, warmup / 3600)
-        t0 = _time.perf_counter()
-        model = FMUModel(staged["plant"])
-        try:
-            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
-                                    parameters=overrides, outputs=plant_vars)
-        finally:
-            model.close()
-        plant_seconds = _time.perf_counter() - t0
-        log.info("plant simulation took %.1f s", plant_seconds)
-        result = _on_grid(result, t_all, plant_vars, d.name)
+        result, plant_seconds, _ = simulate_plant(staged["plant"], t_all, frame, overrides, plant_vars, d.name)
 
         # measurements: true signals on the measured period + sensor noise, then the historian
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense: dict[str, FloatArray] = {"time": t_meas}
-        for s in d.inputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
-        for s in d.outputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
-        dense_frame = pd.DataFrame(dense)
+        dense_frame = noisy_measurements(t_meas, d.inputs, d.outputs, true_inputs, result, keep, 1.0, noise_rng)
         history = None
         if historian_export:
             history = export_history(dense_frame, historian_settings((*d.inputs, *d.outputs), start, seed))

@@ -43,7 +43,7 @@ from ..compiler import (
     library_path,
 )
 from ..errors import FMUError, TrackingError
-from ..fmu import FMUModel, read_info
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -65,10 +65,10 @@ from .base import (
     BenchDefinition,
     Sensor,
     _library_path,
-    _on_grid,
     _tunable_parameters,
-    add_noise,
     check_overrides,
+    noisy_measurements,
+    simulate_plant,
 )
 
 #: Heartbeat of every tag (s) and the CSV form of the historian export: the single effect's.
@@ -661,27 +661,11 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         trajectories_map = {f"effect[{k}].Rf": f"Rf_true[{k}]" for k in range(1, n + 1)}
         plant_vars = list(dict.fromkeys([s.plant for s in tag_outputs] + list(trajectories_map.values())))
         log.info("simulating the %d-effect plant for %.1f h (+%.1f h warm-up)", n, hours, warmup / 3600)
-        t0, c0 = _time.perf_counter(), _time.process_time()
-        model = FMUModel(staged["plant"])
-        try:
-            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
-                                    parameters=overrides, outputs=plant_vars)
-        finally:
-            model.close()
-        plant_seconds, plant_cpu = _time.perf_counter() - t0, _time.process_time() - c0
-        log.info("plant simulation took %.1f s (%.1f s CPU)", plant_seconds, plant_cpu)
-        result = _on_grid(result, t_all, plant_vars, NAME)
+        result, plant_seconds, plant_cpu = simulate_plant(staged["plant"], t_all, frame, overrides, plant_vars, NAME)
 
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense: dict[str, FloatArray] = {"time": t_meas}
-        for s in INPUTS:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
-        for s in tag_outputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
-        dense_frame = pd.DataFrame(dense)
+        dense_frame = noisy_measurements(t_meas, INPUTS, tag_outputs, true_inputs, result, keep, 1.0, noise_rng)
         history = None
         if historian_export:
             history = export_history(dense_frame, historian_settings((*INPUTS, *tag_outputs), start, seed))

@@ -98,15 +98,6 @@ class Progress:
         self.stream.write(text + "\n")
         self.stream.flush()
 
-    def estimation(self, stage: str, iteration: int, total: int, best: float) -> None:
-        """The estimation's ``progress(stage, iteration, total, best_cost)`` callback."""
-        if stage == "global":
-            self("global search", iteration, total, f"best NRMSE {best:.5g}", unit="generation")
-        elif stage == "refine":
-            self("refinement", iteration, total, f"rms NRMSE {best:.5g}", unit="simulation")
-        else:
-            self.note(f"refinement done: NRMSE {best:.5g} ({duration(time.perf_counter() - self.t0)} elapsed)")
-
 
 class Counter:
     """``counter(done, total)`` → ``progress(stage, done, total)``."""

@@ -15,12 +15,13 @@ from ..estimation import (
     DEFAULT_POPULATION,
     DEFAULT_WARMUP,
     MAX_REFINE_ITERATIONS,
-    estimate,
     write_starts,
 )
 from ..io import check_output, output_dir
 from ..report import write_estimate_report
 from ..spec import check_against_fmu, load_spec
+from ..stages import estimate as stage
+from ..stages.contract import settings_from_args
 from ._args import add_executor_arguments, number
 from ._progress import Progress
 
@@ -109,27 +110,12 @@ def run(args: argparse.Namespace) -> int:
     checkpoint = args.report / "checkpoint.json" if args.report else None
     progress = Progress(every=15.0)
     with output_dir(args.report or "."):
-        return _run(args, spec, estimate, write_starts, write_estimate_report, checkpoint, progress)
+        return _run(args, spec, checkpoint, progress)
 
 
-def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, write_estimate_report: Any,
-         checkpoint: Any, progress: Any) -> int:
-    result = estimate(
-        spec,
-        seed=args.seed,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        maxiter=args.maxiter,
-        popsize=args.popsize,
-        warmup=args.warmup,
-        refine=args.refine,
-        refine_iterations=args.refine_iterations,
-        progress=progress.estimation,
-        checkpoint=checkpoint,
-        global_grid=args.global_grid,
-        resume=args.resume,
-        jacobian=args.jacobian,
-    )
+def _run(args: argparse.Namespace, spec: Any, checkpoint: Any, progress: Any) -> int:
+    result = stage.run(spec, settings_from_args(stage.EstimateSettings, args, checkpoint=checkpoint),
+                       progress=progress)
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
     if args.write:

@@ -7,9 +7,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..generate.generator import compile_generated, generate
 from ..io import check_output, output_dir
 from ..spec import load_spec
+from ..stages import generate as stage
+from ..stages.contract import settings_from_args
 
 EPILOG = """\
 examples:
@@ -58,16 +59,16 @@ def run(args: argparse.Namespace) -> int:
     inputs = [spec.path, spec.twin, spec.measurements, *([spec.source.path] if spec.source else [])]
     out = check_output(out, "-o" if args.out is not None else "the output directory", kind="dir", inputs=inputs)
     with output_dir(out):
-        return _run(args, spec, out, generate, compile_generated)
+        return _run(args, spec, out)
 
 
-def _run(args: argparse.Namespace, spec: Any, out: Path, generate: Any, compile_generated: Any) -> int:
-    result = generate(spec, out, rewrite=args.rewrite)
+def _run(args: argparse.Namespace, spec: Any, out: Path) -> int:
+    result = stage.run(spec, settings_from_args(stage.GenerateSettings, args, out_dir=out))
     if result.rewrite is not None:
         # The diff is part of what the user asked for; keep stdout clean for --json.
         stream = sys.stderr if args.json else sys.stdout
         stream.write(result.rewrite.diff)
-    compiled = compile_generated(result, backend=args.backend) if args.compile else None
+    compiled = stage.compile_generated(result, backend=args.backend) if args.compile else None
     if args.json:
         print(json.dumps({**result.to_json(), "compile": None if compiled is None else compiled.to_json()},
                          indent=2))

@@ -12,8 +12,9 @@ from typing import Any
 
 from ..data import read_table
 from ..errors import FMUError, TrackingError, did_you_mean
-from ..fmu import FMUModel, check_values, read_info
+from ..fmu import check_values, read_info
 from ..io import atomic_path, check_output
+from ..simulation.models import open_model
 from ._args import number, parse_assignments
 
 log = logging.getLogger(__name__)
@@ -131,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                             f"(at most {MAX_ROWS:g}): give a larger --step or a shorter run")
 
     t0 = time.perf_counter()
-    with FMUModel(args.fmu, tolerance=args.tolerance, interface=args.interface) as model:
+    with open_model(args.fmu, tolerance=args.tolerance, interface=args.interface) as model:
         result = model.simulate(start_time=start, stop_time=stop, output_interval=step, inputs=inputs,
                                 parameters=settings, outputs=args.outputs)
     seconds = time.perf_counter() - t0

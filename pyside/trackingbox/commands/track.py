@@ -16,7 +16,8 @@ from ..online.opcua import read_credentials
 from ..report import write_track_report
 from ..report.track import summary_tables
 from ..spec import check_against_fmu, load_spec
-from ..tracking.runtime import track
+from ..stages import track as stage
+from ..stages.contract import settings_from_args
 from ._args import number
 from ._progress import Progress
 
@@ -78,7 +79,7 @@ def register(subparsers: Any) -> None:
                         "change of a tracked parameter of at most FRACTION of its bound range (a correction "
                         "flow: of its compensator's gain times its level's range) instead of re-initialising "
                         "it (default 0.02); 0: re-initialise at every change, the restart path, closer to "
-                        "the exact closed loop where the twin's parameters change often (see docs/architecture.md)")
+                        "the exact closed loop where the twin's parameters change often (scripts/bench_carry measures both)")
     p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
@@ -118,11 +119,9 @@ def run(args: argparse.Namespace) -> int:
         CheckpointFile(out / "checkpoint.json", out / "tracking.csv").read()
     check_against_fmu(spec)  # before the output directory exists
     with output_dir(out), output_dir(args.report or out):
-        result = track(spec, out_dir=out, resume=args.resume,
-                       progress=Progress().counter("tracking", unit="row"),
-                       window=args.window, checkpoint_every=args.checkpoint_every,
-                       controllers=args.controllers,
-                       **({} if args.carry is None else {"carry": args.carry}))
+        settings = settings_from_args(stage.TrackSettings, args, out_dir=out,
+                                      carry=stage.CARRY_FRACTION if args.carry is None else args.carry)
+        result = stage.run(spec, settings, progress=Progress())
         if args.report:
             write_track_report(spec, result, args.report)
     if args.json:

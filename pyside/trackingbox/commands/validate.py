@@ -11,7 +11,8 @@ from ..errors import TrackingError
 from ..io import check_output, output_dir
 from ..report import write_validate_report
 from ..spec import load_spec
-from ..validate import validate
+from ..stages import validate as stage
+from ..stages.contract import settings_from_args
 from ._args import number
 
 EPILOG = """\
@@ -56,11 +57,11 @@ def run(args: argparse.Namespace) -> int:
     if args.report is not None:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements, args.fmu])
     with output_dir(args.report or "."):
-        return _run(args, spec, validate, write_validate_report)
+        return _run(args, spec)
 
 
-def _run(args: argparse.Namespace, spec: Any, validate: Any, write_validate_report: Any) -> int:
-    result = validate(spec, args.fmu, band=args.band)
+def _run(args: argparse.Namespace, spec: Any) -> int:
+    result = stage.run(spec, settings_from_args(stage.ValidateSettings, args))
     report = None
     if args.report is not None:
         report = write_validate_report(spec, result, args.fmu, args.report).markdown

@@ -26,13 +26,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import TrackingError
-from ..estimation import (
-    close_models,
-    estimate,
-    jacobian_points,
-    load_windows,
-    problem_from_spec,
-)
+from ..estimation import estimate, jacobian_points
+from ..simulation.models import close_models
+from ..simulation.windows import load_windows, problem_from_spec
 from ..spec import load_spec, write_starts
 from . import library
 from .candidates import Candidate, joint, score

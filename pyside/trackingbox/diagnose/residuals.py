@@ -54,18 +54,14 @@ import numpy.typing as npt
 from scipy.optimize import lsq_linear
 
 from ..data import MeasurementView
-from ..estimation import (
-    close_models,
-    estimate,
-    jacobian_points,
-    load_windows,
-    problem_from_spec,
-    simulate_window,
-)
+from ..estimation import estimate, jacobian_points
+from ..simulation.models import close_models
+from ..simulation.windows import load_windows, problem_from_spec, simulate_window
 from .parallel import map_calls
 
 if TYPE_CHECKING:
-    from ..estimation import EstimationResult, Problem, WindowData
+    from ..estimation import EstimationResult
+    from ..simulation.windows import Problem, WindowData
     from ..spec import Spec
 
 log = logging.getLogger(__name__)

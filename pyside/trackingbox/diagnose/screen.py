@@ -61,8 +61,9 @@ import numpy.typing as npt
 from scipy.optimize import minimize_scalar
 
 from ..errors import SpecError, TrackingError
-from ..estimation import _model, close_models, run_start, window_setup
 from ..fmu import read_info
+from ..simulation.models import cached_model, close_models
+from ..simulation.windows import run_start, window_setup
 from . import library
 from .candidates import Candidate, joint, score
 from .fit import screen_compiled
@@ -355,7 +356,7 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
         return base * (1.0 - rate * (t_abs - t_mid))
 
     parameters[name] = value_at(float(window.time[0]))
-    model = _model(problem.twin)
+    model = cached_model(problem.twin)
     stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs)
     outputs = list(problem.outputs.values())
     if offset > 0:

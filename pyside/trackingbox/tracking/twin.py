@@ -16,7 +16,8 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from ..fmu import FMUModel, NativeStepper
+from ..fmu import NativeStepper
+from ..simulation.models import open_model
 from .plan import read_rows
 
 if TYPE_CHECKING:
@@ -60,7 +61,7 @@ class Twin:
         self.given: dict[str, float] = {}
         #: value name -> CSV column holding what was applied (for a replay)
         self.recorded = dict(recorded)
-        self.model = FMUModel(path, tolerance=tolerance)
+        self.model = open_model(path, tolerance=tolerance)
         self.base = dict(base)
         self.inputs = inputs
         self.me = self.model.interface == "ModelExchange"
