@@ -7,10 +7,15 @@ variable plus a tank whose level takes a correction flow (for ``[[states]]``). S
 ``T = Tc + Qin/(kht*A)`` with ``Tc = 300 K``, ``A = 10 m2``, ``Qin = 50 kW``,
 so ``dT/dkht = -Qin/(kht^2 A) = -0.005 K per W/(m2.K)`` at ``kht = 1000`` and
 the ``kht`` that gives a measured ``T`` is ``50000/(10 (T - 300))``.
+
+``BENCH_PAIRS`` and :func:`box_against_runtime` compare a compiled box with the Python runtime
+on the benches (``test_generate``, ``test_tracking_continuous``).
 """
 from __future__ import annotations
 
 from pathlib import Path
+
+import numpy as np
 
 MINI = '''within;
 package Mini "Small test library"
@@ -201,3 +206,90 @@ def harness(stage: Path, package: str, tracked: str, *, meas: float, hold: float
         f"TI_102_hold = {own_hold!r});\n"
         "  end Run;\nend Harness;\n")
     return h / "package.mo"
+
+
+def box_against_runtime(spec, fmu: Path, runtime_csv: Path) -> dict[str, tuple[float, float]]:
+    """Drive the tracked FMU with the samples the Python runtime used; aligned agreement per parameter.
+
+    Returns ``{parameter: (max, 95th percentile)}`` of ``|p_box - p_python| / (max - min)``.
+
+    The twin's inputs come from the same table as in the runtime; the
+    measurements, the hold (the runtime's ``mode`` column) and the corrections
+    of top-level correction inputs are set once per sample and held over it,
+    as the runtime holds them; the measurements are interpolated linearly
+    between samples (as ``validate`` feeds them and the runtime's default
+    ``"linear"`` error interpolation assumes). The box's value at ``t_k`` is
+    compared with the runtime's row ``k`` (as ``test_generate._aligned_agreement`` does),
+    after the start-up hold.
+    """
+    import pandas as pd
+
+    from trackingbox import data
+    from trackingbox.fmu import FMUModel
+    from trackingbox.generate.filters import modelica_name
+
+    py = pd.read_csv(runtime_csv)
+    grid = py["time"].to_numpy(dtype=float)
+    table = data.read_table(spec.measurements, allow_nan=True)
+    sampled = data.resample(table[["time", *spec.inputs]], float(table["time"].iloc[0]) + grid,
+                            max_gap=spec.data.max_gap)
+    tags = [p.variable for p in spec.pairs] + [s.tag for s in spec.states]
+    measured = py[[f"measured:{t}" for t in tags]].interpolate().ffill().bfill().to_numpy()
+    inputs = pd.DataFrame({"time": grid, **{name: np.asarray(sampled[tag], dtype=float)
+                                            for tag, name in spec.inputs.items()},
+                           **{f"{modelica_name(t)}_meas": measured[:, j] for j, t in enumerate(tags)}})
+    inputs = inputs.ffill().bfill()
+    names = [modelica_name(p.parameter) for p in spec.pairs]
+    box = np.full((grid.size, len(names)), np.nan)
+    held = (py[[f"mode:{p.variable}" for p in spec.pairs]] == "hold").any(axis=1).to_numpy()
+    with FMUModel(fmu) as model:
+        run = model.stepper(start_time=float(grid[0]), inputs=inputs)
+        for k in range(grid.size):
+            box[k] = run.get(names)
+            if k == grid.size - 1:
+                break
+            values = {"hold": 1.0 if held[k] else 0.0}
+            for st in spec.states:
+                if st.correction in model.info.inputs:  # a top-level twin input: fed as the runtime fed it
+                    values[st.correction] = float(py[f"correction:{st.correction}"].iloc[k])
+            run.set(values)
+            run.step(float(grid[k + 1]))
+    after = grid >= float(spec.tracking.hold_until) - 1e-9
+    out = {}
+    for j, p in enumerate(spec.pairs):
+        par = spec.parameter(p.parameter)
+        d = np.abs(box[:, j] - py[f"parameter:{p.parameter}"].to_numpy()) / (par.max - par.min)
+        out[p.parameter] = (float(np.nanmax(d[after])), float(np.nanpercentile(d[after], 95.0)))
+    return out
+
+
+# gains measured on the benches' twins (a 50-unit step of the parameter, steady change of the
+# variable after an hour); time constants rounded from the step responses
+BENCH_PAIRS = {
+    "heat-exchanger": '''
+[[pairs]]
+variable = "TI-102"
+parameter = "hx.kht"
+gain = -0.0226
+time_constant = 70.0
+''',
+    "heat-production": '''
+[[pairs]]
+variable = "TI-301"
+parameter = "HEX300.kht"
+gain = -0.00998
+time_constant = 300.0
+
+[[pairs]]
+variable = "TI-310"
+parameter = "HU300.kht"
+gain = -0.0196
+time_constant = 300.0
+
+[[pairs]]
+variable = "PI-200"
+parameter = "Pipe200.k"
+gain = 1177460.8
+time_constant = 147.7
+''',
+}

@@ -9,41 +9,16 @@ its range over the run).
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import fmpy
 import numpy as np
 import pytest
 import rumoca
 from fmpy.validation import validate_fmu
 
+from _fixtures_benches import bench_models, validation_models
 from trackingbox.compiler import library_path
 
 pytestmark = pytest.mark.compile
-
-BENCHES = library_path() / "Benches"
-
-
-def _classes(folder: Path, prefix: str) -> list[str]:
-    return sorted(
-        f"{prefix}.{f.stem}" for f in folder.glob("*.mo") if f.name != "package.mo"
-    )
-
-
-def bench_models() -> list[str]:
-    out = []
-    for bench in sorted(p for p in BENCHES.iterdir() if p.is_dir()):
-        out += _classes(bench, f"TrackingBox.Benches.{bench.name}")
-    return out
-
-
-def validation_models() -> list[str]:
-    out = []
-    for bench in sorted(p for p in BENCHES.iterdir() if p.is_dir()):
-        if (bench / "Validation").is_dir():
-            out += _classes(bench / "Validation", f"TrackingBox.Benches.{bench.name}.Validation")
-    return out
-
 
 def test_every_bench_has_plant_twin_and_wrappers():
     models = bench_models()

@@ -195,9 +195,18 @@ def test_library_constructs_match_rumoca(tmp_path):
 
 
 def test_package_directory_source(tmp_path, library):
-    res = compile_model(library, "TrackingBox.Blocks.Validation.PIHoldAndLimits", backend="embedded",
-                        output=tmp_path / "pi.fmu")
+    model = "TrackingBox.Blocks.Validation.PIHoldAndLimits"
+    res = compile_model(library, model, backend="embedded", output=tmp_path / "pi.fmu")
     assert res.fmu.is_file() and validate_fmu(str(res.fmu)) == []
+    # the class compiled from the package directory behaves as rumoca simulates it from the same
+    # package: setpoint step at 200 s, hold from 600 s to 900 s
+    out = simulate(res.fmu, 1500, 5.0, output=["x", "con.y"], relative_tolerance=1e-8)
+    ref = rumoca.Session().load(str(library / "package.mo"), model=model).simulate((0, 1500), dt=1.0)
+    for name in ("x", "con.y"):
+        r = np.interp(out["time"], np.asarray(ref.time), np.asarray(ref[name]))
+        assert np.max(np.abs(out[name] - r)) <= 1e-3 * max(np.ptp(r), 1e-9), name
+    # integral action: no steady offset after the step (0.9), before the hold and after it
+    assert np.interp([590.0, 1500.0], out["time"], out["x"]) == pytest.approx([0.9, 0.9], abs=1e-3)
 
 
 # ------------------------------------------------------------------ bad input

@@ -298,6 +298,22 @@ def test_translator_refuses_rumocas_own_lost_equation(tmp_path):
 
 
 def test_translator_passes_rumocas_parenthesised_form(tmp_path):
+    import casadi as ca
+
     text = CASES["1-D, 1:3"][0].replace("der(x[i]) =", "(der(x[i])) =")
     flat, src = _raw_flat(tmp_path, text, "H")
-    FlatTranslator(flat, resolve_source(src), "H").translate()  # no error
+    model = FlatTranslator(flat, resolve_source(src), "H").translate()
+    # and translates it to the model's own equations: der(x[i]) = a[i] - x[i] for every i (the third
+    # one too), evaluated from the causalised assignments at x = (0.5, 0.25, 4) with a = (1, 2, 3)
+    assert [s.name for s in model.states] == ["x[1]", "x[2]", "x[3]"]
+    assert [(p.name, p.value) for p in model.parameters] == [("a[1]", 1.0), ("a[2]", 2.0), ("a[3]", 3.0)]
+    symbols, values = [], []
+    for symbol, expr in model.assignments:  # in evaluation order: substitute the earlier ones
+        values.append(ca.substitute([expr], symbols, values)[0] if symbols else expr)
+        symbols.append(symbol)
+    ders = [next(v for s, v in zip(symbols, values) if ca.is_equal(s, model.derivative[st.name]))
+            for st in model.states]
+    f = ca.Function("f", [ca.vertcat(*[st.sym for st in model.states]),
+                          ca.vertcat(*[p.sym for p in model.parameters])], [ca.vertcat(*ders)])
+    x = np.array([0.5, 0.25, 4.0])
+    assert np.asarray(f(x, [1.0, 2.0, 3.0])).ravel().tolist() == pytest.approx([0.5, 1.75, -1.0], abs=1e-15)

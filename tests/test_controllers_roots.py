@@ -14,25 +14,10 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from _fixtures_controllers import CASES, clamped_by_solve_ivp, law_from_zeros
 from trackingbox.tracking.controllers import _integrate_clamped_linear, _zero_of_rate
-
-
-def _law_from_zeros(z1: float, z2: float, k: float, te: float, ti: float, ts: float) -> tuple[float, float, float]:
-    """``(e0, e1, m0)`` whose rate over a sample of *ts* s is zero at *z1* and *z2* (s), with ``g'' ~ k``.
-
-    ``g(t) = A + B·t + k·exp(-t/te)`` through both zeros gives ``A`` and ``B``;
-    the block's variables follow from ``B = s/ti``, ``A = e0/ti + s`` and
-    ``k = (e0 - m0 - s·te)/te`` with ``s = (e1 - e0)/ts``.
-    """
-    q1, q2 = -k * math.exp(-z1 / te), -k * math.exp(-z2 / te)
-    b = (q2 - q1) / (z2 - z1)
-    a = q1 - b * z1
-    s = b * ti
-    e0 = (a - s) * ti
-    return e0, e0 + s * ts, e0 - s * te - k * te
 
 
 def _rate(e0: float, e1: float, m0: float, ti: float, ts: float, te: float):
@@ -41,22 +26,12 @@ def _rate(e0: float, e1: float, m0: float, ti: float, ts: float, te: float):
     return (lambda t: a + b * t + k * math.exp(-t / te)), (a, b, k)
 
 
-# (zero 1, zero 2) as fractions of the sample; te and ti as in the runtime (te = ts/10) or slower
-CASES = [
-    (1e-7, 0.5, 0.1, 3.0),       # a zero just after the start, the second mid-sample
-    (0.3, 1.0 - 1e-7, 0.1, 3.0),  # a zero just before the end
-    (0.02, 0.98, 0.1, 40.0),      # both near the ends, the extremum inside
-    (0.2, 0.25, 0.5, 1.0),        # two close zeros around the extremum
-    (1e-4, 0.9999, 0.05, 200.0),
-]
-
-
 @pytest.mark.parametrize("f1, f2, te_frac, ti", CASES)
 @pytest.mark.parametrize("k", [2.0, -0.7])
 def test_zeros_are_brentq_zeros(f1: float, f2: float, te_frac: float, ti: float, k: float) -> None:
     ts = 10.0
     te = te_frac * ts
-    e0, e1, m0 = _law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
+    e0, e1, m0 = law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
     g, (a, b, kk) = _rate(e0, e1, m0, ti, ts, te)
     t_ext = -te * math.log(b * te / kk)  # where g' = 0: the pieces on which g is monotone
     assert 0.0 < t_ext < ts
@@ -91,30 +66,14 @@ def test_zeros_on_random_monotone_pieces() -> None:
     assert checked > 50  # the draw has zeros to check
 
 
-def _clamped_by_solve_ivp(u0: float, gain: float, ti: float, e0: float, e1: float, m0: float, ts: float,
-                          te: float) -> float:
-    """The block's law over one sample, ``u`` and the memory ``m`` integrated together by scipy."""
-    def rhs(t: float, y: np.ndarray) -> list[float]:
-        u, m = y
-        e = e0 + (e1 - e0) * t / ts
-        rate = gain * (e / ti + (e - m) / te)
-        if (u >= 100.0 and rate > 0.0) or (u <= 0.0 and rate < 0.0):
-            rate = 0.0
-        return [rate, (e - m) / te]
-
-    sol = solve_ivp(rhs, (0.0, ts), [u0, m0], method="RK45", rtol=1e-10, atol=1e-10, max_step=ts / 1000)
-    assert sol.success
-    return float(np.clip(sol.y[0, -1], 0.0, 100.0))
-
-
 @pytest.mark.parametrize("f1, f2, te_frac, ti", CASES[:4])
 @pytest.mark.parametrize("k, u0", [(20.0, 99.0), (20.0, 1.0), (-15.0, 0.5), (-15.0, 99.5), (20.0, 50.0)])
 def test_clamped_end_value_matches_solve_ivp(f1: float, f2: float, te_frac: float, ti: float, k: float,
                                              u0: float) -> None:
     ts, gain = 10.0, 1.5
     te = te_frac * ts
-    e0, e1, m0 = _law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
-    ref = _clamped_by_solve_ivp(u0, gain, ti, e0, e1, m0, ts, te)
+    e0, e1, m0 = law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
+    ref = clamped_by_solve_ivp(u0, gain, ti, e0, e1, m0, ts, te)
     assert _integrate_clamped_linear(u0, gain, ti, e0, e1, m0, ts, te) == pytest.approx(ref, abs=1e-6)
 
 
@@ -126,7 +85,7 @@ def test_clamp_takes_effect_in_these_cases() -> None:
     for f1, f2, te_frac, ti in CASES[:4]:
         for k, u0 in [(20.0, 99.0), (20.0, 1.0), (-15.0, 0.5), (-15.0, 99.5), (20.0, 50.0)]:
             te = te_frac * ts
-            e0, e1, m0 = _law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
+            e0, e1, m0 = law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
             s = (e1 - e0) / ts
             c = e0 - m0 - s * te
             free = u0 + gain * ((e0 / ti + s) * ts + 0.5 * s / ti * ts * ts + c * (1.0 - math.exp(-ts / te)))

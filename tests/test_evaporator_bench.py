@@ -207,15 +207,27 @@ def test_pairing_is_physical(short_case) -> None:
         assert name in pairs or name in left, f"{name} neither paired nor left out with a reason"
 
 
-@pytest.mark.slow
-@pytest.mark.compile
-def test_tracking_holds_through_the_stoppage_and_closes_the_heat_transfer_offset(short_case, tmp_path) -> None:
+@pytest.fixture(scope="module")
+def tracked(short_case, tmp_path_factory):
+    """``track`` of the short case on its validation window, and assess()'s measure of it (settled after 4 h)."""
     from trackingbox.benches.evaporator_report import assess, vessel_heights
     from trackingbox.fmu import read_info
     from trackingbox.tracking.runtime import track
 
     case, spec, _, truth = short_case
-    res = track(spec, out_dir=tmp_path / "track", window="validation")
+    res = track(spec, out_dir=tmp_path_factory.mktemp("evtrack") / "track", window="validation")
+    nrmse = {tag: (v.nrmse_untracked, v.nrmse_tracked) for tag, v in res.variables.items()
+             if tag in {p.variable for p in spec.pairs}}
+    result = assess(spec, res.csv, truth, nrmse=nrmse, heights=vessel_heights(read_info(spec.twin)),
+                    settle=4 * 3600.0)
+    return res, result
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+def test_tracking_holds_through_the_stoppage_and_closes_the_heat_transfer_offset(short_case, tracked) -> None:
+    _, spec, _, _ = short_case
+    res, result = tracked
     df = pd.read_csv(res.csv)
     t = df["time"].to_numpy(float)
     # parameters frozen while the feed is stopped (the stoppage we imposed), and no bump at the restart
@@ -234,18 +246,28 @@ def test_tracking_holds_through_the_stoppage_and_closes_the_heat_transfer_offset
     for tag in ("TI-6111", "TI-6151"):
         if f"tracked:{tag}" in df.columns:
             assert np.nanmax(np.abs(np.diff(df[f"tracked:{tag}"].to_numpy(float)[window]))) < 1.0, tag
-    nrmse = {tag: (v.nrmse_untracked, v.nrmse_tracked) for tag, v in res.variables.items()
-             if tag in {p.variable for p in spec.pairs}}
-    result = assess(spec, res.csv, truth, nrmse=nrmse, heights=vessel_heights(read_info(spec.twin)),
-                    settle=4 * 3600.0)
     # no twin level leaves its vessel; the tracked heat-transfer parameter stays in its bounds and
     # brings its tag to at most 30 % of the untracked NRMSE on the validation window
     assert result.levels_ok, result.levels
     assert result.fouling is not None and result.fouling.within_bounds
     heat_tag = result.heat_transfer_pair[0]
     assert result.nrmse[heat_tag][2] <= 0.3, result.nrmse
-    # (the tracked fouling's distance to the plant's truth is measured by assess() and reported by
-    # scripts/demo --bench evaporator; see the lead's report for why it is not within 10 % yet)
+
+
+@pytest.mark.slow
+@pytest.mark.compile
+@pytest.mark.xfail(strict=True, reason=(
+    "measured on this case (seed 1): after the 4 h settle the tracked effect.Rf is 3.5e-4 m2.K/W on average "
+    "against the plant's 2.2e-4 (truth.json), 21 % of the bound range too high on average, 61 % at most "
+    "(38 % inside the stoppage): the tracker does not yet follow the plant's fouling within 10 %"))
+def test_tracked_fouling_follows_the_plants_truth_within_10_percent_after_settling(tracked) -> None:
+    _, result = tracked
+    f = result.fouling
+    assert f is not None and f.parameter == "effect.Rf"
+    # |tracked - truth| / (bound range) from 4 h on, and inside the stoppage: the bench's done criterion
+    assert f.max_error <= 0.1, f
+    assert np.isnan(f.max_error_stoppages) or f.max_error_stoppages <= 0.1, f
+    assert f.passed
 
 
 @pytest.mark.parametrize("argv, message", [

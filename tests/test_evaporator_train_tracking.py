@@ -87,7 +87,8 @@ def test_every_effects_fouling_pairs_and_its_gains_have_the_physical_sign(train)
 @pytest.mark.compile
 def test_tracked_fouling_moves_toward_the_plants_in_every_paired_effect(train):
     """The plant fouls from its start (truth.json): each tracked effect's resistance, clean (0) at
-    the start, ends on the plant's side of it and closer to the plant's value than the clean start."""
+    the start, ends on the plant's side of it and closer to the plant's value than the clean start,
+    and in the last hour lags the plant's by no more than a working closed loop lags a ramp."""
     from trackingbox.benches.evaporator import truth_on
 
     df = pd.read_csv(train["track"].csv)
@@ -101,7 +102,17 @@ def test_tracked_fouling_moves_toward_the_plants_in_every_paired_effect(train):
         tracked = df[f"parameter:{p.parameter}"].to_numpy(float)
         assert tracked[0] == 0.0
         assert np.mean(tracked[last]) > 0.0, p.parameter
-        assert abs(np.mean(tracked[last] - truth[last])) < np.mean(truth[last]), p.parameter
+        error = abs(np.mean(tracked[last] - truth[last]))
+        assert error < np.mean(truth[last]), p.parameter
+        # The plant's fouling is a ramp over the last hour (its own change there: slope); a closed loop
+        # of time constant T (slow_pairs: lambda * tau = 3 h) follows a ramp with a lag of slope * T
+        # once its start has died away. A working tracker lags at most half again that (a plant that is
+        # not first order, the start-up offset's remainder). Measured (seed 0, 2 effects, 8 h): effect 1
+        # lags 1.02e-5 m2.K/W against slope * T = 2.04e-5 (0.50x), effect 2 3.75e-6 against 3.11e-6
+        # (1.21x); the former bound (the plant's value itself) was 8.5e-5 and 1.26e-5.
+        slope = (truth[last][-1] - truth[last][0]) / (t[last][-1] - t[last][0])
+        lag = slope * p.lambda_ * p.time_constant
+        assert error <= 1.5 * lag, (p.parameter, error, lag)
 
 
 @pytest.mark.compile

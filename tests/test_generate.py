@@ -23,7 +23,7 @@ from trackingbox.generate import filters
 from trackingbox.generate.generator import environment, generate
 from trackingbox.spec import load_spec
 
-from _fixtures_generate import harness, write_case
+from _fixtures_generate import BENCH_PAIRS, box_against_runtime, harness, write_case
 
 # ---------------------------------------------------------------- filters
 
@@ -108,13 +108,17 @@ def _generate(spec_path: Path, out: Path, **kw):
     return generate(load_spec(spec_path, check_files=False), out, **kw)
 
 
-def test_generated_package_snapshot(case: Path, snapshot):
+def test_generated_package_snapshot(case: Path, tmp_path: Path, snapshot):
     result = _generate(case, case.parent / "out")
     assert result.package == "TwinTracking"
     assert sorted(p.name for p in result.package_dir.iterdir()) == [
         "TwinTracked.mo", "TwinTrackingBox.mo", "package.mo", "package.order"]
     for name in ("package.mo", "package.order", "TwinTrackingBox.mo", "TwinTracked.mo"):
         assert (result.package_dir / name).read_text() == snapshot(name=name)
+    # what the snapshot means, checked on the flattened and simulated Modelica (rumoca), not on the text
+    stage = _stage(tmp_path / "stage", result)
+    _assert_tracked_connections(_connection_sets(stage, result))
+    _assert_pi_step_response(stage, result)
 
 
 def test_generated_package_snapshot_with_units_and_state(tmp_path: Path, snapshot):
@@ -123,6 +127,110 @@ def test_generated_package_snapshot_with_units_and_state(tmp_path: Path, snapsho
     result = _generate(write_case(tmp_path / "case", library="Units"), tmp_path / "out")
     for name in ("TwinTrackingBox.mo", "TwinTracked.mo"):
         assert (result.package_dir / name).read_text() == snapshot(name=name)
+    stage = _stage(tmp_path / "stage", result)
+    sets = _connection_sets(stage, result)
+    _assert_tracked_connections(sets)
+    # the level's compensation: the box's correction drives the tank's conditional input, the measured
+    # and the simulated level reach the compensator; the twin's other equations are kept
+    assert _joined(sets, "box.tank_m_flow_corr_compensation.y", "box.tank_m_flow_corr", "tank.m_flow_corr_in",
+                   "tank.m_flow_corr_internal")
+    assert _joined(sets, "LI_100_meas", "box.LI_100_meas", "box.tank_m_flow_corr_compensation.u_s")
+    assert _joined(sets, "LI_100", "tank.level", "box.LI_100_sim", "box.tank_m_flow_corr_compensation.u_m")
+    assert _joined(sets, "tank.m_flow_in", "m_flow_in")
+    assert not _joined(sets, "tank.m_flow_corr_internal", "tank.m_flow_corr")
+    # compensation law by hand: m' = k (e - eMem)/Te and eMem' = (e - eMem)/Te give m = k eMem,
+    # so a level difference of 0.2 m gives k*0.2*(1 - exp(-t/Te)) = 1.0*(1 - exp(-t)) kg/s
+    df = _pi_step_response(stage, result, extra="LI_100_meas = 1.2, LI_100_sim = 1.0")
+    t = df["time"].to_numpy()
+    np.testing.assert_allclose(df["box.tank_m_flow_corr"], 5.0 * 0.2 * (1.0 - np.exp(-t)), atol=1e-3)
+    _assert_pi_step_response(stage, result, df)
+
+
+def _stage(stage: Path, result) -> Path:
+    """A folder with the twin's library, the generated package and the TrackingBox library side by side."""
+    stage.mkdir(parents=True, exist_ok=True)
+    shutil.copytree(result.library, stage / result.library.name, dirs_exist_ok=True)
+    shutil.copytree(result.package_dir, stage / result.package, dirs_exist_ok=True)
+    shutil.copytree(library_path(), stage / "TrackingBox", dirs_exist_ok=True)  # the box's Blocks
+    return stage
+
+
+def _connection_sets(stage: Path, result) -> list[set[str]]:
+    """The tracked model flattened by rumoca: the sets of variables its ``a = b`` equations make equal.
+
+    ``connect`` of two signal connectors and a plain ``a = b`` both flatten to ``a - b = 0``; a
+    set is every variable reachable through such equations.
+    """
+    model = rumoca.Session(roots=[str(stage)]).load(str(stage / result.package / "package.mo"),
+                                                    model=result.tracked_model)
+    parent: dict[str, str] = {}
+
+    def root(x: str) -> str:
+        while parent.setdefault(x, x) != x:
+            x = parent[x]
+        return x
+
+    def var(e: dict) -> str | None:
+        return e["VarRef"]["name"]["name"] if "VarRef" in e else None
+
+    for eq in model.to_dict("flat")["equations"]:
+        sub = eq["residual"].get("Binary", {})
+        if sub.get("op") == "Sub" and var(sub["lhs"]) and var(sub["rhs"]):
+            parent[root(var(sub["lhs"]))] = root(var(sub["rhs"]))
+    sets: dict[str, set[str]] = {}
+    for x in list(parent):
+        sets.setdefault(root(x), set()).add(x)
+    return list(sets.values())
+
+
+def _joined(sets: list[set[str]], *names: str) -> bool:
+    return any(set(names) <= s for s in sets)
+
+
+def _assert_tracked_connections(sets: list[set[str]]) -> None:
+    """The augmented twin as a modeller would wire it by hand (the spec's pair TI-102 -> hx.kht)."""
+    # the controller's output drives the twin's parameter through its conditional input and is an output
+    assert _joined(sets, "box.hx_kht_controller.y", "box.hx_kht", "hx.kht_in", "hx.kht_internal", "hx_kht")
+    # the measurement is the controller's setpoint, the twin's sensor (ThOut = hx.T) its process value
+    assert _joined(sets, "TI_102_meas", "box.TI_102_meas", "box.hx_kht_controller.u_s")
+    assert _joined(sets, "ThOut", "hx.T", "box.TI_102_sim", "box.hx_kht_controller.u_m")
+    assert _joined(sets, "hold", "box.hold")
+    assert _joined(sets, "box.TI_102_hold", "TI_102_hold")
+    # the twin's own equations are kept, and its parameter no longer sets the value used (the flag is on)
+    assert _joined(sets, "hx.Qin", "Qin")
+    assert not _joined(sets, "hx.kht_internal", "hx.kht")
+
+
+def _pi_step_response(stage: Path, result, extra: str = ""):
+    """The generated box alone in rumoca: a constant 0.1 K error (measured 300.1 K, simulated 300 K) from t = 0."""
+    box = result.box_model
+    h = stage / "StepHarness"
+    h.mkdir(exist_ok=True)
+    (h / "package.mo").write_text(
+        "within;\npackage StepHarness\n  model Run\n"
+        f"    {box} box(hold = 0.0, TI_102_meas = 300.1, TI_102_sim = 300.0, TI_102_hold = 0.0"
+        f"{', ' + extra if extra else ''});\n"
+        "  end Run;\nend StepHarness;\n")
+    model = rumoca.Session(roots=[str(stage)]).load(str(h / "package.mo"), model="StepHarness.Run")
+    return model.simulate((0.0, 1500.0), dt=10.0).to_dataframe().reset_index()
+
+
+def _assert_pi_step_response(stage: Path, result, df=None) -> None:
+    """The box's controller against its law solved by hand for a step of the error.
+
+    Spec: kp = 0.5, Ti = 60 s, bounds [800, 1200], start 1000 (u0 = 50 %), gain -0.005 (reverse
+    action, span = 0.005*400 = 2 K), Te = Ts/10 = 1 s. Error e = 100*0.1/2 = 5 %. With
+    eMem' = (e - eMem)/Te from 0 and u' = -kp (e/Ti + (e - eMem)/Te):
+    u(t) = 50 - 2.5 (t/60 + 1 - exp(-t)) %, clamped at 0 % (reached at t = 1140 s), and
+    kht = 800 + 4 u.
+    """
+    if df is None:
+        df = _pi_step_response(stage, result)
+    t = df["time"].to_numpy()
+    u = np.clip(50.0 - 2.5 * (t / 60.0 + 1.0 - np.exp(-t)), 0.0, 100.0)
+    # measured: 6.8e-5 at most (rumoca's integrator), at the clamp
+    np.testing.assert_allclose(df["box.hx_kht"], 800.0 + 4.0 * u, atol=1e-3)
+    assert df["box.hx_kht"].iloc[-1] == pytest.approx(800.0, abs=1e-6)  # held at the bound, no windup below
 
 
 def _declarations(text: str) -> list[str]:
@@ -279,10 +387,7 @@ def test_rewrite_patches_a_copy_and_the_result_tracks(tmp_path: Path):
 def _simulate_tracked(stage: Path, result, *, meas: float, hold: float = 0.0, own_hold: float = 0.0,
                       stop: float = 3000.0) -> float:
     """Simulate the tracked model with constant inputs in rumoca; the final tracked kht."""
-    stage.mkdir(parents=True, exist_ok=True)
-    shutil.copytree(result.library, stage / result.library.name, dirs_exist_ok=True)
-    shutil.copytree(result.package_dir, stage / result.package, dirs_exist_ok=True)
-    shutil.copytree(library_path(), stage / "TrackingBox", dirs_exist_ok=True)  # the box's Blocks
+    _stage(stage, result)
     entry = harness(stage, result.package, result.tracked_model.rsplit(".", 1)[1], meas=meas, hold=hold,
                     own_hold=own_hold)
     model = rumoca.Session(roots=[str(stage)]).load(str(entry), model="Harness.Run")
@@ -450,93 +555,6 @@ def test_compiled_box_agrees_with_python_runtime_and_would_catch_wrong_gains(tmp
 # ---------------------------------------------------------------- both benches (slow)
 
 
-def _box_against_runtime(spec, fmu: Path, runtime_csv: Path) -> dict[str, tuple[float, float]]:
-    """Drive the tracked FMU with the samples the Python runtime used; aligned agreement per parameter.
-
-    Returns ``{parameter: (max, 95th percentile)}`` of ``|p_box - p_python| / (max - min)``.
-
-    The twin's inputs come from the same table as in the runtime; the
-    measurements, the hold (the runtime's ``mode`` column) and the corrections
-    of top-level correction inputs are set once per sample and held over it,
-    as the runtime holds them; the measurements are interpolated linearly
-    between samples (as ``validate`` feeds them and the runtime's default
-    ``"linear"`` error interpolation assumes). The box's value at ``t_k`` is
-    compared with the runtime's row ``k`` (see :func:`_aligned_agreement`),
-    after the start-up hold.
-    """
-    import pandas as pd
-
-    from trackingbox import data
-    from trackingbox.fmu import FMUModel
-    from trackingbox.generate.filters import modelica_name
-
-    py = pd.read_csv(runtime_csv)
-    grid = py["time"].to_numpy(dtype=float)
-    table = data.read_table(spec.measurements, allow_nan=True)
-    sampled = data.resample(table[["time", *spec.inputs]], float(table["time"].iloc[0]) + grid,
-                            max_gap=spec.data.max_gap)
-    tags = [p.variable for p in spec.pairs] + [s.tag for s in spec.states]
-    measured = py[[f"measured:{t}" for t in tags]].interpolate().ffill().bfill().to_numpy()
-    inputs = pd.DataFrame({"time": grid, **{name: np.asarray(sampled[tag], dtype=float)
-                                            for tag, name in spec.inputs.items()},
-                           **{f"{modelica_name(t)}_meas": measured[:, j] for j, t in enumerate(tags)}})
-    inputs = inputs.ffill().bfill()
-    names = [modelica_name(p.parameter) for p in spec.pairs]
-    box = np.full((grid.size, len(names)), np.nan)
-    held = (py[[f"mode:{p.variable}" for p in spec.pairs]] == "hold").any(axis=1).to_numpy()
-    with FMUModel(fmu) as model:
-        run = model.stepper(start_time=float(grid[0]), inputs=inputs)
-        for k in range(grid.size):
-            box[k] = run.get(names)
-            if k == grid.size - 1:
-                break
-            values = {"hold": 1.0 if held[k] else 0.0}
-            for st in spec.states:
-                if st.correction in model.info.inputs:  # a top-level twin input: fed as the runtime fed it
-                    values[st.correction] = float(py[f"correction:{st.correction}"].iloc[k])
-            run.set(values)
-            run.step(float(grid[k + 1]))
-    after = grid >= float(spec.tracking.hold_until) - 1e-9
-    out = {}
-    for j, p in enumerate(spec.pairs):
-        par = spec.parameter(p.parameter)
-        d = np.abs(box[:, j] - py[f"parameter:{p.parameter}"].to_numpy()) / (par.max - par.min)
-        out[p.parameter] = (float(np.nanmax(d[after])), float(np.nanpercentile(d[after], 95.0)))
-    return out
-
-
-# gains measured on the benches' twins (a 50-unit step of the parameter, steady change of the
-# variable after an hour); time constants rounded from the step responses
-BENCH_PAIRS = {
-    "heat-exchanger": '''
-[[pairs]]
-variable = "TI-102"
-parameter = "hx.kht"
-gain = -0.0226
-time_constant = 70.0
-''',
-    "heat-production": '''
-[[pairs]]
-variable = "TI-301"
-parameter = "HEX300.kht"
-gain = -0.00998
-time_constant = 300.0
-
-[[pairs]]
-variable = "TI-310"
-parameter = "HU300.kht"
-gain = -0.0196
-time_constant = 300.0
-
-[[pairs]]
-variable = "PI-200"
-parameter = "Pipe200.k"
-gain = 1177460.8
-time_constant = 147.7
-''',
-}
-
-
 @pytest.mark.slow
 @pytest.mark.compile
 @pytest.mark.parametrize("bench, hours, max_allowed", [("heat-exchanger", 3.0, 0.01), ("heat-production", 2.0, 0.01)])
@@ -576,5 +594,5 @@ def test_bench_box_compiles_and_agrees_with_runtime(bench: str, hours: float, ma
     assert box.count("TrackingBox.Blocks.ParameterController ") == len(spec.pairs)
     assert box.count("TrackingBox.Blocks.StateCompensation ") == len(spec.states)
     runtime = track(spec, out_dir=tmp_path / "track", window="validation")
-    agreement = _box_against_runtime(spec, fmu, runtime.csv)
+    agreement = box_against_runtime(spec, fmu, runtime.csv)
     assert all(p95 <= 0.01 and worst <= max_allowed for worst, p95 in agreement.values()), agreement

@@ -23,7 +23,7 @@ import pytest
 
 from _fixtures_casadi import build_casadi_fmu
 from _fixtures_tracking import K_TWIN, TANK_SPEC, TAU, make_case, native_unavailable
-from test_controllers_roots import CASES, _clamped_by_solve_ivp, _law_from_zeros
+from _fixtures_controllers import CASES, clamped_by_solve_ivp, law_from_zeros
 from trackingbox.errors import SimulationError
 from trackingbox.spec import load_spec
 from trackingbox.tracking import rows as rows_module
@@ -104,8 +104,8 @@ def test_pi_law_in_c_matches_solve_ivp(f1: float, f2: float, te_frac: float, ti:
     # (rates with zero, one or two sign changes, bounds reached on the way), against scipy's integration
     ts, gain = 10.0, 1.5
     te = te_frac * ts
-    e0, e1, m0 = _law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
-    ref = _clamped_by_solve_ivp(u0, gain, ti, e0, e1, m0, ts, te)
+    e0, e1, m0 = law_from_zeros(f1 * ts, f2 * ts, k, te, ti, ts)
+    ref = clamped_by_solve_ivp(u0, gain, ti, e0, e1, m0, ts, te)
     # span 100 and p in 0..100: the error in % is the setpoint and the parameter is u
     state = np.array([u0, m0, 1.0, e0, 1.0, 0.0, gain, ti, te, 100.0, 0.0, 100.0, 0.0])
     got = native.library().tbn_pi_linear(_ptr(state), e1, 0.0, 0, ts)

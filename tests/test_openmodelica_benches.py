@@ -27,7 +27,7 @@ from trackingbox.compiler import compile_model, library_path
 from trackingbox.compiler.omc_interface import ExpectedInterface, compare_interface
 
 from _fixtures_generate import write_case
-from test_bench_models import bench_models, validation_models
+from _fixtures_benches import bench_models, validation_models
 
 pytestmark = [pytest.mark.openmodelica, pytest.mark.compile, pytest.mark.slow]
 

@@ -5,8 +5,14 @@ Independent expectations: the closed-form solution of the first-order twin
 exchanger bench, the restart path (the integrator re-initialised after every
 change), which the carried run must reproduce within 1e-4 of each tag's range;
 on the heat-production bench, a restart-path run at a tolerance of 1e-10, which
-the restart path (and, once carrying is accurate there, the carried run) at 1e-8
-must reproduce within 1e-4 of each tag's and tracked parameter's range.
+the restart path at 1e-8 must reproduce within 1e-4 of each tag's and tracked parameter's range.
+
+Tracking's accuracy criterion, with the carried integrator the default on every bench (the
+decision of issue 32): at the default tolerance the carried run is within a tenth of each
+tag's measured noise (sigma) of the restart path, and each tracked parameter within 1 % of its
+bound range. Sigma is measured on the tag's own measurements (second differences: white noise
+of sigma gives differences of standard deviation sigma*sqrt(6); a signal that moves slowly over
+three samples adds little), the way a modeller would on plant data.
 """
 from __future__ import annotations
 
@@ -52,19 +58,70 @@ def test_carried_changes_follow_the_closed_form(first_order_fmu: Path, carry: bo
         assert st.restarts == (1 if carry else 3)
 
 
+def noise_sigma(measured: pd.Series) -> float:
+    """The measurement noise of a tag, from its second differences: std(d2 y)/sqrt(6) (white noise)."""
+    d2 = np.diff(measured.to_numpy(float), 2)
+    return float(np.std(d2[np.isfinite(d2)]) / math.sqrt(6.0))
+
+
+def criterion(carried: pd.DataFrame, restarted: pd.DataFrame, spec) -> tuple[dict[str, float], dict[str, float]]:
+    """Tracking's accuracy criterion: ``{tag: max |carried - restarted| / sigma}`` over the
+    run (sigma: :func:`noise_sigma` of the tag's measurements), ``{parameter: max |...| / bound range}``."""
+    assert len(carried) == len(restarted)
+    tags = {tag: float(np.abs(carried[f"tracked:{tag}"] - restarted[f"tracked:{tag}"]).max())
+            / noise_sigma(carried[f"measured:{tag}"]) for tag in spec.outputs}
+    parameters = {}
+    for p in spec.pairs:
+        par = spec.parameter(p.parameter)
+        parameters[p.parameter] = float(np.abs(carried[f"parameter:{p.parameter}"]
+                                               - restarted[f"parameter:{p.parameter}"]).max()) / (par.max - par.min)
+    return tags, parameters
+
+
+def test_noise_sigma_reads_white_noise_under_a_slow_signal() -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 7200.0, 10.0)
+    # a 2 K swing over an hour: second differences of A w^2 dt^2 = 6.1e-4 K at most, 1.8e-4 K as a sigma
+    signal = 350.0 + 2.0 * np.sin(2 * np.pi * t / 3600.0)
+    assert noise_sigma(pd.Series(signal + rng.normal(0.0, 0.1, t.size))) == pytest.approx(0.1, rel=0.1)
+    assert noise_sigma(pd.Series(signal)) < 0.002
+
+
+@pytest.fixture(scope="module")
+def heat_exchanger_case(fmu_cache, tmp_path_factory: pytest.TempPathFactory):
+    """The heat exchanger bench, 2 h, seed 0, with the pair `trackingbox pair` writes for it; its spec."""
+    from trackingbox.benches import make_bench
+
+    case = make_bench("heat-exchanger", tmp_path_factory.mktemp("hx-carry") / "case", seed=0, hours=2.0,
+                      plant_fmu=fmu_cache("TrackingBox.Benches.HeatExchanger.Plant"),
+                      twin_fmu=fmu_cache("TrackingBox.Benches.HeatExchanger.Twin"))
+    return write_pairs(case.spec, [PairSpec("TI-102", "hx.kht", gain=-0.0237, time_constant=64.0, lambda_=1.0)])
+
+
 @pytest.mark.compile
-def test_carried_tracking_matches_the_restart_path_on_the_heat_exchanger(fmu_cache, tmp_path: Path) -> None:
+def test_carried_run_meets_the_accuracy_criterion_on_the_heat_exchanger(heat_exchanger_case,
+                                                                          tmp_path: Path) -> None:
+    # at the default tolerance, as every bench runs. Measured: TI-102 0.071 sigma, TI-202 0.054
+    # (sigma 0.097 and 0.102 K, the bench's 0.1 K), hx.kht 2.7e-4 of its bound range
+    spec = heat_exchanger_case
+    carried = track(spec, out_dir=tmp_path / "carried", checkpoint_every=10**9)
+    restarted = track(spec, out_dir=tmp_path / "restarted", checkpoint_every=10**9, carry=0.0)
+    assert carried.carried > 2000 and restarted.carried == 0
+    tags, parameters = criterion(pd.read_csv(carried.csv), pd.read_csv(restarted.csv), load_spec(spec.path))
+    assert set(tags) == {"TI-102", "TI-202"} and set(parameters) == {"hx.kht"}
+    assert {t: r for t, r in tags.items() if r > 0.1} == {}, tags
+    assert {p: r for p, r in parameters.items() if r > 0.01} == {}, parameters
+
+
+@pytest.mark.compile
+def test_carried_tracking_matches_the_restart_path_on_the_heat_exchanger(heat_exchanger_case,
+                                                                           tmp_path: Path) -> None:
     # the heat exchanger bench, 2 h, with the pair `trackingbox pair` writes for it; sub-steps as
     # chosen automatically (4 on this bench): the carried run against the restart path. Both at a
     # solver tolerance of 1e-8: at the default 1e-6 the restart path itself is 1.2e-3 of TI-102's
     # range away from a 1e-9 reference (the carried run 6.4e-4, measured), so the comparison would
     # measure the solver's tolerance, not the carrying; at 1e-8 both are within 3.1e-5 of it
-    from trackingbox.benches import make_bench
-
-    case = make_bench("heat-exchanger", tmp_path / "case", seed=0, hours=2.0,
-                      plant_fmu=fmu_cache("TrackingBox.Benches.HeatExchanger.Plant"),
-                      twin_fmu=fmu_cache("TrackingBox.Benches.HeatExchanger.Twin"))
-    spec = write_pairs(case.spec, [PairSpec("TI-102", "hx.kht", gain=-0.0237, time_constant=64.0, lambda_=1.0)])
+    spec = heat_exchanger_case
     carried = track(spec, out_dir=tmp_path / "carried", checkpoint_every=10**9, tolerance=1e-8)
     restarted = track(spec, out_dir=tmp_path / "restarted", checkpoint_every=10**9, carry=0.0, tolerance=1e-8)
     a, b = pd.read_csv(carried.csv), pd.read_csv(restarted.csv)
@@ -177,20 +234,37 @@ def test_restart_path_is_within_1e4_of_the_reference_on_heat_production(heat_pro
     assert worst <= WITHIN, (col, worst)
 
 
+@pytest.fixture(scope="module")
+def heat_production_runs(heat_production_reference, tmp_path_factory: pytest.TempPathFactory):
+    """The carried run and the restart path at the default tolerance; the criterion's figures."""
+    spec, _, _ = heat_production_reference
+    root = tmp_path_factory.mktemp("hp-criterion")
+    carried = track(spec, out_dir=root / "carried", untracked=False, checkpoint_every=10**9)
+    restarted = track(spec, out_dir=root / "restarted", untracked=False, checkpoint_every=10**9, carry=0.0)
+    assert carried.carried > 2000 and restarted.carried == 0
+    return criterion(pd.read_csv(carried.csv), pd.read_csv(restarted.csv), spec)
+
+
+@pytest.mark.compile
+def test_carried_parameters_are_within_1_percent_of_the_restart_path_on_heat_production(
+        heat_production_runs) -> None:
+    # measured: 1.9e-3 of the bound range at most (PU200.uRise), HEX300.kht and HU300.kht 9.5e-4 and 9.9e-4
+    _, parameters = heat_production_runs
+    assert set(parameters) == {name for _, name, *_ in HEAT_PRODUCTION_PAIRS}
+    assert {p: r for p, r in parameters.items() if r > 0.01} == {}, parameters
+
+
 @pytest.mark.compile
 @pytest.mark.xfail(strict=True, reason=(
-    "carrying CVODE across the tracked parameters' changes (the jump in the right-hand side integrated "
-    "with the step size and BDF history from before it) is measured 2.3e-3 of FI-200's range from the "
-    "reference at 1e-8 (2.1e-3 with the Jacobian kept across its restarts; the restart path 1.7e-5), 7.6e-3 at 1e-6 (the restart path 8.5e-4): on this bench "
-    "the carried run is the less accurate; carrying even the large jumps (carry=1e9) is 2.2e-3 at 1e-8, "
-    "so the bound tells them apart"))
-def test_carried_run_is_within_1e4_of_the_reference_on_heat_production(heat_production_reference,
-                                                                        tmp_path: Path) -> None:
-    spec, spans, reference = heat_production_reference
-    run = track(spec, out_dir=tmp_path / "carried", untracked=False, checkpoint_every=10**9, tolerance=TOLERANCE)
-    assert run.carried > 2000
-    worst, col = _worst(pd.read_csv(run.csv), reference, spans)
-    assert worst <= WITHIN, (col, worst)
+    "measured at the default tolerance (2 h, seed 0): FI-200 is 0.121 sigma from the restart path (sigma "
+    "3.2e-4 kg/s), and the controller outputs, which the DCS knows without noise (their second differences "
+    "give sigma 4.5e-6 SI-100, 2.6e-4 SI-200, 8.8e-6 ZI-400), 3.7, 0.34 and 4.8 sigma; every other tag "
+    "0.046 sigma at most, every parameter 1.9e-3 of its range. At 1e-8 FI-200 is 0.027 sigma but SI-100 "
+    "and ZI-400 still 0.83 and 0.95: carrying on this bench does not meet a tenth of the noise"))
+def test_carried_tags_are_within_a_tenth_of_their_noise_of_the_restart_path_on_heat_production(
+        heat_production_runs) -> None:
+    tags, _ = heat_production_runs
+    assert {t: r for t, r in tags.items() if r > 0.1} == {}, tags
 
 
 def test_track_help_states_the_runtime_default_carry() -> None:

@@ -26,7 +26,7 @@ from trackingbox.compiler import compile_model
 from trackingbox.spec import load_spec
 from trackingbox.tracking.runtime import track
 
-from _fixtures_generate import MINI, write_case
+from _fixtures_generate import BENCH_PAIRS, MINI, box_against_runtime, write_case
 from _fixtures_tracking import native_unavailable
 
 pytestmark = pytest.mark.skipif(native_unavailable() is not None, reason=str(native_unavailable()))
@@ -240,7 +240,7 @@ def test_continuous_mode_needs_the_source(tmp_path: Path) -> None:
 
 @pytest.mark.compile
 def test_continuous_mode_agrees_with_the_compiled_box_on_the_heat_exchanger(fmu_cache, tmp_path: Path) -> None:
-    """The heat-exchanger bench (3 h, seed 1, the pair of test_generate's BENCH_PAIRS), default tolerances.
+    """The heat-exchanger bench (3 h, seed 1, the pair of _fixtures_generate's BENCH_PAIRS), default tolerances.
 
     Measured: the continuous mode is within 2.8e-5 of the parameter's range of the box (95th
     percentile 1.4e-5), the discrete path 2.4e-4 (8.6e-5); at rtol 1e-10 for both (runtime and box)
@@ -248,7 +248,6 @@ def test_continuous_mode_agrees_with_the_compiled_box_on_the_heat_exchanger(fmu_
     """
     from trackingbox.benches import make_bench
     from trackingbox.generate.generator import compile_generated, generate
-    from test_generate import BENCH_PAIRS, _box_against_runtime
 
     model = "TrackingBox.Benches.HeatExchanger"
     make_bench("heat-exchanger", tmp_path / "case", seed=1, hours=3.0,
@@ -260,7 +259,7 @@ def test_continuous_mode_agrees_with_the_compiled_box_on_the_heat_exchanger(fmu_
     box = compile_generated(generate(spec, tmp_path / "generated"), backend="embedded").fmu
     runs = {mode: track(spec, out_dir=tmp_path / mode, window="validation", controllers=mode)
             for mode in ("discrete", "continuous")}
-    agreement = {mode: _box_against_runtime(spec, box, r.csv)["hx.kht"] for mode, r in runs.items()}
+    agreement = {mode: box_against_runtime(spec, box, r.csv)["hx.kht"] for mode, r in runs.items()}
     worst_c, p95_c = agreement["continuous"]
     worst_d, _ = agreement["discrete"]
     assert worst_c <= 1e-4 and p95_c <= 5e-5, agreement
