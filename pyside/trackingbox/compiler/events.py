@@ -16,7 +16,8 @@ usual machinery of model-exchange FMUs:
   ``elsewhen`` branches in order, its ``reinit(x, e)`` sets a state; ``when initial()`` fires at
   initialisation, any other when-clause never does;
 * ``sample(start, interval)`` is true at the instants ``start + k*interval`` (time events that
-  the FMU announces as its next event time) and is allowed in when conditions;
+  the FMU announces as its next event time; once the instant is over, the FMU makes it false
+  again when it leaves event mode);
 * at an event (and at the end of initialisation) the FMU runs the **event iteration**: with the
   continuous-time values at that instant, it recomputes the relations, the when conditions and
   the discrete variables (in dependency order; ``pre`` = the values of the previous step), applies
@@ -94,11 +95,6 @@ class EventSystem:
     def indicators(self) -> list[ca.MX]:
         return [z for c in self.conditions for z in c.indicators]
 
-    @property
-    def held(self) -> list[ca.MX]:
-        """Every symbol the event iteration updates (its discrete state), in ``updates`` order."""
-        return [lhs for lhs, _ in self.updates]
-
     def internal(self) -> list[tuple[str, ca.MX, float]]:
         """The hidden discrete variables (name, symbol, start): conditions, samples, when conditions,
         the flag of initial() (1 from instantiation until the end of initialisation)."""
@@ -107,9 +103,6 @@ class EventSystem:
         out += [(w.sym.name(), w.sym, 0.0) for w in self.whens]
         out.append((self.initial.name(), self.initial, 1.0))  # true until initialisation ends
         return out
-
-    def empty(self) -> bool:
-        return not (self.discrete or self.conditions or self.samples or self.whens or self.reinits)
 
 
 __all__ = ["Condition", "EventSystem", "MAX_EVENT_ITERATIONS", "Sample", "WhenCondition"]

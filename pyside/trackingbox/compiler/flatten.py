@@ -18,10 +18,16 @@ Modelica source. This module reads the flat model (``Model.to_dict("flat")``):
   (:mod:`.causalize`): a scalar block linear in its unknown is solved
   symbolically, anything else goes to a Newton rootfinder.
 
-Conditions (``if`` expressions, ``min``/``max``/``abs``) are evaluated as they
-stand at each right-hand-side call: there is no event detection, so the
-integrator crosses a switch like any other steep change. ``noEvent`` and
-``smooth`` are therefore accepted and change nothing.
+Events (:mod:`.events`): relations on continuous-time values outside ``noEvent``
+and ``integer``/``floor``/``ceil`` of such values are held between events with
+event indicators; discrete variables, when-clauses (equations and statements),
+``reinit``, ``pre``/``edge``/``change``/``initial()``/``terminal()``/``sample()``
+become the FMU's event iteration. ``min``/``max``/``abs`` are evaluated as they
+stand (no events); relations inside functions and ``noEvent``/``smooth`` too.
+Algorithm sections and initial algorithm sections are executed symbolically
+(:meth:`FlatTranslator.algorithm_residuals`). A structurally singular system is
+handed to index reduction (:mod:`.index`). The MSL's table functions are built
+as expressions (:mod:`.tables`).
 
 ``assert(condition, message, level)`` in equation sections and in the
 algorithm bodies of inlined functions becomes an :class:`Assertion` (a
@@ -36,17 +42,18 @@ warning-level one logs a warning once per violation and the run goes on.
 ``initial equation`` sections are solved when the FMU leaves initialisation
 mode (:class:`InitialSystem`): the unknowns are the states that are not
 ``fixed = true`` and the parameters declared ``fixed = false``; the equations
-are the initial equations, in which ``der(x)`` and the algebraic variables are
+are the initial equations (and ``v = start`` for a variable that is not a state
+with ``fixed = true``), in which ``der(x)`` and the algebraic variables are
 replaced by their causalised expressions, plus ``x = start`` for states with
 ``fixed = true``. If there are fewer equations than unknowns, states that no
-initial equation mentions keep their start values. The system is solved by
-a Newton rootfinder compiled into the FMU, from the start values as guesses
-and with the parameters as the user set them. Models without initial
-equations are exported exactly as before.
+initial equation mentions keep their start values. The system is solved block
+by block (explicitly where a block is linear in its unknown, else by a Newton
+rootfinder compiled into the FMU, from the current values as guesses) with the
+parameters as the user set them. Models without initial equations are exported
+exactly as before.
 
-Anything else (when-clauses, algorithm sections in models, discrete variables,
-``pre``/``edge``/``sample``/``reinit``/``initial()``/``terminal()``, initial
-algorithm sections, external functions) raises
+Anything else (``delay``, ``terminate``, clocks, external functions other than
+``"builtin"`` ones and the MSL's tables, ...) raises
 :class:`UnsupportedConstructError` naming the construct and where it stands.
 """
 from __future__ import annotations
@@ -287,7 +294,6 @@ class FlatTranslator:
         self._freeze = True
         self._frozen: dict[str, ca.MX] = {}
         self._pre: dict[str, ca.MX] = {}
-        self._in_when_condition = False
         self._when_targets: set[str] = set()
         self._uses_initial = False
         self._discrete_defs: list[tuple[ca.MX, str]] = []  # when-equations, discrete outputs of algorithms
@@ -886,11 +892,7 @@ class FlatTranslator:
     def when_fire(self, node: Any, env: Any) -> Value:
         """The firing of a when condition (``c and not pre(c)`` for each element of it); each element
         becomes a held when condition of the event iteration."""
-        self._in_when_condition = True
-        try:
-            cond = self.expr(node, env)
-        finally:
-            self._in_when_condition = False
+        cond = self.expr(node, env)
         fire: Value = False
         for el in (list(cond.ravel()) if arr.is_array(cond) else [cond]):
             if _num(el):
