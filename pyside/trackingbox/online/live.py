@@ -52,12 +52,18 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LiveSettings", "LiveResult", "track_live", "RECORD_NAME", "LIVE_NAME"]
+__all__ = ["LiveSettings", "LiveResult", "track_live", "RECORD_NAME", "LIVE_NAME", "STATUS_NAME"]
 
 #: The samples received, as a historian's long form.
 RECORD_NAME = "live_measurements.csv"
 #: The run's time origin and endpoint (for --resume).
 LIVE_NAME = "live.json"
+#: The tracker's state for the live view (rewritten, whole, about twice a second; see docs/online.md).
+STATUS_NAME = "live_status.json"
+#: Wall-clock seconds between two writes of the status file (a connection's change is written at once).
+STATUS_EVERY = 0.5
+#: First client handle of the monitored items (one per tag; asyncua numbers its own from 201)
+_HANDLE0 = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -132,6 +138,9 @@ class _Record:
         self.path = path
         self.tags = tags
         self.last: dict[str, datetime | None] = {t: None for t in tags}
+        #: per tag: the newest sample of good quality, and whether the newest sample was bad
+        self.good: dict[str, datetime | None] = {t: None for t in tags}
+        self.bad: dict[str, bool] = {t: False for t in tags}
         self.count = 0
         self.first: datetime | None = None
         if resume and path.exists():
@@ -151,7 +160,7 @@ class _Record:
                 if len(row) != 3 or row[0] not in self.last:
                     raise CheckpointError(f"{self.path} has a malformed row {row!r}; run without --resume")
                 t = datetime.fromisoformat(row[1])
-                self.last[row[0]] = t
+                self.last[row[0]] = self.good[row[0]] = t
                 self.first = t if self.first is None or t < self.first else self.first
                 self.count += 1
 
@@ -163,7 +172,10 @@ class _Record:
             return False
         self.last[tag] = stamp
         if value is None or not math.isfinite(value):
+            self.bad[tag] = True
             return True
+        self.good[tag] = stamp
+        self.bad[tag] = False
         if self.first is None or stamp < self.first:
             self.first = stamp
         self._pending.append(f"{tag},{stamp.isoformat()},{value!r}\n")
@@ -277,6 +289,53 @@ class _Tracker:
         self.tail = _CsvTail(out_dir / "tracking.csv")
         self.publisher = _Publisher(spec.live.publish, []) if spec.live.publish else None
         self.done = False
+        #: the link as the live view shows it: connecting, connected, disconnected, stopped
+        self.link = "connecting"
+        self.link_since = time.time()
+        self.link_error = ""
+        self.status_path = out_dir / STATUS_NAME
+        self.status_written = -math.inf
+        self.last_new_wall: float | None = None
+
+    # -- the status file (read by the live view, never waited for) ------------
+    def status(self) -> dict[str, Any]:
+        """The tracker's state now: the link, every tag's newest sample and staleness, the counts."""
+        stamps = [s for s in self.record.last.values() if s is not None]
+        clock = max(stamps) if stamps else None
+        tags = {}
+        for tag in self.tags:
+            last, good = self.record.last[tag], self.record.good[tag]
+            behind = (clock - last).total_seconds() if clock is not None and last is not None else None
+            tags[tag] = {"last": last.isoformat() if last else None, "good": good.isoformat() if good else None,
+                         "quality": None if last is None else "bad" if self.record.bad[tag] else "good",
+                         "behind": behind, "stale": behind is not None and behind > self.stale_after}
+        loop = self.loop
+        return {"version": 1, "written": time.time(), "pid": os.getpid(), "url": self.settings.url,
+                "link": self.link, "link_since": self.link_since, "link_error": self.link_error,
+                "connections": self.connections, "samples": self.samples_seen, "backfilled": self.backfilled,
+                "stale_events": self.stale_events, "rows": loop.k if loop is not None else 0,
+                "origin": self.origin.isoformat() if self.origin else None,
+                "plant_clock": clock.isoformat() if clock else None, "last_sample_wall": self.last_new_wall,
+                "stale_after": self.stale_after, "sample_time": self.ts, "tags": tags}
+
+    def write_status(self, *, force: bool = False) -> None:
+        """Rewrite OUT/live_status.json (at most every STATUS_EVERY s unless *force*); never raises."""
+        now = time.monotonic()
+        if not force and now - self.status_written < STATUS_EVERY:
+            return
+        self.status_written = now
+        tmp = self.status_path.with_name(f".{STATUS_NAME}.{os.getpid()}.tmp")
+        try:
+            tmp.write_text(json.dumps(self.status()), encoding="utf-8")
+            os.replace(tmp, self.status_path)  # a reader sees the old file or the new one, whole
+        except (OSError, ValueError) as exc:  # the view's file: never worth stopping the tracking for
+            log.warning("cannot write %s (%s)", self.status_path, exc)
+
+    def set_link(self, link: str, error: str = "") -> None:
+        if link != self.link:
+            self.link, self.link_since = link, time.time()
+        self.link_error = error
+        self.write_status(force=True)
 
     # -- samples ------------------------------------------------------------
     def take(self, tag: str, dv: Any, *, backfill: bool = False) -> None:
@@ -285,7 +344,7 @@ class _Tracker:
         stamp = dv.SourceTimestamp or dv.ServerTimestamp
         if stamp is None:
             return
-        good = dv.StatusCode_ is None or dv.StatusCode_.value == ua.StatusCodes.Good
+        good = dv.StatusCode is None or dv.StatusCode.value == ua.StatusCodes.Good
         value = None
         if good and dv.Value is not None:
             try:
@@ -298,6 +357,7 @@ class _Tracker:
             self.samples_seen += 1
             self.backfilled += backfill
             self.last_new = time.monotonic()
+            self.last_new_wall = time.time()
 
     # -- the tracking -------------------------------------------------------
     def _rows_ready(self) -> int:
@@ -427,12 +487,18 @@ class _Tracker:
                 log.warning("subscription status from the server: %s", status)
 
         sub = await client.create_subscription(max(10.0, 1000.0 * self.settings.poll), Handler())
-        # every write counts, also of an unchanged value (a new timestamp is a new sample);
-        # asyncua 1.1's public subscribe_data_change takes no filter, hence _subscribe (the version is pinned)
-        handles = await sub._subscribe(list(nodes.values()), ua.AttributeIds.Value,
-                                       mfilter=ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp),
-                                       queuesize=100000, sampling_interval=0.0)
-        for tag, h in zip(nodes, handles if isinstance(handles, list) else [handles]):
+        # every write counts, also of an unchanged value (a new timestamp is a new sample): the
+        # monitored items are made here with that filter (asyncua's subscribe_data_change sets none)
+        requests = []
+        for i, node in enumerate(nodes.values()):
+            params = ua.MonitoringParameters(ClientHandle=_HANDLE0 + i, SamplingInterval=0.0, QueueSize=100000,
+                                             DiscardOldest=True, Filter=ua.DataChangeFilter(
+                                                 Trigger=ua.DataChangeTrigger.StatusValueTimestamp))
+            requests.append(ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value),
+                MonitoringMode=ua.MonitoringMode.Reporting, RequestedParameters=params))
+        handles = await sub.create_monitored_items(requests)
+        for tag, h in zip(nodes, handles):
             if isinstance(h, ua.StatusCode):
                 raise LiveError(f"cannot subscribe to tag {tag!r} at node {self.spec.live.node(tag)!r} on "
                                 f"{self.settings.url}: {h.name}")
@@ -454,6 +520,7 @@ class _Tracker:
             for tag, dv in items:
                 self.take(tag, dv)
             await asyncio.to_thread(self.advance)
+            self.write_status()
             await self._publish()
             if self._idle():
                 return
@@ -497,6 +564,7 @@ class _Tracker:
                                         + (" (this spec connects anonymously; [live] auth = \"user\" to log in)"
                                            if self.spec.live.auth == "anonymous" else "")) from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url, exc, wait)
+                    self.set_link(self.link, str(exc))
                 except (OSError, asyncio.TimeoutError, ConnectionError, ua.UaError) as exc:
                     if "No matching endpoints" in str(exc):  # a security mismatch: retrying will not help
                         raise LiveError(f"{self.settings.url} offers no endpoint with this spec's security "
@@ -505,15 +573,18 @@ class _Tracker:
                                         "offers") from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url,
                                 exc or type(exc).__name__, wait)
+                    self.set_link(self.link, str(exc) or type(exc).__name__)
                 else:
                     self.connections += 1
                     log.info("connected to %s (connection %d)", self.settings.url, self.connections)
+                    self.set_link("connected")
                     wait = self.settings.backoff[0]
                     try:
                         await self._session(client)
                     except (OSError, asyncio.TimeoutError, ConnectionError, ua.UaError) as exc:
                         log.warning("lost %s (%s); reconnecting in %g s", self.settings.url,
                                     exc or type(exc).__name__, wait)
+                        self.set_link("disconnected", str(exc) or type(exc).__name__)
                     finally:
                         try:
                             await asyncio.wait_for(client.disconnect(), timeout=1.0)
@@ -525,9 +596,11 @@ class _Tracker:
                 wait = min(2.0 * wait, self.settings.backoff[1])
                 # samples taken while disconnected cannot come: run what is ready
                 await asyncio.to_thread(self.advance)
+                self.write_status()
                 await self._publish()
         finally:
             self.record.close()
+            self.set_link("stopped")
             if self.publisher is not None:
                 await self.publisher.stop()
 

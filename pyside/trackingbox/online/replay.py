@@ -151,7 +151,7 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
             v = float(values[tag][i])
             ok = math.isfinite(v)
             dv = ua.DataValue(ua.Variant(v if ok else 0.0, ua.VariantType.Double),
-                              StatusCode_=ua.StatusCode(ua.StatusCodes.Good if ok else ua.StatusCodes.Bad),
+                              StatusCode=ua.StatusCode(ua.StatusCodes.Good if ok else ua.StatusCodes.Bad),
                               SourceTimestamp=stamp, ServerTimestamp=datetime.now(timezone.utc))
             await server.write_attribute_value(nodes[tag], dv)
             await history_store.save_node_value(nodes[tag], dv)
