@@ -27,6 +27,7 @@ COMMANDS = (
     "estimate",
     "track",
     "replay",
+    "view",
     "generate",
     "validate",
     "diagnose",

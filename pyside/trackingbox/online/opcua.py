@@ -54,15 +54,18 @@ class Credentials:
         return f"Credentials(user={self.user!r}, password=***)"
 
 
-def read_credentials(path: str | os.PathLike[str] | None = None) -> Credentials | None:
+def read_credentials(path: str | os.PathLike[str] | None = None, *,
+                     env: tuple[str, str, str] = (USER_ENV, PASSWORD_ENV, CREDENTIALS_ENV)) -> Credentials | None:
     """Credentials from *path* (or ``$TRACKINGBOX_OPCUA_CREDENTIALS``), else the environment.
 
     The file has ``user = NAME`` and ``password = SECRET`` lines (``#``
     comments allowed) and must not be readable by others (mode 0600 or
     stricter). Without a file, ``TRACKINGBOX_OPCUA_USER`` and
     ``TRACKINGBOX_OPCUA_PASSWORD`` are used; ``None`` when neither is set.
+    *env* names the user, password and file variables (the live view has its own).
     """
-    path = path or os.environ.get(CREDENTIALS_ENV)
+    user_env, password_env, file_env = env
+    path = path or os.environ.get(file_env)
     if path:
         p = Path(path)
         try:
@@ -85,11 +88,11 @@ def read_credentials(path: str | os.PathLike[str] | None = None) -> Credentials 
         if "user" not in values or "password" not in values:
             raise LiveError(f"credentials file {p} needs both 'user = ...' and 'password = ...'")
         return Credentials(values["user"], values["password"])
-    user, password = os.environ.get(USER_ENV), os.environ.get(PASSWORD_ENV)
+    user, password = os.environ.get(user_env), os.environ.get(password_env)
     if user and password is not None:
         return Credentials(user, password)
     if user or password:
-        raise LiveError(f"set both {USER_ENV} and {PASSWORD_ENV}, or neither")
+        raise LiveError(f"set both {user_env} and {password_env}, or neither")
     return None
 
 
