@@ -115,10 +115,11 @@ function buildCharts() {
                              "shaded: loop held"].filter(Boolean).join(" · ")));
     const tbox = el("div", { class: "chart", "data-tag": p.tag });
     root.appendChild(tbox);
+    // the measurement drawn last, on top of the tracked line it should sit on
     S.charts.push(makeChart(tbox, `${p.tag}: measured / tracked / untracked`, [
-      { label: "measured", column: `measured:${p.tag}`, color: COLORS.measured, width: 1 },
-      { label: "tracked", column: `tracked:${p.tag}`, color: COLORS.tracked, width: 2 },
       { label: "untracked", column: `untracked:${p.tag}`, color: COLORS.untracked, width: 1.5, dash: [4, 3] },
+      { label: "tracked", column: `tracked:${p.tag}`, color: COLORS.tracked, width: 2.5 },
+      { label: "measured", column: `measured:${p.tag}`, color: COLORS.measured, width: 1 },
     ], p.tag, [], ""));
   }
 }
