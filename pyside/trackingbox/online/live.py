@@ -160,24 +160,33 @@ class _Record:
                 if len(row) != 3 or row[0] not in self.last:
                     raise CheckpointError(f"{self.path} has a malformed row {row!r}; run without --resume")
                 t = datetime.fromisoformat(row[1])
-                self.last[row[0]] = self.good[row[0]] = t
+                self.last[row[0]] = t
+                self.bad[row[0]] = not row[2]
+                if row[2]:
+                    self.good[row[0]] = t
+                    self.count += 1
                 self.first = t if self.first is None or t < self.first else self.first
-                self.count += 1
 
     def add(self, tag: str, stamp: datetime, value: float | None) -> bool:
-        """Record one sample (``None``: bad quality, not recorded); False if not newer than the last."""
+        """Record one sample (``None``: bad quality, an empty value); False if not newer than the last.
+
+        A bad-quality sample is kept as a historian keeps it (an empty value): the view of the
+        record then breaks the tag's interpolation there, as it does reading the historian's
+        own export, and a tag reported by exception is not held across a loss of its link.
+        """
         stamp = utc(stamp)
         last = self.last[tag]
         if last is not None and stamp <= last:
             return False
         self.last[tag] = stamp
+        if self.first is None or stamp < self.first:
+            self.first = stamp
         if value is None or not math.isfinite(value):
             self.bad[tag] = True
+            self._pending.append(f"{tag},{stamp.isoformat()},\n")
             return True
         self.good[tag] = stamp
         self.bad[tag] = False
-        if self.first is None or stamp < self.first:
-            self.first = stamp
         self._pending.append(f"{tag},{stamp.isoformat()},{value!r}\n")
         self.count += 1
         return True
@@ -366,6 +375,8 @@ class _Tracker:
         stamps = [s for s in self.record.last.values() if s is not None]
         if first is None or len(stamps) < len(self.tags):
             return 0
+        if self.loop is None and any(g is None for g in self.record.good.values()):
+            return 0  # a tag with bad samples only: nothing to start the twin from yet
         clock = max(stamps)
         live = []
         for tag, s in self.record.last.items():
