@@ -84,6 +84,9 @@ def test_loop_states_and_why(tmp_path: Path) -> None:
         "210.0,35.7,36.0,38.0,0.01,auto",     # at its upper bound
         "220.0,,36.0,38.0,0.01,hold",         # no measured value
         "230.0,35.7,36.0,38.0,0.001,auto",    # at its lower bound
+        "240.0,35.7,36.0,38.0,0.001,hold",    # held on for another reason: a new interval, the last one ended
+        "250.0,,36.0,38.0,0.001,hold",
+        "260.0,35.7,36.0,38.0,0.002,auto",
     ]) + "\n")
     r = RunReader(out, spec)
     r.poll()
@@ -91,10 +94,14 @@ def test_loop_states_and_why(tmp_path: Path) -> None:
     assert texts == ["TI → k: held (start-up hold until 200 s)", "TI → k: tracking",
                      "TI → k: saturated (at its upper bound 0.01)",
                      "TI → k: held (no measured value: bad quality or a gap)",
-                     "TI → k: saturated (at its lower bound 0.001)"]
-    assert r.loops["TI"] == {"state": "saturated", "why": "at its lower bound 0.001", "since": 230.0}
+                     "TI → k: saturated (at its lower bound 0.001)",
+                     "TI → k: held (an input missing or a solver recovery)",
+                     "TI → k: held (no measured value: bad quality or a gap)", "TI → k: tracking"]
+    assert r.loops["TI"] == {"state": "tracking", "why": "", "since": 260.0}
     assert list(r.holds["TI"]) == [[0.0, 200.0, "start-up hold until 200 s"],
-                             [220.0, 230.0, "no measured value: bad quality or a gap"]]
+                                   [220.0, 230.0, "no measured value: bad quality or a gap"],
+                                   [240.0, 250.0, "an input missing or a solver recovery"],
+                                   [250.0, 260.0, "no measured value: bad quality or a gap"]]
     # a stale tag (the tracker's status says so) is named as such
     (out / "live_status.json").write_text(json.dumps({"written": 1.0, "link": "connected", "connections": 1,
                                                       "tags": {"TI": {"stale": True, "behind": 90.0}}}))

@@ -42,6 +42,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from ..data import heartbeat_max_gap
 from ..errors import CheckpointError, DataError, LiveError, SpecError
 from ..io import write_text_atomic
 from .opcua import CLIENT_URI, RESULTS_NAMESPACE, Credentials, at, check_endpoint, make_server, utc
@@ -277,6 +280,11 @@ class _Tracker:
         self.tags = list(spec.tags)
         self.ts = float(spec.sample_time)
         self.stale_after = float(spec.live.stale_after or 3.0 * self.ts)
+        #: per tag: s of plant time without a sample before it is stale. Without [live] stale_after, a tag
+        #: reported by exception ([data] heartbeat) may be quiet for as long as its gap rule allows
+        #: (1.5 heartbeats, as the offline view takes it), any other for 3 sample times
+        self.stale_limit = {tag: self.stale_after if spec.live.stale_after or spec.data.heartbeat_of(tag) is None
+                            else heartbeat_max_gap(spec.data.heartbeat_of(tag)) for tag in self.tags}
         out_dir.mkdir(parents=True, exist_ok=True)
         self.live_json = out_dir / LIVE_NAME
         self.origin: datetime | None = None
@@ -317,7 +325,8 @@ class _Tracker:
             behind = (clock - last).total_seconds() if clock is not None and last is not None else None
             tags[tag] = {"last": last.isoformat() if last else None, "good": good.isoformat() if good else None,
                          "quality": None if last is None else "bad" if self.record.bad[tag] else "good",
-                         "behind": behind, "stale": behind is not None and behind > self.stale_after}
+                         "behind": behind, "stale": behind is not None and behind > self.stale_limit[tag],
+                         "stale_after": self.stale_limit[tag]}
         loop = self.loop
         return {"version": 1, "written": time.time(), "pid": os.getpid(), "url": self.settings.url,
                 "link": self.link, "link_since": self.link_since, "link_error": self.link_error,
@@ -381,7 +390,7 @@ class _Tracker:
         live = []
         for tag, s in self.record.last.items():
             assert s is not None
-            if (clock - s).total_seconds() > self.stale_after:
+            if (clock - s).total_seconds() > self.stale_limit[tag]:
                 if tag not in self.stale:
                     self.stale.add(tag)
                     self.stale_events += 1
@@ -394,6 +403,11 @@ class _Tracker:
                 live.append(s)
         limit = (min(live) - first).total_seconds()
         if self.settings.stop_after is not None:
+            if (clock - first).total_seconds() >= self.settings.stop_after - 1e-9:
+                # the plant's clock is at the run's end: the samples up to it have come (in time order), a
+                # quiet tag says nothing more before it, and the rows to the end are read as a file
+                # that ends there is read (no next sample to wait for)
+                limit = self.settings.stop_after + self.ts
             limit = min(limit, self.settings.stop_after + self.ts)
         # rows k = 0 .. K-1 are ready when t_{k+1} = (k+1)·ts <= limit
         return max(0, int(math.floor(limit / self.ts + 1e-9)))
@@ -429,7 +443,10 @@ class _Tracker:
                 if self.loop.k < ready:
                     self.loop.extend(self._view(ready))
             else:
-                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(ready))
+                view = self._view(ready)
+                if not self.done and not all(np.isfinite(view.values(tag)).any() for tag in self.spec.inputs):
+                    return 0  # an input has no valid value yet: the twin has nothing to start from
+                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=view)
                 self.loop.begin(resume=False)
         else:
             self.loop.extend(self._view(ready))

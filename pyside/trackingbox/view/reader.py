@@ -335,7 +335,7 @@ class RunReader:
         if before is None or before["state"] != state or before["why"] != why:
             self.loops[tag] = {"state": state, "why": why, "since": t}
             holds = self.holds[tag]
-            if holds and holds[-1][1] is None and state != "held":
+            if holds and holds[-1][1] is None:  # a hold ends here (or goes on for another reason)
                 holds[-1][1] = t
             if state == "held":
                 holds.append([t, None, why])

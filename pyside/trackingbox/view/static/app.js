@@ -27,6 +27,12 @@ function fmt(x) {
   const a = Math.abs(x);
   return (a >= 1e6 || a < 1e-3) ? x.toExponential(5) : String(Number(x.toPrecision(6)));
 }
+function fmtAxis(x) {                    // short tick labels
+  if (x === null || !Number.isFinite(x)) return "";
+  if (x === 0) return "0";
+  const a = Math.abs(x);
+  return (a >= 1e5 || a < 1e-2) ? x.toExponential(2) : String(Number(x.toPrecision(4)));
+}
 function ago(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "–";
   if (s < 60) return `${s.toFixed(1)} s ago`;
@@ -81,7 +87,7 @@ function makeChart(box, title, series, tag, bands, note) {
   const opts = {
     width, height: 200,
     scales: { x: { time: S.meta.origin !== null } },
-    axes: [{ label: S.meta.origin !== null ? "" : "h" }, { size: 70, values: (u, splits) => splits.map(fmt) }],
+    axes: [{ label: S.meta.origin !== null ? "" : "h" }, { size: 72, values: (u, splits) => splits.map(fmtAxis) }],
     series: [{}].concat(series.map((s) => ({ label: s.label, stroke: s.color, width: s.width || 1.5,
                                            dash: s.dash, fill: s.fill, points: { show: false },
                                            spanGaps: false }))),
