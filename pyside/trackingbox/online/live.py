@@ -47,6 +47,8 @@ import numpy as np
 from ..data import heartbeat_max_gap
 from ..errors import CheckpointError, DataError, LiveError, SpecError
 from ..io import write_text_atomic
+from . import livestream
+from .livestream import LiveMeasurements
 from .opcua import CLIENT_URI, RESULTS_NAMESPACE, Credentials, at, check_endpoint, make_server, utc
 
 if TYPE_CHECKING:
@@ -93,6 +95,10 @@ class LiveSettings:
         Wall-clock seconds between looks at the received samples.
     timeout : float
         Seconds a connection attempt or a request may take.
+    windowed : bool
+        Hold only the samples the loop can still reach and hand it windows of rows
+        (:mod:`.livestream`: memory flat in the run's length); False: rebuild the whole view
+        of the record at every batch (what a co-simulation twin always does).
     """
 
     url: str
@@ -103,6 +109,7 @@ class LiveSettings:
     backoff: tuple[float, float] = (0.5, 30.0)
     poll: float = 0.1
     timeout: float = 4.0
+    windowed: bool = True
 
     def __post_init__(self) -> None:
         check_endpoint(self.url, "--live")
@@ -296,6 +303,14 @@ class _Tracker:
                 raise CheckpointError(f"{self.live_json} is unreadable; run without --resume") from None
         self.record = _Record(out_dir / RECORD_NAME, self.tags, resume=resume)
         self.live_spec = replace(spec, measurements=self.record.path)
+        #: the samples taken since the last batch, for the windowed stream: (tag, stamp, value or None)
+        self.pending: list[tuple[str, datetime, float | None]] = []
+        #: the rows around the loop's, window by window (memory flat in the run's length); None: the
+        #: whole view of the record is rebuilt at every batch (a co-simulation twin, replayed from row 0)
+        self.stream: LiveMeasurements | None = None
+        if settings.windowed and livestream.usable(spec):
+            self.stream = LiveMeasurements(self.live_spec, self.record.path,
+                                           skip=float(spec.tracking.hold_until))
         self.loop: TrackingLoop | None = None
         self.samples_seen = 0
         self.backfilled = 0
@@ -372,6 +387,7 @@ class _Tracker:
         if self.settings.start is not None and utc(stamp) < utc(self.settings.start):
             return
         if self.record.add(tag, stamp, value):
+            self.pending.append((tag, utc(stamp), value))
             self.samples_seen += 1
             self.backfilled += backfill
             self.last_new = time.monotonic()
@@ -418,42 +434,100 @@ class _Tracker:
         hold = float(self.spec.tracking.hold_until)
         return MeasurementView.from_spec(self.live_spec, (0.0, (rows + 1) * self.ts), skip=hold)
 
-    def advance(self) -> int:
-        """Run every row that is ready (called in a worker thread); the number of rows run."""
+    def _feed(self) -> None:
+        """The samples taken since the last batch into the windowed stream (once the origin is known)."""
+        if self.origin is None:
+            return
+        pending, self.pending = self.pending, []
+        if self.stream is None:
+            return
+        origin = self.origin
+        for tag, stamp, value in pending:
+            self.stream.add(tag, (stamp - origin).total_seconds(), math.nan if value is None else value)
+
+    def _resume_stream(self) -> None:
+        """A resumed run's stream: the record so far read back (held until the loop has begun)."""
+        assert self.stream is not None and self.origin is not None
+        self.stream = LiveMeasurements(self.live_spec, self.record.path, skip=float(self.spec.tracking.hold_until))
+        with open(self.record.path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            next(reader, None)
+            for tag, stamp, value in reader:
+                t = (utc(datetime.fromisoformat(stamp)) - self.origin).total_seconds()
+                self.stream.add(tag, t, float(value) if value else math.nan)
+        self.pending = []  # the record holds them (taken before this batch)
+
+    def _begin(self, ready: int) -> bool:
+        """Make the loop (resumed from the checkpoint, or new): False while the twin cannot start yet."""
         from ..tracking.runtime import TrackingLoop
 
+        ckpt = self.out / "checkpoint.json"
+        if self.resume and ckpt.exists():
+            from ..checkpoint import CheckpointFile
+
+            # the loop resumes on the rows it was checkpointed with, then goes on
+            rows_total = int(CheckpointFile(ckpt, self.out / "tracking.csv").read().get("rows_total", 0))
+            if self.stream is not None:
+                self._resume_stream()
+                self.stream.grow(max(2, rows_total))
+                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, stream=self.stream)
+            else:
+                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(max(1, rows_total - 1)))
+            self.loop.begin(resume=True)
+            if self.loop.k < ready:
+                self._extend(ready)
+            return True
+        if self.stream is not None:
+            if not self.done and not self.stream.inputs_valid(self._rows_known(ready)):
+                return False  # an input has no valid value yet: the twin has nothing to start from
+            self.stream.grow(self._rows_known(ready))
+            self.loop = TrackingLoop(self.live_spec, out_dir=self.out, stream=self.stream)
+        else:
+            view = self._view(ready)
+            if not self.done and not all(np.isfinite(view.values(tag)).any() for tag in self.spec.inputs):
+                return False
+            self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=view)
+        self.loop.begin(resume=False)
+        return True
+
+    def _rows_known(self, ready: int) -> int:
+        """Grid rows the stream holds for *ready* rows to run: one more (the next sample), not past the last sample."""
+        assert self.origin is not None
+        end = (max(s for s in self.record.last.values() if s is not None) - self.origin).total_seconds()
+        return min(ready + 1, int(math.floor(end / self.ts + 1e-9)) + 1)
+
+    def _extend(self, ready: int) -> None:
+        assert self.loop is not None
+        if self.stream is not None:
+            self.stream.grow(self._rows_known(ready))
+            self.loop.extend()
+        else:
+            self.loop.extend(self._view(ready))
+
+    def advance(self) -> int:
+        """Run every row that is ready (called in a worker thread); the number of rows run."""
         self.record.flush()
         ready = self._rows_ready()
         if self.origin is None and self.record.first is not None:
             self.origin = self.record.first
             write_text_atomic(self.live_json, json.dumps({"origin": self.origin.isoformat(),
                                                           "url": self.settings.url}) + "\n")
+        self._feed()
         done = self.loop.k if self.loop is not None else 0
         if ready <= done or ready < 1:
             return 0
         if self.loop is None:
-            ckpt = self.out / "checkpoint.json"
-            if self.resume and ckpt.exists():
-                from ..checkpoint import CheckpointFile
-
-                # the loop resumes on the view it was checkpointed with (its rows), then extends
-                rows_total = int(CheckpointFile(ckpt, self.out / "tracking.csv").read().get("rows_total", 0))
-                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(max(1, rows_total - 1)))
-                self.loop.begin(resume=True)
-                if self.loop.k < ready:
-                    self.loop.extend(self._view(ready))
-            else:
-                view = self._view(ready)
-                if not self.done and not all(np.isfinite(view.values(tag)).any() for tag in self.spec.inputs):
-                    return 0  # an input has no valid value yet: the twin has nothing to start from
-                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=view)
-                self.loop.begin(resume=False)
+            if not self._begin(ready):
+                return 0
         else:
-            self.loop.extend(self._view(ready))
+            self._extend(ready)
+        assert self.loop is not None
         n = ready - self.loop.k
         if n <= 0:
             return 0
         self.loop.run(max_steps=n, progress=self.progress)
+        if self.stream is not None:
+            self.stream.prune(self.loop.k)
         if self.settings.stop_after is not None and self.loop.k * self.ts >= self.settings.stop_after - 1e-9:
             self.done = True
         return n
@@ -462,9 +536,10 @@ class _Tracker:
         """At the end: write the last row whose samples all came (no next sample will come to step to)."""
         if self.loop is None:
             return
+        self._feed()
         ready = self._rows_ready()
         if ready == self.loop.k and ready >= 1:
-            self.loop.extend(self._view(ready))
+            self._extend(ready)
             self.loop.run()
 
     # -- connection ---------------------------------------------------------
