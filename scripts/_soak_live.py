@@ -268,7 +268,8 @@ def main() -> int:
     record = pd.read_csv(live_dir / "live_measurements.csv", dtype={"tag": str, "time": str})
     rec_dup = int(record.duplicated(["tag", "time"]).sum())
     checks["rows"] = (same_rows and dup == 0 and rec_dup == 0,
-                      f"live {len(live)} rows, offline {n_rows}; times equal: {np.array_equal(t_live[:n_rows], t_off[:len(t_live)])}; "
+                      f"live {len(live)} rows, offline {n_rows}; times equal: "
+                      f"{np.array_equal(t_live[:n_rows], t_off[:len(t_live)])}; "
                       f"repeated or backward times {dup}; duplicated samples in the record {rec_dup} of {len(record)}")
     worst = []
     n = min(len(live), n_rows)

@@ -131,8 +131,10 @@ def test_the_page_follows_a_live_run_its_hold_and_a_lost_server(chromium: str, f
             assert page.evaluate("document.querySelector('#link').dataset.link") == "connected"
 
             # the hold: TI is of bad quality from 2500 s to 3000 s; the page logs it and shades it
-            held = page.wait_for("""(() => { const li = [...document.querySelectorAll('#log li[data-kind="loop"]')]
-                .find(l => l.textContent.includes('held (no measured value')); return li ? li.dataset.plant : ''; })()""",
+            held = page.wait_for("""(() => {
+                const li = [...document.querySelectorAll('#log li[data-kind="loop"]')]
+                    .find(l => l.textContent.includes('held (no measured value'));
+                return li ? li.dataset.plant : ''; })()""",
                                  timeout=WAIT)
             assert float(held) == 2500.0
             resumed = page.wait_for("""[...document.querySelectorAll('#log li[data-kind="loop"]')]
@@ -150,10 +152,13 @@ def test_the_page_follows_a_live_run_its_hold_and_a_lost_server(chromium: str, f
             page.screenshot(shots / "view-disconnected.png")
             server, again = start_replay(case, url, origin, replay_log, "--linger", "300", speed=SPEED)
             assert again == origin
-            page.wait_for("document.querySelector('#link').dataset.link === 'connected' && "
-                          "document.querySelector('#reconnects').textContent === '1'", timeout=WAIT)
-            assert page.evaluate("""[...document.querySelectorAll('#log li[data-kind="link-up"]')]
-                .some(l => l.textContent.includes('reconnected'))""")
+            # (on a loaded machine the tracker may lose the restarted server once more while it writes its
+            # history, or finish the case from the history read back: reconnects >= 1, connected or stopped)
+            page.wait_for("""[...document.querySelectorAll('#log li[data-kind="link-up"]')]
+                .some(l => l.textContent.includes('reconnected'))""", timeout=WAIT)
+            page.wait_for("Number(document.querySelector('#reconnects').textContent) >= 1 && "
+                          "['connected', 'stopped'].includes(document.querySelector('#link').dataset.link)",
+                          timeout=WAIT)
             _check_against_csv(page, out / "tracking.csv")
             shot = page.screenshot(shots / "view-live.png")
             assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 20_000

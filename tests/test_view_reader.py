@@ -156,20 +156,26 @@ def test_link_changes_become_log_entries(tmp_path: Path) -> None:
         r._status_mtime = None  # same-second writes: look again whatever the mtime says
         r.poll()
 
-    say(link="connected", connections=1, backfilled=0, tags={"TI": {"stale": False}})
-    say(link="disconnected", connections=1, backfilled=0, link_error="connection reset", tags={"TI": {"stale": False}})
-    say(link="connected", connections=2, backfilled=40, tags={"TI": {"stale": True, "behind": 60.0}})
+    say(link="connected", connections=1, lost=0, backfilled=0, tags={"TI": {"stale": False}})
+    say(link="disconnected", connections=1, lost=1, backfilled=0, link_error="connection reset",
+        tags={"TI": {"stale": False}})
+    say(link="connected", connections=2, lost=1, backfilled=40, tags={"TI": {"stale": True, "behind": 60.0}})
+    # lost and back between two looks, then stopped: the counters tell
+    say(link="stopped", connections=3, lost=2, backfilled=40, link_error="timeout", tags={"TI": {"stale": True}})
     kinds = [(e["kind"], e["text"]) for e in r.events]
     assert kinds == [("link-up", "connected to opc.tcp://x:1"),
                      ("link-lost", "lost opc.tcp://x:1: connection reset; reconnecting"),
                      ("link-up", "reconnected to opc.tcp://x:1 (connection 2)"),
                      ("backfill", "read back 40 samples from the server's history"),
-                     ("stale", "TI stale: nothing for 60 s of plant time")]
-    assert r.health()["reconnects"] == 1
+                     ("stale", "TI stale: nothing for 60 s of plant time"),
+                     ("link-lost", "lost opc.tcp://x:1: timeout; reconnecting"),
+                     ("link-up", "reconnected to opc.tcp://x:1 (connection 3)"),
+                     ("link-stopped", "the tracker stopped")]
+    assert r.health()["reconnects"] == 2
     status.write_text("{ half a fil")  # a foreign, torn file keeps the last good reading
     r._status_mtime = None
     r.poll()
-    assert r.status["connections"] == 2
+    assert r.status["connections"] == 3
 
 
 def test_vendored_chart_library_is_the_npm_package() -> None:

@@ -370,19 +370,23 @@ class RunReader:
                             "wall": time.time() if wall is None else wall})
 
     def _status_changes(self, old: dict[str, Any] | None, new: dict[str, Any]) -> None:
+        """Log entries for what changed between two readings of the status (counters: a state the
+        tracker passed through between two looks, a short loss say, is not missed)."""
         old = old or {}
         wall = new.get("written")
-        if new.get("link") != old.get("link"):
-            link = new.get("link")
-            if link == "connected":
-                n = new.get("connections", 0)
-                self.event("link-up", f"connected to {new.get('url')}" if n <= 1 else
-                           f"reconnected to {new.get('url')} (connection {n})", wall=wall)
-            elif link == "disconnected":
-                self.event("link-lost", f"lost {new.get('url')}: {new.get('link_error') or 'no reason given'}; "
-                           "reconnecting", wall=wall)
-            elif link == "stopped":
-                self.event("link-stopped", "the tracker stopped", wall=wall)
+        url = new.get("url")
+        lost = int(new.get("lost") or 0) - int(old.get("lost") or 0)
+        if lost > 0 or (new.get("link") == "disconnected" and old.get("link") not in (None, "disconnected")
+                        and "lost" not in new):
+            times = f" ({lost} times)" if lost > 1 else ""
+            self.event("link-lost", f"lost {url}{times}: {new.get('link_error') or 'no reason given'}; "
+                       "reconnecting", wall=wall)
+        n_old, n_new = int(old.get("connections") or 0), int(new.get("connections") or 0)
+        if n_new > n_old:
+            self.event("link-up", f"connected to {url}" if n_new <= 1 else
+                       f"reconnected to {url} (connection {n_new})", wall=wall)
+        if new.get("link") == "stopped" and old.get("link") != "stopped":
+            self.event("link-stopped", "the tracker stopped", wall=wall)
         gained = int(new.get("backfilled") or 0) - int(old.get("backfilled") or 0)
         if old and gained > 0:
             self.event("backfill", f"read back {gained} samples from the server's history", wall=wall)
@@ -481,7 +485,8 @@ class RunReader:
                 "link_since": st.get("link_since"), "link_error": st.get("link_error"),
                 "connections": connections, "reconnects": max(0, connections - 1),
                 "backfilled": st.get("backfilled"), "samples": st.get("samples"),
-                "stale_events": st.get("stale_events"), "status_age": now - st["written"] if st.get("written") else None,
+                "stale_events": st.get("stale_events"),
+                "status_age": now - st["written"] if st.get("written") else None,
                 "last_sample_age": now - last_wall if last_wall else None,
                 "plant_clock": _epoch(st.get("plant_clock")) if st.get("plant_clock") else None,
                 "last_time": _float(self.last["time"]) if self.last else None}
