@@ -67,6 +67,8 @@ LIVE_NAME = "live.json"
 STATUS_NAME = "live_status.json"
 #: Wall-clock seconds between two writes of the status file (a connection's change is written at once).
 STATUS_EVERY = 0.5
+#: Samples of plant time (per tag) read back from the server's history in one request after a loss.
+BACKFILL_ROWS = 360
 #: First client handle of the monitored items (one per tag; asyncua numbers its own from 201)
 _HANDLE0 = 1_000_000
 
@@ -373,12 +375,12 @@ class _Tracker:
         self.write_status(force=True)
 
     # -- samples ------------------------------------------------------------
-    def take(self, tag: str, dv: Any, *, backfill: bool = False) -> None:
+    def take(self, tag: str, dv: Any, *, backfill: bool = False) -> bool:
         from asyncua import ua
 
         stamp = dv.SourceTimestamp or dv.ServerTimestamp
         if stamp is None:
-            return
+            return False
         good = dv.StatusCode is None or dv.StatusCode.value == ua.StatusCodes.Good
         value = None
         if good and dv.Value is not None:
@@ -387,13 +389,15 @@ class _Tracker:
             except (TypeError, ValueError):
                 value = None
         if self.settings.start is not None and utc(stamp) < utc(self.settings.start):
-            return
-        if self.record.add(tag, stamp, value):
-            self.pending.append((tag, utc(stamp), value))
-            self.samples_seen += 1
-            self.backfilled += backfill
-            self.last_new = time.monotonic()
-            self.last_new_wall = time.time()
+            return False
+        if not self.record.add(tag, stamp, value):
+            return False
+        self.pending.append((tag, utc(stamp), value))
+        self.samples_seen += 1
+        self.backfilled += backfill
+        self.last_new = time.monotonic()
+        self.last_new_wall = time.time()
+        return True
 
     # -- the tracking -------------------------------------------------------
     def _rows_ready(self) -> int:
@@ -610,19 +614,7 @@ class _Tracker:
             if isinstance(h, ua.StatusCode):
                 raise LiveError(f"cannot subscribe to tag {tag!r} at node {self.spec.live.node(tag)!r} on "
                                 f"{self.settings.url}: {h.name}")
-        # what the server's history holds since the last sample of each tag (or the start)
-        for tag, node in nodes.items():
-            since = self.record.last[tag] or self.settings.start
-            if since is None and self.origin is None:
-                continue
-            try:
-                history = await node.read_raw_history(starttime=since or self.origin, endtime=None)
-            except ua.UaError as exc:
-                log.warning("no history of %r from %s (%s): samples missed while disconnected are lost", tag,
-                            self.settings.url, exc)
-                continue
-            for dv in sorted(history, key=lambda d: d.SourceTimestamp):
-                self.take(tag, dv, backfill=True)
+        await self._backfill(nodes)
         while not self.done:
             items, queue[:] = list(queue), []
             for tag, dv in items:
@@ -636,6 +628,53 @@ class _Tracker:
                 return
             await client.check_connection()
             await asyncio.sleep(self.settings.poll)
+
+    async def _backfill(self, nodes: dict[str, Any]) -> None:
+        """Read what the server's history holds since each tag's last sample (or the start), a stretch of
+        plant time at a time (BACKFILL_ROWS samples), running the rows it makes as it goes: a long loss
+        is read back with the memory of one stretch, every tag as far as the others."""
+        from datetime import timedelta
+
+        from asyncua import ua
+
+        since = {tag: self.record.last[tag] or self.settings.start or self.origin for tag in nodes}
+        since = {tag: utc(s) for tag, s in since.items() if s is not None}
+        if not since:
+            return
+        step = timedelta(seconds=BACKFILL_ROWS * self.ts)
+        a = min(since.values())
+        failed: set[str] = set()
+
+        async def read(tag: str, end: datetime | None) -> int:
+            last = self.record.last[tag]
+            if last is not None and end is not None and utc(last) >= end:
+                return 0  # this tag is past the stretch already
+            start = max(utc(last), a) if last is not None else max(since[tag], a)
+            try:
+                history = await nodes[tag].read_raw_history(starttime=start, endtime=end)
+            except ua.UaError as exc:
+                log.warning("no history of %r from %s (%s): samples missed while disconnected are lost", tag,
+                            self.settings.url, exc)
+                failed.add(tag)
+                return 0
+            return sum(self.take(tag, dv, backfill=True)
+                       for dv in sorted(history, key=lambda d: d.SourceTimestamp or d.ServerTimestamp))
+
+        while not self.done:
+            b = a + step
+            new = 0
+            for tag in since:
+                if tag not in failed:
+                    new += await read(tag, b)
+            if not new:  # nothing in this stretch: the rest, whatever is left, below
+                break
+            self.write_status()
+            await asyncio.to_thread(self.advance)
+            self.write_status()
+            a = b
+        for tag in since:
+            if tag not in failed and not self.done:
+                await read(tag, None)
 
     def _idle(self) -> bool:
         t = self.settings.idle_timeout

@@ -196,18 +196,19 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
         """Wall-clock (epoch s) at which row i falls due."""
         return origin.timestamp() + float(times[starts[i]]) / settings.speed
 
-    async with server:
-        if isinstance(settings.origin, (int, float)):
-            origin = datetime.now(timezone.utc) + timedelta(seconds=float(settings.origin))
-        else:
-            origin = utc(settings.origin) if settings.origin is not None else datetime.now(timezone.utc)
-        # rows that fell due before this server started (a restart): into the history first
+    if not isinstance(settings.origin, (int, float)):
+        origin = utc(settings.origin) if settings.origin is not None else datetime.now(timezone.utc)
+        # rows that fell due before this server started (a restart): into the history first, before
+        # it takes a client (a DCS restarted has its history; its clients see no old values as news)
         while served < n_rows and due(served) <= time.time():
             await write(served)
             served += 1
         history = served
         if history:
             log.info("wrote %d rows that fell due before the start into the history", history)
+    async with server:
+        if isinstance(settings.origin, (int, float)):
+            origin = datetime.now(timezone.utc) + timedelta(seconds=float(settings.origin))
         if ready is not None:
             ready(ReplayResult(url, tuple(tags), served, history, origin, 0.0))
         log.info("serving %d tags of %s at %s from row %d of %d (speed %g, origin %s)", len(tags), spec.path,
