@@ -91,6 +91,53 @@ class ReplayResult:
                 "origin": self.origin.isoformat(), "seconds": self.seconds}
 
 
+def _indexed_history() -> Any:
+    """asyncua's in-memory history store, read by bisection on the source timestamps.
+
+    Its own store scans every value of a node at every read: a client reading a long loss back a
+    stretch at a time then costs the server O(history) per stretch (the 30-day soak: minutes per
+    simulated day). The values come in time order (the replay writes them so), so the stretch's
+    first and last are found by bisection. No period or count limit is used (none is set).
+    """
+    import bisect
+
+    from asyncua.server.history import HistoryDict
+
+    class IndexedHistory(HistoryDict):  # type: ignore[misc]
+        def __init__(self) -> None:
+            super().__init__()
+            self._stamps: dict[Any, list[Any]] = {}
+
+        async def new_historized_node(self, node_id: Any, period: Any, count: int = 0) -> None:
+            await super().new_historized_node(node_id, period, count)
+            self._stamps[node_id] = []
+
+        async def save_node_value(self, node_id: Any, datavalue: Any) -> None:
+            self._datachanges[node_id].append(datavalue)
+            self._stamps[node_id].append(datavalue.SourceTimestamp)
+
+        async def read_node_history(self, node_id: Any, start: Any, end: Any, nb_values: int) -> Any:
+            from asyncua import ua
+
+            epoch = ua.get_win_epoch()
+            if node_id not in self._stamps or start is None or start == epoch or (
+                    end is not None and end != epoch and start > end):
+                return await super().read_node_history(node_id, start, end, nb_values)
+            stamps, data = self._stamps[node_id], self._datachanges[node_id]
+            i = bisect.bisect_left(stamps, start)
+            j = len(stamps) if end is None or end == epoch else bisect.bisect_right(stamps, end)
+            results = data[i:j]
+            if nb_values and len(results) > nb_values:
+                results = results[:nb_values]
+            cont = None
+            if len(results) > self.max_history_data_response_size:
+                cont = results[self.max_history_data_response_size].SourceTimestamp
+                results = results[: self.max_history_data_response_size]
+            return results, cont
+
+    return IndexedHistory()
+
+
 def _records(table: Any, tags: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(time, tag index, value)`` of every record to serve, in time order (tags in spec order within a time).
 
@@ -167,6 +214,7 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
     nodes = []
     # the server's historian keeps every scan, also of an unchanged value (asyncua's own historizing
     # stores changes only), so the store is written directly beside each write
+    server.iserver.history_manager.set_storage(_indexed_history())
     history_store = server.iserver.history_manager.storage
     for tag in tags:
         var = await plant.add_variable(ua.NodeId(tag, idx), ua.QualifiedName(tag, idx),
