@@ -257,3 +257,67 @@ def test_view_refuses_a_missing_folder_and_a_bad_bind(tmp_path: Path) -> None:
                  str(tmp_path / "x.png")]) == 2
     assert main(["view", str(tmp_path), "--bind", "localhost"]) == 2
     assert main(["view", str(tmp_path), "--bind", "0.0.0.0:0"]) == 2  # off loopback without credentials
+
+
+def test_https_and_basic_auth_end_to_end(tmp_path: Path) -> None:
+    """serve() with a certificate: HTTPS only, the credentials asked for, the page and the state served."""
+    import datetime as dt
+    import ssl
+
+    import aiohttp
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import rsa
+    from cryptography.x509.oid import NameOID
+
+    from trackingbox.view.server import ViewSettings, serve
+
+    key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "localhost")])
+    now = dt.datetime.now(dt.timezone.utc)
+    cert = (x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(key.public_key())
+            .serial_number(x509.random_serial_number()).not_valid_before(now - dt.timedelta(days=1))
+            .not_valid_after(now + dt.timedelta(days=2))
+            .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost")]), critical=False)
+            .sign(key, hashes.SHA256()))
+    pem, key_pem = tmp_path / "view.pem", tmp_path / "view.key"
+    pem.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    key_pem.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.TraditionalOpenSSL,
+                                          serialization.NoEncryption()))
+    creds = tmp_path / "view.txt"
+    creds.write_text("user = op\npassword = s3cret\n")
+    creds.chmod(0o600)
+    spec, out = _run(tmp_path)
+    (out / "tracking.csv").write_text(HEADER + "0.0,35.7,38.0,38.0,0.003,hold\n")
+
+    async def go() -> dict[str, object]:
+        stop = asyncio.Event()
+        found: dict[str, str] = {}
+        settings = ViewSettings(bind="localhost:0", spec=spec, credentials=creds, certificate=pem,
+                                private_key=key_pem)
+        task = asyncio.create_task(serve(out, settings, ready=lambda url: found.setdefault("url", url), stop=stop))
+        while "url" not in found:
+            assert not task.done(), task.exception()
+            await asyncio.sleep(0.02)
+        url = found["url"]
+        context = ssl.create_default_context(cafile=str(pem))
+        seen: dict[str, object] = {"url": url}
+        async with aiohttp.ClientSession() as session:
+            seen["none"] = (await session.get(url, ssl=context)).status
+            auth = {"Authorization": "Basic " + base64.b64encode(b"op:s3cret").decode()}
+            seen["page"] = (await session.get(url, ssl=context, headers=auth)).status
+            state = await session.get(url + "state", ssl=context, headers=auth)
+            seen["last"] = (await state.json())["last"]["parameter:k"]
+            try:
+                await session.get(url.replace("https://", "http://"), headers=auth)
+                seen["plain"] = "answered"
+            except aiohttp.ClientError:
+                seen["plain"] = "refused"
+        stop.set()
+        await task
+        return seen
+
+    seen = asyncio.run(go())
+    assert seen["url"].startswith("https://localhost:")
+    assert seen["none"] == 401 and seen["page"] == 200 and seen["last"] == "0.003"
+    assert seen["plain"] == "refused"  # no plain HTTP on the HTTPS port

@@ -242,9 +242,9 @@ async def serve(out: str | os.PathLike[str], settings: ViewSettings,
     if not Path(out).is_dir():
         raise LiveError(f"output folder {out} does not exist (give the folder track writes: --out)")
     hub = Hub(RunReader(out, settings.spec), settings.poll)
-    runner = web.AppRunner(make_app(hub, creds), handle_signals=False, access_log=None)
+    runner = web.AppRunner(make_app(hub, creds), handle_signals=False, access_log=None, shutdown_timeout=1.0)
     await runner.setup()
-    site = web.TCPSite(runner, host, port, ssl_context=context, shutdown_timeout=1.0)
+    site = web.TCPSite(runner, host, port, ssl_context=context)
     try:
         await site.start()
     except OSError as exc:
