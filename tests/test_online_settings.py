@@ -142,6 +142,11 @@ def test_rows_wait_for_every_tag_but_a_stale_one(tmp_path: Path) -> None:
     assert tracker._rows_ready() == 5 and not tracker.stale
     for s in range(80, 121, 10):
         sample("FI", s)  # the plant clock is 120 s: TI silent for 70 s > stale_after = 30 s
+    import time as _time
+
+    tracker.arrived["TI"] = _time.monotonic()  # ... but TI spoke a moment ago (a burst of FI's came first)
+    assert tracker._rows_ready() == 5 and not tracker.stale  # not stale yet: the rows wait for it
+    tracker.arrived["TI"] = _time.monotonic() - 60.0  # silent for a minute of wall time too
     assert tracker._rows_ready() == 12 and tracker.stale == {"TI"} and tracker.stale_events == 1
     sample("TI", 130)
     sample("FI", 130)

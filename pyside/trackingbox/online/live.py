@@ -67,6 +67,8 @@ LIVE_NAME = "live.json"
 STATUS_NAME = "live_status.json"
 #: Wall-clock seconds between two writes of the status file (a connection's change is written at once).
 STATUS_EVERY = 0.5
+#: Wall-clock seconds a tag behind the plant's clock must also have been silent to be stale.
+STALE_GRACE = 5.0
 #: Samples of plant time (per tag) read back from the server's history in one request after a loss.
 BACKFILL_ROWS = 360
 #: First client handle of the monitored items (one per tag; asyncua numbers its own from 201)
@@ -307,6 +309,8 @@ class _Tracker:
         self.live_spec = replace(spec, measurements=self.record.path)
         #: the samples taken since the last batch, for the windowed stream: (tag, stamp, value or None)
         self.pending: list[tuple[str, datetime, float | None]] = []
+        #: per tag: when (monotonic s) its newest sample came
+        self.arrived: dict[str, float] = {}
         #: the rows around the loop's, window by window (memory flat in the run's length); None: the
         #: whole view of the record is rebuilt at every batch (a co-simulation twin, replayed from row 0)
         self.stream: LiveMeasurements | None = None
@@ -393,6 +397,7 @@ class _Tracker:
         if not self.record.add(tag, stamp, value):
             return False
         self.pending.append((tag, utc(stamp), value))
+        self.arrived[tag] = time.monotonic()
         self.samples_seen += 1
         self.backfilled += backfill
         self.last_new = time.monotonic()
@@ -412,7 +417,10 @@ class _Tracker:
         live = []
         for tag, s in self.record.last.items():
             assert s is not None
-            if (clock - s).total_seconds() > self.stale_limit[tag]:
+            # stale: behind the plant's clock by more than its limit, and nothing from it for a while
+            # (samples of one tag may come in a burst after another's, on a loaded machine)
+            if (clock - s).total_seconds() > self.stale_limit[tag] and \
+                    time.monotonic() - self.arrived.get(tag, -math.inf) > STALE_GRACE:
                 if tag not in self.stale:
                     self.stale.add(tag)
                     self.stale_events += 1
@@ -645,10 +653,10 @@ class _Tracker:
         a = min(since.values())
         failed: set[str] = set()
 
-        async def read(tag: str, end: datetime | None) -> int:
+        async def read(tag: str, end: datetime | None) -> list[Any]:
             last = self.record.last[tag]
             if last is not None and end is not None and utc(last) >= end:
-                return 0  # this tag is past the stretch already
+                return []  # this tag is past the stretch already
             start = max(utc(last), a) if last is not None else max(since[tag], a)
             try:
                 history = await nodes[tag].read_raw_history(starttime=start, endtime=end)
@@ -656,25 +664,24 @@ class _Tracker:
                 log.warning("no history of %r from %s (%s): samples missed while disconnected are lost", tag,
                             self.settings.url, exc)
                 failed.add(tag)
-                return 0
-            return sum(self.take(tag, dv, backfill=True)
-                       for dv in sorted(history, key=lambda d: d.SourceTimestamp or d.ServerTimestamp))
+                return []
+            return sorted(history, key=lambda d: d.SourceTimestamp or d.ServerTimestamp)
+
+        async def stretch(end: datetime | None) -> int:
+            # every tag's samples of the stretch are read before any is taken: a link lost half way
+            # leaves no tag further on than the others (they would look stale), the stretch is read again
+            got = {tag: await read(tag, end) for tag in since if tag not in failed}
+            return sum(self.take(tag, dv, backfill=True) for tag, values in got.items() for dv in values)
 
         while not self.done:
-            b = a + step
-            new = 0
-            for tag in since:
-                if tag not in failed:
-                    new += await read(tag, b)
-            if not new:  # nothing in this stretch: the rest, whatever is left, below
+            if not await stretch(a + step):  # nothing in this stretch: the rest, whatever is left, below
                 break
             self.write_status()
             await asyncio.to_thread(self.advance)
             self.write_status()
-            a = b
-        for tag in since:
-            if tag not in failed and not self.done:
-                await read(tag, None)
+            a = a + step
+        if not self.done:
+            await stretch(None)
 
     def _idle(self) -> bool:
         t = self.settings.idle_timeout
