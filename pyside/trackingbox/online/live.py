@@ -622,7 +622,7 @@ class _Tracker:
             if isinstance(h, ua.StatusCode):
                 raise LiveError(f"cannot subscribe to tag {tag!r} at node {self.spec.live.node(tag)!r} on "
                                 f"{self.settings.url}: {h.name}")
-        await self._backfill(nodes)
+        await self._backfill(nodes, queue)
         while not self.done:
             items, queue[:] = list(queue), []
             for tag, dv in items:
@@ -637,7 +637,7 @@ class _Tracker:
             await client.check_connection()
             await asyncio.sleep(self.settings.poll)
 
-    async def _backfill(self, nodes: dict[str, Any]) -> None:
+    async def _backfill(self, nodes: dict[str, Any], queue: list[tuple[str, Any]]) -> None:
         """Read what the server's history holds since each tag's last sample (or the start), a stretch of
         plant time at a time (BACKFILL_ROWS samples), running the rows it makes as it goes: a long loss
         is read back with the memory of one stretch, every tag as far as the others."""
@@ -673,14 +673,31 @@ class _Tracker:
             got = {tag: await read(tag, end) for tag in since if tag not in failed}
             return sum(self.take(tag, dv, backfill=True) for tag, values in got.items() for dv in values)
 
+        def live_from() -> datetime | None:
+            """Where the subscription's samples begin (the newest first sample of a tag in the queue):
+            the history is read up to there, the queue has the rest (it grows while the history is read)."""
+            first: dict[str, datetime] = {}
+            for tag, dv in queue:
+                if tag not in first and (dv.SourceTimestamp or dv.ServerTimestamp) is not None:
+                    first[tag] = utc(dv.SourceTimestamp or dv.ServerTimestamp)
+                    if len(first) == len(nodes):
+                        break
+            return max(first.values()) if first else None
+
         while not self.done:
-            if not await stretch(a + step):  # nothing in this stretch: the rest, whatever is left, below
-                break
+            edge = live_from()
+            if edge is not None and a > edge:
+                break  # the queue goes on from here
+            if not await stretch(a + step):
+                if edge is None or a + step >= edge:
+                    break  # nothing in this stretch: the rest, whatever is left, below
+                a = a + step  # a quiet stretch before the queue's: on
+                continue
             self.write_status()
             await asyncio.to_thread(self.advance)
             self.write_status()
             a = a + step
-        if not self.done:
+        if not self.done and live_from() is None:
             await stretch(None)
 
     def _idle(self) -> bool:
