@@ -2,8 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
+
+from ..view.browser import Browser
+from ..view.server import BackgroundView, ViewSettings, run_view
 
 EPILOG = """\
 examples:
@@ -47,15 +51,9 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until interrupted (or take the screenshot); exit code 0."""
-    import sys
-
-    from ..view.server import BackgroundView, ViewSettings, run_view
-
     settings = ViewSettings(bind=args.bind, spec=args.spec, credentials=args.credentials,
                             certificate=args.certificate, private_key=args.private_key)
     if args.screenshot is not None:
-        from ..view.browser import Browser
-
         with BackgroundView(args.out, settings) as view, Browser() as browser:
             page = browser.open(view.url)
             page.wait_for("document.body.dataset.updated !== undefined && Number(document.body.dataset.rows) >= 0")

@@ -38,22 +38,26 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from ..data import heartbeat_max_gap
+from ..checkpoint import CheckpointFile
+from ..data.series import heartbeat_max_gap
+from ..data.view import MeasurementView
 from ..errors import CheckpointError, DataError, LiveError, SpecError
 from ..io import write_text_atomic
+from ..spec.model import Spec
+from ..spec.parse import check_against_fmu
+from ..tracking.loop import TrackingLoop
+from ..tracking.result import TrackingResult
 from . import livestream
 from .livestream import LiveMeasurements
 from .opcua import CLIENT_URI, RESULTS_NAMESPACE, Credentials, at, check_endpoint, make_server, utc
 
-if TYPE_CHECKING:
-    from ..spec import Spec
-    from ..tracking.runtime import TrackingLoop, TrackingResult
+# asyncua is imported in the functions that use it (the offline commands do not pay for it: see .opcua)
 
 log = logging.getLogger(__name__)
 
@@ -443,8 +447,6 @@ class _Tracker:
         return max(0, int(math.floor(limit / self.ts + 1e-9)))
 
     def _view(self, rows: int) -> Any:
-        from ..data import MeasurementView
-
         hold = float(self.spec.tracking.hold_until)
         return MeasurementView.from_spec(self.live_spec, (0.0, (rows + 1) * self.ts), skip=hold)
 
@@ -473,12 +475,8 @@ class _Tracker:
 
     def _begin(self, ready: int) -> bool:
         """Make the loop (resumed from the checkpoint, or new): False while the twin cannot start yet."""
-        from ..tracking.runtime import TrackingLoop
-
         ckpt = self.out / "checkpoint.json"
         if self.resume and ckpt.exists():
-            from ..checkpoint import CheckpointFile
-
             # the loop resumes on the rows it was checkpointed with, then goes on
             rows_total = int(CheckpointFile(ckpt, self.out / "tracking.csv").read().get("rows_total", 0))
             if self.stream is not None:
@@ -641,8 +639,6 @@ class _Tracker:
         """Read what the server's history holds since each tag's last sample (or the start), a stretch of
         plant time at a time (BACKFILL_ROWS samples), running the rows it makes as it goes: a long loss
         is read back with the memory of one stretch, every tag as far as the others."""
-        from datetime import timedelta
-
         from asyncua import ua
 
         since = {tag: self.record.last[tag] or self.settings.start or self.origin for tag in nodes}
@@ -813,8 +809,6 @@ def track_live(spec: Spec, settings: LiveSettings, *, out_dir: str | Path, resum
     SpecError, DataError, CheckpointError
         As for :func:`trackingbox.tracking.runtime.track`.
     """
-    from ..spec import check_against_fmu
-
     if not spec.pairs:
         raise SpecError(f"spec {spec.path} has no [[pairs]]; run `trackingbox pair` first or add them")
     check_against_fmu(spec)

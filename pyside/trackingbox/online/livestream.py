@@ -38,26 +38,22 @@ from __future__ import annotations
 import math
 from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from ..data import GAP_FACTOR, MeasurementView, heartbeat_max_gap, lay_masks, resample, view_tags
-from ..errors import DataError
+from ..data.series import GAP_FACTOR, heartbeat_max_gap, resample
+from ..data.view import MeasurementView, lay_masks, view_tags
+from ..errors import DataError, TrackingError
+from ..fmu.info import read_info
+from ..spec.model import Spec
 from ..stream import WINDOW_ROWS, Grid, percentile_range
-
-if TYPE_CHECKING:
-    from ..spec import Spec
 
 __all__ = ["LiveMeasurements", "usable"]
 
 
 def usable(spec: Spec) -> bool:
     """True where the live run can be windowed: a model-exchange twin and no tag bridging every gap."""
-    from ..errors import TrackingError
-    from ..fmu import read_info
-
     rule = spec.data.max_gap
     if rule is not None and not math.isfinite(float(rule)):
         return False

@@ -16,6 +16,7 @@ on live: a restart loses no row.
 from __future__ import annotations
 
 import asyncio
+import bisect
 import logging
 import math
 import time
@@ -27,8 +28,12 @@ from typing import Any
 
 import numpy as np
 
+from ..data.table import read_table
 from ..errors import SpecError
+from ..spec.parse import load_spec
 from .opcua import PLANT_NAMESPACE, at, check_endpoint, make_server, utc
+
+# asyncua is imported in the functions that use it (the offline commands do not pay for it: see .opcua)
 
 log = logging.getLogger(__name__)
 
@@ -99,8 +104,6 @@ def _indexed_history() -> Any:
     simulated day). The values come in time order (the replay writes them so), so the stretch's
     first and last are found by bisection. No period or count limit is used (none is set).
     """
-    import bisect
-
     from asyncua.server.history import HistoryDict
 
     class IndexedHistory(HistoryDict):  # type: ignore[misc]
@@ -192,9 +195,6 @@ async def serve(case: str | Path, url: str, settings: ReplaySettings = ReplaySet
         Set it to stop early.
     """
     from asyncua import ua
-
-    from ..data import read_table
-    from ..spec import load_spec
 
     check_endpoint(url)
     spec = load_spec(case_spec(case))

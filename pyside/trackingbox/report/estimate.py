@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..estimation import fit_series
 from ..io import write_text_atomic
 from . import plots
 from .document import Document, StageReport, fmt
@@ -29,8 +30,6 @@ def write_estimate_report(spec: Spec, result: EstimationResult, out: str | os.Pa
     truth
         Plant parameter values where known (bench cases): an extra table column.
     """
-    from ..estimation import fit_series
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     plt = plots.pyplot()

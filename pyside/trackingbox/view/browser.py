@@ -25,7 +25,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .. import config
 from ..errors import TrackingError
+
+# aiohttp is imported in the functions that use it (every command line imports this module: see .server)
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +37,6 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-dev-shm-usage", "--hide-scrollbars", "--mute-audio", "--disable-extensions",
          "--disable-default-apps", "--no-default-browser-check")
-#: Environment variable naming the browser to use instead of the one found on PATH.
-BROWSER_ENV = "TRACKINGBOX_CHROMIUM"
 
 
 class BrowserError(TrackingError):
@@ -44,7 +45,7 @@ class BrowserError(TrackingError):
 
 def find_chromium() -> str | None:
     """The Chromium to drive: ``$TRACKINGBOX_CHROMIUM``, else ``chromium``/``chromium-browser`` on PATH."""
-    given = os.environ.get(BROWSER_ENV)
+    given = config.get("chromium")
     if given:
         return given
     for name in ("chromium", "chromium-browser"):
@@ -116,7 +117,7 @@ class Browser:
         exe = executable or find_chromium()
         if exe is None:
             raise BrowserError("no Chromium found (install Debian's chromium: apt-get install chromium, "
-                               f"or name one in {BROWSER_ENV})")
+                               f"or name one in {config.setting('chromium').env})")
         self.profile = tempfile.mkdtemp(prefix="trackingbox-chromium-")
         args = [exe, *FLAGS, f"--user-data-dir={self.profile}", "--remote-debugging-port=0",
                 "--window-size=1400,1000", *extra, "about:blank"]

@@ -37,6 +37,9 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import TrackingError
+from ..spec.parse import load_spec
+
 log = logging.getLogger(__name__)
 
 TRACKING = "tracking.csv"
@@ -186,9 +189,6 @@ class RunReader:
 
     def _load_spec(self) -> None:
         """The spec (given, or the one checkpoint.json names) and the bench's truth.json beside it."""
-        from ..errors import TrackingError
-        from ..spec import load_spec
-
         path = self.spec_path
         if path is None:
             found = _read_json(self.out / CHECKPOINT)
