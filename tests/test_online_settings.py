@@ -83,12 +83,15 @@ def test_record_keeps_each_sample_once_in_time_order(tmp_path: Path) -> None:
     assert rec.add("A", t0, 1.0) and rec.add("A", t0 + dt.timedelta(seconds=10), 2.0)
     assert not rec.add("A", t0 + dt.timedelta(seconds=10), 2.0)  # the same sample from history and subscription
     assert not rec.add("A", t0, 1.0)
-    assert rec.add("B", t0, None)  # bad quality: advances the tag's clock, not recorded
+    assert rec.add("B", t0, None)  # bad quality: advances the tag's clock, kept as a historian keeps it
+    assert rec.count == 2 and rec.bad["B"] and rec.good["B"] is None
     rec.close()
     lines = (tmp_path / "r.csv").read_text().splitlines()
-    assert lines == ["tag,time,value", "A,2026-01-01T00:00:00+00:00,1.0", "A,2026-01-01T00:00:10+00:00,2.0"]
+    assert lines == ["tag,time,value", "A,2026-01-01T00:00:00+00:00,1.0", "A,2026-01-01T00:00:10+00:00,2.0",
+                     "B,2026-01-01T00:00:00+00:00,"]  # (an empty value: bad quality, as in a historian's export)
     again = _Record(tmp_path / "r.csv", ["A", "B"], resume=True)  # a resumed run continues the record
     assert again.count == 2 and again.last["A"] == t0 + dt.timedelta(seconds=10)
+    assert again.last["B"] == t0 and again.bad["B"] and again.good["B"] is None
     again.close()
 
 
@@ -139,6 +142,11 @@ def test_rows_wait_for_every_tag_but_a_stale_one(tmp_path: Path) -> None:
     assert tracker._rows_ready() == 5 and not tracker.stale
     for s in range(80, 121, 10):
         sample("FI", s)  # the plant clock is 120 s: TI silent for 70 s > stale_after = 30 s
+    import time as _time
+
+    tracker.arrived["TI"] = _time.monotonic()  # ... but TI spoke a moment ago (a burst of FI's came first)
+    assert tracker._rows_ready() == 5 and not tracker.stale  # not stale yet: the rows wait for it
+    tracker.arrived["TI"] = _time.monotonic() - 60.0  # silent for a minute of wall time too
     assert tracker._rows_ready() == 12 and tracker.stale == {"TI"} and tracker.stale_events == 1
     sample("TI", 130)
     sample("FI", 130)

@@ -25,6 +25,7 @@ from .commands import (
     simulate,
     track,
     validate,
+    view,
 )
 from .commands import compile as compile_command
 from .commands import config as config_command
@@ -43,6 +44,7 @@ COMMANDS = (
     "estimate",
     "track",
     "replay",
+    "view",
     "generate",
     "validate",
     "diagnose",
@@ -52,7 +54,7 @@ COMMANDS = (
 #: Subcommand name -> its module.
 MODULES = {"compile": compile_command, "inspect": inspect, "simulate": simulate, "bench": bench, "pair": pair,
            "estimate": estimate, "track": track, "replay": replay, "generate": generate, "validate": validate,
-           "diagnose": diagnose, "config": config_command}
+           "view": view, "diagnose": diagnose, "config": config_command}
 
 EPILOG = """\
 examples:

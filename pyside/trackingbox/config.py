@@ -142,6 +142,15 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("opcua_user", "str", None, "OPC UA user name (without a credentials file)", raw=True),
     Setting("opcua_password", "str", None, "OPC UA password (without a credentials file)", secret=True,
             raw=True),
+    Setting("view_credentials", "path", "",
+            "file with 'user = ...' and 'password = ...' lines for the live view's HTTP basic auth "
+            "(mode 0600 or stricter; needed off loopback)"),
+    Setting("view_user", "str", None, "live view user name (without a credentials file)", raw=True),
+    Setting("view_password", "str", None, "live view password (without a credentials file)", secret=True,
+            raw=True),
+    Setting("chromium", "path", "",
+            "the Chromium the live view's screenshots and browser test drive (empty: chromium or "
+            "chromium-browser on PATH)"),
     Setting("supervisor_note", "path", "",
             "file where a supervised child notes the FMU it opened last (set by the supervisor)", internal=True),
     Setting("supervisor_outputs", "path", "",

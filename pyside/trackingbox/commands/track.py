@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from ..report.track import summary_tables
 from ..spec import check_against_fmu, load_spec
 from ..stages import track as stage
 from ..stages.contract import settings_from_args
+from ..view.server import BackgroundView, ViewSettings
 from ._args import number
 from ._progress import Progress
 
@@ -92,6 +94,11 @@ def register(subparsers: Any) -> None:
                       help="stop once the row at SECONDS of plant time is done (default: run until interrupted)")
     live.add_argument("--idle-timeout", type=float, metavar="SECONDS",
                       help="stop after SECONDS of wall-clock time without a new sample")
+    live.add_argument("--view", metavar="HOST:PORT",
+                      help="serve the live web view of the run at HOST:PORT (e.g. 127.0.0.1:8050; see "
+                           "`trackingbox view`); off loopback it needs --view-credentials")
+    live.add_argument("--view-credentials", type=Path, metavar="FILE",
+                      help="'user = ...' and 'password = ...' lines (mode 600) the view asks for")
     p.set_defaults(func=run)
 
 
@@ -102,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
     out = check_output(args.out or args.report or Path(spec.path).parent / "track",
                        "--out" if args.out else "--report" if args.report else "the output directory",
                        kind="dir", inputs=inputs)
+    if (args.view or args.view_credentials) and not args.live:
+        raise SpecError("--view goes with --live; for an offline run: trackingbox view OUT")
     if args.live:
         if args.controllers != "discrete" or args.carry is not None:
             if args.carry is not None:
@@ -142,8 +151,18 @@ def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
             raise SpecError(f"--live-from {args.live_from!r} is not an ISO 8601 time") from None
     settings = LiveSettings(args.live, credentials=read_credentials(args.credentials), start=start,
                             stop_after=args.stop_after, idle_timeout=args.idle_timeout)
-    live = track_live(spec, settings, out_dir=out, resume=args.resume,
-                      progress=Progress().counter("tracking", unit="row"))
+    view = None
+    if args.view:
+        out.mkdir(parents=True, exist_ok=True)
+        view = BackgroundView(out, ViewSettings(bind=args.view, spec=Path(spec.path),
+                                                credentials=args.view_credentials))
+        print(f"live view at {view.url}", file=sys.stderr, flush=True)
+    try:
+        live = track_live(spec, settings, out_dir=out, resume=args.resume,
+                          progress=Progress().counter("tracking", unit="row"))
+    finally:
+        if view is not None:
+            view.close()
     if args.report:
         write_track_report(spec, live.tracking, args.report)
     if args.json:

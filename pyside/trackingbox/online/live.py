@@ -38,26 +38,45 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import numpy as np
+
+from ..checkpoint import CheckpointFile
+from ..data.series import heartbeat_max_gap
+from ..data.view import MeasurementView
 from ..errors import CheckpointError, DataError, LiveError, SpecError
 from ..io import write_text_atomic
+from ..spec.model import Spec
+from ..spec.parse import check_against_fmu
+from ..tracking.loop import TrackingLoop
+from ..tracking.result import TrackingResult
+from . import livestream
+from .livestream import LiveMeasurements
 from .opcua import CLIENT_URI, RESULTS_NAMESPACE, Credentials, at, check_endpoint, make_server, utc
 
-if TYPE_CHECKING:
-    from ..spec import Spec
-    from ..tracking.runtime import TrackingLoop, TrackingResult
+# asyncua is imported in the functions that use it (the offline commands do not pay for it: see .opcua)
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LiveSettings", "LiveResult", "track_live", "RECORD_NAME", "LIVE_NAME"]
+__all__ = ["LiveSettings", "LiveResult", "track_live", "RECORD_NAME", "LIVE_NAME", "STATUS_NAME"]
 
 #: The samples received, as a historian's long form.
 RECORD_NAME = "live_measurements.csv"
 #: The run's time origin and endpoint (for --resume).
 LIVE_NAME = "live.json"
+#: The tracker's state for the live view (rewritten, whole, about twice a second; see docs/online.md).
+STATUS_NAME = "live_status.json"
+#: Wall-clock seconds between two writes of the status file (a connection's change is written at once).
+STATUS_EVERY = 0.5
+#: Wall-clock seconds a tag behind the plant's clock must also have been silent to be stale.
+STALE_GRACE = 5.0
+#: Samples of plant time (per tag) read back from the server's history in one request after a loss.
+BACKFILL_ROWS = 360
+#: First client handle of the monitored items (one per tag; asyncua numbers its own from 201)
+_HANDLE0 = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -84,6 +103,10 @@ class LiveSettings:
         Wall-clock seconds between looks at the received samples.
     timeout : float
         Seconds a connection attempt or a request may take.
+    windowed : bool
+        Hold only the samples the loop can still reach and hand it windows of rows
+        (:mod:`.livestream`: memory flat in the run's length); False: rebuild the whole view
+        of the record at every batch (what a co-simulation twin always does).
     """
 
     url: str
@@ -94,6 +117,7 @@ class LiveSettings:
     backoff: tuple[float, float] = (0.5, 30.0)
     poll: float = 0.1
     timeout: float = 4.0
+    windowed: bool = True
 
     def __post_init__(self) -> None:
         check_endpoint(self.url, "--live")
@@ -132,6 +156,9 @@ class _Record:
         self.path = path
         self.tags = tags
         self.last: dict[str, datetime | None] = {t: None for t in tags}
+        #: per tag: the newest sample of good quality, and whether the newest sample was bad
+        self.good: dict[str, datetime | None] = {t: None for t in tags}
+        self.bad: dict[str, bool] = {t: False for t in tags}
         self.count = 0
         self.first: datetime | None = None
         if resume and path.exists():
@@ -152,20 +179,32 @@ class _Record:
                     raise CheckpointError(f"{self.path} has a malformed row {row!r}; run without --resume")
                 t = datetime.fromisoformat(row[1])
                 self.last[row[0]] = t
+                self.bad[row[0]] = not row[2]
+                if row[2]:
+                    self.good[row[0]] = t
+                    self.count += 1
                 self.first = t if self.first is None or t < self.first else self.first
-                self.count += 1
 
     def add(self, tag: str, stamp: datetime, value: float | None) -> bool:
-        """Record one sample (``None``: bad quality, not recorded); False if not newer than the last."""
+        """Record one sample (``None``: bad quality, an empty value); False if not newer than the last.
+
+        A bad-quality sample is kept as a historian keeps it (an empty value): the view of the
+        record then breaks the tag's interpolation there, as it does reading the historian's
+        own export, and a tag reported by exception is not held across a loss of its link.
+        """
         stamp = utc(stamp)
         last = self.last[tag]
         if last is not None and stamp <= last:
             return False
         self.last[tag] = stamp
-        if value is None or not math.isfinite(value):
-            return True
         if self.first is None or stamp < self.first:
             self.first = stamp
+        if value is None or not math.isfinite(value):
+            self.bad[tag] = True
+            self._pending.append(f"{tag},{stamp.isoformat()},\n")
+            return True
+        self.good[tag] = stamp
+        self.bad[tag] = False
         self._pending.append(f"{tag},{stamp.isoformat()},{value!r}\n")
         self.count += 1
         return True
@@ -256,6 +295,11 @@ class _Tracker:
         self.tags = list(spec.tags)
         self.ts = float(spec.sample_time)
         self.stale_after = float(spec.live.stale_after or 3.0 * self.ts)
+        #: per tag: s of plant time without a sample before it is stale. Without [live] stale_after, a tag
+        #: reported by exception ([data] heartbeat) may be quiet for as long as its gap rule allows
+        #: (1.5 heartbeats, as the offline view takes it), any other for 3 sample times
+        self.stale_limit = {tag: self.stale_after if spec.live.stale_after or spec.data.heartbeat_of(tag) is None
+                            else heartbeat_max_gap(spec.data.heartbeat_of(tag)) for tag in self.tags}
         out_dir.mkdir(parents=True, exist_ok=True)
         self.live_json = out_dir / LIVE_NAME
         self.origin: datetime | None = None
@@ -267,6 +311,16 @@ class _Tracker:
                 raise CheckpointError(f"{self.live_json} is unreadable; run without --resume") from None
         self.record = _Record(out_dir / RECORD_NAME, self.tags, resume=resume)
         self.live_spec = replace(spec, measurements=self.record.path)
+        #: the samples taken since the last batch, for the windowed stream: (tag, stamp, value or None)
+        self.pending: list[tuple[str, datetime, float | None]] = []
+        #: per tag: when (monotonic s) its newest sample came
+        self.arrived: dict[str, float] = {}
+        #: the rows around the loop's, window by window (memory flat in the run's length); None: the
+        #: whole view of the record is rebuilt at every batch (a co-simulation twin, replayed from row 0)
+        self.stream: LiveMeasurements | None = None
+        if settings.windowed and livestream.usable(spec):
+            self.stream = LiveMeasurements(self.live_spec, self.record.path,
+                                           skip=float(spec.tracking.hold_until))
         self.loop: TrackingLoop | None = None
         self.samples_seen = 0
         self.backfilled = 0
@@ -277,15 +331,65 @@ class _Tracker:
         self.tail = _CsvTail(out_dir / "tracking.csv")
         self.publisher = _Publisher(spec.live.publish, []) if spec.live.publish else None
         self.done = False
+        #: the link as the live view shows it: connecting, connected, disconnected, stopped
+        self.link = "connecting"
+        self.link_since = time.time()
+        self.link_error = ""
+        self.lost = 0  # sessions lost
+        self.status_path = out_dir / STATUS_NAME
+        self.status_written = -math.inf
+        self.last_new_wall: float | None = None
+
+    # -- the status file (read by the live view, never waited for) ------------
+    def status(self) -> dict[str, Any]:
+        """The tracker's state now: the link, every tag's newest sample and staleness, the counts."""
+        stamps = [s for s in self.record.last.values() if s is not None]
+        clock = max(stamps) if stamps else None
+        tags = {}
+        for tag in self.tags:
+            last, good = self.record.last[tag], self.record.good[tag]
+            behind = (clock - last).total_seconds() if clock is not None and last is not None else None
+            tags[tag] = {"last": last.isoformat() if last else None, "good": good.isoformat() if good else None,
+                         "quality": None if last is None else "bad" if self.record.bad[tag] else "good",
+                         "behind": behind, "stale": behind is not None and behind > self.stale_limit[tag],
+                         "stale_after": self.stale_limit[tag]}
+        loop = self.loop
+        return {"version": 1, "written": time.time(), "pid": os.getpid(), "url": self.settings.url,
+                "link": self.link, "link_since": self.link_since, "link_error": self.link_error,
+                "connections": self.connections, "lost": self.lost, "samples": self.samples_seen,
+                "backfilled": self.backfilled,
+                "stale_events": self.stale_events, "rows": loop.k if loop is not None else 0,
+                "origin": self.origin.isoformat() if self.origin else None,
+                "plant_clock": clock.isoformat() if clock else None, "last_sample_wall": self.last_new_wall,
+                "stale_after": self.stale_after, "sample_time": self.ts, "tags": tags}
+
+    def write_status(self, *, force: bool = False) -> None:
+        """Rewrite OUT/live_status.json (at most every STATUS_EVERY s unless *force*); never raises."""
+        now = time.monotonic()
+        if not force and now - self.status_written < STATUS_EVERY:
+            return
+        self.status_written = now
+        tmp = self.status_path.with_name(f".{STATUS_NAME}.{os.getpid()}.tmp")
+        try:
+            tmp.write_text(json.dumps(self.status()), encoding="utf-8")
+            os.replace(tmp, self.status_path)  # a reader sees the old file or the new one, whole
+        except (OSError, ValueError) as exc:  # the view's file: never worth stopping the tracking for
+            log.warning("cannot write %s (%s)", self.status_path, exc)
+
+    def set_link(self, link: str, error: str = "") -> None:
+        if link != self.link:
+            self.link, self.link_since = link, time.time()
+        self.link_error = error
+        self.write_status(force=True)
 
     # -- samples ------------------------------------------------------------
-    def take(self, tag: str, dv: Any, *, backfill: bool = False) -> None:
+    def take(self, tag: str, dv: Any, *, backfill: bool = False) -> bool:
         from asyncua import ua
 
         stamp = dv.SourceTimestamp or dv.ServerTimestamp
         if stamp is None:
-            return
-        good = dv.StatusCode_ is None or dv.StatusCode_.value == ua.StatusCodes.Good
+            return False
+        good = dv.StatusCode is None or dv.StatusCode.value == ua.StatusCodes.Good
         value = None
         if good and dv.Value is not None:
             try:
@@ -293,11 +397,16 @@ class _Tracker:
             except (TypeError, ValueError):
                 value = None
         if self.settings.start is not None and utc(stamp) < utc(self.settings.start):
-            return
-        if self.record.add(tag, stamp, value):
-            self.samples_seen += 1
-            self.backfilled += backfill
-            self.last_new = time.monotonic()
+            return False
+        if not self.record.add(tag, stamp, value):
+            return False
+        self.pending.append((tag, utc(stamp), value))
+        self.arrived[tag] = time.monotonic()
+        self.samples_seen += 1
+        self.backfilled += backfill
+        self.last_new = time.monotonic()
+        self.last_new_wall = time.time()
+        return True
 
     # -- the tracking -------------------------------------------------------
     def _rows_ready(self) -> int:
@@ -306,11 +415,16 @@ class _Tracker:
         stamps = [s for s in self.record.last.values() if s is not None]
         if first is None or len(stamps) < len(self.tags):
             return 0
+        if self.loop is None and any(g is None for g in self.record.good.values()):
+            return 0  # a tag with bad samples only: nothing to start the twin from yet
         clock = max(stamps)
         live = []
         for tag, s in self.record.last.items():
             assert s is not None
-            if (clock - s).total_seconds() > self.stale_after:
+            # stale: behind the plant's clock by more than its limit, and nothing from it for a while
+            # (samples of one tag may come in a burst after another's, on a loaded machine)
+            if (clock - s).total_seconds() > self.stale_limit[tag] and \
+                    time.monotonic() - self.arrived.get(tag, -math.inf) > STALE_GRACE:
                 if tag not in self.stale:
                     self.stale.add(tag)
                     self.stale_events += 1
@@ -323,49 +437,109 @@ class _Tracker:
                 live.append(s)
         limit = (min(live) - first).total_seconds()
         if self.settings.stop_after is not None:
+            if (clock - first).total_seconds() >= self.settings.stop_after - 1e-9:
+                # the plant's clock is at the run's end: the samples up to it have come (in time order), a
+                # quiet tag says nothing more before it, and the rows to the end are read as a file
+                # that ends there is read (no next sample to wait for)
+                limit = self.settings.stop_after + self.ts
             limit = min(limit, self.settings.stop_after + self.ts)
         # rows k = 0 .. K-1 are ready when t_{k+1} = (k+1)·ts <= limit
         return max(0, int(math.floor(limit / self.ts + 1e-9)))
 
     def _view(self, rows: int) -> Any:
-        from ..data import MeasurementView
-
         hold = float(self.spec.tracking.hold_until)
         return MeasurementView.from_spec(self.live_spec, (0.0, (rows + 1) * self.ts), skip=hold)
 
+    def _feed(self) -> None:
+        """The samples taken since the last batch into the windowed stream (once the origin is known)."""
+        if self.origin is None:
+            return
+        pending, self.pending = self.pending, []
+        if self.stream is None:
+            return
+        origin = self.origin
+        for tag, stamp, value in pending:
+            self.stream.add(tag, (stamp - origin).total_seconds(), math.nan if value is None else value)
+
+    def _resume_stream(self) -> None:
+        """A resumed run's stream: the record so far read back (held until the loop has begun)."""
+        assert self.stream is not None and self.origin is not None
+        self.stream = LiveMeasurements(self.live_spec, self.record.path, skip=float(self.spec.tracking.hold_until))
+        with open(self.record.path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            next(reader, None)
+            for tag, stamp, value in reader:
+                t = (utc(datetime.fromisoformat(stamp)) - self.origin).total_seconds()
+                self.stream.add(tag, t, float(value) if value else math.nan)
+        self.pending = []  # the record holds them (taken before this batch)
+
+    def _begin(self, ready: int) -> bool:
+        """Make the loop (resumed from the checkpoint, or new): False while the twin cannot start yet."""
+        ckpt = self.out / "checkpoint.json"
+        if self.resume and ckpt.exists():
+            # the loop resumes on the rows it was checkpointed with, then goes on
+            rows_total = int(CheckpointFile(ckpt, self.out / "tracking.csv").read().get("rows_total", 0))
+            if self.stream is not None:
+                self._resume_stream()
+                self.stream.grow(max(2, rows_total))
+                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, stream=self.stream)
+            else:
+                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(max(1, rows_total - 1)))
+            self.loop.begin(resume=True)
+            if self.loop.k < ready:
+                self._extend(ready)
+            return True
+        if self.stream is not None:
+            if not self.done and not self.stream.inputs_valid(self._rows_known(ready)):
+                return False  # an input has no valid value yet: the twin has nothing to start from
+            self.stream.grow(self._rows_known(ready))
+            self.loop = TrackingLoop(self.live_spec, out_dir=self.out, stream=self.stream)
+        else:
+            view = self._view(ready)
+            if not self.done and not all(np.isfinite(view.values(tag)).any() for tag in self.spec.inputs):
+                return False
+            self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=view)
+        self.loop.begin(resume=False)
+        return True
+
+    def _rows_known(self, ready: int) -> int:
+        """Grid rows the stream holds for *ready* rows to run: one more (the next sample), not past the last sample."""
+        assert self.origin is not None
+        end = (max(s for s in self.record.last.values() if s is not None) - self.origin).total_seconds()
+        return min(ready + 1, int(math.floor(end / self.ts + 1e-9)) + 1)
+
+    def _extend(self, ready: int) -> None:
+        assert self.loop is not None
+        if self.stream is not None:
+            self.stream.grow(self._rows_known(ready))
+            self.loop.extend()
+        else:
+            self.loop.extend(self._view(ready))
+
     def advance(self) -> int:
         """Run every row that is ready (called in a worker thread); the number of rows run."""
-        from ..tracking.runtime import TrackingLoop
-
         self.record.flush()
         ready = self._rows_ready()
         if self.origin is None and self.record.first is not None:
             self.origin = self.record.first
             write_text_atomic(self.live_json, json.dumps({"origin": self.origin.isoformat(),
                                                           "url": self.settings.url}) + "\n")
+        self._feed()
         done = self.loop.k if self.loop is not None else 0
         if ready <= done or ready < 1:
             return 0
         if self.loop is None:
-            ckpt = self.out / "checkpoint.json"
-            if self.resume and ckpt.exists():
-                from ..checkpoint import CheckpointFile
-
-                # the loop resumes on the view it was checkpointed with (its rows), then extends
-                rows_total = int(CheckpointFile(ckpt, self.out / "tracking.csv").read().get("rows_total", 0))
-                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(max(1, rows_total - 1)))
-                self.loop.begin(resume=True)
-                if self.loop.k < ready:
-                    self.loop.extend(self._view(ready))
-            else:
-                self.loop = TrackingLoop(self.live_spec, out_dir=self.out, view=self._view(ready))
-                self.loop.begin(resume=False)
+            if not self._begin(ready):
+                return 0
         else:
-            self.loop.extend(self._view(ready))
+            self._extend(ready)
+        assert self.loop is not None
         n = ready - self.loop.k
         if n <= 0:
             return 0
         self.loop.run(max_steps=n, progress=self.progress)
+        if self.stream is not None:
+            self.stream.prune(self.loop.k)
         if self.settings.stop_after is not None and self.loop.k * self.ts >= self.settings.stop_after - 1e-9:
             self.done = True
         return n
@@ -374,9 +548,10 @@ class _Tracker:
         """At the end: write the last row whose samples all came (no next sample will come to step to)."""
         if self.loop is None:
             return
+        self._feed()
         ready = self._rows_ready()
         if ready == self.loop.k and ready >= 1:
-            self.loop.extend(self._view(ready))
+            self._extend(ready)
             self.loop.run()
 
     # -- connection ---------------------------------------------------------
@@ -385,7 +560,10 @@ class _Tracker:
         from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
         live = self.spec.live
-        client = Client(self.settings.url, timeout=self.settings.timeout)
+        # asyncua 2's connection supervisor probes the server every watchdog interval, with that long to
+        # answer (1 s by default): on a loaded machine a live server was taken for lost (the soak, load 12
+        # on 2 cores: 8 needless reconnections in 12 plant days); the request timeout is the probe's too
+        client = Client(self.settings.url, timeout=self.settings.timeout, watchdog_intervall=self.settings.timeout)
         client.application_uri = CLIENT_URI
         if live.auth == "user":
             creds = self.settings.credentials
@@ -427,38 +605,96 @@ class _Tracker:
                 log.warning("subscription status from the server: %s", status)
 
         sub = await client.create_subscription(max(10.0, 1000.0 * self.settings.poll), Handler())
-        # every write counts, also of an unchanged value (a new timestamp is a new sample);
-        # asyncua 1.1's public subscribe_data_change takes no filter, hence _subscribe (the version is pinned)
-        handles = await sub._subscribe(list(nodes.values()), ua.AttributeIds.Value,
-                                       mfilter=ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValueTimestamp),
-                                       queuesize=100000, sampling_interval=0.0)
-        for tag, h in zip(nodes, handles if isinstance(handles, list) else [handles]):
+        # every write counts, also of an unchanged value (a new timestamp is a new sample): the
+        # monitored items are made here with that filter (asyncua's subscribe_data_change sets none)
+        requests = []
+        for i, node in enumerate(nodes.values()):
+            params = ua.MonitoringParameters(ClientHandle=_HANDLE0 + i, SamplingInterval=0.0, QueueSize=100000,
+                                             DiscardOldest=True, Filter=ua.DataChangeFilter(
+                                                 Trigger=ua.DataChangeTrigger.StatusValueTimestamp))
+            requests.append(ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value),
+                MonitoringMode=ua.MonitoringMode.Reporting, RequestedParameters=params))
+        handles = await sub.create_monitored_items(requests)
+        for tag, h in zip(nodes, handles):
             if isinstance(h, ua.StatusCode):
                 raise LiveError(f"cannot subscribe to tag {tag!r} at node {self.spec.live.node(tag)!r} on "
                                 f"{self.settings.url}: {h.name}")
-        # what the server's history holds since the last sample of each tag (or the start)
-        for tag, node in nodes.items():
-            since = self.record.last[tag] or self.settings.start
-            if since is None and self.origin is None:
-                continue
-            try:
-                history = await node.read_raw_history(starttime=since or self.origin, endtime=None)
-            except ua.UaError as exc:
-                log.warning("no history of %r from %s (%s): samples missed while disconnected are lost", tag,
-                            self.settings.url, exc)
-                continue
-            for dv in sorted(history, key=lambda d: d.SourceTimestamp):
-                self.take(tag, dv, backfill=True)
+        await self._backfill(nodes, queue)
         while not self.done:
             items, queue[:] = list(queue), []
             for tag, dv in items:
                 self.take(tag, dv)
+            # the samples taken, written before the rows they make (a batch may take a while)
+            self.write_status(force=bool(items))
             await asyncio.to_thread(self.advance)
+            self.write_status()
             await self._publish()
             if self._idle():
                 return
             await client.check_connection()
             await asyncio.sleep(self.settings.poll)
+
+    async def _backfill(self, nodes: dict[str, Any], queue: list[tuple[str, Any]]) -> None:
+        """Read what the server's history holds since each tag's last sample (or the start), a stretch of
+        plant time at a time (BACKFILL_ROWS samples), running the rows it makes as it goes: a long loss
+        is read back with the memory of one stretch, every tag as far as the others."""
+        from asyncua import ua
+
+        since = {tag: self.record.last[tag] or self.settings.start or self.origin for tag in nodes}
+        since = {tag: utc(s) for tag, s in since.items() if s is not None}
+        if not since:
+            return
+        step = timedelta(seconds=BACKFILL_ROWS * self.ts)
+        a = min(since.values())
+        failed: set[str] = set()
+
+        async def read(tag: str, end: datetime | None) -> list[Any]:
+            last = self.record.last[tag]
+            if last is not None and end is not None and utc(last) >= end:
+                return []  # this tag is past the stretch already
+            start = max(utc(last), a) if last is not None else max(since[tag], a)
+            try:
+                history = await nodes[tag].read_raw_history(starttime=start, endtime=end)
+            except ua.UaError as exc:
+                log.warning("no history of %r from %s (%s): samples missed while disconnected are lost", tag,
+                            self.settings.url, exc)
+                failed.add(tag)
+                return []
+            return sorted(history, key=lambda d: d.SourceTimestamp or d.ServerTimestamp)
+
+        async def stretch(end: datetime | None) -> int:
+            # every tag's samples of the stretch are read before any is taken: a link lost half way
+            # leaves no tag further on than the others (they would look stale), the stretch is read again
+            got = {tag: await read(tag, end) for tag in since if tag not in failed}
+            return sum(self.take(tag, dv, backfill=True) for tag, values in got.items() for dv in values)
+
+        def live_from() -> datetime | None:
+            """Where the subscription's samples begin (the newest first sample of a tag in the queue):
+            the history is read up to there, the queue has the rest (it grows while the history is read)."""
+            first: dict[str, datetime] = {}
+            for tag, dv in queue:
+                if tag not in first and (dv.SourceTimestamp or dv.ServerTimestamp) is not None:
+                    first[tag] = utc(dv.SourceTimestamp or dv.ServerTimestamp)
+                    if len(first) == len(nodes):
+                        break
+            return max(first.values()) if first else None
+
+        while not self.done:
+            edge = live_from()
+            if edge is not None and a > edge:
+                break  # the queue goes on from here
+            if not await stretch(a + step):
+                if edge is None or a + step >= edge:
+                    break  # nothing in this stretch: the rest, whatever is left, below
+                a = a + step  # a quiet stretch before the queue's: on
+                continue
+            self.write_status()
+            await asyncio.to_thread(self.advance)
+            self.write_status()
+            a = a + step
+        if not self.done and live_from() is None:
+            await stretch(None)
 
     def _idle(self) -> bool:
         t = self.settings.idle_timeout
@@ -497,6 +733,7 @@ class _Tracker:
                                         + (" (this spec connects anonymously; [live] auth = \"user\" to log in)"
                                            if self.spec.live.auth == "anonymous" else "")) from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url, exc, wait)
+                    self.set_link(self.link, str(exc))
                 except (OSError, asyncio.TimeoutError, ConnectionError, ua.UaError) as exc:
                     if "No matching endpoints" in str(exc):  # a security mismatch: retrying will not help
                         raise LiveError(f"{self.settings.url} offers no endpoint with this spec's security "
@@ -505,15 +742,19 @@ class _Tracker:
                                         "offers") from None
                     log.warning("cannot connect to %s (%s); retrying in %g s", self.settings.url,
                                 exc or type(exc).__name__, wait)
+                    self.set_link(self.link, str(exc) or type(exc).__name__)
                 else:
                     self.connections += 1
                     log.info("connected to %s (connection %d)", self.settings.url, self.connections)
+                    self.set_link("connected")
                     wait = self.settings.backoff[0]
                     try:
                         await self._session(client)
                     except (OSError, asyncio.TimeoutError, ConnectionError, ua.UaError) as exc:
                         log.warning("lost %s (%s); reconnecting in %g s", self.settings.url,
                                     exc or type(exc).__name__, wait)
+                        self.lost += 1
+                        self.set_link("disconnected", str(exc) or type(exc).__name__)
                     finally:
                         try:
                             await asyncio.wait_for(client.disconnect(), timeout=1.0)
@@ -525,9 +766,11 @@ class _Tracker:
                 wait = min(2.0 * wait, self.settings.backoff[1])
                 # samples taken while disconnected cannot come: run what is ready
                 await asyncio.to_thread(self.advance)
+                self.write_status()
                 await self._publish()
         finally:
             self.record.close()
+            self.set_link("stopped")
             if self.publisher is not None:
                 await self.publisher.stop()
 
@@ -566,8 +809,6 @@ def track_live(spec: Spec, settings: LiveSettings, *, out_dir: str | Path, resum
     SpecError, DataError, CheckpointError
         As for :func:`trackingbox.tracking.runtime.track`.
     """
-    from ..spec import check_against_fmu
-
     if not spec.pairs:
         raise SpecError(f"spec {spec.path} has no [[pairs]]; run `trackingbox pair` first or add them")
     check_against_fmu(spec)

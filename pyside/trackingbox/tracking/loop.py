@@ -95,7 +95,7 @@ class TrackingLoop:
                  view: MeasurementView | None = None, interpolation: Interpolation = "linear",
                  substeps: int | Literal["auto"] = "auto", carry: float = CARRY_FRACTION,
                  controllers: ControllerMode = "discrete", inputs_twin: Any = None,
-                 window_rows: int | None = None) -> None:
+                 window_rows: int | None = None, stream: Any = None) -> None:
         self.wall0 = _time.perf_counter()
         self.spec = spec
         self.window = window
@@ -114,7 +114,10 @@ class TrackingLoop:
             rows = max(rows, NativeRows.CAP + MARGIN_ROWS + 2)
         stat_tags = list(dict.fromkeys([*(p.variable for p in spec.pairs if p.variable in spec.outputs),
                                         *(s.tag for s in spec.states)]))
-        if view is None and rows > 0 and spec.pairs and not isinstance(untracked, pd.DataFrame):
+        if stream is not None:  # given: a growing stream of the online mode (trackingbox.online.livestream)
+            self.stream = stream
+            view = stream.view(0, min(stream.n_rows, stream.rows_per_window + MARGIN_ROWS))
+        elif view is None and rows > 0 and spec.pairs and not isinstance(untracked, pd.DataFrame):
             self.stream = WindowedMeasurements.open(spec, window, skip=float(spec.tracking.hold_until),
                                                     directory=self.out_dir, stats_tags=stat_tags,
                                                     rows_per_window=rows)
@@ -402,8 +405,11 @@ class TrackingLoop:
         self._running = True
         self.output.open()
 
-    def extend(self, view: MeasurementView) -> None:
+    def extend(self, view: MeasurementView | None = None) -> None:
         """Go on over a longer measurement view: data that arrived while the loop ran (the online mode).
+
+        A loop made with a growing ``stream`` takes no view: it goes on over the stream's rows
+        (its ``n_rows`` grew), read window by window as a windowed run reads them.
 
         *view* must have the current grid as its prefix (same start and
         ``sample_time``; built as in :func:`track`). The rows still to run read
@@ -413,8 +419,14 @@ class TrackingLoop:
         ``run(max_steps=...)`` over the rows whose next sample has arrived.
         """
         if self.stream is not None:
+            if view is None and hasattr(self.stream, "grow"):
+                self.output.flush()
+                self.grid, self.n_rows = self.stream.grid, self.stream.n_rows
+                return
             raise DataError("extend() goes on over a longer measurement view: start the loop with view= "
                             "(the whole view), not from the spec's file window by window")
+        if view is None:
+            raise DataError("extend() needs the longer measurement view (or a loop made with a growing stream)")
         n = self.n_rows
         if view.grid.size < n or not np.array_equal(view.grid[:n], self.grid) or view.skip != self.view.skip:
             raise DataError(f"the measurement view given to extend() does not continue the grid of "
