@@ -299,7 +299,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
                                + " (was it generated from this spec?)")
         # the twin's parameters as the runtime runs it: [fixed] values and the starts of the parameters
         # no pair drives (the box drives the paired ones); names the tracked FMU does not tune are skipped
-        tunable = set(model.info.tunable_parameters) if hasattr(model.info, "tunable_parameters") else set()
+        tunable = set(model.info.names("parameter"))  # tunable or fixed: set before initialisation
         paired = {p.parameter for p in spec.pairs}
         given = {**{p.name: float(p.start) for p in spec.parameters if p.name not in paired}, **spec.fixed}
         sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs,

@@ -35,6 +35,7 @@ import pandas as pd
 
 from ..errors import AnalysisError, FMUError, TrackingError, unknown_name
 from ..fmu import read_info
+from ..fmu.info import change_refusal
 from ..simulation.models import cached_model
 
 logger = logging.getLogger(__name__)
@@ -582,18 +583,17 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
     names = {v.name: v for v in info.variables}
     tunable = set(info.tunable_parameters)
     settable = tunable | set(info.inputs)
+    changeable = tunable | set(info.names("parameter", "fixed"))
     problems: list[str] = []
     where = f"FMU {Path(fmu).name}"
     for tag, out in outputs.items():
         if out not in names:
             problems.append(unknown_name("output", out, info.outputs or list(names), where) + f" (for tag {tag!r})")
     for name, start, lo, hi in parameters:
-        if name not in tunable:
-            if name in names:
-                problems.append(f"parameter {name!r} of {where} is not a tunable parameter "
-                                f"(causality {names[name].causality}, variability {names[name].variability})")
-            else:
-                problems.append(unknown_name("parameter", name, sorted(tunable), where))
+        if name not in names:
+            problems.append(unknown_name("parameter", name, sorted(changeable), where))
+        elif (refusal := change_refusal(info, name)) is not None:
+            problems.append(refusal)
         if not (lo < hi):
             problems.append(f"parameter {name!r} has bounds [{lo:g}, {hi:g}]: min must be below max")
     for name in (freeze or {}):

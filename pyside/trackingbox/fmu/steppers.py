@@ -25,7 +25,7 @@ from fmpy.sundials.sundials_types import sunrealtype
 from ..errors import DataError, FMUError, SimulationError, unknown_name
 from .adapters import FMIAdapter
 from .calls import fmu_calls, simulation_failure
-from .info import REAL_TYPES
+from .info import REAL_TYPES, change_refusal
 
 if TYPE_CHECKING:
     from .model import FMUModel
@@ -65,6 +65,8 @@ class Stepper(abc.ABC):
         self._in_set: Callable[[Any], None] | None = None
         self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf  # the interval _input_values used last
         self._last_set: dict[str, Any] = {}
+        #: every value given before initialisation or set since: what a re-initialisation sets again
+        self._given: dict[str, Any] = {}
         #: the maximum step given (None: the input table's smallest interval)
         self.max_step_given = max_step
         self._prepare_inputs(inputs)
@@ -245,22 +247,35 @@ class Stepper(abc.ABC):
 
     def _initialize(self, parameters: dict[str, Any], max_step: float | None) -> None:
         model = self.model
-        variables = {name: self._settable_before_init(name) for name in parameters}
+        for name in parameters:
+            self._settable_before_init(name)
         # inputs given as constants are not driven by the table any more
         self._drop_inputs(set(parameters))
-        early = model.begin_run(parameters)
-        early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
-                      or v.causality == "input"})
-        late = {n: parameters[n] for n, v in variables.items() if n not in early}
+        restore = model.begin_run(parameters)
+        self._given = dict(parameters)
         model.log_messages.clear()
         with fmu_calls(f"initialisation of {model.path.name} at t = {self.time:g} s failed", model.log_messages):
-            self._set_values(early)
-            self._fmi.enter_initialization_mode(tolerance=model.tolerance, start_time=self.time)
-            self._set_values(late)
-            self._apply_inputs(self.time)
-            self._fmu.exitInitializationMode()
-            self._after_initialization()
+            self._initialization(restore, parameters)
         self._start(max_step)
+
+    def _initialization(self, restore: Mapping[str, Any], values: Mapping[str, Any]) -> None:
+        """The FMI calls of an initialisation at :attr:`time` with *values* (and *restore*, set first) applied.
+
+        Values of variables with ``initial = exact/approx`` and inputs are set before
+        initialisation mode, the others (parameters computed otherwise by default)
+        inside it; inputs driven by the table take their values at :attr:`time`.
+        """
+        variables = {name: self.model.variable(name) for name in values}
+        early = dict(restore)
+        early.update({n: values[n] for n, v in variables.items() if v.initial in ("exact", "approx")
+                      or v.causality == "input"})
+        late = {n: values[n] for n in variables if n not in early}
+        self._set_values(early)
+        self._fmi.enter_initialization_mode(tolerance=self.model.tolerance, start_time=self.time)
+        self._set_values(late)
+        self._apply_inputs(self.time)
+        self._fmu.exitInitializationMode()
+        self._after_initialization()
 
     def _set_values(self, values: Mapping[str, Any]) -> None:
         if not values:
@@ -309,8 +324,13 @@ class Stepper(abc.ABC):
         self._advance(t_next)
 
     def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
-        """Set tunable parameters and/or inputs before the next step.
+        """Set parameters and/or inputs before the next step.
 
+        Tunable parameters and inputs change as FMI allows between steps.
+        ``fixed`` parameters change on model exchange by a re-initialisation
+        that keeps the continuous states (:meth:`ModelExchangeStepper._reinitialize`);
+        on co-simulation they are refused with what to do instead
+        (:func:`~trackingbox.fmu.info.change_refusal`).
         An input set here is no longer driven by the ``inputs`` table of this run.
         For model exchange, the change is a discontinuity: tunable parameters are
         set in event mode and the solver is re-initialised. With
@@ -333,7 +353,7 @@ class Stepper(abc.ABC):
         values = {n: v for n, v in values.items() if self._last_set.get(n) != v}
         if not values:
             return
-        params = False
+        params = fixed = False
         for name in values:
             v = self.model.variable(name)
             if v.causality == "input":
@@ -341,15 +361,24 @@ class Stepper(abc.ABC):
             if v.causality == "parameter" and v.variability == "tunable":
                 params = True
                 continue
-            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
-                           f"{v.variability} {v.causality}; only tunable parameters and inputs can be set "
-                           "between steps")
+            refusal = change_refusal(self.model.info, name, self.model.interface)
+            if refusal is not None:
+                raise FMUError(refusal)
+            fixed = True
         self._drop_inputs(set(values))
         with fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed",
                         self.model.log_messages):
-            self._apply_set(values, params, restart)
+            if fixed:
+                self._reinitialize(values)
+            else:
+                self._apply_set(values, params, restart)
         self.model.note_changed(n for n in values if self.model.variable(n).causality == "parameter")
         self._last_set.update(values)
+        self._given.update(values)
+
+    def _reinitialize(self, values: Mapping[str, Any]) -> None:
+        """Change ``fixed`` parameters (with *values*) where FMI allows it: see :class:`ModelExchangeStepper`."""
+        raise FMUError(f"{self.model.path.name}: fixed parameters cannot change during a co-simulation run")
 
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
         """Current values of *names* as a float array (same order)."""
@@ -523,6 +552,8 @@ class ModelExchangeStepper(Stepper):
         self._x_before = np.zeros_like(self._x)
         self.restarts = 0
         self.carried = 0
+        #: changes of ``fixed`` parameters, each a re-initialisation (also counted in :attr:`restarts`)
+        self.reinitializations = 0
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
                          max_step=max_step)
 
@@ -651,6 +682,36 @@ class ModelExchangeStepper(Stepper):
         else:
             self.restarts += 1
             self._solver.reset(self.time)
+
+    def _reinitialize(self, values: Mapping[str, Any]) -> None:
+        """Change ``fixed`` parameters between steps, the way FMI allows for model exchange.
+
+        A ``fixed`` parameter may be set only before initialisation. The FMU is
+        therefore reset and initialised again at :attr:`time` with every value
+        this run was given or has set since (and *values*), then its continuous
+        states are overwritten with those it had, an event iteration brings its
+        discrete variables and relations (the event indicators' context) in
+        line with the restored states, and the integrator restarts. What the
+        initialisation computes from the parameters (calculated parameters,
+        derived constants) follows the new values; the states continue. Counted
+        in :attr:`restarts` and :attr:`reinitializations`.
+        """
+        x = self._x[: self._nx].copy()
+        if self._nx:
+            self._fmu.getContinuousStates(self._px, self._nx)
+            x = self._x[: self._nx].copy()
+        given = {**self._given, **values}
+        self._fmu.reset()
+        self._initialization({}, given)
+        if self._nx:
+            self._x[: self._nx] = x
+            self._fmu.setContinuousStates(self._px, self._nx)
+            if self._nz:
+                # relations and discrete variables as the restored states make them
+                self._event_iteration()
+        self._solver.reset(self.time)
+        self.restarts += 1
+        self.reinitializations += 1
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints."""
