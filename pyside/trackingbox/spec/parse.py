@@ -30,6 +30,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from .model import (
     CONTROLLERS,
+    INITIAL_STATES,
+    INPUT_RULES,
     WINDOW_NAMES,
     BalanceSpec,
     DataRules,
@@ -387,7 +389,7 @@ def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
     data = DataRules()
     dtable = _table(raw, "data", problems)
     if dtable is not None:
-        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat"), (), "[data]", problems)
+        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat", "inputs", "initial"), (), "[data]", problems)
         stoppage = None
         stable = _table(dtable, "stoppage", problems)
         if stable is not None:
@@ -409,7 +411,16 @@ def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
             value = _number(dtable, "heartbeat", "[data]", problems, positive=True)
             if value is not None:
                 heartbeat["*"] = value
-        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat)
+        choices = {"inputs": INPUT_RULES, "initial": INITIAL_STATES}
+        chosen = {}
+        for key, allowed in choices.items():
+            value = _string(dtable, key, "[data]", problems) if key in dtable else allowed[0]
+            if value is not None and value not in allowed:
+                problems.add(f"[data] {key} = {value!r} is not one of {', '.join(repr(a) for a in allowed)}"
+                             f"{did_you_mean(value, allowed)}")
+                value = None
+            chosen[key] = value or allowed[0]
+        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat, **chosen)
 
     return data
 
