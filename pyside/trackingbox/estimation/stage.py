@@ -207,7 +207,7 @@ class EstimationResult:
             "evaluations": int(self.evaluations),
             "seconds": float(self.seconds),
         }
-        if self.warmups:
+        if self.shortened_warmups():  # only then: the document says what the data did not allow
             out["warmup"] = {"requested": float(self.warmup), "used": {k: float(v) for k, v in self.warmups.items()},
                              "initial": self.initial_state, "note": self.warmup_note()}
         if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's

@@ -32,10 +32,15 @@ class SourceSpec:
         Absolute path of the package directory or ``.mo`` file.
     model : str
         Full class name of the twin, e.g. ``TrackingBox.Benches.HeatExchanger.Twin``.
+    libraries : tuple of Path
+        Modelica libraries the source uses (package directories or ``.mo`` files, e.g. the
+        MSL's ``Modelica`` directory): ``[source] libraries``. Libraries beside the source and
+        on ``MODELICAPATH`` are found without being named.
     """
 
     path: Path
     model: str
+    libraries: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     if spec.source is not None:
         # a library outside the case directory is named absolutely: it does not move with the case
         doc["source"] = {"path": _rel(spec.source.path, base, outside=False), "model": spec.source.model}
+        if spec.source.libraries:
+            doc["source"]["libraries"] = [_rel(p, base, outside=False) for p in spec.source.libraries]
     doc["inputs"] = dict(spec.inputs)
     doc["outputs"] = dict(spec.outputs)
     if spec.parameters:
