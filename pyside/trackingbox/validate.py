@@ -53,7 +53,7 @@ import pandas as pd
 from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
 from .estimation import nrmse
-from .generate.filters import modelica_name
+from .generate.filters import modelica_name, tracked_output
 from .simulation.initial import apply_states, twin_initial_states
 from .simulation.models import open_model
 from .tracking.runtime import track
@@ -277,7 +277,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     # Inputs of the tracked FMU: the twin's inputs, the measurements (filled), hold.
     inputs = view.inputs.to_dict(orient="series")
     inputs = {name: np.asarray(v, dtype=float) for name, v in inputs.items()}
-    pair_names = {p.parameter: modelica_name(p.parameter) for p in spec.pairs}
+    pair_names = {p.parameter: tracked_output(p.parameter) for p in spec.pairs}
     for pair in spec.pairs:
         inputs[f"{modelica_name(pair.variable)}_meas"] = view.filled(pair.variable)
     lead = 1 if interpolation == "zoh" else 0

@@ -99,6 +99,9 @@ class StepSettings:
     warm_start: bool = True
     drift_correction: bool = True
     reference_horizon: float | None = None
+    #: start the first settle from the model's steady state at the operating point (the spec's
+    #: ``[data] initial = "steady"``) instead of its own initial state: a slow twin is settled at once
+    steady_start: bool = False
 
     def __post_init__(self) -> None:
         for name in ("step", "interval", "window", "tolerance", "baseline_tolerance", "max_time",
@@ -275,6 +278,8 @@ def run_plan(plan: RunPlan) -> RunResult:
         stepper = model.stepper(start_time=t_start, parameters=start, max_step=s.interval)
         if warm:
             stepper.set_continuous_states(np.asarray(plan.states, dtype=float))
+        elif s.steady_start:
+            stepper.settle()
     except TrackingError as exc:
         raise AnalysisError(f"step test {plan.label}: the twin could not be initialised: {exc}") from None
     outs = list(plan.outputs)
@@ -370,7 +375,8 @@ def run_plan(plan: RunPlan) -> RunResult:
         if k >= k_max:
             raise AnalysisError(
                 f"step test {plan.label}: the response did not settle within {s.max_time:g} s of the step "
-                f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}")
+                f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}; raise --max-time "
+                f"(a slow twin's responses take several of its time constants to settle)")
         k += 1
         if ref_traj is not None and k - k_step >= len(ref_traj):  # past a shortened reference: run again
             return RunResult(plan.label, freeze_time, step_time, before, traj[-1], (k - 1) * s.interval,

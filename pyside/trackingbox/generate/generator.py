@@ -407,9 +407,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         settings = pair_settings(pair, p_min, p_max, ts=float(spec.sample_time), where=where)
         span, kp, ti, how = settings.scaling.span, settings.kp, settings.ti, settings.tuning
         ident = filters.modelica_name(pair.variable)
-        out = filters.modelica_name(pair.parameter)
-        if site.receivers:  # a top-level parameter of the twin keeps its name: the tracked value is beside it
-            out = f"{out}_tracked"
+        out = filters.tracked_output(pair.parameter)
         names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out, "hold": f"{ident}_hold"}
         for kind in ("meas", "hold", "out"):
             if names[kind] in taken:
