@@ -79,3 +79,19 @@ def build_casadi_fmu(directory: Path, name: str, *,
     if done.returncode != 0:
         raise RuntimeError(f"building the CasADi test FMU {name!r} in {directory} failed:\n{done.stderr}")
     return directory / done.stdout.strip().splitlines()[-1]
+
+
+def rewrite_model_description(fmu: Path, change: Any) -> Path:
+    """Replace *fmu*'s ``modelDescription.xml`` by ``change(text)`` (the other entries copied as they are)."""
+    import zipfile
+
+    fmu = Path(fmu)
+    part = fmu.with_suffix(".part")
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                data = change(data.decode("utf-8")).encode("utf-8")
+            dst.writestr(item, data)
+    part.replace(fmu)
+    return fmu

@@ -109,9 +109,18 @@ validation = [{valid0}, {valid1}]
 def write_case(directory: Path, fmu: Path, table: pd.DataFrame, *, name: str = "kht", start: float = 1000.0,
                lo: float = 600.0, hi: float = 1400.0, training: tuple[float, float] = (0.0, 7200.0),
                validation: tuple[float, float] = (7200.0, 14400.0), data: str = "",
-               measurements: str = "measurements.csv") -> Path:
-    """Write measurements CSV + spec.toml (and a copy of the FMU) into *directory*; return the spec path."""
+               measurements: str = "measurements.csv", initial: str | None = "steady") -> Path:
+    """Write measurements CSV + spec.toml (and a copy of the FMU) into *directory*; return the spec path.
+
+    *initial*: the spec's ``[data] initial`` (default ``"steady"``: the plant of :func:`plant_data`
+    starts settled at its first inputs, and so does the twin); None leaves it out.
+    """
     import shutil
+
+    if initial is not None:
+        line = f'initial = "{initial}"'
+        data = data.replace("[data]\n", f"[data]\n{line}\n", 1) if "[data]\n" in data else \
+            data + f"\n[data]\n{line}\n"
 
     directory.mkdir(parents=True, exist_ok=True)
     if not (directory / "hx1.fmu").exists():

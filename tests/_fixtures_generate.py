@@ -227,6 +227,7 @@ def box_against_runtime(spec, fmu: Path, runtime_csv: Path) -> dict[str, tuple[f
     from trackingbox import data
     from trackingbox.fmu import FMUModel
     from trackingbox.generate.filters import modelica_name
+    from trackingbox.simulation.initial import apply_states, twin_initial_states
 
     py = pd.read_csv(runtime_csv)
     grid = py["time"].to_numpy(dtype=float)
@@ -242,8 +243,15 @@ def box_against_runtime(spec, fmu: Path, runtime_csv: Path) -> dict[str, tuple[f
     names = [modelica_name(p.parameter) for p in spec.pairs]
     box = np.full((grid.size, len(names)), np.nan)
     held = (py[[f"mode:{p.variable}" for p in spec.pairs]] == "hold").any(axis=1).to_numpy()
+    states = None
+    if spec.data.initial == "steady":  # the runtime's twins start from their steady state: so does the box's
+        twin_inputs = inputs[["time", *spec.inputs.values()]]
+        states = twin_initial_states(spec, start_time=float(grid[0]), inputs=twin_inputs,
+                                     parameters={**{p.name: p.start for p in spec.parameters}, **spec.fixed})
     with FMUModel(fmu) as model:
         run = model.stepper(start_time=float(grid[0]), inputs=inputs)
+        if states:
+            assert apply_states(run, states)
         for k in range(grid.size):
             box[k] = run.get(names)
             if k == grid.size - 1:

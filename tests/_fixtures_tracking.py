@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from _fixtures_casadi import build_casadi_fmu
+from _fixtures_casadi import build_casadi_fmu, rewrite_model_description
+from trackingbox.compiler.fmi_export import declare_fixed
 
 from trackingbox.testing.specs import first_order_spec
 
@@ -22,14 +23,22 @@ K_PLANT = 0.004
 K_TWIN = 0.003
 
 
-def make_first_order_fmu(directory: Path) -> Path:
-    """Export, compile and pack the model as an FMI 3.0 model-exchange FMU in *directory*."""
-    return build_casadi_fmu(directory, "hx1", constants={"TAU": TAU}, variables=[
+def make_first_order_fmu(directory: Path, variability: str = "tunable") -> Path:
+    """Export, compile and pack the model as an FMI 3.0 model-exchange FMU in *directory*.
+
+    *variability* ``"fixed"`` declares ``k`` fixed in the model description, as other tools export
+    parameters (the compiler's ``--parameters fixed``). CasADi's own ``"fixed"`` variability is not
+    used: its FMU then keeps the start value whatever is set before initialisation.
+    """
+    fmu = build_casadi_fmu(directory, "hx1", constants={"TAU": TAU}, variables=[
         ("k", ("parameter", "tunable"), {"start": K_TWIN, "min": 0.0, "max": 0.1}),
         ("u", ("input",), {"start": 50.0}),
         ("x", ("local", "continuous"), {"start": 38.0, "initial": "exact"}),
         ("y", ("output",), {}),
     ], equations=[("der(x)", "(u - x) / TAU - k * x"), ("y", "x")])
+    if variability == "fixed":
+        rewrite_model_description(fmu, lambda xml: declare_fixed(xml, {"k"}))
+    return fmu
 
 
 def spec_text(k_twin: float, data: str = "", controller: str = "pi") -> str:

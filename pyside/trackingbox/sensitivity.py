@@ -134,7 +134,7 @@ def support(model: Any, names: Sequence[str], scales: Sequence[float], *,
 def simulate_sensitivities(model: Any, *, wrt: Sequence[str], scales: Sequence[float], start_time: float = 0.0,
                            stop_time: float, output_interval: float, inputs: pd.DataFrame | None = None,
                            parameters: Mapping[str, float] | None = None,
-                           outputs: Sequence[str]) -> SensitivityRun:
+                           outputs: Sequence[str], input_rule: str = "linear") -> SensitivityRun:
     """Simulate as :meth:`FMUModel.simulate` does and return the outputs' sensitivities w.r.t. *wrt*.
 
     Parameters
@@ -170,7 +170,8 @@ def simulate_sensitivities(model: Any, *, wrt: Sequence[str], scales: Sequence[f
     grid = start_time + output_interval * np.arange(n + 1)
     if grid[-1] < stop_time - 1e-9 * max(1.0, abs(stop_time)):
         grid = np.append(grid, stop_time)
-    stepper = model.sensitivity_stepper(wrt, scales, start_time=start_time, parameters=parameters, inputs=inputs)
+    stepper = model.sensitivity_stepper(wrt, scales, start_time=start_time, parameters=parameters, inputs=inputs,
+                                        input_rule=input_rule)
     points = grid
     input_times = stepper.input_times
     if input_times is not None and input_times.size:

@@ -253,14 +253,30 @@ def _fmu_of(frame: FrameType | None) -> str:
     return ""
 
 
-def timeout_message(function: str, fmu: str, timeout: float) -> str:
+#: what the command's simulation is doing now (:func:`note_phase`), for the watchdog's error line
+_PHASE = [""]
+
+
+def note_phase(text: str = "") -> None:
+    """Name what the simulation runs now (e.g. a window's warm-up; ``""``: nothing special).
+
+    Cheap (one assignment): the watchdog adds it to its error line, so a hang in
+    an FMU's binary says in which part of the run it happened.
+    """
+    _PHASE[0] = text
+
+
+def timeout_message(function: str, fmu: str, timeout: float, phase: str = "") -> str:
     """The error line's text for an FMI call that did not return.
 
     >>> timeout_message("fmi2DoStep", "/data/twin.fmu", 60.0)
     "the FMU's binary (twin.fmu) did not return from fmi2DoStep within 60 s (TRACKINGBOX_FMU_TIMEOUT)"
+    >>> timeout_message("fmi2DoStep", "/data/twin.fmu", 60.0, "the warm-up before the training window")[-60:]
+    'within 60 s (TRACKINGBOX_FMU_TIMEOUT) during the warm-up before the training window'
     """
     who = f"the FMU's binary ({os.path.basename(fmu)})" if fmu else "foreign native code (an FMU's binary)"
-    return f"{who} did not return from {function} within {timeout:g} s (TRACKINGBOX_FMU_TIMEOUT)"
+    during = f" during {phase}" if phase else ""
+    return f"{who} did not return from {function} within {timeout:g} s (TRACKINGBOX_FMU_TIMEOUT){during}"
 
 
 def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
@@ -288,7 +304,7 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
         def hung(function: str, fmu: str, timeout: float) -> None:
             # the main thread is stuck in foreign code: say where, then end the whole process
             with report_lock:
-                doc = json.dumps({"function": function, "fmu": fmu, "timeout": timeout})
+                doc = json.dumps({"function": function, "fmu": fmu, "timeout": timeout, "phase": _PHASE[0]})
                 os.write(write_fd, f"timeout {doc}\n".encode())
                 os._exit(2)
 
@@ -348,7 +364,8 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
     if report.startswith("timeout "):
         try:
             doc = json.loads(report[len("timeout "):].splitlines()[0])
-            message = timeout_message(str(doc["function"]), str(doc["fmu"]), float(doc["timeout"]))
+            message = timeout_message(str(doc["function"]), str(doc["fmu"]), float(doc["timeout"]),
+                                      str(doc.get("phase") or ""))
         except (ValueError, KeyError, TypeError, IndexError):
             message = timeout_message("an FMI call", fmu_path, fmu_timeout())
         print(f"error: {message}", file=sys.stderr)

@@ -53,7 +53,8 @@ import pandas as pd
 from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
 from .estimation import nrmse
-from .generate.filters import modelica_name
+from .generate.filters import modelica_name, tracked_output
+from .simulation.initial import apply_states, twin_initial_states
 from .simulation.models import open_model
 from .tracking.runtime import track
 
@@ -189,16 +190,21 @@ def _hold_signal(spec: Spec, view: MeasurementView, lead: int = 0) -> tuple[np.n
 
 
 def _run_box(model: Any, inputs: pd.DataFrame, held: dict[str, np.ndarray], grid: np.ndarray,
-             outputs: list[str], parameters: dict[str, float] | None = None) -> pd.DataFrame:
+             outputs: list[str], parameters: dict[str, float] | None = None,
+             states: dict[str, float] | None = None) -> pd.DataFrame:
     """Run the tracked FMU over *grid*: *inputs* interpolated linearly, *held* held over each sample.
 
-    The held inputs (``hold``, and correction flows fed from the Python
-    runtime) are values per sample as the runtime applies them, so they are set
-    between communication steps instead of being interpolated between samples.
+    The held inputs (``hold``, correction flows fed from the Python runtime,
+    and the twin's inputs under ``[data] inputs = "hold"``) are values per
+    sample as the runtime applies them, so they are set between communication
+    steps instead of being interpolated between samples. *states*: the twin's
+    starting states by name (``[data] initial = "steady"``).
     """
     run = model.stepper(start_time=float(grid[0]),
                         parameters={**(parameters or {}), **{n: float(v[0]) for n, v in held.items()}},
                         inputs=inputs)
+    if states:
+        apply_states(run, states)
     read = run.reader(outputs)
     rows = np.empty((grid.size, len(outputs)))
     rows[0] = read()
@@ -271,7 +277,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     # Inputs of the tracked FMU: the twin's inputs, the measurements (filled), hold.
     inputs = view.inputs.to_dict(orient="series")
     inputs = {name: np.asarray(v, dtype=float) for name, v in inputs.items()}
-    pair_names = {p.parameter: modelica_name(p.parameter) for p in spec.pairs}
+    pair_names = {p.parameter: tracked_output(p.parameter) for p in spec.pairs}
     for pair in spec.pairs:
         inputs[f"{modelica_name(pair.variable)}_meas"] = view.filled(pair.variable)
     lead = 1 if interpolation == "zoh" else 0
@@ -299,11 +305,18 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
                                + " (was it generated from this spec?)")
         # the twin's parameters as the runtime runs it: [fixed] values and the starts of the parameters
         # no pair drives (the box drives the paired ones); names the tracked FMU does not tune are skipped
-        tunable = set(model.info.tunable_parameters) if hasattr(model.info, "tunable_parameters") else set()
+        tunable = set(model.info.names("parameter"))  # tunable or fixed: set before initialisation
         paired = {p.parameter for p in spec.pairs}
         given = {**{p.name: float(p.start) for p in spec.parameters if p.name not in paired}, **spec.fixed}
-        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs,
-                       {n: float(v) for n, v in given.items() if n in tunable})
+        if spec.data.inputs == "hold":  # the twin's inputs held over each sample, as the runtime's twin has them
+            held.update({name: inputs.pop(name) for name in list(view.inputs.columns) if name != "time"})
+        start_params = {n: float(v) for n, v in given.items() if n in tunable}
+        states = None
+        if spec.data.initial == "steady":
+            states = twin_initial_states(spec, start_time=float(grid[0]), inputs=view.inputs, tolerance=tolerance,
+                                         parameters={**{p.name: float(p.start) for p in spec.parameters},
+                                                     **spec.fixed})
+        sim = _run_box(model, pd.DataFrame(inputs), held, grid, outputs, start_params, states)
         logger.info("ran the tracked FMU %s with %d of the spec's fixed values and unpaired starts", fmu.name,
                     sum(n in tunable for n in given))
     finally:

@@ -367,7 +367,9 @@ def simulate_untracked(spec: Spec, variables: Sequence[str], *, start: float, st
     model = open_model(spec.twin, tolerance=tolerance)
     try:
         stepper = model.stepper(start_time=0.0, parameters={**base, **{s.correction: 0.0 for s in spec.states}},
-                                inputs=view.inputs)
+                                inputs=view.inputs, input_rule=spec.data.inputs)
+        if spec.data.initial == "steady":
+            stepper.settle()
         for k in range(n):
             sim[:, k] = stepper.get(outs)
             if k == n - 1:

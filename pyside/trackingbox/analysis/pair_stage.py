@@ -453,7 +453,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     step_settings = StepSettings(step=s.step, two_sided=s.two_sided, freeze=tuple(freeze.items()),
                                  interval=interval, window=float(s.window or 60 * interval),
                                  tolerance=s.tolerance, baseline_tolerance=s.baseline_tolerance,
-                                 max_time=s.max_time)
+                                 max_time=s.max_time, steady_start=spec.data.initial == "steady")
     if s.check_gains not in ("recording", "structure"):
         raise AnalysisError(f"check_gains {s.check_gains!r}: expected 'recording' or 'structure'")
     sob = st2 = st_rec = None

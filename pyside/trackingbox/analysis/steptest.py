@@ -35,6 +35,7 @@ import pandas as pd
 
 from ..errors import AnalysisError, FMUError, TrackingError, unknown_name
 from ..fmu import read_info
+from ..fmu.info import change_refusal
 from ..simulation.models import cached_model
 
 logger = logging.getLogger(__name__)
@@ -98,6 +99,9 @@ class StepSettings:
     warm_start: bool = True
     drift_correction: bool = True
     reference_horizon: float | None = None
+    #: start the first settle from the model's steady state at the operating point (the spec's
+    #: ``[data] initial = "steady"``) instead of its own initial state: a slow twin is settled at once
+    steady_start: bool = False
 
     def __post_init__(self) -> None:
         for name in ("step", "interval", "window", "tolerance", "baseline_tolerance", "max_time",
@@ -274,6 +278,8 @@ def run_plan(plan: RunPlan) -> RunResult:
         stepper = model.stepper(start_time=t_start, parameters=start, max_step=s.interval)
         if warm:
             stepper.set_continuous_states(np.asarray(plan.states, dtype=float))
+        elif s.steady_start:
+            stepper.settle()
     except TrackingError as exc:
         raise AnalysisError(f"step test {plan.label}: the twin could not be initialised: {exc}") from None
     outs = list(plan.outputs)
@@ -369,7 +375,8 @@ def run_plan(plan: RunPlan) -> RunResult:
         if k >= k_max:
             raise AnalysisError(
                 f"step test {plan.label}: the response did not settle within {s.max_time:g} s of the step "
-                f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}")
+                f"at t = {step_time:g} s: {_still_moving(outs, det.spans(), limits, s.window)}; raise --max-time "
+                f"(a slow twin's responses take several of its time constants to settle)")
         k += 1
         if ref_traj is not None and k - k_step >= len(ref_traj):  # past a shortened reference: run again
             return RunResult(plan.label, freeze_time, step_time, before, traj[-1], (k - 1) * s.interval,
@@ -582,18 +589,17 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
     names = {v.name: v for v in info.variables}
     tunable = set(info.tunable_parameters)
     settable = tunable | set(info.inputs)
+    changeable = tunable | set(info.names("parameter", "fixed"))
     problems: list[str] = []
     where = f"FMU {Path(fmu).name}"
     for tag, out in outputs.items():
         if out not in names:
             problems.append(unknown_name("output", out, info.outputs or list(names), where) + f" (for tag {tag!r})")
     for name, start, lo, hi in parameters:
-        if name not in tunable:
-            if name in names:
-                problems.append(f"parameter {name!r} of {where} is not a tunable parameter "
-                                f"(causality {names[name].causality}, variability {names[name].variability})")
-            else:
-                problems.append(unknown_name("parameter", name, sorted(tunable), where))
+        if name not in names:
+            problems.append(unknown_name("parameter", name, sorted(changeable), where))
+        elif (refusal := change_refusal(info, name)) is not None:
+            problems.append(refusal)
         if not (lo < hi):
             problems.append(f"parameter {name!r} has bounds [{lo:g}, {hi:g}]: min must be below max")
     for name in (freeze or {}):

@@ -171,7 +171,9 @@ class BenchDefinition:
     scenario: Scenario
     fixed: Mapping[str, float] = field(default_factory=dict)
     states: tuple[StateSpec, ...] = ()
-    data: DataRules = field(default_factory=DataRules)
+    #: the benches' plants are measured after a warm-up with their inputs held: their twins start from
+    #: their steady state at the first sample (``[data] initial = "steady"``)
+    data: DataRules = field(default_factory=lambda: DataRules(initial="steady"))
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
     truth_map: Mapping[str, str] = field(default_factory=dict)
     """Twin candidate parameter -> plant parameter holding its true value, where names differ."""

@@ -393,7 +393,7 @@ DEFINITION = BenchDefinition(
     # every tag is exception-reported with the same heartbeat: held between records, missing
     # after 1.5 heartbeats of silence or from a bad-quality event (the data layer's rule)
     data=DataRules(stoppage=StoppageRule("FI-6110", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE),
-                   heartbeat={"*": 600.0}),
+                   heartbeat={"*": 600.0}, initial="steady"),
     tracking=TrackingSettings(hold_until=3600.0),
 )
 
@@ -578,7 +578,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         # spec
         lib = _library_path()
         half, end = round(n_meas / 2) * dt, n_meas * dt
-        data = d.data if history is not None else DataRules(stoppage=d.data.stoppage)
+        data = d.data if history is not None else DataRules(stoppage=d.data.stoppage, initial=d.data.initial)
         spec = Spec(
             path=out / "spec.toml", twin=out / "twin.fmu", measurements=out / "measurements.csv",
             sample_time=dt,

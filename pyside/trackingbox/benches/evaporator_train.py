@@ -512,7 +512,7 @@ DEFINITION = BenchDefinition(
     states=states(DEFAULT_EFFECTS),
     data=DataRules(stoppage=StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"],
                                          stoppage_settle(DEFAULT_EFFECTS)),
-                   heartbeat={"*": HEARTBEAT}),
+                   heartbeat={"*": HEARTBEAT}, initial="steady"),
     tracking=TrackingSettings(hold_until=3600.0),
 )
 
@@ -694,8 +694,8 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
             source = SourceSpec(path=out / models.twin_class_file, model=models.twin)
         half, end = round(n_meas / 2) * dt, n_meas * dt
         stoppage = StoppageRule("FI-7010", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], stoppage_settle(n))
-        data = (DataRules(stoppage=stoppage, heartbeat={"*": HEARTBEAT}) if history is not None
-                else DataRules(stoppage=stoppage))
+        data = (DataRules(stoppage=stoppage, heartbeat={"*": HEARTBEAT}, initial="steady") if history is not None
+                else DataRules(stoppage=stoppage, initial="steady"))
         level_tags = {st.tag for st in state_specs}
         spec = Spec(
             path=out / "spec.toml", twin=out / "twin.fmu", measurements=out / "measurements.csv",

@@ -114,3 +114,25 @@ def add_executor_arguments(parser: argparse.ArgumentParser, *, what: str, defaul
                         help="run them on a Dask cluster instead: tcp://HOST:PORT of an existing scheduler "
                              "(workers must see the FMU under the same path), or 'local' for a Dask "
                              "cluster of --workers processes on 127.0.0.1")
+
+
+def add_library_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--library PATH`` (repeatable): a Modelica library the twin's source uses, for *what*."""
+    from pathlib import Path
+
+    p.add_argument("--library", action="append", default=[], type=Path, metavar="PATH",
+                   help=f"Modelica library the twin's source uses when {what} (package directory or .mo file; "
+                        "repeatable), beside the spec's [source] libraries; libraries beside the source and "
+                        "on MODELICAPATH are found without")
+
+
+def with_libraries(spec: Any, libraries: Iterable[Any]) -> Any:
+    """*spec* with *libraries* (``--library``) added to its ``[source] libraries`` (unchanged without)."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    extra = tuple(Path(p).resolve() for p in libraries)
+    if not extra or spec.source is None:
+        return spec
+    return replace(spec, source=replace(spec.source, libraries=tuple(dict.fromkeys((*spec.source.libraries,
+                                                                                     *extra)))))

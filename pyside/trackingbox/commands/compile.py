@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spec", metavar="SPEC",
                    help="check that the FMU exposes this spec's parameters (tunable), inputs and outputs "
                         "under the same names; a difference is an error naming each variable")
+    p.add_argument("--parameters", choices=("tunable", "fixed"), default="tunable",
+                   help="embedded backend: export the parameters tunable (default) or declare them 'fixed' "
+                        "(set only before initialisation), as other tools export them")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=run)
 
@@ -48,10 +51,10 @@ def run(args: argparse.Namespace) -> int:
     if args.spec:
         expected = ExpectedInterface.from_spec(load_spec(args.spec, check_files=False))
     result = compile_model(args.source, args.model, backend=args.backend, output=args.output,
-                           libraries=args.library, expected=expected)
+                           libraries=args.library, expected=expected, parameters=args.parameters)
     if args.json:
         print(json.dumps(result.to_json()))
     else:
         print(f"{result.fmu}  (FMI {result.fmi_version}, {result.backend}, {result.states} states, "
-              f"{result.parameters} tunable parameters, {result.seconds:.2f} s)")
+              f"{result.parameters} {args.parameters} parameters, {result.seconds:.2f} s)")
     return 0

@@ -12,7 +12,7 @@ from ..report.diagnose import write_diagnose_report
 from ..spec import check_against_fmu, load_spec
 from ..stages import diagnose as stage
 from ..stages.contract import settings_from_args
-from ._args import add_executor_arguments, number
+from ._args import add_executor_arguments, add_library_option, number, with_libraries
 from ._progress import Progress
 
 log = logging.getLogger(__name__)
@@ -53,6 +53,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--report", type=Path, metavar="DIR", help="write the diagnosis report (Markdown, plots) to DIR")
     p.add_argument("-o", "--output", type=Path, metavar="DIR",
                    help="write <Twin>Diagnosed.mo, its diff and the patched spec to DIR")
+    add_library_option(p, "diagnose --compile compiles the patched twin")
     p.add_argument("--compile", action="store_true",
                    help="fit the best candidates through their patched, compiled twin and build the patch's FMU")
     p.add_argument("--effects", default="", metavar="ID,...", help="only these effect ids (comma-separated)")
@@ -74,7 +75,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the diagnosis; exit code 0 for every verdict."""
-    spec = load_spec(args.spec)
+    spec = with_libraries(load_spec(args.spec), args.library)
     inputs = [spec.path, spec.twin, spec.measurements]
     for option, value in (("--report", args.report), ("-o", args.output)):
         if value is not None:

@@ -146,6 +146,8 @@ def _print_table(result: Any) -> None:
         print(f"{tag:<{twidth}}  {result.training_nrmse[tag]:>12.4g}  {result.validation_nrmse[tag]:>12.4g}"
               f"  {result.validation_nrmse_initial[tag]:>13.4g}")
     print(f"\n{result.evaluations} simulations in {result.seconds:.1f} s")
+    if result.warmup_note():
+        print(result.warmup_note())
     if result.refinement:
         why = f" ({result.refinement['reason']})" if result.refinement.get("reason") else ""
         print(f"refinement Jacobian: {result.refinement['jacobian']}{why}")

@@ -17,6 +17,7 @@ examples:
   gen-trackingbox case1/spec.toml -o case1/generated
   trackingbox generate case1/spec.toml -o case1/generated --compile
   trackingbox generate case1/spec.toml -o gen --rewrite --json
+  gen-trackingbox wall/spec.toml -o wall/generated --compile --library ../msl/Modelica
 
 writes into -o DIR a Modelica package <Twin>Tracking/ (package.mo, package.order,
 <Twin>TrackingBox.mo, <Twin>Tracked.mo) that loads together with the twin's
@@ -24,9 +25,16 @@ library; --compile also writes DIR/<Twin>Tracked.fmu. The spec needs [source]
 (the twin's Modelica) and [[pairs]] (run `trackingbox pair` first).
 
 Each tracked parameter's component must offer a conditional input
-(parameter Boolean use_kht_in, input kht_in if use_kht_in). If it does not,
-generate stops and prints the lines to add; --rewrite instead writes a patched
-copy of the source to DIR/patched/ and prints the unified diff.
+(parameter Boolean use_kht_in, input kht_in if use_kht_in). If a class of the
+twin's own package does not, generate stops and prints the lines to add;
+--rewrite instead writes a patched copy of the source to DIR/patched/ and
+prints the unified diff. A component whose class lives in a read-only library
+(the MSL, [source] libraries, --library) gets a variant of that class in the
+generated package, and the tracked model extends a variant of the twin that
+uses it: the library is never edited. A top-level parameter of the twin passed
+to components by modifiers (thermalResistor1(R = R1)) is driven through each of
+them. A parameter that cannot follow an input (Evaluate = true, used in another
+parameter's binding or a start value) is refused, naming why.
 """
 
 
@@ -47,7 +55,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--backend", choices=("auto", "embedded", "openmodelica"), default="auto",
                    help="compiler backend for --compile (default auto)")
     p.add_argument("--rewrite", action="store_true",
-                   help="patch a copy of the twin's source where a component lacks the conditional input")
+                   help="patch a copy of the twin's source where a component of its own lacks the conditional "
+                        "input (a component of a library class gets a generated variant of it anyway)")
+    p.add_argument("--library", action="append", default=[], type=Path, metavar="PATH",
+                   help="Modelica library the twin uses (package directory or .mo file; repeatable), beside "
+                        "[source] libraries; libraries beside the source and on MODELICAPATH are found without")
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.set_defaults(func=run)
 
@@ -63,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, spec: Any, out: Path) -> int:
-    result = stage.run(spec, settings_from_args(stage.GenerateSettings, args, out_dir=out))
+    result = stage.run(spec, settings_from_args(stage.GenerateSettings, args, out_dir=out,
+                                                library=tuple(args.library)))
     if result.rewrite is not None:
         # The diff is part of what the user asked for; keep stdout clean for --json.
         stream = sys.stderr if args.json else sys.stdout

@@ -20,7 +20,7 @@ from ..spec import check_against_fmu, load_spec
 from ..stages import track as stage
 from ..stages.contract import settings_from_args
 from ..view.server import BackgroundView, ViewSettings
-from ._args import number
+from ._args import add_library_option, number, with_libraries
 from ._progress import Progress
 
 log = logging.getLogger(__name__)
@@ -72,6 +72,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--window", choices=("training", "validation", "all"), default="all",
                    help="window the NRMSE figures are taken over, after the start-up hold; the run "
                         "goes from the first sample to the window's end (default: all)")
+    add_library_option(p, "track --controllers continuous compiles the twin with its parameters as inputs")
     p.add_argument("--controllers", choices=("discrete", "continuous"), default="discrete",
                    help="discrete (default): the controllers' exact discretisation, updated every sample; "
                         "continuous: the box's laws integrated with the twin by CVODE (needs [source]; "
@@ -104,7 +105,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the tracking simulator; exit code 0 on success."""
-    spec = load_spec(args.spec)
+    spec = with_libraries(load_spec(args.spec), args.library)
     inputs = [spec.path, spec.twin, spec.measurements]
     out = check_output(args.out or args.report or Path(spec.path).parent / "track",
                        "--out" if args.out else "--report" if args.report else "the output directory",

@@ -81,6 +81,7 @@ def compile_model(
     output: str | Path | None = None,
     libraries: tuple[str | Path, ...] | list[str | Path] = (),
     expected: Any = None,
+    parameters: str = "tunable",
 ) -> CompileResult:
     """Compile the Modelica class *model* from *source* into an FMU.
 
@@ -105,6 +106,13 @@ def compile_model(
         must expose these parameters (tunable), inputs and outputs under these
         names, whichever backend built it; otherwise a :class:`CompileError`
         names each difference and no FMU is left behind.
+    parameters:
+        ``"tunable"`` (default): the embedded backend exports every parameter
+        tunable. ``"fixed"``: it declares them with FMI variability ``fixed``
+        (set only before initialisation), as Dymola and OpenModelica export
+        most parameters: an FMU to try the fixed-parameter path on. The
+        OpenModelica backend decides per parameter itself and takes only the
+        default.
 
     Raises
     ------
@@ -115,6 +123,11 @@ def compile_model(
         The embedded backend met a construct it does not support.
     """
     chosen = choose_backend(backend)
+    if parameters not in ("tunable", "fixed"):
+        raise CompileError(f"parameters must be 'tunable' or 'fixed', not {parameters!r}")
+    if parameters == "fixed" and chosen != "embedded":
+        raise CompileError("--parameters fixed is an option of the embedded backend (OpenModelica decides each "
+                           "parameter's variability itself): add --backend embedded")
     src = resolve_source(source)
     out = Path(output) if output is not None else Path.cwd() / f"{model.rsplit('.', 1)[-1]}.fmu"
     out = out.resolve()
@@ -124,7 +137,7 @@ def compile_model(
         if chosen == "embedded":
             from .embedded import compile_embedded
 
-            text, states, params = compile_embedded(src, model, out, libs)
+            text, states, params = compile_embedded(src, model, out, libs, parameters)
             version = "3.0"
         else:
             from .openmodelica import compile_openmodelica

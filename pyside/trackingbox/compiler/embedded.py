@@ -479,8 +479,11 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
 
 
 def compile_embedded(source: ModelicaSource, model: str, output: Path,
-                     libraries: tuple[Path, ...] = ()) -> tuple[str, int, int]:
-    """Compile with the embedded toolchain; returns (log, n_states, n_parameters)."""
+                     libraries: tuple[Path, ...] = (), parameters: str = "tunable") -> tuple[str, int, int]:
+    """Compile with the embedded toolchain; returns (log, n_states, n_parameters).
+
+    *parameters* ``"fixed"`` declares the parameters ``fixed`` in the FMU (:func:`.fmi_export.declare_fixed`).
+    """
     t0 = time.perf_counter()
     libraries, missing = resolve_libraries(source, model, libraries)
     flat = flatten(source, model, libraries, missing)
@@ -495,7 +498,7 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     em = translator.translate()
     t2 = time.perf_counter()
     settings = experiment_settings(source, model)
-    build_log = export_fmu(em, translator, output, experiment=settings)
+    build_log = export_fmu(em, translator, output, experiment=settings, fixed_parameters=parameters == "fixed")
     t3 = time.perf_counter()
     computed = set(em.initial.computed_parameters) if em.initial is not None else set()
     tunable = sum(1 for p in em.parameters if p.name not in computed)  # fixed = false ones are calculated

@@ -203,11 +203,13 @@ def export_fmu(
     experiment: dict[str, float] | None = None,
     description: str | None = None,
     optimize: str | None = None,
+    fixed_parameters: bool = False,
 ) -> str:
     """Write the FMU to *output* atomically; return the build log.
 
     *optimize* is gcc's optimisation flag; ``None`` chooses by the size of the generated C
-    (:func:`optimization_flag`).
+    (:func:`optimization_flag`). *fixed_parameters*: declare the model's parameters with FMI
+    variability ``fixed`` (settable before initialisation only), as other tools export them.
     """
     logs: list[str] = []
     dae, exposed, causality = build_dae(em, translator)
@@ -258,6 +260,8 @@ def export_fmu(
             _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
                                     initial=em.initial, events=em.events)
         )
+        if fixed_parameters:
+            md_path.write_text(declare_fixed(md_path.read_text(), {sv.name for sv in em.parameters}))
         output.parent.mkdir(parents=True, exist_ok=True)
         fd, part = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part", dir=output.parent)
         os.close(fd)
@@ -292,6 +296,20 @@ def _patch_set_time(wrapper: Path) -> None:
             "as expected; the embedded path is pinned to casadi 3.8.2"
         )
     wrapper.write_text(text.replace(_SET_TIME, _SET_TIME_PATCHED))
+
+
+def declare_fixed(xml: str, names: set[str]) -> str:
+    """The model description *xml* with the tunable parameters among *names* declared ``fixed``.
+
+    >>> x = '<m><ModelVariables><Float64 name="k" causality="parameter" variability="tunable"/></ModelVariables></m>'
+    >>> 'variability="fixed"' in declare_fixed(x, {"k"})
+    True
+    """
+    root = ET.fromstring(xml)
+    for var in root.iter():
+        if var.get("name") in names and var.get("causality") == "parameter" and var.get("variability") == "tunable":
+            var.set("variability", "fixed")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def _tidy_model_description(

@@ -302,7 +302,7 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     marker = folder / ".compiled"
     key = _compile_key(spec, render(spec, effect, target, warm_values(effect, None)))
     if not (fmu.is_file() and marker.is_file() and marker.read_text() == key):
-        fmu = Path(library.compile_patch(patch, folder).fmu)
+        fmu = Path(library.compile_patch(patch, folder, libraries=_source_libraries(spec)).fmu)
         marker.write_text(key)
     spec_path = Path(library.patched_spec(spec, patch, folder, fmu))
     full = {_short(p.name, effect): p.name for p in patch.parameters}
@@ -315,6 +315,12 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     known = set(pspec.parameter_names)
     write_starts(spec_path, {k: v for k, v in starts.items() if k in known})
     return Prepared(patch, fmu, spec_path, load_spec(spec_path), full, bounds, start)
+
+
+def _source_libraries(spec: Any) -> tuple[Path, ...]:
+    """The libraries the twin's source uses (``[source] libraries``), none without a ``[source]``."""
+    source = getattr(spec, "source", None)
+    return tuple(source.libraries) if source is not None else ()
 
 
 def _compile_key(spec: Any, structure: Any) -> str:

@@ -723,8 +723,11 @@ def write_patch(patch: Patch, out_dir: str | Path) -> Path:
     return target
 
 
-def compile_patch(patch: Patch, out_dir: str | Path, *, output: str | Path | None = None) -> Any:
+def compile_patch(patch: Patch, out_dir: str | Path, *, output: str | Path | None = None,
+                  libraries: tuple[Path, ...] | list[Path] = ()) -> Any:
     """Compile the patched twin on the embedded path (the twin's library and TrackingBox beside it).
+
+    *libraries*: further libraries the twin uses (the spec's ``[source] libraries``), named as they are.
 
     Returns
     -------
@@ -734,6 +737,7 @@ def compile_patch(patch: Patch, out_dir: str | Path, *, output: str | Path | Non
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     fmu = Path(output) if output is not None else out / f"{patch.model}.fmu"
+    extra = libraries
     with tempfile.TemporaryDirectory(prefix="trackingbox-patch-") as tmp:
         stage = Path(tmp)
         libraries = []
@@ -748,7 +752,8 @@ def compile_patch(patch: Patch, out_dir: str | Path, *, output: str | Path | Non
             libraries.append(target)
         file = stage / patch.file_name
         file.write_text(patch.source, encoding="utf-8")
-        return compile_model(file, patch.model, backend="embedded", output=fmu, libraries=libraries)
+        return compile_model(file, patch.model, backend="embedded", output=fmu,
+                             libraries=[*libraries, *(Path(p) for p in extra)])
 
 
 def patched_spec(spec: Any, patch: Patch, out_dir: str | Path, fmu: str | Path) -> Path:

@@ -341,9 +341,10 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
     """Simulate *window* with parameter *name* = ``base * (1 - rate * (t - t_mid))``, set between steps.
 
     Times are seconds from the first sample; *rate* is per second; *schedule*
-    (time -> value), when given, replaces that straight line. The
-    held-input pre-run of :func:`trackingbox.estimation.simulate_window` comes
-    first, with the parameter at its value at the window's first grid point.
+    (time -> value), when given, replaces that straight line. The run
+    starts as :func:`trackingbox.estimation.simulate_window`'s (its warm-up through
+    the measured history, the spec's input rule and initial state), with the
+    parameter at its value at the window's first grid point.
     Returns output tag -> values on the window's grid (lead-in cut off).
     """
     problem = where.problem
@@ -357,7 +358,9 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
 
     parameters[name] = value_at(float(window.time[0]))
     model = cached_model(problem.twin)
-    stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs)
+    stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs, input_rule=problem.inputs)
+    if problem.initial == "steady":
+        stepper.settle()
     outputs = list(problem.outputs.values())
     if offset > 0:
         stepper.step(t0 + offset)

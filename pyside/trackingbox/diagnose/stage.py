@@ -486,7 +486,8 @@ def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
             assert work is not None
             folder = Path(work) / "named"
             folder.mkdir(parents=True, exist_ok=True)
-            fmu = Path(library.compile_patch(patch, folder).fmu)
+            fmu = Path(library.compile_patch(
+                patch, folder, libraries=spec.source.libraries if spec.source is not None else ()).fmu)
     patch_file = patch_spec = None
     if settings.out_dir is not None:
         out = Path(settings.out_dir)

@@ -199,6 +199,13 @@ def jacobian_support(problem: Problem, window: WindowData, requested: str) -> tu
                "1 + n native runs are the cheaper Jacobian")
         log.info("refinement Jacobian by finite differences: %s", why)
         return "fd", why
+    if problem.initial != "model":
+        why = (f"runs start from the steady state ([data] initial = {problem.initial!r}), which moves with the "
+               "parameters; the sensitivity equations start at zero")
+        if requested == "exact":
+            raise EstimationError(f"jacobian = 'exact' is not possible: {why}; use 'fd' or 'auto'")
+        log.info("refinement Jacobian by finite differences: %s", why)
+        return "fd", why
     parameters, _, _, inputs = window_setup(problem, window, problem.start)
     found = support(model, problem.names, problem.upper - problem.lower, start_time=run_start(problem, window),
                     parameters=parameters, inputs=inputs)

@@ -44,19 +44,16 @@ same minimiser for a single tag.
 Initial states
 --------------
 The twin FMU starts from its own start values, not from the plant's state. Each
-simulation therefore begins ``warmup`` seconds (default :data:`DEFAULT_WARMUP`)
-before its window, with the candidate parameters applied, and that warm-up is
-never scored:
-
-* where measurements precede the window (the validation window), the twin runs
-  through them (*lead-in*, measured inputs), so slow states follow the history;
-* the rest (all of it for a window at the first sample) is a *steady-state
-  pre-run*: the inputs held at their first values, rounded up to whole sample
-  times.
-
-States that integrate (tank levels whose in- and outflows do not balance at the
-first input values) drift during a held pre-run; give such twins a short
-``warmup`` or a level controller.
+simulation therefore begins up to ``warmup`` seconds (default :data:`DEFAULT_WARMUP`)
+before its window, with the candidate parameters applied, and runs through the
+measured history there (*lead-in*, measured inputs, never scored), so slow states
+follow the history into the window. No FMU runs before the data's first sample:
+where the data have less history (a window at the first sample has none) the
+warm-up is shortened to what exists, the result says so
+(:attr:`EstimationResult.warmups`, :meth:`EstimationResult.warmup_note`), and the
+run starts there from the FMU's own initial state, or from its steady state with
+the inputs there when the spec says ``[data] initial = "steady"`` (model exchange;
+an integrating state without a steady state is refused, naming it).
 
 Grid
 ----
@@ -102,6 +99,7 @@ from ..simulation.windows import (
     load_windows,
     problem_from_spec,
     simulate_window,
+    warmup_used,
 )
 from ..spec import write_starts as _write_starts
 from .objective import Objective, fmt_values, jacobian_support
@@ -151,7 +149,14 @@ class EstimationResult:
     bounds
         ``(min, max)`` of each parameter.
     warmup
-        Length of the steady-state pre-run used before each window (s).
+        Warm-up asked for before each window (s).
+    warmups
+        Warm-up each window had (s): the measured history its run went through
+        before it, shortened where the data have less (a window at the first
+        sample: 0, the run starts from ``initial_state``).
+    initial_state
+        Where a run without history started: ``"model"`` (the FMU's own initial
+        state) or ``"steady"`` (its steady state): the spec's ``[data] initial``.
     refinement
         How the local refinement ran: ``jacobian`` (``"exact"`` or ``"fd"``, what
         was used), ``requested`` (the ``jacobian`` setting), ``reason`` (why not
@@ -172,6 +177,23 @@ class EstimationResult:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     warmup: float = DEFAULT_WARMUP
     refinement: dict[str, Any] = field(default_factory=dict)
+    warmups: dict[str, float] = field(default_factory=dict)
+    initial_state: str = "model"
+
+    def shortened_warmups(self) -> dict[str, float]:
+        """Window -> the warm-up it had, for the windows whose warm-up was shorter than asked for."""
+        return {w: v for w, v in self.warmups.items() if v < self.warmup - 1e-9 * max(1.0, self.warmup)}
+
+    def warmup_note(self) -> str:
+        """One sentence on the warm-ups the windows had ("" when each had the one asked for)."""
+        short = self.shortened_warmups()
+        if not short:
+            return ""
+        start = ("the FMU's own initial state" if self.initial_state == "model"
+                 else "the model's steady state")
+        parts = ", ".join(f"the {w} window's to {v:g} s" for w, v in short.items())
+        return (f"warm-up shortened to the measured history that exists ({self.warmup:g} s asked for): {parts}; "
+                f"runs start there from {start} ([data] initial = \"{self.initial_state}\")")
 
     def to_json(self) -> dict[str, Any]:
         """The ``trackingbox estimate --json`` document."""
@@ -185,6 +207,9 @@ class EstimationResult:
             "evaluations": int(self.evaluations),
             "seconds": float(self.seconds),
         }
+        if self.shortened_warmups():  # only then: the document says what the data did not allow
+            out["warmup"] = {"requested": float(self.warmup), "used": {k: float(v) for k, v in self.warmups.items()},
+                             "initial": self.initial_state, "note": self.warmup_note()}
         if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's
             out["refinement"] = {k: v for k, v in self.refinement.items() if k not in ("seconds", "cpu_seconds")}
         return out
@@ -236,7 +261,8 @@ def estimate(
         Population size per parameter (population = ``popsize * n_parameters``, at least 5);
         default ``max(2, ceil(DEFAULT_POPULATION / n_parameters))``.
     warmup
-        Steady-state pre-run before each window (s); default :data:`DEFAULT_WARMUP`.
+        Warm-up before each window (s), through the measured history (shortened to what exists); default
+        :data:`DEFAULT_WARMUP`.
     refine
         Run the least-squares refinement after the global search.
     refine_iterations
@@ -433,6 +459,12 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
          refine_grid: float | None = None, jacobian: str = "auto",
          scheduler: str | None = None, settle: float = GLOBAL_SETTLE) -> EstimationResult:
     training, validation = load_windows(spec, warmup=problem.warmup)
+    warmups = {w.name: warmup_used(w) for w in (training, validation)}
+    for name, used in warmups.items():
+        if used < problem.warmup - 1e-9 * max(1.0, problem.warmup):
+            log.warning("the %s window's warm-up is shortened from %g s to %g s (the measured history before "
+                        "it); its runs start from %s", name, problem.warmup, used,
+                        "the FMU's own initial state" if problem.initial == "model" else "the steady state")
     train = Objective(problem, training)
     valid = Objective(problem, validation)
     history: list[float] = []
@@ -529,6 +561,8 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
         bounds={name: (float(lo), float(hi)) for name, lo, hi in zip(problem.names, problem.lower, problem.upper)},
         warmup=problem.warmup,
         refinement=refinement,
+        warmups=warmups,
+        initial_state=problem.initial,
     )
     _write_checkpoint(ckpt, {"stage": "done", **result.to_json(), "history": list(result.history)})
     return result

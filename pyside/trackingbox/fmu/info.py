@@ -108,6 +108,48 @@ class FMUInfo:
         return self.names("parameter", "tunable")
 
 
+#: What to do with a ``fixed`` parameter of a co-simulation-only FMU (one line, see :func:`change_refusal`).
+FIXED_PARAMETER_REMEDY = (
+    "export the FMU with model exchange as well (OpenModelica: buildModelFMU(..., fmuType=\"me_cs\"); "
+    "Dymola: translateModelFMU(..., fmiType=\"all\")), which trackingbox re-initialises at each change, "
+    "or compile the model's Modelica source here with `trackingbox compile SOURCE --model NAME "
+    "--backend embedded` (every parameter tunable); see docs/your-own-model.md"
+)
+
+
+def change_refusal(info: FMUInfo, name: str, interface: str | None = None) -> str | None:
+    """Why *name* cannot change between two steps of a run of this FMU, or None if it can.
+
+    Inputs and ``tunable`` parameters change between steps as FMI allows. A
+    ``fixed`` parameter can change only before initialisation: on the
+    model-exchange interface a run changes it by re-initialising the FMU at the
+    current time and restoring its continuous states
+    (:meth:`~trackingbox.fmu.steppers.ModelExchangeStepper.set`); a run on the
+    co-simulation interface cannot restore its states, so the answer names what
+    to do instead. *interface* is the one the run uses (default: model exchange
+    where the FMU offers it, as :class:`~trackingbox.fmu.FMUModel` chooses).
+
+    >>> v = Variable("k", "parameter", "fixed", "Real", 1.0, None, None, None, None, "", 1)
+    >>> change_refusal(FMUInfo(Path("me.fmu"), "2.0", "M", ("ModelExchange",), (v,)), "k") is None
+    True
+    >>> change_refusal(FMUInfo(Path("cs.fmu"), "2.0", "M", ("CoSimulation",), (v,)), "k")[:60]
+    "parameter 'k' of FMU cs.fmu is 'fixed' (FMI: set only befor"
+    """
+    v = info.variable(name)
+    if v.causality == "input" or (v.causality == "parameter" and v.variability == "tunable"):
+        return None
+    if v.causality == "parameter" and v.variability == "fixed":
+        if interface is None:
+            interface = "ModelExchange" if "ModelExchange" in info.interfaces else "CoSimulation"
+        if interface == "ModelExchange":
+            return None
+        return (f"parameter {name!r} of FMU {info.path.name} is 'fixed' (FMI: set only before initialisation) "
+                f"and the FMU runs as co-simulation, whose states cannot be restored after a re-initialisation, "
+                f"so it cannot follow a tracking controller: {FIXED_PARAMETER_REMEDY}")
+    return (f"variable {name!r} of FMU {info.path.name} is {v.variability} {v.causality}; only tunable parameters "
+            f"and inputs can be set between steps (fixed parameters too, on model exchange)")
+
+
 def float_or_none(text: Any) -> float | None:
     if text is None:
         return None

@@ -14,7 +14,7 @@ import math
 import os
 import shutil
 import weakref
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -204,6 +204,7 @@ class FMUModel:
         carry: bool = False,
         native: bool | None = None,
         keep_jacobian: bool = False,
+        input_rule: str = "linear",
     ) -> Stepper:
         """Initialise a new run at *start_time* and return its :class:`Stepper`.
 
@@ -219,8 +220,8 @@ class FMUModel:
             Values set before initialisation: parameters (fixed or tunable),
             start values of states (``initial="exact"``), or constant inputs.
         inputs
-            Table with a ``time`` column (s) and FMU input columns; linear
-            interpolation between samples, held constant before the first and
+            Table with a ``time`` column (s) and FMU input columns; between
+            samples as *input_rule* says, held constant before the first and
             after the last sample.
         max_step
             Largest internal solver step (model exchange); default: the smallest
@@ -247,6 +248,11 @@ class FMUModel:
             :meth:`~trackingbox.native.NativeStepper.keep_jacobian`); the
             trajectory stays within the solver's tolerance of the one without
             it, not bit for bit. Ignored on the Python path.
+        input_rule
+            How the *inputs* table reaches the FMU between its samples (the
+            spec's ``[data] inputs``): ``"linear"`` interpolated, ``"hold"`` held
+            at the last sample; the same on both interfaces (see
+            :class:`~trackingbox.fmu.steppers.CoSimulationStepper`).
         """
         if self.closed:
             raise FMUError(f"FMU {self.path} is closed")
@@ -259,7 +265,7 @@ class FMUModel:
         self._used = True
         driver = self._driver(native)
         stepper = driver(self, self._fmi, start_time=float(start_time), parameters=dict(parameters or {}),
-                         inputs=inputs, max_step=max_step)
+                         inputs=inputs, max_step=max_step, input_rule=input_rule)
         if carry and isinstance(stepper, ModelExchangeStepper):
             stepper.carry()
         if keep_jacobian and hasattr(stepper, "keep_jacobian"):
@@ -297,6 +303,7 @@ class FMUModel:
         parameters: Mapping[str, float] | None = None,
         inputs: pd.DataFrame | None = None,
         max_step: float | None = None,
+        input_rule: str = "linear",
     ) -> SensitivityStepper:
         """Initialise a run that also integrates the sensitivities w.r.t. the tunable parameters *wrt*.
 
@@ -319,7 +326,7 @@ class FMUModel:
         self._used = True
         stepper = SensitivityStepper(self, self._fmi, start_time=float(start_time),
                                      parameters=dict(parameters or {}), inputs=inputs, max_step=max_step,
-                                     wrt=wrt, scales=scales)
+                                     wrt=wrt, scales=scales, input_rule=input_rule)
         self._active = stepper
         return stepper
 
@@ -332,12 +339,20 @@ class FMUModel:
         inputs: pd.DataFrame | None = None,
         parameters: Mapping[str, float] | None = None,
         outputs: Sequence[str] | None = None,
+        input_rule: str = "linear",
+        initial: str = "model",
+        note: Callable[[float], None] | None = None,
     ) -> pd.DataFrame:
         """Simulate from *start_time* to *stop_time* and sample every *output_interval*.
 
         Built on :class:`Stepper`: the communication points are the output grid
-        plus every input sample time inside the interval (so co-simulation FMUs,
-        which hold an input over a step, see every input sample).
+        plus every input sample time inside the interval (so co-simulation FMUs
+        see every input sample). *input_rule* as for :meth:`stepper`.
+        *initial* ``"model"``: the FMU's own initial state at *start_time*;
+        ``"steady"``: its steady state there, with the inputs at their first
+        values (:meth:`~trackingbox.fmu.steppers.ModelExchangeStepper.settle`).
+        *note*, if given, is called with each communication point before the
+        step towards it (e.g. to name the phase of the run for the watchdog).
 
         Returns
         -------
@@ -367,7 +382,11 @@ class FMUModel:
         if grid[-1] < stop_time - 1e-9 * max(1.0, abs(stop_time)):
             grid = np.append(grid, stop_time)
         points = grid
-        stepper = self.stepper(start_time=start_time, parameters=parameters, inputs=inputs)
+        stepper = self.stepper(start_time=start_time, parameters=parameters, inputs=inputs, input_rule=input_rule)
+        if initial == "steady":
+            stepper.settle()
+        elif initial != "model":
+            raise FMUError(f"initial state must be 'model' or 'steady', not {initial!r}")
         input_times = stepper.input_times
         if input_times is not None and input_times.size:
             extra = input_times[(input_times > start_time) & (input_times < stop_time)]
@@ -377,6 +396,8 @@ class FMUModel:
         read = stepper.reader(names)
         j = 0
         for t, keep in zip(points, record):
+            if note is not None:
+                note(float(t))
             stepper.step(float(t))
             if keep:
                 rows[j] = read()

@@ -100,7 +100,7 @@ class NativeStepper(ModelExchangeStepper):
     """
 
     def __init__(self, model: FMUModel, fmi: FMIAdapter, *, start_time: float, parameters: dict[str, Any],
-                 inputs: pd.DataFrame | None, max_step: float | None) -> None:
+                 inputs: pd.DataFrame | None, max_step: float | None, input_rule: str = "linear") -> None:
         self._lib = library()
         self._handle: int | None = None
         #: the input table's arrays C reads in place (kept referenced here)
@@ -124,7 +124,11 @@ class NativeStepper(ModelExchangeStepper):
         #: closed-loop integrators (:meth:`closed`): key -> (handle, the arrays C keeps, finaliser)
         self._closed: dict[tuple[Any, ...], tuple[Any, ...]] = {}
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
-                         max_step=max_step)
+                         max_step=max_step, input_rule=input_rule)
+
+    def _table_held(self) -> bool:
+        """True under the "hold" rule with an input table: Python writes the held values part by part."""
+        return self._held and self._in_set is not None
 
     def _start(self, max_step: float | None) -> None:
         if max_step is None:
@@ -153,7 +157,8 @@ class NativeStepper(ModelExchangeStepper):
     def _push_inputs(self) -> None:
         if self._handle is None:
             return
-        if self._in_set is None or self._in_times is None or self._in_table is None:
+        if self._in_set is None or self._in_times is None or self._in_table is None or self._held:
+            # no table in C: none, or held values written part by part (ModelExchangeStepper._advance)
             self._lib.tbn_set_inputs(self._handle, 0, None, 0, None, None)
             self._c_inputs = None
             return
@@ -222,7 +227,7 @@ class NativeStepper(ModelExchangeStepper):
         self._c_inputs = None
 
     # -- stepping -----------------------------------------------------------------------
-    def _advance(self, t_next: float) -> None:
+    def _integrate(self, t_next: float) -> None:
         while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
             target = t_next
             if self._next_event is not None and self.time < self._next_event < t_next:
@@ -382,7 +387,7 @@ class NativeStepper(ModelExchangeStepper):
             self._last_read = (read, names, rplan) if type(read) is tuple else (None, None, None)
         planned = self._set_plan(values) if values else None
         if rplan is None or self._next_event is not None or t_next <= self.time + 1e-12 * max(1.0, abs(t_next)) \
-                or (planned is not None and planned[1] is None):
+                or (planned is not None and planned[1] is None) or self._table_held():
             self.set(values, restart=restart)
             self.step(t_next)
             return self.get_continuous_states(), self.get(names)
@@ -433,7 +438,7 @@ class NativeStepper(ModelExchangeStepper):
         event ahead, a read or a value that is not a Real tunable parameter or
         input, an input still driven by the table.
         """
-        if self._finished or self._next_event is not None:
+        if self._finished or self._next_event is not None or self._table_held():
             return None
         rplan = self._read_plan(tuple(read))
         if rplan is None:
@@ -519,7 +524,7 @@ class NativeStepper(ModelExchangeStepper):
         t_next = float(t_next)
         if t_next <= self.time + 1e-12 * max(1.0, abs(t_next)):
             super().step(t_next)  # nothing to do, or the error for a step back in time
-        elif self._next_event is None:
+        elif self._next_event is None and not self._table_held():
             # one solver call reaches t_next (CV_NORMAL, no time event before it): _advance's loop, once
             code = self._step_c(self._handle, t_next, 1 if self._solver.exact else 0, self._reached_ref)
             if code != OK:

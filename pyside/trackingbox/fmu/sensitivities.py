@@ -115,7 +115,7 @@ class SensitivityStepper(ModelExchangeStepper):
 
     def __init__(self, model: FMUModel, fmi: FMIAdapter, *, start_time: float, parameters: dict[str, Any],
                  inputs: pd.DataFrame | None, max_step: float | None, wrt: Sequence[str],
-                 scales: Sequence[float]) -> None:
+                 scales: Sequence[float], input_rule: str = "linear") -> None:
         md = fmi.model_description
         nx = int(md.numberOfContinuousStates or 0)
         if nx == 0 or not md.derivatives:
@@ -140,7 +140,7 @@ class SensitivityStepper(ModelExchangeStepper):
         #: directional-derivative calls made so far (sensitivity equations and outputs)
         self.directional_calls = 0
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
-                         max_step=max_step)
+                         max_step=max_step, input_rule=input_rule)
 
     @property
     def parameters(self) -> list[str]:

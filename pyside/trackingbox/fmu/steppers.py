@@ -25,12 +25,21 @@ from fmpy.sundials.sundials_types import sunrealtype
 from ..errors import DataError, FMUError, SimulationError, unknown_name
 from .adapters import FMIAdapter
 from .calls import fmu_calls, simulation_failure
-from .info import REAL_TYPES
+from .info import REAL_TYPES, change_refusal
 
 if TYPE_CHECKING:
     from .model import FMUModel
 
 log = logging.getLogger(__name__)
+
+#: How measured inputs reach an FMU between their samples (the spec's ``[data] inputs``):
+#: ``"linear"`` interpolated between samples, ``"hold"`` held at the last sample until the next.
+INPUT_RULES = ("linear", "hold")
+#: Co-simulation under the ``"linear"`` rule when the FMU cannot interpolate inputs itself (no input
+#: derivatives: FMI 2 without ``canInterpolateInputs``, every FMI 3 FMU): each step between two input
+#: samples is split into this many sub-steps, each with the input at its midpoint (the ramp's mean
+#: over the sub-step); the difference from an exact ramp falls with the square of the sub-step.
+CS_LINEAR_SUBSTEPS = 8
 
 # ---------------------------------------------------------------------------
 # Stepper: the interface, and one driver per FMI interface
@@ -51,7 +60,12 @@ class Stepper(abc.ABC):
     """
 
     def __init__(self, model: FMUModel, fmi: FMIAdapter, *, start_time: float, parameters: dict[str, Any],
-                 inputs: pd.DataFrame | None, max_step: float | None) -> None:
+                 inputs: pd.DataFrame | None, max_step: float | None, input_rule: str = "linear") -> None:
+        if input_rule not in INPUT_RULES:
+            raise FMUError(f"input rule must be one of {', '.join(INPUT_RULES)}, not {input_rule!r}")
+        #: how the ``inputs`` table reaches the FMU between its samples (:data:`INPUT_RULES`)
+        self.input_rule = input_rule
+        self._held = input_rule == "hold"
         self.model = model
         self.time = start_time
         self._finished = False
@@ -65,6 +79,8 @@ class Stepper(abc.ABC):
         self._in_set: Callable[[Any], None] | None = None
         self._in_i, self._in_t0, self._in_t1 = 1, math.inf, -math.inf  # the interval _input_values used last
         self._last_set: dict[str, Any] = {}
+        #: every value given before initialisation or set since: what a re-initialisation sets again
+        self._given: dict[str, Any] = {}
         #: the maximum step given (None: the input table's smallest interval)
         self.max_step_given = max_step
         self._prepare_inputs(inputs)
@@ -171,9 +187,30 @@ class Stepper(abc.ABC):
         w = (t - t0) / (t1 - t0)
         return table[i - 1] + w * (table[i] - table[i - 1])
 
+    def _held_values(self, t: float) -> npt.NDArray[np.float64]:
+        """The table's row of the last sample at or before *t* (the first row before the table)."""
+        times, table = self._in_times, self._in_table
+        assert times is not None and table is not None
+        i = int(np.searchsorted(times, t + 1e-12 * max(1.0, abs(t)), side="right")) - 1
+        return table[max(i, 0)]
+
+    def _rule_values(self, t: float) -> npt.NDArray[np.float64]:
+        """The inputs at *t* under this run's rule (at a sample time both rules give the sample)."""
+        return self._held_values(t) if self._held else self._input_values(t)
+
     def _apply_inputs(self, t: float) -> None:
         if self._in_set is not None:
-            self._in_set(self._input_values(t))
+            self._in_set(self._rule_values(t))
+
+    def _input_breaks(self, t0: float, t1: float) -> list[float]:
+        """Input sample times strictly between *t0* and *t1*, then *t1*: where a held input may jump."""
+        times = self._in_times
+        if times is None or self._in_set is None:
+            return [t1]
+        tol = 1e-12 * max(1.0, abs(t1))
+        lo = int(np.searchsorted(times, t0 + tol, side="right"))
+        hi = int(np.searchsorted(times, t1 - tol, side="left"))
+        return [*(float(x) for x in times[lo:hi]), t1]
 
     def _drop_inputs(self, names: set[str]) -> None:
         """Stop driving *names* from the table (the caller set them explicitly)."""
@@ -245,22 +282,35 @@ class Stepper(abc.ABC):
 
     def _initialize(self, parameters: dict[str, Any], max_step: float | None) -> None:
         model = self.model
-        variables = {name: self._settable_before_init(name) for name in parameters}
+        for name in parameters:
+            self._settable_before_init(name)
         # inputs given as constants are not driven by the table any more
         self._drop_inputs(set(parameters))
-        early = model.begin_run(parameters)
-        early.update({n: parameters[n] for n, v in variables.items() if v.initial in ("exact", "approx")
-                      or v.causality == "input"})
-        late = {n: parameters[n] for n, v in variables.items() if n not in early}
+        restore = model.begin_run(parameters)
+        self._given = dict(parameters)
         model.log_messages.clear()
         with fmu_calls(f"initialisation of {model.path.name} at t = {self.time:g} s failed", model.log_messages):
-            self._set_values(early)
-            self._fmi.enter_initialization_mode(tolerance=model.tolerance, start_time=self.time)
-            self._set_values(late)
-            self._apply_inputs(self.time)
-            self._fmu.exitInitializationMode()
-            self._after_initialization()
+            self._initialization(restore, parameters)
         self._start(max_step)
+
+    def _initialization(self, restore: Mapping[str, Any], values: Mapping[str, Any]) -> None:
+        """The FMI calls of an initialisation at :attr:`time` with *values* (and *restore*, set first) applied.
+
+        Values of variables with ``initial = exact/approx`` and inputs are set before
+        initialisation mode, the others (parameters computed otherwise by default)
+        inside it; inputs driven by the table take their values at :attr:`time`.
+        """
+        variables = {name: self.model.variable(name) for name in values}
+        early = dict(restore)
+        early.update({n: values[n] for n, v in variables.items() if v.initial in ("exact", "approx")
+                      or v.causality == "input"})
+        late = {n: values[n] for n in variables if n not in early}
+        self._set_values(early)
+        self._fmi.enter_initialization_mode(tolerance=self.model.tolerance, start_time=self.time)
+        self._set_values(late)
+        self._apply_inputs(self.time)
+        self._fmu.exitInitializationMode()
+        self._after_initialization()
 
     def _set_values(self, values: Mapping[str, Any]) -> None:
         if not values:
@@ -309,8 +359,13 @@ class Stepper(abc.ABC):
         self._advance(t_next)
 
     def set(self, values: Mapping[str, float], *, restart: bool = True) -> None:
-        """Set tunable parameters and/or inputs before the next step.
+        """Set parameters and/or inputs before the next step.
 
+        Tunable parameters and inputs change as FMI allows between steps.
+        ``fixed`` parameters change on model exchange by a re-initialisation
+        that keeps the continuous states (:meth:`ModelExchangeStepper._reinitialize`);
+        on co-simulation they are refused with what to do instead
+        (:func:`~trackingbox.fmu.info.change_refusal`).
         An input set here is no longer driven by the ``inputs`` table of this run.
         For model exchange, the change is a discontinuity: tunable parameters are
         set in event mode and the solver is re-initialised. With
@@ -333,7 +388,7 @@ class Stepper(abc.ABC):
         values = {n: v for n, v in values.items() if self._last_set.get(n) != v}
         if not values:
             return
-        params = False
+        params = fixed = False
         for name in values:
             v = self.model.variable(name)
             if v.causality == "input":
@@ -341,15 +396,24 @@ class Stepper(abc.ABC):
             if v.causality == "parameter" and v.variability == "tunable":
                 params = True
                 continue
-            raise FMUError(f"variable {name!r} of FMU {self.model.path.name} is "
-                           f"{v.variability} {v.causality}; only tunable parameters and inputs can be set "
-                           "between steps")
+            refusal = change_refusal(self.model.info, name, self.model.interface)
+            if refusal is not None:
+                raise FMUError(refusal)
+            fixed = True
         self._drop_inputs(set(values))
         with fmu_calls(f"setting {', '.join(values)} in {self.model.path.name} at t = {self.time:g} s failed",
                         self.model.log_messages):
-            self._apply_set(values, params, restart)
+            if fixed:
+                self._reinitialize(values)
+            else:
+                self._apply_set(values, params, restart)
         self.model.note_changed(n for n in values if self.model.variable(n).causality == "parameter")
         self._last_set.update(values)
+        self._given.update(values)
+
+    def _reinitialize(self, values: Mapping[str, Any]) -> None:
+        """Change ``fixed`` parameters (with *values*) where FMI allows it: see :class:`ModelExchangeStepper`."""
+        raise FMUError(f"{self.model.path.name}: fixed parameters cannot change during a co-simulation run")
 
     def get(self, names: Sequence[str]) -> npt.NDArray[np.float64]:
         """Current values of *names* as a float array (same order)."""
@@ -362,6 +426,12 @@ class Stepper(abc.ABC):
         For tight loops; valid while this stepper is.
         """
         return self._getter(tuple(names))
+
+    def settle(self) -> None:
+        """Start from the model's steady state (model exchange only: :meth:`ModelExchangeStepper.settle`)."""
+        self._check_open()
+        raise FMUError(f"{self.model.path.name} runs as co-simulation: its states cannot be set, so it cannot "
+                       "start from a steady state; set [data] initial = \"model\" (its own initial state)")
 
     @abc.abstractmethod
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
@@ -379,19 +449,47 @@ class Stepper(abc.ABC):
 
 
 class CoSimulationStepper(Stepper):
-    """The co-simulation driver: the FMU integrates itself, one ``doStep`` per communication step.
+    """The co-simulation driver: the FMU integrates itself, ``doStep`` by ``doStep``.
 
-    Inputs are applied at the start of each step and held over it.
+    A communication step is split at the input table's sample times. Under the
+    ``"hold"`` rule each part is one ``doStep`` with the inputs of its first
+    sample. Under ``"linear"`` an FMU that interpolates inputs (FMI 2
+    ``canInterpolateInputs``) gets each part's value and slope
+    (``fmi2SetRealInputDerivatives``, order 1); any other gets
+    :data:`CS_LINEAR_SUBSTEPS` sub-steps per part, each with the ramp's value at
+    its midpoint.
     """
+
+    def _interpolates(self) -> bool:
+        cs = self._fmi.model_description.coSimulation
+        return (not self.model.info.fmi_version.startswith("3") and cs is not None
+                and bool(getattr(cs, "canInterpolateInputs", False)))
+
+    def _do_step(self, t0: float, t1: float) -> None:
+        result = self._fmu.doStep(currentCommunicationPoint=t0, communicationStepSize=t1 - t0)
+        if self._fmi.terminated(result):
+            raise SimulationError(f"{self.model.path.name} requested termination at t = {t1:g} s")
 
     def _advance(self, t_next: float) -> None:
         with fmu_calls(f"simulation of {self.model.path.name} failed in the step from "
                         f"t = {self.time:g} s to t = {t_next:g} s", self.model.log_messages):
-            self._apply_inputs(self.time)
-            result = self._fmu.doStep(currentCommunicationPoint=self.time,
-                                      communicationStepSize=t_next - self.time)
-        if self._fmi.terminated(result):
-            raise SimulationError(f"{self.model.path.name} requested termination at t = {t_next:g} s")
+            t0 = self.time
+            for t1 in self._input_breaks(t0, t_next):
+                if self._in_set is None or self._held:
+                    self._apply_inputs(t0)
+                    self._do_step(t0, t1)
+                elif self._interpolates():
+                    u0, u1 = self._input_values(t0), self._input_values(t1)
+                    self._in_set(u0)
+                    vrs = [int(self.model.variable(n).valueReference) for n in self._in_names]
+                    self._fmu.setRealInputDerivatives(vrs, [1] * len(vrs), list((u1 - u0) / (t1 - t0)))
+                    self._do_step(t0, t1)
+                else:
+                    edges = np.linspace(t0, t1, CS_LINEAR_SUBSTEPS + 1)
+                    for a, b in zip(edges[:-1], edges[1:]):
+                        self._in_set(self._input_values(0.5 * (a + b)))
+                        self._do_step(float(a), float(b))
+                t0 = t1
         self.time = t_next
         self._apply_inputs(self.time)
 
@@ -512,7 +610,7 @@ class ModelExchangeStepper(Stepper):
     """
 
     def __init__(self, model: FMUModel, fmi: FMIAdapter, *, start_time: float, parameters: dict[str, Any],
-                 inputs: pd.DataFrame | None, max_step: float | None) -> None:
+                 inputs: pd.DataFrame | None, max_step: float | None, input_rule: str = "linear") -> None:
         md = fmi.model_description
         self._solver: Any = None
         self._next_event: float | None = None
@@ -523,11 +621,16 @@ class ModelExchangeStepper(Stepper):
         self._x_before = np.zeros_like(self._x)
         self.restarts = 0
         self.carried = 0
+        #: changes of ``fixed`` parameters, each a re-initialisation (also counted in :attr:`restarts`)
+        self.reinitializations = 0
+        #: the held inputs written last ("hold" rule)
+        self._held_now: npt.NDArray[np.float64] | None = None
         super().__init__(model, fmi, start_time=start_time, parameters=parameters, inputs=inputs,
-                         max_step=max_step)
+                         max_step=max_step, input_rule=input_rule)
 
     def _after_initialization(self) -> None:
         self._event_iteration(initial=True)
+        self._held_now = self._held_values(self.time) if (self._held and self._in_set is not None) else None
 
     def _start(self, max_step: float | None) -> None:
         fmu = self._fmu
@@ -556,7 +659,7 @@ class ModelExchangeStepper(Stepper):
 
     def _set_time(self, t: float) -> None:
         self._fmu.setTime(t)
-        if self._in_set is not None:
+        if self._in_set is not None and not self._held:
             self._in_set(self._input_values(t))
 
     def _event_iteration(self, initial: bool = False) -> None:
@@ -587,6 +690,29 @@ class ModelExchangeStepper(Stepper):
                                   f"{', '.join(map(repr, bad)) or ''} at t = {self.time:g} s")
 
     def _advance(self, t_next: float) -> None:
+        if not self._held or self._in_set is None:
+            self._integrate(t_next)
+            return
+        # "hold": the inputs jump at their sample times; integrate part by part, restarting the
+        # solver where a held value changes (the step that crossed the jump used the old value up
+        # to it, so the state there is right)
+        for t1 in self._input_breaks(self.time, t_next):
+            u = self._held_values(self.time)
+            if not np.array_equal(u, self._held_now):
+                self._apply_held(u)
+            self._integrate(t1)
+            self.time = t1
+
+    def _apply_held(self, u: npt.NDArray[np.float64]) -> None:
+        """Write the held inputs *u* at :attr:`time` and restart the solver there (a discontinuity)."""
+        assert self._in_set is not None
+        with fmu_calls(f"setting the inputs of {self.model.path.name} at t = {self.time:g} s failed",
+                        self.model.log_messages):
+            self._in_set(u)
+            self._solver.reset(self.time)
+        self._held_now = np.array(u, copy=True)
+
+    def _integrate(self, t_next: float) -> None:
         fmu, solver = self._fmu, self._solver
         needs_completed = self._fmi.needs_completed_integrator_step()
         while self.time < t_next - 1e-12 * max(1.0, abs(t_next)):
@@ -651,6 +777,102 @@ class ModelExchangeStepper(Stepper):
         else:
             self.restarts += 1
             self._solver.reset(self.time)
+
+    def _reinitialize(self, values: Mapping[str, Any]) -> None:
+        """Change ``fixed`` parameters between steps, the way FMI allows for model exchange.
+
+        A ``fixed`` parameter may be set only before initialisation. The FMU is
+        therefore reset and initialised again at :attr:`time` with every value
+        this run was given or has set since (and *values*), then its continuous
+        states are overwritten with those it had, an event iteration brings its
+        discrete variables and relations (the event indicators' context) in
+        line with the restored states, and the integrator restarts. What the
+        initialisation computes from the parameters (calculated parameters,
+        derived constants) follows the new values; the states continue. Counted
+        in :attr:`restarts` and :attr:`reinitializations`.
+        """
+        x = self._x[: self._nx].copy()
+        if self._nx:
+            self._fmu.getContinuousStates(self._px, self._nx)
+            x = self._x[: self._nx].copy()
+        given = {**self._given, **values}
+        self._fmu.reset()
+        self._initialization({}, given)
+        if self._nx:
+            self._x[: self._nx] = x
+            self._fmu.setContinuousStates(self._px, self._nx)
+            if self._nz:
+                # relations and discrete variables as the restored states make them
+                self._event_iteration()
+        self._solver.reset(self.time)
+        self.restarts += 1
+        self.reinitializations += 1
+
+    #: a steady state is accepted when no state moves by more than this fraction of its scale per hour
+    #: (the scale: its magnitude, at least its nominal value)
+    STEADY_DRIFT = 1e-6
+
+    def settle(self) -> None:
+        """Replace the continuous states by the model's steady state at :attr:`time`.
+
+        Solves ``der(x) = 0`` with the parameters and inputs as they are now (the
+        inputs at this time under the run's rule), by Powell's hybrid method on
+        the FMU's own derivatives (states scaled by their magnitude or nominal
+        value), starting from the current states; then an event iteration and a
+        solver restart, as after :meth:`set_continuous_states`. The FMU's time
+        never moves.
+
+        Raises
+        ------
+        SimulationError
+            No steady state found (an integrating state, such as a tank level
+            whose flows do not balance, has none): names the state that still
+            moves and what to do instead.
+        """
+        from scipy.optimize import root  # scipy.optimize costs 0.2 s of start-up; only steady starts need it
+
+        self._check_open()
+        n = self._nx
+        if n == 0:
+            return
+        fmu = self._fmu
+        name = self.model.path.name
+        dx = np.zeros(n)
+        pdx = dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        with fmu_calls(f"finding the steady state of {name} at t = {self.time:g} s failed", self.model.log_messages):
+            fmu.getContinuousStates(self._px, n)
+            x0 = self._x[:n].copy()
+            nominal = np.ones(n)
+            fmu.getNominalsOfContinuousStates(nominal.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
+            scale = np.maximum(np.abs(x0), np.where(np.isfinite(nominal) & (nominal > 0), nominal, 1.0))
+
+            def rate(z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+                self._x[:n] = z * scale
+                fmu.setContinuousStates(self._px, n)
+                self._fmi.get_derivatives(pdx, n)
+                return dx / scale
+
+            with np.errstate(all="ignore"):
+                sol = root(rate, x0 / scale, method="hybr",
+                           options={"xtol": 1e-13, "maxfev": 200 * (n + 1)})
+                drift = np.abs(rate(sol.x)) * 3600.0
+            if not (np.all(np.isfinite(sol.x)) and np.all(drift <= self.STEADY_DRIFT)):
+                worst = int(np.nanargmax(np.where(np.isfinite(drift), drift, np.inf)))
+                self._x[:n] = x0
+                fmu.setContinuousStates(self._px, n)
+                states = self.state_names
+                which = states[worst] if worst < len(states) else f"state {worst + 1}"
+                raise SimulationError(
+                    f"{name} has no steady state at t = {self.time:g} s with its inputs there: {which} still changes "
+                    f"by {drift[worst]:.3g} times its size per hour ({' '.join(str(sol.message).split()).rstrip('.')}); an "
+                    f"integrating state (a level whose flows do not balance) has none: set [data] initial = "
+                    f"\"model\" to start from the FMU's own initial state")
+            self._x[:n] = sol.x * scale
+            fmu.setContinuousStates(self._px, n)
+            if self._nz:
+                self._event_iteration()
+        self._solver.reset(self.time)
+        log.debug("%s: steady state at t = %g s after %d evaluations", name, self.time, sol.nfev)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints."""

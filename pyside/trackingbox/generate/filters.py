@@ -80,6 +80,20 @@ def modelica_name(text: str) -> str:
     return ident
 
 
+def tracked_output(parameter: str) -> str:
+    """The tracked model's output carrying the tracked value of *parameter*.
+
+    A component's parameter gives its dotted name as an identifier; a top-level parameter of
+    the twin keeps its own name in the tracked model (it extends the twin), so its tracked
+    value is ``<name>_tracked`` beside it.
+
+    >>> tracked_output("hx.kht"), tracked_output("R1")
+    ('hx_kht', 'R1_tracked')
+    """
+    ident = modelica_name(parameter)
+    return ident if "." in parameter else f"{ident}_tracked"
+
+
 def modelica_real(value: Any) -> str:
     """A finite number as a Modelica Real literal with ``repr`` precision.
 

@@ -55,8 +55,9 @@ from .source import (
     parameter_site,
     refusal_message,
     rewrite_source,
-    stage_packages,
+    stage_packages,  # noqa: F401 - importable from here, as it was (tests stage packages with it)
 )
+from .variants import class_variant, component_class, is_library_class, library_index, twin_variant
 
 logger = logging.getLogger(__name__)
 
@@ -119,6 +120,8 @@ class ControllerModel:
     instance: str = ""       # the ParameterController instance in the box, e.g. "hx_kht_controller"
     hold_in: str = ""        # box/model input that holds this controller alone, e.g. "TI_102_hold"
     layout: Layout | None = None
+    #: every conditional input the box drives (a top-level parameter: one per component bound to it)
+    inputs: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -198,6 +201,8 @@ class GeneratedModel:
     package_info: str
     box_info: str
     tracked_info: str
+    #: the class the tracked model extends: the twin, or its variant in the package
+    base_model: str = ""
 
 
 @dataclass(frozen=True)
@@ -213,6 +218,10 @@ class GenerateResult:
     rewrite: Rewrite | None = None
     controllers: tuple[ControllerModel, ...] = field(default=())
     states: tuple[StateModel, ...] = field(default=())
+    #: libraries the tracked model compiles with (the twin's package, TrackingBox, the twin's libraries)
+    libraries: tuple[Path, ...] = field(default=())
+    #: classes generated as variants of library classes and of the twin (names in the package)
+    variants: tuple[str, ...] = field(default=())
 
     def to_json(self) -> dict[str, Any]:
         """The ``trackingbox generate --json`` document (without its ``compile`` entry)."""
@@ -224,6 +233,7 @@ class GenerateResult:
             "box_model": self.box_model,
             "library": str(self.library),
             "patched_source": None if self.rewrite is None else str(self.rewrite.path),
+            "variants": list(self.variants),
             "controllers": [
                 {"tag": c.tag, "parameter": c.parameter, "kp": c.kp, "ti": c.ti, "span": c.span,
                  "direction": int(c.direction), "min": c.p_min, "max": c.p_max, "start": c.p_start}
@@ -284,6 +294,7 @@ def _modifier_lines(sites: Sequence[ParameterSite], variables: Mapping[str, Any]
     """
     tree: dict[str, Any] = {}
     arrays: dict[str, dict[str, set[int]]] = {}  # array path -> flag -> switched elements
+    sites = [leaf for s in sites for leaf in s.leaves()]
     for site in sites:
         parts = site.component.split(".")
         m = _ELEMENT.match(parts[-1])
@@ -323,6 +334,7 @@ def _fill_equations(sites: Sequence[ParameterSite], variables: Mapping[str, Any]
     """``effect[1].Rf_in = effect[1].Rf;`` for every element of a component array that
     :func:`_modifier_lines` switches but no site drives: it keeps its own parameter's value."""
     switched: dict[tuple[str, str], set[int]] = {}
+    sites = [leaf for s in sites for leaf in s.leaves()]
     for site in sites:
         m = _ELEMENT.match(site.component.split(".")[-1])
         if m is not None:
@@ -359,7 +371,8 @@ def _where(library: Path, spec_dir: Path, pkg_dir: Path) -> str:
             return f"{lib.name} (the library shipped with trackingbox)"
     except ImportError:  # pragma: no cover - the compiler is part of the package
         pass
-    return _rel(lib, pkg_dir)
+    rel = _rel(lib, pkg_dir)
+    return rel if not rel.startswith("../../..") else lib.as_posix()
 
 
 def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out_dir: Path,
@@ -394,7 +407,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         settings = pair_settings(pair, p_min, p_max, ts=float(spec.sample_time), where=where)
         span, kp, ti, how = settings.scaling.span, settings.kp, settings.ti, settings.tuning
         ident = filters.modelica_name(pair.variable)
-        out = filters.modelica_name(pair.parameter)
+        out = filters.tracked_output(pair.parameter)
         names = {"meas": f"{ident}_meas", "sim": f"{ident}_sim", "out": out, "hold": f"{ident}_hold"}
         for kind in ("meas", "hold", "out"):
             if names[kind] in taken:
@@ -402,7 +415,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
                                 f"clashes with the {taken[names[kind]]} of that name in {src.model}")
             taken[names[kind]] = f"generated {kind}"
         controllers.append(ControllerModel(
-            tag=pair.variable, parameter=pair.parameter, input=site.input, twin_variable=twin_var,
+            tag=pair.variable, parameter=pair.parameter, input=site.input, inputs=site.inputs, twin_variable=twin_var,
             out=out, meas=names["meas"], sim=names["sim"], span_name=f"{ident}_span",
             p_min=p_min, p_max=p_max, p_start=p_start, span=span, kp=kp, ti=ti,
             direction=float(settings.direction), gain=float(pair.gain),
@@ -534,7 +547,8 @@ def render(model: GeneratedModel) -> dict[str, str]:
     }
 
 
-def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> GenerateResult:
+def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False,
+             libraries: Sequence[str | Path] = ()) -> GenerateResult:
     """Generate the ``<Twin>Tracking`` package for *spec* into *out_dir*.
 
     Parameters
@@ -544,9 +558,16 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     out_dir : path
         Directory that receives ``<Twin>Tracking/`` (and ``patched/`` with *rewrite*).
     rewrite : bool
-        If a tracked parameter's component lacks the conditional-input pattern,
-        write a patched copy of the twin's source (under ``out_dir/patched``)
-        instead of refusing.
+        If a tracked parameter's component lacks the conditional-input pattern
+        and its class is the twin's own, write a patched copy of the twin's source
+        (under ``out_dir/patched``) instead of refusing. A component whose class
+        lives in a library (the MSL, ``[source] libraries``, *libraries*) gets a
+        variant of that class in the generated package instead
+        (:mod:`trackingbox.generate.variants`), whatever *rewrite* says.
+    libraries : paths
+        Further Modelica libraries the twin uses (``--library``), beside
+        ``[source] libraries``; those beside the source and on ``MODELICAPATH``
+        are found without.
 
     Raises
     ------
@@ -563,7 +584,8 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     if spec.source is None:
         raise SpecError(f"{where} has no [source] table: gen-trackingbox needs the twin's Modelica source "
                         f"(path = package directory or .mo file, model = full class name)")
-    src = load_twin(spec.source.path, spec.source.model)
+    libs = tuple(dict.fromkeys([*spec.source.libraries, *(Path(p) for p in libraries)]))
+    src = load_twin(spec.source.path, spec.source.model, libs)
     known = set(spec.parameter_names)
     sites: dict[str, ParameterSite] = {}
     for pair in spec.pairs:
@@ -573,7 +595,10 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     for st in spec.states:
         if st.correction not in src.top_inputs:
             sites[st.correction] = parameter_site(src, st.correction, f"[[states]] {st.tag!r} of {where}")
-    missing = [s for s in sites.values() if not s.has_pattern]
+    index = library_index(src.path, src.libraries)
+    in_library = _library_sites(src, index, sites, libs)
+    missing = [leaf for s in sites.values() for leaf in s.leaves()
+               if not leaf.has_pattern and leaf.name not in in_library]
     rw: Rewrite | None = None
     library = src.top
     if missing:
@@ -581,25 +606,34 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
             raise SpecError("\n".join(refusal_message(src, s) for s in missing))
         rw = rewrite_source(src, missing, out_dir / "patched")
         logger.info("wrote a patched copy of the twin's source to %s", rw.path)
-        src_new = load_twin(rw.path, spec.source.model)
+        src_new = load_twin(rw.path, spec.source.model, libs)
         for name in sites:
             sites[name] = parameter_site(src_new, name, f"[[pairs]]/[[states]] of {where}")
-            if not sites[name].has_pattern:
-                raise SpecError(f"rewriting the source did not give {name!r} a conditional input")
         src = src_new
         library = src_new.top
+        index = library_index(src.path, src.libraries)
+        in_library = _library_sites(src, index, sites, libs)
+        for leaf in (x for s in sites.values() for x in s.leaves()):
+            if not leaf.has_pattern and leaf.name not in in_library:
+                raise SpecError(f"rewriting the source did not give {leaf.name!r} a conditional input")
     model = build_model(spec, src, sites, out_dir, library)
+    variants: dict[str, str] = {}
+    if in_library:
+        model, variants = _with_variants(model, src, index, in_library)
     texts = render(model)
+    for name, text in variants.items():
+        texts[f"{name}.mo"] = text
+    # the twin's own package (or its patched copy) and the shipped library the box instantiates, and the
+    # libraries the twin uses
+    compile_libs = tuple(dict.fromkeys([*([library] if library.is_dir() or library.suffix == ".mo" else []),
+                                        _BLOCKS_LIBRARY(), *src.libraries]))
     # Never write what does not load: check in a staging tree first.
     with tempfile.TemporaryDirectory(prefix="trackingbox-gen-") as tmp:
         staged_gen = Path(tmp) / "gen" / model.package
         staged_gen.mkdir(parents=True)
         for name, text in texts.items():
             (staged_gen / name).write_text(text, encoding="utf-8")
-        pkg = stage_packages(Path(tmp) / "stage", library, staged_gen)
-        if library.name != _BLOCKS_LIBRARY().name:  # the box instantiates TrackingBox.Blocks
-            stage_packages(Path(tmp) / "stage", _BLOCKS_LIBRARY(), staged_gen)
-        check_loads(pkg, f"{model.package}.{model.tracked_class}", pkg.parent)
+        check_loads(staged_gen, f"{model.package}.{model.tracked_class}", staged_gen.parent, compile_libs)
     pkg_dir = out_dir / model.package
     pkg_dir.mkdir(parents=True, exist_ok=True)
     written = []
@@ -610,29 +644,81 @@ def generate(spec: Any, out_dir: str | Path, *, rewrite: bool = False) -> Genera
     return GenerateResult(package_dir=pkg_dir, files=tuple(written), package=model.package,
                           tracked_model=f"{model.package}.{model.tracked_class}",
                           box_model=f"{model.package}.{model.box_class}", library=library,
-                          rewrite=rw, controllers=model.controllers, states=model.states)
+                          rewrite=rw, controllers=model.controllers, states=model.states,
+                          libraries=compile_libs, variants=tuple(sorted(variants)))
+
+
+def _library_sites(src: TwinSource, index: Any, sites: Mapping[str, ParameterSite],
+                   read_only: tuple[Path, ...] = ()) -> dict[str, tuple[str, str]]:
+    """Sites without the pattern whose component's class is a library's: name -> (component, class).
+
+    Only components declared by the twin's own class qualify (their class is switched in a variant of
+    the twin); others take the refusal or ``--rewrite`` path.
+    """
+    out: dict[str, tuple[str, str]] = {}
+    for site in (leaf for s in sites.values() for leaf in s.leaves()):
+        if site.has_pattern or "." in site.component or "[" in site.component or not site.component:
+            continue
+        found = component_class(index, src.model, site.component)
+        if found is None:
+            continue
+        cls, declared_by = found
+        if declared_by == src.model and is_library_class(index, cls, src.top, read_only):
+            out[site.name] = (site.component, cls)
+    return out
+
+
+def _with_variants(model: GeneratedModel, src: TwinSource, index: Any,
+                   in_library: Mapping[str, tuple[str, str]]) -> tuple[GeneratedModel, dict[str, str]]:
+    """The model extending a variant of the twin whose library components are variants with the pattern."""
+    package = model.package
+    connector = "Modelica.Blocks.Interfaces.RealInput"
+    taken = {model.box_class, model.tracked_class, "RealInput", "RealOutput"}
+    twin_name = _unique(src.model.rsplit(".", 1)[-1], taken)
+    by_class: dict[str, list[str]] = {}
+    components: dict[str, str] = {}
+    for name, (component, cls) in sorted(in_library.items()):
+        leaf = name.rsplit(".", 1)[1]
+        if leaf not in by_class.setdefault(cls, []):
+            by_class[cls].append(leaf)
+        components[component] = cls
+    texts: dict[str, str] = {}
+    names: dict[str, str] = {}
+    for cls, leaves in sorted(by_class.items()):
+        short = _unique(cls.rsplit(".", 1)[-1], taken)
+        names[cls] = short
+        texts[short] = class_variant(index, cls, short, tuple(leaves), connector, package).text
+    switched = {component: f"{package}.{names[cls]}" for component, cls in components.items()}
+    texts[twin_name] = twin_variant(index, src.model, twin_name, switched, package).text
+    order = (*model.class_order[:2], *sorted(texts), *model.class_order[2:])
+    described = ", ".join(f"{c} ({cls})" for c, cls in sorted(components.items()))
+    info = model.tracked_info.replace(
+        "<html><p>", f"<html><p>Extends <code>{package}.{twin_name}</code>, the twin with {described} switched to "
+                     "the variants generated beside it (the library is not edited). ", 1)
+    return replace(model, base_model=f"{package}.{twin_name}", class_order=order, tracked_info=info), texts
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    """*name*, or *name* with a number, not in *taken* (which gets it)."""
+    candidate, k = name, 2
+    while candidate in taken:
+        candidate, k = f"{name}{k}", k + 1
+    taken.add(candidate)
+    return candidate
 
 
 def compile_generated(result: GenerateResult, *, backend: str = "auto", output: Path | None = None) -> Any:
     """Compile the tracked model with :func:`trackingbox.compiler.compile_model`.
 
     The generated package is the source; the twin's library (the patched copy
-    after ``--rewrite``) and the shipped ``TrackingBox`` library (whose
-    ``Blocks`` the box instantiates) are further libraries, staged beside it.
+    after ``--rewrite``), the shipped ``TrackingBox`` library (whose ``Blocks``
+    the box instantiates) and the libraries the twin uses are further libraries.
 
     Returns
     -------
     trackingbox.compiler.CompileResult
     """
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
-    # The generated package, the twin's library and TrackingBox (whose Blocks the box
-    # instantiates) are staged side by side under one root: rumoca resolves a
-    # component of a library class from a multi-file package only that way.
-    with tempfile.TemporaryDirectory(prefix="trackingbox-compile-") as tmp:
-        stage = Path(tmp)
-        pkg = stage_packages(stage, result.library, result.package_dir)
-        libraries = [stage / result.library.name]
-        if result.library.name != _BLOCKS_LIBRARY().name:
-            stage_packages(stage, _BLOCKS_LIBRARY(), result.package_dir)
-            libraries.append(stage / _BLOCKS_LIBRARY().name)
-        return compile_model(pkg, result.tracked_model, backend=backend, output=output, libraries=libraries)
+    libraries = result.libraries or (result.library, _BLOCKS_LIBRARY())
+    return compile_model(result.package_dir, result.tracked_model, backend=backend, output=output,
+                         libraries=list(dict.fromkeys(Path(p) for p in libraries)))

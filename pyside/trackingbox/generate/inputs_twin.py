@@ -101,13 +101,17 @@ def inputs_model(spec: Any) -> tuple[InputsModel, Path]:
     if spec.source is None:
         raise SpecError(f"{where} has no [source] table: the continuous tracking mode compiles the twin with "
                         f"its tracked parameters as inputs from its Modelica source")
-    src = load_twin(spec.source.path, spec.source.model)
+    src = load_twin(spec.source.path, spec.source.model, spec.source.libraries)
     sites: dict[str, ParameterSite] = {}
     for pair in spec.pairs:
         sites[pair.parameter] = parameter_site(src, pair.parameter, f"[[pairs]] of {where}")
     for st in spec.states:
         if "." in st.correction:  # a component parameter (a top-level input has no dot)
             sites[st.correction] = parameter_site(src, st.correction, f"[[states]] {st.tag!r} of {where}")
+    shared = [s.name for s in sites.values() if s.receivers]
+    if shared:
+        raise SpecError(f"the continuous tracking mode drives one component parameter per pair; {', '.join(shared)} "
+                        f"reach components through modifiers: run with controllers='discrete'")
     missing = [s.name for s in sites.values() if not s.has_pattern]
     if missing:
         raise SpecError(f"the continuous tracking mode needs {', '.join(missing)} with a conditional input "
@@ -213,5 +217,6 @@ def inputs_twin(spec: Any, *, backend: str = "embedded", cache: Path | None = No
         pkg = stage_packages(Path(tmp) / "stage", top, gen)
         check_loads(pkg, model.model, pkg.parent)
         log.info("compiling the inputs twin %s (%s backend)", model.model, backend)
-        compile_model(pkg, model.model, backend=backend, output=fmu, libraries=[Path(tmp) / "stage" / top.name])
+        compile_model(pkg, model.model, backend=backend, output=fmu,
+                      libraries=[Path(tmp) / "stage" / top.name, *spec.source.libraries])
     return InputsTwin(fmu, model.model, {x.parameter: x.name for x in model.inputs})

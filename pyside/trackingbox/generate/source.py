@@ -15,7 +15,7 @@ Modelica Standard Library (``use_kht_in``/``kht_in``)::
       kht_internal = kht;
     end if;
 
-This module loads the twin with rumoca, checks that every tracked parameter's
+This module flattens the twin with the compiler's front end (rumoca), checks that every tracked parameter's
 component offers that pattern, finds where a parameter is declared (file,
 line, class) so that a refusal can say exactly what to add, and can write a
 patched copy of the source that adds the pattern (``--rewrite``).
@@ -26,14 +26,15 @@ import difflib
 import logging
 import re
 import shutil
-import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import rumoca
 
 from ..compiler import library_path
+from ..compiler.embedded import flatten
+from ..compiler.library import resolve_libraries, source_root
+from ..compiler.source import resolve_source
 from ..errors import CompileError, SpecError, unknown_name
 
 logger = logging.getLogger(__name__)
@@ -77,6 +78,8 @@ class TwinSource:
     top_inputs: tuple[str, ...]
     top_outputs: tuple[str, ...]
     type_names: dict[str, str]
+    libraries: tuple[Path, ...] = ()
+    flat: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def is_boolean_parameter(self, name: str) -> bool:
         v = self.variables.get(name)
@@ -113,14 +116,6 @@ def _locate(path: Path) -> tuple[Path, Path, tuple[Path, ...], Path]:
     return path, path.parent, (path,), path
 
 
-def _rumoca_load(entry: Path, model: str, roots: list[Path]) -> Any:
-    # Without roots a session scans the entry's own directory; a root is scanned
-    # recursively, so only clean (staged) trees are given as roots.
-    session = rumoca.Session(roots=[str(r) for r in roots]) if roots else rumoca.Session()
-    logger.debug("rumoca load %s model=%s roots=%s", entry, model, roots)
-    return session.load(str(entry), model=model)
-
-
 def _with_elements(variables: dict[str, Any]) -> dict[str, Any]:
     """*variables* plus an entry per element of every vector variable (``TI_body[2]`` beside
     ``TI_body``, whose ``dims`` are ``[N]``): specs name elements, as the FMU does."""
@@ -133,57 +128,50 @@ def _with_elements(variables: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _load_with_library(top: Path, entry: Path, model: str) -> Any:
-    """Load *model* with the shipped ``TrackingBox`` library staged beside the twin's source *top*.
-
-    A twin written against the library (the evaporator train's ``N = 3`` wrapper,
-    ``extends TrackingBox.Benches.EvaporatorTrain.Twin(N = 3)``) loads only with it;
-    the generated box stages it beside the twin's source anyway (its ``Blocks``).
-    """
-    lib = library_path()
-    if top.resolve() == lib.resolve():
-        raise CompileError(f"{model} does not load from the TrackingBox library itself")
-    with tempfile.TemporaryDirectory(prefix="trackingbox-twin-") as tmp:
-        stage = Path(tmp)
-        shutil.copytree(lib, stage / lib.name)
-        if top.is_dir():
-            shutil.copytree(top, stage / top.name)
-            staged_entry = stage / top.name / entry.relative_to(top)
-        else:
-            shutil.copy2(top, stage / top.name)
-            staged_entry = stage / top.name
-        logger.debug("loading %s with the TrackingBox library staged beside %s", model, top)
-        return _rumoca_load(staged_entry, model, [stage])
+def twin_libraries(path: str | Path, model: str, libraries: tuple[Path, ...] | list[Path] = ()
+                   ) -> tuple[tuple[Path, ...], dict[str, str]]:
+    """The libraries the twin *model* in *path* needs: *libraries* (``[source] libraries``,
+    ``--library``), the shipped ``TrackingBox`` library (twins written against it), and those found
+    beside the source and on ``MODELICAPATH`` (:func:`trackingbox.compiler.library.resolve_libraries`);
+    also the top-level packages still not found (name -> where they are used)."""
+    src = resolve_source(path)
+    libs = [Path(p) for p in libraries]
+    shipped = library_path()
+    if source_root(src).resolve() != shipped.resolve() and shipped.resolve() not in {p.resolve() for p in libs}:
+        libs.append(shipped)
+    return resolve_libraries(src, model, libs)
 
 
-def load_twin(path: str | Path, model: str) -> TwinSource:
-    """Load the twin *model* from *path* with rumoca and collect its flat variables.
+def load_twin(path: str | Path, model: str, libraries: tuple[Path, ...] | list[Path] = ()) -> TwinSource:
+    """Flatten the twin *model* from *path* with the compiler's front end and collect its flat variables.
+
+    *libraries*: further Modelica libraries it uses (:func:`twin_libraries` adds the others it
+    finds); the flat model is the one ``trackingbox compile`` makes (cached by content).
 
     Raises
     ------
     SpecError
         If the source does not exist.
     CompileError
-        If rumoca cannot load the model (the message carries rumoca's).
+        If the front end cannot flatten the model (a library it uses and nobody gave is named).
     """
     path = Path(path)
     if not path.exists():
         raise SpecError(f"[source] path {path} does not exist")
     entry, root, files, top = _locate(path)
     try:
-        loaded = _rumoca_load(entry, model, [])
-    except Exception as exc:  # rumoca raises its own CompileError/ParseError types
-        try:
-            loaded = _load_with_library(top, entry, model)
-        except Exception:
-            raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}") from exc
-    flat = loaded.to_dict("flat")
+        src = resolve_source(path)
+        libs, missing = twin_libraries(path, model, libraries)
+        flat = flatten(src, model, libs, missing)
+    except CompileError as exc:
+        hint = " (or name it in the spec's [source] libraries)" if "pass --library" in str(exc) else ""
+        raise CompileError(f"cannot load twin model {model!r} from {path}: {exc}{hint}") from None
     variables = _with_elements(dict(flat["variables"]))
     top_inputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Input"))
     top_outputs = tuple(sorted(n for n, v in variables.items() if "." not in n and _causality(v) == "Output"))
     return TwinSource(path=path.resolve(), model=model, root=root, top=top, files=files,
                       variables=variables, top_inputs=top_inputs, top_outputs=top_outputs,
-                      type_names=dict(flat.get("variable_type_names", {})))
+                      type_names=dict(flat.get("variable_type_names", {})), libraries=tuple(libs), flat=flat)
 
 
 @dataclass(frozen=True)
@@ -200,25 +188,50 @@ class ParameterSite:
     flag: str
     input: str
     has_pattern: bool
+    #: a top-level parameter of the twin: the component parameters bound to it (``R = R1``), each driven
+    receivers: tuple[ParameterSite, ...] = ()
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The conditional inputs the box drives for this parameter."""
+        return tuple(r.input for r in self.receivers) if self.receivers else (self.input,)
+
+    def leaves(self) -> tuple[ParameterSite, ...]:
+        """The component sites this parameter is driven through (itself, or its receivers)."""
+        return self.receivers if self.receivers else (self,)
 
 
 def parameter_site(src: TwinSource, name: str, where: str) -> ParameterSite:
-    """Check that *name* is a Real parameter of a component of the twin.
+    """Check that *name* is a Real parameter of the twin that can follow an input, and where it is switched.
+
+    A parameter of a component is switched on that component (``hx.kht`` -> ``hx.use_kht_in``);
+    a top-level parameter of the twin through every component parameter bound to it by a
+    modifier (``thermalResistor1(R = R1)``: its *receivers*).
 
     Raises
     ------
     SpecError
-        For an unknown parameter (with "did you mean") or a parameter of the
-        twin itself (no component to switch).
+        For an unknown parameter (with "did you mean"), a top-level parameter that no component
+        receives by a modifier, or a structural one (:func:`.variants.structural_reason`: why).
     """
+    from .variants import receivers, structural_reason  # variants builds on this module's pattern
+
     v = src.variables.get(name)
     if v is None or not _is_parameter(v):
         raise SpecError(unknown_name("parameter", name, src.parameters(), f"{where} (model {src.model})"))
+    got = receivers(src.variables, name) if "." not in name else []
+    why = structural_reason(src.variables, src.type_names, src.flat, name, allowed=frozenset(got))
+    if why is not None:
+        raise SpecError(f"parameter {name!r} in {where} cannot be tracked: {why}")
     if "." not in name:
-        raise SpecError(
-            f"parameter {name!r} in {where} belongs to the twin {src.model} itself: only parameters of its "
-            f"components (e.g. 'hx.kht') can be switched to a conditional input; move it into a component"
-        )
+        if not got:
+            raise SpecError(
+                f"parameter {name!r} in {where} belongs to the twin {src.model} itself and no component takes it "
+                f"by a modifier (such as thermalResistor1(R = {name})): only parameters of components, or "
+                f"top-level ones passed to them, can be switched to an input of the tracking box")
+        sites = tuple(parameter_site(src, r, f"{where} (receiving {name})") for r in got)
+        return ParameterSite(name=name, component="", leaf=name, flag="", input=sites[0].input,
+                             has_pattern=all(x.has_pattern for x in sites), receivers=sites)
     component, leaf = name.rsplit(".", 1)
     flag = f"{component}.use_{leaf}_in"
     return ParameterSite(name=name, component=component, leaf=leaf, flag=flag,
@@ -490,13 +503,16 @@ def stage_packages(dest: Path, library: Path, generated: Path) -> Path:
     return dest / generated.name
 
 
-def check_loads(package_dir: Path, model: str, root: Path) -> None:
-    """Load *model* from the generated package with rumoca; CompileError if it does not.
+def check_loads(package_dir: Path, model: str, root: Path, libraries: tuple[Path, ...] | list[Path] = ()) -> None:
+    """Flatten *model* from the generated package (with *libraries*); CompileError if it does not.
 
     This is the guard that keeps generated Modelica from ever being written
-    when it would not even flatten.
+    when it would not even flatten. The packages staged beside it under *root*
+    are found there.
     """
     try:
-        _rumoca_load(package_dir / "package.mo", model, [root])
-    except Exception as exc:
-        raise CompileError(f"generated model {model} does not load with rumoca: {exc}") from exc
+        src = resolve_source(package_dir)
+        libs, missing = resolve_libraries(src, model, [Path(p) for p in libraries])
+        flatten(src, model, libs, missing)
+    except CompileError as exc:
+        raise CompileError(f"generated model {model} does not flatten: {exc}") from None

@@ -35,9 +35,10 @@ def write_estimate_report(spec: Spec, result: EstimationResult, out: str | os.Pa
     plt = plots.pyplot()
     files: list[Path] = []
     doc = Document(f"Parameter estimation: {Path(spec.path).name}")
+    note = result.warmup_note()
     doc.paragraph(f"Twin `{Path(spec.twin).name}`, {result.evaluations} simulations in {result.seconds:.1f} s, "
-                  f"unscored warm-up of {result.warmup:g} s before each window (the measured history where "
-                  "there is some, else the inputs held at their first values).")
+                  f"unscored warm-up of {result.warmup:g} s before each window through the measured history"
+                  + (f"; {note}." if note else "."))
     header = ["parameter", "start", "estimate", "min", "max", "at bound"] + (["plant truth"] if truth else [])
     rows = []
     for name, value in result.parameters.items():

@@ -3,7 +3,7 @@
 :class:`WindowData` is one window of the spec's measurement view on the simulation grid
 (:func:`load_windows`), :class:`Problem` everything a worker needs to run the twin on it
 (:func:`problem_from_spec`; picklable, no open FMU), and :func:`simulate_window` (with
-:func:`simulate_window_sensitivities`) the run, held-input pre-run and lead-in included, on the
+:func:`simulate_window_sensitivities`) the run, its warm-up through the measured history included, on the
 process's cached model (:mod:`.models`). Estimation's cost, the diagnosis's residuals and the
 identifiability checks all simulate through here.
 """
@@ -30,6 +30,7 @@ from ..errors import (
 )
 from ..fmu import read_info
 from ..sensitivity import simulate_sensitivities
+from ..supervise import note_phase
 from .models import cached_model
 
 if TYPE_CHECKING:
@@ -37,9 +38,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Default warm-up before each window (s): lead-in through the measured history where there is
-#: some, else a held-input pre-run. Long enough for tank temperatures (time constants of hours)
-#: to settle; the held part costs little because the solver takes long steps there.
+#: Default warm-up before each window (s): the run starts this long before the window and goes
+#: through the measured history, unscored, so that slow states (tank temperatures, time constants of
+#: hours) follow the data into the window. Shortened to the history that exists: no run starts
+#: before the data's first sample (nor inside an input gap); the run then starts from the FMU's own
+#: initial state, or from its steady state with ``[data] initial = "steady"``.
 DEFAULT_WARMUP = 4 * 3600.0
 #: Each output tag needs at least this many valid samples in each window.
 MIN_VALID_SAMPLES = 20
@@ -100,7 +103,15 @@ class Problem:
     sample_time
         Grid step (s).
     warmup
-        Steady-state pre-run before each window (s), a multiple of ``sample_time``.
+        Warm-up asked for before each window (s), a multiple of ``sample_time``: the
+        measured history run through, unscored (shortened to the history that exists).
+    initial
+        Where a run without history starts: ``"model"`` (the FMU's own initial
+        state) or ``"steady"`` (its steady state with the inputs there): the spec's
+        ``[data] initial``.
+    inputs
+        How measured inputs reach the FMU between samples, ``"linear"`` or
+        ``"hold"``: the spec's ``[data] inputs``.
     """
 
     twin: Path
@@ -112,67 +123,91 @@ class Problem:
     outputs: dict[str, str]
     sample_time: float
     warmup: float
+    initial: str = "model"
+    inputs: str = "linear"
 
 
 def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
                  ) -> tuple[dict[str, float], float, np.ndarray, pd.DataFrame | None]:
     """What a run of the twin over *window* with parameter vector *x* starts from.
 
-    Returns the parameter values (the fixed ones and *x*), the length of the
-    held-input pre-run (the part of ``problem.warmup`` the window's lead-in does
-    not cover, in whole sample times), the window's grid from its first sample,
-    and the input table (inputs held at their first values over the pre-run).
+    Returns the parameter values (the fixed ones and *x*), the length of a run
+    before the window's first grid point (always 0: no FMU runs before the data
+    it is given), the window's grid from its first point (lead-in included), and
+    the input table.
 
     The run keeps the data's clock: the input table's times, and the model's
     ``time``, are seconds from the first sample of the data, so the run starts
-    at :func:`run_start` (negative over the pre-run of a window at the first
-    sample). A model whose equations use ``time`` (a drift or a fouling that
-    diagnosis adds) then sees the same time on every window and in tracking.
+    at :func:`run_start`, the window's first grid point. A model whose equations
+    use ``time`` (a drift or a fouling that diagnosis adds) then sees the same
+    time on every window and in tracking.
     """
     values = np.asarray(x, dtype=float)
     parameters = dict(problem.fixed)
     parameters.update({name: float(v) for name, v in zip(problem.names, values)})
     t0 = run_start(problem, window)
-    offset = float(window.time[0]) - t0
     grid = window.time - window.time[0]
-    frame: dict[str, np.ndarray] = {"time": t0 + (np.concatenate(([0.0], offset + grid)) if offset > 0 else grid)}
+    frame: dict[str, np.ndarray] = {"time": t0 + grid}
     for name, series in window.inputs.items():
-        frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
+        frame[name] = series
     inputs = pd.DataFrame(frame) if window.inputs else None
-    return parameters, offset, grid, inputs
+    return parameters, 0.0, grid, inputs
 
 
 def run_start(problem: Problem, window: WindowData) -> float:
-    """Model time at which a run over *window* starts: its first grid time minus the held pre-run.
+    """Model time at which a run over *window* starts: its first grid point (lead-in included).
 
-    Times are the data's clock (s from the first sample), see :func:`window_setup`.
+    Times are the data's clock (s from the first sample), see :func:`window_setup`;
+    never before the first sample.
     """
-    lead_in = float(window.start - window.time[0])
-    offset = max(0.0, problem.warmup - lead_in)
-    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
-    return float(window.time[0]) - offset
+    return float(window.time[0])
+
+
+def warmup_used(window: WindowData) -> float:
+    """Seconds of measured history a run over *window* goes through before the window (its lead-in)."""
+    return float(window.start - window.time[0])
+
+
+def _phase(problem: Problem, window: WindowData, t0: float) -> Any:
+    """``note`` for :meth:`FMUModel.simulate`: names the warm-up for the watchdog while the run is in it."""
+    label = (f"the warm-up before the {window.name} window of the twin {problem.twin.name} "
+             f"(t = {t0:g} to {window.start:g} s, not scored)")
+    end = float(window.start)
+
+    def note(t: float) -> None:
+        note_phase(label if t <= end + 1e-9 * max(1.0, abs(end)) else f"the {window.name} window")
+
+    return note
 
 
 def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
     """Simulate the twin over *window* with parameter vector *x*.
 
-    Runs the held-input pre-run first (inputs held at their first values, for
-    the part of ``problem.warmup`` the window's lead-in does not cover), then
-    the lead-in and the window; returns output tag -> simulated values on the
-    window's grid (lead-in included).
+    Runs from the window's first grid point (its warm-up through the measured
+    history, then the window; from the FMU's initial state or its steady state
+    there, ``problem.initial``); returns output tag -> simulated values on the
+    window's grid (lead-in included). While the run is in the warm-up the
+    watchdog's error line says so.
     """
     parameters, offset, grid, inputs = window_setup(problem, window, x)
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
     model = cached_model(problem.twin)
-    result = model.simulate(
-        start_time=t0,
-        stop_time=stop,
-        output_interval=problem.sample_time,
-        inputs=inputs,
-        parameters=parameters,
-        outputs=list(problem.outputs.values()),
-    )
+    try:
+        note_phase(f"the start of the {window.name} window's run of the twin {problem.twin.name} (t = {t0:g} s)")
+        result = model.simulate(
+            start_time=t0,
+            stop_time=stop,
+            output_interval=problem.sample_time,
+            inputs=inputs,
+            parameters=parameters,
+            outputs=list(problem.outputs.values()),
+            input_rule=problem.inputs,
+            initial=problem.initial,
+            note=_phase(problem, window, t0) if t0 < window.start else None,
+        )
+    finally:
+        note_phase()
     t = np.asarray(result["time"], dtype=float)
     out: dict[str, np.ndarray] = {}
     for tag, name in problem.outputs.items():
@@ -196,9 +231,13 @@ def simulate_window_sensitivities(problem: Problem, window: WindowData, x: npt.A
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
     model = cached_model(problem.twin)
+    if problem.initial != "model":
+        raise SimulationError(f"exact sensitivities start at zero, from the FMU's own initial state; a run from "
+                              f"the steady state ([data] initial = {problem.initial!r}) uses finite differences")
     run = simulate_sensitivities(model, wrt=problem.names, scales=problem.upper - problem.lower,
                                  start_time=t0, stop_time=stop, output_interval=problem.sample_time,
-                                 inputs=inputs, parameters=parameters, outputs=list(problem.outputs.values()))
+                                 inputs=inputs, parameters=parameters, outputs=list(problem.outputs.values()),
+                                 input_rule=problem.inputs)
     at = t0 + offset + grid
     values: dict[str, np.ndarray] = {}
     slopes: dict[str, np.ndarray] = {}
@@ -279,8 +318,9 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
     A window that starts after the first sample gets a *lead-in*: up to
     ``warmup`` seconds of the measured inputs before it (never across an input
     gap), simulated but not part of the cost, so the twin's slow states follow
-    the real history into the window. The rest of the warm-up is the held-input
-    pre-run (:func:`simulate_window`).
+    the real history into the window. Where there is less history (a window at
+    the first sample has none) the warm-up is shortened to what exists: no run
+    starts before the first sample (:func:`warmup_used` says how long it was).
 
     Parameters
     ----------
@@ -402,6 +442,7 @@ def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
     if w < 0:
         raise EstimationError(f"warm-up must be >= 0 s, got {w:g}")
     w = math.ceil(w / dt - 1e-9) * dt
+    data = _get(spec, "data")
     return Problem(
         twin=Path(spec.twin),
         names=tuple(names),
@@ -412,4 +453,6 @@ def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
         outputs=dict(spec.outputs),
         sample_time=dt,
         warmup=w,
+        initial=str(_get(data, "initial", "model") or "model"),
+        inputs=str(_get(data, "inputs", "linear") or "linear"),
     )

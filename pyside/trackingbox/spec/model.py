@@ -14,6 +14,10 @@ log = logging.getLogger(__name__)
 ControllerKind = Literal["pi", "sliding"]
 #: Parameter-controller kinds a pair may name.
 CONTROLLERS: tuple[str, ...] = ("pi", "sliding")
+#: ``[data] inputs``: how measured inputs reach the twin between samples (the first is the default).
+INPUT_RULES: tuple[str, ...] = ("linear", "hold")
+#: ``[data] initial``: where a run without measured history starts (the first is the default).
+INITIAL_STATES: tuple[str, ...] = ("model", "steady")
 #: Names a ``[windows]`` table may hold.
 WINDOW_NAMES: tuple[str, ...] = ("training", "validation")
 
@@ -28,10 +32,15 @@ class SourceSpec:
         Absolute path of the package directory or ``.mo`` file.
     model : str
         Full class name of the twin, e.g. ``TrackingBox.Benches.HeatExchanger.Twin``.
+    libraries : tuple of Path
+        Modelica libraries the source uses (package directories or ``.mo`` files, e.g. the
+        MSL's ``Modelica`` directory): ``[source] libraries``. Libraries beside the source and
+        on ``MODELICAPATH`` are found without being named.
     """
 
     path: Path
     model: str
+    libraries: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -137,6 +146,12 @@ class DataRules:
     #: archived values of a tag whose value did not move (``[data] heartbeat = s`` for every tag or
     #: ``[data.heartbeat]`` per tag; ``"*"`` there is every tag not listed). See ``data.MeasurementView``.
     heartbeat: Mapping[str, float] = field(default_factory=dict)
+    #: How measured inputs reach the twin between their samples, the same in every stage and on both FMI
+    #: interfaces: ``"linear"`` (interpolated) or ``"hold"`` (the last sample held until the next).
+    inputs: str = "linear"
+    #: Where a run without measured history starts (a window at the first sample, tracking, validation):
+    #: ``"model"`` (the FMU's own initial state) or ``"steady"`` (its steady state with the inputs there).
+    initial: str = "model"
 
     def heartbeat_of(self, tag: str) -> float | None:
         """The heartbeat (s) of *tag*, or None when the tag is not exception-reported."""

@@ -30,6 +30,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from .model import (
     CONTROLLERS,
+    INITIAL_STATES,
+    INPUT_RULES,
     WINDOW_NAMES,
     BalanceSpec,
     DataRules,
@@ -287,14 +289,26 @@ def _parse_files(raw: Mapping[str, Any], base: Path, problems: Problems, *, chec
     source = None
     src = _table(raw, "source", problems)
     if src is not None:
-        _check_keys(src, ("path", "model"), ("path", "model"), "[source]", problems)
+        _check_keys(src, ("path", "model", "libraries"), ("path", "model"), "[source]", problems)
         spath = _string(src, "path", "[source]", problems)
         smodel = _string(src, "model", "[source]", problems)
+        libraries: list[Path] = []
+        raw_libs = src.get("libraries", [])
+        if not isinstance(raw_libs, list) or not all(isinstance(x, str) and x for x in raw_libs):
+            problems.add(f"libraries in [source] must be a list of paths (Modelica package directories or .mo "
+                         f"files), got {raw_libs!r}")
+            raw_libs = []
+        for lib in raw_libs:
+            resolved_lib = _resolve(base, lib)
+            libraries.append(resolved_lib)
+            if check_files and not resolved_lib.exists():
+                problems.add(f"library {lib!r} in [source] libraries {_absent(resolved_lib)} "
+                             f"(looked for {resolved_lib})")
         if spath is not None and smodel is not None:
             resolved = _resolve(base, spath)
             if check_files and not resolved.exists():
                 problems.add(f"path {spath!r} in [source] {_absent(resolved)} (looked for {resolved})")
-            source = SourceSpec(path=resolved, model=smodel)
+            source = SourceSpec(path=resolved, model=smodel, libraries=tuple(libraries))
 
     return files, sample_time, source
 
@@ -387,7 +401,7 @@ def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
     data = DataRules()
     dtable = _table(raw, "data", problems)
     if dtable is not None:
-        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat"), (), "[data]", problems)
+        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat", "inputs", "initial"), (), "[data]", problems)
         stoppage = None
         stable = _table(dtable, "stoppage", problems)
         if stable is not None:
@@ -409,7 +423,16 @@ def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
             value = _number(dtable, "heartbeat", "[data]", problems, positive=True)
             if value is not None:
                 heartbeat["*"] = value
-        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat)
+        choices = {"inputs": INPUT_RULES, "initial": INITIAL_STATES}
+        chosen = {}
+        for key, allowed in choices.items():
+            value = _string(dtable, key, "[data]", problems) if key in dtable else allowed[0]
+            if value is not None and value not in allowed:
+                problems.add(f"[data] {key} = {value!r} is not one of {', '.join(repr(a) for a in allowed)}"
+                             f"{did_you_mean(value, allowed)}")
+                value = None
+            chosen[key] = value or allowed[0]
+        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat, **chosen)
 
     return data
 

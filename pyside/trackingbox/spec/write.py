@@ -59,6 +59,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     if spec.source is not None:
         # a library outside the case directory is named absolutely: it does not move with the case
         doc["source"] = {"path": _rel(spec.source.path, base, outside=False), "model": spec.source.model}
+        if spec.source.libraries:
+            doc["source"]["libraries"] = [_rel(p, base, outside=False) for p in spec.source.libraries]
     doc["inputs"] = dict(spec.inputs)
     doc["outputs"] = dict(spec.outputs)
     if spec.parameters:
@@ -68,8 +70,13 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
         doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
     if spec.windows:
         doc["windows"] = {k: [float(a), float(b)] for k, (a, b) in spec.windows.items()}
-    if spec.data.stoppage is not None or spec.data.max_gap is not None or spec.data.heartbeat:
+    if (spec.data.stoppage is not None or spec.data.max_gap is not None or spec.data.heartbeat
+            or spec.data.inputs != "linear" or spec.data.initial != "model"):
         data: dict[str, Any] = {}
+        if spec.data.inputs != "linear":
+            data["inputs"] = spec.data.inputs
+        if spec.data.initial != "model":
+            data["initial"] = spec.data.initial
         if spec.data.stoppage is not None:
             st = spec.data.stoppage
             data["stoppage"] = {"tag": st.tag, "below": float(st.below)}

@@ -22,8 +22,10 @@ class GenerateSettings:
 
     out_dir: Path
     rewrite: bool = False
+    #: further Modelica libraries the twin uses (``--library``), beside ``[source] libraries``
+    library: tuple[Path, ...] = ()
 
 
 def run(spec: Any, settings: GenerateSettings, *, progress: Progress | None = None) -> GenerateResult:
     """Write the package; *progress* is not called (writing takes well under a second)."""
-    return generate(spec, settings.out_dir, rewrite=settings.rewrite)
+    return generate(spec, settings.out_dir, rewrite=settings.rewrite, libraries=settings.library)

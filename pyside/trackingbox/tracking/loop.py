@@ -163,6 +163,10 @@ class TrackingLoop:
                                  f"no sub-steps to choose (got substeps={substeps!r})")
             if any(getattr(p, "controller", "pi") != "pi" for p in spec.pairs):
                 raise SpecError(f"controllers='continuous' runs PI pairs only; {spec.path} has a sliding-mode pair")
+            if spec.data.inputs != "linear":
+                raise SpecError(f"controllers='continuous' integrates the controllers with the twin on its inputs "
+                                f"interpolated in C: it needs [data] inputs = \"linear\", not "
+                                f"{spec.data.inputs!r} ({spec.path})")
             if inputs_twin is None:
                 inputs_twin = make_inputs_twin(spec)
         #: the twin with its tracked parameters as inputs (continuous mode), else None
@@ -196,17 +200,19 @@ class TrackingLoop:
             if interpolation == "linear" and not continuous else {}
         self.twin = Twin(inputs_twin.fmu if continuous else spec.twin, label="tracked", base=base,
                           inputs=self.view.inputs, tolerance=tolerance, recorded=recorded, extrapolate=extrapolate,
-                          rename=inputs_twin.inputs if continuous else None)
+                          rename=inputs_twin.inputs if continuous else None, input_rule=spec.data.inputs)
         if untracked is True:
             try:
                 self.plain = Twin(spec.twin, label="untracked", base=base, inputs=self.view.inputs,
                                    tolerance=tolerance,
-                                   recorded={n: f"untracked_correction:{n}" for n in self.compensation.names})
+                                   recorded={n: f"untracked_correction:{n}" for n in self.compensation.names},
+                                   input_rule=spec.data.inputs)
             except BaseException:
                 self.twin.close()
                 raise
         for tw in (self.twin, self.plain):
             if tw is not None:
+                tw.steady_start = spec.data.initial == "steady"
                 tw.read_names, tw._read_key = self.read, tuple(self.read)
                 if self.stream is not None:
                     tw.max_step, tw.replay_inputs = self.stream.max_step, self._replay_inputs

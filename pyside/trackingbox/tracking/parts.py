@@ -254,7 +254,9 @@ def within_sample_gains(loop: TrackingLoop) -> dict[str, float]:
 
     def answer(changed: Mapping[str, float]) -> npt.NDArray[np.float64]:
         run = tw.model.stepper(start_time=0.0, parameters={**tw.base, **values, **changed}, inputs=tw.inputs,
-                               max_step=tw.max_step)
+                               max_step=tw.max_step, input_rule=tw.input_rule)
+        if tw.steady_start:
+            run.settle()
         run.step(t1)
         y = np.asarray(run.get(names), dtype=float)
         run.finish()

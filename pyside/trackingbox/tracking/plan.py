@@ -16,6 +16,8 @@ import pandas as pd
 
 from ..data import MeasurementView
 from ..errors import DataError, SpecError, unknown_name
+from ..fmu import read_info
+from ..fmu.info import change_refusal
 from ..stream import WindowedMeasurements
 from .controllers import Interpolation, ScaledPI, SlidingMode, StateCompensator
 from .result import TrackingEvent
@@ -117,6 +119,11 @@ def make_plan(spec: Spec, window: Window, untracked: bool | pd.DataFrame, view: 
             problems.append(unknown_name("tracking variable", pair.variable, spec.outputs, f"[outputs] of {spec.path}"))
     if problems:
         raise DataError("; ".join(problems))
+    info = read_info(spec.twin)
+    for pair in spec.pairs:
+        # a fixed parameter of a co-simulation-only twin cannot follow a controller: say what to do first
+        if pair.parameter in info.names("parameter") and (refusal := change_refusal(info, pair.parameter)):
+            raise SpecError(refusal)
     if view is None:
         view = MeasurementView.from_spec(spec, window, skip=float(spec.tracking.hold_until))
     elif view.grid.size == 0 or view.grid[0] != 0.0 or view.skip != float(spec.tracking.hold_until):

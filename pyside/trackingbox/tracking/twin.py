@@ -49,8 +49,12 @@ class Twin:
     def __init__(self, path: Path, *, label: str, base: Mapping[str, float], inputs: pd.DataFrame | None,
                  tolerance: float, recorded: Mapping[str, str],
                  extrapolate: Mapping[str, tuple[float, float]] | None = None,
-                 rename: Mapping[str, str] | None = None) -> None:
+                 rename: Mapping[str, str] | None = None, input_rule: str = "linear") -> None:
         self.label = label
+        #: how the input table reaches the FMU between samples (the spec's ``[data] inputs``)
+        self.input_rule = input_rule
+        #: a start at the first sample begins from the steady state (the spec's ``[data] initial``)
+        self.steady_start = False
         #: value name -> the FMU's variable that takes it (the tracked parameters' inputs of an inputs twin,
         #: :func:`~trackingbox.generate.inputs_twin.inputs_twin`); names not in it are the FMU's own
         self.rename = dict(rename or {})
@@ -89,15 +93,22 @@ class Twin:
         self.replay_inputs: Callable[[int], pd.DataFrame] | None = None
 
     def start(self, t: float, values: Mapping[str, float], x: Sequence[float] | None = None) -> None:
-        """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given."""
+        """(Re)initialise at *t* with *values* applied; overwrite the states with *x* if given.
+
+        Without *x*, a start at the data's first sample (t = 0) with :attr:`steady_start`
+        begins from the model's steady state there (``[data] initial = "steady"``).
+        """
         self._count()
         self.y = None
         self.stepper = self.model.stepper(start_time=t, parameters=self.fmu_values({**self.base, **values}),
                                           inputs=self.inputs, max_step=self.max_step,
-                                          carry=bool(self.carry_limits) and self.me, keep_jacobian=KEEP_JACOBIAN)
+                                          carry=bool(self.carry_limits) and self.me, keep_jacobian=KEEP_JACOBIAN,
+                                          input_rule=self.input_rule)
         self.applied = dict(values)
         if x is not None:
             self.stepper.set_continuous_states(np.asarray(x, dtype=float))
+        elif self.steady_start and t <= 0.0:
+            self.stepper.settle()
         self._save()
 
     def _count(self) -> None:
