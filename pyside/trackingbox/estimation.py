@@ -195,6 +195,12 @@ class EstimationResult:
         run gives residuals and Jacobian together), ``seconds`` and ``cpu_seconds``
         (wall and process CPU time of the refinement; not in :meth:`to_json`, whose
         document a resumed run reproduces exactly). Empty without refinement.
+    identifiability
+        What the data could determine at the start values, checked before the search
+        (:func:`trackingbox.identify.analysis.identify`, its ``to_json``); empty if not run.
+    uncertainty
+        Confidence intervals at the estimate (:class:`trackingbox.identify.intervals.Uncertainty`),
+        or None.
     """
 
     parameters: dict[str, float]
@@ -208,6 +214,8 @@ class EstimationResult:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     warmup: float = DEFAULT_WARMUP
     refinement: dict[str, Any] = field(default_factory=dict)
+    identifiability: dict[str, Any] = field(default_factory=dict)
+    uncertainty: Any = None
 
     def to_json(self) -> dict[str, Any]:
         """The ``trackingbox estimate --json`` document."""
@@ -223,6 +231,10 @@ class EstimationResult:
         }
         if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's
             out["refinement"] = {k: v for k, v in self.refinement.items() if k not in ("seconds", "cpu_seconds")}
+        if self.identifiability:  # trackingbox.identify: the check before, the intervals after
+            out["identifiability"] = self.identifiability
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty.to_json()
         return out
 
 
@@ -324,10 +336,10 @@ class Problem:
 # keep theirs across evaluations (trackingbox.analysis.executor.cached_model).
 
 
-def _model(path: Path) -> Any:
+def _model(path: Path, tolerance: float = 1e-6) -> Any:
     from .analysis.executor import cached_model
 
-    return cached_model(path)
+    return cached_model(path, tolerance)
 
 
 def _forget_models() -> None:
@@ -387,18 +399,20 @@ def run_start(problem: Problem, window: WindowData) -> float:
     return float(window.time[0]) - offset
 
 
-def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
+def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
+                    tolerance: float = 1e-6) -> dict[str, np.ndarray]:
     """Simulate the twin over *window* with parameter vector *x*.
 
     Runs the held-input pre-run first (inputs held at their first values, for
     the part of ``problem.warmup`` the window's lead-in does not cover), then
     the lead-in and the window; returns output tag -> simulated values on the
-    window's grid (lead-in included).
+    window's grid (lead-in included). *tolerance*: the solver's relative
+    tolerance (tighter for finite differences that must resolve small changes).
     """
     parameters, offset, grid, inputs = window_setup(problem, window, x)
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
-    model = _model(problem.twin)
+    model = _model(problem.twin, tolerance)
     result = model.simulate(
         start_time=t0,
         stop_time=stop,
@@ -876,6 +890,8 @@ def estimate(
     jacobian: str = "auto",
     scheduler: str | None = None,
     settle: float = GLOBAL_SETTLE,
+    level: float | None = 0.95,
+    identify: bool = True,
 ) -> EstimationResult:
     """Estimate the spec's ``[[parameters]]`` on its training window.
 
@@ -945,6 +961,12 @@ def estimate(
         Stop the global search once the better half of its population lies within
         this fraction of every parameter's range (default :data:`GLOBAL_SETTLE`);
         0: run every generation.
+    level
+        Confidence level of the intervals at the estimate
+        (:func:`trackingbox.identify.intervals.uncertainty`); None: no intervals.
+    identify
+        Check what the data can determine at the start values before the search and
+        warn about parameters they cannot tell apart (:mod:`trackingbox.identify`).
 
     Returns
     -------
@@ -965,12 +987,18 @@ def estimate(
                               f"not {jacobian!r}")
     if maxiter is None:
         maxiter = default_maxiter(len(list(spec.parameters)), popsize)
+    from .identify import hooks as identify_hooks  # identifiability before, intervals after
+
+    if level is not None and not (isinstance(level, (int, float)) and 0.0 < float(level) < 1.0):
+        raise EstimationError(f"estimate: level must be a fraction in (0, 1), not {level!r}")
     try:
-        return _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
-                         refine=refine, refine_iterations=refine_iterations, progress=progress,
-                         checkpoint=checkpoint, global_grid=global_grid, resume=resume,
-                         refine_grid=refine_grid, jacobian=jacobian, scheduler=scheduler,
-                         settle=float(settle))
+        before = identify_hooks.before_estimate(spec, warmup=warmup, jacobian=jacobian) if identify else None
+        result = _estimate(spec, seed=seed, workers=workers, maxiter=maxiter, popsize=popsize, warmup=warmup,
+                           refine=refine, refine_iterations=refine_iterations, progress=progress,
+                           checkpoint=checkpoint, global_grid=global_grid, resume=resume,
+                           refine_grid=refine_grid, jacobian=jacobian, scheduler=scheduler,
+                           settle=float(settle))
+        return identify_hooks.after_estimate(spec, result, before, level=level, warmup=warmup, jacobian=jacobian)
     finally:
         close_models()
 

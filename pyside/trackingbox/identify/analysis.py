@@ -1,0 +1,572 @@
+"""``trackingbox identify``: what the data can determine, before any estimation.
+
+At the start values and at a few points spread inside the bounds
+(:func:`~trackingbox.identify.model.inside_points`) the twin's output
+sensitivities on the training window are taken (exact, or central differences:
+:mod:`trackingbox.identify.model`), scaled (log-parameters where the bounds are
+positive, else bound ranges; each tag's rows divided by its sensor noise, read
+from the measurements themselves: :func:`tag_noise`) and analysed
+(:func:`trackingbox.identify.structure.analyse`): numerical rank, the directions
+whose 95 % interval would be wider than half what the bounds allow (with the
+sensor noise alone: the best case, as model error only widens them), the
+parameters in those directions, and the combinations the data do determine --
+products and ratios where the undetermined direction is one in ``ln θ`` at every
+point checked, sums where it is one in the parameters' own units, else the
+direction's numbers. Where the twin has further outputs nobody measures, the
+ones that would see an undetermined direction are named.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import EstimationError, TrackingError
+from . import structure as st
+from .model import Evaluation, TwinWindow, inside_points, stack, window_for
+
+log = logging.getLogger(__name__)
+
+#: Points inside the bounds checked besides the start values.
+DEFAULT_POINTS = 3
+#: Largest angle (rad) between the undetermined directions at two points that still counts as "the
+#: same direction": 0.1 rad is a 10 % change of the exponents' ratios.
+SAME_DIRECTION = 0.1
+#: Fraction of the measured range used as a tag's noise when neither the first differences nor the
+#: spread around a moving mean give one (a noise-free, e.g. computed, tag).
+FALLBACK_NOISE = 1e-3
+#: Move along an undetermined direction (in ln θ) the candidate outputs are judged by: 10 %.
+PROBE_MOVE = 0.1
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class Combination:
+    """A combination of parameters the data determine: a product/ratio or a sum.
+
+    Attributes
+    ----------
+    text
+        ``R1·C``, ``R1/R2`` or ``R1 + R2``.
+    kind
+        ``"product"`` (exponents on the parameters) or ``"sum"`` (coefficients).
+    terms
+        Parameter -> exponent or coefficient (only the non-zero ones).
+    """
+
+    text: str
+    kind: str
+    terms: dict[str, int]
+
+    def value(self, values: Mapping[str, float]) -> float:
+        """The combination's value at *values*."""
+        if self.kind == "product":
+            return float(math.prod(float(values[n]) ** e for n, e in self.terms.items()))
+        return float(sum(float(values[n]) * c for n, c in self.terms.items()))
+
+    def to_json(self) -> dict[str, Any]:
+        return {"text": self.text, "kind": self.kind, "terms": dict(self.terms)}
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One group of parameters the data cannot tell apart.
+
+    Attributes
+    ----------
+    parameters
+        The parameters in the group.
+    kind
+        ``"product"``, ``"sum"`` or ``"direction"`` (no simple structure).
+    undetermined
+        The undetermined directions: exponent vectors (products), coefficient vectors in
+        the parameters' units (sums), or unit vectors in the scaled coordinates (directions).
+    determined
+        The combinations the data do determine (empty for ``"direction"``).
+    tags
+        Tags that carry these parameters' effect (largest share of their sensitivities first).
+    structural
+        The direction is numerically null (below the rank tolerance) at every point checked.
+    consistent
+        The same structure was found at every point checked.
+    candidates
+        Unmeasured twin outputs that would see the direction: ``(variable, change, scale)``: its
+        RMS change for a move of :data:`PROBE_MOVE` along the direction, and the largest RMS change
+        a 10 % move of one of its parameters gives.
+    message
+        The finding in plain words.
+    """
+
+    parameters: tuple[str, ...]
+    kind: str
+    undetermined: tuple[tuple[float, ...], ...]
+    determined: tuple[Combination, ...]
+    tags: tuple[str, ...]
+    structural: bool
+    consistent: bool
+    candidates: tuple[tuple[str, float, float], ...] = ()
+    message: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {"parameters": list(self.parameters), "kind": self.kind,
+                "undetermined": [list(v) for v in self.undetermined],
+                "determined": [c.to_json() for c in self.determined], "tags": list(self.tags),
+                "structural": self.structural, "consistent": self.consistent,
+                "candidates": [{"variable": v, "change": c, "scale": s} for v, c, s in self.candidates],
+                "message": self.message}
+
+
+@dataclass(frozen=True)
+class PointResult:
+    """The structure at one point: where, the singular values, rank, determined directions."""
+
+    label: str
+    x: dict[str, float]
+    singular_values: tuple[float, ...]
+    rank: int
+    determined: int
+    undetermined_parameters: tuple[str, ...]
+    error: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {"label": self.label, "x": dict(self.x), "singular_values": list(self.singular_values),
+                "rank": self.rank, "determined": self.determined,
+                "undetermined_parameters": list(self.undetermined_parameters),
+                **({"error": self.error} if self.error else {})}
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What :func:`identify` found.
+
+    Attributes
+    ----------
+    names
+        The spec's ``[[parameters]]``.
+    scaling
+        Per parameter ``"log"`` or ``"range"`` (see :mod:`trackingbox.identify.structure`).
+    noise
+        Tag -> (standard deviation used to scale its rows, where it came from).
+    points
+        The structure at the start values and at each point inside the bounds.
+    rank
+        Numerical rank at the start values (of ``len(names)``).
+    determined
+        Per parameter: determined on its own at the start values.
+    findings
+        The groups of parameters the data cannot tell apart, with the combinations they do determine.
+    correlation
+        Correlation matrix of the (scaled) parameters at the start values.
+    half_widths
+        Per parameter its own 95 % half-width at the start values (scaled units: relative for
+        log-scaled parameters, parts of the bound range otherwise; sensor noise only).
+    sensitivities
+        ``"exact"`` or ``"fd"``, and why not exact.
+    runs
+        Twin runs made.
+    """
+
+    names: tuple[str, ...]
+    scaling: tuple[str, ...]
+    noise: dict[str, tuple[float, str]]
+    points: tuple[PointResult, ...]
+    rank: int
+    determined: dict[str, bool]
+    findings: tuple[Finding, ...]
+    correlation: np.ndarray = field(repr=False, compare=False)
+    half_widths: dict[str, float] = field(default_factory=dict)
+    sensitivities: tuple[str, str] = ("", "")
+    runs: int = 0
+
+    @property
+    def complete(self) -> bool:
+        """Every parameter determined on its own."""
+        return all(self.determined.values())
+
+    def messages(self) -> list[str]:
+        """The findings in plain words, and parameters undetermined on their own outside any finding."""
+        out = [f.message for f in self.findings]
+        grouped = {p for f in self.findings for p in f.parameters}
+        for name, ok in self.determined.items():
+            if not ok and name not in grouped:
+                hw = self.half_widths.get(name, math.inf)
+                k = self.names.index(name)
+                what = (f"±{_pct(hw)}" if self.scaling[k] == "log" else f"±{hw:.3g} of its bound range")
+                out.append(f"{name} is not determined: with the sensor noise alone its 95 % interval would be "
+                           f"{what}, more than half of what its bounds allow")
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "parameters": list(self.names), "scaling": list(self.scaling),
+            "rows": "each tag's samples divided by its noise standard deviation",
+            "noise": {t: {"sigma": s, "source": src} for t, (s, src) in self.noise.items()},
+            "rank": self.rank, "of": len(self.names),
+            "determined": dict(self.determined),
+            "half_widths": {k: _json_float(v) for k, v in self.half_widths.items()},
+            "findings": [f.to_json() for f in self.findings],
+            "messages": self.messages(),
+            "correlation": [[_json_float(v) for v in row] for row in np.asarray(self.correlation)],
+            "points": [p.to_json() for p in self.points],
+            "sensitivities": {"method": self.sensitivities[0], "reason": self.sensitivities[1]},
+            "runs": self.runs,
+        }
+
+
+def _json_float(v: float) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _pct(relative_half_width: float) -> str:
+    """A half-width in ln-units as a percentage (``exp(h) - 1``)."""
+    if not math.isfinite(relative_half_width):
+        return "unbounded"
+    return f"{100.0 * math.expm1(relative_half_width):.3g} %"
+
+
+# --------------------------------------------------------------------------- noise of the tags
+
+
+def tag_noise(window: Any, interval: float, outputs: Sequence[str]) -> dict[str, tuple[float, str]]:
+    """Each output tag's sensor noise on *window*, read from its measurements.
+
+    :func:`~trackingbox.analysis.offsets.noise_sigma` (the robust spread of the first
+    differences); for a held (exception-reported) tag, whose differences are mostly zero,
+    :func:`~trackingbox.analysis.offsets.noise_floor` (the spread around a 30 min moving
+    mean); else :data:`FALLBACK_NOISE` of the measured range.
+    """
+    from ..analysis.offsets import HELD_FRACTION, held_fraction, noise_floor, noise_sigma
+
+    out: dict[str, tuple[float, str]] = {}
+    for tag in outputs:
+        y = np.asarray(window.measured[tag], dtype=float)
+        sigma, source = noise_sigma(y), "first differences of the measurement"
+        if not (sigma > 0) or held_fraction(y) > HELD_FRACTION:
+            floor = noise_floor(y, interval)
+            if floor > 0:
+                sigma, source = floor, "spread around its 30 min moving mean (a held tag)"
+        if not (sigma > 0 and math.isfinite(sigma)):
+            ok = y[np.isfinite(y)]
+            span = float(ok.max() - ok.min()) if ok.size else 1.0
+            sigma, source = FALLBACK_NOISE * (span if span > 0 else 1.0), f"{FALLBACK_NOISE:g} of its range"
+        out[tag] = (float(sigma), source)
+    return out
+
+
+# --------------------------------------------------------------------------- the analysis
+
+
+def identify(spec: Any, *, points: int = DEFAULT_POINTS, method: str = "auto", warmup: float | None = None,
+             candidates: bool = True, progress: Progress | None = None, x: Sequence[float] | None = None,
+             fraction: float = st.DETERMINED_FRACTION) -> Identifiability:
+    """What the training window can determine of the spec's ``[[parameters]]`` (see the module docstring).
+
+    Parameters
+    ----------
+    spec
+        A loaded spec.
+    points
+        Points inside the bounds checked besides the start values (0: the start only).
+    method
+        Sensitivities: ``"auto"`` (exact where the twin provides directional derivatives,
+        else central differences), ``"exact"`` or ``"fd"``.
+    warmup
+        The estimation's warm-up (s).
+    candidates
+        Look for unmeasured twin outputs that would see an undetermined direction.
+    progress
+        ``progress(stage, done, total)``.
+    x
+        The first point instead of the start values.
+    fraction
+        :data:`~trackingbox.identify.structure.DETERMINED_FRACTION`.
+    """
+    from ..estimation import close_models
+
+    if not (isinstance(points, int) and points >= 0):
+        raise EstimationError(f"identify: points must be an integer >= 0, not {points!r}")
+    try:
+        problem, window = window_for(spec, warmup=warmup)
+        tw = TwinWindow(problem, window, method)  # type: ignore[arg-type]
+        noise = tag_noise(window, problem.sample_time, list(problem.outputs))
+        x0 = np.asarray(problem.start if x is None else x, dtype=float)
+        xs = [("start values" if x is None else "given point", x0)]
+        xs += [(f"point {i + 1} inside the bounds", p)
+               for i, p in enumerate(inside_points(x0, problem.lower, problem.upper, points))]
+        results: list[PointResult] = []
+        structures: list[tuple[np.ndarray, st.Structure, st.Scaling] | None] = []
+        first: Evaluation | None = None
+        for i, (label, xi) in enumerate(xs):
+            if progress is not None:
+                progress("sensitivities", i, len(xs))
+            try:
+                ev = tw.sensitivities(xi)
+            except TrackingError as exc:
+                if i == 0:
+                    raise EstimationError(f"identify: the twin failed at the {label} ({exc})") from exc
+                results.append(PointResult(label, dict(zip(problem.names, map(float, xi))), (), 0, 0, (), str(exc)))
+                structures.append(None)
+                continue
+            first = ev if i == 0 else first
+            structure, scaling = point_structure(ev, problem, noise, fraction=fraction)
+            structures.append((xi, structure, scaling))
+            undet = tuple(n for n, p in zip(problem.names, structure.participation()) if p > st.PARTICIPATION)
+            results.append(PointResult(label, dict(zip(problem.names, map(float, xi))),
+                                       tuple(float(s) for s in structure.singular_values), structure.rank,
+                                       int(structure.determined.sum()), undet))
+        if progress is not None:
+            progress("sensitivities", len(xs), len(xs))
+        assert first is not None and structures[0] is not None
+        x_start, s0, scaling0 = structures[0]
+        others = [(xi, s, sc) for item in structures[1:] if item is not None for xi, s, sc in [item]]
+        findings = name_findings(s0, scaling0, x_start, others, first, list(problem.names))
+        if candidates and findings:
+            findings = [replace(f, candidates=_candidates(tw, problem, x_start, scaling0, f)) for f in findings]
+        findings = [replace(f, message=finding_text(f)) for f in findings]
+        marginal_ok = s0.marginal <= fraction * scaling0.widths
+        grouped = {p for f in findings for p in f.parameters}
+        determined = {n: bool(ok) and n not in grouped for n, ok in zip(problem.names, marginal_ok)}
+        return Identifiability(
+            names=tuple(problem.names), scaling=scaling0.kinds, noise=noise, points=tuple(results),
+            rank=s0.rank, determined=determined, findings=tuple(findings), correlation=s0.correlation,
+            half_widths={n: float(h) for n, h in zip(problem.names, s0.marginal)},
+            sensitivities=(tw.method, tw.reason), runs=tw.runs)
+    finally:
+        close_models()
+
+
+def point_structure(ev: Evaluation, problem: Any, noise: Mapping[str, tuple[float, str]], *,
+                    covariance: np.ndarray | None = None,
+                    fraction: float = st.DETERMINED_FRACTION) -> tuple[st.Structure, st.Scaling]:
+    """The :class:`~trackingbox.identify.structure.Structure` of one evaluation, rows scaled by *noise*."""
+    scaling = st.parameter_scaling(ev.x, problem.lower, problem.upper)
+    assert ev.jacobian is not None
+    rows = [ev.jacobian[tag] for tag in ev.simulated]
+    sig = [np.full(len(ev.simulated[tag]), noise[tag][0]) for tag in ev.simulated]
+    S = st.scale_matrix(np.concatenate(rows, axis=0), scaling, np.concatenate(sig))
+    return st.analyse(S, list(problem.names), scaling.widths, covariance=covariance, fraction=fraction), scaling
+
+
+def name_findings(s0: st.Structure, scaling: st.Scaling, x0: np.ndarray,
+                  others: Sequence[tuple[np.ndarray, st.Structure, st.Scaling]], ev: Evaluation,
+                  names: list[str]) -> list[Finding]:
+    """Group the undetermined subspace of *s0* by parameters and name each group (module docstring).
+
+    The subspace's basis is brought to reduced row echelon form; parameters that share a
+    row form a group, and each group's rows are its own undetermined directions.
+    """
+    groups = _groups(s0.undetermined, len(names))
+    return [_name_group(members, Ug, s0, scaling, x0, others, ev, names) for members, Ug in groups]
+
+
+def _groups(U: np.ndarray, n: int) -> list[tuple[list[int], np.ndarray]]:
+    """``(members, orthonormal basis on the members)`` for each group of the subspace span(U) of R^n."""
+    if U.size == 0:
+        return []
+    R, _ = st.rref(U.T, tol=1e-6)
+    parent = list(range(n))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    supports = []
+    for row in R:
+        support = [j for j in range(n) if abs(row[j]) > 1e-3]
+        supports.append(support)
+        for a in support[1:]:
+            parent[find(a)] = find(support[0])
+    rows: dict[int, list[np.ndarray]] = {}
+    for row, support in zip(R, supports):
+        if support:
+            rows.setdefault(find(support[0]), []).append(row)
+    out = []
+    for root, group_rows in rows.items():
+        members = sorted(j for j in range(n) if find(j) == root and any(abs(r[j]) > 1e-3 for r in group_rows))
+        B = np.array(group_rows)[:, members].T
+        q, _ = np.linalg.qr(B)
+        out.append((members, q))
+    return sorted(out, key=lambda g: g[0])
+
+
+def _group_subspace(structure: st.Structure, members: list[int]) -> np.ndarray:
+    """The undetermined directions of *structure* that live on exactly *members* (empty if none do)."""
+    for found, Ug in _groups(structure.undetermined, len(structure.names)):
+        if found == members:
+            return Ug
+    return np.zeros((len(members), 0))
+
+
+def _name_group(members: list[int], Ug: np.ndarray, s0: st.Structure, scaling: st.Scaling, x0: np.ndarray,
+                others: Sequence[tuple[np.ndarray, st.Structure, st.Scaling]], ev: Evaluation,
+                names: list[str]) -> Finding:
+    params = tuple(names[j] for j in members)
+    k = Ug.shape[1]
+    # structural: this group's directions are numerically null at the start and at every other point
+    zero = s0.half_widths == math.inf
+    structural = bool(zero.any()) and _within(Ug, s0.directions[members][:, zero])
+    for _, s, _sc in others:
+        z = s.half_widths == math.inf
+        structural = structural and bool(z.any()) and _within(Ug, s.directions[members][:, z])
+    tags = _carrying_tags(ev, members, scaling)
+    all_log = all(scaling.kinds[j] == "log" for j in members)
+    if all_log:
+        rational = st.rational_basis(Ug)
+        if rational is not None and _same_everywhere(rational, members, others, log=True):
+            comps = st.complement_combinations(rational, len(members))
+            return Finding(params, "product", tuple(tuple(float(v) for v in q) for q in rational),
+                           tuple(Combination(st.product_text(a, params), "product",
+                                             {p: int(e) for p, e in zip(params, a) if e}) for a in comps),
+                           tags, structural, True)
+    lin = st.to_linear(Ug if Ug.ndim == 2 else Ug[:, None], x0, _sub_scaling(scaling, members))
+    rational = st.rational_basis(lin)
+    if rational is not None and _same_everywhere(rational, members, others, log=False):
+        comps = st.complement_combinations(rational, len(members))
+        return Finding(params, "sum", tuple(tuple(float(v) for v in q) for q in rational),
+                       tuple(Combination(st.sum_text(a, params), "sum", {p: int(c) for p, c in zip(params, a) if c})
+                             for a in comps), tags, structural, True)
+    consistent = all(st.subspace_angle(Ug, _group_subspace(s, members)) <= SAME_DIRECTION for _, s, _ in others)
+    dirs = tuple(tuple(round(float(v), 4) for v in Ug[:, i]) for i in range(k))
+    return Finding(params, "direction", dirs, (), tags, structural, consistent)
+
+
+def _sub_scaling(scaling: st.Scaling, members: list[int]) -> st.Scaling:
+    return st.Scaling(tuple(scaling.kinds[j] for j in members), scaling.factors[members], scaling.widths[members])
+
+
+def _within(Ug: np.ndarray, null: np.ndarray) -> bool:
+    """Every column of *Ug* lies (within 0.1 rad) in the span of *null*'s columns."""
+    if null.size == 0:
+        return False
+    q, _ = np.linalg.qr(null)
+    resid = Ug - q @ (q.T @ Ug)
+    return bool(np.linalg.norm(resid, axis=0).max() < math.sin(SAME_DIRECTION))
+
+
+def _same_everywhere(rational: list[list[int]], members: list[int],
+                     others: Sequence[tuple[np.ndarray, st.Structure, st.Scaling]], *, log: bool) -> bool:
+    """The rational directions span the group's undetermined subspace at every other point too."""
+    R = np.array(rational, dtype=float).T
+    for xi, s, sc in others:
+        Ui = _group_subspace(s, members)
+        if not log:
+            Ui = st.to_linear(Ui, xi, _sub_scaling(sc, members)) if Ui.size else Ui
+        if Ui.shape[1] != R.shape[1] or st.subspace_angle(R, Ui) > SAME_DIRECTION:
+            return False
+    return True
+
+
+def _carrying_tags(ev: Evaluation, members: list[int], scaling: st.Scaling) -> tuple[str, ...]:
+    """Tags ordered by their share of the group's (scaled) sensitivity; those below 5 % of the top left out."""
+    assert ev.jacobian is not None
+    share = {}
+    for tag, J in ev.jacobian.items():
+        y = ev.measured[tag]
+        span = float(np.nanmax(y) - np.nanmin(y)) if y.size else 1.0
+        share[tag] = float(np.sqrt(np.mean((J[:, members] * scaling.factors[members]) ** 2)) / (span or 1.0))
+    top = max(share.values(), default=0.0)
+    return tuple(t for t, v in sorted(share.items(), key=lambda kv: -kv[1]) if top > 0 and v >= 0.05 * top)
+
+
+def _candidates(tw: TwinWindow, problem: Any, x0: np.ndarray, scaling: st.Scaling,
+                finding: Finding) -> tuple[tuple[str, float, float], ...]:
+    """Unmeasured twin outputs that would see the finding's first undetermined direction, best first."""
+    from ..fmu import read_info
+
+    info = read_info(problem.twin)
+    measured = set(problem.outputs.values())
+    names = [v.name for v in info.variables if v.causality == "output" and v.name not in measured
+             and str(v.type).lower() in ("real", "float64", "float32")][:50]
+    if not names or not finding.undetermined:
+        return ()
+    members = [list(problem.names).index(p) for p in finding.parameters]
+    q = np.asarray(finding.undetermined[0], dtype=float)
+    if finding.kind == "sum":  # coefficients in the parameters' own units -> scaled coordinates
+        q = q / scaling.factors[members]
+    direction = np.zeros(len(problem.names))
+    direction[members] = q / (np.linalg.norm(q) or 1.0)
+    try:
+        ev = tw.sensitivities(x0, extra=names)
+    except TrackingError as exc:
+        log.info("no candidate outputs: the twin failed with its further outputs (%s)", exc)
+        return ()
+    out = []
+    for n, (_, J) in ev.extra.items():
+        Jz = J * scaling.factors[None, :]
+        change = float(np.sqrt(np.mean((Jz @ direction * PROBE_MOVE) ** 2)))
+        scale = float(max(np.sqrt(np.mean((Jz[:, j] * PROBE_MOVE) ** 2)) for j in range(Jz.shape[1])))
+        if scale > 0 and change > 0.05 * scale:
+            out.append((n, change, scale))
+    out.sort(key=lambda c: -c[1] / c[2])
+    return tuple(out[:3])
+
+
+# --------------------------------------------------------------------------- words
+
+
+def finding_text(f: Finding) -> str:
+    """One finding in plain words."""
+    who = st.listing(list(f.parameters))
+    on = f" on {st.listing(list(f.tags))}" if f.tags else ""
+    if f.kind == "product":
+        if len(f.undetermined) == 1:
+            q = f.undetermined[0]
+            up = [f"{p}{_power(e)}" for p, e in zip(f.parameters, q) if e > 0]
+            down = [f"{p}{_power(-e)}" for p, e in zip(f.parameters, q) if e < 0]
+            move = f"multiplying {st.listing(up)} by any factor f" + (
+                f" and dividing {st.listing(down)} by it" if down else "")
+            head = f"{who} cannot be told apart{on}: {move} leaves {'them' if f.tags else 'the outputs'} unchanged"
+        else:
+            head = f"{who} cannot be told apart{on} ({len(f.undetermined)} undetermined directions)"
+        tail = (f"; only {st.listing([c.text for c in f.determined])} "
+                f"{'is' if len(f.determined) == 1 else 'are'} determined" if f.determined else
+                "; none of them is determined")
+    elif f.kind == "sum":
+        if len(f.undetermined) == 1:
+            q = f.undetermined[0]
+            up = [p for p, c in zip(f.parameters, q) if c > 0]
+            down = [p for p, c in zip(f.parameters, q) if c < 0]
+            move = f"raising {st.listing(up)} and lowering {st.listing(down)} by matching amounts" if down else \
+                f"moving {st.listing(up)} together"
+            head = f"{who} cannot be told apart{on}: {move} leaves the outputs unchanged"
+        else:
+            head = f"{who} cannot be told apart{on}"
+        tail = (f"; only {st.listing([c.text for c in f.determined])} "
+                f"{'is' if len(f.determined) == 1 else 'are'} determined" if f.determined else "")
+    else:
+        q = f.undetermined[0] if f.undetermined else ()
+        terms = ", ".join(f"{v:+.2f} ln {p}" for p, v in zip(f.parameters, q) if abs(v) >= 0.05)
+        head = f"{who} move{'s' if len(f.parameters) == 1 else ''}{on} together"
+        tail = (f": the direction ({terms}) is not determined" + (
+            "" if f.consistent else " (at the start values; it turns at other points of the bounds)"))
+    text = head + tail
+    if f.structural:
+        text += " (at every point checked, whatever the noise)"
+    fix = _fix_text(f)
+    return f"{text}. {fix}" if fix else text + "."
+
+
+def _power(e: float) -> str:
+    e = int(round(e))
+    return "" if e == 1 else f"^{e}"
+
+
+def _fix_text(f: Finding) -> str:
+    k = len(f.undetermined)
+    n = len(f.parameters)
+    holds = "one of them" if k == 1 and n > 1 else f"{k} of them"
+    parts = [f"Fix {holds} ([fixed] in the spec) or measure what separates them"] if n > 1 else \
+        [f"Fix {f.parameters[0]} ([fixed]) or measure what it acts on"]
+    if f.candidates:
+        v, change, scale = f.candidates[0]
+        parts.append(f"the twin's {v} would see it (a {PROBE_MOVE:.0%} move along the undetermined direction "
+                     f"changes it by {change:.3g} RMS, against {scale:.3g} for a {PROBE_MOVE:.0%} move of one "
+                     f"parameter)")
+    return ": ".join(parts) + "."
