@@ -24,6 +24,7 @@ COMMANDS = (
     "simulate",
     "bench",
     "pair",
+    "identify",
     "estimate",
     "track",
     "replay",
@@ -38,6 +39,7 @@ examples:
   trackingbox inspect twin.fmu --json
   trackingbox simulate twin.fmu --inputs inputs.csv --stop 3600 -o result.csv
   trackingbox bench heat-exchanger --out case1 --seed 3
+  trackingbox identify case1/spec.toml
   trackingbox estimate case1/spec.toml --report case1/estimate
   trackingbox pair case1/spec.toml --method rga --report case1/pair
   trackingbox track case1/spec.toml --report case1/track

@@ -18,6 +18,13 @@ examples:
   trackingbox estimate case1/spec.toml --report case1/estimate --resume   # continue after an interruption
   trackingbox estimate hp/spec.toml --workers 2 --maxiter 8 --refine-iterations 6   # ~3-4 min budget
   trackingbox estimate hp/spec.toml --scheduler tcp://10.0.0.5:8786   # population on a Dask cluster
+  trackingbox estimate wall/spec.toml --level 0.9    # 90 % intervals
+
+Before the search the sensitivities at the start values say what the data can
+determine (a warning names parameters they cannot tell apart; `trackingbox
+identify SPEC` gives the whole analysis); after it each parameter gets a
+confidence interval (default 95 %, --level) with its method named, or "not
+determined (with ...)" and intervals of the combinations that are.
 
 The cost is the NRMSE (RMSE / measured range) per output tag, averaged over the
 tags, on the training window; the validation window reports the NRMSE at the
@@ -82,6 +89,10 @@ def register(subparsers: Any) -> None:
                    help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",
                    help="write the estimates back as the [[parameters]] start values of SPEC")
+    p.add_argument("--level", type=number(gt=0, le=0.9999), default=0.95,
+                   help="confidence level of the intervals at the estimate (default 0.95)")
+    p.add_argument("--no-intervals", dest="intervals", action="store_false",
+                   help="no confidence intervals (saves their twin runs)")
     p.set_defaults(func=run)
 
 
@@ -124,6 +135,7 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
         global_grid=args.global_grid,
         resume=args.resume,
         jacobian=args.jacobian,
+        level=args.level if args.intervals else None,
     )
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
@@ -142,11 +154,22 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
 
 
 def _print_table(result: Any) -> None:
+    unc = result.uncertainty
     width = max(len(n) for n in result.parameters)
-    print(f"{'parameter':<{width}}  {'start':>12}  {'estimate':>12}  {'min':>12}  {'max':>12}")
+    level = f"{100 * unc.level:g} % interval" if unc is not None else ""
+    print(f"{'parameter':<{width}}  {'start':>12}  {'estimate':>12}  {'min':>12}  {'max':>12}  {level}")
     for name, value in result.parameters.items():
         lo, hi = result.bounds[name]
-        print(f"{name:<{width}}  {result.initial[name]:>12.6g}  {value:>12.6g}  {lo:>12.6g}  {hi:>12.6g}")
+        iv = unc.interval(name) if unc is not None else None
+        what = "" if iv is None else (f"[{iv.lower:.6g}, {iv.upper:.6g}] {iv.method}" if iv.determined else iv.note)
+        print(f"{name:<{width}}  {result.initial[name]:>12.6g}  {value:>12.6g}  {lo:>12.6g}  {hi:>12.6g}  {what}")
+    if unc is not None and unc.combinations:
+        print()
+        for iv in unc.combinations:
+            print(f"determined: {iv.text()}")
+    if unc is not None:
+        for f in unc.findings:
+            print(f"note: {f.message}")
     tags = list(result.validation_nrmse)
     twidth = max(len(t) for t in tags)
     print()

@@ -95,9 +95,9 @@ class Finding:
     consistent
         The same structure was found at every point checked.
     candidates
-        Unmeasured twin outputs that would see the direction: ``(variable, change, scale)``: its
-        RMS change for a move of :data:`PROBE_MOVE` along the direction, and the largest RMS change
-        a 10 % move of one of its parameters gives.
+        Unmeasured twin outputs that would see the direction: ``(variable, change, scale, unit)``:
+        its RMS change for a move of :data:`PROBE_MOVE` along the direction, the largest RMS change
+        a move of :data:`PROBE_MOVE` of one of its parameters gives, and its unit.
     message
         The finding in plain words.
     """
@@ -109,7 +109,7 @@ class Finding:
     tags: tuple[str, ...]
     structural: bool
     consistent: bool
-    candidates: tuple[tuple[str, float, float], ...] = ()
+    candidates: tuple[tuple[str, float, float, str], ...] = ()
     message: str = ""
 
     def to_json(self) -> dict[str, Any]:
@@ -117,7 +117,7 @@ class Finding:
                 "undetermined": [list(v) for v in self.undetermined],
                 "determined": [c.to_json() for c in self.determined], "tags": list(self.tags),
                 "structural": self.structural, "consistent": self.consistent,
-                "candidates": [{"variable": v, "change": c, "scale": s} for v, c, s in self.candidates],
+                "candidates": [{"variable": v, "change": c, "scale": s, "unit": u} for v, c, s, u in self.candidates],
                 "message": self.message}
 
 
@@ -476,12 +476,13 @@ def _carrying_tags(ev: Evaluation, members: list[int], scaling: st.Scaling) -> t
 
 
 def _candidates(tw: TwinWindow, problem: Any, x0: np.ndarray, scaling: st.Scaling,
-                finding: Finding) -> tuple[tuple[str, float, float], ...]:
+                finding: Finding) -> tuple[tuple[str, float, float, str], ...]:
     """Unmeasured twin outputs that would see the finding's first undetermined direction, best first."""
     from ..fmu import read_info
 
     info = read_info(problem.twin)
     measured = set(problem.outputs.values())
+    units = {v.name: v.unit or "" for v in info.variables}
     names = [v.name for v in info.variables if v.causality == "output" and v.name not in measured
              and str(v.type).lower() in ("real", "float64", "float32")][:50]
     if not names or not finding.undetermined:
@@ -503,7 +504,7 @@ def _candidates(tw: TwinWindow, problem: Any, x0: np.ndarray, scaling: st.Scalin
         change = float(np.sqrt(np.mean((Jz @ direction * PROBE_MOVE) ** 2)))
         scale = float(max(np.sqrt(np.mean((Jz[:, j] * PROBE_MOVE) ** 2)) for j in range(Jz.shape[1])))
         if scale > 0 and change > 0.05 * scale:
-            out.append((n, change, scale))
+            out.append((n, change, scale, units.get(n, "")))
     out.sort(key=lambda c: -c[1] / c[2])
     return tuple(out[:3])
 
@@ -565,8 +566,9 @@ def _fix_text(f: Finding) -> str:
     parts = [f"Fix {holds} ([fixed] in the spec) or measure what separates them"] if n > 1 else \
         [f"Fix {f.parameters[0]} ([fixed]) or measure what it acts on"]
     if f.candidates:
-        v, change, scale = f.candidates[0]
+        v, change, scale, unit = f.candidates[0]
+        u = f" {unit}" if unit else ""
         parts.append(f"the twin's {v} would see it (a {PROBE_MOVE:.0%} move along the undetermined direction "
-                     f"changes it by {change:.3g} RMS, against {scale:.3g} for a {PROBE_MOVE:.0%} move of one "
-                     f"parameter)")
+                     f"changes it by {change:.3g}{u} RMS, against at most {scale:.3g}{u} for a {PROBE_MOVE:.0%} "
+                     "move of one parameter)")
     return ": ".join(parts) + "."

@@ -247,6 +247,82 @@ class Uncertainty:
 # --------------------------------------------------------------------------- the computation
 
 
+@dataclass(frozen=True)
+class Sandwich:
+    """The pieces of the sandwich covariance (scaled coordinates; see the module docstring).
+
+    Attributes
+    ----------
+    A, A_pinv
+        ``Σ_tag w_tag J_tagᵀ J_tag`` and its pseudo-inverse (directions below the rank
+        tolerance left out).
+    C, C0
+        ``A⁺ B A⁺`` with the scores' long-run covariance ``B``, and with their lag-0
+        covariance only (as if the residuals were white).
+    steps
+        Time steps with at least one residual.
+    terms
+        Cosine terms of the long-run covariance: the t quantile's degrees of freedom.
+    integral_scale
+        The scores' integral time scale (time steps).
+    """
+
+    A: np.ndarray
+    A_pinv: np.ndarray
+    C: np.ndarray
+    C0: np.ndarray
+    steps: int
+    terms: float
+    integral_scale: float
+
+
+def sandwich(jacobians: Mapping[str, np.ndarray], residuals: Mapping[str, np.ndarray],
+             index: Mapping[str, np.ndarray], weights: Mapping[str, float], steps: int,
+             terms: int | None = None) -> Sandwich:
+    """The sandwich covariance of a weighted least-squares estimate from its residuals and Jacobians.
+
+    *jacobians*, *residuals*, *index*: per tag the Jacobian rows (scaled coordinates), the
+    residuals and their positions on a grid of *steps* time steps; *weights*: per tag.
+    *terms*: the cosine terms (default :func:`~trackingbox.identify.noise.cosine_terms`).
+    """
+    tags = list(residuals)
+    n = int(np.asarray(jacobians[tags[0]]).shape[1]) if tags else 0
+    g = np.zeros((steps, n))
+    has = np.zeros(steps, dtype=bool)
+    A = np.zeros((n, n))
+    for tag in tags:
+        J = np.asarray(jacobians[tag], dtype=float)
+        r = np.asarray(residuals[tag], dtype=float)
+        w = float(weights[tag])
+        A += w * J.T @ J
+        np.add.at(g, index[tag], (w * r)[:, None] * J)
+        has[index[tag]] = True
+    g = g[has]
+    N = int(g.shape[0])
+    # A's pseudo-inverse: numerically null directions (below the rank tolerance) have no information
+    lam, V = np.linalg.eigh(A)
+    keep = lam > (st.RANK_RTOL ** 2) * max(float(lam.max()), 0.0) if lam.size else np.zeros(0, dtype=bool)
+    P = V[:, keep]
+    A_pinv = (P / lam[keep]) @ P.T
+    # the scores' long-run covariance in the directions A sees (a null direction's scores carry no
+    # information and would only add the integrator's noise)
+    gp = g @ P
+    omega, info = long_run_covariance(gp, terms=terms)
+    B = P @ (N * omega) @ P.T
+    B0 = P @ (gp.T @ gp) @ P.T
+    return Sandwich(A, A_pinv, A_pinv @ B @ A_pinv, A_pinv @ B0 @ A_pinv, N, float(info["terms"]),
+                    float(info["integral_scale"]))
+
+
+def linear_interval(a: np.ndarray, sw: Sandwich, c_hat: float, level: float) -> tuple[float, float, float, float]:
+    """The linearised interval of ``c = aᵀz`` at ``ĉ``: ``(lower, upper, standard error, t quantile)``."""
+    from scipy.stats import t as student_t
+
+    se = math.sqrt(max(float(a @ sw.C @ a), 0.0))
+    tq = float(student_t.ppf(0.5 + level / 2.0, sw.terms))
+    return c_hat - tq * se, c_hat + tq * se, se, tq
+
+
 class _Coordinates:
     """Scaled coordinates ``z`` of the parameters (log or range) and back."""
 
@@ -373,8 +449,6 @@ def _weights(ev: Evaluation) -> dict[str, float]:
 
 def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_hat: np.ndarray, level: float,
                  profile: bool, budget: int) -> Uncertainty:
-    from scipy.stats import t as student_t
-
     names = list(problem.names)
     n = len(names)
     scaling = st.parameter_scaling(x_hat, problem.lower, problem.upper)
@@ -382,34 +456,11 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     weights = _weights(ev)
     res = ev.residuals()
     assert ev.jacobian is not None
-    T = window.time.size
-    g = np.zeros((T, n))
-    has = np.zeros(T, dtype=bool)
-    A = np.zeros((n, n))
-    rows = []
-    for tag, r in res.items():
-        Jz = ev.jacobian[tag] * scaling.factors[None, :]
-        w = weights[tag]
-        A += w * Jz.T @ Jz
-        np.add.at(g, ev.index[tag], (w * r)[:, None] * Jz)
-        has[ev.index[tag]] = True
-        rows.append(Jz * math.sqrt(w))
-    g = g[has]
-    N = int(g.shape[0])
-    Jw = np.concatenate(rows, axis=0)
-    # A's pseudo-inverse: numerically null directions (below the rank tolerance) have no information
-    lam, V = np.linalg.eigh(A)
-    keep = lam > (st.RANK_RTOL ** 2) * max(float(lam.max()), 0.0)
-    P = V[:, keep]
-    A_pinv = (P / lam[keep]) @ P.T
-    # the scores' long-run covariance in the directions A sees (a null direction's scores carry no
-    # information and would only add the integrator's noise)
-    gp = g @ P
-    omega, info = long_run_covariance(gp)
-    B = P @ (N * omega) @ P.T
-    B0 = P @ (gp.T @ gp) @ P.T
-    C = A_pinv @ B @ A_pinv
-    C0 = A_pinv @ B0 @ A_pinv
+    sw = sandwich({t: ev.jacobian[t] * scaling.factors[None, :] for t in res}, res, ev.index, weights,
+                  window.time.size)
+    A_pinv, C, C0, N, info = sw.A_pinv, sw.C, sw.C0, sw.steps, {"terms": sw.terms,
+                                                                 "integral_scale": sw.integral_scale}
+    Jw = np.concatenate([ev.jacobian[t] * scaling.factors[None, :] * math.sqrt(weights[t]) for t in res], axis=0)
     structure = st.analyse(Jw, names, scaling.widths, covariance=C)
     findings = [_with_message(f) for f in name_findings(structure, scaling, x_hat, [], ev, names)]
     prof = _Profile(tw, coords, weights, Jw, A_pinv, math.nan, [int(budget) + 1])
@@ -423,13 +474,12 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     def functional(a: np.ndarray, name: str, value: float, to_value: Any, bounds: tuple[float, float],
                    combination: Combination | None = None) -> Interval:
         var, var0 = float(a @ C @ a), float(a @ C0 @ a)
-        se = math.sqrt(max(var, 0.0))
         n_eff = N * min(1.0, var0 / var) if var > 0 else float(N)
         dof = float(info["terms"])
-        tq = float(student_t.ppf(0.5 + level / 2.0, dof))
         c_hat = float(a @ coords.z_hat)
+        lo_end, hi_end, se, tq = linear_interval(a, sw, c_hat, level)
         kappa = float(a @ A_pinv @ a) / var if var > 0 else 1.0
-        ends = [c_hat - tq * se, c_hat + tq * se]
+        ends = [lo_end, hi_end]
         note = ""
         deviance = [math.nan, math.nan]
         method = "linearised"
