@@ -1542,12 +1542,14 @@ def _series(problem: Problem, window: WindowData,
 
 # --------------------------------------------------------------------------- writing back
 
-def write_starts(path: str | Path, values: Mapping[str, float]) -> Any:
+def write_starts(path: str | Path, values: Mapping[str, float],
+                 intervals: Mapping[str, tuple[float, float]] | None = None) -> Any:
     """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
 
     Delegates to :func:`trackingbox.spec.write_starts` (one writer for the spec,
-    keeping comments and layout); kept here for existing callers.
+    keeping comments and layout); kept here for existing callers. *intervals*: their
+    confidence intervals (``interval = [a, b]``, where determined).
     """
     from .spec import write_starts as _write_starts
 
-    return _write_starts(path, values)
+    return _write_starts(path, values, intervals)

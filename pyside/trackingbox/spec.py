@@ -64,12 +64,17 @@ class SourceSpec:
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """A candidate tracking parameter with its start value and bounds."""
+    """A candidate tracking parameter with its start value and bounds.
+
+    ``interval``: the confidence interval of the start value where an estimate gave one
+    (``estimate --write`` records it; the tracked parameter's band starts from it), else None.
+    """
 
     name: str
     start: float
     min: float
     max: float
+    interval: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -521,7 +526,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     pkeys = ("name", "start", "min", "max")
     for i, table in enumerate(_array_of_tables(raw, "parameters", problems)):
         label = f"[[parameters]] #{i + 1}" + (f" ({table['name']!r})" if isinstance(table.get("name"), str) else "")
-        _check_keys(table, pkeys, pkeys, label, problems)
+        _check_keys(table, (*pkeys, "interval"), pkeys, label, problems)
         name = _string(table, "name", label, problems)
         start = _number(table, "start", label, problems)
         lo = _number(table, "min", label, problems)
@@ -535,7 +540,8 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
             problems.add(f"start = {start!r} is outside its bounds [{lo!r}, {hi!r}] in {label}")
         if any(p.name == name for p in parameters):
             problems.add(f"parameter {name!r} is listed twice in [[parameters]]")
-        parameters.append(ParameterSpec(name=name, start=start, min=lo, max=hi))
+        interval = _parameter_interval(table, start, lo, hi, label, problems)  # trackingbox.identify
+        parameters.append(ParameterSpec(name=name, start=start, min=lo, max=hi, interval=interval))
     pnames = [p.name for p in parameters]
 
     fixed: dict[str, float] = {}
@@ -1070,7 +1076,9 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     doc["outputs"] = dict(spec.outputs)
     if spec.parameters:
         doc["parameters"] = [{"name": p.name, "start": float(p.start), "min": float(p.min),
-                              "max": float(p.max)} for p in spec.parameters]
+                              "max": float(p.max), **({"interval": [float(v) for v in p.interval]}
+                                                      if p.interval is not None else {})}
+                             for p in spec.parameters]
     if spec.fixed:
         doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
     if spec.windows:
@@ -1262,6 +1270,37 @@ def _set_starts(doc: tomlkit.TOMLDocument, starts: Mapping[str, float]) -> None:
             table["start"] = float(starts[str(name)])
 
 
+def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: float, label: str,
+                        problems: _Problems) -> tuple[float, float] | None:
+    """``interval = [a, b]`` of a ``[[parameters]]`` entry: two numbers, ``min <= a <= start <= b <= max``."""
+    if "interval" not in table:
+        return None
+    value = table["interval"]
+    if not (isinstance(value, list) and len(value) == 2 and all(_is_number(v) for v in value)):
+        problems.add(f"'interval' in {label} must be [lower, upper] (two numbers), got {value!r}")
+        return None
+    a, b = float(value[0]), float(value[1])
+    if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= start <= b <= hi):
+        problems.add(f"interval = [{a!r}, {b!r}] in {label} must hold its start {start!r} and lie within "
+                     f"its bounds [{lo!r}, {hi!r}]")
+        return None
+    return (a, b)
+
+
+def _set_intervals(doc: tomlkit.TOMLDocument, starts: Mapping[str, float],
+                   intervals: Mapping[str, tuple[float, float]]) -> None:
+    """The ``interval`` of each parameter whose start is written: the new one, or none (it was the old start's)."""
+    for table in doc.get("parameters", ()):
+        name = table.get("name")
+        if not isinstance(name, str) or str(name) not in starts:
+            continue
+        if str(name) in intervals:
+            a, b = intervals[str(name)]
+            table["interval"] = [float(a), float(b)]
+        elif "interval" in table:
+            del table["interval"]
+
+
 def _check_starts(old: Spec, starts: Mapping[str, float]) -> None:
     names = list(old.parameter_names)
     problems = _Problems(str(old.path))
@@ -1277,7 +1316,8 @@ def _check_starts(old: Spec, starts: Mapping[str, float]) -> None:
 
 
 def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | None = None,
-                starts: Mapping[str, float] | None = None) -> Spec:
+                starts: Mapping[str, float] | None = None,
+                intervals: Mapping[str, tuple[float, float]] | None = None) -> Spec:
     """Write pairs and/or parameter start values into the spec file *path*, atomically.
 
     The file is edited as a TOML document (tomlkit), so everything the call does
@@ -1295,6 +1335,9 @@ def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | Non
         them). ``None`` leaves the pairs alone.
     starts : mapping of str to float, optional
         New ``start`` values of named ``[[parameters]]``.
+    intervals : mapping of str to (float, float), optional
+        The confidence intervals of those starts (``interval = [a, b]``); a start written
+        without one loses the interval it had (it belonged to the old start).
 
     Returns
     -------
@@ -1334,13 +1377,15 @@ def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | Non
     doc = tomlkit.parse(text)
     if pairs is not None:
         _set_pairs(doc, new_pairs)
+    new_intervals = {k: (float(v[0]), float(v[1])) for k, v in dict(intervals or {}).items() if k in new_starts}
     if new_starts:
         _set_starts(doc, new_starts)
+        _set_intervals(doc, new_starts, new_intervals)
     new_text = tomlkit.dumps(doc)
     new = loads_spec(new_text, path, check_files=False)
     wanted = replace(old, pairs=new_pairs, parameters=tuple(
-        replace(p, start=float(new_starts[p.name])) if p.name in new_starts else p
-        for p in old.parameters))
+        replace(p, start=float(new_starts[p.name]), interval=new_intervals.get(p.name))
+        if p.name in new_starts else p for p in old.parameters))
     if new != wanted:
         raise SpecError(f"{path}: writing back {len(new_pairs)} pairs and {len(new_starts)} start "
                         f"values did not give the expected spec; the file is left unchanged")
@@ -1365,7 +1410,8 @@ def write_pairs(path: str | os.PathLike[str], pairs: Iterable[PairSpec]) -> Spec
     return update_spec(path, pairs=pairs)
 
 
-def write_starts(path: str | os.PathLike[str], values: Mapping[str, float]) -> Spec:
+def write_starts(path: str | os.PathLike[str], values: Mapping[str, float],
+                 intervals: Mapping[str, tuple[float, float]] | None = None) -> Spec:
     """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
 
     A thin call of :func:`update_spec`: only the ``start`` values of the named
@@ -1382,4 +1428,4 @@ def write_starts(path: str | os.PathLike[str], values: Mapping[str, float]) -> S
         A name in *values* is not one of the spec's parameters, or a value is
         outside its bounds.
     """
-    return update_spec(path, starts=values)
+    return update_spec(path, starts=values, intervals=intervals)

@@ -88,7 +88,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",
-                   help="write the estimates back as the [[parameters]] start values of SPEC")
+                   help="write the estimates back as the [[parameters]] start values of SPEC, with their "
+                        "intervals (interval = [a, b], where determined: the tracked parameter's band starts "
+                        "from it)")
     p.add_argument("--level", type=number(gt=0, le=0.9999), default=0.95,
                    help="confidence level of the intervals at the estimate (default 0.95)")
     p.add_argument("--no-intervals", dest="intervals", action="store_false",
@@ -140,7 +142,7 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
     if args.write:
-        write_starts(spec.path, result.parameters)
+        write_starts(spec.path, result.parameters, _intervals(result))
         log.info("wrote the estimates as start values to %s", spec.path)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
@@ -151,6 +153,15 @@ def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, 
         if args.report:
             print(f"report in {args.report}")
     return 0
+
+
+def _intervals(result: Any) -> dict[str, tuple[float, float]]:
+    """The determined parameters' intervals (the spec's ``interval``, the band's start)."""
+    unc = result.uncertainty
+    if unc is None:
+        return {}
+    return {iv.name: (iv.lower, iv.upper) for iv in unc.parameters
+            if iv.determined and iv.lower is not None and iv.lower <= iv.estimate <= iv.upper}
 
 
 def _print_table(result: Any) -> None:

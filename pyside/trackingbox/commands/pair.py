@@ -68,6 +68,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--second-point", default="auto", metavar="auto|none|TIME",
                    help="repeat the step tests at a second operating point: auto (default: the hour of the "
                         "training window whose running inputs differ most from the first point), TIME, or none")
+    p.add_argument("--no-identify", dest="identify", action="store_false",
+                   help="do not leave out candidates whose effect on the tags the data cannot tell apart from "
+                        "another's (the twin's output sensitivities over the training window; on by default)")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
     p.add_argument("--noise-ratio", type=number(ge=0), default=5.0, metavar="K",
@@ -116,7 +119,8 @@ def settings(args: argparse.Namespace) -> Any:
                         interval=args.interval, window=args.window,
                         tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
                         max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
-                        data_checks=args.data_checks, noise_ratio=args.noise_ratio, min_reach=args.min_reach,
+                        data_checks=args.data_checks, identify=args.identify, noise_ratio=args.noise_ratio,
+                        min_reach=args.min_reach,
                         max_ratio=args.max_ratio, max_leak=args.max_leak, max_jitter=args.max_jitter,
                         check_gains=args.check_gains,
                         closed_loop=args.closed_loop, closed_loop_min=args.closed_loop_min, samples=args.samples, seed=args.seed, workers=args.workers,

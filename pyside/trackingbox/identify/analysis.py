@@ -41,6 +41,11 @@ SAME_DIRECTION = 0.1
 FALLBACK_NOISE = 1e-3
 #: Move along an undetermined direction (in ln θ) the candidate outputs are judged by: 10 %.
 PROBE_MOVE = 0.1
+#: Two parameters are in one group of undetermined parameters when the undetermined subspace's
+#: projection couples them by more than this (of the geometric mean of their own projections).
+LINK = 0.1
+#: Tags named in a finding's text (the ones carrying most of the group's sensitivity).
+TAGS_NAMED = 3
 
 Progress = Callable[[str, int, int], None]
 
@@ -169,6 +174,9 @@ class Identifiability:
         ``"exact"`` or ``"fd"``, and why not exact.
     runs
         Twin runs made.
+    matrix, widths
+        The scaled sensitivity matrix at the start values and the bound box's widths (for
+        :func:`leave_out`; not in :meth:`to_json`).
     """
 
     names: tuple[str, ...]
@@ -182,6 +190,8 @@ class Identifiability:
     half_widths: dict[str, float] = field(default_factory=dict)
     sensitivities: tuple[str, str] = ("", "")
     runs: int = 0
+    matrix: np.ndarray | None = field(default=None, repr=False, compare=False)
+    widths: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def complete(self) -> bool:
@@ -301,6 +311,7 @@ def identify(spec: Any, *, points: int = DEFAULT_POINTS, method: str = "auto", w
                for i, p in enumerate(inside_points(x0, problem.lower, problem.upper, points))]
         results: list[PointResult] = []
         structures: list[tuple[np.ndarray, st.Structure, st.Scaling] | None] = []
+        matrices: list[np.ndarray] = []
         first: Evaluation | None = None
         for i, (label, xi) in enumerate(xs):
             if progress is not None:
@@ -316,6 +327,7 @@ def identify(spec: Any, *, points: int = DEFAULT_POINTS, method: str = "auto", w
             first = ev if i == 0 else first
             structure, scaling = point_structure(ev, problem, noise, fraction=fraction)
             structures.append((xi, structure, scaling))
+            matrices.append(_scaled(ev, scaling, noise))
             undet = tuple(n for n, p in zip(problem.names, structure.participation()) if p > st.PARTICIPATION)
             results.append(PointResult(label, dict(zip(problem.names, map(float, xi))),
                                        tuple(float(s) for s in structure.singular_values), structure.rank,
@@ -336,7 +348,7 @@ def identify(spec: Any, *, points: int = DEFAULT_POINTS, method: str = "auto", w
             names=tuple(problem.names), scaling=scaling0.kinds, noise=noise, points=tuple(results),
             rank=s0.rank, determined=determined, findings=tuple(findings), correlation=s0.correlation,
             half_widths={n: float(h) for n, h in zip(problem.names, s0.marginal)},
-            sensitivities=(tw.method, tw.reason), runs=tw.runs)
+            sensitivities=(tw.method, tw.reason), runs=tw.runs, matrix=matrices[0], widths=scaling0.widths)
     finally:
         close_models()
 
@@ -346,11 +358,15 @@ def point_structure(ev: Evaluation, problem: Any, noise: Mapping[str, tuple[floa
                     fraction: float = st.DETERMINED_FRACTION) -> tuple[st.Structure, st.Scaling]:
     """The :class:`~trackingbox.identify.structure.Structure` of one evaluation, rows scaled by *noise*."""
     scaling = st.parameter_scaling(ev.x, problem.lower, problem.upper)
+    S = _scaled(ev, scaling, noise)
+    return st.analyse(S, list(problem.names), scaling.widths, covariance=covariance, fraction=fraction), scaling
+
+
+def _scaled(ev: Evaluation, scaling: st.Scaling, noise: Mapping[str, tuple[float, str]]) -> np.ndarray:
     assert ev.jacobian is not None
     rows = [ev.jacobian[tag] for tag in ev.simulated]
     sig = [np.full(len(ev.simulated[tag]), noise[tag][0]) for tag in ev.simulated]
-    S = st.scale_matrix(np.concatenate(rows, axis=0), scaling, np.concatenate(sig))
-    return st.analyse(S, list(problem.names), scaling.widths, covariance=covariance, fraction=fraction), scaling
+    return st.scale_matrix(np.concatenate(rows, axis=0), scaling, np.concatenate(sig))
 
 
 def name_findings(s0: st.Structure, scaling: st.Scaling, x0: np.ndarray,
@@ -366,33 +382,36 @@ def name_findings(s0: st.Structure, scaling: st.Scaling, x0: np.ndarray,
 
 
 def _groups(U: np.ndarray, n: int) -> list[tuple[list[int], np.ndarray]]:
-    """``(members, orthonormal basis on the members)`` for each group of the subspace span(U) of R^n."""
+    """``(members, orthonormal basis on the members)`` for each group of the subspace span(U) of R^n.
+
+    The projection ``P = U Uᵀ`` does not depend on the basis; parameters ``i`` and ``j`` are
+    in one group when ``|P_ij|`` is more than :data:`LINK` of ``sqrt(P_ii P_jj)`` (the subspace
+    couples them), and a group's directions are the part of the subspace on its members.
+    """
     if U.size == 0:
         return []
-    R, _ = st.rref(U.T, tol=1e-6)
-    parent = list(range(n))
+    P = U @ U.T
+    diag = np.sqrt(np.clip(np.diag(P), 0.0, None))
+    involved = [j for j in range(n) if diag[j] > st.PARTICIPATION]
+    parent = {j: j for j in involved}
 
     def find(a: int) -> int:
         while parent[a] != a:
             a = parent[a]
         return a
 
-    supports = []
-    for row in R:
-        support = [j for j in range(n) if abs(row[j]) > 1e-3]
-        supports.append(support)
-        for a in support[1:]:
-            parent[find(a)] = find(support[0])
-    rows: dict[int, list[np.ndarray]] = {}
-    for row, support in zip(R, supports):
-        if support:
-            rows.setdefault(find(support[0]), []).append(row)
+    for i in involved:
+        for j in involved:
+            if i < j and abs(P[i, j]) > LINK * diag[i] * diag[j]:
+                parent[find(j)] = find(i)
+    groups: dict[int, list[int]] = {}
+    for j in involved:
+        groups.setdefault(find(j), []).append(j)
     out = []
-    for root, group_rows in rows.items():
-        members = sorted(j for j in range(n) if find(j) == root and any(abs(r[j]) > 1e-3 for r in group_rows))
-        B = np.array(group_rows)[:, members].T
-        q, _ = np.linalg.qr(B)
-        out.append((members, q))
+    for members in groups.values():
+        members = sorted(members)
+        q, sv, _ = np.linalg.svd(U[members], full_matrices=False)
+        out.append((members, q[:, sv > 0.5]))
     return sorted(out, key=lambda g: g[0])
 
 
@@ -419,16 +438,18 @@ def _name_group(members: list[int], Ug: np.ndarray, s0: st.Structure, scaling: s
     all_log = all(scaling.kinds[j] == "log" for j in members)
     if all_log:
         rational = st.rational_basis(Ug)
-        if rational is not None and _same_everywhere(rational, members, others, log=True):
-            comps = st.complement_combinations(rational, len(members))
+        comps = st.complement_combinations(rational, len(members)) if rational is not None else []
+        if rational is not None and len(comps) == len(members) - len(rational) \
+                and _same_everywhere(rational, members, others, log=True):
             return Finding(params, "product", tuple(tuple(float(v) for v in q) for q in rational),
                            tuple(Combination(st.product_text(a, params), "product",
                                              {p: int(e) for p, e in zip(params, a) if e}) for a in comps),
                            tags, structural, True)
     lin = st.to_linear(Ug if Ug.ndim == 2 else Ug[:, None], x0, _sub_scaling(scaling, members))
     rational = st.rational_basis(lin)
-    if rational is not None and _same_everywhere(rational, members, others, log=False):
-        comps = st.complement_combinations(rational, len(members))
+    comps = st.complement_combinations(rational, len(members)) if rational is not None else []
+    if rational is not None and len(comps) == len(members) - len(rational) \
+            and _same_everywhere(rational, members, others, log=False):
         return Finding(params, "sum", tuple(tuple(float(v) for v in q) for q in rational),
                        tuple(Combination(st.sum_text(a, params), "sum", {p: int(c) for p, c in zip(params, a) if c})
                              for a in comps), tags, structural, True)
@@ -509,20 +530,70 @@ def _candidates(tw: TwinWindow, problem: Any, x0: np.ndarray, scaling: st.Scalin
     return tuple(out[:3])
 
 
+def leave_out(found: Identifiability, fraction: float = st.DETERMINED_FRACTION) -> dict[str, str]:
+    """Which candidates pairing leaves out, and why (name -> reason): the dynamic analogue of its
+    steady-state rank test.
+
+    The candidates are taken strongest first (the norm of their scaled sensitivity column); one
+    whose effect on the tags cannot be told from that of a candidate kept before it -- with only
+    the two of them free, a direction between them is not determined (:func:`~trackingbox.identify.
+    structure.analyse` of the two columns) -- is left out, naming that candidate; so is one the
+    data do not determine even alone. Directions that need three or more parameters (``R1``,
+    ``R2`` and ``C`` of a wall: any two of them are told apart once the third is held) are
+    reported by ``identify`` and ``estimate`` but leave no candidate out: the loops track only
+    the parameters paired, the others held.
+    """
+    if found.matrix is None or found.widths is None:
+        return {}
+    names = list(found.names)
+    S, w = found.matrix, found.widths
+    norms = np.linalg.norm(S, axis=0)
+    order = [int(j) for j in np.argsort(-norms, kind="stable")]
+    kept: list[int] = []
+    out: dict[str, str] = {}
+    for j in order:
+        alone = st.analyse(S[:, [j]], [names[j]], w[[j]], fraction=fraction)
+        if not alone.determined.all():
+            out[names[j]] = ("the data do not see it: with the sensor noise alone its 95 % interval would span more "
+                             "than half its bounds (the twin's output sensitivities over the training window, "
+                             "trackingbox identify)")
+            continue
+        twin = next((k for k in kept if not st.analyse(S[:, [k, j]], [names[k], names[j]], w[[k, j]],
+                                                        fraction=fraction).determined.all()), None)
+        if twin is None:
+            kept.append(j)
+            continue
+        pair = st.analyse(S[:, [twin, j]], [names[twin], names[j]], w[[twin, j]], fraction=fraction)
+        v = pair.undetermined[:, 0]
+        v = v if v[0] > 0 else -v
+        direction = ", ".join(f"{x:+.2f} ln {n}" if found.scaling[k] == "log" else f"{x:+.2f} {n}/range"
+                              for x, n, k in zip(v, (names[twin], names[j]), (twin, j)))
+        out[names[j]] = (f"its effect on the tags cannot be told from that of {names[twin]}: with the two free, "
+                         f"the direction ({direction}) is not determined over the training window (the twin's "
+                         f"output sensitivities, trackingbox identify); {names[twin]} has the larger effect")
+    return out
+
+
 # --------------------------------------------------------------------------- words
 
 
 def finding_text(f: Finding) -> str:
     """One finding in plain words."""
     who = st.listing(list(f.parameters))
-    on = f" on {st.listing(list(f.tags))}" if f.tags else ""
+    tags = list(f.tags[:TAGS_NAMED]) + (["others"] if len(f.tags) > TAGS_NAMED else [])
+    on = f" on {st.listing(tags)}" if f.tags else ""
     if f.kind == "product":
         if len(f.undetermined) == 1:
-            q = f.undetermined[0]
-            up = [f"{p}{_power(e)}" for p, e in zip(f.parameters, q) if e > 0]
-            down = [f"{p}{_power(-e)}" for p, e in zip(f.parameters, q) if e < 0]
-            move = f"multiplying {st.listing(up)} by any factor f" + (
-                f" and dividing {st.listing(down)} by it" if down else "")
+            q = [int(round(e)) for e in f.undetermined[0]]
+            if len({abs(e) for e in q if e}) == 1:
+                up = [p for p, e in zip(f.parameters, q) if e > 0]
+                down = [p for p, e in zip(f.parameters, q) if e < 0]
+                move = f"multiplying {st.listing(up)} by any factor f" + (
+                    f" and dividing {st.listing(down)} by it" if down else "")
+            else:
+                moves = [f"{'multiplying' if e > 0 else 'dividing'} {p} by f{_power(abs(e))}"
+                         for p, e in zip(f.parameters, q) if e]
+                move = st.listing(moves) + " for any factor f"
             head = f"{who} cannot be told apart{on}: {move} leaves {'them' if f.tags else 'the outputs'} unchanged"
         else:
             head = f"{who} cannot be told apart{on} ({len(f.undetermined)} undetermined directions)"
@@ -542,21 +613,24 @@ def finding_text(f: Finding) -> str:
         tail = (f"; only {st.listing([c.text for c in f.determined])} "
                 f"{'is' if len(f.determined) == 1 else 'are'} determined" if f.determined else "")
     else:
-        q = f.undetermined[0] if f.undetermined else ()
+        q = np.asarray(f.undetermined[0] if f.undetermined else (), dtype=float)
+        if q.size and q[np.argmax(np.abs(q))] < 0:
+            q = -q
         terms = ", ".join(f"{v:+.2f} ln {p}" for p, v in zip(f.parameters, q) if abs(v) >= 0.05)
-        head = f"{who} move{'s' if len(f.parameters) == 1 else ''}{on} together"
-        tail = (f": the direction ({terms}) is not determined" + (
-            "" if f.consistent else " (at the start values; it turns at other points of the bounds)"))
+        head = f"{who} cannot be told apart{on}: moving them along ({terms}) leaves the outputs unchanged"
+        tail = ("" if len(f.undetermined) <= 1 else f" ({len(f.undetermined)} such directions)") + (
+            "; it is the same direction at every point checked" if f.consistent else
+            "; the direction turns across the bounds (neither a product nor a sum of them is determined)")
     text = head + tail
     if f.structural:
-        text += " (at every point checked, whatever the noise)"
+        text += "; at every point checked, whatever the noise"
     fix = _fix_text(f)
     return f"{text}. {fix}" if fix else text + "."
 
 
 def _power(e: float) -> str:
     e = int(round(e))
-    return "" if e == 1 else f"^{e}"
+    return "" if e == 1 else str(e).translate(str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻"))
 
 
 def _fix_text(f: Finding) -> str:

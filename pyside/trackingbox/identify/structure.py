@@ -65,8 +65,10 @@ RANK_RTOL = 1e-3
 #: A parameter takes part in an undetermined direction when its component in the (orthonormal)
 #: undetermined subspace has at least this length.
 PARTICIPATION = 0.1
-#: Largest deviation of a row-reduced undetermined direction from the rational vector it is named by.
-RATIONAL_TOLERANCE = 0.05
+#: Largest deviation of a row-reduced undetermined direction from the rational vector it is named by
+#: (a structural product is exact to the sensitivities' accuracy, ~1e-4; a loose tolerance would name
+#: a generic direction after the nearest small fraction).
+RATIONAL_TOLERANCE = 0.01
 #: Largest denominator of a rational exponent.
 MAX_DENOMINATOR = 4
 #: Normal quantile of a two-sided 95 % interval.
@@ -291,7 +293,7 @@ def rational_basis(U: npt.ArrayLike, *, tolerance: float = RATIONAL_TOLERANCE,
     most *max_denominator*; None if any entry moves by more than *tolerance*. Each row is
     then scaled to coprime integers with a positive first entry.
 
-    >>> rational_basis(np.array([[0.577], [0.578], [-0.577]]))
+    >>> rational_basis(np.array([[0.5773], [0.5774], [-0.5773]]))
     [[1, 1, -1]]
     >>> rational_basis(np.array([[0.8], [-0.6]]))            # 1 : -3/4
     [[4, -3]]

@@ -122,6 +122,32 @@ def uncertainty_section(doc: Document, uncertainty: Any, bounds: Mapping[str, tu
     return files
 
 
+def draw_band(ax: Any, hours: Any, lower: Any, upper: Any) -> None:
+    """A tracked parameter's band (``parameter_lo:``/``parameter_hi:`` columns) as a shaded area on *ax*."""
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    ok = np.isfinite(lo) & np.isfinite(hi)
+    if ok.any():
+        ax.fill_between(np.asarray(hours, dtype=float), lo, hi, where=ok, color=plots.PYTHON, alpha=0.25, lw=0,
+                        label=f"{100 * _band_level():g} % band", zorder=1)
+        ax.legend(loc="best", fontsize=8)
+
+
+def band_paragraph() -> str:
+    """How the tracked parameters' bands are made, for the tracking report."""
+    return (f"Bands (shaded; CSV columns `parameter_lo:<name>`, `parameter_hi:<name>`): {100 * _band_level():g} % "
+            "from the tag's noise fed through the parameter controller (the loop linearised from the pair's gain, "
+            "time constant and PI settings; the noise's autocovariance from the tracked error's fast part), the "
+            "start value's interval (the spec's `interval`, else the bounds) fading as the loop converges, and the "
+            "loop's lag behind the parameter's own trend (and the time on hold). Empty until an hour of tracked "
+            "error has been seen. What the twin's structure gets wrong is not in them.")
+
+
+def _band_level() -> float:
+    from ..identify.bands import LEVEL
+
+    return LEVEL
+
+
 def _tolerance() -> float:
     from ..identify.intervals import NONLINEARITY_TOLERANCE
 

@@ -92,7 +92,7 @@ ControllerMode = Literal["discrete", "continuous"]
 CSV_NAME = "tracking.csv"
 CHECKPOINT_NAME = "checkpoint.json"
 RESULT_NAME = "result.json"
-_CHECKPOINT_VERSION = 6  # 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+_CHECKPOINT_VERSION = 7  # 7: band columns; 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 #: Sliding-mode boundary layer (% of the variable span) when a pair asks for it.
 SLIDING_PHI = 5.0
 
@@ -826,9 +826,12 @@ class _Output:
     """The streamed CSV and the summaries of the run (parameter, correction and level ranges, fits)."""
 
     def __init__(self, path: Path, columns: Sequence[str], parameters: Sequence[str], corrections: Sequence[str],
-                 levels: Sequence[str], fitted: Sequence[str]) -> None:
+                 levels: Sequence[str], fitted: Sequence[str], bands: Any = None) -> None:
         self.path = path
-        self.columns = list(columns)
+        #: the tracked parameters' uncertainty bands (trackingbox.identify.bands.BandTracker): two more
+        #: columns per pair after the row's own, computed from the row
+        self.bands = bands
+        self.columns = list(columns) + (list(bands.columns) if bands is not None else [])
         self.pstats = {n: _Stats() for n in parameters}
         self.cstats = {n: _Stats() for n in corrections}
         self.sstats = {n: _Stats() for n in levels}
@@ -843,13 +846,16 @@ class _Output:
         self._writer.writerow(self.columns)
 
     def write(self, row: Sequence[Any]) -> None:
-        self._writer.writerow(row)
+        self._writer.writerow(row if self.bands is None else [*row, *self.bands.row(row)])
 
     def writerows(self, rows: Sequence[Sequence[Any]]) -> None:
-        self._writer.writerows(rows)
+        self._writer.writerows(rows if self.bands is None else [[*r, *self.bands.row(r)] for r in rows])
 
-    def write_text(self, text: str) -> None:
-        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`)."""
+    def write_text(self, text: str, rows: Any = None) -> None:
+        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`);
+        *rows*: the same rows as numbers (modes as flags), for the band columns."""
+        if self.bands is not None:
+            text = self.bands.append_text(text, rows)
         self._fh.write(text)
 
     def flush(self) -> None:
@@ -865,6 +871,7 @@ class _Output:
         """The CSV's valid length (bytes) and the summaries; flushes the CSV first."""
         self._fh.flush()
         return {"csv_bytes": self._fh.tell(),
+                "bands": self.bands.state_dict() if self.bands is not None else None,
                 "parameter_stats": {n: s.state() for n, s in self.pstats.items()},
                 "correction_stats": {n: s.state() for n, s in self.cstats.items()},
                 "state_stats": {n: s.state() for n, s in self.sstats.items()},
@@ -882,6 +889,8 @@ class _Output:
             self.sstats[n].restore(state["state_stats"][n])
         for t in self.fits:
             self.fits[t].restore(state["fits"][t])
+        if self.bands is not None:
+            self.bands.load_state_dict(state["bands"])
         self._fh = open(self.path, "a", newline="", encoding="utf-8")
         self._writer = csv.writer(self._fh)
 
@@ -1251,7 +1260,7 @@ class _NativeRows:
         if written:
             text = self.native.format_rows(self.rows[:written], self.npairs)
             if text is not None:
-                loop.output.write_text(text)
+                loop.output.write_text(text, self.rows[:written])
             else:
                 rows = self.rows[:written].tolist()
                 for row in rows:
@@ -1452,8 +1461,10 @@ class TrackingLoop:
             _State(s.tag, s.variable, s.correction, StateCompensator(s.gain, ts=ts, interpolation=interpolation),
                    StateCompensator(s.gain, ts=ts, interpolation=interpolation))
             for s in spec.states])
+        from ..identify.hooks import band_tracker  # the tracked parameters' bands: two columns per pair
+
         self.output = _Output(self.csv_path, plan.columns, self.controllers.names, self.compensation.names,
-                              [s.tag for s in spec.states], list(spec.outputs))
+                              [s.tag for s in spec.states], list(spec.outputs), band_tracker(spec, plan.columns))
         self.read = plan.read_names
         self.ridx = {name: i for i, name in enumerate(self.read)}
         #: the view the row plan was made for, and per output tag: (read index, samples, scored or None, fit)
@@ -1975,7 +1986,8 @@ class TrackingLoop:
                    "states": {n: {"final": _num(c.final), "min": _num(c.min), "max": _num(c.max)}
                               for n, c in result.states.items()},
                    "events": [[e.time, e.kind, e.message] for e in self.events],
-                   "integrator": {"restarts": restarts, "carried": carried}}
+                   "integrator": {"restarts": restarts, "carried": carried},
+                   **({"bands": out.bands.describe()} if out.bands is not None else {})}
         write_text_atomic(self.out_dir / RESULT_NAME, json.dumps(summary, indent=1))
         return result
 
