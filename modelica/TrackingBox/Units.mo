@@ -21,6 +21,10 @@ package Units "SI types used in the library"
   type Acceleration = Real (final quantity="Acceleration", final unit="m/s2") "Acceleration";
   type Fraction = Real (final unit="1") "Dimensionless fraction, typically 0..1";
   type ValveCoefficient = Real (final unit="m3/h", min=0) "Valve flow coefficient Kv: flow in m3/h at 1 bar pressure drop";
+  type Factor = Real (final unit="1", min=0) "Dimensionless coefficient or factor, not negative";
+  type PressureRise = Real (final quantity="Pressure", final unit="Pa", min=0, nominal=1e4) "Pressure rise of a pump, not negative";
+  type PositiveVolumeFlowRate = Real (final quantity="VolumeFlowRate", final unit="m3/s", min=1e-9) "Volume flow rate that scales a characteristic, positive";
+  type FractionRate = Real (final unit="1/s") "Rate of change of a dimensionless fraction";
   annotation (Documentation(info="<html>
 <p>Real types with SI units, in the style of <code>Modelica.Units.SI</code>.
 Temperatures are absolute (K); pressures are absolute (Pa).</p>

@@ -10,10 +10,14 @@ block PI "PI controller with output limits, anti-windup, hold input and manual m
   parameter Real manual = 0 "Manual mode: > 0.5 sets the output to yMan";
   parameter Real yMan = 0 "Output in manual mode (set it before switching to manual)";
   parameter Boolean use_hold_in = true "= true to enable the input hold";
-  TrackingBox.Interfaces.RealInput u_s "Setpoint";
-  TrackingBox.Interfaces.RealInput u_m "Measurement";
-  TrackingBox.Interfaces.RealInput hold if use_hold_in "Hold: > 0.5 freezes the integral part and the output";
-  TrackingBox.Interfaces.RealOutput y "Controller output";
+  TrackingBox.Interfaces.RealInput u_s "Setpoint"
+    annotation (Placement(transformation(extent={{-140,-20},{-100,20}})));
+  TrackingBox.Interfaces.RealInput u_m "Measurement"
+    annotation (Placement(transformation(origin={0,-120}, extent={{-20,-20},{20,20}}, rotation=90)));
+  TrackingBox.Interfaces.RealInput hold if use_hold_in "Hold: > 0.5 freezes the integral part and the output"
+    annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealOutput y "Controller output"
+    annotation (Placement(transformation(extent={{100,-10},{120,10}})));
   Real e "Control error u_s - u_m";
   Real eF(start=0, fixed=true) "Filtered error used by the proportional part";
   Real yI(start=y_start, fixed=true) "Integral part";
@@ -32,7 +36,14 @@ equation
   yUnsat = k*eF + yI;
   der(yI) = noEvent(if hold_internal > 0.5 then 0 else k*e/Ti + (y - yUnsat)/Tt);
   y = if manual > 0.5 then yMan else min(max(yUnsat, yMin), yMax);
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Line(points={{-80,-80},{-80,0},{60,60},{80,60}}, color={0,0,127}),
+      Line(points={{-90,60},{90,60}}, color={192,192,192}, pattern=LinePattern.Dash),
+      Text(extent={{-10,-10},{90,-70}}, textString="PI", textColor={0,0,127}),
+      Text(extent={{-150,150},{150,110}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Continuous PI controller <code>y = k*(e_f + 1/Ti*&int;e dt)</code> with
 <code>yMin &le; y &le; yMax</code>. The proportional part acts on the error
 filtered with time constant <code>Tf</code> (small), so that the output is a

@@ -1,9 +1,11 @@
 within TrackingBox.Evaporation;
 model DrySolidsMeter "Dry-solids meter on a liquor line, with bias and drift"
   parameter TrackingBox.Units.Fraction bias = 0 "Constant bias";
-  parameter Real drift(unit="1/s") = 0 "Drift rate of the bias (plant)";
-  TrackingBox.Evaporation.LiquorPort_a port "Measuring point (no flow)";
-  TrackingBox.Interfaces.RealOutput y(unit="1") "Dry-solids reading";
+  parameter TrackingBox.Units.FractionRate drift = 0 "Drift rate of the bias (plant)";
+  TrackingBox.Evaporation.LiquorPort_a port "Measuring point (no flow)"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Interfaces.RealOutput y(unit="1") "Dry-solids reading"
+    annotation (Placement(transformation(extent={{100,-10},{120,10}})));
 equation
   port.m_flow = 0;
   y = port.x + bias + drift*time;

@@ -23,11 +23,16 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
   parameter TrackingBox.Units.Fraction steamLeakage = 1e-3 "Flow of the closed steam valve as a fraction of the open one";
   parameter TrackingBox.Units.Fraction ventFraction = 0 "Steam vented or leaking from the chest as a fraction of the condensate (plant)";
   parameter TrackingBox.Units.Pressure p_steam_start = 3.5e5 "Initial steam-chest pressure";
-  TrackingBox.Interfaces.FluidPort_a port_s "Steam inlet (upstream of the effect's own steam valve)";
-  TrackingBox.Evaporation.LiquorPort_b port_c "Condensate outlet (drains freely at the condensing rate)";
-  TrackingBox.Interfaces.RealInput steamOpening(unit="1") "Steam-valve opening, 0..1";
-  TrackingBox.Interfaces.RealInput Rf_in(unit="m2.K/W") if use_Rf_in "Fouling resistance from outside";
-  TrackingBox.Interfaces.RealInput U0_in(unit="W/(m2.K)") if use_U0_in "Clean coefficient from outside";
+  TrackingBox.Interfaces.FluidPort_a port_s "Steam inlet (upstream of the effect's own steam valve)"
+    annotation (Placement(transformation(extent={{90,50},{110,70}})));
+  TrackingBox.Evaporation.LiquorPort_b port_c "Condensate outlet (drains freely at the condensing rate)"
+    annotation (Placement(transformation(extent={{90,-30},{110,-10}})));
+  TrackingBox.Interfaces.RealInput steamOpening(unit="1") "Steam-valve opening, 0..1"
+    annotation (Placement(transformation(origin={60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput Rf_in(unit="m2.K/W") if use_Rf_in "Fouling resistance from outside"
+    annotation (Placement(transformation(extent={{-140,0},{-100,40}})));
+  TrackingBox.Interfaces.RealInput U0_in(unit="W/(m2.K)") if use_U0_in "Clean coefficient from outside"
+    annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   TrackingBox.Units.Mass M_steam(start=p_steam_start*V_steam/(R_w*T_ref_steam), fixed=true) "Steam mass in the chest";
   TrackingBox.Units.Pressure p_s "Steam-chest pressure";
   TrackingBox.Units.Temperature T_s "Condensing temperature";

@@ -3,8 +3,10 @@ block LevelTransmitter "dP level transmitter with a fixed calibration density"
   parameter TrackingBox.Units.Density rho_cal = 1450 "Calibration density";
   parameter TrackingBox.Units.PressureDifference dp0 = 0 "Zero offset of the transmitter (dP at zero level)";
   parameter TrackingBox.Units.Acceleration g = 9.81 "Gravity";
-  TrackingBox.Interfaces.RealInput dp(unit="Pa") "Hydrostatic pressure difference between the taps";
-  TrackingBox.Interfaces.RealOutput y(unit="m") "Level reading";
+  TrackingBox.Interfaces.RealInput dp(unit="Pa") "Hydrostatic pressure difference between the taps"
+    annotation (Placement(transformation(extent={{-140,-20},{-100,20}})));
+  TrackingBox.Interfaces.RealOutput y(unit="m") "Level reading"
+    annotation (Placement(transformation(extent={{100,-10},{120,10}})));
 equation
   y = (dp - dp0)/(rho_cal*g);
   annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Ellipse(extent={{-80,80},{80,-80}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Text(extent={{-60,40},{60,-40}}, textString="LT"), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>

@@ -1,16 +1,21 @@
 within TrackingBox.Evaporation;
 model LiquorPump "Centrifugal liquor pump with a quadratic curve"
-  parameter TrackingBox.Units.PressureDifference dp0(min=0) = 4e5 "Pressure rise at zero flow";
-  parameter TrackingBox.Units.VolumeFlowRate VMax(min=1e-6) = 3e-3 "Volume flow at zero pressure rise";
-  parameter Real head(unit="1", min=0) = 1 "Shut-off pressure rise as a fraction of dp0 (wear; 1: as rated), used when use_head_in = false";
+  parameter TrackingBox.Units.PressureRise dp0 = 4e5 "Pressure rise at zero flow";
+  parameter TrackingBox.Units.PositiveVolumeFlowRate VMax = 3e-3 "Volume flow at zero pressure rise";
+  parameter TrackingBox.Units.Factor head = 1 "Shut-off pressure rise as a fraction of dp0 (wear; 1: as rated), used when use_head_in = false";
   parameter Boolean use_dp0_in = false "= true to take dp0 from the input dp0_in";
   parameter Boolean use_head_in = false "= true to take the head fraction from the input head_in";
   parameter Boolean use_VMax_in = false "= true to take VMax from the input VMax_in";
-  TrackingBox.Evaporation.LiquorPort_a port_a "Suction";
-  TrackingBox.Evaporation.LiquorPort_b port_b "Discharge";
-  TrackingBox.Interfaces.RealInput dp0_in(unit="Pa") if use_dp0_in "Shut-off pressure rise from outside";
-  TrackingBox.Interfaces.RealInput VMax_in(unit="m3/s") if use_VMax_in "Maximum volume flow from outside";
-  TrackingBox.Interfaces.RealInput head_in(unit="1") if use_head_in "Head fraction from outside";
+  TrackingBox.Evaporation.LiquorPort_a port_a "Suction"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Evaporation.LiquorPort_b port_b "Discharge"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
+  TrackingBox.Interfaces.RealInput dp0_in(unit="Pa") if use_dp0_in "Shut-off pressure rise from outside"
+    annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput VMax_in(unit="m3/s") if use_VMax_in "Maximum volume flow from outside"
+    annotation (Placement(transformation(origin={0,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput head_in(unit="1") if use_head_in "Head fraction from outside"
+    annotation (Placement(transformation(origin={60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   TrackingBox.Units.MassFlowRate m_flow "Mass flow from suction to discharge";
   TrackingBox.Units.VolumeFlowRate V_flow "Volume flow";
   TrackingBox.Units.PressureDifference dp "Pressure rise port_b.p - port_a.p";

@@ -1,19 +1,24 @@
 within TrackingBox.Evaporation;
 model LiquorValve "Liquor valve: regularised square-root law, linear or equal-percentage characteristic, leakage"
   import TrackingBox.Evaporation.Functions;
-  parameter TrackingBox.Units.ValveCoefficient KvMax(min=0) = 10 "Flow coefficient at full opening (m3/h of water at 1 bar)";
+  parameter TrackingBox.Units.ValveCoefficient KvMax = 10 "Flow coefficient at full opening (m3/h of water at 1 bar)";
   parameter Boolean use_KvMax_in = false "= true to take KvMax from the input KvMax_in";
-  parameter Real capacity(unit="1", min=0) = 1 "Flow capacity as a fraction of KvMax (wear or deposits; 1: as rated), used when use_capacity_in = false";
+  parameter TrackingBox.Units.Factor capacity = 1 "Flow capacity as a fraction of KvMax (wear or deposits; 1: as rated), used when use_capacity_in = false";
   parameter Boolean use_capacity_in = false "= true to take the capacity from the input capacity_in";
   parameter Boolean equalPercentage = false "= true for the equal-percentage characteristic (R^y - 1)/(R - 1), else linear";
   parameter Real R(unit="1", min=2) = 30 "Rangeability of the equal-percentage characteristic";
   parameter TrackingBox.Units.Fraction leakage = 1e-3 "Flow coefficient of the closed valve as a fraction of KvMax";
   parameter TrackingBox.Units.PressureDifference dp_small = 1000 "Below about this pressure difference the law is regularised to linear";
-  TrackingBox.Evaporation.LiquorPort_a port_a "Inlet";
-  TrackingBox.Evaporation.LiquorPort_b port_b "Outlet";
-  TrackingBox.Interfaces.RealInput opening(unit="1") "Valve opening, 0 (closed) .. 1 (open)";
-  TrackingBox.Interfaces.RealInput KvMax_in(unit="m3/h") if use_KvMax_in "Flow coefficient from outside";
-  TrackingBox.Interfaces.RealInput capacity_in(unit="1") if use_capacity_in "Capacity fraction from outside";
+  TrackingBox.Evaporation.LiquorPort_a port_a "Inlet"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Evaporation.LiquorPort_b port_b "Outlet"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
+  TrackingBox.Interfaces.RealInput opening(unit="1") "Valve opening, 0 (closed) .. 1 (open)"
+    annotation (Placement(transformation(origin={0,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput KvMax_in(unit="m3/h") if use_KvMax_in "Flow coefficient from outside"
+    annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput capacity_in(unit="1") if use_capacity_in "Capacity fraction from outside"
+    annotation (Placement(transformation(origin={60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   TrackingBox.Units.MassFlowRate m_flow "Mass flow from port_a to port_b";
   TrackingBox.Units.PressureDifference dp "port_a.p - port_b.p";
   TrackingBox.Units.Fraction f "Characteristic at the opening";

@@ -7,10 +7,14 @@ block SmoothPI "PI controller with a smooth output limit 0..1, back-calculation 
   parameter Real y_start(min=0.001, max=0.999) = 0.5 "Initial output for zero error";
   parameter Real yEps(min=1e-6) = 1e-3 "Width of the smooth corners of the output limit";
   parameter Boolean use_hold_in = false "= true to enable the input hold";
-  TrackingBox.Interfaces.RealInput u_s "Setpoint";
-  TrackingBox.Interfaces.RealInput u_m "Measurement";
-  TrackingBox.Interfaces.RealInput hold if use_hold_in "Hold: > 0.5 freezes the controller (output held)";
-  TrackingBox.Interfaces.RealOutput y(unit="1") "Output, 0..1";
+  TrackingBox.Interfaces.RealInput u_s "Setpoint"
+    annotation (Placement(transformation(extent={{-140,-20},{-100,20}})));
+  TrackingBox.Interfaces.RealInput u_m "Measurement"
+    annotation (Placement(transformation(origin={0,-120}, extent={{-20,-20},{20,20}}, rotation=90)));
+  TrackingBox.Interfaces.RealInput hold if use_hold_in "Hold: > 0.5 freezes the controller (output held)"
+    annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealOutput y(unit="1") "Output, 0..1"
+    annotation (Placement(transformation(extent={{100,-10},{120,10}})));
   Real e "Control error u_s - u_m";
   Real eF(start=0, fixed=true) "Filtered error";
   Real I(start=y_start/k, fixed=true) "Integral state";
@@ -29,7 +33,7 @@ equation
   v = k*(eF + I);
   der(I) = run*(eF/Ti + (y - v)/(k*Tt)) - (1 - run)*(e - eF)/Tf;
   y = TrackingBox.Evaporation.Functions.splus(v, yEps) - TrackingBox.Evaporation.Functions.splus(v - 1, yEps);
-  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Line(points={{-80,-70},{-80,20},{0,40},{80,60}}, color={0,0,127}), Text(extent={{-40,-20},{80,-80}}, textString="PI"), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,127}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Line(points={{-80,-70},{-80,20},{0,40},{80,60}}, color={0,0,127}), Text(extent={{-40,-20},{80,-80}}, textString="PI"), Text(extent={{-150,150},{150,110}}, textString="%name", textColor={0,0,255})}), Documentation(info="<html>
 <p>The smooth PI of the evaporator notes (section 3):
 <code>v = k&middot;(e_f + I)</code>,
 <code>dI/dt = e_f/Ti + (y - v)/(k&middot;Tt)</code>, with the output limited

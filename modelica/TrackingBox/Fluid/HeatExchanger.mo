@@ -13,12 +13,18 @@ model HeatExchanger "Counter-flow water/water heat exchanger with n cells per si
   parameter TrackingBox.Units.Temperature T2_start = 303.15 "Initial temperature of side 2";
   parameter Boolean use_kht_in = false "= true to take kht from the input kht_in";
   parameter Boolean use_heatLoss = false "= true for a heat loss Q_flow_loss_in from side 1 to the surroundings";
-  TrackingBox.Interfaces.FluidPort_a port_a1 "Side 1 (hot) inlet";
-  TrackingBox.Interfaces.FluidPort_b port_b1 "Side 1 (hot) outlet";
-  TrackingBox.Interfaces.FluidPort_a port_a2 "Side 2 (cold) inlet";
-  TrackingBox.Interfaces.FluidPort_b port_b2 "Side 2 (cold) outlet";
-  TrackingBox.Interfaces.RealInput kht_in(unit="W/(m2.K)") if use_kht_in "Heat-transfer coefficient from outside";
-  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Heat flow lost from side 1 to the surroundings, shared evenly by its cells";
+  TrackingBox.Interfaces.FluidPort_a port_a1 "Side 1 (hot) inlet"
+    annotation (Placement(transformation(extent={{-110,50},{-90,70}})));
+  TrackingBox.Interfaces.FluidPort_b port_b1 "Side 1 (hot) outlet"
+    annotation (Placement(transformation(extent={{90,50},{110,70}})));
+  TrackingBox.Interfaces.FluidPort_a port_a2 "Side 2 (cold) inlet"
+    annotation (Placement(transformation(extent={{90,-70},{110,-50}})));
+  TrackingBox.Interfaces.FluidPort_b port_b2 "Side 2 (cold) outlet"
+    annotation (Placement(transformation(extent={{-110,-70},{-90,-50}})));
+  TrackingBox.Interfaces.RealInput kht_in(unit="W/(m2.K)") if use_kht_in "Heat-transfer coefficient from outside"
+    annotation (Placement(transformation(origin={0,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Heat flow lost from side 1 to the surroundings, shared evenly by its cells"
+    annotation (Placement(transformation(origin={60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   TrackingBox.Units.Temperature T1[n](each start=T1_start, each fixed=true) "Side 1 cell temperatures, in flow order";
   TrackingBox.Units.Temperature T2[n](each start=T2_start, each fixed=true) "Side 2 cell temperatures; cell i faces T1[i], flow from n to 1";
   TrackingBox.Units.HeatFlowRate Q_flow[n] "Heat flow from side 1 to side 2 per cell";
@@ -61,7 +67,18 @@ equation
   Q_total = sum(Q_flow);
   port_b1.T = T1[n];
   port_b2.T = T2[1];
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-90,90},{90,-90}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-90,90},{90,30}}, lineColor={0,0,0}, fillColor={255,170,170}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-90,-30},{90,-90}}, lineColor={0,0,0}, fillColor={170,213,255}, fillPattern=FillPattern.Solid),
+      Line(points={{-90,60},{90,60}}, color={238,46,47}, thickness=0.5, arrow={Arrow.None, Arrow.Filled}),
+      Line(points={{90,-60},{-90,-60}}, color={0,127,255}, thickness=0.5, arrow={Arrow.None, Arrow.Filled}),
+      Line(points={{-40,25},{-40,-25}}, color={238,46,47}, arrow={Arrow.None, Arrow.Filled}),
+      Line(points={{0,25},{0,-25}}, color={238,46,47}, arrow={Arrow.None, Arrow.Filled}),
+      Line(points={{40,25},{40,-25}}, color={238,46,47}, arrow={Arrow.None, Arrow.Filled}),
+      Text(extent={{-150,-100},{150,-140}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Each side is a chain of <code>n</code> well-mixed cells (upwind in the
 design flow direction); cell <code>i</code> of side 1 exchanges
 <code>kht&middot;A/n&middot;(T1[i] - T2[i])</code> with cell <code>i</code> of side 2.

@@ -16,13 +16,20 @@ model OpenTank "Open, well-mixed tank with level, mass and energy balance"
   parameter Boolean use_TAmb_in = false "= true to take the ambient temperature from the input TAmb_in";
   parameter Boolean use_leak = false "= true for a leak: the flow m_flow_leak_in leaves the tank at the tank temperature";
   parameter Boolean use_heatLoss = false "= true for an extra heat loss Q_flow_loss_in to the surroundings";
-  TrackingBox.Interfaces.FluidPort_a port_a[nPorts_a] "Inlets";
-  TrackingBox.Interfaces.FluidPort_b port_b "Outlet at the bottom";
-  TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside";
-  TrackingBox.Interfaces.RealInput Q_flow_in(unit="W") if use_Q_flow_in "Heater power";
-  TrackingBox.Interfaces.RealInput TAmb_in(unit="K") if use_TAmb_in "Ambient temperature";
-  TrackingBox.Interfaces.RealInput m_flow_leak_in(unit="kg/s") if use_leak "Leak flow leaving the tank";
-  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Extra heat flow lost to the surroundings";
+  TrackingBox.Interfaces.FluidPort_a port_a[nPorts_a] "Inlets"
+    annotation (Placement(transformation(extent={{-40,90},{40,110}})));
+  TrackingBox.Interfaces.FluidPort_b port_b "Outlet at the bottom"
+    annotation (Placement(transformation(extent={{-10,-110},{10,-90}})));
+  TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside"
+    annotation (Placement(transformation(extent={{-140,40},{-100,80}})));
+  TrackingBox.Interfaces.RealInput Q_flow_in(unit="W") if use_Q_flow_in "Heater power"
+    annotation (Placement(transformation(extent={{-140,-20},{-100,20}})));
+  TrackingBox.Interfaces.RealInput TAmb_in(unit="K") if use_TAmb_in "Ambient temperature"
+    annotation (Placement(transformation(extent={{-140,-80},{-100,-40}})));
+  TrackingBox.Interfaces.RealInput m_flow_leak_in(unit="kg/s") if use_leak "Leak flow leaving the tank"
+    annotation (Placement(transformation(origin={120,-60}, extent={{-20,-20},{20,20}}, rotation=180)));
+  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Extra heat flow lost to the surroundings"
+    annotation (Placement(transformation(origin={120,0}, extent={{-20,-20},{20,20}}, rotation=180)));
   TrackingBox.Units.Height level(start=level_start, fixed=true) "Water level";
   TrackingBox.Units.Temperature T(start=T_start, fixed=true) "Water temperature";
   TrackingBox.Units.Mass m "Water mass";
@@ -79,7 +86,13 @@ equation
   m*cp*der(T) = H_flow_in + Q_flow_internal - Q_loss - Q_flow_loss_internal;
   port_b.p = pAmb + rho*g*(zBottom + level);
   port_b.T = T;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-80,80},{80,-100}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-80,0},{80,-100}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.Solid),
+      Line(points={{-80,80},{-80,-100},{80,-100},{80,80}}, color={0,0,0}, thickness=0.5),
+      Text(extent={{-75,60},{75,20}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Mass balance in the level (density at the tank temperature), energy balance
 in the temperature: inlets bring their temperature (only when flowing in),
 outflow and correction flow leave or enter at the tank temperature, plus

@@ -3,11 +3,12 @@ model Pipe "Pipe with a quadratic (plant) or linear (twin) pressure loss"
   extends TrackingBox.Interfaces.PartialTwoPort;
   parameter Boolean quadratic = true "= true: pressure loss quadratic in the flow; false: linear";
   parameter Boolean tangent = false "Linear law only: = true: tangent of the quadratic law at m_flow_nominal (forward flow near nominal); false: secant through zero flow";
-  parameter Real k(unit="1", min=0) = 0.005 "Dynamic pressure-drop coefficient: pressure loss at m_flow_nominal divided by dp_ref";
+  parameter TrackingBox.Units.Factor k = 0.005 "Dynamic pressure-drop coefficient: pressure loss at m_flow_nominal divided by dp_ref";
   parameter TrackingBox.Units.MassFlowRate m_flow_nominal(min=1e-6) = 0.07 "Nominal mass flow rate";
   parameter TrackingBox.Units.PressureDifference dp_ref = 1e6 "Reference pressure difference of k";
   parameter Boolean use_k_in = false "= true to take k from the input k_in";
-  TrackingBox.Interfaces.RealInput k_in(unit="1") if use_k_in "Pressure-drop coefficient from outside";
+  TrackingBox.Interfaces.RealInput k_in(unit="1") if use_k_in "Pressure-drop coefficient from outside"
+    annotation (Placement(transformation(origin={0,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   Real x(unit="1") "Relative flow m_flow/m_flow_nominal";
 protected
   TrackingBox.Interfaces.RealInput k_internal(unit="1") "Used pressure-drop coefficient";
@@ -25,7 +26,11 @@ equation
     dp = dp_ref*k_internal*x;
   end if;
   port_b.T = port_a.T;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,30},{100,-30}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.HorizontalCylinder),
+      Text(extent={{-150,-40},{150,-80}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p><code>dp = dp_ref&middot;k&middot;x&middot;|x|</code> (quadratic) or
 <code>dp = dp_ref&middot;k&middot;x</code> (linear), <code>x = m_flow/m_flow_nominal</code>.
 With <code>tangent = true</code> the linear law is instead the tangent of the

@@ -3,7 +3,10 @@ connector FluidPort "Water port for directed flow"
   TrackingBox.Units.Pressure p "Pressure at the port (piezometric: includes the static head of the port's elevation)";
   flow TrackingBox.Units.MassFlowRate m_flow "Mass flow rate from the connection into the component";
   TrackingBox.Units.Temperature T "Temperature of the water flowing in the design direction";
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Ellipse(extent={{-100,100},{100,-100}}, lineColor={0,127,255}, fillColor={0,127,255}, fillPattern=FillPattern.Solid)}),
+    Documentation(info="<html>
 <p>Flow is <em>directed</em>: every two-port component is designed for flow from
 <code>port_a</code> (inlet) to <code>port_b</code> (outlet). The temperature
 <code>T</code> is a potential set by exactly one side of a connection: the

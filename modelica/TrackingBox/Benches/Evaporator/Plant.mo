@@ -29,7 +29,10 @@ equation
   der(Rf_scale) = kScale/(1 + exp(-(effect.x - xScale)/dxScale))*effect.Q/Q_nominal - Rf_scale/tauWash;
   Rf_true = Rf_fouling + Rf_scale;
   effect.Rf_in = Rf_true;
-  annotation (experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Text(extent={{-90,-62},{90,-92}}, textString="plant", textColor={0,0,0})}),
+    experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
 <p>The degradations of the evaporator notes (section 5), with magnitudes as
 parameters a bench can override: fouling growing asymptotically
 <code>Rf0 + (RfInf - Rf0)(1 - exp(-t/tauFouling))</code>; soluble scale

@@ -29,7 +29,10 @@ equation
     Rf_true[k] = Rf_fouling[k] + Rf_scale[k];
     effect[k].Rf_in = Rf_true[k];
   end for;
-  annotation (experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Text(extent={{-90,-62},{90,-92}}, textString="plant", textColor={0,0,0})}),
+    experiment(StopTime=3600, Tolerance=1e-6), Documentation(info="<html>
 <p>The degradations of the evaporator notes (section 5) in every effect:
 fouling growing asymptotically to <code>RfInf[k]</code> (1.5e-4 m2K/W at the
 product end down to 0.5e-4 at the feed end, 8-10 % of U) with its own time constant; soluble

@@ -14,7 +14,10 @@ model Plant "Heat-production process, plant: quadratic curves and degraded compo
     V400(KvMax=1.04),
     PU100(VFlowDesign=6.3e-5, uRise=37500),
     PU200(VFlowDesign=8.1e-5, uRise=38500));
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Text(extent={{-90,-62},{90,-92}}, textString="plant", textColor={0,0,0})}),
+    Documentation(info="<html>
 <p>Stands in for the physical process: quadratic pipe and pump curves and
 degraded or off-design components, all within the tracking bounds: HU300
 fouled (kht 1000 instead of 1050), HEX300 fouled (kht 920, 8 % low), worn

@@ -2,14 +2,20 @@ within TrackingBox.Benches.HeatProduction;
 model Twin "Heat-production process, digital twin: linear curves, initial parameter values, tank correction flows"
   extends TrackingBox.Benches.HeatProduction.BaseClasses.PartialProcess(
     T100(use_m_flow_corr_in=true), T200(use_m_flow_corr_in=true), T400(use_m_flow_corr_in=true));
-  TrackingBox.Interfaces.RealInput T100_m_flow_corr(unit="kg/s", start=0) "Correction flow into T100 (state compensation)";
-  TrackingBox.Interfaces.RealInput T200_m_flow_corr(unit="kg/s", start=0) "Correction flow into T200 (state compensation)";
-  TrackingBox.Interfaces.RealInput T400_m_flow_corr(unit="kg/s", start=0) "Correction flow into T400 (state compensation)";
+  TrackingBox.Interfaces.RealInput T100_m_flow_corr(unit="kg/s", start=0) "Correction flow into T100 (state compensation)"
+    annotation (Placement(transformation(origin={-60,-115}, extent={{-15,-15},{15,15}}, rotation=90)));
+  TrackingBox.Interfaces.RealInput T200_m_flow_corr(unit="kg/s", start=0) "Correction flow into T200 (state compensation)"
+    annotation (Placement(transformation(origin={0,-115}, extent={{-15,-15},{15,15}}, rotation=90)));
+  TrackingBox.Interfaces.RealInput T400_m_flow_corr(unit="kg/s", start=0) "Correction flow into T400 (state compensation)"
+    annotation (Placement(transformation(origin={60,-115}, extent={{-15,-15},{15,15}}, rotation=90)));
 equation
   connect(T100_m_flow_corr, T100.m_flow_corr_in);
   connect(T200_m_flow_corr, T200.m_flow_corr_in);
   connect(T400_m_flow_corr, T400.m_flow_corr_in);
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Text(extent={{-90,-62},{90,-92}}, textString="twin", textColor={0,0,0})}),
+    Documentation(info="<html>
 <p>Linear pipe and pump curves, as the source's twin has them: a pipe's loss
 proportional to its flow (<code>dp = dp_ref&middot;k&middot;x</code>, equal to the
 plant's quadratic loss at zero and at nominal flow), a pump's curve the chord

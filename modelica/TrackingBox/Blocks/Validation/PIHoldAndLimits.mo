@@ -1,5 +1,6 @@
 within TrackingBox.Blocks.Validation;
 model PIHoldAndLimits "PI controller on a first-order process: setpoint step, saturation and hold"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Blocks.PI con(k=2, Ti=50, Tt=10, yMin=0, yMax=1, y_start=0.2) "Controller";
   Real x(start=0, fixed=true) "First-order process output";
 equation

@@ -1,5 +1,6 @@
 within TrackingBox.Blocks.Validation;
 model ParameterControllerInputs "Parameter controllers (direct and reverse) and a state compensation driven by top-level inputs"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Interfaces.RealInput u_s(start = 50.0) "Measured value (plant)"
     annotation (Placement(transformation(extent = {{-140, -20}, {-100, 20}})));
   TrackingBox.Interfaces.RealInput u_m(start = 50.0) "Simulated value (twin)"

@@ -1,5 +1,6 @@
 within TrackingBox.Blocks.Validation;
 model ParameterControllerLoop "Parameter controller tracking the gain of a first-order twin: convergence, saturation, hold and resumption"
+  extends TrackingBox.Icons.Example;
   parameter TrackingBox.Units.Time tau = 100 "Time constant of plant and twin";
   Real kTrue(unit = "1") "Gain of the plant (the truth to track)";
   Real xPlant(unit = "1", start = 1.0, fixed = true) "Plant output (the measurement)";

@@ -29,12 +29,18 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
   parameter TrackingBox.Units.Pressure p_start = 1e5 "Initial vapour-space pressure";
   parameter TrackingBox.Units.Mass M_start = BlackLiquor.density(x_start, T_start)*(V_hold + A_sump*L_start) "Initial liquid mass";
   parameter TrackingBox.Units.Mass M_vap_start = p_start*V_vap/(R_w*T_ref_vap) "Initial vapour mass";
-  TrackingBox.Evaporation.LiquorPort_a port_a "Liquid inlet (enters the vapour space from above)";
-  TrackingBox.Evaporation.LiquorPort_b port_b "Liquid outlet at the bottom";
-  TrackingBox.Interfaces.FluidPort_b port_v "Vapour outlet";
-  TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside";
-  TrackingBox.Interfaces.RealInput dBPR_in(unit="K") if use_dBPR_in "Boiling-point offset from outside";
-  TrackingBox.Interfaces.RealOutput dp_level(unit="Pa") "Hydrostatic pressure of the liquid above the level's zero (what a dP transmitter sees)";
+  TrackingBox.Evaporation.LiquorPort_a port_a "Liquid inlet (enters the vapour space from above)"
+    annotation (Placement(transformation(extent={{-110,50},{-90,70}})));
+  TrackingBox.Evaporation.LiquorPort_b port_b "Liquid outlet at the bottom"
+    annotation (Placement(transformation(extent={{-10,-110},{10,-90}})));
+  TrackingBox.Interfaces.FluidPort_b port_v "Vapour outlet"
+    annotation (Placement(transformation(extent={{-10,90},{10,110}})));
+  TrackingBox.Interfaces.RealInput m_flow_corr_in(unit="kg/s") if use_m_flow_corr_in "Correction flow from outside"
+    annotation (Placement(transformation(extent={{-140,-40},{-100,0}})));
+  TrackingBox.Interfaces.RealInput dBPR_in(unit="K") if use_dBPR_in "Boiling-point offset from outside"
+    annotation (Placement(transformation(extent={{-140,-90},{-100,-50}})));
+  TrackingBox.Interfaces.RealOutput dp_level(unit="Pa") "Hydrostatic pressure of the liquid above the level's zero (what a dP transmitter sees)"
+    annotation (Placement(transformation(extent={{100,-90},{120,-70}})));
   TrackingBox.Units.Mass M(start=M_start, fixed=true) "Liquid mass";
   TrackingBox.Units.Mass M_s(start=x_start*M_start, fixed=true) "Dry-solids mass";
   TrackingBox.Units.Temperature T(start=T_start, fixed=true) "Liquid temperature";
@@ -105,7 +111,7 @@ equation
   der(M_s) = dMsdt;
   dxdt = (dMsdt - x*dMdt)/M;
   M*cp*der(T) + M*dhdx*dxdt + h*dMdt = m_in*h_in - m_out*h - m_ev*h_vap + m_corr*h + Q - Q_loss;
-  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-60,100},{60,-100}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Rectangle(extent={{-60,-10},{60,-100}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid), Text(extent={{-150,-105},{150,-135}}, textString="%name")}), Documentation(info="<html>
+  annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-60,100},{60,-100}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Rectangle(extent={{-60,-10},{60,-100}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid), Text(extent={{-150,-112},{150,-142}}, textString="%name", textColor={0,0,255})}), Documentation(info="<html>
 <p>States: liquid mass <code>M</code>, dry-solids mass <code>M_s</code>,
 temperature <code>T</code> and vapour mass <code>M_vap</code>. The energy
 balance is that of the inventory <code>M&middot;h(x, T)</code>:

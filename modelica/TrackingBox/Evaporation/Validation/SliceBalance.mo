@@ -1,5 +1,6 @@
 within TrackingBox.Evaporation.Validation;
 model SliceBalance "Mass, dry-solids and energy balances of the evaporator slice under varying boundaries and correction flows"
+  extends TrackingBox.Icons.Example;
   import TrackingBox.Media.BlackLiquor;
   TrackingBox.Benches.Evaporator.Twin slice "The slice (twin variant: it has the correction-flow inputs)";
   TrackingBox.Units.Mass massIn(start=0, fixed=true) "Integral of the mass entering: feed, steam, correction flows";

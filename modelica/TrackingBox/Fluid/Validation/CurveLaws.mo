@@ -1,5 +1,6 @@
 within TrackingBox.Fluid.Validation;
 model CurveLaws "Pipe and pump laws (quadratic, linear secant, linear tangent) over a ramp of flow"
+  extends TrackingBox.Icons.Example;
   parameter TrackingBox.Units.MassFlowRate m_flow_nominal = 0.05 "Nominal flow of the pipes";
   parameter TrackingBox.Units.Fraction speed = 0.8 "Relative speed of the pumps";
   parameter TrackingBox.Units.VolumeFlowRate VFlowDesign = 8e-5 "Design flow of the pumps";

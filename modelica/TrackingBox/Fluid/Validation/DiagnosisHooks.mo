@@ -1,5 +1,6 @@
 within TrackingBox.Fluid.Validation;
 model DiagnosisHooks "Tank, heating unit and heat exchanger with their diagnosis hooks switched on"
+  extends TrackingBox.Icons.Example;
   parameter TrackingBox.Units.MassFlowRate mLeak_flow = 0.01 "Leak flow out of the tank";
   parameter TrackingBox.Units.HeatFlowRate QLoss = 2000 "Heat loss of each component";
   TrackingBox.Fluid.OpenTank tank(nPorts_a=1, A=0.2, zInlet=1.5, level_start=0.8, T_start=323.15,
@@ -14,9 +15,12 @@ model DiagnosisHooks "Tank, heating unit and heat exchanger with their diagnosis
   TrackingBox.Fluid.Sources.PressureSink hotOut "Hot stream sink";
   TrackingBox.Fluid.Sources.MassFlowSource coldIn(m_flow=0.07, T=313.15) "Cold stream";
   TrackingBox.Fluid.Sources.PressureSink coldOut "Cold stream sink";
-  TrackingBox.Interfaces.RealOutput leak(unit="kg/s") "Leak flow signal";
-  TrackingBox.Interfaces.RealOutput loss(unit="W") "Heat-loss signal";
-  TrackingBox.Interfaces.RealOutput kht(unit="W/(m2.K)") "Heat-transfer coefficient of the heater, falling with time";
+  TrackingBox.Interfaces.RealOutput leak(unit="kg/s") "Leak flow signal"
+    annotation (Placement(transformation(extent={{100,50},{120,70}})));
+  TrackingBox.Interfaces.RealOutput loss(unit="W") "Heat-loss signal"
+    annotation (Placement(transformation(extent={{100,-10},{120,10}})));
+  TrackingBox.Interfaces.RealOutput kht(unit="W/(m2.K)") "Heat-transfer coefficient of the heater, falling with time"
+    annotation (Placement(transformation(extent={{100,-70},{120,-50}})));
 equation
   leak = mLeak_flow;
   loss = QLoss;

@@ -1,5 +1,6 @@
 within TrackingBox.Fluid.Validation;
 model HeatedLoop "Tank, pump, pipe, valve, heating unit and heat exchanger in a closed loop"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Fluid.OpenTank tank(nPorts_a=1, A=0.2, zInlet=1.5, level_start=0.8, T_start=323.15) "Open tank";
   TrackingBox.Fluid.Pump pump(quadratic=true, VFlowDesign=8e-5, uRise=40000) "Pump";
   TrackingBox.Fluid.Pipe pipe(quadratic=true, k=0.005, m_flow_nominal=0.08) "Pipe";

@@ -1,5 +1,6 @@
 within TrackingBox.Media.Validation;
 model Properties "Every media function evaluated at the point given by the inputs"
+  extends TrackingBox.Icons.Example;
   input TrackingBox.Units.Temperature T(start=373.15) "Temperature";
   input TrackingBox.Units.Pressure p(start=101325) "Pressure";
   input TrackingBox.Units.Fraction x(start=0.5) "Dry-solids mass fraction of the liquor";

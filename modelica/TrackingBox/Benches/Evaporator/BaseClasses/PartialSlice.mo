@@ -8,42 +8,72 @@ partial model PartialSlice "Last-effect slice: inlet flow loop, effect with leve
   parameter TrackingBox.Units.Height flashLevelSet = 1.0 "Setpoint of the flash-tank level (as read by LI_flash)";
   parameter TrackingBox.Units.Height condensateLevelSet = 0.8 "Setpoint of the condensate-tank level (as read by LI_condensate)";
   parameter Real steamRatio(unit="s/kg") = 0.32 "Steam-valve opening = tanh(steamRatio*FI_feed) (ratio station)";
-  TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=2) "Setpoint of the inlet flow loop";
-  TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.52) "Dry-solids fraction of the incoming liquor";
-  TrackingBox.Interfaces.RealInput feedT(unit="K", start=368.15) "Temperature of the incoming liquor";
-  TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the steam source";
-  TrackingBox.Interfaces.RealInput nextP(unit="Pa", start=1.4e5) "Vapour boundary pressure (steam chest of the next effect)";
-  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
-  TrackingBox.Interfaces.RealInput holdFlowController(unit="1", start=0) "> 0.5 freezes the inlet flow loop FIC_feed";
-  TrackingBox.Interfaces.RealInput holdLevelControllers(unit="1", start=0) "> 0.5 freezes the three level loops";
-  TrackingBox.Interfaces.RealInput holdBodyLevelController(unit="1", start=0) "> 0.5 freezes the effect level loop LIC_body";
-  TrackingBox.Interfaces.RealInput holdFlashLevelController(unit="1", start=0) "> 0.5 freezes the flash-tank level loop LIC_flash";
-  TrackingBox.Interfaces.RealInput holdCondensateLevelController(unit="1", start=0) "> 0.5 freezes the condensate level loop LIC_condensate";
-  TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Liquor inflow";
-  TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow";
-  TrackingBox.Interfaces.RealOutput FI_condensate(unit="kg/s") "Condensate flow from the steam chest";
-  TrackingBox.Interfaces.RealOutput FI_steam(unit="kg/s") "Steam flow into the steam chest";
-  TrackingBox.Interfaces.RealOutput PI_vapour(unit="Pa") "Pressure in the effect's vapour space";
-  TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the flash tank";
-  TrackingBox.Interfaces.RealOutput PI_steamChest(unit="Pa") "Pressure in the steam chest";
-  TrackingBox.Interfaces.RealOutput PI_pump(unit="Pa") "Discharge pressure of the product pump";
-  TrackingBox.Interfaces.RealOutput TI_body(unit="K") "Liquor temperature in the effect";
-  TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Liquor temperature after the flash tank";
-  TrackingBox.Interfaces.RealOutput LI_body(unit="m") "Effect level from the dP transmitter";
-  TrackingBox.Interfaces.RealOutput LI_flash(unit="m") "Flash-tank level from the dP transmitter";
-  TrackingBox.Interfaces.RealOutput LI_condensate(unit="m") "Condensate-tank level from the dP transmitter";
-  TrackingBox.Interfaces.RealOutput DI_product(unit="1") "Product dry solids (DS meter)";
-  TrackingBox.Interfaces.RealOutput ZI_inlet(unit="1") "Inlet valve position";
-  TrackingBox.Interfaces.RealOutput ZI_outlet(unit="1") "Outlet valve position (effect level loop)";
-  TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash level loop)";
-  TrackingBox.Interfaces.RealOutput ZI_condensate(unit="1") "Condensate valve position (condensate level loop)";
-  TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Steam valve position";
+  TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=2) "Setpoint of the inlet flow loop"
+    annotation (Placement(transformation(extent={{-114,83},{-100,97}})));
+  TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.52) "Dry-solids fraction of the incoming liquor"
+    annotation (Placement(transformation(extent={{-114,65},{-100,79}})));
+  TrackingBox.Interfaces.RealInput feedT(unit="K", start=368.15) "Temperature of the incoming liquor"
+    annotation (Placement(transformation(extent={{-114,47},{-100,61}})));
+  TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the steam source"
+    annotation (Placement(transformation(extent={{-114,29},{-100,43}})));
+  TrackingBox.Interfaces.RealInput nextP(unit="Pa", start=1.4e5) "Vapour boundary pressure (steam chest of the next effect)"
+    annotation (Placement(transformation(extent={{-114,11},{-100,25}})));
+  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)"
+    annotation (Placement(transformation(extent={{-114,-7},{-100,7}})));
+  TrackingBox.Interfaces.RealInput holdFlowController(unit="1", start=0) "> 0.5 freezes the inlet flow loop FIC_feed"
+    annotation (Placement(transformation(extent={{-114,-25},{-100,-11}})));
+  TrackingBox.Interfaces.RealInput holdLevelControllers(unit="1", start=0) "> 0.5 freezes the three level loops"
+    annotation (Placement(transformation(extent={{-114,-43},{-100,-29}})));
+  TrackingBox.Interfaces.RealInput holdBodyLevelController(unit="1", start=0) "> 0.5 freezes the effect level loop LIC_body"
+    annotation (Placement(transformation(extent={{-114,-61},{-100,-47}})));
+  TrackingBox.Interfaces.RealInput holdFlashLevelController(unit="1", start=0) "> 0.5 freezes the flash-tank level loop LIC_flash"
+    annotation (Placement(transformation(extent={{-114,-79},{-100,-65}})));
+  TrackingBox.Interfaces.RealInput holdCondensateLevelController(unit="1", start=0) "> 0.5 freezes the condensate level loop LIC_condensate"
+    annotation (Placement(transformation(extent={{-114,-97},{-100,-83}})));
+  TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Liquor inflow"
+    annotation (Placement(transformation(extent={{100,86},{108,94}})));
+  TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow"
+    annotation (Placement(transformation(extent={{100,76},{108,84}})));
+  TrackingBox.Interfaces.RealOutput FI_condensate(unit="kg/s") "Condensate flow from the steam chest"
+    annotation (Placement(transformation(extent={{100,66},{108,74}})));
+  TrackingBox.Interfaces.RealOutput FI_steam(unit="kg/s") "Steam flow into the steam chest"
+    annotation (Placement(transformation(extent={{100,56},{108,64}})));
+  TrackingBox.Interfaces.RealOutput PI_vapour(unit="Pa") "Pressure in the effect's vapour space"
+    annotation (Placement(transformation(extent={{100,46},{108,54}})));
+  TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the flash tank"
+    annotation (Placement(transformation(extent={{100,36},{108,44}})));
+  TrackingBox.Interfaces.RealOutput PI_steamChest(unit="Pa") "Pressure in the steam chest"
+    annotation (Placement(transformation(extent={{100,26},{108,34}})));
+  TrackingBox.Interfaces.RealOutput PI_pump(unit="Pa") "Discharge pressure of the product pump"
+    annotation (Placement(transformation(extent={{100,16},{108,24}})));
+  TrackingBox.Interfaces.RealOutput TI_body(unit="K") "Liquor temperature in the effect"
+    annotation (Placement(transformation(extent={{100,6},{108,14}})));
+  TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Liquor temperature after the flash tank"
+    annotation (Placement(transformation(extent={{100,-4},{108,4}})));
+  TrackingBox.Interfaces.RealOutput LI_body(unit="m") "Effect level from the dP transmitter"
+    annotation (Placement(transformation(extent={{100,-14},{108,-6}})));
+  TrackingBox.Interfaces.RealOutput LI_flash(unit="m") "Flash-tank level from the dP transmitter"
+    annotation (Placement(transformation(extent={{100,-24},{108,-16}})));
+  TrackingBox.Interfaces.RealOutput LI_condensate(unit="m") "Condensate-tank level from the dP transmitter"
+    annotation (Placement(transformation(extent={{100,-34},{108,-26}})));
+  TrackingBox.Interfaces.RealOutput DI_product(unit="1") "Product dry solids (DS meter)"
+    annotation (Placement(transformation(extent={{100,-44},{108,-36}})));
+  TrackingBox.Interfaces.RealOutput ZI_inlet(unit="1") "Inlet valve position"
+    annotation (Placement(transformation(extent={{100,-54},{108,-46}})));
+  TrackingBox.Interfaces.RealOutput ZI_outlet(unit="1") "Outlet valve position (effect level loop)"
+    annotation (Placement(transformation(extent={{100,-64},{108,-56}})));
+  TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash level loop)"
+    annotation (Placement(transformation(extent={{100,-74},{108,-66}})));
+  TrackingBox.Interfaces.RealOutput ZI_condensate(unit="1") "Condensate valve position (condensate level loop)"
+    annotation (Placement(transformation(extent={{100,-84},{108,-76}})));
+  TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Steam valve position"
+    annotation (Placement(transformation(extent={{100,-94},{108,-86}})));
   TrackingBox.Evaporation.Sources.LiquorSource feedSource(p=feedSourceP, use_T_in=true, use_x_in=true) "Liquor from the previous effect";
-  TrackingBox.Evaporation.LiquorValve inletValve(KvMax(min=8, max=26)=17, equalPercentage=true) "Inlet valve (flow loop)";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedInletValve inletValve(KvMax=17, equalPercentage=true) "Inlet valve (flow loop)";
   TrackingBox.Evaporation.Effect effect "The last effect";
-  TrackingBox.Evaporation.LiquorValve outletValve(KvMax(min=3.5, max=10.5)=7) "Outlet valve (effect level loop)";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedOutletValve outletValve(KvMax=7) "Outlet valve (effect level loop)";
   TrackingBox.Evaporation.FlashTank flash "Product flash tank";
-  TrackingBox.Evaporation.LiquorPump pump(dp0(min=2e5, max=5e5)=4e5, VMax(min=1.5e-3, max=4.5e-3)=3e-3) "Product pump";
+  TrackingBox.Benches.Evaporator.BaseClasses.TrackedProductPump pump(dp0=4e5, VMax=3e-3) "Product pump";
   TrackingBox.Evaporation.LiquorValve productValve(KvMax=6) "Product valve (flash level loop)";
   TrackingBox.Evaporation.Sources.LiquorSink productSink(p=productSinkP) "Product line";
   TrackingBox.Evaporation.CondensateTank condTank "Condensate tank";
@@ -117,7 +147,18 @@ equation
   ZI_product = LIC_flash.y;
   ZI_condensate = LIC_condensate.y;
   ZI_steam = effect.steamOpening;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,0}, fillColor={245,245,245}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-70,60},{-30,-40}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-70,-10},{-30,-40}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Line(points={{-60,55},{-60,-5}}, color={238,46,47}),
+      Line(points={{-40,55},{-40,-5}}, color={238,46,47}),
+      Rectangle(extent={{10,40},{40,-40}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{10,-15},{40,-40}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Line(points={{-50,-40},{-50,-50},{25,-50},{25,-40}}, color={139,90,43}, thickness=0.5),
+      Text(extent={{-150,145},{150,105}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Design point (1/10 scale of the last effect of the evaporator notes,
 section 2): feed 2 kg/s at 52 % DS and 95 &deg;C, product about 1.35 kg/s at
 77-78 % DS, steam header 4 bar(a) (chest about 3.5 bar), vapour to the next

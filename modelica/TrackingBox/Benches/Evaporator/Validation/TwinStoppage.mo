@@ -1,5 +1,6 @@
 within TrackingBox.Benches.Evaporator.Validation;
 model TwinStoppage "Twin through a one-hour feed stoppage"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Benches.Evaporator.Twin bench "Model under test";
 equation
   bench.feedFlowSet = 2 - 1.99*TrackingBox.Blocks.smoothStep(time, 3600, 60) + 1.99*TrackingBox.Blocks.smoothStep(time, 7260, 60);

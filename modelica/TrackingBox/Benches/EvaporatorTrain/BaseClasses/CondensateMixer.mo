@@ -1,9 +1,12 @@
 within TrackingBox.Benches.EvaporatorTrain.BaseClasses;
 model CondensateMixer "Adiabatic junction of two condensate streams (no volume)"
   parameter TrackingBox.Units.MassFlowRate m_flow_small = 1e-4 "Regularisation of the mixing weights near zero flow";
-  TrackingBox.Evaporation.LiquorPort_a port_a1 "First inlet";
-  TrackingBox.Evaporation.LiquorPort_a port_a2 "Second inlet";
-  TrackingBox.Evaporation.LiquorPort_b port_b "Outlet";
+  TrackingBox.Evaporation.LiquorPort_a port_a1 "First inlet"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Evaporation.LiquorPort_a port_a2 "Second inlet"
+    annotation (Placement(transformation(extent={{-10,-110},{10,-90}})));
+  TrackingBox.Evaporation.LiquorPort_b port_b "Outlet"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
   TrackingBox.Units.MassFlowRate w1 "Mixing weight of the first inlet (its flow, kept positive)";
   TrackingBox.Units.MassFlowRate w2 "Mixing weight of the second inlet (its flow, kept positive)";
 equation

@@ -55,36 +55,66 @@ partial model PartialTrain "N-effect backward-feed train: effects, vapour header
   parameter TrackingBox.Units.PressureDifference dpTransferDesign[N - 1] = {0.75*transferPumpDp0 + rhoDesign[k + 1]*g*(bodyLevelSet + 5) + pVapDesign[k + 1] - pVapDesign[k] for k in 1:N - 1} "Design pressure drop over the transfer valves";
   parameter TrackingBox.Units.PressureDifference dpCondensateDesign[N] = {pVapDesign[k] - (if k < N then pVapDesign[k + 1] else condensateSinkP) + 950*g*(condensateLevelSet + 1) for k in 1:N} "Design pressure drop over the condensate valves";
   parameter TrackingBox.Units.PressureDifference dpOutletDesign = rhoDesign[1]*g*(bodyLevelSet + 5) + pVapDesign[1] - pVapDesign[2] "Design pressure drop over the product outlet valve of effect 1";
-  TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=18) "Setpoint of the feed flow loop";
-  TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.15) "Dry-solids fraction of the weak liquor";
-  TrackingBox.Interfaces.RealInput feedT(unit="K", start=358.15) "Temperature of the weak liquor";
-  TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the live-steam header";
-  TrackingBox.Interfaces.RealInput condenserP(unit="Pa", start=1.4e4) "Pressure of the surface condenser";
-  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
-  TrackingBox.Interfaces.RealInput holdFlowController(unit="1", start=0) "> 0.5 freezes the feed flow loop";
-  TrackingBox.Interfaces.RealInput holdLevelControllers(unit="1", start=0) "> 0.5 freezes every level loop";
-  TrackingBox.Interfaces.RealInput holdBodyLevelControllers(unit="1", start=0) "> 0.5 freezes the effects' level loops";
-  TrackingBox.Interfaces.RealInput holdFlashLevelController(unit="1", start=0) "> 0.5 freezes the product flash-tank level loop";
-  TrackingBox.Interfaces.RealInput holdCondensateLevelControllers(unit="1", start=0) "> 0.5 freezes the condensate-tank level loops";
-  TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Weak-liquor feed";
-  TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow";
-  TrackingBox.Interfaces.RealOutput FI_steam(unit="kg/s") "Live steam into effect 1";
-  TrackingBox.Interfaces.RealOutput FI_liquor[N](each unit="kg/s") "Liquor leaving each effect (transfer flow; effect 1: to the flash tank)";
-  TrackingBox.Interfaces.RealOutput FI_condensate[N](each unit="kg/s") "Condensate leaving each condensate tank";
-  TrackingBox.Interfaces.RealOutput PI_vapour[N](each unit="Pa") "Pressure in each effect's vapour space";
-  TrackingBox.Interfaces.RealOutput PI_steamChest[N](each unit="Pa") "Pressure in each steam chest";
-  TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the product flash tank";
-  TrackingBox.Interfaces.RealOutput TI_body[N](each unit="K") "Liquor temperature in each effect";
-  TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Product temperature after the flash tank";
-  TrackingBox.Interfaces.RealOutput LI_body[N](each unit="m") "Level of each effect (dP transmitter)";
-  TrackingBox.Interfaces.RealOutput LI_flash(unit="m") "Level of the product flash tank";
-  TrackingBox.Interfaces.RealOutput LI_condensate[N](each unit="m") "Level of each condensate tank";
-  TrackingBox.Interfaces.RealOutput DI_product(unit="1") "Product dry solids (DS meter)";
-  TrackingBox.Interfaces.RealOutput ZI_inlet(unit="1") "Feed valve position";
-  TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Live-steam valve position";
-  TrackingBox.Interfaces.RealOutput ZI_body[N](each unit="1") "Position of each effect's level valve";
-  TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash-tank level loop)";
-  TrackingBox.Interfaces.RealOutput ZI_condensate[N](each unit="1") "Position of each condensate valve";
+  TrackingBox.Interfaces.RealInput feedFlowSet(unit="kg/s", start=18) "Setpoint of the feed flow loop"
+    annotation (Placement(transformation(extent={{-114,83},{-100,97}})));
+  TrackingBox.Interfaces.RealInput feedDS(unit="1", start=0.15) "Dry-solids fraction of the weak liquor"
+    annotation (Placement(transformation(extent={{-114,65},{-100,79}})));
+  TrackingBox.Interfaces.RealInput feedT(unit="K", start=358.15) "Temperature of the weak liquor"
+    annotation (Placement(transformation(extent={{-114,47},{-100,61}})));
+  TrackingBox.Interfaces.RealInput steamP(unit="Pa", start=4e5) "Pressure of the live-steam header"
+    annotation (Placement(transformation(extent={{-114,29},{-100,43}})));
+  TrackingBox.Interfaces.RealInput condenserP(unit="Pa", start=1.4e4) "Pressure of the surface condenser"
+    annotation (Placement(transformation(extent={{-114,11},{-100,25}})));
+  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)"
+    annotation (Placement(transformation(extent={{-114,-7},{-100,7}})));
+  TrackingBox.Interfaces.RealInput holdFlowController(unit="1", start=0) "> 0.5 freezes the feed flow loop"
+    annotation (Placement(transformation(extent={{-114,-25},{-100,-11}})));
+  TrackingBox.Interfaces.RealInput holdLevelControllers(unit="1", start=0) "> 0.5 freezes every level loop"
+    annotation (Placement(transformation(extent={{-114,-43},{-100,-29}})));
+  TrackingBox.Interfaces.RealInput holdBodyLevelControllers(unit="1", start=0) "> 0.5 freezes the effects' level loops"
+    annotation (Placement(transformation(extent={{-114,-61},{-100,-47}})));
+  TrackingBox.Interfaces.RealInput holdFlashLevelController(unit="1", start=0) "> 0.5 freezes the product flash-tank level loop"
+    annotation (Placement(transformation(extent={{-114,-79},{-100,-65}})));
+  TrackingBox.Interfaces.RealInput holdCondensateLevelControllers(unit="1", start=0) "> 0.5 freezes the condensate-tank level loops"
+    annotation (Placement(transformation(extent={{-114,-97},{-100,-83}})));
+  TrackingBox.Interfaces.RealOutput FI_feed(unit="kg/s") "Weak-liquor feed"
+    annotation (Placement(transformation(extent={{100,86},{108,94}})));
+  TrackingBox.Interfaces.RealOutput FI_product(unit="kg/s") "Product liquor flow"
+    annotation (Placement(transformation(extent={{100,76},{108,84}})));
+  TrackingBox.Interfaces.RealOutput FI_steam(unit="kg/s") "Live steam into effect 1"
+    annotation (Placement(transformation(extent={{100,66},{108,74}})));
+  TrackingBox.Interfaces.RealOutput FI_liquor[N](each unit="kg/s") "Liquor leaving each effect (transfer flow; effect 1: to the flash tank)"
+    annotation (Placement(transformation(extent={{100,56},{108,64}})));
+  TrackingBox.Interfaces.RealOutput FI_condensate[N](each unit="kg/s") "Condensate leaving each condensate tank"
+    annotation (Placement(transformation(extent={{100,46},{108,54}})));
+  TrackingBox.Interfaces.RealOutput PI_vapour[N](each unit="Pa") "Pressure in each effect's vapour space"
+    annotation (Placement(transformation(extent={{100,36},{108,44}})));
+  TrackingBox.Interfaces.RealOutput PI_steamChest[N](each unit="Pa") "Pressure in each steam chest"
+    annotation (Placement(transformation(extent={{100,26},{108,34}})));
+  TrackingBox.Interfaces.RealOutput PI_flash(unit="Pa") "Pressure in the product flash tank"
+    annotation (Placement(transformation(extent={{100,16},{108,24}})));
+  TrackingBox.Interfaces.RealOutput TI_body[N](each unit="K") "Liquor temperature in each effect"
+    annotation (Placement(transformation(extent={{100,6},{108,14}})));
+  TrackingBox.Interfaces.RealOutput TI_flash(unit="K") "Product temperature after the flash tank"
+    annotation (Placement(transformation(extent={{100,-4},{108,4}})));
+  TrackingBox.Interfaces.RealOutput LI_body[N](each unit="m") "Level of each effect (dP transmitter)"
+    annotation (Placement(transformation(extent={{100,-14},{108,-6}})));
+  TrackingBox.Interfaces.RealOutput LI_flash(unit="m") "Level of the product flash tank"
+    annotation (Placement(transformation(extent={{100,-24},{108,-16}})));
+  TrackingBox.Interfaces.RealOutput LI_condensate[N](each unit="m") "Level of each condensate tank"
+    annotation (Placement(transformation(extent={{100,-34},{108,-26}})));
+  TrackingBox.Interfaces.RealOutput DI_product(unit="1") "Product dry solids (DS meter)"
+    annotation (Placement(transformation(extent={{100,-44},{108,-36}})));
+  TrackingBox.Interfaces.RealOutput ZI_inlet(unit="1") "Feed valve position"
+    annotation (Placement(transformation(extent={{100,-54},{108,-46}})));
+  TrackingBox.Interfaces.RealOutput ZI_steam(unit="1") "Live-steam valve position"
+    annotation (Placement(transformation(extent={{100,-64},{108,-56}})));
+  TrackingBox.Interfaces.RealOutput ZI_body[N](each unit="1") "Position of each effect's level valve"
+    annotation (Placement(transformation(extent={{100,-74},{108,-66}})));
+  TrackingBox.Interfaces.RealOutput ZI_product(unit="1") "Product valve position (flash-tank level loop)"
+    annotation (Placement(transformation(extent={{100,-84},{108,-76}})));
+  TrackingBox.Interfaces.RealOutput ZI_condensate[N](each unit="1") "Position of each condensate valve"
+    annotation (Placement(transformation(extent={{100,-94},{108,-86}})));
   TrackingBox.Evaporation.Sources.LiquorSource feedSource(p=feedSourceP, use_T_in=true, use_x_in=true) "Weak liquor from the storage tank";
   TrackingBox.Evaporation.LiquorValve inletValve(KvMax=feedFlowDesign*3600/(0.2121*sqrt(rhoDesign[N]*(feedSourceP - pVapDesign[N])/100)), equalPercentage=true) "Feed valve (flow loop) into effect N";
   TrackingBox.Evaporation.Effect effect[N](
@@ -233,7 +263,21 @@ equation
   ZI_inlet = FIC_feed.y;
   ZI_steam = effect[1].steamOpening;
   ZI_product = LIC_flash.y;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,0}, fillColor={245,245,245}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-75,50},{-45,-30}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-75,-5},{-45,-30}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-35,50},{-5,-30}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-35,-5},{-5,-30}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{5,50},{35,-30}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{5,-5},{35,-30}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{45,50},{75,-30}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{45,-5},{75,-30}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid),
+      Line(points={{75,-40},{-60,-40}}, color={139,90,43}, thickness=0.5, arrow={Arrow.None, Arrow.Filled}),
+      Text(extent={{-90,90},{90,60}}, textString="N = %N", textColor={0,0,0}),
+      Text(extent={{-150,145},{150,105}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Backward feed: the weak liquor enters effect <code>N</code> (the coldest,
 at the condenser's end) through the flow-controlled feed valve; the liquor of
 effect <code>k+1</code> is pumped into effect <code>k</code> through the level

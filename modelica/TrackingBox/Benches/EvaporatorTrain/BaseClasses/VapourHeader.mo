@@ -6,8 +6,10 @@ model VapourHeader "Vapour header between two effects: a volume of saturated vap
   parameter TrackingBox.Units.Volume V = 30 "Volume of the header and the vapour lines";
   parameter TrackingBox.Units.Temperature T_ref = 373.15 "Temperature in the ideal-gas law (fixed: it sets the capacity only)";
   parameter TrackingBox.Units.Pressure p_start = 1e5 "Initial pressure";
-  TrackingBox.Interfaces.FluidPort_a port_a[nPorts] "Vapour inlets";
-  TrackingBox.Interfaces.FluidPort_b port_b "Vapour outlet (to the next steam chest or the condenser)";
+  TrackingBox.Interfaces.FluidPort_a port_a[nPorts] "Vapour inlets"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Interfaces.FluidPort_b port_b "Vapour outlet (to the next steam chest or the condenser)"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
   TrackingBox.Units.Mass M(start=p_start*V/(R_w*T_ref), fixed=true) "Vapour mass";
   TrackingBox.Units.Pressure p "Pressure";
 equation

@@ -3,8 +3,10 @@ model VapourLine "Vapour line with the regularised square-root law of the vessel
   parameter TrackingBox.Units.MassFlowRate m_flow_nominal = 2 "Flow at dp_nominal";
   parameter TrackingBox.Units.PressureDifference dp_nominal = 500 "Pressure drop at m_flow_nominal";
   parameter TrackingBox.Units.PressureDifference dp_small = 50 "Regularisation of the square-root law";
-  TrackingBox.Interfaces.FluidPort_a port_a "Inlet";
-  TrackingBox.Interfaces.FluidPort_b port_b "Outlet";
+  TrackingBox.Interfaces.FluidPort_a port_a "Inlet"
+    annotation (Placement(transformation(extent={{-110,-10},{-90,10}})));
+  TrackingBox.Interfaces.FluidPort_b port_b "Outlet"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
   TrackingBox.Units.MassFlowRate m_flow "Flow from port_a to port_b";
 equation
   m_flow = m_flow_nominal*TrackingBox.Evaporation.Functions.regRoot(port_a.p - port_b.p, dp_small)/sqrt(dp_nominal);

@@ -1,7 +1,8 @@
 within TrackingBox.Benches.EvaporatorTrain.BaseClasses;
 model VapourPlug "Closed end of an unused vapour inlet"
   parameter TrackingBox.Units.Temperature T = 373.15 "Temperature the closed port reports (no flow carries it)";
-  TrackingBox.Interfaces.FluidPort_b port "Closed port";
+  TrackingBox.Interfaces.FluidPort_b port "Closed port"
+    annotation (Placement(transformation(extent={{90,-10},{110,10}})));
 equation
   port.m_flow = 0;
   port.T = T;

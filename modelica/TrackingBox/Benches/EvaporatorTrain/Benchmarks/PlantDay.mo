@@ -1,5 +1,6 @@
 within TrackingBox.Benches.EvaporatorTrain.Benchmarks;
 model PlantDay "Plant (7 effects) through one day with a feed stoppage"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Benches.EvaporatorTrain.Plant bench "Model under test";
 equation
   bench.feedFlowSet = 18 - 17.82*TrackingBox.Blocks.smoothStep(time, 36000, 60) + 17.82*TrackingBox.Blocks.smoothStep(time, 38400, 180);

@@ -1,5 +1,6 @@
 within TrackingBox.Benches.EvaporatorTrain.Validation;
 model PlantStoppage "3-effect plant through a 40-minute feed stoppage"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Benches.EvaporatorTrain.Plant bench(N=3) "Model under test";
 equation
   bench.feedFlowSet = 18 - 17.82*TrackingBox.Blocks.smoothStep(time, 1800, 60) + 17.82*TrackingBox.Blocks.smoothStep(time, 4200, 180);

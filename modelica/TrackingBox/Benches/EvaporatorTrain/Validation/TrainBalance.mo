@@ -1,5 +1,6 @@
 within TrackingBox.Benches.EvaporatorTrain.Validation;
 model TrainBalance "Mass and dry-solids balances of a 3-effect twin train under varying boundaries and correction flows"
+  extends TrackingBox.Icons.Example;
   parameter Integer N = 3 "Number of effects";
   TrackingBox.Benches.EvaporatorTrain.Twin train(N=N) "The train (twin variant: it has the correction-flow inputs)";
   TrackingBox.Units.Mass massIn(start=0, fixed=true) "Integral of the mass entering: feed, live steam, correction flows";

@@ -1,13 +1,19 @@
 within TrackingBox.Benches.HeatExchanger.BaseClasses;
 partial model PartialBench "Heat-exchanger bench: boundaries, exchanger, inputs and outputs"
-  TrackingBox.Interfaces.RealInput ThIn(unit="K", start=363.15) "Hot inlet temperature";
-  TrackingBox.Interfaces.RealInput TcIn(unit="K", start=283.15) "Cold inlet temperature";
-  TrackingBox.Interfaces.RealInput mHot_flow(unit="kg/s", start=1.0) "Hot mass flow rate";
-  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=2.0) "Cold mass flow rate";
-  TrackingBox.Interfaces.RealOutput ThOut(unit="K") "Hot outlet temperature";
-  TrackingBox.Interfaces.RealOutput TcOut(unit="K") "Cold outlet temperature";
-  TrackingBox.Fluid.HeatExchanger hx(n=10, kht(min=500, max=1500) = 1000, A=4.2, V1=0.12, V2=0.12,
-    T1_start=333.15, T2_start=308.15) "Counter-flow heat exchanger (side 1 hot, side 2 cold)";
+  TrackingBox.Interfaces.RealInput ThIn(unit="K", start=363.15) "Hot inlet temperature"
+    annotation (Placement(transformation(extent={{-132,44},{-100,76}})));
+  TrackingBox.Interfaces.RealInput TcIn(unit="K", start=283.15) "Cold inlet temperature"
+    annotation (Placement(transformation(extent={{-132,-36},{-100,-4}})));
+  TrackingBox.Interfaces.RealInput mHot_flow(unit="kg/s", start=1.0) "Hot mass flow rate"
+    annotation (Placement(transformation(extent={{-132,4},{-100,36}})));
+  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=2.0) "Cold mass flow rate"
+    annotation (Placement(transformation(extent={{-132,-76},{-100,-44}})));
+  TrackingBox.Interfaces.RealOutput ThOut(unit="K") "Hot outlet temperature"
+    annotation (Placement(transformation(extent={{100,20},{120,40}})));
+  TrackingBox.Interfaces.RealOutput TcOut(unit="K") "Cold outlet temperature"
+    annotation (Placement(transformation(extent={{100,-40},{120,-20}})));
+  TrackingBox.Benches.HeatExchanger.BaseClasses.TrackedHeatExchanger hx(n=10, kht=1000, A=4.2, V1=0.12, V2=0.12,
+    T1_start=333.15, T2_start=308.15) "Counter-flow heat exchanger (side 1 hot, side 2 cold); kht bounded 500..1500";
   TrackingBox.Fluid.Sources.MassFlowSource hotIn(use_m_flow_in=true, use_T_in=true) "Hot stream source";
   TrackingBox.Fluid.Sources.MassFlowSource coldIn(use_m_flow_in=true, use_T_in=true) "Cold stream source";
   TrackingBox.Fluid.Sources.PressureSink hotOut "Hot stream sink";
@@ -23,11 +29,20 @@ equation
   connect(hx.port_b2, coldOut.port);
   ThOut = hx.port_b1.T;
   TcOut = hx.port_b2.T;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,0}, fillColor={245,245,245}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-60,50},{60,10}}, lineColor={0,0,0}, fillColor={255,170,170}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-60,-10},{60,-50}}, lineColor={0,0,0}, fillColor={170,213,255}, fillPattern=FillPattern.Solid),
+      Line(points={{-80,30},{80,30}}, color={238,46,47}, thickness=0.5, arrow={Arrow.None, Arrow.Filled}),
+      Line(points={{80,-30},{-80,-30}}, color={0,127,255}, thickness=0.5, arrow={Arrow.None, Arrow.Filled}),
+      Text(extent={{-150,145},{150,105}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
-twin's parameter values and the tracking bounds. <code>Twin</code> extends it
-unmodified; <code>Plant</code> overrides values with plain modifiers
-(rumoca 0.10.2 drops attribute modifiers such as <code>kht(min=...)</code>
-given in an <code>extends</code> clause, so bounds live here only).</p>
+twin's parameter values. <code>Twin</code> extends it unmodified;
+<code>Plant</code> overrides values with plain modifiers
+(<code>hx(kht=910)</code>). The tracking bounds of <code>hx.kht</code>
+(500..1500 W/(m2.K)) come with the exchanger's class,
+<code>TrackedHeatExchanger</code>, so that both keep them.</p>
 </html>"));
 end PartialBench;

@@ -4,7 +4,8 @@ model FoulingExp "Heat-exchanger plant whose heat-transfer coefficient falls exp
   parameter TrackingBox.Units.Time tStart = 3600 "Start of the fouling";
   parameter TrackingBox.Units.Time tau = 14400 "Time constant of the deposit build-up";
   parameter TrackingBox.Units.Fraction fall = 0.25 "Final relative fall of kht";
-  TrackingBox.Interfaces.RealOutput khtFouled(unit="W/(m2.K)") "Heat-transfer coefficient of the fouled exchanger";
+  TrackingBox.Interfaces.RealOutput khtFouled(unit="W/(m2.K)") "Heat-transfer coefficient of the fouled exchanger"
+    annotation (Placement(transformation(origin={0,110}, extent={{-10,-10},{10,10}}, rotation=90)));
 equation
   khtFouled = hx.kht*(1 - fall*(1 - exp(-noEvent(max(time - tStart, 0))/tau)));
   connect(khtFouled, hx.kht_in);

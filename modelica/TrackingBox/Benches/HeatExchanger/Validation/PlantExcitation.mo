@@ -1,5 +1,6 @@
 within TrackingBox.Benches.HeatExchanger.Validation;
 model PlantExcitation "Plant with steps in both flows and inlet temperatures and a sine on the hot inlet"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Benches.HeatExchanger.Plant bench "Model under test";
 equation
   bench.mHot_flow = 1.0 + 0.3*TrackingBox.Blocks.smoothStep(time, 1500, 60);

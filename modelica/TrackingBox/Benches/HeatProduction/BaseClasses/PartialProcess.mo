@@ -10,36 +10,65 @@ partial model PartialProcess "Heat-production process: components, controllers, 
   parameter TrackingBox.Units.Temperature THeatMin = 373.15 "Heating-medium temperature of HU300 at TIC300 output 0";
   parameter TrackingBox.Units.Temperature THeatMax = 443.15 "Heating-medium temperature of HU300 at TIC300 output 1";
   // Inputs
-  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=0.07) "Heat demand: mass flow of the external cold stream";
-  TrackingBox.Interfaces.RealInput TColdIn(unit="K", start=313.15) "Heat demand: inlet temperature of the cold stream";
-  TrackingBox.Interfaces.RealInput TColdOut_set(unit="K", start=338.15) "Setpoint of the cold-stream outlet temperature (TIC302)";
-  TrackingBox.Interfaces.RealInput THU300_set(unit="K", start=363.15) "Setpoint of the HU300 outlet temperature (TIC300)";
-  TrackingBox.Interfaces.RealInput TPre_set(unit="K", start=328.15) "Setpoint of the T100 temperature (TIC100)";
-  TrackingBox.Interfaces.RealInput TMakeUp(unit="K", start=288.15) "Make-up water temperature";
-  TrackingBox.Interfaces.RealInput TAmb(unit="K", start=293.15) "Ambient temperature (tank heat losses)";
-  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)";
+  TrackingBox.Interfaces.RealInput mCold_flow(unit="kg/s", start=0.07) "Heat demand: mass flow of the external cold stream"
+    annotation (Placement(transformation(extent={{-118,75},{-100,93}})));
+  TrackingBox.Interfaces.RealInput TColdIn(unit="K", start=313.15) "Heat demand: inlet temperature of the cold stream"
+    annotation (Placement(transformation(extent={{-118,51},{-100,69}})));
+  TrackingBox.Interfaces.RealInput TColdOut_set(unit="K", start=338.15) "Setpoint of the cold-stream outlet temperature (TIC302)"
+    annotation (Placement(transformation(extent={{-118,27},{-100,45}})));
+  TrackingBox.Interfaces.RealInput THU300_set(unit="K", start=363.15) "Setpoint of the HU300 outlet temperature (TIC300)"
+    annotation (Placement(transformation(extent={{-118,3},{-100,21}})));
+  TrackingBox.Interfaces.RealInput TPre_set(unit="K", start=328.15) "Setpoint of the T100 temperature (TIC100)"
+    annotation (Placement(transformation(extent={{-118,-21},{-100,-3}})));
+  TrackingBox.Interfaces.RealInput TMakeUp(unit="K", start=288.15) "Make-up water temperature"
+    annotation (Placement(transformation(extent={{-118,-45},{-100,-27}})));
+  TrackingBox.Interfaces.RealInput TAmb(unit="K", start=293.15) "Ambient temperature (tank heat losses)"
+    annotation (Placement(transformation(extent={{-118,-69},{-100,-51}})));
+  TrackingBox.Interfaces.RealInput holdControllers(unit="1", start=0) "> 0.5 freezes all PI controllers (outputs held)"
+    annotation (Placement(transformation(extent={{-118,-93},{-100,-75}})));
   // Sensor outputs
-  TrackingBox.Interfaces.RealOutput LI_100(unit="m") "Level T100";
-  TrackingBox.Interfaces.RealOutput LI_200(unit="m") "Level T200";
-  TrackingBox.Interfaces.RealOutput LI_400(unit="m") "Level T400";
-  TrackingBox.Interfaces.RealOutput TI_100(unit="K") "Temperature T100";
-  TrackingBox.Interfaces.RealOutput TI_200(unit="K") "Temperature T200";
-  TrackingBox.Interfaces.RealOutput TI_300(unit="K") "Temperature HU300 outlet";
-  TrackingBox.Interfaces.RealOutput TI_301(unit="K") "Temperature HEX300 hot-side outlet";
-  TrackingBox.Interfaces.RealOutput TI_302(unit="K") "Temperature cold-stream outlet";
-  TrackingBox.Interfaces.RealOutput TI_310(unit="K") "Temperature of the HU300 heating medium";
-  TrackingBox.Interfaces.RealOutput TI_400(unit="K") "Temperature T400";
-  TrackingBox.Interfaces.RealOutput FI_100(unit="kg/s") "Flow PU100 (T100 to T200)";
-  TrackingBox.Interfaces.RealOutput FI_101(unit="kg/s") "Flow V400 (T400 to T100)";
-  TrackingBox.Interfaces.RealOutput FI_200(unit="kg/s") "Flow PU200 (through HU300 and HEX300)";
-  TrackingBox.Interfaces.RealOutput FI_400(unit="kg/s") "Make-up flow into T400";
-  TrackingBox.Interfaces.RealOutput PI_100(unit="Pa") "Pressure at the PU100 discharge";
-  TrackingBox.Interfaces.RealOutput PI_200(unit="Pa") "Pressure at the PU200 discharge";
-  TrackingBox.Interfaces.RealOutput PI_300(unit="Pa") "Pressure in HU300";
-  TrackingBox.Interfaces.RealOutput SI_100(unit="1") "Relative speed PU100";
-  TrackingBox.Interfaces.RealOutput SI_200(unit="1") "Relative speed PU200";
-  TrackingBox.Interfaces.RealOutput ZI_400(unit="1") "Opening V400";
-  TrackingBox.Interfaces.RealOutput QI_100(unit="W") "Preheater power T100";
+  TrackingBox.Interfaces.RealOutput LI_100(unit="m") "Level T100"
+    annotation (Placement(transformation(extent={{100,77},{106,83}})));
+  TrackingBox.Interfaces.RealOutput LI_200(unit="m") "Level T200"
+    annotation (Placement(transformation(extent={{100,69},{106,75}})));
+  TrackingBox.Interfaces.RealOutput LI_400(unit="m") "Level T400"
+    annotation (Placement(transformation(extent={{100,61},{106,67}})));
+  TrackingBox.Interfaces.RealOutput TI_100(unit="K") "Temperature T100"
+    annotation (Placement(transformation(extent={{100,53},{106,59}})));
+  TrackingBox.Interfaces.RealOutput TI_200(unit="K") "Temperature T200"
+    annotation (Placement(transformation(extent={{100,45},{106,51}})));
+  TrackingBox.Interfaces.RealOutput TI_300(unit="K") "Temperature HU300 outlet"
+    annotation (Placement(transformation(extent={{100,37},{106,43}})));
+  TrackingBox.Interfaces.RealOutput TI_301(unit="K") "Temperature HEX300 hot-side outlet"
+    annotation (Placement(transformation(extent={{100,29},{106,35}})));
+  TrackingBox.Interfaces.RealOutput TI_302(unit="K") "Temperature cold-stream outlet"
+    annotation (Placement(transformation(extent={{100,21},{106,27}})));
+  TrackingBox.Interfaces.RealOutput TI_310(unit="K") "Temperature of the HU300 heating medium"
+    annotation (Placement(transformation(extent={{100,13},{106,19}})));
+  TrackingBox.Interfaces.RealOutput TI_400(unit="K") "Temperature T400"
+    annotation (Placement(transformation(extent={{100,5},{106,11}})));
+  TrackingBox.Interfaces.RealOutput FI_100(unit="kg/s") "Flow PU100 (T100 to T200)"
+    annotation (Placement(transformation(extent={{100,-3},{106,3}})));
+  TrackingBox.Interfaces.RealOutput FI_101(unit="kg/s") "Flow V400 (T400 to T100)"
+    annotation (Placement(transformation(extent={{100,-11},{106,-5}})));
+  TrackingBox.Interfaces.RealOutput FI_200(unit="kg/s") "Flow PU200 (through HU300 and HEX300)"
+    annotation (Placement(transformation(extent={{100,-19},{106,-13}})));
+  TrackingBox.Interfaces.RealOutput FI_400(unit="kg/s") "Make-up flow into T400"
+    annotation (Placement(transformation(extent={{100,-27},{106,-21}})));
+  TrackingBox.Interfaces.RealOutput PI_100(unit="Pa") "Pressure at the PU100 discharge"
+    annotation (Placement(transformation(extent={{100,-35},{106,-29}})));
+  TrackingBox.Interfaces.RealOutput PI_200(unit="Pa") "Pressure at the PU200 discharge"
+    annotation (Placement(transformation(extent={{100,-43},{106,-37}})));
+  TrackingBox.Interfaces.RealOutput PI_300(unit="Pa") "Pressure in HU300"
+    annotation (Placement(transformation(extent={{100,-51},{106,-45}})));
+  TrackingBox.Interfaces.RealOutput SI_100(unit="1") "Relative speed PU100"
+    annotation (Placement(transformation(extent={{100,-59},{106,-53}})));
+  TrackingBox.Interfaces.RealOutput SI_200(unit="1") "Relative speed PU200"
+    annotation (Placement(transformation(extent={{100,-67},{106,-61}})));
+  TrackingBox.Interfaces.RealOutput ZI_400(unit="1") "Opening V400"
+    annotation (Placement(transformation(extent={{100,-75},{106,-69}})));
+  TrackingBox.Interfaces.RealOutput QI_100(unit="W") "Preheater power T100"
+    annotation (Placement(transformation(extent={{100,-83},{106,-77}})));
   // Tanks
   TrackingBox.Fluid.OpenTank T100(nPorts_a=2, A=0.3, zBottom=0, zInlet=1.2, level_start=0.8, T_start=328.15,
     UA=5, use_Q_flow_in=true, use_TAmb_in=true) "Preheating tank";
@@ -48,23 +77,21 @@ partial model PartialProcess "Heat-production process: components, controllers, 
   TrackingBox.Fluid.OpenTank T400(nPorts_a=1, A=0.3, zBottom=2.0, zInlet=3.2, level_start=0.6, T_start=288.15,
     UA=5, use_TAmb_in=true) "Elevated make-up tank";
   // Line T100 -> T200
-  TrackingBox.Fluid.Pump PU100(quadratic=quadratic, VFlowDesign(min=6.0e-5, max=7.3e-5) = 6.6e-5,
-    uRise(min=36000, max=44000) = 40000) "Pump T100 to T200";
-  TrackingBox.Fluid.Pipe Pipe100(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Pipe T100 to T200";
-  TrackingBox.Fluid.Valve V100(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedTransferPump PU100(quadratic=quadratic, VFlowDesign=6.6e-5, uRise=40000) "Pump T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe100(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Pipe T100 to T200";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V100(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve T100 to T200";
   // Line T200 -> HU300 -> HEX300 -> T100
-  TrackingBox.Fluid.Pump PU200(quadratic=quadratic, VFlowDesign(min=7.5e-5, max=9.16e-5) = 8.3e-5,
-    uRise(min=36000, max=44000) = 40000) "Pump T200 to HU300";
-  TrackingBox.Fluid.Pipe Pipe200(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Pipe T200 to HU300";
-  TrackingBox.Fluid.Valve V200(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve before HU300";
-  TrackingBox.Fluid.HeatingUnit HU300(kht(min=945, max=1155) = 1050, A=0.2, V=0.03, T_start=363.15) "Pressurised heating unit";
-  TrackingBox.Fluid.HeatExchanger HEX300(n=5, kht(min=850, max=1150) = 1000, A=0.6, V1=0.008, V2=0.008,
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedCirculationPump PU200(quadratic=quadratic, VFlowDesign=8.3e-5, uRise=40000) "Pump T200 to HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe200(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Pipe T200 to HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V200(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve before HU300";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedHeatingUnit HU300(kht=1050, A=0.2, V=0.03, T_start=363.15) "Pressurised heating unit";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedHeatExchanger HEX300(n=5, kht=1000, A=0.6, V1=0.008, V2=0.008,
     T1_start=348.15, T2_start=328.15) "Heat exchanger to the external cold stream (side 1 hot, side 2 cold)";
-  TrackingBox.Fluid.Pipe Pipe201(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.05) "Return pipe HEX300 to T100";
-  TrackingBox.Fluid.Valve V300(KvMax(min=0.9, max=1.1) = 1.0, use_opening_in=false, openingFixed=1.0) "Hand valve in the return";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe201(quadratic=quadratic, k=0.005, m_flow_nominal=0.05) "Return pipe HEX300 to T100";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V300(KvMax=1.0, use_opening_in=false, openingFixed=1.0) "Hand valve in the return";
   // Make-up line T400 -> T100
-  TrackingBox.Fluid.Pipe Pipe101(quadratic=quadratic, k(min=0.0001, max=0.01) = 0.005, m_flow_nominal=0.02) "Pipe T400 to T100";
-  TrackingBox.Fluid.Valve V400(KvMax(min=0.9, max=1.1) = 1.0) "Control valve T400 to T100 (LIC100)";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedPipe Pipe101(quadratic=quadratic, k=0.005, m_flow_nominal=0.02) "Pipe T400 to T100";
+  TrackingBox.Benches.HeatProduction.BaseClasses.TrackedValve V400(KvMax=1.0) "Control valve T400 to T100 (LIC100)";
   // Boundaries
   TrackingBox.Fluid.Sources.MassFlowSource makeUp(use_m_flow_in=true, use_T_in=true) "Make-up water into T400";
   TrackingBox.Fluid.Sources.MassFlowSink bleed(m_flow=mBleed_flow) "Bleed of excess water from T100";
@@ -152,13 +179,25 @@ equation
   SI_200 = PU200.speed;
   ZI_400 = V400.opening;
   QI_100 = T100.Q_flow_in;
-  annotation (Documentation(info="<html>
+  annotation (
+    Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={
+      Rectangle(extent={{-100,100},{100,-100}}, lineColor={0,0,0}, fillColor={245,245,245}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-70,60},{-40,10}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{-15,60},{15,10}}, lineColor={0,0,0}, fillColor={0,127,255}, fillPattern=FillPattern.Solid),
+      Rectangle(extent={{40,40},{70,-10}}, lineColor={0,0,0}, fillColor={238,46,47}, fillPattern=FillPattern.Solid),
+      Line(points={{-55,10},{-55,-30},{55,-30},{55,-10}}, color={0,127,255}, thickness=0.5),
+      Line(points={{-40,35},{-15,35}}, color={0,127,255}, thickness=0.5),
+      Line(points={{15,35},{40,35}}, color={0,127,255}, thickness=0.5),
+      Text(extent={{-150,145},{150,105}}, textString="%name", textColor={0,0,255})}),
+    Documentation(info="<html>
 <p>Structure shared by <code>Plant</code> and <code>Twin</code>, with the
-twin's parameter values (the method notes' initial values) and the tracking
-bounds on the declarations. <code>Twin</code> extends it; <code>Plant</code>
-overrides values with plain modifiers (rumoca 0.10.2 drops attribute
-modifiers such as <code>kht(min=...)</code> in an <code>extends</code> clause,
-so the bounds are declared here only).</p>
+twin's parameter values (the method notes' initial values). <code>Twin</code>
+extends it; <code>Plant</code> overrides values with plain modifiers. The
+tracking bounds of the trackable parameters come with the components'
+classes (<code>TrackedHeatingUnit</code>, <code>TrackedHeatExchanger</code>,
+<code>TrackedPipe</code>, <code>TrackedValve</code>,
+<code>TrackedTransferPump</code>, <code>TrackedCirculationPump</code>), so
+plant and twin both keep them.</p>
 <p>Pressures are absolute and piezometric (reference: bottom of T100/T200).
 All controllers share the hold input <code>holdControllers</code>.</p>
 </html>"));

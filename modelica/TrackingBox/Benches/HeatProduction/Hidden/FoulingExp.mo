@@ -4,7 +4,8 @@ model FoulingExp "Heat-production plant whose heat exchanger HEX300 fouls expone
   parameter TrackingBox.Units.Time tStart = 14400 "Start of the fouling";
   parameter TrackingBox.Units.Time tau = 36000 "Time constant of the deposit build-up";
   parameter TrackingBox.Units.Fraction fall = 0.35 "Final relative fall of kht";
-  TrackingBox.Interfaces.RealOutput khtFouled(unit="W/(m2.K)") "Heat-transfer coefficient of the fouled HEX300";
+  TrackingBox.Interfaces.RealOutput khtFouled(unit="W/(m2.K)") "Heat-transfer coefficient of the fouled HEX300"
+    annotation (Placement(transformation(origin={0,110}, extent={{-10,-10},{10,10}}, rotation=90)));
 equation
   khtFouled = HEX300.kht*(1 - fall*(1 - exp(-noEvent(max(time - tStart, 0))/tau)));
   connect(khtFouled, HEX300.kht_in);

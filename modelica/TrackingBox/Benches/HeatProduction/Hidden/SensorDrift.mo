@@ -4,7 +4,8 @@ model SensorDrift "Heat-production plant whose T100 thermometer TI-100 drifts"
   parameter TrackingBox.Units.Time tStart = 14400 "Start of the drift";
   parameter TrackingBox.Units.TemperatureDifference drift = -2.0 "Final error of the reading";
   parameter TrackingBox.Units.Time tau = 50000 "Time constant of the drift";
-  TrackingBox.Interfaces.RealOutput TI_100_sensor(unit="K") "Reading of the T100 thermometer TI-100";
+  TrackingBox.Interfaces.RealOutput TI_100_sensor(unit="K") "Reading of the T100 thermometer TI-100"
+    annotation (Placement(transformation(origin={0,110}, extent={{-10,-10},{10,10}}, rotation=90)));
 equation
   TI_100_sensor = TI_100 + drift*(1 - exp(-noEvent(max(time - tStart, 0))/tau));
   annotation (Documentation(info="<html>

@@ -1,5 +1,6 @@
 within TrackingBox.Benches.HeatProduction.Validation;
 model TwinDay "Twin over one day of varying heat demand"
+  extends TrackingBox.Icons.Example;
   TrackingBox.Benches.HeatProduction.Twin bench "Model under test";
 protected
   constant Real pi = 3.141592653589793 "Circle constant";
