@@ -110,7 +110,8 @@ def print_result(spec: Any, result: Any) -> None:
         print(m)
     if n > 1:
         width = max(len(x) for x in result.names)
+        col = max(7, min(18, width))
         print("\ncorrelation at the start values:")
-        print(" " * (width + 2) + " ".join(f"{x[-8:]:>8}" for x in result.names))
+        print(" " * (width + 2) + " ".join(f"{x[-col:]:>{col}}" for x in result.names))
         for name, row in zip(result.names, result.correlation):
-            print(f"{name:>{width}}  " + " ".join(f"{v:>8.3f}" for v in row))
+            print(f"{name:>{width}}  " + " ".join(f"{v:>{col}.3f}" for v in row))
