@@ -166,7 +166,7 @@ def _intervals(result: Any) -> dict[str, tuple[float, float]]:
 
 def _print_table(result: Any) -> None:
     unc = result.uncertainty
-    width = max(len(n) for n in result.parameters)
+    width = max(len("parameter"), *(len(n) for n in result.parameters))
     level = f"{100 * unc.level:g} % interval" if unc is not None else ""
     print(f"{'parameter':<{width}}  {'start':>12}  {'estimate':>12}  {'min':>12}  {'max':>12}  {level}")
     for name, value in result.parameters.items():
@@ -177,7 +177,7 @@ def _print_table(result: Any) -> None:
     if unc is not None and unc.combinations:
         print()
         for iv in unc.combinations:
-            print(f"determined: {iv.text()}")
+            print(f"determined: {iv.name} = {iv.text()}")
     if unc is not None:
         for f in unc.findings:
             print(f"note: {f.message}")
