@@ -167,10 +167,10 @@ class PairSettings:
         (*workers* processes on 127.0.0.1) or a scheduler address ``tcp://host:8786``
         (:func:`~trackingbox.analysis.executor.make_executor`).
     identify
-        Leave out candidates whose effect on the tags the data cannot tell apart from
-        another's (the twin's output sensitivities over the training window,
-        :func:`trackingbox.identify.analysis.leave_out`), before the assignment, with that
-        reason (``pair --no-identify``: off).
+        With the data checks: leave out candidates whose effect on the tags the data cannot
+        tell apart from another's (the twin's output sensitivities over the training window,
+        as the data were recorded: :func:`trackingbox.identify.analysis.leave_out`), before the
+        assignment, with that reason (``pair --no-identify``: off).
     """
 
     method: Method = "rga"
@@ -489,7 +489,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     # candidates the data cannot tell apart (dynamic sensitivities, trackingbox.identify): out, with the reason
     from ..identify.hooks import explain, indistinct_candidates, without_candidates
 
-    drop = indistinct_candidates(spec) if s.identify else {}
+    drop = indistinct_candidates(spec) if s.identify and s.data_checks else {}
     st_m, st2_m, rec_m = (without_candidates(x, drop) for x in (st, st2, st_rec))
     pairing = choose_pairs(st_m.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],

@@ -70,7 +70,8 @@ def register(subparsers: Any) -> None:
                         "training window whose running inputs differ most from the first point), TIME, or none")
     p.add_argument("--no-identify", dest="identify", action="store_false",
                    help="do not leave out candidates whose effect on the tags the data cannot tell apart from "
-                        "another's (the twin's output sensitivities over the training window; on by default)")
+                        "another's (the twin's output sensitivities over the training window; on by default, "
+                        "with the data checks)")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
     p.add_argument("--noise-ratio", type=number(ge=0), default=5.0, metavar="K",
