@@ -95,12 +95,14 @@ validation = [{half}, {end}]
 
 
 def wall_case(out: str | Path, fmu: str | Path, *, seed: int = 0, hours: float = 48.0, dt: float = 60.0,
-              truth: dict[str, float] | None = None, noise_scale: float = 1.0) -> Path:
+              truth: dict[str, float] | None = None, noise_scale: float = 1.0, known: tuple[str, ...] = ()) -> Path:
     """Write a thermal-wall case into *out* (``twin.fmu``, ``measurements.csv``, ``spec.toml``,
     ``truth.json``) from the compiled *fmu*; returns the spec's path.
 
     The plant starts settled at the first inputs (a 2-day held pre-run), the twin from
-    its own start temperature (the estimation's warm-up settles it).
+    its own start temperature (the estimation's warm-up settles it). *known*: parameters
+    held at their true values (``[fixed]``) instead of estimated (``("C",)``: R1 and R2
+    alone, which the wall's temperature does determine).
     """
     import shutil
 
@@ -126,8 +128,13 @@ def wall_case(out: str | Path, fmu: str | Path, *, seed: int = 0, hours: float =
     pd.DataFrame(data).to_csv(out / "measurements.csv", index=False, float_format="%.9g")
     if Path(fmu).resolve() != (out / "twin.fmu").resolve():
         shutil.copyfile(fmu, out / "twin.fmu")
+    unknown = [n for n in known if n not in PARAMETERS]
+    if unknown:
+        raise TrackingError(f"wall_case: known parameters must be among {', '.join(PARAMETERS)}, not {unknown}")
     params = "".join(f"\n[[parameters]]\nname = \"{n}\"\nstart = {s!r}\nmin = {lo!r}\nmax = {hi!r}\n"
-                     for n, (s, lo, hi) in PARAMETERS.items())
+                     for n, (s, lo, hi) in PARAMETERS.items() if n not in known)
+    if known:
+        params += "\n[fixed]\n" + "".join(f"{n} = {truth[n]!r}\n" for n in known)
     half = round(t.size / 2) * dt
     write_text_atomic(out / "spec.toml", SPEC.format(seed=seed, dt=dt, parameters=params, half=half, end=t[-1]))
     combos = {"R1·C": truth["R1"] * truth["C"], "R2·C": truth["R2"] * truth["C"]}
