@@ -16,6 +16,15 @@ Then the 7-effect evaporator train (``Benches.EvaporatorTrain.Benchmarks``):
 compile seconds and one simulated day through ``FMUModel`` at a 10 s output
 grid, wall and CPU seconds (the front end and gcc run in child processes: their
 CPU is counted); the issue's targets are 60 s each. ``--train`` runs only that.
+
+``--msl [MODEL ...]``: compile time and peak memory on the Modelica Standard Library
+(``../shared/msl``), each compile a fresh ``trackingbox compile`` process (peak memory: the largest
+process of its tree), three ways in one run: *cold* (empty caches: rumoca's parsed files, the
+class index, the flat models), *library cached* (a new model against a library compiled from
+before: rumoca's parsed files and the class index kept, no flat model), *model cached* (the same
+model again: its flat model kept); beside *full library*, rumoca alone flattening the model
+from the whole library (what each compile cost before front-end trees). A one-state model built
+from ``Modelica.Thermal.HeatTransfer`` components comes first, then MSL examples.
 """
 from __future__ import annotations
 
@@ -76,10 +85,119 @@ def train() -> None:
     print("(one day at a 10 s output grid, CVode tolerance 1e-6, FMU extracted and instantiated once; one run)")
 
 
+ONE_STATE = """model OneState "one heat capacity cooled through a conductance: one state"
+  Modelica.Thermal.HeatTransfer.Components.HeatCapacitor capacity(C = 1000, T(start = 350, fixed = true));
+  Modelica.Thermal.HeatTransfer.Components.ThermalConductor wall(G = 10);
+  Modelica.Thermal.HeatTransfer.Sources.FixedTemperature ambient(T = 290);
+equation
+  connect(capacity.port, wall.port_a);
+  connect(wall.port_b, ambient.port);
+  annotation(experiment(StopTime = 500));
+end OneState;
+"""
+
+MSL_EXAMPLES = (
+    "Modelica.Thermal.HeatTransfer.Examples.TwoMasses",
+    "Modelica.Thermal.HeatTransfer.Examples.ControlledTemperature",
+    "Modelica.Thermal.FluidHeatFlow.Examples.SimpleCooling",
+    "Modelica.Blocks.Examples.PID_Controller",
+    "Modelica.Electrical.Analog.Examples.ChuaCircuit",
+    "Modelica.Mechanics.Rotational.Examples.First",
+    "Modelica.Mechanics.Translational.Examples.Damper",
+    "Modelica.Fluid.Examples.Tanks.EmptyTanks",
+)
+
+
+def _run_measured(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int, str]:
+    """(wall s, peak MB of the largest process of the tree, exit status, last line of output) of *cmd*."""
+    import os
+    import subprocess
+
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    out = proc.stdout.read() if proc.stdout else b""
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    wall = time.perf_counter() - t0
+    lines = out.decode("utf-8", "replace").strip().splitlines()
+    return wall, usage.ru_maxrss / 1024, proc.returncode, (lines[-1] if lines else "")
+
+
+_FULL_LIBRARY = """
+import sys, rumoca
+session = rumoca.Session(roots=[sys.argv[1]])
+session.load(sys.argv[2], model=sys.argv[3]).to_dict("flat")
+"""
+
+
+def msl(models: list[str]) -> int:
+    """Compile time and peak memory on the MSL: cold, library cached, model cached, and rumoca alone on
+    the whole library (see the module docstring)."""
+    import os
+    import statistics
+
+    from trackingbox.compiler.msl_harness import default_msl
+
+    root = default_msl()
+    if not (root / "package.mo").is_file():
+        print(f"error: the Modelica Standard Library is not at {root} (set TRACKINGBOX_MSL)", file=sys.stderr)
+        return 2
+    tb = str(Path(sys.executable).with_name("trackingbox"))
+    print(f"MSL {root}; each figure one fresh process: wall s / peak MB of its largest process")
+    print(f"{'model':58s} {'cold':>13s} {'library cached':>15s} {'model cached':>13s} {'full library':>13s} "
+          f"{'full/lib':>8s}")
+    lib_cached: list[float] = []
+    failures = 0
+    with tempfile.TemporaryDirectory(prefix="tbx-bench-msl-") as tmp:
+        # rumoca alone on the whole library, its parsed files cached: warm that cache once (untimed)
+        peer_env = {**os.environ, "XDG_CACHE_HOME": str(Path(tmp) / "peer")}
+        _run_measured([sys.executable, "-c", _FULL_LIBRARY, str(root.parent),
+                       str(root / "Thermal" / "HeatTransfer" / "Examples" / "TwoMasses.mo"),
+                       "Modelica.Thermal.HeatTransfer.Examples.TwoMasses"], peer_env)
+        one = Path(tmp) / "OneState.mo"
+        one.write_text(ONE_STATE)
+        cases = [("OneState", str(one), ["--library", str(root)], str(one))]
+        for m in models or MSL_EXAMPLES:
+            file = root.parent.joinpath(*m.split(".")).with_suffix(".mo")
+            while not file.is_file() and len(file.parts) > len(root.parent.parts) + 1:
+                file = file.parent.with_suffix(".mo")
+            cases.append((m, str(root), [], str(file)))
+        for k, (model, source, extra, file) in enumerate(cases):
+            cache = Path(tmp) / f"cache{k}"  # this model's own caches, empty before its cold run
+            base = {**os.environ, "XDG_CACHE_HOME": str(cache), "TRACKINGBOX_CACHE_DIR": str(cache / "tbx")}
+            cmd = [tb, "compile", source, "--model", model, "--backend", "embedded", "-o", str(Path(tmp) / "m.fmu"),
+                   *extra]
+            cold = _run_measured(cmd, base)
+            # a new model against the cached library: no flat model kept
+            warm = _run_measured(cmd, {**base, "TRACKINGBOX_FRONTEND_CACHE": "0"})
+            again = _run_measured(cmd, base)
+            full = _run_measured([sys.executable, "-c", _FULL_LIBRARY, str(root.parent), file, model], peer_env)
+            bad = [r for r in (cold, warm, again, full) if r[2] != 0]
+            if bad:
+                failures += 1
+                print(f"{model:58s} failed: {bad[0][3][:150]}")
+                continue
+            lib_cached.append(warm[0])
+            cell = lambda r: f"{r[0]:6.1f}/{r[1]:6.0f}"  # noqa: E731
+            print(f"{model:58s} {cell(cold):>13s} {cell(warm):>15s} {cell(again):>13s} {cell(full):>13s} "
+                  f"{full[0] / warm[0]:8.1f}")
+    if lib_cached:
+        print(f"median compile with the library cached: {statistics.median(lib_cached):.1f} s over "
+              f"{len(lib_cached)} models (targets: one-state model <= 5 s and <= 400 MB; median <= 15 s)")
+    print("(cold: first compile on an empty cache; library cached: rumoca's parsed files and the class index "
+          "kept, the flat model not (a new model); model cached: the same model again; full library: rumoca "
+          "alone loading and flattening the model from the whole MSL, parsed files cached, i.e. what every "
+          "compile cost before; full/lib: how many times longer that takes than a whole compile with the "
+          "library cached)")
+    return 1 if failures else 0
+
+
 def main() -> int:
     if "--train" in sys.argv[1:]:
         train()
         return 0
+    if "--msl" in sys.argv[1:]:
+        return msl([a for a in sys.argv[1:] if a != "--msl"])
     lib = library_path()
     models = []
     for bench in sorted(p for p in (lib / "Benches").iterdir() if p.is_dir()):

@@ -43,7 +43,7 @@ FLOOR_FACTOR = 2.0
 
 def noise_floor(sensor, measured: np.ndarray) -> float:
     """NRMSE that the sensor's noise alone gives on *measured* (the score of a perfect model)."""
-    from trackingbox.estimation import _scale
+    from trackingbox.estimation.objective import scale as _scale
 
     ok = np.isfinite(measured)
     if not ok.any():

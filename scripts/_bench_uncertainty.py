@@ -99,38 +99,39 @@ def hx_definition(two: bool) -> Any:
 
 def run_hx(seed: int, work: Path, fmus: dict[str, Path], two: bool) -> dict[str, Any]:
     from trackingbox.benches.base import build_case
-    from trackingbox.estimation import estimate
     from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
 
     case = build_case(hx_definition(two), work / f"{'hx2' if two else 'hx'}-{seed}", seed=seed,
                       overrides={"hx.V1": V1_TRUTH} if two else None, plant_fmu=fmus["hx-plant"],
                       twin_fmu=fmus["hx-twin"])
-    result = estimate(load_spec(case.spec), seed=seed)
+    result = estimate.run(load_spec(case.spec), estimate.EstimateSettings(seed=seed))
     return {"seed": seed, **intervals_doc(result, case.truth), "spec": str(case.spec)}
 
 
 def run_hp(seed: int, work: Path, fmus: dict[str, Path], hours: float) -> dict[str, Any]:
     from trackingbox.benches import heat_production as hp
     from trackingbox.benches.base import build_case
-    from trackingbox.estimation import estimate
     from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
 
     case = build_case(hp.DEFINITION, work / f"hp-{seed}", seed=seed, hours=hours, suite_twin=True,
                       plant_fmu=fmus["hp-plant"], twin_fmu=fmus["hp-twin"])
     # the demo's budget; the check before the search changes nothing in the intervals: left out (two
     # sensitivity runs of the 14-parameter twin)
-    result = estimate(load_spec(case.spec), seed=seed, workers=2, maxiter=8, refine_iterations=6, identify=False)
+    result = estimate.run(load_spec(case.spec), estimate.EstimateSettings(seed=seed, workers=2, maxiter=8,
+                                                                          refine_iterations=6, identify=False))
     return {"seed": seed, **intervals_doc(result, case.truth)}
 
 
 def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...] = ()) -> dict[str, Any]:
-    from trackingbox.estimation import estimate
     from trackingbox.identify.thermal import TRUTH, wall_case
     from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
 
     spec = wall_case(work / f"wall{'2' if known else ''}-{seed}", fmus["wall"], seed=seed, hours=48.0, known=known)
     truth = {**TRUTH, "R1·C": TRUTH["R1"] * TRUTH["C"], "R2·C": TRUTH["R2"] * TRUTH["C"]}
-    result = estimate(load_spec(spec), seed=seed)
+    result = estimate.run(load_spec(spec), estimate.EstimateSettings(seed=seed))
     return {"seed": seed, **intervals_doc(result, truth)}
 
 

@@ -227,6 +227,7 @@ def test_validate_bad_input_is_one_error_line(case: Path, tmp_path: Path, extra:
 
 def _runs_native(fmu) -> bool:
     """Whether the twin's runs go through the native stepper (then ``jacobian="auto"`` takes fd)."""
-    from trackingbox.estimation import _model, _runs_native as runs_native
+    from trackingbox.estimation.objective import runs_native
+    from trackingbox.simulation.models import cached_model as _model
 
     return runs_native(_model(fmu))

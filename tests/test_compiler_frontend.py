@@ -13,7 +13,8 @@ import pytest
 from trackingbox.cli import main
 from trackingbox.compiler import compile_model
 from trackingbox.compiler.embedded import FRONTEND_GAPS
-from trackingbox.compiler.source import locate, model_files, resolve_source
+from trackingbox.compiler.library import locate, model_files
+from trackingbox.compiler.source import resolve_source
 from trackingbox.errors import CompileError, UnsupportedConstructError
 
 pytestmark = pytest.mark.compile
@@ -111,8 +112,9 @@ def test_refusal_in_an_extended_class_names_that_class_file(package, tmp_path):
 
 def test_model_files_and_locate(package):
     src = resolve_source(package)
-    assert model_files(src, "P.Tank") == (package / "Tank.mo", package / "Base.mo")
-    assert model_files(src, "P.Plant") == (package / "Plant.mo",)
+    # the model's own file, its base class's, then the enclosing package's (its constants are in scope)
+    assert model_files(src, "P.Tank") == (package / "Tank.mo", package / "Base.mo", package / "package.mo")
+    assert model_files(src, "P.Plant") == (package / "Plant.mo", package / "package.mo")
     # the comment on line 3 does not count; line 8 holds the call
     assert [(loc.file.name, loc.line) for loc in locate(src, "P.Plant", r"\bdelay\s*\(")] == [("Plant.mo", 8)]
 

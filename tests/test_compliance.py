@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from trackingbox.compiler.source import model_files, resolve_source
+from trackingbox.compiler.library import model_files
+from trackingbox.compiler.source import resolve_source
 from trackingbox.compliance import default_suite, discover, location_verdict, main
 
 pytestmark = pytest.mark.compile

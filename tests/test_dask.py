@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 
 from trackingbox.analysis import executor
-from trackingbox.analysis.executor import cached_model, make_executor, model_opens
+from trackingbox.analysis.executor import make_executor
+from trackingbox.simulation import models
+from trackingbox.simulation.models import cached_model, model_opens
 from trackingbox.errors import AnalysisError
 
 HX = "TrackingBox.Benches.HeatExchanger"
@@ -180,7 +182,7 @@ def test_cached_model_is_keyed_by_content(hx_fmu, step_fmu, tmp_path):
     assert "kht" in {v.name for v in first.info.variables}
     assert "kht" not in {v.name for v in second.info.variables}
     assert model_opens()[str(path.resolve())] == 2
-    executor.clear_model_cache()
+    models.clear_model_cache()
 
 
 def test_unreachable_scheduler_is_a_clear_error(hx_case, capsys, monkeypatch):

@@ -129,6 +129,7 @@ def test_dependence_on_an_input_and_significant_period():
 
 # --------------------------------------------------------------------------- screening transforms
 
+from trackingbox.diagnose import candidates as cd  # noqa: E402
 from trackingbox.diagnose import screen as sc  # noqa: E402
 
 
@@ -229,8 +230,8 @@ def _samples(n):
 def test_delta_bic_prefers_a_true_bias_and_refuses_a_spurious_one():
     rng = np.random.default_rng(8)
     e = rng.normal(0.0, 0.1, 2000)
-    assert sc.delta_bic({"T": e + 0.1}, {"T": e}, 1) > 10         # one sigma of bias over 2000 samples
-    assert sc.delta_bic({"T": e}, {"T": e - e.mean()}, 1) < 0     # fitting the noise's mean costs ln(n)
+    assert cd.delta_bic({"T": e + 0.1}, {"T": e}, 1) > 10         # one sigma of bias over 2000 samples
+    assert cd.delta_bic({"T": e}, {"T": e - e.mean()}, 1) < 0     # fitting the noise's mean costs ln(n)
 
 
 def test_propagated_input_noise_matches_the_first_order_filter_variance(monkeypatch):
@@ -293,7 +294,7 @@ def test_validation_gain_counts_the_tags_an_effect_materially_moves():
         # the effect: T's gap closed, every other tag moved by 0.01 (a tenth of its noise)
         after.append({g: meas[g] - sim[g] - (gap["T"] if g == "T" else 0.01) for g in tags})
     where = NS(training=windows[0], validation=windows[1], noise={g: 0.1 for g in tags})
-    c = sc.score("heat-loss", "X", "process", "fit", where, 1, after[0], after[1], {})
+    c = cd.score("heat-loss", "X", "process", "fit", where, 1, after[0], after[1], {})
     assert set(c.tags) == set(tags)                                   # all ten are affected (enter ΔBIC, "worse")
     nb, na = c.nrmse_before["T"], c.nrmse_after["T"]
     assert c.validation_gain == pytest.approx(1.0 - na / nb)          # the gain is T's alone
@@ -306,13 +307,13 @@ from trackingbox.diagnose import judge as jd  # noqa: E402
 
 
 def test_a_candidate_failing_any_check_is_never_named():
-    good = sc.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=50.0, validation_gain=0.5, noise_gain=3.0)
+    good = cd.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=50.0, validation_gain=0.5, noise_gain=3.0)
     assert jd.reasons_against(good, 500) == []
-    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 9.0, 0.5, 3.0), 500)      # ΔBIC <= 10
-    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 0.1), 500)     # within noise
-    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, -0.1, 3.0), 500)    # NRMSE rises
-    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.04, 3.0), 500)    # falls 4 %
-    assert jd.reasons_against(sc.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 3.0, pinned=("tau",)), 500)
+    assert jd.reasons_against(cd.Candidate("b", "T", "sensor", "screen", 9.0, 0.5, 3.0), 500)      # ΔBIC <= 10
+    assert jd.reasons_against(cd.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 0.1), 500)     # within noise
+    assert jd.reasons_against(cd.Candidate("b", "T", "sensor", "screen", 50.0, -0.1, 3.0), 500)    # NRMSE rises
+    assert jd.reasons_against(cd.Candidate("b", "T", "sensor", "screen", 50.0, 0.04, 3.0), 500)    # falls 4 %
+    assert jd.reasons_against(cd.Candidate("b", "T", "sensor", "screen", 50.0, 0.5, 3.0, pinned=("tau",)), 500)
 
 
 # --------------------------------------------------------------------------- end to end on the heat-exchanger bench
@@ -427,29 +428,29 @@ def test_held_out_data_decide_between_candidates_alike_on_training():
 
     where = NS(validation_tags={t: NS(samples=500, periods=()) for t in ("T", "T1", "T2")},
                significant=["T1", "T2"], tags={t: NS(periods=()) for t in ("T1", "T2")})
-    a = sc.Candidate("sensor-bias", "T1", "sensor", "screen", delta_bic=100.0, validation_gain=0.5, noise_gain=3.0)
-    b = sc.Candidate("sensor-bias", "T2", "sensor", "screen", delta_bic=95.0, validation_gain=0.6, noise_gain=4.0)
-    c = sc.Candidate("sensor-drift", "T2", "sensor", "screen", delta_bic=60.0, validation_gain=0.9, noise_gain=9.0)
+    a = cd.Candidate("sensor-bias", "T1", "sensor", "screen", delta_bic=100.0, validation_gain=0.5, noise_gain=3.0)
+    b = cd.Candidate("sensor-bias", "T2", "sensor", "screen", delta_bic=95.0, validation_gain=0.6, noise_gain=4.0)
+    c = cd.Candidate("sensor-drift", "T2", "sensor", "screen", delta_bic=60.0, validation_gain=0.9, noise_gain=9.0)
     verdict = jd.judge([a, b, c], where)
     assert verdict.verdict == "effect" and verdict.named is b
     assert "smaller validation gain" in verdict.reasons["sensor-bias@T1"][0]
     assert "by a BIC difference above 10" in verdict.reasons["sensor-drift@T2"][0]
     # a candidate whose tag shows no gap beyond noise is never named
-    d = sc.Candidate("sensor-bias", "T3", "sensor", "screen", delta_bic=500.0, validation_gain=0.9, noise_gain=9.0)
+    d = cd.Candidate("sensor-bias", "T3", "sensor", "screen", delta_bic=500.0, validation_gain=0.9, noise_gain=9.0)
     verdict = jd.judge([d], where)
     assert verdict.verdict != "effect" and "within noise" in verdict.reasons["sensor-bias@T3"][-1]
     # nothing passes but the residual is significant: unexplained, saying where
     where.significant = ["T"]
     where.tags = {"T": NS(periods=((0.0, 3600.0),))}
-    verdict = jd.judge([sc.Candidate("sensor-bias", "T", "sensor", "screen", 5.0, 0.1, 0.1)], where)
+    verdict = jd.judge([cd.Candidate("sensor-bias", "T", "sensor", "screen", 5.0, 0.1, 0.1)], where)
     assert verdict.verdict == "unexplained" and verdict.unexplained == {"T": [(0.0, 3600.0)]}
 
 
 def test_a_sensor_effect_must_gain_on_its_own_tag_and_harm_no_other():
-    c = sc.Candidate("sensor-lag", "Z", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=50.0,
+    c = cd.Candidate("sensor-lag", "Z", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=50.0,
                      noise_gains={"Z": 0.01, "T": 49.99})
     assert any("own tag Z" in r for r in jd.reasons_against(c, 500))
-    c = sc.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=3.0,
+    c = cd.Candidate("sensor-bias", "T", "sensor", "screen", delta_bic=100.0, validation_gain=0.1, noise_gain=3.0,
                      noise_gains={"T": 5.0, "F": -2.0})
     assert any("makes F worse" in r for r in jd.reasons_against(c, 500))
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from trackingbox import estimation
+from trackingbox.estimation import search
 from trackingbox.checkpoint import Journal
 from trackingbox.errors import EstimationError
 
@@ -34,7 +35,7 @@ def _problem() -> estimation.Problem:
 def _search(settle: float, maxiter: int = 40):
     problem, cost = _problem(), _Quadratic()
     start_cost = cost(problem.start)
-    x, best, evaluations = estimation._global_search(
+    x, best, evaluations = search.global_search(
         cost, cost, problem, None, Journal(None, {"test": 1}), seed=0, maxiter=maxiter, popsize=None,
         start_cost=start_cost, history=[], best=(problem.start.copy(), start_cost), progress=None,
         checkpoint=lambda *a: None, settle=settle)

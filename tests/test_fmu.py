@@ -219,7 +219,7 @@ def test_fifty_runs_reuse_one_extraction_and_instance(monkeypatch, fmu_path):
     calls = {"extract": 0, "instantiate": 0}
     import trackingbox.fmu as fmu_module
 
-    real_extract, real_instantiate = fmu_module._extract, fmpy.simulation.instantiate_fmu
+    real_extract, real_instantiate = fmu_module.isolation.extract, fmpy.simulation.instantiate_fmu
 
     def counting_extract(*a, **kw):
         calls["extract"] += 1
@@ -229,7 +229,7 @@ def test_fifty_runs_reuse_one_extraction_and_instance(monkeypatch, fmu_path):
         calls["instantiate"] += 1
         return real_instantiate(*a, **kw)
 
-    monkeypatch.setattr(fmu_module, "_extract", counting_extract)
+    monkeypatch.setattr(fmu_module.isolation, "extract", counting_extract)
     monkeypatch.setattr(fmpy.simulation, "instantiate_fmu", counting_instantiate)
     with FMUModel(fmu_path) as m:
         assert calls == {"extract": 1, "instantiate": 1}
@@ -344,10 +344,13 @@ def test_fmu_classes_use_no_private_attribute_of_another_object():
 
     import trackingbox.fmu as fmu_module
 
-    tree = ast.parse(Path(fmu_module.__file__).read_text())
+    # the classes live in the modules of the fmu package (model, steppers)
+    trees = [ast.parse(path.read_text()) for path in sorted(Path(fmu_module.__file__).parent.glob("*.py"))]
     offending = []
-    for cls in (n for n in tree.body if isinstance(n, ast.ClassDef)
-                and n.name in ("FMUModel", "Stepper", "ModelExchangeStepper", "CoSimulationStepper")):
+    classes = [n for tree in trees for n in tree.body if isinstance(n, ast.ClassDef)
+               and n.name in ("FMUModel", "Stepper", "ModelExchangeStepper", "CoSimulationStepper")]
+    assert len(classes) == 4
+    for cls in classes:
         for node in ast.walk(cls):
             if (isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__")
                     and not (isinstance(node.value, ast.Name) and node.value.id == "self")):

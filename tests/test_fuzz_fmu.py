@@ -20,7 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trackingbox.errors import FMUError
-from trackingbox.fmu import FMUModel, _extract, read_info
+from trackingbox.fmu import FMUModel, read_info
+from trackingbox.fmu.isolation import extract as _extract
 from trackingbox.testing import crafted as crafted_fmus
 from trackingbox.testing.crafted import Misbehaviour
 

@@ -219,8 +219,8 @@ def test_estimate_of_a_linear_twin_is_least_squares_with_its_interval(linear_fmu
 
     from scipy.stats import t as student_t
 
-    from trackingbox.estimation import estimate
     from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
 
     rng = np.random.default_rng(5)
     t = np.arange(0.0, 30000.0 + 5.0, 10.0)
@@ -230,7 +230,7 @@ def test_estimate_of_a_linear_twin_is_least_squares_with_its_interval(linear_fmu
     pd.DataFrame({"time": t, "U1": u1, "U2": u2, "Y": y}).to_csv(tmp_path / "data.csv", index=False)
     shutil.copy(linear_fmu, tmp_path / "lin.fmu")
     (tmp_path / "spec.toml").write_text(LINEAR_SPEC)
-    result = estimate(load_spec(tmp_path / "spec.toml"), maxiter=0, warmup=0.0)
+    result = estimate.run(load_spec(tmp_path / "spec.toml"), estimate.EstimateSettings(maxiter=0, warmup=0.0))
     train = t < 20000.0
     X = np.stack([u1[train], u2[train]], axis=1)
     beta, r = _ols(X, y[train])

@@ -47,10 +47,10 @@ def test_identify_names_the_products_and_the_sensor_that_would_separate_them(wal
 
 @needs_msl
 def test_estimate_reports_the_determined_combinations_with_intervals_that_cover_the_truth(wall: Path) -> None:
-    from trackingbox.estimation import estimate
     from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
 
-    result = estimate(load_spec(wall), maxiter=4)
+    result = estimate.run(load_spec(wall), estimate.EstimateSettings(maxiter=4))
     unc = result.uncertainty
     assert unc is not None
     for name in ("R1", "R2", "C"):

@@ -1,4 +1,4 @@
-"""The tracking loop's rows in C (``tbn_track_rows``, ``runtime._NativeRows``; issue 12).
+"""The tracking loop's rows in C (``tbn_track_rows``, ``rows.NativeRows``; issue 12).
 
 Independent expectations: the Python classes :class:`ScaledPI` and
 :class:`StateCompensator` (the C laws must give the same floats, bit for bit,
@@ -26,6 +26,7 @@ from _fixtures_tracking import K_TWIN, TANK_SPEC, TAU, make_case, native_unavail
 from test_controllers_roots import CASES, _clamped_by_solve_ivp, _law_from_zeros
 from trackingbox.errors import SimulationError
 from trackingbox.spec import load_spec
+from trackingbox.tracking import rows as rows_module
 from trackingbox.tracking import runtime
 from trackingbox.tracking.controllers import Scaling, ScaledPI, StateCompensator
 
@@ -132,9 +133,9 @@ INTERRUPTED: list[tuple[int, int, int]] = []
 
 def _run(spec_path: Path, out: Path, monkeypatch: pytest.MonkeyPatch, rows: bool, **kw):
     """``track`` with the rows in C (*rows*) or on the Python path: (result, rows C wrote, error)."""
-    monkeypatch.setenv(runtime.NATIVE_ROWS_ENV, "1" if rows else "0")
+    monkeypatch.setenv(rows_module.NATIVE_ROWS_ENV, "1" if rows else "0")
     written = [0]
-    original = runtime._NativeRows.run
+    original = rows_module.NativeRows.run
     INTERRUPTED.clear()
 
     def counting(self, loop, k, k_stop):  # type: ignore[no-untyped-def]
@@ -144,7 +145,7 @@ def _run(spec_path: Path, out: Path, monkeypatch: pytest.MonkeyPatch, rows: bool
             INTERRUPTED.append(out_[1][2])  # (twin, sub-step, code) of a step C left to Python
         return out_
 
-    monkeypatch.setattr(runtime._NativeRows, "run", counting)
+    monkeypatch.setattr(rows_module.NativeRows, "run", counting)
     resume = kw.pop("resume_after", None)
     try:
         if resume is not None:
@@ -245,7 +246,7 @@ def test_a_twin_failing_inside_a_row_ends_as_on_the_python_path(fmu: Path, tmp_p
     _, c_rows, c_error = _run(spec, tmp_path / "c", monkeypatch, True, substeps=2)
     assert py_error is not None and c_error == py_error
     assert c_rows > 150
-    assert INTERRUPTED and INTERRUPTED[0][2] == native._CVODE_FAILED  # the failure happened inside C's rows
+    assert INTERRUPTED and INTERRUPTED[0][2] == native.CVODE_FAILED  # the failure happened inside C's rows
     assert (tmp_path / "py" / "tracking.csv").read_bytes() == (tmp_path / "c" / "tracking.csv").read_bytes()
 
 

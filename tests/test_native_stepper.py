@@ -29,7 +29,7 @@ from trackingbox.errors import AssertionFailed, FMUError, SimulationError
 from trackingbox.fmu import FMUModel, ModelExchangeStepper
 
 native = pytest.importorskip("trackingbox.native")
-NativeStepper = native.NativeStepper
+from trackingbox.fmu import NativeStepper  # noqa: E402
 
 RTOL = 1e-6
 

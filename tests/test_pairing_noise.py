@@ -138,8 +138,8 @@ def test_a_tag_at_its_floor_still_carries_the_parameter_it_identifies(monkeypatc
     assert "noise floor" in why["P2"]
     assert "cannot be told apart from effect[2].Rf" in why["effect[1].Rf"]
     # the threshold is what decides: asking for 11 x the floor, the 10 x of gain 1 no longer identifies Rf2
-    import trackingbox.analysis.pairing as pairing
+    import trackingbox.analysis.data_checks as data_checks  # where the data checks read it
 
-    monkeypatch.setattr(pairing, "IDENTIFY_FLOOR", 11.0)
+    monkeypatch.setattr(data_checks, "IDENTIFY_FLOOR", 11.0)
     r = choose_pairs(**_chain_at_floor(1.0))
     assert "P2" not in {x.variable for x in r.pairs} and "noise floor" in dict(r.left_out)["P2"]

@@ -502,3 +502,30 @@ def test_write_starts_in_estimation_is_the_same_writer(tmp_path):
     spec = write_starts(path, {"hx.kht": 912.5})
     assert spec.parameter("hx.kht").start == 912.5
     assert path.read_text() == HANDWRITTEN_TABLES.replace("start   =   1000 ", "start   =   912.5 ")
+
+
+def test_a_path_that_is_a_loop_of_symbolic_links_is_one_clear_error(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A robustness run found ``RuntimeError: Symlink loop`` escaping the spec's path resolution (a traceback)."""
+    from trackingbox import cli
+
+    (tmp_path / "twin.fmu").symlink_to("twin.fmu")  # a link to itself
+    (tmp_path / "a.csv").symlink_to("b.csv")
+    (tmp_path / "b.csv").symlink_to("a.csv")  # two links to each other
+    (tmp_path / "src").symlink_to("src")
+    spec = tmp_path / "spec.toml"
+    spec.write_text('twin = "twin.fmu"\nmeasurements = "a.csv"\nsample_time = 10.0\n'
+                    '[source]\npath = "src"\nmodel = "M"\n[outputs]\ny = "y"\n')
+    with pytest.raises(SpecError) as err:
+        load_spec(spec)
+    text = str(err.value)
+    assert f"twin file 'twin.fmu' is a loop of symbolic links (looked for {tmp_path / 'twin.fmu'})" in text
+    assert f"measurements file 'a.csv' is a loop of symbolic links (looked for {tmp_path / 'a.csv'})" in text
+    assert "path 'src' in [source] is a loop of symbolic links" in text
+    assert cli.main(["estimate", str(spec)]) == 2
+    err_text = capsys.readouterr().err
+    assert err_text.startswith("error: ") and "Traceback" not in err_text and "RuntimeError" not in err_text
+    (tmp_path / "loop.toml").symlink_to("loop.toml")  # the spec path itself
+    assert cli.main(["estimate", str(tmp_path / "loop.toml")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert line.startswith("error: spec file") and "\n" not in line

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import trackingbox.data as data
+import trackingbox.data.table as data_table
 import trackingbox.stream as stream
 from trackingbox.data import MeasurementView
 from trackingbox.spec import DataRules, Spec, StoppageRule
@@ -55,7 +55,7 @@ def _case(tmp_path: Path, *, max_gap: float | None = None, heartbeat: bool = Fal
 @pytest.fixture(autouse=True)
 def _small_chunks(monkeypatch: pytest.MonkeyPatch) -> None:
     """Chunks and index entries much shorter than the file: their boundaries fall inside the stretches."""
-    monkeypatch.setattr(data, "CHUNK_ROWS", 64)
+    monkeypatch.setattr(data_table, "CHUNK_ROWS", 64)  # where the chunked reader reads it
     monkeypatch.setattr(stream, "INDEX_EVERY", 16)
 
 

@@ -188,7 +188,7 @@ def test_solver_failure_recovers_and_keeps_rows(case: Path, baseline: tuple[obje
         return _FailOnce(original(self, **kw), at=3000.0)
 
     monkeypatch.setattr(fmu_module.FMUModel, "stepper", stepper)
-    with caplog.at_level(logging.WARNING, logger="trackingbox.tracking.runtime"):
+    with caplog.at_level(logging.WARNING, logger="trackingbox.tracking"):
         result = track(load_spec(case), out_dir=tmp_path, recovery_hold=300.0, checkpoint_every=50)
     assert _FailOnce.fired
     assert "forced failure" in caplog.text
@@ -208,7 +208,7 @@ def test_solver_failure_recovers_and_keeps_rows(case: Path, baseline: tuple[obje
 def test_nan_stretch_holds_and_recovers(fmu: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     spec = load_spec(make_case(fmu, tmp_path / "case", nan_span=(2500.0, 3100.0),  # 10 minutes
                                      max_gap=120.0))  # longer gaps are masked, not interpolated
-    with caplog.at_level(logging.INFO, logger="trackingbox.tracking.runtime"):
+    with caplog.at_level(logging.INFO, logger="trackingbox.tracking"):
         result = track(spec, out_dir=tmp_path / "out")
     df = pd.read_csv(result.csv)
     gap = (df["time"] >= 2500.0) & (df["time"] < 3100.0)
@@ -455,7 +455,7 @@ def test_tracked_twin_gets_the_predicted_mean_of_the_parameter_ramp() -> None:
     # With the linear error interpolation the compiled box's parameter ramps from p_k to p_k+1 over a
     # sample; the runtime's twin gets p_k + (p_k - p_k-1)/2 over it, clamped to the bounds, and the
     # values given (not applied) are what the next prediction starts from. Hand-computed numbers.
-    from trackingbox.tracking.runtime import _Twin
+    from trackingbox.tracking.twin import Twin as _Twin
 
     tw = object.__new__(_Twin)  # the prediction only: no FMU needed
     tw.extrapolate = {"k": (0.0, 10.0)}

@@ -20,7 +20,7 @@ import pytest
 from _fixtures_tracking import K_TWIN, TAU
 from trackingbox.fmu import FMUModel
 from trackingbox.spec import PairSpec, load_spec, write_pairs
-from trackingbox.tracking import runtime
+from trackingbox.tracking import runtime, twin
 from trackingbox.tracking.runtime import track
 
 
@@ -141,7 +141,7 @@ def heat_production_reference(fmu_cache, tmp_path_factory: pytest.TempPathFactor
     spec = write_pairs(case.spec, [PairSpec(v, p, gain=g, time_constant=t, lambda_=1.0)
                                    for v, p, g, t in HEAT_PRODUCTION_PAIRS])
     with pytest.MonkeyPatch.context() as mp:  # the reference: CVODE's own Jacobian after every restart
-        mp.setattr(runtime, "KEEP_JACOBIAN", False)
+        mp.setattr(twin, "KEEP_JACOBIAN", False)
         ref = track(spec, out_dir=root / "reference", untracked=False, checkpoint_every=10**9, carry=0.0,
                     tolerance=REFERENCE_TOLERANCE)
     c = pd.read_csv(ref.csv)

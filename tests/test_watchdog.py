@@ -196,10 +196,11 @@ def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(fi
                                                                             native_library: None) -> None:
     """What the watchdog reads: an even count after a stepper's calls returned, moved on by them."""
     from trackingbox import native
+    from trackingbox.fmu import NativeStepper
 
     with FMUModel(first_order_fmu) as model:
         st = model.stepper(start_time=0.0, parameters={"k": 0.003})
-        assert isinstance(st, native.NativeStepper)
+        assert isinstance(st, NativeStepper)
         seq0, _ = native.fmi_call()
         st.step(100.0)
         seq1, name = native.fmi_call()
@@ -207,3 +208,72 @@ def test_the_native_call_count_moves_with_every_call_and_is_even_between_them(fi
     # at least a set of the states and a derivative per right-hand side, each counted twice (in, out)
     assert seq1 - seq0 >= 4
     assert name.startswith("fmi3")
+
+
+# --------------------------------------------------------------------------- the watchdog and the imports
+
+#: A process in which the import of ``trackingbox.native`` is held between the moment its (empty) module
+#: object is in ``sys.modules`` and the moment its code runs, whenever a watchdog thread exists then: the
+#: window in which a watchdog that imports or looks the module up finds it partially initialised.
+RACE = r'''
+import importlib.machinery, sys, threading
+
+errors = []
+threading.excepthook = lambda a: errors.append(repr(a.exc_value))
+polled = threading.Event()
+
+
+class Hold:
+    def find_spec(self, name, path, target=None):
+        if name != "trackingbox.native":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            if any(t.name == "trackingbox-fmu-watchdog" for t in threading.enumerate()):
+                polled.wait(30.0)  # the watchdog looks at the module while it is empty
+            run(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, Hold())
+from trackingbox.supervise import Watchdog
+
+looks = []
+original = Watchdog._native_call
+
+
+def counted():
+    try:
+        return original()
+    finally:
+        looks.append(1)
+        if len(looks) >= 3:
+            polled.set()
+
+
+Watchdog._native_call = staticmethod(counted)
+dog = Watchdog(lambda *a: None, timeout=60.0, poll=0.01).start()
+import trackingbox.native  # noqa: E402,F401 - the command's own import, as the estimate stage makes it
+polled.wait(30.0)
+alive = dog._thread.is_alive()
+dog.stop()
+print("errors", errors, "alive", alive, "looks", len(looks) >= 3)
+'''
+
+
+def test_the_watchdog_never_sees_the_native_library_half_imported() -> None:
+    """A watchdog thread started before the command imports ``trackingbox.native`` kept looking at it.
+
+    It read the module from ``sys.modules`` while the main thread was still importing it and died with
+    ``AttributeError: partially initialized module 'trackingbox.native' has no attribute 'fmi_call'``; a
+    hang inside the native stepper then went unseen for the whole run. The supervisor imports the library
+    at module level now, so by the time any watchdog exists the module is whole.
+    """
+    proc = subprocess.run([sys.executable, "-c", RACE], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "errors [] alive True looks True"

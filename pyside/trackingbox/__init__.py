@@ -18,51 +18,31 @@ commands and ``scripts/demo`` call these, and so can a notebook::
     val = tb.validate(spec, fmu)                        # ValidationResult
     dia = tb.diagnose(spec, tb.DiagnoseSettings())      # DiagnosisResult
 
-The other names are imported on first use.
+The same stages with one contract each (a settings dataclass, ``run(spec, settings, *,
+progress=None)``), as the commands and the demo call them: :mod:`trackingbox.stages`::
+
+    est = tb.stages.estimate.run(spec, tb.stages.EstimateSettings(workers=2))
+
+The names are bound here from the modules that define them. Three of them are
+also the names of a subpackage or module (``generate``, ``validate``,
+``diagnose``): each is bound after its module is loaded, so the function wins.
+Modules of the package import from the defining module, never from here.
 """
 from __future__ import annotations
 
-from importlib import import_module
-from typing import Any
+from . import stages
+from .analysis.pair_stage import PairingResult, PairSettings, pair, spec_pairs
+from .data import MeasurementView
+from .diagnose.stage import DiagnoseSettings, DiagnosisResult, diagnose
+from .estimation import EstimationResult, estimate
+from .generate.generator import GenerateResult, compile_generated, generate
+from .spec import Spec, load_spec
+from .tracking.runtime import TrackingResult, track
+from .validate import ValidationResult, validate
+from .version import __version__
 
-__version__ = "0.1.0"
-
-#: Public name -> module that defines it.
-_API = {
-    "Spec": "spec",
-    "load_spec": "spec",
-    "estimate": "estimation",
-    "EstimationResult": "estimation",
-    "pair": "analysis.pair_stage",
-    "PairSettings": "analysis.pair_stage",
-    "PairingResult": "analysis.pair_stage",
-    "spec_pairs": "analysis.pair_stage",
-    "track": "tracking.runtime",
-    "TrackingResult": "tracking.runtime",
-    "compile_generated": "generate.generator",
-    "GenerateResult": "generate.generator",
-    "ValidationResult": "validate",
-    "MeasurementView": "data",
-    "DiagnoseSettings": "diagnose.stage",
-    "DiagnosisResult": "diagnose.stage",
-}
-
-# ``generate`` and ``validate`` are also the names of a subpackage and a module: loading those sets the
-# package attribute to the module, so the functions are bound here, after the modules are loaded.
-from .generate.generator import generate  # noqa: E402
-from .validate import validate  # noqa: E402
-from .diagnose.stage import diagnose  # noqa: E402
-
-__all__ = ["__version__", "generate", "validate", "diagnose", *_API]
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _API:
-        raise AttributeError(f"module 'trackingbox' has no attribute {name!r}")
-    value = getattr(import_module(f".{_API[name]}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__all__ = [
+    "__version__", "Spec", "load_spec", "estimate", "EstimationResult", "pair", "PairSettings", "PairingResult",
+    "spec_pairs", "track", "TrackingResult", "generate", "compile_generated", "GenerateResult", "validate",
+    "ValidationResult", "MeasurementView", "diagnose", "DiagnoseSettings", "DiagnosisResult", "stages",
+]

@@ -8,14 +8,31 @@ printed as one line on stderr with a non-zero exit and no traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import os
 import sys
 from typing import NoReturn
 
-from . import __version__
+from . import config
+from .commands import (
+    bench,
+    diagnose,
+    estimate,
+    identify,
+    generate,
+    inspect,
+    pair,
+    replay,
+    simulate,
+    track,
+    validate,
+)
+from .commands import compile as compile_command
+from .commands import config as config_command
+from .config import ConfigError
 from .errors import TrackingError
+from .supervise import supervise
+from .version import __version__
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -31,7 +48,13 @@ COMMANDS = (
     "generate",
     "validate",
     "diagnose",
+    "config",
 )
+
+#: Subcommand name -> its module.
+MODULES = {"compile": compile_command, "inspect": inspect, "simulate": simulate, "bench": bench, "pair": pair,
+           "identify": identify, "estimate": estimate, "track": track, "replay": replay, "generate": generate,
+           "validate": validate, "diagnose": diagnose, "config": config_command}
 
 EPILOG = """\
 examples:
@@ -46,6 +69,7 @@ examples:
   gen-trackingbox case1/spec.toml -o case1/generated --compile
   trackingbox validate case1/spec.toml --fmu case1/generated/TwinTracked.fmu
   trackingbox diagnose case1/spec.toml --compile --report case1/diagnose -o case1/patched
+  trackingbox config --json
 """
 
 
@@ -73,8 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
-        module = importlib.import_module(f"trackingbox.commands.{name}")
-        module.register(sub)
+        MODULES[name].register(sub)
     return parser
 
 
@@ -93,9 +116,12 @@ def main(argv: list[str] | None = None) -> int:
     (:func:`supervise`; ``TRACKINGBOX_SUPERVISE=0`` turns it off). Called with a
     list (tests, scripts), the command runs in this process.
     """
-    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
-        from .supervise import supervise
-
+    try:
+        config.check_all()  # a bad TRACKINGBOX_* value: one error line before anything runs
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if argv is None and config.get("supervise") and hasattr(os, "fork"):
         return supervise(_run, sys.argv[1:])
     return _run(argv)
 
@@ -132,11 +158,15 @@ def _short(text: str, limit: int = 160) -> str:
 
 def gen_trackingbox_main(argv: list[str] | None = None) -> int:
     """``gen-trackingbox SPEC ...``: the same as ``trackingbox generate SPEC ...``."""
-    if argv is None and os.environ.get("TRACKINGBOX_SUPERVISE", "1") != "0" and hasattr(os, "fork"):
-        from .supervise import supervise
-
-        return supervise(_run, ["generate", *sys.argv[1:]])
-    return _run(["generate", *argv])
+    try:
+        config.check_all()
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    arguments = sys.argv[1:] if argv is None else list(argv)
+    if argv is None and config.get("supervise") and hasattr(os, "fork"):
+        return supervise(_run, ["generate", *arguments])
+    return _run(["generate", *arguments])
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -52,11 +52,29 @@ import sys
 import tempfile
 import threading
 import time
+import traceback
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
+
+from . import config
+from .compiler import InternalCompileError, compile_model
+from .compiler.source import (
+    class_lines,
+    experiment_settings,
+    read_text,
+    resolve_source,
+    strip_comments,
+)
+from .errors import (
+    CompileError,
+    SimulationError,
+    TrackingError,
+    UnsupportedConstructError,
+)
+from .simulation.models import open_model
 
 log = logging.getLogger(__name__)
 
@@ -110,8 +128,6 @@ class ModelResult:
 
 
 def _strip(text: str) -> str:
-    from .compiler.source import strip_comments
-
     return strip_comments(text)
 
 
@@ -185,8 +201,6 @@ def location_verdict(record: dict) -> str | None:
     class definition in its own file); ``"construct"`` (the message names a construct
     such as ``when`` or ``der(`` and the line pointed at does not contain it).
     """
-    from .compiler.source import class_lines, read_text
-
     if record["outcome"] not in ("refused-construct", "refused-other", "rejected"):
         return None
     message = record.get("message", "")
@@ -217,11 +231,6 @@ def _assert_failure(message: str) -> bool:
 
 def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str, str]:
     """Compile (and simulate, for a valid model) *model* in this process: (outcome, message, stage)."""
-    from .compiler import InternalCompileError, compile_model
-    from .compiler.source import experiment_settings, resolve_source
-    from .errors import CompileError, SimulationError, TrackingError, UnsupportedConstructError
-    from .fmu import FMUModel
-
     fmu = workdir / (model.name.rsplit(".", 1)[-1] + ".fmu")
     try:
         compile_model(suite, model.name, backend="embedded", output=fmu)
@@ -245,7 +254,7 @@ def run_one(model: TestModel, suite: Path, workdir: Path) -> tuple[str, str, str
         stop = start + 1e-6
     interval = settings.get("Interval", (stop - start) / 100)
     try:
-        with FMUModel(fmu, tolerance=settings.get("Tolerance", 1e-6)) as fm:
+        with open_model(fmu, tolerance=settings.get("Tolerance", 1e-6)) as fm:
             fm.simulate(start_time=start, stop_time=stop, output_interval=interval)
     except SimulationError as exc:
         text = str(exc)
@@ -266,8 +275,6 @@ def _worker_main(argv: list[str]) -> int:
         try:
             outcome, message, stage = run_one(model, Path(suite), Path(tmp))
         except BaseException as exc:  # noqa: BLE001 - the point is to classify everything
-            import traceback
-
             outcome, stage = "crashed", "compile"
             message = f"{type(exc).__name__}: {exc}\n" + "".join(traceback.format_exc(limit=-3))
     sys.stdout.write("\n@@RESULT@@" + json.dumps({"outcome": outcome, "message": message, "stage": stage})
@@ -372,7 +379,7 @@ def table(results: list[dict]) -> str:
 
 def default_suite() -> Path:
     """``../shared/modelica-compliance/ModelicaCompliance`` beside the repository, or $TRACKINGBOX_COMPLIANCE."""
-    env = os.environ.get("TRACKINGBOX_COMPLIANCE")
+    env = config.get("compliance")
     if env:
         return Path(env)
     repo = Path(__file__).resolve().parents[2]

@@ -14,16 +14,51 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .commands._progress import Progress
+import pandas as pd
+
+from . import stages
+from .analysis.offsets import simulate_untracked
+from .benches import BENCHES, make_bench
+from .benches.evaporator import (
+    CLOSED_LOOP,
+    ESTIMATE_ONLY,
+    TIME_VARYING,
+    fix_parameters,
+    load_truth,
+    slow_pairs,
+)
+from .benches.evaporator_report import (
+    assess,
+    assess_train,
+    vessel_heights,
+    write_evaporator_report,
+    write_train_report,
+)
+from .benches.evaporator_train import estimate_only, time_varying
 from .commands._args import parse_assignments
+from .commands._progress import Progress
 from .errors import TrackingError
-from .report import Document, StageReport
+from .fmu import read_info
+from .io import atomic_path, write_text_atomic
+from .report import (
+    Document,
+    StageReport,
+    plots,
+    write_estimate_report,
+    write_html,
+    write_pair_report,
+    write_track_report,
+    write_validate_report,
+)
+from .report.diagnose import write_diagnose_report
+from .spec import check_against_fmu, load_spec, write_pairs, write_starts
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -93,12 +128,6 @@ def untracked_offset(spec: Spec, out_dir: Path) -> tuple[StageReport, dict[str, 
     document carries, per output tag, the mean and RMS of measured − simulated; so does the returned
     dictionary (tag -> ``mean_offset``, ``rms_offset``).
     """
-    import pandas as pd
-
-    from .analysis.offsets import simulate_untracked
-    from .io import atomic_path
-    from .report import plots
-
     tags = list(spec.outputs)
     res = simulate_untracked(spec, tags, start=0.0, stop=math.inf, skip=0.0)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -130,8 +159,6 @@ def untracked_offset(spec: Spec, out_dir: Path) -> tuple[StageReport, dict[str, 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="scripts/demo", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    from .benches import BENCHES
-
     p.add_argument("--bench", choices=sorted(BENCHES), default="heat-exchanger")
     p.add_argument("--out", type=Path, default=None, help="output directory (default demo-out/<bench>)")
     p.add_argument("--seed", type=int, default=0)
@@ -158,14 +185,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], progress: Progress) -> None:
     """Run *steps* in order, recording each one's result in *run*."""
-    from . import estimate, generate, pair, track, validate
-    from .analysis.pair_stage import spec_pairs
-    from .benches import make_bench
-    from .generate.generator import compile_generated
-    from .report import (write_estimate_report, write_pair_report, write_track_report,
-                         write_validate_report)
-    from .spec import check_against_fmu, load_spec, write_pairs, write_starts
-
     out, summary = run.out, run.summary
 
     def step(name: str, text: str) -> bool:
@@ -186,8 +205,9 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         # then starts from the modeller's guess, which shows the parameter controllers closing the
         # offset on their own.
         try:
-            est = estimate(spec, progress=progress.estimation, checkpoint=out / "estimate" / "checkpoint.json",
-                           **ESTIMATE_BUDGET.get(run.bench, {}))
+            est = stages.estimate.run(spec, stages.EstimateSettings(checkpoint=out / "estimate" / "checkpoint.json",
+                                                                    **ESTIMATE_BUDGET.get(run.bench, {})),
+                                      progress=progress)
         except TrackingError as exc:
             if run.bench not in EVAPORATORS:
                 raise
@@ -207,8 +227,6 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
                              if iv.name in starts and iv.determined and iv.lower <= iv.estimate <= iv.upper}
                 spec = write_starts(spec.path, starts, intervals)
                 if held:
-                    from .benches.evaporator import fix_parameters
-
                     fixed = {k: float(v) for k, v in est.parameters.items() if k in held}
                     spec = load_spec(fix_parameters(spec.path, fixed).path)
                     starts.update(fixed)
@@ -219,21 +237,19 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
                               + (f" ({', '.join(sorted(varying))} left at its start: it varies in time)"
                                  if varying else ""))
     if step("pair", "steady-state step tests → gain matrix → RGA pairing"):
-        res = pair(spec, _pair_settings(spec, run.bench), progress=progress)
+        res = stages.pair.run(spec, _pair_settings(spec, run.bench), progress=progress)
         summary["pair"] = res.to_json()
         run.reports["pair"] = write_pair_report(spec, res, out / "pair")
         if not res.pairing.pairs:
             raise TrackingError(f"no pairs found for {spec.path}; see {run.reports['pair'].markdown}")
-        spec = write_pairs(spec.path, spec_pairs(spec, res))
+        spec = write_pairs(spec.path, stages.pair.spec_pairs(spec, res))
         if run.bench in EVAPORATORS:  # fouling and wear are slow: at least the spec's closed loop (3 h, the train 2 h)
-            from .benches.evaporator import CLOSED_LOOP, slow_pairs
-
             # with a loop speed per pair ([pairing] closed_loop_min) `pair` tuned each pair for its own loop:
             # only its floor is enforced here
             spec = slow_pairs(spec.path, spec.pairing.closed_loop_min or spec.pairing.closed_loop or CLOSED_LOOP)
     if step("track", "tracking with parameter controllers in Python"):
-        tr = track(spec, out_dir=out / "track", progress=progress.counter("tracking", unit="row"),
-                   window=TRACK_WINDOW.get(run.bench, "all"))
+        tr = stages.track.run(spec, stages.TrackSettings(out_dir=out / "track", window=TRACK_WINDOW.get(run.bench, "all")),
+                              progress=progress)
         summary["track"] = tr.to_json()
         run.reports["track"] = write_track_report(spec, tr, out / "track", truth=run.truth)
         if run.bench == "evaporator":
@@ -241,12 +257,12 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         elif run.bench == "evaporator-train":
             _train_report(run, spec, tr, case)
     if step("generate", "gen-trackingbox: Modelica TrackingBox + augmented model, compiled"):
-        gen = generate(spec, out / "generated")
-        compiled = compile_generated(gen)
+        gen = stages.generate.run(spec, stages.GenerateSettings(out_dir=out / "generated"))
+        compiled = stages.generate.compile_generated(gen)
         summary["generate"] = {**gen.to_json(), "compile": compiled.to_json()}
     if step("validate", "validating the compiled TrackingBox on the held-out window"):
         fmu = Path(summary["generate"]["compile"]["fmu"])
-        val = validate(spec, fmu)
+        val = stages.validate.run(spec, stages.ValidateSettings(fmu=fmu))
         summary["validate"] = val.to_json()
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
@@ -255,12 +271,8 @@ def _estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
     """Parameters of *bench* (among *names*, for the train) held at their estimate (moved to
     ``[fixed]``), not tracked."""
     if bench == "evaporator":
-        from .benches.evaporator import ESTIMATE_ONLY
-
         return frozenset(ESTIMATE_ONLY)
     if bench == "evaporator-train":
-        from .benches.evaporator_train import estimate_only
-
         return frozenset(estimate_only(names))
     return frozenset()
 
@@ -269,12 +281,8 @@ def _time_varying(bench: str, names: Any = ()) -> frozenset[str]:
     """Parameters of *bench* (among *names*, for the train) that vary in time (their estimate over a
     window is a mean): not written."""
     if bench == "evaporator":
-        from .benches.evaporator import TIME_VARYING
-
         return frozenset(TIME_VARYING)
     if bench == "evaporator-train":
-        from .benches.evaporator_train import time_varying
-
         return frozenset(time_varying(names))
     return frozenset()
 
@@ -290,23 +298,16 @@ FREEZE_CONTROLLERS: frozenset[str] = frozenset()
 def _pair_settings(spec: Spec, bench: str) -> Any:
     """Pairing settings: step tests with the twin's controllers frozen on the benches of
     :data:`FREEZE_CONTROLLERS` (where the twin has ``holdControllers``)."""
-    from .analysis.pair_stage import PairSettings
-    from .fmu import read_info
-
     if spec.pairing.freeze:
-        return PairSettings()  # the spec's [pairing] freeze
+        return stages.PairSettings()  # the spec's [pairing] freeze
     inputs = read_info(spec.twin).inputs
     names = {getattr(v, "name", v) for v in inputs}
     freeze = bench in FREEZE_CONTROLLERS and "holdControllers" in names
-    return PairSettings(freeze=(("holdControllers", 1.0),) if freeze else ())
+    return stages.PairSettings(freeze=(("holdControllers", 1.0),) if freeze else ())
 
 
 def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
     """The evaporator's checks against the plant's fouling trajectory, and its fouling and stoppage plots."""
-    from .benches.evaporator import load_truth
-    from .benches.evaporator_report import assess, vessel_heights, write_evaporator_report
-    from .fmu import read_info
-
     truth = load_truth(case.truth_file)
     left_out = [(x["name"], x["reason"]) for x in run.summary.get("pair", {}).get("left_out", [])]
     nrmse = {t: (v.nrmse_untracked, v.nrmse_tracked) for t, v in tr.variables.items()
@@ -318,9 +319,6 @@ def _evaporator_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
 
 def _train_report(run: Run, spec: Spec, tr: Any, case: Any) -> None:
     """The train's checks: every effect's tracked fouling against the plant's, and its fouling plot."""
-    from .benches.evaporator import load_truth
-    from .benches.evaporator_report import assess_train, write_train_report
-
     truth = load_truth(case.truth_file)
     left_out = [(x["name"], x["reason"]) for x in run.summary.get("pair", {}).get("left_out", [])]
     nrmse = {t: (v.nrmse_untracked, v.nrmse_tracked) for t, v in tr.variables.items()
@@ -423,9 +421,6 @@ def _truth(run: Run, name: str) -> str:
 
 def write_report(run: Run, seconds: float) -> tuple[Path, Path]:
     """Write ``report.md`` (overview), ``report.html`` (overview and every stage's report) and ``summary.json``."""
-    from .io import write_text_atomic
-    from .report import write_html
-
     doc = summary_document(run, seconds)
     md = doc.write_markdown(run.out / "report.md")
     page = write_html(run.out / "report.html", doc.title, [doc, *(r.document for r in run.reports.values())])
@@ -448,17 +443,6 @@ def diagnose_demo(out: Path, *, seed: int = 0, case: str = "bias", bias: float =
     written to ``out/patched``, and writes the diagnosis report (``out/diagnose``),
     ``report.md``, ``report.html`` and ``summary.json``.
     """
-    import shutil
-
-    import pandas as pd
-
-    from .benches import make_bench
-    from .diagnose import DiagnoseSettings, diagnose
-    from .io import write_text_atomic
-    from .report import write_html
-    from .report.diagnose import write_diagnose_report
-    from .spec import check_against_fmu, load_spec
-
     progress = Progress()
     t0 = time.perf_counter()
     try:
@@ -482,8 +466,8 @@ def diagnose_demo(out: Path, *, seed: int = 0, case: str = "bias", bias: float =
         spec = load_spec(hidden / "spec.toml")
         check_against_fmu(spec)
         progress.note("[2/3] diagnose: null model, screening, fit of the best candidates (patched twins compiled)")
-        result = diagnose(spec, DiagnoseSettings(compile=True, out_dir=out / "patched", workers=2),
-                          progress=lambda stage, done, total: progress(stage, done, total))
+        result = stages.diagnose.run(spec, stages.DiagnoseSettings(compile=True, out_dir=out / "patched", workers=2),
+                                     progress=progress)
         progress.note("[3/3] writing the report")
         report = write_diagnose_report(spec, result, out / "diagnose")
     except TrackingError as exc:

@@ -4,9 +4,13 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import stat as _stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+from .errors import OutputError, TrackingError
+from .supervise import note_output
 
 
 @contextlib.contextmanager
@@ -75,8 +79,6 @@ def user_path(value: str | os.PathLike[str], what: str) -> Path:
     ...
     trackingbox.errors.TrackingError: --out: the path is empty
     """
-    from .errors import TrackingError
-
     text = os.fspath(value)
     if isinstance(text, bytes):  # pragma: no cover - os.fspath of a str path
         text = os.fsdecode(text)
@@ -128,8 +130,6 @@ def check_output(value: str | os.PathLike[str], what: str, *, kind: str = "file"
         is an input, is an existing directory (file) or a non-directory (dir),
         lies under a file, or its nearest existing directory is not writable.
     """
-    from .errors import OutputError, TrackingError
-
     try:
         path = user_path(value, what)
     except TrackingError as exc:
@@ -148,8 +148,6 @@ def check_output(value: str | os.PathLike[str], what: str, *, kind: str = "file"
     except OSError as exc:
         raise OutputError(f"{what} {shown}: cannot be used as an output ({exc.strerror or exc})") from None
     if exists:
-        import stat as _stat
-
         if kind == "file" and _stat.S_ISDIR(st.st_mode):
             raise OutputError(f"{what} {shown}: is an existing directory; give a file name")
         if kind == "file" and not _stat.S_ISREG(st.st_mode):
@@ -169,8 +167,6 @@ def check_output(value: str | os.PathLike[str], what: str, *, kind: str = "file"
             raise OutputError(f"{what} {shown}: a parent of it is a file, not a directory") from None
         except OSError as exc:
             raise OutputError(f"{what} {shown}: cannot be used as an output ({exc.strerror or exc})") from None
-    import stat as _stat
-
     if not _stat.S_ISDIR(st.st_mode):
         raise OutputError(f"{what} {shown}: {_shown(str(probe))} is a file, not a directory")
     if not os.access(probe, os.W_OK | os.X_OK):
@@ -215,8 +211,6 @@ def output_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
     while not probe.exists() and probe != probe.parent:
         first_missing = probe
         probe = probe.parent
-    from .supervise import note_output
-
     if first_missing is not None:
         note_output(first_missing, True)
     try:

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import FMUError, SimulationError, TrackingError
+from .fmu import directional_derivatives_reason
 
 log = logging.getLogger(__name__)
 
@@ -112,8 +113,6 @@ def support(model: Any, names: Sequence[str], scales: Sequence[float], *,
     difference (:data:`CHECK_TOLERANCE`): an FMU that exports derivatives w.r.t.
     states and inputs only, or refuses parameters as knowns, fails here.
     """
-    from .fmu import directional_derivatives_reason
-
     reason = directional_derivatives_reason(model.info, model.interface)
     if reason is not None:
         return Support(False, reason)

@@ -53,8 +53,19 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from .data import (GAP_FACTOR, LONG_COLUMNS, MeasurementView, Method, WindowArg, _header, clean_chunks, grid_rows,
-                   lay_masks, resample, view_tags)
+from .data import (
+    GAP_FACTOR,
+    LONG_COLUMNS,
+    MeasurementView,
+    Method,
+    WindowArg,
+    clean_chunks,
+    grid_rows,
+    lay_masks,
+    resample,
+    view_tags,
+)
+from .data.table import csv_header
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -163,7 +174,7 @@ class WindowedMeasurements:
         path = Path(spec.measurements)
         needed = view_tags(spec)
         try:
-            header = _header(path) if path.is_file() else None
+            header = csv_header(path) if path.is_file() else None
         except (OSError, UnicodeDecodeError, ValueError):
             return None
         rule = spec.data.max_gap

@@ -33,7 +33,6 @@ from __future__ import annotations
 import ctypes
 import faulthandler
 import json
-import math
 import os
 import re
 import shutil
@@ -46,28 +45,26 @@ import traceback
 from collections.abc import Callable
 from types import FrameType
 
+from . import config, native
+
 #: innermost frame of fmpy's FMI wrappers in a faulthandler dump: (fmi2|fmi3|fmi1 module, method)
 _FMPY_FRAME = re.compile(r'File "[^"]*fmpy[/\\](fmi[123])\.py", line \d+ in (\w+)')
 #: environment variable naming the file where :func:`note_fmu` writes the FMU last opened
-NOTE_ENV = "TRACKINGBOX_SUPERVISOR_NOTE"
+NOTE_ENV = config.setting("supervisor_note").env
 #: environment variable naming the file where :func:`note_output` lists output directories being created
-OUTPUTS_ENV = "TRACKINGBOX_SUPERVISOR_OUTPUTS"
+OUTPUTS_ENV = config.setting("supervisor_outputs").env
 _ANY_FRAME = re.compile(r'File "([^"]*)", line (\d+) in (\w+)')
 #: an fmpy FMI wrapper module's file name, as in a code object's ``co_filename``
 _FMPY_FILE = re.compile(r"fmpy[/\\](fmi[123])\.py$")
 #: seconds one FMI call may take, in the canary and under the watchdog (``TRACKINGBOX_FMU_TIMEOUT`` overrides)
-FMU_TIMEOUT = 60.0
+FMU_TIMEOUT = config.setting("fmu_timeout").default
 #: seconds between two looks of the watchdog at the main thread's stack
 WATCHDOG_POLL = 0.5
 
 
 def fmu_timeout() -> float:
-    """``TRACKINGBOX_FMU_TIMEOUT`` in seconds (a positive finite number), else :data:`FMU_TIMEOUT`."""
-    try:
-        value = float(os.environ.get("TRACKINGBOX_FMU_TIMEOUT", FMU_TIMEOUT))
-    except ValueError:
-        return FMU_TIMEOUT
-    return value if value > 0 and math.isfinite(value) else FMU_TIMEOUT
+    """``TRACKINGBOX_FMU_TIMEOUT`` in seconds (a positive finite number; :mod:`trackingbox.config`)."""
+    return float(config.get("fmu_timeout"))
 
 
 def fmi_function(dump: str) -> str | None:
@@ -203,8 +200,7 @@ class Watchdog:
         calls (:func:`trackingbox.native.fmi_call`), and the same call is the
         same odd count.
         """
-        native = sys.modules.get("trackingbox.native")
-        call = native.fmi_call() if native is not None else None
+        call = native.fmi_call()  # the library imported with this module: never seen half-initialised
         return call if call is not None and call[0] % 2 == 1 else None
 
     def _fire(self, function: str, fmu: str) -> None:
@@ -247,7 +243,7 @@ def _fmu_of(frame: FrameType | None) -> str:
             return _FMU_DIRS[os.path.realpath(directory)]
     except Exception:  # noqa: BLE001 - a name for the message only
         pass
-    target = os.environ.get(NOTE_ENV)
+    target = config.get("supervisor_note")
     if target:
         try:
             with open(target, encoding="utf-8", errors="replace") as fh:
@@ -296,7 +292,7 @@ def supervise(run: Callable[[list[str]], int], argv: list[str]) -> int:
                 os.write(write_fd, f"timeout {doc}\n".encode())
                 os._exit(2)
 
-        watchdog = Watchdog(hung) if os.environ.get("TRACKINGBOX_WATCHDOG", "1") != "0" else None
+        watchdog = Watchdog(hung) if config.get("watchdog") else None
         if watchdog is not None:
             watchdog.start()
         code: int = 1
@@ -392,7 +388,7 @@ def note_fmu(path: object, directory: str | None = None) -> None:
     """
     if directory is not None:
         _FMU_DIRS[os.path.realpath(directory)] = str(path)
-    target = os.environ.get(NOTE_ENV)
+    target = config.get("supervisor_note")
     if not target:
         return
     try:
@@ -407,7 +403,7 @@ def note_output(path: object, created: bool) -> None:
 
     Directories still being created when the child dies are removed by the supervisor.
     """
-    target = os.environ.get(OUTPUTS_ENV)
+    target = config.get("supervisor_outputs")
     if not target:
         return
     try:

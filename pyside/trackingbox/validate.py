@@ -41,6 +41,7 @@ from __future__ import annotations
 import logging
 import math
 import tempfile
+import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -51,7 +52,10 @@ import pandas as pd
 
 from .data import MeasurementView, fill_nan
 from .errors import DataError, FMUError, SpecError, unknown_name
+from .estimation import nrmse
 from .generate.filters import modelica_name
+from .simulation.models import open_model
+from .tracking.runtime import track
 
 if TYPE_CHECKING:
     from .spec import Spec
@@ -241,12 +245,6 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
     FMUError
         The FMU lacks an input/output the generated model has (named).
     """
-    import time as _time
-
-    from .fmu import FMUModel
-    from .estimation import nrmse
-    from .tracking.runtime import track
-
     wall0 = _time.perf_counter()
     if not spec.pairs:
         raise SpecError(f"{spec.path} has no [[pairs]]: run `trackingbox pair {spec.path}` first")
@@ -289,7 +287,7 @@ def validate(spec: Spec, fmu: str | Path, *, work_dir: str | Path | None = None,
                    for st in spec.states if f"correction:{st.correction}" in py}
     outputs = list(dict.fromkeys([*(spec.outputs[p.variable] for p in spec.pairs), *pair_names.values()]))
 
-    model = FMUModel(fmu, tolerance=tolerance)
+    model = open_model(fmu, tolerance=tolerance)
     try:
         known_inputs = set(model.info.inputs)
         # the runtime applies its corrections per sample (held over [t_k, t_k+1]): so does the box's twin

@@ -8,5 +8,5 @@
   agreement with the RGA pairing.
 * :mod:`~trackingbox.analysis.executor` -- local process pool or Dask cluster for the runs.
 
-Submodules are imported on use (SALib, scipy and fmpy load only when needed).
+SALib (the Sobol method) and Dask (``--scheduler``) load only when a run needs them.
 """

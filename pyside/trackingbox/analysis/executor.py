@@ -6,32 +6,25 @@ Jacobian columns are independent simulations. They are submitted to a
 process (``workers=1``), a local process pool (the default), a local Dask
 cluster (``address="local"``) or an existing Dask cluster (``address=
 "tcp://host:8786"``). Each worker process extracts and instantiates an FMU once
-(:func:`cached_model`, keyed by the FMU's path and content) and reuses it for
+(:func:`trackingbox.simulation.models.cached_model`, keyed by the FMU's path and content) and reuses it for
 every task it receives; the tasks do the same arithmetic wherever they run, so
 the results do not depend on the executor.
 """
 from __future__ import annotations
 
-import hashlib
 import logging
 import multiprocessing
 import os
-import socket
 import threading
 import time
-from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
 from ..errors import AnalysisError
 
 logger = logging.getLogger(__name__)
 
-#: most FMUs one thread keeps open; its least recently used one is closed past it (a long-lived
-#: Dask worker sees the FMUs of many runs)
-MAX_CACHED_MODELS = 8
 #: seconds to wait for a Dask scheduler to answer (``--scheduler tcp://...``)
 CONNECT_TIMEOUT = 10.0
 #: seconds to wait for the first worker of a Dask cluster (a scheduler without workers would hang)
@@ -40,111 +33,6 @@ WORKER_TIMEOUT = 60.0
 LOCAL = "local"
 #: seconds between a pool worker's checks that the process it works for still runs (:func:`exit_with_parent`)
 PARENT_POLL = 0.5
-
-_MODELS: OrderedDict[tuple[str, str, float, int], Any] = OrderedDict()
-_DIGESTS: dict[str, tuple[tuple[int, int, int], str]] = {}
-_OPENS: Counter[str] = Counter()
-_LOCK = threading.Lock()
-
-
-def fmu_digest(path: str | os.PathLike[str]) -> str:
-    """SHA-256 of the file at *path*, computed again only when its size, mtime or inode change.
-
-    Parameters
-    ----------
-    path : path-like
-        FMU file.
-
-    Returns
-    -------
-    str
-        Hex digest.
-
-    Raises
-    ------
-    AnalysisError
-        If the file cannot be read here (on a cluster: the FMU must be on a file
-        system every worker sees under the same path).
-    """
-    name = str(Path(path).resolve())
-    try:
-        st = os.stat(name)
-        stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
-        known = _DIGESTS.get(name)
-        if known is not None and known[0] == stamp:
-            return known[1]
-        h = hashlib.sha256()
-        with open(name, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-    except OSError as exc:
-        raise AnalysisError(f"FMU {name} cannot be read on host {socket.gethostname()} (process {os.getpid()}): "
-                            f"{exc.strerror or exc}; on a cluster every worker must see the FMU under the "
-                            "same path") from None
-    _DIGESTS[name] = (stamp, h.hexdigest())
-    return h.hexdigest()
-
-
-def cached_model(path: str | os.PathLike[str], tolerance: float = 1e-6) -> Any:
-    """The :class:`trackingbox.fmu.FMUModel` for *path*, extracted and instantiated once per process.
-
-    The cache is keyed by the FMU's resolved path, its content (SHA-256,
-    :func:`fmu_digest`), *tolerance* and the calling thread: a worker process
-    that lives longer than one run (a Dask worker) opens a rewritten FMU afresh
-    and never runs a stale one, and two threads of one worker (a Dask worker
-    with ``--nthreads 2``) never share an instance, which is not thread-safe.
-    At most :data:`MAX_CACHED_MODELS` per thread stay open (least recently used closed).
-
-    Parameters
-    ----------
-    path : path-like
-        FMU file.
-    tolerance : float
-        Solver tolerance (part of the cache key).
-
-    Returns
-    -------
-    trackingbox.fmu.FMUModel
-    """
-    from ..fmu import FMUModel
-
-    name = str(Path(path).resolve())
-    with _LOCK:
-        key = (name, fmu_digest(name), float(tolerance), threading.get_ident())
-        model = _MODELS.get(key)
-        if model is None or model.closed:
-            logger.debug("process %d opens %s", os.getpid(), name)
-            model = FMUModel(name, tolerance=key[2])
-            _OPENS[name] += 1
-            _MODELS[key] = model
-        _MODELS.move_to_end(key)
-        mine = [k for k in _MODELS if k[3] == key[3]]  # another thread's model may be running
-        for old in mine[:max(0, len(mine) - MAX_CACHED_MODELS)]:
-            _MODELS.pop(old).close()
-        return model
-
-
-def model_opens() -> dict[str, int]:
-    """How many times this process has opened each FMU (path -> count) through :func:`cached_model`.
-
-    On a cluster, ``client.run(model_opens)`` gives every worker's counts: one
-    per FMU and worker, however many tasks each ran.
-    """
-    with _LOCK:
-        return dict(_OPENS)
-
-
-def clear_model_cache() -> None:
-    """Close and forget every cached FMU of this process (the open counts stay)."""
-    with _LOCK:
-        models = list(_MODELS.values())
-        _MODELS.clear()
-    for model in models:
-        try:
-            model.close()
-        except Exception:  # noqa: BLE001 - closing is best effort
-            logger.debug("closing %s failed", model, exc_info=True)
-
 
 class SerialExecutor(Executor):
     """Run each task at once in the calling process (``workers=1``).
@@ -270,7 +158,7 @@ def make_executor(address: str | None = None, workers: int | None = None, *,
     -------
     concurrent.futures.Executor
         Use as a context manager, or call ``shutdown()``. On every executor each
-        worker process extracts and instantiates an FMU once (:func:`cached_model`).
+        worker process extracts and instantiates an FMU once (:func:`trackingbox.simulation.models.cached_model`).
 
     Raises
     ------
@@ -346,6 +234,8 @@ def _quiet_dask() -> None:
 
 def _local_cluster(workers: int) -> DaskExecutor:
     """A Dask ``LocalCluster`` of *workers* one-thread processes on 127.0.0.1 (HTTP on a free local port)."""
+    # deferred (start-up): dask.distributed adds 0.2-0.43 s to an import of the package (python -X
+    # importtime); only a --scheduler run uses it
     from dask.distributed import Client, LocalCluster
 
     _quiet_dask()
@@ -366,6 +256,8 @@ def _local_cluster(workers: int) -> DaskExecutor:
 
 def _connect(address: str, timeout: float | None) -> DaskExecutor:
     """A client of the existing Dask scheduler at *address*, with at least one worker."""
+    # deferred (start-up): dask.distributed adds 0.2-0.43 s to an import of the package (python -X
+    # importtime); only a --scheduler run uses it
     from dask.distributed import Client
 
     _quiet_dask()

@@ -33,7 +33,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from ..data import MeasurementView
 from ..errors import AnalysisError, DataError, TrackingError, unknown_name
+from ..simulation.models import open_model
+from ..tracking.controllers import StateCompensator
 
 if TYPE_CHECKING:
     from ..spec import Spec
@@ -339,10 +342,6 @@ def simulate_untracked(spec: Spec, variables: Sequence[str], *, start: float, st
     AnalysisError
         An unknown tag, a window without samples, or a twin that fails.
     """
-    from ..data import MeasurementView
-    from ..fmu import FMUModel
-    from ..tracking.controllers import StateCompensator
-
     for tag in variables:
         if tag not in spec.outputs:
             raise AnalysisError(unknown_name("tag", tag, list(spec.outputs), f"[outputs] of {spec.path}"))
@@ -365,7 +364,7 @@ def simulate_untracked(spec: Spec, variables: Sequence[str], *, start: float, st
     comps = [StateCompensator(s.gain, ts=ts) for s in spec.states]
     level_meas = [view.values(s.tag) for s in spec.states]
     sim = np.full((len(outs), n), math.nan)
-    model = FMUModel(spec.twin, tolerance=tolerance)
+    model = open_model(spec.twin, tolerance=tolerance)
     try:
         stepper = model.stepper(start_time=0.0, parameters={**base, **{s.correction: 0.0 for s in spec.states}},
                                 inputs=view.inputs)
@@ -441,6 +440,8 @@ def lowpass(x: npt.ArrayLike, tau: float, dt: float, initial: float = 0.0) -> np
     >>> [round(float(v), 3) for v in lowpass([1.0, 1.0], tau=1.0, dt=math.log(2.0))]
     [0.5, 0.75]
     """
+# deferred (start-up): scipy.signal adds 0.45-0.54 s to an import of the package (python -X importtime,
+    # on top of numpy/pandas/scipy.optimize) for one filter call
     from scipy.signal import lfilter
 
     v = np.asarray(x, dtype=float)

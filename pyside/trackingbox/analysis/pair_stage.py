@@ -87,7 +87,23 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from ..data import MeasurementView
 from ..errors import AnalysisError, SpecError
+from ..spec import PairSpec
+from .blocks import output_unit, parameter_unit
+from .executor import make_executor
+from ..identify.hooks import explain, indistinct_candidates, without_candidates
+from .offsets import simulate_untracked
+from .pairing import DataChecks, Pair, choose_pairs, complete_with_recording
+from .rga import parameter_ranges, variable_ranges
+from .sobol import agreement, sobol_indices
+from .steptest import (
+    StepSettings,
+    farthest_operating_point,
+    make_problem,
+    operating_point,
+    step_tests,
+)
 
 if TYPE_CHECKING:
     from concurrent.futures import Executor
@@ -334,8 +350,6 @@ def _measured(spec: Spec) -> tuple[pd.DataFrame, pd.DataFrame, npt.NDArray[np.bo
     output tags NaN where they are not scored (stoppages and their settle time, gaps), the training-window
     mask, the window ``[start, stop)`` (all data when the spec has no training window), and the
     measurements with the inputs NaN where the plant was not running (:func:`running_inputs`)."""
-    from ..data import MeasurementView
-
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
     return (view.to_frame(), view.to_frame(scored=True), view.in_window, float(view.window[0]),
             float(view.window[1]), running_inputs(view, spec))
@@ -374,8 +388,6 @@ def running_inputs(view: Any, spec: Spec) -> pd.DataFrame:
 def second_operating_point(choice: str | float, frame: Any, spec: Spec, op: dict[str, float], start: float,
                            stop: float) -> tuple[float, dict[str, float]] | None:
     """The second operating point *choice* asks for (``"auto"``, ``"none"`` or a time in s), or ``None``."""
-    from .steptest import farthest_operating_point, operating_point
-
     text = str(choice).strip().lower()
     if text == "none":
         return None
@@ -423,12 +435,6 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     AnalysisError, DataError, FMUError
         Unusable settings, data or twin (named).
     """
-    from .executor import make_executor
-    from .pairing import DataChecks, choose_pairs
-    from .rga import parameter_ranges, variable_ranges
-    from .sobol import agreement, sobol_indices
-    from .steptest import StepSettings, make_problem, operating_point, step_tests
-
     s = settings or PairSettings()
     if not spec.parameters:
         raise SpecError(f"{spec.path} has no [[parameters]]: nothing to pair")
@@ -478,8 +484,6 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                                 progress=_counter(progress, "Sobol runs"))
     residuals = checks = None
     if s.data_checks:
-        from .offsets import simulate_untracked
-
         checks = DataChecks(noise_ratio=s.noise_ratio, min_reach=s.min_reach, max_ratio=s.max_ratio,
                             closed_loop=float(_closed_loop(spec, s) or 0.0), max_leak=_max_leak(spec, s),
                             closed_loop_min=_closed_loop_min(spec, s), max_jitter=_max_jitter(spec, s))
@@ -487,8 +491,6 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
     # candidates the data cannot tell apart (dynamic sensitivities, trackingbox.identify): out, with the reason
-    from ..identify.hooks import explain, indistinct_candidates, without_candidates
-
     drop = indistinct_candidates(spec) if s.identify and s.data_checks else {}
     st_m, st2_m, rec_m = (without_candidates(x, drop) for x in (st, st2, st_rec))
     pairing = choose_pairs(st_m.gains, st.variables, st.parameters, time_constants=st.time_constants,
@@ -502,8 +504,6 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
                            units=spec_units(spec, st.variables, st.parameters),
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     if st_rec is not None and residuals is not None:
-        from .pairing import complete_with_recording
-
         pairing = complete_with_recording(
             pairing, rec_m.gains, time_constants=st_rec.time_constants,
             variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
@@ -529,8 +529,6 @@ def spec_units(spec: Spec, variables: Sequence[str], parameters: Sequence[str]
     those units (``effect[k].Rf``), for :func:`~trackingbox.analysis.pairing.choose_pairs`' pairing per
     unit; None when the spec names no units. With several arrays a tag listed for any of them belongs
     to that index's units."""
-    from .blocks import output_unit, parameter_unit
-
     if not spec.pairing.units:
         return None
     listed = {t for _, tags in spec.pairing.units for t in tags}
@@ -630,8 +628,6 @@ def explain_left_out(pairing: Pairing, freeze: tuple[tuple[str, float], ...]) ->
 
 def _sobol_pairs(pairing: Pairing, sob: SobolResult, st: StepTestResult) -> Pairing:
     """*pairing* with its pairs replaced by the Sobol total-index choice."""
-    from .pairing import Pair
-
     choice = sob.choice("total")
     idx = {n: k for k, n in enumerate(st.parameters)}
     pairs = []
@@ -655,8 +651,6 @@ def spec_pairs(spec: Spec, result: PairingResult) -> list[PairSpec]:
     else the result's settings or the spec's ``[pairing] closed_loop``), the ``lambda`` that
     makes ``lambda x time_constant`` reach it: the loop the prediction judged.
     """
-    from ..spec import PairSpec
-
     interval = result.step_settings.interval
     loop = _closed_loop(spec, result.settings)
     old = {(p.variable, p.parameter): p for p in spec.pairs}

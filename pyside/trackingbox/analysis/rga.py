@@ -6,6 +6,7 @@ columns: candidate parameters), ``g_ij = dy_i / dp_j``.
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -335,8 +336,6 @@ def variable_ranges(samples: npt.ArrayLike, *, floor: npt.ArrayLike | float = 0.
     if not 0.0 <= trim < 0.5:
         raise AnalysisError(f"variable_ranges: trim must be in [0, 0.5), got {trim!r}")
     with np.errstate(all="ignore"):
-        import warnings
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: span 0, then the floor
             if trim > 0.0:

@@ -34,7 +34,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from ..errors import AnalysisError, FMUError, TrackingError, unknown_name
-from .executor import cached_model
+from ..fmu import read_info
+from ..simulation.models import cached_model
 
 logger = logging.getLogger(__name__)
 
@@ -574,8 +575,6 @@ def make_problem(fmu: str | Path, *, outputs: Mapping[str, str], parameters: Seq
     AnalysisError
         Naming every unknown name, with "did you mean".
     """
-    from ..fmu import read_info
-
     try:
         info = read_info(fmu)
     except FMUError as exc:

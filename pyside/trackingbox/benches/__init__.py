@@ -19,6 +19,7 @@ import os
 from collections.abc import Mapping
 
 from ..errors import TrackingError, did_you_mean
+from . import evaporator, evaporator_train, heat_exchanger, heat_production
 from .base import BenchCase, BenchDefinition, HiddenCase, Sensor, build_case
 
 __all__ = ["BENCHES", "BenchCase", "BenchDefinition", "HiddenCase", "Sensor", "bench_definition", "make_bench"]
@@ -30,6 +31,8 @@ BENCHES: dict[str, str] = {
     "evaporator": "evaporator",
     "evaporator-train": "evaporator_train",
 }
+_MODULES = {"heat_exchanger": heat_exchanger, "heat_production": heat_production, "evaporator": evaporator,
+            "evaporator_train": evaporator_train}
 
 
 def bench_definition(name: str) -> BenchDefinition:
@@ -37,10 +40,7 @@ def bench_definition(name: str) -> BenchDefinition:
     if name not in BENCHES:
         raise TrackingError(f"unknown bench {name!r}{did_you_mean(name, BENCHES)}; "
                                 f"choose one of {', '.join(BENCHES)}")
-    import importlib
-
-    module = importlib.import_module(f"{__name__}.{BENCHES[name]}")
-    return module.DEFINITION
+    return _MODULES[BENCHES[name]].DEFINITION
 
 
 def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
@@ -80,10 +80,8 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
     BenchCase
         Paths of the written files and the true parameter values.
     """
-    import importlib
-
     definition = bench_definition(name)
-    module = importlib.import_module(f"{__name__}.{BENCHES[name]}")
+    module = _MODULES[BENCHES[name]]
     takes_effects = name == "evaporator-train"
     if effects is not None and not takes_effects:
         raise TrackingError(f"bench {name!r} has no number of effects (--effects applies to evaporator-train)")

@@ -31,7 +31,7 @@ import os
 import shutil
 import tempfile
 import time as _time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -39,8 +39,14 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from ..compiler import (
+    compile_model,
+    library_path,
+)
 from ..errors import FMUError, SimulationError, TrackingError, did_you_mean
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
+from ..simulation.models import open_model
 from ..spec import (
     DataRules,
     ParameterSpec,
@@ -209,8 +215,6 @@ class BenchCase:
 # --------------------------------------------------------------------------- helpers
 
 def _compile(model: str, output: Path) -> Path:
-    from ..compiler import compile_model, library_path  # lazy: the compiler pulls in rumoca/casadi
-
     t0 = _time.perf_counter()
     result = compile_model(library_path(), model, output=output)
     log.info("compiled %s -> %s in %.1f s", model, result.fmu, _time.perf_counter() - t0)
@@ -219,8 +223,6 @@ def _compile(model: str, output: Path) -> Path:
 
 def _library_path() -> Path | None:
     try:
-        from ..compiler import library_path
-
         return Path(library_path())
     except (ImportError, AttributeError):  # pragma: no cover - compiler not installed
         return None
@@ -322,8 +324,6 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
     CompileError, SimulationError
         Compiling or simulating the plant failed.
     """
-    from ..fmu import FMUModel, read_info  # lazy: fmpy
-
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise TrackingError(f"output directory {out} of bench {definition.name!r} exists and is not a directory")
@@ -334,18 +334,7 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         if given is not None and not Path(given).is_file():
             raise FMUError(f"{what} FMU {given} for bench {definition.name!r} does not exist")
     overrides = dict(overrides or {})
-    case_hidden: HiddenCase | None = None
-    if hidden is not None:
-        if hidden not in definition.hidden:
-            raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench {definition.name!r}"
-                                f"{did_you_mean(hidden, list(definition.hidden))}; choose one of "
-                                f"{', '.join(definition.hidden) or '(none)'}")
-        case_hidden = definition.hidden[hidden]
-        definition = replace(definition, plant_model=case_hidden.model, outputs=tuple(
-            replace(s, plant=case_hidden.sensors.get(s.tag, s.plant)) for s in definition.outputs))
-    suite = (hidden is not None) if suite_twin is None else bool(suite_twin)
-    if suite and definition.suite_twin_model is not None:
-        definition = replace(definition, twin_model=definition.suite_twin_model)
+    definition, case_hidden, suite = _variant(definition, hidden, suite_twin)
     if not (math.isfinite(noise_scale) and noise_scale >= 0):
         raise TrackingError(f"bench {definition.name!r}: --noise-scale must be a number >= 0, got {noise_scale}")
     seeds = np.random.SeedSequence(int(seed)).spawn(2)
@@ -354,21 +343,11 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
     with tempfile.TemporaryDirectory(prefix=f"bench-{definition.name}-") as tmpdir:
         stage = Path(tmpdir)
         # 1. FMUs (compile once, or copy the given ones) -----------------------
-        staged_plant = stage / "plant.fmu"
-        staged_twin = stage / "twin.fmu"
-        if plant_fmu is not None:
-            shutil.copyfile(plant_fmu, staged_plant)
-        else:
-            built = _compile(definition.plant_model, stage / "build" / "plant.fmu")
-            shutil.copyfile(built, staged_plant)
+        staged_plant = _stage_fmu(definition.plant_model, plant_fmu, stage, "plant")
         plant_info = read_info(staged_plant)
         overrides = check_overrides(overrides, plant_info, f"the {definition.name} plant "
                                     f"({definition.plant_model})")
-        if twin_fmu is not None:
-            shutil.copyfile(twin_fmu, staged_twin)
-        else:
-            built = _compile(definition.twin_model, stage / "build" / "twin.fmu")
-            shutil.copyfile(built, staged_twin)
+        staged_twin = _stage_fmu(definition.twin_model, twin_fmu, stage, "twin")
 
         # 2. scenario over warm-up + measured period ----------------------------
         dt = definition.sample_time
@@ -382,40 +361,18 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
         # 3. plant simulation -------------------------------------------------
         plant_vars = [s.plant for s in definition.outputs]
         log.info("simulating the %s plant for %.1f h (+%.1f h warm-up)", definition.name, hours, warmup / 3600)
-        t0 = _time.perf_counter()
-        model = FMUModel(staged_plant)
-        try:
-            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
-                                    parameters=overrides, outputs=plant_vars)
-        finally:
-            model.close()
-        log.info("plant simulation took %.1f s", _time.perf_counter() - t0)
-        result = _on_grid(result, t_all, plant_vars, definition.name)
+        result, _, _ = simulate_plant(staged_plant, t_all, frame, overrides, plant_vars, definition.name)
 
         # 4. measurements = true signals on the measured period + sensor noise ------
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        columns: dict[str, np.ndarray] = {"time": t_meas}
-        for s in definition.inputs:
-            sigma, rel = s.noise
-            columns[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma * noise_scale, rel,
-                                       noise_rng)
-        for s in definition.outputs:
-            sigma, rel = s.noise
-            columns[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma * noise_scale, rel, noise_rng)
-        measurements = pd.DataFrame(columns)
+        measurements = noisy_measurements(t_meas, definition.inputs, definition.outputs, true_inputs, result, keep,
+                                          noise_scale, noise_rng)
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas
 
         # 5. truth ------------------------------------------------------------
-        plant_params = {name: float(v.start) for name, v in _tunable_parameters(plant_info).items()
-                        if v.start is not None}
-        plant_params.update(overrides)
-        truth: dict[str, float] = {}
-        for p in definition.parameters:
-            source = definition.truth_map.get(p.name, p.name)
-            if source in plant_params:
-                truth[p.name] = plant_params[source]
+        truth, plant_params = _truth(definition, plant_info, overrides)
 
         # 6. spec ---------------------------------------------------------------
         lib = _library_path()
@@ -470,6 +427,79 @@ def build_case(definition: BenchDefinition, out: str | os.PathLike[str], *, seed
                      measurements=out / "measurements.csv", plant_inputs=out / "plant_inputs.csv",
                      truth_file=out / "truth.json", truth=truth, plant_parameters=plant_params,
                      seed=int(seed), hours=hours)
+
+
+def _variant(definition: BenchDefinition, hidden: str | None, suite_twin: bool | None
+             ) -> tuple[BenchDefinition, HiddenCase | None, bool]:
+    """The bench as the case simulates it: the hidden-effect plant, the suite twin (and whether it is used)."""
+    case_hidden: HiddenCase | None = None
+    if hidden is not None:
+        if hidden not in definition.hidden:
+            raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench {definition.name!r}"
+                                f"{did_you_mean(hidden, list(definition.hidden))}; choose one of "
+                                f"{', '.join(definition.hidden) or '(none)'}")
+        case_hidden = definition.hidden[hidden]
+        definition = replace(definition, plant_model=case_hidden.model, outputs=tuple(
+            replace(s, plant=case_hidden.sensors.get(s.tag, s.plant)) for s in definition.outputs))
+    suite = (hidden is not None) if suite_twin is None else bool(suite_twin)
+    if suite and definition.suite_twin_model is not None:
+        definition = replace(definition, twin_model=definition.suite_twin_model)
+    return definition, case_hidden, suite
+
+
+def _stage_fmu(model: str, given: str | os.PathLike[str] | None, stage: Path, name: str) -> Path:
+    """``stage/<name>.fmu``: a copy of the *given* FMU, else *model* compiled once."""
+    staged = stage / f"{name}.fmu"
+    if given is not None:
+        shutil.copyfile(given, staged)
+    else:
+        built = _compile(model, stage / "build" / f"{name}.fmu")
+        shutil.copyfile(built, staged)
+    return staged
+
+
+def noisy_measurements(t_meas: np.ndarray, inputs: Sequence[Sensor], outputs: Sequence[Sensor],
+                       true_inputs: Mapping[str, Any], result: pd.DataFrame, keep: slice, noise_scale: float,
+                       noise_rng: np.random.Generator) -> pd.DataFrame:
+    """The measurements: the true signals on the measured period plus each sensor's noise (inputs, then outputs)."""
+    columns: dict[str, np.ndarray] = {"time": t_meas}
+    for s in inputs:
+        sigma, rel = s.noise
+        columns[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma * noise_scale, rel,
+                                   noise_rng)
+    for s in outputs:
+        sigma, rel = s.noise
+        columns[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma * noise_scale, rel, noise_rng)
+    return pd.DataFrame(columns)
+
+
+def simulate_plant(fmu: Path, t_all: np.ndarray, frame: pd.DataFrame, overrides: Mapping[str, float],
+                   variables: list[str], bench: str) -> tuple[pd.DataFrame, float, float]:
+    """The plant over the scenario on the grid *t_all* (its variables *variables*), its wall and CPU seconds."""
+    t0, c0 = _time.perf_counter(), _time.process_time()
+    model = open_model(fmu)
+    try:
+        result = model.simulate(stop_time=float(t_all[-1]), output_interval=float(t_all[1] - t_all[0]),
+                                inputs=frame, parameters=dict(overrides), outputs=variables)
+    finally:
+        model.close()
+    seconds, cpu = _time.perf_counter() - t0, _time.process_time() - c0
+    log.info("plant simulation took %.1f s (%.1f s CPU)", seconds, cpu)
+    return _on_grid(result, t_all, variables, bench), seconds, cpu
+
+
+def _truth(definition: BenchDefinition, plant_info: Any, overrides: Mapping[str, float]
+           ) -> tuple[dict[str, float], dict[str, float]]:
+    """The twin parameters' true values (through the bench's truth map) and the plant's tunable parameters."""
+    plant_params = {name: float(v.start) for name, v in _tunable_parameters(plant_info).items()
+                    if v.start is not None}
+    plant_params.update(overrides)
+    truth: dict[str, float] = {}
+    for p in definition.parameters:
+        source = definition.truth_map.get(p.name, p.name)
+        if source in plant_params:
+            truth[p.name] = plant_params[source]
+    return truth, plant_params
 
 
 def _on_grid(result: pd.DataFrame, t: np.ndarray, names: list[str], bench: str) -> pd.DataFrame:

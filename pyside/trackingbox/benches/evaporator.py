@@ -27,9 +27,8 @@ import math
 import os
 import shutil
 import tempfile
-import time as _time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +36,8 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from ..errors import FMUError, TrackingError
+from ..errors import FMUError, SpecError, TrackingError
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -52,6 +52,7 @@ from ..spec import (
     dump_spec,
     load_spec,
     loads_spec,
+    write_pairs,
 )
 from . import scenario as sc
 from .base import (
@@ -60,11 +61,12 @@ from .base import (
     Sensor,
     _compile,
     _library_path,
-    _on_grid,
     _tunable_parameters,
-    add_noise,
     check_overrides,
+    noisy_measurements,
+    simulate_plant,
 )
+from .historian import HistorianSettings, TagSettings, export_history
 
 log = logging.getLogger(__name__)
 
@@ -354,10 +356,6 @@ def fix_parameters(spec_path: str | os.PathLike[str], values: Mapping[str, float
     SpecError
         A name that is not a ``[[parameters]]`` entry of the spec (named, with the file).
     """
-    from dataclasses import replace
-
-    from ..errors import SpecError
-
     path = Path(spec_path)
     spec = load_spec(path)
     names = {p.name for p in spec.parameters}
@@ -459,8 +457,6 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int, *, feed: f
     pressure_band : float
         Pressures' dead band (Pa; default 300 Pa).
     """
-    from .historian import HistorianSettings, TagSettings
-
     f0 = NOMINAL["feedFlowSet"] if feed is None else float(feed)
     out = {}
     for s in tags:
@@ -516,8 +512,6 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     -------
     BenchCase
     """
-    from ..fmu import FMUModel, read_info
-
     d = DEFINITION
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
@@ -555,32 +549,14 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         recorded = {tw: pv for tw, pv in TRAJECTORIES.items() if pv in names}
         plant_vars = list(dict.fromkeys([s.plant for s in d.outputs] + list(recorded.values())))
         log.info("simulating the evaporator plant for %.1f h (+%.1f h warm-up)", hours, warmup / 3600)
-        t0 = _time.perf_counter()
-        model = FMUModel(staged["plant"])
-        try:
-            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
-                                    parameters=overrides, outputs=plant_vars)
-        finally:
-            model.close()
-        plant_seconds = _time.perf_counter() - t0
-        log.info("plant simulation took %.1f s", plant_seconds)
-        result = _on_grid(result, t_all, plant_vars, d.name)
+        result, plant_seconds, _ = simulate_plant(staged["plant"], t_all, frame, overrides, plant_vars, d.name)
 
         # measurements: true signals on the measured period + sensor noise, then the historian
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense: dict[str, FloatArray] = {"time": t_meas}
-        for s in d.inputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
-        for s in d.outputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
-        dense_frame = pd.DataFrame(dense)
+        dense_frame = noisy_measurements(t_meas, d.inputs, d.outputs, true_inputs, result, keep, 1.0, noise_rng)
         history = None
         if historian_export:
-            from .historian import export_history
-
             history = export_history(dense_frame, historian_settings((*d.inputs, *d.outputs), start, seed))
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas
@@ -656,10 +632,6 @@ def slow_pairs(spec_path: str | os.PathLike[str], closed_loop: float = CLOSED_LO
     measurement noise out of the parameter. Pairs that already have a larger
     ``lambda`` (or explicit ``kp``/``ti``) keep them.
     """
-    from dataclasses import replace
-
-    from ..spec import write_pairs
-
     spec = load_spec(spec_path)
     pairs = [p if (p.kp is not None or p.ti is not None or p.lambda_ * p.time_constant >= closed_loop)
              else replace(p, lambda_=closed_loop / p.time_constant) for p in spec.pairs]

@@ -24,7 +24,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from ..errors import FMUError
-from ..report import Document, StageReport
+from ..report import Document, StageReport, plots
 from .evaporator import RF_BOUNDS, stoppage_intervals, truth_on
 
 log = logging.getLogger(__name__)
@@ -218,8 +218,6 @@ def _longest_stoppage(truth: Mapping[str, Any], t_end: float, after: float) -> t
 def write_evaporator_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, Any], out: str | Path,
                             assessment: EvaporatorAssessment) -> StageReport:
     """Write ``fouling.png``, ``stoppage.png`` and ``evaporator.md`` into *out*."""
-    from ..report import plots
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     df = pd.read_csv(tracking_csv)
@@ -380,8 +378,6 @@ def write_train_report(spec: Any, tracking_csv: str | Path, truth: Mapping[str, 
                        assessment: TrainAssessment) -> StageReport:
     """Write ``fouling.png`` (one panel per effect: tracked fouling vs the plant's, stoppages shaded)
     and ``evaporator-train.md`` into *out*."""
-    from ..report import plots
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     df = pd.read_csv(tracking_csv)

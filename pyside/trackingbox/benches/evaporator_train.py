@@ -38,7 +38,12 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from ..compiler import (
+    compile_model,
+    library_path,
+)
 from ..errors import FMUError, TrackingError
+from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
@@ -55,9 +60,27 @@ from ..spec import (
     loads_spec,
 )
 from . import scenario as sc
-from .base import BenchCase, BenchDefinition, Sensor, _library_path, _on_grid, _tunable_parameters, add_noise, check_overrides
+from .base import (
+    BenchCase,
+    BenchDefinition,
+    Sensor,
+    _library_path,
+    _tunable_parameters,
+    check_overrides,
+    noisy_measurements,
+    simulate_plant,
+)
+
 #: Heartbeat of every tag (s) and the CSV form of the historian export: the single effect's.
-from .evaporator import HEARTBEAT, MEASUREMENT_FORM, Stoppage, stoppage_factor, stoppage_schedule
+from .evaporator import (
+    HEARTBEAT,
+    MEASUREMENT_FORM,
+    Stoppage,
+    stoppage_factor,
+    stoppage_schedule,
+)
+from .evaporator import historian_settings as effect_settings
+from .historian import export_history
 
 log = logging.getLogger(__name__)
 
@@ -464,8 +487,6 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int) -> Any:
     """Per-tag scan, dead band and heartbeat for the historian export: the single effect's rules
     (:func:`trackingbox.benches.evaporator.historian_settings`) on the train's feed, with the flows'
     dead band at 0.2 % of it and the vacuum pressures' at 0.15 kPa."""
-    from .evaporator import historian_settings as effect_settings
-
     return effect_settings(tags, start, seed, feed=NOMINAL["feedFlowSet"], flow_band=0.002, pressure_band=150.0)
 
 
@@ -537,8 +558,6 @@ def train_models(effects: int) -> TrainModels:
 
 def compile_train(models: TrainModels, what: str, output: Path) -> Path:
     """Compile the plant or twin (*what*) of *models* to *output* with the embedded path."""
-    from ..compiler import compile_model, library_path  # lazy: the compiler pulls in rumoca/casadi
-
     model = models.plant if what == "plant" else models.twin
     t0 = _time.perf_counter()
     if models.wrapper is None:
@@ -601,8 +620,6 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     -------
     BenchCase
     """
-    from ..fmu import FMUModel, read_info
-
     n = _check_effects(effects)
     models = train_models(n)
     out = Path(out).expanduser().resolve()
@@ -644,31 +661,13 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         trajectories_map = {f"effect[{k}].Rf": f"Rf_true[{k}]" for k in range(1, n + 1)}
         plant_vars = list(dict.fromkeys([s.plant for s in tag_outputs] + list(trajectories_map.values())))
         log.info("simulating the %d-effect plant for %.1f h (+%.1f h warm-up)", n, hours, warmup / 3600)
-        t0, c0 = _time.perf_counter(), _time.process_time()
-        model = FMUModel(staged["plant"])
-        try:
-            result = model.simulate(stop_time=float(t_all[-1]), output_interval=dt, inputs=frame,
-                                    parameters=overrides, outputs=plant_vars)
-        finally:
-            model.close()
-        plant_seconds, plant_cpu = _time.perf_counter() - t0, _time.process_time() - c0
-        log.info("plant simulation took %.1f s (%.1f s CPU)", plant_seconds, plant_cpu)
-        result = _on_grid(result, t_all, plant_vars, NAME)
+        result, plant_seconds, plant_cpu = simulate_plant(staged["plant"], t_all, frame, overrides, plant_vars, NAME)
 
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense: dict[str, FloatArray] = {"time": t_meas}
-        for s in INPUTS:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(np.asarray(true_inputs[s.plant], float)[keep], sigma, rel, noise_rng)
-        for s in tag_outputs:
-            sigma, rel = s.noise
-            dense[s.tag] = add_noise(result[s.plant].to_numpy(float)[keep], sigma, rel, noise_rng)
-        dense_frame = pd.DataFrame(dense)
+        dense_frame = noisy_measurements(t_meas, INPUTS, tag_outputs, true_inputs, result, keep, 1.0, noise_rng)
         history = None
         if historian_export:
-            from .historian import export_history
-
             history = export_history(dense_frame, historian_settings((*INPUTS, *tag_outputs), start, seed))
         plant_inputs = frame.iloc[keep].copy()
         plant_inputs["time"] = t_meas

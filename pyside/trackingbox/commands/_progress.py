@@ -16,7 +16,6 @@ import sys
 import time
 from typing import TextIO
 
-
 #: fraction of a stage's items done (since its rate's start) before a line estimates the time left
 ETA_FRACTION = 0.02
 
@@ -98,15 +97,6 @@ class Progress:
             self.stream.write("\r\033[K")
         self.stream.write(text + "\n")
         self.stream.flush()
-
-    def estimation(self, stage: str, iteration: int, total: int, best: float) -> None:
-        """The estimation's ``progress(stage, iteration, total, best_cost)`` callback."""
-        if stage == "global":
-            self("global search", iteration, total, f"best NRMSE {best:.5g}", unit="generation")
-        elif stage == "refine":
-            self("refinement", iteration, total, f"rms NRMSE {best:.5g}", unit="simulation")
-        else:
-            self.note(f"refinement done: NRMSE {best:.5g} ({duration(time.perf_counter() - self.t0)} elapsed)")
 
 
 class Counter:

@@ -7,7 +7,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..benches import BENCHES, make_bench
 from ..errors import TrackingError
+from ..io import check_output
 from ._args import number, parse_assignments
 
 EPILOG = """\
@@ -42,8 +44,6 @@ default period 1 day); truth.json holds every effect's fouling over time.
 
 def register(subparsers: Any) -> None:
     """Add the ``bench`` subcommand."""
-    from ..benches import BENCHES
-
     p = subparsers.add_parser(
         "bench",
         help="generate a bench case: plant and twin FMUs, noisy measurements, spec.toml",
@@ -87,8 +87,6 @@ MAX_HOURS = 24.0 * 366
 
 def run(args: argparse.Namespace) -> int:
     """Generate the case; print a summary (or JSON)."""
-    from ..benches import make_bench
-
     overrides = parse_assignments(args.overrides, "--set")
     if args.hours is not None and not args.hours > 0:
         raise TrackingError(f"--hours must be > 0, got {args.hours:g}")
@@ -100,8 +98,6 @@ def run(args: argparse.Namespace) -> int:
     if hours is not None and hours > MAX_HOURS:
         raise TrackingError(f"--{'days' if args.days is not None else 'hours'}: {hours:g} h is more than the "
                             f"{MAX_HOURS:g} h a bench case may span")
-    from ..io import check_output
-
     check_output(args.out, "--out", kind="dir", inputs=[p for p in (args.plant_fmu, args.twin_fmu) if p])
     case = make_bench(args.bench, args.out, seed=args.seed, overrides=overrides, hours=hours,
                       plant_fmu=args.plant_fmu, twin_fmu=args.twin_fmu, hidden=args.hidden,

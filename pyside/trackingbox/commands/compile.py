@@ -5,6 +5,9 @@ import argparse
 import json
 
 from ..compiler import BACKENDS, compile_model
+from ..compiler.omc_interface import ExpectedInterface
+from ..io import check_output, user_path
+from ..spec import load_spec
 
 EPILOG = """\
 examples:
@@ -38,16 +41,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io import check_output, user_path
-
     source = user_path(args.source, "source")
     if args.output is not None:
         check_output(args.output, "-o", inputs=[source])
     expected = None
     if args.spec:
-        from ..compiler.omc_interface import ExpectedInterface
-        from ..spec import load_spec
-
         expected = ExpectedInterface.from_spec(load_spec(args.spec, check_files=False))
     result = compile_model(args.source, args.model, backend=args.backend, output=args.output,
                            libraries=args.library, expected=expected)

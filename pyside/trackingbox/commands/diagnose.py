@@ -7,7 +7,13 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ..io import check_output
+from ..report.diagnose import write_diagnose_report
+from ..spec import check_against_fmu, load_spec
+from ..stages import diagnose as stage
+from ..stages.contract import settings_from_args
 from ._args import add_executor_arguments, number
+from ._progress import Progress
 
 log = logging.getLogger(__name__)
 
@@ -68,27 +74,16 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the diagnosis; exit code 0 for every verdict."""
-    from ..diagnose import DiagnoseSettings, diagnose
-    from ..spec import check_against_fmu, load_spec
-    from ._progress import Progress
-
-    from ..io import check_output
-
     spec = load_spec(args.spec)
     inputs = [spec.path, spec.twin, spec.measurements]
     for option, value in (("--report", args.report), ("-o", args.output)):
         if value is not None:
             check_output(value, option, kind="dir", inputs=inputs)
     check_against_fmu(spec)
-    settings = DiagnoseSettings(
-        effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()),
-        compile=args.compile, fit_best=args.fit_best, fit_rounds=args.fit_rounds, out_dir=args.output, seed=args.seed,
-        workers=args.workers, maxiter=args.maxiter, warmup=args.warmup, scheduler=args.scheduler)
-    progress = Progress(every=15.0)
-    result = diagnose(spec, settings, progress=lambda stage, done, total: progress(stage, done, total))
+    settings = settings_from_args(stage.DiagnoseSettings, args, out_dir=args.output,
+                                  effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()))
+    result = stage.run(spec, settings, progress=Progress(every=15.0))
     if args.report:
-        from ..report.diagnose import write_diagnose_report
-
         write_diagnose_report(spec, result, args.report)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))

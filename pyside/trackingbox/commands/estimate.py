@@ -7,6 +7,24 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from ..errors import EstimationError
+from ..estimation import (
+    DEFAULT_GLOBAL_EVALUATIONS,
+    DEFAULT_GLOBAL_GRID,
+    DEFAULT_MAXITER,
+    DEFAULT_POPULATION,
+    DEFAULT_WARMUP,
+    MAX_REFINE_ITERATIONS,
+    write_starts,
+)
+from ..io import check_output, output_dir
+from ..report import write_estimate_report
+from ..spec import check_against_fmu, load_spec
+from ..stages import estimate as stage
+from ..stages.contract import settings_from_args
+from ._args import add_executor_arguments, number
+from ._progress import Progress
+
 log = logging.getLogger(__name__)
 
 EPILOG = """\
@@ -45,10 +63,6 @@ goes to stderr.
 
 def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
-    from ._args import add_executor_arguments, number
-    from ..estimation import (DEFAULT_GLOBAL_EVALUATIONS, DEFAULT_GLOBAL_GRID, DEFAULT_MAXITER, DEFAULT_POPULATION,
-                              DEFAULT_WARMUP, MAX_REFINE_ITERATIONS)
-
     p = subparsers.add_parser(
         "estimate",
         help="estimate the spec's [[parameters]] from the measurements (training/validation windows)",
@@ -100,14 +114,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the estimation; exit code 0 on success."""
-    from ..estimation import estimate, write_starts
-    from ..report import write_estimate_report
-    from ..spec import check_against_fmu, load_spec
-    from ._progress import Progress
-
-    from ..errors import EstimationError
-    from ..io import check_output, output_dir
-
     if args.resume and not args.report:
         raise EstimationError("--resume needs --report DIR: the checkpoint and its journal live there")
     spec = load_spec(args.spec)
@@ -117,28 +123,13 @@ def run(args: argparse.Namespace) -> int:
     checkpoint = args.report / "checkpoint.json" if args.report else None
     progress = Progress(every=15.0)
     with output_dir(args.report or "."):
-        return _run(args, spec, estimate, write_starts, write_estimate_report, checkpoint, progress)
+        return _run(args, spec, checkpoint, progress)
 
 
-def _run(args: argparse.Namespace, spec: Any, estimate: Any, write_starts: Any, write_estimate_report: Any,
-         checkpoint: Any, progress: Any) -> int:
-    result = estimate(
-        spec,
-        seed=args.seed,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        maxiter=args.maxiter,
-        popsize=args.popsize,
-        warmup=args.warmup,
-        refine=args.refine,
-        refine_iterations=args.refine_iterations,
-        progress=progress.estimation,
-        checkpoint=checkpoint,
-        global_grid=args.global_grid,
-        resume=args.resume,
-        jacobian=args.jacobian,
-        level=args.level if args.intervals else None,
-    )
+def _run(args: argparse.Namespace, spec: Any, checkpoint: Any, progress: Any) -> int:
+    result = stage.run(spec, settings_from_args(stage.EstimateSettings, args, checkpoint=checkpoint,
+                                                level=args.level if args.intervals else None),
+                       progress=progress)
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
     if args.write:

@@ -7,6 +7,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..io import check_output, output_dir
+from ..spec import load_spec
+from ..stages import generate as stage
+from ..stages.contract import settings_from_args
+
 EPILOG = """\
 examples:
   gen-trackingbox case1/spec.toml -o case1/generated
@@ -49,26 +54,21 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate (and optionally compile); print a summary or JSON."""
-    from ..generate.generator import compile_generated, generate
-    from ..spec import load_spec
-
-    from ..io import check_output, output_dir
-
     spec = load_spec(args.spec, check_files=False)
     out = args.out if args.out is not None else spec.path.parent / "generated"
     inputs = [spec.path, spec.twin, spec.measurements, *([spec.source.path] if spec.source else [])]
     out = check_output(out, "-o" if args.out is not None else "the output directory", kind="dir", inputs=inputs)
     with output_dir(out):
-        return _run(args, spec, out, generate, compile_generated)
+        return _run(args, spec, out)
 
 
-def _run(args: argparse.Namespace, spec: Any, out: Path, generate: Any, compile_generated: Any) -> int:
-    result = generate(spec, out, rewrite=args.rewrite)
+def _run(args: argparse.Namespace, spec: Any, out: Path) -> int:
+    result = stage.run(spec, settings_from_args(stage.GenerateSettings, args, out_dir=out))
     if result.rewrite is not None:
         # The diff is part of what the user asked for; keep stdout clean for --json.
         stream = sys.stderr if args.json else sys.stdout
         stream.write(result.rewrite.diff)
-    compiled = compile_generated(result, backend=args.backend) if args.compile else None
+    compiled = stage.compile_generated(result, backend=args.backend) if args.compile else None
     if args.json:
         print(json.dumps({**result.to_json(), "compile": None if compiled is None else compiled.to_json()},
                          indent=2))

@@ -7,6 +7,14 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..identify.analysis import DEFAULT_POINTS, identify
+from ..io import check_output, output_dir
+from ..report.identify import write_identify_report
+from ..simulation.windows import DEFAULT_WARMUP
+from ..spec import check_against_fmu, load_spec
+from ._args import number
+from ._progress import Progress
+
 EPILOG = """\
 examples:
   trackingbox identify case1/spec.toml
@@ -30,10 +38,6 @@ wide as the bounds allow. Exit code 0 when the analysis ran, whatever it found.
 
 def register(subparsers: Any) -> None:
     """Add the ``identify`` subcommand."""
-    from ._args import number
-    from ..identify.analysis import DEFAULT_POINTS
-    from ..estimation import DEFAULT_WARMUP
-
     p = subparsers.add_parser(
         "identify",
         help="what the data can determine of the spec's [[parameters]] (rank, undetermined combinations, "
@@ -57,11 +61,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the analysis; exit code 0 when it ran."""
-    from ..identify.analysis import identify
-    from ..io import check_output, output_dir
-    from ..spec import check_against_fmu, load_spec
-    from ._progress import Progress
-
     spec = load_spec(args.spec)
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements])
@@ -71,8 +70,6 @@ def run(args: argparse.Namespace) -> int:
         result = identify(spec, points=args.points, method=args.sensitivities, warmup=args.warmup,
                           progress=lambda stage, done, total: progress("sensitivity runs", done, total))
         if args.report:
-            from ..report.identify import write_identify_report
-
             write_identify_report(spec, result, args.report)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))

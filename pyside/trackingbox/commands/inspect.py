@@ -7,6 +7,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..fmu import read_info
+
 EPILOG = """\
 examples:
   trackingbox inspect twin.fmu
@@ -66,8 +68,6 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Print the FMU's interface; 0 on success (FMUError otherwise, handled by the CLI)."""
-    from ..fmu import read_info
-
     info = read_info(args.fmu)
     variables = [
         v for v in info.variables

@@ -6,7 +6,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..io import check_output
+from ..report import Document, write_pair_report
+from ..spec import check_against_fmu, load_spec, write_pairs
+from ..stages import pair as stage
+from ..stages.contract import settings_from_args
 from ._args import add_executor_arguments, number, parse_assignments
+from ._progress import Progress
 
 EPILOG = """\
 examples:
@@ -112,43 +118,26 @@ def register(subparsers: Any) -> None:
 
 def settings(args: argparse.Namespace) -> Any:
     """The :class:`~trackingbox.analysis.pair_stage.PairSettings` the arguments ask for."""
-    from ..analysis.pair_stage import PairSettings
-
-    return PairSettings(method=args.method, step=args.step, two_sided=not args.one_sided,
-                        freeze=() if args.no_freeze else None if args.freeze is None
-                        else tuple(parse_assignments(args.freeze, "--freeze").items()), at=args.at,
-                        interval=args.interval, window=args.window,
-                        tolerance=args.tolerance, baseline_tolerance=args.baseline_tolerance,
-                        max_time=args.max_time, rank_tol=args.rank_tol, second_point=args.second_point,
-                        data_checks=args.data_checks, identify=args.identify, noise_ratio=args.noise_ratio,
-                        min_reach=args.min_reach,
-                        max_ratio=args.max_ratio, max_leak=args.max_leak, max_jitter=args.max_jitter,
-                        check_gains=args.check_gains,
-                        closed_loop=args.closed_loop, closed_loop_min=args.closed_loop_min, samples=args.samples, seed=args.seed, workers=args.workers,
-                        scheduler=args.scheduler)
+    freeze = (() if args.no_freeze else None if args.freeze is None
+              else tuple(parse_assignments(args.freeze, "--freeze").items()))
+    return settings_from_args(stage.PairSettings, args, two_sided=not args.one_sided, freeze=freeze)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trackingbox pair``; exit code 0 on success, 1 when no pair was found."""
-    from ..analysis.pair_stage import pair, spec_pairs
-    from ..report import write_pair_report
-    from ..io import check_output
-    from ..spec import check_against_fmu, load_spec, write_pairs
-    from ._progress import Progress
-
     spec = load_spec(args.spec)
     if args.report:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements])
     check_against_fmu(spec)
     progress = Progress()
-    result = pair(spec, settings(args), progress=progress)
+    result = stage.run(spec, settings(args), progress=progress)
     pairing = result.pairing
     if args.report:
         rep = write_pair_report(spec, result, args.report)
         progress.note(f"report: {', '.join(str(p) for p in rep.files)}")
     if args.write:
         if pairing.pairs:
-            write_pairs(spec.path, spec_pairs(spec, result))
+            write_pairs(spec.path, stage.spec_pairs(spec, result))
             progress.note(f"wrote {len(pairing.pairs)} pairs to {spec.path}")
         else:
             progress.note(f"no pairs found; {spec.path} left unchanged")
@@ -160,8 +149,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(result: Any) -> None:
-    from ..report import Document
-
     pairing, doc = result.pairing, Document("")
     doc.table(["variable", "parameter", "lambda", "gain", "tau (s)"],
               [[p.variable, p.parameter, f"{p.lambda_:.3f}", f"{p.gain:.4g}", f"{p.time_constant:.4g}"]

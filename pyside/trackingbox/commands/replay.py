@@ -5,8 +5,13 @@ import argparse
 import json
 import logging
 import math
+from datetime import datetime
 from pathlib import Path
 from typing import Any
+
+from ..errors import SpecError
+from ..online.opcua import read_users
+from ..online.replay import ReplaySettings, replay
 
 log = logging.getLogger(__name__)
 
@@ -53,12 +58,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until the case ends (and --linger passes) or Ctrl-C; exit code 0."""
-    from datetime import datetime
-
-    from ..errors import SpecError
-    from ..online.opcua import read_users
-    from ..online.replay import ReplaySettings, replay
-
     origin: datetime | float | None = None
     if args.origin and args.origin.startswith("+"):
         try:

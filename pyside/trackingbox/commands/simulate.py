@@ -10,7 +10,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..data import read_table
 from ..errors import FMUError, TrackingError, did_you_mean
+from ..fmu import check_values, read_info
+from ..io import atomic_path, check_output
+from ..simulation.models import open_model
 from ._args import number, parse_assignments
 
 log = logging.getLogger(__name__)
@@ -64,11 +68,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Validate everything, simulate, write the CSV atomically; 0 on success."""
-    from ..data import read_table
-    from ..fmu import FMUModel, read_info
-    from ..fmu import check_values
-    from ..io import atomic_path, check_output
-
     settings = parse_assignments(args.set_values, "--set")
     check_output(args.out, "-o", inputs=[p for p in (args.fmu, args.inputs) if p is not None])
     info = read_info(args.fmu)
@@ -133,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                             f"(at most {MAX_ROWS:g}): give a larger --step or a shorter run")
 
     t0 = time.perf_counter()
-    with FMUModel(args.fmu, tolerance=args.tolerance, interface=args.interface) as model:
+    with open_model(args.fmu, tolerance=args.tolerance, interface=args.interface) as model:
         result = model.simulate(start_time=start, stop_time=stop, output_interval=step, inputs=inputs,
                                 parameters=settings, outputs=args.outputs)
     seconds = time.perf_counter() - t0

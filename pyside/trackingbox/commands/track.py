@@ -4,10 +4,22 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from ..checkpoint import CheckpointFile
+from ..errors import SpecError
+from ..io import check_output, output_dir
+from ..online.live import LiveSettings, track_live
+from ..online.opcua import read_credentials
+from ..report import write_track_report
+from ..report.track import summary_tables
+from ..spec import check_against_fmu, load_spec
+from ..stages import track as stage
+from ..stages.contract import settings_from_args
 from ._args import number
+from ._progress import Progress
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +79,7 @@ def register(subparsers: Any) -> None:
                         "change of a tracked parameter of at most FRACTION of its bound range (a correction "
                         "flow: of its compensator's gain times its level's range) instead of re-initialising "
                         "it (default 0.02); 0: re-initialise at every change, the restart path, closer to "
-                        "the exact closed loop where the twin's parameters change often (see docs/architecture.md)")
+                        "the exact closed loop where the twin's parameters change often (scripts/bench_carry measures both)")
     p.add_argument("--checkpoint-every", type=number(ge=1, integer=True), default=200, metavar="N",
                    help="rows between checkpoints (default 200)")
     live = p.add_argument_group("online mode (OPC UA)")
@@ -85,13 +97,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the tracking simulator; exit code 0 on success."""
-    from ..checkpoint import CheckpointFile
-    from ..io import check_output, output_dir
-    from ..report import write_track_report
-    from ..spec import check_against_fmu, load_spec
-    from ..tracking.runtime import track
-    from ._progress import Progress
-
     spec = load_spec(args.spec)
     inputs = [spec.path, spec.twin, spec.measurements]
     out = check_output(args.out or args.report or Path(spec.path).parent / "track",
@@ -99,8 +104,6 @@ def run(args: argparse.Namespace) -> int:
                        kind="dir", inputs=inputs)
     if args.live:
         if args.controllers != "discrete" or args.carry is not None:
-            from ..errors import SpecError
-
             if args.carry is not None:
                 raise SpecError("--carry is not available with --live (the online mode steps its twins "
                                 "with the default carry)")
@@ -108,8 +111,6 @@ def run(args: argparse.Namespace) -> int:
                             "discrete controllers sample by sample as the data arrive)")
         return _run_live(args, spec, out)
     if args.carry is not None and args.controllers != "discrete":
-        from ..errors import SpecError
-
         raise SpecError("--carry applies to the discrete controllers: with --controllers continuous the "
                         "parameters move inside the integrator and there is nothing to carry")
     if args.report:
@@ -118,11 +119,9 @@ def run(args: argparse.Namespace) -> int:
         CheckpointFile(out / "checkpoint.json", out / "tracking.csv").read()
     check_against_fmu(spec)  # before the output directory exists
     with output_dir(out), output_dir(args.report or out):
-        result = track(spec, out_dir=out, resume=args.resume,
-                       progress=Progress().counter("tracking", unit="row"),
-                       window=args.window, checkpoint_every=args.checkpoint_every,
-                       controllers=args.controllers,
-                       **({} if args.carry is None else {"carry": args.carry}))
+        settings = settings_from_args(stage.TrackSettings, args, out_dir=out,
+                                      carry=stage.CARRY_FRACTION if args.carry is None else args.carry)
+        result = stage.run(spec, settings, progress=Progress())
         if args.report:
             write_track_report(spec, result, args.report)
     if args.json:
@@ -135,14 +134,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
-    from datetime import datetime
-
-    from ..errors import SpecError
-    from ..online.live import LiveSettings, track_live
-    from ..online.opcua import read_credentials
-    from ..report import write_track_report
-    from ._progress import Progress
-
     start = None
     if args.live_from:
         try:
@@ -165,8 +156,6 @@ def _run_live(args: argparse.Namespace, spec: Any, out: Path) -> int:
 
 
 def _print_summary(result: Any, paired: dict[str, str] | None = None) -> None:
-    from ..report.track import summary_tables
-
     print(summary_tables(result, paired).markdown())
     state = "complete" if result.complete else "stopped early (resume to continue)"
     print(f"{result.steps} rows, {result.simulated_seconds:g} s simulated in {result.seconds:.1f} s; {state}")

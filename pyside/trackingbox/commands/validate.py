@@ -7,6 +7,12 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..errors import TrackingError
+from ..io import check_output, output_dir
+from ..report import write_validate_report
+from ..spec import load_spec
+from ..stages import validate as stage
+from ..stages.contract import settings_from_args
 from ._args import number
 
 EPILOG = """\
@@ -45,24 +51,17 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Validate; print a summary (or JSON)."""
-    from ..errors import TrackingError
-    from ..spec import load_spec
-    from ..report import write_validate_report
-    from ..validate import validate
-
     if not (args.band > 0.0 and math.isfinite(args.band)):
         raise TrackingError(f"--band must be a positive number, got {args.band}")
-    from ..io import check_output, output_dir
-
     spec = load_spec(args.spec)
     if args.report is not None:
         check_output(args.report, "--report", kind="dir", inputs=[spec.path, spec.twin, spec.measurements, args.fmu])
     with output_dir(args.report or "."):
-        return _run(args, spec, validate, write_validate_report)
+        return _run(args, spec)
 
 
-def _run(args: argparse.Namespace, spec: Any, validate: Any, write_validate_report: Any) -> int:
-    result = validate(spec, args.fmu, band=args.band)
+def _run(args: argparse.Namespace, spec: Any) -> int:
+    result = stage.run(spec, settings_from_args(stage.ValidateSettings, args))
     report = None
     if args.report is not None:
         report = write_validate_report(spec, result, args.fmu, args.report).markdown

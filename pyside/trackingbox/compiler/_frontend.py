@@ -18,6 +18,7 @@ text, line), ...]}``.
 """
 from __future__ import annotations
 
+import os
 import pickle
 import sys
 import threading
@@ -75,9 +76,8 @@ def main(argv: list[str]) -> int:
         request = pickle.load(fh)
     # rumoca recurses on the native stack: give it a thread with a large one (reserved, not used,
     # unless needed), so that deep but sane expressions pass; deeper ones still fail here, not in the tool.
-    import os
-
-    threading.stack_size(max(1, int(os.environ.get("TRACKINGBOX_FRONTEND_STACK_MB", STACK_MB))) * 1024 * 1024)
+    # the size comes in the request (TRACKINGBOX_FRONTEND_STACK_MB, read by the parent through trackingbox.config)
+    threading.stack_size(max(1, int(request.get("stack_mb", STACK_MB))) * 1024 * 1024)
     box: list[dict] = []
     worker = threading.Thread(target=lambda: box.append(work(request)))
     worker.start()

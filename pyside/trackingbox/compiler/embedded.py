@@ -18,12 +18,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
+from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
+from .library import index_for, locate, model_files, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
-from .source import ModelicaSource, class_names, experiment_settings, locate, model_files
+from .source import ModelicaSource, class_names, experiment_settings
 
 log = logging.getLogger(__name__)
 
@@ -52,13 +55,14 @@ _MENTIONED = (
 )
 
 
-def _mentioned_construct(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+def _mentioned_construct(message: str, source: ModelicaSource, model: str,
+                         libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a construct the embedded path does not support either: say where it is
     (in the model's own file or a class it uses, never elsewhere in the package)."""
     low = message.lower()
     for needle, construct, pattern in _MENTIONED:
         if needle in low:
-            locs = locate(source, model, pattern)
+            locs = locate(source, model, pattern, libraries=libraries)
             if locs:
                 where = ", ".join(str(loc) for loc in locs)
                 return UnsupportedConstructError(
@@ -74,7 +78,7 @@ _IMPLICIT_RANGE = "indices require an explicit range"
 
 
 def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
-                    model: str) -> UnsupportedConstructError | None:
+                    model: str, libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca said it does not support something (not that the model is wrong): refuse naming
     the construct in rumoca's words and where it stands in the model's own files."""
     low = message.lower()
@@ -100,20 +104,20 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
                    else r"\balgorithm\b" if "algorithm" in detail else None)
     else:
         return None
-    allowed = {str(f) for f in model_files(source, model)}
+    allowed = {str(f) for f in model_files(source, model, libraries=libraries)}
     where = [f"{f}:{n}" for f, n in _POSITION.findall(message) if f in allowed]
     where += [d.split(": ", 1)[0].rsplit(":", 1)[0] for d in diags
               if d.split(":", 1)[0] in allowed and ("indices require" in d or "unsupported" in d.lower())]
     if not where and pattern:
-        where = [str(loc) for loc in locate(source, model, pattern)]
+        where = [str(loc) for loc in locate(source, model, pattern, libraries=libraries)]
     if not where:  # the first occurrence of a name rumoca quotes (`f`, `findValue`) in the model's own code
         for name in re.findall(r"`([A-Za-z_]\w*)`", first):
-            found = locate(source, model, rf"\b{re.escape(name)}\b", limit=1)
+            found = locate(source, model, rf"\b{re.escape(name)}\b", limit=1, libraries=libraries)
             if found:
                 where = [str(found[0])]
                 break
     if not where:  # nothing to point at: at least the line that declares the model
-        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1)
+        decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, libraries=libraries)
         where = [f"{decl[0]} (the model's declaration; the front end gave no position)"] if decl else []
     at = f" at {', '.join(dict.fromkeys(where))}" if where else ""
     return UnsupportedConstructError(
@@ -121,14 +125,14 @@ def _frontend_limit(message: str, diags: list[str], source: ModelicaSource,
         "it; use --backend openmodelica where omc is installed, or rewrite the model")
 
 
-def _own_position(first: str, source: ModelicaSource, model: str) -> str:
+def _own_position(first: str, source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> str:
     """For a front-end message without a position: where the first name it quotes (`x`) stands
     in the model's own class, else the line that declares the model (`` (... at file:line)``)."""
     for name in re.findall(r"`([A-Za-z_]\w*)`", first):
-        found = locate(source, model, rf"(?<![\w.]){re.escape(name)}\b", limit=1, own=True)
+        found = locate(source, model, rf"(?<![\w.]){re.escape(name)}\b", limit=1, own=True, libraries=libraries)
         if found:
             return f" (`{name}` at {found[0]} in {model}; the front end gave no position)"
-    decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, own=True)
+    decl = locate(source, model, _CLASS_DECL.format(name=re.escape(model.rsplit(".", 1)[-1])), limit=1, own=True, libraries=libraries)
     return f" ({model} is declared at {decl[0]}; the front end gave no position)" if decl else ""
 
 
@@ -140,7 +144,7 @@ _NAMED_IN_MESSAGE = (
 )
 
 
-def _named_position(first: str, source: ModelicaSource, model: str) -> str:
+def _named_position(first: str, source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> str:
     """Where the construct rumoca's message names (``initial algorithm``, ``delay()``, ...) stands
     in the model's own class (its own file), or "" when the message names none or it is not there."""
     for said, where in _NAMED_IN_MESSAGE:
@@ -148,7 +152,7 @@ def _named_position(first: str, source: ModelicaSource, model: str) -> str:
         if found is None:
             continue
         pattern = where.format(*(re.escape(g) for g in found.groups()))
-        locs = locate(source, model, pattern, limit=3, own=True)
+        locs = locate(source, model, pattern, limit=3, own=True, libraries=libraries)
         if locs:
             return ", ".join(dict.fromkeys(str(loc) for loc in locs))
     return ""
@@ -268,7 +272,8 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
 Modelica compliance suite); each is listed in the README's compile section."""
 
 
-def _frontend_gap(message: str, source: ModelicaSource, model: str) -> UnsupportedConstructError | None:
+def _frontend_gap(message: str, source: ModelicaSource, model: str,
+                  libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
     """rumoca refused a valid construct with a type or shape error: name the construct and the
     line where it stands in the model's own code, saying that the front end does not support it."""
     for gap in FRONTEND_GAPS:
@@ -282,9 +287,9 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str) -> Unsupport
                 template = template.replace("{" + key + "}", value)
             return template
 
-        if gap.requires and not locate(source, model, fill(gap.requires), limit=1):
+        if gap.requires and not locate(source, model, fill(gap.requires), limit=1, libraries=libraries):
             continue
-        locs = locate(source, model, fill(gap.where), limit=3)
+        locs = locate(source, model, fill(gap.where), limit=3, libraries=libraries)
         if not locs:
             continue
         where = ", ".join(dict.fromkeys(str(loc) for loc in locs))
@@ -295,7 +300,7 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str) -> Unsupport
     return None
 
 
-FRONTEND_TIMEOUT = 600.0
+FRONTEND_TIMEOUT = config.setting("frontend_timeout").default
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
 
@@ -312,57 +317,72 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
     """Run rumoca's load + flatten (or, given *validate*, its diagnostics of those files)
     in a worker process and return the worker's answer.
 
+    rumoca reads a front-end tree (:mod:`.frontend`): a copy of the files the model can reach,
+    as rumoca should read them; should the flatten fail on a name the copy may have left out,
+    it is repeated on the whole source and libraries. A flattened model is kept in the flat
+    cache and reused while every file of its tree is unchanged (``"cached": True`` in the answer).
+
     A worker that dies (segmentation fault, abort, stack overflow) or outlives
     :data:`FRONTEND_TIMEOUT` raises :class:`CompileError` naming the model and
     the signal; the tool itself never goes down with it.
     """
-    request = {
-        "mode": "flatten" if validate is None else "validate",
-        "parse_error": parse_error,
-        "entry": str(source.entry),
-        "model": model,
-        "roots": ([str(source.root)] + [str(p) for p in libraries]) if libraries else None,
-        "validate": [str(f) for f in validate or ()],
-        "validate_all": [str(f) for f in source.files],
-    }
-    timeout = float(os.environ.get("TRACKINGBOX_FRONTEND_TIMEOUT", FRONTEND_TIMEOUT))
+    timeout = float(config.get("frontend_timeout"))
     with tempfile.TemporaryDirectory(prefix="tbx-frontend-") as tmp:
         req, res = Path(tmp) / "request.pickle", Path(tmp) / "result.pickle"
-        # rumoca refuses a byte-order mark and loses some der() equations in for-loops: give it a copy
-        # without the mark and with those equations protected (.rewrite; lines and offsets unchanged)
-        if any(frontend_bytes(f) is not None for f in source.files):
+        if validate is not None:
+            return _validate(source, model, validate, parse_error, Path(tmp), req, res, timeout)
+        cache = FlatCache() if FlatCache.enabled() else None
+        index = index_for(source, libraries)
+        for prune in (True, False):
+            tree = build_tree(source, model, libraries, Path(tmp) / ("pruned" if prune else "full"), prune=prune,
+                              index=index)
+            key = tree.cache_key(model)
+            if cache is not None:
+                flat = cache.get(key)
+                if flat is not None:
+                    log.debug("front end: %s from the flat cache (%s)", model, key[:12])
+                    return {"ok": True, "flat": flat, "cached": True}
+            request = {"mode": "flatten", "entry": str(tree.entry), "model": model,
+                       "stack_mb": config.get("frontend_stack_mb"),
+                       "roots": [str(r) for r in tree.roots] if tree.roots else None}
+            answer = tree.rename(_run_worker(request, req, res, source, model, timeout))
+            if answer["ok"]:
+                if cache is not None:
+                    cache.put(key, answer["flat"])
+                return answer
+            if not (tree.pruned and answer.get("kind") == "rumoca" and may_be_pruned(answer["message"], index, tree)):
+                return answer
+            log.info("front end: %s failed on the files its lookup reaches (%s); again on the whole "
+                     "libraries", model, answer["message"].splitlines()[0][:200])
+        return answer
 
-            copy = _without_bom(source, Path(tmp) / "src")
-            request["entry"] = str(copy / source.entry.relative_to(source.root))
-            if request["roots"]:
-                request["roots"] = [str(copy), *request["roots"][1:]]
-            for key in ("validate", "validate_all"):
-                request[key] = [str(copy / Path(f).relative_to(source.root)) for f in request[key]]
-            answer = _run_worker(request, req, res, source, model, timeout)
-            return _rename(answer, str(copy), str(source.root))
-        return _run_worker(request, req, res, source, model, timeout)
 
+def _validate(source: ModelicaSource, model: str, validate: tuple[Path, ...], parse_error: bool, tmp: Path,
+              req: Path, res: Path, timeout: float) -> dict:
+    """rumoca's diagnostics of *validate* (and of every file of the source after a parse error), each
+    read as rumoca reads it in a compile (a rewritten copy where :mod:`.rewrite` changes it)."""
+    renames: list[tuple[str, str]] = []
 
-def _without_bom(source: ModelicaSource, dest: Path) -> Path:
-    """A copy of the package's files under *dest* as rumoca should read them (same relative
-    paths; byte-order marks removed, der() equations in for-loops protected: :mod:`.rewrite`)."""
-    for file in source.files:
-        target = dest / file.relative_to(source.root)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        data = frontend_bytes(file)
-        target.write_bytes(file.read_bytes() if data is None else data)
-    return dest
+    def readable(files) -> list[str]:
+        out = []
+        for f in files:
+            f = Path(f)
+            data = frontend_bytes(f)
+            if data is None:
+                out.append(str(f))
+                continue
+            copy = tmp / "validate" / str(len(renames)) / f.name
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            copy.write_bytes(data)
+            renames.append((str(copy), str(f)))
+            out.append(str(copy))
+        return out
 
-
-def _rename(obj: object, old: str, new: str) -> object:
-    """*obj* with the path prefix *old* replaced by *new* in every string of messages and diagnostics."""
-    if isinstance(obj, dict):
-        return {k: (v if k == "flat" else _rename(v, old, new)) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return type(obj)(_rename(v, old, new) for v in obj)
-    if isinstance(obj, str):
-        return obj.replace(old, new)
-    return obj
+    request = {"mode": "validate", "parse_error": parse_error, "model": model,
+               "stack_mb": config.get("frontend_stack_mb"),
+               "validate": readable(validate), "validate_all": readable(source.files) if parse_error else []}
+    answer = _run_worker(request, req, res, source, model, timeout)
+    return FrontendTree(entry=tmp, roots=None, renames=sorted(renames, key=lambda r: -len(r[0]))).rename(answer)
 
 
 def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, model: str,
@@ -370,8 +390,10 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
     req.write_bytes(pickle.dumps(request))
     cmd = [sys.executable, str(Path(__file__).with_name("_frontend.py")), str(req), str(res)]
     log.debug("front end: %s", " ".join(cmd))
+    # rumoca would load every library on MODELICAPATH itself: the tree already holds what is needed
+    env = {k: v for k, v in os.environ.items() if k != "MODELICAPATH"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True)
+                            start_new_session=True, env=env)
     try:
         out, _ = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -390,17 +412,39 @@ def _run_worker(request: dict, req: Path, res: Path, source: ModelicaSource, mod
     return pickle.loads(res.read_bytes())
 
 
-def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()) -> dict:
-    """Run rumoca on *model*; raise :class:`CompileError` with file:line diagnostics."""
+def _missing_library(message: str, missing: dict[str, str], model: str) -> CompileError | None:
+    """The front end failed while a top-level package the model's classes use is in no library: say
+    which (the package the front end's message names, else the first one missing)."""
+    if not missing:
+        return None
+    names = [(q[0] or q[1]).split(".", 1)[0] for q in re.findall(r"'([A-Za-z_][\w.]*)'|`([A-Za-z_][\w.]*)`", message)]
+    first = next((n for n in names if n in missing), next(iter(missing)))
+    others = [n for n in missing if n != first]
+    also = f" (also not found: {', '.join(others)})" if others else ""
+    return CompileError(
+        f"`{first}` is used by {missing[first]} but not found: pass --library DIR (the {first} package "
+        f"directory, or the directory that holds it) or set MODELICAPATH{also}")
+
+
+def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = (),
+            missing: dict[str, str] | None = None) -> dict:
+    """Run rumoca on *model*; raise :class:`CompileError` with file:line diagnostics.
+
+    *missing*: top-level packages the model uses that no library holds (name -> where it is
+    used, :func:`.library.resolve_libraries`); a failure on one of them names the library."""
     answer = run_frontend(source, model, libraries)
     if answer["ok"]:
         return answer["flat"]
     message = answer["message"]
+    if missing:
+        lost = _missing_library(message, missing, model)
+        if lost is not None:
+            raise lost
     if answer["kind"] != "rumoca":
         raise CompileError(f"rumoca failed on {model!r} from {source.entry}: {message}")
     first = message.splitlines()[0] if message else "rumoca error"
     try:  # diagnostics of the model's own files (and of every file for a syntax error elsewhere)
-        raw = run_frontend(source, model, libraries, validate=model_files(source, model),
+        raw = run_frontend(source, model, libraries, validate=model_files(source, model, libraries=libraries),
                            parse_error="parse" in message.lower())["diagnostics"]
     except CompileError:
         raw = []
@@ -413,17 +457,18 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                    f"{did_you_mean(model, known)} (classes are named with their "
                                    f"package, e.g. Pkg.Sub.Model)")
             raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}"
-                               f"{_own_position(first, source, model)}")
-    construct = (_mentioned_construct(message, source, model) or _frontend_limit(message, diags, source, model)
-                 or _frontend_gap(message, source, model))
+                               f"{_own_position(first, source, model, libraries)}")
+    construct = (_mentioned_construct(message, source, model, libraries)
+                 or _frontend_limit(message, diags, source, model, libraries)
+                 or _frontend_gap(message, source, model, libraries))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""
-    named = _named_position(first, source, model)
+    named = _named_position(first, source, model, libraries)
     if named:  # the construct rumoca names, where it stands in the model's own class, comes first
         detail = f" (at {named}){detail}"
     elif not diags and not _POSITION.search(message):  # e.g. ToDae type errors: at least the class
-        detail = _own_position(first, source, model)
+        detail = _own_position(first, source, model, libraries)
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
@@ -431,7 +476,8 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
                      libraries: tuple[Path, ...] = ()) -> tuple[str, int, int]:
     """Compile with the embedded toolchain; returns (log, n_states, n_parameters)."""
     t0 = time.perf_counter()
-    flat = flatten(source, model, libraries)
+    libraries, missing = resolve_libraries(source, model, libraries)
+    flat = flatten(source, model, libraries, missing)
     if flat.get("is_partial"):
         raise CompileError(f"{model!r} is a partial class and cannot be compiled")
     class_type = str(flat.get("class_type", "")).lower()
@@ -439,7 +485,7 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
     check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
     t1 = time.perf_counter()
-    translator = FlatTranslator(flat, source, model)
+    translator = FlatTranslator(flat, source, model, libraries)
     em = translator.translate()
     t2 = time.perf_counter()
     settings = experiment_settings(source, model)

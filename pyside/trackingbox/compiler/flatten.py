@@ -69,7 +69,8 @@ from .arrays import ArrayError
 from .causalize import StructuralError, blt
 from .modifiers import modifier_check
 from .semantics import check_flat
-from .source import (Location, ModelicaSource, class_extent, locate, model_files, read_text, span_location,
+from .library import locate, model_files
+from .source import (Location, ModelicaSource, class_extent, read_text, span_location,
                      span_sources, strip_comments)
 
 log = logging.getLogger(__name__)
@@ -192,10 +193,12 @@ def _num(x: Value) -> bool:
 class FlatTranslator:
     """Translate one rumoca flat model into an :class:`ExplicitModel`."""
 
-    def __init__(self, flat: dict[str, Any], source: ModelicaSource, model: str):
+    def __init__(self, flat: dict[str, Any], source: ModelicaSource, model: str,
+                 libraries: tuple[Path, ...] = ()):
         self.flat = flat
         self.source = source
         self.model = model
+        self.libraries = tuple(libraries)
         self.types = flat.get("effective_types", {})
         self.functions = flat.get("functions", {}) or {}
         self.vars: dict[str, list[ScalarVar]] = {}
@@ -221,7 +224,7 @@ class FlatTranslator:
         the classes the model uses (:func:`.source.locate`), never other files of the package.
         """
         if self._files is None:
-            self._files = model_files(self.source, self.model)
+            self._files = model_files(self.source, self.model, libraries=self.libraries)
             self._sources = span_sources(self.flat, self._files)
         span = span if span is not None else self._span
         if span is not None:
@@ -231,7 +234,7 @@ class FlatTranslator:
             if loc is not None:
                 return [loc]
         if pattern:
-            locs = locate(self.source, self.model, pattern)
+            locs = locate(self.source, self.model, pattern, libraries=self.libraries)
             if locs:
                 return locs
         if span is not None and pattern:
@@ -261,7 +264,8 @@ class FlatTranslator:
         if flat.get("initial_algorithms"):
             raise self.unsupported("initial algorithm section", r"\binitial\s+algorithm\b")
         for fname, fn in self.functions.items():
-            if fn.get("external"):
+            ext = fn.get("external")
+            if ext and _builtin_external(ext) is None:
                 raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
 
     # ------------------------------------------------------------ variables
@@ -273,7 +277,7 @@ class FlatTranslator:
 
     def check_modifiers(self) -> None:
         """Refuse models whose modifications rumoca 0.10.2 loses (see :mod:`.modifiers`)."""
-        lost = modifier_check(self.source).check(self.model)
+        lost = modifier_check(self.source, self.libraries).check(self.model)
         if lost:
             log.warning("%s: bounds or units lost by the front end (no effect on values): %s",
                         self.model, "; ".join(lost))
@@ -730,6 +734,10 @@ class FlatTranslator:
 
     # ------------------------------------------------------------ functions
     def inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        ext = fn.get("external")
+        builtin = _builtin_external(ext) if ext else None
+        if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
+            return self._builtin_external(fname, fn, ext, builtin, args)
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
@@ -755,6 +763,26 @@ class FlatTranslator:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _builtin_external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], builtin: str,
+                          args: list[Value]) -> list[Value]:
+        """``external "builtin" y = sin(u)``: the built-in on the external call's arguments, which
+        name the function's inputs (given, or their defaults)."""
+        env: dict[str, Value] = {}
+        for i, inp in enumerate(fn.get("inputs") or []):
+            if i < len(args):
+                env[inp["name"]] = args[i]
+            elif inp.get("default") is not None:
+                env[inp["name"]] = self.expr(inp["default"], env)
+            else:
+                raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+        call_args = [self.expr(a, env) for a in ext.get("args") or []]
+        value = _builtin(builtin, call_args, self)
+        outs = [o["name"] for o in fn.get("outputs") or []]
+        if len(outs) != 1 or (ext.get("output_name") not in (None, outs[0])):
+            raise self.unsupported(f"external \"builtin\" function {fname!r} with other than one output "
+                                   "returned by the call", r"\bexternal\b")
+        return [value]
 
     def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
         for st in stmts:
@@ -966,7 +994,7 @@ class FlatTranslator:
         for sv in params:
             self.parameter_start(sv)
         residuals: list[tuple[ca.MX, str]] = list(calc_eqs)
-        check_lost_der_equations(self.flat, self.source, self.model)
+        check_lost_der_equations(self.flat, self.source, self.model, self.libraries)
         for eq in self.flat.get("equations", []):
             origin = _origin_text(eq.get("origin"))
             val = self.expr(eq["residual"])
@@ -1240,7 +1268,8 @@ class FlatTranslator:
         declares its top-level component (and, if elsewhere, where the variable itself is)."""
         base = scalar.split("[", 1)[0]
         head = re.split(r"[.\[]", base, maxsplit=1)[0]
-        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True)
+        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True,
+                     libraries=self.libraries)
         var = (self.flat.get("variables") or {}).get(base) or {}
         leaf = base.rsplit(".", 1)[-1]
         decl = self.location(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", span=var.get("source_span")) if var else []
@@ -1331,6 +1360,22 @@ _ARRAY_BUILTINS = {
     "size", "ndims", "scalar", "vector", "matrix", "identity", "diagonal", "zeros", "ones", "fill",
     "linspace", "cat", "transpose", "outerproduct", "symmetric", "cross", "skew",
 }
+
+
+_BUILTIN_EXTERNALS = {
+    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp", "log", "log10",
+    "sqrt", "abs", "sign", "floor", "ceil",
+}
+"""Functions an ``external "builtin"`` declaration may name (MLS 12.9: the built-ins of the language,
+as Modelica.Math declares its elementary functions)."""
+
+
+def _builtin_external(ext: Any) -> str | None:
+    """The built-in an ``external "builtin"`` clause calls, or None (another language, or unknown)."""
+    if not isinstance(ext, dict) or str(ext.get("language", "")).lower() != "builtin":
+        return None
+    name = str(ext.get("function_name") or "")
+    return name if name in _BUILTIN_EXTERNALS else None
 
 
 def _not(a: Any) -> Any:
@@ -1617,7 +1662,8 @@ def _ref_text(node: Any) -> str:
     return str(body["name"]["name"]) + (f"[{','.join(subs)}]" if subs else "")
 
 
-def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model: str) -> None:
+def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model: str,
+                             libraries: tuple[Path, ...] = ()) -> None:
     """Refuse a flat model in which the front end lost the right-hand side of a ``der`` equation.
 
     rumoca 0.10.2 flattens ``der(x[i]) = a[i] - x[i]`` in a for-loop into
@@ -1651,7 +1697,7 @@ def check_lost_der_equations(flat: dict[str, Any], source: ModelicaSource, model
         return
     from .source import BOM
 
-    files = model_files(source, model)
+    files = model_files(source, model, libraries=libraries)
     known = span_sources(flat, files)
     lost = []
     for var, lit, span in suspects:

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from .. import config
 from ..errors import CompileError
 from .flatten import ExplicitModel, InitialSystem, ScalarVar
 
@@ -171,12 +172,8 @@ def optimization_flag(source_bytes: int, environ: dict[str, str] | None = None) 
     >>> optimization_flag(3_700_000, {"TRACKINGBOX_CC_OPT": "-O2"})
     '-O2'
     """
-    env = os.environ if environ is None else environ
-    chosen = env.get("TRACKINGBOX_CC_OPT", "").strip()
+    chosen = config.get("cc_opt", environ)  # checked there: a gcc optimisation flag or empty
     if chosen:
-        if not re.fullmatch(r"-O[0-3sg]?", chosen):
-            raise CompileError(f"TRACKINGBOX_CC_OPT must be a gcc optimisation flag (-O0 .. -O3, -Os, -Og), "
-                               f"got {chosen!r}")
         return chosen
     return "-O0" if source_bytes > LARGE_SOURCE_BYTES else "-O1"
 

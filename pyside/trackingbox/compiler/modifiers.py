@@ -20,8 +20,10 @@ drops or mixes up values (each found by flattening small models; see
   (``package Water2 extends Water(cp = 1000)``): when a model uses both, the
   base package's constant takes the modified value too.
 
-The check works on the source text (comments and strings blanked), on the
-classes the model can reach by name, so it errs on the side of refusing. Lost
+The check works on the source text (comments and strings blanked) of the classes
+the model uses, found by Modelica's lookup from the model's own scope
+(:mod:`.library`), so a class that only shares a name with one the model uses is
+never read; within those classes it errs on the side of refusing. Lost
 bounds, units or nominal values change no number and give a warning instead
 (the benches rely on that: ``extends PartialBench(hx(kht = 910))``).
 """
@@ -33,17 +35,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UnsupportedConstructError
-from .source import Location, ModelicaSource, strip_comments
+from .library import ClassInfo, LibraryIndex
+from .source import Location, ModelicaSource
 
 log = logging.getLogger(__name__)
 
 # attributes whose loss changes no simulated number
 _HARMLESS = {"min", "max", "nominal", "unit", "displayUnit", "quantity", "stateSelect"}
 _KINDS = r"(?:model|block|class|package|connector|record|function|type|operator)"
-_CLASS_START = re.compile(
-    rf"\b(?:(?:partial|encapsulated|final|replaceable|expandable|pure|impure|operator|redeclare)\s+)*"
-    rf"({_KINDS})\s+([A-Za-z_]\w*)\b"
-)
 _IDENT = re.compile(r"[A-Za-z_]\w*")
 _KEYWORDS = {"each", "final", "redeclare", "replaceable"}
 
@@ -66,9 +65,6 @@ _NOT_TYPES = {"extends", "end", "import", "within", "if", "then", "else", "elsei
               "while", "for", "redeclare", "replaceable", "constrainedby"} | set(_KINDS[3:-1].split("|"))
 
 
-_CACHE: dict[Path, tuple[tuple[object, ...], ModifierCheck]] = {}
-
-
 @dataclass
 class Mod:
     """One element of a modification: ``name(sub...) = value``."""
@@ -77,15 +73,6 @@ class Mod:
     subs: list[Mod] = field(default_factory=list)
     has_value: bool = False
     offset: int = 0
-
-
-@dataclass
-class ClassText:
-    kind: str
-    name: str
-    file: Path
-    start: int
-    end: int
 
 
 def _skip_expr(text: str, pos: int) -> int:
@@ -158,109 +145,48 @@ def parse_modification(text: str, pos: int) -> tuple[list[Mod], int]:
     return mods, pos
 
 
-def modifier_check(source: ModelicaSource) -> ModifierCheck:
-    """A :class:`ModifierCheck` of *source*, reused while its files are unchanged."""
-    stamps = []
-    for file in source.files:
-        try:
-            stamps.append(file.stat().st_mtime_ns)
-        except OSError:
-            stamps.append(-1)
-    key = (source.files, tuple(stamps))
-    cached = _CACHE.get(source.entry)
-    if cached is None or cached[0] != key:
-        cached = (key, ModifierCheck(source))
-        _CACHE[source.entry] = cached
-    return cached[1]
+def modifier_check(source: ModelicaSource, libraries: tuple[Path, ...] | list[Path] = ()) -> ModifierCheck:
+    """A :class:`ModifierCheck` of *source* and the libraries it is compiled with."""
+    from .library import index_for
+
+    return ModifierCheck(index_for(source, libraries))
 
 
 class ModifierCheck:
-    """The classes of a source and the modification patterns rumoca gets wrong."""
+    """The modification patterns rumoca gets wrong, looked for in the classes a model uses.
 
-    def __init__(self, source: ModelicaSource):
-        self.texts: dict[Path, str] = {}
-        self.classes: list[ClassText] = []
-        for file in source.files:
-            try:
-                text = strip_comments(file.read_text(encoding="utf-8", errors="replace"))
-            except OSError:
-                continue
-            self.texts[file] = text
-            self._index_classes(file, text)
-        self.by_name: dict[str, list[ClassText]] = {}
-        self._declared: dict[tuple[str, tuple[int, ...]], list[list[Mod]]] = {}
-        for c in self.classes:
-            self.by_name.setdefault(c.name, []).append(c)
+    The classes are those Modelica's lookup reaches from the model
+    (:meth:`.library.LibraryIndex.used_classes`), each read as its own text (its nested classes
+    are classes of their own, its annotations blanked); a class elsewhere in the package or in a
+    library that merely shares a name is never read.
+    """
 
-    def _index_classes(self, file: Path, text: str) -> None:
-        for m in _CLASS_START.finditer(text):
-            kind, name = m.group(1), m.group(2)
-            if "redeclare" in m.group(0):  # part of a modification: read with its enclosing class
-                continue
-            after = text[m.end():m.end() + 200].lstrip()
-            if after.startswith("="):  # short class definition: up to the semicolon
-                end = text.find(";", m.end())
-                self.classes.append(ClassText(kind, name, file, m.start(), end if end >= 0 else len(text)))
-                continue
-            end_m = re.compile(rf"\bend\s+{re.escape(name)}\s*;").search(text, m.end())
-            self.classes.append(ClassText(kind, name, file, m.start(), end_m.end() if end_m else len(text)))
+    def __init__(self, index: LibraryIndex):
+        self.index = index
+        self._texts: dict[str, str] = {}
+        self._declared: dict[tuple[str, tuple[str, ...]], list[list[Mod]]] = {}
 
-    def body(self, c: ClassText) -> str:
-        return self.texts[c.file][c.start:c.end]
+    def used_classes(self, model: str) -> list[ClassInfo]:
+        """The classes *model* uses (its own class first)."""
+        return [self.index.classes[n] for n in self.index.used_classes(model)]
 
-    def used_classes(self, model: str) -> list[ClassText]:
-        """Classes reachable from *model* by name (an over-approximation)."""
-        parts = model.split(".")
-        candidates = self.by_name.get(parts[-1], [])
-        if len(candidates) > 1:  # the class whose file path matches the dotted name best
-            def score(c: ClassText) -> int:
-                return sum(1 for p in parts if p in c.file.with_suffix("").parts)
-            best = max(score(c) for c in candidates)
-            candidates = [c for c in candidates if score(c) == best]
-        todo = list(candidates)
-        seen: set[int] = set()
-        out: list[ClassText] = []
-        while todo:
-            c = todo.pop()
-            if id(c) in seen:
-                continue
-            seen.add(id(c))
-            out.append(c)
-            for word in set(_IDENT.findall(self.body(c))) - {c.name}:
-                todo.extend(self._nearest(self.by_name.get(word, []), c))
-        return out
+    def body(self, c: ClassInfo) -> str:
+        if c.name not in self._texts:
+            self._texts[c.name] = self.index.own_code(c, annotations=False)
+        return self._texts[c.name]
 
-    @staticmethod
-    def _nearest(candidates: list[ClassText], user: ClassText) -> list[ClassText]:
-        """Of same-named classes, those nearest to *user* in the file tree (Modelica's lookup goes
-        outwards through the enclosing packages)."""
-        if len(candidates) <= 1:
-            return candidates
-
-        def shared(c: ClassText) -> int:
-            n = 0
-            for a, b in zip(c.file.parent.parts, user.file.parent.parts):
-                if a != b:
-                    break
-                n += 1
-            return n
-
-        best = max(shared(c) for c in candidates)
-        return [c for c in candidates if shared(c) == best]
-
-    def _location(self, c: ClassText, offset: int) -> Location:
-        text = self.texts[c.file]
-        return Location(c.file, text.count("\n", 0, c.start + offset) + 1)
+    def _location(self, c: ClassInfo, offset: int) -> Location:
+        return Location(*self.index.location(c, offset))
 
     # --------------------------------------------------------------- checks
-    def declared_subs(self, used: list[ClassText], component: str) -> list[list[Mod]]:
+    def declared_subs(self, used: list[ClassInfo], component: str) -> list[list[Mod]]:
         """Modifications of every declaration of *component* among *used* classes."""
-        key = (component, tuple(id(c) for c in used))
+        key = (component, tuple(c.name for c in used))
         if key not in self._declared:
             self._declared[key] = self._find_declarations(used, component)
         return self._declared[key]
 
-    def _find_declarations(self, used: list[ClassText], component: str) -> list[list[Mod]]:
+    def _find_declarations(self, used: list[ClassInfo], component: str) -> list[list[Mod]]:
         # "Type component[...](" : the name and a parenthesis, preceded by a type name
         pattern = re.compile(rf"(?<![.\w]){re.escape(component)}\s*(?:\[[^\]]*\]\s*)?\(")
         type_before = re.compile(r"(?<![.\w])([A-Za-z_][\w.]*)\s+$")
@@ -276,7 +202,7 @@ class ModifierCheck:
                 found.append(mods)
         return found
 
-    def _lost(self, comp: str, ext: Mod, used: list[ClassText]) -> tuple[set[str], set[str]]:
+    def _lost(self, comp: str, ext: Mod, used: list[ClassInfo]) -> tuple[set[str], set[str]]:
         """What ``extends B(comp(ext))`` drops: (value-changing, harmless) names.
 
         Two sources are replaced rather than merged: the modification of
@@ -310,9 +236,9 @@ class ModifierCheck:
             for m in re.finditer(r"\bextends\s+([\w.]+)\s*\(", text):
                 mods, _ = parse_modification(text, m.end() - 1)
                 base = m.group(1).rsplit(".", 1)[-1]
-                if c.kind == "package" and any(x.has_value for x in mods) and self._used_directly(used, base, c):
+                if c.kind == "package" and any(x.has_value for x in mods) and self._used_directly(used, m.group(1), c):
                     raise UnsupportedConstructError(
-                        f"unsupported Modelica construct in {model}: package {c.name} extends {base} with a "
+                        f"unsupported Modelica construct in {model}: package {c.simple} extends {base} with a "
                         f"modified constant at {self._location(c, m.start())}, and {model} also uses {base} "
                         f"itself: rumoca 0.10.2 would give {base}'s constant the modified value too"
                     )
@@ -343,7 +269,7 @@ class ModifierCheck:
                 )
         return warnings
 
-    def _check_values_with_attributes(self, model: str, c: ClassText, text: str) -> None:
+    def _check_values_with_attributes(self, model: str, c: ClassInfo, text: str) -> None:
         """Refuse ``name(attributes) = value`` where rumoca drops both (see the module docstring)."""
         clauses: list[tuple[str, int, int]] = []  # (what, offset of the clause, first depth that loses)
         for m in re.finditer(r"\bextends\s+([\w.]+)\s*\(", text):
@@ -367,15 +293,24 @@ class ModifierCheck:
                     f"bounds, units or start where {leaf} is declared"
                 )
 
-    def _used_directly(self, used: list[ClassText], base: str, extender: ClassText) -> bool:
-        """Whether *base* is named by a used class other than through *extender*'s extends clause."""
-        word = re.compile(rf"\b{re.escape(base)}\b")
+    def _used_directly(self, used: list[ClassInfo], ext: str, extender: ClassInfo) -> bool:
+        """Whether the class that *extender* extends by the name *ext* is used by name in a used class
+        (a name there, or a prefix of one, resolves to exactly that class), besides that extends clause."""
+        idx = self.index
+        simple = ext.rsplit(".", 1)[-1]
+        targets = [b for b in idx.bases(extender.name) if b.rsplit(".", 1)[-1] == simple]
+        if not targets:
+            return False
+        target = targets[0]
         for c in used:
-            text = self.body(c)
-            if c is extender:
-                text = re.sub(rf"\bextends\s+[\w.]*\b{re.escape(base)}\b", " ", text)
-            if c.name == base and c.kind == "package":
-                continue
-            if word.search(re.sub(rf"\b(?:{_KINDS})\s+{re.escape(base)}\b|\bend\s+{re.escape(base)}\b", " ", text)):
-                return True
+            for name in c.names:
+                if c is extender and name == ext:
+                    continue
+                parts = name.split(".")
+                for k in range(1, len(parts) + 1):
+                    found = idx.lookup(".".join(parts[:k]), c.name)
+                    if found is None:
+                        break
+                    if found == target:
+                        return True
         return False

@@ -248,78 +248,11 @@ def _file_of(source: ModelicaSource, dotted: str) -> Path | None:
     return holder
 
 
-_NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)")
-
-
-def model_files(source: ModelicaSource, model: str, limit: int = 40) -> tuple[Path, ...]:
-    """The files of the classes *model* uses: its own class file first, then the files of the
-    classes its text names (extends, component types, functions), followed transitively.
-
-    Names are looked up from the innermost enclosing package outwards, as Modelica
-    does; names that resolve to no file of *source* (built-ins, variables) are skipped.
-    """
-    own = _file_of(source, model)
-    if own is None:
-        return ()
-    found: list[Path] = [own]
-    queue: list[tuple[Path, str]] = [(own, model)]
-    seen_names: set[str] = {model}
-    seen_classes: set[tuple[Path, str]] = {(own, model.rsplit(".", 1)[-1])}
-    while queue and len(found) < limit:
-        file, cls = queue.pop(0)
-        code = _code(file)
-        rng = _class_range(code, cls)
-        body = code[rng[0]:rng[1]] if rng else code
-        scopes = cls.split(".")
-        for name in dict.fromkeys(_NAME.findall(body)):
-            for depth in range(len(scopes), -1, -1):
-                full = ".".join([*scopes[:depth], name])
-                if full in seen_names:
-                    break
-                target = _file_of(source, full)
-                if target is not None:
-                    seen_names.add(full)
-                    key = (target, full.rsplit(".", 1)[-1])
-                    if key not in seen_classes:
-                        seen_classes.add(key)
-                        if target not in found:
-                            found.append(target)
-                        queue.append((target, full))
-                    break
-    return tuple(found[:limit])
-
-
-def locate(source: ModelicaSource, model: str, pattern: str, limit: int = 5, *,
-           own: bool = False) -> list[Location]:
-    """Where the regular expression *pattern* matches in the code of *model* and the classes it uses.
-
-    Unlike :func:`find_construct` over every file, only the model's own class file and the
-    files of the classes it uses are searched (its own file first), and in each only the
-    text of the class concerned, so an occurrence elsewhere in the package is never named.
-    With *own*, only the model's own class definition is searched.
-    """
-    regex = re.compile(pattern)
-    files = model_files(source, model)[:1] if own else model_files(source, model)
-    found: list[Location] = []
-    for k, file in enumerate(files):
-        code = _code(file)
-        lo, hi = 0, len(code)
-        if k == 0:
-            rng = _class_range(code, model)
-            if rng:
-                lo, hi = rng
-        for match in regex.finditer(code, lo, hi):
-            found.append(Location(file, code.count("\n", 0, match.start()) + 1))
-            if len(found) >= limit:
-                return found
-    return found
-
-
 def span_location(span: dict | None, files: tuple[Path, ...], expect: str | None = None) -> Location | None:
     """The file and line of a rumoca ``span`` (``{"source", "start", "end"}``, byte offsets).
 
     rumoca names a span's file by an opaque number, so the file is the first of *files*
-    (the model's own files, see :func:`model_files`) whose text at the span matches the
+    (the model's own files, see :func:`.library.model_files`) whose text at the span matches the
     regular expression *expect* (or is merely long enough when *expect* is None).
     """
     if not isinstance(span, dict) or not isinstance(span.get("start"), int):

@@ -14,6 +14,7 @@ twin's residuals on both windows are scored as the screening scores a transform
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import re
@@ -24,7 +25,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .screen import Candidate, score
+from ..errors import TrackingError
+from ..estimation import estimate, jacobian_points
+from ..simulation.models import close_models
+from ..simulation.windows import load_windows, problem_from_spec
+from ..spec import load_spec, write_starts
+from . import library
+from .candidates import Candidate, joint, score
+from .residuals import joint_lstsq, step_bounds, window_series
 
 if TYPE_CHECKING:
     from .residuals import WhereResult
@@ -85,8 +93,6 @@ def _get(obj: Any, name: str, default: Any = None) -> Any:
 
 def render(spec: Any, effect: Any, target: str, values: Mapping[str, float]) -> Any:
     """``library.render_patch`` of one effect on one target with *values*."""
-    from . import library
-
     return library.render_patch(spec, [library.Finding(effect.id, target, dict(values))],
                                 effects={effect.id: effect})
 
@@ -153,8 +159,6 @@ def level(where: WhereResult, after_t: dict[str, np.ndarray],
     candidate on the same footing, so that a mere shift along the trade-off between
     tags is not credited to the effect.
     """
-    from .residuals import joint_lstsq, step_bounds
-
     j_train, j_val = where.jacobian
     if not j_train or not all(t in j_train for t in after_t):
         return after_t, after_v
@@ -194,9 +198,6 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     Candidate
         With :attr:`Candidate.fit` = :class:`FitOutcome`.
     """
-    from ..estimation import close_models, estimate, load_windows, problem_from_spec
-    from .residuals import window_series
-
     prepared = prepare(spec, where, effect, target, work_dir, screened=screened)
     patch, fmu, spec_path, full, bounds = (prepared.patch, prepared.fmu, prepared.spec_path, prepared.full,
                                            prepared.bounds)
@@ -240,8 +241,6 @@ def fit_job(spec: Any, where: WhereResult, effect: Any, screened: Candidate, wor
     A fit that fails on purpose (a :class:`trackingbox.errors.TrackingError`: the twin
     failed, the patch did not compile) leaves the screening, marked ``skipped`` with the reason.
     """
-    from ..errors import TrackingError
-
     try:
         return fit_candidate(spec, where, effect, screened.target, work_dir, screened=screened, budget=budget)
     except TrackingError as exc:
@@ -288,9 +287,6 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     value; the patched spec starts at the null fit (the spec's candidates) and at the
     effect's warm start (:func:`warm_values`).
     """
-    from ..spec import load_spec, write_starts
-    from . import library
-
     folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
     folder.mkdir(parents=True, exist_ok=True)
     patch = render(spec, effect, target, warm_values(effect, screened))
@@ -328,8 +324,6 @@ def _compile_key(spec: Any, structure: Any) -> str:
     do not change the FMU; an edited entry, template or twin source does (a work folder
     reused after such an edit must not hand back the old FMU).
     """
-    import hashlib
-
     h = hashlib.sha256(structure.model.encode() + b"\0" + structure.source.encode())
     source = getattr(getattr(spec, "source", None), "path", None)
     if source is not None:
@@ -371,10 +365,6 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
     -------
     Candidate
     """
-    from ..estimation import close_models, jacobian_points, load_windows, problem_from_spec
-    from .residuals import window_series
-    from .screen import joint
-
     prepared = prepare(spec, where, effect, target, work_dir)
     pspec = prepared.spec
     problem = problem_from_spec(pspec, warmup=where.problem.warmup if where.problem is not None else None)

@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-from .screen import Candidate
+from .candidates import Candidate, delta_bic
 
 if TYPE_CHECKING:
     from .residuals import WhereResult
@@ -115,8 +115,6 @@ def between(a: Candidate, b: Candidate) -> float:
 
     Falls back to the difference of their ΔBIC over the null when either lacks residuals.
     """
-    from .screen import delta_bic
-
     tags = [t for t in a.training_residual if t in b.training_residual]
     if not tags:
         return a.delta_bic - b.delta_bic

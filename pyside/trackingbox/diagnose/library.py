@@ -42,8 +42,21 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 import jinja2
 
+from ..compiler import compile_model, library_path
+from ..compiler.source import (
+    _class_range,
+    _file_of,
+    read_text,
+    resolve_source,
+    strip_comments,
+)
 from ..errors import SpecError, did_you_mean
+from ..fmu import read_info
+from ..generate import filters
+from ..generate.filters import modelica_string
 from ..io import write_text_atomic
+from ..spec import ParameterSpec, SourceSpec, load_spec, write_spec
+from ..version import __version__
 
 log = logging.getLogger(__name__)
 
@@ -334,9 +347,6 @@ class _ClassIndex:
     """Class bodies of a Modelica source and the shipped library, looked up by full name."""
 
     def __init__(self, source_path: Path) -> None:
-        from ..compiler import library_path
-        from ..compiler.source import resolve_source
-
         self.sources = [resolve_source(source_path)]
         lib = Path(library_path())
         if lib.resolve() != Path(source_path).resolve():
@@ -347,8 +357,6 @@ class _ClassIndex:
         """(full name, comment-free text of the class) or None when not found."""
         if name in self._cache:
             return self._cache[name]
-        from ..compiler.source import _class_range, _file_of, read_text, strip_comments
-
         found = None
         for src in self.sources:
             file = _file_of(src, name)
@@ -503,8 +511,6 @@ class Patch:
 
 
 def _environment() -> jinja2.Environment:
-    from ..generate import filters
-
     env = jinja2.Environment(
         undefined=jinja2.StrictUndefined, keep_trailing_newline=True, trim_blocks=True, lstrip_blocks=True,
         autoescape=False, variable_start_string="<<", variable_end_string=">>", block_start_string="<%",
@@ -525,8 +531,6 @@ def prefix_for(effect_id: str, target: str) -> str:
 def _variable_units(spec: Any) -> dict[str, str]:
     """Twin variable -> unit, from the twin FMU (empty when it cannot be read)."""
     try:
-        from ..fmu import read_info
-
         info = read_info(spec.twin)
     except Exception as exc:  # noqa: BLE001 - units only refine the bounds
         log.warning("cannot read units from the twin FMU %s: %s", spec.twin, exc)
@@ -670,9 +674,6 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         values = ", ".join(f"{p['name']} = {p['value']:.6g} {p['unit']}".rstrip() for p in params.values())
         header.append(f"//   {effect.id} on {f.target}: {values}")
 
-    from .. import __version__
-    from ..generate.filters import modelica_string
-
     mods = ", ".join(f"{t}({', '.join(sorted(set(m)))})" for t, m in sorted(modifiers.items()))
     extends = f"  extends {twin}({mods});" if mods else f"  extends {twin};"
     summary = "; ".join(f"{f.effect} on {f.target}" for f in ordered)
@@ -730,8 +731,6 @@ def compile_patch(patch: Patch, out_dir: str | Path, *, output: str | Path | Non
     trackingbox.compiler.CompileResult
         The FMU is ``<out_dir>/<model>.fmu`` unless *output* says otherwise.
     """
-    from ..compiler import compile_model, library_path
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     fmu = Path(output) if output is not None else out / f"{patch.model}.fmu"
@@ -761,8 +760,6 @@ def patched_spec(spec: Any, patch: Patch, out_dir: str | Path, fmu: str | Path) 
     value in the patch) so ``estimate`` fits them with the spec's candidates.
     Existing pairs are kept.
     """
-    from ..spec import ParameterSpec, SourceSpec, load_spec, write_spec
-
     out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     mo = write_patch(patch, out)

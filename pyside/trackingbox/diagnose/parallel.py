@@ -10,7 +10,7 @@ numbers, so the results do not depend on the number of workers.
 
 The workers are fresh processes (spawned: an FMU instance and its extracted
 files must not be shared through a fork; and a spawned worker is this process's
-child, so its CPU time is counted here, unlike a forkserver's). Each keeps the FMUs it has opened (:func:`trackingbox.estimation._model`)
+child, so its CPU time is counted here, unlike a forkserver's). Each keeps the FMUs it has opened (:func:`trackingbox.simulation.models.cached_model`)
 for the next task, and closes them when the pool ends. The pool is joined when
 the ``with`` block ends, so the workers' CPU time counts as this process's
 children's time there (:class:`trackingbox.diagnose.stage` reports it per phase).
@@ -27,7 +27,11 @@ import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from multiprocessing.util import Finalize
 from typing import Any
+
+from ..analysis.executor import exit_with_parent, make_executor, stop_executor
+from ..simulation.models import close_models, forget_models
 
 log = logging.getLogger(__name__)
 
@@ -36,12 +40,7 @@ _ACTIVE: list[Any] = []
 
 def _init_worker(parent: int) -> None:
     """A fresh worker owns no FMU yet; it closes the ones it opens when it exits, and ends with *parent*."""
-    from multiprocessing.util import Finalize
-
-    from ..analysis.executor import exit_with_parent
-    from ..estimation import _forget_models, close_models
-
-    _forget_models()
+    forget_models()
     exit_with_parent(parent)
     # run by the worker's own exit (a forkserver child leaves through os._exit, past atexit)
     Finalize(None, close_models, exitpriority=10)
@@ -87,8 +86,6 @@ def pool(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         yield None
         return
     if scheduler:
-        from ..analysis.executor import make_executor, stop_executor
-
         ex = make_executor(scheduler, workers)
         _ACTIVE.append(_ExecutorPool(ex))
         ok = False

@@ -46,14 +46,22 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import lsq_linear
+
+from ..data import MeasurementView
+from ..estimation import estimate, jacobian_points
+from ..simulation.models import close_models
+from ..simulation.windows import load_windows, problem_from_spec, simulate_window
+from .parallel import map_calls
 
 if TYPE_CHECKING:
-    from ..estimation import EstimationResult, Problem, WindowData
+    from ..estimation import EstimationResult
+    from ..simulation.windows import Problem, WindowData
     from ..spec import Spec
 
 log = logging.getLogger(__name__)
@@ -488,8 +496,6 @@ class WhereResult:
 def window_series(problem: Problem, window: WindowData, x: npt.ArrayLike,
                   input_tags: Mapping[str, str]) -> WindowResiduals:
     """Simulate *window* at parameters *x* and cut off the lead-in."""
-    from ..estimation import simulate_window
-
     sim = simulate_window(problem, window, x)
     keep = slice(window.lead, None)
     by_fmu = {fmu: tag for tag, fmu in input_tags.items()}
@@ -521,9 +527,6 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
     -------
     WhereResult
     """
-    from ..data import MeasurementView
-    from ..estimation import close_models, estimate, load_windows, problem_from_spec
-
     options = dict(estimate_options or {})
     if null is None:
         log.info("fitting the null model (the spec's %d candidate parameters)", len(spec.parameters))
@@ -575,16 +578,12 @@ def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
     moves the candidates by *delta*; re-linearising there removes the error of the
     first linearisation when the move is large (a bias absorbed into a coefficient).
     """
-    from ..estimation import close_models
-
     problem = result.problem
     x1 = np.clip(np.asarray(result.x, dtype=float) + delta, problem.lower, problem.upper)
     try:
         series, jac = series_and_jacobian(problem, result.windows, x1, result.input_tags)
     finally:
         close_models()
-    from dataclasses import replace
-
     return replace(result, training=series[0], validation=series[1], jacobian=(jac[0], jac[1]), x=x1)
 
 
@@ -609,8 +608,6 @@ def input_noise(window: Any) -> dict[str, float]:
 
 def perturbed(window: Any, sigma: Mapping[str, float], seed: int = PROPAGATION_SEED) -> Any:
     """*window* with every input moved by an independent normal draw of standard deviation ``sigma[input]``."""
-    from dataclasses import replace
-
     rng = np.random.default_rng(seed)
     inputs = {}
     for name in sorted(window.inputs):
@@ -631,8 +628,6 @@ def propagated_noise(problem: Any, windows: Sequence[Any], x: npt.ArrayLike, inp
     the RMS of that change over the scored samples of all *windows* (pooled) is the
     tag's propagated noise. One run per window, in one batch (:mod:`.parallel`).
     """
-    from .parallel import map_calls
-
     if not windows:
         return {}
     sigma = input_noise(windows[0])
@@ -662,9 +657,6 @@ def series_and_jacobian(problem: Any, windows: Sequence[Any], x: npt.ArrayLike, 
     :func:`trackingbox.diagnose.parallel.pool` they spread over its workers. The
     arithmetic is :func:`output_jacobian`'s, so the result is the same either way.
     """
-    from ..estimation import jacobian_points
-    from .parallel import map_calls
-
     x = np.asarray(x, dtype=float)
     points, h = jacobian_points(x, problem.lower, problem.upper, step)
     calls = [(problem, w, p, input_tags) for w in windows for p in (x, *points)]
@@ -687,8 +679,6 @@ def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Map
     The step is *step* times each bound range, backwards at the upper bound
     (:func:`trackingbox.estimation.jacobian_points`).
     """
-    from ..estimation import jacobian_points
-
     points, h = jacobian_points(x, problem.lower, problem.upper, step)
     cols: dict[str, list[np.ndarray]] = {tag: [] for tag in base.simulated}
     for point, hj in zip(points, h):
@@ -730,8 +720,6 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
         lo = np.asarray(bounds[0], dtype=float)
         hi = np.asarray(bounds[1], dtype=float)
         if np.any(coef < lo) or np.any(coef > hi):
-            from scipy.optimize import lsq_linear
-
             coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
     return coef
 

@@ -49,16 +49,29 @@ Positive ``delta_bic`` favours the candidate.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import minimize_scalar
 
-from .residuals import ljung_box_lag1
+from ..errors import SpecError, TrackingError
+from ..fmu import read_info
+from ..simulation.models import cached_model, close_models
+from ..simulation.windows import run_start, window_setup
+from . import library
+from .candidates import Candidate, joint, score
+from .fit import screen_compiled
+from .parallel import submit
+from .residuals import (
+    relinearised,
+    window_series,
+)
 
 if TYPE_CHECKING:
     from .residuals import WhereResult
@@ -120,6 +133,8 @@ def first_order(time: npt.ArrayLike, y: npt.ArrayLike, tau: float) -> np.ndarray
     steps = np.diff(t)
     if steps.size and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0):
         # uniform grid: the recurrence is a linear filter on u - u0 with a zero initial state
+        # deferred (start-up): scipy.signal adds 0.45-0.54 s to an import of the package (python -X importtime,
+        # on top of numpy/pandas/scipy.optimize) for one filter call
         from scipy.signal import lfilter
 
         h = float(steps[0])
@@ -144,8 +159,6 @@ def fit_lag(time: npt.ArrayLike, simulated: npt.ArrayLike, measured: npt.ArrayLi
 
     Returns ``tau`` and the residual ``measured - lag(simulated)``.
     """
-    from scipy.optimize import minimize_scalar
-
     t = np.asarray(time, dtype=float)
     y = np.asarray(simulated, dtype=float)
     m = np.asarray(measured, dtype=float)
@@ -194,8 +207,6 @@ def search_levelling(cost: Callable[[float], float], upper: float, *, lower: flo
     >>> search_levelling(lambda c: c, 1e-3)
     0.0
     """
-    from scipy.optimize import minimize_scalar
-
     lo_pos = max(lower, upper * 1e-4)
     grid = np.concatenate(([lower], np.geomspace(lo_pos, upper, LEVELLING_GRID)))
     costs = np.array([cost(float(c)) for c in grid])
@@ -208,182 +219,6 @@ def search_levelling(cost: Callable[[float], float], upper: float, *, lower: flo
         if res.fun < best_cost:
             best = float(res.x)
     return best
-
-
-def delta_bic(before: Mapping[str, npt.ArrayLike], after: Mapping[str, npt.ArrayLike], k: int) -> float:
-    """BIC of the null minus BIC of the candidate (module docstring), over the tags of *after*.
-
-    >>> rng = np.random.default_rng(0)
-    >>> e = rng.normal(0.0, 1.0, 1000)
-    >>> delta_bic({"y": e + 1.0}, {"y": e}, 1) > 100
-    True
-    >>> delta_bic({"y": e}, {"y": e - e.mean()}, 1) < 0
-    True
-    """
-    total, n_all = 0.0, 0
-    for tag, r1 in after.items():
-        r1 = np.asarray(r1, dtype=float)
-        r0 = np.asarray(before[tag], dtype=float)
-        ok = np.isfinite(r0) & np.isfinite(r1)
-        n = int(ok.sum())
-        if n < 3:
-            continue
-        rss0 = float(np.dot(r0[ok], r0[ok]))
-        rss1 = float(np.dot(r1[ok], r1[ok]))
-        rho = min(max(ljung_box_lag1(r1[ok]), 0.0), 0.99)
-        n_eff = n * (1.0 - rho) / (1.0 + rho)
-        total += n_eff * math.log(max(rss0, 1e-300) / max(rss1, 1e-300))
-        n_all += n
-    return total - k * math.log(max(n_all, 1))
-
-
-def noise_gain(before: npt.ArrayLike, after: npt.ArrayLike, sigma: float) -> float:
-    """Drop of the mean square residual, in noise variances: ``(MSE0 - MSE1) / sigma**2``.
-
-    >>> round(noise_gain([2.0, -2.0, 2.0], [1.0, -1.0, 1.0], 1.0), 3)
-    3.0
-    """
-    r0 = np.asarray(before, dtype=float)
-    r1 = np.asarray(after, dtype=float)
-    ok = np.isfinite(r0) & np.isfinite(r1)
-    if not ok.any() or not sigma > 0:
-        return math.nan
-    return float((np.mean(r0[ok] ** 2) - np.mean(r1[ok] ** 2)) / sigma ** 2)
-
-
-def nrmse_of(residual: npt.ArrayLike, measured: npt.ArrayLike) -> float:
-    """RMS of *residual* over the range of *measured* (valid samples), as estimation's NRMSE."""
-    r = np.asarray(residual, dtype=float)
-    m = np.asarray(measured, dtype=float)
-    ok = np.isfinite(r) & np.isfinite(m)
-    if not ok.any():
-        return math.nan
-    span = float(m[ok].max() - m[ok].min())
-    scale = span if span > 0 else max(abs(float(m[ok].mean())), 1.0)
-    return float(np.sqrt(np.mean(r[ok] ** 2)) / scale)
-
-
-# --------------------------------------------------------------------------- candidates
-
-
-#: A candidate *materially* moves a tag when it changes the tag's training residual by more than this
-#: many noise sigmas RMS; its validation NRMSE gain is averaged over those tags (:func:`score`).
-MATERIAL_MOVE = 0.5
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """One effect on one target, screened (and maybe fitted).
-
-    Attributes
-    ----------
-    effect, target
-        The effect id and its target (a tag for sensor effects, a component instance otherwise).
-    kind
-        ``"sensor"`` or ``"process"``.
-    stage
-        ``"screen"`` (cheap transform or ramp), ``"fit"`` (patched and compiled) or ``"skipped"``.
-    delta_bic
-        BIC gain over the null on the training window (positive favours the candidate).
-    validation_gain
-        Relative fall of the NRMSE on the validation window, mean over the tags the
-        candidate materially moves (:func:`score`; 0.7 = 70 % smaller).
-    noise_gain
-        Drop of the validation mean square residual of the affected tags, in noise variances (summed).
-    noise_gains
-        The same per affected tag.
-    tags
-        Tags the candidate changes.
-    values
-        Fitted values (screening quantities such as ``bias`` or ``tau``, or the effect's parameters after a fit).
-    nrmse_before, nrmse_after
-        Validation NRMSE per affected tag, null and candidate.
-    whiteness
-        Lag-one autocorrelation of the candidate's training residual per affected tag.
-    pinned
-        Effect parameters at (within 0.1 % of the range of) one of their bounds.
-    reason
-        Why it was skipped, or a remark.
-    """
-
-    effect: str
-    target: str
-    kind: str
-    stage: str
-    delta_bic: float = math.nan
-    validation_gain: float = math.nan
-    noise_gain: float = math.nan
-    tags: tuple[str, ...] = ()
-    values: dict[str, float] = field(default_factory=dict)
-    nrmse_before: dict[str, float] = field(default_factory=dict)
-    nrmse_after: dict[str, float] = field(default_factory=dict)
-    whiteness: dict[str, float] = field(default_factory=dict)
-    pinned: tuple[str, ...] = ()
-    reason: str = ""
-    fit: Any = field(default=None, repr=False, compare=False)
-    validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
-    training_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
-    noise_gains: dict[str, float] = field(default_factory=dict)
-
-    def to_json(self) -> dict[str, Any]:
-        """An entry of ``diagnose --json``'s ``candidates``."""
-        def num(x: float) -> float | None:
-            return float(x) if x is not None and math.isfinite(x) else None
-
-        return {"effect": self.effect, "target": self.target, "stage": self.stage,
-                "delta_bic": num(self.delta_bic), "validation_gain": num(self.validation_gain),
-                "noise_gain": num(self.noise_gain), "tags": list(self.tags),
-                "values": {k: num(v) for k, v in self.values.items()},
-                "whiteness": {k: num(v) for k, v in self.whiteness.items()},
-                **({"reason": self.reason} if self.reason else {})}
-
-
-def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k: int,
-          training_after: Mapping[str, np.ndarray], validation_after: Mapping[str, np.ndarray],
-          values: Mapping[str, float], *, pinned: Sequence[str] = (), fit: Any = None,
-          reason: str = "") -> Candidate:
-    """Score a candidate from its residuals on both windows (same grids as the null model's).
-
-    A tag counts as affected when the candidate changes its training residual by
-    more than a hundredth of its noise sigma RMS: those tags enter the ΔBIC, the
-    noise gains and the check that no tag gets worse. The validation NRMSE gain
-    (``validation_gain``) is the mean over the tags the candidate *materially*
-    moves, by more than :data:`MATERIAL_MOVE` noise sigmas RMS (all affected tags
-    when it moves none that far): a process effect reaches most tags of a plant
-    through its controllers, and averaging the gain on the tags it is about with
-    the near-zero changes of the rest would measure how many tags the plant has,
-    not how much of the gap the effect closes.
-    """
-    tr, va = where.training, where.validation
-    before_t = {t: tr.residual(t) for t in training_after}
-    tags, material = [], []
-    for t, r1 in training_after.items():
-        d = np.asarray(r1) - before_t[t]
-        d = d[np.isfinite(d)]
-        move = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
-        if move > 0.01 * where.noise[t]:
-            tags.append(t)
-        if move > MATERIAL_MOVE * where.noise[t]:
-            material.append(t)
-    if not tags:
-        tags = list(training_after)
-    material = material or tags
-    dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
-    nb, na, gains, ng, white, per_tag = {}, {}, [], 0.0, {}, {}
-    for t in tags:
-        r0 = va.residual(t)
-        r1 = np.asarray(validation_after[t], dtype=float)
-        nb[t] = nrmse_of(r0, va.measured[t])
-        na[t] = nrmse_of(r1, va.measured[t])
-        if nb[t] > 0 and t in material:
-            gains.append(1.0 - na[t] / nb[t])
-        per_tag[t] = noise_gain(r0, r1, where.noise[t])
-        ng += per_tag[t]
-        white[t] = ljung_box_lag1(training_after[t])
-    return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
-                     tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
-                     {t: np.asarray(validation_after[t], dtype=float) for t in tags},
-                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag)
 
 
 def _bounds_of(effect: Any, index: int, default: tuple[float, float]) -> tuple[float, float]:
@@ -401,46 +236,6 @@ def _bounds(effect: Any, default: tuple[float, float]) -> tuple[float, float]:
         p = params[0]
         return float(getattr(p, "min", default[0])), float(getattr(p, "max", default[1]))
     return default
-
-
-def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
-          extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
-          jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None,
-          ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float, np.ndarray]:
-    """Fit an effect's linear terms jointly with the spec's candidates (linearised) on training.
-
-    Every output tag's residual *r_train* is fitted by ``J delta + T beta``: ``J``
-    the null model's output sensitivity to the candidates, ``T`` the effect's
-    columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
-    Returns ``beta``, the residuals after on training and on validation (the
-    same coefficients with the validation window's ``J`` and ``T``), the
-    weighted training cost and the candidates' step ``delta``. The step keeps the
-    candidates inside their bounds (:func:`trackingbox.diagnose.residuals.step_bounds`), as
-    the null model's polish does: an effect is never credited with what a candidate
-    outside its bounds would explain.
-    """
-    from .residuals import joint_lstsq, step_bounds
-
-    j_train, j_val = jac if jac is not None else where.jacobian
-    tags = list(r_train)
-    p = next(iter(j_train.values())).shape[1] if j_train else 0
-    m = next(iter(extra_train.values())).shape[1] if extra_train else 0
-
-    def cols(j: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray] | None, tag: str, n: int) -> np.ndarray:
-        a = j[tag] if tag in j else np.zeros((n, p))
-        e = extra[tag] if extra and tag in extra else np.zeros((n, m))
-        return np.hstack([a, e])
-
-    ct = {t: cols(j_train, extra_train, t, len(r_train[t])) for t in tags}
-    bounds = None
-    problem = getattr(where, "problem", None)
-    if problem is not None and where.x is not None and len(problem.names) == p:
-        bounds = step_bounds(problem, where.x, extra=m)
-    coef = joint_lstsq(r_train, ct, where.noise, bounds)
-    after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
-    after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
-    cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
-    return coef[p:], after_t, after_v, cost, coef[:p]
 
 
 def sensor_fit(effect: Any, tag: str, base: WhereResult) -> tuple[dict[str, float], dict[str, np.ndarray],
@@ -479,8 +274,6 @@ def sensor_fit(effect: Any, tag: str, base: WhereResult) -> tuple[dict[str, floa
         beta, after_t, after_v, _, delta = fit_at(c)
         return {"rate": float(beta[0]), "levelling": c}, after_t, after_v, delta
     if how == "lag":
-        from scipy.optimize import minimize_scalar
-
         lo, hi = _bounds(effect, (0.0, DEFAULT_MAX_LAG))
         lo = max(lo, 0.0)
         j_train, j_val = base.jacobian
@@ -522,8 +315,6 @@ def screen_sensor(effect: Any, tag: str, where: WhereResult, *, relinearise: boo
     problem = where.problem
     if (relinearise and problem is not None and where.x is not None and delta.size
             and np.any(np.abs(delta) > RELINEARISE_STEP * (problem.upper - problem.lower))):
-        from .residuals import relinearised
-
         values, after_t, after_v, _ = sensor_fit(effect, tag, relinearised(where, delta))
     pinned = []
     if effect.screen == "lag":
@@ -555,8 +346,6 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
     first, with the parameter at its value at the window's first grid point.
     Returns output tag -> values on the window's grid (lead-in cut off).
     """
-    from ..estimation import _model, run_start, window_setup
-
     problem = where.problem
     parameters, offset, grid, inputs = window_setup(problem, window, x)
     t0 = run_start(problem, window)
@@ -567,7 +356,7 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
         return base * (1.0 - rate * (t_abs - t_mid))
 
     parameters[name] = value_at(float(window.time[0]))
-    model = _model(problem.twin)
+    model = cached_model(problem.twin)
     stepper = model.stepper(start_time=t0, parameters=parameters, inputs=inputs)
     outputs = list(problem.outputs.values())
     if offset > 0:
@@ -586,8 +375,6 @@ def simulate_ramp(where: WhereResult, window: Any, x: npt.ArrayLike, name: str, 
 
 def read_info_start(fmu: Any, name: str) -> float | None:
     """Start value of variable *name* in *fmu* (None if absent or without a start)."""
-    from ..fmu import read_info
-
     for v in read_info(fmu).variables:
         if v.name == name and v.start is not None:
             try:
@@ -600,10 +387,6 @@ def read_info_start(fmu: Any, name: str) -> float | None:
 def screen_ramp(effect: Any, target: str, where: WhereResult, *, max_fall: float = 0.5,
                 evaluations: int = 12) -> Candidate:
     """Screen a coefficient that falls linearly with time (fouling) on *target*, without compiling."""
-    from scipy.optimize import minimize_scalar
-
-    from ..estimation import close_models
-
     problem = where.problem
     name = f"{target}.{effect.coefficient}"
     x = np.array([where.null.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
@@ -671,11 +454,6 @@ def coefficient_sensitivity(where: WhereResult, name: str, base: float) -> tuple
     The null model's Jacobian column where *name* is a candidate, else one forward
     difference (a step of 1e-3 of *base*) per window.
     """
-    import dataclasses
-
-    from ..estimation import close_models
-    from .residuals import window_series
-
     problem = where.problem
     j_train, j_val = where.jacobian
     if name in problem.names and j_train:
@@ -706,10 +484,6 @@ def screen_levelling_ramp(effect: Any, target: str, where: WhereResult, *, evalu
     bounded scalar fit through the twin with ``p(t)`` set between steps
     (:func:`simulate_ramp`), as the linear ramp is.
     """
-    from scipy.optimize import minimize_scalar
-
-    from ..estimation import close_models
-
     problem = where.problem
     name, base = coefficient_base(effect, target, where)
     if base is None:
@@ -801,11 +575,6 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         :func:`trackingbox.diagnose.fit.screen_compiled` as jobs of their own (on the workers of an
         active :func:`trackingbox.diagnose.parallel.pool`); when given, *fit_compiled* is not used.
     """
-    from . import library
-    from .parallel import submit
-
-    from ..errors import SpecError
-
     jobs = []
     out: list[Candidate] = []
     for eid in sorted(effects):
@@ -853,8 +622,6 @@ SENSOR_SCREENS = ("bias", "drift", "lag", "levelling-drift")
 
 def _guarded(effect: Any, target: str, how: Callable[[Any, str], Candidate]) -> Candidate:
     """``how(effect, target)``; a failure of the twin or of the fit leaves a skipped candidate with the reason."""
-    from ..errors import TrackingError
-
     try:
         return how(effect, target)
     except Exception as exc:  # noqa: BLE001 - one failing candidate does not stop the screening
@@ -884,10 +651,6 @@ def screen_job(effect: Any, target: str, spec: Any, where: WhereResult, compiled
         if how == "levelling-ramp":
             return screen_levelling_ramp(effect, target, where)
         if compiled_in is not None:
-            from pathlib import Path
-
-            from .fit import screen_compiled
-
             return screen_compiled(spec, where, effect, target, Path(compiled_in))
         return Candidate(effect.id, target, getattr(effect, "kind", "process"), "skipped",
                          reason="screened only by compiling its patch, which these settings do not allow")

@@ -29,6 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import shutil
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -36,9 +37,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .judge import Judgement, judge
+from ..analysis.executor import make_executor
+from ..errors import SpecError, did_you_mean
+from . import library
+from .candidates import Candidate
+from .fit import FitBudget, _short, fit_job, render, warm_values
+from .judge import Judgement, judge, objections, reasons_against, validation_samples
+from .parallel import pool, submit
 from .residuals import WhereResult, where
-from .screen import Candidate, rank, screen
+from .screen import rank, screen
 
 log = logging.getLogger(__name__)
 
@@ -287,12 +294,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     ------
     SpecError, DataError, FMUError, EstimationError, CompileError
     """
-    from ..errors import SpecError
-    from . import library
-
     if settings.scheduler == "local":  # one local cluster for every phase, reached through its address
-        from ..analysis.executor import make_executor
-
         cluster = make_executor("local", settings.workers or 2)
         try:
             return diagnose(spec, replace(settings, scheduler=cluster.cluster.scheduler_address),
@@ -305,8 +307,6 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
     effects = library.load_effects(_effect_folders(spec))
     unknown = [e for e in settings.effects if e not in effects]
     if unknown:
-        from ..errors import did_you_mean
-
         raise SpecError("; ".join(f"unknown effect {e!r}{did_you_mean(e, sorted(effects))}" for e in unknown))
     if progress is not None:
         progress("null", 0, 1)
@@ -322,8 +322,6 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                "maxiter": 0 if settings.maxiter is None else settings.maxiter, "warmup": settings.warmup,
                "refine_grid": grid or None, "jacobian": settings.jacobian,
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
-    from .parallel import pool
-
     with pool(workers, scheduler):
         # the null's series and output Jacobian: 1 + n independent runs per window
         found = where(spec, null=null, estimate_options=options)
@@ -336,9 +334,6 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         tmp = tempfile.TemporaryDirectory(prefix="tbx-diagnose-")
         work = Path(tmp.name)
     try:
-        from .fit import FitBudget, fit_job
-        from .parallel import submit
-
         # a candidate's fit estimates the spec's candidates and (mostly) one or two effect parameters
         budget = FitBudget(maxiter=0, refine_iterations=settings.fit_iterations
                            or iterations_for(n_candidates + 1, FIT_RUNS, most=8), workers=workers,
@@ -354,8 +349,6 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                                            else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)
         if settings.compile:
-            from .judge import objections, validation_samples
-
             samples = validation_samples(found)
             eligible = [c for c in screened if c.stage != "skipped" and c.fit is None
                         and math.isfinite(c.delta_bic) and c.delta_bic > settings.fit_min_delta_bic]
@@ -391,8 +384,6 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         nameable = [c for c in ranked if c.fit is not None] if settings.compile else ranked
         judgement = judge(nameable, found)
         if settings.compile:
-            from .judge import reasons_against
-
             samples = min((r.samples for r in found.validation_tags.values()), default=0)
             for c in ranked:
                 key = f"{c.effect}@{c.target}"
@@ -478,9 +469,6 @@ def next_fits(eligible: Sequence[Candidate], passes: Mapping[int, bool],
 def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
            work: Path | None) -> tuple[Any, Path | None, Path | None, Path | None]:
     """Render the named effect; compile and write it as the settings ask."""
-    from . import library
-    from .fit import _short, render, warm_values
-
     if named.fit is not None:
         outcome = named.fit
         bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in outcome.patch.parameters}
@@ -506,8 +494,6 @@ def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
         written = library.write_patch(patch, out)
         patch_file = Path(written) if written is not None else None
         if fmu is not None:
-            import shutil
-
             target = out / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
             shutil.copyfile(fmu, target)
             fmu = target

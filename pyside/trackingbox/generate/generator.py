@@ -39,14 +39,24 @@ from typing import Any
 
 import jinja2
 
-from .. import __version__
+from ..compiler import compile_model, library_path
 from ..errors import SpecError, unknown_name
 from ..io import write_text_atomic
 from ..tracking.controllers import MEMORY_FRACTION
 from ..tracking.tuning import pair_settings, variable_span
+from ..version import __version__
 from . import filters
-from .source import (ParameterSite, Rewrite, TwinSource, check_loads, load_twin, parameter_site,
-                     refusal_message, rewrite_source, stage_packages)
+from .source import (
+    ParameterSite,
+    Rewrite,
+    TwinSource,
+    check_loads,
+    load_twin,
+    parameter_site,
+    refusal_message,
+    rewrite_source,
+    stage_packages,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -257,8 +267,6 @@ def _row_layout(i: int, rows: int) -> Layout:
 
 def _BLOCKS_LIBRARY() -> Path:  # noqa: N802 - reads as the constant it is
     """The shipped library whose ``Blocks`` the generated box instantiates."""
-    from ..compiler import library_path
-
     return library_path()
 
 
@@ -347,8 +355,6 @@ def _where(library: Path, spec_dir: Path, pkg_dir: Path) -> str:
         except ValueError:
             pass
     try:
-        from ..compiler import library_path
-
         if lib == library_path().resolve():
             return f"{lib.name} (the library shipped with trackingbox)"
     except ImportError:  # pragma: no cover - the compiler is part of the package
@@ -405,39 +411,7 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
             y_unit=_text_attr(src.variables[twin_var], "unit"),
             p_description=_text_attr(src.variables[pair.parameter], "description"),
             instance=f"{out}_controller", hold_in=names["hold"]))
-    states: list[StateModel] = []
-    for st in sorted(spec.states, key=lambda x: x.correction):
-        label = f"[[states]] {st.tag!r} in {where}"
-        if st.variable not in src.variables:
-            raise SpecError(unknown_name("twin level variable", st.variable, sorted(src.variables),
-                                         f"model {src.model} ({label})"))
-        if st.correction in src.top_inputs:
-            # A top-level input of the twin cannot be driven from a model that extends the
-            # twin: the embedded path keeps it an FMU input whatever binds it. The box's
-            # correction is then an output of the tracked model, to be fed to that input.
-            target, flow_var = "", src.variables[st.correction]
-        elif st.correction in sites:
-            target, flow_var = sites[st.correction].input, src.variables[st.correction]
-        else:  # pragma: no cover - generate() collects a site for every non-input correction
-            raise SpecError(f"{label}: correction {st.correction!r} is neither a top-level input of "
-                            f"{src.model} nor a component parameter with a conditional input")
-        ident = filters.modelica_name(st.tag)
-        corr = filters.modelica_name(st.correction)
-        names = {"meas": f"{ident}_meas", "out": f"{corr}_comp"}
-        for kind, name in names.items():
-            if kind == "out" and target:
-                continue
-            if name in taken:
-                raise SpecError(f"name {name!r} for {label} clashes with the {taken[name]} of that name in "
-                                f"{src.model}")
-            taken[name] = f"generated {kind}"
-        level_unit = _text_attr(src.variables[st.variable], "unit")
-        flow_unit = _text_attr(flow_var, "unit")
-        states.append(StateModel(
-            tag=st.tag, variable=st.variable, correction=st.correction, meas=names["meas"], sim=f"{ident}_sim",
-            out=corr, gain_name=f"{corr}_k", instance=f"{corr}_compensation", gain=float(st.gain),
-            target=target, level_unit=level_unit, flow_unit=flow_unit,
-            gain_unit=filters.unit_quotient(flow_unit, level_unit)))
+    states = _state_models(spec, src, sites, taken, where)
     rows = len(controllers) + len(states)
     controllers = [replace(c, layout=_row_layout(i, rows)) for i, c in enumerate(controllers)]
     states = [replace(x, layout=_row_layout(len(controllers) + i, rows)) for i, x in enumerate(states)]
@@ -508,6 +482,45 @@ def build_model(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], out
         fill_equations=_fill_equations(list(sites.values()), src.variables),
         class_order=("RealInput", "RealOutput", box_class, tracked_class),
         package_info=package_info, box_info=box_info, tracked_info=tracked_info)
+
+
+def _state_models(spec: Any, src: TwinSource, sites: dict[str, ParameterSite], taken: dict[str, str],
+                  where: str) -> list[StateModel]:
+    """One :class:`StateModel` per ``[[states]]`` entry (sorted by correction); *taken* gets their names."""
+    states: list[StateModel] = []
+    for st in sorted(spec.states, key=lambda x: x.correction):
+        label = f"[[states]] {st.tag!r} in {where}"
+        if st.variable not in src.variables:
+            raise SpecError(unknown_name("twin level variable", st.variable, sorted(src.variables),
+                                         f"model {src.model} ({label})"))
+        if st.correction in src.top_inputs:
+            # A top-level input of the twin cannot be driven from a model that extends the
+            # twin: the embedded path keeps it an FMU input whatever binds it. The box's
+            # correction is then an output of the tracked model, to be fed to that input.
+            target, flow_var = "", src.variables[st.correction]
+        elif st.correction in sites:
+            target, flow_var = sites[st.correction].input, src.variables[st.correction]
+        else:  # pragma: no cover - generate() collects a site for every non-input correction
+            raise SpecError(f"{label}: correction {st.correction!r} is neither a top-level input of "
+                            f"{src.model} nor a component parameter with a conditional input")
+        ident = filters.modelica_name(st.tag)
+        corr = filters.modelica_name(st.correction)
+        names = {"meas": f"{ident}_meas", "out": f"{corr}_comp"}
+        for kind, name in names.items():
+            if kind == "out" and target:
+                continue
+            if name in taken:
+                raise SpecError(f"name {name!r} for {label} clashes with the {taken[name]} of that name in "
+                                f"{src.model}")
+            taken[name] = f"generated {kind}"
+        level_unit = _text_attr(src.variables[st.variable], "unit")
+        flow_unit = _text_attr(flow_var, "unit")
+        states.append(StateModel(
+            tag=st.tag, variable=st.variable, correction=st.correction, meas=names["meas"], sim=f"{ident}_sim",
+            out=corr, gain_name=f"{corr}_k", instance=f"{corr}_compensation", gain=float(st.gain),
+            target=target, level_unit=level_unit, flow_unit=flow_unit,
+            gain_unit=filters.unit_quotient(flow_unit, level_unit)))
+    return states
 
 
 def render(model: GeneratedModel) -> dict[str, str]:
@@ -611,8 +624,6 @@ def compile_generated(result: GenerateResult, *, backend: str = "auto", output: 
     -------
     trackingbox.compiler.CompileResult
     """
-    from ..compiler import compile_model
-
     output = output or result.package_dir.parent / f"{result.tracked_model.rsplit('.', 1)[1]}.fmu"
     # The generated package, the twin's library and TrackingBox (whose Blocks the box
     # instantiates) are staged side by side under one root: rumoca resolves a

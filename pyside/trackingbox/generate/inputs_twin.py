@@ -27,12 +27,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
+from ..compiler import compile_model
 from ..errors import SpecError
 from ..io import write_text_atomic
+from ..version import __version__
 from . import filters
 from .generator import _fill_equations, _modifier_lines, environment
-from .source import ParameterSite, check_loads, load_twin, parameter_site, stage_packages
+from .source import (
+    ParameterSite,
+    check_loads,
+    load_twin,
+    parameter_site,
+    stage_packages,
+)
 
 log = logging.getLogger(__name__)
 
@@ -179,8 +186,6 @@ def inputs_twin(spec: Any, *, backend: str = "embedded", cache: Path | None = No
     InputsTwin
         The FMU, its model name and ``{tracked value: FMU input}``.
     """
-    from ..compiler import compile_model
-
     if spec.source is None:
         inputs_model(spec)  # raises: no [source]
     names = _names(spec)

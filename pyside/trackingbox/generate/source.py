@@ -31,6 +31,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import rumoca
+
+from ..compiler import library_path
 from ..errors import CompileError, SpecError, unknown_name
 
 logger = logging.getLogger(__name__)
@@ -111,8 +114,6 @@ def _locate(path: Path) -> tuple[Path, Path, tuple[Path, ...], Path]:
 
 
 def _rumoca_load(entry: Path, model: str, roots: list[Path]) -> Any:
-    import rumoca
-
     # Without roots a session scans the entry's own directory; a root is scanned
     # recursively, so only clean (staged) trees are given as roots.
     session = rumoca.Session(roots=[str(r) for r in roots]) if roots else rumoca.Session()
@@ -139,8 +140,6 @@ def _load_with_library(top: Path, entry: Path, model: str) -> Any:
     ``extends TrackingBox.Benches.EvaporatorTrain.Twin(N = 3)``) loads only with it;
     the generated box stages it beside the twin's source anyway (its ``Blocks``).
     """
-    from ..compiler import library_path
-
     lib = library_path()
     if top.resolve() == lib.resolve():
         raise CompileError(f"{model} does not load from the TrackingBox library itself")

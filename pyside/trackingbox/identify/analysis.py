@@ -25,7 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis.offsets import HELD_FRACTION, held_fraction, noise_floor, noise_sigma
 from ..errors import EstimationError, TrackingError
+from ..fmu.info import read_info
+from ..simulation.models import close_models
 from . import structure as st
 from .model import Evaluation, TwinWindow, inside_points, stack, window_for
 
@@ -251,8 +254,6 @@ def tag_noise(window: Any, interval: float, outputs: Sequence[str]) -> dict[str,
     :func:`~trackingbox.analysis.offsets.noise_floor` (the spread around a 30 min moving
     mean); else :data:`FALLBACK_NOISE` of the measured range.
     """
-    from ..analysis.offsets import HELD_FRACTION, held_fraction, noise_floor, noise_sigma
-
     out: dict[str, tuple[float, str]] = {}
     for tag in outputs:
         y = np.asarray(window.measured[tag], dtype=float)
@@ -297,8 +298,6 @@ def identify(spec: Any, *, points: int = DEFAULT_POINTS, method: str = "auto", w
     fraction
         :data:`~trackingbox.identify.structure.DETERMINED_FRACTION`.
     """
-    from ..estimation import close_models
-
     if not (isinstance(points, int) and points >= 0):
         raise EstimationError(f"identify: points must be an integer >= 0, not {points!r}")
     try:
@@ -499,8 +498,6 @@ def _carrying_tags(ev: Evaluation, members: list[int], scaling: st.Scaling) -> t
 def _candidates(tw: TwinWindow, problem: Any, x0: np.ndarray, scaling: st.Scaling,
                 finding: Finding) -> tuple[tuple[str, float, float, str], ...]:
     """Unmeasured twin outputs that would see the finding's first undetermined direction, best first."""
-    from ..fmu import read_info
-
     info = read_info(problem.twin)
     measured = set(problem.outputs.values())
     units = {v.name: v.unit or "" for v in info.variables}

@@ -47,6 +47,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import norm
+
+from ..analysis.offsets import FLOOR_SPAN
+from ..tracking.tuning import pair_settings
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -162,10 +166,6 @@ class BandTracker:
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL) -> None:
-        from scipy.stats import norm
-
-        from ..tracking.tuning import pair_settings
-
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -189,8 +189,6 @@ class BandTracker:
                 "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
                 "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
                          index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
-        from ..analysis.offsets import FLOOR_SPAN
-
         self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
         self.forget = math.exp(-self.ts / NOISE_MEMORY)
         self.states = [self._fresh() for _ in self.pairs]

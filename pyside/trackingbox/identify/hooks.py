@@ -1,12 +1,16 @@
-"""What the estimation stage calls: the identifiability check before, the intervals after.
+"""What the stages call: the identifiability check and the intervals around the estimation, pairing's
+candidate check, the tracking run's bands.
 
 :func:`before_estimate` runs :func:`~trackingbox.identify.analysis.identify` at
 the start values and one point inside the bounds (two sensitivity runs, or
 ``2 (2 n + 1)`` runs of central differences: a second point tells a product's
-structure from a direction that only happens to look like one) and logs a warning per parameter group the data cannot tell
-apart, before the global search spends its budget. :func:`after_estimate` adds
-the intervals (:func:`~trackingbox.identify.intervals.uncertainty`) and that
-check to the :class:`~trackingbox.estimation.EstimationResult`.
+structure from a direction that only happens to look like one) and logs a
+warning per parameter group the data cannot tell apart, before the global
+search spends its budget. :func:`after_estimate` adds the intervals
+(:func:`~trackingbox.identify.intervals.uncertainty`) and that check to the
+:class:`~trackingbox.estimation.EstimationResult` (the estimate stage calls
+both). :func:`indistinct_candidates` is pairing's check, :func:`band_tracker`
+the tracking loop's bands.
 """
 from __future__ import annotations
 
@@ -14,7 +18,12 @@ import logging
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
+
 from ..errors import TrackingError
+from .analysis import identify, leave_out
+from .bands import BandTracker
+from .intervals import uncertainty
 
 log = logging.getLogger(__name__)
 
@@ -26,8 +35,6 @@ def _method(jacobian: str) -> str:
 
 def before_estimate(spec: Any, *, warmup: float | None, jacobian: str = "auto") -> Any:
     """The identifiability at the start values (warnings logged), or None if it could not be taken."""
-    from .analysis import identify
-
     try:
         found = identify(spec, points=1, method=_method(jacobian), warmup=warmup, candidates=False)
     except TrackingError as exc:
@@ -41,8 +48,6 @@ def before_estimate(spec: Any, *, warmup: float | None, jacobian: str = "auto") 
 def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, warmup: float | None,
                    jacobian: str = "auto") -> Any:
     """*result* with the identifiability check and, unless *level* is None, the intervals at its estimate."""
-    from .intervals import uncertainty
-
     extra: dict[str, Any] = {}
     if before is not None:
         extra["identifiability"] = before.to_json()
@@ -57,8 +62,6 @@ def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, 
 
 def band_tracker(spec: Any, columns: Any) -> Any:
     """The :class:`~trackingbox.identify.bands.BandTracker` of a tracking run (None without pairs)."""
-    from .bands import BandTracker
-
     return BandTracker(spec, columns) if getattr(spec, "pairs", None) else None
 
 
@@ -69,8 +72,6 @@ def indistinct_candidates(spec: Any, *, warmup: float | None = None) -> dict[str
     bounds, then :func:`~trackingbox.identify.analysis.leave_out`. Nothing (and a log line) when
     the check cannot run (the twin fails at the start values, a window with too few samples).
     """
-    from .analysis import identify, leave_out
-
     try:
         found = identify(spec, points=1, warmup=warmup, candidates=False)
     except TrackingError as exc:
@@ -87,8 +88,6 @@ def without_candidates(steptest: Any, drop: Any) -> Any:
     candidates in *drop* set to zero, so that the assignment cannot choose them."""
     if steptest is None or not drop:
         return steptest
-    import numpy as np
-
     cols = [j for j, p in enumerate(steptest.parameters) if p in drop]
     masked = {}
     for name in ("gains", "gains_up", "gains_down"):

@@ -57,14 +57,17 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from scipy.stats import t as student_t
+
 from ..errors import EstimationError, TrackingError
+from ..simulation.models import close_models
 from . import structure as st
-from .analysis import Combination, Finding, name_findings
+from .analysis import Combination, Finding, finding_text, name_findings
 from .model import Evaluation, TwinWindow, safe, window_for
 from .noise import effective_samples, lag1, long_run_covariance
 
@@ -326,8 +329,6 @@ def sandwich(jacobians: Mapping[str, np.ndarray], residuals: Mapping[str, np.nda
 
 def linear_interval(a: np.ndarray, sw: Sandwich, c_hat: float, level: float) -> tuple[float, float, float, float]:
     """The linearised interval of ``c = aᵀz`` at ``ĉ``: ``(lower, upper, standard error, t quantile)``."""
-    from scipy.stats import t as student_t
-
     se = math.sqrt(max(float(a @ sw.C @ a), 0.0))
     tq = float(student_t.ppf(0.5 + level / 2.0, sw.terms))
     return c_hat - tq * se, c_hat + tq * se, se, tq
@@ -426,8 +427,6 @@ def uncertainty(spec: Any, estimate: Mapping[str, float], *, level: float = DEFA
     budget
         Most twin runs for the linearity checks and profiles.
     """
-    from ..estimation import close_models
-
     if not (isinstance(level, float | int) and 0.0 < float(level) < 1.0):
         raise EstimationError(f"uncertainty: level must be in (0, 1), not {level!r}")
     try:
@@ -445,13 +444,11 @@ def uncertainty(spec: Any, estimate: Mapping[str, float], *, level: float = DEFA
 
 def _weights(ev: Evaluation) -> dict[str, float]:
     """The mean-NRMSE estimator's weights at the estimate: ``1 / (NRMSE · range² · n)`` per tag."""
-    from ..estimation import _scale
-
     res = ev.residuals()
     out = {}
     for tag, r in res.items():
         n = max(r.size, 1)
-        scale = _scale(ev.measured[tag]) if r.size else 1.0
+        scale = _span(ev.measured[tag]) if r.size else 1.0
         nr = math.sqrt(float(np.mean(r * r))) / scale if r.size else 0.0
         out[tag] = 1.0 / (max(nr, 1e-12) * scale * scale * n)
     return out
@@ -557,11 +554,17 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
 
 
 def _with_message(f: Finding) -> Finding:
-    from dataclasses import replace
-
-    from .analysis import finding_text
-
     return replace(f, message=finding_text(f))
+
+
+def _span(values: np.ndarray) -> float:
+    """The range of *values*, as the estimation's NRMSE takes it (``max(|mean|, 1)`` for a constant).
+
+    >>> _span(np.array([1.0, 3.0])), _span(np.array([5.0, 5.0]))
+    (2.0, 5.0)
+    """
+    span = float(np.max(values) - np.min(values))
+    return span if span > 0.0 else max(abs(float(np.mean(values))), 1.0)
 
 
 def _on_grid(r: np.ndarray, index: np.ndarray) -> np.ndarray:

@@ -21,6 +21,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import EstimationError, TrackingError
+from ..estimation.objective import jacobian_support
+from ..simulation.windows import load_windows, problem_from_spec, simulate_window, simulate_window_sensitivities
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +86,6 @@ class TwinWindow:
     """
 
     def __init__(self, problem: Any, window: Any, method: Method = "auto") -> None:
-        from ..estimation import jacobian_support
-
         if method not in ("auto", "exact", "fd"):
             raise EstimationError(f"sensitivities: method must be auto, exact or fd, not {method!r}")
         self.problem = problem
@@ -118,8 +118,6 @@ class TwinWindow:
 
     def outputs(self, x: npt.ArrayLike) -> Evaluation:
         """One run at *x*: the simulated outputs (no sensitivities)."""
-        from ..estimation import simulate_window
-
         x = np.asarray(x, dtype=float)
         self.runs += 1
         return self._pack(x, simulate_window(self.problem, self.window, x), None)
@@ -130,8 +128,6 @@ class TwinWindow:
         *extra*: further twin variables whose values and sensitivities come back in
         :attr:`Evaluation.extra` (on the window's grid after its lead-in).
         """
-        from ..estimation import simulate_window, simulate_window_sensitivities
-
         x = np.asarray(x, dtype=float)
         problem = self.problem
         if extra:
@@ -204,8 +200,6 @@ def _primes(count: int) -> list[int]:
 
 def window_for(spec: Any, *, warmup: float | None = None, window: str = "training") -> tuple[Any, Any]:
     """The estimation problem of *spec* and one of its windows (``"training"`` or ``"validation"``)."""
-    from ..estimation import load_windows, problem_from_spec
-
     problem = problem_from_spec(spec, warmup=warmup)
     training, validation = load_windows(spec, warmup=problem.warmup)
     return problem, (training if window == "training" else validation)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -25,8 +26,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..compiler import compile_model
 from ..errors import TrackingError
 from ..io import write_text_atomic
+from ..simulation.models import open_model
 
 #: The plant's true values.
 TRUTH = {"R1": 0.02, "R2": 0.05, "C": 2.0e5}
@@ -45,8 +48,6 @@ def model_file() -> Path:
 def compile_wall(output: str | Path, msl: str | Path) -> Path:
     """Compile ``ThermalWall`` against the Modelica Standard Library in *msl* (with ``Modelica`` and
     ``ModelicaServices`` in it) into the FMU *output*; returns its path."""
-    from ..compiler import compile_model
-
     msl = Path(msl)
     libraries = [msl / "Modelica", msl / "ModelicaServices"]
     missing = [str(p) for p in libraries if not p.is_dir()]
@@ -104,10 +105,6 @@ def wall_case(out: str | Path, fmu: str | Path, *, seed: int = 0, hours: float =
     held at their true values (``[fixed]``) instead of estimated (``("C",)``: R1 and R2
     alone, which the wall's temperature does determine).
     """
-    import shutil
-
-    from ..fmu import FMUModel
-
     truth = dict(TRUTH if truth is None else truth)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -117,7 +114,7 @@ def wall_case(out: str | Path, fmu: str | Path, *, seed: int = 0, hours: float =
     pre = 2 * 86400.0
     frame = pd.DataFrame({"time": np.concatenate(([0.0], pre + t)),
                           **{k: np.concatenate(([v[0]], v)) for k, v in u.items()}})
-    with FMUModel(fmu) as model:
+    with open_model(fmu) as model:
         r = model.simulate(stop_time=pre + float(t[-1]), output_interval=dt, inputs=frame, parameters=truth,
                            outputs=["T_wall"])
     y = np.interp(pre + t, np.asarray(r["time"], dtype=float), np.asarray(r["T_wall"], dtype=float))

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
+from .. import config
 from ..errors import LiveError, SpecError
 
 log = logging.getLogger(__name__)
@@ -62,7 +63,7 @@ def read_credentials(path: str | os.PathLike[str] | None = None) -> Credentials 
     stricter). Without a file, ``TRACKINGBOX_OPCUA_USER`` and
     ``TRACKINGBOX_OPCUA_PASSWORD`` are used; ``None`` when neither is set.
     """
-    path = path or os.environ.get(CREDENTIALS_ENV)
+    path = path or config.get("opcua_credentials")
     if path:
         p = Path(path)
         try:
@@ -85,7 +86,7 @@ def read_credentials(path: str | os.PathLike[str] | None = None) -> Credentials 
         if "user" not in values or "password" not in values:
             raise LiveError(f"credentials file {p} needs both 'user = ...' and 'password = ...'")
         return Credentials(values["user"], values["password"])
-    user, password = os.environ.get(USER_ENV), os.environ.get(PASSWORD_ENV)
+    user, password = config.get("opcua_user"), config.get("opcua_password")
     if user and password is not None:
         return Credentials(user, password)
     if user or password:

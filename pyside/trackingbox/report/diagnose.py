@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..diagnose.residuals import heatmap_matrix
 from ..io import write_text_atomic
 from . import plots
 from .document import Document, StageReport, fmt
@@ -32,8 +33,6 @@ def write_diagnose_report(spec: Spec, result: DiagnosisResult, out: str | os.Pat
     out
         The report folder.
     """
-    from ..diagnose.residuals import heatmap_matrix
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     plt = plots.pyplot()

@@ -7,9 +7,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..estimation import fit_series
 from ..io import write_text_atomic
 from . import plots
 from .document import Document, StageReport, fmt
+from .identify import uncertainty_section
 
 if TYPE_CHECKING:
     from ..estimation import EstimationResult
@@ -29,8 +31,6 @@ def write_estimate_report(spec: Spec, result: EstimationResult, out: str | os.Pa
     truth
         Plant parameter values where known (bench cases): an extra table column.
     """
-    from ..estimation import fit_series
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     plt = plots.pyplot()
@@ -64,8 +64,6 @@ def write_estimate_report(spec: Spec, result: EstimationResult, out: str | os.Pa
     files.append(plots.save(fig, out / "convergence.png"))
     doc.image(files[-1], "convergence")
     if getattr(result, "uncertainty", None) is not None:  # trackingbox.identify: intervals, correlation
-        from .identify import uncertainty_section
-
         files += uncertainty_section(doc, result.uncertainty, result.bounds, out, truth)
 
     series = fit_series(spec, {"initial": result.initial, "estimated": result.parameters}, warmup=warmup)

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from ..identify.bands import LEVEL as BAND_LEVEL
+from ..identify.intervals import NONLINEARITY_TOLERANCE
 from ..io import write_text_atomic
 from . import plots
 from .document import Document, StageReport
@@ -108,7 +110,7 @@ def uncertainty_section(doc: Document, uncertainty: Any, bounds: Mapping[str, tu
         "Intervals: linearised from the cost's curvature, with each tag's noise and the residuals' autocorrelation "
         "taken from the residuals (a sandwich covariance whose long-run part is an equal-weighted cosine estimate; "
         "Student t on its terms); profile likelihood where the cost at an end of the linearised interval is off its "
-        f"quadratic prediction by more than {100 * _tolerance():g} %. Residuals per tag: "
+        f"quadratic prediction by more than {100 * NONLINEARITY_TOLERANCE:g} %. Residuals per tag: "
         + "; ".join(f"`{t}` RMS {n.rms:.3g}, lag-1 autocorrelation {n.lag1:.2f}, {n.effective_samples:.0f} effective "
                     f"of {n.samples} samples" for t, n in uncertainty.noise.items()) + ".")
     fig = interval_figure(uncertainty, bounds, truth)
@@ -128,13 +130,13 @@ def draw_band(ax: Any, hours: Any, lower: Any, upper: Any) -> None:
     ok = np.isfinite(lo) & np.isfinite(hi)
     if ok.any():
         ax.fill_between(np.asarray(hours, dtype=float), lo, hi, where=ok, color=plots.PYTHON, alpha=0.25, lw=0,
-                        label=f"{100 * _band_level():g} % band", zorder=1)
+                        label=f"{100 * BAND_LEVEL:g} % band", zorder=1)
         ax.legend(loc="best", fontsize=8)
 
 
 def band_paragraph() -> str:
     """How the tracked parameters' bands are made, for the tracking report."""
-    return (f"Bands (shaded; CSV columns `parameter_lo:<name>`, `parameter_hi:<name>`): {100 * _band_level():g} % "
+    return (f"Bands (shaded; CSV columns `parameter_lo:<name>`, `parameter_hi:<name>`): {100 * BAND_LEVEL:g} % "
             "from the tag's noise fed through the parameter controller (the loop linearised from the pair's gain, "
             "time constant and PI settings; the noise's autocovariance from the tracked error's fast part), the "
             "start value's interval (the spec's `interval`, else the bounds) fading as the loop converges, and the "
@@ -142,16 +144,6 @@ def band_paragraph() -> str:
             "error has been seen. What the twin's structure gets wrong is not in them.")
 
 
-def _band_level() -> float:
-    from ..identify.bands import LEVEL
-
-    return LEVEL
-
-
-def _tolerance() -> float:
-    from ..identify.intervals import NONLINEARITY_TOLERANCE
-
-    return NONLINEARITY_TOLERANCE
 
 
 def write_identify_report(spec: Any, result: Any, out: str | os.PathLike[str]) -> StageReport:

@@ -39,6 +39,8 @@ class Line:
 
 def pyplot() -> Any:
     """``matplotlib.pyplot`` on the non-interactive Agg backend."""
+    # deferred (start-up): pyplot adds 0.23-0.66 s to an import of the package (python -X importtime),
+    # and the Agg backend must be chosen before it loads
     import matplotlib
 
     matplotlib.use("Agg")
@@ -130,10 +132,10 @@ def parameter(x: npt.ArrayLike, lines: Sequence[Line], *, name: str, lower: floa
 def heatmap(title: str, rows: Sequence[str], cols: Sequence[str], values: npt.ArrayLike,
             boxed: set[tuple[str, str]], *, cmap: str, center: float | None = None) -> Any:
     """A figure of a matrix with its values written in the cells and *boxed* ``(row, col)`` cells framed."""
+    plt = pyplot()  # matplotlib loaded, on Agg (see pyplot)
     from matplotlib.colors import TwoSlopeNorm
     from matplotlib.patches import Rectangle
 
-    plt = pyplot()
     v = np.asarray(values, dtype=float)
     fig, ax = plt.subplots(figsize=(max(5.0, 2.5 + 0.8 * len(cols)), max(3.0, 1.6 + 0.5 * len(rows))))
     finite = v[np.isfinite(v)]

@@ -1,0 +1,417 @@
+"""The simulation service's windows: a twin run over a window of the measurements.
+
+:class:`WindowData` is one window of the spec's measurement view on the simulation grid
+(:func:`load_windows`), :class:`Problem` everything a worker needs to run the twin on it
+(:func:`problem_from_spec`; picklable, no open FMU), and :func:`simulate_window` (with
+:func:`simulate_window_sensitivities`) the run, held-input pre-run and lead-in included, on the
+process's cached model (:mod:`.models`). Estimation's cost, the diagnosis's residuals and the
+identifiability checks all simulate through here.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from ..data import MeasurementView
+from ..errors import (
+    DataError,
+    EstimationError,
+    SimulationError,
+    SpecError,
+    unknown_name,
+)
+from ..fmu import read_info
+from ..sensitivity import simulate_sensitivities
+from .models import cached_model
+
+if TYPE_CHECKING:
+    from ..spec import Spec
+
+log = logging.getLogger(__name__)
+
+#: Default warm-up before each window (s): lead-in through the measured history where there is
+#: some, else a held-input pre-run. Long enough for tank temperatures (time constants of hours)
+#: to settle; the held part costs little because the solver takes long steps there.
+DEFAULT_WARMUP = 4 * 3600.0
+#: Each output tag needs at least this many valid samples in each window.
+MIN_VALID_SAMPLES = 20
+
+
+# --------------------------------------------------------------------------- problem
+
+
+@dataclass(frozen=True)
+class WindowData:
+    """One window of measurements on the simulation grid.
+
+    Attributes
+    ----------
+    name
+        ``"training"`` or ``"validation"``.
+    start, stop
+        Window bounds in seconds from the first sample, ``[start, stop)``.
+    time
+        Grid times (s from the first sample), step ``sample_time``.
+    inputs
+        FMU input name -> values on the grid (no NaN).
+    measured
+        Output tag -> measured values on the grid; NaN where a sample is excluded
+        from the cost (missing, long gap, stoppage, lead-in).
+    lead
+        Number of grid points before ``start`` (the lead-in through the measured
+        history, simulated but not scored).
+    """
+
+    name: str
+    start: float
+    stop: float
+    time: np.ndarray
+    inputs: dict[str, np.ndarray]
+    measured: dict[str, np.ndarray]
+    lead: int = 0
+
+    def valid_counts(self) -> dict[str, int]:
+        """Number of samples of each output tag that enter the cost."""
+        return {tag: int(np.isfinite(v).sum()) for tag, v in self.measured.items()}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a worker needs to evaluate the cost: picklable, no open FMU.
+
+    Attributes
+    ----------
+    twin
+        Path of the twin FMU.
+    names, start, lower, upper
+        Estimated parameters, start values and bounds (spec order).
+    fixed
+        Known parameters held at these values.
+    outputs
+        Output tag -> FMU output name.
+    sample_time
+        Grid step (s).
+    warmup
+        Steady-state pre-run before each window (s), a multiple of ``sample_time``.
+    """
+
+    twin: Path
+    names: tuple[str, ...]
+    start: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    fixed: dict[str, float]
+    outputs: dict[str, str]
+    sample_time: float
+    warmup: float
+
+
+def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
+                 ) -> tuple[dict[str, float], float, np.ndarray, pd.DataFrame | None]:
+    """What a run of the twin over *window* with parameter vector *x* starts from.
+
+    Returns the parameter values (the fixed ones and *x*), the length of the
+    held-input pre-run (the part of ``problem.warmup`` the window's lead-in does
+    not cover, in whole sample times), the window's grid from its first sample,
+    and the input table (inputs held at their first values over the pre-run).
+
+    The run keeps the data's clock: the input table's times, and the model's
+    ``time``, are seconds from the first sample of the data, so the run starts
+    at :func:`run_start` (negative over the pre-run of a window at the first
+    sample). A model whose equations use ``time`` (a drift or a fouling that
+    diagnosis adds) then sees the same time on every window and in tracking.
+    """
+    values = np.asarray(x, dtype=float)
+    parameters = dict(problem.fixed)
+    parameters.update({name: float(v) for name, v in zip(problem.names, values)})
+    t0 = run_start(problem, window)
+    offset = float(window.time[0]) - t0
+    grid = window.time - window.time[0]
+    frame: dict[str, np.ndarray] = {"time": t0 + (np.concatenate(([0.0], offset + grid)) if offset > 0 else grid)}
+    for name, series in window.inputs.items():
+        frame[name] = np.concatenate(([series[0]], series)) if offset > 0 else series
+    inputs = pd.DataFrame(frame) if window.inputs else None
+    return parameters, offset, grid, inputs
+
+
+def run_start(problem: Problem, window: WindowData) -> float:
+    """Model time at which a run over *window* starts: its first grid time minus the held pre-run.
+
+    Times are the data's clock (s from the first sample), see :func:`window_setup`.
+    """
+    lead_in = float(window.start - window.time[0])
+    offset = max(0.0, problem.warmup - lead_in)
+    offset = math.ceil(offset / problem.sample_time - 1e-9) * problem.sample_time
+    return float(window.time[0]) - offset
+
+
+def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
+                    tolerance: float = 1e-6) -> dict[str, np.ndarray]:
+    """Simulate the twin over *window* with parameter vector *x*.
+
+    Runs the held-input pre-run first (inputs held at their first values, for
+    the part of ``problem.warmup`` the window's lead-in does not cover), then
+    the lead-in and the window; returns output tag -> simulated values on the
+    window's grid (lead-in included). *tolerance*: the solver's relative
+    tolerance (tighter for finite differences that must resolve small changes).
+    """
+    parameters, offset, grid, inputs = window_setup(problem, window, x)
+    t0 = run_start(problem, window)
+    stop = t0 + offset + float(grid[-1])
+    model = cached_model(problem.twin, tolerance)
+    result = model.simulate(
+        start_time=t0,
+        stop_time=stop,
+        output_interval=problem.sample_time,
+        inputs=inputs,
+        parameters=parameters,
+        outputs=list(problem.outputs.values()),
+    )
+    t = np.asarray(result["time"], dtype=float)
+    out: dict[str, np.ndarray] = {}
+    for tag, name in problem.outputs.items():
+        y = np.asarray(result[name], dtype=float)
+        if not np.all(np.isfinite(y)):
+            raise SimulationError(f"twin {problem.twin.name} gave non-finite values of {name!r}")
+        out[tag] = np.interp(t0 + offset + grid, t, y)
+    return out
+
+
+def simulate_window_sensitivities(problem: Problem, window: WindowData, x: npt.ArrayLike
+                                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """:func:`simulate_window` with the outputs' exact sensitivities w.r.t. the estimated parameters.
+
+    One run of the twin with the forward sensitivity equations
+    (:func:`trackingbox.sensitivity.simulate_sensitivities`, scaled by the bound
+    ranges); returns output tag -> values and output tag -> ``d value / d x``
+    (shape ``(len(grid), n_parameters)``) on the window's grid (lead-in included).
+    """
+    parameters, offset, grid, inputs = window_setup(problem, window, x)
+    t0 = run_start(problem, window)
+    stop = t0 + offset + float(grid[-1])
+    model = cached_model(problem.twin)
+    run = simulate_sensitivities(model, wrt=problem.names, scales=problem.upper - problem.lower,
+                                 start_time=t0, stop_time=stop, output_interval=problem.sample_time,
+                                 inputs=inputs, parameters=parameters, outputs=list(problem.outputs.values()))
+    at = t0 + offset + grid
+    values: dict[str, np.ndarray] = {}
+    slopes: dict[str, np.ndarray] = {}
+    for tag, name in problem.outputs.items():
+        values[tag] = np.interp(at, run.time, run.outputs[name])
+        slopes[tag] = np.stack([np.interp(at, run.time, column) for column in run.sensitivities[name].T], axis=1)
+    return values, slopes
+
+
+# --------------------------------------------------------------------------- from a spec
+
+
+def _get(obj: Any, name: str, default: Any = None) -> Any:
+    if obj is None:
+        return default
+    if isinstance(obj, Mapping):
+        return obj.get(name, default)
+    return getattr(obj, name, default)
+
+
+
+
+def _spans(time_s: np.ndarray, bad: np.ndarray) -> list[tuple[float, float]]:
+    spans: list[tuple[float, float]] = []
+    i = 0
+    n = len(bad)
+    while i < n:
+        if bad[i]:
+            j = i
+            while j + 1 < n and bad[j + 1]:
+                j += 1
+            spans.append((float(time_s[i]), float(time_s[j])))
+            i = j + 1
+        else:
+            i += 1
+    return spans
+
+
+def coarsen(window: WindowData, stride: int) -> WindowData:
+    """Every *stride*-th grid point of *window*, for a cheaper cost in the global search.
+
+    The window's start stays on the coarse grid. Inputs are the centred moving
+    mean over *stride* samples (so the coarser input sampling does not pick
+    single noisy samples); measured outputs are taken as they are (the cost
+    averages over them anyway).
+
+    >>> w = WindowData("training", 20.0, 60.0, np.arange(0.0, 60.0, 10.0), {"u": np.arange(6.0)},
+    ...                {"y": np.array([np.nan, np.nan, 2.0, 3.0, 4.0, 5.0])}, lead=2)
+    >>> c = coarsen(w, 2)
+    >>> c.time.tolist(), c.inputs["u"].tolist(), c.lead
+    ([0.0, 20.0, 40.0], [0.0, 1.5, 3.5], 1)
+    """
+    if stride <= 1:
+        return window
+    first = window.lead % stride
+    index = np.arange(first, len(window.time), stride)
+
+    def smooth(v: np.ndarray) -> np.ndarray:
+        half = stride // 2
+        lo = np.clip(index - half, 0, len(v))
+        hi = np.clip(index - half + stride, 0, len(v))
+        csum = np.concatenate(([0.0], np.cumsum(v)))
+        return (csum[hi] - csum[lo]) / (hi - lo)
+
+    return WindowData(
+        window.name, window.start, window.stop, window.time[index],
+        {k: smooth(np.asarray(v, dtype=float)) for k, v in window.inputs.items()},
+        {k: np.asarray(v, dtype=float)[index] for k, v in window.measured.items()},
+        window.lead // stride,
+    )
+
+
+def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
+    """Cut the training and validation windows out of the spec's measurement view.
+
+    Each window is a :class:`~trackingbox.data.MeasurementView` (same grid,
+    gap rule, stoppage mask and scored samples as tracking and validation).
+    A window that starts after the first sample gets a *lead-in*: up to
+    ``warmup`` seconds of the measured inputs before it (never across an input
+    gap), simulated but not part of the cost, so the twin's slow states follow
+    the real history into the window. The rest of the warm-up is the held-input
+    pre-run (:func:`simulate_window`).
+
+    Parameters
+    ----------
+    spec
+        A loaded spec.
+    warmup
+        Warm-up before each window (s); default :data:`DEFAULT_WARMUP`.
+
+    Raises
+    ------
+    DataError
+        A tag is missing from the measurements, an input has no valid value
+        at all, or an output tag has too few valid samples. An input missing
+        over part of a window is held at its last good value and the outputs
+        are not scored there (the view masks it like a stoppage).
+    """
+    where = Path(spec.measurements).name
+    windows = _get(spec, "windows")
+    lead_s = DEFAULT_WARMUP if warmup is None else float(warmup)
+    out = []
+    for name in ("training", "validation"):
+        span = _get(windows, name)
+        if span is None:
+            raise SpecError(f"spec {getattr(spec, 'path', '')} has no [windows] {name} = [start, stop]")
+        start, stop = float(span[0]), float(span[1])
+        try:
+            view = MeasurementView.from_spec(spec, name, lead=lead_s)
+        except DataError as exc:
+            raise DataError(f"{name} window: {exc}; estimation needs at least {MIN_VALID_SAMPLES} samples") \
+                from None
+        grid = view.grid
+        n_lead = view.lead
+        n_window = grid.size - n_lead
+        # the lead-in starts after the last input gap before the window
+        cut = 0
+        for tag in spec.inputs:
+            bad_lead = np.flatnonzero(~np.isfinite(view.values(tag)[:n_lead]))
+            if bad_lead.size:
+                cut = max(cut, int(bad_lead[-1]) + 1)
+        grid = grid[cut:]
+        lead = n_lead - cut
+        problems = []
+        inputs = {}
+        for tag, fmu_name in spec.inputs.items():
+            # through a gap the twin runs on the input's last good value (the view holds it) and the
+            # outputs there are masked like a stoppage; only an input with no value at all is refused
+            v = view.inputs[fmu_name].to_numpy(dtype=float)[cut:]
+            if not np.isfinite(v).all():
+                problems.append(f"input tag {tag!r} in {where} has no valid value in the {name} window "
+                                f"[{start:g}, {stop:g}) s or before it ({n_window} samples); the twin "
+                                f"cannot be simulated without it")
+            elif view.input_gap.size and (gap := view.input_gap[cut:] & ~np.isfinite(view.values(tag)[cut:])).any():
+                spans = ", ".join(f"{a:g}-{b:g} s" for a, b in _spans(grid, gap)[:5])
+                log.info("input tag %r in %s is missing in the %s window at %s: held at its last good value, "
+                         "outputs masked there", tag, where, name, spans)
+            inputs[fmu_name] = v
+        n_stopped = int((view.stopped & view.in_window).sum())
+        measured = {}
+        for tag in spec.outputs:
+            v = view.scored_values(tag)[cut:]  # NaN: missing, long gap, stoppage, lead-in
+            n_ok = int(np.isfinite(v).sum())
+            if n_ok < MIN_VALID_SAMPLES:
+                problems.append(
+                    f"output tag {tag!r} has {n_ok} valid samples in the {name} window "
+                    f"[{start:g}, {stop:g}) s after removing NaN, long gaps and stoppages "
+                    f"({n_stopped} stoppage samples); estimation needs at least "
+                    f"{MIN_VALID_SAMPLES}"
+                )
+            measured[tag] = v
+        if problems:
+            raise DataError("; ".join(problems))
+        out.append(WindowData(name, start, stop, grid, inputs, measured, lead))
+    return out[0], out[1]
+
+
+def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
+    """Build the picklable :class:`Problem` of a loaded spec.
+
+    Checks that every estimated and fixed parameter and every input/output name
+    exists in the twin (did-you-mean on a miss) and that ``min <= start <= max``.
+    """
+    info = read_info(spec.twin)
+    variables = {v.name: v for v in info.variables}
+    where = f"twin {Path(spec.twin).name}"
+    problems = []
+    params = list(spec.parameters)
+    if not params:
+        raise EstimationError(f"spec {getattr(spec, 'path', '')} has no [[parameters]] to estimate")
+    tunable = [v.name for v in info.variables if v.causality == "parameter"]
+    names, start, lower, upper = [], [], [], []
+    for p in params:
+        name = _get(p, "name")
+        if name not in variables:
+            problems.append(unknown_name("parameter", name, tunable, where))
+        lo, hi, s = float(_get(p, "min")), float(_get(p, "max")), float(_get(p, "start"))
+        if not (lo < hi):
+            problems.append(f"parameter {name!r}: min {lo:g} must be below max {hi:g}")
+        elif not (lo <= s <= hi):
+            problems.append(f"parameter {name!r}: start {s:g} is outside [{lo:g}, {hi:g}]")
+        names.append(name)
+        start.append(s)
+        lower.append(lo)
+        upper.append(hi)
+    fixed = {str(k): float(v) for k, v in dict(_get(spec, "fixed", {}) or {}).items()}
+    for name in fixed:
+        if name not in variables:
+            problems.append(unknown_name("fixed parameter", name, tunable, where))
+    fmu_inputs = [v.name for v in info.variables if v.causality == "input"]
+    for tag, name in spec.inputs.items():
+        if name not in variables or variables[name].causality != "input":
+            problems.append(unknown_name(f"input (for tag {tag!r})", name, fmu_inputs, where))
+    for tag, name in spec.outputs.items():
+        if name not in variables:
+            problems.append(unknown_name(f"output (for tag {tag!r})", name, list(variables), where))
+    if problems:
+        raise SpecError("; ".join(problems))
+    dt = float(spec.sample_time)
+    w = DEFAULT_WARMUP if warmup is None else float(warmup)
+    if w < 0:
+        raise EstimationError(f"warm-up must be >= 0 s, got {w:g}")
+    w = math.ceil(w / dt - 1e-9) * dt
+    return Problem(
+        twin=Path(spec.twin),
+        names=tuple(names),
+        start=np.array(start),
+        lower=np.array(lower),
+        upper=np.array(upper),
+        fixed=fixed,
+        outputs=dict(spec.outputs),
+        sample_time=dt,
+        warmup=w,
+    )

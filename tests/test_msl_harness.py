@@ -1,0 +1,134 @@
+"""The MSL harness (scripts/msl): its comparison with reference results, its grouping of refusals,
+and a whole run on a small library whose references are closed-form solutions (issue 35, item 3)."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackingbox.compiler.msl_harness import (Reference, compare, construct_of, deviation, load_reference, main,
+                                              table)
+
+
+def test_deviation_is_relative_to_the_signal_range():
+    t = np.linspace(0.0, 10.0, 101)
+    ref = 100.0 + 5.0 * np.sin(t)  # range about 10
+    ours = ref + 0.02  # 0.02 off everywhere: 2e-3 of the range
+    rng = ref.max() - ref.min()
+    assert deviation(t, ref, t, ours, 1e-3) == pytest.approx(0.02 / rng, rel=1e-9)
+
+
+def test_deviation_of_a_constant_signal_is_relative_to_its_magnitude():
+    t = np.linspace(0.0, 1.0, 11)
+    assert deviation(t, np.full(11, 50.0), t, np.full(11, 50.05), 1e-4) == pytest.approx(1e-3)
+
+
+def test_an_event_a_hair_later_is_not_a_deviation_but_a_missing_jump_is():
+    # reference: a step at t = 0.5 recorded twice (before and after); ours finds it 1e-6 later
+    ref_t = np.array([0.0, 0.25, 0.5, 0.5, 0.75, 1.0])
+    ref_y = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    our_t = np.array([0.0, 0.25, 0.500001, 0.500001, 0.75, 1.0])
+    our_y = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    assert deviation(ref_t, ref_y, our_t, our_y, 1e-4) == 0.0
+    never = np.zeros(6)  # the step never happens: off by the whole range
+    assert deviation(ref_t, ref_y, our_t, never, 1e-4) == pytest.approx(1.0)
+
+
+def test_compare_names_the_worst_signal_and_the_missing_ones():
+    t = np.linspace(0, 1, 5)
+    ref = Reference(("a", "b", "c"), t, {"a": t, "b": 2 * t, "c": t}, Path("x.csv"))
+    worst, where, missing = compare(ref, t, {"a": t + 0.01, "b": 2 * t + 0.1})
+    assert where == "b" and worst == pytest.approx(0.05)
+    assert missing == ["c"]
+
+
+def test_load_reference_reads_signals_and_columns(tmp_path):
+    folder = tmp_path / "Lib" / "Examples" / "Decay"
+    folder.mkdir(parents=True)
+    (folder / "comparisonSignals.txt").write_text("time\nx\n")
+    (folder / "Decay.csv").write_text('"time","x","y"\n0,1,5\n1,0.5,6\n')
+    ref = load_reference(tmp_path, "Lib.Examples.Decay")
+    assert ref is not None and ref.signals == ("x",)
+    assert list(ref.time) == [0.0, 1.0] and list(ref.values["x"]) == [1.0, 0.5]
+    assert load_reference(tmp_path, "Lib.Examples.Other") is None
+    (folder / "comparisonSignals.txt").write_text("time\nz\n")
+    with pytest.raises(ValueError, match="lacks the comparison signals z"):
+        load_reference(tmp_path, "Lib.Examples.Decay")
+
+
+def test_refusals_group_by_construct_without_names_or_places():
+    a = {"model": "P.A", "outcome": "refused", "message": "unsupported Modelica construct in P.A: when-clause at "
+         "/x/P/A.mo:12. The embedded backend cannot compile it; use --backend openmodelica"}
+    b = {"model": "P.B", "outcome": "refused", "message": "unsupported Modelica construct in P.B: when-clause at "
+         "/x/P/Lib.mo:7, /x/P/B.mo:3. The embedded backend cannot compile it"}
+    c = {"model": "P.C", "outcome": "refused", "message": "unsupported Modelica construct in P.C: discrete variable "
+         "'c.y' at /x/P/C.mo:4: only Real variables are supported"}
+    d = {"model": "P.D", "outcome": "error", "message": "P.D is structurally singular: 12 equations for 13 "
+         "unknowns; variables not determined by any equation: x"}
+    assert construct_of(a) == construct_of(b) == "when-clause"
+    assert construct_of(c) == "discrete variable …"
+    assert construct_of(d) == "<model> is structurally singular: N equations for N unknowns"
+
+
+LIBRARY = {
+    "package.mo": "package Lib\nend Lib;\n",
+    "Examples/package.mo": "within Lib;\npackage Examples\nend Examples;\n",
+    "Examples/Decay.mo": ("within Lib.Examples;\nmodel Decay\n  parameter Real k = 1.5;\n"
+                          "  Real x(start = 2, fixed = true);\nequation\n  der(x) = -k*x;\n"
+                          "  annotation(experiment(StopTime = 2, Interval = 0.01));\nend Decay;\n"),
+    "Examples/Off.mo": ("within Lib.Examples;\nmodel Off\n  extends Decay;\n"
+                        "  annotation(experiment(StopTime = 2, Interval = 0.01));\nend Off;\n"),
+    "Examples/NoReference.mo": ("within Lib.Examples;\nmodel NoReference\n  extends Decay(k = 0.5);\n"
+                                "  annotation(experiment(StopTime = 1));\nend NoReference;\n"),
+    "Examples/Foreign.mo": ("within Lib.Examples;\nmodel Foreign\n  function f\n    input Real u;\n"
+                            "    output Real y;\n    external \"C\" y = lib_f(u);\n  end f;\n  Real y;\n"
+                            "equation\n  y = f(time);\n  annotation(experiment(StopTime = 1));\nend Foreign;\n"),
+    "Examples/Partial.mo": ("within Lib.Examples;\npartial model Partial\n  Real z;\n"
+                            "  annotation(experiment(StopTime = 1));\nend Partial;\n"),
+}
+
+
+def _reference(root: Path, model: str, k: float) -> None:
+    folder = root.joinpath(*model.split("."))
+    folder.mkdir(parents=True)
+    (folder / "comparisonSignals.txt").write_text("time\nx\n")
+    t = np.linspace(0.0, 2.0, 401)
+    rows = "\n".join(f"{float(a)!r},{2.0 * math.exp(-k * float(a))!r}" for a in t)  # the closed form of der(x) = -k x
+    (folder / f"{model.rsplit('.', 1)[-1]}.csv").write_text('"time","x"\n' + rows + "\n")
+
+
+@pytest.mark.compile
+def test_a_run_classifies_each_example_and_resumes(tmp_path, capsys):
+    lib = tmp_path / "Lib"
+    for rel, text in LIBRARY.items():
+        (lib / rel).parent.mkdir(parents=True, exist_ok=True)
+        (lib / rel).write_text(text)
+    ref = tmp_path / "ref"
+    _reference(ref, "Lib.Examples.Decay", 1.5)
+    _reference(ref, "Lib.Examples.Off", 1.6)  # the model decays at 1.5: about 3.5e-2 of the range off
+    out = tmp_path / "res.jsonl"
+    args = ["--msl", str(lib), "--reference", str(ref), "--package", "Lib.Examples", "--out", str(out),
+            "--timeout", "300"]
+    assert main([*args, "--list"]) == 0
+    listed = capsys.readouterr().out.split()
+    assert listed == ["Lib.Examples.Decay", "Lib.Examples.Foreign", "Lib.Examples.NoReference", "Lib.Examples.Off"]
+    assert main([*args, "--match", "Decay"]) == 0
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 0
+    printed = capsys.readouterr().out
+    results = {json.loads(line)["model"]: json.loads(line) for line in out.read_text().splitlines()}
+    assert len(out.read_text().splitlines()) == 4  # Decay was not run again
+    outcome = {m.rsplit(".", 1)[-1]: r["outcome"] for m, r in results.items()}
+    assert outcome == {"Decay": "match", "Off": "wrong", "NoReference": "simulated", "Foreign": "refused"}
+    assert results["Lib.Examples.Decay"]["deviation"] < 1e-4
+    assert 2e-2 < results["Lib.Examples.Off"]["deviation"] < 5e-2
+    assert "external function" in results["Lib.Examples.Foreign"]["construct"]
+    assert results["Lib.Examples.Decay"]["peak_mb"] > 0 and results["Lib.Examples.Decay"]["compile_s"] > 0
+    assert "Lib.Examples" in printed and "external function" in printed
+    # the table of the file alone gives the same counts
+    assert main(["--table", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert again.strip() == table(list(results.values()), ["Lib.Examples"]).strip()
