@@ -26,7 +26,10 @@ the time steps) is reported beside it.
 
 **When the linearisation is poor.** At both ends of the linearised interval the
 cost is evaluated (one run each, the other parameters moved as the
-linearisation predicts) and turned into the *adjusted deviance*
+linearisation predicts; every run of this check and of the profile at the
+solver tolerance of the central differences, 1e-9: at the estimation's 1e-6 the
+integrator's own variation between two runs moved the cost by about a tenth of
+the rise it is compared with, on the thermal wall) and turned into the *adjusted deviance*
 ``D(c) = (SSR_w(c) - SSR_w(ĉ)) · aᵀA⁺a / aᵀCa``, which a quadratic cost makes
 exactly ``t_ν²`` there. If it differs from ``t_ν²`` by more than
 :data:`NONLINEARITY_TOLERANCE` at either end (or an end lies beyond a bound),
@@ -68,7 +71,7 @@ from ..errors import EstimationError, TrackingError
 from ..simulation.models import close_models
 from . import structure as st
 from .analysis import Combination, Finding, finding_text, name_findings
-from .model import Evaluation, TwinWindow, safe, window_for
+from .model import FD_TOLERANCE, Evaluation, TwinWindow, safe, window_for
 from .noise import effective_samples, lag1, long_run_covariance
 
 log = logging.getLogger(__name__)
@@ -370,7 +373,7 @@ class _Profile:
             raise _OutOfBudget
         self.budget[0] -= 1
         try:
-            ev = self.tw.outputs(self.coords.to_x(z))
+            ev = self.tw.outputs(self.coords.to_x(z), tolerance=FD_TOLERANCE)
         except TrackingError as exc:
             log.info("profile run failed at %s: %s", self.coords.to_x(z), exc)
             return None

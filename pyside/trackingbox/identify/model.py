@@ -116,11 +116,11 @@ class TwinWindow:
         return Evaluation(np.array(x, dtype=float), out_sim, out_meas, out_jac if jac is not None else None, index,
                           more)
 
-    def outputs(self, x: npt.ArrayLike) -> Evaluation:
-        """One run at *x*: the simulated outputs (no sensitivities)."""
+    def outputs(self, x: npt.ArrayLike, tolerance: float = 1e-6) -> Evaluation:
+        """One run at *x*: the simulated outputs (no sensitivities), at the solver's relative *tolerance*."""
         x = np.asarray(x, dtype=float)
         self.runs += 1
-        return self._pack(x, simulate_window(self.problem, self.window, x), None)
+        return self._pack(x, simulate_window(self.problem, self.window, x, tolerance), None)
 
     def sensitivities(self, x: npt.ArrayLike, extra: Sequence[str] = ()) -> Evaluation:
         """Outputs and their sensitivities at *x* (exact or central differences, see the module).
