@@ -77,7 +77,8 @@ def test_estimate_json_finds_plant_kht(case: Path, tmp_path: Path) -> None:
                             "--report", str(report)])
     assert code == 0
     doc = json.loads(out)
-    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement"}
+    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement",
+                        "identifiability", "uncertainty"}
     # the embedded twin provides directional derivatives; "auto" takes them unless its runs are native
     from trackingbox.spec import load_spec
 

@@ -223,9 +223,12 @@ def test_estimate_command_json_report_write(fmu: Path, tmp_path: Path,
                               "--write"])
     assert args.func(args) == 0
     doc = json.loads(capsys.readouterr().out)  # exactly one JSON document on stdout
-    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement", "warmup"}
+    assert set(doc) == {"parameters", "training", "validation", "evaluations", "seconds", "refinement", "warmup",
+                        "identifiability", "uncertainty"}
     # the training window starts at the first sample: no history there, and the document says so
     assert doc["warmup"]["used"]["training"] == 0.0 and "shortened" in doc["warmup"]["note"]
+    interval = doc["uncertainty"]["parameters"]["kht"]
+    assert interval["lower"] < doc["parameters"]["kht"] < interval["upper"], interval
     # the CasADi-made twin provides directional derivatives; "auto" takes them unless its runs are native
     assert doc["refinement"]["jacobian"] == ("fd" if _runs_native(fmu) else "exact"), doc["refinement"]
     assert set(doc["validation"]) == {"nrmse", "nrmse_initial"}

@@ -18,6 +18,7 @@ from .commands import (
     bench,
     diagnose,
     estimate,
+    identify,
     generate,
     inspect,
     pair,
@@ -41,6 +42,7 @@ COMMANDS = (
     "simulate",
     "bench",
     "pair",
+    "identify",
     "estimate",
     "track",
     "replay",
@@ -53,8 +55,8 @@ COMMANDS = (
 
 #: Subcommand name -> its module.
 MODULES = {"compile": compile_command, "inspect": inspect, "simulate": simulate, "bench": bench, "pair": pair,
-           "estimate": estimate, "track": track, "replay": replay, "generate": generate, "validate": validate,
-           "view": view, "diagnose": diagnose, "config": config_command}
+           "identify": identify, "estimate": estimate, "track": track, "replay": replay, "generate": generate,
+           "validate": validate, "view": view, "diagnose": diagnose, "config": config_command}
 
 EPILOG = """\
 examples:
@@ -62,6 +64,7 @@ examples:
   trackingbox inspect twin.fmu --json
   trackingbox simulate twin.fmu --inputs inputs.csv --stop 3600 -o result.csv
   trackingbox bench heat-exchanger --out case1 --seed 3
+  trackingbox identify case1/spec.toml
   trackingbox estimate case1/spec.toml --report case1/estimate
   trackingbox pair case1/spec.toml --method rga --report case1/pair
   trackingbox track case1/spec.toml --report case1/track

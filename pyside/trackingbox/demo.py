@@ -222,7 +222,10 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
                 varying = _time_varying(run.bench, est.parameters)
                 held = _estimate_only(run.bench, est.parameters)
                 starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
-                spec = write_starts(spec.path, starts)
+                unc = est.uncertainty  # the intervals go with the starts: the tracked parameters' bands start there
+                intervals = {iv.name: (iv.lower, iv.upper) for iv in (unc.parameters if unc is not None else ())
+                             if iv.name in starts and iv.determined and iv.lower <= iv.estimate <= iv.upper}
+                spec = write_starts(spec.path, starts, intervals)
                 if held:
                     fixed = {k: float(v) for k, v in est.parameters.items() if k in held}
                     spec = load_spec(fix_parameters(spec.path, fixed).path)

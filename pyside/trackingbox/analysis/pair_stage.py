@@ -92,6 +92,7 @@ from ..errors import AnalysisError, SpecError
 from ..spec import PairSpec
 from .blocks import output_unit, parameter_unit
 from .executor import make_executor
+from ..identify.hooks import explain, indistinct_candidates, without_candidates
 from .offsets import simulate_untracked
 from .pairing import DataChecks, Pair, choose_pairs, complete_with_recording
 from .rga import parameter_ranges, variable_ranges
@@ -181,6 +182,11 @@ class PairSettings:
         Local worker processes (``None``: all cores), or a Dask cluster: ``"local"``
         (*workers* processes on 127.0.0.1) or a scheduler address ``tcp://host:8786``
         (:func:`~trackingbox.analysis.executor.make_executor`).
+    identify
+        With the data checks: leave out candidates whose effect on the tags the data cannot
+        tell apart from another's (the twin's output sensitivities over the training window,
+        as the data were recorded: :func:`trackingbox.identify.analysis.leave_out`), before the
+        assignment, with that reason (``pair --no-identify``: off).
     """
 
     method: Method = "rga"
@@ -208,6 +214,7 @@ class PairSettings:
     seed: int = 0
     workers: int | None = None
     scheduler: str | None = None
+    identify: bool = True
 
 
 @dataclass(frozen=True)
@@ -483,19 +490,22 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         log.info("data checks: untracked twin over the training window [%g, %g) s", start, stop)
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
-    pairing = choose_pairs(st.gains, st.variables, st.parameters, time_constants=st.time_constants,
+    # candidates the data cannot tell apart (dynamic sensitivities, trackingbox.identify): out, with the reason
+    drop = indistinct_candidates(spec) if s.identify and s.data_checks else {}
+    st_m, st2_m, rec_m = (without_candidates(x, drop) for x in (st, st2, st_rec))
+    pairing = choose_pairs(st_m.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
                            parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]),
                            residuals=residuals, bounds=[(p.start, p.min, p.max) for p in spec.parameters],
-                           checks=checks, other_gains=None if st2 is None else st2.gains,
+                           checks=checks, other_gains=None if st2_m is None else st2_m.gains,
                            other_time_constants=None if st2 is None else st2.time_constants,
-                           check_gains=None if st_rec is None else st_rec.gains,
+                           check_gains=None if rec_m is None else rec_m.gains,
                            check_time_constants=None if st_rec is None else st_rec.time_constants,
                            units=spec_units(spec, st.variables, st.parameters),
                            **({"rtol": s.rank_tol} if s.rank_tol else {}))
     if st_rec is not None and residuals is not None:
         pairing = complete_with_recording(
-            pairing, st_rec.gains, time_constants=st_rec.time_constants,
+            pairing, rec_m.gains, time_constants=st_rec.time_constants,
             variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],
             parameter_ranges=parameter_ranges([(p.min, p.max) for p in spec.parameters]), residuals=residuals,
             bounds=[(p.start, p.min, p.max) for p in spec.parameters], checks=checks,
@@ -503,7 +513,7 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
     agr = agreement(pairing, sob) if sob is not None else None
     if s.method == "sobol" and sob is not None:
         pairing = _sobol_pairs(pairing, sob, st)
-    pairing = replace(pairing, left_out=explain_left_out(pairing, step_settings.freeze))
+    pairing = replace(pairing, left_out=explain(explain_left_out(pairing, step_settings.freeze), drop))
     warnings = list(pairing.warnings)
     warnings += [f"{v}/{p}: +/- step gains differ by {100 * a:.0f} % (nonlinear response)"
                  for v, p, a in st.nonlinear()]

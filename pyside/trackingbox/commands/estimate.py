@@ -36,6 +36,13 @@ examples:
   trackingbox estimate case1/spec.toml --report case1/estimate --resume   # continue after an interruption
   trackingbox estimate hp/spec.toml --workers 2 --maxiter 8 --refine-iterations 6   # ~3-4 min budget
   trackingbox estimate hp/spec.toml --scheduler tcp://10.0.0.5:8786   # population on a Dask cluster
+  trackingbox estimate wall/spec.toml --level 0.9    # 90 % intervals
+
+Before the search the sensitivities at the start values say what the data can
+determine (a warning names parameters they cannot tell apart; `trackingbox
+identify SPEC` gives the whole analysis); after it each parameter gets a
+confidence interval (default 95 %, --level) with its method named, or "not
+determined (with ...)" and intervals of the combinations that are.
 
 The cost is the NRMSE (RMSE / measured range) per output tag, averaged over the
 tags, on the training window; the validation window reports the NRMSE at the
@@ -95,7 +102,13 @@ def register(subparsers: Any) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from DIR/checkpoint.journal (needs --report DIR)")
     p.add_argument("--write", action="store_true",
-                   help="write the estimates back as the [[parameters]] start values of SPEC")
+                   help="write the estimates back as the [[parameters]] start values of SPEC, with their "
+                        "intervals (interval = [a, b], where determined: the tracked parameter's band starts "
+                        "from it)")
+    p.add_argument("--level", type=number(gt=0, le=0.9999), default=0.95,
+                   help="confidence level of the intervals at the estimate (default 0.95)")
+    p.add_argument("--no-intervals", dest="intervals", action="store_false",
+                   help="no confidence intervals (saves their twin runs)")
     p.set_defaults(func=run)
 
 
@@ -114,12 +127,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, spec: Any, checkpoint: Any, progress: Any) -> int:
-    result = stage.run(spec, settings_from_args(stage.EstimateSettings, args, checkpoint=checkpoint),
+    result = stage.run(spec, settings_from_args(stage.EstimateSettings, args, checkpoint=checkpoint,
+                                                level=args.level if args.intervals else None),
                        progress=progress)
     if args.report:
         write_estimate_report(spec, result, args.report, warmup=args.warmup)
     if args.write:
-        write_starts(spec.path, result.parameters)
+        write_starts(spec.path, result.parameters, _intervals(result))
         log.info("wrote the estimates as start values to %s", spec.path)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
@@ -132,12 +146,32 @@ def _run(args: argparse.Namespace, spec: Any, checkpoint: Any, progress: Any) ->
     return 0
 
 
+def _intervals(result: Any) -> dict[str, tuple[float, float]]:
+    """The determined parameters' intervals (the spec's ``interval``, the band's start)."""
+    unc = result.uncertainty
+    if unc is None:
+        return {}
+    return {iv.name: (iv.lower, iv.upper) for iv in unc.parameters
+            if iv.determined and iv.lower is not None and iv.lower <= iv.estimate <= iv.upper}
+
+
 def _print_table(result: Any) -> None:
-    width = max(len(n) for n in result.parameters)
-    print(f"{'parameter':<{width}}  {'start':>12}  {'estimate':>12}  {'min':>12}  {'max':>12}")
+    unc = result.uncertainty
+    width = max(len("parameter"), *(len(n) for n in result.parameters))
+    level = f"{100 * unc.level:g} % interval" if unc is not None else ""
+    print(f"{'parameter':<{width}}  {'start':>12}  {'estimate':>12}  {'min':>12}  {'max':>12}  {level}")
     for name, value in result.parameters.items():
         lo, hi = result.bounds[name]
-        print(f"{name:<{width}}  {result.initial[name]:>12.6g}  {value:>12.6g}  {lo:>12.6g}  {hi:>12.6g}")
+        iv = unc.interval(name) if unc is not None else None
+        what = "" if iv is None else (f"[{iv.lower:.6g}, {iv.upper:.6g}] {iv.method}" if iv.determined else iv.note)
+        print(f"{name:<{width}}  {result.initial[name]:>12.6g}  {value:>12.6g}  {lo:>12.6g}  {hi:>12.6g}  {what}")
+    if unc is not None and unc.combinations:
+        print()
+        for iv in unc.combinations:
+            print(f"determined: {iv.name} = {iv.text()}")
+    if unc is not None:
+        for f in unc.findings:
+            print(f"note: {f.message}")
     tags = list(result.validation_nrmse)
     twidth = max(len(t) for t in tags)
     print()

@@ -74,6 +74,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--second-point", default="auto", metavar="auto|none|TIME",
                    help="repeat the step tests at a second operating point: auto (default: the hour of the "
                         "training window whose running inputs differ most from the first point), TIME, or none")
+    p.add_argument("--no-identify", dest="identify", action="store_false",
+                   help="do not leave out candidates whose effect on the tags the data cannot tell apart from "
+                        "another's (the twin's output sensitivities over the training window; on by default, "
+                        "with the data checks)")
     p.add_argument("--no-data-checks", dest="data_checks", action="store_false",
                    help="pair from the gains alone (no untracked run over the training window)")
     p.add_argument("--noise-ratio", type=number(ge=0), default=5.0, metavar="K",

@@ -164,6 +164,13 @@ class EstimationResult:
         run gives residuals and Jacobian together), ``seconds`` and ``cpu_seconds``
         (wall and process CPU time of the refinement; not in :meth:`to_json`, whose
         document a resumed run reproduces exactly). Empty without refinement.
+    identifiability
+        What the data could determine at the start values, checked before the search
+        (:func:`trackingbox.identify.analysis.identify`'s ``to_json``; the estimate stage
+        adds it); empty if not run.
+    uncertainty
+        Confidence intervals at the estimate (:class:`trackingbox.identify.intervals.Uncertainty`;
+        the estimate stage adds them), or None.
     """
 
     parameters: dict[str, float]
@@ -179,6 +186,8 @@ class EstimationResult:
     refinement: dict[str, Any] = field(default_factory=dict)
     warmups: dict[str, float] = field(default_factory=dict)
     initial_state: str = "model"
+    identifiability: dict[str, Any] = field(default_factory=dict)
+    uncertainty: Any = None
 
     def shortened_warmups(self) -> dict[str, float]:
         """Window -> the warm-up it had, for the windows whose warm-up was shorter than asked for."""
@@ -212,6 +221,10 @@ class EstimationResult:
                              "initial": self.initial_state, "note": self.warmup_note()}
         if self.refinement:  # its timings stay out: a resumed run's document equals an uninterrupted one's
             out["refinement"] = {k: v for k, v in self.refinement.items() if k not in ("seconds", "cpu_seconds")}
+        if self.identifiability:  # trackingbox.identify: the check before, the intervals after
+            out["identifiability"] = self.identifiability
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty.to_json()
         return out
 
 
@@ -615,10 +628,12 @@ def _series(problem: Problem, window: WindowData,
 
 # --------------------------------------------------------------------------- writing back
 
-def write_starts(path: str | Path, values: Mapping[str, float]) -> Any:
+def write_starts(path: str | Path, values: Mapping[str, float],
+                 intervals: Mapping[str, tuple[float, float]] | None = None) -> Any:
     """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
 
     Delegates to :func:`trackingbox.spec.write_starts` (one writer for the spec,
-    keeping comments and layout); kept here for existing callers.
+    keeping comments and layout); kept here for existing callers. *intervals*: their
+    confidence intervals (``interval = [a, b]``, where determined).
     """
-    return _write_starts(path, values)
+    return _write_starts(path, values, intervals)

@@ -22,9 +22,10 @@ reconnects with exponential back-off, and reads the samples it missed back
 with HistoryRead before going on live, so no row is lost.
 
 With ``[live] publish = "opc.tcp://..."`` the tracker serves its results:
-``ns=2;s=parameter:<name>``, ``tracked:<tag>``, ``untracked:<tag>`` and
-``mode:<tag>`` (the CSV's columns), updated after every row with the row's
-plant time as source timestamp.
+``ns=2;s=parameter:<name>``, ``tracked:<tag>``, ``untracked:<tag>``,
+``mode:<tag>`` and the band ``parameter_lo:<name>`` / ``parameter_hi:<name>``
+(the CSV's columns), updated after every row with the row's plant time as
+source timestamp.
 """
 from __future__ import annotations
 
@@ -707,7 +708,8 @@ class _Tracker:
         if self.publisher is None or self.loop is None or self.origin is None:
             return
         if self.publisher.server is None:
-            self.publisher.columns = [c for c in self.loop.plan.columns if c != "time"]
+            # the CSV's columns, the tracked parameters' bands (parameter_lo:/parameter_hi:<name>) included
+            self.publisher.columns = [c for c in self.loop.output.columns if c != "time"]
             await self.publisher.start()
         rows = self.tail.new_rows()
         if rows:

@@ -11,6 +11,7 @@ from ..estimation import fit_series
 from ..io import write_text_atomic
 from . import plots
 from .document import Document, StageReport, fmt
+from .identify import uncertainty_section
 
 if TYPE_CHECKING:
     from ..estimation import EstimationResult
@@ -63,6 +64,8 @@ def write_estimate_report(spec: Spec, result: EstimationResult, out: str | os.Pa
     ax.grid(alpha=0.3, which="both")
     files.append(plots.save(fig, out / "convergence.png"))
     doc.image(files[-1], "convergence")
+    if getattr(result, "uncertainty", None) is not None:  # trackingbox.identify: intervals, correlation
+        files += uncertainty_section(doc, result.uncertainty, result.bounds, out, truth)
 
     series = fit_series(spec, {"initial": result.initial, "estimated": result.parameters}, warmup=warmup)
     for tag in spec.outputs:

@@ -12,6 +12,7 @@ import pandas as pd
 
 from . import plots
 from .document import Document, StageReport, fmt
+from .identify import band_paragraph, draw_band
 
 if TYPE_CHECKING:
     from ..spec import Spec
@@ -78,6 +79,8 @@ def write_track_report(spec: Spec, result: TrackingResult, out: str | os.PathLik
     for name, p in result.parameters.items():
         fig = plots.parameter(hours, [plots.Line(df[f"parameter:{name}"], "tracked", plots.PYTHON)], name=name,
                               lower=p.lower, upper=p.upper, truth=plots.truth_for(truth, name), hold=on_hold)
+        if f"parameter_lo:{name}" in df.columns:  # trackingbox.identify: the tracked parameter's band
+            draw_band(fig.axes[0], hours, df[f"parameter_lo:{name}"], df[f"parameter_hi:{name}"])
         files.append(plots.save(fig, out / f"parameter_{plots.safe_name(name)}.png"))
         images.append((files[-1], f"parameter {name}"))
     corr_cols = [c for c in df.columns if c.startswith("correction:")]
@@ -97,6 +100,8 @@ def write_track_report(spec: Spec, result: TrackingResult, out: str | os.PathLik
                  f"{result.steps} rows, {result.simulated_seconds:g} s simulated in {result.seconds:.1f} s wall",
                  f"trajectory: `{result.csv}`"])
     doc.blocks += summary_tables(result, {p.variable: p.parameter for p in spec.pairs}).blocks
+    if any(c.startswith("parameter_lo:") for c in df.columns):
+        doc.paragraph(band_paragraph())
     if truth:
         known = {n: truth[n] for n in result.parameters if n in truth}
         if known:

@@ -180,19 +180,21 @@ def _phase(problem: Problem, window: WindowData, t0: float) -> Any:
     return note
 
 
-def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike) -> dict[str, np.ndarray]:
+def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
+                    tolerance: float = 1e-6) -> dict[str, np.ndarray]:
     """Simulate the twin over *window* with parameter vector *x*.
 
     Runs from the window's first grid point (its warm-up through the measured
     history, then the window; from the FMU's initial state or its steady state
     there, ``problem.initial``); returns output tag -> simulated values on the
     window's grid (lead-in included). While the run is in the warm-up the
-    watchdog's error line says so.
+    watchdog's error line says so. *tolerance*: the solver's relative tolerance
+    (tighter for finite differences that must resolve small changes).
     """
     parameters, offset, grid, inputs = window_setup(problem, window, x)
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
-    model = cached_model(problem.twin)
+    model = cached_model(problem.twin, tolerance)
     try:
         note_phase(f"the start of the {window.name} window's run of the twin {problem.twin.name} (t = {t0:g} s)")
         result = model.simulate(

@@ -45,12 +45,17 @@ class SourceSpec:
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """A candidate tracking parameter with its start value and bounds."""
+    """A candidate tracking parameter with its start value and bounds.
+
+    ``interval``: the confidence interval of the start value where an estimate gave one
+    (``estimate --write`` records it; the tracked parameter's band starts from it), else None.
+    """
 
     name: str
     start: float
     min: float
     max: float
+    interval: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -320,7 +320,7 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
     pkeys = ("name", "start", "min", "max")
     for i, table in enumerate(_array_of_tables(raw, "parameters", problems)):
         label = f"[[parameters]] #{i + 1}" + (f" ({table['name']!r})" if isinstance(table.get("name"), str) else "")
-        _check_keys(table, pkeys, pkeys, label, problems)
+        _check_keys(table, (*pkeys, "interval"), pkeys, label, problems)
         name = _string(table, "name", label, problems)
         start = _number(table, "start", label, problems)
         lo = _number(table, "min", label, problems)
@@ -334,7 +334,8 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
             problems.add(f"start = {start!r} is outside its bounds [{lo!r}, {hi!r}] in {label}")
         if any(p.name == name for p in parameters):
             problems.add(f"parameter {name!r} is listed twice in [[parameters]]")
-        parameters.append(ParameterSpec(name=name, start=start, min=lo, max=hi))
+        interval = _parameter_interval(table, start, lo, hi, label, problems)  # trackingbox.identify
+        parameters.append(ParameterSpec(name=name, start=start, min=lo, max=hi, interval=interval))
     pnames = [p.name for p in parameters]
 
     fixed: dict[str, float] = {}
@@ -355,6 +356,24 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
         fixed[name] = number
 
     return parameters, fixed
+
+
+
+def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: float, label: str,
+                        problems: _Problems) -> tuple[float, float] | None:
+    """``interval = [a, b]`` of a ``[[parameters]]`` entry: two numbers, ``min <= a <= start <= b <= max``."""
+    if "interval" not in table:
+        return None
+    value = table["interval"]
+    if not (isinstance(value, list) and len(value) == 2 and all(_is_number(v) for v in value)):
+        problems.add(f"'interval' in {label} must be [lower, upper] (two numbers), got {value!r}")
+        return None
+    a, b = float(value[0]), float(value[1])
+    if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= start <= b <= hi):
+        problems.add(f"interval = [{a!r}, {b!r}] in {label} must hold its start {start!r} and lie within "
+                     f"its bounds [{lo!r}, {hi!r}]")
+        return None
+    return (a, b)
 
 
 def _parse_windows(raw: Mapping[str, Any], problems: Problems) -> dict[str, tuple[float, float]]:

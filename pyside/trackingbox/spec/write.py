@@ -65,7 +65,9 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     doc["outputs"] = dict(spec.outputs)
     if spec.parameters:
         doc["parameters"] = [{"name": p.name, "start": float(p.start), "min": float(p.min),
-                              "max": float(p.max)} for p in spec.parameters]
+                              "max": float(p.max), **({"interval": [float(v) for v in p.interval]}
+                                                      if p.interval is not None else {})}
+                             for p in spec.parameters]
     if spec.fixed:
         doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
     if spec.windows:
@@ -262,6 +264,20 @@ def _set_starts(doc: tomlkit.TOMLDocument, starts: Mapping[str, float]) -> None:
             table["start"] = float(starts[str(name)])
 
 
+def _set_intervals(doc: tomlkit.TOMLDocument, starts: Mapping[str, float],
+                   intervals: Mapping[str, tuple[float, float]]) -> None:
+    """The ``interval`` of each parameter whose start is written: the new one, or none (it was the old start's)."""
+    for table in doc.get("parameters", ()):
+        name = table.get("name")
+        if not isinstance(name, str) or str(name) not in starts:
+            continue
+        if str(name) in intervals:
+            a, b = intervals[str(name)]
+            table["interval"] = [float(a), float(b)]
+        elif "interval" in table:
+            del table["interval"]
+
+
 def _check_starts(old: Spec, starts: Mapping[str, float]) -> None:
     names = list(old.parameter_names)
     problems = Problems(str(old.path))
@@ -277,7 +293,8 @@ def _check_starts(old: Spec, starts: Mapping[str, float]) -> None:
 
 
 def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | None = None,
-                starts: Mapping[str, float] | None = None) -> Spec:
+                starts: Mapping[str, float] | None = None,
+                intervals: Mapping[str, tuple[float, float]] | None = None) -> Spec:
     """Write pairs and/or parameter start values into the spec file *path*, atomically.
 
     The file is edited as a TOML document (tomlkit), so everything the call does
@@ -295,6 +312,9 @@ def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | Non
         them). ``None`` leaves the pairs alone.
     starts : mapping of str to float, optional
         New ``start`` values of named ``[[parameters]]``.
+    intervals : mapping of str to (float, float), optional
+        The confidence intervals of those starts (``interval = [a, b]``); a start written
+        without one loses the interval it had (it belonged to the old start).
 
     Returns
     -------
@@ -334,12 +354,15 @@ def update_spec(path: str | os.PathLike[str], *, pairs: Iterable[PairSpec] | Non
     doc = tomlkit.parse(text)
     if pairs is not None:
         _set_pairs(doc, new_pairs)
+    new_intervals = {k: (float(v[0]), float(v[1])) for k, v in dict(intervals or {}).items() if k in new_starts}
     if new_starts:
         _set_starts(doc, new_starts)
+        _set_intervals(doc, new_starts, new_intervals)
     new_text = tomlkit.dumps(doc)
     new = loads_spec(new_text, path, check_files=False)
     wanted = replace(old, pairs=new_pairs, parameters=tuple(
-        replace(p, start=float(new_starts[p.name])) if p.name in new_starts else p
+        replace(p, start=float(new_starts[p.name]), interval=new_intervals.get(p.name))
+        if p.name in new_starts else p
         for p in old.parameters))
     if new != wanted:
         raise SpecError(f"{path}: writing back {len(new_pairs)} pairs and {len(new_starts)} start "
@@ -365,7 +388,8 @@ def write_pairs(path: str | os.PathLike[str], pairs: Iterable[PairSpec]) -> Spec
     return update_spec(path, pairs=pairs)
 
 
-def write_starts(path: str | os.PathLike[str], values: Mapping[str, float]) -> Spec:
+def write_starts(path: str | os.PathLike[str], values: Mapping[str, float],
+                 intervals: Mapping[str, tuple[float, float]] | None = None) -> Spec:
     """Write *values* as the ``start`` of the spec file's ``[[parameters]]``, atomically.
 
     A thin call of :func:`update_spec`: only the ``start`` values of the named
@@ -382,4 +406,4 @@ def write_starts(path: str | os.PathLike[str], values: Mapping[str, float]) -> S
         A name in *values* is not one of the spec's parameters, or a value is
         outside its bounds.
     """
-    return update_spec(path, starts=values)
+    return update_spec(path, starts=values, intervals=intervals)

@@ -1,7 +1,10 @@
 """The estimate stage: bounded gray-box estimation of the spec's ``[[parameters]]`` on its training window.
 
 ``run(spec, EstimateSettings(...), progress=...)`` -> :class:`~trackingbox.estimation.EstimationResult`
-(the computation: :func:`trackingbox.estimation.estimate`, whose keywords are the settings' fields).
+(the computation: :func:`trackingbox.estimation.estimate`, whose keywords are the settings' fields but
+``level`` and ``identify``): before it, what the data can determine at the start values (a warning per
+group of parameters they cannot tell apart: :func:`trackingbox.identify.hooks.before_estimate`); after
+it, the confidence intervals at the estimate (:func:`trackingbox.identify.hooks.after_estimate`).
 """
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import EstimationError
 from ..estimation import (
     GLOBAL_SETTLE,
     MAX_REFINE_ITERATIONS,
@@ -17,6 +21,7 @@ from ..estimation import (
     ProgressCallback,
     estimate,
 )
+from ..identify.hooks import after_estimate, before_estimate
 from .contract import Progress
 
 
@@ -38,6 +43,11 @@ class EstimateSettings:
     refine_grid: float | None = None
     jacobian: str = "auto"
     settle: float = GLOBAL_SETTLE
+    level: float | None = 0.95
+    identify: bool = True
+
+    #: fields that are not the computation's keywords: what the data determine, checked around it
+    AROUND = ("level", "identify")
 
 
 def progress_lines(progress: Progress) -> ProgressCallback:
@@ -56,6 +66,16 @@ def progress_lines(progress: Progress) -> ProgressCallback:
 
 def run(spec: Any, settings: EstimateSettings = EstimateSettings(), *,
         progress: Progress | None = None) -> EstimationResult:
-    """Estimate the spec's parameters with *settings*; *progress* gets the generations and refinement steps."""
-    return estimate(spec, **{f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)},
-                    progress=None if progress is None else progress_lines(progress))
+    """Estimate the spec's parameters with *settings*; *progress* gets the generations and refinement steps.
+
+    ``settings.identify``: check what the data can determine at the start values first (warnings);
+    ``settings.level``: the confidence level of the intervals at the estimate (None: none).
+    """
+    level = settings.level
+    if level is not None and not (isinstance(level, (int, float)) and 0.0 < float(level) < 1.0):
+        raise EstimationError(f"estimate: level must be a fraction in (0, 1), not {level!r}")
+    before = before_estimate(spec, warmup=settings.warmup, jacobian=settings.jacobian) if settings.identify else None
+    result = estimate(spec, **{f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
+                               if f.name not in EstimateSettings.AROUND},
+                      progress=None if progress is None else progress_lines(progress))
+    return after_estimate(spec, result, before, level=level, warmup=settings.warmup, jacobian=settings.jacobian)

@@ -22,6 +22,7 @@ from ..checkpoint import CheckpointFile
 from ..data import MeasurementView
 from ..errors import DataError, SimulationError, SpecError
 from ..generate.inputs_twin import inputs_twin as make_inputs_twin
+from ..identify.hooks import band_tracker
 from ..io import write_text_atomic
 from ..spec import check_against_fmu
 from ..stream import MARGIN_ROWS, WINDOW_ROWS, WindowedMeasurements, percentile_range
@@ -64,7 +65,7 @@ log = logging.getLogger(__name__)
 
 
 
-CHECKPOINT_VERSION = 6  # 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+CHECKPOINT_VERSION = 7  # 7: band columns; 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 
 
 # --------------------------------------------------------------------------- the loop
@@ -181,7 +182,8 @@ class TrackingLoop:
                    StateCompensator(s.gain, ts=ts, interpolation=interpolation))
             for s in spec.states])
         self.output = Output(self.csv_path, plan.columns, self.controllers.names, self.compensation.names,
-                              [s.tag for s in spec.states], list(spec.outputs))
+                             [s.tag for s in spec.states], list(spec.outputs),
+                             band_tracker(spec, plan.columns))  # the tracked parameters' bands (identify)
         self.read = plan.read_names
         self.ridx = {name: i for i, name in enumerate(self.read)}
         #: the view the row plan was made for, and per output tag: (read index, samples, scored or None, fit)
@@ -714,6 +716,7 @@ class TrackingLoop:
                    "states": {n: {"final": num(c.final), "min": num(c.min), "max": num(c.max)}
                               for n, c in result.states.items()},
                    "events": [[e.time, e.kind, e.message] for e in self.events],
-                   "integrator": {"restarts": restarts, "carried": carried}}
+                   "integrator": {"restarts": restarts, "carried": carried},
+                   **({"bands": out.bands.describe()} if out.bands is not None else {})}
         write_text_atomic(self.out_dir / RESULT_NAME, json.dumps(summary, indent=1))
         return result

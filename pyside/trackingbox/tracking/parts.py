@@ -140,9 +140,12 @@ class Output:
     """The streamed CSV and the summaries of the run (parameter, correction and level ranges, fits)."""
 
     def __init__(self, path: Path, columns: Sequence[str], parameters: Sequence[str], corrections: Sequence[str],
-                 levels: Sequence[str], fitted: Sequence[str]) -> None:
+                 levels: Sequence[str], fitted: Sequence[str], bands: Any = None) -> None:
         self.path = path
-        self.columns = list(columns)
+        #: the tracked parameters' uncertainty bands (trackingbox.identify.bands.BandTracker): two more
+        #: columns per pair after the row's own, computed from the row
+        self.bands = bands
+        self.columns = list(columns) + (list(bands.columns) if bands is not None else [])
         self.pstats = {n: Stats() for n in parameters}
         self.cstats = {n: Stats() for n in corrections}
         self.sstats = {n: Stats() for n in levels}
@@ -157,13 +160,16 @@ class Output:
         self._writer.writerow(self.columns)
 
     def write(self, row: Sequence[Any]) -> None:
-        self._writer.writerow(row)
+        self._writer.writerow(row if self.bands is None else [*row, *self.bands.row(row)])
 
     def writerows(self, rows: Sequence[Sequence[Any]]) -> None:
-        self._writer.writerows(rows)
+        self._writer.writerows(rows if self.bands is None else [[*r, *self.bands.row(r)] for r in rows])
 
-    def write_text(self, text: str) -> None:
-        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`)."""
+    def write_text(self, text: str, rows: Any = None) -> None:
+        """Rows already formatted as the csv writer writes them (:func:`trackingbox.native.format_rows`);
+        *rows*: the same rows as numbers (modes as flags), for the band columns."""
+        if self.bands is not None:
+            text = self.bands.append_text(text, rows)
         self._fh.write(text)
 
     def flush(self) -> None:
@@ -179,6 +185,7 @@ class Output:
         """The CSV's valid length (bytes) and the summaries; flushes the CSV first."""
         self._fh.flush()
         return {"csv_bytes": self._fh.tell(),
+                "bands": self.bands.state_dict() if self.bands is not None else None,
                 "parameter_stats": {n: s.state() for n, s in self.pstats.items()},
                 "correction_stats": {n: s.state() for n, s in self.cstats.items()},
                 "state_stats": {n: s.state() for n, s in self.sstats.items()},
@@ -196,6 +203,8 @@ class Output:
             self.sstats[n].restore(state["state_stats"][n])
         for t in self.fits:
             self.fits[t].restore(state["fits"][t])
+        if self.bands is not None:
+            self.bands.load_state_dict(state["bands"])
         self._fh = open(self.path, "a", newline="", encoding="utf-8")
         self._writer = csv.writer(self._fh)
 

@@ -305,7 +305,7 @@ class NativeRows:
         if written:
             text = self.native.format_rows(self.rows[:written], self.npairs)
             if text is not None:
-                loop.output.write_text(text)
+                loop.output.write_text(text, self.rows[:written])
             else:
                 rows = self.rows[:written].tolist()
                 for row in rows:

@@ -1,0 +1,323 @@
+"""Uncertainty bands on tracked parameters, row by row, from what the tracking loop itself sees.
+
+A parameter controller is a filter from its tag's measurement to the parameter:
+the tag's noise moves the parameter, and a change of the plant's true value
+reaches it only through the loop's dynamics. For each ``[[pairs]]`` entry
+:func:`loop_model` linearises the loop the tracking runtime runs -- the
+pair's first-order step response (``gain``, ``time_constant``, the parameter
+held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pair_settings`:
+``Δp = Kc (Δe + Ts (e_k + e_k-1) / (2 Ti))``) -- and computes
+
+* ``h``: the parameter's response to a unit impulse of measurement noise, and
+* ``d``: what is left of an initial parameter error after ``k`` samples in auto
+  (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
+
+:class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
+tracked value ``p`` (level :data:`LEVEL`), in three parts:
+
+1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
+   autocovariance of the tag's fast error (tracked error minus its centred
+   30 min mean, as pairing's noise floor; forgotten over :data:`NOISE_MEMORY`,
+   from auto rows only), ``R_h`` the autocorrelation of ``h``; the band is
+   empty until :data:`NOISE_MIN` of fast error has been seen;
+2. **start**: the truth lies in the start's interval ``[a, b]`` (the spec's
+   ``interval`` of the parameter, which ``estimate --write`` records, else its
+   bounds), so after ``k`` auto samples ``p* ∈ [p - (p0 - a)|d_k|, p + (b - p0)|d_k|]``
+   (sides swapped where ``d_k < 0``), combined with the noise part in quadrature;
+3. **lag**: a truth moving at rate ``ρ`` is ``ρ T_lag`` ahead of ``p``; ``ρ`` is
+   the tracked value's own slope (the difference of two exponential means of
+   ``p`` over ``T_lag/2`` and ``T_lag``), added on the side it moves to; while the
+   controller holds (stoppage, missing tag) the truth may move on: the rate
+   before the hold times its length is added there, and fades with ``d`` once
+   tracking resumes.
+
+The band is clipped to the parameter's bounds. It does not contain what the
+twin's structure gets wrong (an effect the twin lacks, absorbed by the
+parameter): no loop can see that from its own tag.
+
+Everything is causal and its state small (:meth:`BandTracker.state_dict`), so
+the online mode publishes the same band as an offline run writes, and a resumed
+run writes the same bytes.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.stats import norm
+
+from ..analysis.offsets import FLOOR_SPAN
+from ..tracking.tuning import pair_settings
+
+#: Confidence level of the bands.
+LEVEL = 0.95
+#: Forgetting time (s) of the noise statistics.
+NOISE_MEMORY = 12 * 3600.0
+#: Fast error (s, in auto) seen before the band is given.
+NOISE_MIN = 3600.0
+#: Lags (samples) of the fast error's autocovariance used.
+NOISE_LAGS = 30
+#: The impulse and decay responses are followed for this many loop lag times.
+HORIZON = 12.0
+
+
+def column_names(parameter: str) -> tuple[str, str]:
+    """The CSV columns of a tracked parameter's band: ``parameter_lo:<name>``, ``parameter_hi:<name>``."""
+    return f"parameter_lo:{parameter}", f"parameter_hi:{parameter}"
+
+
+@dataclass(frozen=True)
+class LoopModel:
+    """The linearised loop of one pair (see the module docstring).
+
+    Attributes
+    ----------
+    impulse
+        ``h``: parameter units per unit of measurement noise at sample 0.
+    decay
+        ``d``: the fraction of an initial parameter error left after each auto sample.
+    lag_time
+        ``T_lag = Ts Σ d`` (s).
+    acf
+        ``R_h(l)`` for ``l = 0..NOISE_LAGS``.
+    """
+
+    impulse: np.ndarray
+    decay: np.ndarray
+    lag_time: float
+    acf: np.ndarray
+
+
+def loop_model(gain: float, time_constant: float, kc: float, ti: float, ts: float) -> LoopModel:
+    """The linearised loop of a pair with process gain *gain* (variable per parameter unit), first-order
+    *time_constant* (s), PI gain *kc* (parameter per variable unit, positive) and integral time *ti*.
+
+    Examples
+    --------
+    SIMC tuning (``Ti = τ``, ``Kc = 1/(|g| λ)``) makes the loop first order with time constant ``λ τ``;
+    sampled, its lag behind a ramp is about that:
+
+    >>> m = loop_model(-2.0, 600.0, 1.0 / (2.0 * 3.0), 600.0, 10.0)
+    >>> round(m.lag_time / 1800.0, 1)
+    1.0
+    """
+    s = 1.0 if gain > 0 else -1.0
+    a = math.exp(-ts / time_constant) if time_constant > 0 else 0.0
+    guess = max(time_constant, ti, abs(1.0 / (gain * kc)) * ti if gain * kc else ti)
+    n = int(min(200000, max(200, HORIZON * 4.0 * guess / ts)))
+
+    def run(noise: np.ndarray | None, offset: float) -> np.ndarray:
+        # deviation variables: the truth at 0, the parameter starting at *offset*, the twin settled there
+        x = p = offset
+        e_prev = 0.0
+        out = np.empty(n)
+        for k in range(n):
+            e = (noise[k] if noise is not None else 0.0) - gain * x
+            if k == 0:
+                e_prev = e if noise is None else 0.0
+            p += s * kc * ((e - e_prev) + ts * (e + e_prev) / (2.0 * ti))
+            e_prev = e
+            out[k] = p
+            x = a * x + (1.0 - a) * p
+        return out
+
+    impulse_in = np.zeros(n)
+    impulse_in[0] = 1.0
+    h = run(impulse_in, 0.0)
+    d = run(None, 1.0)
+    lags = np.arange(NOISE_LAGS + 1)
+    acf = np.array([float(h[: n - lag] @ h[lag:]) for lag in lags])
+    return LoopModel(h, d, float(ts * np.sum(np.abs(d))), acf)
+
+
+@dataclass
+class _PairState:
+    """One pair's running state (what :meth:`BandTracker.state_dict` saves)."""
+
+    buf: list[float]
+    fast: list[float]
+    sums: list[float]
+    weight: float
+    seen: int
+    auto: int
+    ewma_fast: float
+    ewma_slow: float
+    primed: bool
+    held_lo: float
+    held_hi: float
+    slope: float
+
+
+class BandTracker:
+    """The band columns of a tracking run's CSV (see the module docstring).
+
+    Parameters
+    ----------
+    spec
+        The spec (its ``[[pairs]]``, ``[[parameters]]``, ``sample_time``).
+    columns
+        The CSV's columns (``time``, ``measured:<tag>``, ``tracked:<tag>``,
+        ``parameter:<name>``, ``mode:<tag>``, ...), to find each pair's values in a row.
+    level
+        Confidence level of the bands.
+    """
+
+    def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL) -> None:
+        self.ts = float(spec.sample_time)
+        self.z = float(norm.ppf(0.5 + level / 2.0))
+        self.level = float(level)
+        index = {c: i for i, c in enumerate(columns)}
+        self.pairs: list[dict[str, Any]] = []
+        for pair in spec.pairs:
+            p = spec.parameter(pair.parameter)
+            settings = pair_settings(pair, p.min, p.max, ts=self.ts, where=str(getattr(spec, "path", "the spec")))
+            kc = settings.kp * (p.max - p.min) / settings.scaling.span
+            model = None
+            note = ""
+            if getattr(pair, "controller", "pi") == "pi":
+                model = loop_model(float(pair.gain), float(pair.time_constant), kc, settings.ti, self.ts)
+            else:
+                note = f"no band: {pair.controller} controllers are not modelled (PI only)"
+            interval = getattr(p, "interval", None)
+            start_lo, start_hi = (interval if interval is not None else (p.min, p.max))
+            self.pairs.append({
+                "parameter": pair.parameter, "variable": pair.variable, "model": model, "note": note,
+                "p0": float(p.start), "lo": float(p.min), "hi": float(p.max),
+                "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
+                "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
+                         index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
+        self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
+        self.forget = math.exp(-self.ts / NOISE_MEMORY)
+        self.states = [self._fresh() for _ in self.pairs]
+
+    def _fresh(self) -> _PairState:
+        return _PairState([], [], [0.0] * (NOISE_LAGS + 1), 0.0, 0, 0, 0.0, 0.0, False, 0.0, 0.0, 0.0)
+
+    @property
+    def columns(self) -> list[str]:
+        """The extra CSV columns, two per pair."""
+        return [c for pr in self.pairs for c in column_names(pr["parameter"])]
+
+    # -- one row ---------------------------------------------------------------
+    def _update(self, pr: dict[str, Any], st: _PairState, meas: float, tracked: float, p: float,
+                hold: bool) -> tuple[float, float]:
+        model: LoopModel | None = pr["model"]
+        if model is None or not math.isfinite(p):
+            return math.nan, math.nan
+        e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked) and not hold) else math.nan
+        self._noise(st, e)
+        T = model.lag_time
+        if hold:
+            step = abs(st.slope) * self.ts
+            if st.slope > 0:
+                st.held_hi += step
+            elif st.slope < 0:
+                st.held_lo += step
+        else:
+            fade = math.exp(-self.ts / T) if T > 0 else 0.0
+            st.held_lo *= fade
+            st.held_hi *= fade
+            if not st.primed:
+                st.ewma_fast = st.ewma_slow = p
+                st.primed = True
+            af, as_ = math.exp(-self.ts / (0.5 * T)), math.exp(-self.ts / T)
+            st.ewma_fast = af * st.ewma_fast + (1.0 - af) * p
+            st.ewma_slow = as_ * st.ewma_slow + (1.0 - as_) * p
+            st.slope = (st.ewma_fast - st.ewma_slow) / (0.5 * T) if T > 0 else 0.0
+            st.auto += 1
+        if st.seen * self.ts < NOISE_MIN or st.weight <= 0:
+            return math.nan, math.nan
+        gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
+        taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
+        var = gam[0] * model.acf[0] + 2.0 * float(np.sum((taper * gam * model.acf)[1:]))
+        noise = self.z * math.sqrt(max(var, 0.0))
+        d = model.decay[st.auto] if st.auto < model.decay.size else 0.0
+        a, b = pr["start"]
+        below, above = (pr["p0"] - a) * abs(d), (b - pr["p0"]) * abs(d)
+        if d < 0:
+            below, above = above, below
+        lag = abs(st.slope) * T
+        lo = p - math.sqrt(noise * noise + below * below) - (lag if st.slope < 0 else 0.0) - st.held_lo
+        hi = p + math.sqrt(noise * noise + above * above) + (lag if st.slope > 0 else 0.0) + st.held_hi
+        return max(pr["lo"], lo), min(pr["hi"], hi)
+
+    def _noise(self, st: _PairState, e: float) -> None:
+        """Add one error sample to the fast-error statistics (NaN: a gap)."""
+        buf = st.buf
+        buf.append(e)
+        if not math.isfinite(e):
+            buf.clear()  # a window across a gap is not used, nor are lags across it
+            st.fast.clear()
+            return
+        if len(buf) > self.window:
+            del buf[0]
+        if len(buf) < self.window:
+            return
+        f = buf[self.window // 2] - math.fsum(buf) / self.window
+        fast = st.fast
+        fast.insert(0, f)
+        if len(fast) > NOISE_LAGS + 1:
+            fast.pop()
+        lam = self.forget
+        sums = st.sums
+        for lag, g in enumerate(fast):
+            sums[lag] = lam * sums[lag] + f * g
+        for lag in range(len(fast), NOISE_LAGS + 1):
+            sums[lag] *= lam
+        st.weight = lam * st.weight + 1.0
+        st.seen += 1
+
+    def row(self, values: Sequence[Any]) -> list[float]:
+        """The band values of one row (*values* as the CSV writer gets them; modes ``"hold"``/``"auto"``
+        or a flag)."""
+        out: list[float] = []
+        for pr, st in zip(self.pairs, self.states):
+            it, im, itr, ip, imode = pr["cols"]
+            mode = values[imode]
+            hold = (mode == "hold") if isinstance(mode, str) else bool(mode)
+            out.extend(self._update(pr, st, _num(values[im]), _num(values[itr]), _num(values[ip]), hold))
+        return out
+
+    def rows(self, array: np.ndarray) -> list[list[float]]:
+        """The band values of rows of numbers (modes as flags: non-zero = hold)."""
+        return [self.row(r) for r in np.asarray(array, dtype=float).tolist()]
+
+    def append_text(self, text: str, array: Any) -> str:
+        """CSV lines (``\\r\\n``-terminated, as the csv module writes them) with each row's band values
+        appended, written as the csv module writes floats (``repr``); *array*: the rows as numbers."""
+        if array is None:
+            raise ValueError("band columns need the rows as numbers beside their text")
+        lines = text.split("\r\n")
+        values = self.rows(array)
+        if len(lines) != len(values) + 1 or lines[-1] != "":
+            raise ValueError(f"{len(values)} rows of numbers for {len(lines) - 1} lines of text")
+        return "".join(f"{line},{','.join(map(repr, extra))}\r\n" for line, extra in zip(lines, values))
+
+    # -- state -------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        return {"level": self.level, "pairs": [vars(st).copy() for st in self.states]}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.states = [_PairState(**{k: (list(v) if isinstance(v, list) else v) for k, v in s.items()})
+                       for s in state["pairs"]]
+
+    def describe(self) -> dict[str, Any]:
+        """The bands' settings per parameter (for ``result.json``)."""
+        out: dict[str, Any] = {"level": self.level, "columns": "parameter_lo:<name>, parameter_hi:<name>"}
+        for pr in self.pairs:
+            m: LoopModel | None = pr["model"]
+            out[pr["parameter"]] = {"variable": pr["variable"], "start": list(pr["start"]),
+                                    "start_from": pr["start_source"],
+                                    **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}
+                                       if m is not None else {"note": pr["note"]})}
+        return out
+
+
+def _num(v: Any) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan

@@ -1,0 +1,204 @@
+"""Bands on tracked parameters, the spec's ``interval``, and pairing's candidate check.
+
+Independent expectations: a closed loop simulated here with the runtime's own
+controller class (:class:`~trackingbox.tracking.controllers.ScaledPI`, linear
+interpolation, as ``track`` runs it) around an exactly discretised first-order
+process, driven by white and by correlated measurement noise -- the spread of
+its parameter and how often its band holds the (known, constant or ramping)
+truth are counted, not taken from the band's own model; and hand-made
+sensitivity matrices whose columns are parallel or invisible by construction.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from trackingbox.identify.bands import BandTracker, loop_model
+from trackingbox.tracking.controllers import ScaledPI
+from trackingbox.tracking.tuning import pair_settings
+
+TS = 10.0
+GAIN, TAU, LAM = -0.02, 120.0, 3.0          # K per unit of the parameter, s, closed loop 6 min
+P_MIN, P_MAX, P_TRUE, P0 = 500.0, 1500.0, 910.0, 1000.0
+COLUMNS = ["time", "measured:TI", "tracked:TI", "untracked:TI", "parameter:k", "mode:TI"]
+
+
+def _spec(interval: tuple[float, float] | None = None) -> SimpleNamespace:
+    pair = SimpleNamespace(variable="TI", parameter="k", gain=GAIN, time_constant=TAU, lambda_=LAM, kp=None,
+                           ti=None, controller="pi")
+    par = SimpleNamespace(name="k", start=P0, min=P_MIN, max=P_MAX, interval=interval)
+    return SimpleNamespace(sample_time=TS, pairs=[pair], parameter=lambda name: par, path="test")
+
+
+def _closed_loop(noise: np.ndarray, truth: np.ndarray, hold_rows: int = 30) -> list[list[object]]:
+    """Rows of a tracking run: the runtime's PI controller on an exactly discretised first-order twin."""
+    spec = _spec()
+    settings = pair_settings(spec.pairs[0], P_MIN, P_MAX, ts=TS)
+    pi = ScaledPI(settings.scaling, kp=settings.kp, ti=settings.ti, ts=TS, direction=settings.direction, p0=P0,
+                  interpolation="linear")
+    a = math.exp(-TS / TAU)
+    x = P0  # the twin settled at its start value
+    rows = []
+    for k in range(noise.size):
+        meas = 300.0 + GAIN * truth[k] + noise[k]
+        tracked = 300.0 + GAIN * x
+        hold = k < hold_rows
+        p = pi.update(meas, tracked, hold=hold)
+        rows.append([k * TS, meas, tracked, tracked, p, "hold" if hold else "auto"])
+        x = a * x + (1.0 - a) * p
+    return rows
+
+
+def _coverage(rows: list[list[object]], truth: np.ndarray, interval: tuple[float, float] | None = None,
+              after: float = 0.0) -> tuple[float, np.ndarray]:
+    bands = BandTracker(_spec(interval), COLUMNS)
+    out = np.array([bands.row(r) for r in rows])
+    t = np.array([r[0] for r in rows])
+    ok = np.isfinite(out[:, 0]) & (t >= after)
+    inside = (out[:, 0] <= truth) & (truth <= out[:, 1])
+    return float(inside[ok].mean()), out
+
+
+def test_loop_model_predicts_the_spread_of_the_runtime_controller() -> None:
+    """White noise sigma 0.05 K: the parameter's spread about the truth is sqrt(sum h^2) sigma."""
+    n = 40000
+    rng = np.random.default_rng(4)
+    truth = np.full(n, P_TRUE)
+    rows = _closed_loop(0.05 * rng.normal(size=n), truth)
+    p = np.array([r[4] for r in rows])[2000:]
+    s = pair_settings(_spec().pairs[0], P_MIN, P_MAX, ts=TS)
+    model = loop_model(GAIN, TAU, s.kp * (P_MAX - P_MIN) / s.scaling.span, s.ti, TS)
+    predicted = 0.05 * math.sqrt(float(model.acf[0]))
+    assert abs(np.std(p - P_TRUE) / predicted - 1.0) < 0.1
+    assert abs(np.mean(p) - P_TRUE) < 3 * predicted / math.sqrt(len(p) / 20)
+
+
+@pytest.mark.parametrize("kind", ["white", "correlated"])
+def test_band_holds_a_constant_truth_about_95_percent_of_the_time(kind: str) -> None:
+    n = 30000
+    rng = np.random.default_rng(8)
+    w = rng.normal(size=n)
+    noise = 0.05 * w if kind == "white" else 0.05 * np.convolve(w, np.ones(6) / math.sqrt(6), mode="same")
+    truth = np.full(n, P_TRUE)
+    share, out = _coverage(_closed_loop(noise, truth), truth, after=3600.0)
+    assert 0.90 <= share <= 0.99, share
+    assert np.all(out[np.isfinite(out[:, 0])][:, 0] >= P_MIN) and np.all(out[np.isfinite(out[:, 1])][:, 1] <= P_MAX)
+
+
+def test_band_follows_a_drifting_truth_with_the_loops_lag() -> None:
+    """A truth falling 100 units over the run (fouling): noise alone would leave it outside the band."""
+    n = 30000
+    rng = np.random.default_rng(9)
+    truth = P_TRUE - 100.0 * np.arange(n) / n
+    share, _ = _coverage(_closed_loop(0.05 * rng.normal(size=n), truth), truth, after=3600.0)
+    assert share >= 0.90, share
+
+
+def test_band_starts_from_the_interval_and_is_empty_before_the_noise_is_known() -> None:
+    n = 2000
+    rng = np.random.default_rng(2)
+    truth = np.full(n, P_TRUE)
+    rows = _closed_loop(0.05 * rng.normal(size=n), truth)
+    _, wide = _coverage(rows, truth)
+    _, narrow = _coverage(rows, truth, interval=(980.0, 1020.0))
+    first = int(np.argmax(np.isfinite(wide[:, 0])))
+    assert first > 0 and np.all(np.isnan(wide[:first]))  # empty until an hour of fast error has been seen
+    # within a loop time constant of the start the start's uncertainty still shows, less with an interval
+    assert (narrow[first, 1] - narrow[first, 0]) <= (wide[first, 1] - wide[first, 0])
+
+
+def test_band_state_round_trip_gives_the_same_rows() -> None:
+    n = 1200
+    rng = np.random.default_rng(3)
+    rows = _closed_loop(0.05 * rng.normal(size=n), np.full(n, P_TRUE))
+    whole = BandTracker(_spec(), COLUMNS)
+    expected = [whole.row(r) for r in rows]
+    first = BandTracker(_spec(), COLUMNS)
+    got = [first.row(r) for r in rows[:700]]
+    second = BandTracker(_spec(), COLUMNS)
+    import json
+
+    second.load_state_dict(json.loads(json.dumps(first.state_dict())))
+    got += [second.row(r) for r in rows[700:]]
+    assert np.array_equal(np.array(got), np.array(expected), equal_nan=True)
+
+
+def test_band_text_matches_the_csv_writer() -> None:
+    """The native rows' text gets the same band values as the csv module's rows (byte for byte)."""
+    import csv
+    import io
+
+    n = 800
+    rng = np.random.default_rng(5)
+    rows = _closed_loop(0.05 * rng.normal(size=n), np.full(n, P_TRUE))
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    a = BandTracker(_spec(), COLUMNS)
+    writer.writerows([[*r, *a.row(r)] for r in rows])
+    plain = io.StringIO()
+    csv.writer(plain).writerows(rows)
+    numeric = np.array([[*r[:5], 1.0 if r[5] == "hold" else 0.0] for r in rows])
+    b = BandTracker(_spec(), COLUMNS)
+    assert b.append_text(plain.getvalue(), numeric) == buf.getvalue()
+
+
+# --------------------------------------------------------------------------- the spec's interval
+
+
+SPEC = """\
+twin = "twin.fmu"
+measurements = "data.csv"
+sample_time = 10.0
+[outputs]
+"TI-1" = "T"
+[[parameters]]
+name = "k"
+start = 1.0  # first guess
+min = 0.5
+max = 2.0
+"""
+
+
+def test_spec_interval_is_read_written_and_dropped_with_a_new_start(tmp_path: Path) -> None:
+    from trackingbox.errors import SpecError
+    from trackingbox.spec import load_spec, loads_spec, update_spec
+
+    path = tmp_path / "spec.toml"
+    path.write_text(SPEC)
+    spec = update_spec(path, starts={"k": 1.2}, intervals={"k": (1.1, 1.3)})
+    assert spec.parameter("k").interval == (1.1, 1.3)
+    assert load_spec(path, check_files=False).parameter("k").interval == (1.1, 1.3)
+    assert "# first guess" in path.read_text()
+    spec = update_spec(path, starts={"k": 1.25})  # a new start without an interval: the old one goes
+    assert spec.parameter("k").interval is None and "interval" not in path.read_text()
+    for bad in ("[1.3, 1.4]", "[0.1, 1.1]", "[1.1]", "\"wide\""):
+        with pytest.raises(SpecError, match="interval"):
+            loads_spec(SPEC + f"interval = {bad}\n", tmp_path / "x.toml", check_files=False)
+
+
+# --------------------------------------------------------------------------- pairing's check
+
+
+def test_pairing_leaves_out_a_candidate_parallel_to_a_stronger_one_and_one_nobody_sees() -> None:
+    from trackingbox.identify import structure as st
+    from trackingbox.identify.analysis import Identifiability, leave_out
+
+    t = np.linspace(0.0, 10.0, 500)
+    a = np.sin(t) + 0.3 * t           # strong
+    b = 0.5 * a                       # the same effect, weaker: cannot be told from a's
+    c = np.cos(3 * t)                 # its own effect
+    d = 1e-9 * np.ones_like(t)        # seen by nothing
+    S = np.stack([b, a, c, d], axis=1) * 100.0
+    names = ("b", "a", "c", "d")
+    found = Identifiability(names=names, scaling=("log",) * 4, noise={}, points=(), rank=2,
+                            determined={n: True for n in names}, findings=(), correlation=np.eye(4),
+                            matrix=S, widths=np.full(4, math.log(4.0)))
+    out = leave_out(found)
+    assert set(out) == {"b", "d"}
+    assert "cannot be told from that of a" in out["b"] and "a has the larger effect" in out["b"]
+    assert "do not see it" in out["d"]
+    assert st.analyse(S[:, [1, 2]], ["a", "c"], np.full(2, math.log(4.0))).determined.all()
