@@ -11,7 +11,8 @@ Stages, each timed (wall and the CPU of the processes it ran):
 3. the live run: ``trackingbox replay --serve`` at ``--speed`` and ``trackingbox track --live``
    (supervision off, so the process sampled is the one tracking), the server SIGKILLed at
    ``--kills`` random moments of plant time and restarted with the same origin after 0.5-5 s;
-   the tracker's RSS, peak RSS (VmHWM), open file descriptors and threads sampled every 0.5 s.
+   the tracker's RSS, peak RSS (VmHWM), open file descriptors and threads sampled every 0.5 s (all of
+   them in OUT/memory.csv, the largest per plant day in OUT/soak.json).
 """
 from __future__ import annotations
 
@@ -297,6 +298,9 @@ def main() -> int:
     figures["checks"] = {k: {"ok": ok, "figure": text} for k, (ok, text) in checks.items()}
     figures["memory_by_day"] = {int(d): max(s["hwm"] for s in samples if int(s["plant"] // DAY) == d)
                                 for d in sorted({int(s["plant"] // DAY) for s in samples})}
+    figures["rss_by_day"] = {int(d): max(s["rss"] for s in samples if int(s["plant"] // DAY) == d)
+                             for d in sorted({int(s["plant"] // DAY) for s in samples})}
+    pd.DataFrame(samples).to_csv(out / "memory.csv", index=False)  # every sample: plant s, RSS, peak, fds...
     figures["total"] = {"wall": time.perf_counter() - wall0, "cpu_children": children_cpu() - cpu0}
     (out / "soak.json").write_text(json.dumps(figures, indent=1))
     print(f"live: {stop_after / DAY:.2f} plant days in {live_wall:.0f} s wall ({stop_after / live_wall:.0f}x), "
