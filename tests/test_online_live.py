@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import logging
 import threading
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ import pytest
 from _fixtures_online import free_port, kill, make_certificate, replay_server, start_replay
 from _fixtures_tracking import make_case
 from trackingbox.errors import LiveError
+from trackingbox.online import live as live_module
 from trackingbox.online.live import LiveSettings, track_live
 from trackingbox.online.opcua import CLIENT_URI, Credentials
 from trackingbox.spec import load_spec
@@ -116,6 +118,28 @@ def test_server_killed_and_restarted_mid_run_loses_nothing(case: Path, offline: 
     assert result.connections >= 2 and result.backfilled > 0
     assert "history" in log.read_text()  # the restarted server back-filled its history
     _assert_same_trajectory(pd.read_csv(out / "tracking.csv"), offline)
+
+
+def test_a_tracker_behind_the_plant_reads_the_history_back_with_a_bounded_queue(
+        case: Path, offline: pd.DataFrame, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    # the tracker starts a quarter into the case: it reads the rows before from the history while the
+    # rest come live. The subscription may queue 2 samples meanwhile (the 30-day soak's tracker, days
+    # behind after a restart, held every one: +35 MiB); the ones past that are read from the history
+    # too, a stretch of 10 rows at a time, and no row is lost or repeated
+    monkeypatch.setattr(live_module, "QUEUE_LIMIT", 2)
+    monkeypatch.setattr(live_module, "BACKFILL_ROWS", 10)
+    caplog.set_level(logging.INFO, logger="trackingbox.online.live")
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    with replay_server(case, url, LEAD, tmp_path / "replay.log", "--linger", "60", speed=SPEED) as origin:
+        time.sleep(max(0.0, (origin - dt.datetime.now(dt.timezone.utc)).total_seconds() + 1500.0 / SPEED))
+        result = track_live(load_spec(case), LiveSettings(url, start=origin, stop_after=6000.0, idle_timeout=120.0,
+                                                          poll=0.05, backoff=(0.2, 1.0)), out_dir=tmp_path / "live")
+    assert "read from the history instead" in caplog.text  # the queue overflowed during the back-fill
+    assert 0 < result.backfilled < result.samples == 2 * 601
+    _assert_same_trajectory(pd.read_csv(result.tracking.csv), offline)
+    record = pd.read_csv(tmp_path / "live" / "live_measurements.csv")
+    assert len(record) == 2 * 601 and not record.duplicated(["tag", "time"]).any()
 
 
 def test_anonymous_access_is_refused_when_a_user_is_required(case: Path, tmp_path: Path,

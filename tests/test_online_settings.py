@@ -11,7 +11,7 @@ import pytest
 from _fixtures_online import free_port
 from _fixtures_tracking import spec_text
 from trackingbox.errors import LiveError, SpecError
-from trackingbox.online.live import LiveSettings, _Publisher, _Record
+from trackingbox.online.live import LiveSettings, _Inbox, _Publisher, _Record
 from trackingbox.online.opcua import Credentials, check_endpoint, read_credentials, read_users
 from trackingbox.spec import loads_spec
 
@@ -93,6 +93,43 @@ def test_record_keeps_each_sample_once_in_time_order(tmp_path: Path) -> None:
     assert again.count == 2 and again.last["A"] == t0 + dt.timedelta(seconds=10)
     assert again.last["B"] == t0 and again.bad["B"] and again.good["B"] is None
     again.close()
+
+
+def test_the_subscriptions_queue_is_bounded_while_the_history_is_read_and_loses_nothing() -> None:
+    from asyncua import ua
+
+    t0 = dt.datetime(2026, 1, 1, tzinfo=dt.timezone.utc)
+    # two tags, each at its own times (A every 10 s, B every 7 s), as a historian sends them
+    stream = sorted([("A", t0 + dt.timedelta(seconds=10 * i)) for i in range(300)]
+                    + [("B", t0 + dt.timedelta(seconds=7 * i + 3)) for i in range(400)], key=lambda x: x[1])
+
+    def dv(stamp: dt.datetime) -> ua.DataValue:
+        return ua.DataValue(ua.Variant(1.0, ua.VariantType.Double), SourceTimestamp=stamp)
+
+    live = _Inbox(50)  # live (no back-fill under way): every sample is held until taken
+    for tag, stamp in stream[:120]:
+        live.add(tag, dv(stamp))
+    assert len(live) == 120 and live.dropped == 0 and live.floor is None
+    assert [s.SourceTimestamp for _, s in live.take()] == [s for _, s in stream[:120]] and len(live) == 0
+
+    inbox = _Inbox(50)
+    inbox.spill = True  # a back-fill under way: at most 50 held, whatever the length of the stream
+    held = []
+    for tag, stamp in stream:
+        inbox.add(tag, dv(stamp))
+        held.append(len(inbox))
+        if not len(inbox):  # just emptied: the history is to be read up to the newest sample dropped
+            assert inbox.edge(2) == stamp
+    assert max(held) == 50 and inbox.dropped > 500
+    # what the back-fill reads from the history (each tag up to the edge) and what the queue holds
+    # together are every sample, each once
+    edge = inbox.edge(2)
+    queued = [(tag, s.SourceTimestamp) for tag, s in inbox.take()]
+    from_history = [(tag, stamp) for tag, stamp in stream if stamp <= edge]
+    assert edge >= inbox.floor and set(from_history) | set(queued) == set(stream) and len(set(stream)) == 700
+    assert queued == stream[-len(queued):]  # the queue holds the newest samples, in order
+    with pytest.raises(ValueError, match="limit"):
+        _Inbox(0)
 
 
 def test_published_results_are_readable_over_opc_ua() -> None:
