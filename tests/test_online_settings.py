@@ -189,3 +189,31 @@ def test_rows_wait_for_every_tag_but_a_stale_one(tmp_path: Path) -> None:
     sample("FI", 130)
     assert tracker._rows_ready() == 13 and not tracker.stale  # TI is back
     tracker.record.close()
+
+    # the run's end (--stop-after 200): FI has come to it, TI's sample of the last row not yet (a row
+    # read from the server's history while it was written): the last rows wait for TI a moment ...
+    end = _Tracker(spec, LiveSettings("opc.tcp://127.0.0.1:4840", stop_after=200.0), tmp_path / "end",
+                   resume=False, progress=None)
+    tracker = end
+    for s in range(0, 201, 10):
+        sample("FI", s)
+    for s in range(0, 191, 10):
+        sample("TI", s)
+    end.last_new = end.arrived["TI"] = end.arrived["FI"] = _time.monotonic()
+    assert end._rows_ready() == 19  # rows 0..18 (t_k+1 <= 190 s)
+    sample("TI", 200)
+    assert end._rows_ready() == 21  # ... every tag at the end: the rows to it, the last one (200 s) too
+    end.record.close()
+    # ... and a tag quiet at the end (nothing more will come) does not hold the last rows up for long
+    quiet = _Tracker(spec, LiveSettings("opc.tcp://127.0.0.1:4840", stop_after=200.0), tmp_path / "quiet",
+                     resume=False, progress=None)
+    tracker = quiet
+    for s in range(0, 201, 10):
+        sample("FI", s)
+    for s in range(0, 191, 10):
+        sample("TI", s)
+    quiet.last_new = quiet.arrived["TI"] = quiet.arrived["FI"] = _time.monotonic()
+    assert quiet._rows_ready() == 19
+    quiet.last_new = _time.monotonic() - 60.0  # nothing new for a minute of wall time
+    assert quiet._rows_ready() == 21
+    quiet.record.close()

@@ -235,11 +235,12 @@ def _stamp(dv: Any) -> datetime | None:
 class _Inbox:
     """The subscription's samples not taken yet, ``(tag, DataValue)`` in the order they came.
 
-    While :attr:`spill` is set (the history is being read back), at most *limit* samples are held:
-    the sample past that empties the queue, and :attr:`floor` keeps the newest source timestamp
-    dropped. Every dropped sample is in the server's history at or before :attr:`floor`, and every
-    sample after the drop is queued, so reading the history up to :meth:`edge` (never below the
-    floor) and the queue from there loses nothing.
+    While :attr:`spill` is set, at most *limit* samples are held: the sample past that empties the
+    queue, :attr:`dropped` counts the samples emptied and :attr:`floor` keeps the newest source
+    timestamp among them. Every dropped sample is in the server's history at or before the floor, and
+    every sample after the drop is queued, so reading the history up to :meth:`edge` (never below the
+    floor) and the queue from there loses nothing (:meth:`_Tracker._backfill`). The queue overflows
+    where the tracker is behind: reading the history back after a long loss, or slower than the plant.
     """
 
     def __init__(self, limit: int) -> None:
@@ -258,6 +259,8 @@ class _Inbox:
             if newest is not None and (self.floor is None or newest > self.floor):
                 self.floor = newest
             self.dropped += len(self.items)
+            log.info("%d samples queued while the tracker was behind were emptied: they are read from the history "
+                     "instead (at most %d are queued)", len(self.items), self.limit)
             self.items = []
 
     def take(self) -> list[tuple[str, Any]]:
@@ -496,13 +499,16 @@ class _Tracker:
                     log.info("tag %r is back", tag)
                 live.append(s)
         limit = (min(live) - first).total_seconds()
-        if self.settings.stop_after is not None:
-            if (clock - first).total_seconds() >= self.settings.stop_after - 1e-9:
-                # the plant's clock is at the run's end: the samples up to it have come (in time order), a
-                # quiet tag says nothing more before it, and the rows to the end are read as a file
-                # that ends there is read (no next sample to wait for)
-                limit = self.settings.stop_after + self.ts
-            limit = min(limit, self.settings.stop_after + self.ts)
+        end = self.settings.stop_after
+        if end is not None:
+            if (clock - first).total_seconds() >= end - 1e-9 and (
+                    limit >= end - 1e-9 or time.monotonic() - self.last_new > STALE_GRACE):
+                # the plant's clock is at the run's end and every tag has come to it, or nothing has come
+                # for a while (a quiet tag says nothing more before it; the other tags' samples of the
+                # last row, read half-written from the server's history, have come): the rows to the
+                # end are read as a file that ends there is read (no next sample to wait for)
+                limit = end + self.ts
+            limit = min(limit, end + self.ts)
         # rows k = 0 .. K-1 are ready when t_{k+1} = (k+1)·ts <= limit
         return max(0, int(math.floor(limit / self.ts + 1e-9)))
 
@@ -655,6 +661,7 @@ class _Tracker:
                 raise SpecError(f"[live] node id {self.spec.live.node(tag)!r} of tag {tag!r} in "
                                 f"{self.spec.path} is not a node id: {exc}") from None
         inbox = _Inbox(QUEUE_LIMIT)
+        inbox.spill = True
         by_node = {n.nodeid: tag for tag, n in nodes.items()}
 
         class Handler:
@@ -680,8 +687,11 @@ class _Tracker:
             if isinstance(h, ua.StatusCode):
                 raise LiveError(f"cannot subscribe to tag {tag!r} at node {self.spec.live.node(tag)!r} on "
                                 f"{self.settings.url}: {h.name}")
-        await self._backfill(nodes, inbox)
+        covered = await self._backfill(nodes, inbox)
         while not self.done:
+            if inbox.dropped != covered:  # the queue overflowed (the tracker fell behind): its samples from history
+                covered = await self._backfill(nodes, inbox)
+                continue
             items = inbox.take()
             for tag, dv in items:
                 self.take(tag, dv)
@@ -695,17 +705,18 @@ class _Tracker:
             await client.check_connection()
             await asyncio.sleep(self.settings.poll)
 
-    async def _backfill(self, nodes: dict[str, Any], inbox: _Inbox) -> None:
+    async def _backfill(self, nodes: dict[str, Any], inbox: _Inbox) -> int:
         """Read what the server's history holds since each tag's last sample (or the start), a stretch of
         plant time at a time (BACKFILL_ROWS samples), running the rows it makes as it goes: a long loss
         is read back with the memory of one stretch, every tag as far as the others. The subscription's
-        samples meanwhile wait in *inbox*, at most QUEUE_LIMIT of them (see :class:`_Inbox`)."""
+        samples meanwhile wait in *inbox*, at most QUEUE_LIMIT of them (see :class:`_Inbox`). Returns
+        the inbox's count of dropped samples that the history read covers (a drop after it: read again)."""
         from asyncua import ua
 
         since = {tag: self.record.last[tag] or self.settings.start or self.origin for tag in nodes}
         since = {tag: utc(s) for tag, s in since.items() if s is not None}
         if not since:
-            return
+            return inbox.dropped
         step = timedelta(seconds=BACKFILL_ROWS * self.ts)
         a = min(since.values())
         failed: set[str] = set()
@@ -733,28 +744,24 @@ class _Tracker:
         # Where the subscription's samples begin is inbox.edge(): the history is read up to there, the
         # queue has the rest (it grows while the history is read, and is emptied past its limit: the
         # edge is then the newest sample dropped, and moves on with the samples queued after it)
-        inbox.spill = True
-        try:
-            while not self.done:
-                edge = inbox.edge(len(nodes))
-                if edge is not None and a > edge:
-                    break  # the queue goes on from here
-                if not await stretch(a + step):
-                    if edge is None or a + step >= edge:
-                        break  # nothing in this stretch: the rest, whatever is left, below
-                    a = a + step  # a quiet stretch before the queue's: on
-                    continue
-                self.write_status()
-                await asyncio.to_thread(self.advance)
-                self.write_status()
-                a = a + step
-        finally:
-            inbox.spill = False
-        if inbox.dropped:
-            log.info("%d samples that came while the history was read were read from the history instead "
-                     "(at most %d are queued meanwhile)", inbox.dropped, inbox.limit)
+        covered = inbox.dropped
+        while not self.done:
+            # the edge, and the drops it covers (one during the read below is left to the next call)
+            edge, covered = inbox.edge(len(nodes)), inbox.dropped
+            if edge is not None and a > edge:
+                break  # the queue goes on from here
+            if not await stretch(a + step):
+                if edge is None or a + step >= edge:
+                    break  # nothing in this stretch: the rest, whatever is left, below
+                a = a + step  # a quiet stretch before the queue's: on
+                continue
+            self.write_status()
+            await asyncio.to_thread(self.advance)
+            self.write_status()
+            a = a + step
         if not self.done and inbox.edge(len(nodes)) is None:
             await stretch(None)  # nothing queued, nothing dropped: the server is quiet, or just begun
+        return covered
 
     def _idle(self) -> bool:
         t = self.settings.idle_timeout
