@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from trackingbox.data import MeasurementView
-from trackingbox.online.livestream import LiveMeasurements
+from trackingbox.online.livestream import EXACT_INTERVALS, LiveMeasurements, _Intervals
 from trackingbox.spec import DataRules, Spec, StoppageRule, TrackingSettings
 
 ORIGIN = dt.datetime(2026, 3, 1, 6, 0, tzinfo=dt.timezone.utc)
@@ -104,3 +104,21 @@ def test_windows_are_the_whole_views_rows(tmp_path: Path, seed: int) -> None:
     assert live.held < len(records) / 3  # what the loop left behind was dropped
     with pytest.raises(Exception, match="no longer hold row"):
         live.view(0, 10)
+
+
+def test_interval_counts_stay_bounded_and_give_the_median() -> None:
+    # a historian's irregular timestamps: nearly every interval its own value
+    x = np.random.default_rng(1).lognormal(np.log(10.0), 0.5, 200_000)
+    few = _Intervals()
+    for v in x[:5001]:
+        few.add(float(v))
+    assert not few.coarse and few.median() == np.median(x[:5001])  # exact below the limit
+    many = _Intervals()
+    sizes = []
+    for i, v in enumerate(x):
+        many.add(float(v))
+        if i % 10_000 == 0:
+            sizes.append(len(many.counts))
+    decades = int(np.ceil(np.log10(x.max())) - np.floor(np.log10(x.min())))
+    assert many.coarse and max(sizes) <= EXACT_INTERVALS + 1 and len(many.counts) <= 9000 * decades
+    assert many.median() == pytest.approx(np.median(x), rel=5e-4)  # 4 significant digits

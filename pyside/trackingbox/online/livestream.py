@@ -23,7 +23,8 @@ every sample that can reach it:
 
 What the whole view takes from the whole file is taken from the samples so far:
 a tag's gap limit without ``[data] max_gap`` or a heartbeat (2.5 x the median
-of its sampling intervals, counted as the samples come), and the 1st and 99th
+of its sampling intervals, counted as the samples come: exactly, or past 20,000
+distinct values to 4 significant digits, see :class:`_Intervals`), and the 1st and 99th
 percentiles of the pairs' variables and levels (from the rows the loop starts
 with), as the rebuilt view took them. Samples older than the stretch the loop
 can reach are dropped (:meth:`LiveMeasurements.prune`); only counters and a
@@ -61,6 +62,46 @@ def usable(spec: Spec) -> bool:
         return "ModelExchange" in read_info(spec.twin).interfaces
     except (TrackingError, OSError):  # the loop words what is wrong with the twin when it loads it
         return False
+
+
+#: Distinct sampling intervals a tag's count keeps exactly. A historian's irregular timestamps give
+#: nearly every interval its own value (the 30-day evaporator: 920,005 distinct, 61 MiB as a Counter
+#: of floats); past this many, intervals are counted to 4 significant digits (:class:`_Intervals`)
+EXACT_INTERVALS = 20_000
+
+
+class _Intervals:
+    """A tag's sampling intervals, counted for their median in memory that does not grow with the run.
+
+    Exact up to :data:`EXACT_INTERVALS` distinct values (the median is :func:`numpy.median`'s of all
+    of them); past that every interval is counted rounded to 4 significant digits (at most 9,000 values
+    a decade; the median then within 0.05 % of the exact one).
+    """
+
+    def __init__(self) -> None:
+        self.counts: Counter[float] = Counter()
+        self.coarse = False
+
+    @staticmethod
+    def _round(x: float) -> float:
+        return float(f"{x:.4g}")
+
+    def add(self, interval: float) -> None:
+        if self.coarse:
+            self.counts[self._round(interval)] += 1
+            return
+        self.counts[interval] += 1
+        if len(self.counts) > EXACT_INTERVALS:
+            merged: Counter[float] = Counter()
+            for value, n in self.counts.items():
+                merged[self._round(value)] += n
+            self.counts, self.coarse = merged, True
+
+    def median(self) -> float:
+        return _median(self.counts)
+
+    def __bool__(self) -> bool:
+        return bool(self.counts)
 
 
 def _median(counts: Counter[float]) -> float:
@@ -137,7 +178,7 @@ class LiveMeasurements:
                 self._fixed[tag] = heartbeat_max_gap(hb)
             elif rule is not None:
                 self._fixed[tag] = float(rule)
-        self._counts: dict[str, Counter[float]] = {t: Counter() for t in self.tags if t not in self._fixed}
+        self._counts: dict[str, _Intervals] = {t: _Intervals() for t in self.tags if t not in self._fixed}
         self._last_valid: dict[str, float] = {}
         self._good = {t: _Samples() for t in self.tags}
         self._bad = {t: _Samples() for t in self.tags}
@@ -166,7 +207,7 @@ class LiveMeasurements:
             if tag in self._counts:
                 last = self._last_valid.get(tag)
                 if last is not None:
-                    self._counts[tag][t - last] += 1
+                    self._counts[tag].add(t - last)
             self._last_valid[tag] = t
         else:
             self._bad[tag].add(t, math.nan)
@@ -176,7 +217,7 @@ class LiveMeasurements:
         """Tag -> its gap limit (s): heartbeat rule, the spec's ``max_gap``, or 2.5 x the median interval so far."""
         out = dict(self._fixed)
         for tag, counts in self._counts.items():
-            out[tag] = GAP_FACTOR * _median(counts) if counts else math.inf
+            out[tag] = GAP_FACTOR * counts.median() if counts else math.inf
         return out
 
     def grow(self, n_rows: int) -> None:
