@@ -53,7 +53,7 @@ import casadi as ca
 from .. import config
 from ..errors import CompileError
 from .events import MAX_EVENT_ITERATIONS, EventSystem
-from .flatten import ExplicitModel, InitialSystem, ScalarVar
+from .flat_model import ExplicitModel, InitialSystem, ScalarVar
 
 log = logging.getLogger(__name__)
 
