@@ -30,7 +30,7 @@ HYSTERESIS = 1e-10
 
 
 class ExpressionTranslation:
-    """The expression half of :class:`.flatten.FlatTranslator` (its state is set up there)."""
+    """The expression part of :class:`.flatten.FlatTranslator` (its state is set up there)."""
 
     # ------------------------------------------------------------ expressions
     def expr(self, node: Any, env: dict[str, Value] | None = None) -> Value:

@@ -38,7 +38,7 @@ def _in(context: str) -> str:
 
 
 class StatementTranslation:
-    """The statement half of :class:`.flatten.FlatTranslator` (its state is set up there)."""
+    """The statement part of :class:`.flatten.FlatTranslator` (its state is set up there)."""
 
     # ------------------------------------------------------------ functions
     def inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:

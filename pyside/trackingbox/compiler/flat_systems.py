@@ -25,7 +25,7 @@ log = logging.getLogger(__name__)
 
 
 class SystemAssembly:
-    """The system half of :class:`.flatten.FlatTranslator` (its state is set up there)."""
+    """The system part of :class:`.flatten.FlatTranslator` (its state is set up there)."""
 
     def _split_discrete(self, residuals: list[tuple[ca.MX, str]], continuous: set[str], discrete: list[ScalarVar],
                         initial: bool = False) -> tuple[list[tuple[ca.MX, str]], list[tuple[ca.MX, str]]]:
