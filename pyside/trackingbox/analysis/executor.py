@@ -257,7 +257,10 @@ def _release_fork_server() -> bool:
     owner holds one copy, and every child it forks is handed another (so that the child
     could use the same server): as long as a worker lives, its server lives, and as long as
     the server lives, the worker's parent-death signal never comes. Closing the worker's copy
-    leaves the server's life to its owner alone.
+    leaves the server's life to its owner alone (and to any fork-server child that keeps its
+    copy: in trackingbox the process pool of :func:`make_executor` is the only user of the fork
+    server, and all its workers close theirs). The pipe is found through CPython's
+    ``multiprocessing.forkserver`` internals; where they change, the worker polls instead.
     """
     server = getattr(_forkserver, "_forkserver", None)
     fd = getattr(server, "_forkserver_alive_fd", None)  # set by the server's child code (CPython 3.8+)
