@@ -819,12 +819,9 @@ class ModelExchangeStepper(Stepper):
         Solves ``der(x) = 0`` with the parameters and inputs as they are now (the
         inputs at this time under the run's rule), by Powell's hybrid method on
         the FMU's own derivatives (states scaled by their magnitude or nominal
-        value), starting from the current states. Where that stalls (a stiff
-        model started far from its steady state, such as the evaporator train's
-        vapour spaces beside its tanks), a stiff integrator follows the model's
-        own settling from the current states, in a time of its own, to the
-        steady state it reaches (:func:`~trackingbox.fmu.steady.settle_by_integration`).
-        Then an event
+        value), starting from the current states; where that stalls (a stiff model
+        far from its steady state), by integrating the model's own settling from
+        there (:func:`~trackingbox.fmu.steady.settle_by_integration`). Then an event
         iteration and a solver restart, as after :meth:`set_continuous_states`.
         The FMU's time never moves.
 
@@ -861,11 +858,9 @@ class ModelExchangeStepper(Stepper):
             with np.errstate(all="ignore"):
                 sol = root(rate, x0 / scale, method="hybr",
                            options={"xtol": 1e-13, "maxfev": 200 * (n + 1)})
-                z, evaluations = sol.x, sol.nfev
+                z, evaluations, how = sol.x, sol.nfev, " ".join(str(sol.message).split()).rstrip(".")
                 drift = np.abs(rate(z)) * 3600.0
-                how = " ".join(str(sol.message).split()).rstrip(".")
-                if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):
-                    # Powell's method stalled or ended where the model does not go: follow its own settling
+                if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):  # Powell's method stalled
                     run = settle_by_integration(rate, x0 / scale, self.STEADY_DRIFT / 3600.0)
                     z, evaluations = run.z, evaluations + run.evaluations
                     drift = np.abs(rate(z)) * 3600.0
