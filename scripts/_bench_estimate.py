@@ -201,7 +201,8 @@ def modestpy_job(spec, problem, training, workdir: Path, workers: int, generatio
     }
 
 
-def main() -> int:
+def _arguments() -> argparse.Namespace:
+    """The command line (a bench named by position is the same as --bench)."""
     from trackingbox.estimation import MAX_REFINE_ITERATIONS
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
@@ -225,6 +226,11 @@ def main() -> int:
     args = parser.parse_args()
     if args.bench_name:
         args.bench = args.bench_name
+    return args
+
+
+def main() -> int:
+    args = _arguments()
 
     import numpy as np
 

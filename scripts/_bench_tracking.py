@@ -328,7 +328,8 @@ def exact_timing_floor(r: dict) -> float:
     return float(r["stops_in_c"] + max(r["plain_cpu"] - r["plain_in_c"], 0.0))
 
 
-def main() -> int:
+def _arguments() -> tuple[argparse.Namespace, list[float], list[str]]:
+    """The command line, checked: (arguments, the memory runs' lengths in days, the benches they run on)."""
     ap = argparse.ArgumentParser(prog="bench_tracking")
     ap.add_argument("benches", nargs="*", default=list(BENCHES))
     ap.add_argument("--seed", type=int, default=0)
@@ -358,6 +359,11 @@ def main() -> int:
     unknown = [b for b in mem_benches if b not in BENCHES]
     if unknown:
         ap.error(f"--memory-benches: unknown bench {unknown}; known: {list(BENCHES)}")
+    return args, days, mem_benches
+
+
+def main() -> int:
+    args, days, mem_benches = _arguments()
 
     rows, memory = [], []
     with tempfile.TemporaryDirectory() as tmp:

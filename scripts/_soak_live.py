@@ -29,6 +29,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -123,7 +124,8 @@ def add_bursts(case: Path, n: int, rng: random.Random, tags: list[str]) -> list[
     return bursts
 
 
-def main() -> int:
+def _arguments() -> argparse.Namespace:
+    """The command line, checked."""
     ap = argparse.ArgumentParser(prog="soak_live")
     ap.add_argument("--days", type=float, default=30.0)
     ap.add_argument("--speed", type=float, default=2000.0, help="plant seconds per wall second (default 2000)")
@@ -140,6 +142,54 @@ def main() -> int:
     args = ap.parse_args()
     if not (args.days > 0 and args.speed > 0 and args.kills >= 0 and args.bursts >= 0):
         ap.error("--days and --speed must be > 0, --kills and --bursts >= 0")
+    return args
+
+
+def _checks(csv_path: Path, offline: pd.DataFrame, live_dir: Path, spec: Any, samples: list[dict[str, float]],
+            day1: dict[str, float] | None, stop_after: float, memory_slack: float) -> dict[str, tuple[bool, str]]:
+    """The live run against the offline one (rows, trajectory) and against itself over time (memory, fds,
+    threads): name -> (passed, figure)."""
+    n_rows = len(offline)
+    last = samples[-1]
+    live = pd.read_csv(csv_path)
+    checks: dict[str, tuple[bool, str]] = {}
+    t_live, t_off = live["time"].to_numpy(), offline["time"].to_numpy()
+    same_rows = len(live) == n_rows and np.array_equal(t_live, t_off)
+    dup = int((np.diff(t_live) <= 0).sum())
+    record = pd.read_csv(live_dir / "live_measurements.csv", dtype={"tag": str, "time": str})
+    rec_dup = int(record.duplicated(["tag", "time"]).sum())
+    checks["rows"] = (same_rows and dup == 0 and rec_dup == 0,
+                      f"live {len(live)} rows, offline {n_rows}; times equal: "
+                      f"{np.array_equal(t_live[:n_rows], t_off[:len(t_live)])}; "
+                      f"repeated or backward times {dup}; duplicated samples in the record {rec_dup} of {len(record)}")
+    worst = []
+    n = min(len(live), n_rows)
+    for p in spec.pairs:
+        col = f"parameter:{p.parameter}"
+        bounds = next(x for x in spec.parameters if x.name == p.parameter)
+        span = bounds.max - bounds.min
+        dev = float(np.nanmax(np.abs(live[col].to_numpy()[:n] - offline[col].to_numpy()[:n]))) / span
+        worst.append((dev, p.parameter))
+    dev, name = max(worst)
+    checks["trajectory"] = (dev <= 1e-4, f"largest |live - offline| / bound range {dev:.2e} ({name}); "
+                            + ", ".join(f"{nm} {d:.1e}" for d, nm in worst))
+    assert day1 is not None
+    grew = last["hwm"] - day1["hwm"]
+    checks["memory"] = (grew <= memory_slack, f"peak RSS after day 1 {day1['hwm']:.1f} MiB, after "
+                        f"{stop_after / DAY:.2f} days {last['hwm']:.1f} MiB (+{grew:.1f}; slack {memory_slack:g})")
+    first_day = [s for s in samples if s["plant"] <= DAY]
+    last_day = [s for s in samples if s["plant"] >= stop_after - DAY]
+    fd1, fdn = statistics.median(s["fds"] for s in first_day), statistics.median(s["fds"] for s in last_day)
+    th1, thn = statistics.median(s["threads"] for s in first_day), statistics.median(s["threads"] for s in last_day)
+    checks["fds"] = (fdn <= fd1, f"open fds, median over the first day {fd1:g}, over the last {fdn:g} "
+                     f"(max over the run {max(s['fds'] for s in samples)})")
+    checks["threads"] = (thn <= th1, f"threads, median over the first day {th1:g}, over the last {thn:g} "
+                         f"(max over the run {max(s['threads'] for s in samples)})")
+    return checks
+
+
+def main() -> int:
+    args = _arguments()
     view = args.view or args.screenshot is not None
     out = (args.out or Path("runs") / f"soak-live-{args.days:g}d").resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -260,41 +310,7 @@ def main() -> int:
     result = json.loads((out / "live-result.json").read_text())
     figures["live"]["result"] = result.get("live")
 
-    # the checks
-    live = pd.read_csv(csv_path)
-    checks: dict[str, tuple[bool, str]] = {}
-    t_live, t_off = live["time"].to_numpy(), offline["time"].to_numpy()
-    same_rows = len(live) == n_rows and np.array_equal(t_live, t_off)
-    dup = int((np.diff(t_live) <= 0).sum())
-    record = pd.read_csv(live_dir / "live_measurements.csv", dtype={"tag": str, "time": str})
-    rec_dup = int(record.duplicated(["tag", "time"]).sum())
-    checks["rows"] = (same_rows and dup == 0 and rec_dup == 0,
-                      f"live {len(live)} rows, offline {n_rows}; times equal: "
-                      f"{np.array_equal(t_live[:n_rows], t_off[:len(t_live)])}; "
-                      f"repeated or backward times {dup}; duplicated samples in the record {rec_dup} of {len(record)}")
-    worst = []
-    n = min(len(live), n_rows)
-    for p in spec.pairs:
-        col = f"parameter:{p.parameter}"
-        bounds = next(x for x in spec.parameters if x.name == p.parameter)
-        span = bounds.max - bounds.min
-        dev = float(np.nanmax(np.abs(live[col].to_numpy()[:n] - offline[col].to_numpy()[:n]))) / span
-        worst.append((dev, p.parameter))
-    dev, name = max(worst)
-    checks["trajectory"] = (dev <= 1e-4, f"largest |live - offline| / bound range {dev:.2e} ({name}); "
-                            + ", ".join(f"{nm} {d:.1e}" for d, nm in worst))
-    assert day1 is not None
-    grew = last["hwm"] - day1["hwm"]
-    checks["memory"] = (grew <= args.memory_slack, f"peak RSS after day 1 {day1['hwm']:.1f} MiB, after "
-                        f"{stop_after / DAY:.2f} days {last['hwm']:.1f} MiB (+{grew:.1f}; slack {args.memory_slack:g})")
-    first_day = [s for s in samples if s["plant"] <= DAY]
-    last_day = [s for s in samples if s["plant"] >= stop_after - DAY]
-    fd1, fdn = statistics.median(s["fds"] for s in first_day), statistics.median(s["fds"] for s in last_day)
-    th1, thn = statistics.median(s["threads"] for s in first_day), statistics.median(s["threads"] for s in last_day)
-    checks["fds"] = (fdn <= fd1, f"open fds, median over the first day {fd1:g}, over the last {fdn:g} "
-                     f"(max over the run {max(s['fds'] for s in samples)})")
-    checks["threads"] = (thn <= th1, f"threads, median over the first day {th1:g}, over the last {thn:g} "
-                         f"(max over the run {max(s['threads'] for s in samples)})")
+    checks = _checks(csv_path, offline, live_dir, spec, samples, day1, stop_after, args.memory_slack)
     figures["checks"] = {k: {"ok": ok, "figure": text} for k, (ok, text) in checks.items()}
     figures["memory_by_day"] = {int(d): max(s["hwm"] for s in samples if int(s["plant"] // DAY) == d)
                                 for d in sorted({int(s["plant"] // DAY) for s in samples})}

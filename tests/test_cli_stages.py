@@ -178,8 +178,9 @@ def test_generate_json_and_compile(generated: dict[str, Any], case: Path) -> Non
     assert generated["code"] == 0
     doc = json.loads(generated["out"])
     assert set(doc) == {"package", "package_dir", "files", "tracked_model", "box_model", "library",
-                        "patched_source", "controllers", "compile"}
+                        "patched_source", "variants", "controllers", "compile"}
     assert doc["tracked_model"] == "TwinTracking.TwinTracked" and doc["patched_source"] is None
+    assert doc["variants"] == []  # the twin's own library class takes the pattern: no library variant
     [c] = doc["controllers"]
     assert (c["tag"], c["parameter"], c["min"], c["max"], c["start"]) == ("TI-102", "hx.kht", 800.0, 1200.0, 1000.0)
     assert (c["kp"], c["ti"]) == (0.5, 60.0)  # the spec's kp and ti, taken as given

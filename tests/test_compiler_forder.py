@@ -18,7 +18,8 @@ import pytest
 import rumoca
 
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.flatten import FlatTranslator, check_lost_der_equations
+from trackingbox.compiler.flat_text import check_lost_der_equations
+from trackingbox.compiler.flatten import FlatTranslator
 from trackingbox.compiler.rewrite import protect_der_equations
 from trackingbox.compiler.source import resolve_source
 from trackingbox.errors import CompileError, UnsupportedConstructError

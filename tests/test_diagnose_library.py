@@ -286,7 +286,7 @@ def test_a_window_run_keeps_the_data_clock(hx_spec, hx_patch):
     """Every window of an estimation sees the model time = seconds from the data's first sample.
 
     A drift d*t/(1 + c*t), t = max(time, 0), added to TI-102 must read that at the data time on the window
-    (which starts at the first sample, after a held pre-run) and on a later window
+    (which starts at the first sample: no run goes before it) and on a later window
     (which starts after a lead-in through the history) alike.
     """
     from trackingbox.estimation import Problem, WindowData, run_start, simulate_window
@@ -300,7 +300,7 @@ def test_a_window_run_keeps_the_data_clock(hx_spec, hx_patch):
         time = np.arange(first, start + 1800.0, 10.0)
         window = WindowData("w", start, start + 1800.0, time, {k: np.full(time.size, v) for k, v in ins.items()},
                             {"y": np.zeros(time.size), "x": np.zeros(time.size)}, int(round((start - first) / 10.0)))
-        assert run_start(problem, window) == start - 1200.0
+        assert run_start(problem, window) == first  # never before the data's first sample
         sim = simulate_window(problem, window, np.zeros(0))
         d, c = drift.values["d"], drift.values["c"]
         np.testing.assert_allclose(sim["y"] - sim["x"], d * time / (1 + c * time), rtol=1e-9, atol=1e-9)

@@ -64,10 +64,19 @@ def test_pair_then_track_heat_production(fmu_cache, tmp_path, capsys):
     by_param = {p: v for v, p in pairs.items()}
     assert by_param.get("HEX300.kht") in SENSIBLE["HEX300.kht"], pairs
     assert by_param.get("HU300.kht") in SENSIBLE["HU300.kht"], pairs
-    # no parameter range closes the make-up flow offset (the valve coefficient's whole range moves
-    # the flow by a few percent of it): it must not be paired, and the reason says so
+    # FI-400 is the make-up flow LIC400 sets to hold T400's level: in steady operation it equals the
+    # bleed drawn from T100 (mBleed_flow = 0.02 kg/s, a constant of plant and twin alike), whatever the
+    # candidate parameters are. The twin starts at the steady state of the data's first inputs, so
+    # its untracked make-up flow follows the plant's up to the level loops' transients: within
+    # 5 x the flow sensor's noise (1 % of the reading: 2e-4 kg/s), the pairing's noise-level rule.
+    # There is nothing to track, and the reason says so. (Measured on this case: RMS 9.7e-4 kg/s,
+    # mean -4.8e-4. The held 4 h pre-run the twin had before left its make-up flow 6.1 g/s above the
+    # plant's in the second hour, decaying to 1.1 g/s in the fifth: taken for an offset no parameter
+    # closes, which was the reason given then.)
     reasons = {d["name"]: d["reason"] for d in doc["left_out"]}
-    assert "FI-400" not in pairs and "close its offset" in reasons["FI-400"], reasons.get("FI-400")
+    assert "FI-400" not in pairs and "at noise level" in reasons["FI-400"], reasons.get("FI-400")
+    make_up = next(o for o in doc["offsets"] if o["variable"] == "FI-400")
+    assert make_up["rms"] < 5 * 0.01 * 0.02, make_up
     # the second operating point is the high-load part of the training window
     assert doc["second_operating_point"]["inputs"]["mCold_flow"] > 1.3 * doc["operating_point"]["mCold_flow"]
     # every variable has data figures; the thresholds are reported

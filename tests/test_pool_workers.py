@@ -6,7 +6,10 @@ stopped with SIGTERM left its workers running their current simulations to the
 end (26 CPU minutes each, seen on the evaporator train). A thread polling the
 parent then failed under load (load 8-13 on two cores: the diagnose workers still
 ran 10 s after their parent died); the workers now ask the kernel for SIGKILL when
-their parent ends (Linux ``PR_SET_PDEATHSIG``). Independent expectation: the
+their parent ends (Linux ``PR_SET_PDEATHSIG``). That alone still left the process
+pool's workers running 60 s after their parent died, once they were really inside
+their tasks: each held a copy of its fork server's lifeline pipe, so the server (the
+parent their signal watches) never ended; they now close it. Independent expectation: the
 operating system's process table (``os.kill(pid, 0)`` and ``/proc/PID/stat``) after
 the submitting process was killed, while each worker still had a 60 s task to run
 and this test kept every core busy; and the kernel's own answer
@@ -14,6 +17,7 @@ and this test kept every core busy; and the kernel's own answer
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -36,10 +40,12 @@ LINUX = sys.platform.startswith("linux")
 
 _CHILD = textwrap.dedent("""
     import os, sys, time
+    from pathlib import Path
     from trackingbox.analysis.executor import make_executor
     from trackingbox.diagnose.parallel import pool as worker_pool
 
     def busy(seconds):
+        Path(f"started-{os.getpid()}").touch()  # the task runs: the worker is initialised
         t = time.monotonic()
         while time.monotonic() - t < seconds:
             pass
@@ -63,7 +69,8 @@ _CHILD = textwrap.dedent("""
                     found = [r.get() for r in [pool.apply_async(probe, (seconds,)) for _ in range(2)]]
             print(json.dumps(found), flush=True)
             sys.exit(0)
-        if sys.argv[1] == "executor":
+        kind, phase = sys.argv[1].split("-")
+        if kind == "executor":
             ex = make_executor(workers=2)
             futures = [ex.submit(busy, seconds) for _ in range(2)]
             while len(ex._processes) < 2:
@@ -74,17 +81,21 @@ _CHILD = textwrap.dedent("""
             pool = cm.__enter__()
             results = [pool.apply_async(busy, (seconds,)) for _ in range(2)]
             pids = [p.pid for p in pool._pool]
-        time.sleep(1.0)  # the tasks are running
+        if phase == "running":  # both workers initialised and in their task (a spawned one imports for seconds)
+            while {p.name for p in Path().glob("started-*")} != {f"started-{p}" for p in pids}:
+                time.sleep(0.05)
         print(" ".join(map(str, pids)), flush=True)
         time.sleep(2 * seconds)
 """)
 
 
-def _pool_child(tmp_path: Path, kind: str) -> tuple[subprocess.Popen[str], list[int]]:
+def _pool_child(tmp_path: Path, kind: str, phase: str = "running") -> tuple[subprocess.Popen[str], list[int]]:
+    """A process with a pool of two workers, each given a 60 s task; its workers' pids once *phase*:
+    ``running`` (both in their task) or ``starting`` (just made: a spawned worker still imports)."""
     script = tmp_path / "child.py"
     script.write_text(_CHILD)
-    proc = subprocess.Popen([sys.executable, str(script), kind, str(TASK_SECONDS)], stdout=subprocess.PIPE,
-                            text=True, cwd=tmp_path)
+    proc = subprocess.Popen([sys.executable, str(script), f"{kind}-{phase}", str(TASK_SECONDS)],
+                            stdout=subprocess.PIPE, text=True, cwd=tmp_path)
     assert proc.stdout is not None
     line = proc.stdout.readline()
     pids = [int(p) for p in line.split()]
@@ -92,11 +103,11 @@ def _pool_child(tmp_path: Path, kind: str) -> tuple[subprocess.Popen[str], list[
     return proc, pids
 
 
-@pytest.fixture
+@contextlib.contextmanager
 def busy_machine():
-    """Two busy-loop processes per core for the length of a test: the load the polling thread lost to."""
+    """A busy-loop process on every core while the block runs: the load the polling thread lost to."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    loops = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2 * cores)]
+    loops = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(cores)]
     try:
         yield len(loops)
     finally:
@@ -107,21 +118,29 @@ def busy_machine():
 
 
 @pytest.mark.parametrize("kind", ["executor", "diagnose"])
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+@pytest.mark.parametrize("sig, phase", [(signal.SIGTERM, "running"), (signal.SIGKILL, "running"),
+                                        (signal.SIGKILL, "starting")])
 def test_workers_end_when_their_parent_is_killed(tmp_path: Path, kind: str, sig: signal.Signals,
-                                                 busy_machine: int) -> None:
-    proc, pids = _pool_child(tmp_path, kind)
+                                                 phase: str) -> None:
+    # "running": the workers are in their tasks, the kernel kills them as their parent ends;
+    # "starting": the parent dies while its workers still start, so they set the signal after it
+    # ended and must see that their parent changed and leave
+    proc, pids = _pool_child(tmp_path, kind, phase)
     try:
-        assert all(_alive(p) for p in pids)  # busy with their 60 s tasks
-        proc.send_signal(sig)
-        proc.wait(timeout=GONE_WITHIN)
-        assert proc.returncode == -sig
-        died = time.monotonic()
-        while any(_alive(p) for p in pids) and time.monotonic() - died < GONE_WITHIN:
-            time.sleep(0.1)
-        left = [p for p in pids if _alive(p)]
-        assert not left, (f"workers {left} still run {time.monotonic() - died:.1f} s after their parent died of "
-                          f"{sig.name} ({busy_machine} busy loops beside them)")
+        assert all(_alive(p) for p in pids)
+        if phase == "running":
+            assert {p.name for p in tmp_path.glob("started-*")} == {f"started-{p}" for p in pids}
+        # every core busy from before the parent dies until its workers are gone (or the wait ends)
+        with busy_machine() as loops:
+            proc.send_signal(sig)
+            proc.wait(timeout=GONE_WITHIN)
+            assert proc.returncode == -sig
+            died = time.monotonic()
+            while any(_alive(p) for p in pids) and time.monotonic() - died < GONE_WITHIN:
+                time.sleep(0.1)
+            left = [p for p in pids if _alive(p)]
+            assert not left, (f"workers {left} still run {time.monotonic() - died:.1f} s after their parent died "
+                              f"of {sig.name} ({loops} busy loops beside them)")
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -22,8 +22,10 @@ def _imported_test_modules(path: Path) -> list[str]:
             names = [node.module]
         else:
             continue
+        # a module of this suite is imported by its own name (tests/ is on the path) or as tests.*;
+        # a library's test helpers (aiohttp.test_utils) are not the suite's
         found += [f"{path.name}:{node.lineno} imports {n}" for n in names
-                  if n.split(".")[0].startswith("test_") or n.startswith("tests.test_")]  # not aiohttp.test_utils
+                  if n.split(".")[0].startswith("test_") or n.startswith("tests.test_")]
     return found
 
 
@@ -37,6 +39,7 @@ def test_the_check_sees_an_import_of_a_test_module(tmp_path: Path) -> None:
     sample = tmp_path / "test_sample.py"
     sample.write_text("import os\nfrom _fixtures_generate import write_case\n\n\ndef f():\n"
                       "    from test_generate import BENCH_PAIRS\n    import test_other as o\n"
-                      "    from aiohttp.test_utils import TestClient\n")  # a library's module: not ours
+                      "    from aiohttp.test_utils import TestServer\n    import tests.test_x\n")
     assert _imported_test_modules(sample) == ["test_sample.py:6 imports test_generate",
-                                              "test_sample.py:7 imports test_other"]
+                                              "test_sample.py:7 imports test_other",
+                                              "test_sample.py:9 imports tests.test_x"]

@@ -26,6 +26,11 @@ from typing import Any
 
 from ..errors import AnalysisError
 
+try:
+    from multiprocessing import forkserver as _forkserver
+except ImportError:  # pragma: no cover - a platform without fork servers (Windows)
+    _forkserver = None  # type: ignore[assignment]
+
 logger = logging.getLogger(__name__)
 
 #: seconds to wait for a Dask scheduler to answer (``--scheduler tcp://...``)
@@ -245,6 +250,30 @@ def parent_death_signal() -> int | None:
     return value.value
 
 
+def _release_fork_server() -> bool:
+    """Close this fork-server child's copy of its fork server's lifeline; False if it cannot be found.
+
+    The fork server leaves when the write end of its "alive" pipe is closed everywhere. Its
+    owner holds one copy, and every child it forks is handed another (so that the child
+    could use the same server): as long as a worker lives, its server lives, and as long as
+    the server lives, the worker's parent-death signal never comes. Closing the worker's copy
+    leaves the server's life to its owner alone (and to any fork-server child that keeps its
+    copy: in trackingbox the process pool of :func:`make_executor` is the only user of the fork
+    server, and all its workers close theirs). The pipe is found through CPython's
+    ``multiprocessing.forkserver`` internals; where they change, the worker polls instead.
+    """
+    server = getattr(_forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)  # set by the server's child code (CPython 3.8+)
+    if fd is None:
+        return False
+    try:
+        os.close(fd)
+    except OSError:
+        return False
+    server._forkserver_alive_fd = None  # a process this worker starts gets a fork server of its own
+    return True
+
+
 def exit_with_parent(parent: int) -> None:
     """Pool worker initializer: end this worker as soon as process *parent* is gone.
 
@@ -256,23 +285,32 @@ def exit_with_parent(parent: int) -> None:
     killed the moment its parent process ends, however busy the machine (a thread
     polling the parent, as before, was not scheduled in time at load 8-13 on two
     cores). The parent is *parent* itself for spawned workers (the diagnose pool,
-    estimation's pool), or the forkserver *parent* started (the default process pool),
-    which leaves as soon as *parent* ends (its pipe from *parent* closes), taking its
-    workers with it. The kernel sends the signal when the *thread* that started the
-    worker ends: a pool must be used within the thread that made it (each of ours
-    is). Right after setting it, the worker checks that its parent is still that
-    process; if the parent ended before (it is then another one, ``init`` or a
-    sub-reaper) the worker leaves at once: no signal would come.
+    estimation's pool); the kernel sends the signal when the *thread* that started the
+    worker ends, so such a pool must be used within the thread that made it (each of
+    ours is). The default process pool's workers are children of the fork server
+    *parent* started, a single-threaded process that leaves when its pipe from *parent*
+    reaches end of file: each worker first closes its own copy of that pipe
+    (:func:`_release_fork_server`; before, the workers kept their server alive and the
+    server kept them alive, 60 s after *parent* died of SIGKILL), so *parent*'s end
+    ends the server and the server's end kills its workers. Right after setting the
+    signal, the worker checks that *parent* still runs (its parent, or its parent's
+    parent for the fork server's children); if it ended before (the worker's parent
+    is then another process, ``init`` or a sub-reaper) the worker leaves at once: no
+    signal would come.
 
-    Where there is no ``prctl`` (macOS, Windows) a daemon thread checks every
-    :data:`PARENT_POLL` seconds that *parent* still runs and leaves through ``os._exit``.
+    Where there is no ``prctl`` (macOS, Windows), or a fork-server child cannot find
+    its server's pipe, a daemon thread checks every :data:`PARENT_POLL` seconds that
+    *parent* still runs and leaves through ``os._exit``.
     """
     prctl = _prctl()
     if prctl is not None and prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
         direct = os.getppid()
-        if direct != parent and _parent_of(direct) != parent:
+        if direct == parent:
+            return  # a spawned worker: the kernel signals it when parent ends
+        if _parent_of(direct) != parent:
             os._exit(1)  # the parent ended before the signal was set: nobody waits for this worker
-        return
+        if _release_fork_server():
+            return  # the fork server ends with parent, and the kernel signals this worker then
 
     def watch() -> None:
         while _alive(parent):

@@ -14,7 +14,7 @@ over one index, from the fourth in ``for i in 1:3, j in 1:2``). Nothing warns.
 The same equation with its left-hand side in parentheses, ``(der(x[i])) = ...``,
 is flattened correctly, so the embedded backend hands rumoca a copy of the
 source in which every such equation inside a for-equation is written that way
-(:func:`protect_der_equations`). :func:`.flatten.check_lost_der_equations`
+(:func:`protect_der_equations`). :func:`.flat_text.check_lost_der_equations`
 refuses the model should an equation still come back with the bug's signature.
 
 The copy keeps every byte offset where it can, and every line always: the

@@ -26,6 +26,7 @@ from ..errors import DataError, FMUError, SimulationError, unknown_name
 from .adapters import FMIAdapter
 from .calls import fmu_calls, simulation_failure
 from .info import REAL_TYPES, change_refusal
+from .steady import settle_by_integration
 
 if TYPE_CHECKING:
     from .model import FMUModel
@@ -818,9 +819,11 @@ class ModelExchangeStepper(Stepper):
         Solves ``der(x) = 0`` with the parameters and inputs as they are now (the
         inputs at this time under the run's rule), by Powell's hybrid method on
         the FMU's own derivatives (states scaled by their magnitude or nominal
-        value), starting from the current states; then an event iteration and a
-        solver restart, as after :meth:`set_continuous_states`. The FMU's time
-        never moves.
+        value), starting from the current states; where that stalls (a stiff model
+        far from its steady state), by integrating the model's own settling from
+        there (:func:`~trackingbox.fmu.steady.settle_by_integration`). Then an event
+        iteration and a solver restart, as after :meth:`set_continuous_states`.
+        The FMU's time never moves.
 
         Raises
         ------
@@ -855,8 +858,14 @@ class ModelExchangeStepper(Stepper):
             with np.errstate(all="ignore"):
                 sol = root(rate, x0 / scale, method="hybr",
                            options={"xtol": 1e-13, "maxfev": 200 * (n + 1)})
-                drift = np.abs(rate(sol.x)) * 3600.0
-            if not (np.all(np.isfinite(sol.x)) and np.all(drift <= self.STEADY_DRIFT)):
+                z, evaluations, how = sol.x, sol.nfev, " ".join(str(sol.message).split()).rstrip(".")
+                drift = np.abs(rate(z)) * 3600.0
+                if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):  # Powell's method stalled
+                    run = settle_by_integration(rate, x0 / scale, self.STEADY_DRIFT / 3600.0)
+                    z, evaluations = run.z, evaluations + run.evaluations
+                    drift = np.abs(rate(z)) * 3600.0
+                    how = f"Powell's hybrid method: {how}; the model's own settling: {run.message or 'settled'}"
+            if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):
                 worst = int(np.nanargmax(np.where(np.isfinite(drift), drift, np.inf)))
                 self._x[:n] = x0
                 fmu.setContinuousStates(self._px, n)
@@ -864,15 +873,15 @@ class ModelExchangeStepper(Stepper):
                 which = states[worst] if worst < len(states) else f"state {worst + 1}"
                 raise SimulationError(
                     f"{name} has no steady state at t = {self.time:g} s with its inputs there: {which} still changes "
-                    f"by {drift[worst]:.3g} times its size per hour ({' '.join(str(sol.message).split()).rstrip('.')}); an "
+                    f"by {drift[worst]:.3g} times its size per hour ({how}); an "
                     f"integrating state (a level whose flows do not balance) has none: set [data] initial = "
                     f"\"model\" to start from the FMU's own initial state")
-            self._x[:n] = sol.x * scale
+            self._x[:n] = z * scale
             fmu.setContinuousStates(self._px, n)
             if self._nz:
                 self._event_iteration()
         self._solver.reset(self.time)
-        log.debug("%s: steady state at t = %g s after %d evaluations", name, self.time, sol.nfev)
+        log.debug("%s: steady state at t = %g s after %d evaluations", name, self.time, evaluations)
 
     def get_continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous state vector, for checkpoints."""

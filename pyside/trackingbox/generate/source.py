@@ -36,6 +36,7 @@ from ..compiler.embedded import flatten
 from ..compiler.library import resolve_libraries, source_root
 from ..compiler.source import resolve_source
 from ..errors import CompileError, SpecError, unknown_name
+from .parameter_uses import receivers, structural_reason
 
 logger = logging.getLogger(__name__)
 
@@ -212,10 +213,8 @@ def parameter_site(src: TwinSource, name: str, where: str) -> ParameterSite:
     ------
     SpecError
         For an unknown parameter (with "did you mean"), a top-level parameter that no component
-        receives by a modifier, or a structural one (:func:`.variants.structural_reason`: why).
+        receives by a modifier, or a structural one (:func:`.parameter_uses.structural_reason`: why).
     """
-    from .variants import receivers, structural_reason  # variants builds on this module's pattern
-
     v = src.variables.get(name)
     if v is None or not _is_parameter(v):
         raise SpecError(unknown_name("parameter", name, src.parameters(), f"{where} (model {src.model})"))

@@ -4,7 +4,7 @@ Two places the conditional-input pattern of :mod:`.source` cannot be switched on
 
 * a **top-level parameter** of the twin passed down to components by modifiers
   (``parameter Real R1; ThermalResistor thermalResistor1(R = R1);``): the box drives every
-  component parameter bound to it (:func:`receivers`);
+  component parameter bound to it (:func:`.parameter_uses.receivers`);
 * a parameter of a component whose class lives in a **read-only library** (the MSL, or any
   library given with ``[source] libraries``/``--library``/``MODELICAPATH``): the generated package
   gets its own *variant* of that class, the library class's text with its names written in full
@@ -12,23 +12,22 @@ Two places the conditional-input pattern of :mod:`.source` cannot be switched on
   twin*, the twin's text with the component's class switched to it (:func:`twin_variant`). The
   library is never edited; the review is a diff of generated files.
 
-A parameter that cannot follow an input is refused, naming why (:func:`structural_reason`):
+A parameter that cannot follow an input is refused, naming why (:func:`.parameter_uses.structural_reason`):
 ``Evaluate = true``, not a Real, used in another parameter's binding, a start value, an array size
 or a modifier, or (a top-level one) in the twin's own equations.
 """
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from ..compiler.library import LibraryIndex, index_for
 from ..compiler.source import read_text, resolve_source, strip_comments
 from ..errors import SpecError
 
-__all__ = ["Variant", "TwinVariant", "references", "receivers", "structural_reason", "library_index",
+__all__ = ["Variant", "TwinVariant", "library_index",
            "component_class", "declaring_class", "class_variant", "twin_variant", "is_library_class"]
 
 #: Modelica words that are never class names (not looked up when names are written in full)
@@ -59,69 +58,6 @@ class TwinVariant:
     twin: str
     switched: Mapping[str, str]
     text: str
-
-
-# --------------------------------------------------------------------------- the flat model
-
-def references(expr: Any) -> Iterator[str]:
-    """The names of the variables a rumoca flat expression refers to."""
-    if isinstance(expr, dict):
-        ref = expr.get("VarRef")
-        if isinstance(ref, dict):
-            name = (ref.get("name") or {}).get("name")
-            if isinstance(name, str):
-                yield name
-        for value in expr.values():
-            yield from references(value)
-    elif isinstance(expr, list):
-        for value in expr:
-            yield from references(value)
-
-
-def _bound_to(v: Mapping[str, Any], name: str) -> bool:
-    """True if the flat variable *v*'s binding is exactly a reference to *name*."""
-    binding = v.get("binding")
-    return isinstance(binding, dict) and set(binding) == {"VarRef"} and list(references(binding)) == [name]
-
-
-def receivers(variables: Mapping[str, Mapping[str, Any]], name: str) -> list[str]:
-    """Component parameters whose binding is the top-level parameter *name* itself (``R = R1``)."""
-    return sorted(n for n, v in variables.items() if n != name and "[" not in n and _bound_to(v, name))
-
-
-def structural_reason(variables: Mapping[str, Mapping[str, Any]], type_names: Mapping[str, str],
-                      flat: Mapping[str, Any], name: str, *, allowed: frozenset[str] = frozenset()) -> str | None:
-    """Why the parameter *name* cannot follow an input of the tracking box, or None if it can.
-
-    *allowed*: variables whose binding may be *name* itself (the receivers of a top-level one).
-    """
-    v = variables.get(name, {})
-    if v.get("evaluate"):
-        return "it is declared with annotation(Evaluate = true): the tool uses its value when it translates the model"
-    kind = type_names.get(name, "Real")
-    if kind != "Real":
-        return f"it is a {kind} parameter (sizes and switches are structural)"
-    for other, w in variables.items():
-        if other == name:
-            continue
-        for role, key in (("binding", "binding"), ("start value", "start"), ("fixed attribute", "fixed"),
-                          ("min", "min"), ("max", "max"), ("nominal", "nominal")):
-            expr = w.get(key)
-            if expr is None or name not in set(references(expr)):
-                continue
-            if key == "binding" and other in allowed and _bound_to(w, name):
-                continue
-            what = "parameter" if isinstance(w.get("variability"), dict) and "Parameter" in w["variability"] \
-                else "variable"
-            return (f"it is used in the {role} of the {what} {other!r}, which the tool computes from it once "
-                    f"(at initialisation): that value would not follow the box")
-    if "." not in name:
-        for section in ("equations", "initial_equations", "algorithms", "initial_algorithms"):
-            if name in set(references(flat.get(section))):
-                where = section.replace("_", " ")
-                return (f"it is used in the twin's own {where}: only a parameter passed to components by "
-                        f"modifiers (R = {name}) can be driven from a model that extends the twin")
-    return None
 
 
 # --------------------------------------------------------------------------- the classes

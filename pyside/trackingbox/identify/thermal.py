@@ -92,6 +92,9 @@ TI-wall = "T_wall"
 [windows]
 training = [0.0, {half}]
 validation = [{half}, {end}]
+
+[data]
+initial = "steady"   # the plant starts settled at its first inputs: so does the twin
 """
 
 
@@ -100,8 +103,9 @@ def wall_case(out: str | Path, fmu: str | Path, *, seed: int = 0, hours: float =
     """Write a thermal-wall case into *out* (``twin.fmu``, ``measurements.csv``, ``spec.toml``,
     ``truth.json``) from the compiled *fmu*; returns the spec's path.
 
-    The plant starts settled at the first inputs (a 2-day held pre-run), the twin from
-    its own start temperature (the estimation's warm-up settles it). *known*: parameters
+    The plant starts settled at the first inputs (a 2-day held pre-run); so does the twin
+    (``[data] initial = "steady"``: no run goes before the data's first sample, so no warm-up
+    could settle it from its own start temperature). *known*: parameters
     held at their true values (``[fixed]``) instead of estimated (``("C",)``: R1 and R2
     alone, which the wall's temperature does determine).
     """

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["OwnCase", "CASES", "repository_root", "default_msl", "plant_package", "write_historian",
+__all__ = ["OwnCase", "CASES", "repository_root", "default_msl", "plant_package", "write_historian", "write_spec",
            "example_folder"]
 
 
@@ -54,7 +55,7 @@ class OwnCase:
         The twin's source as the spec names it (``"MSL"``: the MSL's ``Modelica`` directory) and class.
     plant_edit
         ``(declaration in the twin's text, what the plant declares instead, equations the plant adds)``:
-        how the plant variant differs from the twin.
+        how the plant variant differs from the twin (the declaration matched whatever the white space).
     truth
         The degrading twin parameter and its value as a function of time (s from the first sample).
     inputs
@@ -111,6 +112,11 @@ def _wall_r2(t: np.ndarray) -> np.ndarray:
     return 0.04 * (1.0 - 0.3 * np.clip(t / (3.0 * _DAY), 0.0, 1.0))
 
 
+def _ramp_down(start: float, fraction: float, duration: float) -> Callable[[np.ndarray], np.ndarray]:
+    """``start`` falling linearly by *fraction* of itself over *duration* seconds, then held."""
+    return lambda t: start * (1.0 - fraction * np.clip(np.asarray(t, dtype=float) / duration, 0.0, 1.0))
+
+
 CASES: dict[str, OwnCase] = {
     "wall": OwnCase(
         name="wall",
@@ -125,9 +131,36 @@ CASES: dict[str, OwnCase] = {
         truth=("R2", _wall_r2),
         inputs={"TI-IN": ("T_in", _wall_inside), "TI-OUT": ("T_out", _wall_outside)},
         outputs={"TI-WALL": ("T_wall", 0.05)},
-        parameters=(("R1", 0.015, 0.004, 0.04), ("R2", 0.05, 0.01, 0.1)),
+        parameters=(("R1", 0.01, 0.008, 0.013), ("R2", 0.05, 0.01, 0.1)),  # the tutorial's spec
         fixed={"C": 2e6},
         sample_time=300.0, hours=72.0, training_hours=24.0,
+    ),
+    # The MSL's own examples, unchanged, as the twins: their sources are constant (no measured inputs) and
+    # their time constants a fraction of a second, so the runs are minutes sampled at 50 ms; the plant's
+    # conductance falls by 30 % over the run, by 6 % at the end of the training window.
+    "cooling": OwnCase(
+        name="cooling",
+        title="Modelica.Thermal.FluidHeatFlow.Examples.SimpleCooling, its convection fouling",
+        twin_path="MSL", twin_model="Modelica.Thermal.FluidHeatFlow.Examples.SimpleCooling",
+        plant_edit=("Modelica.Blocks.Sources.Constant thermalConductance(k=1)",
+                    "Modelica.Blocks.Sources.Ramp thermalConductance(offset=1, height=-0.3, duration=300)", ()),
+        truth=("thermalConductance.k", _ramp_down(1.0, 0.3, 300.0)),
+        inputs={},
+        outputs={"TI-SRC": ("heatCapacitor.T", 0.02), "TI-COOL": ("pipe.T", 0.02)},
+        parameters=(("thermalConductance.k", 1.0, 0.3, 2.0),),
+        sample_time=0.05, hours=300.0 / 3600.0, training_hours=60.0 / 3600.0, initial="model",
+    ),
+    "indirect": OwnCase(
+        name="indirect",
+        title="Modelica.Thermal.FluidHeatFlow.Examples.IndirectCooling, its cooler fouling on the inner side",
+        twin_path="MSL", twin_model="Modelica.Thermal.FluidHeatFlow.Examples.IndirectCooling",
+        plant_edit=("Modelica.Blocks.Sources.Constant innerGc(k=2)",
+                    "Modelica.Blocks.Sources.Ramp innerGc(offset=2, height=-0.6, duration=300)", ()),
+        truth=("innerGc.k", _ramp_down(2.0, 0.3, 300.0)),
+        inputs={},
+        outputs={"TI-SRC": ("heatCapacitor.T", 0.02), "TI-INNER": ("pipe1.T", 0.02)},
+        parameters=(("thermalConductor.G", 1.0, 0.3, 2.0), ("innerGc.k", 2.0, 0.5, 4.0)),
+        sample_time=0.05, hours=300.0 / 3600.0, training_hours=60.0 / 3600.0, initial="model",
     ),
 }
 
@@ -146,9 +179,11 @@ def plant_package(case: OwnCase, twin_source: Path, libraries: tuple[Path, ...])
     index = library_index(twin_source, libraries)
     text = _class_text(index, case.twin_model, "Plant")
     old, new, equations = case.plant_edit
-    if old not in text:
+    pattern = r"\s+".join(re.escape(part) for part in old.split())
+    found = re.search(pattern, text)
+    if found is None:
         raise ValueError(f"the twin {case.twin_model} has no declaration {old!r} to replace in its plant")
-    text = text.replace(old, new, 1)
+    text = text[:found.start()] + new + text[found.end():]
     at = text.index("equation") + len("equation")
     text = text[:at] + "".join(f"\n    {eq}" for eq in equations) + text[at:]
     return (f"within;\npackage OwnPlants \"The plant of the own-model case {case.name} (made by "
@@ -172,8 +207,12 @@ end VariableConductor;
 
 
 def _iso(t: np.ndarray) -> list[str]:
+    """ISO 8601 UTC times of *t* (s from the first sample), with milliseconds where a sample needs them."""
     start = datetime(2026, 3, 2, tzinfo=timezone.utc)
-    return [(start + timedelta(seconds=float(s))).strftime("%Y-%m-%dT%H:%M:%SZ") for s in t]
+    stamps = [start + timedelta(seconds=round(float(s), 3)) for s in t]
+    if all(stamp.microsecond == 0 for stamp in stamps):
+        return [stamp.strftime("%Y-%m-%dT%H:%M:%SZ") for stamp in stamps]
+    return [stamp.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" for stamp in stamps]
 
 
 def write_historian(case: OwnCase, out: Path, *, msl: Path | None = None, seed: int = 1) -> Path:
@@ -221,4 +260,43 @@ def write_historian(case: OwnCase, out: Path, *, msl: Path | None = None, seed: 
         "value": {"start": float(law(t[:1])[0]), "end": float(law(t[-1:])[0])},
         "training_mean": float(np.mean(law(t[t < case.training_hours * 3600.0])))}, indent=2) + "\n",
         encoding="utf-8")
+    return path
+
+
+def _toml_value(value: object) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)
+    return repr(float(value))
+
+
+def write_spec(case: OwnCase, out: Path, *, twin: str = "twin.fmu", msl: Path | None = None) -> Path:
+    """Write ``spec.toml`` for *case* into *out*: the smallest spec the tutorial teaches, for this case.
+
+    The twin FMU *twin* and ``historian.csv`` are named relative to *out*; the twin's source is the MSL
+    (``twin_path == "MSL"``) or the repository's package, with the MSL as its library.
+    """
+    msl = Path(msl) if msl is not None else default_msl()
+    out = Path(out)
+    source = msl if case.twin_path == "MSL" else repository_root() / case.twin_path
+    lines = [f"twin = {_toml_value(twin)}", 'measurements = "historian.csv"',
+             f"sample_time = {_toml_value(case.sample_time)}", "",
+             "[source]", f"path = {_toml_value(str(source))}", f"model = {_toml_value(case.twin_model)}"]
+    if source != msl:
+        lines.append(f"libraries = [{_toml_value(str(msl))}]")
+    if case.inputs:
+        lines += ["", "[inputs]"] + [f"{_toml_value(tag)} = {_toml_value(name)}"
+                                     for tag, (name, _) in case.inputs.items()]
+    lines += ["", "[outputs]"] + [f"{_toml_value(tag)} = {_toml_value(name)}"
+                                  for tag, (name, _) in case.outputs.items()]
+    for name, start, low, high in case.parameters:
+        lines += ["", "[[parameters]]", f"name = {_toml_value(name)}", f"start = {_toml_value(start)}",
+                  f"min = {_toml_value(low)}", f"max = {_toml_value(high)}"]
+    if case.fixed:
+        lines += ["", "[fixed]"] + [f"{_toml_value(name)} = {_toml_value(v)}" for name, v in case.fixed.items()]
+    split, end = case.training_hours * 3600.0, case.hours * 3600.0
+    lines += ["", "[windows]", f"training = [0.0, {_toml_value(split)}]",
+              f"validation = [{_toml_value(split)}, {_toml_value(end)}]",
+              "", "[data]", f"initial = {_toml_value(case.initial)}", ""]
+    path = out / "spec.toml"
+    path.write_text("\n".join(lines), encoding="utf-8")
     return path

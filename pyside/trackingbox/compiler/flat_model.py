@@ -1,0 +1,104 @@
+"""The flat translation's data: one scalar variable, an assert, the initialisation problem and the
+explicit model (:mod:`.flatten` builds them, :mod:`.fmi_export` writes them into an FMU).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+
+from .events import EventSystem
+
+
+REAL, INTEGER, BOOLEAN, STRING = 0, 1, 2, 3
+
+Value = Any  # float | bool | ca.MX | np.ndarray (object array of the former)
+
+
+@dataclass
+class ScalarVar:
+    """One scalar of a flattened variable."""
+
+    name: str
+    kind: str  # "parameter" | "structural" | "constant" | "input" | "continuous"
+    type: int
+    top_level: bool
+    output: bool
+    start_node: Any
+    binding_node: Any
+    index: tuple[int, ...]
+    attrs: dict[str, Any]
+    description: str | None
+    fixed: bool | None = None
+    sym: ca.MX | None = None
+    value: Any = None  # evaluated value for structural/constant
+
+
+@dataclass(frozen=True)
+class Assertion:
+    """One ``assert(condition, message, level)`` of the model or of an inlined function."""
+
+    condition: ca.MX  # 1 where the assert holds, 0 where it fails
+    message: str
+    level: str  # "error" | "warning"
+    origin: str
+
+
+@dataclass(frozen=True)
+class InitialSystem:
+    """The initialisation problem solved when the FMU leaves initialisation mode.
+
+    ``residual`` (one entry per equation) is expressed in ``unknowns`` (free
+    states, then ``fixed = false`` parameters) and ``knowns`` (time,
+    parameters, inputs, fixed states); no algebraic variable or derivative
+    is left in it.
+    """
+
+    unknowns: list[ca.MX]
+    knowns: list[ca.MX]
+    residual: list[ca.MX]
+    free_states: list[str]
+    computed_parameters: list[str]
+    origins: list[str]
+    guesses: list[ca.MX] = field(default_factory=list)
+    solution: list[ca.MX] = field(default_factory=list)
+    """The unknowns solved block by block (a scalar equation linear in its unknown explicitly, a loop by
+    Newton from ``guesses``, the unknowns' values when the FMU leaves initialisation mode), as
+    expressions in ``guesses`` and ``knowns``; empty: one Newton solve of all ``residual``."""
+
+
+@dataclass
+class ExplicitModel:
+    """The causalised model, ready for FMU export.
+
+    ``assignments`` are in evaluation order; each assigns an unknown symbol (an
+    algebraic variable, a calculated parameter, or a state derivative
+    placeholder) an expression in states, inputs, parameters, time and earlier
+    unknowns.
+    """
+
+    name: str
+    time: ca.MX
+    parameters: list[ScalarVar]
+    calculated: list[ScalarVar]
+    inputs: list[ScalarVar]
+    states: list[ScalarVar]
+    algebraics: list[ScalarVar]
+    derivative: dict[str, ca.MX]  # state name -> placeholder symbol of der(state)
+    assignments: list[tuple[ca.MX, ca.MX]]
+    n_loops: int = 0
+    loop_sizes: list[int] = field(default_factory=list)
+    unused_parameters: list[str] = field(default_factory=list)
+    torn_sizes: list[tuple[int, int]] = field(default_factory=list)
+    asserts: list[Assertion] = field(default_factory=list)
+    initial: InitialSystem | None = None
+    events: EventSystem | None = None
+    discrete: list[ScalarVar] = field(default_factory=list)
+
+
+def kind_of(node: Any) -> tuple[str, Any]:
+    if isinstance(node, dict) and len(node) == 1:
+        key = next(iter(node))
+        return key, node[key]
+    return type(node).__name__, node

@@ -1,0 +1,401 @@
+"""Functions and algorithm sections executed symbolically (:class:`StatementTranslation`, a part
+of :class:`.flatten.FlatTranslator`): a function call inlined into its outputs, assignments,
+if-, for- and when-statements, ``return``, asserts, and an algorithm section as equations.
+"""
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import CompileError
+from . import arrays as arr
+from .flat_model import STRING, Assertion, Value, kind_of
+from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
+from .flat_text import literal_text
+
+_RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
+
+
+def _branch_guard(cond: Any, prior: list[Any]) -> Any:
+    """The condition under which an if-branch is taken: *cond* and none of the *prior* ones."""
+    guard = None if cond is None else cond
+    for p in prior:
+        guard = logical_not(p) if guard is None else ca.logic_and(guard, logical_not(p))
+    return guard
+
+
+def _is_algorithm(context: str) -> bool:
+    """Whether a statement context names an algorithm section of the model (not a function)."""
+    return context.startswith(("algorithm ", "initial algorithm "))
+
+
+def _in(context: str) -> str:
+    """``in function 'f'`` or ``in the initial algorithm of pipe`` for messages."""
+    return f"in the {context}" if _is_algorithm(context) else f"in function {context!r}"
+
+
+class StatementTranslation:
+    """The statement part of :class:`.flatten.FlatTranslator` (its state is set up there)."""
+
+    # ------------------------------------------------------------ functions
+    def inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        ext = fn.get("external")
+        builtin = builtin_external_name(ext) if ext else None
+        if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
+            return self._builtin_external(fname, fn, ext, builtin, args)
+        if ext:
+            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
+        self._inline_depth += 1
+        if self._inline_depth > 40:
+            raise self.unsupported(f"recursive function {fname!r}")
+        try:
+            env: dict[str, Value] = {}
+            inputs = fn.get("inputs") or []
+            for i, inp in enumerate(inputs):
+                if i < len(args):
+                    env[inp["name"]] = args[i]
+                elif inp.get("default") is not None:
+                    env[inp["name"]] = self.expr(inp["default"], env)
+                else:
+                    raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+            for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
+                if loc.get("default") is not None:
+                    env[loc["name"]] = self.expr(loc["default"], env)
+                elif loc.get("dims"):  # an array declared with its sizes: its elements can be assigned
+                    dims = self._local_dims(loc, env, fname)
+                    if dims is not None:
+                        env[loc["name"]] = arr.fill(0.0, list(dims))
+            saved, self._freeze = self._freeze, False  # relations in functions generate no events
+            env[_RETURNED] = False
+            try:
+                self._statements(fn.get("body") or [], env, fname)
+            finally:
+                self._freeze = saved
+            outs = []
+            for out in fn.get("outputs") or []:
+                if out["name"] not in env:
+                    raise CompileError(f"function {fname!r} does not assign its output {out['name']!r}")
+                outs.append(env[out["name"]])
+            return outs
+        finally:
+            self._inline_depth -= 1
+
+    def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
+        """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
+        out = []
+        for d in loc.get("dims") or []:
+            if isinstance(d, int):
+                out.append(d)
+                continue
+            if kind_of(d)[0] in ("Colon", "Empty") or d is None:
+                return None
+            val = self.expr(d, env)
+            if not is_number(val):
+                return None
+            out.append(int(val))
+        return tuple(out)
+
+    def _builtin_external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], builtin: str,
+                          args: list[Value]) -> list[Value]:
+        """``external "builtin" y = sin(u)``: the built-in on the external call's arguments, which
+        name the function's inputs (given, or their defaults)."""
+        env: dict[str, Value] = {}
+        for i, inp in enumerate(fn.get("inputs") or []):
+            if i < len(args):
+                env[inp["name"]] = args[i]
+            elif inp.get("default") is not None:
+                env[inp["name"]] = self.expr(inp["default"], env)
+            else:
+                raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+        call_args = [self.expr(a, env) for a in ext.get("args") or []]
+        value = builtin_call(builtin, call_args, self)
+        outs = [o["name"] for o in fn.get("outputs") or []]
+        if len(outs) != 1 or (ext.get("output_name") not in (None, outs[0])):
+            raise self.unsupported(f"external \"builtin\" function {fname!r} with other than one output "
+                                   "returned by the call", r"\bexternal\b")
+        return [value]
+
+    def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
+        for st in stmts:
+            if _RETURNED in env and is_number(env[_RETURNED]) and bool(env[_RETURNED]):
+                return  # after a return taken on every path, nothing more happens
+            kind, body = kind_of(st)
+            if kind == "Assignment":
+                value = self.expr(body["value"], env)
+                self._assign(body["comp"]["parts"], value, env, fname)
+            elif kind == "FunctionCall":  # (a, b, ...) := f(...), or a call of a function for nothing
+                cname = (body.get("comp") or {}).get("name") or ""
+                args = [self.expr(a, env) for a in body.get("args") or []]
+                fn = self.functions.get(cname)
+                if fn is None:
+                    raise CompileError(f"call of unknown function {cname!r} {_in(fname)} in {self.model}")
+                outs = self.inline(cname, fn, args)
+                targets = body.get("outputs") or []
+                if len(targets) > len(outs):
+                    raise CompileError(f"{len(targets)} results taken from {cname!r}, which has {len(outs)} "
+                                       f"outputs, {_in(fname)}")
+                for target, value in zip(targets, outs):
+                    parts = (target or {}).get("parts") if isinstance(target, dict) else None
+                    if parts:
+                        self._assign(parts, value, env, fname)
+            elif kind == "Return" and not _is_algorithm(fname):
+                # in this branch's environment; merging the branches makes it the branch's condition
+                env[_RETURNED] = True
+            elif kind == "If":
+                self._if_statement(body, env, fname)
+            elif kind == "When" and _is_algorithm(fname):
+                blocks = body.get("blocks") or []
+                fires = [self.when_fire(blk.get("cond"), env) for blk in blocks]
+                self._if_statement({"cond_blocks": [{"cond": None, "stmts": blk.get("stmts") or []} for blk in blocks],
+                                    "else_block": []}, env, fname, conds=fires)
+            elif kind == "For":
+                self._for_statement(body, env, fname)
+            elif kind == "Assert":
+                self.add_assert(body, env, fname if _is_algorithm(fname) else f"function {fname}")
+            else:
+                pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
+                raise self.unsupported(f"{kind.lower()} statement {_in(fname)}", pattern)
+
+    def _assign(self, parts: list[dict[str, Any]], value: Value, env: dict[str, Value], fname: str) -> None:
+        """``target := value`` in a function or algorithm (a whole variable, array elements or slices);
+        after a possible return, only where the function has not returned."""
+        if len(parts) != 1 and not _is_algorithm(fname):
+            raise self.unsupported(f"record field assignment {_in(fname)}")
+        ident = self._flat_target(parts, env)
+        subs = parts[-1].get("subs") or []
+        returned = env.get(_RETURNED, False)
+        if subs:
+            target = env.get(ident)
+            if not isinstance(target, np.ndarray):
+                raise self.unsupported(f"indexed assignment to {ident!r} {_in(fname)}")
+            picks = [self._subscript(sb, target, k, env) for k, sb in enumerate(subs)]
+            if len(picks) != target.ndim:
+                raise CompileError(f"assignment to {ident!r} {_in(fname)} with {len(picks)} "
+                                   f"subscripts for an array of size {arr.size_text(target.shape)}")
+            index = tuple(
+                slice(None) if p is None else ([int(i) - 1 for i in p] if arr.is_array(p) else int(p) - 1)
+                for p in picks
+            )
+            for k, p in enumerate(picks):
+                bad = [int(i) for i in (p if arr.is_array(p) else [p]) if p is not None
+                       and not 1 <= int(i) <= target.shape[k]]
+                if bad:
+                    raise CompileError(f"index {bad[0]} out of range 1..{target.shape[k]} in assignment "
+                                       f"to {ident!r} {_in(fname)}")
+            new = target.copy()
+            try:
+                new[np.ix_(*[range(new.shape[k]) if p is None else
+                             ([i] if isinstance(i, int) else i) for k, (p, i) in
+                             enumerate(zip(picks, index))])] = (
+                    np.asarray(value, dtype=object).reshape(
+                        [new.shape[k] if p is None else (len(i) if isinstance(i, list) else 1)
+                         for k, (p, i) in enumerate(zip(picks, index))])
+                    if arr.is_array(value) else value)
+            except ValueError:
+                raise CompileError(f"assignment of a value of size {arr.size_text(arr.shape(value))} "
+                                   f"to a part of {ident!r} {_in(fname)} that does not "
+                                   "have that size") from None
+            value = new
+            old = target
+        else:
+            old = env.get(ident)
+        if not (is_number(returned) and not bool(returned)) and old is not None:
+            value = arr.map2(lambda a, b: if_then(returned, a, b), old, value, f"assignment to {ident!r}",
+                             broadcast=False)
+        env[ident] = value
+
+    def _flat_target(self, parts: list[dict[str, Any]], env: dict[str, Value]) -> str:
+        """The name an assignment's target ``a[2].b.c[i]`` has in the environment: the flat name
+        ``a[2].b.c`` (subscripts of the enclosing components must be constant; those of the last
+        part index into the value)."""
+        names = []
+        for k, part in enumerate(parts):
+            subs = part.get("subs") or []
+            if subs and k < len(parts) - 1:
+                picks = []
+                for sub in subs:
+                    val = self._subscript(sub, None, 0, env)
+                    if not isinstance(val, int):
+                        raise self.unsupported(f"assignment to an element of a component array with a "
+                                               f"subscript that is not a constant ({part['ident']}[...])")
+                    picks.append(str(val))
+                names.append(f"{part['ident']}[{','.join(picks)}]")
+            else:
+                names.append(part["ident"])
+        return ".".join(names)
+
+    def _if_statement(self, body: Any, env: dict[str, Value], fname: str, conds: list[Value] | None = None) -> None:
+        """An if-statement (or, given *conds*, the branches of a when-statement with their firings)."""
+        blocks = body.get("cond_blocks") or body.get("branches") or []
+        else_block = body.get("else_block") or body.get("else_branch") or []
+        conds_and_envs = []
+        prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
+        for k, blk in enumerate(blocks):
+            if isinstance(blk, dict):
+                cond_node, stmts = blk.get("cond"), blk.get("stmts", blk.get("body", []))
+            else:
+                cond_node, stmts = blk
+            cond = conds[k] if conds is not None else self.expr(cond_node, env)
+            if is_number(cond):
+                if bool(cond):
+                    branch_env = dict(env)
+                    self._guarded(_branch_guard(None, prior), stmts, branch_env, fname)
+                    conds_and_envs.append((True, branch_env))
+                    break
+                continue
+            branch_env = dict(env)
+            self._guarded(_branch_guard(cond, prior), stmts, branch_env, fname)
+            prior.append(cond)
+            conds_and_envs.append((cond, branch_env))
+        else:
+            final_env = dict(env)
+            self._guarded(_branch_guard(None, prior), else_block or [], final_env, fname)
+            conds_and_envs.append((True, final_env))
+        # merge from the last branch backwards
+        merged = conds_and_envs[-1][1]
+        for cond, branch_env in reversed(conds_and_envs[:-1]):
+            out = {}
+            for key in set(branch_env) | set(merged):
+                a = branch_env.get(key, env.get(key))
+                b = merged.get(key, env.get(key))
+                if a is None or b is None:
+                    out[key] = a if b is None else b
+                elif a is b:
+                    out[key] = a
+                else:
+                    out[key] = arr.map2(lambda x, y, c=cond: ca.if_else(c, x, y), a, b, f"if-branches of {key!r}")
+            merged = out
+        env.clear()
+        env.update(merged)
+
+    def _guarded(self, guard: Any, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
+        if guard is not None:
+            self._guards.append(guard)
+        try:
+            self._statements(stmts, env, fname)
+        finally:
+            if guard is not None:
+                self._guards.pop()
+
+    # ------------------------------------------------------------- asserts
+    def add_assert(self, body: dict[str, Any], env: dict[str, Value] | None, origin: str) -> None:
+        """Record ``assert(condition, message, level)``; *env* is a function's environment."""
+        message = self._message_text(body.get("message"), env)
+        saved, self._freeze = self._freeze, False  # an assert is checked as its condition stands (no events)
+        try:
+            cond = self.expr(body["condition"], env)
+        finally:
+            self._freeze = saved
+        if isinstance(cond, np.ndarray):
+            raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is an array")
+        if is_number(cond) and not isinstance(cond, (bool, np.bool_)):
+            raise CompileError(f"the condition of assert({message!r}) in {origin} of {self.model} is the "
+                               f"number {cond!r}, not a Boolean")
+        level = "error"
+        if body.get("level") is not None:
+            lv = self.expr(body["level"], env)  # AssertionLevel.warning = 1, error = 2
+            if not is_number(lv):  # rumoca already refuses this (MLS 8.3.7); kept as a clear error
+                raise CompileError(f"the level of assert({message!r}) in {origin} of {self.model} "
+                                   "is not a constant")
+            level = "warning" if int(lv) == 1 else "error"
+        self._record_assert(cond, message, level, origin)
+
+    def _record_assert(self, cond: Any, message: str, level: str, origin: str) -> None:
+        for guard in self._guards:  # an assert in a function's if-branch only counts where it is taken
+            cond = ca.logic_or(logical_not(guard), cond) if not is_number(cond) or not bool(cond) else cond
+        if is_number(cond):
+            cond = ca.MX(1.0 if bool(cond) else 0.0)
+        elif not isinstance(cond, ca.MX):
+            cond = ca.MX(cond)
+        self.asserts.append(Assertion(condition=ca.if_else(cond, 1.0, 0.0), message=message,
+                                      level=level, origin=origin))
+
+    def _message_text(self, node: Any, env: dict[str, Value] | None) -> str:
+        """The text of an assert message: literals and constant ``String(...)`` parts; others as ``<...>``."""
+        kind, body = kind_of(node)
+        if node is None:
+            return "assertion failed"
+        if kind == "Literal":
+            val = body.get("value") or {}
+            if isinstance(val, dict) and "String" in val:
+                return str(val["String"])
+            raise CompileError(f"the message of an assert in {self.model} is {literal_text(val)}, not a String")
+        if kind == "Parenthesized":
+            return self._message_text(body.get("expr", body.get("inner")), env)
+        if kind == "Binary" and str(body.get("op")) in ("Add", "AddElem"):
+            return self._message_text(body["lhs"], env) + self._message_text(body["rhs"], env)
+        if kind == "VarRef":
+            name = body["name"]["name"]
+            sv = self.scalars.get(name)
+            if sv is not None and sv.type == STRING:
+                return str(sv.value)
+        try:
+            args = (body.get("args") or []) if isinstance(body, dict) else []
+            fn = str(body.get("function") or (body.get("name") or {}).get("name", "")) if isinstance(body, dict) else ""
+            if fn.lower() == "string" and args:
+                val = self.expr(args[0], env)
+                if is_number(val):
+                    return f"{float(val):g}" if not isinstance(val, (bool, np.bool_)) else str(bool(val)).lower()
+        except CompileError:
+            pass
+        return "<...>"
+
+    def _for_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
+        indices = body.get("indices") or []
+        if len(indices) != 1:
+            raise self.unsupported(f"for-loop with {len(indices)} indices {_in(fname)}")
+        ident = indices[0].get("ident")
+        name = ident.get("text") if isinstance(ident, dict) else ident
+        rng = self.expr(indices[0]["range"], env)
+        for value in rng:
+            env[name] = value
+            self._statements(body.get("equations") or body.get("stmts") or body.get("body") or [], env, fname)
+
+    def algorithm_residuals(self, section: dict[str, Any], initial: bool) -> list[tuple[ca.MX, str]]:
+        """An (initial) algorithm section as equations: ``v = value`` for each variable it assigns.
+
+        The statements are executed symbolically, as a function body is inlined (assignments,
+        if, for, assert): each assigned variable starts from its start value (MLS 11.1.2: a value
+        read before the section assigns it) and ends as an expression in the other variables.
+        A section is one vector equation whose unknowns are the variables it assigns: an initial
+        algorithm determines them at initialisation (e.g. a ``fixed = false`` parameter), an
+        algorithm for all time.
+        """
+        origin = section.get("origin")
+        owner = str(origin).removeprefix("algorithm from ").strip() if isinstance(origin, str) else ""
+        owner = owner if owner and owner != "(top level)" else self.model
+        context = f"{'initial ' if initial else ''}algorithm of {owner}"
+        env: dict[str, Value] = {}
+        assigned: list[str] = []
+        for out in section.get("outputs") or []:
+            name = str(out.get("name") or "")
+            base = name if name in self.vars else re.sub(r"\[[^\]]*\]$", "", name)
+            if base not in self.vars:
+                raise CompileError(f"the {context} in {self.model} assigns {name!r}, which is not a variable")
+            if base in env:
+                continue
+            scalars = self.vars[base]
+            if any(sv.sym is None for sv in scalars):
+                raise CompileError(f"the {context} in {self.model} assigns {base!r}, which is a constant or "
+                                   "a structural parameter")
+            # a discrete variable starts from pre(v), any other from its start value (MLS 11.1.2)
+            starts = [self.pre_sym(sv) if sv.kind == "discrete" else self._start_of(sv) for sv in scalars]
+            env[base] = arr.from_list(starts).reshape(self.dims[base]) if self.dims[base] else starts[0]
+            assigned.append(base)
+        self._statements(section.get("statements") or [], env, context)
+        out: list[tuple[ca.MX, str]] = []
+        for base in assigned:
+            value = env[base]
+            for sv in self.vars[base]:
+                v = value[tuple(i - 1 for i in sv.index)] if sv.index else value
+                if arr.is_array(v):
+                    raise CompileError(f"the {context} in {self.model} gives {sv.name} a value of size "
+                                       f"{arr.size_text(arr.shape(v))}")
+                if sv.kind == "discrete" and not initial:  # defined at events (a when-statement, pre(v))
+                    self._discrete_defs.append((sv.sym - v, f"{context} ({sv.name})"))
+                else:
+                    out.append((sv.sym - v, f"{context} ({sv.name})"))
+        return out

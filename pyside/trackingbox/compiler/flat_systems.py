@@ -1,0 +1,448 @@
+"""From residuals to solved systems (:class:`SystemAssembly`, a part of
+:class:`.flatten.FlatTranslator`): equations of discrete variables and the event iteration,
+index reduction, the initialisation problem, tearing of algebraic loops and their Newton
+rootfinders, and the messages naming the equations of a structurally singular system.
+"""
+from __future__ import annotations
+
+import logging
+import re
+from typing import Any
+
+import casadi as ca
+
+from ..errors import CompileError
+from .causalize import StructuralError, blt
+from .events import EventSystem
+from .index import IndexError_, max_matching, reduce_index
+from .library import locate
+from .source import class_extent, read_text, strip_comments
+from .flat_model import REAL, Assertion, InitialSystem, ScalarVar
+from .flat_builtins import solve_scalar_linear
+from .flat_text import origin_text
+
+log = logging.getLogger(__name__)
+
+
+class SystemAssembly:
+    """The system part of :class:`.flatten.FlatTranslator` (its state is set up there)."""
+
+    def _split_discrete(self, residuals: list[tuple[ca.MX, str]], continuous: set[str], discrete: list[ScalarVar],
+                        initial: bool = False) -> tuple[list[tuple[ca.MX, str]], list[tuple[ca.MX, str]]]:
+        """(continuous equations, equations of discrete variables). An equation belongs to a discrete
+        variable when no continuous unknown is in it and a discrete variable is (in an initial equation,
+        also pre(v), which is v there). In the continuous equations pre(v) is v (between events)."""
+        names = {sv.name for sv in discrete}
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        cont, disc = [], []
+        for r, origin in residuals:
+            held = ca.substitute([r], [a for a, _ in pres], [b for _, b in pres])[0] if pres else r
+            used = {sym.name() for sym in ca.symvar(held)}
+            if used & names and not used & continuous and not (initial and used & set(self.der_placeholders)):
+                # at an event pre(v) is the value before the step; at initialisation it is v
+                disc.append((held if initial else r, origin))
+            else:
+                cont.append((held, origin))
+        return cont, disc
+
+    def _event_system(self, discrete: list[ScalarVar], residuals: list[tuple[ca.MX, str]],
+                      initial: list[tuple[ca.MX, str]]) -> EventSystem | None:
+        """The event iteration's assignments (.events): conditions and samples first, then the when
+        conditions and the discrete variables in dependency order; an initial equation or initial
+        algorithm of a discrete variable gives its value at initialisation."""
+        ev = self.events
+        if not (discrete or ev.conditions or ev.samples or ev.whens or ev.reinits or self._uses_initial):
+            return None
+        unknowns = [sv.sym for sv in discrete] + [w.sym for w in ev.whens]
+        eqs = list(residuals) + [(w.sym - w.value, f"when condition {w.sym.name()}") for w in ev.whens]
+        assigned = self._discrete_order(eqs, unknowns, "equations of discrete variables")
+        at_start = dict(self._discrete_order(initial, [sv.sym for sv in discrete], "initial equations of discrete "
+                                             "variables", partial=True)) if initial else {}
+        t = self.time
+        updates: list[tuple[ca.MX, ca.MX]] = [(c.sym, c.value) for c in ev.conditions]
+        for smp in ev.samples:
+            eps = 1e-9 * ca.fmax(1, ca.fabs(t))
+            k = ca.floor((t - smp.start) / smp.interval + 0.5)
+            at = ca.logic_and(t >= smp.start - eps, ca.fabs(t - smp.start - k * smp.interval) <= eps)
+            quiet = ca.logic_or(self.quiet, ev.initial)  # sample() is never true at initialisation
+            updates.append((smp.sym, ca.logic_and(at, ca.logic_not(quiet))))
+        for sym, expr in assigned:
+            if sym.name() in {k.name() for k in at_start}:
+                expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
+            updates.append((sym, expr))
+        ev.updates = updates
+        pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        if pres:  # between events (where indicators are evaluated) pre(v) is v
+            for cond in ev.conditions:
+                cond.indicators = ca.substitute(cond.indicators, [a for a, _ in pres], [b for _, b in pres])
+        ev.discrete = [(sv.name, sv.sym, self._start_of(sv)) for sv in discrete]
+        ev.pre = dict(self._pre)
+        return ev
+
+    def _discrete_order(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX], what: str,
+                        partial: bool = False) -> list[tuple[ca.MX, ca.MX]]:
+        """Solve equations of discrete variables one at a time, each for its variable, in dependency
+        order (a loop of discrete variables is refused, naming them)."""
+        names = [u.name() for u in unknowns]
+        position = {n: i for i, n in enumerate(names)}
+        incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
+        if partial:  # initial equations of some discrete variables: match each to the one it has
+            out = []
+            for (r, origin), inc in zip(eqs, incidence):
+                if len(inc) != 1:
+                    raise self.unsupported(f"initial equation of several discrete variables ({origin})")
+                sol = solve_scalar_linear(r, unknowns[inc[0]])
+                if sol is None:
+                    raise self.unsupported(f"initial equation of discrete variable {names[inc[0]]} that is not "
+                                           f"explicit in it ({origin})")
+                out.append((unknowns[inc[0]], sol))
+            return out
+        try:
+            blocks = blt(incidence, len(unknowns))
+        except StructuralError as exc:
+            und = [names[j] for j in exc.unknowns][:8]
+            eq = sorted({eqs[i][1] for i in exc.equations})[:8]
+            raise CompileError(
+                f"the {what} of {self.model} do not determine them: {len(eqs)} equations for {len(unknowns)} "
+                f"variables" + (f"; not determined: {', '.join(und)}" if und else "")
+                + (f"; equations with no variable left: {', '.join(eq)}" if eq else "")) from None
+        out: list[tuple[ca.MX, ca.MX]] = []
+        for block in blocks:
+            if len(block.unknowns) != 1:
+                loop = ", ".join(names[j] for j in block.unknowns[:8])
+                raise self.unsupported(f"algebraic loop among discrete variables ({loop})")
+            r, origin = eqs[block.equations[0]]
+            u = unknowns[block.unknowns[0]]
+            sol = solve_scalar_linear(r, u)
+            if sol is None:
+                raise self.unsupported(f"equation of discrete variable {u.name()} that is not explicit in it "
+                                       f"({origin})")
+            out.append((u, sol))
+        return out
+
+    def _start_of(self, sv: ScalarVar) -> float:
+        """The start value of a variable (0 when it has none), with parameters at their start values."""
+        if sv.kind == "parameter" and sv.value is not None and sv.fixed is not False:
+            return float(sv.value)
+        node = sv.start_node
+        if node is None:
+            return 0.0
+        try:
+            return self.numeric(self._element(sv, node), f"start value of {sv.name!r}")
+        except CompileError:
+            return 0.0
+
+    def _where(self, origin: Any) -> str:
+        text = origin_text(origin)
+        return f"of {self.model}" if text == "of component (top level)" else text
+
+    def _unique_asserts(self) -> list[Assertion]:
+        """The asserts, each once (a function inlined twice with the same arguments asserts once)."""
+        seen: set[tuple[str, str, str]] = set()
+        out = []
+        for a in self.asserts:
+            key = (a.message, a.level, str(a.condition))
+            if key not in seen:
+                seen.add(key)
+                out.append(a)
+        return out
+
+    def _needed_optional(self, residuals: list[tuple[ca.MX, str]], optional: list[tuple[ca.MX, str]],
+                         states: list[ScalarVar], computed: list[ScalarVar],
+                         assignments: list[tuple[ca.MX, ca.MX]]) -> list[tuple[ca.MX, str]]:
+        """Those of *optional* initial equations that determine an unknown of the initialisation problem
+        (free states, fixed = false parameters) that the others leave undetermined (by structural rank)."""
+        free = [s for s in states if s.fixed is not True] + list(computed)
+        position = {s.sym.name(): i for i, s in enumerate(free)}
+        exprs = [r for r, _ in residuals] + [r for r, _ in optional]
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        incid = [sorted({position[v.name()] for v in ca.symvar(e) if v.name() in position}) for e in exprs]
+        kept = incid[:len(residuals)]
+        rank = max_matching(kept)
+        out = []
+        for k, (r, origin) in enumerate(optional):
+            trial = kept + [incid[len(residuals) + k]]
+            if rank < len(free) and max_matching(trial) > rank:
+                kept, rank = trial, rank + 1
+                out.append((r, origin))
+        return out
+
+    def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
+                      calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
+                      ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
+        """Index reduction (.index) of the continuous equations; None when it cannot help. Returns the
+        equations (the parameters' bindings, then the original and differentiated ones), the states
+        chosen, and the initial equations v = start of former states with fixed = true, which hold
+        where they are needed (a position prescribed elsewhere makes its own start redundant)."""
+        calc_names = {sv.name for sv in calculated}
+        eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
+        preference = {}
+        for name, v in (self.flat.get("variables") or {}).items():
+            select = v.get("state_select") if isinstance(v, dict) else None
+            if select:
+                for sv in self.vars.get(name, []):
+                    preference[sv.name] = str(select)
+        try:
+            red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
+                                                                      for s in states},
+                               {a.name: a.sym for a in algebraics if a.name not in calc_names}, self.time,
+                               {sv.name for sv in self.scalars.values() if sv.kind == "input"}, preference)
+        except IndexError_ as exc:
+            log.info("%s: index reduction not possible: %s", self.model, exc)
+            return None
+        chosen = set(red.states)
+        for name, sym in red.created:  # derivatives that are algebraic unknowns (dummy derivatives)
+            if name in self.scalars or any(sym is d for d in red.derivative.values()):
+                continue
+            self.scalars[name] = ScalarVar(name=name, kind="continuous", type=REAL, top_level=False, output=False,
+                                           start_node=None, binding_node=None, index=(), attrs={},
+                                           description="derivative (index reduction)", sym=sym)
+        for s in states:  # a former state's derivative symbol is now an algebraic unknown
+            if s.name not in chosen and s.name in self.der_placeholders:
+                d = self.der_placeholders[s.name]
+                self.scalars.setdefault(d.name(), ScalarVar(
+                    name=d.name(), kind="continuous", type=REAL, top_level=False, output=False, start_node=None,
+                    binding_node=None, index=(), attrs={}, description=f"derivative of {s.name} (dummy)", sym=d))
+        self.der_placeholders = dict(red.derivative)
+        new_states = [self.scalars[n] for n in red.states]
+        optional = [(s.sym - self._element(s, s.start_node), f"start value of {s.name} (fixed = true)")
+                    for s in states if s.name not in chosen and s.fixed is True and s.start_node is not None]
+        log.info("%s: index reduction differentiated %d equations; states %s", self.model,
+                 len(red.differentiated), ", ".join(red.states))
+        return list(calc_eqs) + red.residuals, new_states, optional
+
+    def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
+                        computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
+                        optional: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
+        """Build the initialisation problem (see the module docstring). *optional* initial equations
+        are added where they determine an unknown the others leave free."""
+        if optional:
+            residuals = list(residuals) + self._needed_optional(residuals, optional, states, computed, assignments)
+        mentioned: set[str] = set()
+        for r, _ in residuals:
+            for sym in ca.symvar(r):
+                name = sym.name()
+                mentioned.add(name[4:-1] if name.startswith("der(") and name.endswith(")") else name)
+        free = [s for s in states if s.fixed is not True]
+        if len(residuals) < len(free) + len(computed):
+            kept = []
+            for s in list(free):
+                if len(residuals) >= len(free) + len(computed):
+                    break
+                if s.name not in mentioned:
+                    free.remove(s)
+                    kept.append(s.name)
+            if kept:
+                log.info("%s: states kept at their start values at initialisation (no initial equation "
+                         "for them): %s", self.model, ", ".join(kept))
+        n_unknowns = len(free) + len(computed)
+        if len(residuals) != n_unknowns:
+            what = []
+            if free:
+                what.append("states " + ", ".join(s.name for s in free))
+            if computed:
+                what.append("parameters with fixed = false " + ", ".join(s.name for s in computed))
+            raise CompileError(
+                f"the initialisation problem of {self.model} has {len(residuals)} equations for {n_unknowns} "
+                f"unknowns ({'; '.join(what) or 'none'}); "
+                + ("add initial equations or set fixed = true on start values"
+                   if len(residuals) < n_unknowns else
+                   "remove initial equations, or fixed = true from the start values they conflict with")
+            )
+        exprs = [r for r, _ in residuals]
+        # replace derivatives and algebraic variables by their causalised expressions, latest first
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        unknowns = [s.sym for s in free] + [s.sym for s in computed]
+        unknown_names = [u.name() for u in unknowns]
+        position = {n: i for i, n in enumerate(unknown_names)}
+        knowns: dict[str, ca.MX] = {}
+        for e in exprs:
+            for sym in ca.symvar(e):
+                if sym.name() not in position:
+                    knowns.setdefault(sym.name(), sym)
+        incidence = [sorted({position[s.name()] for s in ca.symvar(e) if s.name() in position}) for e in exprs]
+        try:
+            blocks = blt(incidence, len(unknowns))
+        except StructuralError as exc:
+            eqs = sorted({residuals[i][1] for i in exc.equations})[:8]
+            unk = [unknown_names[j] for j in exc.unknowns][:8]
+            raise CompileError(
+                f"the initialisation problem of {self.model} is structurally singular"
+                + (f"; not determined by the initial equations: {', '.join(unk)}" if unk else "")
+                + (f"; equations with no unknown left, from: {', '.join(eqs)}" if eqs else "")
+            ) from None
+        # solve block by block: an explicit assignment where a scalar block is linear in its unknown
+        # (so e.g. a mass is found from a level before a temperature divides by it), Newton for loops
+        guesses = [ca.MX.sym(f"guess({u.name()})") for u in unknowns]
+        done_syms: list[ca.MX] = []
+        done_vals: list[ca.MX] = []
+        solution: dict[int, ca.MX] = {}
+        for k, block in enumerate(blocks):
+            res = [exprs[i] for i in block.equations]
+            if done_syms:
+                res = ca.substitute(res, done_syms, done_vals)
+            unk = [unknowns[j] for j in block.unknowns]
+            sols = None
+            if len(unk) == 1:
+                sol = solve_scalar_linear(res[0], unk[0])
+                sols = [sol] if sol is not None else None
+            if sols is None:
+                sols = self._rootfinder(f"init{k}", res, unk, [guesses[j] for j in block.unknowns])
+            for j, sol in zip(block.unknowns, sols):
+                solution[j] = sol
+                done_syms.append(unknowns[j])
+                done_vals.append(sol)
+        return InitialSystem(
+            unknowns=unknowns, knowns=[knowns[n] for n in sorted(knowns)], residual=list(exprs),
+            free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
+            origins=[o for _, o in residuals], guesses=guesses, solution=[solution[j] for j in range(len(unknowns))],
+        )
+
+    def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None
+              ) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
+        """Greedy tearing of an algebraic loop.
+
+        Repeatedly solve an equation that has one unknown left and is linear in
+        it with a coefficient that depends on parameters only (never zero at run
+        time by surprise); when none is left, make a tearing variable of an
+        unknown with a start value (Newton's first guess; one without may be a
+        divisor, e.g. a resistance with no start) that appears in the most
+        remaining equations, else of the unknown that appears in the most. Returns the tearing
+        variables, the explicit assignments in order, and the residual
+        equations (as many as tearing variables) that the rootfinder solves.
+        """
+        names = [u.name() for u in unk]
+        index = {n: i for i, n in enumerate(names)}
+        eq_vars = [{index[s.name()] for s in ca.symvar(r) if s.name() in index} for r in res]
+        known: set[int] = set()
+        remaining = list(range(len(res)))
+        tears: list[int] = []
+        solved: list[tuple[ca.MX, ca.MX]] = []
+        while remaining:
+            progress = False
+            for e in list(remaining):
+                left = eq_vars[e] - known
+                if len(left) != 1:
+                    continue
+                v = next(iter(left))
+                sol = self._solve_with_parameter_coefficient(res[e], unk[v])
+                if sol is None:
+                    continue
+                solved.append((unk[v], sol))
+                known.add(v)
+                remaining.remove(e)
+                progress = True
+            if progress:
+                continue
+            unknown = [v for v in range(len(unk)) if v not in known]
+            if not unknown:
+                break
+            counts = {v: sum(1 for e in remaining if v in eq_vars[e]) for v in unknown}
+            # a variable with a start value (a guess for Newton) before one without, then the most used
+            informed = {v: bool(guess) and abs((guess or {}).get(names[v], 0.0)) > 0 for v in unknown}
+            tear = max(unknown, key=lambda v: (informed[v], counts[v], -v))
+            tears.append(tear)
+            known.add(tear)
+        if len(remaining) != len(tears):  # pragma: no cover - counting argument guarantees equality
+            raise CompileError(f"tearing of an algebraic loop in {self.model} went wrong "
+                               f"({len(remaining)} residuals for {len(tears)} tearing variables)")
+        return [unk[t] for t in tears], solved, [res[e] for e in remaining]
+
+    def _solve_with_parameter_coefficient(self, res: ca.MX, v: ca.MX) -> ca.MX | None:
+        jac = ca.jacobian(res, v)
+        if jac.is_zero():
+            return None
+        if any(s.name() not in self._parameter_names for s in ca.symvar(jac)):
+            return None
+        # a coefficient that is zero at the parameters' values (e.g. a zero entry of a parameter
+        # matrix in A*y = b) cannot be divided by
+        if abs(self.numeric(jac, "coefficient in an algebraic loop")) < 1e-12:
+            return None
+        r0 = ca.substitute(res, v, ca.MX(0))
+        return -r0 / jac
+
+    def _torn_rootfinder(self, k: int, residual: list[ca.MX], tears: list[ca.MX],
+                         solved: list[tuple[ca.MX, ca.MX]], guess: list[float]) -> list[ca.MX]:
+        """Rootfinder over the tearing variables only; the torn equations are inlined."""
+        inner = list(residual)
+        # express the residuals in tearing variables and outer symbols: substitute the
+        # explicitly solved unknowns, latest first, so each definition sees the earlier ones
+        for var, expr in reversed(solved):
+            inner = ca.substitute(inner, [var], [expr])
+        return self._rootfinder(k, inner, tears, guess)
+
+    def _rootfinder(self, k: int | str, res: list[ca.MX], unk: list[ca.MX], guess: list[Any]) -> list[ca.MX]:
+        others: dict[str, ca.MX] = {}
+        unk_names = {u.name() for u in unk}
+        for r in res:
+            for s in ca.symvar(r):
+                if s.name() not in unk_names:
+                    others[s.name()] = s
+        other_syms = list(others.values())
+        z = ca.MX.sym(f"loop{k}_z", len(unk))
+        p = ca.MX.sym(f"loop{k}_p", len(other_syms))
+        g = ca.substitute(
+            [ca.vertcat(*res)], unk + other_syms,
+            [z[i] for i in range(len(unk))] + [p[i] for i in range(len(other_syms))],
+        )[0]
+        rf = ca.rootfinder(
+            f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
+            {"abstol": 1e-10, "max_iter": 100},
+        )
+        start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
+        sol = rf(start, ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
+        return [sol[i] for i in range(len(unk))]
+
+    def _declared_at(self, scalar: str) -> str:
+        """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
+        declares its top-level component (and, if elsewhere, where the variable itself is)."""
+        base = scalar.split("[", 1)[0]
+        head = re.split(r"[.\[]", base, maxsplit=1)[0]
+        own = locate(self.source, self.model, rf"(?<![\w.]){re.escape(head)}\b(?!\s*\()", limit=1, own=True,
+                     libraries=self.libraries)
+        var = (self.flat.get("variables") or {}).get(base) or {}
+        leaf = base.rsplit(".", 1)[-1]
+        decl = self.location(rf"(?:[\w.]+\s+)+{re.escape(leaf)}\b", span=var.get("source_span")) if var else []
+        where = [f"{head} declared at {own[0]}"] if own else []
+        if decl and (not own or str(decl[0]) != str(own[0])):
+            where.append(f"{base} at {decl[0]}")
+        return f"{scalar} ({'; '.join(where)})" if where else scalar
+
+    def _equation_at(self, origin: str) -> str:
+        """An equation's origin text, with the line of the ``connect`` of the model's own class it
+        comes from (``connect(a.c.e, b.c.e)`` comes from ``connect(a.c, b.c)``)."""
+        conn = re.fullmatch(r"connect\((.+), (.+)\)", origin)
+        extent = class_extent(self.source, self.model) if conn else None
+        if conn is None or extent is None:
+            return origin
+        file, first, last = extent
+
+        def within(full: str, part: str) -> bool:
+            return full == part or full.startswith(part + ".") or full.startswith(part + "[")
+
+        lines = strip_comments(read_text(file)).splitlines()
+        code = "\n".join(lines[first - 1:last])
+        for m in re.finditer(r"\bconnect\s*\(\s*([\w.\[\], ]+?)\s*,\s*([\w.\[\]]+)\s*\)", code):
+            a, b = (re.sub(r"\s+", "", g) for g in m.groups())
+            lhs, rhs = conn.groups()
+            if (within(lhs, a) and within(rhs, b)) or (within(lhs, b) and within(rhs, a)):
+                return f"{origin} at {file}:{first + code.count(chr(10), 0, m.start())}"
+        return origin
+
+    def _structural_message(self, exc: StructuralError, residuals: list[tuple[ca.MX, str]], names: list[str]) -> str:
+        n_eq, n_unk = len(residuals), len(names)
+        head = f"{self.model} is structurally singular: {n_eq} equations for {n_unk} unknowns"
+        eqs = sorted({residuals[i][1] for i in exc.equations})[:8]
+        unk = [names[j] for j in exc.unknowns][:8]
+        parts = [head]
+        if unk:
+            parts.append("variables not determined by any equation: "
+                         + ", ".join(self._declared_at(u) for u in unk))
+        if eqs and n_eq != n_unk or (eqs and unk):
+            parts.append("equations with no variable left to solve for, from: "
+                         + ", ".join(self._equation_at(e) for e in eqs))
+        return "; ".join(parts)
