@@ -33,10 +33,12 @@ def _method(jacobian: str) -> str:
     return "fd" if jacobian == "fd" else "exact" if jacobian == "exact" else "auto"
 
 
-def before_estimate(spec: Any, *, warmup: float | None, jacobian: str = "auto") -> Any:
-    """The identifiability at the start values (warnings logged), or None if it could not be taken."""
+def before_estimate(spec: Any, *, warmup: float | None, jacobian: str = "auto", progress: Any = None) -> Any:
+    """The identifiability at the start values (warnings logged), or None if it could not be taken
+    (*progress*: ``progress(stage, done, total)`` per sensitivity point)."""
     try:
-        found = identify(spec, points=1, method=_method(jacobian), warmup=warmup, candidates=False)
+        found = identify(spec, points=1, method=_method(jacobian), warmup=warmup, candidates=False,
+                         progress=progress)
     except TrackingError as exc:
         log.info("no identifiability check before the estimation: %s", exc)
         return None
@@ -46,15 +48,16 @@ def before_estimate(spec: Any, *, warmup: float | None, jacobian: str = "auto") 
 
 
 def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, warmup: float | None,
-                   jacobian: str = "auto") -> Any:
-    """*result* with the identifiability check and, unless *level* is None, the intervals at its estimate."""
+                   jacobian: str = "auto", progress: Any = None) -> Any:
+    """*result* with the identifiability check and, unless *level* is None, the intervals at its estimate
+    (*progress*: ``progress(runs, budget)`` per twin run of the profiles)."""
     extra: dict[str, Any] = {}
     if before is not None:
         extra["identifiability"] = before.to_json()
     if level is not None:
         try:
             extra["uncertainty"] = uncertainty(spec, result.parameters, level=level, method=_method(jacobian),
-                                               warmup=warmup)
+                                               warmup=warmup, progress=progress)
         except TrackingError as exc:
             log.warning("estimate: no confidence intervals: %s", exc)
     return replace(result, **extra) if extra else result

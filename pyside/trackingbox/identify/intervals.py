@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -364,14 +364,18 @@ class _Profile:
     """The cost along one functional ``aᵀz`` (see the module docstring)."""
 
     def __init__(self, tw: TwinWindow, coords: _Coordinates, weights: Mapping[str, float], Jw: np.ndarray,
-                 A_pinv: np.ndarray, ssr0: float, budget: list[int]) -> None:
+                 A_pinv: np.ndarray, ssr0: float, budget: list[int],
+                 progress: Callable[[int, int], None] | None = None) -> None:
         self.tw, self.coords, self.weights = tw, coords, dict(weights)
         self.Jw, self.A_pinv, self.ssr0, self.budget = Jw, A_pinv, ssr0, budget
+        self.total, self.progress = budget[0], progress
 
     def _run(self, z: np.ndarray) -> tuple[float, np.ndarray] | None:
         if self.budget[0] <= 0:
             raise _OutOfBudget
         self.budget[0] -= 1
+        if self.progress is not None:  # runs so far, against the budget (most runs end well before it)
+            self.progress(self.total - self.budget[0], self.total)
         try:
             ev = self.tw.outputs(self.coords.to_x(z), tolerance=FD_TOLERANCE)
         except TrackingError as exc:
@@ -410,7 +414,8 @@ class _OutOfBudget(Exception):
 
 
 def uncertainty(spec: Any, estimate: Mapping[str, float], *, level: float = DEFAULT_LEVEL, method: str = "auto",
-                warmup: float | None = None, profile: bool = True, budget: int = PROFILE_BUDGET) -> Uncertainty:
+                warmup: float | None = None, profile: bool = True, budget: int = PROFILE_BUDGET,
+                progress: Callable[[int, int], None] | None = None) -> Uncertainty:
     """Confidence intervals of the spec's ``[[parameters]]`` at *estimate* (see the module docstring).
 
     Parameters
@@ -429,6 +434,8 @@ def uncertainty(spec: Any, estimate: Mapping[str, float], *, level: float = DEFA
         Use the profile likelihood where the linearisation is poor (else only say so).
     budget
         Most twin runs for the linearity checks and profiles.
+    progress
+        ``progress(runs, budget)`` after each of those runs (each can take seconds on a day of data).
     """
     if not (isinstance(level, float | int) and 0.0 < float(level) < 1.0):
         raise EstimationError(f"uncertainty: level must be in (0, 1), not {level!r}")
@@ -440,7 +447,7 @@ def uncertainty(spec: Any, estimate: Mapping[str, float], *, level: float = DEFA
         x_hat = np.array([float(estimate[n]) for n in problem.names])
         tw = TwinWindow(problem, window, method)  # type: ignore[arg-type]
         ev = safe(lambda: tw.sensitivities(x_hat), "uncertainty at the estimate")
-        return _uncertainty(problem, window, tw, ev, x_hat, float(level), profile, budget)
+        return _uncertainty(problem, window, tw, ev, x_hat, float(level), profile, budget, progress)
     finally:
         close_models()
 
@@ -458,7 +465,8 @@ def _weights(ev: Evaluation) -> dict[str, float]:
 
 
 def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_hat: np.ndarray, level: float,
-                 profile: bool, budget: int) -> Uncertainty:
+                 profile: bool, budget: int, progress: Callable[[int, int], None] | None = None
+                 ) -> Uncertainty:
     names = list(problem.names)
     n = len(names)
     scaling = st.parameter_scaling(x_hat, problem.lower, problem.upper)
@@ -473,7 +481,7 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     Jw = np.concatenate([ev.jacobian[t] * scaling.factors[None, :] * math.sqrt(weights[t]) for t in res], axis=0)
     structure = st.analyse(Jw, names, scaling.widths, covariance=C)
     findings = [_with_message(f) for f in name_findings(structure, scaling, x_hat, [], ev, names)]
-    prof = _Profile(tw, coords, weights, Jw, A_pinv, math.nan, [int(budget) + 1])
+    prof = _Profile(tw, coords, weights, Jw, A_pinv, math.nan, [int(budget) + 1], progress)
     # the reference cost from a run like the profile's own (the sensitivity run integrates differently)
     base = prof._run(coords.z_hat)
     if base is None:

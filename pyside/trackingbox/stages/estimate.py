@@ -66,7 +66,8 @@ def progress_lines(progress: Progress) -> ProgressCallback:
 
 def run(spec: Any, settings: EstimateSettings = EstimateSettings(), *,
         progress: Progress | None = None) -> EstimationResult:
-    """Estimate the spec's parameters with *settings*; *progress* gets the generations and refinement steps.
+    """Estimate the spec's parameters with *settings*; *progress* gets the identifiability check's points,
+    the generations and refinement steps, and the interval profiles' runs.
 
     ``settings.identify``: check what the data can determine at the start values first (warnings);
     ``settings.level``: the confidence level of the intervals at the estimate (None: none).
@@ -74,8 +75,14 @@ def run(spec: Any, settings: EstimateSettings = EstimateSettings(), *,
     level = settings.level
     if level is not None and not (isinstance(level, (int, float)) and 0.0 < float(level) < 1.0):
         raise EstimationError(f"estimate: level must be a fraction in (0, 1), not {level!r}")
-    before = before_estimate(spec, warmup=settings.warmup, jacobian=settings.jacobian) if settings.identify else None
+    points = None if progress is None else (
+        lambda stage, done, total: progress(f"identifiability ({stage})", done, total, unit="point"))
+    before = (before_estimate(spec, warmup=settings.warmup, jacobian=settings.jacobian, progress=points)
+              if settings.identify else None)
     result = estimate(spec, **{f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
                                if f.name not in EstimateSettings.AROUND},
                       progress=None if progress is None else progress_lines(progress))
-    return after_estimate(spec, result, before, level=level, warmup=settings.warmup, jacobian=settings.jacobian)
+    runs = None if progress is None else (
+        lambda done, total: progress("intervals", done, total, "profile likelihood", unit="run"))
+    return after_estimate(spec, result, before, level=level, warmup=settings.warmup, jacobian=settings.jacobian,
+                          progress=runs)
