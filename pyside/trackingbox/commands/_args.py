@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable, Iterable
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from ..errors import TrackingError
@@ -118,8 +120,6 @@ def add_executor_arguments(parser: argparse.ArgumentParser, *, what: str, defaul
 
 def add_library_option(p: argparse.ArgumentParser, what: str) -> None:
     """``--library PATH`` (repeatable): a Modelica library the twin's source uses, for *what*."""
-    from pathlib import Path
-
     p.add_argument("--library", action="append", default=[], type=Path, metavar="PATH",
                    help=f"Modelica library the twin's source uses when {what} (package directory or .mo file; "
                         "repeatable), beside the spec's [source] libraries; libraries beside the source and "
@@ -128,9 +128,6 @@ def add_library_option(p: argparse.ArgumentParser, what: str) -> None:
 
 def with_libraries(spec: Any, libraries: Iterable[Any]) -> Any:
     """*spec* with *libraries* (``--library``) added to its ``[source] libraries`` (unchanged without)."""
-    from dataclasses import replace
-    from pathlib import Path
-
     extra = tuple(Path(p).resolve() for p in libraries)
     if not extra or spec.source is None:
         return spec

@@ -24,6 +24,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..compiler import compile_model
+from ..fmu import FMUModel
+from ..generate.variants import _class_text, library_index  # the twin's text, read as gen-trackingbox reads it
+
 __all__ = ["OwnCase", "CASES", "repository_root", "default_msl", "plant_package", "write_historian", "write_spec",
            "example_folder"]
 
@@ -174,8 +178,6 @@ def plant_package(case: OwnCase, twin_source: Path, libraries: tuple[Path, ...])
     gen-trackingbox makes of a library class) with the case's one edit: a component swapped for
     one whose parameter is driven, and the equation that drives it.
     """
-    from ..generate.variants import _class_text, library_index  # the twin's text, read as gen-trackingbox reads it
-
     index = library_index(twin_source, libraries)
     text = _class_text(index, case.twin_model, "Plant")
     old, new, equations = case.plant_edit
@@ -221,9 +223,6 @@ def write_historian(case: OwnCase, out: Path, *, msl: Path | None = None, seed: 
     Returns the historian's path. The twin's source is looked for relative to the repository
     (``twin_path``) or is the MSL (``"MSL"``).
     """
-    from ..compiler import compile_model
-    from ..fmu import FMUModel
-
     msl = Path(msl) if msl is not None else default_msl()
     twin_source = msl if case.twin_path == "MSL" else repository_root() / case.twin_path
     out = Path(out)
