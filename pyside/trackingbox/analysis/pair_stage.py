@@ -491,7 +491,9 @@ def pair(spec: Spec, settings: PairSettings | None = None, *,
         residuals = simulate_untracked(spec, st.variables, start=start, stop=stop)
     scales = dict(spec.pairing.scale)
     # candidates the data cannot tell apart (dynamic sensitivities, trackingbox.identify): out, with the reason
-    drop = indistinct_candidates(spec) if s.identify and s.data_checks else {}
+    points = None if progress is None else (lambda stage, done, total: progress(f"identifiability ({stage})",
+                                                                                 done, total))
+    drop = indistinct_candidates(spec, progress=points) if s.identify and s.data_checks else {}
     st_m, st2_m, rec_m = (without_candidates(x, drop) for x in (st, st2, st_rec))
     pairing = choose_pairs(st_m.gains, st.variables, st.parameters, time_constants=st.time_constants,
                            variable_ranges=[scales.get(v, r) for v, r in zip(st.variables, st.ranges)],

@@ -68,15 +68,16 @@ def band_tracker(spec: Any, columns: Any) -> Any:
     return BandTracker(spec, columns) if getattr(spec, "pairs", None) else None
 
 
-def indistinct_candidates(spec: Any, *, warmup: float | None = None) -> dict[str, str]:
+def indistinct_candidates(spec: Any, *, warmup: float | None = None, progress: Any = None) -> dict[str, str]:
     """Pairing's candidates the data cannot tell apart: name -> the reason to leave it out.
 
     :func:`~trackingbox.identify.analysis.identify` at the start values and one point inside the
     bounds, then :func:`~trackingbox.identify.analysis.leave_out`. Nothing (and a log line) when
     the check cannot run (the twin fails at the start values, a window with too few samples).
+    *progress*: ``progress(stage, done, total)`` per sensitivity point.
     """
     try:
-        found = identify(spec, points=1, warmup=warmup, candidates=False)
+        found = identify(spec, points=1, warmup=warmup, candidates=False, progress=progress)
     except TrackingError as exc:
         log.info("pairing without the identifiability check: %s", exc)
         return {}
