@@ -44,10 +44,8 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import re
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -74,6 +72,7 @@ from .errors import (
     TrackingError,
     UnsupportedConstructError,
 )
+from .isolated import interrupt, run_worker, stop_workers, write_result
 from .simulation.models import open_model
 
 log = logging.getLogger(__name__)
@@ -277,25 +276,8 @@ def _worker_main(argv: list[str]) -> int:
         except BaseException as exc:  # noqa: BLE001 - the point is to classify everything
             outcome, stage = "crashed", "compile"
             message = f"{type(exc).__name__}: {exc}\n" + "".join(traceback.format_exc(limit=-3))
-    sys.stdout.write("\n@@RESULT@@" + json.dumps({"outcome": outcome, "message": message, "stage": stage})
-                     + "\n")
-    sys.stdout.flush()
+    write_result({"outcome": outcome, "message": message, "stage": stage})
     return 0
-
-
-_LIVE: set[subprocess.Popen] = set()  # worker processes running now (killed on interruption)
-
-
-def _stop_workers() -> None:
-    for proc in list(_LIVE):
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
 
 
 def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
@@ -304,30 +286,11 @@ def run_isolated(model: TestModel, suite: Path, timeout: float) -> ModelResult:
            "true" if model.should_pass else "false", str(suite)]
     t0 = time.perf_counter()
     stage = "compile"
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, errors="replace")
-    _LIVE.add(proc)
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.communicate()
+    data = run_worker(cmd, timeout)
+    if data is None:
         outcome, message = "hang", f"no result after {timeout:g} s"
     else:
-        _LIVE.discard(proc)
-        marker = out.rfind("@@RESULT@@")
-        if marker >= 0:
-            data = json.loads(out[marker + len("@@RESULT@@"):].strip())
-            outcome, message, stage = data["outcome"], data["message"], data.get("stage", "compile")
-        elif proc.returncode < 0:
-            outcome = "crashed"
-            message = f"worker killed by signal {signal.Signals(-proc.returncode).name}: {err.strip()[-500:]}"
-        else:
-            outcome = "crashed"
-            message = f"worker exited with {proc.returncode}: {err.strip()[-1500:]}"
+        outcome, message, stage = data["outcome"], data["message"], data.get("stage", stage)
     seconds = time.perf_counter() - t0
     message = message.strip()
     return ModelResult(model.name, model.section, model.should_pass, outcome, message[:4000],
@@ -439,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
              len(models), len(models) - len(todo), args.jobs, args.timeout, args.out)
     lock = threading.Lock()
     t0 = time.perf_counter()
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     pool = ThreadPoolExecutor(max(1, args.jobs))
     try:
         with open(args.out, "a", encoding="utf-8") as fh:
@@ -453,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
                 log.info("[%d/%d] %-70s %-17s %6.1f s", k, len(todo), res.model, res.outcome, res.seconds)
     except KeyboardInterrupt:
         pool.shutdown(wait=False, cancel_futures=True)
-        _stop_workers()
+        stop_workers()
         log.info("interrupted: the results so far are in %s (continue with --resume)", args.out)
         return 130
     pool.shutdown()

@@ -33,11 +33,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import re
 import resource
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -50,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import config
+from ..isolated import interrupt, run_worker, stop_workers, write_result
 
 log = logging.getLogger(__name__)
 
@@ -267,8 +266,7 @@ def _worker_main(argv: list[str]) -> int:
     result["wall_s"] = round(time.perf_counter() - t0, 2)
     result["cpu_s"] = round(_cpu(), 2)
     result["peak_mb"], result["peak_children_mb"] = _peak_mb()
-    sys.stdout.write("\n@@RESULT@@" + json.dumps(result, default=str) + "\n")
-    sys.stdout.flush()
+    write_result(result)
     return 0
 
 
@@ -297,21 +295,6 @@ def construct_of(record: dict) -> str:
 
 
 # ------------------------------------------------------------------------------------ the runner
-_LIVE: set[subprocess.Popen] = set()
-
-
-def _stop_workers() -> None:
-    for proc in list(_LIVE):
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def run_isolated(request: dict, timeout: float) -> dict:
     """Run one example in a fresh worker process with a time limit; never raises for the model's sake."""
     t0 = time.perf_counter()
@@ -319,30 +302,9 @@ def run_isolated(request: dict, timeout: float) -> dict:
         req = Path(tmp) / "request.json"
         req.write_text(json.dumps(request))
         cmd = [sys.executable, "-m", "trackingbox.compiler.msl_harness", "--one", str(req)]
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True, errors="replace")
-        _LIVE.add(proc)
-        try:
-            out, err = proc.communicate(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            proc.communicate()
-            result = {"outcome": "timeout", "message": f"no result after {timeout:g} s"}
-        else:
-            marker = out.rfind("@@RESULT@@")
-            if marker >= 0:
-                result = json.loads(out[marker + len("@@RESULT@@"):].strip())
-            elif proc.returncode < 0:
-                result = {"outcome": "crashed", "message": f"worker killed by signal "
-                          f"{signal.Signals(-proc.returncode).name}: {err.strip()[-500:]}"}
-            else:
-                result = {"outcome": "crashed", "message": f"worker exited with {proc.returncode}: "
-                          f"{err.strip()[-1500:]}"}
-        finally:
-            _LIVE.discard(proc)
+        result = run_worker(cmd, timeout)
+    if result is None:
+        result = {"outcome": "timeout", "message": f"no result after {timeout:g} s"}
     result["model"] = request["model"]
     result["package"] = request["package"]
     result["seconds"] = round(time.perf_counter() - t0, 2)
@@ -514,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
              len(todo_all), len(todo_all) - len(todo), args.jobs, args.timeout, args.out)
     lock = threading.Lock()
     t0 = time.perf_counter()
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     pool = ThreadPoolExecutor(max(1, args.jobs))
     try:
         with open(args.out, "a", encoding="utf-8") as fh:
@@ -529,7 +491,7 @@ def main(argv: list[str] | None = None) -> int:
                          res["seconds"], res.get("construct", ""))
     except KeyboardInterrupt:
         pool.shutdown(wait=False, cancel_futures=True)
-        _stop_workers()
+        stop_workers()
         log.info("interrupted: the results so far are in %s (continue with --resume)", args.out)
         return 130
     pool.shutdown()
