@@ -223,7 +223,8 @@ class LibraryBody:
     name:
         The function's full name (for messages).
     header:
-        The bytes that open the function's declaration in its file.
+        The code that opens the function's declaration (``function name``): every place it stands in
+        a file's code (comments and strings left out) is tried.
     digest:
         SHA-256 of the code tokens (comments and blanks left out) from *header* up to the function's
         first ``annotation``: only that exact text is replaced.
@@ -255,7 +256,7 @@ LIBRARY_BODIES = (
     # result would depend on iLast) stop the run with the MSL's message instead of giving a value.
     LibraryBody(
         name="Modelica.Math.Vectors.interpolate",
-        header=b'function interpolate "Interpolate linearly in a vector"',
+        header=b"function interpolate",
         digest="46e06a8d4630ecf8c93c8de7acf7a4b91d1a73fd7886cd6ddd644e3e5099fcb9",
         start=b"protected",
         body=b"""protected
@@ -275,6 +276,26 @@ LIBRARY_BODIES = (
 """,
         why="while loops and an output assigned on one branch",
     ),
+    # Modelica.Math.BooleanVectors.firstTrueIndex (MSL 4.0.0), which the MSL's MultiSwitch blocks
+    # call (Blocks.Examples BooleanNetwork1, IntegerNetwork1, RealNetwork1): a `return` inside an
+    # if inside a for-loop, which rumoca refuses ("non-guarded nested return"). The index of the
+    # first true element, or 0 where none is, is the same as the last true index found going
+    # backwards through the vector.
+    LibraryBody(
+        name="Modelica.Math.BooleanVectors.firstTrueIndex",
+        header=b"function firstTrueIndex",
+        digest="8e1398c57cca82bdb07a17248eee4c29713ffd456d40d37cdb97b65336dbc952",
+        start=b"algorithm",
+        body=b"""algorithm
+   index := 0;
+   for i in size(b, 1):-1:1 loop
+      if b[i] then
+         index := i;
+      end if;
+   end for;
+""",
+        why="a return nested in a for-loop",
+    ),
 )
 
 
@@ -293,13 +314,16 @@ def replace_library_bodies(data: bytes) -> tuple[bytes, list[tuple[str, int]]]:
     """
     done: list[tuple[str, int]] = []
     for lib in LIBRARY_BODIES:
-        at = data.find(lib.header)
-        if at < 0:
+        if lib.header not in data:  # the common case, cheaply
             continue
         code, _, _ = _code_mask(data)
-        end = code.find(b"annotation", at)
-        start = code.find(lib.start, at, end)
-        if end < 0 or start < 0 or _code_digest(code[at:end]) != lib.digest:
+        for hit in re.finditer(rb"\b" + re.escape(lib.header) + rb"\b", code):
+            at = hit.start()
+            end = code.find(b"annotation", at)
+            start = code.find(lib.start, at, end) if end >= 0 else -1
+            if start >= 0 and _code_digest(code[at:end]) == lib.digest:
+                break
+        else:
             continue
         old = data[start:end]
         lines = old.count(b"\n")
