@@ -164,29 +164,3 @@ def test_function_locals_sized_by_an_input_critical_damping_filter_matches_scipy
     y = y[1:]
     assert np.max(np.abs(out["f.y"][~after])) < 1e-9
     assert np.max(np.abs(out["f.y"][after] - y)) < 1e-5
-
-
-@pytest.mark.compile
-def test_first_true_index_without_its_nested_return(tmp_path):
-    """Modelica.Math.BooleanVectors.firstTrueIndex returns from inside a for-loop (rumoca: "non-guarded
-    nested return"); read without it, it still gives the first true element's index, 0 where none is."""
-    _need_msl()
-    import fmpy
-
-    from trackingbox.compiler import compile_model
-
-    data = (MSL / "Math" / "BooleanVectors.mo").read_bytes()
-    new, done = replace_library_bodies(data)
-    assert [name for name, _ in done] == ["Modelica.Math.BooleanVectors.firstTrueIndex"]
-    assert len(new) == len(data) and new.count(b"\n") == data.count(b"\n")
-    src = tmp_path / "First.mo"
-    src.write_text("model First\n  Integer k;\nequation\n"
-                   "  k = Modelica.Math.BooleanVectors.firstTrueIndex({time > 0.5, time > 0.2, false});\nend First;\n")
-    res = compile_model(src, "First", backend="embedded", output=tmp_path / "k.fmu", libraries=[MSL])
-    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.05, output=["k"])
-    grid = np.isclose(out["time"] / 0.05, np.round(out["time"] / 0.05))
-    for t, k in zip(out["time"][grid], out["k"][grid]):
-        flags = [t > 0.5, t > 0.2, False]
-        expect = next((i + 1 for i, f in enumerate(flags) if f), 0)
-        if min(abs(t - 0.2), abs(t - 0.5)) > 1e-6:  # at a switching instant either side may be recorded
-            assert k == expect, (t, k, expect)

@@ -276,26 +276,6 @@ LIBRARY_BODIES = (
 """,
         why="while loops and an output assigned on one branch",
     ),
-    # Modelica.Math.BooleanVectors.firstTrueIndex (MSL 4.0.0), which the MSL's MultiSwitch blocks
-    # call (Blocks.Examples BooleanNetwork1, IntegerNetwork1, RealNetwork1): a `return` inside an
-    # if inside a for-loop, which rumoca refuses ("non-guarded nested return"). The index of the
-    # first true element, or 0 where none is, is the same as the last true index found going
-    # backwards through the vector.
-    LibraryBody(
-        name="Modelica.Math.BooleanVectors.firstTrueIndex",
-        header=b"function firstTrueIndex",
-        digest="8e1398c57cca82bdb07a17248eee4c29713ffd456d40d37cdb97b65336dbc952",
-        start=b"algorithm",
-        body=b"""algorithm
-   index := 0;
-   for i in size(b, 1):-1:1 loop
-      if b[i] then
-         index := i;
-      end if;
-   end for;
-""",
-        why="a return nested in a for-loop",
-    ),
 )
 
 
