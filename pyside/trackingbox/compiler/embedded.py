@@ -306,6 +306,41 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str,
     return None
 
 
+_NESTED_REFERENCE = re.compile(r"reference to non-constant variable '(\w+)' from a lexically nested class")
+NESTED_EXTENDS = "`extends` of a class declared inside the extending class itself"
+"""The README's words for the construct :func:`_nested_extends` names."""
+
+
+def _nested_extends(message: str, source: ModelicaSource, model: str,
+                    libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
+    """rumoca 0.10.2 says a nested class refers to a non-constant of its enclosing class (MLS 5.3.1)
+    where a class extends a class declared inside itself (the MSL's ``MassWithStopAndFriction``
+    extends its own ``PartialFrictionWithStop``): the nested class's references to its own
+    components are then taken for the enclosing class's. Modelica finds them in the nested class
+    (MLS 5.3.1 looks there first), so the model is valid: where a class the model uses does that,
+    refuse naming the ``extends``, its file and line (else the message stands as an error)."""
+    found = _NESTED_REFERENCE.search(message)
+    if found is None:
+        return None
+    index = index_for(source, libraries)
+    for name in index.used_classes(model):
+        info = index.classes[name]
+        own = index.children.get(name, {})
+        for base in info.extends:
+            if "." in base or base not in own:
+                continue
+            at = re.search(rf"\bextends\s+{re.escape(base)}\b", index.own_code(info))
+            where = f"{index.location(info, at.start())[0]}:{index.location(info, at.start())[1]}" if at \
+                else f"{info.file}:{info.line}"
+            return UnsupportedConstructError(
+                f"unsupported Modelica construct in {model}: {NESTED_EXTENDS} (`extends {base}` in {name}, "
+                f"{base} declared inside {name}) at {where}. The front end (rumoca {_frontend_version()}) "
+                f"takes {base}'s references to its own components (`{found.group(1)}`) for {name}'s and "
+                "refuses them (rumoca: a reference to a non-constant variable from a lexically nested class); "
+                "use --backend openmodelica where omc is installed, or rewrite the model")
+    return None
+
+
 FRONTEND_TIMEOUT = config.setting("frontend_timeout").default
 """Seconds the front end (rumoca load + flatten) may take before it counts as hung;
 ``TRACKINGBOX_FRONTEND_TIMEOUT`` overrides it."""
@@ -455,6 +490,9 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
     except CompileError:
         raw = []
     diags = _diagnostics(raw)
+    nested = _nested_extends(message, source, model, libraries)
+    if nested is not None:
+        raise nested
     if "resolve/parse failed" in first or not diags:
         if not diags and ("not found" in first.lower() or "resolve/parse failed" in first):
             known = class_names(source)

@@ -27,6 +27,24 @@ def _branch_guard(cond: Any, prior: list[Any]) -> Any:
     return guard
 
 
+def _declared_dims(loc: dict[str, Any]) -> list[Any]:
+    """The declared sizes of a function's input, output or local: ``dims`` where the flat model gives
+    them so, else its ``shape_expr`` (rumoca 0.10.2: ``{"Index": {"value": n}}`` for a literal size,
+    ``{"Expr": {"expr": e}}`` for an expression such as an input ``order``, anything else for ``:``)."""
+    if loc.get("dims"):
+        return list(loc["dims"])
+    out: list[Any] = []
+    for d in loc.get("shape_expr") or []:
+        kind, body = kind_of(d)
+        if kind == "Index" and isinstance(body, dict) and isinstance(body.get("value"), int):
+            out.append(int(body["value"]))
+        elif kind == "Expr" and isinstance(body, dict) and body.get("expr") is not None:
+            out.append(body["expr"])
+        else:
+            out.append({"Colon": None})
+    return out
+
+
 def _is_algorithm(context: str) -> bool:
     """Whether a statement context names an algorithm section of the model (not a function)."""
     return context.startswith(("algorithm ", "initial algorithm "))
@@ -64,7 +82,7 @@ class StatementTranslation:
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     env[loc["name"]] = self.expr(loc["default"], env)
-                elif loc.get("dims"):  # an array declared with its sizes: its elements can be assigned
+                elif _declared_dims(loc):  # an array declared with its sizes: its elements can be assigned
                     dims = self._local_dims(loc, env, fname)
                     if dims is not None:
                         env[loc["name"]] = arr.fill(0.0, list(dims))
@@ -86,7 +104,7 @@ class StatementTranslation:
     def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
         """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
         out = []
-        for d in loc.get("dims") or []:
+        for d in _declared_dims(loc):
             if isinstance(d, int):
                 out.append(d)
                 continue

@@ -27,6 +27,15 @@ INIT_TOLERANCE = 1e-6
 _TIME_VR = -1  # marks the time in the runtime's tables of value references
 
 
+CHATTER_EVENTS = 1000
+"""Events in a row, each within :data:`CHATTER_SPACING` of the last, after which the FMU stops with
+an error saying the model chatters (a relation that its own event flips back, over and over: the
+integrator would otherwise creep on by 1e-13 s per event and never finish)."""
+
+CHATTER_SPACING = 1e-9
+"""Seconds (relative to max(1, |t|)) within which two events count as one burst (see above)."""
+
+
 def value_references(xml: str) -> dict[str, int]:
     root = ET.fromstring(xml)
     variables = root.find("ModelVariables")
@@ -313,7 +322,22 @@ _UPDATE_DISCRETE = """FMI3_Export fmi3Status fmi3UpdateDiscreteStates(fmi3Instan
   // trackingbox runtime: the event iteration (trackingbox.compiler.events)
   casadi_fmi_memory* m = (casadi_fmi_memory*)instance;
   int states_changed = 0;
-  fmi3Status status = tbx_event_iteration(m, 0, &states_changed);
+  fmi3Status status;
+  // chattering: events in a row, each within TBX_CHATTER_DT (relative) of the last one
+  if (m->tbx_burst >= 0 && fabs(m->t - m->tbx_last_event) <= TBX_CHATTER_DT * fmax(1.0, fabs(m->t))) {
+    if (++m->tbx_burst >= TBX_CHATTER_N) {
+      char text[300];
+      snprintf(text, sizeof text, "the model chatters at t = %.17g s: %d events in a row, each within "
+               "%g s of the last (a switch that its own event undoes)", m->t, TBX_CHATTER_N,
+               TBX_CHATTER_DT * fmax(1.0, fabs(m->t)));
+      tbx_log(m, fmi3Error, "event", text);
+      return fmi3Error;
+    }
+  } else {
+    m->tbx_burst = 0;
+  }
+  m->tbx_last_event = m->t;
+  status = tbx_event_iteration(m, 0, &states_changed);
   *discreteStatesNeedUpdate = fmi3False;
   *terminateSimulation = fmi3False;
   *nominalsOfContinuousStatesChanged = fmi3False;
@@ -452,6 +476,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(f"#define TBX_E_NW {len(event_syms)}\n#define TBX_E_NU {n_updates}\n"
                     f"#define TBX_E_NR {len(ev.reinits)}\n#define TBX_E_NS {len(ev.samples)}\n"
                     f"#define TBX_E_NOUT {max(n_out, 1)}\n#define TBX_E_MAXIT {MAX_EVENT_ITERATIONS}\n"
+                    f"#define TBX_CHATTER_N {CHATTER_EVENTS}\n#define TBX_CHATTER_DT {CHATTER_SPACING!r}\n"
                     f"#define TBX_E_INIT_VR {refs[ev.initial.name()]}\n#define TBX_NZ {n_z}\n")
         glue.append(_work_defines("TBX_E", fn))
         glue.append("int tbx_event(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
@@ -487,13 +512,13 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
          "  const char* instance_name;\n  // trackingbox runtime: FMI logger and assert warning flags\n"
          "  fmi3LogMessageCallback tbx_logger;\n  fmi3InstanceEnvironment tbx_env;\n"
          f"  int tbx_warned[{max(n_assert, 1)}];\n  int tbx_pending;\n"
-         "  double tbx_next;\n  int tbx_next_defined;\n"),
+         "  double tbx_next;\n  int tbx_next_defined;\n  double tbx_last_event;\n  int tbx_burst;\n"),
         ("    m->instance_name = instanceName;\n",
          "    m->instance_name = instanceName;\n    m->tbx_logger = logMessage;\n"
          "    m->tbx_env = instanceEnvironment;\n"),
         ("  // Zero index is negative: No event\n",
          f"  for (i = 0; i < {max(n_assert, 1)}; ++i) m->tbx_warned[i] = 0;\n  m->tbx_pending = -1;\n"
-         "  m->tbx_next = 0;\n  m->tbx_next_defined = 0;\n"
+         "  m->tbx_next = 0;\n  m->tbx_next_defined = 0;\n  m->tbx_last_event = 0;\n  m->tbx_burst = -1;\n"
          "  // Zero index is negative: No event\n"),
         ("FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n",
          "".join(glue) + "FMI3_Export fmi3Status fmi3Reset(fmi3Instance instance) {\n"),

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import bisect
 import functools
+import hashlib
 import logging
 import re
 from dataclasses import dataclass
@@ -212,18 +213,127 @@ def protect_der_equations(data: bytes) -> Rewrite:
     return Rewrite(bytes(out), lines, kept)
 
 
+@dataclass(frozen=True)
+class LibraryBody:
+    """A library function whose algorithm rumoca 0.10.2 cannot take, and a body it can that computes
+    the same (:func:`replace_library_bodies`).
+
+    Attributes
+    ----------
+    name:
+        The function's full name (for messages).
+    header:
+        The code that opens the function's declaration (``function name``): every place it stands in
+        a file's code (comments and strings left out) is tried.
+    digest:
+        SHA-256 of the code tokens (comments and blanks left out) from *header* up to the function's
+        first ``annotation``: only that exact text is replaced.
+    start:
+        The keyword from which the text is replaced (up to the ``annotation``).
+    body:
+        What rumoca reads instead, from *start* on.
+    why:
+        What rumoca does with the original.
+    """
+
+    name: str
+    header: bytes
+    digest: str
+    start: bytes
+    body: bytes
+    why: str
+
+
+LIBRARY_BODIES = (
+    # Modelica.Math.Vectors.interpolate (MSL 4.0.0): the search for the interval runs in while
+    # loops, which rumoca refuses when xi varies ("a statement without a checked DAE owner"), and
+    # iNew is assigned on one branch only ("missing function value definition" in ToDae). For the
+    # abscissae the function requires (non-decreasing), the MSL's search ends at the largest k in
+    # 1..nx-1 with x[k] <= xi, or at 1 where there is none, whatever iLast is: forward from iLast it
+    # stops before the first x[k] > xi, backward at the first x[k] <= xi. The loop below takes that
+    # same k and the MSL's interpolation (and extrapolation) on it, with the MSL's assert on the
+    # segment; abscissae that decrease somewhere (outside the function's contract, where the MSL's
+    # result would depend on iLast) stop the run with the MSL's message instead of giving a value.
+    LibraryBody(
+        name="Modelica.Math.Vectors.interpolate",
+        header=b"function interpolate",
+        digest="46e06a8d4630ecf8c93c8de7acf7a4b91d1a73fd7886cd6ddd644e3e5099fcb9",
+        start=b"protected",
+        body=b"""protected
+    Integer nx = size(x, 1);
+  algorithm
+    assert(nx > 0, "The table vectors must have at least 1 entry.");
+    yi := y[1];
+    iNew := 1;
+    for k in 1:nx - 1 loop
+      assert(x[k + 1] >= x[k], "Abscissa table vector values must be increasing");
+      if k == 1 or xi >= x[k] then
+        assert(x[k + 1] > x[k], "Abscissa table vector values must be increasing");
+        yi := y[k] + (y[k + 1] - y[k])*(xi - x[k])/(x[k + 1] - x[k]);
+        iNew := k;
+      end if;
+    end for;
+""",
+        why="while loops and an output assigned on one branch",
+    ),
+)
+
+
+def _code_digest(code: bytes) -> str:
+    """SHA-256 of the tokens of comment-free *code*, one blank between them."""
+    return hashlib.sha256(b" ".join(m.group(0) for m in _TOKEN.finditer(code))).hexdigest()
+
+
+def replace_library_bodies(data: bytes) -> tuple[bytes, list[tuple[str, int]]]:
+    """*data* with the algorithm of each :data:`LIBRARY_BODIES` function found in it, exactly as the
+    library writes it, replaced by the body rumoca can take; and (function, line) of each replaced.
+
+    The replacement takes the same lines and bytes (padded with blanks and empty lines), so every
+    position after it, and every line, stays where it is in the user's file. A function whose text
+    differs in any token (another library version, an edit) is left alone.
+    """
+    done: list[tuple[str, int]] = []
+    for lib in LIBRARY_BODIES:
+        if lib.header not in data:  # the common case, cheaply
+            continue
+        code, _, _ = _code_mask(data)
+        for hit in re.finditer(rb"\b" + re.escape(lib.header) + rb"\b", code):
+            at = hit.start()
+            end = code.find(b"annotation", at)
+            start = code.find(lib.start, at, end) if end >= 0 else -1
+            if start >= 0 and _code_digest(code[at:end]) == lib.digest:
+                break
+        else:
+            continue
+        old = data[start:end]
+        lines = old.count(b"\n")
+        new = lib.body + b"\n" * max(0, lines - lib.body.count(b"\n"))
+        if new.count(b"\n") != lines or len(new) > len(old):
+            raise AssertionError(f"the body replacing {lib.name} is longer than the library's")
+        new += b" " * (len(old) - len(new))  # the indentation of the annotation's line
+        data = data[:start] + new + data[end:]
+        done.append((lib.name, data.count(b"\n", 0, start) + 1))
+    return data, done
+
+
 @functools.lru_cache(maxsize=4096)
 def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int) -> bytes | None:
     data = file.read_bytes()
     bom = data.startswith(BOM)
     body = data[3:] if bom else data
+    changed = bom
+    body, replaced = replace_library_bodies(body)
+    for name, line in replaced:
+        log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
+                  next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
+        changed = True
     rewrite = protect_der_equations(body)
     if rewrite.lines:
         log.debug("%s: der(...) equations in for-loops put in parentheses for rumoca at lines %s%s",
                   file, ", ".join(map(str, rewrite.lines)),
                   "" if rewrite.offsets_kept else " (byte offsets after them shifted)")
         return rewrite.data
-    return body if bom else None
+    return body if changed else None
 
 
 def frontend_bytes(file: Path) -> bytes | None:
