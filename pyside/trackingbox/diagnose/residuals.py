@@ -739,8 +739,8 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
 
     *columns*: tag -> ``(n, m)`` matrix ``A`` of that tag (same ``m`` for all tags).
     *bounds*: ``(lower, upper)``, each of length ``m`` (``-inf``/``inf`` where free): the
-    bounded least-squares solution where the free one leaves them (the free one otherwise).
-    Solved from the normal equations (:func:`_solve_normal`).
+    bounded least-squares solution where the free one leaves them (the free one otherwise,
+    unchanged to the bit).
 
     >>> A = {"y": np.array([[1.0], [2.0], [3.0]])}
     >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).tolist()
@@ -748,57 +748,24 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
     >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}, bounds=([-1.0], [1.5])).round(9).tolist()
     [1.5]
     """
-    m = None
-    gram = rhs = None
+    rows, rhs = [], []
     for tag, r in residual.items():
         r = np.asarray(r, dtype=float)
         a = np.asarray(columns[tag], dtype=float)
-        m = a.shape[1]
-        if m == 0:
-            continue
         ok = np.isfinite(r) & np.all(np.isfinite(a), axis=1)
         w = 1.0 / noise[tag] if noise[tag] > 0 else 1.0
-        aw = a[ok] * w
-        rw = r[ok] * w
-        g, h = aw.T @ aw, aw.T @ rw
-        gram = g if gram is None else gram + g
-        rhs = h if rhs is None else rhs + h
-    if not m or gram is None:
-        return np.zeros(m or 0)
-    return _solve_normal(gram, rhs, bounds)
-
-
-#: Relative size below which an eigenvalue of the scaled normal matrix counts as zero (a rank-deficient fit
-#: takes the minimum-norm solution, as ``numpy.linalg.lstsq`` does).
-RCOND = 1e-12
-
-
-def _solve_normal(gram: np.ndarray, rhs: np.ndarray, bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None
-                  ) -> np.ndarray:
-    """Least squares from its normal equations ``G c = g`` (columns scaled to unit norm first), bounded when asked.
-
-    The diagnosis fits the same few columns to 10^5 samples many times (a levelling search
-    tries 35 coefficients per candidate): the normal equations cost one ``(m, n) x (n, m)``
-    product where a factorisation of the stacked samples cost ten times that. The bounded
-    solution is the bounded least squares of the equivalent ``m``-row system
-    ``S^(1/2) V' c ~ S^(-1/2) V' g`` (``G = V S V'``), whose solution is that of the samples'.
-    """
-    d = np.sqrt(np.clip(np.diag(gram), 0.0, None))
-    d[d == 0] = 1.0
-    gs = gram / np.outer(d, d)
-    hs = rhs / d
-    vals, vecs = np.linalg.eigh(gs)
-    keep = vals > RCOND * max(float(vals.max()), 0.0)
-    proj = vecs[:, keep].T @ hs
-    coef = (vecs[:, keep] @ (proj / vals[keep])) / d
+        rows.append(a[ok] * w)
+        rhs.append(r[ok] * w)
+    a_all = np.vstack(rows)
+    if a_all.shape[1] == 0:
+        return np.zeros(0)
+    b_all = np.concatenate(rhs)
+    coef, *_ = np.linalg.lstsq(a_all, b_all, rcond=None)
     if bounds is not None:
         lo = np.asarray(bounds[0], dtype=float)
         hi = np.asarray(bounds[1], dtype=float)
         if np.any(coef < lo) or np.any(coef > hi):
-            root = np.sqrt(vals[keep])
-            a_small = (vecs[:, keep] * root).T * d[None, :]
-            b_small = proj / root
-            coef = lsq_linear(a_small, b_small, bounds=(lo, hi), method="bvls").x
+            coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
     return coef
 
 
