@@ -42,7 +42,7 @@ FINDINGS = [
     Finding("entrainment", "effect", {"eps": 0.005}),
     Finding("vapour-line", "flash", {"r": 0.3}),
     Finding("level-density", "LT_flash", {"e": 0.08}),
-    Finding("ds-meter", "DS_product", {"b": 0.01, "d": 5e-7}),
+    Finding("ds-meter", "DS_product", {"b": 0.01, "d": 8e-9}),
 ]
 #: the same findings with every effect switched off by its parameters
 ZERO = [Finding(f.effect, f.target, {k: (0.6 if k == "xOn" else 3600.0 if k == "tau" else 0.0) for k in f.values})
@@ -112,6 +112,7 @@ def test_evaporator_patch_effects_act_as_explained(fmu_cache, ev_patches):
              f"{e}.M_s", f"{e}.port_a.m_flow", f"{e}.port_a.x", f"{e}.port_b.m_flow", f"{e}.m_corr",
              "flash.vapourCapacity_internal", "PI_flash", "LT_flash.y", "LT_flash.dp", "DS_product.y",
              "DS_product.port.x", *TAGS.values()]
+    names = list(dict.fromkeys(names))
     df = _run(ev_patches["on"], names)
     t = df["time"].to_numpy()
     last = t > STOP - 600.0
@@ -144,24 +145,35 @@ def test_evaporator_patch_effects_act_as_explained(fmu_cache, ev_patches):
     # level transmitter calibrated 8 % denser: reads dp/(1.08*1450*g)
     np.testing.assert_allclose(df["LT_flash.y"], df["LT_flash.dp"] / (1.08 * 1450.0 * 9.81), rtol=1e-9)
     # dry-solids meter: b + d*t
-    np.testing.assert_allclose(df["DS_product.y"] - df["DS_product.port.x"], 0.01 + 5e-7 * t, atol=1e-12)
+    np.testing.assert_allclose(df["DS_product.y"] - df["DS_product.port.x"], 0.01 + 8e-9 * t, atol=1e-12)
 
-    # against the unpatched twin: the restricted vapour line holds the flash tank at a higher pressure,
-    # the vent and the loss leave less heat for evaporation (thinner product at the same feed)
+    # against the unpatched twin: the vapour line's square-root law at 70 % of its capacity needs 1/0.7^2 of the
+    # pressure drop to the 1 bar header for about the same flash vapour; the vent and the loss leave less heat
+    # for evaporation (a thinner product at the same feed)
     base = _run(Path(fmu_cache(EV)), ["PI_flash", "DI_product", "DS_product.port.x"])
-    assert (df["PI_flash"] - base["PI_flash"])[last].min() > 1000.0
+    ratio = ((df["PI_flash"] - 1e5) / (base["PI_flash"] - 1e5))[last]
+    np.testing.assert_allclose(ratio, 1 / 0.7**2, rtol=0.05)
     assert (df["DS_product.port.x"] - base["DS_product.port.x"])[last].max() < -0.002
 
 
 @pytest.mark.compile
 def test_evaporator_hooks_off_change_nothing(fmu_cache, ev_patches):
-    """The evaporator twin equals the patched twin with every evaporator effect at zero, on every tag."""
+    """The patched twin with every evaporator effect at zero follows the evaporator twin on every tag as closely
+    as the twin follows itself on another output grid (the integrator's own spread: the communication points
+    restart its steps; FI-6150 moved by 3e-5 of its value between a 10 s and a 5 s grid)."""
+    from trackingbox.fmu import FMUModel
+
     outputs = list(TAGS.values()) + ["LI_body", "LI_flash", "LI_condensate", "ZI_inlet", "ZI_outlet"]
     base = _run(Path(fmu_cache(EV)), outputs)
     off = _run(ev_patches["off"], outputs)
+    with FMUModel(Path(fmu_cache(EV))) as model:
+        fine = model.simulate(stop_time=STOP, output_interval=5.0, outputs=outputs).iloc[::2].reset_index(drop=True)
+    assert len(fine) == len(base)
     for name in outputs:
         scale = max(1.0, float(np.abs(base[name]).max()))
-        np.testing.assert_allclose(off[name], base[name], atol=1e-7 * scale, err_msg=name)
+        spread = float(np.max(np.abs(fine[name].to_numpy() - base[name].to_numpy())))
+        gap = float(np.max(np.abs(off[name].to_numpy() - base[name].to_numpy())))
+        assert gap <= 3.0 * spread + 1e-7 * scale, (name, gap, spread)
 
 
 def test_prefixes_are_distinct():

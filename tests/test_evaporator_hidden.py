@@ -97,7 +97,10 @@ def test_flash_demister(fmu_cache, clean):
     df = _run(fmu_cache, f"{PKG}.FlashDemister", ["PI_flash", "flash.vapourCapacity_internal"])
     capacity = _tail(df, "flash.vapourCapacity_internal")
     assert 0.3 < capacity < 0.6  # phi0 = 0.6 at no load, "about half" at the flash's flow
-    assert _tail(df, "PI_flash") > _tail(clean, "PI_flash") + 1000.0  # a restricted line holds the tank higher
+    # the square-root law at capacity phi needs 1/phi^2 of the pressure drop to the 1 bar header for the same
+    # flash vapour: a few hundred Pa here (the line's design drop is about 60 Pa)
+    dp, dp_clean = _tail(df, "PI_flash") - 1e5, _tail(clean, "PI_flash") - 1e5
+    assert dp == pytest.approx(dp_clean / capacity**2, rel=0.1)
 
 
 @pytest.mark.compile
