@@ -75,7 +75,7 @@ def test_vent_orifice(fmu_cache):
     df = _run(fmu_cache, f"{PKG}.VentOrifice", ["effect.p_s", "effect.m_flow_vent_internal", "effect.m_steam",
                                                  "effect.m_c"])
     vent = _tail(df, "effect.m_flow_vent_internal")
-    assert vent == pytest.approx(2.2e-5 * math.sqrt(_tail(df, "effect.p_s") - 1e5), rel=0.01)
+    assert vent == pytest.approx(0.011 * math.sqrt((_tail(df, "effect.p_s") - 1e5) / 2.5e5), rel=0.01)
     assert 0.008 < vent < 0.014  # "about 11 g/s"
     assert 0.01 < vent / _tail(df, "effect.m_steam") < 0.025  # "1.5 % of the steam"
     # the chest is steady: what enters and is not condensed is the vent
@@ -94,13 +94,17 @@ def test_shell_loss(fmu_cache, clean):
 
 @pytest.mark.compile
 def test_flash_demister(fmu_cache, clean):
-    df = _run(fmu_cache, f"{PKG}.FlashDemister", ["PI_flash", "flash.vapourCapacity_internal"])
+    df = _run(fmu_cache, f"{PKG}.FlashDemister", ["PI_flash", "flash.vapourCapacity_internal", "flash.m_vap_out"])
+    base = _run(fmu_cache, f"{PKG}.Clean", ["PI_flash", "flash.m_vap_out"])
     capacity = _tail(df, "flash.vapourCapacity_internal")
     assert 0.3 < capacity < 0.6  # phi0 = 0.6 at no load, "about half" at the flash's flow
-    # the square-root law at capacity phi needs 1/phi^2 of the pressure drop to the 1 bar header for the same
-    # flash vapour: a few hundred Pa here (the line's design drop is about 60 Pa)
-    dp, dp_clean = _tail(df, "PI_flash") - 1e5, _tail(clean, "PI_flash") - 1e5
-    assert dp == pytest.approx(dp_clean / capacity**2, rel=0.1)
+    # the flash vapour is what the liquor's drop to the tank's saturation releases: nearly the same, so the tank's
+    # pressure rises until the clogged line passes it, by more than the 1/phi^(1...2) of its drop to the 1 bar
+    # header that a linear (small drops, regularised) to square-root law needs
+    dp, dp_clean = _tail(df, "PI_flash") - 1e5, _tail(base, "PI_flash") - 1e5
+    flow, flow_clean = _tail(df, "flash.m_vap_out"), _tail(base, "flash.m_vap_out")
+    assert flow / flow_clean == pytest.approx(1.0, abs=0.02)
+    assert dp / dp_clean > 0.98 / capacity
 
 
 @pytest.mark.compile
@@ -113,19 +117,28 @@ def test_borated_liquor(fmu_cache, clean):
     assert _tail(df, "TI_flash") > _tail(clean, "TI_flash") + 0.5  # the flash tank's liquor boils hotter
 
 
+def _splus(z, eps):
+    return 0.5 * (z + np.sqrt(z * z + eps * eps))
+
+
 @pytest.mark.compile
 def test_burkeite_scale(fmu_cache):
-    """Above saturation the scale grows at kSat*(x - xSat); run thick (low feed) to get there."""
-    feed = {**NOMINAL, "feedFlowSet": 1.5}
+    """Thick liquor (low feed): the scale grows with the supersaturation by the documented law, and by taking
+    duty away it brings the product back towards saturation (3 h: part of the way), where the clean plant runs
+    above it."""
+    feed = {**NOMINAL, "feedFlowSet": 1.3}
     inputs = pd.DataFrame({"time": [0.0, STOP], **{k: [v, v] for k, v in feed.items()}})
     df = _run(fmu_cache, f"{PKG}.BurkeiteScale", ["effect.x", "Rs", "effect.dRf_internal"], inputs)
+    base = _run(fmu_cache, f"{PKG}.Clean", ["effect.x"], inputs)
     t = df["time"].to_numpy()
-    x = df["effect.x"].to_numpy()
-    assert x[t >= TAIL].min() > 0.8  # supersaturated
-    np.testing.assert_allclose(df["effect.dRf_internal"], df["Rs"], atol=1e-15)
-    # the growth rate at the tail, from the hand form (splus ~ the plain excess 5 widths above saturation)
-    rate = np.gradient(df["Rs"].to_numpy(), t)[t >= TAIL]
-    np.testing.assert_allclose(rate, 2e-6 * (x[t >= TAIL] - 0.795), rtol=0.05)
+    x, rs = df["effect.x"].to_numpy(), df["Rs"].to_numpy()
+    np.testing.assert_allclose(df["effect.dRf_internal"], rs, atol=1e-15)
+    rate = 2e-6 * _splus(x - 0.795, 0.002) - _splus(0.795 - x, 0.002) / 0.01 * rs / 14400.0
+    inner = slice(5, -5)
+    np.testing.assert_allclose(np.gradient(rs, t)[inner], rate[inner], rtol=0.02, atol=1e-3 * np.abs(rate).max())
+    assert rs[-1] > 5e-5
+    assert _tail(base, "effect.x") > 0.805
+    assert _tail(df, "effect.x") < _tail(base, "effect.x") - 0.002  # the scale took duty: thinner product
 
 
 @pytest.mark.compile
@@ -140,8 +153,8 @@ def test_foaming_flash(fmu_cache, clean):
     df = _run(fmu_cache, f"{PKG}.FoamingFlash", ["flash.level", "LI_flash"])
     # the loop holds the reading at the 1.0 m setpoint; the true level is 1570/1450 of the reading
     assert _tail(df, "LI_flash") == pytest.approx(1.0, abs=0.01)
-    assert _tail(df, "flash.level") == pytest.approx(1570.0 / 1450.0, abs=0.01)
-    assert _tail(clean, "flash.level") == pytest.approx(1.0, abs=0.01)
+    # the same liquor (density) at the same reading: the true level is 1570/1450 of the clean plant's
+    assert _tail(df, "flash.level") / _tail(clean, "flash.level") == pytest.approx(1570.0 / 1450.0, rel=0.002)
 
 
 @pytest.mark.compile
