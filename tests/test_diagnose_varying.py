@@ -15,7 +15,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from trackingbox.diagnose.residuals import fit_windows
+from trackingbox.diagnose.linear import fit_windows
 from trackingbox.diagnose.varying import VaryingBasis, ramps
 from trackingbox.errors import SpecError
 from trackingbox.spec import dump_spec, load_spec, loads_spec

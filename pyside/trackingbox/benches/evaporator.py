@@ -525,6 +525,18 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int, *, feed: f
     return HistorianSettings(tags=out, start=start, seed=int(seed))
 
 
+def _hidden_case(hidden: str | None, noise_scale: float) -> tuple[BenchDefinition, HiddenCase | None]:
+    """The bench with the plant of hidden-effect case *hidden* (:data:`HIDDEN`), and the case; checks *noise_scale*."""
+    if not (math.isfinite(noise_scale) and noise_scale >= 0):
+        raise TrackingError(f"bench 'evaporator': the noise scale must be a number >= 0, got {noise_scale!r}")
+    if hidden is None:
+        return DEFINITION, None
+    if hidden not in HIDDEN:
+        raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench 'evaporator'"
+                            f"{did_you_mean(hidden, list(HIDDEN))}; choose one of {', '.join(HIDDEN)}")
+    return replace(DEFINITION, plant_model=HIDDEN[hidden].model), HIDDEN[hidden]
+
+
 def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str, float] | None = None,
           hours: float | None = None, plant_fmu: str | os.PathLike[str] | None = None,
           twin_fmu: str | os.PathLike[str] | None = None, start: str = "2026-01-12T06:00:00+00:00",
@@ -565,16 +577,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     -------
     BenchCase
     """
-    d = DEFINITION
-    case_hidden = None
-    if hidden is not None:
-        if hidden not in HIDDEN:
-            raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench 'evaporator'"
-                                f"{did_you_mean(hidden, list(HIDDEN))}; choose one of {', '.join(HIDDEN)}")
-        case_hidden = HIDDEN[hidden]
-        d = replace(d, plant_model=case_hidden.model)
-    if not (math.isfinite(noise_scale) and noise_scale >= 0):
-        raise TrackingError(f"bench 'evaporator': the noise scale must be a number >= 0, got {noise_scale!r}")
+    d, case_hidden = _hidden_case(hidden, noise_scale)
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise TrackingError(f"output directory {out} of bench 'evaporator' exists and is not a directory")
