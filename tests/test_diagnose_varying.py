@@ -111,3 +111,35 @@ def test_spec_varying_round_trip(tmp_path):
 def test_spec_varying_errors_name_the_entry(tmp_path, extra, message):
     with pytest.raises(SpecError, match=message):
         load_spec(_case(tmp_path, extra))
+
+
+def _stacked(res, cols, noise):
+    a = np.vstack([cols[t] / noise[t] for t in res])
+    b = np.concatenate([res[t] / noise[t] for t in res])
+    return a, b
+
+
+def test_joint_lstsq_equals_the_factorised_samples():
+    """Against numpy's SVD least squares and scipy's bounded one on the stacked, noise-weighted samples."""
+    from scipy.optimize import lsq_linear
+
+    from trackingbox.diagnose.linear import joint_lstsq
+
+    rng = np.random.default_rng(3)
+    n, m = 2000, 9
+    cols = {t: rng.standard_normal((n, m)) * np.logspace(-3, 4, m) for t in ("a", "b", "c")}
+    res = {t: rng.standard_normal(n) + cols[t][:, 0] * 50 for t in cols}
+    noise = {"a": 0.5, "b": 2.0, "c": 1.0}
+    a, b = _stacked(res, cols, noise)
+    free = np.linalg.lstsq(a, b, rcond=None)[0]
+    np.testing.assert_allclose(joint_lstsq(res, cols, noise), free, rtol=1e-9, atol=1e-12 * np.abs(free).max())
+    lo, hi = np.full(m, -np.inf), np.full(m, np.inf)
+    hi[0] = 20.0  # the free solution's first coefficient is about 50: the bound is active
+    bounded = lsq_linear(a, b, bounds=(lo, hi), method="bvls").x
+    got = joint_lstsq(res, cols, noise, bounds=(lo, hi))
+    assert got[0] == pytest.approx(20.0)
+    np.testing.assert_allclose(got, bounded, rtol=1e-7, atol=1e-9 * np.abs(bounded).max())
+    # rank-deficient (a repeated column): the minimum-norm solution, as numpy's
+    dup = {t: np.hstack([c, c[:, :1]]) for t, c in cols.items()}
+    a2, _ = _stacked(res, dup, noise)
+    np.testing.assert_allclose(joint_lstsq(res, dup, noise), np.linalg.lstsq(a2, b, rcond=None)[0], rtol=1e-9)

@@ -12,9 +12,17 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
 from scipy.optimize import lsq_linear
 
 from .varying import VaryingBasis
+
+
+#: Largest condition number of the column-scaled normal matrix ``G = A'A`` that :func:`joint_lstsq` solves
+#: by its Cholesky factor (1e5 on the samples' matrix ``A``: the solution's relative error stays near
+#: 1e10 * 2e-16 = 2e-6 of what an orthogonal factorisation gives); beyond it, or singular, it factorises the
+#: stacked samples (``numpy.linalg.lstsq``, the minimum-norm solution of a rank-deficient fit).
+NORMAL_COND = 1e10
 
 
 def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.ndarray],
@@ -23,11 +31,17 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
 
     *columns*: tag -> ``(n, m)`` matrix ``A`` of that tag (same ``m`` for all tags).
     *bounds*: ``(lower, upper)``, each of length ``m`` (``-inf``/``inf`` where free): the
-    bounded least-squares solution where the free one leaves them (the free one otherwise,
-    unchanged to the bit).
+    bounded least-squares solution where the free one leaves them (the free one otherwise).
+
+    Solved from the normal equations with unit-norm columns where they are well conditioned
+    (:data:`NORMAL_COND`): the diagnosis fits a few columns to 10^5 samples thousands of
+    times (every candidate's levelling, with the ``[diagnose] varying`` trajectories as 8-14
+    extra columns), and on 13 tags x 4320 samples x 14 columns an SVD of the samples took
+    107 ms where the normal equations took 8 ms. The bounded solution is that of the
+    equivalent ``m``-row system ``L' c ~ L^-1 A'r`` (``A'A = L L'``).
 
     >>> A = {"y": np.array([[1.0], [2.0], [3.0]])}
-    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).tolist()
+    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).round(12).tolist()
     [2.0]
     >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}, bounds=([-1.0], [1.5])).round(9).tolist()
     [1.5]
@@ -44,12 +58,27 @@ def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.nda
     if a_all.shape[1] == 0:
         return np.zeros(0)
     b_all = np.concatenate(rhs)
-    coef, *_ = np.linalg.lstsq(a_all, b_all, rcond=None)
+    lo = hi = None
     if bounds is not None:
         lo = np.asarray(bounds[0], dtype=float)
         hi = np.asarray(bounds[1], dtype=float)
-        if np.any(coef < lo) or np.any(coef > hi):
-            coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
+    d = np.sqrt(np.einsum("ij,ij->j", a_all, a_all))
+    if np.all(d > 0) and np.all(np.isfinite(d)):
+        scaled = a_all / d
+        gram = scaled.T @ scaled
+        if np.linalg.cond(gram) <= NORMAL_COND:
+            chol = cho_factor(gram, lower=True)
+            g = scaled.T @ b_all
+            coef = cho_solve(chol, g) / d
+            if lo is not None and hi is not None and (np.any(coef < lo) or np.any(coef > hi)):
+                low = np.tril(chol[0])
+                small = lsq_linear(low.T, solve_triangular(low, g, lower=True), bounds=(lo * d, hi * d),
+                                   method="bvls")
+                coef = small.x / d
+            return coef
+    coef, *_ = np.linalg.lstsq(a_all, b_all, rcond=None)
+    if lo is not None and hi is not None and (np.any(coef < lo) or np.any(coef > hi)):
+        coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
     return coef
 
 
