@@ -29,6 +29,7 @@ Examples::
 
     scripts/bench_diagnose                                  # both benches, noise x1 and x3
     scripts/bench_diagnose --bench heat-exchanger --noise 1 --cases fouling-exp,none
+    scripts/bench_diagnose --bench evaporator --noise 1 --hours 24 --cases clean,vent-orifice
     scripts/bench_diagnose --json > suite.json
 """
 from __future__ import annotations
@@ -44,7 +45,12 @@ from pathlib import Path
 
 from trackingbox.benches import bench_definition, make_bench
 
-LIMITS = {"heat-exchanger": 180.0, "heat-production": 900.0}
+LIMITS = {"heat-exchanger": 180.0, "heat-production": 900.0, "evaporator": 600.0}
+
+#: Benches whose plain case is not a no-effect case (the evaporator's ``Plant`` carries a vent, heat
+#: losses, scale and a drifting DS meter its twin lacks: several effects at once), and the case of each
+#: that hides nothing.
+NO_EFFECT_CASE = {"evaporator": "clean"}
 
 
 #: The plain bench against the bench's own twin, where the suite diagnoses against a suite twin
@@ -54,7 +60,8 @@ OWN_TWIN = "own-twin"
 
 def _cases(bench: str, wanted: list[str] | None) -> list[str]:
     definition = bench_definition(bench)
-    names = ["none", *definition.hidden, *([OWN_TWIN] if definition.suite_twin_model else [])]
+    plain = [] if bench in NO_EFFECT_CASE else ["none"]
+    names = [*plain, *definition.hidden, *([OWN_TWIN] if definition.suite_twin_model else [])]
     return [n for n in names if wanted is None or n in wanted]
 
 
@@ -65,7 +72,8 @@ def _build(bench: str, case: str, scale: float, seed: int, work: Path, hours: fl
         return folder
     own = case == OWN_TWIN
     built = make_bench(bench, folder, seed=seed, hours=hours, twin_fmu=None if own else twin,
-                       hidden=None if case in ("none", OWN_TWIN) else case, noise_scale=scale, suite_twin=not own)
+                       hidden=None if case in ("none", OWN_TWIN) else case, noise_scale=scale,
+                       suite_twin=None if bench in NO_EFFECT_CASE else not own)
     return built.directory
 
 
@@ -87,7 +95,8 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
     row = {"bench": bench, "case": case, "noise_scale": scale, "seconds": seconds, "cpu_seconds": cpu,
-           "hidden": (f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}" if hidden else "none"),
+           "hidden": ("none" if not hidden or case == NO_EFFECT_CASE.get(bench)
+                      else f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}"),
            "expected_effect": hidden["effect"] if hidden else None,
            "expected_target": hidden["target"] if hidden else None,
            "affected": hidden["affected"] if hidden else [], "exit": proc.returncode}
@@ -120,7 +129,7 @@ def _fmt(x: float | None, spec: str = ".3f") -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--bench", action="append", choices=sorted(LIMITS), help="bench (repeatable; default both)")
+    ap.add_argument("--bench", action="append", choices=sorted(LIMITS), help="bench (repeatable; default heat-exchanger and heat-production)")
     ap.add_argument("--cases", default=None, help="comma-separated case names ('none' = the plain bench)")
     ap.add_argument("--noise", default="1,3", help="comma-separated noise scales (default 1,3)")
     ap.add_argument("--seed", type=int, default=0)
@@ -129,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the rows and criteria as one JSON document")
     ap.add_argument("diagnose_args", nargs="*", help="further arguments for trackingbox diagnose (after --)")
     args = ap.parse_args(argv)
-    benches = args.bench or sorted(LIMITS)
+    benches = args.bench or ["heat-exchanger", "heat-production"]
     wanted = args.cases.split(",") if args.cases else None
     scales = [float(s) for s in args.noise.split(",")]
     rows = []
@@ -153,8 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     in_lib = [r for r in rows if r["expected_effect"]]
     correct = [r for r in in_lib if r.get("verdict") == "effect" and r.get("named_effect") == r["expected_effect"]
                and r.get("named_target") == r["expected_target"]]
-    none_rows = [r for r in rows if r["case"] == "none"]
-    outside = [r for r in rows if r["hidden"].startswith("out-of-library")]
+    none_rows = [r for r in rows if r["case"] == "none" or r["case"] == NO_EFFECT_CASE.get(r["bench"])]
+    outside = [r for r in rows if r["hidden"].startswith("out-of-library") and r not in none_rows]
     gains = [1 - r["after"] / r["before"] for r in correct if r["before"] and r["after"] is not None]
     criteria = {
         "named_correctly": {"value": len(correct) / len(in_lib) if in_lib else None, "limit": ">= 0.9",

@@ -53,7 +53,9 @@ def hp_spec(fmu_cache, tmp_path_factory):
 
 def test_builtin_entries():
     effects = load_effects()
-    assert sorted(effects) == ["fouling", "heat-loss", "leak", "sensor-bias", "sensor-drift", "sensor-lag"]
+    assert sorted(effects) == ["bpr-offset", "ds-meter", "entrainment", "fouling", "heat-loss", "leak", "level-density",
+                               "sensor-bias", "sensor-drift", "sensor-lag", "shell-heat-loss", "soluble-scale",
+                               "steam-vent", "vapour-line"]
     assert {e.kind for e in effects.values()} == {"sensor", "process"}
     assert effects["fouling"].screen == "levelling-ramp" and effects["fouling"].coefficient == "kht"
     assert effects["leak"].hook == "use_leak"

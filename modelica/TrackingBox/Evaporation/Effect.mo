@@ -12,6 +12,8 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
   parameter Real Rf(unit="m2.K/W", min=0, max=6e-4) = 0 "Fouling resistance, used when use_Rf_in = false";
   parameter Boolean use_Rf_in = false "= true to take the fouling resistance from the input Rf_in";
   parameter Boolean use_U0_in = false "= true to take the clean coefficient from the input U0_in";
+  parameter Boolean use_vent_in = false "= true to let the input m_flow_vent_in of steam leave the chest uncondensed (diagnosis hook)";
+  parameter Boolean use_dRf_in = false "= true to add the input dRf_in to the fouling resistance (diagnosis hook)";
   parameter Real nu_ref(unit="m2/s") = 8e-5 "Reference kinematic viscosity (the liquor at about 79 % DS and 132 degC)";
   parameter Real n_visc(unit="1") = 0.41 "Exponent of the viscosity ratio in the clean coefficient";
   parameter TrackingBox.Units.MassFlowRate m_flow_rec = 10 "Recirculation flow (mixes with the feed on top of the tubes)";
@@ -33,6 +35,10 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
     annotation (Placement(transformation(extent={{-140,0},{-100,40}})));
   TrackingBox.Interfaces.RealInput U0_in(unit="W/(m2.K)") if use_U0_in "Clean coefficient from outside"
     annotation (Placement(transformation(origin={-60,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput m_flow_vent_in(unit="kg/s") if use_vent_in "Steam leaving the chest uncondensed (diagnosis hook)"
+    annotation (Placement(transformation(origin={100,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput dRf_in(unit="m2.K/W") if use_dRf_in "Resistance of deposits beside Rf (diagnosis hook)"
+    annotation (Placement(transformation(extent={{-140,30},{-100,70}})));
   TrackingBox.Units.Mass M_steam(start=p_steam_start*V_steam/(R_w*T_ref_steam), fixed=true) "Steam mass in the chest";
   TrackingBox.Units.Pressure p_s "Steam-chest pressure";
   TrackingBox.Units.Temperature T_s "Condensing temperature";
@@ -47,10 +53,20 @@ model Effect "Falling-film evaporator effect: liquor body with recirculation, va
 protected
   TrackingBox.Interfaces.RealInput Rf_internal(unit="m2.K/W") "Used fouling resistance";
   TrackingBox.Interfaces.RealInput U0_internal(unit="W/(m2.K)") "Used clean coefficient";
+  TrackingBox.Interfaces.RealInput m_flow_vent_internal(unit="kg/s") "Extra vent (0 without the hook)";
+  TrackingBox.Interfaces.RealInput dRf_internal(unit="m2.K/W") "Extra resistance (0 without the hook)";
   TrackingBox.Units.MassFlowRate m_feed_pos "Feed flow, smoothly kept positive for the mixing rule";
 equation
   connect(Rf_in, Rf_internal);
   connect(U0_in, U0_internal);
+  connect(m_flow_vent_in, m_flow_vent_internal);
+  connect(dRf_in, dRf_internal);
+  if not use_vent_in then
+    m_flow_vent_internal = 0;
+  end if;
+  if not use_dRf_in then
+    dRf_internal = 0;
+  end if;
   if not use_Rf_in then
     Rf_internal = Rf;
   end if;
@@ -61,7 +77,7 @@ equation
   x_d = (m_feed_pos*port_a.x + m_flow_rec*x)/(m_feed_pos + m_flow_rec);
   nu = Functions.kinematicViscosity(x_d, T);
   U_clean = U0_internal*(nu_ref/nu)^n_visc;
-  U_eff = 1/(1/U_clean + Rf_internal);
+  U_eff = 1/(1/U_clean + Rf_internal + dRf_internal);
   p_s = M_steam*R_w*T_ref_steam/V_steam;
   T_s = Saturation.TSat(p_s);
   Q = U_eff*A*(T_s - T);
@@ -69,7 +85,7 @@ equation
   m_c = Q/(Saturation.hVapour(T_s) - h_c);
   m_vent = ventFraction*m_c;
   m_steam = m_flow_steam_nominal*(steamLeakage + (1 - steamLeakage)*steamOpening)*Functions.regRoot(port_s.p - p_s, dp_steam_small)/sqrt(dp_steam_nominal);
-  der(M_steam) = m_steam - m_c - m_vent;
+  der(M_steam) = m_steam - m_c - m_vent - m_flow_vent_internal;
   port_s.m_flow = m_steam;
   port_c.m_flow = -m_c;
   port_c.x = 0;
@@ -94,5 +110,10 @@ own steam valve (regularised square-root law, opening input
 <code>m_c = Q/(hVapour(T_s) - h(0, T_s))</code> and drains at once through
 <code>port_c</code> as saturated condensate; a fraction
 <code>ventFraction</code> of it is vented (plant leak).</p>
+<p>Diagnosis hooks (off by default; off, the internal signals are 0 and the
+equations those without them): <code>use_vent_in</code> lets the input
+<code>m_flow_vent_in</code> (kg/s) of steam leave the chest uncondensed;
+<code>use_dRf_in</code> adds the input <code>dRf_in</code> (m2.K/W) to the
+fouling resistance (deposits that behave otherwise than <code>Rf</code>).</p>
 </html>"));
 end Effect;

@@ -36,11 +36,12 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from ..errors import FMUError, SpecError, TrackingError
+from ..errors import FMUError, SpecError, TrackingError, did_you_mean
 from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
+    DiagnoseSpec,
     PairingSettings,
     ParameterSpec,
     SourceSpec,
@@ -58,6 +59,7 @@ from . import scenario as sc
 from .base import (
     BenchCase,
     BenchDefinition,
+    HiddenCase,
     Sensor,
     _compile,
     _library_path,
@@ -377,6 +379,50 @@ TRAJECTORIES: dict[str, str] = {"effect.Rf": "Rf_true"}
 STOPPAGE_BELOW = 0.3
 STOPPAGE_SETTLE = 1800.0
 
+_HIDDEN = f"{PACKAGE}.Hidden"
+
+#: The hidden-effect suite of this bench (``trackingbox bench evaporator --hidden NAME``): the plant
+#: ``Hidden.Clean`` (the bench plant with only what the twin describes: fouling, which it tracks, the
+#: boiling-point offset and the wear, which it estimates) plus one effect, written in
+#: ``Benches/Evaporator/Hidden`` independently of the diagnosis templates (other functional forms and
+#: magnitudes, see its package documentation). ``clean`` hides nothing: diagnose must name nothing.
+HIDDEN = {c.name: c for c in (
+    HiddenCase("clean", f"{_HIDDEN}.Clean", None, None,
+               "nothing beyond the fouling the twin tracks (no vent, no heat loss, no scale, a true DS meter)"),
+    HiddenCase("vent-orifice", f"{_HIDDEN}.VentOrifice", "steam-vent", "effect",
+               "the steam chest vents 2.2e-5 kg/(s Pa^0.5) * sqrt(p_s - 1 bar) (about 11 g/s, 1.5 % of the steam)",
+               affected=("FI-6125", "PI-6121")),
+    HiddenCase("shell-loss", f"{_HIDDEN}.ShellLoss", "shell-heat-loss", "effect",
+               "the effect's shell loses 45 W/K^1.25 * (T - 25 degC)^1.25 (about 15 kW at 131 degC)",
+               affected=("QI-6150", "FI-6150")),
+    HiddenCase("flash-demister", f"{_HIDDEN}.FlashDemister", "vapour-line", "flash",
+               "the flash tank's vapour line passes 0.6/(1 + 4 s/kg * L) of its design law L",
+               affected=("PI-6151", "TI-6151")),
+    HiddenCase("borated-liquor", f"{_HIDDEN}.BoratedLiquor", "bpr-offset", "effect",
+               "the liquor boils 2 K * sigma((x - 0.72)/0.02) hotter in the effect and the flash tank (borate)",
+               affected=("TI-6111", "TI-6151")),
+    HiddenCase("burkeite-scale", f"{_HIDDEN}.BurkeiteScale", "soluble-scale", "effect",
+               "burkeite scale grows at 2e-6 m2.K/W per s per unit supersaturation above 79.5 % DS and "
+               "dissolves below it", affected=("PI-6121", "FI-6125", "QI-6150")),
+    HiddenCase("density-meter", f"{_HIDDEN}.DensityMeter", "ds-meter", "DS_product",
+               "the product DS meter reads x*694/649 (a density constant of 649 on a liquor of 694 kg/m3)",
+               affected=("QI-6150",)),
+    HiddenCase("foaming-flash", f"{_HIDDEN}.FoamingFlash", "level-density", "LT_flash",
+               "the flash-tank level transmitter is calibrated for 1570 kg/m3 instead of 1450",
+               affected=("PI-6152",)),
+    HiddenCase("demister-carryover", f"{_HIDDEN}.DemisterCarryover", "entrainment", "effect",
+               "the effect's vapour carries 0.012 s/kg * m_ev^2 of liquor (about 5 g/s)",
+               affected=("FI-6150", "QI-6150")),
+    HiddenCase("ncg-after-restart", f"{_HIDDEN}.NcgAfterRestart", None, None,
+               "air blankets the steam chest in every stoppage (up to 2.5e-4 m2.K/W) and is vented with 40 min "
+               "after the restart (outside the library)", affected=("PI-6121", "FI-6125")),
+)}
+
+#: ``[diagnose] varying`` of the spec: the fouling resistance is tracked in time (deposits build up
+#: between cleanings), so diagnose's null model lets it rise as tracking would; a constant fouling
+#: left its growth over the record (2e-4 m2.K/W) as a trend in PI-6152 that ``sensor-drift`` explained.
+VARYING = (("effect.Rf", "rising"),)
+
 DEFINITION = BenchDefinition(
     name="evaporator",
     title="Black-liquor evaporator, last effect (TrackingBox.Benches.Evaporator)",
@@ -395,6 +441,7 @@ DEFINITION = BenchDefinition(
     data=DataRules(stoppage=StoppageRule("FI-6110", STOPPAGE_BELOW * NOMINAL["feedFlowSet"], STOPPAGE_SETTLE),
                    heartbeat={"*": 600.0}, initial="steady"),
     tracking=TrackingSettings(hold_until=3600.0),
+    hidden=HIDDEN,
 )
 
 
@@ -478,10 +525,23 @@ def historian_settings(tags: Sequence[Sensor], start: str, seed: int, *, feed: f
     return HistorianSettings(tags=out, start=start, seed=int(seed))
 
 
+def _hidden_case(hidden: str | None, noise_scale: float) -> tuple[BenchDefinition, HiddenCase | None]:
+    """The bench with the plant of hidden-effect case *hidden* (:data:`HIDDEN`), and the case; checks *noise_scale*."""
+    if not (math.isfinite(noise_scale) and noise_scale >= 0):
+        raise TrackingError(f"bench 'evaporator': the noise scale must be a number >= 0, got {noise_scale!r}")
+    if hidden is None:
+        return DEFINITION, None
+    if hidden not in HIDDEN:
+        raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench 'evaporator'"
+                            f"{did_you_mean(hidden, list(HIDDEN))}; choose one of {', '.join(HIDDEN)}")
+    return replace(DEFINITION, plant_model=HIDDEN[hidden].model), HIDDEN[hidden]
+
+
 def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str, float] | None = None,
           hours: float | None = None, plant_fmu: str | os.PathLike[str] | None = None,
           twin_fmu: str | os.PathLike[str] | None = None, start: str = "2026-01-12T06:00:00+00:00",
-          historian_export: bool = True, stoppages: Sequence[Stoppage] | None = None) -> BenchCase:
+          historian_export: bool = True, stoppages: Sequence[Stoppage] | None = None,
+          hidden: str | None = None, noise_scale: float = 1.0) -> BenchCase:
     """Generate the evaporator case into *out* (the files of :func:`trackingbox.benches.make_bench`).
 
     Differs from the generic :func:`~trackingbox.benches.base.build_case` in three ways:
@@ -507,12 +567,17 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
     stoppages : sequence of Stoppage, optional
         The flow stoppages (s from the first measured sample); default: drawn by
         :func:`stoppage_schedule` from the seed.
+    hidden : str, optional
+        A hidden-effect case (:data:`HIDDEN`): its plant variant is simulated instead of
+        ``Plant``; ``truth.json`` says what is hidden.
+    noise_scale : float
+        Factor on every sensor's noise.
 
     Returns
     -------
     BenchCase
     """
-    d = DEFINITION
+    d, case_hidden = _hidden_case(hidden, noise_scale)
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise TrackingError(f"output directory {out} of bench 'evaporator' exists and is not a directory")
@@ -554,7 +619,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         # measurements: true signals on the measured period + sensor noise, then the historian
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense_frame = noisy_measurements(t_meas, d.inputs, d.outputs, true_inputs, result, keep, 1.0, noise_rng)
+        dense_frame = noisy_measurements(t_meas, d.inputs, d.outputs, true_inputs, result, keep, noise_scale, noise_rng)
         history = None
         if historian_export:
             history = export_history(dense_frame, historian_settings((*d.inputs, *d.outputs), start, seed))
@@ -573,7 +638,8 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
                      "parameters": truth, "plant_parameters": plant_params, "trajectories": trajectories,
                      "stoppages": [s.to_json() for s in stoppages],
                      "historian": history.to_json() if history is not None else None,
-                     "plant_simulation_seconds": plant_seconds}
+                     "plant_simulation_seconds": plant_seconds, "noise_scale": float(noise_scale),
+                     "hidden": case_hidden.to_json() if case_hidden is not None else None}
 
         # spec
         lib = _library_path()
@@ -587,9 +653,11 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
             outputs={s.tag: s.twin for s in d.outputs if s.tag not in {st.tag for st in d.states}},
             parameters=parameters, windows={"training": (0.0, half), "validation": (half, end)},
             data=data, states=d.states, tracking=d.tracking, pairing=PAIRING,
+            diagnose=DiagnoseSpec(varying=VARYING),
         )
-        header = (f"{d.title}: generated by `trackingbox bench evaporator`\n"
-                  f"seed = {seed}, hours = {hours:g}, plant overrides = "
+        command = "trackingbox bench evaporator" + (f" --hidden {hidden}" if hidden else "")
+        header = (f"{d.title}: generated by `{command}`\n"
+                  f"seed = {seed}, hours = {hours:g}, noise scale = {noise_scale:g}, plant overrides = "
                   f"{json.dumps(overrides) if overrides else 'none'}\n"
                   f"measurements as a historian exports them; the plant's fouling over time is in truth.json")
         spec_text = dump_spec(spec, header=header)

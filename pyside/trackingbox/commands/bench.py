@@ -19,6 +19,7 @@ examples:
   trackingbox bench heat-production --out hp --json
   trackingbox bench heat-production --out leak --hidden leak-level --noise-scale 2
   trackingbox bench evaporator --out ev --days 3 --seed 1 --set RfInf=2e-4
+  trackingbox bench evaporator --out ev-clean --days 1 --hidden clean
   trackingbox bench evaporator-train --out train --effects 7 --days 1
 
 writes into --out:
@@ -66,7 +67,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--hidden", default=None, metavar="CASE",
                    help="simulate a plant variant with an effect the twin lacks (diagnose's suite; "
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
-                        "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift); truth.json says which")
+                        "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift; evaporator: clean, vent-orifice, "
+                        "shell-loss, flash-demister, borated-liquor, burkeite-scale, density-meter, foaming-flash, "
+                        "demister-carryover, ncg-after-restart); truth.json says which")
     p.add_argument("--suite-twin", action=argparse.BooleanOptionalAction, default=None,
                    help="write the case against the bench's suite twin, the twin the hidden-effect suite "
                         "diagnoses against (heat-production: the twin with the plant's quadratic curves); "

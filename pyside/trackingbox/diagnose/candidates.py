@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .residuals import (
-    joint_lstsq,
+    fit_windows,
     ljung_box_lag1,
     step_bounds,
 )
@@ -205,37 +205,32 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
 
 def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
           extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
-          jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None,
+          jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None, *,
+          x: npt.ArrayLike | None = None,
           ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], float, np.ndarray]:
     """Fit an effect's linear terms jointly with the spec's candidates (linearised) on training.
 
     Every output tag's residual *r_train* is fitted by ``J delta + T beta``: ``J``
     the null model's output sensitivity to the candidates, ``T`` the effect's
-    columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted.
+    columns (*extra_train*, tag -> ``(n, m)``; tags without are zero), noise-weighted,
+    and the varying candidates' trajectories where the spec has some
+    (:mod:`trackingbox.diagnose.varying`; refitted on validation, as the null's are).
     Returns ``beta``, the residuals after on training and on validation (the
     same coefficients with the validation window's ``J`` and ``T``), the
     weighted training cost and the candidates' step ``delta``. The step keeps the
     candidates inside their bounds (:func:`trackingbox.diagnose.residuals.step_bounds`), as
     the null model's polish does: an effect is never credited with what a candidate
-    outside its bounds would explain.
+    outside its bounds would explain. *x*: where the candidates are (default the null's).
     """
     j_train, j_val = jac if jac is not None else where.jacobian
-    tags = list(r_train)
     p = next(iter(j_train.values())).shape[1] if j_train else 0
     m = next(iter(extra_train.values())).shape[1] if extra_train else 0
-
-    def cols(j: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray] | None, tag: str, n: int) -> np.ndarray:
-        a = j[tag] if tag in j else np.zeros((n, p))
-        e = extra[tag] if extra and tag in extra else np.zeros((n, m))
-        return np.hstack([a, e])
-
-    ct = {t: cols(j_train, extra_train, t, len(r_train[t])) for t in tags}
     bounds = None
     problem = getattr(where, "problem", None)
-    if problem is not None and where.x is not None and len(problem.names) == p:
-        bounds = step_bounds(problem, where.x, extra=m)
-    coef = joint_lstsq(r_train, ct, where.noise, bounds)
-    after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
-    after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, len(r_val[t])) @ coef for t in tags}
-    cost = float(sum(np.nansum((after_t[t] / where.noise[t]) ** 2) for t in tags))
-    return coef[p:], after_t, after_v, cost, coef[:p]
+    at = where.x if x is None else x
+    if problem is not None and at is not None and len(problem.names) == p:
+        bounds = step_bounds(problem, at, extra=m)
+    fit = fit_windows(r_train, r_val, (j_train, j_val), where.noise, bounds=bounds, extra_train=extra_train,
+                      extra_val=extra_val, varying=getattr(where, "varying", None) if p else None,
+                      x=at if p else None)
+    return fit.beta, fit.after_train, fit.after_valid, fit.cost, fit.delta

@@ -32,7 +32,7 @@ from ..simulation.windows import load_windows, problem_from_spec
 from ..spec import load_spec, write_starts
 from . import library
 from .candidates import Candidate, joint, score
-from .residuals import joint_lstsq, step_bounds, window_series
+from .residuals import fit_windows, step_bounds, window_series
 
 if TYPE_CHECKING:
     from .residuals import WhereResult
@@ -157,18 +157,17 @@ def level(where: WhereResult, after_t: dict[str, np.ndarray],
     noise-weighted least-squares optimum (:func:`trackingbox.diagnose.residuals.polish`);
     one linearised step with the null model's output Jacobian puts the fitted
     candidate on the same footing, so that a mere shift along the trade-off between
-    tags is not credited to the effect.
+    tags is not credited to the effect. The varying candidates move as in the null
+    (:mod:`trackingbox.diagnose.varying`).
     """
     j_train, j_val = where.jacobian
     if not j_train or not all(t in j_train for t in after_t):
         return after_t, after_v
     # the step keeps the spec's candidates (fitted at *x*) inside their bounds, as the null's polish does
     bounds = step_bounds(where.problem, x) if x is not None else None
-    delta = joint_lstsq(after_t, {t: j_train[t] for t in after_t}, where.noise, bounds)
-    if delta.size == 0:
-        return after_t, after_v
-    return ({t: r - j_train[t] @ delta for t, r in after_t.items()},
-            {t: r - j_val[t] @ delta for t, r in after_v.items()})
+    fit = fit_windows(after_t, after_v, (j_train, j_val), where.noise, bounds=bounds,
+                      varying=getattr(where, "varying", None), x=x)
+    return fit.after_train, fit.after_valid
 
 
 def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,

@@ -74,7 +74,7 @@ UNIT_OF_VARIABLE = "{unit}"
 _ID = re.compile(r"^[a-z][a-z0-9]*(?:-[a-z0-9]+)*$")
 _IDENT = re.compile(r"^[A-Za-z_]\w*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*$")
-_ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters")
+_ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters", "sources")
 _PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges")
 
 
@@ -143,6 +143,8 @@ class Effect:
         Text of ``patch.mo.jinja``.
     folder : Path
         Where the entry was read from.
+    sources : str
+        Where its form and bounds come from (notes, literature), for the reader.
     """
 
     id: str
@@ -155,6 +157,7 @@ class Effect:
     parameters: tuple[EffectParameter, ...]
     template: str
     folder: Path
+    sources: str = ""
 
     def parameter(self, name: str) -> EffectParameter:
         """The parameter *name*; SpecError with did-you-mean when unknown."""
@@ -272,6 +275,10 @@ def read_effect(folder: str | Path) -> Effect:
     hook = raw.get("hook")
     if hook is not None and (not isinstance(hook, str) or not _IDENT.match(hook)):
         problems.append(f"{where}: field 'hook' must be the name of a Boolean parameter, got {hook!r}")
+    sources = raw.get("sources", "")
+    if not isinstance(sources, str):
+        problems.append(f"{where}: field 'sources' must be a string (where the form and the bounds come from)")
+        sources = ""
     coefficient = raw.get("coefficient")
     if coefficient is not None and (not isinstance(coefficient, str) or not _IDENT.match(coefficient)):
         problems.append(f"{where}: field 'coefficient' must be a parameter name, got {coefficient!r}")
@@ -302,7 +309,7 @@ def read_effect(folder: str | Path) -> Effect:
         raise SpecError("bad effect entry: " + "; ".join(problems))
     return Effect(id=eid, explanation=explanation.strip(), kind=kind, classes=tuple(classes), hook=hook,
                   screen=screen, coefficient=coefficient, parameters=tuple(params), template=template,
-                  folder=folder.resolve())
+                  folder=folder.resolve(), sources=sources.strip())
 
 
 def load_effects(folders: Iterable[str | Path] = ()) -> dict[str, Effect]:
@@ -337,7 +344,7 @@ def load_effects(folders: Iterable[str | Path] = ()) -> dict[str, Effect]:
 _CLASS_KW = r"(?:model|block|class|connector|record)"
 _EXTENDS = re.compile(r"\bextends\s+([A-Za-z_][\w.]*)")
 _DECL = re.compile(r"(?m)^\s*(?:(?:parameter|constant|input|output|flow|stream|inner|outer|final|replaceable|"
-                   r"redeclare|discrete)\s+)*([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\[[^\]]*\]\s*)?(?=[(\"=;]|\bif\b)")
+                   r"redeclare|discrete)\s+)*([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\[([^\]]*)\]\s*)?(?=[(\"=;]|\bif\b)")
 _NOT_TYPES = {"extends", "import", "within", "equation", "algorithm", "protected", "public", "end", "connect",
               "annotation", "if", "for", "when", "else", "elseif", "der", "initial", "model", "block", "class",
               "package", "connector", "record", "function", "type", "partial", "encapsulated"}
@@ -398,7 +405,11 @@ class _ClassIndex:
 
     def components(self, model: str) -> dict[str, str]:
         """Component instance name -> full class name, of *model* and the classes it extends."""
-        comps: dict[str, str] = {}
+        return {inst: cls for inst, (cls, _) in self.declarations(model).items()}
+
+    def declarations(self, model: str) -> dict[str, tuple[str, str | None]]:
+        """Component instance name -> (full class name, its array dimensions as written or None)."""
+        comps: dict[str, tuple[str, str | None]] = {}
         for cls in self.bases(model):
             found = self.body(cls)
             if found is None:
@@ -412,7 +423,8 @@ class _ClassIndex:
                     continue
                 full = self.resolve(type_name, cls)
                 if full is not None and inst not in comps:
-                    comps[inst] = full
+                    dims = m.group(3)
+                    comps[inst] = (full, dims.strip() if dims is not None else None)
         return comps
 
 
@@ -642,14 +654,18 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             if f.target not in known:
                 raise SpecError(f"{where}: {f.target!r} is not a component of {twin} that the effect applies to "
                                 f"(classes {', '.join(effect.classes)}){did_you_mean(f.target, known)}")
+            cls, dims = index.declarations(twin)[f.target]
             if effect.hook:
-                if f"{effect.hook} = true" in modifiers.get(f.target, []):
+                # an array of components (a train's effects): the hook on every element
+                hook = f"{'each ' if dims else ''}{effect.hook} = true"
+                if hook in modifiers.get(f.target, []):
                     raise SpecError(f"{where}: another effect of the patch already uses the hook {effect.hook!r} "
                                     f"of {f.target!r}; one patch can drive a hook once")
-                modifiers.setdefault(f.target, []).append(f"{effect.hook} = true")
-            cls = index.components(twin)[f.target]
+                modifiers.setdefault(f.target, []).append(hook)
             context["cls"] = cls
             context["bases"] = index.bases(cls)
+            context["array"] = dims is not None
+            context["dims"] = dims or ""
         params: dict[str, dict[str, Any]] = {}
         for p in effect.parameters:
             unit, start, lo, hi = p.resolved(variable_unit)

@@ -51,13 +51,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import lsq_linear
 
+from ..analysis.offsets import noise_floor
 from ..data import MeasurementView
 from ..estimation import estimate, jacobian_points
 from ..simulation.models import close_models
 from ..simulation.windows import load_windows, problem_from_spec, simulate_window
 from .parallel import map_calls
+from .linear import fit_windows, joint_lstsq, step_bounds
+from .varying import VaryingBasis, basis_for
 
 if TYPE_CHECKING:
     from ..estimation import EstimationResult
@@ -469,6 +471,8 @@ class WhereResult:
     input_tags: dict[str, str] = field(default_factory=dict, repr=False)
     sensor_noise: dict[str, float] = field(default_factory=dict)
     propagated: dict[str, float] = field(default_factory=dict)
+    varying: VaryingBasis | None = field(default=None, repr=False)
+    held: tuple[str, ...] = ()
 
     @property
     def significant(self) -> list[str]:
@@ -508,7 +512,7 @@ def window_series(problem: Problem, window: WindowData, x: npt.ArrayLike,
 
 
 def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options: Mapping[str, Any] | None = None,
-          blocks: int = DEFAULT_BLOCKS) -> WhereResult:
+          blocks: int = DEFAULT_BLOCKS, varying_step: float | None = None) -> WhereResult:
     """Fit the null model (unless given) and describe every output tag's residual.
 
     Parameters
@@ -522,6 +526,9 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
         Keyword arguments for :func:`trackingbox.estimation.estimate`.
     blocks
         Periods per window for the heat map.
+    varying_step
+        Knot spacing (s) of the spec's ``[diagnose] varying`` candidates in the null model
+        (:func:`trackingbox.diagnose.varying.basis_for`; default the spec's ``[pairing] closed_loop``).
 
     Returns
     -------
@@ -544,7 +551,19 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
     finally:
         close_models()
     noise = {tag: math.hypot(sensor[tag], propagated.get(tag, 0.0)) for tag in spec.outputs}
-    series, delta0 = polish(series, jac, noise, step_bounds(problem, x))
+    basis = basis_for(spec, problem, series[0].time, series[1].time, varying_step)
+    held = tuple(t for t in spec.outputs if view.method.get(t) == "hold")
+    raw = series
+    series, delta0 = polish(raw, jac, noise, step_bounds(problem, x), basis, x)
+    for _ in range(2 if held else 0):
+        # an exception-reported tag held on the grid: its noise is the fast part of the residual
+        # (sensor noise, the held value's distance from the truth), measured, then the null polished again
+        for tag in held:
+            floor = held_noise(series, tag, problem.sample_time)
+            if math.isfinite(floor) and floor > 0:
+                sensor[tag] = floor
+                noise[tag] = max(floor, math.hypot(noise_level(view.values(tag)), propagated.get(tag, 0.0)))
+        series, delta0 = polish(raw, jac, noise, step_bounds(problem, x), basis, x)
     described = []
     for s in series:
         idx = np.searchsorted(view.grid, s.time)
@@ -568,7 +587,33 @@ def where(spec: Spec, *, null: EstimationResult | None = None, estimate_options:
                  " (significant)" if res.significant else "")
     return WhereResult(null, described[0], described[1], balances, series[0], series[1], noise, problem,
                        (training, validation), corrections, (jac[0], jac[1]), x + delta0 if delta0.size else x,
-                       dict(spec.inputs), sensor, propagated)
+                       dict(spec.inputs), sensor, propagated, basis, held)
+
+
+def held_noise(series: Sequence[WindowResiduals], tag: str, sample_time: float) -> float:
+    """The noise of an exception-reported tag laid on the grid by sample-and-hold: the residual's floor.
+
+    A historian archives such a tag only when it leaves its dead band (or at its heartbeat),
+    so on the grid it is a staircase: the second differences that :func:`noise_sigma` reads
+    are mostly zero and its estimate collapses (on the evaporator's flash pressure PI-6151,
+    1.2 Pa against 200 Pa of sensor noise and a 300 Pa dead band). What a perfect twin would
+    leave in such a tag is the sensor noise plus the held value's distance from the truth,
+    both faster than the half hour the pairing's noise floor averages over: the spread of
+    the null model's residual around its own moving average over that span
+    (:func:`trackingbox.analysis.offsets.noise_floor`), pooled over the windows. The
+    residual rather than the series, so the process's own moves within the span (a
+    controller's swing, an operator's ramp) are not counted as noise.
+    """
+    values = []
+    for s in series:
+        r = s.residual(tag)
+        f = noise_floor(r, sample_time)
+        if math.isfinite(f):
+            values.append((f, int(np.isfinite(r).sum())))
+    if not values:
+        return math.nan
+    total = sum(n for _, n in values)
+    return math.sqrt(sum(f * f * n for f, n in values) / max(total, 1))
 
 
 def relinearised(result: WhereResult, delta: np.ndarray) -> WhereResult:
@@ -688,59 +733,9 @@ def output_jacobian(problem: Any, window: Any, x: npt.ArrayLike, input_tags: Map
     return {tag: np.column_stack(c) if c else np.zeros((base.time.size, 0)) for tag, c in cols.items()}
 
 
-def joint_lstsq(residual: Mapping[str, np.ndarray], columns: Mapping[str, np.ndarray],
-                noise: Mapping[str, float], bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None) -> np.ndarray:
-    """Coefficients ``c`` minimising ``sum_tag sum_k ((r - A c) / sigma_tag)**2`` over valid samples.
-
-    *columns*: tag -> ``(n, m)`` matrix ``A`` of that tag (same ``m`` for all tags).
-    *bounds*: ``(lower, upper)``, each of length ``m`` (``-inf``/``inf`` where free): the
-    bounded least-squares solution where the free one leaves them (the free one otherwise,
-    unchanged to the bit).
-
-    >>> A = {"y": np.array([[1.0], [2.0], [3.0]])}
-    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}).tolist()
-    [2.0]
-    >>> joint_lstsq({"y": np.array([2.0, 4.0, np.nan])}, A, {"y": 1.0}, bounds=([-1.0], [1.5])).round(9).tolist()
-    [1.5]
-    """
-    rows, rhs = [], []
-    for tag, r in residual.items():
-        r = np.asarray(r, dtype=float)
-        a = np.asarray(columns[tag], dtype=float)
-        ok = np.isfinite(r) & np.all(np.isfinite(a), axis=1)
-        w = 1.0 / noise[tag] if noise[tag] > 0 else 1.0
-        rows.append(a[ok] * w)
-        rhs.append(r[ok] * w)
-    a_all = np.vstack(rows)
-    if a_all.shape[1] == 0:
-        return np.zeros(0)
-    b_all = np.concatenate(rhs)
-    coef, *_ = np.linalg.lstsq(a_all, b_all, rcond=None)
-    if bounds is not None:
-        lo = np.asarray(bounds[0], dtype=float)
-        hi = np.asarray(bounds[1], dtype=float)
-        if np.any(coef < lo) or np.any(coef > hi):
-            coef = lsq_linear(a_all, b_all, bounds=(lo, hi), method="bvls").x
-    return coef
-
-
-def step_bounds(problem: Any, x: npt.ArrayLike, extra: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of a linearised step of the spec's candidates from *x* (the step keeps them inside
-    their bounds), followed by *extra* free coefficients.
-
-    >>> from types import SimpleNamespace
-    >>> lo, hi = step_bounds(SimpleNamespace(lower=[0.0, 1.0], upper=[2.0, 3.0]), [0.5, 3.0], extra=1)
-    >>> lo.tolist(), hi.tolist()
-    ([-0.5, -2.0, -inf], [1.5, 0.0, inf])
-    """
-    x = np.asarray(x, dtype=float)
-    lo = np.concatenate([np.asarray(problem.lower, dtype=float) - x, np.full(extra, -np.inf)])
-    hi = np.concatenate([np.asarray(problem.upper, dtype=float) - x, np.full(extra, np.inf)])
-    return lo, hi
-
-
 def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndarray]],
            noise: Mapping[str, float], bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+           varying: VaryingBasis | None = None, x: npt.ArrayLike | None = None,
            ) -> tuple[list[WindowResiduals], np.ndarray]:
     """The null model (and the step taken) moved by one linearised step to the noise-weighted least-squares optimum.
 
@@ -755,14 +750,24 @@ def polish(series: Sequence[WindowResiduals], jac: Sequence[Mapping[str, np.ndar
     850 to 690, where the ramps of the screening were then simulated).
     """
     train, valid = series
-    delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise, bounds)
-    if delta.size == 0:
-        return list(series), delta
+    if varying is None:
+        delta = joint_lstsq({t: train.residual(t) for t in train.simulated}, jac[0], noise, bounds)
+        if delta.size == 0:
+            return list(series), delta
+        out = []
+        for s, j in zip(series, jac):
+            sim = {t: v + j[t] @ delta for t, v in s.simulated.items()}
+            out.append(WindowResiduals(s.name, s.time, s.measured, sim, s.inputs))
+        return out, delta
+    # with varying candidates: the simulated series move by the fitted step and trajectories
+    fit = fit_windows({t: train.residual(t) for t in train.simulated}, {t: valid.residual(t) for t in valid.simulated},
+                      (jac[0], jac[1]), noise, bounds=bounds, varying=varying, x=x)
     out = []
-    for s, j in zip(series, jac):
-        sim = {t: v + j[t] @ delta for t, v in s.simulated.items()}
+    for s, j, u, which in ((train, jac[0], fit.varying_train, "train"), (valid, jac[1], fit.varying_valid, "valid")):
+        v = varying.columns(j, which, list(s.simulated), {t: s.time.size for t in s.simulated})
+        sim = {t: y + j[t] @ fit.delta + (v[t] @ u if u.size else 0.0) for t, y in s.simulated.items()}
         out.append(WindowResiduals(s.name, s.time, s.measured, sim, s.inputs))
-    return out, delta
+    return out, fit.delta
 
 
 def _after_stoppage(view: Any) -> np.ndarray | None:

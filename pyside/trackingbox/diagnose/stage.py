@@ -133,6 +133,10 @@ class DiagnoseSettings:
         model is fitted as accurately as the twin allows (on heat production fd
         reached a 1 % higher training cost in the same iterations,
         ``scripts/bench_jacobian``), and the hidden-effect suite was measured so.
+    varying_step
+        Knot spacing (s) of the spec's ``[diagnose] varying`` candidates, which the null model
+        lets move in time as tracking would (:mod:`trackingbox.diagnose.varying`); None: the
+        spec's ``[pairing] closed_loop``, else 3 h.
     """
 
     effects: tuple[str, ...] = ()
@@ -152,6 +156,7 @@ class DiagnoseSettings:
     relinearise: int | None = None
     scheduler: str | None = None
     jacobian: str = "prefer-exact"
+    varying_step: float | None = None
 
 
 #: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
@@ -324,7 +329,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                "refine_iterations": settings.null_iterations or iterations_for(n_candidates, NULL_RUNS)}
     with pool(workers, scheduler):
         # the null's series and output Jacobian: 1 + n independent runs per window
-        found = where(spec, null=null, estimate_options=options)
+        found = where(spec, null=null, estimate_options=options, varying_step=settings.varying_step)
     if progress is not None:
         progress("null", 1, 1)
 

@@ -127,9 +127,15 @@ class DiagnoseSpec:
     effects : tuple of Path
         Folders of user effect entries (absolute, resolved relative to the spec
         file); ``diagnose`` reads them beside the built-in entries.
+    varying : tuple of (str, str)
+        Candidate parameters the twin tracks because they change in time (a fouling
+        resistance), each with how: ``"rising"``, ``"falling"`` or ``"free"``.
+        ``diagnose`` lets them move in its null model as tracking would, so that
+        their change is never taken for a missing effect.
     """
 
     effects: tuple[Path, ...] = ()
+    varying: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)

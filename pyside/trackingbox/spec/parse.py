@@ -51,6 +51,7 @@ log = logging.getLogger(__name__)
 
 # --------------------------------------------------------------------------- parsing
 
+VARYING_KINDS = ("rising", "falling", "free")
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
              "fixed", "windows", "data", "pairs", "states", "tracking",
              "balances", "diagnose", "live", "pairing")
@@ -252,7 +253,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     _check_data_tags(data, known_tags, states, problems)
     tracking = _parse_tracking(raw, problems)
     balances = _parse_balances(raw, problems)
-    diagnose = _parse_diagnose(raw, base, problems, check_files=check_files)
+    diagnose = _parse_diagnose(raw, base, problems, check_files=check_files, parameters=pnames)
     live = _parse_live(raw, base, problems, [*inputs, *outputs, *(s.tag for s in states)])
     pairing = _parse_pairing(raw, problems)
     for tag, _ in pairing.scale:
@@ -665,23 +666,39 @@ def _parse_pairing(raw: Mapping[str, Any], problems: Problems) -> PairingSetting
 
 
 def _parse_diagnose(raw: Mapping[str, Any], base: Path, problems: Problems, *,
-                    check_files: bool) -> DiagnoseSpec:
-    """``[diagnose]``: ``effects``, a list of folders (relative to the spec file) of user effect entries."""
+                    check_files: bool, parameters: Sequence[str] = ()) -> DiagnoseSpec:
+    """``[diagnose]``: ``effects``, a list of folders (relative to the spec file) of user effect entries;
+    ``varying``, candidate parameter -> ``"rising"`` | ``"falling"`` | ``"free"`` (tracked in time)."""
     table = _table(raw, "diagnose", problems)
     if table is None:
         return DiagnoseSpec()
-    _check_keys(table, ("effects",), (), "[diagnose]", problems)
+    _check_keys(table, ("effects", "varying"), (), "[diagnose]", problems)
+    varying: list[tuple[str, str]] = []
+    how = table.get("varying", {})
+    if not isinstance(how, dict):
+        problems.add(f"varying in [diagnose] must be a table parameter = \"rising\" | \"falling\" | \"free\", "
+                     f"got {how!r}")
+    else:
+        for name, kind in how.items():
+            if kind not in VARYING_KINDS:
+                problems.add(f"varying {name!r} in [diagnose] must be one of {', '.join(VARYING_KINDS)}, got {kind!r}"
+                             f"{did_you_mean(str(kind), VARYING_KINDS)}")
+            elif name not in parameters:
+                problems.add(f"varying {name!r} in [diagnose] is not a [[parameters]] entry"
+                             f"{did_you_mean(name, list(parameters))}")
+            else:
+                varying.append((str(name), str(kind)))
     value = table.get("effects", [])
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         problems.add(f"effects in [diagnose] must be a list of folder paths (strings), got {value!r}")
-        return DiagnoseSpec()
+        return DiagnoseSpec(varying=tuple(varying))
     folders: list[Path] = []
     for item in value:
         resolved = _resolve(base, item)
         if check_files and not resolved.is_dir():
             problems.add(f"effects folder {item!r} in [diagnose] {_absent(resolved)} (looked for {resolved})")
         folders.append(resolved)
-    return DiagnoseSpec(effects=tuple(folders))
+    return DiagnoseSpec(effects=tuple(folders), varying=tuple(varying))
 
 
 def _parse_balances(raw: Mapping[str, Any], problems: Problems) -> tuple[BalanceSpec, ...]:

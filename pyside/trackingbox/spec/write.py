@@ -111,8 +111,12 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
             doc["pairing"]["max_jitter"] = float(spec.pairing.max_jitter)
         if spec.pairing.units:
             doc["pairing"]["units"] = {u: list(tags) for u, tags in spec.pairing.units}
-    if spec.diagnose.effects:
-        doc["diagnose"] = {"effects": [_rel(f, base, outside=False) for f in spec.diagnose.effects]}
+    if spec.diagnose.effects or spec.diagnose.varying:
+        doc["diagnose"] = {}
+        if spec.diagnose.effects:
+            doc["diagnose"]["effects"] = [_rel(f, base, outside=False) for f in spec.diagnose.effects]
+        if spec.diagnose.varying:
+            doc["diagnose"]["varying"] = dict(spec.diagnose.varying)
     if spec.balances:
         doc["balances"] = [{"name": b.name, "terms": dict(b.terms),
                             **({"tolerance": float(b.tolerance)} if b.tolerance else {})} for b in spec.balances]

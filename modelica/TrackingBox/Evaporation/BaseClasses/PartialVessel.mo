@@ -23,6 +23,9 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
   parameter TrackingBox.Units.Acceleration g = 9.81 "Gravity";
   parameter TrackingBox.Units.MassFlowRate m_flow_corr = 0 "Correction flow into the liquid (state compensation), added to m_flow_corr_in";
   parameter Boolean use_m_flow_corr_in = false "= true to add the input m_flow_corr_in to the correction flow";
+  parameter Boolean use_heatLoss = false "= true to take an extra heat loss from the input Q_flow_loss_in (diagnosis hook)";
+  parameter Boolean use_vapourCapacity_in = false "= true to scale the vapour line's flow by the input vapourCapacity_in (diagnosis hook)";
+  parameter Boolean use_entrainment_in = false "= true to let the input m_flow_entrain_in of liquor leave with the vapour (diagnosis hook)";
   parameter TrackingBox.Units.Fraction x_start = 0.5 "Initial dry-solids fraction";
   parameter TrackingBox.Units.Temperature T_start = 373.15 "Initial liquid temperature";
   parameter TrackingBox.Units.Height L_start = 1 "Initial level";
@@ -39,6 +42,12 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
     annotation (Placement(transformation(extent={{-140,-40},{-100,0}})));
   TrackingBox.Interfaces.RealInput dBPR_in(unit="K") if use_dBPR_in "Boiling-point offset from outside"
     annotation (Placement(transformation(extent={{-140,-90},{-100,-50}})));
+  TrackingBox.Interfaces.RealInput Q_flow_loss_in(unit="W") if use_heatLoss "Extra heat lost by the liquid (diagnosis hook)"
+    annotation (Placement(transformation(origin={60,-120}, extent={{-20,-20},{20,20}}, rotation=90)));
+  TrackingBox.Interfaces.RealInput vapourCapacity_in(unit="1") if use_vapourCapacity_in "Vapour-line flow as a fraction of its design law (diagnosis hook)"
+    annotation (Placement(transformation(origin={40,120}, extent={{-20,-20},{20,20}}, rotation=270)));
+  TrackingBox.Interfaces.RealInput m_flow_entrain_in(unit="kg/s") if use_entrainment_in "Liquor leaving with the vapour as droplets (diagnosis hook)"
+    annotation (Placement(transformation(origin={-40,120}, extent={{-20,-20},{20,20}}, rotation=270)));
   TrackingBox.Interfaces.RealOutput dp_level(unit="Pa") "Hydrostatic pressure of the liquid above the level's zero (what a dP transmitter sees)"
     annotation (Placement(transformation(extent={{100,-90},{120,-70}})));
   TrackingBox.Units.Mass M(start=M_start, fixed=true) "Liquid mass";
@@ -70,9 +79,24 @@ partial model PartialVessel "Well-mixed liquor volume boiling into a vapour spac
 protected
   TrackingBox.Interfaces.RealInput m_flow_corr_internal(unit="kg/s") "Correction flow from outside (0 without input)";
   TrackingBox.Interfaces.RealInput dBPR_internal(unit="K") "Used boiling-point offset";
+  TrackingBox.Interfaces.RealInput Q_flow_loss_internal(unit="W") "Extra heat loss (0 without the hook)";
+  TrackingBox.Interfaces.RealInput vapourCapacity_internal(unit="1") "Vapour-line capacity factor (1 without the hook)";
+  TrackingBox.Interfaces.RealInput m_flow_entrain_internal(unit="kg/s") "Entrained liquor (0 without the hook)";
 equation
   connect(m_flow_corr_in, m_flow_corr_internal);
   connect(dBPR_in, dBPR_internal);
+  connect(Q_flow_loss_in, Q_flow_loss_internal);
+  connect(vapourCapacity_in, vapourCapacity_internal);
+  connect(m_flow_entrain_in, m_flow_entrain_internal);
+  if not use_heatLoss then
+    Q_flow_loss_internal = 0;
+  end if;
+  if not use_vapourCapacity_in then
+    vapourCapacity_internal = 1;
+  end if;
+  if not use_entrainment_in then
+    m_flow_entrain_internal = 0;
+  end if;
   if not use_dBPR_in then
     dBPR_internal = dBPR;
   end if;
@@ -96,7 +120,7 @@ equation
   BPR = BlackLiquor.boilingPointRise(x, p_vap);
   T_b = T_vap + dBPR_internal + (1 + epsBPR)*BPR;
   m_ev = K_ev*Functions.splus(T - T_b, dT_smooth);
-  m_vap_out = m_flow_vap_nominal*Functions.regRoot(p_vap - port_v.p, dp_vap_small)/sqrt(dp_vap_nominal);
+  m_vap_out = vapourCapacity_internal*m_flow_vap_nominal*Functions.regRoot(p_vap - port_v.p, dp_vap_small)/sqrt(dp_vap_nominal);
   der(M_vap) = m_ev - m_vap_out;
   port_v.m_flow = -m_vap_out;
   port_v.T = T_vap;
@@ -104,13 +128,13 @@ equation
   port_b.p = p_vap + rho*g*(level + z_out);
   port_b.x = x;
   port_b.T = T;
-  Q_loss = UA_loss*(T - T_amb);
-  dMdt = m_in - m_out - m_ev + m_corr;
-  dMsdt = port_a.x*m_in - x*m_out + x*m_corr;
+  Q_loss = UA_loss*(T - T_amb) + Q_flow_loss_internal;
+  dMdt = m_in - m_out - m_ev + m_corr - m_flow_entrain_internal;
+  dMsdt = port_a.x*m_in - x*m_out + x*m_corr - x*m_flow_entrain_internal;
   der(M) = dMdt;
   der(M_s) = dMsdt;
   dxdt = (dMsdt - x*dMdt)/M;
-  M*cp*der(T) + M*dhdx*dxdt + h*dMdt = m_in*h_in - m_out*h - m_ev*h_vap + m_corr*h + Q - Q_loss;
+  M*cp*der(T) + M*dhdx*dxdt + h*dMdt = m_in*h_in - m_out*h - m_ev*h_vap + m_corr*h - m_flow_entrain_internal*h + Q - Q_loss;
   annotation (Icon(coordinateSystem(extent={{-100,-100},{100,100}}), graphics={Rectangle(extent={{-60,100},{60,-100}}, lineColor={0,0,0}, fillColor={255,255,255}, fillPattern=FillPattern.Solid), Rectangle(extent={{-60,-10},{60,-100}}, lineColor={0,0,0}, fillColor={139,90,43}, fillPattern=FillPattern.Solid), Text(extent={{-150,-112},{150,-142}}, textString="%name", textColor={0,0,255})}), Documentation(info="<html>
 <p>States: liquid mass <code>M</code>, dry-solids mass <code>M_s</code>,
 temperature <code>T</code> and vapour mass <code>M_vap</code>. The energy
@@ -128,6 +152,14 @@ pressure moves. The vapour line follows the regularised square-root law.
 The correction flow <code>m_corr</code> enters at the vessel's own
 <code>x</code> and <code>h</code>: it changes the mass, never the composition
 or the temperature.</p>
+<p>Diagnosis hooks (off by default; off, the equations are those without them:
+the internal signals are 0, or 1 for the capacity factor): <code>use_heatLoss</code>
+adds the input <code>Q_flow_loss_in</code> (W) to the heat loss;
+<code>use_vapourCapacity_in</code> multiplies the vapour line's flow by
+<code>vapourCapacity_in</code>; <code>use_entrainment_in</code> lets
+<code>m_flow_entrain_in</code> (kg/s) of liquid leave with the vapour, at the
+liquid's own dry solids and enthalpy (the vapour line's flow is the evaporation's
+alone: the droplets do not change the vapour space's pressure).</p>
 <p>Level: <code>(M/&rho; - V_hold)/A_sump</code>; <code>dp_level =
 &rho;&middot;g&middot;level</code> is what a dP transmitter with its lower tap at the
 level's zero sees.</p>
