@@ -106,6 +106,9 @@ def uncertainty_section(doc: Document, uncertainty: Any, bounds: Mapping[str, tu
                     + ([f"{t:.6g}" if t is not None else "", "" if cov is None else ("yes" if cov else "NO")]
                        if truth else []))
     doc.table(header, rows)
+    for iv in list(uncertainty.parameters) + list(uncertainty.combinations):
+        if iv.determined and iv.note:
+            doc.paragraph(f"`{iv.name}`: {iv.note}.")
     doc.paragraph(
         "Intervals: linearised from the cost's curvature, with each tag's noise and the residuals' autocorrelation "
         "taken from the residuals (a sandwich covariance whose long-run part is an equal-weighted cosine estimate; "
