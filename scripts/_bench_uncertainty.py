@@ -23,7 +23,10 @@ Cases (``--cases``, default all):
   on ``--evaporator-seeds`` seeds (default 3): the share of the rows after 12 h whose band for
   ``effect.Rf`` contains the plant's fouling trajectory (``truth.json``); and the same with the
   plant's effects the twin lacks switched off (``bands-evaporator-plain``: dBPR, vent, heat losses,
-  DS meter), which tells what the band covers from what the twin's structure gets wrong.
+  DS meter), which tells what the band covers from what the twin's structure gets wrong. Where the
+  run's CSV has the bands' ``lack_of_fit`` column, the share of those rows it flags (an untracked
+  tag disagrees with the twin beyond its noise: the band does not cover model error) and the
+  coverage in the flagged and unflagged rows apart.
 
 Every seed's result is appended to ``OUT/<case>.jsonl`` as it finishes; a rerun with the same
 ``--out`` skips the seeds already there (an interrupted run keeps what it measured). The table
@@ -146,7 +149,14 @@ def band_coverage(csv: Path, parameter: str, truth: np.ndarray | float, after: f
     truth = np.broadcast_to(np.asarray(truth, dtype=float), t.shape)
     rows = np.isfinite(lo) & np.isfinite(hi) & (t >= after)
     inside = (lo <= truth) & (truth <= hi)
-    return {"rows": int(rows.sum()), "covered": float(inside[rows].mean()) if rows.any() else math.nan,
+    fit: dict[str, float] = {}
+    if "lack_of_fit" in df.columns:  # the bands' model-error flag (trackingbox.identify.bands)
+        f = df["lack_of_fit"].to_numpy(float)
+        flagged, clear = rows & (f >= 1.0), rows & (f < 1.0)
+        fit = {"flagged": float(flagged.sum() / rows.sum()) if rows.any() else math.nan,
+               "covered_flagged": float(inside[flagged].mean()) if flagged.any() else math.nan,
+               "covered_clear": float(inside[clear].mean()) if clear.any() else math.nan}
+    return {"rows": int(rows.sum()), **fit, "covered": float(inside[rows].mean()) if rows.any() else math.nan,
             "below": float((truth < lo)[rows].mean()) if rows.any() else math.nan,
             "median_half_width": float(np.median((hi - lo)[rows]) / 2) if rows.any() else math.nan,
             "rms_error": float(np.sqrt(np.mean((p - truth)[rows] ** 2))) if rows.any() else math.nan}
@@ -236,6 +246,15 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
                      f"{100 * float(np.mean([d['below'] for d in docs])):.1f} %)"
                      + ("" if case == "bands-evaporator-plain" else f"  [target >= {100 * BAND_TARGET:.0f} %: "
                         f"{'met' if met else 'MISSED'}]"))
+        flags = [d for d in docs if math.isfinite(d.get("flagged", math.nan))]
+        if flags:
+            def share(key: str) -> str:
+                v = [d[key] for d in flags if math.isfinite(d.get(key, math.nan))]
+                return f"{100 * float(np.mean(v)):.1f} %" if v else "no rows"
+
+            lines.append(f"{'':<24} lack of fit flagged in {share('flagged')} of those rows; the band contains the "
+                         f"truth in {share('covered_clear')} of the unflagged rows, {share('covered_flagged')} of "
+                         "the flagged ones (per-run means)")
         return lines, ok
     names = sorted({n for d in docs for n in d["intervals"]})
     for name in names:
