@@ -8,7 +8,7 @@ Cases (``--cases``, default all):
 * ``hx2``: the same bench with two parameters, ``hx.kht`` and the hot side's volume ``hx.V1``
   (bounds 0.06..0.24 m3, start 0.12; the plant's is set to 0.10), 50 seeds. The volume sets a
   2 min residence time, sampled every 10 s from flows measured with 1 % noise: the case where the
-  inputs' noise biases an estimate beyond its interval (see :mod:`trackingbox.identify.intervals`).
+  inputs' noise biases an estimate (see :mod:`trackingbox.identify.inputs`).
 * ``hp``: the heat-production bench against the twin with the plant's quadratic curves (the
   suite twin: nothing but parameter values differs), 14 parameters, ``--hp-hours`` of data
   (default 12), the demo's estimation budget; ``--hp-seeds`` seeds (default 20). Coverage is

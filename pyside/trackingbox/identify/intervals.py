@@ -41,15 +41,20 @@ its ends found by the secant rule on ``sqrt(D)``. The magnitude adjustment
 the residuals are correlated (the naive deviance overstates the information by
 exactly the sandwich's ratio).
 
-**What they do not hold.** The twin is driven by *measured* inputs, taken as the truth; their
-noise can bias an estimate, and no residual shows that bias. On the heat-exchanger bench with the
-hot side's volume estimated beside the heat-transfer coefficient (flows measured with 1 % noise, a
-2 min residence time sampled every 10 s) the volume came out 6 % high on average over 50 seeds and
-24 % high on one scenario (30 % with twice the noise variance: the bias saturates, so a
-simulation-extrapolation assuming it linear in the noise variance removes a quarter of it); its
-intervals held the plant's value in 62 % of the seeds, in 12 of 12 with the same inputs noise-free,
-and the heat-transfer coefficient's in 96 %. A time constant near the sample time estimated from
-noisy inputs is the case to distrust; ``scripts/bench_uncertainty`` measures it (``hx2``).
+**The measured inputs' noise.** The twin is driven by *measured* inputs; their
+noise adds variance to the residuals (which the sandwich takes from them) and can
+bias an estimate, which no residual shows. On the heat-exchanger bench with the
+hot side's volume estimated beside the heat-transfer coefficient (flows measured
+with 1 % noise, a 2 min residence time sampled every 10 s) the volume came out
+6 % high on average over 50 seeds and 24 % high on one scenario, and the
+intervals without the inputs' noise held the plant's value in 29 of 50 seeds.
+:mod:`trackingbox.identify.inputs` reads each input's noise from its samples and
+finds the bias ``b`` one more dose of it adds at the estimate; where its runs fit
+in a third of the budget the interval is moved to cover a bias from ``b`` to
+``2 b`` plus the doses' Monte Carlo error, and its note says so
+(``scripts/bench_uncertainty`` measures it: ``hx2``). Where they do not fit (many
+parameters with central differences: ``8 (2n + 1)`` runs) the JSON says the
+inputs' noise was not propagated.
 
 **Not determined.** A parameter in a direction the data do not determine
 (:mod:`trackingbox.identify.structure`, with ``C``) gets no interval: it is
