@@ -502,9 +502,13 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
                        f"({tw.method} sensitivities) exceed a third of the budget of {budget}")
     else:
         before = tw.runs
-        ib = safe(lambda: input_bias(tw, ev, scaling.factors, weights), "uncertainty: the inputs' noise")
+        try:
+            ib = safe(lambda: input_bias(tw, ev, scaling.factors, weights), "the inputs' noise")
+        except EstimationError as exc:  # e.g. a noisy dose drove an input out of the twin's range
+            log.warning("uncertainty: the inputs' noise was not propagated: %s", exc)
+            inputs_note = f"the inputs' noise was not propagated: {exc}"
         budget -= tw.runs - before
-        if ib is None:
+        if ib is None and not inputs_note:
             inputs_note = "no noise found on the measured inputs"
     prof = _Profile(tw, coords, weights, Jw, A_pinv, math.nan, [int(budget) + 1], progress)
     # the reference cost from a run like the profile's own (the sensitivity run integrates differently)
