@@ -304,8 +304,9 @@ def test_input_noise_is_read_from_the_inputs_own_samples() -> None:
 def test_noisy_input_attenuation_is_found_and_the_interval_moved(linear_fmu: Path, tmp_path: Path) -> None:
     """Errors in variables on ``y = a·u1 + b·u2`` with u1 measured with noise of variance ``s²``: least
     squares attenuates ``a`` (regression dilution: ``â → (XᵀX + n Σ)⁻¹ XᵀX a``, a textbook result, not our
-    code). The one-dose bias is that formula applied once more at the estimate; the interval, moved by it,
-    covers the truth that the uncorrected one misses."""
+    code). The first dose's step is that formula applied once more at the estimate; the extrapolated bias is
+    the method-of-moments correction ``(XᵀX - n Σ)⁻¹ XᵀX â``; the interval, moved by it, covers the truth
+    that the uncorrected one misses."""
     import shutil
 
     from trackingbox.spec import load_spec
@@ -335,7 +336,11 @@ def test_noisy_input_attenuation_is_found_and_the_interval_moved(linear_fmu: Pat
     again = np.linalg.solve(X.T @ X + n * sig, X.T @ X @ beta)
     expected = (again - beta) / beta  # scaled coordinates: relative (log-scaled parameters)
     assert unc.scaling == ("log", "log")
-    assert abs(unc.inputs.bias[0] / expected[0] - 1.0) < 0.15, (unc.inputs.bias, expected)
+    assert abs(unc.inputs.first[0] / expected[0] - 1.0) < 0.15, (unc.inputs.first, expected)
+    # the extrapolated bias against the textbook correction of the moments, (XᵀX - n Σ)⁻¹ XᵀX β̂
+    corrected = np.linalg.solve(X.T @ X - n * sig, X.T @ X @ beta)
+    assert unc.inputs.kinds[0] == "rational"
+    assert abs(unc.inputs.bias[0] / ((beta[0] - corrected[0]) / beta[0]) - 1.0) < 0.1, (unc.inputs.bias, corrected)
     a = unc.interval("a")
     assert a.covers(2.0), a  # the moved interval holds the truth ...
     assert a.lower > beta[0] and "inputs' noise" in a.note  # ... and lies above the attenuated estimate

@@ -20,33 +20,31 @@ of an input whose own moves are fast against the sample time (that makes the
 correction larger, never silent), and under-states noise correlated from one
 sample to the next.
 
-**The bias** to first order in the noise variance (:func:`input_bias`) is what
-one more dose of the same noise does to the estimate: ``K`` antithetic pairs
-``u ± δ_k`` (``δ_k`` white with the estimated ``σ`` per input), each run with
-the sensitivities at the estimate, each giving the Gauss-Newton step of its
-own fit, ``Δz = -A_k⁺ g_k`` (``g_k = Σ_tag w_tag J_kᵀ r_k`` in the scaled
-coordinates of the intervals). In the pair's mean the part linear in ``δ``
-cancels exactly; what is left, averaged over the pairs and less the step at the
-measured inputs, is ``b``: the bias that a second dose of the noise adds.
-
-**Why ``b`` is a lower bound.** Where a parameter sets how much noise the twin
-passes on, the noise's own share of the cost bends it too (a filter's passed
-variance goes as ``1/τ``: its slope in ``ln τ`` falls as ``τ`` grows), so the bias
-saturates with the noise: the second dose adds less than the first put in. On the
-heat-exchanger bench with the hot side's volume estimated (``hx2`` of
-``scripts/bench_uncertainty``) ``b`` was 0.47-0.59 of the estimate's actual error
-in ``ln V1`` on 4 seeds (0, 4, 11, 19), and a fixed point ``θ = θ̂ - b(θ)`` did not
-close the gap (``b`` is smaller at the lower volume). :mod:`trackingbox.identify.intervals`
-therefore moves the interval so that it covers a bias from ``b`` to ``2b`` (the
-estimate is biased by ``b`` or more, and by no more than twice ``b`` on that bench --
-an assumption measured there, not a theorem), and widens it by the pairs' spread
-(the correction's own Monte Carlo error).
+**The bias** (:func:`input_bias`) is extrapolated from what more of the same
+noise does to the estimate (simulation-extrapolation, SIMEX): ``K`` antithetic
+pairs ``u ± √λ δ_k`` (``δ_k`` white with the estimated ``σ`` per input) at the
+doses ``λ = 1`` and ``2`` (the same draws), each run with the sensitivities at
+the estimate and giving the Gauss-Newton step of its own fit,
+``Δz = -A_k⁺ g_k`` (``g_k = Σ_tag w_tag J_kᵀ r_k`` in the scaled coordinates of
+the intervals). In a pair's mean the part linear in ``δ`` cancels exactly; the
+means less the step at the measured inputs are ``d1`` and ``d2``, what one and
+two more doses add. The bias does not grow linearly with the noise: where a
+parameter sets how much noise the twin passes on, the noise's own share of the
+cost bends the cost too (a filter passes a variance ``∝ 1/τ``), and the bias
+saturates (on the heat-exchanger bench with the hot side's volume estimated,
+``d1`` alone was 0.47-0.59 of the estimate's actual error in ``ln V1`` on seeds
+0, 4, 11 and 19). :func:`extrapolate` fits the rational extrapolant
+``θ(λ) = a + β/(c + λ)`` (Cook and Stefanski's, exact for regression dilution) through
+``0, d1, d2`` and takes ``-θ(-1)``; where its pole would lie in ``[-1, 0]`` the
+interval instead covers a bias from ``d1`` to ``2 d1``. The interval is moved by
+the bias and widened by its jackknife error over the pairs
+(:mod:`trackingbox.identify.intervals`).
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -104,10 +102,14 @@ class InputBias:
     covariance: np.ndarray
     pairs: int
     runs: int
+    first: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    second: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    kinds: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {"sigma": self.sigma, "bias": self.bias.tolist(), "error": self.error.tolist(), "pairs": self.pairs,
-                "runs": self.runs}
+                "runs": self.runs, "first_dose": self.first.tolist(), "second_dose": self.second.tolist(),
+                "extrapolation": list(self.kinds)}
 
 
 def _step(ev: Any, factors: np.ndarray, weights: Mapping[str, float]) -> np.ndarray:
@@ -151,25 +153,67 @@ def input_bias(tw: Any, ev: Any, factors: np.ndarray, weights: Mapping[str, floa
         raise EstimationError(f"inputs' noise: pairs must be >= 1, not {pairs}")
     rng = np.random.default_rng(seed)
     base = _step(ev, factors, weights)
-    means = []
+    first, second = [], []
     runs = 0
     for _ in range(pairs):
-        delta = {k: rng.normal(0.0, s, np.asarray(window.inputs[k]).size) for k, s in sigma.items() if s > 0}
-        steps = []
-        for sign in (1.0, -1.0):
-            noisy = replace(window, inputs={k: np.asarray(u, dtype=float) + sign * delta[k] if k in delta else u
-                                            for k, u in window.inputs.items()})
-            tw.window = noisy
-            try:
-                e = tw.sensitivities(ev.x)
-            finally:
-                tw.window = window
-            runs += 1
-            if progress is not None:
-                progress()
-            steps.append(_step(e, factors, weights))
-        means.append(0.5 * (steps[0] + steps[1]) - base)
-    m = np.asarray(means)
-    bias = m.mean(axis=0)
-    cov = np.cov(m.T, ddof=1).reshape(bias.size, bias.size) / pairs if pairs > 1 else np.zeros((bias.size,) * 2)
-    return InputBias(dict(sigma), bias, np.sqrt(np.maximum(np.diag(cov), 0.0)), cov, pairs, runs)
+        z = {k: rng.normal(0.0, 1.0, np.asarray(window.inputs[k]).size) for k, s in sigma.items() if s > 0}
+        for dose, out in ((1.0, first), (2.0, second)):
+            steps = []
+            for sign in (1.0, -1.0):
+                noisy = replace(window, inputs={k: np.asarray(u, dtype=float)
+                                                + (sign * math.sqrt(dose) * sigma[k] * z[k] if k in z else 0.0)
+                                                for k, u in window.inputs.items()})
+                tw.window = noisy
+                try:
+                    e = tw.sensitivities(ev.x)
+                finally:
+                    tw.window = window
+                runs += 1
+                if progress is not None:
+                    progress()
+                steps.append(_step(e, factors, weights))
+            out.append(0.5 * (steps[0] + steps[1]) - base)
+    d1, d2 = np.asarray(first), np.asarray(second)
+    bias, kinds = extrapolate(d1.mean(axis=0), d2.mean(axis=0))
+    if pairs > 1:  # jackknife over the pairs
+        keep = [np.arange(pairs) != i for i in range(pairs)]
+        jack = np.array([extrapolate(d1[k].mean(axis=0), d2[k].mean(axis=0))[0] for k in keep])
+        dev = jack - jack.mean(axis=0)
+        cov = (pairs - 1) / pairs * dev.T @ dev
+    else:
+        cov = np.zeros((bias.size, bias.size))
+    return InputBias(dict(sigma), bias, np.sqrt(np.maximum(np.diag(cov), 0.0)), cov, pairs, runs,
+                     d1.mean(axis=0), d2.mean(axis=0), tuple(kinds))
+
+
+def extrapolate(d1: np.ndarray, d2: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The bias from the steps one and two more doses of the noise add (per coordinate; see the module).
+
+    The rational extrapolant ``θ(λ) = a + β / (c + λ)`` through ``θ(0) = 0``, ``θ(1) = d1``, ``θ(2) = d2``,
+    evaluated at ``λ = -1`` (no noise): the bias is ``-θ(-1)``. Exact for regression dilution
+    (``θ(λ) ∝ V / (V + (1 + λ) σ²)``); ``d1`` where the doses add alike (linear). Where the extrapolant's
+    pole lies in ``[-1, 0]`` (it is not to be trusted there) ``kinds`` says ``"bounds"`` and the value is
+    ``d1``: :mod:`trackingbox.identify.intervals` then covers a bias from ``d1`` to ``2 d1``.
+
+    >>> v, s2 = 2.0, 0.5  # regression dilution: θ(λ) = ln(V / (V + (1 + λ) s²)) in log coordinates, linearised
+    >>> th = lambda lam: v / (v + (1 + lam) * s2) - v / (v + s2)
+    >>> b, kinds = extrapolate(np.array([th(1)]), np.array([th(2)]))
+    >>> round(float(b[0]), 6) == round(-th(-1), 6), kinds
+    (True, ['rational'])
+    """
+    bias = np.array(d1, dtype=float)
+    kinds = []
+    for j, (x1, x2) in enumerate(zip(np.asarray(d1, float), np.asarray(d2, float))):
+        den = x2 - 2.0 * x1
+        if x1 == 0.0 or abs(den) <= 1e-9 * abs(x1):
+            kinds.append("linear")
+            continue
+        c = 2.0 * (x1 - x2) / den
+        if not math.isfinite(c) or c <= 1.0 or x1 * x2 <= 0:
+            kinds.append("bounds")
+            continue
+        beta = -x1 * c * (c + 1.0)
+        a = -beta / c
+        bias[j] = -(a + beta / (c - 1.0))
+        kinds.append("rational")
+    return bias, kinds

@@ -49,11 +49,11 @@ with 1 % noise, a 2 min residence time sampled every 10 s) the volume came out
 6 % high on average over 50 seeds and 24 % high on one scenario, and the
 intervals without the inputs' noise held the plant's value in 29 of 50 seeds.
 :mod:`trackingbox.identify.inputs` reads each input's noise from its samples and
-finds the bias ``b`` one more dose of it adds at the estimate; where its runs fit
-in a third of the budget the interval is moved to cover a bias from ``b`` to
-``2 b`` plus the doses' Monte Carlo error, and its note says so
+extrapolates the bias from what one and two more doses of it do at the estimate;
+where its runs fit in a third of the budget the interval is moved by it and
+widened by its Monte Carlo error, and its note says so
 (``scripts/bench_uncertainty`` measures it: ``hx2``). Where they do not fit (many
-parameters with central differences: ``8 (2n + 1)`` runs) the JSON says the
+parameters with central differences: ``16 (2n + 1)`` runs) the JSON says the
 inputs' noise was not propagated.
 
 **Not determined.** A parameter in a direction the data do not determine
@@ -492,7 +492,7 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     structure = st.analyse(Jw, names, scaling.widths, covariance=C)
     findings = [_with_message(f) for f in name_findings(structure, scaling, x_hat, [], ev, names)]
     # the measured inputs' noise: its bias, where the runs fit in a third of the budget
-    per_run = 1 if tw.method == "exact" else 2 * n + 1
+    per_run = 4 * (1 if tw.method == "exact" else 2 * n + 1)  # two doses, antithetic
     ib: InputBias | None = None
     inputs_note = ""
     if not window.inputs:
@@ -547,16 +547,21 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
         except _OutOfBudget:
             note = f"profile not computed: the budget of {budget} runs is spent"
         if ib is not None:
-            # the inputs' noise biases the estimate by at least aᵀb (a lower bound where the bias saturates
-            # with the noise, see trackingbox.identify.inputs): the interval covers a bias from aᵀb to 2 aᵀb,
-            # and the correction's Monte Carlo error
-            shift = float(a @ ib.bias)
+            # the inputs' noise biases the estimate by aᵀb (trackingbox.identify.inputs): the interval is moved
+            # by it and widened by its jackknife error; where the extrapolation is not to be trusted it covers
+            # a bias from aᵀd1 to 2 aᵀd1 (d1: the first dose's step, a lower bound where the bias saturates)
+            involved = [ib.kinds[j] for j in np.flatnonzero(a)]
             mc = tq * math.sqrt(max(float(a @ ib.covariance @ a), 0.0))
-            ends = [ends[0] - max(2.0 * shift, shift) - mc, ends[1] - min(2.0 * shift, shift) + mc]
+            if "bounds" in involved:
+                shift = float(a @ ib.first)
+                ends = [ends[0] - max(2.0 * shift, shift) - mc, ends[1] - min(2.0 * shift, shift) + mc]
+            else:
+                shift = float(a @ ib.bias)
+                ends = [ends[0] - shift - mc, ends[1] - shift + mc]
             if abs(shift) > 0.1 * max(se, 1e-300):
                 note = (note + "; " if note else "") + (
-                    f"the measured inputs' noise biases the estimate by about {_shift_text(shift, a, scaling)} "
-                    "or more: the interval is moved for it")
+                    f"the measured inputs' noise biases the estimate by about {_shift_text(shift, a, scaling)}"
+                    + (" or more" if "bounds" in involved else "") + ": the interval is moved for it")
         at_bound = (ends[0] <= bounds[0] + 1e-12 * max(1.0, abs(bounds[0])),
                     ends[1] >= bounds[1] - 1e-12 * max(1.0, abs(bounds[1])))
         ends = [float(np.clip(ends[0], *bounds)), float(np.clip(ends[1], *bounds))]
