@@ -497,8 +497,8 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     inputs_note = ""
     if not window.inputs:
         inputs_note = "the twin has no measured inputs"
-    elif 2 * PAIRS * per_run > budget / 3:
-        inputs_note = (f"the inputs' noise was not propagated: {2 * PAIRS * per_run} twin runs "
+    elif PAIRS * per_run > budget / 3:
+        inputs_note = (f"the inputs' noise was not propagated: {PAIRS * per_run} twin runs "
                        f"({tw.method} sensitivities) exceed a third of the budget of {budget}")
     else:
         before = tw.runs
