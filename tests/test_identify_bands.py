@@ -279,3 +279,15 @@ def test_lack_of_fit_state_round_trip_gives_the_same_rows() -> None:
     got += [second.row(r) for r in rows[1500:]]
     assert np.array_equal(np.array(got), np.array(expected), equal_nan=True)
     assert second.describe()["lack_of_fit"] == whole.describe()["lack_of_fit"]
+
+
+def test_a_checkpoint_from_before_the_lack_of_fit_column_is_refused() -> None:
+    """Its CSV has no lack_of_fit column: resuming would append rows one column longer than its header."""
+    from trackingbox.errors import CheckpointError
+
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    old = BandTracker(_spec(), columns).state_dict()
+    del old["fit"], old["fit_rows"], old["fit_worst"]
+    with pytest.raises(CheckpointError, match="lack_of_fit"):
+        BandTracker(_spec(), columns).load_state_dict(old)
+    BandTracker(_spec(), COLUMNS).load_state_dict(old)  # no untracked tag: no such column, resumes

@@ -74,6 +74,7 @@ import numpy as np
 from scipy.stats import norm
 
 from ..analysis.offsets import FLOOR_SPAN
+from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
 
 #: Confidence level of the bands.
@@ -385,8 +386,11 @@ class BandTracker:
         def load(s: Mapping[str, Any]) -> _PairState:
             return _PairState(**{k: (list(v) if isinstance(v, list) else v) for k, v in s.items()})
 
+        if self.fit_tags and "fit" not in state:
+            # its CSV has no lack_of_fit column: the rows appended now would not match its header
+            raise CheckpointError("the checkpoint was written before the bands' lack_of_fit column; run without --resume")
         self.states = [load(s) for s in state["pairs"]]
-        if "fit" in state:  # a checkpoint from before the lack-of-fit test starts it afresh
+        if "fit" in state:
             self.fit_states = [load(s) for s in state["fit"]]
             self.fit_rows = [int(v) for v in state.get("fit_rows", [0, 0])]
             self.fit_worst = {str(k): int(v) for k, v in state.get("fit_worst", {}).items()}
