@@ -8,7 +8,7 @@ Cases (``--cases``, default all):
 * ``hx2``: the same bench with two parameters, ``hx.kht`` and the hot side's volume ``hx.V1``
   (bounds 0.06..0.24 m3, start 0.12; the plant's is set to 0.10), 50 seeds. The volume sets a
   2 min residence time, sampled every 10 s from flows measured with 1 % noise: the case where the
-  inputs' noise biases an estimate beyond its interval (see :mod:`trackingbox.identify.intervals`).
+  inputs' noise biases an estimate (see :mod:`trackingbox.identify.inputs`).
 * ``hp``: the heat-production bench against the twin with the plant's quadratic curves (the
   suite twin: nothing but parameter values differs), 14 parameters, ``--hp-hours`` of data
   (default 12), the demo's estimation budget; ``--hp-seeds`` seeds (default 20). Coverage is
@@ -23,7 +23,12 @@ Cases (``--cases``, default all):
   on ``--evaporator-seeds`` seeds (default 3): the share of the rows after 12 h whose band for
   ``effect.Rf`` contains the plant's fouling trajectory (``truth.json``); and the same with the
   plant's effects the twin lacks switched off (``bands-evaporator-plain``: dBPR, vent, heat losses,
-  DS meter), which tells what the band covers from what the twin's structure gets wrong.
+  DS meter), which tells what the band covers from what the twin's structure gets wrong. Where the
+  run's CSV has the bands' ``lack_of_fit`` column, the share of those rows it flags (an untracked
+  tag disagrees with the twin beyond its noise: the band does not cover model error) and the
+  coverage in the flagged and unflagged rows apart. ``--rebands`` recomputes the bands of the runs
+  on disk from their tracking CSV with this checkout's band code (the bands are causal functions of
+  the CSV's other columns) and records those seeds again, without rerunning the demo.
 
 Every seed's result is appended to ``OUT/<case>.jsonl`` as it finishes; a rerun with the same
 ``--out`` skips the seeds already there (an interrupted run keeps what it measured). The table
@@ -135,10 +140,27 @@ def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...
     return {"seed": seed, **intervals_doc(result, truth)}
 
 
-def band_coverage(csv: Path, parameter: str, truth: np.ndarray | float, after: float) -> dict[str, float]:
+def rebanded(csv: Path, spec_path: Path) -> Any:
+    """The tracking CSV with its band columns recomputed by this checkout's
+    :class:`~trackingbox.identify.bands.BandTracker` (causal: the same values a new run would write)."""
     import pandas as pd
 
+    from trackingbox.identify.bands import BandTracker
+    from trackingbox.spec import load_spec
+
     df = pd.read_csv(csv)
+    base = [c for c in df.columns if not c.startswith(("parameter_lo:", "parameter_hi:", "lack_of_fit"))]
+    numbers = pd.DataFrame({c: ((df[c].astype(str) == "hold").astype(float) if c.startswith("mode:")
+                                else pd.to_numeric(df[c], errors="coerce")) for c in base})
+    bands = BandTracker(load_spec(spec_path), base)
+    extra = pd.DataFrame(bands.rows(numbers.to_numpy(float)), columns=bands.columns, index=df.index)
+    return pd.concat([df[base], extra], axis=1)
+
+
+def band_coverage(csv: Path | Any, parameter: str, truth: np.ndarray | float, after: float) -> dict[str, float]:
+    import pandas as pd
+
+    df = pd.read_csv(csv) if isinstance(csv, (str, Path)) else csv
     t = df["time"].to_numpy(float)
     lo = df[f"parameter_lo:{parameter}"].to_numpy(float)
     hi = df[f"parameter_hi:{parameter}"].to_numpy(float)
@@ -146,7 +168,14 @@ def band_coverage(csv: Path, parameter: str, truth: np.ndarray | float, after: f
     truth = np.broadcast_to(np.asarray(truth, dtype=float), t.shape)
     rows = np.isfinite(lo) & np.isfinite(hi) & (t >= after)
     inside = (lo <= truth) & (truth <= hi)
-    return {"rows": int(rows.sum()), "covered": float(inside[rows].mean()) if rows.any() else math.nan,
+    fit: dict[str, float] = {}
+    if "lack_of_fit" in df.columns:  # the bands' model-error flag (trackingbox.identify.bands)
+        f = df["lack_of_fit"].to_numpy(float)
+        flagged, clear = rows & (f >= 1.0), rows & (f < 1.0)
+        fit = {"flagged": float(flagged.sum() / rows.sum()) if rows.any() else math.nan,
+               "covered_flagged": float(inside[flagged].mean()) if flagged.any() else math.nan,
+               "covered_clear": float(inside[clear].mean()) if clear.any() else math.nan}
+    return {"rows": int(rows.sum()), **fit, "covered": float(inside[rows].mean()) if rows.any() else math.nan,
             "below": float((truth < lo)[rows].mean()) if rows.any() else math.nan,
             "median_half_width": float(np.median((hi - lo)[rows]) / 2) if rows.any() else math.nan,
             "rms_error": float(np.sqrt(np.mean((p - truth)[rows] ** 2))) if rows.any() else math.nan}
@@ -170,7 +199,7 @@ def run_bands_hx(seed: int, work: Path, fmus: dict[str, Path]) -> dict[str, Any]
             **band_coverage(run.csv, "hx.kht", case.truth["hx.kht"], after), "after": after}
 
 
-def run_bands_evaporator(seed: int, work: Path, plain: bool) -> dict[str, Any]:
+def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = False) -> dict[str, Any]:
     from trackingbox.benches.evaporator_report import truth_on
 
     out = work / f"bands-evaporator{'-plain' if plain else ''}-{seed}"
@@ -185,9 +214,11 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool) -> dict[str, Any]:
     truth = json.loads((out / "truth.json").read_text())
     import pandas as pd
 
-    t = pd.read_csv(out / "track" / "tracking.csv", usecols=["time"])["time"].to_numpy(float)
-    return {"seed": seed, **band_coverage(out / "track" / "tracking.csv", "effect.Rf",
-                                          truth_on(truth, "effect.Rf", t), 12 * 3600.0), "after": 12 * 3600.0}
+    csv = out / "track" / "tracking.csv"
+    t = pd.read_csv(csv, usecols=["time"])["time"].to_numpy(float)
+    source = rebanded(csv, out / "spec.toml") if rebands else csv
+    return {"seed": seed, **band_coverage(source, "effect.Rf", truth_on(truth, "effect.Rf", t), 12 * 3600.0),
+            "after": 12 * 3600.0, **({"rebanded": True} if rebands else {})}
 
 
 # --------------------------------------------------------------------------- driver
@@ -236,6 +267,15 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
                      f"{100 * float(np.mean([d['below'] for d in docs])):.1f} %)"
                      + ("" if case == "bands-evaporator-plain" else f"  [target >= {100 * BAND_TARGET:.0f} %: "
                         f"{'met' if met else 'MISSED'}]"))
+        flags = [d for d in docs if math.isfinite(d.get("flagged", math.nan))]
+        if flags:
+            def share(key: str) -> str:
+                v = [d[key] for d in flags if math.isfinite(d.get(key, math.nan))]
+                return f"{100 * float(np.mean(v)):.1f} %" if v else "-- (none)"
+
+            lines.append(f"{'':<24} lack of fit flagged in {share('flagged')} of those rows; the band contains the "
+                         f"truth in the unflagged rows {share('covered_clear')}, in the flagged ones "
+                         f"{share('covered_flagged')} (per-run means)")
         return lines, ok
     names = sorted({n for d in docs for n in d["intervals"]})
     for name in names:
@@ -275,6 +315,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="results (one JSON line per seed) and the cases (default bench-uncertainty/)")
     ap.add_argument("--msl", type=Path, default=ROOT.parent / "shared" / "msl")
     ap.add_argument("--report-only", action="store_true", help="print the table of what OUT holds")
+    ap.add_argument("--rebands", action="store_true",
+                    help="bands-evaporator*: recompute the bands of the runs on disk from their tracking CSV with "
+                         "this checkout's band code (no demo rerun) and record the seeds again")
     args = ap.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     known = {"hx", "hx2", "hp", "wall", "wall2", "bands-hx", "bands-evaporator", "bands-evaporator-plain"}
@@ -292,8 +335,11 @@ def main(argv: list[str] | None = None) -> int:
         path = args.out / f"{case}.jsonl"
         have = done_seeds(path)
         for seed in range(args.first, args.first + counts.get(case, args.seeds)):
-            if seed in have:
+            if seed in have and not (args.rebands and case.startswith("bands-evaporator")):
                 continue
+            if args.rebands and case.startswith("bands-evaporator") and \
+                    not (work / f"{case}-{seed}" / "track" / "result.json").exists():
+                continue  # --rebands recomputes runs on disk, it starts none
             t0 = time.time()
             try:
                 if case in ("hx", "hx2"):
@@ -305,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
                 elif case == "bands-hx":
                     doc = run_bands_hx(seed, work, fmus)
                 else:
-                    doc = run_bands_evaporator(seed, work, case.endswith("plain"))
+                    doc = run_bands_evaporator(seed, work, case.endswith("plain"), args.rebands)
             except Exception as exc:  # noqa: BLE001 - one seed's failure is a row of the table, not the end
                 doc = {"seed": seed, "error": f"{type(exc).__name__}: {exc}"}
             doc["wall_seconds"] = time.time() - t0
@@ -313,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{case} seed {seed}: {json.dumps(doc)[:300]}", flush=True)
     print(f"\ncoverage of the truth (command: scripts/bench_uncertainty --cases {','.join(cases)} --first "
           f"{args.first} --seeds {args.seeds} --hp-seeds {args.hp_seeds} --evaporator-seeds "
-          f"{args.evaporator_seeds}; results in {args.out})")
+          f"{args.evaporator_seeds}{' --rebands' if args.rebands else ''}; results in {args.out})")
     ok = True
     for case in cases:
         docs = list(done_seeds(args.out / f"{case}.jsonl").values())

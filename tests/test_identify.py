@@ -284,3 +284,64 @@ def test_identify_command_refuses_a_missing_spec(tmp_path: Path) -> None:
     code, out, err = _run_cli(["identify", str(tmp_path / "nope.toml")])
     assert code == 2 and out == ""
     assert err.startswith("error: ") and "nope.toml" in err
+
+
+# --------------------------------------------------------------------------- the inputs' noise
+
+
+def test_input_noise_is_read_from_the_inputs_own_samples() -> None:
+    """A smooth signal with steps, ramps and white noise of known σ: the estimate is within 5 % of it."""
+    from trackingbox.identify.inputs import input_noise
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 28800.0, 10.0)
+    signal = 1.0 + 0.3 * (t > 9000) - 0.2 * np.clip((t - 15000) / 1800, 0, 1) + 0.1 * np.sin(t / 2000)
+    for sigma in (0.003, 0.01, 0.05):
+        assert abs(input_noise(signal + rng.normal(0.0, sigma, t.size)) / sigma - 1.0) < 0.05
+    assert input_noise(signal) < 1e-4  # no noise: nothing but the signal's own curvature
+
+
+def test_noisy_input_attenuation_is_found_and_the_interval_moved(linear_fmu: Path, tmp_path: Path) -> None:
+    """Errors in variables on ``y = a·u1 + b·u2`` with u1 measured with noise of variance ``s²``: least
+    squares attenuates ``a`` (regression dilution: ``â → (XᵀX + n Σ)⁻¹ XᵀX a``, a textbook result, not our
+    code). The first dose's step is that formula applied once more at the estimate; the extrapolated bias is
+    the method-of-moments correction ``(XᵀX - n Σ)⁻¹ XᵀX â``; the interval, moved by it, covers the truth
+    that the uncorrected one misses."""
+    import shutil
+
+    from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
+
+    rng = np.random.default_rng(11)
+    t = np.arange(0.0, 30000.0 + 5.0, 10.0)
+    u1 = 1.0 + 0.5 * np.sin(t / 900.0)
+    u2 = np.cos(t / 1300.0) + 0.2 * np.sin(t / 1700.0)
+    y = 2.0 * u1 + 0.7 * u2 + 0.02 * rng.normal(size=t.size)
+    s = 0.3
+    u1_meas = u1 + s * rng.normal(size=t.size)
+    pd.DataFrame({"time": t, "U1": u1_meas, "U2": u2, "Y": y}).to_csv(tmp_path / "data.csv", index=False)
+    shutil.copy(linear_fmu, tmp_path / "lin.fmu")
+    (tmp_path / "spec.toml").write_text(LINEAR_SPEC)
+    result = estimate.run(load_spec(tmp_path / "spec.toml"), estimate.EstimateSettings(maxiter=0, warmup=0.0))
+    unc = result.uncertainty
+    assert unc is not None and unc.inputs is not None
+    # the inputs' noise as measured: U1's near s, U2 (smooth, noise-free) near nothing
+    assert abs(unc.inputs.sigma["u1"] / s - 1.0) < 0.1 and unc.inputs.sigma["u2"] < 1e-3
+    train = t < 20000.0
+    X = np.stack([u1_meas[train], u2[train]], axis=1)
+    beta, _ = _ols(X, y[train])
+    assert beta[0] < 2.0 * 0.97  # attenuated by about s²/(mean u1² + s²) = 7 %
+    n = int(train.sum())
+    sig = np.diag([unc.inputs.sigma["u1"] ** 2, unc.inputs.sigma["u2"] ** 2])
+    again = np.linalg.solve(X.T @ X + n * sig, X.T @ X @ beta)
+    expected = (again - beta) / beta  # scaled coordinates: relative (log-scaled parameters)
+    assert unc.scaling == ("log", "log")
+    assert abs(unc.inputs.first[0] / expected[0] - 1.0) < 0.15, (unc.inputs.first, expected)
+    # the extrapolated bias against the textbook correction of the moments, (XᵀX - n Σ)⁻¹ XᵀX β̂
+    corrected = np.linalg.solve(X.T @ X - n * sig, X.T @ X @ beta)
+    assert unc.inputs.kinds[0] == "rational"
+    assert abs(unc.inputs.bias[0] / ((beta[0] - corrected[0]) / beta[0]) - 1.0) < 0.1, (unc.inputs.bias, corrected)
+    a = unc.interval("a")
+    assert a.covers(2.0), a  # the moved interval holds the truth ...
+    assert a.lower > beta[0] and "inputs' noise" in a.note  # ... and lies above the attenuated estimate
+    assert "inputs_noise" in unc.to_json() and unc.to_json()["inputs_noise"]["sigma"]["u1"] > 0

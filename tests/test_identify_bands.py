@@ -202,3 +202,92 @@ def test_pairing_leaves_out_a_candidate_parallel_to_a_stronger_one_and_one_nobod
     assert "cannot be told from that of a" in out["b"] and "a has the larger effect" in out["b"]
     assert "do not see it" in out["d"]
     assert st.analyse(S[:, [1, 2]], ["a", "c"], np.full(2, math.log(4.0))).determined.all()
+
+
+# --------------------------------------------------------------------------- lack of fit
+
+
+C2 = 0.01  # K per unit of the parameter on a second, untracked tag
+
+
+def _closed_loop_two_tags(noise: np.ndarray, noise2: np.ndarray, truth: np.ndarray, missing: float
+                          ) -> list[list[object]]:
+    """:func:`_closed_loop` with a second output ``TO = 50 + C2·k`` nobody tracks; the plant's TI carries an
+    effect of *missing* K the twin lacks (absorbed by the tracked parameter)."""
+    spec = _spec()
+    settings = pair_settings(spec.pairs[0], P_MIN, P_MAX, ts=TS)
+    pi = ScaledPI(settings.scaling, kp=settings.kp, ti=settings.ti, ts=TS, direction=settings.direction, p0=P0,
+                  interpolation="linear")
+    a = math.exp(-TS / TAU)
+    x = P0
+    rows = []
+    for k in range(noise.size):
+        meas = 300.0 + GAIN * truth[k] + missing + noise[k]
+        tracked = 300.0 + GAIN * x
+        hold = k < 30
+        p = pi.update(meas, tracked, hold=hold)
+        rows.append([k * TS, meas, tracked, tracked, p, "hold" if hold else "auto",
+                     50.0 + C2 * truth[k] + noise2[k], 50.0 + C2 * x, 50.0 + C2 * x])
+        x = a * x + (1.0 - a) * p
+    return rows
+
+
+@pytest.mark.parametrize("kind", ["white", "correlated"])
+def test_lack_of_fit_is_quiet_when_the_twin_is_right_and_flags_a_missing_effect(kind: str) -> None:
+    """Twin right: the untracked tag's error is its noise (white, or correlated over a minute) and the
+    loop's jitter: the flag is raised in under 1 % of the rows. A missing effect of 0.4 K on the tracked
+    tag (20 units of the parameter, several band half-widths): the band misses the truth, and the untracked
+    tag, off by C2 · 20 = 0.2 K against its 0.05 K noise, raises the flag in nearly every row."""
+    n = 20000
+    rng = np.random.default_rng(12)
+    w = rng.normal(size=n)
+    n2 = 0.05 * (w if kind == "white" else np.convolve(w, np.ones(6) / math.sqrt(6), mode="same"))
+    truth = np.full(n, P_TRUE)
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    after = 4 * 3600.0
+    t = np.arange(n) * TS
+    for missing in (0.0, 0.4):
+        rows = _closed_loop_two_tags(0.05 * rng.normal(size=n), n2, truth, missing)
+        bands = BandTracker(_spec(), columns)
+        assert bands.columns == ["parameter_lo:k", "parameter_hi:k", "lack_of_fit"] and bands.fit_tags == ["TO"]
+        out = np.array([bands.row(r) for r in rows])
+        sel = (t >= after) & np.isfinite(out[:, 0])
+        assert np.all(np.isfinite(out[sel, 2]))
+        flagged = float(np.mean(out[sel, 2] >= 1.0))
+        inside = float(np.mean(((out[:, 0] <= truth) & (truth <= out[:, 1]))[sel]))
+        summary = bands.describe()["lack_of_fit"]
+        if missing == 0.0:
+            assert flagged < 0.01 and inside >= 0.9, (flagged, inside)
+        else:
+            assert inside < 0.5 and flagged > 0.95, (flagged, inside)
+            assert summary["flagged_by"] == {"TO": summary["rows_flagged"]}
+
+
+def test_lack_of_fit_state_round_trip_gives_the_same_rows() -> None:
+    import json
+
+    n = 2000
+    rng = np.random.default_rng(13)
+    rows = _closed_loop_two_tags(0.05 * rng.normal(size=n), 0.05 * rng.normal(size=n), np.full(n, P_TRUE), 0.4)
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    whole = BandTracker(_spec(), columns)
+    expected = [whole.row(r) for r in rows]
+    first = BandTracker(_spec(), columns)
+    got = [first.row(r) for r in rows[:1500]]
+    second = BandTracker(_spec(), columns)
+    second.load_state_dict(json.loads(json.dumps(first.state_dict())))
+    got += [second.row(r) for r in rows[1500:]]
+    assert np.array_equal(np.array(got), np.array(expected), equal_nan=True)
+    assert second.describe()["lack_of_fit"] == whole.describe()["lack_of_fit"]
+
+
+def test_a_checkpoint_from_before_the_lack_of_fit_column_is_refused() -> None:
+    """Its CSV has no lack_of_fit column: resuming would append rows one column longer than its header."""
+    from trackingbox.errors import CheckpointError
+
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    old = BandTracker(_spec(), columns).state_dict()
+    del old["fit"], old["fit_rows"], old["fit_worst"]
+    with pytest.raises(CheckpointError, match="lack_of_fit"):
+        BandTracker(_spec(), columns).load_state_dict(old)
+    BandTracker(_spec(), COLUMNS).load_state_dict(old)  # no untracked tag: no such column, resumes

@@ -172,6 +172,9 @@ def _print_table(result: Any) -> None:
     if unc is not None:
         for f in unc.findings:
             print(f"note: {f.message}")
+        for iv in unc.parameters + unc.combinations:
+            if iv.determined and iv.note:
+                print(f"note: {iv.name}: {iv.note}")
     tags = list(result.validation_nrmse)
     twidth = max(len(t) for t in tags)
     print()

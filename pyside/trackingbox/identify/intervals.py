@@ -41,15 +41,20 @@ its ends found by the secant rule on ``sqrt(D)``. The magnitude adjustment
 the residuals are correlated (the naive deviance overstates the information by
 exactly the sandwich's ratio).
 
-**What they do not hold.** The twin is driven by *measured* inputs, taken as the truth; their
-noise can bias an estimate, and no residual shows that bias. On the heat-exchanger bench with the
-hot side's volume estimated beside the heat-transfer coefficient (flows measured with 1 % noise, a
-2 min residence time sampled every 10 s) the volume came out 6 % high on average over 50 seeds and
-24 % high on one scenario (30 % with twice the noise variance: the bias saturates, so a
-simulation-extrapolation assuming it linear in the noise variance removes a quarter of it); its
-intervals held the plant's value in 62 % of the seeds, in 12 of 12 with the same inputs noise-free,
-and the heat-transfer coefficient's in 96 %. A time constant near the sample time estimated from
-noisy inputs is the case to distrust; ``scripts/bench_uncertainty`` measures it (``hx2``).
+**The measured inputs' noise.** The twin is driven by *measured* inputs; their
+noise adds variance to the residuals (which the sandwich takes from them) and can
+bias an estimate, which no residual shows. On the heat-exchanger bench with the
+hot side's volume estimated beside the heat-transfer coefficient (flows measured
+with 1 % noise, a 2 min residence time sampled every 10 s) the volume came out
+6 % high on average over 50 seeds and 24 % high on one scenario, and the
+intervals without the inputs' noise held the plant's value in 29 of 50 seeds.
+:mod:`trackingbox.identify.inputs` reads each input's noise from its samples and
+extrapolates the bias from what one and two more doses of it do at the estimate;
+where its runs fit in a third of the budget the interval is moved by it and
+widened by its Monte Carlo error, and its note says so
+(``scripts/bench_uncertainty`` measures it: ``hx2``). Where they do not fit (many
+parameters with central differences: ``16 (2n + 1)`` runs) the JSON says the
+inputs' noise was not propagated.
 
 **Not determined.** A parameter in a direction the data do not determine
 (:mod:`trackingbox.identify.structure`, with ``C``) gets no interval: it is
@@ -72,6 +77,7 @@ from ..simulation.models import close_models
 from . import structure as st
 from .analysis import Combination, Finding, finding_text, name_findings
 from .model import FD_TOLERANCE, Evaluation, TwinWindow, safe, window_for
+from .inputs import PAIRS, InputBias, input_bias
 from .noise import effective_samples, lag1, long_run_covariance
 
 log = logging.getLogger(__name__)
@@ -233,6 +239,8 @@ class Uncertainty:
     sandwich: dict[str, float] = field(default_factory=dict)
     sensitivities: tuple[str, str] = ("", "")
     runs: int = 0
+    inputs: InputBias | None = None
+    inputs_note: str = ""
 
     def interval(self, name: str) -> Interval:
         for iv in self.parameters + self.combinations:
@@ -253,6 +261,8 @@ class Uncertainty:
             "sandwich": dict(self.sandwich),
             "sensitivities": {"method": self.sensitivities[0], "reason": self.sensitivities[1]},
             "runs": self.runs,
+            "inputs_noise": ({**self.inputs.to_json(), "names": list(self.names)} if self.inputs is not None
+                             else {"note": self.inputs_note}),
             "method": ("linearised from the cost's curvature with the residuals' own noise and autocorrelation "
                        "(sandwich with an equal-weighted cosine long-run covariance, Student t on its terms); profile likelihood "
                        f"where the adjusted deviance at an end of the linearised interval is off its prediction "
@@ -481,6 +491,25 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
     Jw = np.concatenate([ev.jacobian[t] * scaling.factors[None, :] * math.sqrt(weights[t]) for t in res], axis=0)
     structure = st.analyse(Jw, names, scaling.widths, covariance=C)
     findings = [_with_message(f) for f in name_findings(structure, scaling, x_hat, [], ev, names)]
+    # the measured inputs' noise: its bias, where the runs fit in a third of the budget
+    per_run = 4 * (1 if tw.method == "exact" else 2 * n + 1)  # two doses, antithetic
+    ib: InputBias | None = None
+    inputs_note = ""
+    if not window.inputs:
+        inputs_note = "the twin has no measured inputs"
+    elif PAIRS * per_run > budget / 3:
+        inputs_note = (f"the inputs' noise was not propagated: {PAIRS * per_run} twin runs "
+                       f"({tw.method} sensitivities) exceed a third of the budget of {budget}")
+    else:
+        before = tw.runs
+        try:
+            ib = safe(lambda: input_bias(tw, ev, scaling.factors, weights), "the inputs' noise")
+        except EstimationError as exc:  # e.g. a noisy dose drove an input out of the twin's range
+            log.warning("uncertainty: the inputs' noise was not propagated: %s", exc)
+            inputs_note = f"the inputs' noise was not propagated: {exc}"
+        budget -= tw.runs - before
+        if ib is None and not inputs_note:
+            inputs_note = "no noise found on the measured inputs"
     prof = _Profile(tw, coords, weights, Jw, A_pinv, math.nan, [int(budget) + 1], progress)
     # the reference cost from a run like the profile's own (the sensitivity run integrates differently)
     base = prof._run(coords.z_hat)
@@ -517,6 +546,22 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
                 note = "the linearisation is poor here (profile not asked for)"
         except _OutOfBudget:
             note = f"profile not computed: the budget of {budget} runs is spent"
+        if ib is not None:
+            # the inputs' noise biases the estimate by aᵀb (trackingbox.identify.inputs): the interval is moved
+            # by it and widened by its jackknife error; where the extrapolation is not to be trusted it covers
+            # a bias from aᵀd1 to 2 aᵀd1 (d1: the first dose's step, a lower bound where the bias saturates)
+            involved = [ib.kinds[j] for j in np.flatnonzero(a)]
+            mc = tq * math.sqrt(max(float(a @ ib.covariance @ a), 0.0))
+            if "bounds" in involved:
+                shift = float(a @ ib.first)
+                ends = [ends[0] - max(2.0 * shift, shift) - mc, ends[1] - min(2.0 * shift, shift) + mc]
+            else:
+                shift = float(a @ ib.bias)
+                ends = [ends[0] - shift - mc, ends[1] - shift + mc]
+            if abs(shift) > 0.1 * max(se, 1e-300):
+                note = (note + "; " if note else "") + (
+                    f"the measured inputs' noise biases the estimate by about {_shift_text(shift, a, scaling)}"
+                    + (" or more" if "bounds" in involved else "") + ": the interval is moved for it")
         at_bound = (ends[0] <= bounds[0] + 1e-12 * max(1.0, abs(bounds[0])),
                     ends[1] >= bounds[1] - 1e-12 * max(1.0, abs(bounds[1])))
         ends = [float(np.clip(ends[0], *bounds)), float(np.clip(ends[1], *bounds))]
@@ -561,7 +606,15 @@ def _uncertainty(problem: Any, window: Any, tw: TwinWindow, ev: Evaluation, x_ha
                            int(r.size), effective_samples(_on_grid(r, ev.index[tag]))) for tag, r in res.items()}
     return Uncertainty(level, tuple(intervals), tuple(combos), tuple(findings), tuple(names), scaling.kinds,
                        structure.correlation, noise, {**info, "time_steps": float(N)}, (tw.method, tw.reason),
-                       tw.runs)
+                       tw.runs, ib, inputs_note)
+
+
+def _shift_text(shift: float, a: np.ndarray, scaling: st.Scaling) -> str:
+    """A bias in scaled coordinates as words: ``+6.2 %`` (log-scaled) or ``+0.031 of its range``."""
+    logs = [scaling.kinds[j] == "log" for j in np.flatnonzero(a)]
+    if all(logs):
+        return f"{100.0 * math.expm1(shift):+.2g} %"
+    return f"{shift:+.2g} of its range"
 
 
 def _with_message(f: Finding) -> Finding:

@@ -23,8 +23,8 @@ with HistoryRead before going on live, so no row is lost.
 
 With ``[live] publish = "opc.tcp://..."`` the tracker serves its results:
 ``ns=2;s=parameter:<name>``, ``tracked:<tag>``, ``untracked:<tag>``,
-``mode:<tag>`` and the band ``parameter_lo:<name>`` / ``parameter_hi:<name>``
-(the CSV's columns), updated after every row with the row's plant time as
+``mode:<tag>``, the band ``parameter_lo:<name>`` / ``parameter_hi:<name>`` and its
+``lack_of_fit`` where some output is untracked (the CSV's columns), updated after every row with the row's plant time as
 source timestamp.
 """
 from __future__ import annotations

@@ -106,6 +106,9 @@ def uncertainty_section(doc: Document, uncertainty: Any, bounds: Mapping[str, tu
                     + ([f"{t:.6g}" if t is not None else "", "" if cov is None else ("yes" if cov else "NO")]
                        if truth else []))
     doc.table(header, rows)
+    for iv in list(uncertainty.parameters) + list(uncertainty.combinations):
+        if iv.determined and iv.note:
+            doc.paragraph(f"`{iv.name}`: {iv.note}.")
     doc.paragraph(
         "Intervals: linearised from the cost's curvature, with each tag's noise and the residuals' autocorrelation "
         "taken from the residuals (a sandwich covariance whose long-run part is an equal-weighted cosine estimate; "
@@ -141,7 +144,26 @@ def band_paragraph() -> str:
             "time constant and PI settings; the noise's autocovariance from the tracked error's fast part), the "
             "start value's interval (the spec's `interval`, else the bounds) fading as the loop converges, and the "
             "loop's lag behind the parameter's own trend (and the time on hold). Empty until an hour of tracked "
-            "error has been seen. What the twin's structure gets wrong is not in them.")
+            "error has been seen. What the twin's structure gets wrong is not in them: the `lack_of_fit` column "
+            "says where the tags no pair tracks show it.")
+
+
+def fit_paragraph(df: Any) -> str | None:
+    """The lack-of-fit flag of a tracking CSV (:mod:`trackingbox.identify.bands`) in words; None without it."""
+    if "lack_of_fit" not in df.columns:
+        return None
+    f = np.asarray(df["lack_of_fit"], dtype=float)
+    known = np.isfinite(f)
+    if not known.any():
+        return "Lack of fit: not known yet (it needs an hour of tracked error and two hours of the untracked tags)."
+    flagged = known & (f >= 1.0)
+    share = float(flagged.sum() / known.sum())
+    head = (f"Lack of fit: the tags no pair tracks disagree with the twin beyond their noise in {100 * share:.1f} % "
+            f"of the rows where it is known (the CSV's `lack_of_fit` >= 1, largest {float(np.nanmax(f)):.3g}).")
+    if flagged.any():
+        return head + (" **There the bands do not cover the twin's model error**: a tracked parameter may be "
+                       "absorbing an effect the twin lacks (find it with `diagnose`).")
+    return head + " The bands' noise and start terms are all there is to it."
 
 
 

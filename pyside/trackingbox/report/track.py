@@ -12,7 +12,7 @@ import pandas as pd
 
 from . import plots
 from .document import Document, StageReport, fmt
-from .identify import band_paragraph, draw_band
+from .identify import band_paragraph, draw_band, fit_paragraph
 
 if TYPE_CHECKING:
     from ..spec import Spec
@@ -102,6 +102,9 @@ def write_track_report(spec: Spec, result: TrackingResult, out: str | os.PathLik
     doc.blocks += summary_tables(result, {p.variable: p.parameter for p in spec.pairs}).blocks
     if any(c.startswith("parameter_lo:") for c in df.columns):
         doc.paragraph(band_paragraph())
+        fit = fit_paragraph(df)
+        if fit:
+            doc.paragraph(fit)
     if truth:
         known = {n: truth[n] for n in result.parameters if n in truth}
         if known:
