@@ -35,7 +35,10 @@ Every seed's result is appended to ``OUT/<case>.jsonl`` as it finishes; a rerun 
 at the end: per case and parameter, the coverage ``k/n`` (%), the median interval width relative
 to the truth, the methods used; per band case the coverage. Targets: intervals cover the truth in
 90-99 % of the runs (``hx``, ``hx2``, ``wall2``, ``hp``, ``wall``), bands at least 90 % of the time after
-settling (``bands-hx``, ``bands-evaporator``). Exit 1 when a target is missed.
+settling (``bands-hx``, ``bands-evaporator``). A coverage outside 90-99 % whose exact 95 %
+(Clopper-Pearson) interval still reaches into it is reported as consistent, not met: the runs are
+too few to tell; a case with several parameters gets a pooled line too. Exit 1 when a target is
+missed.
 """
 from __future__ import annotations
 
@@ -51,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = (0.90, 0.99)
@@ -278,6 +282,7 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
                          f"{share('covered_flagged')} (per-run means)")
         return lines, ok
     names = sorted({n for d in docs for n in d["intervals"]})
+    pooled = [0, 0, 0]  # covered, runs, parameters
     for name in names:
         rows = [d["intervals"][name] for d in docs if name in d["intervals"]]
         truth = rows[0]["truth"]
@@ -292,15 +297,44 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
         n = len(determined)
         width = np.median([(r["upper"] - r["lower"]) / abs(truth) for r in determined])
         methods = {m: sum(r["method"] == m for r in determined) for m in ("linearised", "profile")}
-        share = k / n
-        met = TARGET[0] <= share <= TARGET[1]
-        ok &= met
+        verdict = coverage_verdict(k, n)
+        ok &= verdict != "MISSED"
+        pooled[0] += k
+        pooled[1] += n
+        pooled[2] += 1
         undet = len(rows) - n
-        lines.append(f"{case:<6} {name:<20} covered {k:>3}/{n:<3} = {100 * share:5.1f} %  median width "
+        lines.append(f"{case:<6} {name:<20} covered {k:>3}/{n:<3} = {100 * k / n:5.1f} %  median width "
                      f"{100 * width:.3g} % of the truth  (linearised {methods['linearised']}, profile "
                      f"{methods['profile']}" + (f", not determined in {undet}" if undet else "") + ")  "
-                     f"[target {100 * TARGET[0]:.0f}-{100 * TARGET[1]:.0f} %: {'met' if met else 'MISSED'}]")
+                     f"[target {100 * TARGET[0]:.0f}-{100 * TARGET[1]:.0f} %: {verdict}]")
+    if pooled[2] > 1:
+        k, n, _ = pooled
+        verdict = coverage_verdict(k, n)
+        ok &= verdict != "MISSED"
+        lines.append(f"{case:<6} {'all determined':<20} covered {k:>3}/{n:<3} = {100 * k / n:5.1f} %  (pooled over "
+                     f"the parameters; not independent within a seed)  [target {100 * TARGET[0]:.0f}-"
+                     f"{100 * TARGET[1]:.0f} %: {verdict}]")
     return lines, ok
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) two-sided interval of a binomial share k/n."""
+    a = (1.0 - level) / 2.0
+    lower = 0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1))
+    upper = 1.0 if k == n else float(stats.beta.ppf(1.0 - a, k + 1, n - k))
+    return lower, upper
+
+
+def coverage_verdict(k: int, n: int) -> str:
+    """``met`` when k/n lies in TARGET; ``MISSED`` when even the 95 % Clopper-Pearson interval of the
+    coverage lies outside it; otherwise ``consistent`` (k/n is outside but n runs cannot tell it
+    from a coverage inside: with 20 runs a calibrated 95 % interval covers 20/20 in 36 % of them)."""
+    if TARGET[0] <= k / n <= TARGET[1]:
+        return "met"
+    lower, upper = clopper_pearson(k, n)
+    if upper < TARGET[0] or lower > TARGET[1]:
+        return "MISSED"
+    return f"consistent: k/n outside, 95 % interval of the coverage {100 * lower:.0f}-{100 * upper:.0f} %"
 
 
 def main(argv: list[str] | None = None) -> int:
