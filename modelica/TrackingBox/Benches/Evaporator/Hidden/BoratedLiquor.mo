@@ -3,8 +3,10 @@ model BoratedLiquor "Evaporator plant whose liquor carries borate: it boils 2 K 
   extends Clean(effect(use_dBPR_in=true), flash(use_dBPR_in=true));
   parameter TrackingBox.Units.TemperatureDifference dTBorate = 2 "Extra boiling-point rise at high dry solids";
   parameter TrackingBox.Units.Fraction xBorate = 0.72 "Dry solids at the middle of the borate's onset";
-  TrackingBox.Interfaces.RealOutput dBPR_effect(unit="K") "Boiling-point offset of the effect's liquor";
-  TrackingBox.Interfaces.RealOutput dBPR_flash(unit="K") "Boiling-point offset of the flash tank's liquor";
+  TrackingBox.Interfaces.RealOutput dBPR_effect(unit="K") "Boiling-point offset of the effect's liquor"
+    annotation (Placement(transformation(extent={{100,50},{120,70}})));
+  TrackingBox.Interfaces.RealOutput dBPR_flash(unit="K") "Boiling-point offset of the flash tank's liquor"
+    annotation (Placement(transformation(extent={{100,10},{120,30}})));
 equation
   dBPR_effect = dBPR + dTBorate/(1 + exp(-(effect.x - xBorate)/0.02));
   dBPR_flash = dTBorate/(1 + exp(-(flash.x - xBorate)/0.02));

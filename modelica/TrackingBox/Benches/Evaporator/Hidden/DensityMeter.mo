@@ -3,7 +3,8 @@ model DensityMeter "Evaporator plant whose product DS meter infers DS from densi
   extends Clean(DS_product(use_error_in=true));
   parameter Real kTrue(unit="kg/m3") = 694 "Density constant of the real liquor (rho = (997 + k x) f(T))";
   parameter Real kMeter(unit="kg/m3") = 649 "Density constant the meter's calibration assumes";
-  TrackingBox.Interfaces.RealOutput DS_error(unit="1") "Error of the DS reading";
+  TrackingBox.Interfaces.RealOutput DS_error(unit="1") "Error of the DS reading"
+    annotation (Placement(transformation(extent={{100,50},{120,70}})));
 equation
   // the meter measures rho = (997 + kTrue x) f(T) and inverts it with kMeter: x_read = x kTrue/kMeter
   DS_error = DS_product.port.x*(kTrue/kMeter - 1);

@@ -2,7 +2,8 @@ within TrackingBox.Benches.Evaporator.Hidden;
 model FoamingFlash "Evaporator plant whose flash-tank level transmitter is calibrated for a liquor 8 % denser than it"
   extends Clean(LT_flash(use_error_in=true));
   parameter TrackingBox.Units.Density rhoCal = 1570 "Density the transmitter was calibrated for (the design's 1450 intended)";
-  TrackingBox.Interfaces.RealOutput LT_error(unit="m") "Error of the flash-tank level reading";
+  TrackingBox.Interfaces.RealOutput LT_error(unit="m") "Error of the flash-tank level reading"
+    annotation (Placement(transformation(extent={{100,50},{120,70}})));
 equation
   LT_error = (LT_flash.dp - LT_flash.dp0)/LT_flash.g*(1/rhoCal - 1/LT_flash.rho_cal);
   connect(LT_error, LT_flash.error_in);
