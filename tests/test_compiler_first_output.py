@@ -126,3 +126,32 @@ def test_matrices_is_equal_agrees_with_numpy(tmp_path):
         expect = m.shape == a.shape and bool(np.all(np.abs(a - m) <= e))
         assert bool(out[f"v_{n}"][-1]) == expect, n
     assert [n for n, (m, e) in cases.items() if m.shape == a.shape and np.all(np.abs(a - m) <= e)] == ["same", "inside"]
+
+
+@pytest.mark.compile
+def test_msl_lossy_gear_demo1_loses_power_as_its_efficiency_says(tmp_path):
+    """Modelica.Mechanics.Rotational.Examples.LossyGearDemo1 (ratio 2, efficiency 0.5 both ways, no
+    bearing friction) over its experiment: where flange_a drives (tau_a w_a > 0) the gear passes on
+    eta of the power, tau_b = -ratio eta tau_a; where flange_b drives, tau_a w_a = -eta tau_b w_b, so
+    tau_b = -ratio tau_a / eta; the power lost is never negative; w_b = w_a / ratio; and the run goes
+    through forward, backward and stuck."""
+    if not (MSL / "Mechanics" / "Rotational" / "Components" / "LossyGear.mo").is_file():
+        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    import fmpy
+
+    from trackingbox.compiler import compile_model
+
+    res = compile_model(MSL, "Modelica.Mechanics.Rotational.Examples.LossyGearDemo1", backend="embedded",
+                        output=tmp_path / "lg.fmu")
+    names = ["gear.flange_a.tau", "gear.flange_b.tau", "gear.w_a", "Inertia2.w", "PowerLoss", "gear.mode"]
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=0.5, output_interval=1e-3, output=names)
+    ta, tb, wa, wb, loss, mode = (out[n] for n in names)
+    ratio, eta = 2.0, 0.5
+    assert np.allclose(wb, wa / ratio, atol=1e-12)
+    sliding = np.abs(wa) > 1e-4
+    a_drives, b_drives = sliding & (ta * wa > 1e-6), sliding & (ta * wa < -1e-6)
+    assert a_drives.sum() > 50 and b_drives.sum() > 50 and (~sliding).sum() > 50
+    assert np.allclose(tb[a_drives], -ratio * eta * ta[a_drives], atol=1e-9 * np.abs(ta).max())
+    assert np.allclose(tb[b_drives], -ratio * ta[b_drives] / eta, atol=1e-9 * np.abs(ta).max())
+    assert loss.min() > -1e-6 * loss.max()
+    assert set(np.unique(mode)) == {-1.0, 0.0, 1.0}
