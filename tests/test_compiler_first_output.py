@@ -155,3 +155,14 @@ def test_msl_lossy_gear_demo1_loses_power_as_its_efficiency_says(tmp_path):
     assert np.allclose(tb[b_drives], -ratio * ta[b_drives] / eta, atol=1e-9 * np.abs(ta).max())
     assert loss.min() > -1e-6 * loss.max()
     assert set(np.unique(mode)) == {-1.0, 0.0, 1.0}
+
+
+def test_a_function_another_extends_or_a_replaceable_one_is_left_with_all_its_outputs(tmp_path):
+    a = tmp_path / "A.mo"
+    a.write_text(TWO)
+    b = tmp_path / "B.mo"
+    b.write_text("package B\n  function g\n    extends Two.f;\n  end g;\nend B;\n")
+    assert tuple_function_names([a, b]) == frozenset()
+    c = tmp_path / "C.mo"
+    c.write_text(TWO.replace("  function f \"two outputs\"", "  replaceable function f \"two outputs\""))
+    assert tuple_function_names([c]) == frozenset()

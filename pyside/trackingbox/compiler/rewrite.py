@@ -407,8 +407,10 @@ class _Function:
 
 
 def _previous_word(code: bytes, at: int) -> bytes:
-    m = re.search(rb"([A-Za-z_]\w*)\s*$", code[max(0, at - 40):at])
-    return m.group(1) if m else b""
+    """The identifier just before *at* in comment-free *code* (blanks and blanked comments between)."""
+    end = len(code[:at].rstrip())
+    m = re.search(rb"[A-Za-z_]\w*$", code[max(0, end - 200):end])
+    return m.group(0) if m else b""
 
 
 def _statement_end(code: bytes, at: int, stop: int) -> int | None:
@@ -460,7 +462,8 @@ def _functions(code: bytes) -> list[_Function]:
 
 def tuple_function_names(files) -> frozenset[bytes]:
     """The simple names of the functions defined in *files* that declare several outputs, less the
-    names some other function definition in them also has (a tuple call of such a name is left alone)."""
+    names some other function definition in them also has or some class extends (such a function
+    keeps all its outputs and a call taking them is left alone)."""
     several: set[bytes] = set()
     others: set[bytes] = set()
     for f in files:
@@ -485,7 +488,10 @@ def _function_names(file: Path, mtime_ns: int, size: int) -> tuple[frozenset[byt
         return frozenset(), frozenset()
     code, _, _ = _code_mask(data)
     multi = frozenset(fn.name for fn in _functions(code))
-    return multi, frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi
+    # a function some class extends (its outputs are inherited) stays as it is; so does one that is
+    # partial, replaceable or redeclared (a call may reach another definition than the copy's)
+    extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(rb"\bextends\s+([\w.]+)", code))
+    return multi - extended, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended
 
 
 def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
