@@ -166,3 +166,9 @@ def test_a_function_another_extends_or_a_replaceable_one_is_left_with_all_its_ou
     c = tmp_path / "C.mo"
     c.write_text(TWO.replace("  function f \"two outputs\"", "  replaceable function f \"two outputs\""))
     assert tuple_function_names([c]) == frozenset()
+    d = tmp_path / "D.mo"
+    d.write_text(TWO.replace("  end f;", "    annotation(derivative = f_der);\n  end f;").replace(
+        "  function f \"two outputs\"", "  function f_der\n    input Real x;\n    input Real dx;\n"
+        "    output Real dy;\n    output Real dk;\n  algorithm\n    dy := 2*dx;\n    dk := 0;\n  end f_der;\n"
+        "  function f \"two outputs\""))
+    assert tuple_function_names([d]) == frozenset({b"f"})  # f_der stays as f's derivative needs it

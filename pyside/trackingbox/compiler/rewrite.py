@@ -490,7 +490,9 @@ def _function_names(file: Path, mtime_ns: int, size: int) -> tuple[frozenset[byt
     multi = frozenset(fn.name for fn in _functions(code))
     # a function some class extends (its outputs are inherited) stays as it is; so does one that is
     # partial, replaceable or redeclared (a call may reach another definition than the copy's)
-    extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(rb"\bextends\s+([\w.]+)", code))
+    # and so does a function named as another's derivative or inverse (its outputs must match)
+    extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(
+        rb"\b(?:extends|derivative(?:\s*\([^()]*\))?\s*=|inverse\s*\(\s*\w+\s*=)\s*([A-Za-z_][\w.]*)", code))
     return multi - extended, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended
 
 
