@@ -36,12 +36,12 @@ from pathlib import Path
 
 from .. import config
 from .library import LibraryIndex, cache_dir, index_for, source_root
-from .rewrite import frontend_bytes
+from .rewrite import frontend_bytes, tuple_function_names
 from .source import ModelicaSource
 
 log = logging.getLogger(__name__)
 
-TREE_VERSION = 1
+TREE_VERSION = 2
 """Changes when what a tree holds changes (it is part of the flat cache's key)."""
 
 CACHE_LIMIT_MB = 512
@@ -121,6 +121,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     if needed is None:
         return _full_tree(source, libraries, dest)
     lib_dir, src_dir = dest / "lib", dest / "src"
+    tuple_names = tuple_function_names(sorted(needed))
     digest = hashlib.sha256()
     originals: dict[Path, Path] = {}
     renames: list[tuple[str, str]] = []
@@ -137,11 +138,11 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
             renames.append((str(base) + os.sep, str(root) + os.sep))
             for f in files:
                 target = base / f.relative_to(root)
-                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}")
+                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}", tuple_names)
                 originals[target] = f
         else:
             target = (src_dir if root == own else lib_dir) / root.name
-            _copy(root, target, digest, root.name)
+            _copy(root, target, digest, root.name, tuple_names)
             originals[target] = root
             renames.append((str(target), str(root)))
     if source.entry.name != "package.mo":
@@ -162,9 +163,10 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) 
     digest = hashlib.sha256()
     copy_root = dest / "src"
     originals: dict[Path, Path] = {}
+    tuple_names = tuple_function_names(source.files)
     for f in source.files:
         target = copy_root / f.relative_to(source.root)
-        _copy(f, target, digest, str(f.relative_to(source.root)))
+        _copy(f, target, digest, str(f.relative_to(source.root)), tuple_names)
         originals[target] = f
     for lib in libraries:  # not copied: their content enters the key by their files' stamps
         for f in (sorted(Path(lib).rglob("*.mo")) if Path(lib).is_dir() else [Path(lib)]):
@@ -180,8 +182,8 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) 
                         entry_rel=str(entry.relative_to(dest)))
 
 
-def _copy(src: Path, target: Path, digest, rel: str) -> None:
-    data = frontend_bytes(src)
+def _copy(src: Path, target: Path, digest, rel: str, tuple_names: frozenset[bytes] = frozenset()) -> None:
+    data = frontend_bytes(src, tuple_names)
     if data is None:
         data = src.read_bytes()
     target.parent.mkdir(parents=True, exist_ok=True)

@@ -276,6 +276,31 @@ LIBRARY_BODIES = (
 """,
         why="while loops and an output assigned on one branch",
     ),
+    # Modelica.Math.Matrices.isEqual (MSL 4.0.0): two nested while loops that stop at the first
+    # pair of elements farther apart than eps, which rumoca refuses. The result does not depend on
+    # where the search stops: true where the sizes agree and no pair is farther apart than eps, so
+    # two for loops over every pair give it (the loops' bounds take the smaller size so that the
+    # indices stay inside M2 where the sizes differ and the result is already false).
+    LibraryBody(
+        name="Modelica.Math.Matrices.isEqual",
+        header=b"function isEqual",
+        digest="0dff0c4aa972219ab581435487b0748b0d07da4ee299ebe0528be09153e66aee",
+        start=b"protected",
+        body=b"""protected
+    Integer nrow = size(M1, 1);
+    Integer ncol = size(M1, 2);
+  algorithm
+    result := size(M2, 1) == nrow and size(M2, 2) == ncol;
+    for i in 1:min(nrow, size(M2, 1)) loop
+      for j in 1:min(ncol, size(M2, 2)) loop
+        if abs(M1[i, j] - M2[i, j]) > eps then
+          result := false;
+        end if;
+      end for;
+    end for;
+""",
+        why="while loops",
+    ),
 )
 
 
@@ -317,7 +342,8 @@ def replace_library_bodies(data: bytes) -> tuple[bytes, list[tuple[str, int]]]:
 
 
 @functools.lru_cache(maxsize=4096)
-def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int) -> bytes | None:
+def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int,
+                           tuple_names: frozenset[bytes] = frozenset()) -> bytes | None:
     data = file.read_bytes()
     bom = data.startswith(BOM)
     body = data[3:] if bom else data
@@ -327,6 +353,12 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int) -> bytes | None
         log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
                   next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
         changed = True
+    firsts, lines = first_output_functions(body, tuple_names)
+    if firsts != body:
+        if lines:
+            log.debug("%s: functions with several outputs read with their first one (a __tuple copy "
+                      "for the calls taking all) at lines %s", file, ", ".join(map(str, lines)))
+        body, changed = firsts, True
     rewrite = protect_der_equations(body)
     if rewrite.lines:
         log.debug("%s: der(...) equations in for-loops put in parentheses for rumoca at lines %s%s",
@@ -336,11 +368,218 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int) -> bytes | None
     return body if changed else None
 
 
-def frontend_bytes(file: Path) -> bytes | None:
+def frontend_bytes(file: Path, tuple_names: frozenset[bytes] = frozenset()) -> bytes | None:
     """What rumoca should read for *file* if not the file itself: its text without a
-    byte-order mark and with :func:`protect_der_equations` applied; None if neither changes it."""
+    byte-order mark, with :func:`replace_library_bodies`, :func:`first_output_functions` (calls
+    taking several outputs renamed for the functions in *tuple_names*, see
+    :func:`tuple_function_names`) and :func:`protect_der_equations` applied; None if none changes it."""
     try:
         st = file.stat()
-        return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size)
+        return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size, tuple_names)
     except OSError:
         return None
+
+
+# --- functions with several outputs -------------------------------------------------------------
+#
+# rumoca 0.10.2 evaluates a call of a function with several outputs as the array of all its
+# outputs where it evaluates a binding (a parameter's): ``parameter Real p = f(a)`` with ``f``
+# returning ``(y, k)`` makes ``p`` an array, and ``if p > 2 ...`` fails with "type mismatch:
+# expected comparable, got Array". In Modelica such a call in an expression is its first output
+# (MLS 12.4.3). So every function that declares several outputs itself is read with its first
+# output only, the others moved to its protected section (computed as before, not returned), and a
+# copy under the name ``<name>__tuple`` keeps every output for the calls that take them all,
+# ``(a, b) := f(...)`` / ``(a, b) = f(...)``, which are renamed to call it. The copy stands on the
+# line of the function's ``end``, so every line of the file stays where it is.
+
+TUPLE_SUFFIX = b"__tuple"
+_FUNCTION = re.compile(rb"\bfunction\s+([A-Za-z_]\w*)")
+_SKIP_BEFORE = {b"partial", b"replaceable", b"redeclare"}
+
+
+@dataclass(frozen=True)
+class _Function:
+    name: bytes
+    start: int  # of 'function'
+    end: int  # after the ';' of 'end name;'
+    outputs: tuple[tuple[int, int], ...]  # spans of the output declarations, 'output' to ';'
+    single: bool  # whether it is read with its first output only
+
+
+def _previous_word(code: bytes, at: int) -> bytes:
+    """The identifier just before *at* in comment-free *code* (blanks and blanked comments between)."""
+    end = len(code[:at].rstrip())
+    m = re.search(rb"[A-Za-z_]\w*$", code[max(0, end - 200):end])
+    return m.group(0) if m else b""
+
+
+def _statement_end(code: bytes, at: int, stop: int) -> int | None:
+    depth = 0
+    for k in range(at, stop):
+        c = code[k]
+        if c in b"([{":
+            depth += 1
+        elif c in b")]}":
+            depth -= 1
+        elif c == 59 and depth == 0:  # ';'
+            return k + 1
+    return None
+
+
+def _functions(code: bytes) -> list[_Function]:
+    """The function definitions of comment-free *code* that declare two or more outputs themselves."""
+    found: list[_Function] = []
+    for m in _FUNCTION.finditer(code):
+        name = m.group(1)
+        if name == b"extends" or _previous_word(code, m.start()) in _SKIP_BEFORE | {b"end"}:
+            continue
+        after = re.match(rb"\s*=", code[m.end():m.end() + 200])
+        if after:  # a short class definition
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(name) + rb"\s*;").search(code, m.end())
+        if end is None:
+            continue
+        body = code[m.end():end.start()]
+        if _FUNCTION.search(body):  # nested functions: not this rewrite's business
+            continue
+        outputs = []
+        for o in re.finditer(rb"\boutput\b", body):
+            stop = _statement_end(code, m.end() + o.start(), end.start())
+            if stop is None:
+                break
+            outputs.append((m.end() + o.start(), stop))
+        else:
+            if len(outputs) < 2:
+                continue
+            words = set(re.findall(rb"[A-Za-z_]\w*", body))
+            extends = re.findall(rb"\bextends\s+([\w.]+)", body)
+            single = (not words & {b"external", b"public", b"derivative", b"inverse"}
+                      and all(e.split(b".")[-1] == b"Function" for e in extends)
+                      and re.search(rb"\b(algorithm|protected)\b", body) is not None)
+            found.append(_Function(name, m.start(), end.end(), tuple(outputs), single))
+    return found
+
+
+def tuple_function_names(files) -> frozenset[bytes]:
+    """The simple names of the functions defined in *files* that declare several outputs, less the
+    names some other function definition in them also has or some class extends (such a function
+    keeps all its outputs and a call taking them is left alone)."""
+    several: set[bytes] = set()
+    others: set[bytes] = set()
+    for f in files:
+        try:
+            st = Path(f).stat()
+        except OSError:
+            continue
+        multi, other = _function_names(Path(f), st.st_mtime_ns, st.st_size)
+        several |= multi
+        others |= other
+    return frozenset(several - others)
+
+
+@functools.lru_cache(maxsize=8192)
+def _function_names(file: Path, mtime_ns: int, size: int) -> tuple[frozenset[bytes], frozenset[bytes]]:
+    """(names of the functions with several outputs, names of the other functions) defined in *file*."""
+    try:
+        data = file.read_bytes()
+    except OSError:
+        return frozenset(), frozenset()
+    if b"function" not in data:
+        return frozenset(), frozenset()
+    code, _, _ = _code_mask(data)
+    multi = frozenset(fn.name for fn in _functions(code))
+    # a function some class extends (its outputs are inherited) stays as it is; so does one that is
+    # partial, replaceable or redeclared (a call may reach another definition than the copy's)
+    # and so does a function named as another's derivative or inverse (its outputs must match)
+    extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(
+        rb"\b(?:extends|derivative(?:\s*\([^()]*\))?\s*=|inverse\s*\(\s*\w+\s*=)\s*([A-Za-z_][\w.]*)", code))
+    return multi - extended, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended
+
+
+def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
+    out = bytearray(data)
+    for s, e in zip(starts, ends):
+        if data[s:s + 2] in (b"//", b"/*"):
+            out[s:e] = re.sub(rb"[^\n]", b" ", data[s:e])
+    return bytes(out)
+
+
+def _one_line(text: bytes) -> bytes:
+    return re.sub(rb"\s*\n\s*", b" ", text)
+
+
+def first_output_functions(data: bytes, tuple_names: frozenset[bytes] = frozenset()) -> tuple[bytes, list[int]]:
+    """*data* with a ``<name>__tuple`` copy beside each function that declares several outputs, each
+    such function whose name is in *tuple_names* read with its first output only (the others
+    protected), and each call taking several outputs of a function in *tuple_names* renamed to the
+    copy; and the lines of the functions changed. Lines are kept (byte offsets after an edit shift).
+
+    *tuple_names* (:func:`tuple_function_names`) must hold the names for every file rumoca reads,
+    so that no call taking all outputs reaches a function read with its first one."""
+    if tuple_names:
+        data = _rename_tuple_calls(data, tuple_names)
+    if b"output" not in data:
+        return data, []
+    code, starts, ends = _code_mask(data)
+    clean = _blank_comments(data, starts, ends)
+    edits: list[tuple[int, int, bytes]] = []  # (start, end, replacement)
+    changed: list[int] = []
+    for fn in _functions(code):
+        copy = _one_line(clean[fn.start:fn.end])
+        copy = re.sub(rb"^function\s+" + re.escape(fn.name), b"function " + fn.name + TUPLE_SUFFIX, copy)
+        copy = re.sub(rb"\bend\s+" + re.escape(fn.name) + rb"\s*;$", b"end " + fn.name + TUPLE_SUFFIX + b";", copy)
+        edits.append((fn.end, fn.end, b" " + copy))
+        if not fn.single or fn.name not in tuple_names:  # its calls taking all outputs might not be renamed
+            continue
+        moved = []
+        for s, e in fn.outputs[1:]:
+            decl = _one_line(clean[s:e])
+            moved.append(re.sub(rb"^output\s+", b"", decl))
+            edits.append((s, e, re.sub(rb"[^\n]", b"", data[s:e])))
+        prot = re.compile(rb"\bprotected\b").search(code, fn.outputs[-1][1], fn.end)
+        alg = re.compile(rb"\balgorithm\b").search(code, fn.outputs[-1][1], fn.end)
+        if prot is not None:
+            edits.append((prot.end(), prot.end(), b" " + b" ".join(moved)))
+        else:
+            edits.append((alg.start(), alg.start(), b"protected " + b" ".join(moved) + b" "))
+        changed.append(data.count(b"\n", 0, fn.start) + 1)
+    if not edits:
+        return data, []
+    out = bytearray()
+    pos = 0
+    for s, e, new in sorted(edits, key=lambda x: (x[0], x[1])):
+        out += data[pos:s] + new
+        pos = max(pos, e)
+    out += data[pos:]
+    return bytes(out), changed
+
+
+def _rename_tuple_calls(data: bytes, tuple_names: frozenset[bytes]) -> bytes:
+    """*data* with each ``(a, b, ...) := f(`` or ``(a, b, ...) = f(`` statement or equation whose
+    function's simple name is in *tuple_names* calling ``f__tuple`` instead."""
+    code, _, _ = _code_mask(data)
+    inserts: list[int] = []
+    for m in re.finditer(rb"\)\s*(?::=|=)\s*([A-Za-z_][\w.]*)\s*\(", code):
+        if m.group(1).split(b".")[-1] not in tuple_names:
+            continue
+        depth, k = 0, m.start()
+        while k >= 0:  # the '(' opening the left-hand side
+            depth += {41: 1, 40: -1}.get(code[k], 0)
+            if depth == 0:
+                break
+            k -= 1
+        if k < 0 or b"," not in code[k + 1:m.start()]:
+            continue
+        before = code[:k].rstrip()
+        if before and not before.endswith(b";") and _previous_word(code, k) not in _TUPLE_AFTER:
+            continue
+        inserts.append(m.end(1))
+    out = bytearray()
+    pos = 0
+    for at in inserts:
+        out += data[pos:at] + TUPLE_SUFFIX
+        pos = at
+    return bytes(out + data[pos:])
+
+
+_TUPLE_AFTER = {b"then", b"else", b"loop", b"algorithm", b"equation"}
