@@ -299,6 +299,32 @@ def test_validation_gain_counts_the_tags_an_effect_materially_moves():
     nb, na = c.nrmse_before["T"], c.nrmse_after["T"]
     assert c.validation_gain == pytest.approx(1.0 - na / nb)          # the gain is T's alone
     assert c.validation_gain > 0.9
+    assert c.material == ("T",)                                       # 2.0 = 20 sigma; the 0.01 nudges are not
+
+
+def test_an_effect_that_moves_a_significant_gap_without_closing_it_is_not_named():
+    """Two significant tags; the candidate closes one and reshapes the other without closing it."""
+    from types import SimpleNamespace as NS
+
+    where = NS(validation_tags={t: NS(samples=500, periods=()) for t in ("L", "P", "F")},
+               significant=["L", "P"], tags={t: NS(periods=((0.0, 600.0),)) for t in ("L", "P")})
+    limit = jd.noise_threshold(500)
+    # L closed by 1.3 noise variances, P (significant, materially moved) by 0.15: that gap is not its doing
+    c = cd.Candidate("level-density", "LT", "process", "fit", delta_bic=137.0, validation_gain=0.16, noise_gain=1.5,
+                     tags=("L", "P", "F"), noise_gains={"L": 1.3, "P": 0.15, "F": 0.05}, material=("L", "P"))
+    why = jd.objections(c, where)
+    assert len(why) == 1 and "P" in why[0] and "does not close it" in why[0] and 0.15 < limit
+    verdict = jd.judge([c], where)
+    assert verdict.verdict == "unexplained" and set(verdict.unexplained) == {"L", "P"}
+    # closing both gaps beyond noise: named
+    ok = cd.Candidate("steam-vent", "E", "process", "fit", delta_bic=137.0, validation_gain=0.5, noise_gain=3.0,
+                      tags=("L", "P", "F"), noise_gains={"L": 1.3, "P": 1.6, "F": 0.05}, material=("L", "P"))
+    assert jd.objections(ok, where) == [] and jd.judge([ok], where).named is ok
+    # a significant tag it moves by less than MATERIAL_MOVE sigma is not held to it (a second effect may be
+    # behind that gap): the name stands with the gap it closes
+    one = cd.Candidate("steam-vent", "E", "process", "fit", delta_bic=137.0, validation_gain=0.5, noise_gain=1.4,
+                       tags=("L", "P", "F"), noise_gains={"L": 1.3, "P": 0.05, "F": 0.05}, material=("L",))
+    assert jd.objections(one, where) == []
 
 
 # --------------------------------------------------------------------------- judging (fast)

@@ -134,6 +134,13 @@ class HiddenCase:
         Tag -> plant variable that replaces the plain plant's (a faulty sensor's reading).
     affected : tuple of str
         Output tags the effect shows in (the NRMSE criterion of the suite).
+    also : tuple of str
+        Further targets the plant carries the same effect on (the borate's boiling-point rise is in
+        the effect and in the flash tank): naming the effect on any of them is right.
+    instrument : str or None
+        The tag of the faulty instrument when the effect is one meter's error: a generic sensor
+        entry on that tag (``sensor-bias@QI-6150`` for a ``ds-meter`` case) names the right
+        instrument with another entry's form; the suite reports it apart, neither right nor wrong.
     """
 
     name: str
@@ -143,9 +150,17 @@ class HiddenCase:
     description: str
     sensors: Mapping[str, str] = field(default_factory=dict)
     affected: tuple[str, ...] = ()
+    also: tuple[str, ...] = ()
+    instrument: str | None = None
+
+    @property
+    def targets(self) -> tuple[str, ...]:
+        """Every target the plant carries the effect on (``target`` first)."""
+        return (self.target, *self.also) if self.target else ()
 
     def to_json(self) -> dict[str, Any]:
         return {"case": self.name, "model": self.model, "effect": self.effect, "target": self.target,
+                "targets": list(self.targets), "instrument": self.instrument,
                 "description": self.description, "sensors": dict(self.sensors), "affected": list(self.affected)}
 
 

@@ -109,6 +109,9 @@ class Candidate:
         Drop of the validation mean square residual of the affected tags, in noise variances (summed).
     noise_gains
         The same per affected tag.
+    material
+        Affected tags the candidate *materially* moves (training residual changed by more than
+        :data:`MATERIAL_MOVE` noise sigmas RMS).
     tags
         Tags the candidate changes.
     values
@@ -141,6 +144,7 @@ class Candidate:
     validation_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
     training_residual: dict[str, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
     noise_gains: dict[str, float] = field(default_factory=dict)
+    material: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """An entry of ``diagnose --json``'s ``candidates``."""
@@ -149,7 +153,7 @@ class Candidate:
 
         return {"effect": self.effect, "target": self.target, "stage": self.stage,
                 "delta_bic": num(self.delta_bic), "validation_gain": num(self.validation_gain),
-                "noise_gain": num(self.noise_gain), "tags": list(self.tags),
+                "noise_gain": num(self.noise_gain), "tags": list(self.tags), "material": list(self.material),
                 "values": {k: num(v) for k, v in self.values.items()},
                 "whiteness": {k: num(v) for k, v in self.whiteness.items()},
                 **({"reason": self.reason} if self.reason else {})}
@@ -182,6 +186,7 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
             tags.append(t)
         if move > MATERIAL_MOVE * where.noise[t]:
             material.append(t)
+    moved = tuple(material)
     if not tags:
         tags = list(training_after)
     material = material or tags
@@ -200,7 +205,8 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
     return Candidate(effect, target, kind, stage, dbic, float(np.mean(gains)) if gains else math.nan, ng,
                      tuple(tags), dict(values), nb, na, white, tuple(pinned), reason, fit,
                      {t: np.asarray(validation_after[t], dtype=float) for t in tags},
-                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag)
+                     {t: np.asarray(r, dtype=float) for t, r in training_after.items()}, per_tag,
+                     tuple(t for t in moved if t in per_tag))
 
 
 def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],

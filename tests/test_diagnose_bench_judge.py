@@ -1,0 +1,45 @@
+"""How ``scripts/_bench_diagnose.py`` scores a name against a case's truth, by hand."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+from trackingbox.benches import bench_definition
+
+_SPEC = importlib.util.spec_from_file_location(
+    "_bench_diagnose", Path(__file__).resolve().parents[1] / "scripts" / "_bench_diagnose.py")
+bench = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(bench)
+
+
+def _row(effect, targets, named, instrument=None, verdict="effect"):
+    e, _, t = named.partition("@")
+    return {"expected_effect": effect, "expected_targets": targets, "instrument": instrument,
+            "verdict": verdict, "named_effect": e or None, "named_target": t or None}
+
+
+def test_a_name_is_right_only_on_a_target_the_plant_carries_the_effect_on():
+    # the borate's offset is in the effect and in the flash tank: either target is a true name
+    assert bench._judged(_row("bpr-offset", ["effect", "flash"], "bpr-offset@flash")) == "right"
+    assert bench._judged(_row("bpr-offset", ["effect", "flash"], "bpr-offset@effect")) == "right"
+    assert bench._judged(_row("bpr-offset", ["effect"], "bpr-offset@flash")) == "wrong"
+    assert bench._judged(_row("bpr-offset", ["effect", "flash"], "steam-vent@effect")) == "wrong"
+    assert bench._judged(_row("bpr-offset", ["effect"], "-", verdict="unexplained")) == "nothing"
+    # anything named where nothing in the library was hidden is wrong
+    assert bench._judged(_row(None, [], "level-density@LT_body")) == "wrong"
+
+
+def test_another_entry_on_the_faulty_meter_is_the_instrument_not_a_right_name():
+    row = _row("ds-meter", ["DS_product"], "sensor-bias@QI-6150", instrument="QI-6150")
+    assert bench._judged(row) == "instrument"
+    assert bench._judged(_row("ds-meter", ["DS_product"], "sensor-bias@TI-6151", instrument="QI-6150")) == "wrong"
+    assert bench._judged(_row("ds-meter", ["DS_product"], "ds-meter@DS_product", instrument="QI-6150")) == "right"
+
+
+def test_the_evaporator_cases_record_where_the_plant_carries_their_effect():
+    hidden = bench_definition("evaporator").hidden
+    assert hidden["borated-liquor"].targets == ("effect", "flash")
+    assert hidden["borated-liquor"].to_json()["targets"] == ["effect", "flash"]
+    assert hidden["density-meter"].instrument == "QI-6150"
+    assert hidden["vent-orifice"].targets == ("effect",) and hidden["vent-orifice"].instrument is None
+    assert hidden["ncg-after-restart"].targets == ()
