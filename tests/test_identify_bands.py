@@ -10,6 +10,7 @@ sensitivity matrices whose columns are parallel or invisible by construction.
 """
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from types import SimpleNamespace
@@ -115,16 +116,21 @@ def test_band_state_round_trip_gives_the_same_rows() -> None:
     n = 1200
     rng = np.random.default_rng(3)
     rows = _closed_loop(0.05 * rng.normal(size=n), np.full(n, P_TRUE))
-    whole = BandTracker(_spec(), COLUMNS)
-    expected = [whole.row(r) for r in rows]
-    first = BandTracker(_spec(), COLUMNS)
-    got = [first.row(r) for r in rows[:700]]
-    second = BandTracker(_spec(), COLUMNS)
-    import json
-
-    second.load_state_dict(json.loads(json.dumps(first.state_dict())))
-    got += [second.row(r) for r in rows[700:]]
+    expected, got, _, _ = _whole_and_resumed(COLUMNS, rows, 700)
     assert np.array_equal(np.array(got), np.array(expected), equal_nan=True)
+
+
+def _whole_and_resumed(columns: list[str], rows: list, split: int) -> tuple[list, list, BandTracker, BandTracker]:
+    """The band rows of one run through *rows*, and of a run stopped at *split* and resumed from its
+    state written as JSON (as a checkpoint holds it); with the two trackers that ended them."""
+    whole = BandTracker(_spec(), columns)
+    expected = [whole.row(r) for r in rows]
+    first = BandTracker(_spec(), columns)
+    got = [first.row(r) for r in rows[:split]]
+    second = BandTracker(_spec(), columns)
+    second.load_state_dict(json.loads(json.dumps(first.state_dict())))
+    got += [second.row(r) for r in rows[split:]]
+    return expected, got, whole, second
 
 
 def test_band_text_matches_the_csv_writer() -> None:
@@ -264,19 +270,11 @@ def test_lack_of_fit_is_quiet_when_the_twin_is_right_and_flags_a_missing_effect(
 
 
 def test_lack_of_fit_state_round_trip_gives_the_same_rows() -> None:
-    import json
-
     n = 2000
     rng = np.random.default_rng(13)
     rows = _closed_loop_two_tags(0.05 * rng.normal(size=n), 0.05 * rng.normal(size=n), np.full(n, P_TRUE), 0.4)
     columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
-    whole = BandTracker(_spec(), columns)
-    expected = [whole.row(r) for r in rows]
-    first = BandTracker(_spec(), columns)
-    got = [first.row(r) for r in rows[:1500]]
-    second = BandTracker(_spec(), columns)
-    second.load_state_dict(json.loads(json.dumps(first.state_dict())))
-    got += [second.row(r) for r in rows[1500:]]
+    expected, got, whole, second = _whole_and_resumed(columns, rows, 1500)
     assert np.array_equal(np.array(got), np.array(expected), equal_nan=True)
     assert second.describe()["lack_of_fit"] == whole.describe()["lack_of_fit"]
 
