@@ -292,32 +292,40 @@ static int tbx_search_relations(casadi_fmi_memory* m, int quiet, const int* flip
 static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* states_changed) {
   casadi_real out[TBX_E_NOUT + 1];
   char text[400];
-  int it, pass, found, changed = 0;
+  casadi_real first[TBX_E_NOUT + 1];
+  int it, pass, found, changed = 0, fallbacks = 0, unsettled = 0;
   int flipped[TBX_E_NC + 1];
   size_t k, j;
   for (it = 0; it < TBX_E_MAXIT; ++it) {
     for (k = 0; k < TBX_E_NP; ++k) m->v[var_offset[tbx_e_pre_vr[k]]] = m->v[var_offset[tbx_e_pre_of_vr[k]]];
     m->up_to_date = 0;
     for (k = 0; k < TBX_E_NC; ++k) flipped[k] = 0;
+    unsettled = 0;
     for (pass = 0;; ++pass) {
       if (pass >= TBX_E_PASSES) {
         found = tbx_search_relations(m, quiet, flipped, out);
         if (found == 0) break;
         if (found < 0) {
           snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
-        } else {
-          snprintf(text, sizeof text, "event iteration at t = %.17g s: the discrete variables do not settle in "
-                   "%d passes of one step, and no combination of the relations that change between them is "
-                   "consistent (a mixed system of discrete and continuous equations without a solution)",
-                   m->t, TBX_E_PASSES);
+          tbx_log(m, fmi3Error, "event", text);
+          return fmi3Error;
         }
-        tbx_log(m, fmi3Error, "event", text);
-        return fmi3Error;
+        /* no consistent combination with these pre values: the step is its first pass (the
+           values it gave become the pre values of the next step), as in an iteration whose every
+           pass is a step; a model that needs that forever fails after TBX_E_MAXIT steps */
+        for (k = 0; k < TBX_E_NOUT; ++k) out[k] = first[k];
+        tbx_write_updates(m, out);
+        ++fallbacks;
+        unsettled = 1;
+        break;
       }
       if (tbx_event_step(m, quiet, 0, out)) {
         snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
         tbx_log(m, fmi3Error, "event", text);
         return fmi3Error;
+      }
+      if (pass == 0) {
+        for (k = 0; k < TBX_E_NOUT; ++k) first[k] = out[k];
       }
       if (pass >= TBX_E_PASSES / 2) {  /* the relations that still change: the search's candidates */
         for (k = 0; k < TBX_E_NC; ++k) {
@@ -326,8 +334,9 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
       }
       if (!tbx_write_updates(m, out)) break;
     }
-    /* the last pass changed nothing: its re-initialisations are those of the settled step */
-    changed = 0;
+    /* the last pass changed nothing (or the step fell back to its first pass, which calls for
+       another step): its re-initialisations are those of the step */
+    changed = unsettled;
     for (k = 0; k < TBX_E_NR; ++k) {
       casadi_real* v = &m->v[var_offset[tbx_e_reinit_vr[k]]];
       if (*v != out[TBX_E_NU + k]) {
@@ -359,7 +368,9 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
       return fmi3OK;
     }
   }
-  snprintf(text, sizeof text, "event iteration at t = %.17g s did not converge after %d steps", m->t, TBX_E_MAXIT);
+  snprintf(text, sizeof text, "event iteration at t = %.17g s did not converge after %d steps (%d of them with "
+           "discrete variables that do not settle: a mixed system of discrete and continuous equations without "
+           "a consistent solution)", m->t, TBX_E_MAXIT, fallbacks);
   tbx_log(m, fmi3Error, "event", text);
   return fmi3Error;
 }
