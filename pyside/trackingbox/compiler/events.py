@@ -26,7 +26,12 @@ usual machinery of model-exchange FMUs:
   continuous-time values of the current iterate, the when conditions and the discrete variables
   (in dependency order), re-evaluates the continuous part with them, and repeats until the discrete
   values no longer change; the step's re-initialisations are applied. The steps are repeated until
-  a step changes nothing (``pre(v) == v`` for all); at most 100 steps, each of at most 100 passes.
+  a step changes nothing (``pre(v) == v`` for all); at most 100 steps. Passes that cycle (40 in
+  a step) are resolved by a search over the relations that changed in them (every combination,
+  fewest changes first, at most 12 relations) for one that the discrete and continuous values it
+  leads to reproduce; where there is none, the step falls back to its first pass and another step
+  follows (the MSL's ``OneWayClutch`` leaves its stuck state through ``pre(startForward)`` of the
+  step before).
   Between events ``pre(v) == v``: the FMU holds each ``pre(v)`` as a hidden variable, equal to
   ``v`` outside the event iteration.
 
