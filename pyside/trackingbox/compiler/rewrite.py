@@ -496,12 +496,29 @@ def _function_names(file: Path, mtime_ns: int, size: int) -> tuple[frozenset[byt
         return frozenset(), frozenset()
     code, _, _ = _code_mask(data)
     multi = frozenset(fn.name for fn in _functions(code))
+    # a function that holds functions of its own gets no copy (see _functions): its name must not
+    # be renamed in calls, whichever other definition of that name has one (Modelica.Fluid.Pipes:
+    # two Internal.m_flow_of_dp_fric, one with nested functions)
+    nested = frozenset(_nesting_function_names(code))
     # a function some class extends (its outputs are inherited) stays as it is; so does one that is
     # partial, replaceable or redeclared (a call may reach another definition than the copy's)
     # and so does a function named as another's derivative or inverse (its outputs must match)
     extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(
         rb"\b(?:extends|derivative(?:\s*\([^()]*\))?\s*=|inverse\s*\(\s*\w+\s*=)\s*([A-Za-z_][\w.]*)", code))
-    return multi - extended, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended
+    return multi - extended - nested, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended | nested
+
+
+def _nesting_function_names(code: bytes) -> list[bytes]:
+    """The names of the function definitions of comment-free *code* that hold function definitions."""
+    out = []
+    for m in _FUNCTION.finditer(code):
+        name = m.group(1)
+        if name == b"extends" or _previous_word(code, m.start()) == b"end":
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(name) + rb"\s*;").search(code, m.end())
+        if end is not None and _FUNCTION.search(code[m.end():end.start()]):
+            out.append(name)
+    return out
 
 
 def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
