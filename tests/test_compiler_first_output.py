@@ -66,6 +66,22 @@ def test_the_rewrite_keeps_every_line_and_renames_only_calls_taking_all_outputs(
     assert lines == [] and b"output Integer k" in alone and b"f__tuple(time)" not in alone
 
 
+def test_a_name_a_function_holding_functions_also_has_is_left_with_all_its_outputs(tmp_path):
+    """Modelica.Fluid.Pipes has two Internal.m_flow_of_dp_fric with two outputs, one of them holding
+    functions of its own (which gets no copy): a call taking both outputs of that one was renamed to a
+    copy that did not exist ('unresolved component reference: Internal.m_flow_of_dp_fric__tuple')."""
+    src = tmp_path / "N.mo"
+    src.write_text("package N\n  package A\n    function f\n      input Real x;\n      output Real y;\n"
+                   "      output Real d;\n    algorithm\n      y := x;\n      d := 1;\n    end f;\n  end A;\n"
+                   "  package B\n    function f\n      input Real x;\n      output Real y;\n      output Real d;\n"
+                   "    protected\n      function g\n        input Real u;\n        output Real v;\n"
+                   "      algorithm\n        v := 2*u;\n      end g;\n    algorithm\n      y := g(x);\n"
+                   "      d := 2;\n    end f;\n  end B;\nend N;\n")
+    assert b"f" not in tuple_function_names([src])
+    new, lines = first_output_functions(src.read_bytes(), tuple_function_names([src]))
+    assert lines == [] and b"output Real d" in new
+
+
 def test_a_name_another_function_also_has_is_left_with_all_its_outputs(tmp_path):
     a = tmp_path / "A.mo"
     a.write_text(TWO)

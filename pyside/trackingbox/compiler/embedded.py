@@ -353,6 +353,9 @@ def _signal_name(code: int) -> str:
         return f"signal {-code}"
 
 
+_ASSERT_COUNTED = re.compile(r"unbalanced model: (\d+) equations, (\d+) unknowns \(balance = [1-9]")
+
+
 def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = (),
                  validate: tuple[Path, ...] | None = None, parse_error: bool = False) -> dict:
     """Run rumoca's load + flatten (or, given *validate*, its diagnostics of those files)
@@ -391,6 +394,26 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
                 if cache is not None:
                     cache.put(key, answer["flat"])
                 return answer
+            if (tree.pruned and answer.get("kind") == "rumoca"
+                    and _ASSERT_COUNTED.search(answer["message"] or "")):
+                # rumoca counts an assert reached by evaluating a parameter's binding as an equation
+                # (.rewrite.computed_parameter_bindings): again with such parameters computed at
+                # initialisation; the first answer stands if that does not help
+                first = answer
+                retry = build_tree(source, model, libraries, Path(tmp) / "computed", prune=True,
+                                   index=index, computed=True)
+                if retry.digest == tree.digest:  # no such parameter: nothing to try
+                    return first
+                log.info("front end: %s unbalanced (%s); again with parameters bound to calls of asserting "
+                         "functions computed at initialisation", model, answer["message"].splitlines()[0][:200])
+                request = {**request, "entry": str(retry.entry),
+                           "roots": [str(r) for r in retry.roots] if retry.roots else None}
+                again = retry.rename(_run_worker(request, req, res, source, model, timeout))
+                if again["ok"]:
+                    if cache is not None:
+                        cache.put(key, again["flat"])  # under the first tree's key: the retry is its reading
+                    return again
+                return first
             if not (tree.pruned and answer.get("kind") == "rumoca" and may_be_pruned(answer["message"], index, tree)):
                 return answer
             log.info("front end: %s failed on the files its lookup reaches (%s); again on the whole "

@@ -18,10 +18,22 @@ usual machinery of model-exchange FMUs:
 * ``sample(start, interval)`` is true at the instants ``start + k*interval`` (time events that
   the FMU announces as its next event time; once the instant is over, the FMU makes it false
   again when it leaves event mode);
-* at an event (and at the end of initialisation) the FMU runs the **event iteration**: with the
-  continuous-time values at that instant, it recomputes the relations, the when conditions and
-  the discrete variables (in dependency order; ``pre`` = the values of the previous step), applies
-  the re-initialisations, and repeats until nothing changes (at most 100 steps).
+* at an event (and at the end of initialisation) the FMU runs the **event iteration** (MLS 8.6):
+  each of its steps takes ``pre(v) := v`` for every discrete variable, then solves the model's
+  equations with these ``pre`` values held, the continuous ones included (a mixed system such as
+  the MSL's friction elements, whose ``locked``/``startForward`` depend on the path torque ``sa``
+  that in turn depends on them and on ``pre(mode)``): it recomputes the relations from the
+  continuous-time values of the current iterate, the when conditions and the discrete variables
+  (in dependency order), re-evaluates the continuous part with them, and repeats until the discrete
+  values no longer change; the step's re-initialisations are applied. The steps are repeated until
+  a step changes nothing (``pre(v) == v`` for all); at most 100 steps. Passes that cycle (40 in
+  a step) are resolved by a search over the relations that changed in them (every combination,
+  fewest changes first, at most 12 relations) for one that the discrete and continuous values it
+  leads to reproduce; where there is none, the step falls back to its first pass and another step
+  follows (the MSL's ``OneWayClutch`` leaves its stuck state through ``pre(startForward)`` of the
+  step before).
+  Between events ``pre(v) == v``: the FMU holds each ``pre(v)`` as a hidden variable, equal to
+  ``v`` outside the event iteration.
 
 :class:`EventSystem` is that structure for :mod:`.fmi_export`; it is built by
 :class:`.flatten.FlatTranslator`.
@@ -78,7 +90,7 @@ class EventSystem:
     ``discrete`` are the model's discrete variables (name, symbol, start value); ``updates``
     are the assignments of one event-iteration step in order: first every condition's and
     sample's new value (from the continuous-time values), then the when conditions and the
-    discrete variables; ``pre`` maps each discrete symbol's name to its ``pre`` symbol;
+    discrete variables; ``pre`` maps each discrete variable's name to its ``pre`` symbol;
     ``reinits`` give a state's value after the step.
     """
 
@@ -95,13 +107,23 @@ class EventSystem:
     def indicators(self) -> list[ca.MX]:
         return [z for c in self.conditions for z in c.indicators]
 
+    def pres(self) -> list[tuple[ca.MX, ca.MX, float]]:
+        """``(pre symbol, symbol of v, start)`` for every ``pre(v)`` of a discrete variable or a when
+        condition: held by the FMU, set to ``v`` at each step of the event iteration."""
+        starts = {name: start for name, _, start in self.discrete}
+        syms = {name: sym for name, sym, _ in self.discrete}
+        out = [(p, syms[name], starts[name]) for name, p in self.pre.items() if name in syms]
+        out += [(w.pre, w.sym, 0.0) for w in self.whens]
+        return out
+
     def internal(self) -> list[tuple[str, ca.MX, float]]:
         """The hidden discrete variables (name, symbol, start): conditions, samples, when conditions,
-        the flag of initial() (1 from instantiation until the end of initialisation)."""
+        the flag of initial() (1 from instantiation until the end of initialisation), the pre values."""
         out = [(c.sym.name(), c.sym, 0.0) for c in self.conditions]
         out += [(s.sym.name(), s.sym, 0.0) for s in self.samples]
         out += [(w.sym.name(), w.sym, 0.0) for w in self.whens]
         out.append((self.initial.name(), self.initial, 1.0))  # true until initialisation ends
+        out += [(p.name(), p, start) for p, _, start in self.pres()]
         return out
 
 

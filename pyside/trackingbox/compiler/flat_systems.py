@@ -31,7 +31,8 @@ class SystemAssembly:
                         initial: bool = False) -> tuple[list[tuple[ca.MX, str]], list[tuple[ca.MX, str]]]:
         """(continuous equations, equations of discrete variables). An equation belongs to a discrete
         variable when no continuous unknown is in it and a discrete variable is (in an initial equation,
-        also pre(v), which is v there). In the continuous equations pre(v) is v (between events)."""
+        also pre(v), which is v there). The continuous equations keep pre(v): between events the FMU
+        holds it equal to v, in the event iteration it is the value before the step (.events)."""
         names = {sv.name for sv in discrete}
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         cont, disc = [], []
@@ -42,7 +43,7 @@ class SystemAssembly:
                 # at an event pre(v) is the value before the step; at initialisation it is v
                 disc.append((held if initial else r, origin))
             else:
-                cont.append((held, origin))
+                cont.append((held if initial else r, origin))
         return cont, disc
 
     def _event_system(self, discrete: list[ScalarVar], residuals: list[tuple[ca.MX, str]],

@@ -36,6 +36,14 @@ CHATTER_SPACING = 1e-9
 """Seconds (relative to max(1, |t|)) within which two events count as one burst (see above)."""
 
 
+EVENT_PASSES = 40
+"""Passes of one event-iteration step (pre values held) after which the step's passes count as a
+cycle and the relations that changed in the second half are searched (``tbx_search_relations``)."""
+
+SEARCH_RELATIONS = 12
+"""At most this many cycling relations are searched (2^12 combinations); more fail the step."""
+
+
 def value_references(xml: str) -> dict[str, int]:
     root = ET.fromstring(xml)
     variables = root.find("ModelVariables")
@@ -68,8 +76,8 @@ def _vrs(syms: list[ca.MX], refs: dict[str, int], model: str, what: str) -> list
     out = []
     for sym in syms:
         name = sym.name()
-        if name.startswith("pre(") and name.endswith(")") and name[4:-1] in refs:
-            name = name[4:-1]  # pre(v) in a runtime function: v's value when it is called
+        if name not in refs and name.startswith("pre(") and name.endswith(")") and name[4:-1] in refs:
+            name = name[4:-1]  # pre(v) that the FMU does not hold: v's value when it is called
         if name == "time":
             out.append(str(_TIME_VR))
         elif name in refs:
@@ -207,7 +215,7 @@ static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
 
 
 _EVENTS = """
-static int tbx_event_step(casadi_fmi_memory* m, int quiet, casadi_real* out) {
+static int tbx_event_step(casadi_fmi_memory* m, int quiet, int given, casadi_real* out) {
   casadi_real win[TBX_E_NW + 1];
   casadi_real q = quiet ? 1 : 0;
   const casadi_real* arg[TBX_E_SZ_ARG + 1];
@@ -221,29 +229,114 @@ static int tbx_event_step(casadi_fmi_memory* m, int quiet, casadi_real* out) {
   arg[0] = win;
   arg[1] = &q;
   res[0] = out;
-  return tbx_call_tbx_event(arg, res);
+  return given ? tbx_call_tbx_event_given(arg, res) : tbx_call_tbx_event(arg, res);
 }
-/* The event iteration (trackingbox.compiler.events): repeat the step until no held value changes;
-   re-initialised states are written too. Then the next sample() instant, if any. */
+/* Write the updates of *out*; 1 if one changed. */
+static int tbx_write_updates(casadi_fmi_memory* m, const casadi_real* out) {
+  int changed = 0;
+  size_t k;
+  for (k = 0; k < TBX_E_NU; ++k) {
+    casadi_real* v = &m->v[var_offset[tbx_e_upd_vr[k]]];
+    if (*v != out[k]) {
+      *v = out[k];
+      changed = 1;
+    }
+  }
+  m->up_to_date = 0;
+  return changed;
+}
+/* The passes of a step cycle (relations that the discrete values they select flip back): search the
+   relations that changed in the cycle, every combination of their values (at most 2^TBX_E_SEARCH),
+   for one that the discrete variables it selects and the continuous values that follow reproduce
+   (the mixed system's solution). Fewest changes from the current values first. 0: found (*out*
+   holds its pass), 1: none, -1: the model could not be evaluated. */
+static int tbx_search_relations(casadi_fmi_memory* m, int quiet, const int* flipped, casadi_real* out) {
+  size_t idx[TBX_E_NC + 1], n = 0, k, b;
+  casadi_real base[TBX_E_NC + 1], keep[TBX_E_NU + 1];
+  unsigned long mask, count;
+  int bits;
+  for (k = 0; k < TBX_E_NC; ++k) {
+    if (flipped[k]) idx[n++] = k;
+  }
+  if (n == 0 || n > TBX_E_SEARCH) return 1;
+  for (k = 0; k < TBX_E_NU; ++k) keep[k] = m->v[var_offset[tbx_e_upd_vr[k]]];
+  for (k = 0; k < n; ++k) base[k] = keep[idx[k]];
+  count = 1UL << n;
+  for (bits = 0; bits <= (int)n; ++bits) {
+    for (mask = 0; mask < count; ++mask) {
+      unsigned long x = mask;
+      int ones = 0;
+      while (x) { ones += (int)(x & 1UL); x >>= 1; }
+      if (ones != bits) continue;
+      for (k = 0; k < TBX_E_NU; ++k) m->v[var_offset[tbx_e_upd_vr[k]]] = keep[k];
+      for (b = 0; b < n; ++b) {
+        casadi_real flip = (mask >> b) & 1UL ? 1 : 0;
+        m->v[var_offset[tbx_e_upd_vr[idx[b]]]] = flip ? (base[b] != 0 ? 0 : 1) : base[b];
+      }
+      m->up_to_date = 0;
+      if (tbx_event_step(m, quiet, 1, out)) return -1;
+      tbx_write_updates(m, out);
+      if (tbx_event_step(m, quiet, 0, out)) return -1;
+      if (!tbx_write_updates(m, out)) return 0;
+    }
+  }
+  for (k = 0; k < TBX_E_NU; ++k) m->v[var_offset[tbx_e_upd_vr[k]]] = keep[k];
+  m->up_to_date = 0;
+  return 1;
+}
+/* The event iteration (trackingbox.compiler.events, MLS 8.6). Each step: pre(v) := v, then passes
+   with these pre values held (relations from the continuous-time values of the current iterate,
+   the discrete variables, the continuous part again) until no discrete value changes: the mixed
+   system of the step solved by fixed-point iteration; then the step's re-initialisations. Steps
+   are repeated until one changes nothing (pre(v) == v). Then the next sample() instant, if any. */
 static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* states_changed) {
   casadi_real out[TBX_E_NOUT + 1];
-  char text[300];
-  int it, changed;
+  char text[400];
+  casadi_real first[TBX_E_NOUT + 1];
+  int it, pass, found, changed = 0, fallbacks = 0, unsettled = 0;
+  int flipped[TBX_E_NC + 1];
   size_t k, j;
   for (it = 0; it < TBX_E_MAXIT; ++it) {
-    if (tbx_event_step(m, quiet, out)) {
-      snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
-      tbx_log(m, fmi3Error, "event", text);
-      return fmi3Error;
-    }
-    changed = 0;
-    for (k = 0; k < TBX_E_NU; ++k) {
-      casadi_real* v = &m->v[var_offset[tbx_e_upd_vr[k]]];
-      if (*v != out[k]) {
-        *v = out[k];
-        changed = 1;
+    for (k = 0; k < TBX_E_NP; ++k) m->v[var_offset[tbx_e_pre_vr[k]]] = m->v[var_offset[tbx_e_pre_of_vr[k]]];
+    m->up_to_date = 0;
+    for (k = 0; k < TBX_E_NC; ++k) flipped[k] = 0;
+    unsettled = 0;
+    for (pass = 0;; ++pass) {
+      if (pass >= TBX_E_PASSES) {
+        found = tbx_search_relations(m, quiet, flipped, out);
+        if (found == 0) break;
+        if (found < 0) {
+          snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
+          tbx_log(m, fmi3Error, "event", text);
+          return fmi3Error;
+        }
+        /* no consistent combination with these pre values: the step is its first pass (the
+           values it gave become the pre values of the next step), as in an iteration whose every
+           pass is a step; a model that needs that forever fails after TBX_E_MAXIT steps */
+        for (k = 0; k < TBX_E_NOUT; ++k) out[k] = first[k];
+        tbx_write_updates(m, out);
+        ++fallbacks;
+        unsettled = 1;
+        break;
       }
+      if (tbx_event_step(m, quiet, 0, out)) {
+        snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
+        tbx_log(m, fmi3Error, "event", text);
+        return fmi3Error;
+      }
+      if (pass == 0) {
+        for (k = 0; k < TBX_E_NOUT; ++k) first[k] = out[k];
+      }
+      if (pass >= TBX_E_PASSES / 2) {  /* the relations that still change: the search's candidates */
+        for (k = 0; k < TBX_E_NC; ++k) {
+          if (m->v[var_offset[tbx_e_upd_vr[k]]] != out[k]) flipped[k] = 1;
+        }
+      }
+      if (!tbx_write_updates(m, out)) break;
     }
+    /* the last pass changed nothing (or the step fell back to its first pass, which calls for
+       another step): its re-initialisations are those of the step */
+    changed = unsettled;
     for (k = 0; k < TBX_E_NR; ++k) {
       casadi_real* v = &m->v[var_offset[tbx_e_reinit_vr[k]]];
       if (*v != out[TBX_E_NU + k]) {
@@ -251,6 +344,9 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
         changed = 1;
         *states_changed = 1;
       }
+    }
+    for (k = 0; k < TBX_E_NP; ++k) {
+      if (m->v[var_offset[tbx_e_pre_vr[k]]] != m->v[var_offset[tbx_e_pre_of_vr[k]]]) changed = 1;
     }
     m->up_to_date = 0;
     if (!changed) {
@@ -272,7 +368,9 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
       return fmi3OK;
     }
   }
-  snprintf(text, sizeof text, "event iteration at t = %.17g s did not converge after %d steps", m->t, TBX_E_MAXIT);
+  snprintf(text, sizeof text, "event iteration at t = %.17g s did not converge after %d steps (%d of them with "
+           "discrete variables that do not settle: a mixed system of discrete and continuous equations without "
+           "a consistent solution)", m->t, TBX_E_MAXIT, fallbacks);
   tbx_log(m, fmi3Error, "event", text);
   return fmi3Error;
 }
@@ -290,6 +388,7 @@ static fmi3Status tbx_initialize_events(casadi_fmi_memory* m) {
   int round, changed = 0;
   size_t k;
   m->v[var_offset[TBX_E_INIT_VR]] = 1;
+  for (k = 0; k < TBX_E_NP; ++k) m->v[var_offset[tbx_e_pre_vr[k]]] = m->v[var_offset[tbx_e_pre_of_vr[k]]];
   m->up_to_date = 0;
   for (round = 0; round < 20; ++round) {
 #ifdef TBX_I_NZ
@@ -398,33 +497,49 @@ def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX
     return functions, assert_syms, known_syms
 
 
-def _event_function(em: ExplicitModel, quiet: ca.MX) -> tuple[ca.Function, list[ca.MX], int]:
-    """``tbx_event(w, quiet) -> out``: one step of the event iteration (.events). *w* are the values
-    of the symbols it reads (as the FMU holds them: pre(v) is v's value), *out* the new values of
-    ``events.updates`` in order, then of the re-initialised states, then each sample's start and
-    interval. Returns the function, its input symbols and the number of updates."""
+def _event_function(em: ExplicitModel, quiet: ca.MX) -> tuple[ca.Function, ca.Function, list[ca.MX], int]:
+    """``tbx_event(w, quiet) -> out``: one pass of the event iteration (.events). *w* are the values
+    of the symbols it reads (as the FMU holds them, pre(v) its held pre value), *out* the new values
+    of ``events.updates`` in order, then of the re-initialised states, then each sample's start and
+    interval. ``tbx_event_given(w, quiet)``, with the same inputs and outputs, takes the relations'
+    values as the FMU holds them instead of recomputing them (the search for a consistent set of
+    relations). Returns both functions, their input symbols and the number of updates."""
     ev = em.events
-    olds: list[ca.MX] = []
-    news: list[ca.MX] = []
-    for lhs, expr in ev.updates:
-        value = ca.substitute([expr], olds, news)[0] if olds else expr
-        olds.append(lhs)
-        news.append(value)
-    reinit = [ca.substitute([e], olds, news)[0] if olds else e for _, e in ev.reinits]
-    timing = [x for smp in ev.samples for x in (smp.start,)] + [x for smp in ev.samples for x in (smp.interval,)]
-    outs = news + reinit + timing
-    body = ca.vertcat(*outs) if outs else ca.MX(0, 1)
+    conditions = {c.sym.name() for c in ev.conditions}
+
+    def body_of(given: bool) -> ca.MX:
+        olds: list[ca.MX] = []
+        news: list[ca.MX] = []
+        for lhs, expr in ev.updates:
+            if given and lhs.name() in conditions:
+                value = lhs
+            else:
+                value = ca.substitute([expr], olds, news)[0] if olds else expr
+            olds.append(lhs)
+            news.append(value)
+        reinit = [ca.substitute([e], olds, news)[0] if olds else e for _, e in ev.reinits]
+        timing = [smp.start for smp in ev.samples] + [smp.interval for smp in ev.samples]
+        outs = news + reinit + timing
+        return ca.vertcat(*outs) if outs else ca.MX(0, 1)
+
+    bodies = [body_of(False), body_of(True)]
     seen: dict[str, ca.MX] = {}
-    for sym in ca.symvar(body):
-        if sym.name() != quiet.name():
-            seen.setdefault(sym.name(), sym)
+    for body in bodies:
+        for sym in ca.symvar(body):
+            if sym.name() != quiet.name():
+                seen.setdefault(sym.name(), sym)
     syms = [seen[n] for n in sorted(seen)]
     w = ca.MX.sym("w", len(syms))
     q = ca.MX.sym("q")
-    args = syms + [s for s in ca.symvar(body) if s.name() == quiet.name()]
-    vals = [w[i] for i in range(len(syms))] + [q] * (len(args) - len(syms))
-    body = ca.substitute([body], args, vals)[0] if args else body
-    return ca.Function("tbx_event", [w, q], [body]), syms, len(news)
+    position = {sym.name(): i for i, sym in enumerate(syms)}
+    out = []
+    for body in bodies:
+        args = ca.symvar(body)
+        vals = [w[position[a.name()]] if a.name() in position else q for a in args]
+        out.append(ca.substitute([body], args, vals)[0] if args else body)
+    n_updates = len(ev.updates)
+    return (ca.Function("tbx_event", [w, q], [out[0]]), ca.Function("tbx_event_given", [w, q], [out[1]]),
+            syms, n_updates)
 
 
 def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, int]) -> str:
@@ -433,8 +548,8 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
     ev = em.events
     if ev is not None:
         quiet = ca.MX.sym("_tbx_quiet")
-        event_fn, event_syms, n_updates = _event_function(em, quiet)
-        functions.append(event_fn)
+        event_fn, given_fn, event_syms, n_updates = _event_function(em, quiet)
+        functions += [event_fn, given_fn]
     name = "tbx_runtime.c"
     gen = ca.CodeGenerator(name, {"with_header": False})
     for fn in functions:
@@ -485,11 +600,22 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(_c_array("long", "tbx_e_upd_vr", _vrs([lhs for lhs, _ in ev.updates], refs, em.name,
                                                           "the event iteration")))
         glue.append(_c_array("long", "tbx_e_reinit_vr", _vrs([x for x, _ in ev.reinits], refs, em.name, "reinit")))
+        pres = ev.pres()
+        glue.append(f"#define TBX_E_NP {len(pres)}\n")
+        glue.append(_c_array("long", "tbx_e_pre_vr", _vrs([p for p, _, _ in pres], refs, em.name, "pre()")))
+        glue.append(_c_array("long", "tbx_e_pre_of_vr", _vrs([v for _, v, _ in pres], refs, em.name, "pre()")))
         glue.append(_c_array("long", "tbx_e_sample_vr", _vrs([smp.sym for smp in ev.samples], refs, em.name,
                                                              "sample()")))
         glue.append(_c_array("fmi3ValueReference", "tbx_z_vr",
                              [str(refs[f"_tbx_z{k + 1}"]) for k in range(n_z)]))
+        glue.append(_work_defines("TBX_G", by_name["tbx_event_given"]))
+        glue.append("int tbx_event_given(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
+                    "casadi_real* w, int mem);\nint tbx_event_given_checkout(void);\n"
+                    "void tbx_event_given_release(int mem);\n")
+        glue.append(f"#define TBX_E_NC {len(ev.conditions)}\n#define TBX_E_PASSES {EVENT_PASSES}\n"
+                    f"#define TBX_E_SEARCH {SEARCH_RELATIONS}\n")
         glue.append(_CALL % {"fn": "tbx_event", "P": "TBX_E"})
+        glue.append(_CALL % {"fn": "tbx_event_given", "P": "TBX_G"})
         glue.append(_EVENTS)
 
     exit_body = ["  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n"]

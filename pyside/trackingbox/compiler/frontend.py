@@ -36,7 +36,7 @@ from pathlib import Path
 
 from .. import config
 from .library import LibraryIndex, cache_dir, index_for, source_root
-from .rewrite import frontend_bytes, tuple_function_names
+from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
 from .source import ModelicaSource
 
 log = logging.getLogger(__name__)
@@ -107,14 +107,16 @@ class FrontendTree:
 
 
 def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], dest: Path,
-               prune: bool = True, index: LibraryIndex | None = None) -> FrontendTree:
+               prune: bool = True, index: LibraryIndex | None = None, computed: bool = False) -> FrontendTree:
     """Copy what the front end needs for *model* under *dest* (see the module docstring).
 
     With *prune*, the files the model can reach, from the source and the libraries, under
     ``dest/lib/<package>/...`` (rumoca's root; the entry is the model's own file); a single-file
     source goes to ``dest/src``. Without, the whole source as the compiler always gave it
     (``dest/src/...`` relative to the source's root directory, entry its ``package.mo`` or file,
-    the libraries as they are).
+    the libraries as they are). With *computed* (a retry after rumoca counted an assert as an
+    equation), parameters bound to a call of a function that asserts are computed at
+    initialisation (:func:`.rewrite.computed_parameter_bindings`).
     """
     index = index if index is not None else index_for(source, libraries)
     needed = index.frontend_files(model) if prune and model in index.classes else None
@@ -122,6 +124,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
         return _full_tree(source, libraries, dest)
     lib_dir, src_dir = dest / "lib", dest / "src"
     tuple_names = tuple_function_names(sorted(needed))
+    asserting = asserting_function_names(sorted(needed)) if computed else frozenset()
     digest = hashlib.sha256()
     originals: dict[Path, Path] = {}
     renames: list[tuple[str, str]] = []
@@ -138,11 +141,11 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
             renames.append((str(base) + os.sep, str(root) + os.sep))
             for f in files:
                 target = base / f.relative_to(root)
-                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}", tuple_names)
+                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}", tuple_names, asserting)
                 originals[target] = f
         else:
             target = (src_dir if root == own else lib_dir) / root.name
-            _copy(root, target, digest, root.name, tuple_names)
+            _copy(root, target, digest, root.name, tuple_names, asserting)
             originals[target] = root
             renames.append((str(target), str(root)))
     if source.entry.name != "package.mo":
@@ -182,8 +185,9 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) 
                         entry_rel=str(entry.relative_to(dest)))
 
 
-def _copy(src: Path, target: Path, digest, rel: str, tuple_names: frozenset[bytes] = frozenset()) -> None:
-    data = frontend_bytes(src, tuple_names)
+def _copy(src: Path, target: Path, digest, rel: str, tuple_names: frozenset[bytes] = frozenset(),
+          asserting: frozenset[bytes] = frozenset()) -> None:
+    data = frontend_bytes(src, tuple_names, asserting)
     if data is None:
         data = src.read_bytes()
     target.parent.mkdir(parents=True, exist_ok=True)

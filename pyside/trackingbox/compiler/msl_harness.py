@@ -9,7 +9,7 @@ time limit:
    ``ModelicaServices`` beside ``Modelica`` itself; ``--library`` adds libraries);
 2. simulate the FMU over its ``experiment`` (start, stop; the output grid of the reference where
    there is one, else the experiment's interval; relative tolerance the smaller of the experiment's
-   and 1e-6) with fmpy's CVODE;
+   and 1e-6) with fmpy's CVODE (at most :data:`CVODE_MAX_STEPS` internal steps per output interval);
 3. compare the reference's comparison signals (``<ref>/<path of the model>/comparisonSignals.txt``
    and ``<Name>.csv``, the Modelica Association's reference results) with the simulation: for each
    signal the largest deviation over the reference's time points, divided by the signal's range in
@@ -31,6 +31,7 @@ worker and of its child processes (the front end, gcc).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import re
@@ -63,6 +64,11 @@ DEFAULT_PACKAGES = (
 )
 OUTCOMES = ("match", "close", "simulated", "refused", "error", "wrong", "sim-failed", "crashed", "timeout")
 MATCH, CLOSE = 1e-3, 1e-2
+
+CVODE_MAX_STEPS = 1_000_000
+"""Internal CVODE steps allowed per output interval (fmpy's default is 500: the MSL's
+``Analog.Examples.DifferenceAmplifier`` drives a transistor pair with a 200 MHz damped sine over a
+1 s experiment, so 2 ms output steps need far more; ``OpAmps.Multivibrator`` switches fast too)."""
 WINDOW = 1e-4
 """Half-width of the time window (fraction of the horizon) read around each reference point."""
 
@@ -216,6 +222,27 @@ def run_example(request: dict) -> dict:
                 "message": f"largest deviation {worst:.3g} of the signal's range, on {where}"}
 
 
+@contextlib.contextmanager
+def _cvode_steps(steps: int):
+    """fmpy 0.3.32's ``simulate_fmu`` builds its CVODE solver with 500 steps per output interval and
+    no way to pass more: while in this block it builds one with *steps* (the harness's worker runs one
+    simulation at a time)."""
+    from fmpy import sundials
+
+    original = sundials.CVodeSolver
+
+    class Solver(original):  # type: ignore[misc, valid-type]
+        def __init__(self, *args, **kwargs):
+            kwargs["maxNumSteps"] = steps
+            super().__init__(*args, **kwargs)
+
+    sundials.CVodeSolver = Solver
+    try:
+        yield
+    finally:
+        sundials.CVodeSolver = original
+
+
 def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np.ndarray], str]:
     """Simulate *fmu* over its default experiment; (time, {signal: values}, problem or "")."""
     import fmpy
@@ -238,8 +265,9 @@ def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np
         interval = (stop - start) / 500
     interval = max(interval, (stop - start) / 200_000)
     wanted = [s for s in (ref.signals if ref is not None else ()) if s in names]
-    result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, relative_tolerance=tol,
-                               output_interval=interval, output=wanted or None, fmi_type="ModelExchange")
+    with _cvode_steps(CVODE_MAX_STEPS):
+        result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, relative_tolerance=tol,
+                                   output_interval=interval, output=wanted or None, fmi_type="ModelExchange")
     time_ = np.asarray(result["time"], dtype=float)
     values = {s: np.asarray(result[s], dtype=float) for s in (wanted or result.dtype.names[1:])}
     bad = [s for s, v in values.items() if not np.all(np.isfinite(v))]

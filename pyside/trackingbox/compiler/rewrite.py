@@ -342,8 +342,8 @@ def replace_library_bodies(data: bytes) -> tuple[bytes, list[tuple[str, int]]]:
 
 
 @functools.lru_cache(maxsize=4096)
-def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int,
-                           tuple_names: frozenset[bytes] = frozenset()) -> bytes | None:
+def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: frozenset[bytes] = frozenset(),
+                           asserting: frozenset[bytes] = frozenset()) -> bytes | None:
     data = file.read_bytes()
     bom = data.startswith(BOM)
     body = data[3:] if bom else data
@@ -359,6 +359,11 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int,
             log.debug("%s: functions with several outputs read with their first one (a __tuple copy "
                       "for the calls taking all) at lines %s", file, ", ".join(map(str, lines)))
         body, changed = firsts, True
+    computed, lines = computed_parameter_bindings(body, asserting)
+    if lines:
+        log.debug("%s: parameters bound to a call of a function that asserts computed at initialisation "
+                  "(fixed = false) at lines %s", file, ", ".join(map(str, lines)))
+        body, changed = computed, True
     rewrite = protect_der_equations(body)
     if rewrite.lines:
         log.debug("%s: der(...) equations in for-loops put in parentheses for rumoca at lines %s%s",
@@ -368,14 +373,17 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int,
     return body if changed else None
 
 
-def frontend_bytes(file: Path, tuple_names: frozenset[bytes] = frozenset()) -> bytes | None:
+def frontend_bytes(file: Path, tuple_names: frozenset[bytes] = frozenset(),
+                   asserting: frozenset[bytes] = frozenset()) -> bytes | None:
     """What rumoca should read for *file* if not the file itself: its text without a
     byte-order mark, with :func:`replace_library_bodies`, :func:`first_output_functions` (calls
     taking several outputs renamed for the functions in *tuple_names*, see
-    :func:`tuple_function_names`) and :func:`protect_der_equations` applied; None if none changes it."""
+    :func:`tuple_function_names`), :func:`computed_parameter_bindings` for the functions in
+    *asserting* (none unless a first try failed, see :func:`asserting_function_names`) and
+    :func:`protect_der_equations` applied; None if none changes it."""
     try:
         st = file.stat()
-        return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size, tuple_names)
+        return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size, tuple_names, asserting)
     except OSError:
         return None
 
@@ -488,12 +496,29 @@ def _function_names(file: Path, mtime_ns: int, size: int) -> tuple[frozenset[byt
         return frozenset(), frozenset()
     code, _, _ = _code_mask(data)
     multi = frozenset(fn.name for fn in _functions(code))
+    # a function that holds functions of its own gets no copy (see _functions): its name must not
+    # be renamed in calls, whichever other definition of that name has one (Modelica.Fluid.Pipes:
+    # two Internal.m_flow_of_dp_fric, one with nested functions)
+    nested = frozenset(_nesting_function_names(code))
     # a function some class extends (its outputs are inherited) stays as it is; so does one that is
     # partial, replaceable or redeclared (a call may reach another definition than the copy's)
     # and so does a function named as another's derivative or inverse (its outputs must match)
     extended = frozenset(m.group(1).split(b".")[-1] for m in re.finditer(
         rb"\b(?:extends|derivative(?:\s*\([^()]*\))?\s*=|inverse\s*\(\s*\w+\s*=)\s*([A-Za-z_][\w.]*)", code))
-    return multi - extended, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended
+    return multi - extended - nested, (frozenset(m.group(1) for m in _FUNCTION.finditer(code)) - multi) | extended | nested
+
+
+def _nesting_function_names(code: bytes) -> list[bytes]:
+    """The names of the function definitions of comment-free *code* that hold function definitions."""
+    out = []
+    for m in _FUNCTION.finditer(code):
+        name = m.group(1)
+        if name == b"extends" or _previous_word(code, m.start()) == b"end":
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(name) + rb"\s*;").search(code, m.end())
+        if end is not None and _FUNCTION.search(code[m.end():end.start()]):
+            out.append(name)
+    return out
 
 
 def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
@@ -583,3 +608,122 @@ def _rename_tuple_calls(data: bytes, tuple_names: frozenset[bytes]) -> bytes:
 
 
 _TUPLE_AFTER = {b"then", b"else", b"loop", b"algorithm", b"equation"}
+
+
+# --- parameters bound to a call of a function that asserts -------------------------------------
+#
+# rumoca 0.10.2 evaluates a parameter's binding when it builds the DAE, and an ``assert`` that the
+# evaluation of a called function reaches is counted as one more equation: ``parameter Real p =
+# g(...)`` with ``g`` asserting makes the model unbalanced ("unbalanced model: 2 equations, 1
+# unknowns"). The MSL's ``Vectors.interpolate`` asserts in its loop over the table's segments, so a
+# ``LossyGear`` whose ``lossTable`` has two rows or more (``Rotational.Examples.HeatLosses``) fails.
+# Only when a model fails so, the front end is run again on a copy in which each Real parameter
+# bound to a call of such a function is declared ``fixed = false`` and its binding becomes an
+# initial equation (the same value, computed at initialisation, its asserts checked there).
+
+_ASSERTING_SKIP_TYPES = {b"Integer", b"Boolean", b"String"}
+_PARAMETER_DECL = re.compile(rb"\bparameter\s+([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*")
+_CLASS_HEADER = re.compile(rb"\b(?:model|block|class|record|connector|package|function)\s+[A-Za-z_]\w*")
+
+
+def asserting_function_names(files) -> frozenset[bytes]:
+    """The simple names of the functions defined in *files* whose text (as rumoca reads it) asserts."""
+    names: set[bytes] = set()
+    for f in files:
+        try:
+            st = Path(f).stat()
+        except OSError:
+            continue
+        names |= _asserting_functions(Path(f), st.st_mtime_ns, st.st_size)
+    return frozenset(names)
+
+
+@functools.lru_cache(maxsize=8192)
+def _asserting_functions(file: Path, mtime_ns: int, size: int) -> frozenset[bytes]:
+    try:
+        data = file.read_bytes()
+    except OSError:
+        return frozenset()
+    if b"function" not in data or b"assert" not in data:
+        return frozenset()
+    data, _ = replace_library_bodies(data[3:] if data.startswith(BOM) else data)
+    code, _, _ = _code_mask(data)
+    out = set()
+    for m in _FUNCTION.finditer(code):
+        name = m.group(1)
+        if name == b"extends" or _previous_word(code, m.start()) == b"end":
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(name) + rb"\s*;").search(code, m.end())
+        if end is not None and re.search(rb"\bassert\s*\(", code[m.end():end.start()]):
+            out.add(name)
+    return frozenset(out)
+
+
+def computed_parameter_bindings(data: bytes, names: frozenset[bytes]) -> tuple[bytes, list[int]]:
+    """*data* with each scalar Real parameter bound to a call of a function in *names* declared
+    ``fixed = false``, its binding an initial equation (see above); and the lines changed. Lines
+    are kept (the binding's text keeps its line breaks), byte offsets after an edit shift."""
+    if not names or b"parameter" not in data:
+        return data, []
+    code, _, _ = _code_mask(data)
+    edits: list[tuple[int, int, bytes]] = []
+    lines: list[int] = []
+    for m in _PARAMETER_DECL.finditer(code):
+        ctype, name = m.group(1), m.group(2)
+        if ctype.split(b".")[-1] in _ASSERTING_SKIP_TYPES or _previous_word(code, m.start()) in {b"constant", b"final"}:
+            continue
+        k = m.end()
+        mods: tuple[int, int] | None = None
+        if code[k:k + 1] == b"(":
+            close = _matching_paren(code, k)
+            if close is None:
+                continue
+            mods = (k, close)
+            k = close + 1
+        eq = re.match(rb"\s*=(?!=)", code[k:])
+        if eq is None:  # no binding, or an array (name[...]) or a modifier only
+            continue
+        start = k + eq.end()
+        stop = _statement_end(code, start, len(code))
+        if stop is None:
+            continue
+        # the binding ends before a description string or an annotation (strings are blanked in code)
+        text_end = start + _binding_end(code, data, start, stop - 1)
+        binding = code[start:text_end]
+        calls = {c.split(b".")[-1] for c in re.findall(rb"(?<![\w.])([A-Za-z_][\w.]*)\s*\(", binding)}
+        if not calls & names:
+            continue
+        if re.search(rb"\b(?:fixed)\s*=", code[mods[0]:mods[1]] if mods else b""):
+            continue
+        header = data[m.start():mods[0] + 1] + b"fixed = false, " + data[mods[0] + 1:mods[1] + 1] if mods else \
+            data[m.start():m.end()].rstrip() + b"(fixed = false)"
+        before = code[:m.start()]
+        heads = list(_CLASS_HEADER.finditer(before))
+        scope = before[heads[-1].end():] if heads else before
+        sections = re.findall(rb"\b(public|protected)\b", scope)
+        visibility = sections[-1] if sections else b"public"
+        new = (header + data[text_end:stop - 1] + b"; initial equation " + name + b" = "
+               + data[start:text_end].strip() + b"; " + visibility)
+        edits.append((m.start(), stop, new))  # the declaration's ';' too: the new text ends in a keyword
+        lines.append(data.count(b"\n", 0, m.start()) + 1)
+    if not edits:
+        return data, []
+    out = bytearray(data)
+    for s, e, new in reversed(edits):
+        out[s:e] = new
+    return bytes(out), lines
+
+
+def _binding_end(code: bytes, data: bytes, start: int, stop: int) -> int:
+    """The length of a binding in *code*[start:stop]: up to a description string or an annotation
+    at depth 0 (strings are blanked in *code*, so they are found in *data*)."""
+    depth = 0
+    for k in range(start, stop):
+        c = code[k]
+        if c in b"([{":
+            depth += 1
+        elif c in b")]}":
+            depth -= 1
+        elif depth == 0 and (data[k:k + 1] == b'"' or re.match(rb"annotation\b", code[k:k + 11])):
+            return len(code[start:k].rstrip())
+    return len(code[start:stop].rstrip())
