@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import time
@@ -47,6 +48,12 @@ def build(bench: str, case: str, scale: float, seed: int, work: Path, hours: flo
 
 def run_case(bench: str, case: str, folder: Path, rounds: int, extra: list[str]) -> dict:
     out = folder / "apply"
+    done = out / "apply.json"
+    if done.is_file():  # a finished run (its stop recorded) is reported again, not rerun
+        doc = json.loads(done.read_text())
+        if doc.get("stopped"):
+            return {"bench": bench, "case": case, "folder": str(folder), "seconds": math.nan, "exit": 0,
+                    "doc": doc, "reused": True}
     cmd = [sys.executable, "-m", "trackingbox.cli", "diagnose", str(folder / "spec.toml"), "--apply",
            "--apply-rounds", str(rounds), "--truth", str(folder / "truth.json"), "-o", str(out), "--json", *extra]
     t0 = time.perf_counter()
@@ -82,13 +89,39 @@ def summary(row: dict, biased: float) -> dict:
                         "after_max_of_range": a["max_error_of_range"] if a else None,
                         "ratio": ratio, "biased": was_biased,
                         "ok": (ratio is not None and ratio <= 0.5) if was_biased else None}
+    bands = {}
+    truth_file = Path(row["folder"]) / "truth.json"
+    runs = [("before", doc.get("before"))] + [(f"round{r['round']}", r.get("retrack")) for r in rounds]
+    for label, run in runs:
+        if run and truth_file.is_file():
+            bands[label] = band_coverages(Path(run["csv"]), json.loads(truth_file.read_text()), before)
     phases = {}
     if doc.get("before"):
         phases["before"] = doc["before"].get("timings", {})
     for r in rounds:
         phases[f"round{r['round']}"] = {**{"diagnose": r.get("timings", {}).get("diagnose")},
                                         **((r.get("retrack") or {}).get("timings") or {})}
-    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases}
+    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands}
+
+
+def band_coverages(csv: Path, truth: dict, errors: dict) -> dict:
+    """Per tracked parameter with a band in *csv*: ``scripts/bench_uncertainty``'s coverage of the truth
+    after settling (the band machinery of issue 31: the share of rows whose band holds the truth, the share
+    its lack-of-fit flag marks)."""
+    import pandas as pd
+    from _bench_uncertainty import band_coverage
+
+    from trackingbox.diagnose.apply import truth_on
+
+    columns = pd.read_csv(csv, nrows=0).columns
+    out = {}
+    for name, e in errors.items():
+        if f"parameter_lo:{name}" not in columns:
+            continue
+        t = pd.read_csv(csv, usecols=["time"])["time"].to_numpy(float)
+        cov = band_coverage(csv, name, truth_on(truth, name, t), float(e["settle"]))
+        out[name] = {k: cov.get(k) for k in ("rows", "covered", "flagged", "below", "median_half_width")}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -114,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
         with open(args.work / "apply.jsonl", "a") as f:
             f.write(json.dumps({k: v for k, v in row.items() if k not in ("doc", "partial")}, default=str) + "\n")
         print(f"{args.bench} {case} x{args.noise:g} s{args.seed}: named per round {' | '.join(s['named']) or '-'}"
-              f"; {s['stopped'] or ''}; {row['seconds']:.0f} s" + (f"; ERROR {row['error']}" if "error" in row else ""),
+              f"; {s['stopped'] or ''}; {row['seconds']:.0f} s" + (" (reused)" if row.get("reused") else "")
+              + (f"; ERROR {row['error']}" if "error" in row else ""),
               flush=True)
         for name, p in s["parameters"].items():
             def g(x: float | None) -> str:
@@ -125,6 +159,11 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if not p["biased"] else f"  [biased: falls by half? {'ok' if p['ok'] else 'MISSED'}]"),
                   flush=True)
             ok &= p["ok"] is not False
+        for label, per in s["bands"].items():
+            for name, c in per.items():
+                print(f"    band of {name} ({label}): holds the truth in {100 * c['covered']:.1f} % of {c['rows']} rows "
+                      f"after settling (lack of fit flagged in {100 * (c.get('flagged') or 0):.1f} %, truth below "
+                      f"the band {100 * c['below']:.1f} %)", flush=True)
         print("    wall per phase (s): " + "; ".join(
             f"{ph}: " + ", ".join(f"{k} {v:.0f}" for k, v in t.items() if v is not None)
             for ph, t in s["phases"].items()), flush=True)
