@@ -312,11 +312,13 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
     current = spec
     originals = frozenset(p.name for p in spec.parameters)
     named_once = False
+    applied: list[str] = []  # effect@target already in the twin: not screened again
     try:
         for r in range(1, max(rounds, 1) + 1):
             t0 = time.perf_counter()
             say(f"round {r}: diagnose {current.path}")
-            found = diagnose(current, replace(settings, compile=True, out_dir=out / f"round{r}" / "patched"),
+            found = diagnose(current, replace(settings, compile=True, out_dir=out / f"round{r}" / "patched",
+                                              exclude=tuple(settings.exclude) + tuple(applied)),
                              progress=progress)
             entry: dict[str, Any] = {"round": r, "spec": str(current.path), "verdict": found.verdict,
                                      "named": None, "timings": {"diagnose": round(time.perf_counter() - t0, 3)},
@@ -334,6 +336,7 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
                 break
             named_once = True
             c = found.named
+            applied.append(f"{c.effect}@{c.target}")
             entry["named"] = {"effect": c.effect, "target": c.target, "delta_bic": _num(c.delta_bic),
                               "parameters": {k: _num(v) for k, v in c.values.items()}}
             entry["patch_spec"] = str(found.patch_spec)
