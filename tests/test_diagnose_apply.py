@@ -57,6 +57,7 @@ def test_apply_removes_the_hidden_heat_loss_from_the_tracked_coefficient(hx_case
     doc = json.loads((tmp_path / "apply" / "apply.json").read_text())
     assert doc["rounds"][0]["named"]["effect"] == "heat-loss" and doc["ratio_max_error"]["hx.kht"] <= 0.5
     assert (tmp_path / "apply" / "apply.png").stat().st_size > 0
+    assert "heat-loss@hx" in (tmp_path / "apply" / "apply.md").read_text()
 
 
 @pytest.mark.compile

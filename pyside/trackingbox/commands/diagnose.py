@@ -153,7 +153,7 @@ def _apply(args: argparse.Namespace, spec: Any, settings: Any) -> int:
         print(f"{name}: largest error after / before = {ratio:.3f}")
     if result.plot:
         print(f"plot: {result.plot}")
-    print(f"results: {args.output / 'apply.json'}")
+    print(f"results: {args.output / 'apply.json'}, report: {args.output / 'apply.md'}")
     return 0
 
 

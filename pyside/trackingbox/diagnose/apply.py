@@ -369,6 +369,8 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
     if truth:
         result.plot = plot_errors(result, truth, spec)
     result.write()
+    from ..report.diagnose import write_apply_report
+    write_apply_report(result)
     return result
 
 
