@@ -225,7 +225,9 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     t0 = time.perf_counter()
     res = stages.pair.run(spec, stages.PairSettings(), progress=progress)
     if not res.pairing.pairs:
-        raise ApplyError(f"{path}: pair found no pairs; nothing to track")
+        why = "; ".join(f"{x['name']}: {x['reason']}" for x in res.to_json().get("left_out", []))
+        raise ApplyError(f"{path}: pair found no pairs, nothing to track (a record too short for the tracked "
+                         f"parameters to move its tags beyond their noise?): {why or 'no reason given'}")
     spec = write_pairs(path, stages.pair.spec_pairs(spec, res))
     if recipe.closed_loop is not None:
         spec = slow_pairs(path, spec.pairing.closed_loop_min or spec.pairing.closed_loop or recipe.closed_loop)
