@@ -89,6 +89,8 @@ def test_apply_refuses_bad_arguments_before_any_work(hx_fmu, tmp_path, capsys) -
     assert "no 'parameters' or 'trajectories' table" in capsys.readouterr().err
     assert main(["diagnose", str(case), "--truth", str(bad)]) == 2
     assert "--truth is an option of --apply" in capsys.readouterr().err
+    assert main(["diagnose", str(case), "--apply", "--report", str(tmp_path / "r"), "-o", str(tmp_path / "o")]) == 2
+    assert "its report is DIR/apply.md" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

@@ -43,8 +43,10 @@ twin is re-estimated, re-paired and re-tracked over the same data, and so is the
 unpatched twin; the patched spec is diagnosed again, up to --apply-rounds times,
 until nothing more is named. With --truth (a bench's truth.json: the plant's
 parameters and trajectories) the tracked parameters' largest and median error after
-settling are reported before and after, and plotted (DIR/apply.png). Every round is
-written to DIR/apply.json as it finishes. Nothing named in the first round: an
+settling are reported before and after, and plotted (DIR/apply.png, DIR/apply.md).
+The pipeline is the demo's for the bench --truth names (its "bench"; on the
+evaporators the estimates become the starts), else estimate's defaults with the
+spec's starts kept. Every round is written to DIR/apply.json as it finishes. Nothing named in the first round: an
 error (exit 2), and nothing is left in DIR.
 """
 
@@ -121,6 +123,8 @@ def _apply(args: argparse.Namespace, spec: Any, settings: Any) -> int:
 
     if not args.apply:
         raise ApplyError("--truth is an option of --apply")
+    if args.report is not None:
+        raise ApplyError("--report is not written with --apply: its report is DIR/apply.md (-o DIR)")
     if args.output is None:
         raise ApplyError("--apply needs -o DIR (the patched twins, the re-tracked runs and apply.json go there)")
     truth = None
