@@ -58,6 +58,13 @@ def test_apply_removes_the_hidden_heat_loss_from_the_tracked_coefficient(hx_case
     assert doc["rounds"][0]["named"]["effect"] == "heat-loss" and doc["ratio_max_error"]["hx.kht"] <= 0.5
     assert (tmp_path / "apply" / "apply.png").stat().st_size > 0
     assert "heat-loss@hx" in (tmp_path / "apply" / "apply.md").read_text()
+    # an interrupted run resumes from apply.json: round 1's naming and both re-tracks reused, nothing recomputed
+    (tmp_path / "apply" / "round1" / "patched" / "work").rename(tmp_path / "work-moved")  # no diagnose could reuse it
+    again = apply(spec, DiagnoseSettings(workers=1), truth=truth, recipe=Recipe(), out=tmp_path / "apply", rounds=1,
+                  resume=True)
+    assert again.before.errors["hx.kht"].max_error == before.max_error
+    assert again.rounds[0]["retrack"] == result.rounds[0]["retrack"]
+    assert again.rounds[0]["named"] == result.rounds[0]["named"]
 
 
 @pytest.mark.compile

@@ -87,6 +87,9 @@ def register(subparsers: Any) -> None:
                         "again (implies --compile; needs -o)")
     p.add_argument("--apply-rounds", type=number(ge=1, integer=True), default=3, metavar="N",
                    help="--apply: rounds of diagnose and apply at most (default 3)")
+    p.add_argument("--resume", action="store_true",
+                   help="--apply: reuse what DIR/apply.json holds of an interrupted run (its namings, finished "
+                        "re-tracks)")
     p.add_argument("--truth", type=Path, metavar="FILE",
                    help="--apply: the plant's truth (a bench's truth.json) to measure the tracked parameters "
                         "against")
@@ -138,7 +141,7 @@ def _apply(args: argparse.Namespace, spec: Any, settings: Any) -> int:
     bench = truth.get("bench") if truth else None
     recipe = bench_recipe(bench, spec.parameter_names)
     result = apply(spec, settings, truth=truth, recipe=recipe, out=args.output, rounds=args.apply_rounds,
-                   note=lambda text: print(text, flush=True) if not args.json else log.info(text))
+                   resume=args.resume, note=lambda text: print(text, flush=True) if not args.json else log.info(text))
     if args.json:
         print(json.dumps(result.to_json(), indent=2, default=str))
         return 0

@@ -283,7 +283,8 @@ class ApplyResult:
 
 
 def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, recipe: Recipe | None = None,
-          out: Path, rounds: int = 3, note: Note | None = None, progress: Any = None) -> ApplyResult:
+          out: Path, rounds: int = 3, note: Note | None = None, progress: Any = None,
+          resume: bool = False) -> ApplyResult:
     """Diagnose *spec*, apply what is named, re-estimate, re-pair, re-track; repeat up to *rounds* times.
 
     Parameters
@@ -298,6 +299,9 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
         How to re-estimate, re-pair and re-track (:func:`bench_recipe`).
     out
         Folder of the rounds (``round<N>/patched``, ``round<N>/retrack``), ``before/`` and ``apply.json``.
+    resume
+        Reuse what *out*'s ``apply.json`` holds of an interrupted run of the same spec: each round's
+        naming (its patched spec on disk) and the finished re-tracks; what is missing is computed.
 
     Raises
     ------
@@ -315,8 +319,40 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
     originals = frozenset(p.name for p in spec.parameters)
     named_once = False
     applied: list[str] = []  # effect@target already in the twin: not screened again
+    done = _finished(out, spec) if resume else {"rounds": []}
     try:
         for r in range(1, max(rounds, 1) + 1):
+            old = next((x for x in done["rounds"] if x.get("round") == r and x.get("named")
+                        and Path(x.get("patch_spec", "")).is_file()), None)
+            if old is not None:  # an interrupted run's naming: reused
+                say(f"round {r}: {old['named']['effect']} on {old['named']['target']} (named by the interrupted run)")
+                named_once = True
+                applied.append(f"{old['named']['effect']}@{old['named']['target']}")
+                entry = {k: v for k, v in old.items() if k != "retrack"}
+                result.rounds.append(entry)
+                if r == 1:
+                    result.before = done.get("before_run")
+                    if result.before is None:
+                        t1 = time.perf_counter()
+                        say("before: estimate, pair, track the unpatched twin")
+                        result.before = retrack(Path(spec.path), out / "before", recipe, truth, progress=progress)
+                        result.before.timings["total"] = time.perf_counter() - t1
+                result.write()
+                patched_path = Path(old["patch_spec"])
+                from ..spec import load_spec
+                patched = load_spec(patched_path)
+                if old.get("retrack") and Path(old["retrack"]["csv"]).is_file():
+                    entry["retrack"] = old["retrack"]
+                else:
+                    added = frozenset(p.name for p in patched.parameters) - originals
+                    t1 = time.perf_counter()
+                    again = retrack(patched_path, out / f"round{r}" / "retrack", recipe, truth, hold=added,
+                                    progress=progress)
+                    entry["retrack"] = again.to_json()
+                    entry.setdefault("timings", {})["retrack"] = round(time.perf_counter() - t1, 3)
+                result.write()
+                current = patched
+                continue
             t0 = time.perf_counter()
             say(f"round {r}: diagnose {current.path}")
             found = diagnose(current, replace(settings, compile=True, out_dir=out / f"round{r}" / "patched",
@@ -374,6 +410,30 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
     from ..report.diagnose import write_apply_report
     write_apply_report(result)
     return result
+
+
+def _finished(out: Path, spec: Any) -> dict[str, Any]:
+    """What ``out/apply.json`` holds of an earlier run of *spec*: its rounds and its unpatched re-track."""
+    path = out / "apply.json"
+    if not path.is_file():
+        return {"rounds": []}
+    try:
+        doc = json.loads(path.read_text())
+    except ValueError as exc:
+        raise ApplyError(f"{path}: cannot resume from it: {exc}") from exc
+    rounds = doc.get("rounds") or []
+    if rounds and Path(rounds[0].get("spec", "")) != Path(spec.path):
+        raise ApplyError(f"{path}: written for {rounds[0].get('spec')}, not {spec.path}; cannot resume from it")
+    before = doc.get("before")
+    run = None
+    if before and Path(before.get("csv", "")).is_file():
+        run = Retrack(spec=Path(before["spec"]), csv=Path(before["csv"]), pairs=[tuple(p) for p in before["pairs"]],
+                      estimates=before.get("estimates", {}), held=before.get("held", {}),
+                      errors={k: ParameterError(**{f: v[f] for f in ("parameter", "settle", "max_error",
+                                                                      "median_error", "span")})
+                              for k, v in before.get("errors", {}).items()},
+                      timings=before.get("timings", {}), note=before.get("note", ""))
+    return {"rounds": rounds, "before_run": run}
 
 
 def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Path | None:
