@@ -202,7 +202,13 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     estimates: dict[str, float] = {}
     held: dict[str, float] = {}
     try:
-        est = stages.estimate.run(spec, stages.EstimateSettings(**recipe.estimate), progress=progress)
+        # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
+        # the journal instead of repeating its simulations
+        checkpoint = out / "estimate" / "checkpoint.json"
+        journal = checkpoint.with_suffix(".journal")
+        checkpoint.parent.mkdir(parents=True, exist_ok=True)
+        est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
+                                                                   "resume": journal.exists()}), progress=progress)
     except TrackingError as exc:
         if not recipe.estimate_may_fail:
             raise
