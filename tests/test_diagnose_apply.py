@@ -124,6 +124,11 @@ def test_parameter_errors_after_settling_against_a_trajectory_and_a_constant(tmp
 
     truth = {"trajectories": {"a": {"time": [0.0, 9.0], "value": [0.0, 18.0]}}, "parameters": {"b": 5.0}}
     errs = parameter_errors(S(), tmp_path / "t.csv", truth, settle=5.0)
-    assert set(errs) == {"a", "b"}  # c: not tracked, not in the truth
+    assert set(errs) == {"a", "b"}  # c: not in the truth
     assert errs["a"].max_error == pytest.approx(3.0) and errs["a"].median_error == pytest.approx(1.0)
     assert errs["b"].max_error == pytest.approx(2.0) and errs["b"].to_json()["max_error_of_range"] == 0.2
+    # a candidate no pair drives keeps its start: its error against the truth is the start's
+    S.parameters = (P("a", 0.0, 40.0), P("d", 0.0, 10.0))
+    S.parameters[1].start = 1.0
+    truth["parameters"]["d"] = 4.0
+    assert parameter_errors(S(), tmp_path / "t.csv", truth, settle=5.0)["d"].max_error == pytest.approx(3.0)

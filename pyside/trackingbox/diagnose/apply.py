@@ -161,7 +161,8 @@ def truth_on(truth: Mapping[str, Any], name: str, t: np.ndarray) -> np.ndarray |
 
 
 def parameter_errors(spec: Any, csv: Path, truth: Mapping[str, Any] | None, settle: float) -> dict[str, ParameterError]:
-    """Each tracked parameter the truth knows: its largest and median error from *settle* on."""
+    """Each candidate the truth knows: its largest and median error from *settle* on (tracked: its
+    trajectory in *csv*; left unpaired: its start, which it keeps)."""
     if not truth:
         return {}
     df = pd.read_csv(csv)
@@ -171,9 +172,11 @@ def parameter_errors(spec: Any, csv: Path, truth: Mapping[str, Any] | None, sett
     for p in spec.parameters:
         column = f"parameter:{p.name}"
         true = truth_on(truth, p.name, t)
-        if column not in df.columns or true is None or not after.any():
+        if true is None or not after.any():
             continue
-        err = np.abs(df[column].to_numpy(float) - true)[after]
+        # a candidate no pair drives stays at its start: its error is the start's
+        value = df[column].to_numpy(float) if column in df.columns else np.full(t.shape, float(p.start))
+        err = np.abs(value - true)[after]
         err = err[np.isfinite(err)]
         if err.size:
             out[p.name] = ParameterError(p.name, settle, float(err.max()), float(np.median(err)),
