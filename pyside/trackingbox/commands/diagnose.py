@@ -23,6 +23,7 @@ examples:
   trackingbox diagnose case1/spec.toml --json
   trackingbox diagnose case1/spec.toml --compile --report case1/diagnose -o case1/patched
   trackingbox diagnose case1/spec.toml --effects sensor-bias,sensor-drift
+  trackingbox diagnose case1/spec.toml --apply --truth case1/truth.json -o case1/apply
 
 The null model is the twin with the spec's [[parameters]] fitted on the training
 window. Every tag's residual is described against its noise level; every effect
@@ -36,6 +37,17 @@ and the named patch's FMU is built. The null model is refined from the spec's
 starts (--maxiter N adds a global search); with more than 3 candidates the
 estimations refine on a 60 s grid. Verdict (exit code 0 for each): effect | none | unexplained. -o DIR writes
 <Twin>Diagnosed.mo, its diff and (when an FMU was built) the patched spec.
+
+--apply closes the loop (implies --compile, needs -o): the named effect's patched
+twin is re-estimated, re-paired and re-tracked over the same data, and so is the
+unpatched twin; the patched spec is diagnosed again, up to --apply-rounds times,
+until nothing more is named. With --truth (a bench's truth.json: the plant's
+parameters and trajectories) the tracked parameters' largest and median error after
+settling are reported before and after, and plotted (DIR/apply.png, DIR/apply.md).
+The pipeline is the demo's for the bench --truth names (its "bench"; on the
+evaporators the estimates become the starts), else estimate's defaults with the
+spec's starts kept. Every round is written to DIR/apply.json as it finishes. Nothing named in the first round: an
+error (exit 2), and nothing is left in DIR.
 """
 
 
@@ -70,6 +82,17 @@ def register(subparsers: Any) -> None:
                         "refinement from the spec's starts only; give one when the starts are far off)")
     p.add_argument("--warmup", type=number(ge=0), default=None, metavar="SECONDS",
                    help="unscored warm-up before each window (default: estimate's)")
+    p.add_argument("--apply", action="store_true",
+                   help="apply the named effect: re-estimate, re-pair and re-track the patched twin, diagnose "
+                        "again (implies --compile; needs -o)")
+    p.add_argument("--apply-rounds", type=number(ge=1, integer=True), default=3, metavar="N",
+                   help="--apply: rounds of diagnose and apply at most (default 3)")
+    p.add_argument("--resume", action="store_true",
+                   help="--apply: reuse what DIR/apply.json holds of an interrupted run (its namings, finished "
+                        "re-tracks)")
+    p.add_argument("--truth", type=Path, metavar="FILE",
+                   help="--apply: the plant's truth (a bench's truth.json) to measure the tracked parameters "
+                        "against")
     p.set_defaults(func=run)
 
 
@@ -83,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     check_against_fmu(spec)
     settings = settings_from_args(stage.DiagnoseSettings, args, out_dir=args.output,
                                   effects=tuple(e.strip() for e in args.effects.split(",") if e.strip()))
+    if args.apply or args.truth is not None:
+        return _apply(args, spec, settings)
     result = stage.run(spec, settings, progress=Progress(every=15.0))
     if args.report:
         write_diagnose_report(spec, result, args.report)
@@ -92,6 +117,50 @@ def run(args: argparse.Namespace) -> int:
     _print(result)
     if args.report:
         print(f"report in {args.report}")
+    return 0
+
+
+def _apply(args: argparse.Namespace, spec: Any, settings: Any) -> int:
+    """``--apply``: diagnose, apply, re-track, per round (:func:`trackingbox.diagnose.apply.apply`)."""
+    from ..diagnose.apply import ApplyError, apply, bench_recipe
+
+    if not args.apply:
+        raise ApplyError("--truth is an option of --apply")
+    if args.report is not None:
+        raise ApplyError("--report is not written with --apply: its report is DIR/apply.md (-o DIR)")
+    if args.output is None:
+        raise ApplyError("--apply needs -o DIR (the patched twins, the re-tracked runs and apply.json go there)")
+    truth = None
+    if args.truth is not None:
+        try:
+            truth = json.loads(Path(args.truth).read_text())
+        except (OSError, ValueError) as exc:
+            raise ApplyError(f"--truth {args.truth}: cannot read it as JSON: {exc}") from exc
+        if not isinstance(truth, dict) or not ({"parameters", "trajectories"} & set(truth)):
+            raise ApplyError(f"--truth {args.truth}: no 'parameters' or 'trajectories' table (a bench's truth.json)")
+    bench = truth.get("bench") if truth else None
+    recipe = bench_recipe(bench, spec.parameter_names)
+    result = apply(spec, settings, truth=truth, recipe=recipe, out=args.output, rounds=args.apply_rounds,
+                   resume=args.resume, note=lambda text: print(text, flush=True) if not args.json else log.info(text))
+    if args.json:
+        print(json.dumps(result.to_json(), indent=2, default=str))
+        return 0
+    before = result.before
+    for r in result.rounds:
+        named = r.get("named")
+        print(f"round {r['round']}: " + (f"named {named['effect']} on {named['target']}" if named
+                                          else f"nothing named (verdict {r['verdict']})"))
+        for name, e in (r.get("retrack") or {}).get("errors", {}).items():
+            b = before.errors.get(name) if before else None
+            print(f"  {name}: largest error after settling {b.max_error:.4g} -> {e['max_error']:.4g}, median "
+                  f"{b.median_error:.4g} -> {e['median_error']:.4g}" if b else f"  {name}: {e}")
+    if result.stopped:
+        print(f"stopped: {result.stopped}")
+    for name, ratio in result.ratios().items():
+        print(f"{name}: largest error after / before = {ratio:.3f}")
+    if result.plot:
+        print(f"plot: {result.plot}")
+    print(f"results: {args.output / 'apply.json'}, report: {args.output / 'apply.md'}")
     return 0
 
 

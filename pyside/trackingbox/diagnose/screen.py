@@ -52,7 +52,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -552,7 +552,7 @@ def screen_levelling_ramp(effect: Any, target: str, where: WhereResult, *, evalu
 def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
            fit_compiled: Callable[[Any, str], Candidate] | None = None,
            only: Sequence[str] = (), progress: Callable[[str, int, int], None] | None = None,
-           relinearise: int = 3, compiled_in: Any = None) -> list[Candidate]:
+           relinearise: int = 3, compiled_in: Any = None, exclude: Collection[str] = ()) -> list[Candidate]:
     """Screen every effect × target; return the candidates ranked by ``delta_bic`` (best first).
 
     Parameters
@@ -577,6 +577,10 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         Work folder (path) for ``compile`` entries screened by
         :func:`trackingbox.diagnose.fit.screen_compiled` as jobs of their own (on the workers of an
         active :func:`trackingbox.diagnose.parallel.pool`); when given, *fit_compiled* is not used.
+    exclude
+        ``"effect@target"`` pairs not screened (``diagnose --apply``: those already in the twin, whose
+        second copy would not compile: a heat-loss patch on a twin patched with one declares its
+        port's equation twice).
     """
     jobs = []
     out: list[Candidate] = []
@@ -589,7 +593,7 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         except SpecError as exc:
             out.append(Candidate(eid, "", getattr(effect, "kind", "process"), "skipped", reason=str(exc)))
             continue
-        jobs.extend((effect, target) for target in found)
+        jobs.extend((effect, target) for target in found if f"{eid}@{target}" not in exclude)
     # the expensive jobs (a ramp's search, a compiled patch) start on the workers of an active
     # parallel.pool first; the cheap sensor transforms run here meanwhile; results keep the jobs' order
     heavy = ("coefficient-ramp", "levelling-ramp")

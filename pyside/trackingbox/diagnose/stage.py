@@ -133,6 +133,9 @@ class DiagnoseSettings:
         model is fitted as accurately as the twin allows (on heat production fd
         reached a 1 % higher training cost in the same iterations,
         ``scripts/bench_jacobian``), and the hidden-effect suite was measured so.
+    exclude
+        ``"effect@target"`` candidates not screened (:func:`trackingbox.diagnose.apply.apply`: the
+        effects already applied to the twin).
     varying_step
         Knot spacing (s) of the spec's ``[diagnose] varying`` candidates, which the null model
         lets move in time as tracking would (:mod:`trackingbox.diagnose.varying`); None: the
@@ -157,6 +160,7 @@ class DiagnoseSettings:
     scheduler: str | None = None
     jacobian: str = "prefer-exact"
     varying_step: float | None = None
+    exclude: tuple[str, ...] = ()
 
 
 #: Runs (simulations) a refinement pass of the null estimation may cost about (:func:`iterations_for`).
@@ -349,7 +353,7 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
         # screen_workers (they do not depend on each other); the sensor transforms run here meanwhile
         with pool(screen_workers, settings.scheduler):
             screened = screen(effects, spec, found, compiled_in=work if settings.compile else None,
-                              only=settings.effects, progress=progress,
+                              only=settings.effects, progress=progress, exclude=settings.exclude,
                               relinearise=(settings.relinearise if settings.relinearise is not None
                                            else 3 if n_candidates <= 3 else 1))
         ranked = list(screened)

@@ -15,6 +15,7 @@ from . import plots
 from .document import Document, StageReport, fmt
 
 if TYPE_CHECKING:
+    from ..diagnose.apply import ApplyResult
     from ..diagnose.stage import DiagnosisResult
     from ..spec import Spec
 
@@ -151,3 +152,43 @@ def _json_default(value: object) -> object:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return str(value)
+
+
+def write_apply_report(result: ApplyResult) -> StageReport:
+    """Write ``apply.md`` beside ``apply.json``: what each round named, the tracked parameters' errors
+    against the plant's truth before and after the patch, the phases' wall times and ``apply.png``."""
+    doc = Document("diagnose --apply: the named effects removed from the tracked parameters")
+    doc.paragraph("Each round diagnoses the twin, patches it with the named effect and re-estimates, re-pairs "
+                  "and re-tracks it over the same data (the effect's parameters held at their joint estimate); "
+                  "the unpatched twin went through the same pipeline. Errors are |tracked - plant truth| from "
+                  "the settling time on. Stopped: " + (result.stopped or "-") + ".")
+    before = result.before
+    rows = []
+    for name, e in (before.errors.items() if before else ()):
+        rows.append(["unpatched", name, fmt(e.max_error), fmt(e.median_error), "-"])
+    for r in result.rounds:
+        named = r.get("named")
+        label = f"round {r['round']}: " + (f"+ {named['effect']}@{named['target']}" if named
+                                           else f"nothing named ({r['verdict']})")
+        errors = (r.get("retrack") or {}).get("errors", {})
+        if not errors:
+            rows.append([label, "-", "-", "-", "-"])
+        for name, e in errors.items():
+            b = before.errors.get(name) if before else None
+            ratio = e["max_error"] / b.max_error if b and b.max_error and e["max_error"] is not None else None
+            rows.append([label, name, fmt(e["max_error"]), fmt(e["median_error"]), fmt(ratio)])
+    doc.table(["twin", "parameter", "largest error after settling", "median error", "largest / unpatched"], rows)
+    phases = []
+    if before:
+        phases.append(["unpatched"] + [fmt(before.timings.get(k)) for k in ("estimate", "pair", "track")] + ["-"])
+    for r in result.rounds:
+        t = (r.get("retrack") or {}).get("timings", {})
+        phases.append([f"round {r['round']}"] + [fmt(t.get(k)) for k in ("estimate", "pair", "track")]
+                      + [fmt(r.get("timings", {}).get("diagnose"))])
+    doc.table(["twin", "estimate (s)", "pair (s)", "track (s)", "diagnose (s)"], phases)
+    files = [result.out / "apply.json"]
+    if result.plot is not None:
+        doc.image(result.plot, "tracked parameters before and after the patch")
+        files.append(result.plot)
+    md = doc.write_markdown(result.out / "apply.md")
+    return StageReport(markdown=md, files=(*files, md), document=doc)
