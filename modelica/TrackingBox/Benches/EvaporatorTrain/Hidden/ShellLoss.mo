@@ -15,7 +15,7 @@ equation
   annotation (Documentation(info="<html>
 <p><code>Q = c&middot;(T - THall)^1.25</code> on the shell of effect
 <code>kLoss</code> (2), sized to 1 % of that effect's design duty at its design
-liquor temperature (3-effect train: about 110 kW at 95 degC; 7 effects: about
-48 kW at 115 degC). The other shells are insulated.</p>
+liquor temperature (3-effect train at the nominal inputs: 142 kW at 85 degC, 1.2 %
+of the duty there). The other shells are insulated.</p>
 </html>"));
 end ShellLoss;
