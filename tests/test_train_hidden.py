@@ -167,3 +167,55 @@ def test_bench_writes_a_hidden_train_case(train_fmu, tmp_path):
     plain = make_bench("evaporator-train", tmp_path / "p", hours=1.0, effects=N, plant_fmu=train_fmu(N),
                        twin_fmu=twin, seed=3)
     assert {"ventFractionAll", "UA_lossAll"} <= set(load_spec(plain.spec).parameter_names)
+
+
+@pytest.fixture(scope="module")
+def vent_case(train_fmu, tmp_path_factory):
+    """A 1-hour 3-effect vent-orifice case (its spec's twin: the 3-effect wrapper in twin_source.mo)."""
+    return make_bench("evaporator-train", tmp_path_factory.mktemp("train-vent") / "case", hours=1.0,
+                      hidden="vent-orifice", effects=N, plant_fmu=train_fmu(N, HIDDEN["vent-orifice"].model),
+                      twin_fmu=train_fmu(N, twin=True))
+
+
+def test_each_effect_of_the_train_is_a_target(vent_case):
+    """The library's process entries apply to the train's whole effect array and to each effect on its own."""
+    from trackingbox.diagnose import library
+    from trackingbox.spec import load_spec
+
+    spec = load_spec(vent_case.spec)
+    effects = library.load_effects()
+    for entry in ("steam-vent", "shell-heat-loss", "soluble-scale"):
+        found = library.targets(effects[entry], spec)
+        assert {"effect", "effect[1]", "effect[2]", "effect[3]"} <= set(found), entry
+        assert "effect[4]" not in found
+    # one hook drives one element per patch: a second element's vent in the same patch is refused by name
+    with pytest.raises(Exception, match=r"already uses the hook 'use_vent_in' of 'effect'"):
+        library.render_patch(spec, [library.Finding("steam-vent", "effect[1]"),
+                                    library.Finding("steam-vent", "effect[3]")])
+
+
+@pytest.mark.compile
+def test_a_patch_on_one_effect_acts_on_that_effect_only(vent_case, tmp_path):
+    """steam-vent@effect[1] and shell-heat-loss@effect[2] compiled into the 3-effect twin: the template's laws
+    (vent f*m_c, loss UA*(T - 20 degC)) on those effects, nothing on the others."""
+    from trackingbox.diagnose import library
+    from trackingbox.fmu import FMUModel
+    from trackingbox.spec import load_spec
+
+    spec = load_spec(vent_case.spec)
+    patch = library.render_patch(spec, [library.Finding("steam-vent", "effect[1]", {"f": 0.015}),
+                                        library.Finding("shell-heat-loss", "effect[2]", {"UA": 800.0})])
+    fmu = library.compile_patch(patch, tmp_path).fmu
+    stop = 1800.0
+    inputs = pd.DataFrame({"time": [0.0, stop], **{k: [v, v] for k, v in NOMINAL.items()}})
+    names = [f"effect[{k}].{v}" for k in range(1, N + 1)
+             for v in ("m_flow_vent_internal", "Q_flow_loss_internal", "m_c", "T")]
+    with FMUModel(fmu) as m:
+        df = m.simulate(stop_time=stop, output_interval=60.0, inputs=inputs, outputs=names)
+    np.testing.assert_allclose(df["effect[1].m_flow_vent_internal"], 0.015 * df["effect[1].m_c"], rtol=1e-9)
+    np.testing.assert_allclose(df["effect[2].Q_flow_loss_internal"], 800.0 * (df["effect[2].T"] - 293.15), rtol=1e-9)
+    assert float(df["effect[1].m_flow_vent_internal"].iloc[-1]) > 0.05
+    for k in (2, 3):
+        assert np.abs(df[f"effect[{k}].m_flow_vent_internal"]).max() == 0.0
+    for k in (1, 3):
+        assert np.abs(df[f"effect[{k}].Q_flow_loss_internal"]).max() == 0.0
