@@ -219,3 +219,30 @@ def test_a_patch_on_one_effect_acts_on_that_effect_only(vent_case, tmp_path):
         assert np.abs(df[f"effect[{k}].m_flow_vent_internal"]).max() == 0.0
     for k in (1, 3):
         assert np.abs(df[f"effect[{k}].Q_flow_loss_internal"]).max() == 0.0
+
+
+@pytest.mark.compile
+def test_a_patch_on_one_effect_keeps_what_the_others_use_without_the_hook(vent_case, tmp_path):
+    """bpr-offset@effect[2] (hook use_dBPR_in replaces the offset parameter) and vapour-line@effect[3] (hook
+    use_vapourCapacity_in replaces the design capacity 1): the other effects keep their own dBPR, a tunable
+    parameter the spec's candidates name, and a vapour line at capacity 1."""
+    from trackingbox.diagnose import library
+    from trackingbox.fmu import FMUModel, read_info
+    from trackingbox.spec import load_spec
+
+    spec = load_spec(vent_case.spec)
+    patch = library.render_patch(spec, [library.Finding("bpr-offset", "effect[2]"),
+                                        library.Finding("vapour-line", "effect[3]")])
+    fmu = library.compile_patch(patch, tmp_path).fmu
+    params = {v.name for v in read_info(fmu).variables if v.causality == "parameter"}
+    assert {f"effect[{k}].dBPR" for k in range(1, N + 1)} <= params
+    stop = 600.0
+    inputs = pd.DataFrame({"time": [0.0, stop], **{k: [v, v] for k, v in NOMINAL.items()}})
+    with FMUModel(fmu) as m:
+        df = m.simulate(stop_time=stop, output_interval=60.0, inputs=inputs, parameters={"effect[1].dBPR": 0.7},
+                        outputs=[f"effect[{k}].{v}" for k in range(1, N + 1)
+                                 for v in ("dBPR_internal", "vapourCapacity_internal")])
+    np.testing.assert_allclose(df["effect[1].dBPR_internal"], 0.7, rtol=1e-12)
+    np.testing.assert_allclose(df["effect[3].dBPR_internal"], 0.0, atol=1e-12)
+    for k in (1, 2):
+        np.testing.assert_allclose(df[f"effect[{k}].vapourCapacity_internal"], 1.0, rtol=1e-12)

@@ -475,6 +475,23 @@ def _array_size(spec: Any, inst: str, dims: str) -> int:
     return max((int(m.group(1)) for v in info.variables if (m := pat.match(v.name))), default=0)
 
 
+def _hook_default(index: _ClassIndex, cls: str, hook: str, element: str) -> str | None:
+    """What element *element* of class *cls* uses without its *hook* (``if not hook then x_internal = EXPR``):
+    a number as written, or the element's own parameter (``effect[2].dBPR``); None when neither."""
+    pat = re.compile(rf"\bif\s+not\s+{re.escape(hook)}\s+then\s+\w+\s*=\s*([^;]+?)\s*;")
+    for base in index.bases(cls):
+        found = index.body(base)
+        m = pat.search(found[1]) if found is not None else None
+        if m is not None:
+            expr = m.group(1)
+            if re.fullmatch(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?", expr):
+                return expr
+            if re.fullmatch(r"[A-Za-z_]\w*", expr):
+                return f"{element}.{expr}"
+            return None
+    return None
+
+
 def _hooked_inputs(index: _ClassIndex, cls: str, hook: str) -> list[str]:
     """The connectors of class *cls* (and its bases) declared conditional on the Boolean *hook*."""
     pat = re.compile(rf"\b([A-Za-z_]\w*)\s*(?:\([^;]*?\))?\s*if\s+{re.escape(hook)}\b")
@@ -702,12 +719,17 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             context["dims"] = (dims or "") if element is None else ""
         element_fill: tuple[list[str], list[str]] = ([], [])
         if effect.kind != "sensor" and element is not None and effect.hook and dims is not None:
-            # one element of an array: the hook is on every element, the other elements' hooked inputs get 0
+            # one element of an array: the hook is on every element, the other elements' hooked inputs get
+            # what they use without it (0 for an added flow, their own parameter for a replaced one)
             i, n = int(element.group(2)), _array_size(spec, array_name, dims)
             off = f"{context['prefix']}_off"
+            default = _hook_default(index, cls, effect.hook, f"{array_name}[k]")
+            if default is None:
+                raise SpecError(f"{where}: cannot tell what the other elements of {array_name!r} use without the hook "
+                                f"{effect.hook!r} (no 'if not {effect.hook} then ... = <number or parameter>' in {cls})")
             element_fill[0].append(f"  TrackingBox.Interfaces.RealOutput {off}[{dims}] "
-                                   f"{modelica_string(f'0 into the hooked inputs of {array_name} but element {i}')};")
-            element_fill[1].append(f"  for k in 1:{dims} loop\n    {off}[k] = 0;\n  end for;")
+                                   f"{modelica_string(f'What the elements of {array_name} but {i} use without {effect.hook}')};")
+            element_fill[1].append(f"  for k in 1:{dims} loop\n    {off}[k] = {default};\n  end for;")
             for connector in _hooked_inputs(index, cls, effect.hook):
                 for lo, hi in ((1, i - 1), (i + 1, n)):
                     if lo <= hi:
