@@ -112,7 +112,8 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
     instrument = (hidden or {}).get("instrument", known.instrument if known else None)
     row = {"bench": bench, "case": case, "noise_scale": scale, "seconds": seconds, "cpu_seconds": cpu,
            "hidden": ("none" if not hidden or case == NO_EFFECT_CASE.get(bench)
-                      else f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}"),
+                      else f"{hidden['effect'] or 'out-of-library'}@{hidden['target'] or '-'}"
+                      + "".join(f"+{e}@{t}" for e, t in (hidden.get("others") or []))),
            "expected_effect": hidden["effect"] if hidden else None,
            "expected_target": hidden["target"] if hidden else None,
            "expected_targets": targets if hidden and hidden.get("effect") else [],
