@@ -24,6 +24,7 @@ writes a spec for the patched twin so that estimation and tracking go on with it
 from __future__ import annotations
 
 import difflib
+import functools
 import importlib.resources
 import logging
 import math
@@ -467,12 +468,18 @@ def _array_size(spec: Any, inst: str, dims: str) -> int:
     if dims.strip().isdigit():
         return int(dims)
     try:
-        info = read_info(spec.twin)
+        names = _fmu_names(str(Path(spec.twin).resolve()), Path(spec.twin).stat().st_mtime_ns)
     except Exception as exc:  # noqa: BLE001 - without the FMU the whole array stays a target
         log.warning("cannot read the size of %s[%s] from the twin FMU %s: %s", inst, dims, spec.twin, exc)
         return 0
     pat = re.compile(rf"^{re.escape(inst)}\[(\d+)\]\.")
-    return max((int(m.group(1)) for v in info.variables if (m := pat.match(v.name))), default=0)
+    return max((int(m.group(1)) for name in names if (m := pat.match(name))), default=0)
+
+
+@functools.lru_cache(maxsize=8)
+def _fmu_names(path: str, mtime_ns: int) -> tuple[str, ...]:
+    """Variable names of the FMU at *path* (read once per file version)."""
+    return tuple(v.name for v in read_info(path).variables)
 
 
 def _hook_default(index: _ClassIndex, cls: str, hook: str, element: str) -> str | None:
@@ -501,6 +508,28 @@ def _hooked_inputs(index: _ClassIndex, cls: str, hook: str) -> list[str]:
         if found is not None:
             out += [m.group(1) for m in pat.finditer(found[1]) if m.group(1) not in out]
     return out
+
+
+def _element_fill(spec: Any, index: _ClassIndex, cls: str, hook: str, array_name: str, dims: str, i: int,
+                  prefix: str, where: str) -> tuple[list[str], list[str]]:
+    """Protected declarations and equations of a finding on element *i* of the component array *array_name*:
+    the hook is on every element (an array takes one modifier), so the other elements' hooked inputs get
+    what they use without it (0 for an added flow, their own parameter for a replaced one)."""
+    n = _array_size(spec, array_name, dims)
+    off = f"{prefix}_off"
+    default = _hook_default(index, cls, hook, f"{array_name}[k]")
+    if default is None:
+        raise SpecError(f"{where}: cannot tell what the other elements of {array_name!r} use without the hook "
+                        f"{hook!r} (no 'if not {hook} then ... = <number or parameter>' in {cls})")
+    declarations = [f"  TrackingBox.Interfaces.RealOutput {off}[{dims}] "
+                    f"{modelica_string(f'What the elements of {array_name} but {i} use without {hook}')};"]
+    equations = [f"  for k in 1:{dims} loop\n    {off}[k] = {default};\n  end for;"]
+    for connector in _hooked_inputs(index, cls, hook):
+        for lo, hi in ((1, i - 1), (i + 1, n)):
+            if lo <= hi:
+                equations.append(f"  for k in {lo}:{hi} loop\n    connect({off}[k], {array_name}[k].{connector});\n"
+                                 f"  end for;")
+    return declarations, equations
 
 
 # --------------------------------------------------------------------------- patches
@@ -719,22 +748,8 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             context["dims"] = (dims or "") if element is None else ""
         element_fill: tuple[list[str], list[str]] = ([], [])
         if effect.kind != "sensor" and element is not None and effect.hook and dims is not None:
-            # one element of an array: the hook is on every element, the other elements' hooked inputs get
-            # what they use without it (0 for an added flow, their own parameter for a replaced one)
-            i, n = int(element.group(2)), _array_size(spec, array_name, dims)
-            off = f"{context['prefix']}_off"
-            default = _hook_default(index, cls, effect.hook, f"{array_name}[k]")
-            if default is None:
-                raise SpecError(f"{where}: cannot tell what the other elements of {array_name!r} use without the hook "
-                                f"{effect.hook!r} (no 'if not {effect.hook} then ... = <number or parameter>' in {cls})")
-            element_fill[0].append(f"  TrackingBox.Interfaces.RealOutput {off}[{dims}] "
-                                   f"{modelica_string(f'What the elements of {array_name} but {i} use without {effect.hook}')};")
-            element_fill[1].append(f"  for k in 1:{dims} loop\n    {off}[k] = {default};\n  end for;")
-            for connector in _hooked_inputs(index, cls, effect.hook):
-                for lo, hi in ((1, i - 1), (i + 1, n)):
-                    if lo <= hi:
-                        element_fill[1].append(f"  for k in {lo}:{hi} loop\n    connect({off}[k], {array_name}[k].{connector});\n"
-                                               f"  end for;")
+            element_fill = _element_fill(spec, index, cls, effect.hook, array_name, dims, int(element.group(2)),
+                                         context["prefix"], where)
         params: dict[str, dict[str, Any]] = {}
         for p in effect.parameters:
             unit, start, lo, hi = p.resolved(variable_unit)
