@@ -85,6 +85,29 @@ def hx_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return build_fmu(tmp_path_factory.mktemp("hx1fmu"))
 
 
+@pytest.fixture(scope="session")
+def train_fmu(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:
+    """``train_fmu(n, plant=None)`` / ``train_fmu(n, twin=True)``: the *n*-effect train's plant (default
+    ``Plant``, or the full class name of a variant such as ``...EvaporatorTrain.Hidden.Clean``) or its twin,
+    compiled once per session (``benches.evaporator_train.compile_train``)."""
+    from trackingbox.benches.evaporator_train import compile_train, train_models
+
+    root = tmp_path_factory.mktemp("train-fmus")
+    lock = threading.Lock()
+    built: dict[tuple[int, str], Path] = {}
+
+    def get(n: int, plant: str | None = None, *, twin: bool = False) -> Path:
+        key = (n, "twin" if twin else (plant or "Plant"))
+        with lock:
+            if key not in built:
+                what = "twin" if twin else "plant"
+                folder = root / f"{n}-{len(built)}"
+                built[key] = compile_train(train_models(n, plant), what, folder / "build" / f"{what}.fmu")
+            return built[key]
+
+    return get
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if omc_available():
         return

@@ -187,8 +187,10 @@ def test_unknown_case_is_named(tmp_path):
     with pytest.raises(TrackingError, match=r"unknown hidden-effect case 'vent-orifise'.*did you mean 'vent-orifice'"):
         make_bench("evaporator", tmp_path / "x", hidden="vent-orifise")
     assert not (tmp_path / "x").exists()
-    with pytest.raises(TrackingError, match=r"no hidden-effect cases"):
-        make_bench("evaporator-train", tmp_path / "y", hidden="clean")
+    with pytest.raises(TrackingError, match=r"unknown hidden-effect case 'vent-orifise' of bench 'evaporator-train'"
+                                            r".*did you mean 'vent-orifice'"):
+        make_bench("evaporator-train", tmp_path / "y", hidden="vent-orifise", effects=3)
+    assert not (tmp_path / "y").exists()
 
 
 @pytest.mark.compile

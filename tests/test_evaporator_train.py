@@ -66,7 +66,8 @@ def test_train_levels_stay_inside_their_vessels(balance_run):
     (["--effects", "3.5"], "--effects: must be an integer >= 2 and <= 12, got '3.5'"),
     (["--days", "0"], "--days: must be a finite number > 0, got '0'"),
     (["--days", "1", "--hours", "2"], "give --days or --hours, not both"),
-    (["--hidden", "heat-loss"], "bench 'evaporator-train' has no hidden-effect cases"),
+    (["--hidden", "heat-loss"], "unknown hidden-effect case 'heat-loss' of bench 'evaporator-train'"),
+    (["--noise-scale", "-1"], "--noise-scale"),
     (["--plant-fmu", "missing-plant.fmu"], "missing-plant.fmu"),
 ])
 def test_bad_arguments_exit_2_and_write_nothing(tmp_path, capsys, argv, message):

@@ -89,14 +89,10 @@ def make_bench(name: str, out: str | os.PathLike[str], seed: int = 0,
     if hasattr(module, "build"):  # a bench with its own case writer (the evaporator: historian export)
         if suite_twin:
             raise TrackingError(f"bench {name!r} has no suite twin (--suite-twin applies to heat-exchanger and "
-                                f"heat-production; the evaporator's hidden-effect cases use its own twin)")
-        if takes_effects and (hidden is not None or noise_scale != 1.0):
-            raise TrackingError(f"bench {name!r} has no hidden-effect cases and no noise scale yet "
-                                f"(--hidden and --noise-scale apply to heat-exchanger, heat-production and "
-                                f"evaporator)")
+                                f"heat-production; the evaporator's hidden-effect cases use its own twin, the "
+                                f"train's its twin without the steam-economy candidates)")
         extra: dict[str, Any] = {"effects": effects} if takes_effects and effects is not None else {}
-        if not takes_effects:
-            extra.update(hidden=hidden, noise_scale=noise_scale)
+        extra.update(hidden=hidden, noise_scale=noise_scale)
         return module.build(out, seed=seed, overrides=overrides, hours=hours, plant_fmu=plant_fmu,
                             twin_fmu=twin_fmu, **extra)
     return build_case(definition, out, seed=seed, overrides=overrides, hours=hours,

@@ -141,6 +141,9 @@ class HiddenCase:
         The tag of the faulty instrument when the effect is one meter's error: a generic sensor
         entry on that tag (``sensor-bias@QI-6150`` for a ``ds-meter`` case) names the right
         instrument with another entry's form; the suite reports it apart, neither right nor wrong.
+    others : tuple of (str, str)
+        Further (effect, target) pairs the plant carries at once (a two-effect case): naming any
+        of them is right too.
     """
 
     name: str
@@ -152,6 +155,7 @@ class HiddenCase:
     affected: tuple[str, ...] = ()
     also: tuple[str, ...] = ()
     instrument: str | None = None
+    others: tuple[tuple[str, str], ...] = ()
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -161,7 +165,8 @@ class HiddenCase:
     def to_json(self) -> dict[str, Any]:
         return {"case": self.name, "model": self.model, "effect": self.effect, "target": self.target,
                 "targets": list(self.targets), "instrument": self.instrument,
-                "description": self.description, "sensors": dict(self.sensors), "affected": list(self.affected)}
+                "description": self.description, "sensors": dict(self.sensors), "affected": list(self.affected),
+                "others": [list(o) for o in self.others]}
 
 
 @dataclass(frozen=True)

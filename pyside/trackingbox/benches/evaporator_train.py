@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import shutil
 import tempfile
@@ -42,11 +43,12 @@ from ..compiler import (
     compile_model,
     library_path,
 )
-from ..errors import FMUError, TrackingError
+from ..errors import FMUError, TrackingError, did_you_mean
 from ..fmu import read_info
 from ..io import atomic_path, write_text_atomic
 from ..spec import (
     DataRules,
+    DiagnoseSpec,
     PairingSettings,
     ParameterSpec,
     SourceSpec,
@@ -63,6 +65,7 @@ from . import scenario as sc
 from .base import (
     BenchCase,
     BenchDefinition,
+    HiddenCase,
     Sensor,
     _library_path,
     _tunable_parameters,
@@ -390,12 +393,13 @@ def candidates(n: int) -> dict[str, tuple[float, float]]:
     return out
 
 
-def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
+def candidate_parameters(twin_info: Any, n: int, *, losses: bool = True) -> tuple[ParameterSpec, ...]:
     """Every effect's fouling resistance (absolute bounds :data:`RF_BOUNDS`), every effect's
     boiling-point offset ``effect[k].dBPR`` (K, bounds :data:`DBPR_BOUNDS`: a constant of the liquor
     the demo estimates and holds, :func:`estimate_only`), the train's vent fraction and heat-loss
     conductance (:data:`LOSSES`, estimated and held too) and :func:`candidates` around the twin FMU's
-    declared starts (within its declared min/max).
+    declared starts (within its declared min/max). *losses* False leaves the two steam-economy constants
+    out (the suite twin's spec: they stay at the twin's 0, the hidden effects of the suite).
 
     Raises
     ------
@@ -411,7 +415,7 @@ def candidate_parameters(twin_info: Any, n: int) -> tuple[ParameterSpec, ...]:
     out = [ParameterSpec(name, 0.0, *RF_BOUNDS) for name in absolute]
     out += [ParameterSpec(f"effect[{k}].dBPR", 0.0, *DBPR_BOUNDS) for k in range(1, n + 1)
             if f"effect[{k}].dBPR" in params]
-    out += [ParameterSpec(name, 0.0, *bounds) for name, bounds in LOSSES if name in params]
+    out += [ParameterSpec(name, 0.0, *bounds) for name, bounds in LOSSES if losses and name in params]
     for name, (lo, hi) in relative.items():
         var = params[name]
         start = float(var.start)
@@ -495,6 +499,44 @@ def _scenario(t: FloatArray, rng: np.random.Generator, warmup: float) -> dict[st
     return train_inputs(t, rng, warmup, stoppage_schedule(float(t[-1] - warmup), rng))
 
 
+_HIDDEN = f"{PACKAGE}.Hidden"
+
+#: The train's hidden-effect suite (``trackingbox bench evaporator-train --hidden NAME``): the plant
+#: ``Hidden.Clean`` (the bench plant with only what the suite twin describes: every effect's fouling, which
+#: it tracks, the boiling-point offsets and the wear, which it estimates) plus an effect on one named
+#: effect of the train, written in ``Benches/EvaporatorTrain/Hidden`` independently of the diagnosis
+#: templates (an orifice vent, a natural-convection shell loss; see its package documentation), sized on
+#: the train's design so that they hold for any N. ``clean`` hides nothing: diagnose must name nothing.
+#: The affected tags are those the effect moves by more than 1.5 sensor sigmas against ``Clean`` (3-effect
+#: train, 3 h at the nominal inputs, last half hour: the vent lowers PI-7121 by 1.34 kPa and raises the live
+#: steam FI-7020 by 81 g/s; the loss lowers PI-7121, PI-7221, PI-7111, PI-7211 by 0.68, 0.27, 0.22, 0.20 kPa;
+#: ``tests/test_train_hidden.py`` checks the directions).
+HIDDEN = {c.name: c for c in (
+    HiddenCase("clean", f"{_HIDDEN}.Clean", None, None,
+               "nothing beyond the fouling the twin tracks (no vent, no heat loss, no scale, a true DS meter)"),
+    HiddenCase("vent-orifice", f"{_HIDDEN}.VentOrifice", "steam-vent", "effect[1]",
+               "effect 1's steam chest vents 0.015 x design steam x sqrt((p_s - 1 bar)/2.5 bar) through an orifice "
+               "(1.5 % of the design live steam at 3.5 bar)",
+               affected=("PI-7121", "FI-7020")),
+    HiddenCase("shell-loss", f"{_HIDDEN}.ShellLoss", "shell-heat-loss", "effect[2]",
+               "effect 2's shell loses c (T - 25 degC)^1.25, 1 % of its design duty at its design temperature",
+               affected=("PI-7121", "PI-7221", "PI-7111", "PI-7211")),
+    HiddenCase("vent-and-loss", f"{_HIDDEN}.VentAndLoss", "steam-vent", "effect[1]",
+               "two effects: effect 1's orifice vent (vent-orifice) and effect 2's shell loss (shell-loss)",
+               affected=("PI-7121", "PI-7221", "PI-7111", "FI-7020"), others=(("shell-heat-loss", "effect[2]"),)),
+)}
+
+
+def varying(n: int) -> tuple[tuple[str, str], ...]:
+    """``[diagnose] varying`` of an *n*-effect case: every effect's fouling rises in time (the twin tracks it),
+    as the single effect's (:data:`trackingbox.benches.evaporator.VARYING`).
+
+    >>> varying(2)
+    (('effect[1].Rf', 'rising'), ('effect[2].Rf', 'rising'))
+    """
+    return tuple((f"effect[{k}].Rf", "rising") for k in range(1, n + 1))
+
+
 #: The 7-effect train as a :class:`BenchDefinition` (what ``bench_definition`` reports; :func:`build`
 #: writes the case, for any number of effects).
 DEFINITION = BenchDefinition(
@@ -514,6 +556,7 @@ DEFINITION = BenchDefinition(
                                          stoppage_settle(DEFAULT_EFFECTS)),
                    heartbeat={"*": HEARTBEAT}, initial="steady"),
     tracking=TrackingSettings(hold_until=3600.0),
+    hidden=HIDDEN,
 )
 
 
@@ -535,22 +578,29 @@ class TrainModels:
         return "twin_source.mo"
 
 
-def train_models(effects: int) -> TrainModels:
+def train_models(effects: int, plant: str | None = None) -> TrainModels:
     """The classes to compile for *effects* effects (a generated wrapper unless it is the default).
+
+    *plant*: the plant class (default ``Plant``; a hidden-effect case's ``Hidden.<Model>``).
 
     >>> train_models(7).plant
     'TrackingBox.Benches.EvaporatorTrain.Plant'
     >>> print(train_models(3).wrapper.splitlines()[2])
       model Plant "TrackingBox.Benches.EvaporatorTrain.Plant with N = 3"
+    >>> train_models(7, f"{PACKAGE}.Hidden.Clean").plant
+    'TrackingBox.Benches.EvaporatorTrain.Hidden.Clean'
+    >>> print(train_models(3, f"{PACKAGE}.Hidden.Clean").wrapper.splitlines()[3])
+        extends TrackingBox.Benches.EvaporatorTrain.Hidden.Clean(N = 3);
     """
+    plant = f"{PACKAGE}.Plant" if plant is None else plant
     if effects == DEFAULT_EFFECTS:
-        return TrainModels(effects, f"{PACKAGE}.Plant", f"{PACKAGE}.Twin", None)
+        return TrainModels(effects, plant, f"{PACKAGE}.Twin", None)
     pkg = f"EvaporatorTrain{effects}"
     text = (f"// generated by trackingbox bench evaporator-train --effects {effects}\n"
             f"package {pkg} \"{PACKAGE} with {effects} effects\"\n")
-    for what in ("Plant", "Twin"):
-        text += (f"  model {what} \"{PACKAGE}.{what} with N = {effects}\"\n"
-                 f"    extends {PACKAGE}.{what}(N = {effects});\n"
+    for what, base in (("Plant", plant), ("Twin", f"{PACKAGE}.Twin")):
+        text += (f"  model {what} \"{base} with N = {effects}\"\n"
+                 f"    extends {base}(N = {effects});\n"
                  f"  end {what};\n")
     text += f"end {pkg};\n"
     return TrainModels(effects, f"{pkg}.Plant", f"{pkg}.Twin", text)
@@ -569,6 +619,34 @@ def compile_train(models: TrainModels, what: str, output: Path) -> Path:
         result = compile_model(source, model, backend="embedded", output=output, libraries=(library_path(),))
     log.info("compiled %s -> %s in %.1f s", model, result.fmu, _time.perf_counter() - t0)
     return Path(result.fmu)
+
+
+def _hidden_case(hidden: str | None, noise_scale: float) -> HiddenCase | None:
+    """The hidden-effect case *hidden* of :data:`HIDDEN` (None: the plain bench); checks *noise_scale*."""
+    if isinstance(noise_scale, bool) or not isinstance(noise_scale, (int, float, np.floating)) or not (
+            math.isfinite(noise_scale) and noise_scale >= 0):
+        raise TrackingError(f"bench {NAME!r}: the noise scale must be a number >= 0, got {noise_scale!r}")
+    if hidden is None:
+        return None
+    if hidden not in HIDDEN:
+        raise TrackingError(f"unknown hidden-effect case {hidden!r} of bench {NAME!r}"
+                            f"{did_you_mean(hidden, list(HIDDEN))}; choose one of {', '.join(HIDDEN)}")
+    return HIDDEN[hidden]
+
+
+def _check_arguments(out: str | os.PathLike[str], hours: float | None, plant_fmu: Any, twin_fmu: Any
+                     ) -> tuple[Path, float]:
+    """The output directory (resolved) and the measured period (h) of a case, checked with the given FMUs."""
+    folder = Path(out).expanduser().resolve()
+    if folder.exists() and not folder.is_dir():
+        raise TrackingError(f"output directory {folder} of bench {NAME!r} exists and is not a directory")
+    period = float(DEFAULT_HOURS if hours is None else hours)
+    if not period > 0:
+        raise TrackingError(f"bench {NAME!r}: the measured period must be > 0 h, got {period:g}")
+    for given, what in ((plant_fmu, "plant"), (twin_fmu, "twin")):
+        if given is not None and not Path(given).is_file():
+            raise FMUError(f"{what} FMU {given} for bench {NAME!r} does not exist")
+    return folder, period
 
 
 def _check_effects(effects: Any) -> int:
@@ -594,7 +672,8 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
           hours: float | None = None, effects: int = DEFAULT_EFFECTS,
           plant_fmu: str | os.PathLike[str] | None = None, twin_fmu: str | os.PathLike[str] | None = None,
           start: str = "2026-01-12T06:00:00+00:00", historian_export: bool = True,
-          stoppages: Sequence[Stoppage] | None = None) -> BenchCase:
+          stoppages: Sequence[Stoppage] | None = None, hidden: str | None = None,
+          noise_scale: float = 1.0) -> BenchCase:
     """Generate the evaporator-train case into *out* (the files of :func:`trackingbox.benches.make_bench`).
 
     Parameters
@@ -615,22 +694,20 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
         False writes the dense noisy samples (time in s) instead.
     stoppages : sequence of Stoppage, optional
         The flow stoppages (s from the first measured sample); default: drawn from the seed.
+    hidden : str, optional
+        A hidden-effect case (:data:`HIDDEN`): its plant variant instead of ``Plant``, against the suite
+        twin: ``Twin`` without the steam-economy candidates (:data:`LOSSES`: they stay at 0).
+    noise_scale : float
+        Factor on every sensor's noise.
 
     Returns
     -------
     BenchCase
     """
     n = _check_effects(effects)
-    models = train_models(n)
-    out = Path(out).expanduser().resolve()
-    if out.exists() and not out.is_dir():
-        raise TrackingError(f"output directory {out} of bench {NAME!r} exists and is not a directory")
-    hours = float(DEFAULT_HOURS if hours is None else hours)
-    if not hours > 0:
-        raise TrackingError(f"bench {NAME!r}: the measured period must be > 0 h, got {hours:g}")
-    for given, what in ((plant_fmu, "plant"), (twin_fmu, "twin")):
-        if given is not None and not Path(given).is_file():
-            raise FMUError(f"{what} FMU {given} for bench {NAME!r} does not exist")
+    case_hidden = _hidden_case(hidden, noise_scale)
+    models = train_models(n, case_hidden.model if case_hidden is not None else None)
+    out, hours = _check_arguments(out, hours, plant_fmu, twin_fmu)
     scenario_rng, noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(2))
     tag_outputs = outputs(n)
     state_specs = states(n)
@@ -648,7 +725,7 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
             if got != n:
                 raise FMUError(f"the {what} FMU has {got} effects, but --effects is {n}")
         overrides = check_overrides(dict(overrides or {}), plant_info, f"the evaporator-train plant ({models.plant})")
-        parameters = candidate_parameters(twin_info, n)
+        parameters = candidate_parameters(twin_info, n, losses=case_hidden is None)
 
         dt, warmup = SAMPLE_TIME, WARMUP
         n_meas, n_warm = int(round(hours * 3600.0 / dt)), int(round(warmup / dt))
@@ -665,7 +742,8 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
 
         keep = slice(n_warm, None)
         t_meas = t_all[keep] - warmup
-        dense_frame = noisy_measurements(t_meas, INPUTS, tag_outputs, true_inputs, result, keep, 1.0, noise_rng)
+        dense_frame = noisy_measurements(t_meas, INPUTS, tag_outputs, true_inputs, result, keep, float(noise_scale),
+                                         noise_rng)
         history = None
         if historian_export:
             history = export_history(dense_frame, historian_settings((*INPUTS, *tag_outputs), start, seed))
@@ -685,7 +763,9 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
                      "parameters": truth, "plant_parameters": plant_params, "trajectories": trajectories,
                      "stoppages": [s.to_json() for s in stops],
                      "historian": history.to_json() if history is not None else None,
-                     "plant_simulation_seconds": plant_seconds, "plant_simulation_cpu_seconds": plant_cpu}
+                     "plant_simulation_seconds": plant_seconds, "plant_simulation_cpu_seconds": plant_cpu,
+                     "noise_scale": float(noise_scale),
+                     "hidden": case_hidden.to_json() if case_hidden is not None else None}
 
         lib = _library_path()
         if models.wrapper is None:
@@ -704,11 +784,11 @@ def build(out: str | os.PathLike[str], *, seed: int = 0, overrides: Mapping[str,
             outputs={s.tag: s.twin for s in tag_outputs if s.tag not in level_tags},
             parameters=parameters, windows={"training": (0.0, half), "validation": (half, end)},
             data=data, states=state_specs, tracking=TrackingSettings(hold_until=3600.0),
-            pairing=pairing_settings(n),
+            pairing=pairing_settings(n), diagnose=DiagnoseSpec(varying=varying(n)),
         )
         header = (f"Black-liquor evaporator train, {n} effects ({PACKAGE}): generated by "
-                  f"`trackingbox bench {NAME}`\n"
-                  f"seed = {seed}, hours = {hours:g}, effects = {n}, plant overrides = "
+                  f"`trackingbox bench {NAME}{f' --hidden {hidden}' if hidden else ''}`\n"
+                  f"seed = {seed}, hours = {hours:g}, effects = {n}, noise scale = {noise_scale:g}, plant overrides = "
                   f"{json.dumps(overrides) if overrides else 'none'}\n"
                   f"measurements as a historian exports them; every effect's fouling over time is in truth.json")
         spec_text = dump_spec(spec, header=header)

@@ -21,6 +21,7 @@ examples:
   trackingbox bench evaporator --out ev --days 3 --seed 1 --set RfInf=2e-4
   trackingbox bench evaporator --out ev-clean --days 1 --hidden clean
   trackingbox bench evaporator-train --out train --effects 7 --days 1
+  trackingbox bench evaporator-train --out train-vent --effects 3 --hidden vent-orifice --noise-scale 2
 
 writes into --out:
   plant.fmu, twin.fmu     the "physical" plant and the digital twin (FMUs)
@@ -69,7 +70,8 @@ def register(subparsers: Any) -> None:
                         "heat-exchanger: fouling-exp, heat-loss, sensor-drift, sensor-lag, bypass; "
                         "heat-production: leak-level, fouling-exp, heat-loss, sensor-drift; evaporator: clean, vent-orifice, "
                         "shell-loss, flash-demister, borated-liquor, burkeite-scale, density-meter, foaming-flash, "
-                        "demister-carryover, ncg-after-restart); truth.json says which")
+                        "demister-carryover, ncg-after-restart; evaporator-train: clean, vent-orifice, shell-loss, "
+                        "vent-and-loss); truth.json says which")
     p.add_argument("--suite-twin", action=argparse.BooleanOptionalAction, default=None,
                    help="write the case against the bench's suite twin, the twin the hidden-effect suite "
                         "diagnoses against (heat-production: the twin with the plant's quadratic curves); "

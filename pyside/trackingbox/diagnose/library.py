@@ -24,6 +24,7 @@ writes a spec for the patched twin so that estimation and tracking go on with it
 from __future__ import annotations
 
 import difflib
+import functools
 import importlib.resources
 import logging
 import math
@@ -370,7 +371,7 @@ class _ClassIndex:
             if file is None:
                 continue
             code = strip_comments(read_text(file))
-            rng = _class_range(code, name.rsplit(".", 1)[-1])
+            rng = _class_range(code, name)  # the longest suffix: a class nested in a one-file package too
             if rng is not None:
                 found = (name, code[rng[0]:rng[1]])
                 break
@@ -450,9 +451,85 @@ def targets(effect: Effect, spec: Any, *, _index: _ClassIndex | None = None) -> 
         raise SpecError(f"model {spec.source.model!r} in [source] of {spec.path} is not found in "
                         f"{spec.source.path}")
     wanted = set(effect.classes)
-    found = [inst for inst, cls in index.components(spec.source.model).items()
-             if wanted & set(index.bases(cls))]
-    return sorted(found)
+    declared = index.declarations(spec.source.model)
+    found = [inst for inst, (cls, _) in declared.items() if wanted & set(index.bases(cls))]
+    # an array of components (a train's effects): the whole array, and each element on its own
+    elements = [f"{inst}[{k}]" for inst in found if declared[inst][1] is not None
+                for k in range(1, _array_size(spec, inst, declared[inst][1]) + 1)]
+    return sorted(found + elements)
+
+
+_ELEMENT = re.compile(r"^([A-Za-z_]\w*)\[(\d+)\]$")
+
+
+def _array_size(spec: Any, inst: str, dims: str) -> int:
+    """Number of elements of the component array *inst* declared ``[dims]``: the literal, else the largest
+    index of ``inst[k].`` among the twin FMU's variables (0 when neither tells: no element targets)."""
+    if dims.strip().isdigit():
+        return int(dims)
+    try:
+        names = _fmu_names(str(Path(spec.twin).resolve()), Path(spec.twin).stat().st_mtime_ns)
+    except Exception as exc:  # noqa: BLE001 - without the FMU the whole array stays a target
+        log.warning("cannot read the size of %s[%s] from the twin FMU %s: %s", inst, dims, spec.twin, exc)
+        return 0
+    pat = re.compile(rf"^{re.escape(inst)}\[(\d+)\]\.")
+    return max((int(m.group(1)) for name in names if (m := pat.match(name))), default=0)
+
+
+@functools.lru_cache(maxsize=8)
+def _fmu_names(path: str, mtime_ns: int) -> tuple[str, ...]:
+    """Variable names of the FMU at *path* (read once per file version)."""
+    return tuple(v.name for v in read_info(path).variables)
+
+
+def _hook_default(index: _ClassIndex, cls: str, hook: str, element: str) -> str | None:
+    """What element *element* of class *cls* uses without its *hook* (``if not hook then x_internal = EXPR``):
+    a number as written, or the element's own parameter (``effect[2].dBPR``); None when neither."""
+    pat = re.compile(rf"\bif\s+not\s+{re.escape(hook)}\s+then\s+\w+\s*=\s*([^;]+?)\s*;")
+    for base in index.bases(cls):
+        found = index.body(base)
+        m = pat.search(found[1]) if found is not None else None
+        if m is not None:
+            expr = m.group(1)
+            if re.fullmatch(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?", expr):
+                return expr
+            if re.fullmatch(r"[A-Za-z_]\w*", expr):
+                return f"{element}.{expr}"
+            return None
+    return None
+
+
+def _hooked_inputs(index: _ClassIndex, cls: str, hook: str) -> list[str]:
+    """The connectors of class *cls* (and its bases) declared conditional on the Boolean *hook*."""
+    pat = re.compile(rf"\b([A-Za-z_]\w*)\s*(?:\([^;]*?\))?\s*if\s+{re.escape(hook)}\b")
+    out: list[str] = []
+    for base in index.bases(cls):
+        found = index.body(base)
+        if found is not None:
+            out += [m.group(1) for m in pat.finditer(found[1]) if m.group(1) not in out]
+    return out
+
+
+def _element_fill(spec: Any, index: _ClassIndex, cls: str, hook: str, array_name: str, dims: str, i: int,
+                  prefix: str, where: str) -> tuple[list[str], list[str]]:
+    """Protected declarations and equations of a finding on element *i* of the component array *array_name*:
+    the hook is on every element (an array takes one modifier), so the other elements' hooked inputs get
+    what they use without it (0 for an added flow, their own parameter for a replaced one)."""
+    n = _array_size(spec, array_name, dims)
+    off = f"{prefix}_off"
+    default = _hook_default(index, cls, hook, f"{array_name}[k]")
+    if default is None:
+        raise SpecError(f"{where}: cannot tell what the other elements of {array_name!r} use without the hook "
+                        f"{hook!r} (no 'if not {hook} then ... = <number or parameter>' in {cls})")
+    declarations = [f"  TrackingBox.Interfaces.RealOutput {off}[{dims}] "
+                    f"{modelica_string(f'What the elements of {array_name} but {i} use without {hook}')};"]
+    equations = [f"  for k in 1:{dims} loop\n    {off}[k] = {default};\n  end for;"]
+    for connector in _hooked_inputs(index, cls, hook):
+        for lo, hi in ((1, i - 1), (i + 1, n)):
+            if lo <= hi:
+                equations.append(f"  for k in {lo}:{hi} loop\n    connect({off}[k], {array_name}[k].{connector});\n"
+                                 f"  end for;")
+    return declarations, equations
 
 
 # --------------------------------------------------------------------------- patches
@@ -635,6 +712,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             effect.parameter(key)
         context: dict[str, Any] = {"target": f.target, "prefix": prefix_for(effect.id, f.target)}
         variable_unit = ""
+        element = None
         if effect.kind == "sensor":
             if f.target not in spec.outputs:
                 raise SpecError(f"{where}: {f.target!r} is not a tag of [outputs] in {spec.path}"
@@ -654,18 +732,24 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             if f.target not in known:
                 raise SpecError(f"{where}: {f.target!r} is not a component of {twin} that the effect applies to "
                                 f"(classes {', '.join(effect.classes)}){did_you_mean(f.target, known)}")
-            cls, dims = index.declarations(twin)[f.target]
+            element = _ELEMENT.match(f.target)
+            array_name = element.group(1) if element else f.target
+            cls, dims = index.declarations(twin)[array_name]
             if effect.hook:
                 # an array of components (a train's effects): the hook on every element
                 hook = f"{'each ' if dims else ''}{effect.hook} = true"
-                if hook in modifiers.get(f.target, []):
+                if hook in modifiers.get(array_name, []):
                     raise SpecError(f"{where}: another effect of the patch already uses the hook {effect.hook!r} "
-                                    f"of {f.target!r}; one patch can drive a hook once")
-                modifiers.setdefault(f.target, []).append(hook)
+                                    f"of {array_name!r}; one patch can drive a hook once")
+                modifiers.setdefault(array_name, []).append(hook)
             context["cls"] = cls
             context["bases"] = index.bases(cls)
-            context["array"] = dims is not None
-            context["dims"] = dims or ""
+            context["array"] = dims is not None and element is None
+            context["dims"] = (dims or "") if element is None else ""
+        element_fill: tuple[list[str], list[str]] = ([], [])
+        if effect.kind != "sensor" and element is not None and effect.hook and dims is not None:
+            element_fill = _element_fill(spec, index, cls, effect.hook, array_name, dims, int(element.group(2)),
+                                         context["prefix"], where)
         params: dict[str, dict[str, Any]] = {}
         for p in effect.parameters:
             unit, start, lo, hi = p.resolved(variable_unit)
@@ -684,9 +768,9 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             raise SpecError(f"{effect.folder / 'patch.mo.jinja'}: rendering for {f.target!r} failed: {exc}") from None
         parts = _split_rendered(rendered, str(effect.folder / "patch.mo.jinja"))
         declarations += [f"  // {effect.id} on {f.target}: {effect.explanation}", *parts["public"]]
-        hidden += parts["protected"]
+        hidden += parts["protected"] + element_fill[0]
         initial += parts["initial equation"]
-        equations += [f"  // {effect.id} on {f.target}", *parts["equation"]] if parts["equation"] else []
+        equations += [f"  // {effect.id} on {f.target}", *parts["equation"], *element_fill[1]] if parts["equation"] else []
         values = ", ".join(f"{p['name']} = {p['value']:.6g} {p['unit']}".rstrip() for p in params.values())
         header.append(f"//   {effect.id} on {f.target}: {values}")
 
