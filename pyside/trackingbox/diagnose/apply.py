@@ -43,6 +43,7 @@ import pandas as pd
 
 from ..errors import TrackingError
 from ..io import write_text_atomic
+from ..spec import load_spec
 
 log = logging.getLogger(__name__)
 
@@ -348,7 +349,6 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
                         result.before.timings["total"] = time.perf_counter() - t1
                 result.write()
                 patched_path = Path(old["patch_spec"])
-                from ..spec import load_spec
                 patched = load_spec(patched_path)
                 if old.get("retrack") and Path(old["retrack"]["csv"]).is_file():
                     entry["retrack"] = old["retrack"]
@@ -396,7 +396,6 @@ def apply(spec: Any, settings: Any, *, truth: Mapping[str, Any] | None = None, r
                 result.before = retrack(Path(spec.path), out / "before", recipe, truth, progress=progress)
                 result.before.timings["total"] = time.perf_counter() - t1
                 result.write()
-            from ..spec import load_spec
             patched = load_spec(found.patch_spec)
             added = frozenset(p.name for p in patched.parameters) - originals
             t1 = time.perf_counter()
