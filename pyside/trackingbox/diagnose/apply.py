@@ -193,7 +193,7 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     """
     from .. import stages
     from ..benches.evaporator import fix_parameters, slow_pairs
-    from ..spec import load_spec, write_pairs, write_spec, write_starts
+    from ..spec import write_pairs, write_spec, write_starts
 
     out.mkdir(parents=True, exist_ok=True)
     spec = load_spec(spec_path)
