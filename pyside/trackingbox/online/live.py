@@ -728,7 +728,10 @@ class _Tracker:
             last = self.record.last[tag]
             if last is not None and end is not None and utc(last) >= end:
                 return []  # this tag is past the stretch already
-            start = max(utc(last), a) if last is not None else max(since[tag], a)
+            # from the tag's own newest sample, not from the stretch's start: a tag read while the server
+            # was still writing the stretch (the history ends at the server's present) has samples
+            # between its newest and the stretch's start that the next stretch would otherwise skip
+            start = utc(last) if last is not None else since[tag]
             try:
                 history = await nodes[tag].read_raw_history(starttime=start, endtime=end)
             except ua.UaError as exc:
@@ -752,6 +755,13 @@ class _Tracker:
             # the edge, and the drops it covers (one during the read below is left to the next call)
             edge, covered = inbox.edge(len(nodes)), inbox.dropped
             if edge is not None and a > edge:
+                # the stretches read end past the edge, but a tag read while the server was still writing
+                # them ends where the server was then (a dropped sample of it may lie beyond): every tag
+                # once more from its newest sample to the edge, which the server has written by now
+                if await stretch(edge):
+                    self.write_status()
+                    await asyncio.to_thread(self.advance)
+                    self.write_status()
                 break  # the queue goes on from here
             if not await stretch(a + step):
                 if edge is None or a + step >= edge:
