@@ -728,9 +728,7 @@ class _Tracker:
             last = self.record.last[tag]
             if last is not None and end is not None and utc(last) >= end:
                 return []  # this tag is past the stretch already
-            # from the tag's own newest sample, not from the stretch's start: a tag read while the server
-            # was still writing the stretch (the history ends at the server's present) has samples
-            # between its newest and the stretch's start that the next stretch would otherwise skip
+            # from its own newest sample: read while the server was writing, it may end before the stretch
             start = utc(last) if last is not None else since[tag]
             try:
                 history = await nodes[tag].read_raw_history(starttime=start, endtime=end)
@@ -754,24 +752,16 @@ class _Tracker:
         while not self.done:
             # the edge, and the drops it covers (one during the read below is left to the next call)
             edge, covered = inbox.edge(len(nodes)), inbox.dropped
-            if edge is not None and a > edge:
-                # the stretches read end past the edge, but a tag read while the server was still writing
-                # them ends where the server was then (a dropped sample of it may lie beyond): every tag
-                # once more from its newest sample to the edge, which the server has written by now
-                if await stretch(edge):
-                    self.write_status()
-                    await asyncio.to_thread(self.advance)
-                    self.write_status()
-                break  # the queue goes on from here
-            if not await stretch(a + step):
-                if edge is None or a + step >= edge:
-                    break  # nothing in this stretch: the rest, whatever is left, below
-                a = a + step  # a quiet stretch before the queue's: on
-                continue
-            self.write_status()
-            await asyncio.to_thread(self.advance)
-            self.write_status()
-            a = a + step
+            # past the edge, every tag once more up to it (one read as the server wrote may stop short of it)
+            past = edge is not None and a > edge
+            got = await stretch(edge if past else a + step)
+            if got:
+                self.write_status()
+                await asyncio.to_thread(self.advance)
+                self.write_status()
+            if past or (not got and (edge is None or a + step >= edge)):
+                break  # the queue goes on from here (nothing in this stretch: the rest, if any, below)
+            a = a + step  # (a quiet stretch before the queue's: on)
         if not self.done and inbox.edge(len(nodes)) is None:
             await stretch(None)  # nothing queued, nothing dropped: the server is quiet, or just begun
         return covered
