@@ -9,13 +9,12 @@ from __future__ import annotations
 import fmpy
 import pytest
 
+from _fixtures_msl import MSL, need_msl
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.msl_harness import default_msl
 from trackingbox.compiler.rewrite import computed_parameter_bindings
 
 pytestmark = pytest.mark.compile
 
-MSL = default_msl()
 
 OWN = """package Own
   function g "linear interpolation on the last segment, asserting increasing abscissae"
@@ -70,8 +69,7 @@ def test_a_binding_through_an_asserting_function_compiles_with_its_value(tmp_pat
 
 
 def test_msl_interpolate_in_a_parameter_binding(tmp_path):
-    if not (MSL / "package.mo").exists():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     src = tmp_path / "Q.mo"
     src.write_text("model Q\n  parameter Real tab[:, 2] = [0, 0.8; 1, 0.7; 2, 0.4];\n"
                    "  parameter Real p = Modelica.Math.Vectors.interpolate(tab[:, 1], tab[:, 2], 1.5, 1);\n"

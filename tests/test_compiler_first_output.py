@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trackingbox.compiler.msl_harness import default_msl
+from _fixtures_msl import MSL, need_msl
 from trackingbox.compiler.rewrite import first_output_functions, tuple_function_names
 
-MSL = default_msl()
 
 TWO = """package Two
   function f "two outputs"
@@ -111,8 +110,7 @@ def test_first_output_in_parameter_bindings_and_all_outputs_in_a_tuple_equation(
 @pytest.mark.compile
 def test_matrices_is_equal_agrees_with_numpy(tmp_path):
     """Equal where the sizes agree and every pair is within eps (|a - b| <= eps), else false."""
-    if not (MSL / "Math" / "package.mo").is_file():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl("Math", "package.mo")
     import fmpy
 
     from trackingbox.compiler import compile_model
@@ -151,8 +149,7 @@ def test_msl_lossy_gear_demo1_loses_power_as_its_efficiency_says(tmp_path):
     eta of the power, tau_b = -ratio eta tau_a; where flange_b drives, tau_a w_a = -eta tau_b w_b, so
     tau_b = -ratio tau_a / eta; the power lost is never negative; w_b = w_a / ratio; and the run goes
     through forward, backward and stuck."""
-    if not (MSL / "Mechanics" / "Rotational" / "Components" / "LossyGear.mo").is_file():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl("Mechanics", "Rotational", "Components", "LossyGear.mo")
     import fmpy
 
     from trackingbox.compiler import compile_model

@@ -10,16 +10,14 @@ import hashlib
 import numpy as np
 import pytest
 
-from trackingbox.compiler.msl_harness import default_msl
+from _fixtures_msl import MSL, need_msl
 from trackingbox.compiler.rewrite import LIBRARY_BODIES, replace_library_bodies
 
-MSL = default_msl()
 MATH = MSL / "Math" / "package.mo"
 
 
 def _need_msl() -> None:
-    if not MATH.is_file():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl("Math", "package.mo")
 
 
 def test_interpolate_is_replaced_in_place_keeping_every_line_and_byte_offset():

@@ -21,12 +21,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from _fixtures_msl import MSL, need_msl
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.msl_harness import default_msl
 
 pytestmark = pytest.mark.compile
 
-MSL = default_msl()
 
 STICK = """model Stick "an inertia on a bearing with stiction, driven by a sinusoidal torque"
   Modelica.Mechanics.Rotational.Components.Inertia inertia(J = 0.5, phi(start = 0, fixed = true),
@@ -95,8 +94,7 @@ def _at(pieces, times):
 
 @pytest.fixture(scope="module")
 def stick_fmu(tmp_path_factory):
-    if not (MSL / "package.mo").exists():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     tmp = tmp_path_factory.mktemp("stick")
     (tmp / "Stick.mo").write_text(STICK)
     return compile_model(tmp / "Stick.mo", "Stick", backend="embedded", output=tmp / "stick.fmu",
@@ -127,8 +125,7 @@ def test_bearing_friction_sticks_and_slides_as_the_piecewise_solution(stick_fmu,
 
 @pytest.fixture(scope="module")
 def friction_run(tmp_path_factory):
-    if not (MSL / "package.mo").exists():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     tmp = tmp_path_factory.mktemp("friction")
     fmu = compile_model(MSL, "Modelica.Mechanics.Rotational.Examples.Friction", backend="embedded",
                         output=tmp / "friction.fmu").fmu
@@ -202,8 +199,7 @@ def test_msl_heat_losses_dissipates_in_every_element(tmp_path):
     step before (a step without a consistent solution falls back to its first pass), a clutch, a
     brake and a bearing. Over its experiment every element's loss power is >= 0 (the second law),
     and the friction elements both stick and slide."""
-    if not (MSL / "package.mo").exists():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     fmu = compile_model(MSL, "Modelica.Mechanics.Rotational.Examples.HeatLosses", backend="embedded",
                         output=tmp_path / "hl.fmu").fmu
     md = fmpy.read_model_description(str(fmu))

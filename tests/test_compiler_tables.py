@@ -7,13 +7,12 @@ import fmpy
 import numpy as np
 import pytest
 
+from _fixtures_msl import MSL, need_msl
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.msl_harness import default_msl
 from trackingbox.errors import UnsupportedConstructError
 
 pytestmark = pytest.mark.compile
 
-MSL = default_msl()
 TABLE = [[0.0, 1.0], [1.0, 3.0], [1.0, 5.0], [2.5, 2.0], [4.0, 2.0]]  # a jump at t = 1
 
 MODEL = """
@@ -64,8 +63,7 @@ def _linear(t, table):
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
-    if not (MSL / "package.mo").is_file():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     d = tmp_path_factory.mktemp("tables")
     (d / "Tables.mo").write_text(MODEL)
     res = compile_model(d / "Tables.mo", "Tables", backend="embedded", output=d / "t.fmu", libraries=[MSL])

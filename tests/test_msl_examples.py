@@ -6,17 +6,16 @@ from pathlib import Path
 
 import pytest
 
-from trackingbox.compiler.msl_harness import default_msl, default_reference, run_example
+from _fixtures_msl import MSL, need_msl
+from trackingbox.compiler.msl_harness import default_reference, run_example
 
 pytestmark = pytest.mark.compile
 
-MSL = default_msl()
 REFERENCE = default_reference()
 
 
 def _need_msl() -> None:
-    if not (MSL / "package.mo").is_file():
-        pytest.skip(f"the Modelica Standard Library is not at {MSL} (set TRACKINGBOX_MSL)")
+    need_msl()
     if not REFERENCE.is_dir():
         pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
 
