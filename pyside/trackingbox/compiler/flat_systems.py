@@ -402,17 +402,18 @@ class SystemAssembly:
 
 
 LOOP_TOLERANCE = 1e-6
-"""The largest residual (2-norm) of an algebraic loop accepted from Newton's method; above it (or
-NaN, e.g. from a singular Jacobian) the loop is solved again for the solution nearest the guess."""
+"""The largest residual (2-norm, relative to 1 + |z|) accepted from the nearest-solution fallback;
+above it the loop has no solution near the guess and gives NaN."""
 NEAREST_REGULARISATION = 1e-10
 """epsilon of the regularised optimality conditions of the nearest solution (see _or_nearest_solution)."""
 
 
 def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
                          values: ca.MX | ca.DM) -> ca.MX:
-    """Newton's solution *sol* of the loop g(z, p) = 0 where it is one; else (a Jacobian singular at
-    the solution, e.g. two stuck friction elements in series, whose torque split no equation
-    determines: MSL ``Rotational.Examples.LossyGearDemo2``) the solution nearest the guess z0,
+    """Newton's iterate *sol* of the loop g(z, p) = 0 where it and its residual are finite (as
+    before: the iterate after at most 100 steps); where not (a Jacobian singular at the solution,
+    e.g. two stuck friction elements in series, whose torque split no equation determines: MSL
+    ``Rotational.Examples.LossyGearDemo2``) the solution nearest the guess z0,
     argmin |z - z0| subject to g(z) = 0, from its optimality conditions regularised so that their
     Jacobian [[I + sum y_i H_i, J'], [J, -eps I]] is nonsingular whatever the rank of J:
 
@@ -431,13 +432,13 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
                             {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
     residual = ca.Function(f"{name}_residual", [z, p], [g])
 
-    def solves(s: ca.MX, scale: ca.MX | float) -> ca.MX:
-        # NaN or inf anywhere makes the comparison false (s*0 is NaN for an infinite s)
-        return ca.sumsqr(residual(s, values)) + ca.sumsqr(s * 0) <= (LOOP_TOLERANCE * scale) ** 2
-
+    # NaN or inf anywhere makes these comparisons false (x*0 is NaN for an infinite x)
+    r = residual(sol, values)
+    finite = ca.sumsqr(r * 0) + ca.sumsqr(sol * 0) == 0
     z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
-    fallback = ca.if_else(solves(z1, 1 + ca.norm_2(z1)), z1, ca.DM.nan(n, 1), True)
-    return ca.if_else(solves(sol, 1.0), sol, fallback, True)
+    solves = ca.sumsqr(residual(z1, values)) + ca.sumsqr(z1 * 0) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
+    fallback = ca.if_else(solves, z1, ca.DM.nan(n, 1), True)
+    return ca.if_else(finite, sol, fallback, True)
 
     def _declared_at(self, scalar: str) -> str:
         """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
