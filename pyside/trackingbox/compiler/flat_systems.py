@@ -432,11 +432,10 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
                             {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
     residual = ca.Function(f"{name}_residual", [z, p], [g])
 
-    # NaN or inf anywhere makes these comparisons false (x*0 is NaN for an infinite x)
-    r = residual(sol, values)
-    finite = ca.sumsqr(r * 0) + ca.sumsqr(sol * 0) == 0
+    # NaN or inf anywhere makes these comparisons false
+    finite = ca.sumsqr(residual(sol, values)) + ca.sumsqr(sol) < ca.inf
     z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
-    solves = ca.sumsqr(residual(z1, values)) + ca.sumsqr(z1 * 0) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
+    solves = ca.sumsqr(residual(z1, values)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
     fallback = ca.if_else(solves, z1, ca.DM.nan(n, 1), True)
     return ca.if_else(finite, sol, fallback, True)
 
