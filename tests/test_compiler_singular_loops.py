@@ -16,7 +16,7 @@ from trackingbox.compiler.flat_systems import _or_nearest_solution
 
 pytestmark = pytest.mark.compile
 
-SINGULAR = """model Singular "a consistent linear loop of rank 1 (coefficients that vary in time, so that it is not torn)"
+SINGULAR = """model Singular "a consistent linear loop of rank 1 (time-varying coefficients: not torn)"
   parameter Real b = 3;
   Real x(start = 1);
   Real y(start = -2);
