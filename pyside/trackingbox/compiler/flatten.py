@@ -390,6 +390,12 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             if ordinal is not None and not subs:  # an enumeration literal is its ordinal (MLS 4.9.5)
                 return int(ordinal)
             # component_ref names of array elements of components come as "a[2].b"
+            if any(v.startswith(name + ".") for v in self.vars):  # a record's fields are variables
+                raise self.unsupported(
+                    f"a record variable used whole (`{name}`, e.g. a medium's ThermodynamicState set from "
+                    "or passed to a function that returns or takes the record; its fields are variables of "
+                    "their own)",
+                    rf"\b{re.escape(name.rsplit('.', 1)[-1])}\b", span=self._span)
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
