@@ -400,7 +400,6 @@ class SystemAssembly:
         sol = _or_nearest_solution(f"loop{k}", z, p, g, sol, start, values)
         return [sol[i] for i in range(len(unk))]
 
-
     def _declared_at(self, scalar: str) -> str:
         """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
         declares its top-level component (and, if elsewhere, where the variable itself is)."""

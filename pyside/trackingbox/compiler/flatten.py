@@ -482,7 +482,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
     def _zero_settings(residuals: list[tuple[ca.MX, str]], continuous: dict[str, ca.MX], ders: set[str],
                        known: dict[int, ca.MX]) -> dict[int, ca.MX]:
         """{equation index: variable} of the equations (not in *known*) that, expanded, depend on one
-        continuous variable only and hold where it is 0 (and not where it is 1)."""
+        continuous variable only, linearly, and hold where it is 0 (and not where it is 1)."""
         found: dict[int, ca.MX] = {}
         for k, (r, origin) in enumerate(residuals):
             if k in known:
@@ -497,7 +497,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             sx = f.sx_in()
             e = f(*sx)
             left = [(m, x) for m, x in zip(syms, sx) if ca.depends_on(e, x)]
-            if len(left) == 1 and left[0][0].name() in continuous:
+            if len(left) == 1 and left[0][0].name() in continuous and not ca.depends_on(
+                    ca.jacobian(e, left[0][1]), left[0][1]):  # linear in it: 0 is its one solution
                 g = ca.Function("g", [left[0][1]], [e])
                 if float(g(0.0)) == 0 and float(g(1.0)) != 0:
                     found[k] = left[0][0]
