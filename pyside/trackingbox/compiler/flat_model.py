@@ -33,6 +33,7 @@ class ScalarVar:
     fixed: bool | None = None
     sym: ca.MX | None = None
     value: Any = None  # evaluated value for structural/constant
+    evaluate: bool = False  # a Real parameter with annotation(Evaluate = true) (its own or a final binding's)
 
 
 @dataclass(frozen=True)

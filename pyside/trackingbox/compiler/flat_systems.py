@@ -395,7 +395,9 @@ class SystemAssembly:
             {"abstol": 1e-10, "max_iter": 100},
         )
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
-        sol = rf(start, ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1))
+        values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
+        sol = rf(start, values)
+        sol = _or_nearest_solution(f"loop{k}", z, p, g, sol, start, values)
         return [sol[i] for i in range(len(unk))]
 
     def _declared_at(self, scalar: str) -> str:
@@ -447,3 +449,42 @@ class SystemAssembly:
             parts.append("equations with no variable left to solve for, from: "
                          + ", ".join(self._equation_at(e) for e in eqs))
         return "; ".join(parts)
+
+
+LOOP_TOLERANCE = 1e-6
+"""The largest residual (2-norm, relative to 1 + |z|) accepted from the nearest-solution fallback;
+above it the loop has no solution near the guess and gives NaN."""
+NEAREST_REGULARISATION = 1e-10
+"""epsilon of the regularised optimality conditions of the nearest solution (see _or_nearest_solution)."""
+
+
+def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
+                         values: ca.MX | ca.DM) -> ca.MX:
+    """Newton's iterate *sol* of the loop g(z, p) = 0 where it and its residual are finite (as
+    before: the iterate after at most 100 steps); where not (a Jacobian singular at the solution,
+    e.g. two stuck friction elements in series, whose torque split no equation determines: MSL
+    ``Rotational.Examples.LossyGearDemo2``) the solution nearest the guess z0,
+    argmin |z - z0| subject to g(z) = 0, from its optimality conditions regularised so that their
+    Jacobian [[I + sum y_i H_i, J'], [J, -eps I]] is nonsingular whatever the rank of J:
+
+        z - z0 + J(z)' y = 0,   g(z) - eps y = 0.
+
+    For a linear g = A z - b this is z = z0 - A'(A A' + eps I)^-1 (A z0 - b), which tends to
+    z0 + pinv(A) (b - A z0) as eps -> 0. Only the branch taken is evaluated (a short-circuit
+    if_else); a loop that neither solves leaves NaN, so that the importer's solver fails rather than
+    going on with values that do not satisfy the equations."""
+    n = z.numel()
+    y = ca.MX.sym(f"{name}_y", n)
+    z0 = ca.MX.sym(f"{name}_z0", n)
+    kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(g, z).T, y), g - NEAREST_REGULARISATION * y)
+    nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
+                            {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
+                            {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
+    residual = ca.Function(f"{name}_residual", [z, p], [g])
+
+    # NaN or inf anywhere makes these comparisons false
+    finite = ca.sumsqr(residual(sol, values)) + ca.sumsqr(sol) < ca.inf
+    z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
+    solves = ca.sumsqr(residual(z1, values)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
+    fallback = ca.if_else(solves, z1, ca.DM.nan(n, 1), True)
+    return ca.if_else(finite, sol, fallback, True)

@@ -148,6 +148,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self.time = ca.MX.sym("time")
         self.der_placeholders: dict[str, ca.MX] = {}
         self._evaluating: set[str] = set()
+        self._evaluated: dict[str, float | None] = {}
         self._inline_depth = 0
         self.asserts: list[Assertion] = []
         self._guards: list[Any] = []  # conditions of the function if-branches being inlined
@@ -273,6 +274,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                     output=(caus_kind == "Output" and top), start_node=v.get("start"),
                     binding_node=v.get("binding"), index=idx, attrs=attrs, description=desc,
                     fixed=self._fixed(fixed_raw),
+                    evaluate=(kind == "parameter" and str(v.get("evaluate")) == "True"
+                              and str(v.get("evaluate_refused")) != "True"),
                 )
                 if kind in ("parameter", "input", "continuous", "discrete"):
                     sv.sym = ca.MX.sym(sname)
@@ -387,6 +390,12 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             if ordinal is not None and not subs:  # an enumeration literal is its ordinal (MLS 4.9.5)
                 return int(ordinal)
             # component_ref names of array elements of components come as "a[2].b"
+            if any(v.startswith(name + ".") for v in self.vars):  # a record's fields are variables
+                raise self.unsupported(
+                    f"a record variable used whole (`{name}`, e.g. a medium's ThermodynamicState set from "
+                    "or passed to a function that returns or takes the record; its fields are variables of "
+                    "their own)",
+                    rf"\b{re.escape(name.rsplit('.', 1)[-1])}\b", span=self._span)
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
@@ -417,7 +426,101 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
     def _scalar_value(self, sv: ScalarVar) -> Value:
         if sv.kind in ("structural", "constant"):
             return self.structural_value(sv)
+        if sv.evaluate and sv.fixed is not False:
+            value = self._evaluated_parameter(sv)
+            if value is not None:
+                return value
         return sv.sym
+
+    def _without_vanished_derivatives(self, residuals: list[tuple[ca.MX, str]],
+                                      init_residuals: list[tuple[ca.MX, str]]) -> list[tuple[ca.MX, str]]:
+        """The residuals without the derivatives that an evaluated parameter equal to 0 multiplies
+        away (``i = C*der(v)`` with ``C = 0`` is ``i = 0``; a transistor's charge terms ``(if .. then
+        Cjc*.. else Cjc*..)*der(vbc)`` with ``Cjc = 0``): each residual that has a derivative is
+        expanded into CasADi's scalar graph, whose construction folds ``0*x`` and ``if c then 0 else
+        0`` to 0, and a derivative it no longer depends on is removed; a variable whose derivative no
+        equation keeps is no state. A residual that cannot be expanded (a rootfinder, an external
+        function) keeps what it has."""
+        ders = {d.name() for d in self.der_placeholders.values()}
+        continuous = {sv.sym.name(): sv.sym for sv in self.scalars.values() if sv.kind == "continuous"}
+        residuals = list(residuals)
+        # a variable that an equation v = e sets to 0 (e folding to 0 once expanded, e.g. a junction
+        # capacitance Cjc*powlin(..) with Cjc = 0) is 0 in the other equations
+        zero: dict[int, ca.MX] = {}  # the equation that sets it -> the variable
+        while True:  # until no equation sets another one to 0 (Capcjc = 0, then cbc = Taur*.. + Capcjc)
+            found = self._zero_settings(residuals, continuous, ders, zero)
+            if not found:
+                break
+            zero.update(found)
+            set_zero = list(found.values())
+            residuals = [(r if k in zero else ca.substitute([r], set_zero, [ca.MX(0)] * len(set_zero))[0], o)
+                         for k, (r, o) in enumerate(residuals)]
+        out = []
+        for r, origin in residuals:
+            syms = ca.symvar(r)
+            if any(s.name() in ders for s in syms):
+                try:
+                    f = ca.Function("vanish", syms, [r]).expand()
+                except RuntimeError:
+                    out.append((r, origin))
+                    continue
+                sx = f.sx_in()
+                e = f(*sx)
+                gone = [m for m, x in zip(syms, sx) if m.name() in ders and not ca.depends_on(e, x)]
+                if gone:
+                    r = ca.substitute([r], gone, [ca.MX(0)] * len(gone))[0]
+            out.append((r, origin))
+        used = {s.name() for r, _ in list(out) + list(init_residuals) for s in ca.symvar(r)}
+        for name, d in list(self.der_placeholders.items()):
+            if d.name() not in used:
+                log.info("%s: %s is no state: its derivative is multiplied by an evaluated parameter equal "
+                         "to 0 wherever it appears", self.model, name)
+                del self.der_placeholders[name]
+        return out
+
+    @staticmethod
+    def _zero_settings(residuals: list[tuple[ca.MX, str]], continuous: dict[str, ca.MX], ders: set[str],
+                       known: dict[int, ca.MX]) -> dict[int, ca.MX]:
+        """{equation index: variable} of the equations (not in *known*) that, expanded, depend on one
+        continuous variable only, linearly, and hold where it is 0 (and not where it is 1)."""
+        found: dict[int, ca.MX] = {}
+        for k, (r, origin) in enumerate(residuals):
+            if k in known:
+                continue
+            syms = ca.symvar(r)
+            if not any(m.name() in continuous for m in syms) or any(m.name() in ders for m in syms):
+                continue
+            try:
+                f = ca.Function("vanish", syms, [r]).expand()
+            except RuntimeError:
+                continue
+            sx = f.sx_in()
+            e = f(*sx)
+            left = [(m, x) for m, x in zip(syms, sx) if ca.depends_on(e, x)]
+            if len(left) == 1 and left[0][0].name() in continuous and not ca.depends_on(
+                    ca.jacobian(e, left[0][1]), left[0][1]):  # linear in it: 0 is its one solution
+                g = ca.Function("g", [left[0][1]], [e])
+                if float(g(0.0)) == 0 and float(g(1.0)) != 0:
+                    found[k] = left[0][0]
+        return found
+
+    def _evaluated_parameter(self, sv: ScalarVar) -> float | None:
+        """The value of a Real parameter with ``annotation(Evaluate = true)`` where its binding is a
+        number (else None: it stays a parameter). The equations then see the number, as tools that
+        evaluate such parameters do, so that e.g. a capacitor with ``C = 0`` (MSL
+        ``Analog.Examples.HeatingNPN_NORGate``: ``final C = CapVal``, ``CapVal = 0`` evaluated) has
+        ``i = 0`` and its voltage is no state."""
+        if sv.name not in self._evaluated:
+            self._evaluated[sv.name] = None
+            node = sv.binding_node if sv.binding_node is not None else sv.start_node
+            if node is not None:
+                try:
+                    val = self._element(sv, node)
+                except CompileError:
+                    val = None
+                if is_number(val):
+                    self._evaluated[sv.name] = float(val)
+        return self._evaluated[sv.name]
 
     def _subscript(self, sub: Any, value: Value, k: int, env: dict[str, Value] | None) -> Value:
         """One subscript: an Integer, a vector of Integers, or None for ``:``.
@@ -451,6 +554,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self.collect_variables()
         params, calculated, calc_eqs, computed, init_residuals = self._parameters()
         residuals = self._model_residuals(calc_eqs)
+        if any(v == 0 for v in self._evaluated.values()):
+            residuals = self._without_vanished_derivatives(residuals, init_residuals)
         states = [self.scalars[n] for n in self.der_placeholders]
         state_names = set(self.der_placeholders)
         algebraics = self._initial_residuals(init_residuals, state_names)

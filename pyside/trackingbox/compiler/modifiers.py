@@ -293,9 +293,24 @@ class ModifierCheck:
                     f"bounds, units or start where {leaf} is declared"
                 )
 
+    def _only_as_replaceable_default(self, c: ClassInfo, name: str, target: ClassInfo | None) -> bool:
+        """Whether *name* stands in *c* only as the default or constraining class of a replaceable
+        package (``replaceable package Medium = Modelica.Media.Interfaces.PartialMedium``) and
+        names a partial package: a model cannot be simulated with such a package left in place (its
+        functions are partial), so its constants are read through the package that replaces it."""
+        if target is None or not target.partial or target.kind != "package":
+            return False
+        text = self.body(c)
+        esc = re.escape(name)
+        every = len(re.findall(rf"(?<![\w.]){esc}(?![\w])", text))
+        default = len(re.findall(rf"\breplaceable\s+package\s+\w+\s*=\s*{esc}(?![\w.])"
+                                 rf"|\bconstrainedby\s+{esc}(?![\w.])", text))
+        return every > 0 and every == default
+
     def _used_directly(self, used: list[ClassInfo], ext: str, extender: ClassInfo) -> bool:
         """Whether the class that *extender* extends by the name *ext* is used by name in a used class
-        (a name there, or a prefix of one, resolves to exactly that class), besides that extends clause."""
+        (a name there, or a prefix of one, resolves to exactly that class), besides that extends clause
+        and the class's own name in its own text (``package P ... end P;``)."""
         idx = self.index
         simple = ext.rsplit(".", 1)[-1]
         targets = [b for b in idx.bases(extender.name) if b.rsplit(".", 1)[-1] == simple]
@@ -305,6 +320,10 @@ class ModifierCheck:
         for c in used:
             for name in c.names:
                 if c is extender and name == ext:
+                    continue
+                if c.name == target and name == c.simple:  # its own header and `end` name no use
+                    continue
+                if self._only_as_replaceable_default(c, name, idx.classes.get(target)):
                     continue
                 parts = name.split(".")
                 for k in range(1, len(parts) + 1):

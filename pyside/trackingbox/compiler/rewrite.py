@@ -364,6 +364,11 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         log.debug("%s: parameters bound to a call of a function that asserts computed at initialisation "
                   "(fixed = false) at lines %s", file, ", ".join(map(str, lines)))
         body, changed = computed, True
+    relaxed, lines = relax_input_extents(body)
+    if lines:
+        log.debug("%s: function inputs sized by a package constant read as [:] at lines %s", file,
+                  ", ".join(map(str, lines)))
+        body, changed = relaxed, True
     rewrite = protect_der_equations(body)
     if rewrite.lines:
         log.debug("%s: der(...) equations in for-loops put in parentheses for rumoca at lines %s%s",
@@ -380,7 +385,8 @@ def frontend_bytes(file: Path, tuple_names: frozenset[bytes] = frozenset(),
     taking several outputs renamed for the functions in *tuple_names*, see
     :func:`tuple_function_names`), :func:`computed_parameter_bindings` for the functions in
     *asserting* (none unless a first try failed, see :func:`asserting_function_names`) and
-    :func:`protect_der_equations` applied; None if none changes it."""
+    :func:`relax_input_extents` and :func:`protect_der_equations` applied; None if none changes
+    it."""
     try:
         st = file.stat()
         return _frontend_bytes_cached(file, st.st_mtime_ns, st.st_size, tuple_names, asserting)
@@ -727,3 +733,54 @@ def _binding_end(code: bytes, data: bytes, start: int, stop: int) -> int:
         elif depth == 0 and (data[k:k + 1] == b'"' or re.match(rb"annotation\b", code[k:k + 11])):
             return len(code[start:k].rstrip())
     return len(code[start:stop].rstrip())
+
+
+# --- function inputs sized by a package constant ------------------------------------------------
+#
+# rumoca 0.10.2 proves the extents of a function's arrays from the function's own inputs and
+# locals; an input sized by a constant of the enclosing package, ``input MassFraction X[nX]`` in
+# ``Modelica.Media.Interfaces.PartialSimpleMedium.density_phX``, stops it with "function shape
+# proof: dependent extent is not an exact Integer expression over proven shape axes" wherever the
+# function is merely reachable (every Modelica.Fluid source and vessel with such a medium). An
+# input's declared size only constrains what a caller may pass (MLS 12.4.1: the argument's size
+# must match); the function computes the same with ``X[:]``, so such inputs are read as ``X[:]``.
+# The edit keeps every byte: ``[nX]`` becomes ``[: ]`` (the blanks inside the brackets).
+
+_INPUT_DECL = re.compile(rb"\binput\s+[A-Za-z_][\w.]*\s+[A-Za-z_]\w*\s*\[([^\]]*)\]")
+_DECLARED = rb"(?:\b(?:input|output|parameter|constant|Integer|Real|Boolean)\b[^;]*?)\b%s\b\s*(?:[=;(,\"\[]|$)"
+
+
+def relax_input_extents(data: bytes) -> tuple[bytes, list[int]]:
+    """*data* with each array dimension of a function input that is a bare name the function does
+    not declare itself (a constant of an enclosing package) read as ``:``; and the lines changed."""
+    if b"input" not in data or b"function" not in data:
+        return data, []
+    code, _, _ = _code_mask(data)
+    out = bytearray(data)
+    lines: list[int] = []
+    for m in _FUNCTION.finditer(code):
+        name = m.group(1)
+        if name == b"extends" or _previous_word(code, m.start()) == b"end":
+            continue
+        if re.match(rb"\s*=", code[m.end():m.end() + 200]):  # a short class definition
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(name) + rb"\s*;").search(code, m.end())
+        if end is None:
+            continue
+        body = code[m.end():end.start()]
+        if _FUNCTION.search(body):  # nested functions: their declarations are not this one's
+            continue
+        unsized = re.sub(rb"\[[^\]]*\]", b"", body)  # names declared, not those in sizes
+        for decl in _INPUT_DECL.finditer(body):
+            dims = decl.group(1)
+            first = m.end() + decl.start(1)
+            offset = 0
+            for dim in dims.split(b","):
+                ident = dim.strip()
+                if re.fullmatch(rb"[A-Za-z_]\w*", ident) and ident != b"end" and not re.search(
+                        _DECLARED % re.escape(ident), unsized, re.M):
+                    at = first + offset + dim.index(ident)
+                    out[at:at + len(ident)] = b":" + b" " * (len(ident) - 1)
+                    lines.append(data.count(b"\n", 0, at) + 1)
+                offset += len(dim) + 1
+    return bytes(out), sorted(set(lines))

@@ -1,0 +1,93 @@
+"""An algebraic loop whose Jacobian is singular at its solution (issue 35: MSL
+``Rotational.Examples.LossyGearDemo2``, two stuck friction elements in series whose torque split no
+equation determines) is solved for the solution nearest the guess (the start values) instead of
+giving NaN; a loop with a regular Jacobian keeps Newton's solution; where Newton's iterate is NaN and
+no solution is near, the loop stays NaN. The expectations: numpy's pseudo-inverse,
+z0 + pinv(A) (b - A z0) for A z = b, and the point of a circle nearest a given one."""
+from __future__ import annotations
+
+import casadi as ca
+import fmpy
+import numpy as np
+import pytest
+
+from trackingbox.compiler import compile_model
+from trackingbox.compiler.flat_systems import _or_nearest_solution
+
+pytestmark = pytest.mark.compile
+
+SINGULAR = """model Singular "a consistent linear loop of rank 1 (time-varying coefficients: not torn)"
+  parameter Real b = 3;
+  Real x(start = 1);
+  Real y(start = -2);
+  Real s(start = 0, fixed = true);
+equation
+  der(s) = 1;
+  (1 + time)*x + (1 + time)*y = (1 + time)*b;
+  2*(1 + time)*x + 2*(1 + time)*y = 2*(1 + time)*b + RHS;
+end Singular;
+"""
+
+
+def _compile(tmp_path, rhs: str):
+    src = tmp_path / "Singular.mo"
+    src.write_text(SINGULAR.replace("RHS", rhs))
+    return compile_model(src, "Singular", backend="embedded", output=tmp_path / "s.fmu")
+
+
+def _solve(g, z, p, guess, value):
+    """(Newton's iterate, the loop's solution) of g(z, p) = 0 from *guess*, evaluated by CasADi."""
+    rf = ca.rootfinder("r", "fast_newton", {"x": z, "p": p, "g": g}, {"abstol": 1e-10, "max_iter": 100})
+    z0, pv = ca.MX.sym("z0", z.numel()), ca.MX.sym("pv", p.numel())
+    newton = rf(z0, pv)
+    f = ca.Function("f", [z0, pv], [newton, _or_nearest_solution("t", z, p, g, newton, z0, pv)])
+    a, b = f(guess, value)
+    return np.array(a).ravel(), np.array(b).ravel()
+
+
+@pytest.mark.parametrize("guess", [[1.0, -2.0], [0.3, 0.1], [5.0, 5.0], [-4.0, 0.0]])
+def test_a_singular_linear_loop_gives_the_solution_nearest_the_guess(guess):
+    z, p = ca.MX.sym("z", 2), ca.MX.sym("p")
+    newton, sol = _solve(ca.vertcat(z[0] + z[1] - p, 2 * (z[0] + z[1] - p)), z, p, guess, 3.0)
+    assert not np.all(np.isfinite(newton))  # Newton's step divides by the zero pivot
+    a, b, z0 = np.array([[1.0, 1.0], [2.0, 2.0]]), np.array([3.0, 6.0]), np.array(guess)
+    assert np.allclose(sol, z0 + np.linalg.pinv(a) @ (b - a @ z0), atol=1e-8)
+
+
+@pytest.mark.parametrize("guess", [[1.0, -2.0], [0.3, 0.1], [5.0, 5.0]])
+def test_a_singular_nonlinear_loop_gives_the_point_nearest_the_guess(guess):
+    """x^2 + y^2 = 3 stated twice: the nearest point of the circle lies on the ray through the guess."""
+    z, p = ca.MX.sym("z", 2), ca.MX.sym("p")
+    circle = z[0] ** 2 + z[1] ** 2 - p
+    _, sol = _solve(ca.vertcat(circle, 2 * circle), z, p, guess, 3.0)
+    assert np.allclose(sol, np.sqrt(3.0) * np.array(guess) / np.linalg.norm(guess), atol=1e-7)
+
+
+def test_a_loop_without_a_solution_gives_nan():
+    z, p = ca.MX.sym("z", 2), ca.MX.sym("p")
+    _, sol = _solve(ca.vertcat(z[0] + z[1] - p, 2 * (z[0] + z[1] - p) - 1), z, p, [1.0, -2.0], 3.0)
+    assert np.all(np.isnan(sol))
+
+
+def test_a_consistent_singular_loop_in_an_fmu_is_solved_at_every_output(tmp_path):
+    """Where the FMU's Newton iteration meets the zero pivot (before: NaN, the run failed) it falls
+    back to the nearest solution; where roundoff lets Newton reach a solution, that one stays."""
+    res = _compile(tmp_path, "0")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.05, output=["x", "y"])
+    assert np.all(np.isfinite(out["x"])) and np.all(np.isfinite(out["y"]))
+    assert np.allclose(out["x"] + out["y"], 3.0, atol=1e-8)
+    # at t = 0 the pivot is exactly zero: the nearest solution to the start values (1, -2)
+    assert np.allclose([out["x"][0], out["y"][0]], [3.0, 0.0], atol=1e-8)
+
+
+def test_a_regular_loop_keeps_newtons_solution(tmp_path):
+    src = tmp_path / "Regular.mo"
+    src.write_text("model Regular\n  Real x(start = 1);\n  Real y(start = 1);\n  Real s(start = 0, fixed = true);\n"
+                   "equation\n  der(s) = 1;\n  x^2 + y = 2 + time;\n  x - (1 + time)*y = 0;\nend Regular;\n")
+    res = compile_model(src, "Regular", backend="embedded", output=tmp_path / "r.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.25, output=["x", "y"])
+    for t, x, y in zip(out["time"], out["x"], out["y"]):
+        # x = (1 + t) y, x^2 + y = 2 + t: the positive root of (1 + t)^2 y^2 + y - (2 + t) = 0
+        c = (1 + t) ** 2
+        yy = (-1 + np.sqrt(1 + 4 * c * (2 + t))) / (2 * c)
+        assert abs(y - yy) < 1e-9 and abs(x - (1 + t) * yy) < 1e-9
