@@ -44,3 +44,14 @@ def test_an_integrating_state_never_settles_and_says_so():
     run = settle_by_integration(lambda z: np.array([0.5]), [2.0], 1e-9, t_max=1e6)
     assert not run.converged and run.rates.tolist() == [0.5]
     assert run.message == "still moving after 1e+06 s"
+
+
+def test_rates_that_turn_nan_on_the_way_end_the_run_where_they_were_finite_and_say_so():
+    # a body boiled dry at a fixed rate: 0.5 kg/s of its 2 kg until t = 4 s (by hand), no rate once empty
+    run = settle_by_integration(lambda z: np.where(z > 0.0, -0.5, np.nan), [2.0], 1e-9)
+    assert not run.converged and run.nonfinite == (0,)
+    assert "non-finite" in run.message
+    # the last states with finite rates lie on the hand-solved trajectory, before it empties
+    assert 0.0 < run.time <= 4.0 and run.z[0] > 0.0
+    assert run.z[0] == pytest.approx(2.0 - 0.5 * run.time, abs=1e-6)
+    assert run.rates.tolist() == [-0.5]

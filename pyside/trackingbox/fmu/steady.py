@@ -45,6 +45,9 @@ class Settled:
     evaluations: int
     #: why it did not settle ("" where it did)
     message: str
+    #: the states whose rates the model gave as NaN or infinite on the way (their indices; empty where
+    #: every rate it gave was finite). The run then ends at the last states with finite rates.
+    nonfinite: tuple[int, ...] = ()
 
 
 def settle_by_integration(f: Callable[[Vector], Vector], z0: npt.ArrayLike, tol: float, *,
@@ -66,10 +69,18 @@ def settle_by_integration(f: Callable[[Vector], Vector], z0: npt.ArrayLike, tol:
     from scipy.integrate import solve_ivp  # 0.03 s more imports than scipy.optimize; only needed here
 
     count = [0]
+    # the last states whose rates were all finite, and where the first non-finite rates were
+    last_finite: list[tuple[float, Vector]] = []
+    bad: list[int] = []
 
-    def rhs(_t: float, z: Vector) -> Vector:
+    def rhs(t: float, z: Vector) -> Vector:
         count[0] += 1
-        return np.array(f(z), dtype=float)
+        rates = np.array(f(z), dtype=float)
+        if np.all(np.isfinite(rates)):
+            last_finite[:] = [(float(t), np.array(z, dtype=float))]
+        elif not bad:
+            bad.extend(int(i) for i in np.flatnonzero(~np.isfinite(rates)))
+        return rates
 
     def settled(_t: float, z: Vector) -> float:
         count[0] += 1
@@ -81,10 +92,23 @@ def settle_by_integration(f: Callable[[Vector], Vector], z0: npt.ArrayLike, tol:
     z = np.array(z0, dtype=float)
     t_end, message = 0.0, ""
     if not np.max(np.abs(rhs(0.0, z)), initial=0.0) <= tol:
-        sol = solve_ivp(rhs, (0.0, float(t_max)), z, method="BDF", rtol=RTOL, atol=ATOL, events=settled)
-        z, t_end = np.array(sol.y[:, -1], dtype=float), float(sol.t[-1])
-        message = (f"the integrator failed at {t_end:.3g} s ({' '.join(str(sol.message).split()).rstrip('.')})"
-                   if sol.status < 0 else f"still moving after {t_end:.3g} s")
+        try:
+            sol = solve_ivp(rhs, (0.0, float(t_max)), z, method="BDF", rtol=RTOL, atol=ATOL, events=settled)
+        except ValueError:
+            # scipy refuses to factor a Jacobian holding NaN or infinity ("array must not contain infs or
+            # NaNs"): the run reached states where the model's rates are not finite (outside the range its
+            # equations hold). It ends at the last states it had finite rates for, and says so.
+            if not bad:
+                raise
+            if last_finite:
+                t_end, z = last_finite[0]
+            message = (f"its rates became non-finite after {t_end:.3g} s (the run left the range the model's "
+                       f"equations hold)")
+        else:
+            z, t_end = np.array(sol.y[:, -1], dtype=float), float(sol.t[-1])
+            message = (f"the integrator failed at {t_end:.3g} s ({' '.join(str(sol.message).split()).rstrip('.')})"
+                       if sol.status < 0 else f"still moving after {t_end:.3g} s")
     rates = rhs(t_end, z)
     converged = bool(np.all(np.isfinite(rates)) and np.max(np.abs(rates), initial=0.0) <= tol)
-    return Settled(z, rates, converged, t_end, count[0], "" if converged else message)
+    return Settled(z, rates, converged, t_end, count[0], "" if converged else message,
+                   () if converged else tuple(bad))

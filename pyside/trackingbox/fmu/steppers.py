@@ -855,6 +855,7 @@ class ModelExchangeStepper(Stepper):
                 self._fmi.get_derivatives(pdx, n)
                 return dx / scale
 
+            lost: tuple[int, ...] = ()
             with np.errstate(all="ignore"):
                 sol = root(rate, x0 / scale, method="hybr",
                            options={"xtol": 1e-13, "maxfev": 200 * (n + 1)})
@@ -865,11 +866,23 @@ class ModelExchangeStepper(Stepper):
                     z, evaluations = run.z, evaluations + run.evaluations
                     drift = np.abs(rate(z)) * 3600.0
                     how = f"Powell's hybrid method: {how}; the model's own settling: {run.message or 'settled'}"
+                    lost = run.nonfinite
+            states = self.state_names
+            if lost:
+                # the model's own settling from here leaves the range its equations hold (a plant stopped
+                # with its heating on boils dry): there is no steady state to start from at these inputs
+                self._x[:n] = x0
+                fmu.setContinuousStates(self._px, n)
+                which = ", ".join(states[i] if i < len(states) else f"state {i + 1}" for i in lost[:5])
+                raise SimulationError(
+                    f"{name} has no steady state at t = {self.time:g} s with its inputs there: settling from its "
+                    f"states, the derivative of {which}{' and more' if len(lost) > 5 else ''} became NaN or "
+                    f"infinite ({how}); the inputs there may be outside where the model operates (a stoppage): "
+                    f"start the run at a time the plant runs, or set [data] initial = \"model\"")
             if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):
                 worst = int(np.nanargmax(np.where(np.isfinite(drift), drift, np.inf)))
                 self._x[:n] = x0
                 fmu.setContinuousStates(self._px, n)
-                states = self.state_names
                 which = states[worst] if worst < len(states) else f"state {worst + 1}"
                 raise SimulationError(
                     f"{name} has no steady state at t = {self.time:g} s with its inputs there: {which} still changes "
