@@ -312,6 +312,83 @@ def coarsen(window: WindowData, stride: int) -> WindowData:
     )
 
 
+def _after_input_gaps(spec: Spec, view: MeasurementView) -> int:
+    """Index of the first lead-in point after the last input gap before the window (0: none)."""
+    cut = 0
+    for tag in spec.inputs:
+        bad_lead = np.flatnonzero(~np.isfinite(view.values(tag)[:view.lead]))
+        if bad_lead.size:
+            cut = max(cut, int(bad_lead[-1]) + 1)
+    return cut
+
+
+def _lead_in(spec: Spec, name: str, lead: float) -> tuple[MeasurementView, int]:
+    """The window's view and the index its run starts at (see :func:`load_windows`).
+
+    The run starts *lead* seconds before the window, after the last input gap. A run that starts from
+    the twin's steady state (``[data] initial = "steady"``) does not start inside a stoppage
+    (``data.stoppage``: the tag below its threshold): a stopped plant is not at the steady state of its
+    stopped inputs (an evaporator whose feed stops while its steam stays on boils dry; its model has no
+    steady state there). The run then starts the stoppage rule's ``settle`` time (at least one sample)
+    before that stoppage began, and runs through it as the plant did: the stoppage tag lags the inputs
+    that stop the plant (a measured flow behind its set-point), so its last sample above the threshold
+    may already have the inputs stopped, and ``settle`` is the spec's own measure of how long a stoppage
+    disturbs the plant. Where that time is not in the data (they begin stopped) or an input gap lies
+    between, the start stays where it was.
+    """
+    view = MeasurementView.from_spec(spec, name, lead=lead)
+    cut = _after_input_gaps(spec, view)
+    stoppage = spec.data.stoppage
+    if spec.data.initial != "steady" or stoppage is None:
+        return view, cut
+    below = float(stoppage.below)
+    ts = float(spec.sample_time)
+    margin = max(float(stoppage.settle), ts)
+    window_start = float(view.grid[view.lead]) if view.lead < view.grid.size else float(view.grid[-1])
+
+    def stopped(v: MeasurementView) -> npt.NDArray[np.bool_]:
+        level = v.values(stoppage.tag)
+        return np.isfinite(level) & (level < below)
+
+    def index(v: MeasurementView, at: float) -> int:
+        return int(np.searchsorted(v.grid, at - 1e-6 * ts))
+
+    down = stopped(view)
+    if not down[cut]:
+        return view, cut
+    t_asked = t = float(view.grid[cut])
+    began = t
+    while True:
+        if t < float(view.grid[0]) - 1e-6 * ts:  # before this view: lay a longer one
+            view = MeasurementView.from_spec(spec, name, lead=window_start - t + ts)
+            down = stopped(view)
+        k = index(view, t)
+        if not down[k]:
+            break
+        first = k
+        while first > 0 and down[first - 1]:
+            first -= 1
+        if first == 0:
+            if float(view.grid[0]) <= 0.0:  # the data begin stopped: no running sample before it
+                log.info("%s window: the run starts at t = %g s inside a stoppage (%s below %g) the data begin "
+                         "in: no running sample before it to start from", name, t_asked, stoppage.tag, below)
+                return MeasurementView.from_spec(spec, name, lead=lead), cut
+            view = MeasurementView.from_spec(spec, name, lead=window_start - float(view.grid[0]) + margin)
+            down = stopped(view)
+            continue
+        began = float(view.grid[first])
+        t = max(began - margin, 0.0)
+    start, k_asked = index(view, t), index(view, t_asked)
+    if any(not np.all(np.isfinite(view.values(tag)[start:k_asked + 1])) for tag in spec.inputs):
+        log.info("%s window: the run starts at t = %g s inside a stoppage (%s below %g); an input gap lies "
+                 "between it and a running sample before it", name, t_asked, stoppage.tag, below)
+        return MeasurementView.from_spec(spec, name, lead=lead), cut
+    log.info("%s window: its warm-up would start at t = %g s inside a stoppage (%s below %g since t = %g s), "
+             "where the twin has no steady state to start from; it starts at t = %g s, the stoppage rule's "
+             "settle time before", name, t_asked, stoppage.tag, below, began, float(view.grid[start]))
+    return view, start
+
+
 def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData, WindowData]:
     """Cut the training and validation windows out of the spec's measurement view.
 
@@ -323,6 +400,10 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
     the real history into the window. Where there is less history (a window at
     the first sample has none) the warm-up is shortened to what exists: no run
     starts before the first sample (:func:`warmup_used` says how long it was).
+    A run from the twin's steady state (``[data] initial = "steady"``) whose
+    warm-up would start inside a stoppage starts the stoppage rule's ``settle``
+    time before that stoppage began instead, a longer warm-up (a stopped plant
+    has no steady state to start from).
 
     Parameters
     ----------
@@ -349,19 +430,13 @@ def load_windows(spec: Spec, *, warmup: float | None = None) -> tuple[WindowData
             raise SpecError(f"spec {getattr(spec, 'path', '')} has no [windows] {name} = [start, stop]")
         start, stop = float(span[0]), float(span[1])
         try:
-            view = MeasurementView.from_spec(spec, name, lead=lead_s)
+            view, cut = _lead_in(spec, name, lead_s)
         except DataError as exc:
             raise DataError(f"{name} window: {exc}; estimation needs at least {MIN_VALID_SAMPLES} samples") \
                 from None
         grid = view.grid
         n_lead = view.lead
         n_window = grid.size - n_lead
-        # the lead-in starts after the last input gap before the window
-        cut = 0
-        for tag in spec.inputs:
-            bad_lead = np.flatnonzero(~np.isfinite(view.values(tag)[:n_lead]))
-            if bad_lead.size:
-                cut = max(cut, int(bad_lead[-1]) + 1)
         grid = grid[cut:]
         lead = n_lead - cut
         problems = []
