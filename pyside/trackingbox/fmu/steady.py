@@ -18,7 +18,7 @@ slowest tank cost a few hundred steps.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,3 +112,28 @@ def settle_by_integration(f: Callable[[Vector], Vector], z0: npt.ArrayLike, tol:
     converged = bool(np.all(np.isfinite(rates)) and np.max(np.abs(rates), initial=0.0) <= tol)
     return Settled(z, rates, converged, t_end, count[0], "" if converged else message,
                    () if converged else tuple(bad))
+
+
+def no_steady_state(states: Sequence[str], drift: Vector, limit: float, lost: tuple[int, ...], how: str) -> str:
+    """Why the states reached are no steady state ("" when they are one), for ``settle``'s error.
+
+    *drift*: each state's rate in its own size per hour there (infinite where the states are not finite);
+    *limit*: the largest accepted; *lost*: the states whose rates turned non-finite on the way
+    (:attr:`Settled.nonfinite`); *how*: how the search ended.
+    """
+    def named(i: int) -> str:
+        return states[i] if i < len(states) else f"state {i + 1}"
+
+    if lost:
+        # the model's own settling leaves the range its equations hold (a plant stopped with its heating on
+        # boils dry): there is no steady state to start from at these inputs
+        return (f"settling from its states, the derivative of {', '.join(named(i) for i in lost[:5])}"
+                f"{' and more' if len(lost) > 5 else ''} became NaN or infinite ({how}); the inputs there may be "
+                f"outside where the model operates (a stoppage): start the run at a time the plant runs, or set "
+                f"[data] initial = \"model\"")
+    if np.all(drift <= limit):
+        return ""
+    worst = int(np.nanargmax(np.where(np.isfinite(drift), drift, np.inf)))
+    return (f"{named(worst)} still changes by {drift[worst]:.3g} times its size per hour ({how}); an integrating "
+            f"state (a level whose flows do not balance) has none: set [data] initial = \"model\" to start from "
+            f"the FMU's own initial state")

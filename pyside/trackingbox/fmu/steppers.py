@@ -26,7 +26,7 @@ from ..errors import DataError, FMUError, SimulationError, unknown_name
 from .adapters import FMIAdapter
 from .calls import fmu_calls, simulation_failure
 from .info import REAL_TYPES, change_refusal
-from .steady import settle_by_integration
+from .steady import no_steady_state, settle_by_integration
 
 if TYPE_CHECKING:
     from .model import FMUModel
@@ -867,28 +867,12 @@ class ModelExchangeStepper(Stepper):
                     drift = np.abs(rate(z)) * 3600.0
                     how = f"Powell's hybrid method: {how}; the model's own settling: {run.message or 'settled'}"
                     lost = run.nonfinite
-            states = self.state_names
-            if lost:
-                # the model's own settling from here leaves the range its equations hold (a plant stopped
-                # with its heating on boils dry): there is no steady state to start from at these inputs
+            why = no_steady_state(self.state_names, np.where(np.isfinite(z), drift, np.inf), self.STEADY_DRIFT,
+                                  lost, how)
+            if why:
                 self._x[:n] = x0
                 fmu.setContinuousStates(self._px, n)
-                which = ", ".join(states[i] if i < len(states) else f"state {i + 1}" for i in lost[:5])
-                raise SimulationError(
-                    f"{name} has no steady state at t = {self.time:g} s with its inputs there: settling from its "
-                    f"states, the derivative of {which}{' and more' if len(lost) > 5 else ''} became NaN or "
-                    f"infinite ({how}); the inputs there may be outside where the model operates (a stoppage): "
-                    f"start the run at a time the plant runs, or set [data] initial = \"model\"")
-            if not (np.all(np.isfinite(z)) and np.all(drift <= self.STEADY_DRIFT)):
-                worst = int(np.nanargmax(np.where(np.isfinite(drift), drift, np.inf)))
-                self._x[:n] = x0
-                fmu.setContinuousStates(self._px, n)
-                which = states[worst] if worst < len(states) else f"state {worst + 1}"
-                raise SimulationError(
-                    f"{name} has no steady state at t = {self.time:g} s with its inputs there: {which} still changes "
-                    f"by {drift[worst]:.3g} times its size per hour ({how}); an "
-                    f"integrating state (a level whose flows do not balance) has none: set [data] initial = "
-                    f"\"model\" to start from the FMU's own initial state")
+                raise SimulationError(f"{name} has no steady state at t = {self.time:g} s with its inputs there: {why}")
             self._x[:n] = z * scale
             fmu.setContinuousStates(self._px, n)
             if self._nz:
