@@ -132,3 +132,62 @@ def test_parameter_errors_after_settling_against_a_trajectory_and_a_constant(tmp
     S.parameters[1].start = 1.0
     truth["parameters"]["d"] = 4.0
     assert parameter_errors(S(), tmp_path / "t.csv", truth, settle=5.0)["d"].max_error == pytest.approx(3.0)
+
+
+def _pairing_result(rejected, pairs=()):
+    """A pair stage result by hand: 3 tags x 2 candidates, a relative gain array chosen so that
+    PI-1 (lambda 1.0) is Rf's best refused pair and TI-1 (lambda 3.2) its worse one."""
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from trackingbox.analysis.pairing_model import Pairing
+
+    variables, parameters = ("PI-1", "TI-1", "QI-1"), ("Rf", "dp0")
+    gains = np.array([[9.6e6, 0.0], [-2.4e3, 0.0], [-44.0, 0.9]])
+    rga = np.array([[1.0, 0.0], [3.2, 0.0], [-0.4, 1.0]])
+    tau = np.array([[480.0, 1.0], [1065.0, 1.0], [4200.0, 7.0]])
+    pairing = Pairing(pairs=tuple(pairs), left_out=(("Rf", "the data checks rejected its best pair"),
+                                                    ("PI-1", "tracking would leave 26 %"), ("QI-1", "floor")),
+                      warnings=(), variables=variables, parameters=parameters, gains=gains, rga=rga,
+                      rejected=tuple(rejected))
+
+    @dataclass(frozen=True)
+    class Result:
+        pairing: Pairing
+        steptest: SimpleNamespace
+
+    return Result(pairing, SimpleNamespace(variables=variables, parameters=parameters, gains=gains,
+                                           time_constants=tau))
+
+
+def test_a_varying_parameter_pair_refused_is_kept_on_its_best_relative_gain() -> None:
+    from trackingbox.diagnose.apply import keep_varying
+
+    refused = [("TI-1", "Rf", "tracking would leave 40 %"), ("PI-1", "Rf", "tracking would leave 26 %")]
+    res, kept = keep_varying(_pairing_result(refused), ["Rf"])
+    # the refused pair with the relative gain closest to 1 (PI-1, 1.0; not TI-1, 3.2), its reason kept
+    assert kept == [{"variable": "PI-1", "parameter": "Rf", "refused": "tracking would leave 26 %"}]
+    (pair,) = res.pairing.pairs
+    assert (pair.variable, pair.parameter, pair.lambda_, pair.gain, pair.time_constant) == ("PI-1", "Rf", 1.0,
+                                                                                              9.6e6, 480.0)
+    # neither is "left out" any more; the tag nobody paired still is
+    assert [n for n, _ in res.pairing.left_out] == ["QI-1"]
+    # a parameter not in varying is never added; nothing refused: the result unchanged
+    same, none = keep_varying(_pairing_result(refused), ["dp0"])
+    assert none == [] and same.pairing.pairs == ()
+    same, none = keep_varying(_pairing_result([]), ["Rf"])
+    assert none == [] and same.pairing.pairs == ()
+
+
+def test_a_kept_pair_takes_no_tag_another_pair_uses_nor_a_negative_relative_gain() -> None:
+    from trackingbox.analysis.pairing_model import Pair
+    from trackingbox.diagnose.apply import keep_varying
+
+    taken = Pair("PI-1", "dp0", 1.0, 0.5, 7.0)
+    refused = [("PI-1", "Rf", "26 %"), ("TI-1", "Rf", "40 %"), ("QI-1", "Rf", "negative")]
+    res, kept = keep_varying(_pairing_result(refused, [taken]), ["Rf"])
+    # PI-1 is dp0's: Rf goes to TI-1 (3.2); QI-1's relative gain is negative (a loop there would fight)
+    assert [k["variable"] for k in kept] == ["TI-1"]
+    assert [(p.variable, p.parameter) for p in res.pairing.pairs] == [("PI-1", "dp0"), ("TI-1", "Rf")]
+    res, kept = keep_varying(_pairing_result([("QI-1", "Rf", "negative")]), ["Rf"])
+    assert kept == [] and res.pairing.pairs == ()

@@ -17,7 +17,15 @@ order on a copy of the spec (the input spec is never written):
    jointly) move to ``[fixed]`` at their estimate: only the spec's own candidates
    are tracked;
 2. ``pair`` (its ``[[pairs]]`` written), each pair's loop at least the recipe's
-   ``closed_loop`` slow;
+   ``closed_loop`` slow. A parameter the spec tracks in time (``[diagnose] varying``: the one whose
+   error the patch should shrink) that ``pair``'s data checks refused to pair is paired all the same
+   with the tag its relative gain chose (:func:`keep_varying`), the refusal written beside the figures:
+   the refusal is ``pair``'s judgement of how well a loop would track on this record, and the
+   comparison needs the parameter tracked before and after the patch, whatever that judgement. (On the
+   evaporator's hidden-effect plants, which foul without the soluble scale of the bench's own plant, the
+   fouling resistance reaches 1.9e-4 m2.K/W in 72 h instead of 3.1e-4; its tags move 0.6 times as much
+   and ``pair`` refused effect.Rf on PI-6121 at a predicted 26 % of the error above the noise floor,
+   limit 25 %, on the unpatched and the patched twin alike);
 3. ``track`` over the whole record.
 
 Every round's naming, the fitted effect parameters, the tracked parameter's error
@@ -143,13 +151,59 @@ class Retrack:
     errors: dict[str, ParameterError]
     timings: dict[str, float]
     note: str = ""
+    kept: list[dict[str, str]] = field(default_factory=list)
+    """Pairs of :func:`keep_varying`: ``variable``, ``parameter`` and ``refused`` (pair's reason)."""
 
     def to_json(self) -> dict[str, Any]:
         return {"spec": str(self.spec), "csv": str(self.csv), "pairs": [list(p) for p in self.pairs],
                 "estimates": self.estimates, "held": self.held,
                 "errors": {k: v.to_json() for k, v in self.errors.items()},
                 "timings": {k: round(v, 3) for k, v in self.timings.items()},
-                **({"note": self.note} if self.note else {})}
+                **({"note": self.note} if self.note else {}),
+                **({"kept": self.kept} if self.kept else {})}
+
+
+def keep_varying(result: Any, varying: Any) -> tuple[Any, list[dict[str, str]]]:
+    """*result* (a :class:`~trackingbox.analysis.pair_stage.PairingResult`) with each parameter of
+    *varying* that its data checks refused to pair given a pair all the same, and those pairs.
+
+    The pair is the refused one (``pairing.rejected``: the relative gain array chose it, the data
+    checks then refused it) whose relative gain is closest to 1, on a tag no chosen pair uses; its gain
+    is the pairing's, its time constant the step test's. A parameter with no such refusal (every tag it moves at its
+    noise floor, or no positive relative gain) stays unpaired, as ``pair`` left it.
+    """
+    from ..analysis.pairing_model import Pair
+
+    pairing = result.pairing
+    st = result.steptest
+    used = {p.variable for p in pairing.pairs}
+    paired = {p.parameter for p in pairing.pairs}
+    added: list[Any] = []
+    kept: list[dict[str, str]] = []
+    for name in varying:
+        if name in paired or name not in st.parameters:
+            continue
+        options = []
+        for v, q, why in pairing.rejected:
+            if q != name or v in used or v not in pairing.variables or v not in st.variables:
+                continue
+            i, j = pairing.variables.index(v), pairing.parameters.index(q)
+            lam = float(pairing.rga[i, j]) if pairing.rga.size else math.nan
+            if math.isfinite(lam) and lam > 0:
+                options.append((abs(lam - 1.0), v, i, j, lam, why))
+        if not options:
+            continue
+        _, v, i, j, lam, why = min(options, key=lambda o: o[0])
+        tau = float(st.time_constants[st.variables.index(v), st.parameters.index(name)])
+        added.append(Pair(v, name, lam, float(pairing.gains[i, j]), tau))
+        used.add(v)
+        kept.append({"variable": v, "parameter": name, "refused": why})
+    if not added:
+        return result, []
+    names = {p.variable for p in added} | {p.parameter for p in added}
+    pairing = replace(pairing, pairs=tuple(pairing.pairs) + tuple(added),
+                      left_out=tuple((n, r) for n, r in pairing.left_out if n not in names))
+    return replace(result, pairing=pairing), kept
 
 
 def truth_on(truth: Mapping[str, Any], name: str, t: np.ndarray) -> np.ndarray | None:
@@ -234,6 +288,10 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     timings["estimate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = stages.pair.run(spec, stages.PairSettings(), progress=progress)
+    res, kept = keep_varying(res, [name for name, _ in spec.diagnose.varying])
+    for k in kept:
+        log.warning("%s paired with %s although pair refused it (%s): diagnose --apply compares the parameter "
+                    "the spec tracks in time before and after the patch", k["parameter"], k["variable"], k["refused"])
     if not res.pairing.pairs:
         why = "; ".join(f"{x['name']}: {x['reason']}" for x in res.to_json().get("left_out", []))
         raise ApplyError(f"{path}: pair found no pairs, nothing to track (a record too short for the tracked "
@@ -248,7 +306,7 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     settle = settle_time(spec, recipe)
     return Retrack(spec=path, csv=Path(tr.csv), pairs=[(p.variable, p.parameter) for p in spec.pairs],
                    estimates=estimates, held=held, errors=parameter_errors(spec, Path(tr.csv), truth, settle),
-                   timings=timings, note=note)
+                   timings=timings, note=note, kept=kept)
 
 
 def settle_time(spec: Any, recipe: Recipe) -> float:
@@ -440,7 +498,8 @@ def _finished(out: Path, spec: Any) -> dict[str, Any]:
                       errors={k: ParameterError(**{f: v[f] for f in ("parameter", "settle", "max_error",
                                                                       "median_error", "span")})
                               for k, v in before.get("errors", {}).items()},
-                      timings=before.get("timings", {}), note=before.get("note", ""))
+                      timings=before.get("timings", {}), note=before.get("note", ""),
+                      kept=before.get("kept", []))
     return {"rounds": rounds, "before_run": run}
 
 

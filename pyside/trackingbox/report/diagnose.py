@@ -178,6 +178,13 @@ def write_apply_report(result: ApplyResult) -> StageReport:
             ratio = e["max_error"] / b.max_error if b and b.max_error and e["max_error"] is not None else None
             rows.append([label, name, fmt(e["max_error"]), fmt(e["median_error"]), fmt(ratio)])
     doc.table(["twin", "parameter", "largest error after settling", "median error", "largest / unpatched"], rows)
+    kept = [("unpatched", k) for k in (before.kept if before else ())]
+    kept += [(f"round {r['round']}", k) for r in result.rounds for k in (r.get("retrack") or {}).get("kept", [])]
+    if kept:
+        doc.paragraph("Paired although `pair` refused the pair (a parameter the spec tracks in time, "
+                      "`[diagnose] varying`: the comparison needs it tracked before and after the patch):")
+        doc.bullets([f"{label}: {k['parameter']} on {k['variable']}; pair's reason: {k['refused']}"
+                     for label, k in kept])
     phases = []
     if before:
         phases.append(["unpatched"] + [fmt(before.timings.get(k)) for k in ("estimate", "pair", "track")] + ["-"])
