@@ -107,7 +107,10 @@ def summary(row: dict, biased: float) -> dict:
     for r in rounds:
         phases[f"round{r['round']}"] = {**{"diagnose": r.get("timings", {}).get("diagnose")},
                                         **((r.get("retrack") or {}).get("timings") or {})}
-    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands}
+    kept = {label: [f"{k['parameter']} on {k['variable']} (pair refused: {k['refused']})" for k in run.get("kept", [])]
+            for label, run in runs if run and run.get("kept")}
+    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands,
+            "kept": kept}
 
 
 def band_coverages(csv: Path, truth: dict, errors: dict) -> dict:
@@ -165,6 +168,9 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if not p["biased"] else f"  [biased: falls by half? {'ok' if p['ok'] else 'MISSED'}]"),
                   flush=True)
             ok &= p["ok"] is not False
+        for label, pairs in s["kept"].items():
+            for text in pairs:
+                print(f"    {label}: paired although pair refused it: {text}", flush=True)
         for label, per in s["bands"].items():
             for name, c in per.items():
                 print(f"    band of {name} ({label}): holds the truth in {100 * c['covered']:.1f} % of {c['rows']} rows "

@@ -191,3 +191,29 @@ def test_a_kept_pair_takes_no_tag_another_pair_uses_nor_a_negative_relative_gain
     assert [(p.variable, p.parameter) for p in res.pairing.pairs] == [("PI-1", "dp0"), ("TI-1", "Rf")]
     res, kept = keep_varying(_pairing_result([("QI-1", "Rf", "negative")]), ["Rf"])
     assert kept == [] and res.pairing.pairs == ()
+
+
+def test_kept_pairs_are_written_with_pair_s_reason_and_read_back_on_resume(tmp_path) -> None:
+    from trackingbox.diagnose.apply import ApplyResult, ParameterError, Retrack, _finished
+    from trackingbox.report.diagnose import write_apply_report
+
+    csv = tmp_path / "before.csv"
+    csv.write_text("time,parameter:Rf\n0,0\n")
+    spec = tmp_path / "spec.toml"
+    before = Retrack(spec=spec, csv=csv, pairs=[("PI-1", "Rf")], estimates={}, held={},
+                     errors={"Rf": ParameterError("Rf", 10.0, 2e-4, 1e-4, 6e-4)}, timings={},
+                     kept=[{"variable": "PI-1", "parameter": "Rf", "refused": "would leave 26 % (limit 25 %)"}])
+    result = ApplyResult(out=tmp_path, before=before, rounds=[{
+        "round": 1, "spec": str(spec), "verdict": "effect", "named": {"effect": "steam-vent", "target": "effect"},
+        "retrack": {"errors": {"Rf": {"max_error": 5e-5, "median_error": 1e-5}}, "timings": {},
+                    "kept": [{"variable": "PI-1", "parameter": "Rf", "refused": "would leave 27 % (limit 25 %)"}]}}])
+    result.write()
+    md = Path(write_apply_report(result).markdown).read_text()
+    assert "unpatched: Rf on PI-1; pair's reason: would leave 26 % (limit 25 %)" in md
+    assert "round 1: Rf on PI-1; pair's reason: would leave 27 % (limit 25 %)" in md
+
+    class Spec:
+        path = spec
+
+    again = _finished(tmp_path, Spec())["before_run"]
+    assert again.kept == before.kept
