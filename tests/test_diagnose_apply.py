@@ -69,6 +69,29 @@ def test_apply_removes_the_hidden_heat_loss_from_the_tracked_coefficient(hx_case
 
 @pytest.mark.compile
 @pytest.mark.slow
+def test_a_resumed_retrack_reuses_its_estimate_and_estimates_again_for_other_settings(hx_cases, tmp_path, monkeypatch) -> None:
+    from trackingbox import stages
+    from trackingbox.diagnose.apply import retrack
+
+    case = hx_cases["heat-loss"]
+    truth = json.loads(case.truth_file.read_text())
+    first = retrack(Path(case.spec), tmp_path / "rt", Recipe(), truth)
+    assert (tmp_path / "rt" / "estimate" / "outcome.json").is_file()
+    calls = []
+    real = stages.estimate.run
+    monkeypatch.setattr(stages.estimate, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    # interrupted after its estimate: run again, the estimate is read back (no estimation), the same figures
+    again = retrack(Path(case.spec), tmp_path / "rt", Recipe(), truth)
+    assert calls == []
+    assert again.estimates == first.estimates and again.pairs == first.pairs
+    assert again.errors["hx.kht"].max_error == first.errors["hx.kht"].max_error
+    # an estimate for other settings is not reused
+    retrack(Path(case.spec), tmp_path / "rt", Recipe(estimate={"workers": 1}), truth)
+    assert calls == [1]
+
+
+@pytest.mark.compile
+@pytest.mark.slow
 def test_apply_with_nothing_named_is_an_error_and_writes_nothing(hx_cases, tmp_path, capsys) -> None:
     from trackingbox.cli import main
 
@@ -217,3 +240,21 @@ def test_kept_pairs_are_written_with_pair_s_reason_and_read_back_on_resume(tmp_p
 
     again = _finished(tmp_path, Spec())["before_run"]
     assert again.kept == before.kept
+
+
+def test_a_saved_estimate_is_reused_only_for_the_spec_and_settings_it_was_written_for(hx_fmu, tmp_path) -> None:
+    from trackingbox.diagnose.apply import _estimate_key, _saved_outcome
+
+    spec = _tiny_spec(hx_fmu, tmp_path)
+    key = _estimate_key(spec, Recipe())
+    assert key == _estimate_key(spec, Recipe())
+    assert key != _estimate_key(spec, Recipe(estimate={"workers": 1}))
+    saved = tmp_path / "outcome.json"
+    assert _saved_outcome(saved, key) is None  # none yet
+    saved.write_text(json.dumps({"key": key, "estimates": {"hx.kht": 900.0}, "intervals": {}}))
+    assert _saved_outcome(saved, key)["estimates"] == {"hx.kht": 900.0}
+    spec.write_text(spec.read_text().replace("start = 1000.0", "start = 1100.0"))
+    assert "start = 1100.0" in spec.read_text()
+    assert _saved_outcome(saved, _estimate_key(spec, Recipe())) is None  # another spec: estimated again
+    saved.write_text("{half a file")
+    assert _saved_outcome(saved, key) is None

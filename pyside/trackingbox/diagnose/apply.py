@@ -259,27 +259,49 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     t0 = time.perf_counter()
     estimates: dict[str, float] = {}
     held: dict[str, float] = {}
+    # the estimate stage's outcome, kept: a re-track interrupted after it (diagnose --apply --resume) goes on
+    # from it. Its fit is journaled (checkpoint.journal), but the identifiability check before it and the
+    # profile-likelihood intervals after it are not, and they are most of its time (on the evaporator's 72 h,
+    # vent-orifice: the fit 77 s of evaluations, the stage about 1700 s on a loaded machine)
+    saved = out / "estimate" / "outcome.json"
+    key = _estimate_key(path, recipe)
+    found = _saved_outcome(saved, key)
     try:
-        # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
-        # the journal instead of repeating its simulations
-        checkpoint = out / "estimate" / "checkpoint.json"
-        journal = checkpoint.with_suffix(".journal")
-        checkpoint.parent.mkdir(parents=True, exist_ok=True)
-        est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
-                                                                   "resume": journal.exists()}), progress=progress)
+        if found is not None:
+            log.info("%s: the estimate of an earlier run of this re-track, reused (%s)", path, saved)
+            if found.get("failed"):
+                raise TrackingError(found["failed"])
+            estimates, intervals = found["estimates"], {k: tuple(v) for k, v in found["intervals"].items()}
+        else:
+            # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
+            # the journal instead of repeating its simulations
+            checkpoint = out / "estimate" / "checkpoint.json"
+            journal = checkpoint.with_suffix(".journal")
+            checkpoint.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
+                                                                           "resume": journal.exists()}),
+                                          progress=progress)
+            except TrackingError as exc:
+                if recipe.estimate_may_fail:
+                    write_text_atomic(saved, json.dumps({"key": key, "failed": str(exc)}) + "\n")
+                raise
+            estimates = {k: float(v) for k, v in est.parameters.items()}
+            unc = est.uncertainty
+            intervals = {iv.name: (float(iv.lower), float(iv.upper)) for iv in (unc.parameters if unc is not None else ())
+                         if iv.determined and iv.lower <= iv.estimate <= iv.upper}
+            write_text_atomic(saved, json.dumps({"key": key, "estimates": estimates,
+                                                 "intervals": {k: list(v) for k, v in intervals.items()}}) + "\n")
     except TrackingError as exc:
         if not recipe.estimate_may_fail:
             raise
         note = f"estimate skipped, tracking starts from the spec's starts: {exc}"
         log.warning(note)
     else:
-        estimates = {k: float(v) for k, v in est.parameters.items()}
         keep = {k for k in estimates if k not in recipe.varying}
         hold_now = {k for k in keep if k in recipe.held or k in hold}
         starts = {k: v for k, v in estimates.items() if k in keep and k not in hold_now and recipe.write_estimates}
-        unc = est.uncertainty
-        intervals = {iv.name: (iv.lower, iv.upper) for iv in (unc.parameters if unc is not None else ())
-                     if iv.name in starts and iv.determined and iv.lower <= iv.estimate <= iv.upper}
+        intervals = {k: v for k, v in intervals.items() if k in starts}
         if starts:
             spec = write_starts(path, starts, intervals)
         if hold_now:
@@ -307,6 +329,30 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     return Retrack(spec=path, csv=Path(tr.csv), pairs=[(p.variable, p.parameter) for p in spec.pairs],
                    estimates=estimates, held=held, errors=parameter_errors(spec, Path(tr.csv), truth, settle),
                    timings=timings, note=note, kept=kept)
+
+
+def _estimate_key(spec_path: Path, recipe: Recipe) -> str:
+    """What an estimate of a re-track depends on: the spec as copied (before any estimate is written), its
+    measurements and twin (size and modification time) and the recipe's estimate settings."""
+    import hashlib
+
+    spec = load_spec(spec_path)
+    files = [(str(f), f.stat().st_size, f.stat().st_mtime_ns) for f in (Path(spec.twin), Path(spec.measurements))
+             if f.is_file()]
+    text = json.dumps([spec_path.read_text(), files, sorted((k, repr(v)) for k, v in recipe.estimate.items())])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _saved_outcome(path: Path, key: str) -> dict[str, Any] | None:
+    """The estimate outcome saved at *path* when it was written for *key*, else None."""
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+    except ValueError:
+        log.warning("%s: unreadable, the estimate is run again", path)
+        return None
+    return doc if isinstance(doc, dict) and doc.get("key") == key else None
 
 
 def settle_time(spec: Any, recipe: Recipe) -> float:
