@@ -24,6 +24,12 @@ default plant and vent-orifice) the fouling rises too little for ``pair`` to fin
 (``pair``: the noise floor of every tag the fouling moves is 36-75 % of its untracked RMS error once
 loops of 3 h settled, and no loop brings it under 30 %), and the case ends with that error after the first round's naming.
 
+On the evaporator's hidden-effect plants (72 h) ``pair`` refuses the fouling on both twins (they foul
+without the soluble scale of the bench's own plant, to 1.9e-4 m2.K/W instead of 3.1e-4, and the
+predicted tracking of PI-6121 misses its limit by a point); ``--apply`` then pairs it all the same (a
+``[diagnose] varying`` parameter) and this prints the pair with pair's reason. Add ``-- --resume`` to
+go on from an interrupted case (its namings and finished re-tracks, each re-track's estimate).
+
 Examples::
 
     scripts/bench_apply --bench evaporator --cases vent-orifice,shell-loss,default
