@@ -258,3 +258,25 @@ def test_a_saved_estimate_is_reused_only_for_the_spec_and_settings_it_was_writte
     assert _saved_outcome(saved, _estimate_key(spec, Recipe())) is None  # another spec: estimated again
     saved.write_text("{half a file")
     assert _saved_outcome(saved, key) is None
+
+
+def test_the_plot_draws_a_parameter_no_pair_drove_at_the_start_it_kept(hx_fmu, tmp_path) -> None:
+    from trackingbox.diagnose.apply import ApplyResult, ParameterError, Retrack, _trajectory, plot_errors
+
+    spec = _tiny_spec(hx_fmu, tmp_path)  # kht starts at 1000
+    t = np.arange(0.0, 100.0, 10.0)
+    unpaired, tracked = tmp_path / "before.csv", tmp_path / "after.csv"
+    pd.DataFrame({"time": t, "parameter:other": 0.0}).to_csv(unpaired, index=False)
+    pd.DataFrame({"time": t, "parameter:kht": 1250.0 - t}).to_csv(tracked, index=False)
+    y, paired = _trajectory(unpaired, spec, "kht", t)
+    assert not paired and np.all(y == 1000.0)
+    y, paired = _trajectory(tracked, spec, "kht", t[:3])
+    assert paired and y.tolist() == [1250.0, 1240.0, 1230.0]
+    err = ParameterError("kht", 0.0, 250.0, 250.0, 800.0)
+    result = ApplyResult(out=tmp_path, before=Retrack(spec=spec, csv=unpaired, pairs=[], estimates={}, held={},
+                                                      errors={"kht": err}, timings={}),
+                         rounds=[{"round": 1, "named": {"effect": "heat-loss", "target": "hx"},
+                                  "retrack": {"spec": str(spec), "csv": str(tracked),
+                                              "errors": {"kht": {**err.to_json(), "max_error": 99.0}}}}])
+    png = plot_errors(result, {"parameters": {"kht": 1250.0}}, None)
+    assert png is not None and png.stat().st_size > 0

@@ -560,22 +560,22 @@ def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Pat
         return None
     plt = plots.pyplot()
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 3.4 * len(names)), squeeze=False)
-    runs = [("unpatched", result.before.csv, plots.UNTRACKED, result.before.errors)]
+    runs = [("unpatched", result.before.csv, plots.UNTRACKED, result.before.errors, result.before.spec)]
     colours = ("tab:blue", "tab:green", "tab:purple")
     for i, r in enumerate(x for x in result.rounds if x.get("retrack")):
         named = r["named"]
         errs = {k: ParameterError(**{f: v[f] for f in ("parameter", "settle", "max_error", "median_error", "span")})
                 for k, v in r["retrack"]["errors"].items()}
         runs.append((f"round {r['round']}: + {named['effect']}@{named['target']}", Path(r["retrack"]["csv"]),
-                     colours[i % len(colours)], errs))
+                     colours[i % len(colours)], errs, Path(r["retrack"]["spec"])))
     for ax, name in zip(axes[:, 0], names):
         first = pd.read_csv(runs[0][1], usecols=["time"])["time"].to_numpy(float)
         lines = []
-        for label, csv, colour, errs in runs:
-            df = pd.read_csv(csv, usecols=["time", f"parameter:{name}"])
-            y = np.interp(first, df["time"].to_numpy(float), df[f"parameter:{name}"].to_numpy(float))
+        for label, csv, colour, errs, run_spec in runs:
+            y, paired = _trajectory(csv, run_spec, name, first)
             e = errs.get(name)
-            lines.append(plots.Line(y, f"{label} (max error {e.max_error:.3g})" if e else label, colour))
+            text = f"{label} (max error {e.max_error:.3g})" if e else label
+            lines.append(plots.Line(y, text if paired else f"{text}, not paired: its start", colour))
         true = truth_on(truth, name, first)
         lines.append(plots.Line(true, "plant truth", plots.TRUTH, ":", 1.8))
         settle = result.before.errors[name].settle
@@ -584,6 +584,19 @@ def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Pat
                            f"(errors after {settle / 3600:g} h)")
         ax.axvline(settle / 3600.0, color="0.5", lw=0.8, ls="-.")
     return plots.save(fig, result.out / "apply.png")
+
+
+def _trajectory(csv: Path, spec_path: Path, name: str, t: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Parameter *name* of a re-track on times *t*: its tracked column in *csv*, or (no pair drove it) its
+    start in the run's spec, which it kept; and whether it was tracked."""
+    column = f"parameter:{name}"
+    if column in pd.read_csv(csv, nrows=0).columns:
+        df = pd.read_csv(csv, usecols=["time", column])
+        return np.interp(t, df["time"].to_numpy(float), df[column].to_numpy(float)), True
+    spec = load_spec(spec_path)
+    starts = {p.name: float(p.start) for p in spec.parameters}
+    value = starts.get(name, dict(spec.fixed).get(name, math.nan))  # held: moved to [fixed] at its estimate
+    return np.full(np.shape(t), float(value)), False
 
 
 def _num(x: Any) -> float | None:
