@@ -234,6 +234,9 @@ def test_kept_pairs_are_written_with_pair_s_reason_and_read_back_on_resume(tmp_p
     md = Path(write_apply_report(result).markdown).read_text()
     assert "unpatched: Rf on PI-1; pair's reason: would leave 26 % (limit 25 %)" in md
     assert "round 1: Rf on PI-1; pair's reason: would leave 27 % (limit 25 %)" in md
+    # the errors table says which run left the parameter unpaired (its error is then its start's)
+    assert "| unpatched | Rf | 0.0002 |" in md
+    assert "| round 1: + steam-vent@effect | Rf (not paired: its start) | 5e-05 |" in md
 
     class Spec:
         path = spec
