@@ -24,6 +24,12 @@ default plant and vent-orifice) the fouling rises too little for ``pair`` to fin
 (``pair``: the noise floor of every tag the fouling moves is 36-75 % of its untracked RMS error once
 loops of 3 h settled, and no loop brings it under 30 %), and the case ends with that error after the first round's naming.
 
+On the evaporator's hidden-effect plants (72 h) ``pair`` refuses the fouling on both twins (they foul
+without the soluble scale of the bench's own plant, to 1.9e-4 m2.K/W instead of 3.1e-4, and the
+predicted tracking of PI-6121 misses its limit by a point); ``--apply`` then pairs it all the same (a
+``[diagnose] varying`` parameter) and this prints the pair with pair's reason. Add ``-- --resume`` to
+go on from an interrupted case (its namings and finished re-tracks, each re-track's estimate).
+
 Examples::
 
     scripts/bench_apply --bench evaporator --cases vent-orifice,shell-loss,default
@@ -107,7 +113,10 @@ def summary(row: dict, biased: float) -> dict:
     for r in rounds:
         phases[f"round{r['round']}"] = {**{"diagnose": r.get("timings", {}).get("diagnose")},
                                         **((r.get("retrack") or {}).get("timings") or {})}
-    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands}
+    kept = {label: [f"{k['parameter']} on {k['variable']} (pair refused: {k['refused']})" for k in run.get("kept", [])]
+            for label, run in runs if run and run.get("kept")}
+    return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands,
+            "kept": kept}
 
 
 def band_coverages(csv: Path, truth: dict, errors: dict) -> dict:
@@ -165,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if not p["biased"] else f"  [biased: falls by half? {'ok' if p['ok'] else 'MISSED'}]"),
                   flush=True)
             ok &= p["ok"] is not False
+        for label, pairs in s["kept"].items():
+            for text in pairs:
+                print(f"    {label}: paired although pair refused it: {text}", flush=True)
         for label, per in s["bands"].items():
             for name, c in per.items():
                 print(f"    band of {name} ({label}): holds the truth in {100 * c['covered']:.1f} % of {c['rows']} rows "

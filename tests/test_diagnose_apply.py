@@ -69,6 +69,29 @@ def test_apply_removes_the_hidden_heat_loss_from_the_tracked_coefficient(hx_case
 
 @pytest.mark.compile
 @pytest.mark.slow
+def test_a_resumed_retrack_reuses_its_estimate_and_estimates_again_for_other_settings(hx_cases, tmp_path, monkeypatch) -> None:
+    from trackingbox import stages
+    from trackingbox.diagnose.apply import retrack
+
+    case = hx_cases["heat-loss"]
+    truth = json.loads(case.truth_file.read_text())
+    first = retrack(Path(case.spec), tmp_path / "rt", Recipe(), truth)
+    assert (tmp_path / "rt" / "estimate" / "outcome.json").is_file()
+    calls = []
+    real = stages.estimate.run
+    monkeypatch.setattr(stages.estimate, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    # interrupted after its estimate: run again, the estimate is read back (no estimation), the same figures
+    again = retrack(Path(case.spec), tmp_path / "rt", Recipe(), truth)
+    assert calls == []
+    assert again.estimates == first.estimates and again.pairs == first.pairs
+    assert again.errors["hx.kht"].max_error == first.errors["hx.kht"].max_error
+    # an estimate for other settings is not reused
+    retrack(Path(case.spec), tmp_path / "rt", Recipe(estimate={"workers": 1}), truth)
+    assert calls == [1]
+
+
+@pytest.mark.compile
+@pytest.mark.slow
 def test_apply_with_nothing_named_is_an_error_and_writes_nothing(hx_cases, tmp_path, capsys) -> None:
     from trackingbox.cli import main
 
@@ -132,3 +155,131 @@ def test_parameter_errors_after_settling_against_a_trajectory_and_a_constant(tmp
     S.parameters[1].start = 1.0
     truth["parameters"]["d"] = 4.0
     assert parameter_errors(S(), tmp_path / "t.csv", truth, settle=5.0)["d"].max_error == pytest.approx(3.0)
+
+
+def _pairing_result(rejected, pairs=()):
+    """A pair stage result by hand: 3 tags x 2 candidates, a relative gain array chosen so that
+    PI-1 (lambda 1.0) is Rf's best refused pair and TI-1 (lambda 3.2) its worse one."""
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from trackingbox.analysis.pairing_model import Pairing
+
+    variables, parameters = ("PI-1", "TI-1", "QI-1"), ("Rf", "dp0")
+    gains = np.array([[9.6e6, 0.0], [-2.4e3, 0.0], [-44.0, 0.9]])
+    rga = np.array([[1.0, 0.0], [3.2, 0.0], [-0.4, 1.0]])
+    tau = np.array([[480.0, 1.0], [1065.0, 1.0], [4200.0, 7.0]])
+    pairing = Pairing(pairs=tuple(pairs), left_out=(("Rf", "the data checks rejected its best pair"),
+                                                    ("PI-1", "tracking would leave 26 %"), ("QI-1", "floor")),
+                      warnings=(), variables=variables, parameters=parameters, gains=gains, rga=rga,
+                      rejected=tuple(rejected))
+
+    @dataclass(frozen=True)
+    class Result:
+        pairing: Pairing
+        steptest: SimpleNamespace
+
+    return Result(pairing, SimpleNamespace(variables=variables, parameters=parameters, gains=gains,
+                                           time_constants=tau))
+
+
+def test_a_varying_parameter_pair_refused_is_kept_on_its_best_relative_gain() -> None:
+    from trackingbox.diagnose.apply import keep_varying
+
+    refused = [("TI-1", "Rf", "tracking would leave 40 %"), ("PI-1", "Rf", "tracking would leave 26 %")]
+    res, kept = keep_varying(_pairing_result(refused), ["Rf"])
+    # the refused pair with the relative gain closest to 1 (PI-1, 1.0; not TI-1, 3.2), its reason kept
+    assert kept == [{"variable": "PI-1", "parameter": "Rf", "refused": "tracking would leave 26 %"}]
+    (pair,) = res.pairing.pairs
+    assert (pair.variable, pair.parameter, pair.lambda_, pair.gain, pair.time_constant) == ("PI-1", "Rf", 1.0,
+                                                                                              9.6e6, 480.0)
+    # neither is "left out" any more; the tag nobody paired still is
+    assert [n for n, _ in res.pairing.left_out] == ["QI-1"]
+    # a parameter not in varying is never added; nothing refused: the result unchanged
+    same, none = keep_varying(_pairing_result(refused), ["dp0"])
+    assert none == [] and same.pairing.pairs == ()
+    same, none = keep_varying(_pairing_result([]), ["Rf"])
+    assert none == [] and same.pairing.pairs == ()
+
+
+def test_a_kept_pair_takes_no_tag_another_pair_uses_nor_a_negative_relative_gain() -> None:
+    from trackingbox.analysis.pairing_model import Pair
+    from trackingbox.diagnose.apply import keep_varying
+
+    taken = Pair("PI-1", "dp0", 1.0, 0.5, 7.0)
+    refused = [("PI-1", "Rf", "26 %"), ("TI-1", "Rf", "40 %"), ("QI-1", "Rf", "negative")]
+    res, kept = keep_varying(_pairing_result(refused, [taken]), ["Rf"])
+    # PI-1 is dp0's: Rf goes to TI-1 (3.2); QI-1's relative gain is negative (a loop there would fight)
+    assert [k["variable"] for k in kept] == ["TI-1"]
+    assert [(p.variable, p.parameter) for p in res.pairing.pairs] == [("PI-1", "dp0"), ("TI-1", "Rf")]
+    res, kept = keep_varying(_pairing_result([("QI-1", "Rf", "negative")]), ["Rf"])
+    assert kept == [] and res.pairing.pairs == ()
+
+
+def test_kept_pairs_are_written_with_pair_s_reason_and_read_back_on_resume(tmp_path) -> None:
+    from trackingbox.diagnose.apply import ApplyResult, ParameterError, Retrack, _finished
+    from trackingbox.report.diagnose import write_apply_report
+
+    csv = tmp_path / "before.csv"
+    csv.write_text("time,parameter:Rf\n0,0\n")
+    spec = tmp_path / "spec.toml"
+    before = Retrack(spec=spec, csv=csv, pairs=[("PI-1", "Rf")], estimates={}, held={},
+                     errors={"Rf": ParameterError("Rf", 10.0, 2e-4, 1e-4, 6e-4)}, timings={},
+                     kept=[{"variable": "PI-1", "parameter": "Rf", "refused": "would leave 26 % (limit 25 %)"}])
+    result = ApplyResult(out=tmp_path, before=before, rounds=[{
+        "round": 1, "spec": str(spec), "verdict": "effect", "named": {"effect": "steam-vent", "target": "effect"},
+        "retrack": {"errors": {"Rf": {"max_error": 5e-5, "median_error": 1e-5}}, "timings": {},
+                    "kept": [{"variable": "PI-1", "parameter": "Rf", "refused": "would leave 27 % (limit 25 %)"}]}}])
+    result.write()
+    md = Path(write_apply_report(result).markdown).read_text()
+    assert "unpatched: Rf on PI-1; pair's reason: would leave 26 % (limit 25 %)" in md
+    assert "round 1: Rf on PI-1; pair's reason: would leave 27 % (limit 25 %)" in md
+    # the errors table says which run left the parameter unpaired (its error is then its start's)
+    assert "| unpatched | Rf | 0.0002 |" in md
+    assert "| round 1: + steam-vent@effect | Rf (not paired: its start) | 5e-05 |" in md
+
+    class Spec:
+        path = spec
+
+    again = _finished(tmp_path, Spec())["before_run"]
+    assert again.kept == before.kept
+
+
+def test_a_saved_estimate_is_reused_only_for_the_spec_and_settings_it_was_written_for(hx_fmu, tmp_path) -> None:
+    from trackingbox.diagnose.apply import _estimate_key, _saved_outcome
+
+    spec = _tiny_spec(hx_fmu, tmp_path)
+    key = _estimate_key(spec, Recipe())
+    assert key == _estimate_key(spec, Recipe())
+    assert key != _estimate_key(spec, Recipe(estimate={"workers": 1}))
+    saved = tmp_path / "outcome.json"
+    assert _saved_outcome(saved, key) is None  # none yet
+    saved.write_text(json.dumps({"key": key, "estimates": {"hx.kht": 900.0}, "intervals": {}}))
+    assert _saved_outcome(saved, key)["estimates"] == {"hx.kht": 900.0}
+    spec.write_text(spec.read_text().replace("start = 1000.0", "start = 1100.0"))
+    assert "start = 1100.0" in spec.read_text()
+    assert _saved_outcome(saved, _estimate_key(spec, Recipe())) is None  # another spec: estimated again
+    saved.write_text("{half a file")
+    assert _saved_outcome(saved, key) is None
+
+
+def test_the_plot_draws_a_parameter_no_pair_drove_at_the_start_it_kept(hx_fmu, tmp_path) -> None:
+    from trackingbox.diagnose.apply import ApplyResult, ParameterError, Retrack, _trajectory, plot_errors
+
+    spec = _tiny_spec(hx_fmu, tmp_path)  # kht starts at 1000
+    t = np.arange(0.0, 100.0, 10.0)
+    unpaired, tracked = tmp_path / "before.csv", tmp_path / "after.csv"
+    pd.DataFrame({"time": t, "parameter:other": 0.0}).to_csv(unpaired, index=False)
+    pd.DataFrame({"time": t, "parameter:kht": 1250.0 - t}).to_csv(tracked, index=False)
+    y, paired = _trajectory(unpaired, spec, "kht", t)
+    assert not paired and np.all(y == 1000.0)
+    y, paired = _trajectory(tracked, spec, "kht", t[:3])
+    assert paired and y.tolist() == [1250.0, 1240.0, 1230.0]
+    err = ParameterError("kht", 0.0, 250.0, 250.0, 800.0)
+    result = ApplyResult(out=tmp_path, before=Retrack(spec=spec, csv=unpaired, pairs=[], estimates={}, held={},
+                                                      errors={"kht": err}, timings={}),
+                         rounds=[{"round": 1, "named": {"effect": "heat-loss", "target": "hx"},
+                                  "retrack": {"spec": str(spec), "csv": str(tracked),
+                                              "errors": {"kht": {**err.to_json(), "max_error": 99.0}}}}])
+    png = plot_errors(result, {"parameters": {"kht": 1250.0}}, None)
+    assert png is not None and png.stat().st_size > 0

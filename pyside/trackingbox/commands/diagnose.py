@@ -46,7 +46,10 @@ parameters and trajectories) the tracked parameters' largest and median error af
 settling are reported before and after, and plotted (DIR/apply.png, DIR/apply.md).
 The pipeline is the demo's for the bench --truth names (its "bench"; on the
 evaporators the estimates become the starts), else estimate's defaults with the
-spec's starts kept. Every round is written to DIR/apply.json as it finishes. Nothing named in the first round: an
+spec's starts kept. A parameter of [diagnose] varying (tracked in time) that pair's
+data checks refuse is paired all the same with the tag its relative gain chose, and
+the refusal is printed: the comparison needs it tracked before and after. Every round is
+written to DIR/apply.json as it finishes. Nothing named in the first round: an
 error (exit 2), and nothing is left in DIR.
 """
 
@@ -146,10 +149,15 @@ def _apply(args: argparse.Namespace, spec: Any, settings: Any) -> int:
         print(json.dumps(result.to_json(), indent=2, default=str))
         return 0
     before = result.before
+    for k in (before.kept if before else ()):
+        print(f"unpatched: {k['parameter']} paired with {k['variable']} although pair refused it ({k['refused']}): "
+              "the parameter the spec tracks in time is compared before and after the patch")
     for r in result.rounds:
         named = r.get("named")
         print(f"round {r['round']}: " + (f"named {named['effect']} on {named['target']}" if named
                                           else f"nothing named (verdict {r['verdict']})"))
+        for k in (r.get("retrack") or {}).get("kept", []):
+            print(f"  {k['parameter']} paired with {k['variable']} although pair refused it ({k['refused']})")
         for name, e in (r.get("retrack") or {}).get("errors", {}).items():
             b = before.errors.get(name) if before else None
             print(f"  {name}: largest error after settling {b.max_error:.4g} -> {e['max_error']:.4g}, median "

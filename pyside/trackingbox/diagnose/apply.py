@@ -17,7 +17,15 @@ order on a copy of the spec (the input spec is never written):
    jointly) move to ``[fixed]`` at their estimate: only the spec's own candidates
    are tracked;
 2. ``pair`` (its ``[[pairs]]`` written), each pair's loop at least the recipe's
-   ``closed_loop`` slow;
+   ``closed_loop`` slow. A parameter the spec tracks in time (``[diagnose] varying``: the one whose
+   error the patch should shrink) that ``pair``'s data checks refused to pair is paired all the same
+   with the tag its relative gain chose (:func:`keep_varying`), the refusal written beside the figures:
+   the refusal is ``pair``'s judgement of how well a loop would track on this record, and the
+   comparison needs the parameter tracked before and after the patch, whatever that judgement. (On the
+   evaporator's hidden-effect plants, which foul without the soluble scale of the bench's own plant, the
+   fouling resistance reaches 1.9e-4 m2.K/W in 72 h instead of 3.1e-4; its tags move 0.6 times as much
+   and ``pair`` refused effect.Rf on PI-6121 at a predicted 26 % of the error above the noise floor,
+   limit 25 %, on the unpatched and the patched twin alike);
 3. ``track`` over the whole record.
 
 Every round's naming, the fitted effect parameters, the tracked parameter's error
@@ -143,13 +151,59 @@ class Retrack:
     errors: dict[str, ParameterError]
     timings: dict[str, float]
     note: str = ""
+    kept: list[dict[str, str]] = field(default_factory=list)
+    """Pairs of :func:`keep_varying`: ``variable``, ``parameter`` and ``refused`` (pair's reason)."""
 
     def to_json(self) -> dict[str, Any]:
         return {"spec": str(self.spec), "csv": str(self.csv), "pairs": [list(p) for p in self.pairs],
                 "estimates": self.estimates, "held": self.held,
                 "errors": {k: v.to_json() for k, v in self.errors.items()},
                 "timings": {k: round(v, 3) for k, v in self.timings.items()},
-                **({"note": self.note} if self.note else {})}
+                **({"note": self.note} if self.note else {}),
+                **({"kept": self.kept} if self.kept else {})}
+
+
+def keep_varying(result: Any, varying: Any) -> tuple[Any, list[dict[str, str]]]:
+    """*result* (a :class:`~trackingbox.analysis.pair_stage.PairingResult`) with each parameter of
+    *varying* that its data checks refused to pair given a pair all the same, and those pairs.
+
+    The pair is the refused one (``pairing.rejected``: the relative gain array chose it, the data
+    checks then refused it) whose relative gain is closest to 1, on a tag no chosen pair uses; its gain
+    is the pairing's, its time constant the step test's. A parameter with no such refusal (every tag it moves at its
+    noise floor, or no positive relative gain) stays unpaired, as ``pair`` left it.
+    """
+    from ..analysis.pairing_model import Pair
+
+    pairing = result.pairing
+    st = result.steptest
+    used = {p.variable for p in pairing.pairs}
+    paired = {p.parameter for p in pairing.pairs}
+    added: list[Any] = []
+    kept: list[dict[str, str]] = []
+    for name in varying:
+        if name in paired or name not in st.parameters:
+            continue
+        options = []
+        for v, q, why in pairing.rejected:
+            if q != name or v in used or v not in pairing.variables or v not in st.variables:
+                continue
+            i, j = pairing.variables.index(v), pairing.parameters.index(q)
+            lam = float(pairing.rga[i, j]) if pairing.rga.size else math.nan
+            if math.isfinite(lam) and lam > 0:
+                options.append((abs(lam - 1.0), v, i, j, lam, why))
+        if not options:
+            continue
+        _, v, i, j, lam, why = min(options, key=lambda o: o[0])
+        tau = float(st.time_constants[st.variables.index(v), st.parameters.index(name)])
+        added.append(Pair(v, name, lam, float(pairing.gains[i, j]), tau))
+        used.add(v)
+        kept.append({"variable": v, "parameter": name, "refused": why})
+    if not added:
+        return result, []
+    names = {p.variable for p in added} | {p.parameter for p in added}
+    pairing = replace(pairing, pairs=tuple(pairing.pairs) + tuple(added),
+                      left_out=tuple((n, r) for n, r in pairing.left_out if n not in names))
+    return replace(result, pairing=pairing), kept
 
 
 def truth_on(truth: Mapping[str, Any], name: str, t: np.ndarray) -> np.ndarray | None:
@@ -205,27 +259,49 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     t0 = time.perf_counter()
     estimates: dict[str, float] = {}
     held: dict[str, float] = {}
+    # the estimate stage's outcome, kept: a re-track interrupted after it (diagnose --apply --resume) goes on
+    # from it. Its fit is journaled (checkpoint.journal), but the identifiability check before it and the
+    # profile-likelihood intervals after it are not, and they are most of its time (on the evaporator's 72 h,
+    # vent-orifice: the fit 77 s of evaluations, the stage about 1700 s on a loaded machine)
+    saved = out / "estimate" / "outcome.json"
+    key = _estimate_key(path, recipe)
+    found = _saved_outcome(saved, key)
     try:
-        # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
-        # the journal instead of repeating its simulations
-        checkpoint = out / "estimate" / "checkpoint.json"
-        journal = checkpoint.with_suffix(".journal")
-        checkpoint.parent.mkdir(parents=True, exist_ok=True)
-        est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
-                                                                   "resume": journal.exists()}), progress=progress)
+        if found is not None:
+            log.info("%s: the estimate of an earlier run of this re-track, reused (%s)", path, saved)
+            if found.get("failed"):
+                raise TrackingError(found["failed"])
+            estimates, intervals = found["estimates"], {k: tuple(v) for k, v in found["intervals"].items()}
+        else:
+            # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
+            # the journal instead of repeating its simulations
+            checkpoint = out / "estimate" / "checkpoint.json"
+            journal = checkpoint.with_suffix(".journal")
+            checkpoint.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
+                                                                           "resume": journal.exists()}),
+                                          progress=progress)
+            except TrackingError as exc:
+                if recipe.estimate_may_fail:
+                    write_text_atomic(saved, json.dumps({"key": key, "failed": str(exc)}) + "\n")
+                raise
+            estimates = {k: float(v) for k, v in est.parameters.items()}
+            unc = est.uncertainty
+            intervals = {iv.name: (float(iv.lower), float(iv.upper)) for iv in (unc.parameters if unc is not None else ())
+                         if iv.determined and iv.lower <= iv.estimate <= iv.upper}
+            write_text_atomic(saved, json.dumps({"key": key, "estimates": estimates,
+                                                 "intervals": {k: list(v) for k, v in intervals.items()}}) + "\n")
     except TrackingError as exc:
         if not recipe.estimate_may_fail:
             raise
         note = f"estimate skipped, tracking starts from the spec's starts: {exc}"
         log.warning(note)
     else:
-        estimates = {k: float(v) for k, v in est.parameters.items()}
         keep = {k for k in estimates if k not in recipe.varying}
         hold_now = {k for k in keep if k in recipe.held or k in hold}
         starts = {k: v for k, v in estimates.items() if k in keep and k not in hold_now and recipe.write_estimates}
-        unc = est.uncertainty
-        intervals = {iv.name: (iv.lower, iv.upper) for iv in (unc.parameters if unc is not None else ())
-                     if iv.name in starts and iv.determined and iv.lower <= iv.estimate <= iv.upper}
+        intervals = {k: v for k, v in intervals.items() if k in starts}
         if starts:
             spec = write_starts(path, starts, intervals)
         if hold_now:
@@ -234,6 +310,10 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     timings["estimate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = stages.pair.run(spec, stages.PairSettings(), progress=progress)
+    res, kept = keep_varying(res, [name for name, _ in spec.diagnose.varying])
+    for k in kept:
+        log.warning("%s paired with %s although pair refused it (%s): diagnose --apply compares the parameter "
+                    "the spec tracks in time before and after the patch", k["parameter"], k["variable"], k["refused"])
     if not res.pairing.pairs:
         why = "; ".join(f"{x['name']}: {x['reason']}" for x in res.to_json().get("left_out", []))
         raise ApplyError(f"{path}: pair found no pairs, nothing to track (a record too short for the tracked "
@@ -248,7 +328,31 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     settle = settle_time(spec, recipe)
     return Retrack(spec=path, csv=Path(tr.csv), pairs=[(p.variable, p.parameter) for p in spec.pairs],
                    estimates=estimates, held=held, errors=parameter_errors(spec, Path(tr.csv), truth, settle),
-                   timings=timings, note=note)
+                   timings=timings, note=note, kept=kept)
+
+
+def _estimate_key(spec_path: Path, recipe: Recipe) -> str:
+    """What an estimate of a re-track depends on: the spec as copied (before any estimate is written), its
+    measurements and twin (size and modification time) and the recipe's estimate settings."""
+    import hashlib
+
+    spec = load_spec(spec_path)
+    files = [(str(f), f.stat().st_size, f.stat().st_mtime_ns) for f in (Path(spec.twin), Path(spec.measurements))
+             if f.is_file()]
+    text = json.dumps([spec_path.read_text(), files, sorted((k, repr(v)) for k, v in recipe.estimate.items())])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _saved_outcome(path: Path, key: str) -> dict[str, Any] | None:
+    """The estimate outcome saved at *path* when it was written for *key*, else None."""
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+    except ValueError:
+        log.warning("%s: unreadable, the estimate is run again", path)
+        return None
+    return doc if isinstance(doc, dict) and doc.get("key") == key else None
 
 
 def settle_time(spec: Any, recipe: Recipe) -> float:
@@ -440,7 +544,8 @@ def _finished(out: Path, spec: Any) -> dict[str, Any]:
                       errors={k: ParameterError(**{f: v[f] for f in ("parameter", "settle", "max_error",
                                                                       "median_error", "span")})
                               for k, v in before.get("errors", {}).items()},
-                      timings=before.get("timings", {}), note=before.get("note", ""))
+                      timings=before.get("timings", {}), note=before.get("note", ""),
+                      kept=before.get("kept", []))
     return {"rounds": rounds, "before_run": run}
 
 
@@ -455,22 +560,22 @@ def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Pat
         return None
     plt = plots.pyplot()
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 3.4 * len(names)), squeeze=False)
-    runs = [("unpatched", result.before.csv, plots.UNTRACKED, result.before.errors)]
+    runs = [("unpatched", result.before.csv, plots.UNTRACKED, result.before.errors, result.before.spec)]
     colours = ("tab:blue", "tab:green", "tab:purple")
     for i, r in enumerate(x for x in result.rounds if x.get("retrack")):
         named = r["named"]
         errs = {k: ParameterError(**{f: v[f] for f in ("parameter", "settle", "max_error", "median_error", "span")})
                 for k, v in r["retrack"]["errors"].items()}
         runs.append((f"round {r['round']}: + {named['effect']}@{named['target']}", Path(r["retrack"]["csv"]),
-                     colours[i % len(colours)], errs))
+                     colours[i % len(colours)], errs, Path(r["retrack"]["spec"])))
     for ax, name in zip(axes[:, 0], names):
         first = pd.read_csv(runs[0][1], usecols=["time"])["time"].to_numpy(float)
         lines = []
-        for label, csv, colour, errs in runs:
-            df = pd.read_csv(csv, usecols=["time", f"parameter:{name}"])
-            y = np.interp(first, df["time"].to_numpy(float), df[f"parameter:{name}"].to_numpy(float))
+        for label, csv, colour, errs, run_spec in runs:
+            y, paired = _trajectory(csv, run_spec, name, first)
             e = errs.get(name)
-            lines.append(plots.Line(y, f"{label} (max error {e.max_error:.3g})" if e else label, colour))
+            text = f"{label} (max error {e.max_error:.3g})" if e else label
+            lines.append(plots.Line(y, text if paired else f"{text}, not paired: its start", colour))
         true = truth_on(truth, name, first)
         lines.append(plots.Line(true, "plant truth", plots.TRUTH, ":", 1.8))
         settle = result.before.errors[name].settle
@@ -479,6 +584,19 @@ def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Pat
                            f"(errors after {settle / 3600:g} h)")
         ax.axvline(settle / 3600.0, color="0.5", lw=0.8, ls="-.")
     return plots.save(fig, result.out / "apply.png")
+
+
+def _trajectory(csv: Path, spec_path: Path, name: str, t: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Parameter *name* of a re-track on times *t*: its tracked column in *csv*, or (no pair drove it) its
+    start in the run's spec, which it kept; and whether it was tracked."""
+    column = f"parameter:{name}"
+    if column in pd.read_csv(csv, nrows=0).columns:
+        df = pd.read_csv(csv, usecols=["time", column])
+        return np.interp(t, df["time"].to_numpy(float), df[column].to_numpy(float)), True
+    spec = load_spec(spec_path)
+    starts = {p.name: float(p.start) for p in spec.parameters}
+    value = starts.get(name, dict(spec.fixed).get(name, math.nan))  # held: moved to [fixed] at its estimate
+    return np.full(np.shape(t), float(value)), False
 
 
 def _num(x: Any) -> float | None:

@@ -5,7 +5,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -164,8 +164,11 @@ def write_apply_report(result: ApplyResult) -> StageReport:
                   "the settling time on. Stopped: " + (result.stopped or "-") + ".")
     before = result.before
     rows = []
+    def shown(name: str, pairs: Any) -> str:  # a candidate no pair drove kept its start
+        return name if name in {q for _, q in pairs} else f"{name} (not paired: its start)"
+
     for name, e in (before.errors.items() if before else ()):
-        rows.append(["unpatched", name, fmt(e.max_error), fmt(e.median_error), "-"])
+        rows.append(["unpatched", shown(name, before.pairs), fmt(e.max_error), fmt(e.median_error), "-"])
     for r in result.rounds:
         named = r.get("named")
         label = f"round {r['round']}: " + (f"+ {named['effect']}@{named['target']}" if named
@@ -176,8 +179,16 @@ def write_apply_report(result: ApplyResult) -> StageReport:
         for name, e in errors.items():
             b = before.errors.get(name) if before else None
             ratio = e["max_error"] / b.max_error if b and b.max_error and e["max_error"] is not None else None
-            rows.append([label, name, fmt(e["max_error"]), fmt(e["median_error"]), fmt(ratio)])
+            rows.append([label, shown(name, r["retrack"].get("pairs", [])), fmt(e["max_error"]),
+                         fmt(e["median_error"]), fmt(ratio)])
     doc.table(["twin", "parameter", "largest error after settling", "median error", "largest / unpatched"], rows)
+    kept = [("unpatched", k) for k in (before.kept if before else ())]
+    kept += [(f"round {r['round']}", k) for r in result.rounds for k in (r.get("retrack") or {}).get("kept", [])]
+    if kept:
+        doc.paragraph("Paired although `pair` refused the pair (a parameter the spec tracks in time, "
+                      "`[diagnose] varying`: the comparison needs it tracked before and after the patch):")
+        doc.bullets([f"{label}: {k['parameter']} on {k['variable']}; pair's reason: {k['refused']}"
+                     for label, k in kept])
     phases = []
     if before:
         phases.append(["unpatched"] + [fmt(before.timings.get(k)) for k in ("estimate", "pair", "track")] + ["-"])
