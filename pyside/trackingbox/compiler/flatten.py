@@ -211,11 +211,6 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         )
         return UnsupportedConstructError(msg)
 
-    # --------------------------------------------------------------- checks
-    def check_constructs(self) -> None:
-        flat = self.flat
-
-
     # ------------------------------------------------------------ variables
     def _type_of(self, v: dict[str, Any]) -> int:
         if v.get("type_id") in (self.flat.get("enumeration_types") or []):
@@ -549,7 +544,6 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
 
     # ------------------------------------------------------------ translate
     def translate(self) -> ExplicitModel:
-        self.check_constructs()
         check_flat(self.flat, self.model, self.location)  # constants: bound, to constant expressions
         self.collect_variables()
         params, calculated, calc_eqs, computed, init_residuals = self._parameters()
