@@ -559,7 +559,8 @@ def plot_errors(result: ApplyResult, truth: Mapping[str, Any], spec: Any) -> Pat
     if not names:
         return None
     plt = plots.pyplot()
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 3.4 * len(names)), squeeze=False)
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 3.4 * len(names)), squeeze=False,
+                             layout="constrained")
     runs = [("unpatched", result.before.csv, plots.UNTRACKED, result.before.errors, result.before.spec)]
     colours = ("tab:blue", "tab:green", "tab:purple")
     for i, r in enumerate(x for x in result.rounds if x.get("retrack")):
