@@ -199,6 +199,14 @@ def msl(models: list[str]) -> int:
 
 
 def main() -> int:
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        print(__doc__)
+        return 0
+    unknown = [a for a in sys.argv[1:] if a.startswith("-") and a not in ("--train", "--msl")]
+    if unknown:
+        print(f"bench_compile: unknown option {unknown[0]} (options: --train, --msl [MODEL ...], --help)",
+              file=sys.stderr)
+        return 2
     if "--train" in sys.argv[1:]:
         train()
         return 0
