@@ -132,6 +132,17 @@ session.load(sys.argv[2], model=sys.argv[3]).to_dict("flat")
 """
 
 
+def _defining_file(top: Path, model: str) -> str:
+    """The file under *top* that defines *model*: ``A/B/C.mo``, else the nearest enclosing package's
+    ``A/B.mo`` or ``A/B/package.mo`` (``Modelica.Blocks.Examples`` is written in ``Blocks/package.mo``)."""
+    parts = model.split(".")
+    for n in range(len(parts), 0, -1):
+        for file in (top.joinpath(*parts[:n]).with_suffix(".mo"), top.joinpath(*parts[:n], "package.mo")):
+            if file.is_file():
+                return str(file)
+    raise FileNotFoundError(f"no file under {top} defines {model}")
+
+
 def msl(models: list[str]) -> int:
     """Compile time and peak memory on the MSL: cold, library cached, model cached, and rumoca alone on
     the whole library (see the module docstring)."""
@@ -163,9 +174,7 @@ def msl(models: list[str]) -> int:
         one.write_text(ONE_STATE)
         cases = [("OneState", str(one), ["--library", str(root)], str(one))]
         for m in models or MSL_EXAMPLES:
-            file = root.parent.joinpath(*m.split(".")).with_suffix(".mo")
-            while not file.is_file() and len(file.parts) > len(root.parent.parts) + 1:
-                file = file.parent.with_suffix(".mo")
+            file = _defining_file(root.parent, m)
             cases.append((m, str(root), [], str(file)))
         for k, (model, source, extra, file) in enumerate(cases):
             cache = Path(tmp) / f"cache{k}"  # this model's own caches, empty before its cold run
