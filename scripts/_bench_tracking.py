@@ -102,10 +102,10 @@ def hold_constants(case, bench: str) -> None:
     pairing sees them after its estimate (which takes the 7-effect train about 40 min: not this
     benchmark's subject, so the truth stands in for it)."""
     from trackingbox.benches.evaporator import fix_parameters
-    from trackingbox.demo import _estimate_only
+    from trackingbox.demo import bench_estimate_only
 
     names = [p.name for p in load_spec(case.spec).parameters]
-    values = {n: float(case.truth[n]) for n in _estimate_only(bench, names) if n in names and n in case.truth}
+    values = {n: float(case.truth[n]) for n in bench_estimate_only(bench, names) if n in names and n in case.truth}
     if values:
         fix_parameters(case.spec, values)
         log(f"{bench}: held at the plant's values (the demo estimates and holds them): " + ", ".join(sorted(values)))

@@ -82,7 +82,7 @@ EVAPORATORS: frozenset[str] = frozenset({"evaporator", "evaporator-train"})
 
 #: Benches whose estimates of the constant parameters become the spec's starts before ``pair``
 #: (the source's order: estimate, then pair, then track), leaving out the parameters
-#: :func:`_time_varying` names: a constant the tracking loops could not follow (the evaporator's
+#: :func:`bench_time_varying` names: a constant the tracking loops could not follow (the evaporator's
 #: boiling-point offset: its only tag, the body temperature, is at its noise floor) is then right
 #: when pairing and tracking start, and the fouling the only fouling-like parameter left.
 WRITE_ESTIMATES: frozenset[str] = EVAPORATORS
@@ -219,8 +219,8 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
             summary["estimate"] = est.to_json()
             run.reports["estimate"] = write_estimate_report(spec, est, out / "estimate", truth=run.truth)
             if run.bench in WRITE_ESTIMATES:
-                varying = _time_varying(run.bench, est.parameters)
-                held = _estimate_only(run.bench, est.parameters)
+                varying = bench_time_varying(run.bench, est.parameters)
+                held = bench_estimate_only(run.bench, est.parameters)
                 starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
                 unc = est.uncertainty  # the intervals go with the starts: the tracked parameters' bands start there
                 intervals = {iv.name: (iv.lower, iv.upper) for iv in (unc.parameters if unc is not None else ())
@@ -267,7 +267,7 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
         run.reports["validate"] = write_validate_report(spec, val, fmu, out / "validate", truth=run.truth)
 
 
-def _estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
+def bench_estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
     """Parameters of *bench* (among *names*, for the train) held at their estimate (moved to
     ``[fixed]``), not tracked."""
     if bench == "evaporator":
@@ -277,7 +277,7 @@ def _estimate_only(bench: str, names: Any = ()) -> frozenset[str]:
     return frozenset()
 
 
-def _time_varying(bench: str, names: Any = ()) -> frozenset[str]:
+def bench_time_varying(bench: str, names: Any = ()) -> frozenset[str]:
     """Parameters of *bench* (among *names*, for the train) that vary in time (their estimate over a
     window is a mean): not written."""
     if bench == "evaporator":

@@ -113,8 +113,8 @@ def bench_recipe(bench: str | None, names: Any = ()) -> Recipe:
     if evaporator:
         from ..benches.evaporator import CLOSED_LOOP
         closed = CLOSED_LOOP
-    return Recipe(estimate=dict(demo.ESTIMATE_BUDGET[bench]), varying=demo._time_varying(bench, names),
-                  held=demo._estimate_only(bench, names), closed_loop=closed,
+    return Recipe(estimate=dict(demo.ESTIMATE_BUDGET[bench]), varying=demo.bench_time_varying(bench, names),
+                  held=demo.bench_estimate_only(bench, names), closed_loop=closed,
                   window=demo.TRACK_WINDOW.get(bench, "all"),
                   settle=12 * 3600.0 if bench == "evaporator" else None,
                   write_estimates=bench in demo.WRITE_ESTIMATES, estimate_may_fail=evaporator)
