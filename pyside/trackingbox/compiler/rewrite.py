@@ -301,6 +301,25 @@ LIBRARY_BODIES = (
 """,
         why="while loops",
     ),
+    # Modelica.Math.BooleanVectors.firstTrueIndex (MSL 4.0.0): a for loop that returns at the first
+    # true element, which rumoca refuses ("a non-guarded nested return requires a checked
+    # control-flow owner"; MathInteger.MultiSwitch, MathBoolean.MultiSwitch and Math.MultiSwitch call
+    # it). Setting the index only while it is still 0 gives the same first index, 0 if none is true.
+    LibraryBody(
+        name="Modelica.Math.BooleanVectors.firstTrueIndex",
+        header=b"function firstTrueIndex",
+        digest="8e1398c57cca82bdb07a17248eee4c29713ffd456d40d37cdb97b65336dbc952",
+        start=b"algorithm",
+        body=b"""algorithm
+   index := 0;
+   for i in 1:size(b, 1) loop
+      if b[i] and index == 0 then
+         index := i;
+      end if;
+   end for;
+""",
+        why="a return inside a for loop",
+    ),
 )
 
 
