@@ -387,7 +387,7 @@ FRONTEND_GAP_MODELS = {
         "  connect(p1.y, m.u[1]);\n"
         "  connect(p2.y, m.u[2]);\n"
         "end M;\n",
-        "connected to a scalar input before an element of an input array", 29),
+        "connected to several inputs, one of them an element of an input array", 29),
 }
 
 
