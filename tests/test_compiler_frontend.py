@@ -354,6 +354,40 @@ FRONTEND_GAP_MODELS = {
         "  N m;\n"
         "end M;\n",
         "`cardinality()`", 10),
+    "discrete_connection_order": (
+        "model M\n"
+        "  connector BI = input Boolean;\n"
+        "  connector BO = output Boolean;\n"
+        "  block Src\n"
+        "    parameter Real t0;\n"
+        "    BO y;\n"
+        "  equation\n"
+        "    y = time > t0;\n"
+        "  end Src;\n"
+        "  block Sw\n"
+        "    BI u[2];\n"
+        "    output Integer k;\n"
+        "  equation\n"
+        "    k = if u[1] then 1 elseif u[2] then 2 else 0;\n"
+        "  end Sw;\n"
+        "  block Trig\n"
+        "    BI trigger;\n"
+        "    output Integer n(start = 0, fixed = true);\n"
+        "  equation\n"
+        "    when trigger then\n"
+        "      n = pre(n) + 1;\n"
+        "    end when;\n"
+        "  end Trig;\n"
+        "  Src p1(t0 = 0.5);\n"
+        "  Src p2(t0 = 0.2);\n"
+        "  Sw m;\n"
+        "  Trig t;\n"
+        "equation\n"
+        "  connect(p1.y, t.trigger);\n"
+        "  connect(p1.y, m.u[1]);\n"
+        "  connect(p2.y, m.u[2]);\n"
+        "end M;\n",
+        "connected to several inputs, one of them an element of an input array", 29),
 }
 
 

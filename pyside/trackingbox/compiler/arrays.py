@@ -423,10 +423,18 @@ def extremum(values: list[Value], which: str) -> Value:
 
 
 def subscript(a: Value, subs: Sequence[Value | None], what: str) -> Value:
-    """Index *a* with 1-based subscripts: an Integer, a vector of Integers, or ``None`` for ``:``."""
+    """Index *a* with 1-based subscripts: an Integer, a vector of Integers, ``None`` for ``:``, or a
+    scalar expression (an Integer variable, see :func:`_select`)."""
     s = shape(a)
     if len(subs) > len(s):
         raise ArrayError(f"{len(subs)} subscripts for {what} of size {size_text(s)}")
+    for k, sub in enumerate(subs):
+        if isinstance(sub, (ca.MX, ca.SX)):
+            picked = subscript(a, [None] * k + [1] + [None] * (len(s) - k - 1), what)
+            options = [subscript(a, [None] * k + [i] + [None] * (len(s) - k - 1), what) for i in range(1, s[k] + 1)]
+            rest = list(subs[:k]) + list(subs[k + 1:])
+            chosen = _select(sub, options, picked)
+            return subscript(chosen, rest, what) if any(r is not None for r in rest) else chosen
     index: list[Any] = []
     for k, sub in enumerate(subs):
         n = s[k]
@@ -460,6 +468,24 @@ def subscript(a: Value, subs: Sequence[Value | None], what: str) -> Value:
     if isinstance(result, np.ndarray) and result.shape == ():
         return result[()]
     return result
+
+
+def _select(index: Any, options: list[Value], like: Value) -> Value:
+    """``options[index - 1]`` for a scalar *index* known only when the model runs, element by element
+    (each option has the size of *like*): ``if index == 1 then options[1] elseif ... else NaN``. An
+    index outside ``1..n`` is an error in Modelica (MLS 10.5); here it gives NaN, which the run
+    shows instead of a number taken from a wrong element."""
+    def pick(*elements: Any) -> Any:
+        out: Any = ca.MX(float("nan")) if isinstance(index, ca.MX) else ca.SX(float("nan"))
+        for i in range(len(elements), 0, -1):
+            out = ca.if_else(index == i, elements[i - 1], out)
+        return out
+    if not is_array(like):
+        return pick(*options)
+    out = new(like.shape)
+    for pos in np.ndindex(*like.shape):
+        out[pos] = pick(*(o[pos] for o in options))
+    return out
 
 
 def fold_math(name: str, fn: Callable[[float], float], x: Value) -> float:

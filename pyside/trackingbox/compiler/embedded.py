@@ -264,6 +264,13 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
                 r"String conversion currently requires .*found Enumeration",
                 r"\bString\s*\(",
                 readme="`String()` of an enumeration"),
+    FrontendGap("a Boolean or Integer output connected to several inputs, one of them an element of an "
+                "input array (`connect(p.y, t.trigger)` and `connect(p.y, m.u[1])`: the front end cannot "
+                "orient the connection equation between two of the inputs)",
+                r"element assignments must cover a discrete coordinate exactly once",
+                r"\bconnect\s*\(\s*([\w.]+)\s*,\s*[\w.\[\]]+\s*\)[^;]*;(?:[^;]*;){0,40}?"
+                r"\s*connect\s*\(\s*\1\s*,\s*[\w.]+\[\s*\d+\s*\]\s*\)",
+                readme="a discrete output connected to several inputs, one of them an element of an input array"),
     FrontendGap("`cardinality()`",
                 r"unresolved Flat reference `[^`]*cardinality|cardinality\(\) may only be used",
                 r"\bcardinality\s*\(",

@@ -29,7 +29,10 @@ usual machinery of model-exchange FMUs:
   a step changes nothing (``pre(v) == v`` for all); at most 100 steps. Passes that cycle (40 in
   a step) are resolved by a search over the relations that changed in them (every combination,
   fewest changes first, at most 12 relations) for one that the discrete and continuous values it
-  leads to reproduce; where there is none, the step falls back to its first pass and another step
+  leads to reproduce, up to ties: a relation whose operands come out equal within the indicators'
+  hysteresis keeps the value it was given (the MSL's ``LossyGear`` with equal sliding and
+  break-away torques, where either value of ``sa > tau0_max`` selects the other); where there is
+  none, the step falls back to its first pass and another step
   follows (the MSL's ``OneWayClutch`` leaves its stuck state through ``pre(startForward)`` of the
   step before).
   Between events ``pre(v) == v``: the FMU holds each ``pre(v)`` as a hidden variable, equal to

@@ -101,7 +101,7 @@ class ExpressionTranslation:
         """A subscripted expression, e.g. ``f(x)[2]`` or an array input ``A[i]`` inside a function."""
         base = self.expr(body["base"], env)
         subs = body.get("subscripts") or []
-        return arr.subscript(base, [self._subscript(s, base, k, env) for k, s in enumerate(subs)],
+        return arr.subscript(base, [self._subscript(s, base, k, env, read=True) for k, s in enumerate(subs)],
                              f"`{expression_text(body['base'])}`")
 
     def _x_Unary(self, body: Any, env: Any) -> Value:

@@ -376,7 +376,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         if env is not None and name in env:
             val = env[name]
             if subs:
-                return arr.subscript(val, [self._subscript(s, val, k, env) for k, s in enumerate(subs)], repr(name))
+                return arr.subscript(val, [self._subscript(s, val, k, env, read=True) for k, s in enumerate(subs)],
+                                     repr(name))
             return val
         if name == "time":
             return self.time
@@ -401,7 +402,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                                    f"in {self.model}")
             # ``end`` comes as size(name, k): evaluate it on a placeholder of the right size
             shape_only = arr.new(dims)
-            picks = [self._subscript(s, shape_only, k, env) for k, s in enumerate(subs)]
+            picks = [self._subscript(s, shape_only, k, env, read=True) for k, s in enumerate(subs)]
         if picks and len(picks) == len(dims) and all(isinstance(p, int) for p in picks):
             sname = name + "[" + ",".join(str(i) for i in picks) + "]"
             if sname not in self.scalars:
@@ -517,8 +518,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                     self._evaluated[sv.name] = float(val)
         return self._evaluated[sv.name]
 
-    def _subscript(self, sub: Any, value: Value, k: int, env: dict[str, Value] | None) -> Value:
-        """One subscript: an Integer, a vector of Integers, or None for ``:``.
+    def _subscript(self, sub: Any, value: Value, k: int, env: dict[str, Value] | None, read: bool = False) -> Value:
+        """One subscript: an Integer, a vector of Integers, or None for ``:``; where an element is
+        *read*, also an Integer variable (:func:`.arrays.subscript` selects on its value).
 
         ``end`` comes from the flat model as ``size(a, k)`` of the array itself.
         """
@@ -533,6 +535,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 if not all(is_number(v) for v in val.ravel()):
                     raise CompileError(f"non-constant array subscript `{expression_text(body['expr'])}` "
                                        f"in {self.model}")
+                return val
+            if read and isinstance(val, ca.MX) and val.is_scalar():
                 return val
             if not is_number(val):
                 raise self.unsupported(

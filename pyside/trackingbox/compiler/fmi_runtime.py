@@ -245,6 +245,26 @@ static int tbx_write_updates(casadi_fmi_memory* m, const casadi_real* out) {
   m->up_to_date = 0;
   return changed;
 }
+/* Whether the relations of *out* (a pass with the relations recomputed) that differ from those the
+   FMU holds (at least one) are all at a tie: each such relation's indicator, shifted by the
+   hysteresis towards the held value, still gives the held value (its operands are equal within the
+   hysteresis), so the held value is as consistent as the other. Rounding conditions never tie. The
+   discrete variables of *out* follow from the recomputed relations: the caller checks that those
+   the held relations select reproduce themselves. */
+static int tbx_only_ties(casadi_fmi_memory* m, const casadi_real* out) {
+  size_t k;
+  int differ = 0;
+  for (k = 0; k < TBX_E_NU; ++k) {
+    casadi_real held = m->v[var_offset[tbx_e_upd_vr[k]]], z;
+    if (held == out[k]) continue;
+    if (k >= TBX_E_NC) continue;  /* a discrete variable: follows the relations (checked after) */
+    if (tbx_c_z[k] < 0) return 0;
+    z = m->v[var_offset[tbx_z_vr[tbx_c_z[k]]]];
+    if (!(held != 0 ? z > 0 : z < 0)) return 0;
+    differ = 1;
+  }
+  return differ;
+}
 /* The passes of a step cycle (relations that the discrete values they select flip back): search the
    relations that changed in the cycle, every combination of their values (at most 2^TBX_E_SEARCH),
    for one that the discrete variables it selects and the continuous values that follow reproduce
@@ -277,6 +297,11 @@ static int tbx_search_relations(casadi_fmi_memory* m, int quiet, const int* flip
       if (tbx_event_step(m, quiet, 1, out)) return -1;
       tbx_write_updates(m, out);
       if (tbx_event_step(m, quiet, 0, out)) return -1;
+      if (tbx_only_ties(m, out)) {  /* consistent up to ties: the held relations stand */
+        if (tbx_event_step(m, quiet, 1, out)) return -1;
+        if (!tbx_write_updates(m, out)) return 0;
+        continue;
+      }
       if (!tbx_write_updates(m, out)) return 0;
     }
   }
@@ -608,6 +633,11 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
                                                              "sample()")))
         glue.append(_c_array("fmi3ValueReference", "tbx_z_vr",
                              [str(refs[f"_tbx_z{k + 1}"]) for k in range(n_z)]))
+        first, at = [], 0  # each relation's indicator (index into tbx_z_vr), -1 for a rounding
+        for c in ev.conditions:
+            first.append(str(at) if c.kind == "rel" and len(c.indicators) == 1 else "-1")
+            at += len(c.indicators)
+        glue.append(_c_array("int", "tbx_c_z", first))
         glue.append(_work_defines("TBX_G", by_name["tbx_event_given"]))
         glue.append("int tbx_event_given(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
                     "casadi_real* w, int mem);\nint tbx_event_given_checkout(void);\n"

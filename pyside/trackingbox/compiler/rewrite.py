@@ -234,6 +234,9 @@ class LibraryBody:
         What rumoca reads instead, from *start* on.
     why:
         What rumoca does with the original.
+    until:
+        The code before which the replaced text ends (and the digest's): the function's first
+        ``annotation`` unless given (a function without an annotation names its own ``end``).
     """
 
     name: str
@@ -242,6 +245,7 @@ class LibraryBody:
     start: bytes
     body: bytes
     why: str
+    until: bytes = b"annotation"
 
 
 LIBRARY_BODIES = (
@@ -301,6 +305,72 @@ LIBRARY_BODIES = (
 """,
         why="while loops",
     ),
+    # Modelica.Math.BooleanVectors.firstTrueIndex (MSL 4.0.0): a for loop that returns at the first
+    # true element, which rumoca refuses ("a non-guarded nested return requires a checked
+    # control-flow owner"; MathInteger.MultiSwitch, MathBoolean.MultiSwitch and Math.MultiSwitch call
+    # it). Setting the index only while it is still 0 gives the same first index, 0 if none is true.
+    LibraryBody(
+        name="Modelica.Math.BooleanVectors.firstTrueIndex",
+        header=b"function firstTrueIndex",
+        digest="8e1398c57cca82bdb07a17248eee4c29713ffd456d40d37cdb97b65336dbc952",
+        start=b"algorithm",
+        body=b"""algorithm
+   index := 0;
+   for i in 1:size(b, 1) loop
+      if b[i] and index == 0 then
+         index := i;
+      end if;
+   end for;
+""",
+        why="a return inside a for loop",
+    ),
+    # Modelica.Blocks.Sources.TimeTable.getInterpolationCoefficients (MSL 4.0.0): a while loop moves
+    # the grid index `next` up from `last` while the row's time has been reached, which the embedded
+    # backend cannot translate (its condition varies with time). The loop's condition depends only
+    # on `next`, so once false it stays false, and it is true at most nrow - last < nrow times: a for
+    # loop over nrow passes that moves `next` up where the condition holds ends on the same index.
+    LibraryBody(
+        name="Modelica.Blocks.Sources.TimeTable.getInterpolationCoefficients",
+        header=b"function getInterpolationCoefficients",
+        digest="58da4f4104e2ae794c4dfc9e4731e245fe22ae33fb95c13682d145e89a91f431",
+        start=b"algorithm",
+        until=b"end getInterpolationCoefficients",
+        body=b"""algorithm
+      next := last;
+      nextEventScaled := timeScaled - TimeEps*abs(timeScaled);
+      tp := timeScaled + TimeEps*abs(timeScaled);
+      if tp < startTimeScaled then
+        nextEventScaled := startTimeScaled;
+        a := 0;
+        b := offset;
+      elseif nrow < 2 then
+        a := 0;
+        b := offset + table[1, columns];
+      else
+        tp := tp - shiftTimeScaled;
+        for k in 1:nrow loop
+          if next < nrow and tp >= table[next, 1] then next := next + 1; end if;
+        end for;
+        if next < nrow then
+          nextEventScaled := shiftTimeScaled + table[next, 1];
+        end if;
+        if next == 1 then
+          next := 2;
+        end if;
+        next0 := next - 1;
+        dt := table[next, 1] - table[next0, 1];
+        if dt <= TimeEps*abs(table[next, 1]) then
+          a := 0;
+          b := offset + table[next, columns];
+        else
+          a := (table[next, columns] - table[next0, columns])/dt;
+          b := offset + table[next0, columns] - a*table[next0, 1];
+        end if;
+      end if;
+      b := b - a*shiftTimeScaled;
+""",
+        why="a while loop on a condition that varies with time",
+    ),
 )
 
 
@@ -324,7 +394,7 @@ def replace_library_bodies(data: bytes) -> tuple[bytes, list[tuple[str, int]]]:
         code, _, _ = _code_mask(data)
         for hit in re.finditer(rb"\b" + re.escape(lib.header) + rb"\b", code):
             at = hit.start()
-            end = code.find(b"annotation", at)
+            end = code.find(lib.until, at)
             start = code.find(lib.start, at, end) if end >= 0 else -1
             if start >= 0 and _code_digest(code[at:end]) == lib.digest:
                 break
