@@ -121,6 +121,12 @@ def test_band_carries_a_parameter_the_twin_holds_off_within_its_interval() -> No
     _, plain = _coverage(rows, truth, after=3600.0)
     ok = np.isfinite(out[:, 0])
     assert np.all(out[ok, 1] - plain[ok, 1] <= 10.0 + 1e-9) and np.all(plain[ok, 0] - out[ok, 0] <= 10.0 + 1e-9)
+    # the summary says what the band takes as exact, and drops what a fixed part covers
+    spec = _spec()
+    spec.fixed = {"q": q_hat, "known": 1.0}
+    assert BandTracker(spec, COLUMNS).describe()["k"]["taken_as_exact"] == ["known", "q"]
+    described = BandTracker(spec, COLUMNS, fixed=fixed).describe()["k"]
+    assert described["taken_as_exact"] == ["known"] and described["fixed"] == {"q": [-10.0, 10.0]}
     # only the pair's own parameter gets it: an entry for another parameter changes nothing
     _, other = _coverage(rows, truth, after=3600.0, fixed={"not-k": fixed["k"]})
     assert np.array_equal(other, plain, equal_nan=True)

@@ -47,8 +47,10 @@ tracked value ``p`` (level :data:`LEVEL`), in three parts:
    without this part, and the size of the misses (truth above the band by about 1e-5 from
    48 h on, while the loop's own error averaged 0 +- 30 Pa there).
 
-The band is clipped to the parameter's bounds. It does not contain what the
-twin's structure gets wrong (an effect the twin lacks, absorbed by the
+The band is clipped to the parameter's bounds. ``result.json``'s band summary
+names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
+twin's ``[fixed]`` values and the parameters no pair tracks, less those given a
+fixed part). It does not contain what the twin's structure gets wrong (an effect the twin lacks, absorbed by the
 parameter): no loop can see that from its own tag, which it drives to the
 measurement whatever the parameter has to absorb.
 
@@ -273,6 +275,11 @@ class BandTracker:
                 "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
                 "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
                          index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
+        # what the bands take as exact: the twin's fixed values and the parameters no pair tracks (held at
+        # their starts), less those given a fixed part (named per pair by describe())
+        tracked = {pr["parameter"] for pr in self.pairs}
+        self.assumed = sorted(set(getattr(spec, "fixed", None) or {})
+                              | {q.name for q in getattr(spec, "parameters", ()) if q.name not in tracked})
         self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
         self.forget = math.exp(-self.ts / NOISE_MEMORY)
         self.states = [self._fresh() for _ in self.pairs]
@@ -468,6 +475,8 @@ class BandTracker:
                                     "start_from": pr["start_source"],
                                     **({"fixed": {h.name: [h.at_lower, h.at_upper] for h in pr["fixed"]}}
                                        if pr["fixed"] else {}),
+                                    "taken_as_exact": [n for n in self.assumed
+                                                       if n not in {h.name for h in pr["fixed"]}],
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}
                                        if m is not None else {"note": pr["note"]})}
         return out
