@@ -13,7 +13,7 @@ held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pai
   (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
 
 :class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
-tracked value ``p`` (level :data:`LEVEL`), in three parts:
+tracked value ``p`` (level :data:`LEVEL`), in four parts:
 
 1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
    autocovariance of the tag's fast error (tracked error minus its centred
@@ -30,7 +30,6 @@ tracked value ``p`` (level :data:`LEVEL`), in three parts:
    controller holds (stoppage, missing tag) the truth may move on: the rate
    before the hold times its length is added there, and fades with ``d`` once
    tracking resumes.
-
 4. **fixed**: a parameter the twin holds at an estimate (``[fixed]`` after ``estimate``, or a
    ``[[parameters]]`` entry no pair tracks) is off by up to its interval, and the loop makes
    its own parameter absorb that: where the pair's tag moves by ``Δy(q)`` when the held ``q``
@@ -38,20 +37,24 @@ tracked value ``p`` (level :data:`LEVEL`), in three parts:
    (a steady shift: the held value never moves, so this part does not fade). Given per pair
    as :class:`Fixed` (*fixed* of :class:`BandTracker`): the shifts of the truth at the two ends
    of each held parameter's interval; each side takes the shifts toward it, in quadrature
-   over the fixed parameters and with the noise and start parts.
+   over the fixed parameters and with the noise and start parts. The shifts need the tag's
+   sensitivity to the held parameters, which the twin alone gives: ``track`` does not compute
+   them yet (its bands take the held values as exact and say so, below);
+   ``scripts/bench_apply --explain-bands`` does, by replays of the twin.
 
    Why: on the evaporator (``diagnose --apply``, vent-orifice, 72 h) the patched twin holds
    the named vent's fraction at 0.0144 (interval 0.0120..0.0163). Replayed with the fouling
    forced to the plant's, the twin reads PI-6121 137 Pa lower with the fraction at the
    interval's upper end: 1.4e-5 m2K/W of fouling, 2.5 times the band's median half-width
-   without this part, and the size of the misses (truth above the band by about 1e-5 from
-   48 h on, while the loop's own error averaged 0 +- 30 Pa there).
+   without this part, and the size of the misses (from 48 h on the truth sat about 1e-5 above
+   ``p`` and the band's upper side 5e-6 above it, while the loop's own error read 0 +- 30 Pa;
+   ``scripts/bench_apply --explain-bands``).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
 twin's ``[fixed]`` values and the parameters no pair tracks, less those given a
-fixed part). It does not contain what the twin's structure gets wrong (an effect the twin lacks, absorbed by the
-parameter): no loop can see that from its own tag, which it drives to the
+fixed part). It does not contain what the twin's structure gets wrong (an effect the
+twin lacks, absorbed by the parameter): no loop can see that from its own tag, which it drives to the
 measurement whatever the parameter has to absorb.
 
 **Lack of fit: where the band is not to be trusted.** The other measured tags
