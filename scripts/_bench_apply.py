@@ -30,11 +30,19 @@ predicted tracking of PI-6121 misses its limit by a point); ``--apply`` then pai
 ``[diagnose] varying`` parameter) and this prints the pair with pair's reason. Add ``-- --resume`` to
 go on from an interrupted case (its namings and finished re-tracks, each re-track's estimate).
 
+``--explain-bands`` (issue 31) then replays the last re-track's twin with every tracked parameter
+playing the plant's truth, and with each parameter it holds at an estimate at the ends of that
+estimate's interval, and prints per 6 h why the tracked parameter's band misses the truth: the loop's
+own error and the replay's (what no loop on the tag can see), read through the pair's gain; the shift
+each held parameter implies; and the coverage and median width of the bands recomputed with that
+fixed part (:class:`trackingbox.identify.bands.Fixed`). Replays go to ``CASE/apply/explain`` (reused).
+
 Examples::
 
     scripts/bench_apply --bench evaporator --cases vent-orifice,shell-loss,default
     scripts/bench_apply --bench evaporator --seed 1 --rounds 2 --cases default
     scripts/bench_apply --bench heat-exchanger --hours 4 --cases heat-loss
+    scripts/bench_apply --bench evaporator --hours 72 --rounds 1 --cases vent-orifice --explain-bands -- --resume
 """
 from __future__ import annotations
 
