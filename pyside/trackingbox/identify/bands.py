@@ -38,9 +38,11 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    as :class:`Fixed` (*fixed* of :class:`BandTracker`): the shifts of the truth at the two ends
    of each held parameter's interval; each side takes the shifts toward it, in quadrature
    over the fixed parameters and with the noise and start parts. The shifts need the tag's
-   sensitivity to the held parameters, which the twin alone gives: ``track`` does not compute
-   them yet (its bands take the held values as exact and say so, below);
-   ``scripts/bench_apply --explain-bands`` does, by replays of the twin.
+   sensitivity to the held parameters, which the twin alone gives: ``track`` (and the online
+   mode, and ``diagnose --apply``'s re-track) measures it at its start by step tests on the twin
+   (:func:`trackingbox.identify.held.held_parts`) for every held parameter with an interval
+   (``[fixed_intervals]``, or ``interval`` of an untracked ``[[parameters]]`` entry);
+   ``scripts/bench_apply --explain-bands`` replays the whole record instead.
 
    Why: on the evaporator (``diagnose --apply``, vent-orifice, 72 h) the patched twin holds
    the named vent's fraction at 0.0144 (interval 0.0120..0.0163). Replayed with the fouling
@@ -250,10 +252,12 @@ class BandTracker:
     fixed
         Per tracked parameter, the parameters the twin holds at an estimate (:class:`Fixed`; part 4
         of the module). None or a parameter left out: no fixed part for it.
+    note
+        Why held parameters with an interval got no fixed part (``result.json``'s ``fixed_note``).
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
-                 fixed: Mapping[str, Sequence[Fixed]] | None = None) -> None:
+                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "") -> None:
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -283,6 +287,7 @@ class BandTracker:
         tracked = {pr["parameter"] for pr in self.pairs}
         self.assumed = sorted(set(getattr(spec, "fixed", None) or {})
                               | {q.name for q in getattr(spec, "parameters", ()) if q.name not in tracked})
+        self.fixed_note = str(note)
         self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
         self.forget = math.exp(-self.ts / NOISE_MEMORY)
         self.states = [self._fresh() for _ in self.pairs]
@@ -478,6 +483,7 @@ class BandTracker:
                                     "start_from": pr["start_source"],
                                     **({"fixed": {h.name: [h.at_lower, h.at_upper] for h in pr["fixed"]}}
                                        if pr["fixed"] else {}),
+                                    **({"fixed_note": self.fixed_note} if self.fixed_note else {}),
                                     "taken_as_exact": [n for n in self.assumed
                                                        if n not in {h.name for h in pr["fixed"]}],
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}
