@@ -70,7 +70,7 @@ def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
         return {}, ""
     try:
         dy, refused = _responses(spec, held)
-    except TrackingError as exc:
+    except (TrackingError, ValueError, KeyError, OSError) as exc:  # e.g. the online mode's record, too short yet
         note = f"the twin's response to {', '.join(sorted(held))} could not be measured ({exc}): taken as exact"
         log.warning("bands: %s", note)
         return {}, note

@@ -10,7 +10,7 @@ search spends its budget. :func:`after_estimate` adds the intervals
 (:func:`~trackingbox.identify.intervals.uncertainty`) and that check to the
 :class:`~trackingbox.estimation.EstimationResult` (the estimate stage calls
 both). :func:`indistinct_candidates` is pairing's check, :func:`band_tracker`
-the tracking loop's bands.
+the tracking loop's bands (with their fixed part, :mod:`.held`).
 """
 from __future__ import annotations
 
