@@ -149,6 +149,7 @@ def test_fixed_intervals_are_read_written_and_travel_with_a_parameter_moved_to_f
     # an interval must hold its [fixed] value and name one
     held = (tmp_path / "spec.toml").read_text().split("[fixed_intervals]")[0]
     for bad, why in (("f = [0.015, 0.02]", "holding its"), ("g = [0.0, 1.0]", "not in \\[fixed\\]"),
-                     ('f = "wide"', "two finite numbers"), ("f = [0.01]", "two finite numbers")):
+                     ('f = "wide"', "two finite numbers"), ("f = [0.01]", "two finite numbers"),
+                     ("f = [0.0, 1" + "0" * 400 + "]", "two finite numbers"), ("f = [0.0, inf]", "two finite")):
         with pytest.raises(SpecError, match=why):
             loads_spec(held + "[fixed_intervals]\n" + bad + "\n", tmp_path / "x.toml", check_files=False)

@@ -360,7 +360,6 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
     return parameters, fixed
 
 
-
 def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: float, label: str,
                         problems: _Problems) -> tuple[float, float] | None:
     """``interval = [a, b]`` of a ``[[parameters]]`` entry: two numbers, ``min <= a <= start <= b <= max``."""
@@ -385,8 +384,8 @@ def _parse_fixed_intervals(raw: Mapping[str, Any], fixed: Mapping[str, float],
     for name, value in (_table(raw, "fixed_intervals", problems) or {}).items():
         if name not in fixed:
             problems.add(f"{name!r} in [fixed_intervals] is not in [fixed]{did_you_mean(name, list(fixed))}")
-        elif not (isinstance(value, list) and len(value) == 2 and all(_is_number(v) for v in value)
-                  and all(math.isfinite(float(v)) for v in value) and value[0] <= fixed[name] <= value[1]):
+        elif not (isinstance(value, list) and len(value) == 2 and all(_is_number(v) and abs(v) < 1e308 for v in value)
+                  and value[0] <= fixed[name] <= value[1]):  # finite (a huge integer would overflow a float)
             problems.add(f"[fixed_intervals] {name} = {value!r} must be [lower, upper] (two finite numbers) "
                          f"holding its [fixed] value {fixed[name]!r}")
         else:
