@@ -153,3 +153,16 @@ def test_fixed_intervals_are_read_written_and_travel_with_a_parameter_moved_to_f
                      ("f = [0.0, 1" + "0" * 400 + "]", "two finite numbers"), ("f = [0.0, inf]", "two finite")):
         with pytest.raises(SpecError, match=why):
             loads_spec(held + "[fixed_intervals]\n" + bad + "\n", tmp_path / "x.toml", check_files=False)
+
+
+def test_a_held_interval_the_twin_cannot_be_measured_for_is_named_and_taken_as_exact(
+        fmu: Path, measurements: Path, tmp_path: Path) -> None:
+    """The step tests need the first hour of the training window; here it lies after the record: track still
+    runs, and the band says it takes q as exact and why."""
+    spec = _spec(tmp_path / "case", fmu, measurements, "fixed")
+    spec.write_text(spec.read_text().replace("training = [0.0, 10000.0]", "training = [30000.0, 40000.0]"))
+    df, result = _track(spec, tmp_path / "out")
+    band = result["bands"]["k"]
+    assert "fixed" not in band and band["taken_as_exact"] == ["q"]
+    assert "could not be measured" in band["fixed_note"] and "q" in band["fixed_note"]
+    assert _coverage(df) < 0.05

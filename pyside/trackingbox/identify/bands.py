@@ -258,6 +258,7 @@ class BandTracker:
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
                  fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "") -> None:
+        self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -287,7 +288,6 @@ class BandTracker:
         tracked = {pr["parameter"] for pr in self.pairs}
         self.assumed = sorted(set(getattr(spec, "fixed", None) or {})
                               | {q.name for q in getattr(spec, "parameters", ()) if q.name not in tracked})
-        self.fixed_note = str(note)
         self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
         self.forget = math.exp(-self.ts / NOISE_MEMORY)
         self.states = [self._fresh() for _ in self.pairs]
