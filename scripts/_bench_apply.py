@@ -257,7 +257,7 @@ def explain_bands(retrack: dict, truth_file: Path, out: Path, bench: str) -> dic
             fixed[pr.parameter].append(Fixed(name, at[0], at[1]))
             shifts.setdefault(pr.parameter, {})[name] = at
     current = retrack["csv"]
-    before = rebanded(Path(current), Path(retrack["spec"]))
+    before = rebanded(Path(current), Path(retrack["spec"]), fixed={})  # the bands without the fixed part
     after_df = rebanded(Path(current), Path(retrack["spec"]), fixed=fixed)
     result: dict = {"settle": settle, "held_intervals": held, "shifts": shifts, "pairs": {}}
     for pr in spec.pairs:
