@@ -30,17 +30,27 @@ predicted tracking of PI-6121 misses its limit by a point); ``--apply`` then pai
 ``[diagnose] varying`` parameter) and this prints the pair with pair's reason. Add ``-- --resume`` to
 go on from an interrupted case (its namings and finished re-tracks, each re-track's estimate).
 
+``--explain-bands`` (issue 31) then replays the last re-track's twin with every tracked parameter
+playing the plant's truth, and with each parameter it holds at an estimate at the ends of that
+estimate's interval, and prints per 6 h why the tracked parameter's band misses the truth: the loop's
+own error and the replay's (what no loop on the tag can see), read through the pair's gain; the shift
+each held parameter implies; and the coverage and median width of the bands recomputed with that
+fixed part (:class:`trackingbox.identify.bands.Fixed`). Replays go to ``CASE/apply/explain`` (reused).
+
 Examples::
 
     scripts/bench_apply --bench evaporator --cases vent-orifice,shell-loss,default
     scripts/bench_apply --bench evaporator --seed 1 --rounds 2 --cases default
     scripts/bench_apply --bench heat-exchanger --hours 4 --cases heat-loss
+    scripts/bench_apply --bench evaporator --hours 72 --rounds 1 --cases vent-orifice --explain-bands -- --resume
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -139,6 +149,165 @@ def band_coverages(csv: Path, truth: dict, errors: dict) -> dict:
     return out
 
 
+# --------------------------------------------------------------------------- --explain-bands
+
+
+@contextlib.contextmanager
+def _replaying(truth: dict, names: set[str]):
+    """While inside: every tracking run plays the plant's true trajectory for the pairs' parameters in
+    *names* instead of their controllers' output (the runs go through the Python rows: the native
+    stepper has the controllers in C). A bench device, not a runtime mode: the twin then shows what
+    it reads with the plant's values, the rest of the run (inputs, state compensation) as tracked."""
+    import numpy as np
+
+    from trackingbox.diagnose.apply import truth_on
+    from trackingbox.tracking import parts
+
+    update, substep = parts.Controllers.update, parts.Controllers.substep
+
+    def force(self, t: float) -> None:
+        for pr in self.pairs:
+            if pr.parameter in names:
+                pr.controller.u = pr.controller.scaling.to_percent(float(truth_on(truth, pr.parameter, np.array([t]))[0]))
+
+    def forced_update(self, t, *a, **k):
+        modes = update(self, t, *a, **k)
+        force(self, t)
+        return modes
+
+    def forced_substep(self, t, *a, **k):
+        substep(self, t, *a, **k)
+        force(self, t)
+
+    env = os.environ.get("TRACKINGBOX_NATIVE_ROWS")
+    parts.Controllers.update, parts.Controllers.substep = forced_update, forced_substep
+    os.environ["TRACKINGBOX_NATIVE_ROWS"] = "0"
+    try:
+        yield
+    finally:
+        parts.Controllers.update, parts.Controllers.substep = update, substep
+        if env is None:
+            os.environ.pop("TRACKINGBOX_NATIVE_ROWS", None)
+        else:
+            os.environ["TRACKINGBOX_NATIVE_ROWS"] = env
+
+
+def _replay(spec, truth: dict, out: Path, values: dict[str, float], bench: str):
+    """The tracking CSV (a DataFrame) of *spec* with every pair's parameter at the plant's truth and the
+    held or untracked parameters in *values* at those values (reused from *out* when it is there)."""
+    import dataclasses
+
+    import pandas as pd
+
+    from trackingbox import stages
+    from trackingbox.demo import TRACK_WINDOW
+
+    csv = out / "tracking.csv"
+    if not (out / "result.json").is_file():
+        fixed = {**spec.fixed, **{k: v for k, v in values.items() if k in spec.fixed}}
+        params = tuple(dataclasses.replace(q, start=values[q.name], interval=None) if q.name in values else q
+                       for q in spec.parameters)
+        run = dataclasses.replace(spec, fixed=fixed, parameters=params)
+        with _replaying(truth, {p.parameter for p in spec.pairs}):
+            stages.track.run(run, stages.TrackSettings(out_dir=out, window=TRACK_WINDOW.get(bench, "all"),
+                                                       untracked=False))
+    return pd.read_csv(csv)
+
+
+def explain_bands(retrack: dict, truth_file: Path, out: Path, bench: str) -> dict:
+    """Why a re-track's bands miss the truth (issue 31): replays of the twin with each tracked parameter
+    at the plant's truth (the tag's error left is what no loop on it can see: the twin's structure
+    and its held values), and with each parameter the twin holds at an estimate (``[fixed]``, or a
+    ``[[parameters]]`` entry no pair tracks) at the ends of its estimate's interval (``outcome.json``
+    of the re-track's estimate): the shift of the truth from the tracked value that each implies
+    (:class:`trackingbox.identify.bands.Fixed`). Then the bands recomputed with that fixed part.
+    Per pair, per 6 h after settling: truth - tracked, the loop's own error and the replay's, read
+    through the pair's gain, and the band's sides; coverage and median width before and after."""
+    import numpy as np
+
+    from _bench_uncertainty import rebanded
+
+    from trackingbox.diagnose.apply import truth_on
+    from trackingbox.identify.bands import Fixed
+    from trackingbox.spec import load_spec
+
+    truth = json.loads(truth_file.read_text())
+    spec = load_spec(retrack["spec"])
+    saved = Path(retrack["spec"]).parent / "estimate" / "outcome.json"
+    doc = json.loads(saved.read_text()) if saved.is_file() else {}
+    estimates, intervals = doc.get("estimates", {}), doc.get("intervals", {})
+    paired = {p.parameter for p in spec.pairs}
+    held = {k: v for k, v in intervals.items() if k not in paired and k in estimates
+            and (k in spec.fixed or any(q.name == k for q in spec.parameters))}
+    at_truth = _replay(spec, truth, out / "truth", {}, bench)
+    t = at_truth["time"].to_numpy(float)
+    settle = min(e["settle"] for e in retrack["errors"].values()) if retrack.get("errors") else 0.0
+    after = t >= settle
+    fixed: dict[str, list] = {p.parameter: [] for p in spec.pairs}
+    shifts: dict[str, dict[str, list[float]]] = {}
+    for name, (lo, hi) in sorted(held.items()):
+        ends = []
+        for label, value in (("lower", lo), ("upper", hi)):
+            df = _replay(spec, truth, out / f"{name}-{label}", {name: value}, bench)
+            ends.append(df)
+        for pr in spec.pairs:
+            tag = f"tracked:{pr.variable}"
+            dy = [float(np.nanmedian((e[tag] - at_truth[tag]).to_numpy(float)[after])) for e in ends]
+            at = [-d / pr.gain for d in dy]
+            fixed[pr.parameter].append(Fixed(name, at[0], at[1]))
+            shifts.setdefault(pr.parameter, {})[name] = at
+    current = retrack["csv"]
+    before = rebanded(Path(current), Path(retrack["spec"]), fixed={})  # the bands without the fixed part
+    after_df = rebanded(Path(current), Path(retrack["spec"]), fixed=fixed)
+    result: dict = {"settle": settle, "held_intervals": held, "shifts": shifts, "pairs": {}}
+    for pr in spec.pairs:
+        name, var = pr.parameter, pr.variable
+        tr = truth_on(truth, name, t)
+        if tr is None:
+            continue
+        q = spec.parameter(name)
+        p = before[f"parameter:{name}"].to_numpy(float)
+        auto = (before[f"mode:{var}"].astype(str) == "auto").to_numpy() if f"mode:{var}" in before else np.ones_like(t, bool)
+        seen = (before[f"measured:{var}"] - before[f"tracked:{var}"]).to_numpy(float) / pr.gain
+        unseen = -(at_truth[f"measured:{var}"] - at_truth[f"tracked:{var}"]).to_numpy(float) / pr.gain
+        per = {}
+        for label, df in (("before", before), ("with fixed part", after_df)):
+            lo, hi = df[f"parameter_lo:{name}"].to_numpy(float), df[f"parameter_hi:{name}"].to_numpy(float)
+            rows = after & np.isfinite(lo)
+            inside = (lo <= tr) & (tr <= hi)
+            per[label] = {"covered": float(inside[rows].mean()), "below": float((tr < lo)[rows].mean()),
+                          "width_of_range": float(np.median((hi - lo)[rows]) / (q.max - q.min)),
+                          "blocks": [{"hours": h, "miss": float(np.mean((tr - p)[b])),
+                                      "loop_error": float(np.nanmean(seen[b & auto])),
+                                      "structural": float(np.nanmean(unseen[b & auto])),
+                                      "hi_minus_p": float(np.mean((hi - p)[b])), "p_minus_lo": float(np.mean((p - lo)[b])),
+                                      "covered": float(inside[b].mean())}
+                                     for h in range(int(settle // 3600), int(t[-1] // 3600) + 1, 6)
+                                     for b in [rows & (t >= h * 3600) & (t < (h + 6) * 3600)] if b.any()]}
+        result["pairs"][name] = {"variable": var, **per}
+    return result
+
+
+def print_explained(case: str, ex: dict) -> None:
+    print(f"    bands explained ({case}; replays from {ex['settle'] / 3600:.0f} h on):", flush=True)
+    for name, shifts in ex["shifts"].items():
+        for held, (a, b) in shifts.items():
+            lo, hi = ex["held_intervals"][held]
+            print(f"      {name}: {held} held, interval {lo:.5g}..{hi:.5g}: truth - tracked {a:+.3g} at its lower "
+                  f"end, {b:+.3g} at its upper end", flush=True)
+    for name, per in ex["pairs"].items():
+        print(f"      {name} on {per['variable']}: per 6 h, truth - tracked = loop's own error / gain + the replay's "
+              "(twin at the truth) error / gain; the band's sides about the tracked value:", flush=True)
+        for blk in per["before"]["blocks"]:
+            print(f"        {blk['hours']:3d} h: {blk['miss']:+.3g} = {blk['loop_error']:+.3g} + {blk['structural']:+.3g}"
+                  f"  band +{blk['hi_minus_p']:.3g} / -{blk['p_minus_lo']:.3g}  covered {100 * blk['covered']:.0f} %",
+                  flush=True)
+        for label in ("before", "with fixed part"):
+            c = per[label]
+            print(f"      {name} band {label}: holds the truth in {100 * c['covered']:.1f} % (below it "
+                  f"{100 * c['below']:.1f} %), median width {100 * c['width_of_range']:.2f} % of the range", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bench", default="evaporator")
@@ -151,6 +320,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="a case's tracked parameter counts as biased where its largest error before the patch "
                          "exceeds this share of its range (default 0.05)")
     ap.add_argument("--work", type=Path, default=Path("out/bench-apply"))
+    ap.add_argument("--explain-bands", action="store_true",
+                    help="after each case, replay the last re-track's twin at the plant's truth and with each held "
+                         "parameter at its interval's ends, and print why its bands miss (WORK/.../apply/explain)")
     ap.add_argument("diagnose_args", nargs="*", help="further arguments for trackingbox diagnose (after --)")
     args = ap.parse_args(argv)
     ok = True
@@ -182,6 +354,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"    band of {name} ({label}): holds the truth in {100 * c['covered']:.1f} % of {c['rows']} rows "
                       f"after settling (lack of fit flagged in {100 * (c.get('flagged') or 0):.1f} %, truth below "
                       f"the band {100 * c['below']:.1f} %)", flush=True)
+        doc = row.get("doc") or {}
+        last = next((r["retrack"] for r in reversed(doc.get("rounds") or []) if r.get("retrack")), None)
+        if args.explain_bands and last:
+            ex = explain_bands(last, folder / "truth.json", folder / "apply" / "explain", args.bench)
+            with open(args.work / "explain.jsonl", "a") as f:
+                f.write(json.dumps({"bench": args.bench, "case": case, **ex}, default=str) + "\n")
+            print_explained(case, ex)
         print("    wall per phase (s): " + "; ".join(
             f"{ph}: " + ", ".join(f"{k} {v:.0f}" for k, v in t.items() if v is not None)
             for ph, t in s["phases"].items()), flush=True)

@@ -18,7 +18,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from trackingbox.identify.bands import BandTracker, loop_model
+from trackingbox.identify.bands import BandTracker, Fixed, loop_model
 from trackingbox.tracking.controllers import ScaledPI
 from trackingbox.tracking.tuning import pair_settings
 
@@ -35,8 +35,9 @@ def _spec(interval: tuple[float, float] | None = None) -> SimpleNamespace:
     return SimpleNamespace(sample_time=TS, pairs=[pair], parameter=lambda name: par, path="test")
 
 
-def _closed_loop(noise: np.ndarray, truth: np.ndarray, hold_rows: int = 30) -> list[list[object]]:
-    """Rows of a tracking run: the runtime's PI controller on an exactly discretised first-order twin."""
+def _closed_loop(noise: np.ndarray, truth: np.ndarray, hold_rows: int = 30, offset: float = 0.0) -> list[list[object]]:
+    """Rows of a tracking run: the runtime's PI controller on an exactly discretised first-order twin
+    (*offset*: what the plant's tag reads above the twin's at equal parameters)."""
     spec = _spec()
     settings = pair_settings(spec.pairs[0], P_MIN, P_MAX, ts=TS)
     pi = ScaledPI(settings.scaling, kp=settings.kp, ti=settings.ti, ts=TS, direction=settings.direction, p0=P0,
@@ -45,7 +46,7 @@ def _closed_loop(noise: np.ndarray, truth: np.ndarray, hold_rows: int = 30) -> l
     x = P0  # the twin settled at its start value
     rows = []
     for k in range(noise.size):
-        meas = 300.0 + GAIN * truth[k] + noise[k]
+        meas = 300.0 + GAIN * truth[k] + offset + noise[k]
         tracked = 300.0 + GAIN * x
         hold = k < hold_rows
         p = pi.update(meas, tracked, hold=hold)
@@ -55,8 +56,8 @@ def _closed_loop(noise: np.ndarray, truth: np.ndarray, hold_rows: int = 30) -> l
 
 
 def _coverage(rows: list[list[object]], truth: np.ndarray, interval: tuple[float, float] | None = None,
-              after: float = 0.0) -> tuple[float, np.ndarray]:
-    bands = BandTracker(_spec(interval), COLUMNS)
+              after: float = 0.0, fixed: dict | None = None) -> tuple[float, np.ndarray]:
+    bands = BandTracker(_spec(interval), COLUMNS, fixed=fixed)
     out = np.array([bands.row(r) for r in rows])
     t = np.array([r[0] for r in rows])
     ok = np.isfinite(out[:, 0]) & (t >= after)
@@ -97,6 +98,38 @@ def test_band_follows_a_drifting_truth_with_the_loops_lag() -> None:
     truth = P_TRUE - 100.0 * np.arange(n) / n
     share, _ = _coverage(_closed_loop(0.05 * rng.normal(size=n), truth), truth, after=3600.0)
     assert share >= 0.90, share
+
+
+def test_band_carries_a_parameter_the_twin_holds_off_within_its_interval() -> None:
+    """A second parameter q moves the tag by GQ per unit; the twin holds it at its estimate 50
+    (interval 45..55), the plant's is 53.5. Worked by hand: the loop settles where
+    GAIN (p - truth) = GQ (53.5 - 50), i.e. 7 units below the truth, four times the noise part;
+    q at its interval's ends would put the truth -GQ (45 - 50) / GAIN = -10 and +10 from p."""
+    gq, q_hat, q_true, (qa, qb) = 0.04, 50.0, 53.5, (45.0, 55.0)
+    n = 20000
+    rng = np.random.default_rng(11)
+    truth = np.full(n, P_TRUE)
+    rows = _closed_loop(0.05 * rng.normal(size=n), truth, offset=gq * (q_true - q_hat))
+    p = np.array([r[4] for r in rows])[4000:]
+    assert abs(np.mean(p) - (P_TRUE + gq * (q_true - q_hat) / GAIN)) < 0.3  # the runtime loop: 7 below
+    without, _ = _coverage(rows, truth, after=3600.0)
+    fixed = {"k": [Fixed("q", -gq * (qa - q_hat) / GAIN, -gq * (qb - q_hat) / GAIN)]}
+    share, out = _coverage(rows, truth, after=3600.0, fixed=fixed)
+    assert without < 0.05, without
+    assert share >= 0.95, share
+    # the fixed part adds at most its own extent on either side (in quadrature with the others)
+    _, plain = _coverage(rows, truth, after=3600.0)
+    ok = np.isfinite(out[:, 0])
+    assert np.all(out[ok, 1] - plain[ok, 1] <= 10.0 + 1e-9) and np.all(plain[ok, 0] - out[ok, 0] <= 10.0 + 1e-9)
+    # the summary says what the band takes as exact, and drops what a fixed part covers
+    spec = _spec()
+    spec.fixed = {"q": q_hat, "known": 1.0}
+    assert BandTracker(spec, COLUMNS).describe()["k"]["taken_as_exact"] == ["known", "q"]
+    described = BandTracker(spec, COLUMNS, fixed=fixed).describe()["k"]
+    assert described["taken_as_exact"] == ["known"] and described["fixed"] == {"q": [-10.0, 10.0]}
+    # only the pair's own parameter gets it: an entry for another parameter changes nothing
+    _, other = _coverage(rows, truth, after=3600.0, fixed={"not-k": fixed["k"]})
+    assert np.array_equal(other, plain, equal_nan=True)
 
 
 def test_band_starts_from_the_interval_and_is_empty_before_the_noise_is_known() -> None:

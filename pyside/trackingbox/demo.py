@@ -224,11 +224,11 @@ def _pipeline(run: Run, steps: tuple[str, ...], overrides: dict[str, float], pro
                 starts = {k: float(v) for k, v in est.parameters.items() if k not in varying and k not in held}
                 unc = est.uncertainty  # the intervals go with the starts: the tracked parameters' bands start there
                 intervals = {iv.name: (iv.lower, iv.upper) for iv in (unc.parameters if unc is not None else ())
-                             if iv.name in starts and iv.determined and iv.lower <= iv.estimate <= iv.upper}
-                spec = write_starts(spec.path, starts, intervals)
-                if held:
+                             if iv.determined and iv.lower <= iv.estimate <= iv.upper}
+                spec = write_starts(spec.path, starts, {k: v for k, v in intervals.items() if k in starts})
+                if held:  # with their intervals, which the tracked parameters' bands carry
                     fixed = {k: float(v) for k, v in est.parameters.items() if k in held}
-                    spec = load_spec(fix_parameters(spec.path, fixed).path)
+                    spec = load_spec(fix_parameters(spec.path, fixed, intervals).path)
                     starts.update(fixed)
                     progress.note("estimated and held (moved to [fixed]): " + ", ".join(sorted(fixed)))
                 summary["estimate_written"] = starts

@@ -350,8 +350,12 @@ TIME_VARYING: tuple[str, ...] = ("effect.Rf",)
 ESTIMATE_ONLY: tuple[str, ...] = (DBPR.name,)
 
 
-def fix_parameters(spec_path: str | os.PathLike[str], values: Mapping[str, float]) -> Spec:
+def fix_parameters(spec_path: str | os.PathLike[str], values: Mapping[str, float],
+                   intervals: Mapping[str, tuple[float, float]] | None = None) -> Spec:
     """Move the ``[[parameters]]`` named in *values* into ``[fixed]`` at those values (atomically).
+
+    *intervals*: the confidence intervals of those values (an estimate's), written as
+    ``[fixed_intervals]``: the tracked parameters' bands carry what a held value may be off by.
 
     Raises
     ------
@@ -365,7 +369,9 @@ def fix_parameters(spec_path: str | os.PathLike[str], values: Mapping[str, float
     if unknown:
         raise SpecError(f"{path}: {unknown} are not [[parameters]] entries; cannot fix them")
     fixed = {**spec.fixed, **{k: float(v) for k, v in values.items()}}
-    spec = replace(spec, parameters=tuple(p for p in spec.parameters if p.name not in values), fixed=fixed)
+    held = {k: (float(a), float(b)) for k, (a, b) in (intervals or {}).items() if k in values}
+    spec = replace(spec, parameters=tuple(p for p in spec.parameters if p.name not in values), fixed=fixed,
+                   fixed_intervals={**{k: v for k, v in spec.fixed_intervals.items() if k not in values}, **held})
     text = dump_spec(spec)
     check = loads_spec(text, path, check_files=False)
     write_text_atomic(path, text)

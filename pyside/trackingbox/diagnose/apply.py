@@ -301,12 +301,11 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
         keep = {k for k in estimates if k not in recipe.varying}
         hold_now = {k for k in keep if k in recipe.held or k in hold}
         starts = {k: v for k, v in estimates.items() if k in keep and k not in hold_now and recipe.write_estimates}
-        intervals = {k: v for k, v in intervals.items() if k in starts}
         if starts:
-            spec = write_starts(path, starts, intervals)
-        if hold_now:
+            spec = write_starts(path, starts, {k: v for k, v in intervals.items() if k in starts})
+        if hold_now:  # with their intervals: the tracked parameters' bands carry them (trackingbox.identify.held)
             held = {k: estimates[k] for k in sorted(hold_now)}
-            spec = load_spec(fix_parameters(path, held).path)
+            spec = load_spec(fix_parameters(path, held, intervals).path)
     timings["estimate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = stages.pair.run(spec, stages.PairSettings(), progress=progress)

@@ -10,6 +10,8 @@
 * :mod:`~trackingbox.identify.intervals` -- intervals at an estimate: sandwich covariance with the
   residuals' autocorrelation, profile likelihood where the linearisation is poor.
 * :mod:`~trackingbox.identify.bands` -- the band of each tracked parameter, row by row.
+* :mod:`~trackingbox.identify.held` -- the bands' fixed part: what the parameters the twin holds at an
+  estimate may be off by, through each pair's tag (step tests at track start).
 * :mod:`~trackingbox.identify.thermal` -- the MSL thermal-wall case (two resistors, a capacitor).
 * :mod:`~trackingbox.identify.hooks` -- what estimation, pairing and tracking call.
 """

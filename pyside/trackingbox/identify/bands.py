@@ -13,7 +13,7 @@ held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pai
   (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
 
 :class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
-tracked value ``p`` (level :data:`LEVEL`), in three parts:
+tracked value ``p`` (level :data:`LEVEL`), in four parts:
 
 1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
    autocovariance of the tag's fast error (tracked error minus its centred
@@ -30,10 +30,33 @@ tracked value ``p`` (level :data:`LEVEL`), in three parts:
    controller holds (stoppage, missing tag) the truth may move on: the rate
    before the hold times its length is added there, and fades with ``d`` once
    tracking resumes.
+4. **fixed**: a parameter the twin holds at an estimate (``[fixed]`` after ``estimate``, or a
+   ``[[parameters]]`` entry no pair tracks) is off by up to its interval, and the loop makes
+   its own parameter absorb that: where the pair's tag moves by ``Δy(q)`` when the held ``q``
+   goes from its estimate to an end of its interval, the truth lies ``-Δy(q)/gain`` from ``p``
+   (a steady shift: the held value never moves, so this part does not fade). Given per pair
+   as :class:`Fixed` (*fixed* of :class:`BandTracker`): the shifts of the truth at the two ends
+   of each held parameter's interval; each side takes the shifts toward it, in quadrature
+   over the fixed parameters and with the noise and start parts. The shifts need the tag's
+   sensitivity to the held parameters, which the twin alone gives: ``track`` (and the online
+   mode, and ``diagnose --apply``'s re-track) measures it at its start by step tests on the twin
+   (:func:`trackingbox.identify.held.held_parts`) for every held parameter with an interval
+   (``[fixed_intervals]``, or ``interval`` of an untracked ``[[parameters]]`` entry);
+   ``scripts/bench_apply --explain-bands`` replays the whole record instead.
 
-The band is clipped to the parameter's bounds. It does not contain what the
-twin's structure gets wrong (an effect the twin lacks, absorbed by the
-parameter): no loop can see that from its own tag, which it drives to the
+   Why: on the evaporator (``diagnose --apply``, vent-orifice, 72 h) the patched twin holds
+   the named vent's fraction at 0.0144 (interval 0.0120..0.0163). Replayed with the fouling
+   forced to the plant's, the twin reads PI-6121 137 Pa lower with the fraction at the
+   interval's upper end: 1.4e-5 m2K/W of fouling, 2.5 times the band's median half-width
+   without this part, and the size of the misses (from 48 h on the truth sat about 1e-5 above
+   ``p`` and the band's upper side 5e-6 above it, while the loop's own error read 0 +- 30 Pa;
+   ``scripts/bench_apply --explain-bands``).
+
+The band is clipped to the parameter's bounds. ``result.json``'s band summary
+names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
+twin's ``[fixed]`` values and the parameters no pair tracks, less those given a
+fixed part). It does not contain what the twin's structure gets wrong (an effect the
+twin lacks, absorbed by the parameter): no loop can see that from its own tag, which it drives to the
 measurement whatever the parameter has to absorb.
 
 **Lack of fit: where the band is not to be trusted.** The other measured tags
@@ -95,6 +118,36 @@ FIT_ALPHA = 1e-3
 FIT_EFFECT = 1.0
 #: The CSV column of the lack-of-fit statistic.
 FIT_COLUMN = "lack_of_fit"
+
+
+@dataclass(frozen=True)
+class Fixed:
+    """A parameter the twin holds at an estimate, as one pair's band sees it (part 4 of the module).
+
+    Attributes
+    ----------
+    name
+        The held parameter.
+    at_lower, at_upper
+        ``truth - p`` of the pair's parameter, in its units, were the plant's value of the held
+        parameter at the lower / upper end of its interval (``-Δy/gain``, ``Δy`` the pair's tag's
+        change when the twin's held value moves from its estimate to that end).
+    """
+
+    name: str
+    at_lower: float
+    at_upper: float
+
+
+def fixed_sides(held: Sequence[Fixed]) -> tuple[float, float]:
+    """The fixed part's (below, above) extent: each held parameter's shifts toward a side, in quadrature.
+
+    >>> fixed_sides([Fixed("f", -1.0, 3.0), Fixed("g", 4.0, -0.5)])
+    (1.118033988749895, 5.0)
+    """
+    below = math.sqrt(sum(max(0.0, -h.at_lower, -h.at_upper) ** 2 for h in held))
+    above = math.sqrt(sum(max(0.0, h.at_lower, h.at_upper) ** 2 for h in held))
+    return below, above
 
 
 def column_names(parameter: str) -> tuple[str, str]:
@@ -196,9 +249,16 @@ class BandTracker:
         ``parameter:<name>``, ``mode:<tag>``, ...), to find each pair's values in a row.
     level
         Confidence level of the bands.
+    fixed
+        Per tracked parameter, the parameters the twin holds at an estimate (:class:`Fixed`; part 4
+        of the module). None or a parameter left out: no fixed part for it.
+    note
+        Why held parameters with an interval got no fixed part (``result.json``'s ``fixed_note``).
     """
 
-    def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL) -> None:
+    def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
+                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "") -> None:
+        self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -216,12 +276,18 @@ class BandTracker:
                 note = f"no band: {pair.controller} controllers are not modelled (PI only)"
             interval = getattr(p, "interval", None)
             start_lo, start_hi = (interval if interval is not None else (p.min, p.max))
-            self.pairs.append({
+            kept = tuple((fixed or {}).get(pair.parameter, ()))
+            self.pairs.append({"fixed": kept, "fixed_sides": fixed_sides(kept),
                 "parameter": pair.parameter, "variable": pair.variable, "model": model, "note": note,
                 "p0": float(p.start), "lo": float(p.min), "hi": float(p.max),
                 "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
                 "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
                          index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
+        # what the bands take as exact: the twin's fixed values and the parameters no pair tracks (held at
+        # their starts), less those given a fixed part (named per pair by describe())
+        tracked = {pr["parameter"] for pr in self.pairs}
+        self.assumed = sorted(set(getattr(spec, "fixed", None) or {})
+                              | {q.name for q in getattr(spec, "parameters", ()) if q.name not in tracked})
         self.window = max(3, int(round(FLOOR_SPAN / self.ts)) | 1)
         self.forget = math.exp(-self.ts / NOISE_MEMORY)
         self.states = [self._fresh() for _ in self.pairs]
@@ -318,8 +384,11 @@ class BandTracker:
         if d < 0:
             below, above = above, below
         lag = abs(st.slope) * T
-        lo = p - math.sqrt(noise * noise + below * below) - (lag if st.slope < 0 else 0.0) - st.held_lo
-        hi = p + math.sqrt(noise * noise + above * above) + (lag if st.slope > 0 else 0.0) + st.held_hi
+        f_below, f_above = pr["fixed_sides"]
+        lo = p - math.sqrt(noise * noise + below * below + f_below * f_below) - (lag if st.slope < 0 else 0.0) \
+            - st.held_lo
+        hi = p + math.sqrt(noise * noise + above * above + f_above * f_above) + (lag if st.slope > 0 else 0.0) \
+            + st.held_hi
         return max(pr["lo"], lo), min(pr["hi"], hi)
 
     def _noise(self, st: _PairState, e: float) -> None:
@@ -412,6 +481,11 @@ class BandTracker:
             m: LoopModel | None = pr["model"]
             out[pr["parameter"]] = {"variable": pr["variable"], "start": list(pr["start"]),
                                     "start_from": pr["start_source"],
+                                    **({"fixed": {h.name: [h.at_lower, h.at_upper] for h in pr["fixed"]}}
+                                       if pr["fixed"] else {}),
+                                    **({"fixed_note": self.fixed_note} if self.fixed_note else {}),
+                                    "taken_as_exact": [n for n in self.assumed
+                                                       if n not in {h.name for h in pr["fixed"]}],
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}
                                        if m is not None else {"note": pr["note"]})}
         return out

@@ -10,7 +10,7 @@ search spends its budget. :func:`after_estimate` adds the intervals
 (:func:`~trackingbox.identify.intervals.uncertainty`) and that check to the
 :class:`~trackingbox.estimation.EstimationResult` (the estimate stage calls
 both). :func:`indistinct_candidates` is pairing's check, :func:`band_tracker`
-the tracking loop's bands.
+the tracking loop's bands (with their fixed part, :mod:`.held`).
 """
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import TrackingError
 from .analysis import identify, leave_out
 from .bands import BandTracker
+from .held import held_parts
 from .intervals import uncertainty
 
 log = logging.getLogger(__name__)
@@ -64,8 +65,13 @@ def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, 
 
 
 def band_tracker(spec: Any, columns: Any) -> Any:
-    """The :class:`~trackingbox.identify.bands.BandTracker` of a tracking run (None without pairs)."""
-    return BandTracker(spec, columns) if getattr(spec, "pairs", None) else None
+    """The :class:`~trackingbox.identify.bands.BandTracker` of a tracking run (None without pairs), with the
+    fixed part of the parameters the twin holds at an estimate with an interval
+    (:func:`~trackingbox.identify.held.held_parts`: step tests on the twin, none without such a parameter)."""
+    if not getattr(spec, "pairs", None):
+        return None
+    fixed, note = held_parts(spec)
+    return BandTracker(spec, columns, fixed=fixed or None, note=note)
 
 
 def indistinct_candidates(spec: Any, *, warmup: float | None = None, progress: Any = None) -> dict[str, str]:

@@ -276,6 +276,10 @@ class Spec:
     outputs: dict[str, str] = field(default_factory=dict)
     parameters: tuple[ParameterSpec, ...] = ()
     fixed: dict[str, float] = field(default_factory=dict)
+    #: ``[fixed_intervals]``: the confidence interval of a ``[fixed]`` value where an estimate gave one
+    #: (the value the twin holds is off by up to it: the tracked parameters' bands carry that, see
+    #: :mod:`trackingbox.identify.held`)
+    fixed_intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
     windows: dict[str, tuple[float, float]] = field(default_factory=dict)
     data: DataRules = field(default_factory=DataRules)
     pairs: tuple[PairSpec, ...] = ()

@@ -53,7 +53,7 @@ log = logging.getLogger(__name__)
 
 VARYING_KINDS = ("rising", "falling", "free")
 _TOP_KEYS = ("twin", "measurements", "sample_time", "source", "inputs", "outputs", "parameters",
-             "fixed", "windows", "data", "pairs", "states", "tracking",
+             "fixed", "fixed_intervals", "windows", "data", "pairs", "states", "tracking",
              "balances", "diagnose", "live", "pairing")
 _REQUIRED_TOP = ("twin", "measurements", "sample_time", "outputs")
 
@@ -244,6 +244,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
         problems.add(f"tag {tag!r} is both in [inputs] and [outputs]")
 
     parameters, fixed = _parse_parameters(raw, problems)
+    fixed_intervals = _parse_fixed_intervals(raw, fixed, problems)
     pnames = [p.name for p in parameters]
     windows = _parse_windows(raw, problems)
     known_tags = [*inputs, *outputs]
@@ -267,7 +268,7 @@ def _parse(raw: Mapping[str, Any], path: Path, *, check_files: bool) -> Spec:
     assert sample_time is not None
     return Spec(path=path, twin=files["twin"], measurements=files["measurements"],
                 sample_time=sample_time, source=source, inputs=inputs, outputs=outputs,
-                parameters=tuple(parameters), fixed=fixed, windows=windows, data=data,
+                parameters=tuple(parameters), fixed=fixed, fixed_intervals=fixed_intervals, windows=windows, data=data,
                 pairs=tuple(pairs), states=tuple(states), tracking=tracking, balances=balances,
                 diagnose=diagnose, live=live, pairing=pairing)
 
@@ -359,7 +360,6 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
     return parameters, fixed
 
 
-
 def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: float, label: str,
                         problems: _Problems) -> tuple[float, float] | None:
     """``interval = [a, b]`` of a ``[[parameters]]`` entry: two numbers, ``min <= a <= start <= b <= max``."""
@@ -375,6 +375,22 @@ def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: f
                      f"its bounds [{lo!r}, {hi!r}]")
         return None
     return (a, b)
+
+
+def _parse_fixed_intervals(raw: Mapping[str, Any], fixed: Mapping[str, float],
+                           problems: Problems) -> dict[str, tuple[float, float]]:
+    """``[fixed_intervals]``: ``name = [a, b]``, the confidence interval of a ``[fixed]`` value (``a <= it <= b``)."""
+    out: dict[str, tuple[float, float]] = {}
+    for name, value in (_table(raw, "fixed_intervals", problems) or {}).items():
+        if name not in fixed:
+            problems.add(f"{name!r} in [fixed_intervals] is not in [fixed]{did_you_mean(name, list(fixed))}")
+        elif not (isinstance(value, list) and len(value) == 2 and all(_is_number(v) and abs(v) < 1e308 for v in value)
+                  and value[0] <= fixed[name] <= value[1]):  # finite (a huge integer would overflow a float)
+            problems.add(f"[fixed_intervals] {name} = {value!r} must be [lower, upper] (two finite numbers) "
+                         f"holding its [fixed] value {fixed[name]!r}")
+        else:
+            out[name] = (float(value[0]), float(value[1]))
+    return out
 
 
 def _parse_windows(raw: Mapping[str, Any], problems: Problems) -> dict[str, tuple[float, float]]:

@@ -70,6 +70,8 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
                              for p in spec.parameters]
     if spec.fixed:
         doc["fixed"] = {k: float(v) for k, v in spec.fixed.items()}
+    if spec.fixed_intervals:
+        doc["fixed_intervals"] = {k: [float(a), float(b)] for k, (a, b) in spec.fixed_intervals.items()}
     if spec.windows:
         doc["windows"] = {k: [float(a), float(b)] for k, (a, b) in spec.windows.items()}
     if (spec.data.stoppage is not None or spec.data.max_gap is not None or spec.data.heartbeat
