@@ -89,7 +89,8 @@ def _other_uses(files: Iterable[Path], short: str) -> Path | None:
         if short.encode() not in data:
             continue
         code = _code_mask(data)[0]
-        if ext.search(code) or any(_word_before(code, m.start()) not in (b"inner", b"outer") for m in decl.finditer(code)):
+        if ext.search(code) or any(_word_before(code, m.start()) not in (b"inner", b"outer")
+                                   for m in decl.finditer(code)):
             return f
     return None
 
@@ -158,7 +159,8 @@ def patches(index, model: str, needed: set[Path]) -> dict[Path, Callable[[bytes]
             cuts = []
             for cls, param, value in items:
                 ci, short = index.classes[cls], re.escape(cls.rsplit(".", 1)[-1].encode())
-                heads = list(re.finditer(rb"\b" + re.escape(ci.kind.split()[-1].encode()) + rb"\s+" + short + rb"\b", code))
+                kind = re.escape(ci.kind.split()[-1].encode())
+                heads = list(re.finditer(rb"\b" + kind + rb"\s+" + short + rb"\b", code))
                 ends = list(re.finditer(rb"\bend\s+" + short + rb"\s*;", code))
                 if len(heads) != 1 or len(ends) != 1:
                     continue  # the class is not found once in the text the front end reads: left as it is
