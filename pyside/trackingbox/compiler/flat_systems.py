@@ -481,7 +481,7 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
     rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
-    scaled = g / ca.if_else(rows > 0, rows, 1)  # in (p, z0)
+    scaled = g / ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
     kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
     nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
                             {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},

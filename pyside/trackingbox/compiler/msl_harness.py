@@ -9,7 +9,8 @@ time limit:
    ``ModelicaServices`` beside ``Modelica`` itself; ``--library`` adds libraries);
 2. simulate the FMU over its ``experiment`` (start, stop; the output grid of the reference where
    there is one, else the experiment's interval; relative tolerance :func:`relative_tolerance`: the
-   one the reference was made with, else the Modelica Association's rule for making one) with fmpy's CVODE (at most :data:`CVODE_MAX_STEPS` internal steps per output interval);
+   one the reference was made with, else the Modelica Association's rule for making one) with
+   fmpy's CVODE (at most :data:`CVODE_MAX_STEPS` internal steps per output interval);
 3. compare the reference's comparison signals (``<ref>/<path of the model>/comparisonSignals.txt``
    and ``<Name>.csv``, the Modelica Association's reference results) with the simulation: for each
    signal the largest deviation over the reference's time points, divided by the signal's range in
