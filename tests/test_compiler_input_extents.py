@@ -60,18 +60,18 @@ def test_a_fluid_boundary_with_a_simple_medium_passes_the_front_end(tmp_path):
     """Before: refused with rumoca's shape-proof message (the medium's density_phX, sized by the
     package constant nX, is reachable from the boundary's density parameter); then by the check of
     packages extended with modified constants, which took PartialSimpleMedium's own ``end`` name
-    and PartialMedium as the default of a replaceable package for uses. It now passes both and
-    stops at the first construct the translation lacks, a field of a record returned by a function,
-    named with its file and line."""
+    and PartialMedium as the default of a replaceable package for uses; then at a field of a record
+    returned by a function. It now compiles, and the medium's functions, which go through its
+    ThermodynamicState record (``density(setState_pTX(p, T, X))``), give the values of the medium's
+    definition worked by hand: d = d_const = 995.586, h = cp_const*(T - T0) = 4184*(300 - 273.15)."""
     need_msl("Fluid", "Sources.mo")
-    from trackingbox.errors import UnsupportedConstructError
-
+    medium = "Modelica.Media.Water.ConstantPropertyLiquidWater"
     src = tmp_path / "B.mo"
-    src.write_text("model B\n  Modelica.Fluid.Sources.FixedBoundary a(redeclare package Medium = "
-                   "Modelica.Media.Water.ConstantPropertyLiquidWater, nPorts = 0, p = 1.1e5, T = 300);\n"
-                   "  inner Modelica.Fluid.System system;\nend B;\n")
-    with pytest.raises(UnsupportedConstructError) as err:
-        compile_model(src, "B", backend="embedded", output=tmp_path / "b.fmu", libraries=[MSL])
-    text = str(err.value)
-    assert "shape proof" not in text and "modified constant" not in text
-    assert "FieldAccess" in text and "Media/package.mo:" in text
+    src.write_text(f"model B\n  Modelica.Fluid.Sources.FixedBoundary a(redeclare package Medium = {medium}, "
+                   "nPorts = 0, p = 1.1e5, T = 300);\n  inner Modelica.Fluid.System system;\n"
+                   f"  Real d = {medium}.density_pTX(a.p, a.T, a.X);\n"
+                   f"  Real h = {medium}.specificEnthalpy_pTX(a.p, a.T, a.X);\nend B;\n")
+    res = compile_model(src, "B", backend="embedded", output=tmp_path / "b.fmu", libraries=[MSL])
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output=["d", "h"])
+    assert np.allclose(out["d"], 995.586, rtol=1e-12)
+    assert np.allclose(out["h"], 4184 * (300 - 273.15), rtol=1e-12)

@@ -59,6 +59,48 @@ def test_load_reference_reads_signals_and_columns(tmp_path):
         load_reference(tmp_path, "Lib.Examples.Decay")
 
 
+def test_the_reference_tolerance_is_read_and_simulated_with(tmp_path, monkeypatch):
+    """The Modelica Association made its references with the experiment's Tolerance times 0.1 (1e-6
+    without one) and says so in creation.txt: the harness integrates with the same tolerance (it used
+    the experiment's own, ten times looser, e.g. 1e-6 for FluidHeatFlow's WaterPump made with 1e-7)."""
+    import fmpy
+
+    from trackingbox.compiler import msl_harness
+
+    folder = tmp_path / "Lib" / "Examples" / "Decay"
+    folder.mkdir(parents=True)
+    (folder / "comparisonSignals.txt").write_text("time\nx\n")
+    (folder / "Decay.csv").write_text('"time","x"\n0,1\n1,0.5\n')
+    assert load_reference(tmp_path, "Lib.Examples.Decay").tolerance is None  # no creation.txt
+    (folder / "creation.txt").write_text("StopTime=1 // from model\n"
+                                         "Tolerance=1e-07 // used annotation from model, multiplied by 0.1\n")
+    ref = load_reference(tmp_path, "Lib.Examples.Decay")
+    assert ref.tolerance == 1e-7
+    assert msl_harness.relative_tolerance(1e-6, None) == 1e-7  # the same rule without a creation.txt
+    assert msl_harness.relative_tolerance(1e-3, None) == 1e-6  # never looser than 1e-6
+    assert msl_harness.relative_tolerance(None, None) == 1e-6
+
+    class Experiment:  # what fmpy reads from a DefaultExperiment with Tolerance = 1e-6
+        startTime, stopTime, tolerance, stepSize = "0", "1", "1e-6", None
+
+    class Description:
+        defaultExperiment = Experiment()
+        modelVariables = []
+
+    used = {}
+
+    def fake_simulate(fmu, **kwargs):
+        used.update(kwargs)
+        return np.array([(0.0,), (1.0,)], dtype=[("time", float)])
+
+    monkeypatch.setattr(fmpy, "read_model_description", lambda _: Description())
+    monkeypatch.setattr(fmpy, "simulate_fmu", fake_simulate)
+    msl_harness.simulate(tmp_path / "x.fmu", ref)
+    assert used["relative_tolerance"] == 1e-7
+    msl_harness.simulate(tmp_path / "x.fmu", None)
+    assert used["relative_tolerance"] == 1e-7  # the experiment's 1e-6, times 0.1
+
+
 def test_refusals_group_by_construct_without_names_or_places():
     a = {"model": "P.A", "outcome": "refused", "message": "unsupported Modelica construct in P.A: when-clause at "
          "/x/P/A.mo:12. The embedded backend cannot compile it; use --backend openmodelica"}

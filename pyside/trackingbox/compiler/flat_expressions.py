@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
-from . import tables
+from . import records, tables
 from .arrays import ArrayError
 from .events import Condition, Sample, WhenCondition
 from .source import Location, strip_comments
@@ -24,6 +24,7 @@ from .flat_model import ScalarVar, Value, kind_of
 from .flat_builtins import (ARRAY_BUILTINS, BUILTIN_NAMES, EVENT_BUILTINS, UNSUPPORTED_BUILTINS, binary,
                             builtin_call, if_then, is_number, logical_and, logical_not, logical_or, plain_ge)
 from .flat_text import expression_text, span_hint
+from .records import Record
 
 HYSTERESIS = 1e-10
 """Relative shift of event indicators past the switching point (see FlatTranslator.relation)."""
@@ -73,7 +74,25 @@ class ExpressionTranslation:
         if str(op).lower() in ("and", "or") and is_number(lhs) and bool(lhs) == (str(op).lower() == "or"):
             return bool(lhs)  # false and ..., true or ...: the other operand is not evaluated
         rhs = self.expr(body["rhs"], env)
+        if isinstance(lhs, Record) or isinstance(rhs, Record):
+            if str(op) != "Sub":
+                raise self.unsupported(f"operator {op!r} on a record")
+            try:  # an equation between records: one per field (the only record operation in the model)
+                return arr.from_list(records.difference(lhs, rhs, f"`{expression_text(body)}`"))
+            except records.RecordError as exc:
+                raise CompileError(f"{exc} in {self.model}") from None
         return binary(str(op), lhs, rhs, self)
+
+    def _x_FieldAccess(self, body: Any, env: Any) -> Value:
+        """``f(x).p``: a field of a record value (the front end passes a record argument so)."""
+        base = self.expr(body["base"], env)
+        field = body.get("field")
+        if not isinstance(base, Record):
+            raise self.unsupported(f"field access `.{field}` on a value that is not a record")
+        if field not in base:
+            raise CompileError(f"record `{expression_text(body['base'])}` has no field {field!r} "
+                               f"(fields: {', '.join(base)}) in {self.model}")
+        return base[field]
 
     def _tuple_equation(self, body: Any, env: Any) -> Value:
         """``(a, , c) = f(x)``: one residual per output that is not omitted, flattened."""
@@ -433,7 +452,11 @@ class ExpressionTranslation:
         fn = self.functions.get(fname)
         if fn is None:
             raise CompileError(f"call of unknown function {fname!r} in {self.model}")
+        if fn.get("is_constructor"):
+            return self.record_constructor(fname, fn, args)
         outs = self.inline(fname, fn, args)
+        if not outs:
+            raise CompileError(f"function {fname!r}, which has no output, called in an expression in {self.model}")
         return outs[0]
 
     # --------------------------------------------------------------- tables

@@ -12,9 +12,11 @@ import numpy as np
 
 from ..errors import CompileError
 from . import arrays as arr
+from . import records
 from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
+from .records import Record
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
 
@@ -64,6 +66,9 @@ class StatementTranslation:
         builtin = builtin_external_name(ext) if ext else None
         if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
             return self._builtin_external(fname, fn, ext, builtin, args)
+        vectorized = self._vectorized(fname, fn, args)
+        if vectorized is not None:
+            return vectorized
         if ext:
             raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
         self._inline_depth += 1
@@ -81,7 +86,11 @@ class StatementTranslation:
                     raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
-                    env[loc["name"]] = self.expr(loc["default"], env)
+                    value = self.expr(loc["default"], env)
+                    if isinstance(value, Record):
+                        records.store(loc["name"], value, env)
+                    else:
+                        env[loc["name"]] = value
                 elif _declared_dims(loc):  # an array declared with its sizes: its elements can be assigned
                     dims = self._local_dims(loc, env, fname)
                     if dims is not None:
@@ -94,12 +103,61 @@ class StatementTranslation:
                 self._freeze = saved
             outs = []
             for out in fn.get("outputs") or []:
+                if out.get("type_class") == "Record" and out["name"] not in env:
+                    outs.append(self._record_output(fname, fn, out, env))
+                    continue
                 if out["name"] not in env:
                     raise CompileError(f"function {fname!r} does not assign its output {out['name']!r}")
                 outs.append(env[out["name"]])
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _vectorized(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
+        """A call with arrays for scalar inputs (MLS 12.4.6): the function applied element by element,
+        each result an array of that size; None when no scalar input has an array."""
+        mapped = [arr.is_array(a) and not (inp.get("shape_expr") or (inp.get("effective_type") or {}).get("dimensions")
+                                           or inp.get("type_class") == "Record")
+                  for inp, a in zip(fn.get("inputs") or [], args)]
+        shapes = {arr.shape(a) for a, m in zip(args, mapped) if m}
+        if not shapes:
+            return None
+        if len(shapes) > 1:
+            raise CompileError(f"vectorized call of {fname!r} in {self.model} with arrays of different sizes "
+                               f"({', '.join(arr.size_text(s) for s in sorted(shapes))}) for scalar inputs")
+        shape = shapes.pop()
+        outs = [arr.new(shape) for _ in fn.get("outputs") or []]
+        for idx in np.ndindex(*shape):
+            results = self.inline(fname, fn, [a[idx] if m else a for a, m in zip(args, mapped)])
+            for out, res in zip(outs, results):
+                out[idx] = res
+        return outs
+
+    def _record_output(self, fname: str, fn: dict[str, Any], out: dict[str, Any], env: dict[str, Value]) -> Record:
+        """A function's record output, from its fields in *env*; each field the record type declares
+        must have been assigned."""
+        value = records.gather(out["name"], env, env.__getitem__) or Record()
+        declared = ((self.flat.get("record_types") or {}).get(str(out.get("type_def_id"))) or {}).get("fields") or []
+        unset = [f["name"] for f in declared if f.get("name") not in value]
+        if unset or not value:
+            raise CompileError(f"function {fname!r} does not assign field{'s' if len(unset) > 1 else ''} "
+                               f"{', '.join(unset) or '(any)'} of its record output {out['name']!r} in {self.model}")
+        return value
+
+    def record_constructor(self, fname: str, fn: dict[str, Any], args: list[Value]) -> Record:
+        """``R(a, b)`` (the front end orders named arguments): the record of the given fields, the others
+        at their declared defaults."""
+        env: dict[str, Value] = {}
+        out = Record()
+        for i, inp in enumerate(fn.get("inputs") or []):
+            if i < len(args):
+                env[inp["name"]] = args[i]
+            elif inp.get("default") is not None:
+                env[inp["name"]] = self.expr(inp["default"], env)
+            else:
+                raise CompileError(f"record constructor {fname!r} in {self.model} lacks field {inp['name']!r}")
+            out[inp["name"]] = env[inp["name"]]
+        return out
 
     def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
         """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
@@ -180,10 +238,16 @@ class StatementTranslation:
     def _assign(self, parts: list[dict[str, Any]], value: Value, env: dict[str, Value], fname: str) -> None:
         """``target := value`` in a function or algorithm (a whole variable, array elements or slices);
         after a possible return, only where the function has not returned."""
-        if len(parts) != 1 and not _is_algorithm(fname):
-            raise self.unsupported(f"record field assignment {_in(fname)}")
         ident = self._flat_target(parts, env)
         subs = parts[-1].get("subs") or []
+        if isinstance(value, Record):  # a record, field by field (records.store)
+            if subs:
+                raise self.unsupported(f"assignment of a record to an element of {ident!r} {_in(fname)}")
+            fields: dict[str, Value] = {}
+            records.store(ident, value, fields)
+            for key, val in fields.items():
+                self._assign([{"ident": key, "subs": []}], val, env, fname)
+            return
         returned = env.get(_RETURNED, False)
         if subs:
             target = env.get(ident)

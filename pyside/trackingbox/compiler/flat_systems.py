@@ -470,21 +470,28 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
         z - z0 + J(z)' y = 0,   g(z) - eps y = 0.
 
     For a linear g = A z - b this is z = z0 - A'(A A' + eps I)^-1 (A z0 - b), which tends to
-    z0 + pinv(A) (b - A z0) as eps -> 0. Only the branch taken is evaluated (a short-circuit
+    z0 + pinv(A) (b - A z0) as eps -> 0. Each equation is first divided by the norm of its gradient at
+    the guess (1 where that is zero), so that eps is small against J J' and the accepted residual
+    (LOOP_TOLERANCE) is a distance in z whatever the units: with flows in kg/s over pressures in Pa
+    (gradients ~1e-6) eps = 1e-10 held the solution short of a root, and a residual of 0.08 kg/s
+    passed 1e-6*(1 + |z|) with |z| ~ 1e5 Pa. Only the branch taken is evaluated (a short-circuit
     if_else); a loop that neither solves leaves NaN, so that the importer's solver fails rather than
     going on with values that do not satisfy the equations."""
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
-    kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(g, z).T, y), g - NEAREST_REGULARISATION * y)
+    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
+    scaled = g / ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
+    kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
     nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
                             {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
                             {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
     residual = ca.Function(f"{name}_residual", [z, p], [g])
+    distance = ca.Function(f"{name}_distance", [z, p, z0], [scaled])
 
     # NaN or inf anywhere makes these comparisons false
     finite = ca.sumsqr(residual(sol, values)) + ca.sumsqr(sol) < ca.inf
     z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
-    solves = ca.sumsqr(residual(z1, values)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
+    solves = ca.sumsqr(distance(z1, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
     fallback = ca.if_else(solves, z1, ca.DM.nan(n, 1), True)
     return ca.if_else(finite, sol, fallback, True)

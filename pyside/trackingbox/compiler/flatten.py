@@ -69,6 +69,7 @@ import numpy as np
 
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
+from . import records
 from .causalize import StructuralError, blt
 from .events import EventSystem
 from .modifiers import modifier_check
@@ -379,6 +380,10 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 return arr.subscript(val, [self._subscript(s, val, k, env, read=True) for k, s in enumerate(subs)],
                                      repr(name))
             return val
+        if env is not None and not subs:  # a record of the function, kept field by field (.records)
+            rec = records.gather(name, env, env.__getitem__)
+            if rec is not None:
+                return rec
         if name == "time":
             return self.time
         if name not in self.vars:
@@ -386,6 +391,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             if ordinal is not None and not subs:  # an enumeration literal is its ordinal (MLS 4.9.5)
                 return int(ordinal)
             # component_ref names of array elements of components come as "a[2].b"
+            rec = None if subs else records.gather(name, self.vars, lambda n: self.ref(n, [], None))
+            if rec is not None:  # a record variable used whole: the record of its fields' variables
+                return rec
             if any(v.startswith(name + ".") for v in self.vars):  # a record's fields are variables
                 raise self.unsupported(
                     f"a record variable used whole (`{name}`, e.g. a medium's ThermodynamicState set from "

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config
+from . import inner_defaults
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
 from .source import ModelicaSource
@@ -119,9 +120,11 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     initialisation (:func:`.rewrite.computed_parameter_bindings`).
     """
     index = index if index is not None else index_for(source, libraries)
-    needed = index.frontend_files(model) if prune and model in index.classes else None
+    reached = index.frontend_files(model) if model in index.classes else None
+    inner = inner_defaults.patches(index, model, reached) if reached else {}  # rumoca's outer references
+    needed = reached if prune else None
     if needed is None:
-        return _full_tree(source, libraries, dest)
+        return _full_tree(source, libraries, dest, inner)
     lib_dir, src_dir = dest / "lib", dest / "src"
     tuple_names = tuple_function_names(sorted(needed))
     asserting = asserting_function_names(sorted(needed)) if computed else frozenset()
@@ -141,11 +144,12 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
             renames.append((str(base) + os.sep, str(root) + os.sep))
             for f in files:
                 target = base / f.relative_to(root)
-                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}", tuple_names, asserting)
+                _copy(f, target, digest, f"{root.name}/{f.relative_to(root)}", tuple_names, asserting,
+                      inner.get(f))
                 originals[target] = f
         else:
             target = (src_dir if root == own else lib_dir) / root.name
-            _copy(root, target, digest, root.name, tuple_names, asserting)
+            _copy(root, target, digest, root.name, tuple_names, asserting, inner.get(root))
             originals[target] = root
             renames.append((str(target), str(root)))
     if source.entry.name != "package.mo":
@@ -160,7 +164,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
                         digest=digest.hexdigest(), pruned=True, entry_rel=str(entry.relative_to(dest)))
 
 
-def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) -> FrontendTree:
+def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path, inner=None) -> FrontendTree:
     """The whole source as rumoca should read it, the libraries as they are (the compiler's
     behaviour before front-end trees, kept for what the index cannot place)."""
     digest = hashlib.sha256()
@@ -169,7 +173,7 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) 
     tuple_names = tuple_function_names(source.files)
     for f in source.files:
         target = copy_root / f.relative_to(source.root)
-        _copy(f, target, digest, str(f.relative_to(source.root)), tuple_names)
+        _copy(f, target, digest, str(f.relative_to(source.root)), tuple_names, patch=(inner or {}).get(f))
         originals[target] = f
     for lib in libraries:  # not copied: their content enters the key by their files' stamps
         for f in (sorted(Path(lib).rglob("*.mo")) if Path(lib).is_dir() else [Path(lib)]):
@@ -186,10 +190,12 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path) 
 
 
 def _copy(src: Path, target: Path, digest, rel: str, tuple_names: frozenset[bytes] = frozenset(),
-          asserting: frozenset[bytes] = frozenset()) -> None:
+          asserting: frozenset[bytes] = frozenset(), patch=None) -> None:
     data = frontend_bytes(src, tuple_names, asserting)
     if data is None:
         data = src.read_bytes()
+    if patch is not None:
+        data = patch(data)
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_bytes(data)
     digest.update(rel.encode() + b"\0" + hashlib.sha256(data).digest())

@@ -8,8 +8,9 @@ time limit:
    (``trackingbox compile <MSL>/Modelica --model ... --backend embedded``; the compiler finds
    ``ModelicaServices`` beside ``Modelica`` itself; ``--library`` adds libraries);
 2. simulate the FMU over its ``experiment`` (start, stop; the output grid of the reference where
-   there is one, else the experiment's interval; relative tolerance the smaller of the experiment's
-   and 1e-6) with fmpy's CVODE (at most :data:`CVODE_MAX_STEPS` internal steps per output interval);
+   there is one, else the experiment's interval; relative tolerance :func:`relative_tolerance`: the
+   one the reference was made with, else the Modelica Association's rule for making one) with
+   fmpy's CVODE (at most :data:`CVODE_MAX_STEPS` internal steps per output interval);
 3. compare the reference's comparison signals (``<ref>/<path of the model>/comparisonSignals.txt``
    and ``<Name>.csv``, the Modelica Association's reference results) with the simulation: for each
    signal the largest deviation over the reference's time points, divided by the signal's range in
@@ -82,6 +83,8 @@ class Reference:
     time: np.ndarray
     values: dict[str, np.ndarray]
     csv: Path
+    tolerance: float | None = None
+    """The relative tolerance the reference was integrated with (its ``creation.txt``), if stated."""
 
 
 def reference_dir(reference_root: Path, model: str) -> Path:
@@ -110,7 +113,36 @@ def load_reference(reference_root: Path | None, model: str) -> Reference | None:
     missing = [s for s in signals if s not in col]
     if missing:
         raise ValueError(f"{csv} lacks the comparison signals {', '.join(missing)}")
-    return Reference(tuple(signals), data[:, col.get("time", 0)], values, csv)
+    return Reference(tuple(signals), data[:, col.get("time", 0)], values, csv, _creation_tolerance(folder))
+
+
+_TOLERANCE_LINE = re.compile(r"^\s*Tolerance\s*=\s*([-+0-9.eE]+)", re.M)
+
+
+def _creation_tolerance(folder: Path) -> float | None:
+    """``Tolerance=`` of the reference's ``creation.txt`` (how the Modelica Association made it)."""
+    try:
+        found = _TOLERANCE_LINE.search((folder / "creation.txt").read_text(encoding="utf-8", errors="replace"))
+        value = float(found.group(1)) if found else None
+    except (OSError, ValueError):
+        return None
+    return value if value is not None and 0 < value < 1 else None
+
+
+def relative_tolerance(experiment: float | None, reference: float | None) -> float:
+    """The relative tolerance an example is simulated with: the reference's own when its
+    ``creation.txt`` states it, else the rule the Modelica Association's references were made by
+    (the ``experiment`` annotation's ``Tolerance`` times 0.1, 1e-6 without one), and never looser
+    than 1e-6.
+
+    >>> relative_tolerance(None, None), relative_tolerance(1e-6, None), relative_tolerance(1e-4, 1e-7)
+    (1e-06, 1e-07, 1e-07)
+    """
+    if reference is not None:
+        return min(reference, 1e-6)
+    if experiment is not None and experiment > 0:
+        return min(experiment / 10, 1e-6)
+    return 1e-6
 
 
 def deviation(ref_t: np.ndarray, ref_y: np.ndarray, t: np.ndarray, y: np.ndarray, window: float) -> float:
@@ -251,8 +283,8 @@ def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np
     exp = md.defaultExperiment
     start = float(exp.startTime) if exp is not None and exp.startTime is not None else 0.0
     stop = float(exp.stopTime) if exp is not None and exp.stopTime is not None else 1.0
-    tol = float(exp.tolerance) if exp is not None and exp.tolerance is not None else 1e-6
-    tol = min(tol, 1e-6)
+    tol = relative_tolerance(float(exp.tolerance) if exp is not None and exp.tolerance is not None else None,
+                             ref.tolerance if ref is not None else None)
     names = {v.name for v in md.modelVariables}
     if ref is not None and ref.time.size > 1:
         # the reference's output grid (its typical step: points at events are a hair apart)
