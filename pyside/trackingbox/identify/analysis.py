@@ -30,7 +30,7 @@ from ..errors import EstimationError, TrackingError
 from ..fmu.info import read_info
 from ..simulation.models import close_models
 from . import structure as st
-from .model import Evaluation, TwinWindow, inside_points, stack, window_for
+from .model import Evaluation, TwinWindow, inside_points, window_for
 
 log = logging.getLogger(__name__)
 

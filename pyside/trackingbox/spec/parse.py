@@ -361,7 +361,7 @@ def _parse_parameters(raw: Mapping[str, Any], problems: Problems) -> tuple[list[
 
 
 def _parameter_interval(table: Mapping[str, Any], start: float, lo: float, hi: float, label: str,
-                        problems: _Problems) -> tuple[float, float] | None:
+                        problems: Problems) -> tuple[float, float] | None:
     """``interval = [a, b]`` of a ``[[parameters]]`` entry: two numbers, ``min <= a <= start <= b <= max``."""
     if "interval" not in table:
         return None
