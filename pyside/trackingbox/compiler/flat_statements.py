@@ -75,15 +75,7 @@ class StatementTranslation:
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
         try:
-            env: dict[str, Value] = {}
-            inputs = fn.get("inputs") or []
-            for i, inp in enumerate(inputs):
-                if i < len(args):
-                    env[inp["name"]] = args[i]
-                elif inp.get("default") is not None:
-                    env[inp["name"]] = self.expr(inp["default"], env)
-                else:
-                    raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+            env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     value = self.expr(loc["default"], env)
@@ -147,17 +139,24 @@ class StatementTranslation:
     def record_constructor(self, fname: str, fn: dict[str, Any], args: list[Value]) -> Record:
         """``R(a, b)`` (the front end orders named arguments): the record of the given fields, the others
         at their declared defaults."""
-        env: dict[str, Value] = {}
+        env = self._bind_inputs(fname, fn, args, f"record constructor {fname!r} in {self.model} lacks field")
         out = Record()
+        for inp in fn.get("inputs") or []:
+            out[inp["name"]] = env[inp["name"]]
+        return out
+
+    def _bind_inputs(self, fname: str, fn: dict[str, Any], args: list[Value], lacks: str) -> dict[str, Value]:
+        """A call's inputs by position: the given arguments, then the inputs' defaults (which may read the
+        inputs before them); an input with neither is refused as ``lacks 'name'``."""
+        env: dict[str, Value] = {}
         for i, inp in enumerate(fn.get("inputs") or []):
             if i < len(args):
                 env[inp["name"]] = args[i]
             elif inp.get("default") is not None:
                 env[inp["name"]] = self.expr(inp["default"], env)
             else:
-                raise CompileError(f"record constructor {fname!r} in {self.model} lacks field {inp['name']!r}")
-            out[inp["name"]] = env[inp["name"]]
-        return out
+                raise CompileError(f"{lacks} {inp['name']!r}")
+        return env
 
     def _local_dims(self, loc: dict[str, Any], env: dict[str, Value], fname: str) -> tuple[int, ...] | None:
         """The sizes of a function's local or output array (None when one is flexible, ``:``)."""
@@ -178,14 +177,7 @@ class StatementTranslation:
                           args: list[Value]) -> list[Value]:
         """``external "builtin" y = sin(u)``: the built-in on the external call's arguments, which
         name the function's inputs (given, or their defaults)."""
-        env: dict[str, Value] = {}
-        for i, inp in enumerate(fn.get("inputs") or []):
-            if i < len(args):
-                env[inp["name"]] = args[i]
-            elif inp.get("default") is not None:
-                env[inp["name"]] = self.expr(inp["default"], env)
-            else:
-                raise CompileError(f"call of {fname!r} in {self.model} lacks argument {inp['name']!r}")
+        env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
         call_args = [self.expr(a, env) for a in ext.get("args") or []]
         value = builtin_call(builtin, call_args, self)
         outs = [o["name"] for o in fn.get("outputs") or []]
