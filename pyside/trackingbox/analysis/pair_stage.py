@@ -108,10 +108,10 @@ from .steptest import (
 if TYPE_CHECKING:
     from concurrent.futures import Executor
 
-    from ..spec import PairSpec, Spec
+    from ..spec import Spec
     from .pairing import Pairing
     from .sobol import Agreement, SobolResult
-    from .steptest import StepSettings, StepTestResult
+    from .steptest import StepTestResult
 
 log = logging.getLogger(__name__)
 
