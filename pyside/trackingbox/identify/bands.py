@@ -34,6 +34,8 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    ``[[parameters]]`` entry no pair tracks) is off by up to its interval, and the loop makes
    its own parameter absorb that: where the pair's tag moves by ``Δy(q)`` when the held ``q``
    goes from its estimate to an end of its interval, the truth lies ``-Δy(q)/gain`` from ``p``
+   (with several pairs the loops absorb it together: ``-G⁻¹ Δy(q)`` over the paired tags, ``G``
+   the tracked parameters' gains on them, :func:`trackingbox.identify.held.joint_shifts`)
    (a steady shift: the held value never moves, so this part does not fade). Given per pair
    as :class:`Fixed` (*fixed* of :class:`BandTracker`): the shifts of the truth at the two ends
    of each held parameter's interval; each side takes the shifts toward it, in quadrature
