@@ -144,26 +144,27 @@ def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...
     return {"seed": seed, **intervals_doc(result, truth)}
 
 
-def rebanded(csv: Path, spec_path: Path, fixed: Any = None) -> Any:
+def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, coupling: Any = None) -> Any:
     """The tracking CSV with its band columns recomputed by this checkout's
     :class:`~trackingbox.identify.bands.BandTracker` (causal: the same values a new run would write;
-    *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate; None: as ``track``
-    computes it, :func:`trackingbox.identify.held.held_parts`; ``{}``: none)."""
+    *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate, and *coupling* its
+    ``coupling``; *fixed* None: both as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
+    ``{}``: none). *spec*: the loaded spec to use instead of *spec_path*'s."""
     import pandas as pd
 
     from trackingbox.identify.bands import BandTracker
-    from trackingbox.identify.held import held_parts
+    from trackingbox.identify.held import band_parts
     from trackingbox.spec import load_spec
 
     df = pd.read_csv(csv)
     base = [c for c in df.columns if not c.startswith(("parameter_lo:", "parameter_hi:", "lack_of_fit"))]
     numbers = pd.DataFrame({c: ((df[c].astype(str) == "hold").astype(float) if c.startswith("mode:")
                                 else pd.to_numeric(df[c], errors="coerce")) for c in base})
-    spec = load_spec(spec_path)
+    spec = load_spec(spec_path) if spec is None else spec
     note = ""
     if fixed is None:
-        fixed, note = held_parts(spec)
-    bands = BandTracker(spec, base, fixed=fixed, note=note)
+        fixed, note, coupling = band_parts(spec)
+    bands = BandTracker(spec, base, fixed=fixed, note=note, coupling=coupling)
     extra = pd.DataFrame(bands.rows(numbers.to_numpy(float)), columns=bands.columns, index=df.index)
     return pd.concat([df[base], extra], axis=1)
 

@@ -13,7 +13,7 @@ held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pai
   (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
 
 :class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
-tracked value ``p`` (level :data:`LEVEL`), in four parts:
+tracked value ``p`` (level :data:`LEVEL`), in five parts:
 
 1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
    autocovariance of the tag's fast error (tracked error minus its centred
@@ -42,7 +42,7 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    over the fixed parameters and with the noise and start parts. The shifts need the tag's
    sensitivity to the held parameters, which the twin alone gives: ``track`` (and the online
    mode, and ``diagnose --apply``'s re-track) measures it at its start by step tests on the twin
-   (:func:`trackingbox.identify.held.held_parts`) for every held parameter with an interval
+   (:func:`trackingbox.identify.held.band_parts`) for every held parameter with an interval
    (``[fixed_intervals]``, or ``interval`` of an untracked ``[[parameters]]`` entry);
    ``scripts/bench_apply --explain-bands`` replays the whole record instead.
 
@@ -53,6 +53,18 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    without this part, and the size of the misses (from 48 h on the truth sat about 1e-5 above
    ``p`` and the band's upper side 5e-6 above it, while the loop's own error read 0 +- 30 Pa;
    ``scripts/bench_apply --explain-bands``).
+5. **interaction**: with several pairs, every loop drives its own tag to the measurement
+   together with the others, so a tracked parameter also absorbs what the other tracked
+   parameters' errors do to its tag: with ``G`` the tracked parameters' steady gains on the
+   paired tags (tag ``i`` of pair ``i`` per unit of parameter ``j``), the errors ``e`` the loops
+   are left with put the truths ``G⁻¹ e`` from the tracked values, where each pair's band
+   alone takes ``e_k/G_kk``. So pair ``j``'s band carries pair ``k``'s noise, start, lag and hold
+   parts scaled by ``M[j, k]``, ``M = G⁻¹ diag(G)`` (*coupling* of :class:`BandTracker`; a
+   negative entry turns ``k``'s sides over): the squared parts summed, the lag and hold parts
+   added. ``M`` is the identity when the loops do not interact (and the band is the one above);
+   it is the steady state's, so the noise part is carried as if slow. The fixed part is already
+   the loops' joint shift (part 4) and is not carried again. ``track`` measures ``G`` with the
+   fixed part's step tests (:func:`trackingbox.identify.held.band_parts`), one pair needs none.
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -256,11 +268,22 @@ class BandTracker:
         of the module). None or a parameter left out: no fixed part for it.
     note
         Why held parameters with an interval got no fixed part (``result.json``'s ``fixed_note``).
+    coupling
+        ``M = G⁻¹ diag(G)`` of the loops' steady gains (part 5 of the module), pairs in the spec's order;
+        None: each band from its own loop alone.
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
-                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "") -> None:
+                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "",
+                 coupling: Any = None) -> None:
         self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
+        #: the loops' interaction (part 5 of the module): ``M[j, k]``, pairs in the spec's order; None: none
+        self.coupling = None if coupling is None else np.asarray(coupling, dtype=float)
+        n = len(getattr(spec, "pairs", ()))
+        if self.coupling is not None and (self.coupling.shape != (n, n) or not np.all(np.isfinite(self.coupling))):
+            raise ValueError(f"the bands' coupling must be a finite {n} x {n} matrix (one row and column per pair), "
+                             f"got shape {self.coupling.shape}")
+        self.coupling_rows = [] if self.coupling is None else [[float(m) for m in row] for row in self.coupling]
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -349,10 +372,12 @@ class BandTracker:
 
     # -- one row ---------------------------------------------------------------
     def _update(self, pr: dict[str, Any], st: _PairState, meas: float, tracked: float, p: float,
-                hold: bool) -> tuple[float, float]:
+                hold: bool) -> tuple[float, float, float, float, float, float] | None:
+        """One row of a pair: its parts about ``p`` (None where it has no band yet): the squared noise and
+        start parts below and above, and the lag and hold drift below and above (added linearly)."""
         model: LoopModel | None = pr["model"]
         if model is None or not math.isfinite(p):
-            return math.nan, math.nan
+            return None
         e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked) and not hold) else math.nan
         self._noise(st, e)
         T = model.lag_time
@@ -375,7 +400,7 @@ class BandTracker:
             st.slope = (st.ewma_fast - st.ewma_slow) / (0.5 * T) if T > 0 else 0.0
             st.auto += 1
         if st.seen * self.ts < NOISE_MIN or st.weight <= 0:
-            return math.nan, math.nan
+            return None
         gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
         taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
         var = gam[0] * model.acf[0] + 2.0 * float(np.sum((taper * gam * model.acf)[1:]))
@@ -386,11 +411,35 @@ class BandTracker:
         if d < 0:
             below, above = above, below
         lag = abs(st.slope) * T
+        return (noise * noise + below * below, noise * noise + above * above, (lag if st.slope < 0 else 0.0),
+                (lag if st.slope > 0 else 0.0), st.held_lo, st.held_hi)
+
+    def _band(self, j: int, p: float, parts: Sequence[tuple[float, float, float, float, float, float] | None]
+              ) -> tuple[float, float]:
+        """Pair *j*'s band about its value *p* from every pair's *parts* (:meth:`_update`) and its fixed part: its
+        own parts alone, or with :attr:`coupling` each pair's parts carried through the loops' interaction
+        (a pair without a band yet adds nothing to the others')."""
+        pr = self.pairs[j]
+        own = parts[j]
+        if own is None:
+            return math.nan, math.nan
         f_below, f_above = pr["fixed_sides"]
-        lo = p - math.sqrt(noise * noise + below * below + f_below * f_below) - (lag if st.slope < 0 else 0.0) \
-            - st.held_lo
-        hi = p + math.sqrt(noise * noise + above * above + f_above * f_above) + (lag if st.slope > 0 else 0.0) \
-            + st.held_hi
+        if self.coupling is None:
+            quad_below, quad_above, lag_below, lag_above, held_below, held_above = own
+            lo = p - math.sqrt(quad_below + f_below * f_below) - lag_below - held_below
+            hi = p + math.sqrt(quad_above + f_above * f_above) + lag_above + held_above
+            return max(pr["lo"], lo), min(pr["hi"], hi)
+        qb = qa = lb = la = 0.0
+        for m, part in zip(self.coupling_rows[j], parts):
+            if part is None or m == 0.0:
+                continue
+            b, a = (0, 1) if m > 0 else (1, 0)  # a negative coupling turns the other's sides over
+            qb += m * m * part[b]
+            qa += m * m * part[a]
+            lb += abs(m) * (part[2 + b] + part[4 + b])
+            la += abs(m) * (part[2 + a] + part[4 + a])
+        lo = p - math.sqrt(qb + f_below * f_below) - lb
+        hi = p + math.sqrt(qa + f_above * f_above) + la
         return max(pr["lo"], lo), min(pr["hi"], hi)
 
     def _noise(self, st: _PairState, e: float) -> None:
@@ -423,11 +472,15 @@ class BandTracker:
         """The band values of one row (*values* as the CSV writer gets them; modes ``"hold"``/``"auto"``
         or a flag)."""
         out: list[float] = []
+        parts, ps = [], []
         for pr, st in zip(self.pairs, self.states):
             it, im, itr, ip, imode = pr["cols"]
             mode = values[imode]
             hold = (mode == "hold") if isinstance(mode, str) else bool(mode)
-            out.extend(self._update(pr, st, _num(values[im]), _num(values[itr]), _num(values[ip]), hold))
+            ps.append(_num(values[ip]))
+            parts.append(self._update(pr, st, _num(values[im]), _num(values[itr]), ps[-1], hold))
+        for j, p in enumerate(ps):
+            out.extend(self._band(j, p, parts))
         if self.fit_tags:
             out.append(self._fit(values))
         return out
@@ -486,6 +539,9 @@ class BandTracker:
                                     **({"fixed": {h.name: [h.at_lower, h.at_upper] for h in pr["fixed"]}}
                                        if pr["fixed"] else {}),
                                     **({"fixed_note": self.fixed_note} if self.fixed_note else {}),
+                                    **({"coupling": {q["parameter"]: float(m) for q, m in
+                                                     zip(self.pairs, self.coupling[self.pairs.index(pr)])}}
+                                       if self.coupling is not None else {}),
                                     "taken_as_exact": [n for n in self.assumed
                                                        if n not in {h.name for h in pr["fixed"]}],
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}

@@ -108,10 +108,29 @@ def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
     Empty (and no simulation) when the twin holds nothing with an interval. The note says why held
     parameters with an interval were left out (taken as exact), or why the loops' interaction was not used.
     """
+    fixed, note, _ = band_parts(spec)
+    return fixed, note
+
+
+def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | None]:
+    """What :class:`~.bands.BandTracker` takes from the twin: the fixed part (:func:`held_parts`), a note, and the
+    loops' coupling ``M = G_tt⁻¹ diag(G_tt)`` (part 5 of :mod:`.bands`; None with one pair, or where ``G_tt``
+    could not be measured or inverted: the note says why). No simulation with one pair and nothing held."""
     found, note = measure(spec)
     if found is None:
-        return {}, note
-    return shifts(spec, found)
+        return {}, note, None
+    fixed, note = shifts(spec, found)
+    return fixed, note, coupling(spec, found)
+
+
+def coupling(spec: Any, found: Responses) -> np.ndarray | None:
+    """``M = G⁻¹ diag(G)`` of *found*'s gain matrix (None without one, or where it is singular)."""
+    if found.gains is None or _singular(found.gains, _scales(spec, found)):
+        return None
+    m = np.linalg.solve(found.gains, np.diag(np.diag(found.gains)))
+    log.info("bands: the loops' coupling (rows and columns %s): %s", ", ".join(found.parameters),
+             np.array2string(m, precision=4))
+    return m
 
 
 def measure(spec: Any, *, joint: bool | None = None) -> tuple[Responses | None, str]:
@@ -120,15 +139,17 @@ def measure(spec: Any, *, joint: bool | None = None) -> tuple[Responses | None, 
     *joint*: also measure the tracked parameters' gain matrix (default: with more than one pair).
     """
     held = held_intervals(spec)
-    if not held or not getattr(spec, "pairs", None):
-        return None, ""
-    pairs = list(spec.pairs)
+    pairs = list(getattr(spec, "pairs", None) or ())
     if joint is None:
         joint = len(pairs) > 1
+    if not pairs or not (held or joint):
+        return None, ""
     try:
         return _responses(spec, held, joint), ""
     except (TrackingError, ValueError, KeyError, OSError) as exc:  # e.g. the online mode's record, too short yet
-        note = f"the twin's response to {', '.join(sorted(held))} could not be measured ({exc}): taken as exact"
+        what = ", ".join([*sorted(held), *(["the tracked parameters"] if joint else [])])
+        note = (f"the twin's response to {what} could not be measured ({exc}): "
+                + ("taken as exact" if held else "each band from its own loop alone"))
         log.warning("bands: %s", note)
         return None, note
 
@@ -222,7 +243,7 @@ def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bo
     tracked = [p.parameter for p in spec.pairs]
     if joint and (len(tags) != len(tracked) or len(set(tracked)) != len(tracked)):
         joint = False  # two pairs on one tag or one parameter: no square matrix (the pairs' own gains)
-    if not names:
+    if not names and not joint:
         return Responses(held, {}, refused, tuple(tags), tuple(tracked), None)
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
     frame, scored = view.to_frame(), view.to_frame(scored=True)
@@ -239,9 +260,12 @@ def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bo
             d = STEP * (q.max - q.min)
             steps += [(name, v) for v in dict.fromkeys(min(q.max, max(q.min, q.start + s * d)) for s in (1, -1))
                       if v != q.start]
+    stepped = list(dict.fromkeys(n for n, _ in steps))
     problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in tags},
-                           parameters=[(n, held[n][0], held[n][1], held[n][2]) for n in names],
-                           fixed={k: v for k, v in values.items() if k not in names}, operating=op,
+                           parameters=[(n, held[n][0], held[n][1], held[n][2]) for n in names]
+                           + [(n, values[n], spec.parameter(n).min, spec.parameter(n).max) for n in stepped],
+                           fixed={k: v for k, v in values.items() if k not in names and k not in stepped},
+                           operating=op,
                            ranges={t: float(r) for t, r in zip(tags, spans) if math.isfinite(r) and r > 0},
                            freeze=freeze,
                            compensation=[(st.variable, st.correction, st.gain) for st in spec.states])
