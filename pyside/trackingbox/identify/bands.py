@@ -56,14 +56,17 @@ tracked value ``p`` (level :data:`LEVEL`), in five parts:
 5. **interaction**: with several pairs, every loop drives its own tag to the measurement
    together with the others, so a tracked parameter also absorbs what the other tracked
    parameters' errors do to its tag: with ``G`` the tracked parameters' steady gains on the
-   paired tags (tag ``i`` of pair ``i`` per unit of parameter ``j``), the errors ``e`` the loops
-   are left with put the truths ``G⁻¹ e`` from the tracked values, where each pair's band
-   alone takes ``e_k/G_kk``. So pair ``j``'s band carries pair ``k``'s noise, start, lag and hold
-   parts scaled by ``M[j, k]``, ``M = G⁻¹ diag(G)`` (*coupling* of :class:`BandTracker`; a
-   negative entry turns ``k``'s sides over): the squared parts summed, the lag and hold parts
-   added. ``M`` is the identity when the loops do not interact (and the band is the one above);
-   it is the steady state's, so the noise part is carried as if slow. The fixed part is already
-   the loops' joint shift (part 4) and is not carried again. ``track`` measures ``G`` with the
+   paired tags (tag ``i`` of pair ``i`` per unit of parameter ``j``), the slow errors ``e`` the
+   loops are left with put the truths ``G⁻¹ e`` from the tracked values, where each pair's band
+   alone takes ``e_k/G_kk``. So pair ``j``'s band carries pair ``k``'s start, lag and hold parts
+   scaled by ``M[j, k]``, ``M = G⁻¹ diag(G)`` (*coupling* of :class:`BandTracker`; a negative
+   entry turns ``k``'s sides over): the squared start parts summed, the lag and hold parts
+   added. ``M`` is the identity when the loops do not interact (and the band is the one above).
+   The noise part stays the pair's own: ``M`` is the steady state's, and the noise moves the
+   loops faster than they reach it (on a 2x2 linear twin with 0.3 of noise on the other tag,
+   carrying it widened the band to 28 times the parameter's standard deviation), while a tag's
+   fast error already holds what the other loops' fast moves do to it. The fixed part is
+   already the loops' joint shift (part 4) and is not carried again. ``track`` measures ``G`` with the
    fixed part's step tests (:func:`trackingbox.identify.held.band_parts`), one pair needs none.
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
@@ -233,6 +236,49 @@ def loop_model(gain: float, time_constant: float, kc: float, ti: float, ts: floa
     return LoopModel(h, d, float(ts * np.sum(np.abs(d))), acf)
 
 
+def loops_noise(gains: Any, loops: Sequence[tuple[float, float, float, float]], ts: float) -> np.ndarray | None:
+    """The loops' noise model together (part 5): ``acf[j, k, l]``, the autocorrelation at lag ``l`` of parameter
+    ``j``'s response to a unit impulse of measurement noise on the tag of pair ``k``, every tag following all the
+    parameters through *gains* with its own pair's first-order lag, each parameter moved by its own PI law
+    (*loops*: per pair ``(gain, time_constant, kc, ti)`` as :func:`loop_model` takes them; ``gain`` sets the
+    controller's sign). None where the loops together do not settle (their responses have not decayed).
+
+    One pair reduces to :func:`loop_model`'s ``acf``:
+
+    >>> a = loops_noise([[-2.0]], [(-2.0, 600.0, 1.0 / 6.0, 600.0)], 10.0)
+    >>> bool(np.allclose(a[0, 0], loop_model(-2.0, 600.0, 1.0 / 6.0, 600.0, 10.0).acf, rtol=1e-9))
+    True
+    """
+    g = np.asarray(gains, dtype=float)
+    m = len(loops)
+    sign = np.array([1.0 if lp[0] > 0 else -1.0 for lp in loops])
+    tau = np.array([lp[1] for lp in loops])
+    kc = np.array([lp[2] for lp in loops])
+    ti = np.array([lp[3] for lp in loops])
+    a = np.where(tau > 0, np.exp(-ts / np.where(tau > 0, tau, 1.0)), 0.0)
+    n = 0
+    for gain, t, k, i in loops:
+        guess = max(t, i, abs(1.0 / (gain * k)) * i if gain * k else i)
+        n = max(n, int(min(200000, max(200, HORIZON * 4.0 * guess / ts))))
+    # column k: the loops' response to an impulse on tag k; deviation variables, the twin settled at 0
+    z = np.zeros((m, m))
+    p = np.zeros((m, m))
+    e_prev = np.zeros((m, m))
+    h = np.empty((n, m, m))
+    for t in range(n):
+        e = (np.eye(m) if t == 0 else 0.0) - z
+        p = p + (sign * kc)[:, None] * ((e - e_prev) + ts * (e + e_prev) / (2.0 * ti[:, None]))
+        e_prev = e
+        h[t] = p
+        z = a[:, None] * z + (1.0 - a)[:, None] * (g @ p)
+    peak = float(np.max(np.abs(h))) if np.all(np.isfinite(h)) else math.inf
+    if not math.isfinite(peak) or float(np.max(np.abs(h[-max(1, n // 10):]))) > 1e-3 * peak:
+        return None
+    lags = range(NOISE_LAGS + 1)
+    return np.array([[[float(h[: n - lag, j, k] @ h[lag:, j, k]) for lag in lags] for k in range(m)]
+                     for j in range(m)])
+
+
 @dataclass
 class _PairState:
     """One pair's running state (what :meth:`BandTracker.state_dict` saves)."""
@@ -268,21 +314,22 @@ class BandTracker:
         of the module). None or a parameter left out: no fixed part for it.
     note
         Why held parameters with an interval got no fixed part (``result.json``'s ``fixed_note``).
-    coupling
-        ``M = G⁻¹ diag(G)`` of the loops' steady gains (part 5 of the module), pairs in the spec's order;
-        None: each band from its own loop alone.
+    gains
+        ``G``: the tracked parameters' steady gains on the paired tags (tag of pair ``i`` per unit of the
+        parameter of pair ``j``; part 5 of the module). None: each band from its own loop alone.
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
                  fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "",
-                 coupling: Any = None) -> None:
+                 gains: Any = None) -> None:
         self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
-        #: the loops' interaction (part 5 of the module): ``M[j, k]``, pairs in the spec's order; None: none
-        self.coupling = None if coupling is None else np.asarray(coupling, dtype=float)
         n = len(getattr(spec, "pairs", ()))
-        if self.coupling is not None and (self.coupling.shape != (n, n) or not np.all(np.isfinite(self.coupling))):
-            raise ValueError(f"the bands' coupling must be a finite {n} x {n} matrix (one row and column per pair), "
-                             f"got shape {self.coupling.shape}")
+        self.gains = None if gains is None else np.asarray(gains, dtype=float)
+        if self.gains is not None and (self.gains.shape != (n, n) or not np.all(np.isfinite(self.gains))):
+            raise ValueError(f"the loops' gain matrix must be a finite {n} x {n} matrix (one row and column per "
+                             f"pair), got shape {self.gains.shape}")
+        #: the loops' interaction (part 5 of the module): ``M = G⁻¹ diag(G)``, pairs in the spec's order; None: none
+        self.coupling = None if self.gains is None else np.linalg.solve(self.gains, np.diag(np.diag(self.gains)))
         self.coupling_rows = [] if self.coupling is None else [[float(m) for m in row] for row in self.coupling]
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
@@ -303,11 +350,16 @@ class BandTracker:
             start_lo, start_hi = (interval if interval is not None else (p.min, p.max))
             kept = tuple((fixed or {}).get(pair.parameter, ()))
             self.pairs.append({"fixed": kept, "fixed_sides": fixed_sides(kept),
+                "loop": (float(pair.gain), float(pair.time_constant), kc, float(settings.ti)),
                 "parameter": pair.parameter, "variable": pair.variable, "model": model, "note": note,
                 "p0": float(p.start), "lo": float(p.min), "hi": float(p.max),
                 "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
                 "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
                          index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
+        # the loops' noise through their interaction (part 5): None without gains or where a loop is not a PI's
+        self.cross_acf = None
+        if self.gains is not None and all(pr["model"] is not None for pr in self.pairs):
+            self.cross_acf = loops_noise(self.gains, [pr["loop"] for pr in self.pairs], self.ts)
         # what the bands take as exact: the twin's fixed values and the parameters no pair tracks (held at
         # their starts), less those given a fixed part (named per pair by describe())
         tracked = {pr["parameter"] for pr in self.pairs}
@@ -372,9 +424,10 @@ class BandTracker:
 
     # -- one row ---------------------------------------------------------------
     def _update(self, pr: dict[str, Any], st: _PairState, meas: float, tracked: float, p: float,
-                hold: bool) -> tuple[float, float, float, float, float, float] | None:
-        """One row of a pair: its parts about ``p`` (None where it has no band yet): the squared noise and
-        start parts below and above, and the lag and hold drift below and above (added linearly)."""
+                hold: bool) -> tuple[float, float, float, float, float, float, float] | None:
+        """One row of a pair: its parts about ``p`` (None where it has no band yet): the squared noise part, the
+        squared start part below and above, the lag below and above and the hold drift below and above (the
+        last four added linearly)."""
         model: LoopModel | None = pr["model"]
         if model is None or not math.isfinite(p):
             return None
@@ -411,35 +464,42 @@ class BandTracker:
         if d < 0:
             below, above = above, below
         lag = abs(st.slope) * T
-        return (noise * noise + below * below, noise * noise + above * above, (lag if st.slope < 0 else 0.0),
-                (lag if st.slope > 0 else 0.0), st.held_lo, st.held_hi)
+        return (noise * noise, below * below, above * above, (lag if st.slope < 0 else 0.0),
+                (lag if st.slope > 0 else 0.0), st.held_lo, st.held_hi, gam)
 
-    def _band(self, j: int, p: float, parts: Sequence[tuple[float, float, float, float, float, float] | None]
-              ) -> tuple[float, float]:
+    def _band(self, j: int, p: float, parts: Sequence[tuple[float, ...] | None]) -> tuple[float, float]:
         """Pair *j*'s band about its value *p* from every pair's *parts* (:meth:`_update`) and its fixed part: its
-        own parts alone, or with :attr:`coupling` each pair's parts carried through the loops' interaction
-        (a pair without a band yet adds nothing to the others')."""
+        own parts alone, or with :attr:`coupling` every pair's start, lag and hold parts carried through the loops'
+        interaction (its own noise part as it is; a pair without a band yet adds nothing to the others')."""
         pr = self.pairs[j]
         own = parts[j]
         if own is None:
             return math.nan, math.nan
         f_below, f_above = pr["fixed_sides"]
+        noise2, below2, above2, lag_below, lag_above, held_below, held_above, _ = own
         if self.coupling is None:
-            quad_below, quad_above, lag_below, lag_above, held_below, held_above = own
-            lo = p - math.sqrt(quad_below + f_below * f_below) - lag_below - held_below
-            hi = p + math.sqrt(quad_above + f_above * f_above) + lag_above + held_above
+            lo = p - math.sqrt(noise2 + below2 + f_below * f_below) - lag_below - held_below
+            hi = p + math.sqrt(noise2 + above2 + f_above * f_above) + lag_above + held_above
             return max(pr["lo"], lo), min(pr["hi"], hi)
+        if self.cross_acf is not None:  # every tag's fast error through the loops together
+            taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
+            var = 0.0
+            for acf, part in zip(self.cross_acf[j], parts):
+                if part is not None:
+                    gam = part[7]
+                    var += gam[0] * acf[0] + 2.0 * float(np.sum((taper * gam * acf)[1:]))
+            noise2 = self.z * self.z * max(var, 0.0)
         qb = qa = lb = la = 0.0
         for m, part in zip(self.coupling_rows[j], parts):
             if part is None or m == 0.0:
                 continue
             b, a = (0, 1) if m > 0 else (1, 0)  # a negative coupling turns the other's sides over
-            qb += m * m * part[b]
-            qa += m * m * part[a]
-            lb += abs(m) * (part[2 + b] + part[4 + b])
-            la += abs(m) * (part[2 + a] + part[4 + a])
-        lo = p - math.sqrt(qb + f_below * f_below) - lb
-        hi = p + math.sqrt(qa + f_above * f_above) + la
+            qb += m * m * part[1 + b]
+            qa += m * m * part[1 + a]
+            lb += abs(m) * (part[3 + b] + part[5 + b])
+            la += abs(m) * (part[3 + a] + part[5 + a])
+        lo = p - math.sqrt(noise2 + qb + f_below * f_below) - lb
+        hi = p + math.sqrt(noise2 + qa + f_above * f_above) + la
         return max(pr["lo"], lo), min(pr["hi"], hi)
 
     def _noise(self, st: _PairState, e: float) -> None:

@@ -114,23 +114,20 @@ def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
 
 def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | None]:
     """What :class:`~.bands.BandTracker` takes from the twin: the fixed part (:func:`held_parts`), a note, and the
-    loops' coupling ``M = G_tt⁻¹ diag(G_tt)`` (part 5 of :mod:`.bands`; None with one pair, or where ``G_tt``
-    could not be measured or inverted: the note says why). No simulation with one pair and nothing held."""
+    loops' gain matrix ``G_tt`` (part 5 of :mod:`.bands`; None with one pair, or where it could not be measured
+    or inverted: the note says why). No simulation with one pair and nothing held."""
     found, note = measure(spec)
     if found is None:
         return {}, note, None
     fixed, note = shifts(spec, found)
-    return fixed, note, coupling(spec, found)
+    return fixed, note, loop_gains(spec, found)
 
 
-def coupling(spec: Any, found: Responses) -> np.ndarray | None:
-    """``M = G⁻¹ diag(G)`` of *found*'s gain matrix (None without one, or where it is singular)."""
+def loop_gains(spec: Any, found: Responses) -> np.ndarray | None:
+    """*found*'s gain matrix ``G_tt`` where it can be inverted (None without one, or where it is singular)."""
     if found.gains is None or _singular(found.gains, _scales(spec, found)):
         return None
-    m = np.linalg.solve(found.gains, np.diag(np.diag(found.gains)))
-    log.info("bands: the loops' coupling (rows and columns %s): %s", ", ".join(found.parameters),
-             np.array2string(m, precision=4))
-    return m
+    return np.array(found.gains, dtype=float)
 
 
 def measure(spec: Any, *, joint: bool | None = None) -> tuple[Responses | None, str]:
