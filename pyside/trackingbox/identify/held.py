@@ -32,6 +32,13 @@ moves ZI-6150 (36.8 per m2K/W) as well as its own QI-6150, so the held ``dBPR``'
 effect on QI-6150, absorbed by the fouling, moves ZI-6150 against its own direct
 effect: the outlet valve's shift is 0.00066 at the interval's ends, not the
 0.0024 of its own gain alone.
+
+A held parameter without an interval adds nothing (the band takes it as exact
+and says so in ``result.json``); so does one the twin cannot change after
+initialisation, or every held parameter when the step tests fail (a warning
+names why). With one pair and no held interval no simulation runs and the band
+is what it was before; with several pairs the gain matrix is measured all the
+same, for the loops' interaction (part 5 of :mod:`.bands`, :func:`band_parts`).
 """
 from __future__ import annotations
 
@@ -105,7 +112,7 @@ class Responses:
 def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
     """Per tracked parameter, the :class:`~.bands.Fixed` shifts of its truth, and a note ('' if none).
 
-    Empty (and no simulation) when the twin holds nothing with an interval. The note says why held
+    Empty when the twin holds nothing with an interval (no simulation either with one pair). The note says why held
     parameters with an interval were left out (taken as exact), or why the loops' interaction was not used.
     """
     fixed, note, _ = band_parts(spec)
