@@ -36,6 +36,11 @@ estimate's interval, and prints per 6 h why the tracked parameter's band misses 
 own error and the replay's (what no loop on the tag can see), read through the pair's gain; the shift
 each held parameter implies; and the coverage and median width of the bands recomputed with that
 fixed part (:class:`trackingbox.identify.bands.Fixed`). Replays go to ``CASE/apply/explain`` (reused).
+Then the same with the fixed part ``track`` computes (the step tests of :mod:`trackingbox.identify.held` on
+the re-track's spec with every held estimate's interval): each pair's own gain, the loops' joint shift, and
+the joint shift with the loops' interaction (part 5 of :mod:`trackingbox.identify.bands`); with several
+pairs the loops' gain matrix, and per 6 h the miss the loops make jointly (``G⁻¹`` of the loop's own and the
+replay's errors on every paired tag), which adds up where the pairs interact.
 
 Examples::
 
@@ -227,7 +232,10 @@ def explain_bands(retrack: dict, truth_file: Path, out: Path, bench: str) -> dic
 
     from _bench_uncertainty import rebanded
 
+    import dataclasses
+
     from trackingbox.diagnose.apply import truth_on
+    from trackingbox.identify import held as held_mod
     from trackingbox.identify.bands import Fixed
     from trackingbox.spec import load_spec
 
@@ -259,7 +267,32 @@ def explain_bands(retrack: dict, truth_file: Path, out: Path, bench: str) -> dic
     current = retrack["csv"]
     before = rebanded(Path(current), Path(retrack["spec"]), fixed={})  # the bands without the fixed part
     after_df = rebanded(Path(current), Path(retrack["spec"]), fixed=fixed)
-    result: dict = {"settle": settle, "held_intervals": held, "shifts": shifts, "pairs": {}}
+    # as track computes them now: the step tests of identify.held on the spec with every held estimate's interval
+    withheld = dataclasses.replace(spec, fixed_intervals={**spec.fixed_intervals,
+                                                          **{k: tuple(v) for k, v in held.items() if k in spec.fixed}})
+    found, note = held_mod.measure(withheld, joint=len(spec.pairs) > 1)
+    variants = {"before": before, "with fixed part": after_df}
+    gains = None
+    if found is not None:
+        own, _ = held_mod.shifts(withheld, found, joint=False)
+        joint, _ = held_mod.shifts(withheld, found)
+        variants["step tests, own gains"] = rebanded(Path(current), Path(retrack["spec"]), fixed=own, spec=withheld)
+        if found.gains is not None:
+            gains = found.gains
+            variants["step tests, joint shift"] = rebanded(Path(current), Path(retrack["spec"]), fixed=joint,
+                                                           spec=withheld)
+            variants["joint shift and interaction"] = rebanded(
+                Path(current), Path(retrack["spec"]), fixed=joint, spec=withheld,
+                gains=held_mod.loop_gains(withheld, found))
+    result: dict = {"settle": settle, "held_intervals": held, "shifts": shifts, "pairs": {},
+                    "gains": None if gains is None else {"tags": list(found.tags), "parameters": list(found.parameters),
+                                                         "matrix": gains.tolist()}, "note": note}
+    # the loops' errors on every paired tag, each loop's own and the replay's (twin at the truth), per row
+    e_loop = np.column_stack([(before[f"measured:{pr.variable}"] - before[f"tracked:{pr.variable}"]).to_numpy(float)
+                              for pr in spec.pairs])
+    e_truth = np.column_stack([(at_truth[f"measured:{pr.variable}"] - at_truth[f"tracked:{pr.variable}"]).to_numpy(float)
+                               for pr in spec.pairs])
+    all_auto = np.all([(before[f"mode:{pr.variable}"].astype(str) == "auto").to_numpy() for pr in spec.pairs], axis=0)
     for pr in spec.pairs:
         name, var = pr.parameter, pr.variable
         tr = truth_on(truth, name, t)
@@ -271,15 +304,20 @@ def explain_bands(retrack: dict, truth_file: Path, out: Path, bench: str) -> dic
         seen = (before[f"measured:{var}"] - before[f"tracked:{var}"]).to_numpy(float) / pr.gain
         unseen = -(at_truth[f"measured:{var}"] - at_truth[f"tracked:{var}"]).to_numpy(float) / pr.gain
         per = {}
-        for label, df in (("before", before), ("with fixed part", after_df)):
+        j = [q.parameter for q in spec.pairs].index(name)
+        for label, df in variants.items():
             lo, hi = df[f"parameter_lo:{name}"].to_numpy(float), df[f"parameter_hi:{name}"].to_numpy(float)
             rows = after & np.isfinite(lo)
             inside = (lo <= tr) & (tr <= hi)
             per[label] = {"covered": float(inside[rows].mean()), "below": float((tr < lo)[rows].mean()),
                           "width_of_range": float(np.median((hi - lo)[rows]) / (q.max - q.min)),
+                          "median_width": float(np.median((hi - lo)[rows])),
                           "blocks": [{"hours": h, "miss": float(np.mean((tr - p)[b])),
                                       "loop_error": float(np.nanmean(seen[b & auto])),
                                       "structural": float(np.nanmean(unseen[b & auto])),
+                                      **({"joint": float(np.linalg.solve(gains, np.nanmean(
+                                          (e_loop - e_truth)[b & all_auto], axis=0))[j])}
+                                         if gains is not None and (b & all_auto).any() else {}),
                                       "hi_minus_p": float(np.mean((hi - p)[b])), "p_minus_lo": float(np.mean((p - lo)[b])),
                                       "covered": float(inside[b].mean())}
                                      for h in range(int(settle // 3600), int(t[-1] // 3600) + 1, 6)
@@ -295,17 +333,23 @@ def print_explained(case: str, ex: dict) -> None:
             lo, hi = ex["held_intervals"][held]
             print(f"      {name}: {held} held, interval {lo:.5g}..{hi:.5g}: truth - tracked {a:+.3g} at its lower "
                   f"end, {b:+.3g} at its upper end", flush=True)
+    if ex.get("gains"):
+        g = ex["gains"]
+        print(f"      the loops' steady gains (rows {', '.join(g['tags'])}; columns {', '.join(g['parameters'])}): "
+              + "; ".join(" ".join(f"{v:+.4g}" for v in row) for row in g["matrix"]), flush=True)
     for name, per in ex["pairs"].items():
         print(f"      {name} on {per['variable']}: per 6 h, truth - tracked = loop's own error / gain + the replay's "
               "(twin at the truth) error / gain; the band's sides about the tracked value:", flush=True)
         for blk in per["before"]["blocks"]:
             print(f"        {blk['hours']:3d} h: {blk['miss']:+.3g} = {blk['loop_error']:+.3g} + {blk['structural']:+.3g}"
-                  f"  band +{blk['hi_minus_p']:.3g} / -{blk['p_minus_lo']:.3g}  covered {100 * blk['covered']:.0f} %",
+                  + (f" (the loops jointly, G^-1 of both errors: {blk['joint']:+.3g})" if "joint" in blk else "")
+                  + f"  band +{blk['hi_minus_p']:.3g} / -{blk['p_minus_lo']:.3g}  covered {100 * blk['covered']:.0f} %",
                   flush=True)
-        for label in ("before", "with fixed part"):
+        for label in [k for k in per if k not in ("variable",)]:
             c = per[label]
             print(f"      {name} band {label}: holds the truth in {100 * c['covered']:.1f} % (below it "
-                  f"{100 * c['below']:.1f} %), median width {100 * c['width_of_range']:.2f} % of the range", flush=True)
+                  f"{100 * c['below']:.1f} %), median width {c.get('median_width', math.nan):.4g} "
+                  f"({100 * c['width_of_range']:.2f} % of the range)", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,7 +26,11 @@ Cases (``--cases``, default all):
   DS meter), which tells what the band covers from what the twin's structure gets wrong. Where the
   run's CSV has the bands' ``lack_of_fit`` column, the share of those rows it flags (an untracked
   tag disagrees with the twin beyond its noise: the band does not cover model error) and the
-  coverage in the flagged and unflagged rows apart. ``--rebands`` recomputes the bands of the runs
+  coverage in the flagged and unflagged rows apart. Every other tracked parameter with a known truth
+  (the twin-structure plant pairs three: ``pump.dp0``, ``effect.Rf``, ``outletValve.KvMax``) gets its
+  own line: coverage per run, median half-width; with ``--rebands`` and several pairs also each
+  loop's band alone (each pair's own gain for the fixed part, no interaction, as before the loops'
+  interaction was modelled: part 5 of :mod:`trackingbox.identify.bands`). ``--rebands`` recomputes the bands of the runs
   on disk from their tracking CSV with this checkout's band code (the bands are causal functions of
   the CSV's other columns) and records those seeds again, without rerunning the demo.
 
@@ -144,26 +148,27 @@ def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...
     return {"seed": seed, **intervals_doc(result, truth)}
 
 
-def rebanded(csv: Path, spec_path: Path, fixed: Any = None) -> Any:
+def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, gains: Any = None) -> Any:
     """The tracking CSV with its band columns recomputed by this checkout's
     :class:`~trackingbox.identify.bands.BandTracker` (causal: the same values a new run would write;
-    *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate; None: as ``track``
-    computes it, :func:`trackingbox.identify.held.held_parts`; ``{}``: none)."""
+    *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate, and *gains* its
+    ``gains``; *fixed* None: both as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
+    ``{}``: none). *spec*: the loaded spec to use instead of *spec_path*'s."""
     import pandas as pd
 
     from trackingbox.identify.bands import BandTracker
-    from trackingbox.identify.held import held_parts
+    from trackingbox.identify.held import band_parts
     from trackingbox.spec import load_spec
 
     df = pd.read_csv(csv)
     base = [c for c in df.columns if not c.startswith(("parameter_lo:", "parameter_hi:", "lack_of_fit"))]
     numbers = pd.DataFrame({c: ((df[c].astype(str) == "hold").astype(float) if c.startswith("mode:")
                                 else pd.to_numeric(df[c], errors="coerce")) for c in base})
-    spec = load_spec(spec_path)
+    spec = load_spec(spec_path) if spec is None else spec
     note = ""
     if fixed is None:
-        fixed, note = held_parts(spec)
-    bands = BandTracker(spec, base, fixed=fixed, note=note)
+        fixed, note, gains = band_parts(spec)
+    bands = BandTracker(spec, base, fixed=fixed, note=note, gains=gains)
     extra = pd.DataFrame(bands.rows(numbers.to_numpy(float)), columns=bands.columns, index=df.index)
     return pd.concat([df[base], extra], axis=1)
 
@@ -228,8 +233,32 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
     csv = out / "track" / "tracking.csv"
     t = pd.read_csv(csv, usecols=["time"])["time"].to_numpy(float)
     source = rebanded(csv, out / "spec.toml") if rebands else csv
-    return {"seed": seed, **band_coverage(source, "effect.Rf", truth_on(truth, "effect.Rf", t), 12 * 3600.0),
-            "after": 12 * 3600.0, **({"rebanded": True} if rebands else {})}
+    doc = {"seed": seed, **band_coverage(source, "effect.Rf", truth_on(truth, "effect.Rf", t), 12 * 3600.0),
+           "after": 12 * 3600.0, **({"rebanded": True} if rebands else {})}
+    # every tracked parameter with a known truth: the bands as ``track`` computes them and, with several pairs,
+    # each loop's band alone (each pair's own gain for the fixed part, no interaction: the bands before 37c)
+    from trackingbox.identify import held
+    from trackingbox.spec import load_spec
+
+    spec = load_spec(out / "spec.toml")
+    alone = None
+    if rebands and len(spec.pairs) > 1:
+        found, _ = held.measure(spec, joint=False)
+        alone = rebanded(csv, out / "spec.toml", fixed=held.shifts(spec, found, joint=False)[0] if found else {},
+                         gains=None)
+    frame = pd.read_csv(source) if isinstance(source, Path) else source
+    doc["tracked"] = {}
+    for pr in spec.pairs:
+        value = truth_on(truth, pr.parameter, t)
+        if value is None:
+            value = truth.get("parameters", {}).get(pr.parameter)
+        if value is None:
+            continue
+        doc["tracked"][pr.parameter] = {"variable": pr.variable,
+                                        **band_coverage(frame, pr.parameter, value, 12 * 3600.0),
+                                        **({"alone": band_coverage(alone, pr.parameter, value, 12 * 3600.0)}
+                                           if alone is not None else {})}
+    return doc
 
 
 # --------------------------------------------------------------------------- driver
@@ -287,6 +316,15 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
             lines.append(f"{'':<24} lack of fit flagged in {share('flagged')} of those rows; the band contains the "
                          f"truth in the unflagged rows {share('covered_clear')}, in the flagged ones "
                          f"{share('covered_flagged')} (per-run means)")
+        for name in sorted({n for d in docs for n in d.get("tracked", {})}):
+            per = [d["tracked"][name] for d in docs if name in d.get("tracked", {})]
+            for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r])):
+                c = [r["covered"] for r in rows if math.isfinite(r.get("covered", math.nan))]
+                if c:
+                    lines.append(f"{'':<24} {name}{label}: contains the truth {100 * float(np.mean(c)):.1f} % "
+                                 f"(runs {', '.join(f'{100 * x:.1f}' for x in c)} %), median half-width "
+                                 f"{np.median([r['median_half_width'] for r in rows]):.4g}, truth below "
+                                 f"{100 * float(np.mean([r['below'] for r in rows])):.1f} %")
         return lines, ok
     names = sorted({n for d in docs for n in d["intervals"]})
     pooled = [0, 0, 0]  # covered, runs, parameters

@@ -13,7 +13,7 @@ held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pai
   (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
 
 :class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
-tracked value ``p`` (level :data:`LEVEL`), in four parts:
+tracked value ``p`` (level :data:`LEVEL`), in five parts:
 
 1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
    autocovariance of the tag's fast error (tracked error minus its centred
@@ -34,13 +34,15 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    ``[[parameters]]`` entry no pair tracks) is off by up to its interval, and the loop makes
    its own parameter absorb that: where the pair's tag moves by ``Δy(q)`` when the held ``q``
    goes from its estimate to an end of its interval, the truth lies ``-Δy(q)/gain`` from ``p``
+   (with several pairs the loops absorb it together: ``-G⁻¹ Δy(q)`` over the paired tags, ``G``
+   the tracked parameters' gains on them, :func:`trackingbox.identify.held.joint_shifts`)
    (a steady shift: the held value never moves, so this part does not fade). Given per pair
    as :class:`Fixed` (*fixed* of :class:`BandTracker`): the shifts of the truth at the two ends
    of each held parameter's interval; each side takes the shifts toward it, in quadrature
    over the fixed parameters and with the noise and start parts. The shifts need the tag's
    sensitivity to the held parameters, which the twin alone gives: ``track`` (and the online
    mode, and ``diagnose --apply``'s re-track) measures it at its start by step tests on the twin
-   (:func:`trackingbox.identify.held.held_parts`) for every held parameter with an interval
+   (:func:`trackingbox.identify.held.band_parts`) for every held parameter with an interval
    (``[fixed_intervals]``, or ``interval`` of an untracked ``[[parameters]]`` entry);
    ``scripts/bench_apply --explain-bands`` replays the whole record instead.
 
@@ -51,6 +53,36 @@ tracked value ``p`` (level :data:`LEVEL`), in four parts:
    without this part, and the size of the misses (from 48 h on the truth sat about 1e-5 above
    ``p`` and the band's upper side 5e-6 above it, while the loop's own error read 0 +- 30 Pa;
    ``scripts/bench_apply --explain-bands``).
+5. **interaction**: with several pairs, every loop drives its own tag to the measurement
+   together with the others, so a tracked parameter also absorbs what the other tracked
+   parameters' errors do to its tag: with ``G`` the tracked parameters' steady gains on the
+   paired tags (tag ``i`` of pair ``i`` per unit of parameter ``j``), the slow errors ``e`` the
+   loops are left with put the truths ``G⁻¹ e`` from the tracked values, where each pair's band
+   alone takes ``e_k/G_kk``. So pair ``j``'s band carries pair ``k``'s start, lag and hold parts
+   scaled by ``M[j, k]``, ``M = G⁻¹ diag(G)`` (``G``: *gains* of :class:`BandTracker`; a negative
+   entry turns ``k``'s sides over): the squared start parts summed, the lag and hold parts
+   added. ``M`` is the identity when the loops do not interact (and the band is the one above).
+   ``M`` is the steady state's, and the noise moves the loops faster than they reach it:
+   carried through ``M``, 0.3 of noise on the other tag of a 2x2 linear twin made a band 28 of its
+   parameter's standard deviations wide (median). So the noise part is the loops' together instead
+   (:func:`loops_noise`): every tag follows all the parameters through ``G`` with its own pair's
+   lag, each parameter its own PI law, and pair ``j``'s noise variance sums each tag's fast
+   error through the impulse response from that tag to ``j`` (on that twin: the band held the
+   truth in 95.9 % of the rows where its own loop's noise alone gave 80.1 %; where the loops
+   together do not settle, each pair's own noise part). The fixed part is
+   already the loops' joint shift (part 4) and is not carried again. ``track`` measures ``G`` with the
+   fixed part's step tests (:func:`trackingbox.identify.held.band_parts`), one pair needs none.
+
+   Why: the evaporator's twin pairs three loops, and the fouling moves the outlet valve's
+   ZI-6150 as well as its own tag (``G`` 36.8 per m2K/W against the valve's own -0.064 per unit
+   of ``outletValve.KvMax``): the valve's ``KvMax`` absorbs what the fouling's error does to its
+   tag. On the twin-structure plant (``scripts/bench_uncertainty --cases bands-evaporator-plain
+   --rebands``, seeds 0-2) its band held the truth in 36.6 % of the rows after 12 h from its own
+   loop alone, 75.9 % with this part. What is left are the fouling's slow errors (6 h means up to
+   3.5e-5, carried 560 to one), which its own band holds through a noise part dominated by the
+   controller's fast kick, which the valve's loop does not pass on: the fast error's statistics
+   (centred over 30 min) do not see slow errors, and where the fouling's come from on that plant
+   was not measured.
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -219,6 +251,49 @@ def loop_model(gain: float, time_constant: float, kc: float, ti: float, ts: floa
     return LoopModel(h, d, float(ts * np.sum(np.abs(d))), acf)
 
 
+def loops_noise(gains: Any, loops: Sequence[tuple[float, float, float, float]], ts: float) -> np.ndarray | None:
+    """The loops' noise model together (part 5): ``acf[j, k, l]``, the autocorrelation at lag ``l`` of parameter
+    ``j``'s response to a unit impulse of measurement noise on the tag of pair ``k``, every tag following all the
+    parameters through *gains* with its own pair's first-order lag, each parameter moved by its own PI law
+    (*loops*: per pair ``(gain, time_constant, kc, ti)`` as :func:`loop_model` takes them; ``gain`` sets the
+    controller's sign). None where the loops together do not settle (their responses have not decayed).
+
+    One pair reduces to :func:`loop_model`'s ``acf``:
+
+    >>> a = loops_noise([[-2.0]], [(-2.0, 600.0, 1.0 / 6.0, 600.0)], 10.0)
+    >>> bool(np.allclose(a[0, 0], loop_model(-2.0, 600.0, 1.0 / 6.0, 600.0, 10.0).acf, rtol=1e-9))
+    True
+    """
+    g = np.asarray(gains, dtype=float)
+    m = len(loops)
+    sign = np.array([1.0 if lp[0] > 0 else -1.0 for lp in loops])
+    tau = np.array([lp[1] for lp in loops])
+    kc = np.array([lp[2] for lp in loops])
+    ti = np.array([lp[3] for lp in loops])
+    a = np.where(tau > 0, np.exp(-ts / np.where(tau > 0, tau, 1.0)), 0.0)
+    n = 0
+    for gain, t, k, i in loops:
+        guess = max(t, i, abs(1.0 / (gain * k)) * i if gain * k else i)
+        n = max(n, int(min(200000, max(200, HORIZON * 4.0 * guess / ts))))
+    # column k: the loops' response to an impulse on tag k; deviation variables, the twin settled at 0
+    z = np.zeros((m, m))
+    p = np.zeros((m, m))
+    e_prev = np.zeros((m, m))
+    h = np.empty((n, m, m))
+    for t in range(n):
+        e = (np.eye(m) if t == 0 else 0.0) - z
+        p = p + (sign * kc)[:, None] * ((e - e_prev) + ts * (e + e_prev) / (2.0 * ti[:, None]))
+        e_prev = e
+        h[t] = p
+        z = a[:, None] * z + (1.0 - a)[:, None] * (g @ p)
+    peak = float(np.max(np.abs(h))) if np.all(np.isfinite(h)) else math.inf
+    if not math.isfinite(peak) or float(np.max(np.abs(h[-max(1, n // 10):]))) > 1e-3 * peak:
+        return None
+    lags = range(NOISE_LAGS + 1)
+    return np.array([[[float(h[: n - lag, j, k] @ h[lag:, j, k]) for lag in lags] for k in range(m)]
+                     for j in range(m)])
+
+
 @dataclass
 class _PairState:
     """One pair's running state (what :meth:`BandTracker.state_dict` saves)."""
@@ -254,11 +329,23 @@ class BandTracker:
         of the module). None or a parameter left out: no fixed part for it.
     note
         Why held parameters with an interval got no fixed part (``result.json``'s ``fixed_note``).
+    gains
+        ``G``: the tracked parameters' steady gains on the paired tags (tag of pair ``i`` per unit of the
+        parameter of pair ``j``; part 5 of the module). None: each band from its own loop alone.
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
-                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "") -> None:
+                 fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "",
+                 gains: Any = None) -> None:
         self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
+        n = len(getattr(spec, "pairs", ()))
+        self.gains = None if gains is None else np.asarray(gains, dtype=float)
+        if self.gains is not None and (self.gains.shape != (n, n) or not np.all(np.isfinite(self.gains))):
+            raise ValueError(f"the loops' gain matrix must be a finite {n} x {n} matrix (one row and column per "
+                             f"pair), got shape {self.gains.shape}")
+        #: the loops' interaction (part 5 of the module): ``M = G⁻¹ diag(G)``, pairs in the spec's order; None: none
+        self.coupling = None if self.gains is None else np.linalg.solve(self.gains, np.diag(np.diag(self.gains)))
+        self.coupling_rows = [] if self.coupling is None else [[float(m) for m in row] for row in self.coupling]
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -278,11 +365,16 @@ class BandTracker:
             start_lo, start_hi = (interval if interval is not None else (p.min, p.max))
             kept = tuple((fixed or {}).get(pair.parameter, ()))
             self.pairs.append({"fixed": kept, "fixed_sides": fixed_sides(kept),
+                "loop": (float(pair.gain), float(pair.time_constant), kc, float(settings.ti)),
                 "parameter": pair.parameter, "variable": pair.variable, "model": model, "note": note,
                 "p0": float(p.start), "lo": float(p.min), "hi": float(p.max),
                 "start": (float(start_lo), float(start_hi)), "start_source": "interval" if interval else "bounds",
                 "cols": (index["time"], index[f"measured:{pair.variable}"], index[f"tracked:{pair.variable}"],
                          index[f"parameter:{pair.parameter}"], index[f"mode:{pair.variable}"])})
+        # the loops' noise through their interaction (part 5): None without gains or where a loop is not a PI's
+        self.cross_acf = None
+        if self.gains is not None and all(pr["model"] is not None for pr in self.pairs):
+            self.cross_acf = loops_noise(self.gains, [pr["loop"] for pr in self.pairs], self.ts)
         # what the bands take as exact: the twin's fixed values and the parameters no pair tracks (held at
         # their starts), less those given a fixed part (named per pair by describe())
         tracked = {pr["parameter"] for pr in self.pairs}
@@ -347,10 +439,13 @@ class BandTracker:
 
     # -- one row ---------------------------------------------------------------
     def _update(self, pr: dict[str, Any], st: _PairState, meas: float, tracked: float, p: float,
-                hold: bool) -> tuple[float, float]:
+                hold: bool) -> tuple[float, float, float, float, float, float, float] | None:
+        """One row of a pair: its parts about ``p`` (None where it has no band yet): the squared noise part, the
+        squared start part below and above, the lag below and above and the hold drift below and above (the
+        last four added linearly)."""
         model: LoopModel | None = pr["model"]
         if model is None or not math.isfinite(p):
-            return math.nan, math.nan
+            return None
         e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked) and not hold) else math.nan
         self._noise(st, e)
         T = model.lag_time
@@ -373,7 +468,7 @@ class BandTracker:
             st.slope = (st.ewma_fast - st.ewma_slow) / (0.5 * T) if T > 0 else 0.0
             st.auto += 1
         if st.seen * self.ts < NOISE_MIN or st.weight <= 0:
-            return math.nan, math.nan
+            return None
         gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
         taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
         var = gam[0] * model.acf[0] + 2.0 * float(np.sum((taper * gam * model.acf)[1:]))
@@ -384,11 +479,42 @@ class BandTracker:
         if d < 0:
             below, above = above, below
         lag = abs(st.slope) * T
+        return (noise * noise, below * below, above * above, (lag if st.slope < 0 else 0.0),
+                (lag if st.slope > 0 else 0.0), st.held_lo, st.held_hi, gam)
+
+    def _band(self, j: int, p: float, parts: Sequence[tuple[float, ...] | None]) -> tuple[float, float]:
+        """Pair *j*'s band about its value *p* from every pair's *parts* (:meth:`_update`) and its fixed part: its
+        own parts alone, or with :attr:`coupling` every pair's start, lag and hold parts carried through the loops'
+        interaction (its own noise part as it is; a pair without a band yet adds nothing to the others')."""
+        pr = self.pairs[j]
+        own = parts[j]
+        if own is None:
+            return math.nan, math.nan
         f_below, f_above = pr["fixed_sides"]
-        lo = p - math.sqrt(noise * noise + below * below + f_below * f_below) - (lag if st.slope < 0 else 0.0) \
-            - st.held_lo
-        hi = p + math.sqrt(noise * noise + above * above + f_above * f_above) + (lag if st.slope > 0 else 0.0) \
-            + st.held_hi
+        noise2, below2, above2, lag_below, lag_above, held_below, held_above, _ = own
+        if self.coupling is None:
+            lo = p - math.sqrt(noise2 + below2 + f_below * f_below) - lag_below - held_below
+            hi = p + math.sqrt(noise2 + above2 + f_above * f_above) + lag_above + held_above
+            return max(pr["lo"], lo), min(pr["hi"], hi)
+        if self.cross_acf is not None:  # every tag's fast error through the loops together
+            taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
+            var = 0.0
+            for acf, part in zip(self.cross_acf[j], parts):
+                if part is not None:
+                    gam = part[7]
+                    var += gam[0] * acf[0] + 2.0 * float(np.sum((taper * gam * acf)[1:]))
+            noise2 = self.z * self.z * max(var, 0.0)
+        qb = qa = lb = la = 0.0
+        for m, part in zip(self.coupling_rows[j], parts):
+            if part is None or m == 0.0:
+                continue
+            b, a = (0, 1) if m > 0 else (1, 0)  # a negative coupling turns the other's sides over
+            qb += m * m * part[1 + b]
+            qa += m * m * part[1 + a]
+            lb += abs(m) * (part[3 + b] + part[5 + b])
+            la += abs(m) * (part[3 + a] + part[5 + a])
+        lo = p - math.sqrt(noise2 + qb + f_below * f_below) - lb
+        hi = p + math.sqrt(noise2 + qa + f_above * f_above) + la
         return max(pr["lo"], lo), min(pr["hi"], hi)
 
     def _noise(self, st: _PairState, e: float) -> None:
@@ -421,11 +547,15 @@ class BandTracker:
         """The band values of one row (*values* as the CSV writer gets them; modes ``"hold"``/``"auto"``
         or a flag)."""
         out: list[float] = []
+        parts, ps = [], []
         for pr, st in zip(self.pairs, self.states):
             it, im, itr, ip, imode = pr["cols"]
             mode = values[imode]
             hold = (mode == "hold") if isinstance(mode, str) else bool(mode)
-            out.extend(self._update(pr, st, _num(values[im]), _num(values[itr]), _num(values[ip]), hold))
+            ps.append(_num(values[ip]))
+            parts.append(self._update(pr, st, _num(values[im]), _num(values[itr]), ps[-1], hold))
+        for j, p in enumerate(ps):
+            out.extend(self._band(j, p, parts))
         if self.fit_tags:
             out.append(self._fit(values))
         return out
@@ -484,6 +614,9 @@ class BandTracker:
                                     **({"fixed": {h.name: [h.at_lower, h.at_upper] for h in pr["fixed"]}}
                                        if pr["fixed"] else {}),
                                     **({"fixed_note": self.fixed_note} if self.fixed_note else {}),
+                                    **({"coupling": {q["parameter"]: float(m) for q, m in
+                                                     zip(self.pairs, self.coupling[self.pairs.index(pr)])}}
+                                       if self.coupling is not None else {}),
                                     "taken_as_exact": [n for n in self.assumed
                                                        if n not in {h.name for h in pr["fixed"]}],
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}

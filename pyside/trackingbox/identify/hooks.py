@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import TrackingError
 from .analysis import identify, leave_out
 from .bands import BandTracker
-from .held import held_parts
+from .held import band_parts
 from .intervals import uncertainty
 
 log = logging.getLogger(__name__)
@@ -66,12 +66,13 @@ def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, 
 
 def band_tracker(spec: Any, columns: Any) -> Any:
     """The :class:`~trackingbox.identify.bands.BandTracker` of a tracking run (None without pairs), with the
-    fixed part of the parameters the twin holds at an estimate with an interval
-    (:func:`~trackingbox.identify.held.held_parts`: step tests on the twin, none without such a parameter)."""
+    fixed part of the parameters the twin holds at an estimate with an interval and, with several pairs, the
+    loops' gain matrix (:func:`~trackingbox.identify.held.band_parts`: step tests on the twin, none with one pair
+    and no such parameter)."""
     if not getattr(spec, "pairs", None):
         return None
-    fixed, note = held_parts(spec)
-    return BandTracker(spec, columns, fixed=fixed or None, note=note)
+    fixed, note, gains = band_parts(spec)
+    return BandTracker(spec, columns, fixed=fixed or None, note=note, gains=gains)
 
 
 def indistinct_candidates(spec: Any, *, warmup: float | None = None, progress: Any = None) -> dict[str, str]:
