@@ -423,6 +423,12 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
                   next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
         changed = True
+    from .external_locals import external_locals_as_inputs  # (it uses this module's scanner)
+    body, lines = external_locals_as_inputs(body)
+    if lines:
+        log.debug("%s: protected locals of external Fortran functions read as inputs at lines %s", file,
+                  ", ".join(map(str, lines)))
+        changed = True
     firsts, lines = first_output_functions(body, tuple_names)
     if firsts != body:
         if lines:
@@ -628,6 +634,8 @@ def first_output_functions(data: bytes, tuple_names: frozenset[bytes] = frozense
     for fn in _functions(code):
         copy = _one_line(clean[fn.start:fn.end])
         copy = re.sub(rb"^function\s+" + re.escape(fn.name), b"function " + fn.name + TUPLE_SUFFIX, copy)
+        if _previous_word(code, fn.start) in (b"pure", b"impure"):  # the copy is as pure as the function
+            copy = _previous_word(code, fn.start) + b" " + copy
         copy = re.sub(rb"\bend\s+" + re.escape(fn.name) + rb"\s*;$", b"end " + fn.name + TUPLE_SUFFIX + b";", copy)
         edits.append((fn.end, fn.end, b" " + copy))
         if not fn.single or fn.name not in tuple_names:  # its calls taking all outputs might not be renamed
