@@ -54,8 +54,8 @@ def _closing(code: bytes, at: int) -> int | None:
     return None
 
 
-def _as_input(code: bytes, data: bytes, start: int, stop: int) -> list[tuple[int, bytes]] | None:
-    """The insertions that make the declaration in ``code[start:stop]`` (up to its ``;``) an input
+def _as_input(code: bytes, data: bytes, start: int, stop: int) -> list[tuple[int, int, bytes]] | None:
+    """The edits (offset, bytes dropped there, bytes put there) that make the declaration in ``code[start:stop]`` (up to its ``;``) an input
     with a default, or None when it is not a plain Real, Integer or Boolean component (*data*: the
     text with its strings, which *code* has blanked)."""
     m = _DECL.match(code, start, stop)
@@ -79,13 +79,18 @@ def _as_input(code: bytes, data: bytes, start: int, stop: int) -> list[tuple[int
             return None
         after = close
     tail = code[after:stop].lstrip()
-    edits = [(m.start("type"), b"input ")]
-    if tail.startswith(b"=") and not tail.startswith(b"=="):
-        return edits  # bound: the binding is the default
+    edits = [(m.start("type"), 0, b"input ")]
+    if tail.startswith(b"=") and not tail.startswith(b"=="):  # bound: the binding is the default
+        # (zeros(n) is fill(0, n) by definition, MLS 10.3.3; rumoca 0.10.2 gives an Integer input
+        # bound to zeros(...) the wrong shape, so it reads the fill)
+        z = re.compile(rb"=\s*(zeros\s*\()").match(code, after + len(code[after:stop]) - len(tail))
+        if z is not None and m.group("type") == b"Integer":
+            edits.append((z.start(1), z.end(1) - z.start(1), b"fill(0, "))
+        return edits
     if tail.strip(b" \t\r\n;"):  # anything but a (blanked) comment before the ';'
         return None
     zero = _ZERO[m.group("type")]
-    edits.append((after, b" = " + (b"fill(" + zero + b", " + b", ".join(dims) + b")" if dims else zero)))
+    edits.append((after, 0, b" = " + (b"fill(" + zero + b", " + b", ".join(dims) + b")" if dims else zero)))
     return edits
 
 
@@ -97,7 +102,7 @@ def external_locals_as_inputs(data: bytes) -> tuple[bytes, list[int]]:
     if b"FORTRAN 77" not in data:
         return data, []
     code, _, _ = _code_mask(data)
-    edits: list[tuple[int, bytes]] = []
+    edits: list[tuple[int, int, bytes]] = []
     lines: list[int] = []
     for ext in _EXTERNAL_F77.finditer(data):  # the language is a string, blanked in *code*
         if code[ext.start():ext.start() + 8] != b"external":  # in a comment or a string
@@ -114,7 +119,7 @@ def external_locals_as_inputs(data: bytes) -> tuple[bytes, list[int]]:
         if prot is None or re.search(rb"\b(?:public|algorithm|equation|function)\b", body[prot.end():]):
             continue
         start, stop = header.end() + prot.end(), ext.start()
-        found: list[tuple[int, bytes]] = []
+        found: list[tuple[int, int, bytes]] = []
         while code[start:stop].strip():
             end = _statement_end(code, start, stop)
             decl = _as_input(code, data, start, end) if end is not None else None
@@ -125,20 +130,15 @@ def external_locals_as_inputs(data: bytes) -> tuple[bytes, list[int]]:
             start = end
         if found:
             at = header.end() + prot.start()
-            edits.append((at, None))  # the word 'protected' blanked
+            edits.append((at, len(b"protected"), b" " * len(b"protected")))
             edits += found
             lines.append(data.count(b"\n", 0, header.start()) + 1)
     if not edits:
         return data, []
     out = bytearray()
     pos = 0
-    for at, new in sorted(edits, key=lambda e: e[0]):
-        out += data[pos:at]
-        if new is None:
-            out += b" " * len(b"protected")
-            pos = at + len(b"protected")
-        else:
-            out += new
-            pos = at
+    for at, drop, new in sorted(edits, key=lambda e: (e[0], e[1])):
+        out += data[pos:at] + new
+        pos = at + drop
     out += data[pos:]
     return bytes(out), lines

@@ -324,6 +324,25 @@ LIBRARY_BODIES = (
 """,
         why="a return inside a for loop",
     ),
+    # Modelica.Math.Polynomials.fitting (MSL 4.0.0): the Vandermonde matrix is built column by
+    # column from its last one, which rumoca refuses ("reads elements of `V` that do not all have
+    # a definition"). Declaring V filled with ones gives the same last column, and the loop then
+    # fills the others from it with the same products.
+    LibraryBody(
+        name="Modelica.Math.Polynomials.fitting",
+        header=b"function fitting",
+        digest="e164c70ab823a3cf3549c4808142bca51ae45a93408b967d80fbb4770d08dc22",
+        start=b"protected",
+        body=b"""protected
+        Real V[size(u, 1), n + 1] = fill(1.0, size(u, 1), n + 1);
+      algorithm
+        for j in n:-1:1 loop
+          V[:, j] := {u[i] * V[i, j + 1] for i in 1:size(u,1)};
+        end for;
+        p :=Modelica.Math.Matrices.leastSquares(V, y);
+""",
+        why="a matrix built column by column without a binding",
+    ),
     # Modelica.Blocks.Sources.TimeTable.getInterpolationCoefficients (MSL 4.0.0): a while loop moves
     # the grid index `next` up from `last` while the row's time has been reached, which the embedded
     # backend cannot translate (its condition varies with time). The loop's condition depends only
