@@ -442,12 +442,15 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
                   next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
         changed = True
-    from .external_locals import external_locals_as_inputs  # (it uses this module's scanner)
-    body, lines = external_locals_as_inputs(body)
-    if lines:
-        log.debug("%s: protected locals of external Fortran functions read as inputs at lines %s", file,
-                  ", ".join(map(str, lines)))
-        changed = True
+    from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
+    from .redeclare_short import short_class_redeclarations
+    for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
+                          (short_class_redeclarations, "class redeclarations with a literal modification read "
+                                                       "through a short class")):
+        body, lines = rewrite(body)
+        if lines:
+            log.debug("%s: %s at lines %s", file, what, ", ".join(map(str, lines)))
+            changed = True
     firsts, lines = first_output_functions(body, tuple_names)
     if firsts != body:
         if lines:
