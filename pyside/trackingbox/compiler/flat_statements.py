@@ -195,21 +195,16 @@ class StatementTranslation:
         return [value]
 
     def _external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], args: list[Value]) -> list[Value]:
-        """A function whose external routine the embedded path knows (:mod:`.lapack`, the C
-        ``ModelicaError``): the routine on its call's arguments, the values it writes to the
-        function's outputs returned; any other routine is refused naming the function."""
+        """A function whose external routine the embedded path knows (:mod:`.lapack`): the routine on
+        its call's arguments, the values it writes to the function's outputs returned; any other
+        routine is refused naming the function and where it is declared."""
         language = str(ext.get("language") or "C").upper()
         routine = str(ext.get("function_name") or fname.rsplit(".", 1)[-1])
-        short = fname.rsplit(".", 1)[-1].removesuffix("__tuple")
-        where = rf"\bfunction\s+{re.escape(short)}\b"
-        if language == "C" and routine == "ModelicaError" and not fn.get("outputs") and len(ext.get("args") or []) == 1:
-            # Modelica.Utilities.Streams.error: stops the simulation with the message (as a failing assert)
-            env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
-            self._record_assert(False, self._message_text(ext["args"][0], env), "error", f"function {fname}")
-            return []
+        shown = fname.removesuffix("__tuple")  # (the copy taking every output, see rewrite.first_output_functions)
+        where = rf"\bfunction\s+{re.escape(shown.rsplit('.', 1)[-1])}\b"
         impl = lapack.ROUTINES.get(routine.lower()) if language == "FORTRAN 77" else None
         if impl is None or ext.get("output_name"):
-            raise self.unsupported(f"external function {fname!r} (external {language!r} routine {routine!r})", where)
+            raise self.unsupported(f"external function {shown!r} (external {language!r} routine {routine!r})", where)
         env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
         for out in fn.get("outputs") or []:
             if out.get("default") is not None:
@@ -222,12 +217,12 @@ class StatementTranslation:
         try:
             written = impl(values)
         except lapack.NotGiven as exc:
-            raise self.unsupported(f"external function {fname!r} (LAPACK {routine})", where, str(exc)) from None
+            raise self.unsupported(f"external function {shown!r} (LAPACK {routine})", where, str(exc)) from None
         for k, node in enumerate(ext.get("args") or []):
             name = _var_name(node)
             if name in outs:
                 if k not in written:
-                    raise self.unsupported(f"external function {fname!r} (LAPACK {routine})", where,
+                    raise self.unsupported(f"external function {shown!r} (LAPACK {routine})", where,
                                            f"its output {name!r} is not given for these arguments")
                 env[name] = written[k]
         missing = [o["name"] for o in fn.get("outputs") or [] if o["name"] not in env]

@@ -444,7 +444,9 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         changed = True
     from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
     from .redeclare_short import short_class_redeclarations
+    from .streams_error import streams_error_as_assert
     for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
+                          (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
                           (short_class_redeclarations, "class redeclarations with a literal modification read "
                                                        "through a short class")):
         body, lines = rewrite(body)
