@@ -97,7 +97,7 @@ def short_class_redeclarations(data: bytes) -> tuple[bytes, list[int]]:
         line = data.count(b"\n", 0, m.start()) + 1
         name = m.group(2) + b"__tb%d_%d" % (line, m.start())
         original = data[m.start(3):close_at + 1]
-        short = m.group(1) + b" " + name + b" = " + re.sub(rb"\s*\n\s*", b" ", original) + b"; "
+        short = b" " + m.group(1) + b" " + name + b" = " + re.sub(rb"\s*\n\s*", b" ", original) + b"; "
         edits.append((start, 0, short))
         edits.append((m.start(3), close_at + 1 - m.start(3), name + b"\n" * original.count(b"\n")))
         lines.append(line)
