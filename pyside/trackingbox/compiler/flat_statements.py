@@ -199,6 +199,8 @@ class StatementTranslation:
         its call's arguments, the values it writes to the function's outputs returned; any other
         routine is refused naming the function and where it is declared."""
         language = str(ext.get("language") or "C").upper()
+        if language == "BUILTIN":  # a built-in the language does not have (flat_builtins.builtin_external_name)
+            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
         routine = str(ext.get("function_name") or fname.rsplit(".", 1)[-1])
         shown = fname.removesuffix("__tuple")  # (the copy taking every output, see rewrite.first_output_functions)
         where = rf"\bfunction\s+{re.escape(shown.rsplit('.', 1)[-1])}\b"
