@@ -225,3 +225,42 @@ def test_a_literal_class_redeclaration_and_a_function_redeclaration_keep_their_m
     new, lines = short_class_redeclarations(data)
     assert lines == [REDECLARE.count("\n", 0, REDECLARE.index("redeclare model M = Base(k = 5)")) + 1]
     assert new.count(b"\n") == data.count(b"\n") and b"redeclare function f = lin(a = 3)" in new
+
+
+MIXED = """
+package Mixed
+  package Medium
+    constant Real cp = 4180;
+  end Medium;
+  package Medium2
+    extends Medium(cp = 1000);
+  end Medium2;
+  model Holder
+    replaceable package M = Medium2 constrainedby Medium;
+    Real c = M.cp*(1 + time);
+  end Holder;
+  model DefaultReplaced "Medium2 is only the default of a package redeclared to Medium"
+    Holder h(redeclare package M = Medium);
+    Real c1 = Medium.cp*(1 + time);
+  end DefaultReplaced;
+end Mixed;
+"""
+
+
+def test_a_modified_constant_mixes_in_rumoca_even_from_a_replaced_default_so_it_stays_refused(tmp_path):
+    """The check behind "package ... extends ... with a modified constant" (Fluid's
+    PartialSimpleMedium on PartialPureSubstance) is still needed: rumoca 0.10.2 gives Medium.cp
+    Medium2's 1000 even where Medium2 is only a default that the model redeclares away. Should
+    rumoca stop mixing them, the first assertion fails and the refusal can be lifted."""
+    import rumoca
+
+    from trackingbox.compiler import compile_model
+
+    flat = rumoca.Session().loads(MIXED, model="Mixed.DefaultReplaced", filename="Mixed.mo").to_dict("flat")
+    factor = flat["variables"]["c1"]["binding"]["Binary"]["lhs"]["Literal"]["value"]
+    assert factor == {"Integer": 1000}  # Modelica says 4180: Medium itself is not modified
+    src = tmp_path / "Mixed.mo"
+    src.write_text(MIXED)
+    with pytest.raises(UnsupportedConstructError, match=r"package Medium2 extends Medium with a modified constant "
+                                                        r"at .*Mixed.mo:7, and Mixed.DefaultReplaced also uses Medium"):
+        compile_model(src, "Mixed.DefaultReplaced", backend="embedded", output=tmp_path / "m.fmu")
