@@ -104,7 +104,9 @@ package Redeclare
     Real z = f(2 + time);
   end Holder;
   model Literal
+    parameter Real kk = 4;
     Holder h(redeclare model M = Base(k = 5), redeclare function f = lin(a = 3));
+    Holder h2(redeclare function f = lin(a = kk));
   end Literal;
 end Redeclare;
 """
@@ -218,9 +220,11 @@ def test_a_literal_class_redeclaration_and_a_function_redeclaration_keep_their_m
     src = tmp_path / "Redeclare.mo"
     src.write_text(REDECLARE)
     res = compile_model(src, "Redeclare.Literal", backend="embedded", output=tmp_path / "r.fmu")
-    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["h.m.y", "h.z"])
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["h.m.y", "h.z", "h2.z"],
+                            start_values={"kk": 7.0})
     assert np.allclose(out["h.m.y"], 5.0)  # Base's own k is 1
     assert np.allclose(out["h.z"], 3.0 * (2 + out["time"]))  # lin's own a is 1
+    assert np.allclose(out["h2.z"], 7.0 * (2 + out["time"]))  # a function's modification follows the parameter
     data = REDECLARE.encode()
     new, lines = short_class_redeclarations(data)
     assert lines == [REDECLARE.count("\n", 0, REDECLARE.index("redeclare model M = Base(k = 5)")) + 1]
