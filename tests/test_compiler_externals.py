@@ -207,8 +207,15 @@ def test_streams_error_is_read_as_an_assert_in_place():
     new, lines = streams_error_as_assert(data)
     assert len(new) == len(data) and new.count(b"\n") == data.count(b"\n")
     at = _line_of(MSL / "Blocks" / "Continuous.mo", r"Modelica\.Utilities\.Streams\.error\(\"LimPID")
-    assert lines == [at]
+    assert at in lines
     assert b"assert(not (initType == Init.InitialOutput and (y_start < yMin or y_start > yMax)), " in new
+    # error(...) where the function imports Modelica.Utilities.Streams.error
+    path = MSL / "Math" / "Nonlinear.mo"
+    data = path.read_bytes()
+    new, lines = streams_error_as_assert(data)
+    assert len(new) == len(data) and new.count(b"\n") == data.count(b"\n")
+    assert lines == [_line_of(path, r"(?m)^[ \t]*error\($")]
+    assert b"assert(not (fa > 0.0 and fb > 0.0 or fa < 0.0 and fb < 0.0), " in new
 
 
 @pytest.mark.compile

@@ -9,7 +9,9 @@ each call written with the function's full name as the assert with the same mean
 * ``if c then Modelica.Utilities.Streams.error(m); end if;`` (the branch holding nothing else, no
   ``elseif``/``else``) as ``assert(not (c), m);``: rumoca also drops an assert inside an
   if-equation, and the condition in the assert is the same check;
-* any other ``Modelica.Utilities.Streams.error(m);`` as ``assert(false, m);``.
+* any other ``Modelica.Utilities.Streams.error(m);`` as ``assert(false, m);``;
+* the same for ``error(m)`` in a class that imports ``Modelica.Utilities.Streams.error``
+  (``Modelica.Math.Nonlinear.solveOneNonlinearEquation``).
 
 A failing assert of level error stops the run with its message, as ``ModelicaError`` does. The
 text keeps its lines and byte offsets (the replacement is padded with blanks).
@@ -21,7 +23,9 @@ import re
 from .rewrite import _code_mask, _matching_paren
 
 _CALL = re.compile(rb"\bModelica\s*\.\s*Utilities\s*\.\s*Streams\s*\.\s*error\s*\(")
-_IF = re.compile(rb"\bif\b")
+_IMPORT = re.compile(rb"\bimport\s+Modelica\s*\.\s*Utilities\s*\.\s*Streams\s*\.\s*error\s*;")
+_HEAD = re.compile(rb"\b(?:function|model|block|class|package)\s+([A-Za-z_]\w*)")
+_SHORT_CALL = re.compile(rb"(?<![\w.])error\s*\(")
 
 
 def _pad(new: bytes, old: bytes) -> bytes:
@@ -33,15 +37,35 @@ def _pad(new: bytes, old: bytes) -> bytes:
     return body + b" " * (len(old) - len(body))
 
 
+def _imported_regions(code: bytes) -> list[tuple[int, int]]:
+    """(start, end) of each class body that holds ``import Modelica.Utilities.Streams.error;``, from
+    the import to the class's ``end``: there a call ``error(...)`` names Streams.error."""
+    regions = []
+    for imp in _IMPORT.finditer(code):
+        head = None
+        for head in _HEAD.finditer(code, 0, imp.start()):
+            pass
+        if head is None:
+            continue
+        end = re.compile(rb"\bend\s+" + re.escape(head.group(1)) + rb"\s*;").search(code, imp.end())
+        if end is not None:
+            regions.append((imp.end(), end.start()))
+    return regions
+
+
 def streams_error_as_assert(data: bytes) -> tuple[bytes, list[int]]:
-    """*data* with each ``Modelica.Utilities.Streams.error`` call read as an assert (see the
-    module's docstring), and the lines of the calls."""
+    """*data* with each ``Modelica.Utilities.Streams.error`` call (written with its full name, or as
+    ``error`` where the class imports it so) read as an assert (see the module's docstring), and
+    the lines of the calls."""
     if b"Streams" not in data:
         return data, []
     code, _, _ = _code_mask(data)
+    calls = list(_CALL.finditer(code))
+    for start, stop in _imported_regions(code):
+        calls += [m for m in _SHORT_CALL.finditer(code, start, stop)]
     out = bytearray(data)
     lines: list[int] = []
-    for m in _CALL.finditer(code):
+    for m in sorted(calls, key=lambda c: c.start()):
         close = _matching_paren(code, m.end() - 1)
         semi = re.compile(rb"\s*;").match(code, close + 1) if close is not None else None
         if semi is None:
