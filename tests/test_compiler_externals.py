@@ -275,3 +275,14 @@ def test_a_modified_constant_mixes_in_rumoca_even_from_a_replaced_default_so_it_
     with pytest.raises(UnsupportedConstructError, match=r"package Medium2 extends Medium with a modified constant "
                                                         r"at .*Mixed.mo:7, and Mixed.DefaultReplaced also uses Medium"):
         compile_model(src, "Mixed.DefaultReplaced", backend="embedded", output=tmp_path / "m.fmu")
+
+
+def test_a_short_class_takes_the_modification_without_its_comments_keeping_every_line():
+    text = (b"model A\n  Holder h(x = 1, // first\n    redeclare model M = Base(k = 5, // the gain\n"
+            b"      j = 2));\nend A;\n")
+    new, lines = short_class_redeclarations(text)
+    assert lines == [3] and new.count(b"\n") == text.count(b"\n")
+    assert b"model M__tb3_39 = Base(k = 5, j = 2);" in new and b"redeclare model M = M__tb3_39\n" in new
+    # a modification that names anything is left to the refusal
+    named = text.replace(b"k = 5", b"k = kk")
+    assert short_class_redeclarations(named) == (named, [])

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 
-from .rewrite import _code_mask, _matching_paren
+from .rewrite import _blank_comments, _code_mask, _matching_paren
 
 _KINDS = rb"(?:model|block|class|connector|record)"
 REDECLARATION = re.compile(rb"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*(" + _KINDS
@@ -83,7 +83,8 @@ def short_class_redeclarations(data: bytes) -> tuple[bytes, list[int]]:
     lines of the redeclarations changed. Lines are kept; byte offsets after an edit shift."""
     if b"redeclare" not in data:
         return data, []
-    code, _, _ = _code_mask(data)
+    code, starts, ends = _code_mask(data)
+    clean = _blank_comments(data, starts, ends)  # (the strings kept: a literal may be one)
     edits: list[tuple[int, int, bytes]] = []
     lines: list[int] = []
     for m in REDECLARATION.finditer(code):
@@ -96,8 +97,8 @@ def short_class_redeclarations(data: bytes) -> tuple[bytes, list[int]]:
             continue
         line = data.count(b"\n", 0, m.start()) + 1
         name = m.group(2) + b"__tb%d_%d" % (line, m.start())
-        original = data[m.start(3):close_at + 1]
-        short = b" " + m.group(1) + b" " + name + b" = " + re.sub(rb"\s*\n\s*", b" ", original) + b"; "
+        original = clean[m.start(3):close_at + 1]
+        short = b" " + m.group(1) + b" " + name + b" = " + re.sub(rb"\s*\n\s*", b" ", original).strip() + b"; "
         edits.append((start, 0, short))
         edits.append((m.start(3), close_at + 1 - m.start(3), name + b"\n" * original.count(b"\n")))
         lines.append(line)
