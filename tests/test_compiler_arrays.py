@@ -372,8 +372,8 @@ package Mods
     replaceable model M = Base;
     M m;
   end Holder;
-  model LostRedeclare "the redeclaration's k = 5 must reach h.m.k"
-    Holder h(redeclare model M = Base(k = 5));
+  model LostRedeclare "the redeclaration's k = kk must reach h.m.k (a literal is read through a short class)"
+    parameter Real kk = 5; Holder h(redeclare model M = Base(k = kk));
   end LostRedeclare;
   package Medium
     constant Real cp = 4180;

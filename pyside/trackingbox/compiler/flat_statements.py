@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import CompileError
 from . import arrays as arr
-from . import records
+from . import lapack, records
 from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
@@ -47,6 +47,14 @@ def _declared_dims(loc: dict[str, Any]) -> list[Any]:
     return out
 
 
+def _var_name(node: Any) -> str | None:
+    """The name an expression node refers to when it is a plain variable reference, else None."""
+    kind, body = kind_of(node)
+    if kind != "VarRef" or not isinstance(body, dict) or body.get("subscripts"):
+        return None
+    return (body.get("name") or {}).get("name")
+
+
 def _is_algorithm(context: str) -> bool:
     """Whether a statement context names an algorithm section of the model (not a function)."""
     return context.startswith(("algorithm ", "initial algorithm "))
@@ -70,7 +78,7 @@ class StatementTranslation:
         if vectorized is not None:
             return vectorized
         if ext:
-            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
+            return self._external(fname, fn, ext, args)
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")
@@ -185,6 +193,44 @@ class StatementTranslation:
             raise self.unsupported(f"external \"builtin\" function {fname!r} with other than one output "
                                    "returned by the call", r"\bexternal\b")
         return [value]
+
+    def _external(self, fname: str, fn: dict[str, Any], ext: dict[str, Any], args: list[Value]) -> list[Value]:
+        """A function whose external routine the embedded path knows (:mod:`.lapack`): the routine on
+        its call's arguments, the values it writes to the function's outputs returned; any other
+        routine is refused naming the function and where it is declared."""
+        language = str(ext.get("language") or "C").upper()
+        if language == "BUILTIN":  # a built-in the language does not have (flat_builtins.builtin_external_name)
+            raise self.unsupported(f"external function {fname!r}", r"\bexternal\b")
+        routine = str(ext.get("function_name") or fname.rsplit(".", 1)[-1])
+        shown = fname.removesuffix("__tuple")  # (the copy taking every output, see rewrite.first_output_functions)
+        where = rf"\bfunction\s+{re.escape(shown.rsplit('.', 1)[-1])}\b"
+        impl = lapack.ROUTINES.get(routine.lower()) if language == "FORTRAN 77" else None
+        if impl is None or ext.get("output_name"):
+            raise self.unsupported(f"external function {shown!r} (external {language!r} routine {routine!r})", where)
+        env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
+        for out in fn.get("outputs") or []:
+            if out.get("default") is not None:
+                env[out["name"]] = self.expr(out["default"], env)
+        outs = {o["name"] for o in fn.get("outputs") or []}
+        values = []
+        for node in ext.get("args") or []:  # an output without a default is only written (None here)
+            name = _var_name(node)
+            values.append(None if name in outs and name not in env else self.expr(node, env))
+        try:
+            written = impl(values)
+        except lapack.NotGiven as exc:
+            raise self.unsupported(f"external function {shown!r} (LAPACK {routine})", where, str(exc)) from None
+        for k, node in enumerate(ext.get("args") or []):
+            name = _var_name(node)
+            if name in outs:
+                if k not in written:
+                    raise self.unsupported(f"external function {shown!r} (LAPACK {routine})", where,
+                                           f"its output {name!r} is not given for these arguments")
+                env[name] = written[k]
+        missing = [o["name"] for o in fn.get("outputs") or [] if o["name"] not in env]
+        if missing:
+            raise CompileError(f"external function {fname!r} does not give its output {missing[0]!r}")
+        return [env[o["name"]] for o in fn.get("outputs") or []]
 
     def _statements(self, stmts: list[Any], env: dict[str, Value], fname: str) -> None:
         for st in stmts:

@@ -10,7 +10,9 @@ drops or mixes up values (each found by flattening small models; see
   declaration) says about ``o.i``: ``o.i.b`` loses its value, a start value
   given there is lost, and so are bounds.
 * **A class redeclaration with a modification**
-  (``redeclare model M = Base(k = 5)``): the modification is dropped.
+  (``redeclare model M = Base(k = 5)``): the modification is dropped. Where it gives only
+  literal values, :mod:`.redeclare_short` has rumoca read it through a short class, which it
+  keeps; a function redeclaration with a modification is kept as written.
 * **A value given together with attributes, inside a nested modification.** In
   ``extends Base(k(max = 5) = 3)``, ``model D = C(k(min = 1) = 3)`` or
   ``A a(c(k(max = 5) = 3))`` the value 3 and the attributes are both dropped
@@ -36,6 +38,7 @@ from pathlib import Path
 
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
+from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
 log = logging.getLogger(__name__)
@@ -260,11 +263,14 @@ class ModifierCheck:
                             warnings.append(f"{path}: {', '.join(sorted(harmless))} declared for it are not "
                                             f"kept through 'extends {m.group(1)}(...)' at {where}")
             self._check_values_with_attributes(model, c, text)
-            for m in re.finditer(rf"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*{_KINDS}\s+\w+\s*=\s*[\w.]+\s*\(",
+            for m in re.finditer(rf"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*({_KINDS})\s+\w+\s*=\s*[\w.]+\s*\(",
                                  text):
+                if m.group(1) == "function" or short_class_handles(text, m.start()):
+                    continue  # kept by rumoca / read through a short class (see .redeclare_short)
                 raise UnsupportedConstructError(
                     f"unsupported Modelica construct in {model}: class redeclaration with a modification at "
-                    f"{self._location(c, m.start())} (rumoca 0.10.2 drops the modification); declare a "
+                    f"{self._location(c, m.start())} (rumoca 0.10.2 drops the modification, and it sets more "
+                    "than literal values, which the embedded path reads through a short class); declare a "
                     "short class with the modification and redeclare to it"
                 )
         return warnings

@@ -324,6 +324,25 @@ LIBRARY_BODIES = (
 """,
         why="a return inside a for loop",
     ),
+    # Modelica.Math.Polynomials.fitting (MSL 4.0.0): the Vandermonde matrix is built column by
+    # column from its last one, which rumoca refuses ("reads elements of `V` that do not all have
+    # a definition"). Declaring V filled with ones gives the same last column, and the loop then
+    # fills the others from it with the same products.
+    LibraryBody(
+        name="Modelica.Math.Polynomials.fitting",
+        header=b"function fitting",
+        digest="e164c70ab823a3cf3549c4808142bca51ae45a93408b967d80fbb4770d08dc22",
+        start=b"protected",
+        body=b"""protected
+        Real V[size(u, 1), n + 1] = fill(1.0, size(u, 1), n + 1);
+      algorithm
+        for j in n:-1:1 loop
+          V[:, j] := {u[i] * V[i, j + 1] for i in 1:size(u,1)};
+        end for;
+        p :=Modelica.Math.Matrices.leastSquares(V, y);
+""",
+        why="a matrix built column by column without a binding",
+    ),
     # Modelica.Blocks.Sources.TimeTable.getInterpolationCoefficients (MSL 4.0.0): a while loop moves
     # the grid index `next` up from `last` while the row's time has been reached, which the embedded
     # backend cannot translate (its condition varies with time). The loop's condition depends only
@@ -423,6 +442,17 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
                   next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
         changed = True
+    from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
+    from .redeclare_short import short_class_redeclarations
+    from .streams_error import streams_error_as_assert
+    for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
+                          (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
+                          (short_class_redeclarations, "class redeclarations with a literal modification read "
+                                                       "through a short class")):
+        body, lines = rewrite(body)
+        if lines:
+            log.debug("%s: %s at lines %s", file, what, ", ".join(map(str, lines)))
+            changed = True
     firsts, lines = first_output_functions(body, tuple_names)
     if firsts != body:
         if lines:
@@ -628,6 +658,8 @@ def first_output_functions(data: bytes, tuple_names: frozenset[bytes] = frozense
     for fn in _functions(code):
         copy = _one_line(clean[fn.start:fn.end])
         copy = re.sub(rb"^function\s+" + re.escape(fn.name), b"function " + fn.name + TUPLE_SUFFIX, copy)
+        if _previous_word(code, fn.start) in (b"pure", b"impure"):  # the copy is as pure as the function
+            copy = _previous_word(code, fn.start) + b" " + copy
         copy = re.sub(rb"\bend\s+" + re.escape(fn.name) + rb"\s*;$", b"end " + fn.name + TUPLE_SUFFIX + b";", copy)
         edits.append((fn.end, fn.end, b" " + copy))
         if not fn.single or fn.name not in tuple_names:  # its calls taking all outputs might not be renamed
