@@ -130,8 +130,10 @@ def summary(row: dict, biased: float) -> dict:
                                         **((r.get("retrack") or {}).get("timings") or {})}
     kept = {label: [f"{k['parameter']} on {k['variable']} (pair refused: {k['refused']})" for k in run.get("kept", [])]
             for label, run in runs if run and run.get("kept")}
+    # a re-track's note says what it did not do as asked (an estimate skipped: tracking from the spec's starts)
+    notes = {label: run["note"] for label, run in runs if run and run.get("note")}
     return {"named": named, "stopped": doc.get("stopped"), "parameters": params, "phases": phases, "bands": bands,
-            "kept": kept}
+            "kept": kept, "notes": notes}
 
 
 def band_coverages(csv: Path, truth: dict, errors: dict) -> dict:
@@ -393,6 +395,8 @@ def main(argv: list[str] | None = None) -> int:
         for label, pairs in s["kept"].items():
             for text in pairs:
                 print(f"    {label}: paired although pair refused it: {text}", flush=True)
+        for label, text in s.get("notes", {}).items():
+            print(f"    {label}: NOTE {text}", flush=True)
         for label, per in s["bands"].items():
             for name, c in per.items():
                 print(f"    band of {name} ({label}): holds the truth in {100 * c['covered']:.1f} % of {c['rows']} rows "

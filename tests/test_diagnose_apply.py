@@ -283,3 +283,35 @@ def test_the_plot_draws_a_parameter_no_pair_drove_at_the_start_it_kept(hx_fmu, t
                                               "errors": {"kht": {**err.to_json(), "max_error": 99.0}}}}])
     png = plot_errors(result, {"parameters": {"kht": 1250.0}}, None)
     assert png is not None and png.stat().st_size > 0
+
+
+def test_a_journal_another_run_wrote_is_set_aside_and_the_estimate_starts_over(hx_fmu, tmp_path) -> None:
+    """A re-track's estimate resumes its own journal only: one written for another spec (a copied case folder,
+    an edited spec) is set aside and the estimate runs from scratch to the same figures as a clean run, where
+    it used to fail (and the evaporators' recipe then tracked from the spec's starts). A corrupt journal still
+    stops the run."""
+    from trackingbox.diagnose.apply import _estimate_checkpointed
+    from trackingbox.errors import CheckpointError
+    from trackingbox.spec import load_spec
+
+    recipe = Recipe(estimate={"workers": 1})
+    spec_path = _tiny_spec(hx_fmu, tmp_path)
+    first = tmp_path / "first" / "checkpoint.json"
+    first.parent.mkdir()
+    _estimate_checkpointed(load_spec(spec_path), recipe, first, None)
+    journal = first.with_suffix(".journal")
+    assert journal.is_file()
+
+    spec_path.write_text(spec_path.read_text().replace("start = 1000.0", "start = 1100.0"))
+    clean = tmp_path / "clean" / "checkpoint.json"
+    clean.parent.mkdir()
+    expected = _estimate_checkpointed(load_spec(spec_path), recipe, clean, None)
+    old = journal.read_bytes()
+    got = _estimate_checkpointed(load_spec(spec_path), recipe, first, None)
+    assert got.parameters == expected.parameters
+    assert (first.parent / "checkpoint.journal.stale").read_bytes() == old
+    assert journal.read_bytes() != old  # this run's own journal now
+
+    journal.write_bytes(journal.read_bytes()[:-5])  # truncated: not another run's, a damaged one
+    with pytest.raises(CheckpointError, match="truncated"):
+        _estimate_checkpointed(load_spec(spec_path), recipe, first, None)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CheckpointError
+from .errors import CheckpointError, StaleCheckpointError
 from .io import write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -262,7 +262,7 @@ class Journal:
         if head.get("version") != self.VERSION or head.get("identity") != self.identity:
             theirs, ours = head.get("identity") or {}, self.identity
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
-            raise CheckpointError(f"journal {self.path} was written by another run (differs in: "
+            raise StaleCheckpointError(f"journal {self.path} was written by another run (differs in: "
                                   f"{', '.join(diff) or 'version'}); run without --resume to start over")
         for i, batch in enumerate(entries[1:], start=2):
             try:

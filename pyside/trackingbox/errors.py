@@ -63,6 +63,11 @@ class CheckpointError(TrackingError, ValueError):
     """A checkpoint or journal to resume from is unreadable, corrupt, truncated or belongs to another run."""
 
 
+class StaleCheckpointError(CheckpointError):
+    """A journal to resume from was written by another run (its spec, twin or settings differ): sound, but not
+    this run's."""
+
+
 class LiveError(TrackingError, RuntimeError):
     """The online mode cannot connect, authenticate or read its tags (OPC UA)."""
 

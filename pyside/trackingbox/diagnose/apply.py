@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..errors import TrackingError
+from ..errors import StaleCheckpointError, TrackingError
 from ..io import write_text_atomic
 from ..spec import load_spec
 
@@ -276,12 +276,9 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
             # checkpointed: an interrupted re-track (diagnose --apply --resume) continues its estimation from
             # the journal instead of repeating its simulations
             checkpoint = out / "estimate" / "checkpoint.json"
-            journal = checkpoint.with_suffix(".journal")
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
             try:
-                est = stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
-                                                                           "resume": journal.exists()}),
-                                          progress=progress)
+                est = _estimate_checkpointed(spec, recipe, checkpoint, progress)
             except TrackingError as exc:
                 if recipe.estimate_may_fail:
                     write_text_atomic(saved, json.dumps({"key": key, "failed": str(exc)}) + "\n")
@@ -328,6 +325,33 @@ def retrack(spec_path: Path, out: Path, recipe: Recipe, truth: Mapping[str, Any]
     return Retrack(spec=path, csv=Path(tr.csv), pairs=[(p.variable, p.parameter) for p in spec.pairs],
                    estimates=estimates, held=held, errors=parameter_errors(spec, Path(tr.csv), truth, settle),
                    timings=timings, note=note, kept=kept)
+
+
+def _estimate_checkpointed(spec: Any, recipe: Recipe, checkpoint: Path, progress: Any) -> Any:
+    """The estimate stage with its journal beside *checkpoint*: resumed when the journal is this re-track's.
+
+    A journal another run wrote (the spec, twin or settings changed since, e.g. a case folder copied or a
+    spec edited) holds nothing this estimate may reuse: it is set aside (``.stale``, with a warning) and the
+    estimate starts over, instead of failing on it (which, where the recipe lets the estimate fail, would track
+    from the spec's starts). A journal that is corrupt or truncated still stops the run.
+    """
+    from .. import stages
+
+    journal = checkpoint.with_suffix(".journal")
+
+    def run(resume: bool) -> Any:
+        return stages.estimate.run(spec, stages.EstimateSettings(**{**recipe.estimate, "checkpoint": checkpoint,
+                                                                   "resume": resume}), progress=progress)
+
+    if not journal.exists():
+        return run(False)
+    try:
+        return run(True)
+    except StaleCheckpointError as exc:
+        stale = journal.with_name(journal.name + ".stale")
+        journal.replace(stale)
+        log.warning("%s; set aside as %s, the estimate starts over", exc, stale)
+        return run(False)
 
 
 def _estimate_key(spec_path: Path, recipe: Recipe) -> str:
