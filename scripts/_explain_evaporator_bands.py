@@ -19,7 +19,7 @@ band's noise part gives it (``loops_noise``'s autocorrelations with the tag's fa
 :class:`~trackingbox.identify.bands.BandTracker`), and the tag's error spectrum (Welch, 45 h segments) against
 the white level that autocovariance implies.
 
-    scripts/explain_evaporator_bands --out DIR [--seeds 3]     (DIR: bench_uncertainty's --out)
+    scripts/explain_evaporator_bands --out DIR [--seeds 3] [--first 0]     (DIR: bench_uncertainty's --out)
 """
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ def explain(case: Path) -> dict[str, Any]:
 
     from trackingbox.diagnose.apply import truth_on
     from trackingbox.identify import held as held_mod
-    from trackingbox.identify.bands import NOISE_LAGS, loops_noise
+    from trackingbox.identify.bands import NOISE_LAGS, loop_model, loops_noise
     from trackingbox.spec import load_spec
     from trackingbox.tracking.tuning import pair_settings
 
@@ -187,7 +187,22 @@ def explain(case: Path) -> dict[str, Any]:
             gam = fast_autocovariance(e_a[auto, k], NOISE_LAGS)
             var = gam[0] * acf[j, k, 0] + 2.0 * float(np.sum((taper * gam * acf[j, k])[1:])) if acf is not None else math.nan
             band[tag] = math.sqrt(max(var, 0.0))
+        # the lag part's slope: the tracked value's own (two exponential means, as BandTracker) against the truth's
+        lag = loop_model(*loops[j][:3], loops[j][3], ts).lag_time
+        fast, slow, est = p[first, j], p[first, j], np.zeros_like(t)
+        af, as_ = math.exp(-ts / (0.5 * lag)), math.exp(-ts / lag)
+        for i in range(first, t.size):
+            if np.isfinite(p[i, j]) and not hold[i, j]:
+                fast, slow = af * fast + (1 - af) * p[i, j], as_ * slow + (1 - as_) * p[i, j]
+            est[i] = (fast - slow) / (0.5 * lag)
+        rate = np.gradient(tv[:, j], t)
+        moving = after & (rate != 0)
         doc["parameters"][name] = {
+            "lag_time": lag,
+            **({"truth_rate_x_lag_median": float(np.median(np.abs(rate[moving]) * lag)),
+                "own_rate_x_lag_median": float(np.median(np.abs(est[moving]) * lag)),
+                "own_rate_wrong_sign": float(np.mean(np.sign(est[moving]) != np.sign(rate[moving])))}
+               if moving.any() else {}),
             "miss_rms": float(np.sqrt(np.mean(miss[after] ** 2))),
             "reconstruction_corr": float(np.corrcoef(miss[after], drivers["all"][after, j])[0, 1]),
             "rms_by_driver": rms, "band_noise_sd_by_tag": band}
@@ -198,9 +213,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="explain_evaporator_bands", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="bench_uncertainty's --out (its cases/ are read)")
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first", type=int, default=0, help="first seed (default 0)")
     args = ap.parse_args(argv)
     ok = True
-    for seed in range(args.seeds):
+    for seed in range(args.first, args.first + args.seeds):
         case = args.out / "cases" / f"bands-evaporator-plain-{seed}"
         if not (case / "track" / "result.json").exists():
             print(f"seed {seed}: no run in {case} (scripts/bench_uncertainty --cases bands-evaporator-plain "
@@ -220,6 +236,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"(corr {d['reconstruction_corr']:.3f}); by driver: "
                   + ", ".join(f"{k} {v:.3g}" for k, v in d["rms_by_driver"].items() if k != "all")
                   + "; band's noise sd by tag: " + ", ".join(f"{k} {v:.3g}" for k, v in d["band_noise_sd_by_tag"].items()))
+            if "truth_rate_x_lag_median" in d:
+                print(f"    lag part (T_lag {d['lag_time']:.0f} s): truth's rate x T_lag median {d['truth_rate_x_lag_median']:.3g}, "
+                      f"the band's (its own rate) {d['own_rate_x_lag_median']:.3g}, of the wrong sign in "
+                      f"{100 * d['own_rate_wrong_sign']:.0f} % of the rows")
     return 0 if ok else 1
 
 
