@@ -80,9 +80,22 @@ tracked value ``p`` (level :data:`LEVEL`), in five parts:
    --rebands``, seeds 0-2) its band held the truth in 36.6 % of the rows after 12 h from its own
    loop alone, 75.9 % with this part. What is left are the fouling's slow errors (6 h means up to
    3.5e-5, carried 560 to one), which its own band holds through a noise part dominated by the
-   controller's fast kick, which the valve's loop does not pass on: the fast error's statistics
-   (centred over 30 min) do not see slow errors, and where the fouling's come from on that plant
-   was not measured.
+   controller's fast kick, which the valve's loop does not pass on. Where they come from
+   (``scripts/explain_evaporator_bands``, seeds 0-2): the three loops linearised as here, driven by
+   what the twin reads wrong at the truth on each paired tag and by the fouling's motion, reproduce
+   the misses (correlation 0.97-0.99; the valve's rms 0.0065-0.0117), and the valve's come in
+   comparable shares from (i) the fouling's motion behind the loops' lag and holds (rms 0.009-0.011
+   on ``KvMax``), (ii) QI-6150's own error at the truth (the analyser's noise as the historian
+   records it; not the inputs: with the plant's true inputs the sd of its 6 h means goes from
+   1.9-2.1e-4 to 1.6-2.0e-4), which the fouling's loop integrates into a wander that reaches the
+   valve through ZI-6150 (rms 0.005-0.0064 against this part's 0.0011 from that tag), and (iii)
+   ZI-6150's error at the truth, most of it from the levels' state compensation (the sd of its 6 h
+   means 2.3-2.9e-4 with it, 0.9e-4 without), with mostly 2-20 times the fast error's spectral level
+   at periods of 9-45 h (one of 15 estimates below 1; rms 0.0046-0.0055 against 0.0020). The noise
+   part takes the fast error's level (30 lags of the error less its 30 min mean) to hold at the
+   loops' periods; a parameter the noise reaches only through the loops' slow path, as the valve's,
+   is fed by exactly the periods where that fails, and a 72 h record does not pin down a spectrum
+   at them.
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
