@@ -28,6 +28,20 @@ def test_a_tank_emptying_through_a_pipe_matches_its_reference():
     assert res["deviation"] <= 1e-3
 
 
+def test_a_tank_started_from_its_preferred_level_and_temperature_matches_its_reference():
+    """``AST_BatchPlant.Test.OneTank`` runs with the system's default ``DynamicFreeInitial``: no
+    initial equation fixes the tank's differentiated ``U`` and ``m`` (no start values); the tank's
+    ``level`` (stateSelect = prefer, start = level_start) and its medium's ``T`` (preferred medium
+    state, start T_start) give the initial point, as a tool choosing them as states starts them."""
+    need_msl("Fluid", "Examples", "AST_BatchPlant.mo")
+    model = "Modelica.Fluid.Examples.AST_BatchPlant.Test.OneTank"
+    if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
+        pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
+    res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
+    assert res["outcome"] == "match", res.get("message")
+    assert res["deviation"] <= 1e-3
+
+
 def test_a_tank_filled_through_a_falling_pipe_follows_the_closed_form_the_reference_misses(tmp_path):
     """``TankWithEmptyingPipe1``: 50 kg/s of water at T_in = 293.15 K falls through a pipe with
     height_ab = 1 m into a tank (valve closed) holding m0 = 0.2 m3 * 995.586 kg/m3 at T_in. As the MSL

@@ -170,6 +170,69 @@ class SystemAssembly:
                 out.append((r, origin))
         return out
 
+    def _state_select(self) -> dict[str, str]:
+        """``stateSelect`` by scalar name, where a variable has one (Always, Prefer, Default, Avoid, Never)."""
+        preference = {}
+        for name, v in (self.flat.get("variables") or {}).items():
+            select = v.get("state_select") if isinstance(v, dict) else None
+            if select:
+                for sv in self.vars.get(name, []):
+                    preference[sv.name] = str(select)
+        return preference
+
+    def preferred_starts(self, states: list[ScalarVar]) -> list[tuple[ca.MX, str]]:
+        """The initial equations ``v = start`` of the variables the model prefers as states
+        (``stateSelect`` always, then prefer) that have a start value and are not states here. A tool
+        choosing its states by ``stateSelect`` integrates such a variable and starts it at its start
+        value where no initial equation fixes it; keeping the differentiated variables as states, the
+        same initial point is where these equations hold (:meth:`_initial_system` adds those that
+        determine a free state the initial equations leave undetermined)."""
+        if not any(s.fixed is not True for s in states):
+            return []
+        preference = self._state_select()
+        state_names = {s.name for s in states}
+        out = []
+        for rank in ("Always", "Prefer"):
+            for name, select in preference.items():
+                sv = self.scalars.get(name)
+                if (select != rank or sv is None or sv.kind != "continuous" or sv.type != REAL
+                        or name in state_names or sv.start_node is None):
+                    continue
+                out.append((sv.sym - self._element(sv, sv.start_node),
+                            f"start value of {name} (stateSelect = {rank.lower()}, standing in for a free state)"))
+        return out
+
+    def _free_kept_at_start(self, residuals: list[tuple[ca.MX, str]], free: list[ScalarVar],
+                            computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
+                            mentioned: set[str]) -> list[ScalarVar]:
+        """The free states left as unknowns of an initialisation problem with fewer equations than
+        unknowns: those named by no initial equation keep their start values, in order, as long as
+        the equations stay as determined (structural rank) as with them, until the problem is square."""
+        exprs = [r for r, _ in residuals]
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        names = [s.sym.name() for s in free] + [s.sym.name() for s in computed]
+        syms = [{v.name() for v in ca.symvar(e)} for e in exprs]
+
+        def rank(left: set[str]) -> int:
+            position = {n: i for i, n in enumerate(n for n in names if n in left)}
+            return max_matching([sorted(position[n] for n in used if n in position) for used in syms])
+
+        left = set(names)
+        full = rank(left)
+        kept = []
+        for s in free:
+            if len(residuals) >= len(left):
+                break
+            if s.name not in mentioned and rank(left - {s.sym.name()}) == full:
+                left.discard(s.sym.name())
+                kept.append(s.name)
+        if kept:
+            log.info("%s: states kept at their start values at initialisation (no initial equation "
+                     "for them): %s", self.model, ", ".join(kept))
+        return [s for s in free if s.sym.name() in left]
+
     def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
                       calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
                       ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
@@ -179,12 +242,7 @@ class SystemAssembly:
         where they are needed (a position prescribed elsewhere makes its own start redundant)."""
         calc_names = {sv.name for sv in calculated}
         eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
-        preference = {}
-        for name, v in (self.flat.get("variables") or {}).items():
-            select = v.get("state_select") if isinstance(v, dict) else None
-            if select:
-                for sv in self.vars.get(name, []):
-                    preference[sv.name] = str(select)
+        preference = self._state_select()
         try:
             red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
                                                                       for s in states},
@@ -216,9 +274,12 @@ class SystemAssembly:
 
     def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
                         computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
-                        optional: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
+                        optional: list[tuple[ca.MX, str]] | None = None,
+                        preferred: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
         """Build the initialisation problem (see the module docstring). *optional* initial equations
-        are added where they determine an unknown the others leave free."""
+        (fixed = true starts of former states), then *preferred* ones (:meth:`preferred_starts`), are
+        added where they determine an unknown the others leave free; a free state still undetermined
+        and named by no initial equation keeps its start value."""
         if optional:
             residuals = list(residuals) + self._needed_optional(residuals, optional, states, computed, assignments)
         mentioned: set[str] = set()
@@ -226,18 +287,15 @@ class SystemAssembly:
             for sym in ca.symvar(r):
                 name = sym.name()
                 mentioned.add(name[4:-1] if name.startswith("der(") and name.endswith(")") else name)
+        if preferred:
+            used = self._needed_optional(residuals, preferred, states, computed, assignments)
+            if used:
+                log.info("%s: free states determined at initialisation by the start values of variables "
+                         "preferred as states: %s", self.model, "; ".join(o for _, o in used))
+                residuals = list(residuals) + used
         free = [s for s in states if s.fixed is not True]
         if len(residuals) < len(free) + len(computed):
-            kept = []
-            for s in list(free):
-                if len(residuals) >= len(free) + len(computed):
-                    break
-                if s.name not in mentioned:
-                    free.remove(s)
-                    kept.append(s.name)
-            if kept:
-                log.info("%s: states kept at their start values at initialisation (no initial equation "
-                         "for them): %s", self.model, ", ".join(kept))
+            free = self._free_kept_at_start(residuals, free, computed, assignments, mentioned)
         n_unknowns = len(free) + len(computed)
         if len(residuals) != n_unknowns:
             what = []
