@@ -575,8 +575,8 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     passed 1e-6*(1 + |z|) with |z| ~ 1e5 Pa. Only the branch taken is evaluated (a short-circuit
     if_else). It is first sought from where a damped Gauss-Newton iteration (_damped_newton) ends
     (from the guess, Newton's steps on the optimality conditions can swing across the root of a
-    square-root flow law), then from the guess; a loop that neither solves leaves NaN, so that the importer's solver fails rather than
-    going on with values that do not satisfy the equations."""
+    square-root flow law), then from the guess; a loop that neither solves leaves NaN, so that the
+    importer's solver fails rather than going on with values that do not satisfy the equations."""
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
@@ -608,7 +608,8 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, start - z2))
     z2 = nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n]
     solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
-    # the damped start first: where the nearest solution's Newton converges from the guess it ends at the
-    # same point, and where it swings it costs most (100 steps with second derivatives)
+    # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
+    # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs
+    # most where it fails (100 steps with second derivatives)
     fallback = ca.if_else(solves2, z2, ca.if_else(solves, z1, ca.DM.nan(n, 1), True), True)
     return ca.if_else(finite, sol, fallback, True)
