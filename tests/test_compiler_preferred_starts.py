@@ -59,6 +59,17 @@ package Pref
     der(x) = -x;
     y = 2*x;
   end Avoided;
+  model Through "an initial equation on an algebraic variable that depends on the first state only"
+    Real x1(start = 4);
+    Real x2(start = 7);
+    Real a;
+  equation
+    der(x1) = -x1;
+    der(x2) = -2*x2;
+    a = 2*x1;
+  initial equation
+    a = 1;
+  end Through;
 end Pref;
 """
 
@@ -106,3 +117,13 @@ def test_temperature_and_level_set_mass_and_energy(src, tmp_path):
 def test_an_avoided_variable_leaves_the_state_at_its_own_start(src, tmp_path):
     _, out = run(src, tmp_path, "Avoided", 1.0, ["x", "y"])
     assert np.allclose(out["x"], 3 * np.exp(-out["time"]), rtol=1e-8)
+
+
+def test_a_state_determined_through_an_algebraic_variable_is_not_the_one_kept_at_its_start(src, tmp_path):
+    """One initial equation for two free states, named by none: x1, the first, was kept at its start
+    and a = 2*x1 = 1 left with no unknown (refused as structurally singular); x1 is determined (0.5)
+    and x2 keeps its start, 7."""
+    _, out = run(src, tmp_path, "Through", 1.0, ["x1", "x2"])
+    t = out["time"]
+    assert np.allclose(out["x1"], 0.5 * np.exp(-t), rtol=1e-8)
+    assert np.allclose(out["x2"], 7 * np.exp(-2 * t), rtol=1e-8)
