@@ -28,6 +28,36 @@ def test_a_tank_emptying_through_a_pipe_matches_its_reference():
     assert res["deviation"] <= 1e-3
 
 
+def test_a_tank_started_from_its_preferred_level_and_temperature_matches_its_reference():
+    """``AST_BatchPlant.Test.OneTank`` runs with the system's default ``DynamicFreeInitial``: no
+    initial equation fixes the tank's differentiated ``U`` and ``m`` (no start values); the tank's
+    ``level`` (stateSelect = prefer, start = level_start) and its medium's ``T`` (preferred medium
+    state, start T_start) give the initial point, as a tool choosing them as states starts them."""
+    need_msl("Fluid", "Examples", "AST_BatchPlant.mo")
+    model = "Modelica.Fluid.Examples.AST_BatchPlant.Test.OneTank"
+    if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
+        pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
+    res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
+    assert res["outcome"] == "match", res.get("message")
+    assert res["deviation"] <= 1e-3
+
+
+@pytest.mark.slow
+def test_two_tanks_with_an_overflow_pipe_between_ports_above_their_levels_match_their_reference():
+    """``Tanks.TanksWithOverflow`` (about 80 s to compile, 70 s to simulate on a loaded machine): the
+    overflow pipe joins two ports above their tanks' levels, so no flow passes and only the pipe's
+    pressure difference is determined (the loop's Jacobian is singular), and with the lower port
+    taking inflow the pipe's square-root flow law makes Newton's steps swing across the root. The
+    loop is solved from where a damped iteration ends (before: NaN at initialisation)."""
+    need_msl("Fluid", "Examples", "Tanks.mo")
+    model = "Modelica.Fluid.Examples.Tanks.TanksWithOverflow"
+    if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
+        pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
+    res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
+    assert res["outcome"] == "match", res.get("message")
+    assert res["deviation"] <= 1e-3
+
+
 def test_a_tank_filled_through_a_falling_pipe_follows_the_closed_form_the_reference_misses(tmp_path):
     """``TankWithEmptyingPipe1``: 50 kg/s of water at T_in = 293.15 K falls through a pipe with
     height_ab = 1 m into a tank (valve closed) holding m0 = 0.2 m3 * 995.586 kg/m3 at T_in. As the MSL

@@ -170,6 +170,69 @@ class SystemAssembly:
                 out.append((r, origin))
         return out
 
+    def _state_select(self) -> dict[str, str]:
+        """``stateSelect`` by scalar name, where a variable has one (Always, Prefer, Default, Avoid, Never)."""
+        preference = {}
+        for name, v in (self.flat.get("variables") or {}).items():
+            select = v.get("state_select") if isinstance(v, dict) else None
+            if select:
+                for sv in self.vars.get(name, []):
+                    preference[sv.name] = str(select)
+        return preference
+
+    def preferred_starts(self, states: list[ScalarVar]) -> list[tuple[ca.MX, str]]:
+        """The initial equations ``v = start`` of the variables the model prefers as states
+        (``stateSelect`` always, then prefer) that have a start value and are not states here. A tool
+        choosing its states by ``stateSelect`` integrates such a variable and starts it at its start
+        value where no initial equation fixes it; keeping the differentiated variables as states, the
+        same initial point is where these equations hold (:meth:`_initial_system` adds those that
+        determine a free state the initial equations leave undetermined)."""
+        if not any(s.fixed is not True for s in states):
+            return []
+        preference = self._state_select()
+        state_names = {s.name for s in states}
+        out = []
+        for rank in ("Always", "Prefer"):
+            for name, select in preference.items():
+                sv = self.scalars.get(name)
+                if (select != rank or sv is None or sv.kind != "continuous" or sv.type != REAL
+                        or name in state_names or sv.start_node is None):
+                    continue
+                out.append((sv.sym - self._element(sv, sv.start_node),
+                            f"start value of {name} (stateSelect = {rank.lower()}, standing in for a free state)"))
+        return out
+
+    def _free_kept_at_start(self, residuals: list[tuple[ca.MX, str]], free: list[ScalarVar],
+                            computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
+                            mentioned: set[str]) -> list[ScalarVar]:
+        """The free states left as unknowns of an initialisation problem with fewer equations than
+        unknowns: those named by no initial equation keep their start values, in order, as long as
+        the equations stay as determined (structural rank) as with them, until the problem is square."""
+        exprs = [r for r, _ in residuals]
+        for var, val in reversed(assignments):
+            if any(ca.depends_on(e, var) for e in exprs):
+                exprs = ca.substitute(exprs, [var], [val])
+        names = [s.sym.name() for s in free] + [s.sym.name() for s in computed]
+        syms = [{v.name() for v in ca.symvar(e)} for e in exprs]
+
+        def rank(left: set[str]) -> int:
+            position = {n: i for i, n in enumerate(n for n in names if n in left)}
+            return max_matching([sorted(position[n] for n in used if n in position) for used in syms])
+
+        left = set(names)
+        full = rank(left)
+        kept = []
+        for s in free:
+            if len(residuals) >= len(left):
+                break
+            if s.name not in mentioned and rank(left - {s.sym.name()}) == full:
+                left.discard(s.sym.name())
+                kept.append(s.name)
+        if kept:
+            log.info("%s: states kept at their start values at initialisation (no initial equation "
+                     "for them): %s", self.model, ", ".join(kept))
+        return [s for s in free if s.sym.name() in left]
+
     def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
                       calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
                       ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
@@ -179,12 +242,7 @@ class SystemAssembly:
         where they are needed (a position prescribed elsewhere makes its own start redundant)."""
         calc_names = {sv.name for sv in calculated}
         eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
-        preference = {}
-        for name, v in (self.flat.get("variables") or {}).items():
-            select = v.get("state_select") if isinstance(v, dict) else None
-            if select:
-                for sv in self.vars.get(name, []):
-                    preference[sv.name] = str(select)
+        preference = self._state_select()
         try:
             red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
                                                                       for s in states},
@@ -216,9 +274,12 @@ class SystemAssembly:
 
     def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
                         computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],
-                        optional: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
+                        optional: list[tuple[ca.MX, str]] | None = None,
+                        preferred: list[tuple[ca.MX, str]] | None = None) -> InitialSystem:
         """Build the initialisation problem (see the module docstring). *optional* initial equations
-        are added where they determine an unknown the others leave free."""
+        (fixed = true starts of former states), then *preferred* ones (:meth:`preferred_starts`), are
+        added where they determine an unknown the others leave free; a free state still undetermined
+        and named by no initial equation keeps its start value."""
         if optional:
             residuals = list(residuals) + self._needed_optional(residuals, optional, states, computed, assignments)
         mentioned: set[str] = set()
@@ -226,18 +287,15 @@ class SystemAssembly:
             for sym in ca.symvar(r):
                 name = sym.name()
                 mentioned.add(name[4:-1] if name.startswith("der(") and name.endswith(")") else name)
+        if preferred:
+            used = self._needed_optional(residuals, preferred, states, computed, assignments)
+            if used:
+                log.info("%s: free states determined at initialisation by the start values of variables "
+                         "preferred as states: %s", self.model, "; ".join(o for _, o in used))
+                residuals = list(residuals) + used
         free = [s for s in states if s.fixed is not True]
         if len(residuals) < len(free) + len(computed):
-            kept = []
-            for s in list(free):
-                if len(residuals) >= len(free) + len(computed):
-                    break
-                if s.name not in mentioned:
-                    free.remove(s)
-                    kept.append(s.name)
-            if kept:
-                log.info("%s: states kept at their start values at initialisation (no initial equation "
-                         "for them): %s", self.model, ", ".join(kept))
+            free = self._free_kept_at_start(residuals, free, computed, assignments, mentioned)
         n_unknowns = len(free) + len(computed)
         if len(residuals) != n_unknowns:
             what = []
@@ -392,7 +450,7 @@ class SystemAssembly:
         )[0]
         rf = ca.rootfinder(
             f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
-            {"abstol": 1e-10, "max_iter": 100},
+            {"abstol": NEWTON_TOLERANCE, "max_iter": 100},
         )
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
@@ -456,12 +514,52 @@ LOOP_TOLERANCE = 1e-6
 above it the loop has no solution near the guess and gives NaN."""
 NEAREST_REGULARISATION = 1e-10
 """epsilon of the regularised optimality conditions of the nearest solution (see _or_nearest_solution)."""
+NEWTON_TOLERANCE = 1e-10
+"""The loops' Newton tolerance (largest residual): the rootfinders' abstol."""
+DAMPED_ITERATIONS = 60
+"""Steps of the damped Gauss-Newton iteration, the last fallback of a loop (see _damped_newton)."""
+DAMPED_HALVINGS = 24
+"""Step lengths 1, 1/2, ... 1/2**(DAMPED_HALVINGS - 1) tried on each step of the damped iteration."""
+
+
+def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.DM,
+                   values: ca.MX | ca.DM) -> ca.MX:
+    """A root of the scaled residual *distance(z, p, z0)* by Gauss-Newton steps of minimum norm,
+    dz = -J'(J J' + mu I)^-1 r (defined whatever the rank of J), each shortened by halving until the
+    residual's square falls by the Armijo fraction (the shortest length tried is taken otherwise),
+    from *start*. Newton's full steps swing across the root of a flow law that goes as the square
+    root of a pressure difference (from a flow q ~ sqrt(x), the full step lands at -x, and back):
+    e.g. MSL ``Fluid.Examples.Tanks.TanksWithOverflow``'s overflow pipe between two ports above their
+    levels. The iteration is a fixed number of steps (one step function, folded), so that it is
+    exported as C like the rest of the model."""
+    z = ca.MX.sym(f"{name}_dz", n)
+    q = ca.MX.sym(f"{name}_dq", values.numel() + n)
+    p, z0 = q[:values.numel()], q[values.numel():]
+    r = distance(z, p, z0)
+    jac = ca.jacobian(r, z)
+    jjt = ca.mtimes(jac, jac.T)
+    mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
+    dz = -ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(r.numel()), r))
+    phi0 = ca.sumsqr(r)
+
+    def trial(j: int) -> ca.MX:  # the first length from 1/2**j on that the residual accepts
+        a = 0.5 ** j
+        if j == DAMPED_HALVINGS - 1:
+            return z + a * dz
+        phi = ca.sumsqr(distance(z + a * dz, p, z0))
+        return ca.if_else(phi <= (1 - 1e-4 * a) * phi0, z + a * dz, trial(j + 1), True)
+
+    # only the branch taken is evaluated: a step needs as many residuals as lengths it tries, and
+    # none (not even the Jacobian) once the residual is far below the accepted one
+    done = phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2
+    step = ca.Function(f"{name}_damped_step", [z, q], [ca.if_else(done, z, trial(0), True)])
+    return step.fold(DAMPED_ITERATIONS)(start, ca.vertcat(values, start))
 
 
 def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
                          values: ca.MX | ca.DM) -> ca.MX:
-    """Newton's iterate *sol* of the loop g(z, p) = 0 where it and its residual are finite (as
-    before: the iterate after at most 100 steps); where not (a Jacobian singular at the solution,
+    """Newton's iterate *sol* of the loop g(z, p) = 0 where it and its residual are finite and it is
+    a root (Newton's tolerance met, or the test below); where not (a Jacobian singular at the solution,
     e.g. two stuck friction elements in series, whose torque split no equation determines: MSL
     ``Rotational.Examples.LossyGearDemo2``) the solution nearest the guess z0,
     argmin |z - z0| subject to g(z) = 0, from its optimality conditions regularised so that their
@@ -475,8 +573,10 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     (LOOP_TOLERANCE) is a distance in z whatever the units: with flows in kg/s over pressures in Pa
     (gradients ~1e-6) eps = 1e-10 held the solution short of a root, and a residual of 0.08 kg/s
     passed 1e-6*(1 + |z|) with |z| ~ 1e5 Pa. Only the branch taken is evaluated (a short-circuit
-    if_else); a loop that neither solves leaves NaN, so that the importer's solver fails rather than
-    going on with values that do not satisfy the equations."""
+    if_else). It is first sought from where a damped Gauss-Newton iteration (_damped_newton) ends
+    (from the guess, Newton's steps on the optimality conditions can swing across the root of a
+    square-root flow law), then from the guess; a loop that neither solves leaves NaN, so that the
+    importer's solver fails rather than going on with values that do not satisfy the equations."""
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
@@ -489,9 +589,27 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     residual = ca.Function(f"{name}_residual", [z, p], [g])
     distance = ca.Function(f"{name}_distance", [z, p, z0], [scaled])
 
-    # NaN or inf anywhere makes these comparisons false
-    finite = ca.sumsqr(residual(sol, values)) + ca.sumsqr(sol) < ca.inf
+    # NaN or inf anywhere makes these comparisons false. Newton's iterate counts where it met its own
+    # tolerance or is a root by the fallback's test: after its 100 steps, an iterate swinging across
+    # the root of a square-root flow law is finite but no root (TanksWithOverflow's overflow pipe:
+    # 0.084 kg/s out of a port the equations close)
+    r_sol = residual(sol, values)
+    converged = ca.logic_or(ca.mmax(ca.fabs(r_sol)) <= NEWTON_TOLERANCE,
+                            ca.sumsqr(distance(sol, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(sol))) ** 2)
+    finite = ca.logic_and(ca.sumsqr(r_sol) + ca.sumsqr(sol) < ca.inf, converged)
     z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
     solves = ca.sumsqr(distance(z1, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
-    fallback = ca.if_else(solves, z1, ca.DM.nan(n, 1), True)
+    # the damped iteration only finds where to start the nearest solution's Newton again (with the
+    # multipliers that fit it), a guess whose derivatives are stopped: the solution's derivatives are
+    # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
+    # through the iteration (which tripled the generated C of TanksWithOverflow)
+    z2 = _damped_newton(name, distance, n, start, values)
+    jac2 = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])(z2, values, start)
+    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, start - z2))
+    z2 = nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n]
+    solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
+    # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
+    # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs
+    # most where it fails (100 steps with second derivatives)
+    fallback = ca.if_else(solves2, z2, ca.if_else(solves, z1, ca.DM.nan(n, 1), True), True)
     return ca.if_else(finite, sol, fallback, True)

@@ -583,8 +583,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                   self.model, len(blocks), torn_sizes)
         events = self._event_system(discrete, discrete_residuals, discrete_initial)
         initial = None
-        if init_residuals or computed or optional_init:
-            initial = self._initial_system(init_residuals, states, computed, assignments, optional_init)
+        preferred = self.preferred_starts(states)
+        if init_residuals or computed or optional_init or preferred:
+            initial = self._initial_system(init_residuals, states, computed, assignments, optional_init, preferred)
             if not initial.unknowns:
                 initial = None
         asserts = self._unique_asserts()
