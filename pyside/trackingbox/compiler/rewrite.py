@@ -444,9 +444,11 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         changed = True
     from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
     from .redeclare_short import short_class_redeclarations
+    from .if_asserts import if_asserts_outside
     from .streams_error import streams_error_as_assert
     for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
                           (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
+                          (if_asserts_outside, "asserts in if-equations read outside them with their guard"),
                           (short_class_redeclarations, "class redeclarations with a literal modification read "
                                                        "through a short class")):
         body, lines = rewrite(body)
