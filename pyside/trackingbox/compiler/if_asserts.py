@@ -3,7 +3,7 @@
 rumoca 0.10.2 drops an ``assert(...)`` written in a branch of an if-equation without a word, so a
 model that should stop on it runs on. In Modelica the assert holds only while its branch is the
 active one, which is the same as an assert outside the if-equation whose condition is
-``not (guard) or (condition)``, the guard being the branch's own condition and the negation of the
+``if guard then (condition) else true``, the guard being the branch's own condition and the negation of the
 conditions of the branches before it (``else``: of all of them), and of the branches around it
 when if-equations are nested. :func:`if_asserts_outside` has rumoca read each such assert so:
 
@@ -141,12 +141,27 @@ class _Unreadable(Exception):
     """A section the scanner does not follow: left as it is."""
 
 
-def _one_line(text: bytes) -> bytes:
-    return b" ".join(text.split())
+def _one_line(text: bytes, quoted: bytes) -> bytes:
+    """*text* (comments blanked) on one line: each run of blanks outside strings (*quoted* is 1
+    inside them) as one blank, a line break inside a string as ``\\n``."""
+    out = bytearray()
+    for k, c in enumerate(text):
+        if not quoted[k]:
+            if chr(c).isspace():
+                if out and out[-1:] != b" ":
+                    out += b" "
+            else:
+                out.append(c)
+        elif c == 10:
+            out += b"\\n"
+        elif c != 13:
+            out.append(c)
+    return bytes(out).strip()
 
 
 def _guarded(scan: _Scan, start: int, stop: int, guards) -> bytes:
-    """``assert(not (g1 and not (g2) ...) or (condition), rest)`` for the assert at start:stop."""
+    """``assert(if (g1) and not (g2) ... then (condition) else true, rest)`` for the assert at
+    start:stop (the condition is read only where its branch is active, as in the if-equation)."""
     text, code = scan.text, scan.code
     open_at = code.index(b"(", start)
     close = _matching_paren(code, open_at)
@@ -160,11 +175,12 @@ def _guarded(scan: _Scan, start: int, stop: int, guards) -> bytes:
             break
     if comma is None:
         raise _Unreadable
-    guard = " and ".join(("not (%s)" if neg else "(%s)") % _one_line(text[a:b]).decode("utf-8", "replace")
-                         for a, b, neg in guards if neg is not None).encode()
-    loops = [_one_line(text[a:b]) for a, b, neg in guards if neg is None]  # for-loops inside the if
-    new = (b"assert(not (" + guard + b") or (" + _one_line(text[open_at + 1:comma]) + b"), "
-           + _one_line(text[comma + 1:close]).strip() + b");")
+    def line(a: int, b: int) -> bytes:
+        return _one_line(text[a:b], scan.quoted[a:b])
+
+    guard = b" and ".join((b"not (%s)" if neg else b"(%s)") % line(a, b) for a, b, neg in guards if neg is not None)
+    loops = [line(a, b) for a, b, neg in guards if neg is None]  # for-loops inside the if
+    new = b"assert(if " + guard + b" then (" + line(open_at + 1, comma) + b") else true, " + line(comma + 1, close) + b");"
     for head in reversed(loops):
         new = b"for " + head + b" loop " + new + b" end for;"
     return new
@@ -177,10 +193,14 @@ def if_asserts_outside(data: bytes) -> tuple[bytes, list[int]]:
         return data, []
     code, starts, ends = _code_mask(data)
     text = bytearray(data)  # comments blanked, strings kept
+    quoted = bytearray(len(data))
     for a, b in zip(starts, ends):
         if data[a:a + 2] in (b"//", b"/*"):
             text[a:b] = re.sub(rb"[^\n]", b" ", data[a:b])
+        else:
+            quoted[a:b] = b"\1" * (b - a)
     scan = _Scan(code, bytes(text))
+    scan.quoted = bytes(quoted)
     for m in _SECTION.finditer(code):
         try:
             scan.equations(m.end(), [], False, None)
