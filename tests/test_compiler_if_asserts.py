@@ -180,6 +180,18 @@ def test_an_assert_guarded_by_initial_is_checked_at_initialisation_only(branches
 
 
 @pytest.mark.compile
+def test_if_initial_of_asserts_only_in_the_models_own_class_is_checked_not_refused(tmp_path):
+    # refused before (rumoca dropped it); the assert is false at t = 0 only
+    src = tmp_path / "GuardedAssert.mo"
+    src.write_text("model GuardedAssert\n  Real x(start = 0, fixed = true);\nequation\n  der(x) = 1;\n"
+                   "  if initial() then\n    assert(time > 1, \"must fail at t = 0\");\n  end if;\n"
+                   "end GuardedAssert;\n")
+    with pytest.raises(AssertionFailed) as exc:
+        _run(_fmu(src, "GuardedAssert"))
+    assert exc.value.message == "must fail at t = 0" and exc.value.time == 0.0
+
+
+@pytest.mark.compile
 def test_the_msl_lim_integrator_stops_on_its_start_value_check(tmp_path):
     need_msl("Blocks", "Continuous.mo")
     from trackingbox.fmu import FMUModel
