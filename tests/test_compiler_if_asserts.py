@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from _fixtures_msl import MSL, need_msl
-from trackingbox.compiler.if_asserts import if_asserts_outside
+from trackingbox.compiler.if_asserts import call_equations, if_asserts_outside
 from trackingbox.errors import AssertionFailed
 
 BRANCHES = """
@@ -202,3 +202,16 @@ def test_the_msl_lim_integrator_stops_on_its_start_value_check(tmp_path):
         model.simulate(stop_time=1.0, output_interval=0.1, outputs=["lim.y"])
     assert exc.value.message.startswith("LimIntegrator: During initialization the limits have been ignored.")
     assert exc.value.time == 0.0
+
+
+def test_call_equations_that_rumoca_drops_are_found_for_a_warning():
+    """rumoca 0.10.2 drops a call equation of a function without outputs (with the asserts in its
+    body): each is named with its line so the compile warns (not yet compiled with its meaning)."""
+    src = (b"model M\n  Real x = time;\nequation\n  connect(a, b);\n  Connections.root(f.R);\n"
+           b"  P.check(x,\n    2);\n  assert(x < 2, \"m\");\n  when x > 1 then\n    reinit(x, 0);\n"
+           b"    P.check(x, 3);\n  end when;\nend M;\n")
+    assert call_equations(src) == [(6, "P.check")]
+    path = need_msl("Fluid", "Sources.mo")
+    text = path.read_text(encoding="utf-8")
+    lines = [text.count("\n", 0, k) + 1 for k in range(len(text)) if text.startswith("checkBoundary(", k)]
+    assert [at for at, _ in call_equations(path.read_bytes())] == lines and len(lines) == 5

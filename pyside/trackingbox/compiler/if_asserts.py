@@ -24,6 +24,8 @@ from .rewrite import _code_mask, _matching_paren
 
 _WORD = re.compile(rb"[A-Za-z_]\w*")
 _SECTION = re.compile(rb"\bequation\b")
+_CALL = re.compile(rb"([A-Za-z_]\w*(?:\s*\.\s*[A-Za-z_]\w*)*)\s*\(")
+_KNOWN_CALLS = {b"assert", b"connect", b"terminate", b"reinit"}
 _STOP = {b"algorithm", b"equation", b"initial", b"protected", b"public", b"annotation", b"external"}
 
 
@@ -35,6 +37,7 @@ class _Scan:
         self.code, self.text = code, text
         self.found: list[tuple[int, int, list[tuple[int, int, bool]], int]] = []  # assert span, guards, if
         self.ifs: dict[int, int] = {}  # outermost if-equation start -> end (after 'end if;')
+        self.calls: list[tuple[int, bytes]] = []  # call equations name(...); outside when-equations
 
     def word_at(self, pos: int) -> tuple[bytes, int, int]:
         m = re.compile(rb"\s*").match(self.code, pos)
@@ -105,6 +108,12 @@ class _Scan:
                     raise _Unreadable
                 if word == b"assert" and guards and not in_when:
                     self.found.append((start, stop, list(guards), outer_if))
+                call = _CALL.match(self.code, start)
+                if call and call.group(1) not in _KNOWN_CALLS and not call.group(1).startswith(b"Connections") \
+                        and not in_when:
+                    close = _matching_paren(self.code, call.end() - 1)
+                    if close is not None and self.code[close + 1:stop].strip() == b";":
+                        self.calls.append((start, re.sub(rb"\s", b"", call.group(1))))
                 pos = stop
             if pos is None:
                 raise _Unreadable
@@ -240,10 +249,26 @@ def if_asserts_outside(data: bytes) -> tuple[bytes, list[int]]:
     return bytes(out), sorted(lines)
 
 
+def call_equations(data: bytes) -> list[tuple[int, str]]:
+    """(line, name) of each call equation ``name(...);`` in an equation section outside a
+    ``when`` (other than assert, connect, terminate and the ``Connections`` operators): rumoca 0.10.2 drops such a call of a function
+    without outputs, the asserts in its body included (e.g. ``Modelica.Fluid.Utilities.checkBoundary``)."""
+    if b"equation" not in data:
+        return []
+    code = _code_mask(data)[0]
+    scan = _Scan(code, code)
+    for m in _SECTION.finditer(code):
+        try:
+            scan.equations(m.end(), [], False, None)
+        except (_Unreadable, ValueError, TypeError):
+            continue
+    return [(data.count(b"\n", 0, at) + 1, name.decode()) for at, name in scan.calls]
+
+
 def _strip_heads(code: bytes) -> bytes:
     """*code* of an if-equation without its conditions (``if``/``elseif`` ... ``then``), which may
     hold '=' or calls of their own."""
     return re.sub(rb"\b(?:if|elseif)\b.*?\bthen\b", b" ", code, flags=re.S)
 
 
-__all__ = ["if_asserts_outside"]
+__all__ = ["call_equations", "if_asserts_outside"]
