@@ -81,6 +81,14 @@ package Branches
       assert(x < 0.5, "checked at initialisation only");
     end if;
   end OnlyAtInit;
+  model InitialSection "an initial equation's assert holds at initialisation (x = 0), fails after t = 0.5"
+    parameter Boolean p = true;
+    Real x = time;
+  initial equation
+    if p then
+      assert(x < 0.5, "initial equation only");
+    end if;
+  end InitialSection;
 end Branches;
 """
 
@@ -134,6 +142,7 @@ def test_the_rewrite_keeps_every_line_strings_and_the_guard_of_each_branch():
     # an if-equation of asserts only is replaced in place: the first model's text keeps its length
     first = new[:new.index(b"end Stops;")]
     assert len(first) == len(text[:text.index(b"end Stops;")]) and b"if time" not in first
+    assert b'assert(if initial() and (p) then (x < 0.5) else true, "initial equation only");' in new
     # a string's line break is written as \n, its blanks kept; a comment in the if-equation goes
     src = b'equation\n  if a > 1 then // c\n    assert(b,\n "two  blanks\nand a break");\n  end if;\n'
     new, lines = if_asserts_outside(src)
@@ -176,6 +185,8 @@ def test_an_assert_guarded_by_initial_is_checked_at_initialisation_only(branches
         _run(_fmu(branches, "Branches.AtInit"), "y")
     assert exc.value.message == "y too large at initialisation" and exc.value.time == 0.0
     df = _run(_fmu(branches, "Branches.OnlyAtInit"))
+    assert np.isclose(df["x"].iloc[-1], 1.0)
+    df = _run(_fmu(branches, "Branches.InitialSection"))  # read with initial() in its guard
     assert np.isclose(df["x"].iloc[-1], 1.0)
 
 

@@ -13,7 +13,8 @@ when if-equations are nested. :func:`if_asserts_outside` has rumoca read each su
   but asserts is replaced by them, padded to its length when they fit (then every byte offset of
   the file is kept; otherwise only its lines are).
 
-Only equation sections are read (an if-statement in an algorithm keeps its asserts in rumoca); an
+In an initial equation section the guard starts with ``initial()`` (the FMU checks its asserts
+while it is true). Only equation sections are read (an if-statement in an algorithm keeps its asserts in rumoca); an
 assert in a ``when`` equation is left as it is.
 """
 from __future__ import annotations
@@ -37,6 +38,7 @@ class _Scan:
         self.code, self.text = code, text
         self.found: list[tuple[int, int, list[tuple[int, int, bool]], int]] = []  # assert span, guards, if
         self.ifs: dict[int, int] = {}  # outermost if-equation start -> end (after 'end if;')
+        self.initial: set[int] = set()  # starts of the asserts found in initial equation sections
         self.calls: list[tuple[int, bytes]] = []  # call equations name(...); outside when-equations
 
     def word_at(self, pos: int) -> tuple[bytes, int, int]:
@@ -188,6 +190,8 @@ def _guarded(scan: _Scan, start: int, stop: int, guards) -> bytes:
         return _one_line(text[a:b], scan.quoted[a:b])
 
     guard = b" and ".join((b"not (%s)" if neg else b"(%s)") % line(a, b) for a, b, neg in guards if neg is not None)
+    if start in scan.initial:  # checked at initialisation only, as an initial equation is
+        guard = b"initial() and " + guard
     loops = [line(a, b) for a, b, neg in guards if neg is None]  # for-loops inside the if
     new = b"assert(if " + guard + b" then (" + line(open_at + 1, comma) + b") else true, " + line(comma + 1, close) + b");"
     for head in reversed(loops):
@@ -211,10 +215,13 @@ def if_asserts_outside(data: bytes) -> tuple[bytes, list[int]]:
     scan = _Scan(code, bytes(text))
     scan.quoted = bytes(quoted)
     for m in _SECTION.finditer(code):
+        before = len(scan.found)
         try:
             scan.equations(m.end(), [], False, None)
         except (_Unreadable, ValueError, TypeError):
             continue
+        if re.search(rb"\binitial\s*$", code[max(0, m.start() - 40):m.start()]):  # an initial equation
+            scan.initial.update(start for start, *_ in scan.found[before:])
     if not scan.found:
         return data, []
     by_if: dict[int, list] = {}
