@@ -8,6 +8,9 @@ conditions of the branches before it (``else``: of all of them), and of the bran
 when if-equations are nested. :func:`if_asserts_outside` has rumoca read each such assert so:
 
 * the assert inside the branch is blanked (its lines kept);
+* each ``String(...)`` in its message is written ``"<...>"`` (rumoca 0.10.2 refuses ``String`` of
+  an enumeration value, which an assert it drops never showed, e.g. ``Blocks.Continuous.Filter``;
+  the FMU shows a message's values as ``<...>`` anyway);
 * the assert with the guarded condition (its message and level as written) is written after the
   ``end if;`` of the outermost if-equation holding it, on that line; an if-equation holding nothing
   but asserts is replaced by them, padded to its length when they fit (then every byte offset of
@@ -193,7 +196,16 @@ def _guarded(scan: _Scan, start: int, stop: int, guards) -> bytes:
     if start in scan.initial:  # checked at initialisation only, as an initial equation is
         guard = b"initial() and " + guard
     loops = [line(a, b) for a, b, neg in guards if neg is None]  # for-loops inside the if
-    new = b"assert(if " + guard + b" then (" + line(open_at + 1, comma) + b") else true, " + line(comma + 1, close) + b");"
+    rest, at = [], comma + 1  # the message (and level), each String(...) in it as "<...>"
+    for m in re.finditer(rb"\bString\s*\(", code[comma + 1:close]):
+        start_s = comma + 1 + m.start()
+        if start_s < at:
+            continue
+        end_s = _matching_paren(code, comma + m.end())
+        rest += [line(at, start_s), b'"<...>"']
+        at = end_s + 1
+    rest.append(line(at, close))
+    new = b"assert(if " + guard + b" then (" + line(open_at + 1, comma) + b") else true, " + b" ".join(rest) + b");"
     for head in reversed(loops):
         new = b"for " + head + b" loop " + new + b" end for;"
     return new
