@@ -16,7 +16,7 @@ from fmpy.validation import validate_fmu
 
 from trackingbox.cli import main
 from trackingbox.compiler import compile_model
-from trackingbox.errors import AssertionFailed, CompileError, SimulationError, UnsupportedConstructError
+from trackingbox.errors import AssertionFailed, CompileError, SimulationError
 from trackingbox.fmu import FMUModel
 
 pytestmark = pytest.mark.compile
