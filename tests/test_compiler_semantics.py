@@ -298,14 +298,15 @@ def test_source_checks_on_the_compliance_suite():
 
 @pytest.mark.parametrize("name,text,line", [
     ("GuardedAssert", "model GuardedAssert\n  Real x(start = 0, fixed = true);\nequation\n  der(x) = 1;\n"
-                      "  if initial() then\n    assert(time > 1, \"must fail at t = 0\");\n  end if;\n"
+                      "  if terminal() then\n    assert(time > 1, \"must fail at the end\");\n  end if;\n"
                       "end GuardedAssert;\n", 5),
     ("Terminal", "model Terminal\n  Real x(start = 0, fixed = true);\nalgorithm\n  x := 1;\n"
                  "  if terminal() then\n    x := 2;\n  end if;\nend Terminal;\n", 5),
 ])
 def test_initial_and_terminal_are_refused_at_their_line(tmp_path, name, text, line):
-    """rumoca 0.10.2 drops ``if initial() then assert(...) end if`` from the flat model without a
-    word (the assert above, false at t = 0, would never be checked): refused, as the README says."""
+    """rumoca 0.10.2 drops ``if terminal() then assert(...) end if`` from the flat model without a
+    word (the assert above would never be checked): refused, as the README says (guarded by
+    ``initial()`` it is checked at initialisation: tests/test_compiler_if_asserts.py)."""
     from trackingbox.errors import UnsupportedConstructError
 
     src = tmp_path / f"{name}.mo"

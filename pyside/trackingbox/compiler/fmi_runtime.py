@@ -430,6 +430,10 @@ static fmi3Status tbx_initialize_events(casadi_fmi_memory* m) {
     }
     if (!changed) break;
   }
+#ifdef TBX_N_ASSERT
+  /* the asserts hold at initialisation too, where initial() is true (e.g. `if initial() then assert(...)`) */
+  if (tbx_check_asserts(m) != fmi3OK) return fmi3Error;
+#endif
   m->v[var_offset[TBX_E_INIT_VR]] = 0;
   m->up_to_date = 0;
   return fmi3OK;

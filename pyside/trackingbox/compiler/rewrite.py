@@ -444,15 +444,20 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         changed = True
     from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
     from .redeclare_short import short_class_redeclarations
+    from .if_asserts import call_equations, if_asserts_outside
     from .streams_error import streams_error_as_assert
     for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
                           (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
+                          (if_asserts_outside, "asserts in if-equations read outside them with their guard"),
                           (short_class_redeclarations, "class redeclarations with a literal modification read "
                                                        "through a short class")):
         body, lines = rewrite(body)
         if lines:
             log.debug("%s: %s at lines %s", file, what, ", ".join(map(str, lines)))
             changed = True
+    for line, name in call_equations(body):  # (.if_asserts) after Streams.error is read as an assert
+        log.warning("%s:%d: call equation %s(...) is dropped by rumoca 0.10.2 with any assert in the function: "
+                    "not checked in the FMU", file, line, name)
     firsts, lines = first_output_functions(body, tuple_names)
     if firsts != body:
         if lines:

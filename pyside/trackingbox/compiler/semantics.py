@@ -21,9 +21,11 @@ section), the file and the line. What is checked:
   a field ``r.y`` may be made constant by a prefix on ``r``, which the flat model does not show).
 
 One check is about valid Modelica instead: an if-equation guarded by ``initial()`` or
-``terminal()`` without an else branch (``if initial() then assert(...); end if;``) in the model's
+``terminal()`` without an else branch (``if terminal() then assert(...); end if;``) in the model's
 own class is refused (:class:`UnsupportedConstructError`, as the README lists), because
-rumoca 0.10.2 drops it (the ``assert`` in it included) from the flat model without a word.
+rumoca 0.10.2 drops it (the ``assert`` in it included) from the flat model without a word; an
+if-equation of asserts only guarded by ``initial()`` passes (:mod:`.if_asserts` has rumoca read
+them outside it).
 """
 from __future__ import annotations
 
@@ -241,6 +243,9 @@ class _Checker:
             end = re.search(r"\bend\s+if\s*;", rest)
             if end is not None and re.search(r"\belse(?:if)?\b", rest[:end.start()]):
                 return
+            if (end is not None and m.group(1) == "initial" and st.section == "equation"
+                    and re.fullmatch(r"(?:\s*assert\s*\([^;]*\)\s*;)+\s*", rest[:end.start()])):
+                return  # asserts only: read outside the if-equation with their guard (.if_asserts)
             raise UnsupportedConstructError(
                 f"unsupported Modelica construct in {self.model}: built-in {m.group(1)}() at "
                 f"{self.file}:{_line(self.code, st.start + m.start())}. The embedded backend cannot compile it "
