@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 
-from .rewrite import _FUNCTION, _code_mask, _statement_end
+from .source_scan import _FUNCTION, _code_mask, _statement_end
 
 _EXTERNAL_F77 = re.compile(rb'\bexternal\s*"FORTRAN 77"')
 _DECL = re.compile(rb"\s*(?P<type>Real|Integer|Boolean)\s+(?P<name>[A-Za-z_]\w*)\s*")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import re
 
-from .rewrite import _code_mask, _matching_paren
+from .source_scan import _code_mask, _matching_paren
 
 _WORD = re.compile(rb"[A-Za-z_]\w*")
 _SECTION = re.compile(rb"\bequation\b")

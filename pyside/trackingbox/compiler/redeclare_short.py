@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 
-from .rewrite import _blank_comments, _code_mask, _matching_paren
+from .source_scan import _blank_comments, _code_mask, _matching_paren
 
 _KINDS = rb"(?:model|block|class|connector|record)"
 REDECLARATION = re.compile(rb"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*(" + _KINDS

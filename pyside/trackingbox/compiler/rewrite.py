@@ -34,12 +34,15 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from .external_locals import external_locals_as_inputs
+from .if_asserts import call_equations, if_asserts_outside
+from .redeclare_short import short_class_redeclarations
 from .source import BOM
+from .source_scan import _FUNCTION, _blank_comments, _code_mask, _matching_paren, _statement_end
+from .streams_error import streams_error_as_assert
 
 log = logging.getLogger(__name__)
 
-# comments, string literals and quoted identifiers: never code
-_NOT_CODE = re.compile(rb"//[^\n]*|/\*.*?(?:\*/|\Z)|\"(?:\\.|[^\"\\])*(?:\"|\Z)|'(?:\\.|[^'\\])*(?:'|\Z)", re.S)
 _TOKEN = re.compile(rb"[A-Za-z_][A-Za-z_0-9]*|\d+(?:\.\d*)?(?:[eE][-+]?\d+)?|\S")
 _DER_CALL = re.compile(rb"\bder\s*\(")
 _EQUALS = re.compile(rb"\s*=(?!=)")  # '=' of an equation, not '=='
@@ -67,34 +70,6 @@ class Rewrite:
     data: bytes
     lines: tuple[int, ...]
     offsets_kept: bool
-
-
-def _code_mask(data: bytes) -> tuple[bytes, list[int], list[int]]:
-    """*data* with comments, strings and quoted identifiers blanked (newlines kept), and the
-    start and end offsets of those blanked ranges."""
-    starts: list[int] = []
-    ends: list[int] = []
-
-    def blank(match: re.Match[bytes]) -> bytes:
-        starts.append(match.start())
-        ends.append(match.end())
-        return re.sub(rb"[^\n]", b" ", match.group(0))
-
-    return _NOT_CODE.sub(blank, data), starts, ends
-
-
-def _matching_paren(code: bytes, open_at: int) -> int | None:
-    """Offset of the parenthesis closing the one at *open_at* in comment-free *code*."""
-    depth = 0
-    for k in range(open_at, len(code)):
-        c = code[k : k + 1]
-        if c == b"(":
-            depth += 1
-        elif c == b")":
-            depth -= 1
-            if depth == 0:
-                return k
-    return None
 
 
 def _der_equations(code: bytes) -> list[tuple[int, int]]:
@@ -442,10 +417,6 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         log.debug("%s:%d: %s read by rumoca with an equivalent body (%s)", file, line, name,
                   next(lib.why for lib in LIBRARY_BODIES if lib.name == name))
         changed = True
-    from .external_locals import external_locals_as_inputs  # (they use this module's scanner)
-    from .redeclare_short import short_class_redeclarations
-    from .if_asserts import call_equations, if_asserts_outside
-    from .streams_error import streams_error_as_assert
     for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
                           (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
                           (if_asserts_outside, "asserts in if-equations read outside them with their guard"),
@@ -512,7 +483,6 @@ def frontend_bytes(file: Path, tuple_names: frozenset[bytes] = frozenset(),
 # line of the function's ``end``, so every line of the file stays where it is.
 
 TUPLE_SUFFIX = b"__tuple"
-_FUNCTION = re.compile(rb"\bfunction\s+([A-Za-z_]\w*)")
 _SKIP_BEFORE = {b"partial", b"replaceable", b"redeclare"}
 
 
@@ -530,19 +500,6 @@ def _previous_word(code: bytes, at: int) -> bytes:
     end = len(code[:at].rstrip())
     m = re.search(rb"[A-Za-z_]\w*$", code[max(0, end - 200):end])
     return m.group(0) if m else b""
-
-
-def _statement_end(code: bytes, at: int, stop: int) -> int | None:
-    depth = 0
-    for k in range(at, stop):
-        c = code[k]
-        if c in b"([{":
-            depth += 1
-        elif c in b")]}":
-            depth -= 1
-        elif c == 59 and depth == 0:  # ';'
-            return k + 1
-    return None
 
 
 def _functions(code: bytes) -> list[_Function]:
@@ -630,14 +587,6 @@ def _nesting_function_names(code: bytes) -> list[bytes]:
         if end is not None and _FUNCTION.search(code[m.end():end.start()]):
             out.append(name)
     return out
-
-
-def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
-    out = bytearray(data)
-    for s, e in zip(starts, ends):
-        if data[s:s + 2] in (b"//", b"/*"):
-            out[s:e] = re.sub(rb"[^\n]", b" ", data[s:e])
-    return bytes(out)
 
 
 def _one_line(text: bytes) -> bytes:

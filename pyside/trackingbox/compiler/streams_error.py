@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 
-from .rewrite import _code_mask, _matching_paren
+from .source_scan import _code_mask, _matching_paren
 
 _CALL = re.compile(rb"\bModelica\s*\.\s*Utilities\s*\.\s*Streams\s*\.\s*error\s*\(")
 _IMPORT = re.compile(rb"\bimport\s+Modelica\s*\.\s*Utilities\s*\.\s*Streams\s*\.\s*error\s*;")
