@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 
-from .source_scan import _FUNCTION, _code_mask, _statement_end
+from .source_scan import _FUNCTION, _code_mask, _splice, _statement_end
 
 _EXTERNAL_F77 = re.compile(rb'\bexternal\s*"FORTRAN 77"')
 _DECL = re.compile(rb"\s*(?P<type>Real|Integer|Boolean)\s+(?P<name>[A-Za-z_]\w*)\s*")
@@ -135,10 +135,4 @@ def external_locals_as_inputs(data: bytes) -> tuple[bytes, list[int]]:
             lines.append(data.count(b"\n", 0, header.start()) + 1)
     if not edits:
         return data, []
-    out = bytearray()
-    pos = 0
-    for at, drop, new in sorted(edits, key=lambda e: (e[0], e[1])):
-        out += data[pos:at] + new
-        pos = at + drop
-    out += data[pos:]
-    return bytes(out), lines
+    return _splice(data, edits), lines

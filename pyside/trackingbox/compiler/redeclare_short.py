@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 
-from .source_scan import _blank_comments, _code_mask, _matching_paren
+from .source_scan import _blank_comments, _code_mask, _matching_paren, _splice
 
 _KINDS = rb"(?:model|block|class|connector|record)"
 REDECLARATION = re.compile(rb"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*(" + _KINDS
@@ -104,13 +104,7 @@ def short_class_redeclarations(data: bytes) -> tuple[bytes, list[int]]:
         lines.append(line)
     if not edits:
         return data, []
-    out = bytearray()
-    pos = 0
-    for at, drop, new in sorted(edits, key=lambda e: (e[0], e[1])):
-        out += data[pos:at] + new
-        pos = at + drop
-    out += data[pos:]
-    return bytes(out), lines
+    return _splice(data, edits), lines
 
 
 def short_class_handles(text: str, at: int) -> bool:

@@ -61,3 +61,15 @@ def _blank_comments(data: bytes, starts: list[int], ends: list[int]) -> bytes:
         if data[s:s + 2] in (b"//", b"/*"):
             out[s:e] = re.sub(rb"[^\n]", b" ", data[s:e])
     return bytes(out)
+
+
+def _splice(data: bytes, edits: list[tuple[int, int, bytes]]) -> bytes:
+    """*data* with each edit ``(at, drop, new)`` applied: the *drop* bytes at offset *at* replaced by *new*
+    (offsets into the original *data*; edits must not overlap)."""
+    out = bytearray()
+    pos = 0
+    for at, drop, new in sorted(edits, key=lambda e: (e[0], e[1])):
+        out += data[pos:at] + new
+        pos = at + drop
+    out += data[pos:]
+    return bytes(out)
