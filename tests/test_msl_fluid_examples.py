@@ -18,14 +18,20 @@ pytestmark = pytest.mark.compile
 REFERENCE = default_reference()
 
 
-def test_a_tank_emptying_through_a_pipe_matches_its_reference():
-    need_msl("Fluid", "Examples", "AST_BatchPlant.mo")
-    model = "Modelica.Fluid.Examples.AST_BatchPlant.Test.TankWithEmptyingPipe2"
+def assert_matches_reference(file: str, model: str) -> None:
+    """Compile and simulate *model* (declared in ``Modelica/Fluid/Examples/<file>``) as the harness does, and
+    require it to match its reference within 1e-3 of each compared signal's range."""
+    need_msl("Fluid", "Examples", file)
     if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
         pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
     res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
     assert res["outcome"] == "match", res.get("message")
     assert res["deviation"] <= 1e-3
+
+
+def test_a_tank_emptying_through_a_pipe_matches_its_reference():
+    assert_matches_reference("AST_BatchPlant.mo",
+                             "Modelica.Fluid.Examples.AST_BatchPlant.Test.TankWithEmptyingPipe2")
 
 
 def test_a_tank_started_from_its_preferred_level_and_temperature_matches_its_reference():
@@ -33,13 +39,7 @@ def test_a_tank_started_from_its_preferred_level_and_temperature_matches_its_ref
     initial equation fixes the tank's differentiated ``U`` and ``m`` (no start values); the tank's
     ``level`` (stateSelect = prefer, start = level_start) and its medium's ``T`` (preferred medium
     state, start T_start) give the initial point, as a tool choosing them as states starts them."""
-    need_msl("Fluid", "Examples", "AST_BatchPlant.mo")
-    model = "Modelica.Fluid.Examples.AST_BatchPlant.Test.OneTank"
-    if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
-        pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
-    res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
-    assert res["outcome"] == "match", res.get("message")
-    assert res["deviation"] <= 1e-3
+    assert_matches_reference("AST_BatchPlant.mo", "Modelica.Fluid.Examples.AST_BatchPlant.Test.OneTank")
 
 
 @pytest.mark.slow
@@ -49,13 +49,7 @@ def test_two_tanks_with_an_overflow_pipe_between_ports_above_their_levels_match_
     pressure difference is determined (the loop's Jacobian is singular), and with the lower port
     taking inflow the pipe's square-root flow law makes Newton's steps swing across the root. The
     loop is solved from where a damped iteration ends (before: NaN at initialisation)."""
-    need_msl("Fluid", "Examples", "Tanks.mo")
-    model = "Modelica.Fluid.Examples.Tanks.TanksWithOverflow"
-    if not (REFERENCE / "Modelica" / "Fluid" / "Examples").is_dir():
-        pytest.skip(f"the MSL reference results are not at {REFERENCE} (set TRACKINGBOX_MSL_REFERENCE)")
-    res = run_example({"model": model, "source": str(MSL), "libraries": [], "reference": str(REFERENCE)})
-    assert res["outcome"] == "match", res.get("message")
-    assert res["deviation"] <= 1e-3
+    assert_matches_reference("Tanks.mo", "Modelica.Fluid.Examples.Tanks.TanksWithOverflow")
 
 
 def test_a_tank_filled_through_a_falling_pipe_follows_the_closed_form_the_reference_misses(tmp_path):
