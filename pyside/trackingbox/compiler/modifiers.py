@@ -38,6 +38,7 @@ from pathlib import Path
 
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
+from .package_overrides import check_overridden_constants
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
@@ -233,6 +234,7 @@ class ModifierCheck:
     def check(self, model: str) -> list[str]:
         """Refuse what rumoca would get wrong; return warnings for lost bounds and units."""
         used = self.used_classes(model)
+        check_overridden_constants(self, model, used)  # a package constant modified twice in a chain
         warnings: list[str] = []
         for c in used:
             text = self.body(c)
