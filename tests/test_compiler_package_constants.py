@@ -75,3 +75,109 @@ def test_a_partial_base_only_as_a_replaceable_default_is_no_use(tmp_path):
 def test_a_base_read_by_name_or_a_default_that_is_not_partial_is_still_refused(tmp_path, model, base):
     with pytest.raises(UnsupportedConstructError, match=rf"extends {base} with a modified constant at .*Lib.mo:\d+"):
         compile_model(_lib(tmp_path), f"Lib.{model}", backend="embedded", output=tmp_path / "x.fmu")
+
+
+CHAIN = """package Chain
+  package A
+    constant Real cp = 1;
+    constant Real k = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := cp*k*u;
+    end f;
+  end A;
+  package B
+    extends A(cp = 2);
+  end B;
+  package C "cp modified again: Modelica gives C.cp = 4 (the outer modification wins)"
+    extends B(cp = 4);
+  end C;
+  package A2
+    constant Real cp = 1;
+    constant Real k = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := cp*k*u;
+    end f;
+  end A2;
+  package B2
+    extends A2(k = 3);
+  end B2;
+  package C2 "an element B2 leaves alone: C2.cp = 4, C2.k = 3"
+    extends B2(cp = 4);
+  end C2;
+  package Same "the value B gives, repeated: Same.cp = 2"
+    extends B(cp = 2);
+  end Same;
+  package S = B(cp = 5) "a short class: S.cp = 5";
+  model ReadC
+    Real c = C.cp*(1 + 0*time);
+  end ReadC;
+  model ReadS
+    Real c = S.cp*(1 + 0*time);
+  end ReadS;
+  model ReadLocal
+    package M = B(cp = 6);
+    Real c = M.cp*(1 + 0*time);
+  end ReadLocal;
+  model Distinct
+    Real c = C2.cp*(1 + 0*time);
+    Real k = C2.k*(1 + 0*time);
+    Real y = C2.f(2 + 0*time);
+    Real s = Same.cp*(1 + 0*time);
+  end Distinct;
+  model MA
+    parameter Real k = 1;
+    Real y = k*(1 + 0*time);
+  end MA;
+  model MB
+    extends MA(k = 2);
+  end MB;
+  model MC "the same chain of models: the outer k = 4 wins"
+    extends MB(k = 4);
+  end MC;
+end Chain;
+"""
+
+
+def _chain(tmp_path: Path) -> Path:
+    src = tmp_path / "Chain.mo"
+    src.write_text(CHAIN)
+    return src
+
+
+def test_rumoca_keeps_the_inner_value_of_a_package_constant_modified_twice():
+    """The wrong value behind the refusal below: rumoca 0.10.2 flattens C.cp (extends B(cp = 4), B
+    extends A(cp = 2)) as 2 where Modelica says 4 (MLS 7.2.4: the outer modification wins). Should
+    rumoca read it right, this fails and the refusal can be lifted."""
+    import rumoca
+
+    flat = rumoca.Session().loads(CHAIN, model="Chain.ReadC", filename="Chain.mo").to_dict("flat")
+    factor = flat["variables"]["c"]["binding"]["Binary"]["lhs"]["Literal"]["value"]
+    assert factor == {"Integer": 2}
+
+
+@pytest.mark.parametrize("model, package, line, outer, inner", [
+    ("ReadC", "C", 16, "4", "2"), ("ReadS", "S", 37, "5", "2"), ("ReadLocal", "M", 45, "6", "2")])
+def test_a_package_constant_modified_twice_along_its_extends_chain_is_refused(tmp_path, model, package, line,
+                                                                              outer, inner):
+    with pytest.raises(UnsupportedConstructError,
+                       match=rf"package {package} modifies cp at .*Chain.mo:{line} where its base B modifies it "
+                             rf"too, at .*Chain.mo:13: rumoca 0.10.2 keeps the inner value \(cp = {inner}\) "
+                             rf"instead of the outer one \(cp = {outer}\)"):
+        compile_model(_chain(tmp_path), f"Chain.{model}", backend="embedded", output=tmp_path / "x.fmu")
+
+
+def test_other_elements_a_repeated_value_and_a_chain_of_models_compile_with_modelicas_values(tmp_path):
+    src = _chain(tmp_path)
+    res = compile_model(src, "Chain.Distinct", backend="embedded", output=tmp_path / "d.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["c", "k", "y", "s"])
+    assert np.allclose(out["c"], 4.0) and np.allclose(out["k"], 3.0) and np.allclose(out["s"], 2.0)
+    assert np.allclose(out["y"], 4.0 * 3.0 * 2.0)  # C2.f(2) = cp*k*u
+    res = compile_model(src, "Chain.MC", backend="embedded", output=tmp_path / "m.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
+    assert np.allclose(out["y"], 4.0)
