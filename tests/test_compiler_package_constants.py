@@ -181,3 +181,61 @@ def test_other_elements_a_repeated_value_and_a_chain_of_models_compile_with_mode
     res = compile_model(src, "Chain.MC", backend="embedded", output=tmp_path / "m.fmu")
     out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
     assert np.allclose(out["y"], 4.0)
+
+
+SIBLINGS = """package Sib
+  partial package PM "a medium-like base: the function reads three constants"
+    constant Boolean singleState = false;
+    constant Integer ThermoStates = 0;
+    constant Real cp = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := (if singleState then 1 else 2)*u + ThermoStates*10 + cp*100;
+    end f;
+  end PM;
+  partial package PPS
+    extends PM(cp = 2);
+  end PPS;
+  package PSM "one branch: f(1) = 1 + 10 + 200 = 211"
+    extends PPS(final ThermoStates = 1, final singleState = true);
+  end PSM;
+  package PT "the other, unmodified: f(1) = 2 + 0 + 200 = 202"
+    extends PPS;
+  end PT;
+  model H
+    replaceable package M = PM;
+    Real y = M.f(1 + 0*time);
+    Real t = M.ThermoStates*(1 + 0*time);
+  end H;
+  model Two "two components, each with a medium of one branch"
+    H a(redeclare package M = PSM);
+    H b(redeclare package M = PT);
+  end Two;
+end Sib;
+"""
+
+
+def test_a_sibling_extension_counts_as_a_use_because_rumoca_mixes_functions_through_redeclared_packages(
+        tmp_path, monkeypatch):
+    """Why "package PSM extends PPS with a modified constant" is refused when the only other use of
+    PPS is another package's ``extends PPS`` (Modelica.Fluid's PartialSimpleMedium and
+    PartialTwoPhaseMedium on PartialPureSubstance): with two components whose media come from the two
+    branches, rumoca 0.10.2 computes b's M.f with PSM's constants (211 where Modelica gives 202), while
+    b's constants read directly are right. Measured here with the refusal switched off; should
+    rumoca get it right, the first assertion fails and the refusal can be narrowed."""
+    from trackingbox.compiler.modifiers import ModifierCheck
+
+    src = tmp_path / "Sib.mo"
+    src.write_text(SIBLINGS)
+    with monkeypatch.context() as m:
+        m.setattr(ModifierCheck, "_used_directly", lambda *a, **k: False)
+        res = compile_model(src, "Sib.Two", backend="embedded", output=tmp_path / "s.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5,
+                            output=["a.y", "b.y", "a.t", "b.t"])
+    assert np.allclose(out["b.y"], 211.0)  # rumoca's value; Modelica: 202
+    assert np.allclose(out["a.y"], 211.0) and np.allclose(out["a.t"], 1.0) and np.allclose(out["b.t"], 0.0)
+    with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
+                                                        r".*Sib.mo:17, and Sib.Two also uses PPS itself"):
+        compile_model(src, "Sib.Two", backend="embedded", output=tmp_path / "r.fmu")
