@@ -239,3 +239,84 @@ def test_a_sibling_extension_counts_as_a_use_because_rumoca_mixes_functions_thro
     with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
                                                         r".*Sib.mo:17, and Sib.Two also uses PPS itself"):
         compile_model(src, "Sib.Two", backend="embedded", output=tmp_path / "r.fmu")
+
+
+ONE_MEDIUM = """package Med
+  partial package PM
+    constant Boolean singleState = false;
+    constant Integer ThermoStates = 0;
+    constant Real cp = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := (if singleState then 1 else 2)*u + ThermoStates*10 + cp*100;
+    end f;
+  end PM;
+  partial package PPS
+    extends PM(cp = 2);
+  end PPS;
+  partial package PSM "a branch that modifies PPS's constants (Fluid's PartialSimpleMedium)"
+    extends PPS(final ThermoStates = 1, final singleState = true);
+  end PSM;
+  partial package PT "the other branch (PartialTwoPhaseMedium)"
+    extends PPS;
+  end PT;
+  package Water
+    import Med.Water.CPLW.k0;
+    constant Real kw = k0;
+    package CPLW
+      extends PSM;
+      constant Real k0 = 7;
+    end CPLW;
+    package W
+      extends PT(ThermoStates = 3);
+    end W;
+    package Standard = W;
+  end Water;
+  model H
+    replaceable package M = PM;
+    Real y = M.f(1 + 0*time);
+    Real t = M.ThermoStates*(1 + 0*time);
+  end H;
+  model H2 "constrained by the taken medium's own base"
+    replaceable package M = PM constrainedby PT;
+    Real y = M.f(2 + 0*time);
+  end H2;
+  model HD "a default of the other branch"
+    replaceable package M = Water.CPLW constrainedby PPS;
+    Real y = M.f(1 + 0*time);
+  end HD;
+  model System "one medium throughout (W: singleState false, ThermoStates 3, cp 2)"
+    replaceable package Medium = Water.Standard constrainedby PM;
+    H a(redeclare package M = Medium);
+    H b(redeclare package M = Medium);
+    H2 c(redeclare package M = Medium);
+    Real k = Water.kw*(1 + 0*time);
+  end System;
+  model Replaced "the other branch's default, redeclared to W"
+    HD d(redeclare package M = Water.W);
+  end Replaced;
+end Med;
+"""
+
+
+def test_a_sibling_extension_is_no_use_when_the_model_takes_one_branch_as_its_medium(tmp_path):
+    """Modelica.Fluid's pattern: the model takes one medium (here W, through a short class) for every
+    component, and the other branch (PSM, which modifies PPS's constants) is only reached through
+    an import of a constant. Values worked by hand: W.f(u) = 2*u + 3*10 + 2*100."""
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    res = compile_model(src, "Med.System", backend="embedded", output=tmp_path / "s.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5,
+                            output=["a.y", "b.y", "a.t", "c.y", "k"])
+    assert np.allclose(out["a.y"], 232.0) and np.allclose(out["b.y"], 232.0) and np.allclose(out["a.t"], 3.0)
+    assert np.allclose(out["c.y"], 234.0) and np.allclose(out["k"], 7.0)
+
+
+def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
+                                                        r".*Med.mo:17, and Med.Replaced also uses PPS itself"):
+        compile_model(src, "Med.Replaced", backend="embedded", output=tmp_path / "r.fmu")

@@ -26,6 +26,7 @@ import re
 from typing import TYPE_CHECKING
 
 from ..errors import UnsupportedConstructError
+from .modification_parse import _skip_expr, parse_modification
 
 if TYPE_CHECKING:  # (modifiers imports this module: no cycle at run time)
     from .library import ClassInfo
@@ -38,8 +39,6 @@ _SHORT_PACKAGE = re.compile(r"\bpackage\s+[A-Za-z_]\w*\s*=\s*([A-Za-z_][\w.]*)\s
 def _value_text(text: str, offset: int) -> str | None:
     """The value of the modification element starting at *offset* (``[final] name[(...)] = value``),
     blanks removed; None if it gives none."""
-    from .modifiers import _skip_expr
-
     depth = 0
     pos = offset
     while pos < len(text):
@@ -61,8 +60,6 @@ def _value_text(text: str, offset: int) -> str | None:
 
 def _valued(text: str, paren: int) -> dict[str, tuple[str, int]]:
     """The elements the modification ``( ... )`` at *paren* gives a value: name -> (value, offset)."""
-    from .modifiers import parse_modification
-
     mods, _ = parse_modification(text, paren)
     out: dict[str, tuple[str, int]] = {}
     for m in mods:
@@ -122,3 +119,83 @@ def check_overridden_constants(check: ModifierCheck, model: str, used: list[Clas
                                 f"{inner_valued[element][0]}) instead of the outer one ({element} = {value}) "
                                 f"in a package"
                             )
+
+
+# --- another package's extends of a modified base ----------------------------------------------
+#
+# rumoca 0.10.2 mixes the constants of two packages that extend the same base with different
+# modifications where both are *taken as packages* by the model: a component's redeclared or default
+# replaceable package (``tests/test_compiler_package_constants.py``: two components with media of
+# the base's two branches compute one's functions with the other's constants; a default that is
+# redeclared away lends the package that replaces it its modifications). A sibling that is never
+# taken so changes nothing: two branches read by name (``PSM.f(...)``, ``PT.f(...)``), or a
+# constant read from a package the model does not take as its medium, come out right (measured in
+# the same test file). So another package's ``extends B`` is no use of ``B`` when every package the
+# model's classes take (``package X = Y``, ``redeclare package X = Y``, ``constrainedby Y``) that
+# extends ``B`` is one package and its own bases (Modelica.Fluid.Examples.PumpingSystem: the medium
+# ``WaterIF97_pT`` and the constraining ``PartialTwoPhaseMedium``; ``ConstantPropertyLiquidWater``,
+# whose ``PartialSimpleMedium`` modifies ``PartialPureSubstance``, only imported by
+# ``Modelica.Media.Water``).
+
+_TAKEN = re.compile(r"\bpackage\s+\w+\s*=\s*([A-Za-z_][\w.]*)|\bconstrainedby\s+([A-Za-z_][\w.]*)")
+
+
+def only_in_extends(text: str, name: str) -> bool:
+    """Whether *name* stands in *text* (a class's comment-free own text) only as the class an
+    ``extends`` clause names."""
+    esc = re.escape(name)
+    every = len(re.findall(rf"(?<![\w.]){esc}(?![\w])", text))
+    extended = len(re.findall(rf"\bextends\s+{esc}(?![\w.])", text))
+    return every > 0 and every == extended
+
+
+def _final(check: ModifierCheck, name: str) -> str | None:
+    """The class a short class chain ``package A = B`` ends at (None where it cannot be followed)."""
+    classes = check.index.classes
+    seen: set[str] = set()
+    while name in classes and classes[name].short:
+        if name in seen:
+            return None
+        seen.add(name)
+        bases = check.index.bases(name)
+        if not bases:
+            return None
+        name = bases[0]
+    return name if name in classes else None
+
+
+def _ancestors(check: ModifierCheck, name: str) -> set[str]:
+    out: set[str] = set()
+    todo = [name]
+    while todo:
+        n = todo.pop()
+        if n not in out:
+            out.add(n)
+            todo.extend(check.index.bases(n))
+    return out
+
+
+def one_branch_taken(check: ModifierCheck, used: list[ClassInfo], base: str) -> bool:
+    """Whether the packages the classes of *used* take (see above) that extend *base* are one package
+    and its own bases; False where a taken package cannot be resolved."""
+    taken: set[str] = set()
+    texts = []
+    for c in used:
+        texts.append((c, check.body(c)))  # (a redeclaration in a modification)
+        for child in check.index.children.get(c.name, {}).values():
+            k = check.index.classes.get(child)
+            if k is None or not k.short or k.kind != "package":
+                continue
+            text = check.body(k)  # (its own class: blanked in its parent's text)
+            if c.kind != "package" or re.match(r"\s*(?:\w+\s+)*?(?:replaceable|redeclare)\b", text):
+                texts.append((c, text))  # a package a model declares, or a replaceable one anywhere
+    for c, text in texts:
+        for m in _TAKEN.finditer(text):
+            target = check.index.lookup(m.group(1) or m.group(2), c.name)
+            final = _final(check, target) if target else None
+            if final is None:
+                return False
+            if base in _ancestors(check, final) - {final}:
+                taken.add(final)
+    leaves = {t for t in taken if not any(t != o and t in _ancestors(check, o) for o in taken)}
+    return len(leaves) <= 1
