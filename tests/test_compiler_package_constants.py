@@ -320,3 +320,25 @@ def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
     with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
                                                         r".*Med.mo:17, and Med.Replaced also uses PPS itself"):
         compile_model(src, "Med.Replaced", backend="embedded", output=tmp_path / "r.fmu")
+
+
+@pytest.mark.slow
+def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say():
+    """(62 s on a loaded 2-core machine, most of it indexing the MSL.) On MSL 4.0.0: NonCircularPipes takes StandardWater (WaterIF97_ph) for every component and
+    reaches PartialSimpleMedium only through Modelica.Media.Water's import of a constant: no
+    refusal of the package constants. PumpingSystem takes StandardWaterOnePhase (WaterIF97_pT), whose
+    ``final smoothModel=true`` (Media/Water/package.mo:88) overrides WaterIF97_base's
+    ``smoothModel=false`` (line 129): refused, as rumoca would read false."""
+    from _fixtures_msl import MSL, need_msl
+
+    from trackingbox.compiler.modifiers import modifier_check
+    from trackingbox.compiler.source import resolve_source
+
+    need_msl("Media", "Water", "package.mo")
+    check = modifier_check(resolve_source(MSL), ())
+    assert check.check("Modelica.Fluid.Examples.NonCircularPipes") == []
+    with pytest.raises(UnsupportedConstructError,
+                       match=r"package WaterIF97_pT modifies smoothModel at .*Water.package\.mo:88 where its base "
+                             r"WaterIF97_base modifies it too, at .*Water.package\.mo:129: rumoca 0\.10\.2 keeps the "
+                             r"inner value \(smoothModel = false\) instead of the outer one \(smoothModel = true\)"):
+        check.check("Modelica.Fluid.Examples.PumpingSystem")
