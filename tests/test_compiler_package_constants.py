@@ -294,6 +294,12 @@ ONE_MEDIUM = """package Med
     H2 c(redeclare package M = Medium);
     Real k = Water.kw*(1 + 0*time);
   end System;
+  model DirectOther "one medium taken, the other branch's function and constant read by name"
+    replaceable package Medium = Water.Standard constrainedby PM;
+    H a(redeclare package M = Medium);
+    Real z = Water.CPLW.f(1 + 0*time);
+    Real zt = Water.CPLW.ThermoStates*(1 + 0*time);
+  end DirectOther;
   model Replaced "the other branch's default, redeclared to W"
     HD d(redeclare package M = Water.W);
   end Replaced;
@@ -312,6 +318,10 @@ def test_a_sibling_extension_is_no_use_when_the_model_takes_one_branch_as_its_me
                             output=["a.y", "b.y", "a.t", "c.y", "k"])
     assert np.allclose(out["a.y"], 232.0) and np.allclose(out["b.y"], 232.0) and np.allclose(out["a.t"], 3.0)
     assert np.allclose(out["c.y"], 234.0) and np.allclose(out["k"], 7.0)
+    res = compile_model(src, "Med.DirectOther", backend="embedded", output=tmp_path / "o.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "z", "zt"])
+    assert np.allclose(out["a.y"], 232.0)
+    assert np.allclose(out["z"], 211.0) and np.allclose(out["zt"], 1.0)  # CPLW.f(1) = 1 + 1*10 + 2*100
 
 
 def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
