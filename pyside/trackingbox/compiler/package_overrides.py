@@ -1,4 +1,5 @@
-"""Package constants modified twice along an extends chain, which rumoca 0.10.2 reads wrong.
+"""Package constants modified twice along an extends chain, which rumoca 0.10.2 reads wrong; and
+when another package's ``extends`` of a modified base is a use of it (:func:`one_branch_taken`).
 
 In Modelica the outer modification wins (MLS 7.2.4): with
 
@@ -8,9 +9,9 @@ In Modelica the outer modification wins (MLS 7.2.4): with
     package B  extends A(cp = 2);  end B;
     package C  extends B(cp = 4);  end C;
 
-``C.cp`` is 4. rumoca 0.10.2 gives 2, the value of the inner clause, wherever ``C.cp`` is read (by
-name, through a short class ``package M = C`` or a redeclared replaceable package), and a function
-inherited into ``C`` that reads ``cp`` computes with 2 as well. Nothing warns. The same chain of
+``C.cp`` is 4. rumoca 0.10.2 gives 2, the value of the inner clause, where ``C.cp`` is read by name
+or through a short class (``package M = B(cp = 5)`` gives 2 as well), and a function inherited into
+``C`` that reads ``cp`` computes with 2. Nothing warns. The same chain of
 *models* (parameters) is flattened right; only packages lose the outer value
 (``tests/test_compiler_package_constants.py`` measures both).
 
