@@ -17,6 +17,7 @@ from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
 from .records import Record
+from .while_loops import while_statement
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
 
@@ -267,10 +268,12 @@ class StatementTranslation:
                                     "else_block": []}, env, fname, conds=fires)
             elif kind == "For":
                 self._for_statement(body, env, fname)
+            elif kind == "While":
+                while_statement(self, body, env, fname)
             elif kind == "Assert":
                 self.add_assert(body, env, fname if _is_algorithm(fname) else f"function {fname}")
             else:
-                pattern = {"While": r"\bwhile\b", "Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
+                pattern = {"Return": r"\breturn\b", "Break": r"\bbreak\b"}.get(kind)
                 raise self.unsupported(f"{kind.lower()} statement {_in(fname)}", pattern)
 
     def _assign(self, parts: list[dict[str, Any]], value: Value, env: dict[str, Value], fname: str) -> None:
