@@ -17,7 +17,7 @@ from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
 from .records import Record
-from .while_loops import while_statement
+from .while_loops import marked_while, while_statement
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
 
@@ -467,6 +467,9 @@ class StatementTranslation:
         return "<...>"
 
     def _for_statement(self, body: Any, env: dict[str, Value], fname: str) -> None:
+        loop = marked_while(body)  # a while statement given to rumoca as a for loop (.while_source)
+        if loop is not None:
+            return while_statement(self, loop, env, fname)
         indices = body.get("indices") or []
         if len(indices) != 1:
             raise self.unsupported(f"for-loop with {len(indices)} indices {_in(fname)}")

@@ -37,6 +37,7 @@ from pathlib import Path
 from .external_locals import external_locals_as_inputs
 from .if_asserts import call_equations, if_asserts_outside
 from .redeclare_short import short_class_redeclarations
+from .while_source import while_loops_as_for
 from .source import BOM
 from .source_scan import _FUNCTION, _blank_comments, _code_mask, _matching_paren, _statement_end
 from .streams_error import streams_error_as_assert
@@ -421,7 +422,8 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
                           (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
                           (if_asserts_outside, "asserts in if-equations read outside them with their guard"),
                           (short_class_redeclarations, "class redeclarations with a literal modification read "
-                                                       "through a short class")):
+                                                       "through a short class"),
+                          (while_loops_as_for, "while statements read as bounded for loops (.while_source)")):
         body, lines = rewrite(body)
         if lines:
             log.debug("%s: %s at lines %s", file, what, ", ".join(map(str, lines)))

@@ -120,3 +120,23 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
     if result is not env:
         env.clear()
         env.update(result)
+
+
+def marked_while(body: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``while`` statement a ``for`` loop was written from by :mod:`.while_source`
+    (``for _while_pass_ in 1:N loop if COND then BODY end if; end for``), as a while statement's
+    body; None for any other ``for`` loop."""
+    indices = body.get("indices") or []
+    if len(indices) != 1:
+        return None
+    ident = indices[0].get("ident")
+    if (ident.get("text") if isinstance(ident, dict) else ident) != "_while_pass_":
+        return None
+    stmts = body.get("equations") or body.get("stmts") or body.get("body") or []
+    if len(stmts) != 1 or not isinstance(stmts[0], dict) or "If" not in stmts[0]:
+        return None
+    branch = stmts[0]["If"]
+    blocks = branch.get("cond_blocks") or branch.get("branches") or []
+    if len(blocks) != 1 or branch.get("else_block") or branch.get("else_branch") or not isinstance(blocks[0], dict):
+        return None
+    return {"block": {"cond": blocks[0].get("cond"), "stmts": blocks[0].get("stmts", blocks[0].get("body", []))}}
