@@ -26,10 +26,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import re
+
 import casadi as ca
 
 from . import arrays as arr
 from .flat_builtins import is_number, logical_and, logical_not
+from .source import Location
 
 if TYPE_CHECKING:  # pragma: no cover
     from .flat_model import Value
@@ -72,7 +75,10 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
     def place() -> str:
         nonlocal where
         if where is None:
-            locs = tr.location(r"\bwhile\b", span if isinstance(span, dict) else None)
+            # the condition's file and line (a search for the keyword could name another loop of the file)
+            locs = tr.location(None, span) if isinstance(span, dict) else []
+            if locs and body.get("line"):  # (a for loop written from the while: the span's file, its line)
+                locs = [Location(locs[0].file, int(body["line"]))]
             where = f" at {locs[0]}" if locs else ""
         return where
 
@@ -124,13 +130,14 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
 
 def marked_while(body: dict[str, Any]) -> dict[str, Any] | None:
     """The ``while`` statement a ``for`` loop was written from by :mod:`.while_source`
-    (``for _while_pass_ in 1:N loop if COND then BODY end if; end for``), as a while statement's
+    (``for _while_line_L in 1:N loop if COND then BODY end if; end for``, L the while's line), as a while statement's
     body; None for any other ``for`` loop."""
     indices = body.get("indices") or []
     if len(indices) != 1:
         return None
     ident = indices[0].get("ident")
-    if (ident.get("text") if isinstance(ident, dict) else ident) != "_while_pass_":
+    name = str(ident.get("text") if isinstance(ident, dict) else ident)
+    if not re.fullmatch(r"_while_line_\d+", name):
         return None
     stmts = body.get("equations") or body.get("stmts") or body.get("body") or []
     if len(stmts) != 1 or not isinstance(stmts[0], dict) or "If" not in stmts[0]:
@@ -139,4 +146,5 @@ def marked_while(body: dict[str, Any]) -> dict[str, Any] | None:
     blocks = branch.get("cond_blocks") or branch.get("branches") or []
     if len(blocks) != 1 or branch.get("else_block") or branch.get("else_branch") or not isinstance(blocks[0], dict):
         return None
-    return {"block": {"cond": blocks[0].get("cond"), "stmts": blocks[0].get("stmts", blocks[0].get("body", []))}}
+    return {"block": {"cond": blocks[0].get("cond"), "stmts": blocks[0].get("stmts", blocks[0].get("body", []))},
+            "line": int(name.rsplit("_", 1)[1])}

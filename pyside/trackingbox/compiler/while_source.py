@@ -1,20 +1,23 @@
 """``while`` statements given to rumoca as bounded ``for`` loops.
 
-rumoca 0.10.2 accepts a ``while`` statement in a function only where it proves the loop finite
-from a counter (``while i < n and ... loop ... i := i + 1``); any other (a bisection
-``while hi - lo > tol``, Brent's ``while not found`` in ``Modelica.Math.Nonlinear``, the filter
-normalisation of ``Modelica.Blocks``) is refused ("a statement without a checked DAE owner").
-:func:`while_loops_as_for` rewrites every ::
+rumoca 0.10.2 accepts a ``while`` statement in a function where it proves the loop finite from a
+counter (``while i < n and ... loop ... i := i + 1``, as in ``Modelica.Media``'s IF97 iterations);
+any other (a bisection ``while hi - lo > tol``, Brent's ``while not found`` in
+``Modelica.Math.Nonlinear``, the filter normalisation of ``Modelica.Blocks``) is refused ("a statement
+without a checked DAE owner"). :func:`while_loops_as_for` rewrites each loop of the second kind (a
+loop is left as it is where its condition compares a name with ``<`` or ``<=`` to a number or a
+package constant and its body adds one to that name) ::
 
     while COND loop BODY end while;
 
 into ::
 
-    for _while_pass_ in 1:N loop if COND then BODY end if; end for;
+    for _while_line_L in 1:N loop if COND then BODY end if; end for;
     assert(not (COND), "while loop at line L did not end within N passes");
 
 with N = :data:`.while_loops.MAX_PASSES`, lines kept. Where the loop ends within N passes this is
-the loop's meaning; where it would not, the assert stops the model (never a silently wrong value).
+the loop's meaning (rumoca refuses the rewritten loop where an output is first assigned in it:
+"leaves output ... without a definition on some branch", a refusal naming the function); where it would not, the assert stops the model (never a silently wrong value).
 The embedded translator recognises the marked ``for`` loop and executes it as the ``while`` it was
 (:mod:`.while_loops`: a constant condition iterates concretely, a bound is proved where the
 condition turns constant false).
@@ -26,11 +29,21 @@ import re
 from .source_scan import _code_mask, _splice
 from .while_loops import MAX_PASSES
 
-MARKER = "_while_pass_"
-"""The index of a ``for`` loop that was a ``while`` statement."""
+MARKER = "_while_line_"
+"""The index of a ``for`` loop that was a ``while`` statement starts so, followed by the while's line
+(``_while_line_25``): rumoca's spans are offsets into the rewritten text, which the file does not have."""
 
 _TOKEN = re.compile(rb"\bend\s+while\b|\bwhile\b")
 _LOOP = re.compile(rb"\bloop\b")
+_COUNTED = re.compile(rb"\b([A-Za-z_]\w*)\s*<=?\s*(?:[0-9]|[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)")
+
+
+def _counted(cond: bytes, body: bytes) -> bool:
+    """Whether rumoca bounds the loop itself: *cond* compares a name ``i`` with ``<`` or ``<=`` to a
+    number or a package constant (``IterationData.IMAX``) and *body* holds ``i := i + 1`` (an input
+    as the bound is refused by rumoca, "does not have a proved finite arithmetic-series form")."""
+    return any(re.search(rb"\b" + re.escape(m.group(1)) + rb"\s*:=\s*" + re.escape(m.group(1)) + rb"\s*\+\s*1\s*;",
+                         body) for m in _COUNTED.finditer(cond))
 
 
 def while_loops_as_for(data: bytes) -> tuple[bytes, list[int]]:
@@ -60,9 +73,11 @@ def while_loops_as_for(data: bytes) -> tuple[bytes, list[int]]:
         if opened is None or end is None:
             continue
         start, header_end, cond = opened
+        if _counted(cond, code[header_end:tok.start()]):
+            continue
         line = data.count(b"\n", 0, start) + 1
         edits.append((start, header_end - start,
-                      b"for " + MARKER.encode() + b" in 1:" + str(MAX_PASSES).encode() + b" loop if "
+                      b"for " + MARKER.encode() + str(line).encode() + b" in 1:" + str(MAX_PASSES).encode() + b" loop if "
                       + data[start + 5:header_end - 4].strip() + b" then"))
         edits.append((tok.start(), end.end() - tok.start(),
                       b"end if; end for; assert(not (" + cond + b"), \"while loop at line " + str(line).encode()

@@ -1,0 +1,174 @@
+"""``while`` statements in functions (issue 35, item 2): compiled by the embedded backend with their
+Modelica meaning (:mod:`trackingbox.compiler.while_loops`, :mod:`trackingbox.compiler.while_source`)
+and checked against the same algorithms written in Python or against math/scipy; a loop that does not
+end within the passes the compiler unrolls stops the model with an error naming the loop."""
+from __future__ import annotations
+
+import math
+import re
+
+import fmpy
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from trackingbox.compiler import compile_model
+from trackingbox.compiler.while_loops import MAX_PASSES
+from trackingbox.compiler.while_source import while_loops_as_for
+from trackingbox.errors import AssertionFailed
+from trackingbox.fmu import FMUModel
+
+pytestmark = pytest.mark.compile
+
+MODELS = """
+package Wh
+  function newtonSqrt "Newton's square root: a counter bounds the loop"
+    input Real a;
+    input Real tol = 1e-12;
+    output Real x;
+  protected
+    Integer i;
+  algorithm
+    x := max(a, 1);
+    i := 0;
+    while abs(x*x - a) > tol*a and i < 60 loop
+      x := 0.5*(x + a/x);
+      i := i + 1;
+    end while;
+  end newtonSqrt;
+  function sumOfSquares "1^2 + ... + k^2 for the k that first reaches n: the count follows the input"
+    input Real n;
+    output Real s;
+  protected
+    Real k;
+  algorithm
+    k := 0;
+    s := 0;
+    while k < n loop
+      k := k + 1;
+      s := s + k*k;
+    end while;
+  end sumOfSquares;
+  function bisect "root of u^3 + u - a by bisection: nothing bounds the loop but its convergence"
+    input Real a;
+    input Real tol = 1e-10;
+    output Real u;
+  protected
+    Real lo;
+    Real hi;
+  algorithm
+    u := 0;
+    lo := 0;
+    hi := max(1, a);
+    while hi - lo > tol loop
+      u := (lo + hi)/2;
+      if u^3 + u > a then
+        hi := u;
+      else
+        lo := u;
+      end if;
+    end while;
+    u := (lo + hi)/2;
+  end bisect;
+  function collatz "steps of the Collatz sequence from n to 1: a constant condition, iterated concretely"
+    input Integer n;
+    output Integer steps;
+  protected
+    Integer m;
+  algorithm
+    m := n;
+    steps := 0;
+    while m <> 1 loop
+      m := if mod(m, 2) == 0 then div(m, 2) else 3*m + 1;
+      steps := steps + 1;
+    end while;
+  end collatz;
+  model Loops
+    parameter Real rate = 1;
+    Real x(start = 0.5, fixed = true);
+    Real r;
+    Real s;
+    Real b;
+    Real c;
+  equation
+    der(x) = rate;
+    r = newtonSqrt(x);
+    s = sumOfSquares(x);
+    b = bisect(x);
+    c = collatz(27);
+  end Loops;
+end Wh;
+"""
+
+
+@pytest.fixture(scope="module")
+def loops_fmu(tmp_path_factory):
+    d = tmp_path_factory.mktemp("while")
+    src = d / "Wh.mo"
+    src.write_text(MODELS)
+    return src, compile_model(src, "Wh.Loops", backend="embedded", output=d / "loops.fmu").fmu
+
+
+def _sum_of_squares(n: float) -> float:
+    k = s = 0.0
+    while k < n:
+        k += 1
+        s += k * k
+    return s
+
+
+def _collatz(n: int) -> int:
+    steps = 0
+    while n != 1:
+        n = n // 2 if n % 2 == 0 else 3 * n + 1
+        steps += 1
+    return steps
+
+
+def test_while_loops_match_the_same_algorithms_in_python(loops_fmu):
+    _, fmu = loops_fmu
+    # the output grid avoids integer x, where sumOfSquares steps
+    out = fmpy.simulate_fmu(str(fmu), stop_time=6.0, output_interval=0.25, output=["x", "r", "s", "b", "c"],
+                            relative_tolerance=1e-9, record_events=False)
+    x = out["x"]
+    assert np.allclose(x, 0.5 + out["time"], atol=1e-8)
+    assert np.allclose(out["r"], [math.sqrt(v) for v in x], rtol=1e-10)
+    interior = np.abs(x - np.round(x)) > 1e-6
+    assert interior.sum() >= 12
+    assert np.array_equal(out["s"][interior], [_sum_of_squares(v) for v in x[interior]])
+    assert np.allclose(out["b"], [brentq(lambda u, a=v: u**3 + u - a, 0.0, max(1.0, v), xtol=1e-13) for v in x],
+                       atol=1e-9)
+    assert np.all(out["c"] == _collatz(27))  # 111 passes: beyond the unrolling bound, yet constant
+
+
+def test_a_loop_that_does_not_end_within_its_bound_stops_the_model_naming_it(loops_fmu):
+    src, fmu = loops_fmu
+    # sumOfSquares(x) takes ceil(x) passes: past x = MAX_PASSES the unrolled loop has not ended, and the
+    # run stops there (asserts are checked at each communication point) instead of giving a wrong sum
+    line = MODELS.splitlines().index("    while k < n loop") + 1
+    with pytest.raises(AssertionFailed, match=rf"the while loop at {re.escape(str(src))}:{line} in function "
+                       rf"'sumOfSquares' did not end within {MAX_PASSES} passes") as exc:
+        FMUModel(fmu).simulate(stop_time=2.0, output_interval=0.1, parameters={"rate": 60.0}, outputs=["s"])
+    t = float(re.search(r"at t = ([0-9.]+) s", str(exc.value)).group(1))
+    assert 0.5 + 60.0 * (t - 0.1) <= MAX_PASSES < 0.5 + 60.0 * t + 1e-9  # the first point past x = 100
+
+
+def test_the_source_rewrite_keeps_lines_and_nesting():
+    src = (b"algorithm\n  while a < 1 // first\n    and b loop\n    while c loop\n      c := false;\n"
+           b"    end while;\n  a := \"while x loop\";\n  end  while ;\n")
+    out, lines = while_loops_as_for(src)
+    assert lines == [4, 2]
+    assert out.count(b"\n") == src.count(b"\n")
+    text = out.decode()
+    assert text.count("for _while_line_") == 2 and text.count("end if; end for;") == 2
+    assert "assert(not (a < 1 and b)" in text and "assert(not (c)" in text
+    assert '"while x loop"' in text  # a string is never read as a loop
+    assert "end while" not in text
+
+
+def test_a_loop_rumoca_bounds_by_its_counter_is_left_to_it():
+    src = (b"  while (i < IterationData.IMAX) and not found loop\n    found := x > 1;\n    i := i + 1;\n"
+           b"  end while;\n  while k < n loop\n    k := k + 1;\n  end while;\n")
+    out, lines = while_loops_as_for(src)
+    assert lines == [5]  # a bound that is an input: rumoca cannot prove the loop finite
+    assert out.decode().startswith("  while (i < IterationData.IMAX) and not found loop")
