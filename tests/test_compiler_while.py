@@ -83,6 +83,23 @@ package Wh
       steps := steps + 1;
     end while;
   end collatz;
+  function powerAbove "the first power of two above a: the output is assigned only where the loop ends"
+    input Real a;
+    output Real p;
+  protected
+    Real k;
+    Boolean found;
+  algorithm
+    k := 1;
+    found := false;
+    while not found loop
+      k := 2*k;
+      if k > a then
+        found := true;
+        p := k;
+      end if;
+    end while;
+  end powerAbove;
   model Loops
     parameter Real rate = 1;
     Real x(start = 0.5, fixed = true);
@@ -90,12 +107,14 @@ package Wh
     Real s;
     Real b;
     Real c;
+    Real p;
   equation
     der(x) = rate;
     r = newtonSqrt(x);
     s = sumOfSquares(x);
     b = bisect(x);
     c = collatz(27);
+    p = powerAbove(x);
   end Loops;
 end Wh;
 """
@@ -117,6 +136,14 @@ def _sum_of_squares(n: float) -> float:
     return s
 
 
+def _power_above(a: float) -> float:
+    k = 1.0
+    while True:
+        k *= 2
+        if k > a:
+            return k
+
+
 def _collatz(n: int) -> int:
     steps = 0
     while n != 1:
@@ -128,7 +155,7 @@ def _collatz(n: int) -> int:
 def test_while_loops_match_the_same_algorithms_in_python(loops_fmu):
     _, fmu = loops_fmu
     # the output grid avoids integer x, where sumOfSquares steps
-    out = fmpy.simulate_fmu(str(fmu), stop_time=6.0, output_interval=0.25, output=["x", "r", "s", "b", "c"],
+    out = fmpy.simulate_fmu(str(fmu), stop_time=6.0, output_interval=0.25, output=["x", "r", "s", "b", "c", "p"],
                             relative_tolerance=1e-9, record_events=False)
     x = out["x"]
     assert np.allclose(x, 0.5 + out["time"], atol=1e-8)
@@ -138,6 +165,7 @@ def test_while_loops_match_the_same_algorithms_in_python(loops_fmu):
     assert np.array_equal(out["s"][interior], [_sum_of_squares(v) for v in x[interior]])
     assert np.allclose(out["b"], [brentq(lambda u, a=v: u**3 + u - a, 0.0, max(1.0, v), xtol=1e-13) for v in x],
                        atol=1e-9)
+    assert np.array_equal(out["p"][interior], [_power_above(v) for v in x[interior]])
     assert np.all(out["c"] == _collatz(27))  # 111 passes: beyond the unrolling bound, yet constant
 
 

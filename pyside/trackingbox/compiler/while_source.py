@@ -15,9 +15,12 @@ into ::
     for _while_line_L in 1:N loop if COND then BODY end if; end for;
     assert(not (COND), "while loop at line L did not end within N passes");
 
-with N = :data:`.while_loops.MAX_PASSES`, lines kept. Where the loop ends within N passes this is
-the loop's meaning (rumoca refuses the rewritten loop where an output is first assigned in it:
-"leaves output ... without a definition on some branch", a refusal naming the function); where it would not, the assert stops the model (never a silently wrong value).
+with N = :data:`.while_loops.MAX_PASSES`, lines kept. A scalar output (Real, Integer, Boolean or a
+type derived from Real) of the function that the loop assigns and that nothing assigns before it is
+first set to zero (``u := 0.0;`` before the ``for``): rumoca refuses an output left without a
+definition on a branch (Brent's ``u``, assigned only where the root is found), and a valid function
+never reads an output before assigning it, so the zero is never seen where the loop ends. Where the loop ends within N passes this is
+the loop's meaning  where it would not, the assert stops the model (never a silently wrong value).
 The embedded translator recognises the marked ``for`` loop and executes it as the ``while`` it was
 (:mod:`.while_loops`: a constant condition iterates concretely, a bound is proved where the
 condition turns constant false).
@@ -44,6 +47,31 @@ def _counted(cond: bytes, body: bytes) -> bool:
     as the bound is refused by rumoca, "does not have a proved finite arithmetic-series form")."""
     return any(re.search(rb"\b" + re.escape(m.group(1)) + rb"\s*:=\s*" + re.escape(m.group(1)) + rb"\s*\+\s*1\s*;",
                          body) for m in _COUNTED.finditer(cond))
+
+
+_FUNCTION_HEAD = re.compile(rb"\bfunction\s+[A-Za-z_]\w*")
+_OUTPUT = re.compile(rb"\boutput\s+([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\([^;=]*\))?\s*;")
+_ZERO = {b"Integer": b"0", b"Boolean": b"false"}
+
+
+def _first_definitions(code: bytes, start: int, body: bytes) -> bytes:
+    """``name := zero;`` for each scalar output of the function around offset *start* that *body*
+    assigns and that its algorithm does not assign before *start* (see the module's docstring)."""
+    head = None
+    for head in _FUNCTION_HEAD.finditer(code, 0, start):
+        pass
+    if head is None:
+        return b""
+    algorithm = re.compile(rb"\balgorithm\b").search(code, head.end(), start)
+    if algorithm is None:
+        return b""
+    out = b""
+    for decl in _OUTPUT.finditer(code, head.end(), algorithm.start()):
+        kind, name = decl.group(1), decl.group(2)
+        assigned = re.compile(rb"\b" + re.escape(name) + rb"\s*:=")
+        if assigned.search(body) and not assigned.search(code, algorithm.end(), start):
+            out += name + b" := " + _ZERO.get(kind, b"0.0") + b"; "
+    return out
 
 
 def while_loops_as_for(data: bytes) -> tuple[bytes, list[int]]:
@@ -77,7 +105,7 @@ def while_loops_as_for(data: bytes) -> tuple[bytes, list[int]]:
             continue
         line = data.count(b"\n", 0, start) + 1
         edits.append((start, header_end - start,
-                      b"for " + MARKER.encode() + str(line).encode() + b" in 1:" + str(MAX_PASSES).encode() + b" loop if "
+                      _first_definitions(code, start, code[header_end:tok.start()]) + b"for " + MARKER.encode() + str(line).encode() + b" in 1:" + str(MAX_PASSES).encode() + b" loop if "
                       + data[start + 5:header_end - 4].strip() + b" then"))
         edits.append((tok.start(), end.end() - tok.start(),
                       b"end if; end for; assert(not (" + cond + b"), \"while loop at line " + str(line).encode()
