@@ -15,11 +15,12 @@ into ::
     for _while_line_L in 1:N loop if COND then BODY end if; end for;
     assert(not (COND), "while loop at line L did not end within N passes");
 
-with N = :data:`.while_loops.MAX_PASSES`, lines kept. A scalar output (Real, Integer, Boolean or a
-type derived from Real) of the function that the loop assigns and that nothing assigns before it is
-first set to zero (``u := 0.0;`` before the ``for``): rumoca refuses an output left without a
-definition on a branch (Brent's ``u``, assigned only where the root is found), and a valid function
-never reads an output before assigning it, so the zero is never seen where the loop ends. Where the loop ends within N passes this is
+with N = :data:`.while_loops.MAX_PASSES`, lines kept. A scalar output or protected local
+(Real, Integer, Boolean, an ``SI`` type) declared without a value, which the loop assigns and
+nothing assigns before it, is first set to zero (``u := 0.0;`` before the ``for``): rumoca refuses an
+output left without a definition on a branch (Brent's ``u``, assigned only where the root is found)
+and a local the loop carries without a value before it ("missing function value definition"); a
+valid function never reads a variable before assigning it, so the zero is never seen. Where the loop ends within N passes this is
 the loop's meaning  where it would not, the assert stops the model (never a silently wrong value).
 The embedded translator recognises the marked ``for`` loop and executes it as the ``while`` it was
 (:mod:`.while_loops`: a constant condition iterates concretely, a bound is proved where the
@@ -50,12 +51,14 @@ def _counted(cond: bytes, body: bytes) -> bool:
 
 
 _FUNCTION_HEAD = re.compile(rb"\bfunction\s+[A-Za-z_]\w*")
-_OUTPUT = re.compile(rb"\boutput\s+([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\([^;=]*\))?\s*;")
+_DECL = re.compile(rb"(?:output\s+)?(Real|Integer|Boolean|(?:Modelica\.Units\.)?SI\.\w+)\s+([A-Za-z_]\w*)"
+                   rb"\s*(?:\([^=]*\))?")
 _ZERO = {b"Integer": b"0", b"Boolean": b"false"}
 
 
 def _first_definitions(code: bytes, start: int, body: bytes) -> bytes:
-    """``name := zero;`` for each scalar output of the function around offset *start* that *body*
+    """``name := zero;`` for each scalar output or protected local (Real, Integer, Boolean, an
+    ``SI`` type) of the function around offset *start*, declared without a value, that *body*
     assigns and that its algorithm does not assign before *start* (see the module's docstring)."""
     head = None
     for head in _FUNCTION_HEAD.finditer(code, 0, start):
@@ -66,7 +69,13 @@ def _first_definitions(code: bytes, start: int, body: bytes) -> bytes:
     if algorithm is None:
         return b""
     out = b""
-    for decl in _OUTPUT.finditer(code, head.end(), algorithm.start()):
+    for stmt in code[head.end():algorithm.start()].split(b";"):
+        words = stmt.split()
+        while words and words[0] in (b"protected", b"public"):
+            words = words[1:]
+        decl = _DECL.fullmatch(b" ".join(words))
+        if decl is None:
+            continue
         kind, name = decl.group(1), decl.group(2)
         assigned = re.compile(rb"\b" + re.escape(name) + rb"\s*:=")
         if assigned.search(body) and not assigned.search(code, algorithm.end(), start):
