@@ -10,6 +10,7 @@ import re
 import fmpy
 import numpy as np
 import pytest
+from _fixtures_msl import need_msl
 from scipy.optimize import brentq
 
 from trackingbox.compiler import compile_model
@@ -200,3 +201,28 @@ def test_a_loop_rumoca_bounds_by_its_counter_is_left_to_it():
     out, lines = while_loops_as_for(src)
     assert lines == [5]  # a bound that is an input: rumoca cannot prove the loop finite
     assert out.decode().startswith("  while (i < IterationData.IMAX) and not found loop")
+
+
+def test_msl_critical_damping_filter_normalised_by_its_while_loops(tmp_path):
+    """``Modelica.Blocks.Continuous.Filter`` (CriticalDamping, normalized): the cut-off correction is found
+    by the MSL's while loops (``findInterval``, Brent's ``solveOneNonlinearEquation``,
+    ``Blocks/Continuous.mo:4019``, ``:4081``), which rumoca refused. Expected independently: three equal
+    poles at w with |H(j w_cut)| = 10^(-3/20), i.e. w = w_cut/sqrt(10^(3/20*2/3) - 1), and the closed-form
+    step response of 1/(s/w + 1)^3."""
+    msl = need_msl().parent
+    src = tmp_path / "CD.mo"
+    src.write_text("""model CD
+  Modelica.Blocks.Sources.Step step(startTime = 0.1, offset = 0.1);
+  Modelica.Blocks.Continuous.Filter f(analogFilter = Modelica.Blocks.Types.AnalogFilter.CriticalDamping,
+    normalized = true, init = Modelica.Blocks.Types.Init.SteadyState,
+    filterType = Modelica.Blocks.Types.FilterType.LowPass, order = 3, f_cut = 2, f_min = 1.6);
+equation
+  connect(step.y, f.u);
+end CD;
+""")
+    fmu = compile_model(src, "CD", backend="embedded", output=tmp_path / "cd.fmu", libraries=[msl]).fmu
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.05, output=["f.y"], relative_tolerance=1e-9)
+    w = 2 * math.pi * 2 / math.sqrt(10 ** (3 / 20 * 2 / 3) - 1)
+    tau = np.maximum(out["time"] - 0.1, 0.0)
+    expected = 0.1 + 1.0 * (1 - np.exp(-w * tau) * (1 + w * tau + (w * tau) ** 2 / 2))
+    assert np.allclose(out["f.y"], expected, atol=2e-5)
