@@ -226,3 +226,23 @@ end CD;
     tau = np.maximum(out["time"] - 0.1, 0.0)
     expected = 0.1 + 1.0 * (1 - np.exp(-w * tau) * (1 + w * tau + (w * tau) ** 2 / 2))
     assert np.allclose(out["f.y"], expected, atol=2e-5)
+
+
+def test_msl_if97_region_3_inverse_iteration_matches_iapws(tmp_path):
+    """``IF97_Utilities.BaseIF97.Inverses.dofpt3`` (``Media/Water/IF97_Utilities.mo:5025``): density from
+    p and T in region 3 by Newton's method in ``while ((i < IterationData.IMAX) and not found)``, a loop
+    rumoca bounds by its counter and the translator unrolls to exactly IMAX = 50 guarded passes; against
+    the ``iapws`` package's IAPWS-IF97 (an independent implementation)."""
+    iapws = pytest.importorskip("iapws", reason="the iapws package (a test dependency) is not installed")
+    msl = need_msl().parent
+    src = tmp_path / "D3.mo"
+    src.write_text("""model D3
+  Real T = 630 + 30*time;
+  Real d = Modelica.Media.Water.IF97_Utilities.BaseIF97.Inverses.dofpt3(p = 30e6, T = T, delp = 1e-7);
+end D3;
+""")
+    fmu = compile_model(src, "D3", backend="embedded", output=tmp_path / "d3.fmu", libraries=[msl]).fmu
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["T", "d"])
+    expected = [iapws.IAPWS97(P=30.0, T=float(t)) for t in out["T"]]
+    assert all(s.region == 3 for s in expected)
+    assert np.allclose(out["d"], [s.rho for s in expected], rtol=1e-7)
