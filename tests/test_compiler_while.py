@@ -14,9 +14,9 @@ from _fixtures_msl import need_msl
 from scipy.optimize import brentq
 
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.while_loops import MAX_PASSES
+from trackingbox.compiler.while_loops import MAX_CONSTANT_PASSES, MAX_PASSES
 from trackingbox.compiler.while_source import while_loops_as_for
-from trackingbox.errors import AssertionFailed
+from trackingbox.errors import AssertionFailed, UnsupportedConstructError
 from trackingbox.fmu import FMUModel
 
 pytestmark = pytest.mark.compile
@@ -246,3 +246,31 @@ end D3;
     expected = [iapws.IAPWS97(P=30.0, T=float(t)) for t in out["T"]]
     assert all(s.region == 3 for s in expected)
     assert np.allclose(out["d"], [s.rho for s in expected], rtol=1e-7)
+
+
+def test_a_loop_whose_constant_condition_never_turns_false_is_refused_naming_it(tmp_path):
+    src = tmp_path / "Forever.mo"
+    src.write_text("""package Forever
+  function count
+    input Real a;
+    output Real y;
+  protected
+    Integer k;
+  algorithm
+    k := 0;
+    y := a;
+    while k >= 0 loop
+      k := k + 1;
+    end while;
+  end count;
+  model M
+    Real x(start = 1, fixed = true);
+    Real y = count(x);
+  equation
+    der(x) = 1;
+  end M;
+end Forever;
+""")
+    with pytest.raises(UnsupportedConstructError, match=rf"while statement at {re.escape(str(src))}:10 in function "
+                       rf"'count' whose condition stays true: it has not ended after {MAX_CONSTANT_PASSES} passes\."):
+        compile_model(src, "Forever.M", backend="embedded", output=tmp_path / "f.fmu")

@@ -30,6 +30,7 @@ import re
 
 import casadi as ca
 
+from ..errors import UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number, logical_and, logical_not
 from .source import Location
@@ -40,7 +41,7 @@ if TYPE_CHECKING:  # pragma: no cover
 MAX_PASSES = 100
 """Passes a loop with a symbolic condition is unrolled to before its end is asserted."""
 
-MAX_CONSTANT_PASSES = 100_000
+MAX_CONSTANT_PASSES = 10_000
 """Passes a loop whose condition is a constant may take before it is refused as not ending."""
 
 RETURNED = "\0returned"  # (flat_statements._RETURNED: where a return statement was taken)
@@ -60,6 +61,14 @@ def _merge(active: Any, new: dict[str, Value], old: dict[str, Value]) -> dict[st
         else:
             out[key] = arr.map2(lambda x, y: ca.if_else(active, x, y), a, b, f"while-loop passes of {key!r}")
     return out
+
+
+def _refused(tr: Any, construct: str) -> UnsupportedConstructError:
+    """The refusal of a loop, located by :func:`while_statement`'s own file and line (the translator's
+    default span is an offset into the text rumoca read, which :mod:`.while_source` may have changed)."""
+    return UnsupportedConstructError(f"unsupported Modelica construct in {tr.model}: {construct}. The embedded "
+                                     "backend cannot compile it; use --backend openmodelica where omc is "
+                                     "installed, or rewrite the model")
 
 
 def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname: str) -> None:
@@ -89,7 +98,7 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
         finally:
             tr._freeze = saved
         if arr.is_array(c):
-            raise tr.unsupported(f"while statement whose condition is an array in {named}", r"\bwhile\b")
+            raise _refused(tr, f"while statement{place()} in {named} whose condition is an array")
         returned = e.get(RETURNED, False)
         return logical_and(c, logical_not(returned)) if RETURNED in e else c
 
@@ -104,8 +113,8 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
         if is_number(active):
             constant_passes += 1
             if constant_passes > MAX_CONSTANT_PASSES:
-                raise tr.unsupported(f"while statement in {named} whose condition stays true", r"\bwhile\b",
-                                     f"it has not ended after {MAX_CONSTANT_PASSES} passes")
+                raise _refused(tr, f"while statement{place()} in {named} whose condition stays true: it has not "
+                                   f"ended after {MAX_CONSTANT_PASSES} passes")
         else:
             symbolic_passes += 1
             if symbolic_passes > MAX_PASSES:
