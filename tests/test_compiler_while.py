@@ -192,6 +192,7 @@ def test_the_source_rewrite_keeps_lines_and_nesting():
     assert text.count("for _while_line_") == 2 and text.count("end if; end for;") == 2
     assert "assert(not (a < 1 and b)" in text and "assert(not (c)" in text
     assert '"while x loop"' in text  # a string is never read as a loop
+    assert "if a < 1" in text and "first" not in text  # a comment in the condition cannot swallow 'then'
     assert "end while" not in text
 
 

@@ -113,9 +113,10 @@ def while_loops_as_for(data: bytes) -> tuple[bytes, list[int]]:
         if _counted(cond, code[header_end:tok.start()]):
             continue
         line = data.count(b"\n", 0, start) + 1
-        edits.append((start, header_end - start,
-                      _first_definitions(code, start, code[header_end:tok.start()]) + b"for " + MARKER.encode() + str(line).encode() + b" in 1:" + str(MAX_PASSES).encode() + b" loop if "
-                      + data[start + 5:header_end - 4].strip() + b" then"))
+        # the condition as the code has it (a comment blanked, its newlines kept: the lines stay)
+        header = (b"for " + MARKER.encode() + str(line).encode() + b" in 1:" + str(MAX_PASSES).encode()
+                  + b" loop if" + code[start + 5:header_end - 4] + b"then")
+        edits.append((start, header_end - start, _first_definitions(code, start, code[header_end:tok.start()]) + header))
         edits.append((tok.start(), end.end() - tok.start(),
                       b"end if; end for; assert(not (" + cond + b"), \"while loop at line " + str(line).encode()
                       + b" did not end within " + str(MAX_PASSES).encode() + b" passes\");"))
