@@ -87,17 +87,8 @@ class SystemAssembly:
         names = [u.name() for u in unknowns]
         position = {n: i for i, n in enumerate(names)}
         incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
-        if partial:  # initial equations of some discrete variables: match each to the one it has
-            out = []
-            for (r, origin), inc in zip(eqs, incidence):
-                if len(inc) != 1:
-                    raise self.unsupported(f"initial equation of several discrete variables ({origin})")
-                sol = solve_scalar_linear(r, unknowns[inc[0]])
-                if sol is None:
-                    raise self.unsupported(f"initial equation of discrete variable {names[inc[0]]} that is not "
-                                           f"explicit in it ({origin})")
-                out.append((unknowns[inc[0]], sol))
-            return out
+        if partial:  # initial equations of some discrete variables: each solved for the one it has
+            return self._initial_discrete(eqs, unknowns, incidence)
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
@@ -120,6 +111,34 @@ class SystemAssembly:
                                        f"({origin})")
             out.append((u, sol))
         return out
+
+    def _initial_discrete(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX],
+                          incidence: list[list[int]]) -> list[tuple[ca.MX, ca.MX]]:
+        """Initial equations of some discrete variables, each solved for the one variable of it not
+        solved yet (``pre(state) = initialState(seed)`` first, then ``r = random(pre(state))``), the
+        values already solved substituted into the later ones."""
+        solved: dict[int, ca.MX] = {}
+        pending = list(range(len(eqs)))
+        while pending:
+            ready = [i for i in pending if len(set(incidence[i]) - set(solved)) == 1]
+            if not ready:
+                raise self.unsupported(f"initial equation of several discrete variables ({eqs[pending[0]][1]})")
+            for i in ready:
+                left = set(incidence[i]) - set(solved)
+                if len(left) != 1:  # another ready equation solved for the same variable
+                    raise self.unsupported(f"initial equation of discrete variables that other initial "
+                                           f"equations determine ({eqs[i][1]})")
+                (j,) = left
+                r = eqs[i][0]
+                if solved:
+                    r = ca.substitute([r], [unknowns[k] for k in solved], list(solved.values()))[0]
+                sol = solve_scalar_linear(r, unknowns[j])
+                if sol is None:
+                    raise self.unsupported(f"initial equation of discrete variable {unknowns[j].name()} that is "
+                                           f"not explicit in it ({eqs[i][1]})")
+                solved[j] = sol
+                pending.remove(i)
+        return [(unknowns[j], sol) for j, sol in solved.items()]
 
     def _start_of(self, sv: ScalarVar) -> float:
         """The start value of a variable (0 when it has none), with parameters at their start values."""

@@ -322,8 +322,11 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._evaluating.add(sv.name)
         try:
             node = sv.binding_node if sv.binding_node is not None else sv.start_node
-            if node is None:
-                val: Any = False if sv.type == BOOLEAN else 0
+            defined = self._initial_definition(sv) if sv.fixed is False and sv.binding_node is None else None
+            if defined is not None:  # an Integer/Boolean parameter (fixed = false) that an initial equation gives
+                val: Any = self.expr(defined)
+            elif node is None:
+                val = False if sv.type == BOOLEAN else 0
             else:
                 val = self._element(sv, node)
             if not is_number(val):
@@ -341,6 +344,18 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             return val
         finally:
             self._evaluating.discard(sv.name)
+
+    def _initial_definition(self, sv: ScalarVar) -> Any:
+        """The right-hand side of the initial equation ``name = expression`` of a scalar variable
+        (``final parameter Integer seed(fixed = false)`` with ``seed = fixedSeed`` in the
+        initial equations of Modelica.Blocks.Noise.GlobalSeed), or None."""
+        for eq in self.flat.get("initial_equations") or []:
+            sub = (eq.get("residual") or {}).get("Binary") or {}
+            ref = (sub.get("lhs") or {}).get("VarRef") or {}
+            if (sub.get("op") == "Sub" and not ref.get("subscripts")
+                    and (ref.get("name") or {}).get("name") == sv.name):
+                return sub.get("rhs")
+        return None
 
     def numeric(self, value: Value, what: str) -> float:
         """Evaluate *value* with every parameter at its start value."""
