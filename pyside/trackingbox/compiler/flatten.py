@@ -74,6 +74,7 @@ from .causalize import StructuralError, blt
 from .events import EventSystem
 from .modifiers import modifier_check
 from .semantics import check_flat
+from .structural_params import evaluated_from_parameters, initial_definition
 from .library import locate, model_files
 from .source import Location, ModelicaSource, span_location, span_sources
 from .flat_builtins import is_number, solve_scalar_linear
@@ -322,13 +323,15 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._evaluating.add(sv.name)
         try:
             node = sv.binding_node if sv.binding_node is not None else sv.start_node
-            defined = self._initial_definition(sv) if sv.fixed is False and sv.binding_node is None else None
+            defined = initial_definition(self.flat, sv.name) if sv.fixed is False and sv.binding_node is None else None
             if defined is not None:  # an Integer/Boolean parameter (fixed = false) that an initial equation gives
                 val: Any = self.expr(defined)
             elif node is None:
                 val = False if sv.type == BOOLEAN else 0
             else:
                 val = self._element(sv, node)
+            if not is_number(val) and sv.kind != "constant":  # bound to Real parameters (structural_params)
+                val = evaluated_from_parameters(self, sv, val) if sv.type != REAL else val
             if not is_number(val):
                 raise CompileError(
                     f"{'constant' if sv.kind == 'constant' else 'structural parameter'} {sv.name!r} "
@@ -344,18 +347,6 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             return val
         finally:
             self._evaluating.discard(sv.name)
-
-    def _initial_definition(self, sv: ScalarVar) -> Any:
-        """The right-hand side of the initial equation ``name = expression`` of a scalar variable
-        (``final parameter Integer seed(fixed = false)`` with ``seed = fixedSeed`` in the
-        initial equations of Modelica.Blocks.Noise.GlobalSeed), or None."""
-        for eq in self.flat.get("initial_equations") or []:
-            sub = (eq.get("residual") or {}).get("Binary") or {}
-            ref = (sub.get("lhs") or {}).get("VarRef") or {}
-            if (sub.get("op") == "Sub" and not ref.get("subscripts")
-                    and (ref.get("name") or {}).get("name") == sv.name):
-                return sub.get("rhs")
-        return None
 
     def numeric(self, value: Value, what: str) -> float:
         """Evaluate *value* with every parameter at its start value."""
