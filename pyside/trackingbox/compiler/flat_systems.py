@@ -467,10 +467,21 @@ class SystemAssembly:
             [ca.vertcat(*res)], unk + other_syms,
             [z[i] for i in range(len(unk))] + [p[i] for i in range(len(other_syms))],
         )[0]
-        rf = ca.rootfinder(
-            f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
-            {"abstol": NEWTON_TOLERANCE, "max_iter": 100},
-        )
+        try:
+            rf = ca.rootfinder(
+                f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
+                {"abstol": NEWTON_TOLERANCE, "max_iter": 100},
+            )
+        except RuntimeError as exc:  # its residuals cancel the unknowns out (x - (x - y) is y)
+            if "structurally rank-deficient" not in str(exc):
+                raise
+            held = sorted({s.name() for r in res for s in ca.symvar(r)} - unk_names)[:4]
+            raise self.unsupported(
+                f"an algebraic loop in {', '.join(u.name() for u in unk)} whose equations do not depend on it "
+                f"once the others are substituted: {'; '.join(str(r)[:160] + ' = 0' for r in res[:3])}, a relation "
+                f"between variables each of which is also given otherwise (two states for one quantity, which "
+                f"index reduction does not see where the dependence cancels only in the expressions)",
+                detail="; ".join(self._declared_at(n) for n in held)) from None
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
         sol = rf(start, values)
