@@ -267,3 +267,34 @@ def test_noise_blocks_draw_their_distributions(tmp_path):
         assert abs(y.mean() - dist.mean()) < mean_bound, name
         chi = stats.chi2(n - 1)  # exact for the normal draws; wider than needed for the other two
         assert chi.ppf(0.0005) < (n - 1) * y.var(ddof=1) / dist.var() < chi.ppf(0.9995), name
+
+
+AUTOMATIC = """
+model Automatic
+  inner Modelica.Blocks.Noise.GlobalSeed globalSeed(useAutomaticSeed = true);
+  Modelica.Blocks.Noise.UniformNoise noise(samplePeriod = 0.1);
+end Automatic;
+"""
+
+
+def _line(path: Path, text: str) -> int:
+    data = path.read_text(encoding="utf-8")
+    return data.count("\n", 0, data.index(text)) + 1
+
+
+def test_wall_clock_seed_and_impure_generator_are_refused_naming_the_function(tmp_path):
+    from trackingbox.compiler import compile_model
+    from trackingbox.errors import UnsupportedConstructError
+
+    random_mo = need_msl("Math", "Random.mo")
+    src = tmp_path / "Automatic.mo"
+    src.write_text(AUTOMATIC)
+    with pytest.raises(UnsupportedConstructError) as info:
+        compile_model(src, "Automatic", backend="embedded", output=tmp_path / "a.fmu", libraries=[MSL])
+    line = _line(random_mo, "impure function automaticGlobalSeed")
+    assert "automaticGlobalSeed" in str(info.value) and f"Random.mo:{line}" in str(info.value)
+    with pytest.raises(UnsupportedConstructError) as info:
+        compile_model(MSL, "Modelica.Blocks.Examples.Noise.ImpureGenerator", backend="embedded",
+                      output=tmp_path / "i.fmu")
+    line = _line(random_mo, "impure function impureRandom\n")
+    assert "ModelicaRandom_impureRandom_xorshift1024star" in str(info.value) and f"Random.mo:{line}" in str(info.value)
