@@ -298,3 +298,30 @@ def test_wall_clock_seed_and_impure_generator_are_refused_naming_the_function(tm
                       output=tmp_path / "i.fmu")
     line = _line(random_mo, "impure function impureRandom\n")
     assert "ModelicaRandom_impureRandom_xorshift1024star" in str(info.value) and f"Random.mo:{line}" in str(info.value)
+
+
+@pytest.mark.parametrize("example, dist", [
+    ("UniformNoiseProperties", stats.uniform(loc=0, scale=6)),
+    ("NormalNoiseProperties", stats.norm(loc=3, scale=1)),
+])
+def test_msl_noise_property_examples_meet_their_theoretical_mean_and_deviation(tmp_path, example, dist):
+    """The MSL's examples over their experiment (20 s, a draw each 1 ms): the running mean and
+    standard deviation they compute from the noise (``meanError``, ``sigmaError``: estimate minus
+    theory) end within 4.5 standard errors of the estimators for 20000 draws of the distribution
+    (the estimators' spreads from scipy.stats' moments)."""
+    import fmpy
+
+    from trackingbox.compiler import compile_model
+
+    need_msl("Blocks", "package.mo")
+    fmu = tmp_path / f"{example}.fmu"
+    compile_model(MSL, f"Modelica.Blocks.Examples.Noise.{example}", backend="embedded", output=fmu)
+    res = fmpy.simulate_fmu(str(fmu), stop_time=20.0, output_interval=0.004, relative_tolerance=1e-9,
+                            output=["meanError_y", "sigmaError_y", "noise.y"])
+    n = 20000
+    sigma = dist.std()
+    mu4 = dist.moment(4) - 4 * dist.mean() * dist.moment(3) + 6 * dist.mean() ** 2 * dist.moment(2) - 3 * dist.mean() ** 4
+    sd_var = np.sqrt((mu4 - sigma ** 4) / n)  # the sample variance's standard error
+    assert abs(res["meanError_y"][-1]) < 4.5 * sigma / np.sqrt(n)
+    assert abs(res["sigmaError_y"][-1]) < 4.5 * sd_var / (2 * sigma)
+    assert len(np.unique(res["noise.y"])) > 4000  # the draws differ (5000 outputs, 20000 draws)
