@@ -4,9 +4,13 @@ meaning on the embedded path, bit for bit.
 The MSL's generators (``Modelica.Math.Random.Generators``: xorshift64*, xorshift128+,
 xorshift1024*, S. Vigna 2014) keep their state in a Modelica ``Integer`` vector: each 64-bit word is
 two 32-bit Integers, the low half first (the C union of ``int32_t[2]`` and ``uint64_t`` on a
-little-endian machine). A call returns the new state and a Real ``0 < r <= 1``: the new 64-bit word
-(xorshift64*: the state after its multiplication; xorshift128+: the second word; xorshift1024*: the
-new word times 1181783497276652981) read as a signed 64-bit integer, times 2^-64, plus 0.5.
+little-endian machine). A call returns the new state and a Real in [0, 1] (the MSL documents
+0 < r <= 1): the new 64-bit word read as a signed 64-bit integer, times 2^-64, plus 0.5. The word is,
+as the MSL's C source adapts Vigna's published generators: for xorshift64* the state after its
+multiplication (kept as the next state, where the published generator keeps the state before it);
+for xorshift128+ the sum that the published generator returns (kept as the second word, where the
+published one keeps the sum's first term); for xorshift1024* the new word times
+1181783497276652981, as published.
 
 Where every argument is a constant at translation the routine runs here on Python integers. Where
 the state is a variable (the noise blocks draw ``(r_raw, state) = random(pre(state))`` at sample
@@ -14,8 +18,8 @@ events) the same arithmetic is built as a CasADi expression on the Integers' val
 below 2^53): a word is split into its 64 bits (``fmod`` by 2, exact), ``xor`` of two bits is
 ``a + b - 2ab``, shifts move bits, and sums and products modulo 2^64 are taken on 16-bit limbs with
 their carries (every partial sum stays below 2^36). The result is the C routine's, bit for bit, for
-every state; ``tests/test_compiler_random.py`` checks it against an independent implementation of the
-published algorithms.
+every state; ``tests/test_compiler_random.py`` checks it against the published algorithms (with those
+adaptations) and against the MSL's C source compiled there.
 
 ``impureRandom`` and ``automaticGlobalSeed`` are refused (the first would need the hidden
 xorshift1024* state across events, the second the wall clock and process id at the FMU's start).
