@@ -41,6 +41,7 @@ def noise_draw_as_algorithm(data: bytes) -> tuple[bytes, list[int]]:
         lines.append(data.count(b"\n", 0, m.start()) + 1)
     return bytes(out), lines
 
+
 # Modelica.Math.Random.Utilities.initializeImpureRandom: every Modelica.Blocks.Noise.GlobalSeed
 # computes ``id_impure = initializeImpureRandom(seed)`` in an initial equation. The function returns
 # its constant ``localSeed`` (715827883) and, on the way, copies an xorshift1024* state into the C
@@ -77,11 +78,12 @@ _GENERATOR_INITIAL_STATE = dict(
     why="the size of the output being defined read in its own definition",
 )
 
+# (Keyword arguments of rewrite.LibraryBody, which rewrite.py builds.) The last:
 # Modelica.Math.Random.Utilities.initialStateWithXorshift64star (MSL 4.0.0): rumoca 0.10.2 refuses
 # its slices of the state vector ``state[i:i+1] := aux`` and ``random(state[i-2:i-1])`` whose
 # bounds follow the loop variable ("dependent extent is not an exact Integer expression over
 # proven shape axes"). The body below assigns and passes the same two elements one by one: the same
-# states, in the same order. (Keyword arguments of rewrite.LibraryBody, which rewrite.py builds.)
+# states, in the same order.
 LIBRARY_BODIES = (
     _INITIALIZE_IMPURE,
     _GENERATOR_INITIAL_STATE,  # Xorshift128plus's
