@@ -20,6 +20,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
+from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
@@ -561,6 +562,10 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     if class_type in ("package", "function", "connector", "record", "type"):
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
     check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
+    absent = drop_absent_members(flat)  # unconnected members of expandable connectors (MLS 9.1.3)
+    if absent:
+        log.debug("%s: expandable-connector members nothing connects, not in the model: %s",
+                  model, ", ".join(absent))
     t1 = time.perf_counter()
     translator = FlatTranslator(flat, source, model, libraries)
     em = translator.translate()
