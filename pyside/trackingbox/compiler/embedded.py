@@ -221,6 +221,12 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
                 r"(?:colon dimension|:)",
                 r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]",
                 readme="flexible `:` sizes taken from a function result"),
+    FrontendGap("an array dimension given by an Integer parameter that a function computes "
+                "(`parameter Integer ns = f(...)`, `Real buf[ns]`: the front end does not evaluate the call)",
+                r"unevaluable array dimensions for '(?:\w+\.)*(?P<var>\w+)': dimension expression could not be "
+                r"evaluated: \[Expression\((?P<dim>\w+)\)\]",
+                r"\b{var}\s*\[\s*{dim}\s*\]", requires=r"\bparameter\s+Integer\s+{dim}\s*=\s*[\w.]+\s*\(",
+                readme="array dimensions given by a parameter that a function computes"),
     FrontendGap("`cross`/`skew` of Integer vectors",
                 r"ToDae.*expression type mismatch: expected Real, found Integer",
                 r"\b(?:cross|skew)\s*\(",
