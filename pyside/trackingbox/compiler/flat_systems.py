@@ -20,6 +20,7 @@ from .source import class_extent, read_text, strip_comments
 from .flat_model import REAL, Assertion, InitialSystem, ScalarVar
 from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
+from .initial_pre import hold_at_initialisation, pre_initial_equations
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,9 @@ class SystemAssembly:
         also pre(v), which is v there). The continuous equations keep pre(v): between events the FMU
         holds it equal to v, in the event iteration it is the value before the step (.events)."""
         names = {sv.name for sv in discrete}
+        if initial:  # pre(v) = e of a variable with an equation of its own: pre(v) at initialisation (.initial_pre)
+            residuals, self._pre_at_start = pre_initial_equations(residuals, self._pre, self._when_targets,
+                                                                  continuous | names)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         cont, disc = [], []
         for r, origin in residuals:
@@ -71,7 +75,7 @@ class SystemAssembly:
             if sym.name() in {k.name() for k in at_start}:
                 expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
             updates.append((sym, expr))
-        ev.updates = updates
+        ev.updates = hold_at_initialisation(updates, getattr(self, "_pre_at_start", {}), ev.initial)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         if pres:  # between events (where indicators are evaluated) pre(v) is v
             for cond in ev.conditions:
