@@ -75,3 +75,280 @@ def test_a_partial_base_only_as_a_replaceable_default_is_no_use(tmp_path):
 def test_a_base_read_by_name_or_a_default_that_is_not_partial_is_still_refused(tmp_path, model, base):
     with pytest.raises(UnsupportedConstructError, match=rf"extends {base} with a modified constant at .*Lib.mo:\d+"):
         compile_model(_lib(tmp_path), f"Lib.{model}", backend="embedded", output=tmp_path / "x.fmu")
+
+
+CHAIN = """package Chain
+  package A
+    constant Real cp = 1;
+    constant Real k = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := cp*k*u;
+    end f;
+  end A;
+  package B
+    extends A(cp = 2);
+  end B;
+  package C "cp modified again: Modelica gives C.cp = 4 (the outer modification wins)"
+    extends B(cp = 4);
+  end C;
+  package A2
+    constant Real cp = 1;
+    constant Real k = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := cp*k*u;
+    end f;
+  end A2;
+  package B2
+    extends A2(k = 3);
+  end B2;
+  package C2 "an element B2 leaves alone: C2.cp = 4, C2.k = 3"
+    extends B2(cp = 4);
+  end C2;
+  package Same "the value B gives, repeated: Same.cp = 2"
+    extends B(cp = 2);
+  end Same;
+  package S = B(cp = 5) "a short class: S.cp = 5";
+  model ReadC
+    Real c = C.cp*(1 + 0*time);
+  end ReadC;
+  model ReadS
+    Real c = S.cp*(1 + 0*time);
+  end ReadS;
+  model ReadLocal
+    package M = B(cp = 6);
+    Real c = M.cp*(1 + 0*time);
+  end ReadLocal;
+  model Distinct
+    Real c = C2.cp*(1 + 0*time);
+    Real k = C2.k*(1 + 0*time);
+    Real y = C2.f(2 + 0*time);
+    Real s = Same.cp*(1 + 0*time);
+  end Distinct;
+  model MA
+    parameter Real k = 1;
+    Real y = k*(1 + 0*time);
+  end MA;
+  model MB
+    extends MA(k = 2);
+  end MB;
+  model MC "the same chain of models: the outer k = 4 wins"
+    extends MB(k = 4);
+  end MC;
+end Chain;
+"""
+
+
+def _chain(tmp_path: Path) -> Path:
+    src = tmp_path / "Chain.mo"
+    src.write_text(CHAIN)
+    return src
+
+
+def test_rumoca_keeps_the_inner_value_of_a_package_constant_modified_twice():
+    """The wrong value behind the refusal below: rumoca 0.10.2 flattens C.cp (extends B(cp = 4), B
+    extends A(cp = 2)) as 2 where Modelica says 4 (MLS 7.2.4: the outer modification wins). Should
+    rumoca read it right, this fails and the refusal can be lifted."""
+    import rumoca
+
+    flat = rumoca.Session().loads(CHAIN, model="Chain.ReadC", filename="Chain.mo").to_dict("flat")
+    factor = flat["variables"]["c"]["binding"]["Binary"]["lhs"]["Literal"]["value"]
+    assert factor == {"Integer": 2}
+
+
+@pytest.mark.parametrize("model, package, line, outer, inner", [
+    ("ReadC", "C", 16, "4", "2"), ("ReadS", "S", 37, "5", "2"), ("ReadLocal", "M", 45, "6", "2")])
+def test_a_package_constant_modified_twice_along_its_extends_chain_is_refused(tmp_path, model, package, line,
+                                                                              outer, inner):
+    with pytest.raises(UnsupportedConstructError,
+                       match=rf"package {package} modifies cp at .*Chain.mo:{line} where its base B modifies it "
+                             rf"too, at .*Chain.mo:13: rumoca 0.10.2 keeps the inner value \(cp = {inner}\) "
+                             rf"instead of the outer one \(cp = {outer}\)"):
+        compile_model(_chain(tmp_path), f"Chain.{model}", backend="embedded", output=tmp_path / "x.fmu")
+
+
+def test_other_elements_a_repeated_value_and_a_chain_of_models_compile_with_modelicas_values(tmp_path):
+    src = _chain(tmp_path)
+    res = compile_model(src, "Chain.Distinct", backend="embedded", output=tmp_path / "d.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["c", "k", "y", "s"])
+    assert np.allclose(out["c"], 4.0) and np.allclose(out["k"], 3.0) and np.allclose(out["s"], 2.0)
+    assert np.allclose(out["y"], 4.0 * 3.0 * 2.0)  # C2.f(2) = cp*k*u
+    res = compile_model(src, "Chain.MC", backend="embedded", output=tmp_path / "m.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["y"])
+    assert np.allclose(out["y"], 4.0)
+
+
+SIBLINGS = """package Sib
+  partial package PM "a medium-like base: the function reads three constants"
+    constant Boolean singleState = false;
+    constant Integer ThermoStates = 0;
+    constant Real cp = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := (if singleState then 1 else 2)*u + ThermoStates*10 + cp*100;
+    end f;
+  end PM;
+  partial package PPS
+    extends PM(cp = 2);
+  end PPS;
+  package PSM "one branch: f(1) = 1 + 10 + 200 = 211"
+    extends PPS(final ThermoStates = 1, final singleState = true);
+  end PSM;
+  package PT "the other, unmodified: f(1) = 2 + 0 + 200 = 202"
+    extends PPS;
+  end PT;
+  model H
+    replaceable package M = PM;
+    Real y = M.f(1 + 0*time);
+    Real t = M.ThermoStates*(1 + 0*time);
+  end H;
+  model Two "two components, each with a medium of one branch"
+    H a(redeclare package M = PSM);
+    H b(redeclare package M = PT);
+  end Two;
+end Sib;
+"""
+
+
+def test_a_sibling_extension_counts_as_a_use_because_rumoca_mixes_functions_through_redeclared_packages(
+        tmp_path, monkeypatch):
+    """Why "package PSM extends PPS with a modified constant" is refused when the only other use of
+    PPS is another package's ``extends PPS`` (Modelica.Fluid's PartialSimpleMedium and
+    PartialTwoPhaseMedium on PartialPureSubstance): with two components whose media come from the two
+    branches, rumoca 0.10.2 computes b's M.f with PSM's constants (211 where Modelica gives 202), while
+    b's constants read directly are right. Measured here with the refusal switched off; should
+    rumoca get it right, the first assertion fails and the refusal can be narrowed."""
+    from trackingbox.compiler.modifiers import ModifierCheck
+
+    src = tmp_path / "Sib.mo"
+    src.write_text(SIBLINGS)
+    with monkeypatch.context() as m:
+        m.setattr(ModifierCheck, "_used_directly", lambda *a, **k: False)
+        res = compile_model(src, "Sib.Two", backend="embedded", output=tmp_path / "s.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5,
+                            output=["a.y", "b.y", "a.t", "b.t"])
+    assert np.allclose(out["b.y"], 211.0)  # rumoca's value; Modelica: 202
+    assert np.allclose(out["a.y"], 211.0) and np.allclose(out["a.t"], 1.0) and np.allclose(out["b.t"], 0.0)
+    with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
+                                                        r".*Sib.mo:17, and Sib.Two also uses PPS itself"):
+        compile_model(src, "Sib.Two", backend="embedded", output=tmp_path / "r.fmu")
+
+
+ONE_MEDIUM = """package Med
+  partial package PM
+    constant Boolean singleState = false;
+    constant Integer ThermoStates = 0;
+    constant Real cp = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := (if singleState then 1 else 2)*u + ThermoStates*10 + cp*100;
+    end f;
+  end PM;
+  partial package PPS
+    extends PM(cp = 2);
+  end PPS;
+  partial package PSM "a branch that modifies PPS's constants (Fluid's PartialSimpleMedium)"
+    extends PPS(final ThermoStates = 1, final singleState = true);
+  end PSM;
+  partial package PT "the other branch (PartialTwoPhaseMedium)"
+    extends PPS;
+  end PT;
+  package Water
+    import Med.Water.CPLW.k0;
+    constant Real kw = k0;
+    package CPLW
+      extends PSM;
+      constant Real k0 = 7;
+    end CPLW;
+    package W
+      extends PT(ThermoStates = 3);
+    end W;
+    package Standard = W;
+  end Water;
+  model H
+    replaceable package M = PM;
+    Real y = M.f(1 + 0*time);
+    Real t = M.ThermoStates*(1 + 0*time);
+  end H;
+  model H2 "constrained by the taken medium's own base"
+    replaceable package M = PM constrainedby PT;
+    Real y = M.f(2 + 0*time);
+  end H2;
+  model HD "a default of the other branch"
+    replaceable package M = Water.CPLW constrainedby PPS;
+    Real y = M.f(1 + 0*time);
+  end HD;
+  model System "one medium throughout (W: singleState false, ThermoStates 3, cp 2)"
+    replaceable package Medium = Water.Standard constrainedby PM;
+    H a(redeclare package M = Medium);
+    H b(redeclare package M = Medium);
+    H2 c(redeclare package M = Medium);
+    Real k = Water.kw*(1 + 0*time);
+  end System;
+  model DirectOther "one medium taken, the other branch's function and constant read by name"
+    replaceable package Medium = Water.Standard constrainedby PM;
+    H a(redeclare package M = Medium);
+    Real z = Water.CPLW.f(1 + 0*time);
+    Real zt = Water.CPLW.ThermoStates*(1 + 0*time);
+  end DirectOther;
+  model Replaced "the other branch's default, redeclared to W"
+    HD d(redeclare package M = Water.W);
+  end Replaced;
+end Med;
+"""
+
+
+def test_a_sibling_extension_is_no_use_when_the_model_takes_one_branch_as_its_medium(tmp_path):
+    """Modelica.Fluid's pattern: the model takes one medium (here W, through a short class) for every
+    component, and the other branch (PSM, which modifies PPS's constants) is only reached through
+    an import of a constant. Values worked by hand: W.f(u) = 2*u + 3*10 + 2*100."""
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    res = compile_model(src, "Med.System", backend="embedded", output=tmp_path / "s.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5,
+                            output=["a.y", "b.y", "a.t", "c.y", "k"])
+    assert np.allclose(out["a.y"], 232.0) and np.allclose(out["b.y"], 232.0) and np.allclose(out["a.t"], 3.0)
+    assert np.allclose(out["c.y"], 234.0) and np.allclose(out["k"], 7.0)
+    res = compile_model(src, "Med.DirectOther", backend="embedded", output=tmp_path / "o.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "z", "zt"])
+    assert np.allclose(out["a.y"], 232.0)
+    assert np.allclose(out["z"], 211.0) and np.allclose(out["zt"], 1.0)  # CPLW.f(1) = 1 + 1*10 + 2*100
+
+
+def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    with pytest.raises(UnsupportedConstructError, match=r"package PSM extends PPS with a modified constant at "
+                                                        r".*Med.mo:17, and Med.Replaced also uses PPS itself"):
+        compile_model(src, "Med.Replaced", backend="embedded", output=tmp_path / "r.fmu")
+
+
+@pytest.mark.slow
+def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say():
+    """(62 s on a loaded 2-core machine, most of it indexing the MSL.) On MSL 4.0.0: NonCircularPipes takes StandardWater (WaterIF97_ph) for every component and
+    reaches PartialSimpleMedium only through Modelica.Media.Water's import of a constant: no
+    refusal of the package constants. PumpingSystem takes StandardWaterOnePhase (WaterIF97_pT), whose
+    ``final smoothModel=true`` (Media/Water/package.mo:88) overrides WaterIF97_base's
+    ``smoothModel=false`` (line 129): refused, as rumoca would read false."""
+    from _fixtures_msl import MSL, need_msl
+
+    from trackingbox.compiler.modifiers import modifier_check
+    from trackingbox.compiler.source import resolve_source
+
+    need_msl("Media", "Water", "package.mo")
+    check = modifier_check(resolve_source(MSL), ())
+    assert check.check("Modelica.Fluid.Examples.NonCircularPipes") == []
+    with pytest.raises(UnsupportedConstructError,
+                       match=r"package WaterIF97_pT modifies smoothModel at .*Water.package\.mo:88 where its base "
+                             r"WaterIF97_base modifies it too, at .*Water.package\.mo:129: rumoca 0\.10\.2 keeps the "
+                             r"inner value \(smoothModel = false\) instead of the outer one \(smoothModel = true\)"):
+        check.check("Modelica.Fluid.Examples.PumpingSystem")

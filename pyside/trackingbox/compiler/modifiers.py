@@ -33,11 +33,12 @@ from __future__ import annotations
 
 import logging
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
+from .modification_parse import Mod, _skip_expr, parse_modification  # noqa: F401 (read from here too)
+from .package_overrides import check_overridden_constants, one_branch_taken, only_in_extends
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
@@ -46,8 +47,6 @@ log = logging.getLogger(__name__)
 # attributes whose loss changes no simulated number
 _HARMLESS = {"min", "max", "nominal", "unit", "displayUnit", "quantity", "stateSelect"}
 _KINDS = r"(?:model|block|class|package|connector|record|function|type|operator)"
-_IDENT = re.compile(r"[A-Za-z_]\w*")
-_KEYWORDS = {"each", "final", "redeclare", "replaceable"}
 
 
 def _values_with_attributes(mods: list[Mod], depth: int, first: int, path: str = "") -> list[tuple[str, Mod]]:
@@ -66,86 +65,6 @@ _DECLARATION = re.compile(r"(?<![.\w])([A-Za-z_][\w.]*)\s+([A-Za-z_]\w*)\s*(?:\[
 _NOT_TYPES = {"extends", "end", "import", "within", "if", "then", "else", "elseif", "and", "or", "not", "in",
               "loop", "annotation", "return", "der", "equation", "algorithm", "connect", "assert", "when",
               "while", "for", "redeclare", "replaceable", "constrainedby"} | set(_KINDS[3:-1].split("|"))
-
-
-@dataclass
-class Mod:
-    """One element of a modification: ``name(sub...) = value``."""
-
-    name: str
-    subs: list[Mod] = field(default_factory=list)
-    has_value: bool = False
-    offset: int = 0
-
-
-def _skip_expr(text: str, pos: int) -> int:
-    """Position of the ``,`` or ``)`` that ends the expression starting at *pos*."""
-    depth = 0
-    while pos < len(text):
-        ch = text[pos]
-        if ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            if depth == 0:
-                return pos
-            depth -= 1
-        elif ch == "," and depth == 0:
-            return pos
-        pos += 1
-    return pos
-
-
-def parse_modification(text: str, pos: int) -> tuple[list[Mod], int]:
-    """Parse ``( ... )`` at *pos* (comments and strings already blanked); return the elements and the end."""
-    assert text[pos] == "("
-    pos += 1
-    mods: list[Mod] = []
-    while pos < len(text):
-        while pos < len(text) and text[pos] in " \t\r\n,":
-            pos += 1
-        if pos >= len(text):
-            break
-        if text[pos] == ")":
-            return mods, pos + 1
-        start = pos
-        m = _IDENT.match(text, pos)
-        while m and m.group(0) in _KEYWORDS:
-            if m.group(0) in ("redeclare", "replaceable"):
-                m = None
-                break
-            pos = m.end()
-            while pos < len(text) and text[pos] in " \t\r\n":
-                pos += 1
-            m = _IDENT.match(text, pos)
-        if m is None:  # a redeclaration or something we do not read: skip it
-            pos = _skip_expr(text, pos)
-            continue
-        names = [m.group(0)]
-        pos = m.end()
-        while pos < len(text) and text[pos] == ".":  # a.b = 1 is a(b = 1)
-            m2 = _IDENT.match(text, pos + 1)
-            if not m2:
-                break
-            names.append(m2.group(0))
-            pos = m2.end()
-        while pos < len(text) and text[pos] in " \t\r\n":
-            pos += 1
-        if pos < len(text) and text[pos] == "[":  # subscripted element: skip the subscripts
-            pos = _skip_expr(text, pos)
-        mod = Mod(names[-1], offset=start)
-        if pos < len(text) and text[pos] == "(":
-            mod.subs, pos = parse_modification(text, pos)
-        while pos < len(text) and text[pos] in " \t\r\n":
-            pos += 1
-        if pos < len(text) and text[pos] in "=:":
-            mod.has_value = True
-            pos = _skip_expr(text, pos + 1)
-        else:
-            pos = _skip_expr(text, pos)
-        for outer in reversed(names[:-1]):
-            mod = Mod(outer, subs=[mod], offset=start)
-        mods.append(mod)
-    return mods, pos
 
 
 def modifier_check(source: ModelicaSource, libraries: tuple[Path, ...] | list[Path] = ()) -> ModifierCheck:
@@ -233,6 +152,7 @@ class ModifierCheck:
     def check(self, model: str) -> list[str]:
         """Refuse what rumoca would get wrong; return warnings for lost bounds and units."""
         used = self.used_classes(model)
+        check_overridden_constants(self, model, used)  # a package constant modified twice in a chain
         warnings: list[str] = []
         for c in used:
             text = self.body(c)
@@ -337,5 +257,8 @@ class ModifierCheck:
                     if found is None:
                         break
                     if found == target:
+                        if (c.kind == "package" and only_in_extends(self.body(c), name)
+                                and one_branch_taken(self, used, target)):
+                            break  # another package's extends of the base (see .package_overrides)
                         return True
         return False

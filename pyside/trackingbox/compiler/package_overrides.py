@@ -1,0 +1,202 @@
+"""Package constants modified twice along an extends chain, which rumoca 0.10.2 reads wrong; and
+when another package's ``extends`` of a modified base is a use of it (:func:`one_branch_taken`).
+
+In Modelica the outer modification wins (MLS 7.2.4): with
+
+.. code-block:: modelica
+
+    package A  constant Real cp = 1;  end A;
+    package B  extends A(cp = 2);  end B;
+    package C  extends B(cp = 4);  end C;
+
+``C.cp`` is 4. rumoca 0.10.2 gives 2, the value of the inner clause, where ``C.cp`` is read by name
+or through a short class (``package M = B(cp = 5)`` gives 2 as well), and a function inherited into
+``C`` that reads ``cp`` computes with 2. Nothing warns. The same chain of
+*models* (parameters) is flattened right; only packages lose the outer value
+(``tests/test_compiler_package_constants.py`` measures both).
+
+:func:`check_overridden_constants` refuses such a chain among the classes a model uses: a package
+(or a short package class) whose modification gives an element a value that a modification in
+an ``extends`` clause of one of its bases, at any depth, also gives a different value (the two
+values compared as source text, blanks ignored; the same value twice changes nothing, e.g.
+``Modelica.Media.Water.WaterIF97_ph`` repeating ``WaterIF97_base``'s ``smoothModel=false``).
+"""
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING
+
+from ..errors import UnsupportedConstructError
+from .modification_parse import _skip_expr, parse_modification
+
+if TYPE_CHECKING:  # (modifiers imports this module: no cycle at run time)
+    from .library import ClassInfo
+    from .modifiers import ModifierCheck
+
+_EXTENDS = re.compile(r"\bextends\s+([\w.]+)\s*\(")
+_SHORT_PACKAGE = re.compile(r"\bpackage\s+[A-Za-z_]\w*\s*=\s*([A-Za-z_][\w.]*)\s*\(")
+
+
+def _value_text(text: str, offset: int) -> str | None:
+    """The value of the modification element starting at *offset* (``[final] name[(...)] = value``),
+    blanks removed; None if it gives none."""
+    depth = 0
+    pos = offset
+    while pos < len(text):
+        ch = text[pos]
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            if depth == 0:
+                return None
+            depth -= 1
+        elif depth == 0 and ch == ",":
+            return None
+        elif depth == 0 and ch == "=" and text[pos + 1:pos + 2] != "=":
+            end = _skip_expr(text, pos + 1)
+            return re.sub(r"\s+", "", text[pos + 1:end])
+        pos += 1
+    return None
+
+
+def _valued(text: str, paren: int) -> dict[str, tuple[str, int]]:
+    """The elements the modification ``( ... )`` at *paren* gives a value: name -> (value, offset)."""
+    mods, _ = parse_modification(text, paren)
+    out: dict[str, tuple[str, int]] = {}
+    for m in mods:
+        if m.has_value:
+            value = _value_text(text, m.offset)
+            if value is not None:
+                out[m.name] = (value, m.offset)
+    return out
+
+
+def _modifications(check: ModifierCheck, c: ClassInfo) -> list[tuple[str, int, dict[str, tuple[str, int]]]]:
+    """(base name, offset of the clause, valued elements) of each extends clause of package *c*, and
+    of its short-class definition's modification."""
+    text = check.body(c)
+    found = []
+    pattern = _SHORT_PACKAGE if c.short else _EXTENDS
+    for m in pattern.finditer(text):
+        valued = _valued(text, m.end() - 1)
+        if valued:
+            found.append((m.group(1), m.start(), valued))
+    return found
+
+
+def _base_named(check: ModifierCheck, c: ClassInfo, name: str) -> str | None:
+    simple = name.rsplit(".", 1)[-1]
+    return next((b for b in check.index.bases(c.name) if b.rsplit(".", 1)[-1] == simple), None)
+
+
+def check_overridden_constants(check: ModifierCheck, model: str, used: list[ClassInfo]) -> None:
+    """Refuse a package of *used* whose modification overrides a value a base's extends clause
+    gives the same element (see the module docstring)."""
+    classes = check.index.classes
+    for c in used:
+        if c.kind != "package":
+            continue
+        for base_name, at, valued in _modifications(check, c):
+            base = _base_named(check, c, base_name)
+            seen: set[str] = set()
+            todo = [base] if base else []
+            while todo:
+                name = todo.pop()
+                if name in seen or name not in classes:
+                    continue
+                seen.add(name)
+                inner = classes[name]
+                todo.extend(check.index.bases(name))
+                if inner.kind != "package":
+                    continue
+                for _, _, inner_valued in _modifications(check, inner):
+                    for element, (value, _) in valued.items():
+                        if element in inner_valued and inner_valued[element][0] != value:
+                            raise UnsupportedConstructError(
+                                f"unsupported Modelica construct in {model}: package {c.simple} modifies "
+                                f"{element} at {check._location(c, at)} where its base {inner.simple} "
+                                f"modifies it too, at {check._location(inner, inner_valued[element][1])}: "
+                                f"rumoca 0.10.2 keeps the inner value ({element} = "
+                                f"{inner_valued[element][0]}) instead of the outer one ({element} = {value}) "
+                                f"in a package"
+                            )
+
+
+# --- another package's extends of a modified base ----------------------------------------------
+#
+# rumoca 0.10.2 mixes the constants of two packages that extend the same base with different
+# modifications where both are *taken as packages* by the model: a component's redeclared or default
+# replaceable package (``tests/test_compiler_package_constants.py``: two components with media of
+# the base's two branches compute one's functions with the other's constants; a default that is
+# redeclared away lends the package that replaces it its modifications). A sibling that is never
+# taken so changes nothing: two branches read by name (``PSM.f(...)``, ``PT.f(...)``), or a
+# constant read from a package the model does not take as its medium, come out right (measured in
+# the same test file). So another package's ``extends B`` is no use of ``B`` when every package the
+# model's classes take (``package X = Y``, ``redeclare package X = Y``, ``constrainedby Y``) that
+# extends ``B`` is one package and its own bases (Modelica.Fluid.Examples.PumpingSystem: the medium
+# ``WaterIF97_pT`` and the constraining ``PartialTwoPhaseMedium``; ``ConstantPropertyLiquidWater``,
+# whose ``PartialSimpleMedium`` modifies ``PartialPureSubstance``, only imported by
+# ``Modelica.Media.Water``).
+
+_TAKEN = re.compile(r"\bpackage\s+\w+\s*=\s*([A-Za-z_][\w.]*)|\bconstrainedby\s+([A-Za-z_][\w.]*)")
+
+
+def only_in_extends(text: str, name: str) -> bool:
+    """Whether *name* stands in *text* (a class's comment-free own text) only as the class an
+    ``extends`` clause names."""
+    esc = re.escape(name)
+    every = len(re.findall(rf"(?<![\w.]){esc}(?![\w])", text))
+    extended = len(re.findall(rf"\bextends\s+{esc}(?![\w.])", text))
+    return every > 0 and every == extended
+
+
+def _final(check: ModifierCheck, name: str) -> str | None:
+    """The class a short class chain ``package A = B`` ends at (None where it cannot be followed)."""
+    classes = check.index.classes
+    seen: set[str] = set()
+    while name in classes and classes[name].short:
+        if name in seen:
+            return None
+        seen.add(name)
+        bases = check.index.bases(name)
+        if not bases:
+            return None
+        name = bases[0]
+    return name if name in classes else None
+
+
+def _ancestors(check: ModifierCheck, name: str) -> set[str]:
+    out: set[str] = set()
+    todo = [name]
+    while todo:
+        n = todo.pop()
+        if n not in out:
+            out.add(n)
+            todo.extend(check.index.bases(n))
+    return out
+
+
+def one_branch_taken(check: ModifierCheck, used: list[ClassInfo], base: str) -> bool:
+    """Whether the packages the classes of *used* take (see above) that extend *base* are one package
+    and its own bases; False where a taken package cannot be resolved."""
+    taken: set[str] = set()
+    texts = []
+    for c in used:
+        texts.append((c, check.body(c)))  # (a redeclaration in a modification)
+        for child in check.index.children.get(c.name, {}).values():
+            k = check.index.classes.get(child)
+            if k is None or not k.short or k.kind != "package":
+                continue
+            text = check.body(k)  # (its own class: blanked in its parent's text)
+            if c.kind != "package" or re.match(r"\s*(?:\w+\s+)*?(?:replaceable|redeclare)\b", text):
+                texts.append((c, text))  # a package a model declares, or a replaceable one anywhere
+    for c, text in texts:
+        for m in _TAKEN.finditer(text):
+            target = check.index.lookup(m.group(1) or m.group(2), c.name)
+            final = _final(check, target) if target else None
+            if final is None:
+                return False
+            if base in _ancestors(check, final) - {final}:
+                taken.add(final)
+    leaves = {t for t in taken if not any(t != o and t in _ancestors(check, o) for o in taken)}
+    return len(leaves) <= 1
