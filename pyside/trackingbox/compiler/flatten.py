@@ -103,15 +103,20 @@ def _when_targets(flat: dict[str, Any]) -> set[str]:
             kind, body = kind_of(st)
             if not isinstance(body, dict):
                 continue
-            if kind == "Assignment" and inside:
-                parts = (body.get("comp") or {}).get("parts") or []
-                names = []
-                for k, part in enumerate(parts):
-                    subs = part.get("subs") or [] if k < len(parts) - 1 else []
-                    idx = [str(kind_of(sb)[1].get("value")) for sb in subs
-                           if kind_of(sb)[0] == "Index" and isinstance(kind_of(sb)[1], dict)]
-                    names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
-                found.add(".".join(names))
+            if kind in ("Assignment", "FunctionCall") and inside:
+                # a := e, or (a, b) := f(...) (the outputs' targets)
+                targets = ([body.get("comp") or {}] if kind == "Assignment"
+                           else [t for t in body.get("outputs") or [] if isinstance(t, dict)])
+                for target in targets:
+                    parts = target.get("parts") or []
+                    names = []
+                    for k, part in enumerate(parts):
+                        subs = part.get("subs") or [] if k < len(parts) - 1 else []
+                        idx = [str(kind_of(sb)[1].get("value")) for sb in subs
+                               if kind_of(sb)[0] == "Index" and isinstance(kind_of(sb)[1], dict)]
+                        names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
+                    if names:
+                        found.add(".".join(names))
             elif kind == "When":
                 for blk in body.get("blocks") or []:
                     statements(blk.get("stmts") or [], True)
