@@ -108,7 +108,20 @@ def train_fmu(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:
     return get
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--long", action="store_true",
+                     help="run the tests marked long (scripts/bench_long passes it)")
+
+
+LONG_REASON = ("a long end-to-end run, kept out of scripts/test to hold the suite inside CI's 25 minutes: "
+               "scripts/bench_long runs it")
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not config.getoption("--long"):
+        for item in items:
+            if "long" in item.keywords:
+                item.add_marker(pytest.mark.skip(reason=LONG_REASON))
     if omc_available():
         return
     reason = ("omc (OpenModelica) is not on PATH: it cannot be installed from Debian's or PyPI's "

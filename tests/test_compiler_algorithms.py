@@ -51,6 +51,12 @@ package Alg
   model Bad "the initial algorithm's assert fails: the FMU refuses to initialise"
     extends Friction(V_flowNominal = 0.5);
   end Bad;
+  model Grows "an assert that fails between events, at t = 0.3 s"
+    Real x(start = 0, fixed = true);
+  equation
+    der(x) = 1;
+    assert(x < 0.3, "x has grown past 0.3");
+  end Grows;
 end Alg;
 """
 
@@ -99,3 +105,24 @@ def test_a_failing_assert_of_an_initial_algorithm_stops_the_run(pkg, tmp_path):
     with pytest.raises(Exception, match="fmi3ExitInitializationMode failed"):
         fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, logger=logger)
     assert any("assert failed at t = 0 s: V_flowNominal has to be > V_flowLaminar" in m for m in logged)
+
+
+def test_an_assert_failing_between_events_stops_an_importer_that_follows_the_model_description(pkg, tmp_path):
+    """fmpy calls fmi3CompletedIntegratorStep only where the model description asks for it
+    (needsCompletedIntegratorStep); the asserts are checked there, so the FMU must ask, or an
+    importer like fmpy runs on past a failed assert (x = 0.3 at t = 0.3 s, by hand)."""
+    res = compile_model(pkg, "Alg.Grows", backend="embedded", output=tmp_path / "g.fmu")
+    md = fmpy.read_model_description(str(res.fmu))
+    assert md.modelExchange.needsCompletedIntegratorStep
+    logged: list[str] = []
+
+    def logger(*args):
+        logged.append(" ".join(a.decode() if isinstance(a, bytes) else str(a) for a in args))
+
+    with pytest.raises(Exception, match="fmi3CompletedIntegratorStep failed"):
+        fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.05, logger=logger,
+                          fmi_type="ModelExchange")
+    failed = [m for m in logged if "assert failed at t = " in m and "x has grown past 0.3" in m]
+    assert failed, logged
+    t = float(failed[0].split("assert failed at t = ")[1].split(" s")[0])
+    assert 0.3 <= t <= 0.35 + 1e-9, failed[0]

@@ -354,6 +354,24 @@ FRONTEND_GAP_MODELS = {
         "  N m;\n"
         "end M;\n",
         "`cardinality()`", 10),
+    "function_dimension": (
+        "model M\n"
+        "  function evenUp\n"
+        "    input Real a;\n"
+        "    output Integer n;\n"
+        "  algorithm\n"
+        "    n := integer(ceil(a));\n"
+        "    while mod(n, 2) <> 0 loop\n"
+        "      n := n + 1;\n"
+        "    end while;\n"
+        "  end evenUp;\n"
+        "  parameter Real a = 2.5;\n"
+        "  final parameter Integer ns = evenUp(a);\n"
+        "  Real buf[ns](each start = 0, each fixed = true);\n"
+        "equation\n"
+        "  der(buf) = ones(ns);\n"
+        "end M;\n",
+        "an array dimension given by an Integer parameter that a function computes", 13),
     "discrete_connection_order": (
         "model M\n"
         "  connector BI = input Boolean;\n"
@@ -378,16 +396,19 @@ FRONTEND_GAP_MODELS = {
         "      n = pre(n) + 1;\n"
         "    end when;\n"
         "  end Trig;\n"
-        "  Src p1(t0 = 0.5);\n"
-        "  Src p2(t0 = 0.2);\n"
-        "  Sw m;\n"
-        "  Trig t;\n"
-        "equation\n"
-        "  connect(p1.y, t.trigger);\n"
-        "  connect(p1.y, m.u[1]);\n"
-        "  connect(p2.y, m.u[2]);\n"
+        "  model Net \"the fan-out in a class the model uses (compiler.discrete_connects reads the model's own)\"\n"
+        "    Src p1(t0 = 0.5);\n"
+        "    Src p2(t0 = 0.2);\n"
+        "    Sw m;\n"
+        "    Trig t;\n"
+        "  equation\n"
+        "    connect(p1.y, t.trigger);\n"
+        "    connect(p1.y, m.u[1]);\n"
+        "    connect(p2.y, m.u[2]);\n"
+        "  end Net;\n"
+        "  Net net;\n"
         "end M;\n",
-        "connected to several inputs, one of them an element of an input array", 29),
+        "connected to several inputs, one of them an element of an input array", 30),
 }
 
 

@@ -43,6 +43,7 @@ def test_a_tank_started_from_its_preferred_level_and_temperature_matches_its_ref
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_tanks_with_an_overflow_pipe_between_ports_above_their_levels_match_their_reference():
     """``Tanks.TanksWithOverflow`` (about 80 s to compile, 70 s to simulate on a loaded machine): the
     overflow pipe joins two ports above their tanks' levels, so no flow passes and only the pipe's

@@ -44,6 +44,7 @@ def test_sensible_table_by_hand() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.compile
 def test_pair_then_track_heat_production(fmu_cache, tmp_path, capsys):
     from trackingbox.benches import make_bench

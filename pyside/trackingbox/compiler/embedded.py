@@ -20,6 +20,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
+from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
@@ -220,6 +221,12 @@ FRONTEND_GAPS: tuple[FrontendGap, ...] = (
                 r"(?:colon dimension|:)",
                 r"(?m)^(?!\s*(?:input|output)\b)[^\n]*?\b{var}\s*\[[\s:,]*\]",
                 readme="flexible `:` sizes taken from a function result"),
+    FrontendGap("an array dimension given by an Integer parameter that a function computes "
+                "(`parameter Integer ns = f(...)`, `Real buf[ns]`: the front end does not evaluate the call)",
+                r"unevaluable array dimensions for '(?:\w+\.)*(?P<var>\w+)': dimension expression could not be "
+                r"evaluated: \[Expression\((?P<dim>\w+)\)\]",
+                r"\b{var}\s*\[\s*{dim}\s*\]", requires=r"\bparameter\s+Integer\s+{dim}\s*=\s*[\w.]+\s*\(",
+                readme="array dimensions given by a parameter that a function computes"),
     FrontendGap("`cross`/`skew` of Integer vectors",
                 r"ToDae.*expression type mismatch: expected Real, found Integer",
                 r"\b(?:cross|skew)\s*\(",
@@ -561,6 +568,10 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     if class_type in ("package", "function", "connector", "record", "type"):
         raise CompileError(f"{model!r} is a {class_type}, not a model or block")
     check_source(source, model)  # invalid Modelica the front end accepted (.semantics)
+    absent = drop_absent_members(flat)  # unconnected members of expandable connectors (MLS 9.1.3)
+    if absent:
+        log.debug("%s: expandable-connector members nothing connects, not in the model: %s",
+                  model, ", ".join(absent))
     t1 = time.perf_counter()
     translator = FlatTranslator(flat, source, model, libraries)
     em = translator.translate()

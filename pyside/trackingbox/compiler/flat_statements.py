@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import CompileError
 from . import arrays as arr
-from . import lapack, records
+from . import lapack, random_ext, records
 from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
@@ -206,7 +206,9 @@ class StatementTranslation:
         shown = fname.removesuffix("__tuple")  # (the copy taking every output, see rewrite.first_output_functions)
         where = rf"\bfunction\s+{re.escape(shown.rsplit('.', 1)[-1])}\b"
         impl = lapack.ROUTINES.get(routine.lower()) if language == "FORTRAN 77" else None
-        if impl is None or ext.get("output_name"):
+        if language == "C" and routine in random_ext.ROUTINES:  # (Modelica.Math.Random, hashString)
+            impl = random_ext.ROUTINES[routine]
+        elif impl is None or ext.get("output_name"):
             raise self.unsupported(f"external function {shown!r} (external {language!r} routine {routine!r})", where)
         env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
         for out in fn.get("outputs") or []:
@@ -219,8 +221,11 @@ class StatementTranslation:
             values.append(None if name in outs and name not in env else self.expr(node, env))
         try:
             written = impl(values)
-        except lapack.NotGiven as exc:
-            raise self.unsupported(f"external function {shown!r} (LAPACK {routine})", where, str(exc)) from None
+        except (lapack.NotGiven, random_ext.NotGiven) as exc:
+            kind = f"LAPACK {routine}" if language == "FORTRAN 77" else routine
+            raise self.unsupported(f"external function {shown!r} ({kind})", where, str(exc)) from None
+        if ext.get("output_name") and -1 in written:
+            env[ext["output_name"]] = written[-1]
         for k, node in enumerate(ext.get("args") or []):
             name = _var_name(node)
             if name in outs:

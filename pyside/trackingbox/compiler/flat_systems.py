@@ -20,6 +20,7 @@ from .source import class_extent, read_text, strip_comments
 from .flat_model import REAL, Assertion, InitialSystem, ScalarVar
 from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
+from .initial_pre import hold_at_initialisation, pre_initial_equations
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,9 @@ class SystemAssembly:
         also pre(v), which is v there). The continuous equations keep pre(v): between events the FMU
         holds it equal to v, in the event iteration it is the value before the step (.events)."""
         names = {sv.name for sv in discrete}
+        if initial:  # pre(v) = e of a variable with an equation of its own: pre(v) at initialisation (.initial_pre)
+            residuals, self._pre_at_start = pre_initial_equations(residuals, self._pre, self._when_targets,
+                                                                  continuous | names)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         cont, disc = [], []
         for r, origin in residuals:
@@ -71,7 +75,7 @@ class SystemAssembly:
             if sym.name() in {k.name() for k in at_start}:
                 expr = ca.if_else(ev.initial, at_start[next(k for k in at_start if k.name() == sym.name())], expr)
             updates.append((sym, expr))
-        ev.updates = updates
+        ev.updates = hold_at_initialisation(updates, getattr(self, "_pre_at_start", {}), ev.initial)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         if pres:  # between events (where indicators are evaluated) pre(v) is v
             for cond in ev.conditions:
@@ -87,17 +91,8 @@ class SystemAssembly:
         names = [u.name() for u in unknowns]
         position = {n: i for i, n in enumerate(names)}
         incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
-        if partial:  # initial equations of some discrete variables: match each to the one it has
-            out = []
-            for (r, origin), inc in zip(eqs, incidence):
-                if len(inc) != 1:
-                    raise self.unsupported(f"initial equation of several discrete variables ({origin})")
-                sol = solve_scalar_linear(r, unknowns[inc[0]])
-                if sol is None:
-                    raise self.unsupported(f"initial equation of discrete variable {names[inc[0]]} that is not "
-                                           f"explicit in it ({origin})")
-                out.append((unknowns[inc[0]], sol))
-            return out
+        if partial:  # initial equations of some discrete variables: each solved for the one it has
+            return self._initial_discrete(eqs, unknowns, incidence)
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
@@ -120,6 +115,34 @@ class SystemAssembly:
                                        f"({origin})")
             out.append((u, sol))
         return out
+
+    def _initial_discrete(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX],
+                          incidence: list[list[int]]) -> list[tuple[ca.MX, ca.MX]]:
+        """Initial equations of some discrete variables, each solved for the one variable of it not
+        solved yet (``pre(state) = initialState(seed)`` first, then ``r = random(pre(state))``), the
+        values already solved substituted into the later ones."""
+        solved: dict[int, ca.MX] = {}
+        pending = list(range(len(eqs)))
+        while pending:
+            ready = [i for i in pending if len(set(incidence[i]) - set(solved)) == 1]
+            if not ready:
+                raise self.unsupported(f"initial equation of several discrete variables ({eqs[pending[0]][1]})")
+            for i in ready:
+                left = set(incidence[i]) - set(solved)
+                if len(left) != 1:  # another ready equation solved for the same variable
+                    raise self.unsupported(f"initial equation of discrete variables that other initial "
+                                           f"equations determine ({eqs[i][1]})")
+                (j,) = left
+                r = eqs[i][0]
+                if solved:
+                    r = ca.substitute([r], [unknowns[k] for k in solved], list(solved.values()))[0]
+                sol = solve_scalar_linear(r, unknowns[j])
+                if sol is None:
+                    raise self.unsupported(f"initial equation of discrete variable {unknowns[j].name()} that is "
+                                           f"not explicit in it ({eqs[i][1]})")
+                solved[j] = sol
+                pending.remove(i)
+        return [(unknowns[j], sol) for j, sol in solved.items()]
 
     def _start_of(self, sv: ScalarVar) -> float:
         """The start value of a variable (0 when it has none), with parameters at their start values."""
@@ -448,10 +471,21 @@ class SystemAssembly:
             [ca.vertcat(*res)], unk + other_syms,
             [z[i] for i in range(len(unk))] + [p[i] for i in range(len(other_syms))],
         )[0]
-        rf = ca.rootfinder(
-            f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
-            {"abstol": NEWTON_TOLERANCE, "max_iter": 100},
-        )
+        try:
+            rf = ca.rootfinder(
+                f"loop{k}", "fast_newton", {"x": z, "p": p, "g": g},
+                {"abstol": NEWTON_TOLERANCE, "max_iter": 100},
+            )
+        except RuntimeError as exc:  # its residuals cancel the unknowns out (x - (x - y) is y)
+            if "structurally rank-deficient" not in str(exc):
+                raise
+            held = sorted({s.name() for r in res for s in ca.symvar(r)} - unk_names)[:4]
+            raise self.unsupported(
+                f"an algebraic loop in {', '.join(u.name() for u in unk)} whose equations do not depend on it "
+                f"once the others are substituted: {'; '.join(str(r)[:160] + ' = 0' for r in res[:3])}, a relation "
+                f"between variables each of which is also given otherwise (two states for one quantity, which "
+                f"index reduction does not see where the dependence cancels only in the expressions)",
+                detail="; ".join(self._declared_at(n) for n in held)) from None
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
         sol = rf(start, values)

@@ -74,6 +74,7 @@ from .causalize import StructuralError, blt
 from .events import EventSystem
 from .modifiers import modifier_check
 from .semantics import check_flat
+from .structural_params import evaluated_from_parameters, initial_definition
 from .library import locate, model_files
 from .source import Location, ModelicaSource, span_location, span_sources
 from .flat_builtins import is_number, solve_scalar_linear
@@ -102,15 +103,20 @@ def _when_targets(flat: dict[str, Any]) -> set[str]:
             kind, body = kind_of(st)
             if not isinstance(body, dict):
                 continue
-            if kind == "Assignment" and inside:
-                parts = (body.get("comp") or {}).get("parts") or []
-                names = []
-                for k, part in enumerate(parts):
-                    subs = part.get("subs") or [] if k < len(parts) - 1 else []
-                    idx = [str(kind_of(sb)[1].get("value")) for sb in subs
-                           if kind_of(sb)[0] == "Index" and isinstance(kind_of(sb)[1], dict)]
-                    names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
-                found.add(".".join(names))
+            if kind in ("Assignment", "FunctionCall") and inside:
+                # a := e, or (a, b) := f(...) (the outputs' targets)
+                targets = ([body.get("comp") or {}] if kind == "Assignment"
+                           else [t for t in body.get("outputs") or [] if isinstance(t, dict)])
+                for target in targets:
+                    parts = target.get("parts") or []
+                    names = []
+                    for k, part in enumerate(parts):
+                        subs = part.get("subs") or [] if k < len(parts) - 1 else []
+                        idx = [str(kind_of(sb)[1].get("value")) for sb in subs
+                               if kind_of(sb)[0] == "Index" and isinstance(kind_of(sb)[1], dict)]
+                        names.append(str(part.get("ident")) + (f"[{','.join(idx)}]" if idx else ""))
+                    if names:
+                        found.add(".".join(names))
             elif kind == "When":
                 for blk in body.get("blocks") or []:
                     statements(blk.get("stmts") or [], True)
@@ -322,10 +328,15 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._evaluating.add(sv.name)
         try:
             node = sv.binding_node if sv.binding_node is not None else sv.start_node
-            if node is None:
-                val: Any = False if sv.type == BOOLEAN else 0
+            defined = initial_definition(self.flat, sv.name) if sv.fixed is False and sv.binding_node is None else None
+            if defined is not None:  # an Integer/Boolean parameter (fixed = false) that an initial equation gives
+                val: Any = self.expr(defined)
+            elif node is None:
+                val = False if sv.type == BOOLEAN else 0
             else:
                 val = self._element(sv, node)
+            if not is_number(val) and sv.kind != "constant":  # bound to Real parameters (structural_params)
+                val = evaluated_from_parameters(self, sv, val) if sv.type != REAL else val
             if not is_number(val):
                 raise CompileError(
                     f"{'constant' if sv.kind == 'constant' else 'structural parameter'} {sv.name!r} "

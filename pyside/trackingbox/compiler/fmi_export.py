@@ -33,7 +33,9 @@ unit, :mod:`.fmi_runtime`) and called from patched FMI functions of the wrapper:
 
 Asserts are checked at the points the importer completes a step (for
 :class:`trackingbox.fmu.Stepper`: every communication point), not at the
-solver's internal steps.
+solver's internal steps; a model with asserts declares ``needsCompletedIntegratorStep``,
+without which an importer such as fmpy never calls ``fmi3CompletedIntegratorStep``
+and runs on past a failed assert.
 """
 from __future__ import annotations
 
@@ -259,7 +261,7 @@ def export_fmu(
         md_path = tmpdir / "modelDescription.xml"
         md_path.write_text(
             _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
-                                    initial=em.initial, events=em.events)
+                                    initial=em.initial, events=em.events, asserts=bool(em.asserts))
         )
         if fixed_parameters:
             md_path.write_text(declare_fixed(md_path.read_text(), {sv.name for sv in em.parameters}))
@@ -322,9 +324,15 @@ def _tidy_model_description(
     description: str | None,
     initial: InitialSystem | None = None,
     events: EventSystem | None = None,
+    asserts: bool = False,
 ) -> str:
     root = ET.fromstring(xml)
     root.set("modelName", model)
+    me = root.find("ModelExchange")
+    if asserts and me is not None:
+        # the asserts are checked in fmi3CompletedIntegratorStep: an importer calls it only when asked
+        # (FMI 3.0 needsCompletedIntegratorStep, default false; fmpy follows it)
+        me.set("needsCompletedIntegratorStep", "true")
     if description:
         root.set("description", description)
     root.set("generationTool", "trackingbox (embedded: rumoca + CasADi)")

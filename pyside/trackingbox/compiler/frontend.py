@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config
-from . import inner_defaults
+from . import discrete_connects, inner_defaults
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
 from .source import ModelicaSource
@@ -122,6 +122,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     index = index if index is not None else index_for(source, libraries)
     reached = index.frontend_files(model) if model in index.classes else None
     inner = inner_defaults.patches(index, model, reached) if reached else {}  # rumoca's outer references
+    inner = _chained(inner, discrete_connects.patches(index, model) if reached else {})
     needed = reached if prune else None
     if needed is None:
         return _full_tree(source, libraries, dest, inner)
@@ -162,6 +163,15 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     roots = [lib_dir] if lib_dir.is_dir() else None
     return FrontendTree(entry=entry, roots=roots, renames=renames, originals=originals,
                         digest=digest.hexdigest(), pruned=True, entry_rel=str(entry.relative_to(dest)))
+
+
+def _chained(first: dict, then: dict) -> dict:
+    """Per-file patches of *first* followed by those of *then* for the same file."""
+    out = dict(first)
+    for f, patch in then.items():
+        before = out.get(f)
+        out[f] = patch if before is None else (lambda body, a=before, b=patch: b(a(body)))
+    return out
 
 
 def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path, inner=None) -> FrontendTree:

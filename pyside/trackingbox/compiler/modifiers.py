@@ -37,7 +37,7 @@ from pathlib import Path
 
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
-from .modification_parse import Mod, _skip_expr, parse_modification  # noqa: F401 (read from here too)
+from .modification_parse import Mod, parse_modification  # noqa: F401 (tests read parse_modification from here)
 from .package_overrides import check_overridden_constants, one_branch_taken, only_in_extends
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource

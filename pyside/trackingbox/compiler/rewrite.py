@@ -40,6 +40,7 @@ from .redeclare_short import short_class_redeclarations
 from .while_source import while_loops_as_for
 from .source import BOM
 from .source_scan import _FUNCTION, _blank_comments, _code_mask, _matching_paren, _statement_end
+from .random_source import LIBRARY_BODIES as _RANDOM_BODIES, noise_draw_as_algorithm
 from .streams_error import streams_error_as_assert
 
 log = logging.getLogger(__name__)
@@ -366,6 +367,7 @@ LIBRARY_BODIES = (
 """,
         why="a while loop on a condition that varies with time",
     ),
+    *(LibraryBody(**body) for body in _RANDOM_BODIES),  # (random_source)
 )
 
 
@@ -420,6 +422,7 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
         changed = True
     for rewrite, what in ((external_locals_as_inputs, "protected locals of external Fortran functions read as inputs"),
                           (streams_error_as_assert, "Modelica.Utilities.Streams.error read as an assert"),
+                          (noise_draw_as_algorithm, "PartialNoise's draw read as a when-statement (random_source)"),
                           (if_asserts_outside, "asserts in if-equations read outside them with their guard"),
                           (short_class_redeclarations, "class redeclarations with a literal modification read "
                                                        "through a short class"),
