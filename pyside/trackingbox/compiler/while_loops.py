@@ -34,6 +34,7 @@ from ..errors import UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number, logical_and, logical_not
 from .source import Location
+from .while_fold import folded_while
 
 if TYPE_CHECKING:  # pragma: no cover
     from .flat_model import Value
@@ -69,6 +70,11 @@ def _refused(tr: Any, construct: str) -> UnsupportedConstructError:
     return UnsupportedConstructError(f"unsupported Modelica construct in {tr.model}: {construct}. The embedded "
                                      "backend cannot compile it; use --backend openmodelica where omc is "
                                      "installed, or rewrite the model")
+
+
+def _not_ended(where: str, named: str) -> str:
+    return (f"the while loop{where} in {named} did not end within {MAX_PASSES} passes "
+            "(the embedded compiler runs it that many)")
 
 
 def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname: str) -> None:
@@ -107,7 +113,16 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
     active: Any = True  # a_(k-1)
     symbolic_passes = constant_passes = 0
     while True:
-        active = logical_and(active, condition(current))
+        cond = condition(current)
+        if symbolic_passes == 0 and is_number(active) and bool(active) and not is_number(cond):
+            # the first pass whose condition is symbolic: the rest as one body folded (.while_fold)
+            got = folded_while(tr, condition, stmts, fname, current, MAX_PASSES)
+            if got is not None:
+                result, running = got
+                tr._record_assert(logical_not(running), _not_ended(place(), named), "error",
+                                  fname if algorithm else f"function {fname}")
+                break
+        active = logical_and(active, cond)
         if is_number(active) and not bool(active):
             break  # the loop has ended on every path
         if is_number(active):
@@ -118,9 +133,8 @@ def while_statement(tr: Any, body: dict[str, Any], env: dict[str, Value], fname:
         else:
             symbolic_passes += 1
             if symbolic_passes > MAX_PASSES:
-                message = (f"the while loop{place()} in {named} did not end within {MAX_PASSES} passes "
-                           "(the embedded compiler unrolls it to that many)")
-                tr._record_assert(logical_not(active), message, "error", fname if algorithm else f"function {fname}")
+                tr._record_assert(logical_not(active), _not_ended(place(), named), "error",
+                                  fname if algorithm else f"function {fname}")
                 break
         following = dict(current)
         if not is_number(active):
