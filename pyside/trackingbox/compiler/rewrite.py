@@ -41,6 +41,7 @@ from .while_source import while_loops_as_for
 from .source import BOM
 from .source_scan import _FUNCTION, _blank_comments, _code_mask, _matching_paren, _statement_end
 from .random_source import LIBRARY_BODIES as _RANDOM_BODIES, noise_draw_as_algorithm
+from .filter_bodies import LIBRARY_BODIES as _FILTER_BODIES
 from .streams_error import streams_error_as_assert
 
 log = logging.getLogger(__name__)
@@ -368,6 +369,7 @@ LIBRARY_BODIES = (
         why="a while loop on a condition that varies with time",
     ),
     *(LibraryBody(**body) for body in _RANDOM_BODIES),  # (random_source)
+    *(LibraryBody(**body) for body in _FILTER_BODIES),  # (filter_bodies)
 )
 
 
