@@ -279,23 +279,26 @@ end CD;
 def test_msl_if97_region_3_inverse_iteration_matches_iapws(tmp_path):
     """``IF97_Utilities.BaseIF97.Inverses.dofpt3`` (``Media/Water/IF97_Utilities.mo:5025``): density from
     p and T in region 3 by Newton's method in ``while ((i < IterationData.IMAX) and not found)``, a loop
-    rumoca bounds by its counter and the translator unrolls to exactly IMAX = 50 guarded passes; against
-    the ``iapws`` package's IAPWS-IF97 (an independent implementation)."""
+    rumoca bounds by its counter, folded by the translator (at most 100 passes, IMAX = 50 ends it); three
+    calls, against the ``iapws`` package's IAPWS-IF97 (an independent implementation)."""
     iapws = pytest.importorskip("iapws", reason="the iapws package (a test dependency) is not installed")
     msl = need_msl().parent
     src = tmp_path / "D3.mo"
     src.write_text("""model D3
   Real T = 630 + 30*time;
-  Real d = Modelica.Media.Water.IF97_Utilities.BaseIF97.Inverses.dofpt3(p = 30e6, T = T, delp = 1e-7);
+  Real d[3] = {Modelica.Media.Water.IF97_Utilities.BaseIF97.Inverses.dofpt3(p = 30e6, T = T + 10*k, delp = 1e-7)
+               for k in 0:2};
 end D3;
 """)
     fmu = compile_model(src, "D3", backend="embedded", output=tmp_path / "d3.fmu", libraries=[msl]).fmu
-    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["T", "d"])
-    expected = [iapws.IAPWS97(P=30.0, T=float(t)) for t in out["T"]]
-    assert all(s.region == 3 for s in expected)
-    assert np.allclose(out["d"], [s.rho for s in expected], rtol=1e-7)
-    # the Newton step is one CasADi function folded over the passes: unrolled, the 50 passes gave
-    # 5.0 MB of C for this one call (measured on 800881a); folded, 0.42 MB
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["T", "d[1]", "d[2]", "d[3]"])
+    for k in range(3):
+        expected = [iapws.IAPWS97(P=30.0, T=float(t) + 10 * k) for t in out["T"]]
+        assert all(s.region == 3 for s in expected)
+        assert np.allclose(out[f"d[{k + 1}]"], [s.rho for s in expected], rtol=1e-7)
+    # the Newton step is one CasADi function folded over the passes (compiler.while_fold), and dofpt3 one
+    # function called three times (compiler.while_calls): unrolled, the 50 passes of one call gave 5.0 MB
+    # of C (measured on 800881a); folded and called, 0.42 MB for one call
     with zipfile.ZipFile(fmu) as z:
         assert z.getinfo("sources/D3.c").file_size < 1_500_000
 

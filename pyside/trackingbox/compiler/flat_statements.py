@@ -17,6 +17,7 @@ from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
 from .records import Record
+from .while_calls import called
 from .while_loops import marked_while, while_statement
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
@@ -80,6 +81,9 @@ class StatementTranslation:
             return vectorized
         if ext:
             return self._external(fname, fn, ext, args)
+        traced = called(self, fname, fn, args)  # a function running a while loop: traced once (.while_calls)
+        if traced is not None:
+            return traced
         self._inline_depth += 1
         if self._inline_depth > 40:
             raise self.unsupported(f"recursive function {fname!r}")

@@ -1,0 +1,177 @@
+"""Calls of functions with ``while`` loops, as calls of one CasADi function per Modelica function.
+
+The translator inlines a Modelica function at each call. For a function that runs a ``while`` loop,
+itself or through the functions it calls (``Modelica.Media.Water.IF97_Utilities.T_ph`` reaches the
+region-3 inverse ``dtofph3``, a Newton iteration), every call would trace the loop and everything
+around it again: a Fluid model with water in a few vessels and pipes calls such functions from dozens
+of places, and was still translating after 15 minutes. :func:`called` traces such a function once per
+combination of constant arguments (Integer flags such as IF97's ``phase`` and ``region`` stay
+constants, so their branches are still chosen while translating) on fresh symbols for the others,
+and gives each later call a call of that CasADi function: the expression graph and the generated C
+hold the function once.
+
+The function's asserts come out as extra outputs (1 where the assert holds) and are recorded at
+each call with the guards of that call. A function is inlined as before where its trace does what a
+CasADi function cannot carry: a record or String argument or result, or an event.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from . import arrays as arr
+from .flat_builtins import is_number
+from .flat_model import Value
+from .while_fold import _events, _restored
+
+log = logging.getLogger(__name__)
+
+_MARKED = "_while_line_"
+
+
+def _walk_loops(node: Any, calls: set[str]) -> bool:
+    """Whether *node* (a part of rumoca's JSON) holds a ``while`` loop; the functions it calls into *calls*."""
+    found = False
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, dict):
+            if "While" in n:
+                found = True
+            fc = n.get("FunctionCall")
+            if isinstance(fc, dict):
+                name = (fc.get("name") or fc.get("comp") or {}).get("name") if isinstance(
+                    fc.get("name") or fc.get("comp"), dict) else None
+                if isinstance(name, str):
+                    calls.add(name)
+            text = n.get("text")
+            if isinstance(text, str) and text.startswith(_MARKED):
+                found = True
+            stack.extend(n.values())
+        elif isinstance(n, list):
+            stack.extend(n)
+    return found
+
+
+def _loops(tr: Any, fname: str) -> bool:
+    """Whether *fname* runs a ``while`` loop, itself or through a function it calls (memoised on *tr*)."""
+    memo: dict[str, bool] = tr.__dict__.setdefault("_while_functions", {})
+    if fname in memo:
+        return memo[fname]
+    memo[fname] = False  # (a recursive call is refused elsewhere)
+    fn = tr.functions.get(fname)
+    if fn is None or fn.get("external"):
+        return False
+    calls: set[str] = set()
+    found = _walk_loops(fn, calls)
+    for c in sorted(calls):
+        if found:
+            break
+        found = c in tr.functions and _loops(tr, c)
+    memo[fname] = found
+    return found
+
+
+def _flat(value: Any) -> tuple[tuple[int, ...], list[Any]] | None:
+    """(shape, scalar elements) of a number, scalar MX or array of them; None for anything else."""
+    if isinstance(value, (str, bytes)):
+        return None
+    shape = arr.shape(value) if arr.is_array(value) else ()
+    elems = list(np.asarray(value, dtype=object).flat) if shape else [value]
+    if all(is_number(e) or (isinstance(e, ca.MX) and e.is_scalar()) for e in elems):
+        return shape, elems
+    return None
+
+
+def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tuple) -> Any:
+    """(CasADi function, output layout, asserts, parameter symbols) of *fname* for the arguments'
+    pattern *key*; None where it cannot be one."""
+    inputs, sym_args = [], []
+    for k, a in enumerate(args):
+        shape, elems = _flat(a)
+        if all(is_number(e) for e in elems):
+            sym_args.append(a)
+            continue
+        s = ca.MX.sym(f"tbx_call_{k}", len(elems))
+        inputs.append(s)
+        if shape:
+            v = arr.new(shape)
+            for j, idx in enumerate(np.ndindex(*shape)):
+                v[idx] = s[j]
+            sym_args.append(v)
+        else:
+            sym_args.append(s[0])
+    tracing: set = tr.__dict__.setdefault("_while_tracing", set())
+    guards, tr._guards = tr._guards, []
+    n_asserts, events = len(tr.asserts), _events(tr)
+    tracing.add(key)
+    try:
+        outs = tr.inline(fname, fn, sym_args)
+    finally:
+        tracing.discard(key)
+        tr._guards = guards
+        asserts = tr.asserts[n_asserts:]
+        del tr.asserts[n_asserts:]
+        changed = _restored(tr, events)
+    if changed:
+        return None  # (inlined at the call instead, which records its events there)
+    layout, values = [], []
+    for o in outs:
+        got = _flat(o)
+        if got is None:
+            return None
+        layout.append(got[0])
+        values += [ca.MX(float(e)) if is_number(e) else e for e in got[1]]
+    values += [a.condition for a in asserts]
+    out = ca.vertcat(*values) if values else ca.MX(0, 1)
+    own = {s.name() for s in inputs}
+    params = [s for s in ca.symvar(out) if s.name() not in own]
+    p = ca.veccat(*params) if params else ca.MX(0, 1)
+    f = ca.Function(f"tbx_fn{len(tr._while_calls) + 1}", [*inputs, p], [out])
+    return f, layout, asserts, p
+
+
+def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
+    """The outputs of ``fname(args)`` as a call of its traced CasADi function (see the module's
+    docstring); None where the function is to be inlined as before (no ``while`` loop reached, every
+    argument a constant, or a trace that cannot be a function)."""
+    if not _loops(tr, fname):
+        return None
+    flats = [_flat(a) for a in args]
+    if any(f is None for f in flats) or all(is_number(e) for f in flats for e in f[1]):
+        return None
+    key = (fname,) + tuple(("c", tuple(float(e) for e in f[1]), f[0]) if all(is_number(e) for e in f[1])
+                           else ("s", f[0]) for f in flats)
+    if key in tr.__dict__.setdefault("_while_tracing", set()):
+        return None  # the trace itself
+    cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
+    if key not in cache:
+        cache[key] = _trace(tr, fname, fn, args, key)
+        log.debug("%s: %s %s", tr.model, fname, "traced once as a CasADi function" if cache[key] is not None
+                  else "inlined at each call (its trace cannot be a function)")
+    traced = cache[key]
+    if traced is None:
+        return None
+    f, layout, asserts, p = traced
+    actual = [ca.vertcat(*[ca.MX(float(e)) if is_number(e) else e for e in fl[1]])
+              for fl in flats if not all(is_number(e) for e in fl[1])]
+    res = f(*actual, p)
+    outs: list[Value] = []
+    at = 0
+    for shape in layout:
+        if not shape:
+            outs.append(res[at])
+            at += 1
+            continue
+        v = arr.new(shape)
+        for idx in np.ndindex(*shape):
+            v[idx] = res[at]
+            at += 1
+        outs.append(v)
+    for a in asserts:
+        tr._record_assert(res[at], a.message, a.level, a.origin)
+        at += 1
+    return outs
