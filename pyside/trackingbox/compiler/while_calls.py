@@ -22,10 +22,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number
 from .flat_model import Value
-from .while_fold import _events, _restored
+from .while_fold import _NAMES, _events, _restored
 
 log = logging.getLogger(__name__)
 
@@ -86,16 +87,23 @@ def _flat(value: Any) -> tuple[tuple[int, ...], list[Any]] | None:
     return None
 
 
+def _constant(elems: list[Any]) -> bool:
+    """Whether an argument stays a constant in the trace: Integer and Boolean values (flags such as IF97's
+    ``phase`` and ``region`` choose branches); a Real, even a literal, is an input of the function, so
+    that the calls with different pressures share one trace."""
+    return all(isinstance(e, (bool, int, np.bool_, np.integer)) for e in elems)
+
+
 def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tuple) -> Any:
     """(CasADi function, output layout, asserts, parameter symbols) of *fname* for the arguments'
     pattern *key*; None where it cannot be one."""
     inputs, sym_args = [], []
-    for k, a in enumerate(args):
+    for a in args:
         shape, elems = _flat(a)
-        if all(is_number(e) for e in elems):
+        if _constant(elems):
             sym_args.append(a)
             continue
-        s = ca.MX.sym(f"tbx_call_{k}", len(elems))
+        s = ca.MX.sym(f"tbx_call{next(_NAMES)}", len(elems))  # (names unique: a nested trace's are its own)
         inputs.append(s)
         if shape:
             v = arr.new(shape)
@@ -110,13 +118,15 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
     tracing.add(key)
     try:
         outs = tr.inline(fname, fn, sym_args)
+    except (UnsupportedConstructError, CompileError):
+        outs = None  # (e.g. a Real input that must be a constant there: inlined at the call instead)
     finally:
         tracing.discard(key)
         tr._guards = guards
         asserts = tr.asserts[n_asserts:]
         del tr.asserts[n_asserts:]
         changed = _restored(tr, events)
-    if changed:
+    if changed or outs is None:
         return None  # (inlined at the call instead, which records its events there)
     layout, values = [], []
     for o in outs:
@@ -130,7 +140,7 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
     own = {s.name() for s in inputs}
     params = [s for s in ca.symvar(out) if s.name() not in own]
     p = ca.veccat(*params) if params else ca.MX(0, 1)
-    f = ca.Function(f"tbx_fn{len(tr._while_calls) + 1}", [*inputs, p], [out])
+    f = ca.Function(f"tbx_fn{next(_NAMES)}", [*inputs, p], [out])
     return f, layout, asserts, p
 
 
@@ -143,8 +153,7 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
     flats = [_flat(a) for a in args]
     if any(f is None for f in flats) or all(is_number(e) for f in flats for e in f[1]):
         return None
-    key = (fname,) + tuple(("c", tuple(float(e) for e in f[1]), f[0]) if all(is_number(e) for e in f[1])
-                           else ("s", f[0]) for f in flats)
+    key = (fname,) + tuple(("c", tuple(f[1]), f[0]) if _constant(f[1]) else ("s", f[0]) for f in flats)
     if key in tr.__dict__.setdefault("_while_tracing", set()):
         return None  # the trace itself
     cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
@@ -157,7 +166,7 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
         return None
     f, layout, asserts, p = traced
     actual = [ca.vertcat(*[ca.MX(float(e)) if is_number(e) else e for e in fl[1]])
-              for fl in flats if not all(is_number(e) for e in fl[1])]
+              for fl in flats if not _constant(fl[1])]
     res = f(*actual, p)
     outs: list[Value] = []
     at = 0
