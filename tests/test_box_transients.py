@@ -28,7 +28,8 @@ import pytest
 
 from trackingbox.compiler import compile_model
 from trackingbox.fmu import FMUModel
-from trackingbox.generate.generator import _BLOCKS_LIBRARY, generate, stage_packages
+from trackingbox.generate.generator import _BLOCKS_LIBRARY, generate
+from trackingbox.generate.source import stage_packages
 from trackingbox.spec import load_spec
 from trackingbox.tracking.controllers import Scaling, ScaledPI
 

@@ -8,8 +8,6 @@ is the identity (its inverse is triangular too, so ``A * inv(A)^T`` is diagonal,
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 

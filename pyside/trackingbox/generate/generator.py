@@ -55,7 +55,6 @@ from .source import (
     parameter_site,
     refusal_message,
     rewrite_source,
-    stage_packages,  # noqa: F401 - importable from here, as it was (tests stage packages with it)
 )
 from .variants import class_variant, component_class, is_library_class, library_index, twin_variant
 
