@@ -358,3 +358,19 @@ end Forever;
     with pytest.raises(UnsupportedConstructError, match=rf"while statement at {re.escape(str(src))}:10 in function "
                        rf"'count' whose condition stays true: it has not ended after {MAX_CONSTANT_PASSES} passes\."):
         compile_model(src, "Forever.M", backend="embedded", output=tmp_path / "f.fmu")
+
+
+def test_a_call_of_a_very_large_function_running_a_while_loop_is_refused_naming_it(tmp_path):
+    """``IF97_Utilities.rho_ph`` reaches ``dtofph3``'s while loop through ``waterBaseProp_ph`` and inlines
+    to about 74 million nodes of function bodies, past ``MAX_INLINED_SIZE``: refused before any trace,
+    naming the function (the Fluid examples that call it from many places did not compile in 900 s)."""
+    msl = need_msl().parent
+    src = tmp_path / "RH.mo"
+    src.write_text("""model RH
+  Real h = 1.5e6 + 1e5*time;
+  Real d = Modelica.Media.Water.IF97_Utilities.rho_ph(p = 20e6, h = h);
+end RH;
+""")
+    with pytest.raises(UnsupportedConstructError, match=r"call of function 'Modelica\.Media\.Water\.IF97_Utilities\."
+                       r"rho_ph', which runs a while loop through the functions it calls and inlines to \d+ nodes"):
+        compile_model(src, "RH", backend="embedded", output=tmp_path / "rh.fmu", libraries=[msl])

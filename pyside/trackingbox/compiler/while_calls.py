@@ -32,6 +32,14 @@ log = logging.getLogger(__name__)
 
 _MARKED = "_while_line_"
 
+MAX_INLINED_SIZE = 3_000_000
+"""The largest :func:`inlined_size` of a function running a while loop that is traced for a call with
+symbolic arguments; a larger one is refused. Measured (MSL 4.0.0): ``dofpt3`` 61 946 (traced in under a
+second), ``IF97_Utilities.h_pT`` 2 369 308 (4 s); ``IF97_Utilities.rho_ph`` 74 018 804 took 130 s to
+trace on a loaded machine, and ``Fluid.Examples.Explanatory.MeasuringTemperature``, which calls it and
+its like from several components, was still compiling after 900 s, where a refusal at its ``while``
+loops had taken seconds."""
+
 
 def _walk_loops(node: Any, calls: set[str]) -> bool:
     """Whether *node* (a part of rumoca's JSON) holds a ``while`` loop; the functions it calls into *calls*."""
@@ -74,6 +82,39 @@ def _loops(tr: Any, fname: str) -> bool:
         found = c in tr.functions and _loops(tr, c)
     memo[fname] = found
     return found
+
+
+def _calls_in(node: Any) -> tuple[int, list[str]]:
+    """(number of JSON nodes, names of the functions called, once per call site) of *node*."""
+    count, names, stack = 0, [], [node]
+    while stack:
+        n = stack.pop()
+        count += 1
+        if isinstance(n, dict):
+            fc = n.get("FunctionCall")
+            if isinstance(fc, dict):
+                ref = fc.get("name") or fc.get("comp")
+                if isinstance(ref, dict) and isinstance(ref.get("name"), str):
+                    names.append(ref["name"])
+            stack.extend(n.values())
+        elif isinstance(n, list):
+            stack.extend(n)
+    return count, names
+
+
+def inlined_size(tr: Any, fname: str) -> int:
+    """The size of *fname* once every function it calls is inlined: its own JSON nodes plus, per call
+    site, the inlined size of the function called (memoised on *tr*; external functions count 1)."""
+    memo: dict[str, int] = tr.__dict__.setdefault("_while_sizes", {})
+    if fname in memo:
+        return memo[fname]
+    memo[fname] = 1  # (a recursive call is refused elsewhere)
+    fn = tr.functions.get(fname)
+    if fn is None or fn.get("external"):
+        return 1
+    own, names = _calls_in(fn)
+    memo[fname] = own + sum(inlined_size(tr, c) for c in names if c in tr.functions)
+    return memo[fname]
 
 
 def _flat(value: Any) -> tuple[tuple[int, ...], list[Any]] | None:
@@ -158,9 +199,14 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
         return None  # the trace itself
     cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
     if key not in cache:
+        size = inlined_size(tr, fname)
+        if size > MAX_INLINED_SIZE:
+            raise tr.unsupported(f"call of function {fname!r}, which runs a while loop through the functions it "
+                                 f"calls and inlines to {size} nodes of their bodies (the embedded backend traces "
+                                 f"such a function up to {MAX_INLINED_SIZE})")
         cache[key] = _trace(tr, fname, fn, args, key)
-        log.debug("%s: %s %s", tr.model, fname, "traced once as a CasADi function" if cache[key] is not None
-                  else "inlined at each call (its trace cannot be a function)")
+        log.debug("%s: %s %s", tr.model, fname, f"traced once as a CasADi function of {cache[key][0].n_nodes()} "
+                  "nodes" if cache[key] is not None else "inlined at each call (its trace cannot be a function)")
     traced = cache[key]
     if traced is None:
         return None
