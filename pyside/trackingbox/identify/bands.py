@@ -25,11 +25,26 @@ tracked value ``p`` (level :data:`LEVEL`), in six parts:
    bounds), so after ``k`` auto samples ``p* ∈ [p - (p0 - a)|d_k|, p + (b - p0)|d_k|]``
    (sides swapped where ``d_k < 0``), combined with the noise part in quadrature;
 3. **lag**: a truth moving at rate ``ρ`` is ``ρ T_lag`` ahead of ``p``; ``ρ`` is
-   the tracked value's own slope (the difference of two exponential means of
-   ``p`` over ``T_lag/2`` and ``T_lag``), added on the side it moves to; while the
-   controller holds (stoppage, missing tag) the truth may move on: the rate
-   before the hold times its length is added there, and fades with ``d`` once
-   tracking resumes.
+   the tracked value's own slope over a day (:data:`RATE_MEMORY`, at least ``T_lag``:
+   two exponential means of the auto rows' ``p`` over half of it and all of it, each
+   with its rows' mean time, ``ρ = ΔP/Δt``, exact on a ramp however short the history),
+   added on the side it moves to; while the controller holds (stoppage, missing tag)
+   the truth may move on: the rate before the hold times its length is added there,
+   and fades with ``d`` once tracking resumes.
+
+   Why a day and not ``T_lag``: a slow error on a tag makes the loops wander, and the
+   wander's slope over ``T_lag`` is as large as a slow truth's rate. On the evaporator's
+   twin-structure plant the fouling's rate over its 3 h lag was twice the truth's in the median
+   and of the wrong sign in 11 % of the rows (``scripts/explain_evaporator_bands``, seed 0):
+   ``outletValve.KvMax``'s truth sat above ``p`` by 0.004-0.010 on average after 12 h (seeds
+   0-2), of which the fouling's motion behind the loops gave 0.007-0.009 (the linearised loops
+   driven by the truth's motion alone), and in 8 of the 12 3 h windows where its band held the
+   truth in under 90 % of the rows, that rate, carried 560 to one (part 5), put less on the band
+   than the motion put on the truth (0.0002-0.0068 against 0.0023-0.0106), the paired tags' slow
+   errors at the truth adding up to 0.008 (QI-6150) and 0.010 (ZI-6150) on top. Over a day the
+   carried lag was 0.0059-0.0124 in those windows; seeds 0-2 (``--rebands``): 84.9, 85.3, 97.1 %
+   -> 91.9, 95.1, 97.2 %, median half-width 0.0160, 0.0169, 0.0134 -> 0.0162, 0.0165, 0.0139. The
+   cost: a rate that changes within hours (a cleaning) reaches the lag part over a day.
 4. **fixed**: a parameter the twin holds at an estimate (``[fixed]`` after ``estimate``, or a
    ``[[parameters]]`` entry no pair tracks) is off by up to its interval, and the loop makes
    its own parameter absorb that: where the pair's tag moves by ``Δy(q)`` when the held ``q``
@@ -125,7 +140,8 @@ tracked value ``p`` (level :data:`LEVEL`), in six parts:
    --evaporator-seeds 3 --rebands``, all three lags 3.0 h) ``KvMax``'s band held the truth in 84.9, 85.2
    and 97.1 % of the rows after 12 h (72.0, 72.1, 83.5 % without it), its median half-width 0.0160 (0.0115);
    the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's
-   motion and the loops' own-tag errors are the part no batch mean of tracked error shows.
+   motion and the loops' own-tag errors are the part no batch mean of tracked error shows (the first
+   is the lag part's, over a day since: part 3).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -187,6 +203,8 @@ NOISE_LAGS = 30
 HORIZON = 12.0
 #: Forgetting time (s) of the slow part's batch means (part 6 of the module).
 SLOW_MEMORY = 24 * 3600.0
+#: Memory (s) of the lag part's rate, the tracked value's slope (part 3 of the module).
+RATE_MEMORY = SLOW_MEMORY
 #: Complete batches seen before the slow part is given.
 SLOW_MIN = 3
 #: Standard errors of the batch means' own scatter an excess must pass before the slow part counts it.
@@ -402,6 +420,7 @@ class _PairState:
     held_lo: float
     held_hi: float
     slope: float
+    rate: list[float]
 
 
 class BandTracker:
@@ -559,7 +578,7 @@ class BandTracker:
         return np.maximum(seen - (1.0 + scatter) * np.einsum("kq,jkq->j", fast, self.slow_weights), 0.0)
 
     def _fresh(self) -> _PairState:
-        return _PairState([], [], [0.0] * (NOISE_LAGS + 1), 0.0, 0, 0, 0.0, 0.0, False, 0.0, 0.0, 0.0)
+        return _PairState([], [], [0.0] * (NOISE_LAGS + 1), 0.0, 0, 0, 0.0, 0.0, False, 0.0, 0.0, 0.0, [0.0] * 7)
 
     @property
     def columns(self) -> list[str]:
@@ -613,6 +632,7 @@ class BandTracker:
         e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked) and not hold) else math.nan
         self._noise(st, e)
         T = model.lag_time
+        st.rate[6] += 1.0  # rows seen: the rate's clock runs through holds, as the truth does
         if hold:
             step = abs(st.slope) * self.ts
             if st.slope > 0:
@@ -623,13 +643,7 @@ class BandTracker:
             fade = math.exp(-self.ts / T) if T > 0 else 0.0
             st.held_lo *= fade
             st.held_hi *= fade
-            if not st.primed:
-                st.ewma_fast = st.ewma_slow = p
-                st.primed = True
-            af, as_ = math.exp(-self.ts / (0.5 * T)), math.exp(-self.ts / T)
-            st.ewma_fast = af * st.ewma_fast + (1.0 - af) * p
-            st.ewma_slow = as_ * st.ewma_slow + (1.0 - as_) * p
-            st.slope = (st.ewma_fast - st.ewma_slow) / (0.5 * T) if T > 0 else 0.0
+            st.slope = self._rate(st, p, T)
             st.auto += 1
         if st.seen * self.ts < NOISE_MIN or st.weight <= 0:
             return None
@@ -645,6 +659,24 @@ class BandTracker:
         lag = abs(st.slope) * T
         return (noise * noise, below * below, above * above, (lag if st.slope < 0 else 0.0),
                 (lag if st.slope > 0 else 0.0), st.held_lo, st.held_hi, gam)
+
+    def _rate(self, st: _PairState, p: float, lag: float) -> float:
+        """The lag part's rate (part 3 of the module): the slope between two exponential means of the auto rows'
+        ``p`` over ``W/2`` and ``W`` (``W`` :data:`RATE_MEMORY`, at least the loop's lag *lag*), each with the
+        mean of its rows' times, so ``(P_W/2 - P_W) / (t_W/2 - t_W)`` is exactly a ramp's slope however short
+        the history."""
+        r = st.rate
+        if not st.primed:
+            st.ewma_fast, st.primed = p, True  # the reference value: the means are of p - p_first
+        x, k = p - st.ewma_fast, r[6]
+        memory = max(RATE_MEMORY, lag)
+        for i, m in ((0, 0.5 * memory), (3, memory)):
+            lam = math.exp(-self.ts / m)
+            r[i] = lam * r[i] + 1.0
+            r[i + 1] = lam * r[i + 1] + x
+            r[i + 2] = lam * r[i + 2] + k
+        dt = (r[2] / r[0] - r[5] / r[3]) * self.ts
+        return (r[1] / r[0] - r[4] / r[3]) / dt if dt > 0 else 0.0
 
     def _band(self, j: int, p: float, parts: Sequence[tuple[float, ...] | None],
               slow: np.ndarray | None = None) -> tuple[float, float]:
@@ -766,6 +798,8 @@ class BandTracker:
             raise CheckpointError("the checkpoint was written before the bands' lack_of_fit column; run without --resume")
         if "slow" not in state:
             raise CheckpointError("the checkpoint was written before the bands' slow part; run without --resume")
+        if any("rate" not in s for s in state["pairs"]):
+            raise CheckpointError("the checkpoint was written before the bands' day-long rate; run without --resume")
         self.states = [load(s) for s in state["pairs"]]
         sl = state["slow"]
         self.slow = {"acc": [float(v) for v in sl["acc"]], "count": int(sl["count"]),

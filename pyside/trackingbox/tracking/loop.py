@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 
 
 
-CHECKPOINT_VERSION = 8  # 8: the bands' slow part (batch means); 7: band columns; 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
+CHECKPOINT_VERSION = 9  # 9: the bands' day-long rate; 8: the bands' slow part (batch means); 7: band columns; 6: controller mode; 5: carried integrator (carry, hold flag); 4: sub-steps; 3: error interpolation in the controllers; 2: one entry per part
 
 
 # --------------------------------------------------------------------------- the loop
