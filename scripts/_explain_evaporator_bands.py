@@ -187,7 +187,8 @@ def explain(case: Path) -> dict[str, Any]:
             gam = fast_autocovariance(e_a[auto, k], NOISE_LAGS)
             var = gam[0] * acf[j, k, 0] + 2.0 * float(np.sum((taper * gam * acf[j, k])[1:])) if acf is not None else math.nan
             band[tag] = math.sqrt(max(var, 0.0))
-        # the lag part's slope: the tracked value's own (two exponential means, as BandTracker) against the truth's
+        # the slope over the loop's lag (two exponential means, as BandTracker took it before 560dba8; it now
+        # takes it over bands.RATE_MEMORY, a day) against the truth's: how far that short-memory slope strays
         lag = loop_model(*loops[j][:3], loops[j][3], ts).lag_time
         fast, slow, est = p[first, j], p[first, j], np.zeros_like(t)
         af, as_ = math.exp(-ts / (0.5 * lag)), math.exp(-ts / lag)
