@@ -406,7 +406,7 @@ def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say()
     from trackingbox.compiler.package_overrides import patches
 
     water = MSL / "Media" / "Water" / "package.mo"
-    edits = patches(check.index, "Modelica.Fluid.Examples.PumpingSystem")
+    edits = patches(check, "Modelica.Fluid.Examples.PumpingSystem")
     assert [f.resolve() for f in edits] == [water.resolve()]
     before = water.read_bytes()
     after = next(iter(edits.values()))(before)

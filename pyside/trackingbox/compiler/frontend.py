@@ -38,6 +38,7 @@ from .. import config
 from ..errors import CompileError
 from . import discrete_connects, inner_defaults, package_overrides
 from .library import LibraryIndex, cache_dir, index_for, source_root
+from .modifiers import ModifierCheck
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
 from .source import ModelicaSource
 
@@ -124,7 +125,8 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     reached = index.frontend_files(model) if model in index.classes else None
     inner = inner_defaults.patches(index, model, reached) if reached else {}  # rumoca's outer references
     inner = _chained(inner, discrete_connects.patches(index, model) if reached else {})
-    inner = _chained(inner, package_overrides.patches(index, model) if reached else {})  # repeated constants
+    repeated = package_overrides.patches(ModifierCheck(index), model) if reached else {}  # (values rumoca loses)
+    inner = _chained(inner, repeated)
     needed = reached if prune else None
     if needed is None:
         return _full_tree(source, libraries, dest, inner)

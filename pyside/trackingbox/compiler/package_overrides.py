@@ -206,13 +206,11 @@ def _clause_edits(text: str, paren: int, drop: set[int]) -> list[tuple[int, int]
     return spans
 
 
-def patches(index, model: str) -> dict[Path, Callable[[bytes], bytes]]:
+def patches(check: ModifierCheck, model: str) -> dict[Path, Callable[[bytes], bytes]]:
     """For the files of the packages *model* uses: the edit that blanks each modification that
     :func:`check_overridden_constants` lets pass because it repeats its element's declared value
     under an outer one (lines and byte offsets kept), so that rumoca reads the outer value."""
-    from .modifiers import ModifierCheck  # (modifiers imports this module)
-
-    check = ModifierCheck(index)
+    index = check.index
     drops: dict[tuple[str, int], set[int]] = {}  # (package, offset of its clause's '(') -> element offsets
     for o in _overrides(check, check.used_classes(model)):
         if _repeats_declaration(check, o.inner, o.inner_base, o.element, o.inner_value):
