@@ -11,6 +11,7 @@ from trackingbox.compiler.embedded import run_frontend
 from trackingbox.compiler.frontend import FlatCache, build_tree
 from trackingbox.compiler.library import LibraryIndex, index_for
 from trackingbox.compiler.source import resolve_source
+from trackingbox.errors import CompileError
 
 pytestmark = pytest.mark.compile
 
@@ -97,3 +98,28 @@ def test_the_model_compiles_the_same_from_the_tree(lib, tmp_path):
                             relative_tolerance=1e-9)
     assert out["tank.h"][-1] == pytest.approx(2.718281828459045 ** -2, rel=1e-6)
     assert index_for(resolve_source(lib)).classes["Lib.Parts.Tank"].line == 3
+
+
+MEDIA = {
+    "package.mo": "package Media\nend Media;\n",
+    "Chain.mo": ("within Media;\npackage Chain\n  package A\n    constant Real cp = 1;\n  end A;\n"
+                 "  package B\n    extends A(cp = 1);\n  end B;\n  package C\n    extends B(cp = 4);\n  end C;\n"
+                 "end Chain;\n"),
+}
+USER = "model User\n  package M = Media.Chain.C;\n  Real c = M.cp*(1 + 0*time);\nend User;\n"
+
+
+def test_an_edit_of_a_library_file_is_in_the_tree_or_the_whole_library_reading_refuses(tmp_path):
+    """B's ``cp = 1`` repeats A's declaration under C's ``cp = 4`` (.package_overrides): the pruned tree
+    reads B without it, lines kept; the whole-library reading, which gives rumoca the libraries as
+    they are, cannot, and says so rather than letting rumoca read C.cp as 1."""
+    media = write(tmp_path / "Media", MEDIA)
+    user = tmp_path / "User.mo"
+    user.write_text(USER)
+    source = resolve_source(user)
+    tree = build_tree(source, "User", (media,), tmp_path / "t")
+    copy = next(c for c, o in tree.originals.items() if o.name == "Chain.mo")
+    lines = copy.read_text().splitlines()
+    assert lines[6].strip() == "extends A(      );" and len(lines) == MEDIA["Chain.mo"].count("\n")
+    with pytest.raises(CompileError, match=r"must read .*Chain\.mo edited .*whole-library reading cannot"):
+        build_tree(source, "User", (media,), tmp_path / "f", prune=False)

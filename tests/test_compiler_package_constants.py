@@ -183,6 +183,59 @@ def test_other_elements_a_repeated_value_and_a_chain_of_models_compile_with_mode
     assert np.allclose(out["y"], 4.0)
 
 
+REPEATED = """package Rep
+  partial package A
+    constant Real cp = 1;
+    constant Boolean smooth = false "a description";
+    constant Real k = 1;
+    function f
+      input Real u;
+      output Real y;
+    algorithm
+      y := (if smooth then 10 else 1)*cp*k*u;
+    end f;
+  end A;
+  partial package B "repeats A's declared cp and smooth (MSL: WaterIF97_base over PartialTwoPhaseMedium)"
+    extends A(k = 2, smooth = false,
+      cp = 1);
+  end B;
+  package C "Modelica: cp = 4, smooth = true, k = 2 (MSL: WaterIF97_pT)"
+    extends B(final cp = 4, final smooth = true);
+  end C;
+  partial package B1 "the repeated value as the clause's only element"
+    extends A(cp = 1);
+  end B1;
+  package C1 "cp = 3"
+    extends B1(cp = 3);
+  end C1;
+  model User
+    replaceable package M = A;
+    Real y = M.f(1 + 0*time);
+    Real c = M.cp*(1 + 0*time);
+  end User;
+  model UseC
+    User u(redeclare package M = C);
+  end UseC;
+  model UseC1
+    User u(redeclare package M = C1);
+  end UseC1;
+end Rep;
+"""
+
+
+@pytest.mark.parametrize("model, y, c", [("UseC", 10 * 4 * 2, 4.0), ("UseC1", 3.0, 3.0)])
+def test_an_inner_modification_repeating_the_declared_value_is_no_second_modification(tmp_path, model, y, c):
+    """B's ``smooth = false`` and ``cp = 1`` repeat what A declares, so C's chain modifies them once
+    (MLS 7.2.4: C.cp = 4, C.smooth = true); the front end reads B without them
+    (:func:`.package_overrides.patches`), where rumoca 0.10.2 would keep B's values. Worked by hand:
+    C.f(1) = 10*cp*k*u with k = 2 from B, C1.f(1) = cp*k*u = 3."""
+    src = tmp_path / "Rep.mo"
+    src.write_text(REPEATED)
+    res = compile_model(src, f"Rep.{model}", backend="embedded", output=tmp_path / "r.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["u.y", "u.c"])
+    assert np.allclose(out["u.y"], y) and np.allclose(out["u.c"], c)
+
+
 SIBLINGS = """package Sib
   partial package PM "a medium-like base: the function reads three constants"
     constant Boolean singleState = false;
@@ -337,8 +390,10 @@ def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say()
     """(62 s on a loaded 2-core machine, most of it indexing the MSL.) On MSL 4.0.0: NonCircularPipes takes StandardWater (WaterIF97_ph) for every component and
     reaches PartialSimpleMedium only through Modelica.Media.Water's import of a constant: no
     refusal of the package constants. PumpingSystem takes StandardWaterOnePhase (WaterIF97_pT), whose
-    ``final smoothModel=true`` (Media/Water/package.mo:88) overrides WaterIF97_base's
-    ``smoothModel=false`` (line 129): refused, as rumoca would read false."""
+    ``final smoothModel=true, final onePhase=true`` (Media/Water/package.mo:93-94) override
+    WaterIF97_base's ``smoothModel=false, onePhase=false`` (lines 129-130), which repeat
+    PartialTwoPhaseMedium's declared values (Media/package.mo:5288, 5290): not refused, and the front
+    end reads WaterIF97_base without those two elements."""
     from _fixtures_msl import MSL, need_msl
 
     from trackingbox.compiler.modifiers import modifier_check
@@ -347,8 +402,15 @@ def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say()
     need_msl("Media", "Water", "package.mo")
     check = modifier_check(resolve_source(MSL), ())
     assert check.check("Modelica.Fluid.Examples.NonCircularPipes") == []
-    with pytest.raises(UnsupportedConstructError,
-                       match=r"package WaterIF97_pT modifies smoothModel at .*Water.package\.mo:88 where its base "
-                             r"WaterIF97_base modifies it too, at .*Water.package\.mo:129: rumoca 0\.10\.2 keeps the "
-                             r"inner value \(smoothModel = false\) instead of the outer one \(smoothModel = true\)"):
-        check.check("Modelica.Fluid.Examples.PumpingSystem")
+    check.check("Modelica.Fluid.Examples.PumpingSystem")  # no refusal (a lost bound's warning only)
+    from trackingbox.compiler.package_overrides import patches
+
+    water = MSL / "Media" / "Water" / "package.mo"
+    edits = patches(check, "Modelica.Fluid.Examples.PumpingSystem")
+    assert [f.resolve() for f in edits] == [water.resolve()]
+    before = water.read_bytes()
+    after = next(iter(edits.values()))(before)
+    assert len(after) == len(before) and after.count(b"\n") == before.count(b"\n")
+    changed = [i + 1 for i, (a, b) in enumerate(zip(before.splitlines(), after.splitlines())) if a != b]
+    assert changed == [129, 130]
+    assert [ln.strip() for ln in after.splitlines()[128:130]] == [b"", b""]

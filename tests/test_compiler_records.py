@@ -106,3 +106,59 @@ def test_a_record_field_a_function_leaves_unset_is_an_error_naming_it(tmp_path):
     with pytest.raises(CompileError, match=r"`s\.T` of `R\.mk2` is never assigned|mk2.*does not assign field T"):
         _run(tmp_path, text, ["y"])
 
+
+
+HALF_SET = """model U
+  record B
+    Real h;
+    Real cp;
+    Real cv;
+  end B;
+  function curve "as MSL 4.0.0's IF97 boilingcurve_p: cp set on one branch, cv on the other"
+    input Real p;
+    output B b;
+  algorithm
+    b.h := 2*p;
+    if p < 0.5 then
+      b.cp := 3*p;
+    else
+      b.cv := 4*p;
+    end if;
+  end curve;
+  function hOf "as IF97's hvl_p: reads one field of the record it is given"
+    input Real p;
+    input B b;
+    output Real h;
+  algorithm
+    h := b.h;
+  end hOf;
+  Real h = hOf(time, curve(time));
+  Real hk = hOf(0.25, curve(0.25))*(1 + 0*time) "the branch known at translation";
+  function cpOf
+    input B b;
+    output Real cp = b.cp;
+  end cpOf;
+  function cvOf
+    input B b;
+    output Real cv = b.cv;
+  end cvOf;
+  Real cp = cpOf(curve(time));
+  Real cv = cvOf(curve(time));
+end U;
+"""
+
+
+def test_a_record_field_set_on_some_branches_is_undefined_on_the_others(tmp_path):
+    """A field of a function's record output that the branch taken leaves unassigned is undefined
+    (MLS 12.4.4): the functions that read the record's other fields compute (here h = 2 p, worked by
+    hand), and a value computed from the undefined field is NaN, never another branch's number
+    (rumoca's ``b__cv`` local was an unknown variable when the branch is known at translation)."""
+    src = tmp_path / "U.mo"
+    src.write_text(HALF_SET)
+    res = compile_model(src, "U", backend="embedded", output=tmp_path / "u.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.125, output=["h", "hk", "cp", "cv"])
+    t = out["time"]
+    assert np.allclose(out["h"], 2 * t) and np.allclose(out["hk"], 0.5)
+    low = t < 0.5
+    assert np.allclose(out["cp"][low], 3 * t[low]) and np.isnan(out["cp"][~low]).all()
+    assert np.allclose(out["cv"][~low], 4 * t[~low]) and np.isnan(out["cv"][low]).all()

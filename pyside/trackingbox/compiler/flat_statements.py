@@ -49,6 +49,41 @@ def _declared_dims(loc: dict[str, Any]) -> list[Any]:
     return out
 
 
+# The value of a field of a function's record output that no statement on the path taken assigns
+# (MSL 4.0.0's ``IF97_Utilities.BaseIF97.Regions.boilingcurve_p`` sets ``bpro.cv`` only near the
+# critical point, ``bpro.cp`` only away from it): undefined in Modelica (MLS 12.4.4: a variable of a
+# function without a binding is undefined until assigned), so any number computed from it is NaN,
+# which stops the simulation, rather than a value.
+UNDEFINED_FIELD = float("nan")
+
+
+def _assigned(node: Any, out: set[str]) -> set[str]:
+    """The first names of the targets of the assignments in the statements *node*, nested ones too."""
+    if isinstance(node, dict):
+        for key, val in node.items():
+            if key == "Assignment" and isinstance(val, dict):
+                parts = (val.get("comp") or {}).get("parts") or []
+                if parts:
+                    out.add(parts[0].get("ident"))
+            _assigned(val, out)
+    elif isinstance(node, list):
+        for item in node:
+            _assigned(item, out)
+    return out
+
+
+def _record_field_locals(fn: dict[str, Any]) -> set[str]:
+    """The locals rumoca 0.10.2 makes for the fields of *fn*'s record outputs (``bpro__cv`` for
+    ``bpro.cv``, copied into the output after the body), scalar, without a binding, and assigned by
+    some statement of the body (a field no statement assigns stays an error)."""
+    prefixes = tuple(o["name"] + "__" for o in fn.get("outputs") or [] if o.get("type_class") == "Record")
+    if not prefixes:
+        return set()
+    fields = {loc["name"] for loc in fn.get("locals") or [] if loc["name"].startswith(prefixes)
+              and loc.get("default") is None and not _declared_dims(loc)}
+    return fields & _assigned(fn.get("body") or [], set()) if fields else fields
+
+
 def _var_name(node: Any) -> str | None:
     """The name an expression node refers to when it is a plain variable reference, else None."""
     kind, body = kind_of(node)
@@ -89,6 +124,7 @@ class StatementTranslation:
             raise self.unsupported(f"recursive function {fname!r}")
         try:
             env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
+            unset_fields = _record_field_locals(fn)
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     value = self.expr(loc["default"], env)
@@ -100,6 +136,8 @@ class StatementTranslation:
                     dims = self._local_dims(loc, env, fname)
                     if dims is not None:
                         env[loc["name"]] = arr.fill(0.0, list(dims))
+                elif loc["name"] in unset_fields:
+                    env[loc["name"]] = UNDEFINED_FIELD
             saved, self._freeze = self._freeze, False  # relations in functions generate no events
             env[_RETURNED] = False
             try:

@@ -35,8 +35,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config
-from . import discrete_connects, inner_defaults
+from ..errors import CompileError
+from . import discrete_connects, inner_defaults, package_overrides
 from .library import LibraryIndex, cache_dir, index_for, source_root
+from .modifiers import ModifierCheck
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
 from .source import ModelicaSource
 
@@ -123,6 +125,8 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     reached = index.frontend_files(model) if model in index.classes else None
     inner = inner_defaults.patches(index, model, reached) if reached else {}  # rumoca's outer references
     inner = _chained(inner, discrete_connects.patches(index, model) if reached else {})
+    repeated = package_overrides.patches(ModifierCheck(index), model) if reached else {}  # (values rumoca loses)
+    inner = _chained(inner, repeated)
     needed = reached if prune else None
     if needed is None:
         return _full_tree(source, libraries, dest, inner)
@@ -181,6 +185,10 @@ def _full_tree(source: ModelicaSource, libraries: tuple[Path, ...], dest: Path, 
     copy_root = dest / "src"
     originals: dict[Path, Path] = {}
     tuple_names = tuple_function_names(source.files)
+    outside = sorted(set(inner or {}) - set(source.files))
+    if outside:  # the libraries are read as they are: an edit that keeps a value right would be lost
+        raise CompileError(f"the front end must read {outside[0]} edited for {source.entry} (a value rumoca "
+                           "0.10.2 reads wrong), which the whole-library reading cannot do")
     for f in source.files:
         target = copy_root / f.relative_to(source.root)
         _copy(f, target, digest, str(f.relative_to(source.root)), tuple_names, patch=(inner or {}).get(f))

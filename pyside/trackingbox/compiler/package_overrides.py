@@ -23,15 +23,21 @@ values compared as source text, blanks ignored; the same value twice changes not
 """
 from __future__ import annotations
 
+import logging
 import re
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
 
 from ..errors import UnsupportedConstructError
 from .modification_parse import _skip_expr, parse_modification
+from .source import read_text
 
 if TYPE_CHECKING:  # (modifiers imports this module: no cycle at run time)
     from .library import ClassInfo
     from .modifiers import ModifierCheck
+
+log = logging.getLogger(__name__)
 
 _EXTENDS = re.compile(r"\bextends\s+([\w.]+)\s*\(")
 _SHORT_PACKAGE = re.compile(r"\bpackage\s+[A-Za-z_]\w*\s*=\s*([A-Za-z_][\w.]*)\s*\(")
@@ -89,9 +95,21 @@ def _base_named(check: ModifierCheck, c: ClassInfo, name: str) -> str | None:
     return next((b for b in check.index.bases(c.name) if b.rsplit(".", 1)[-1] == simple), None)
 
 
-def check_overridden_constants(check: ModifierCheck, model: str, used: list[ClassInfo]) -> None:
-    """Refuse a package of *used* whose modification overrides a value a base's extends clause
-    gives the same element (see the module docstring)."""
+class _Override(NamedTuple):
+    package: ClassInfo
+    at: int  # offset of its extends clause (or short class) in its text
+    element: str
+    value: str
+    inner: ClassInfo  # the base whose own clause modifies the element too
+    inner_at: int  # offset of that modification's element in its text
+    inner_value: str
+    inner_base: str  # the class that clause extends, as written
+    inner_clause: int  # offset of that clause
+
+
+def _overrides(check: ModifierCheck, used: list[ClassInfo]) -> Iterator[_Override]:
+    """Each place where a package of *used* modifies an element that a base of it, at any depth,
+    modifies with another value in an ``extends`` clause of its own."""
     classes = check.index.classes
     for c in used:
         if c.kind != "package":
@@ -109,17 +127,118 @@ def check_overridden_constants(check: ModifierCheck, model: str, used: list[Clas
                 todo.extend(check.index.bases(name))
                 if inner.kind != "package":
                     continue
-                for _, _, inner_valued in _modifications(check, inner):
+                for inner_base, inner_clause, inner_valued in _modifications(check, inner):
                     for element, (value, _) in valued.items():
                         if element in inner_valued and inner_valued[element][0] != value:
-                            raise UnsupportedConstructError(
-                                f"unsupported Modelica construct in {model}: package {c.simple} modifies "
-                                f"{element} at {check._location(c, at)} where its base {inner.simple} "
-                                f"modifies it too, at {check._location(inner, inner_valued[element][1])}: "
-                                f"rumoca 0.10.2 keeps the inner value ({element} = "
-                                f"{inner_valued[element][0]}) instead of the outer one ({element} = {value}) "
-                                f"in a package"
-                            )
+                            yield _Override(c, at, element, value, inner, inner_valued[element][1],
+                                            inner_valued[element][0], inner_base, inner_clause)
+
+
+def _declared_value(check: ModifierCheck, start: str | None, element: str) -> str | None:
+    """The value (blanks removed) that the declaration ``constant T element = value`` gives *element*
+    in package *start* or the bases it inherits it from, where no ``extends`` clause along the way
+    modifies it; None where it is declared otherwise or modified on the way."""
+    classes = check.index.classes
+    declared = re.compile(rf"\bconstant\s+[A-Za-z_][\w.]*\s*(?:\[[^\]]*\]\s*)?{re.escape(element)}\s*=")
+    seen: set[str] = set()
+    todo = [start] if start else []
+    while todo:
+        name = todo.pop(0)
+        if name in seen or name not in classes:
+            continue
+        seen.add(name)
+        text = check.body(classes[name])
+        m = declared.search(text)
+        if m:
+            end = text.find(";", m.end())  # (a description string is blanked)
+            return re.sub(r"\s+", "", text[m.end():end]) if end >= 0 else None
+        if any(element in valued for _, _, valued in _modifications(check, classes[name])):
+            return None
+        todo.extend(check.index.bases(name))
+    return None
+
+
+def _repeats_declaration(check: ModifierCheck, inner: ClassInfo, base_name: str, element: str, value: str) -> bool:
+    """Whether *inner*'s modification ``element = value`` in its clause extending *base_name* gives the
+    value *element* has there anyway (``WaterIF97_base``'s ``smoothModel=false`` over
+    ``PartialTwoPhaseMedium``'s ``constant Boolean smoothModel=false``): such a modification changes
+    nothing in Modelica, and without it rumoca reads the outer one."""
+    return _declared_value(check, _base_named(check, inner, base_name), element) == value
+
+
+def check_overridden_constants(check: ModifierCheck, model: str, used: list[ClassInfo]) -> None:
+    """Refuse a package of *used* whose modification overrides a value a base's extends clause
+    gives the same element (see the module docstring), unless that inner modification only repeats
+    the value the element's declaration gives (:func:`patches` then blanks it for rumoca)."""
+    for c, at, element, value, inner, inner_at, inner_value, inner_base, _ in _overrides(check, used):
+        if _repeats_declaration(check, inner, inner_base, element, inner_value):
+            continue
+        raise UnsupportedConstructError(
+            f"unsupported Modelica construct in {model}: package {c.simple} modifies "
+            f"{element} at {check._location(c, at)} where its base {inner.simple} "
+            f"modifies it too, at {check._location(inner, inner_at)}: "
+            f"rumoca 0.10.2 keeps the inner value ({element} = "
+            f"{inner_value}) instead of the outer one ({element} = {value}) "
+            f"in a package"
+        )
+
+
+def _clause_edits(text: str, paren: int, drop: set[int]) -> list[tuple[int, int]]:
+    """The spans of *text* to blank so that the modification ``( ... )`` at *paren* loses its
+    elements starting at the offsets *drop* and stays well formed (a comma is kept after an element
+    that stays and has another after it)."""
+    ends = []  # the position of the comma or ')' after each element
+    pos = paren + 1
+    while True:
+        pos = _skip_expr(text, pos)
+        ends.append(pos)
+        if pos >= len(text) or text[pos] == ")":
+            break
+        pos += 1
+    starts = [paren + 1] + [e + 1 for e in ends[:-1]]
+    gone = [any(a <= d < b for d in drop) for a, b in zip(starts, ends)]
+    spans = []
+    for i, (a, b) in enumerate(zip(starts, ends)):
+        if gone[i]:
+            spans.append((a, b))
+        if i < len(ends) - 1 and (gone[i] or all(gone[i + 1:])):
+            spans.append((b, b + 1))  # the comma after it
+    return spans
+
+
+def patches(check: ModifierCheck, model: str) -> dict[Path, Callable[[bytes], bytes]]:
+    """For the files of the packages *model* uses: the edit that blanks each modification that
+    :func:`check_overridden_constants` lets pass because it repeats its element's declared value
+    under an outer one (lines and byte offsets kept), so that rumoca reads the outer value."""
+    index = check.index
+    drops: dict[tuple[str, int], set[int]] = {}  # (package, offset of its clause's '(') -> element offsets
+    for o in _overrides(check, check.used_classes(model)):
+        if _repeats_declaration(check, o.inner, o.inner_base, o.element, o.inner_value):
+            paren = check.body(o.inner).index("(", o.inner_clause)
+            drops.setdefault((o.inner.name, paren), set()).add(o.inner_at)
+    edits: dict[Path, list[tuple[int, bytes]]] = {}
+    for (name, paren), offsets in drops.items():
+        info = index.classes[name]
+        full = read_text(info.file)
+        for a, b in _clause_edits(check.body(info), paren, offsets):
+            lo = len(full[:info.start + a].encode())
+            edits.setdefault(info.file, []).append((lo, full[info.start + a:info.start + b].encode()))
+            log.debug("%s: %s read without the modification %r, which repeats the declared value",
+                      info.file, name, full[info.start + a:info.start + b])
+
+    def patch_for(file: Path, spans: list[tuple[int, bytes]]) -> Callable[[bytes], bytes]:
+        def patch(body: bytes) -> bytes:
+            for lo, old in spans:
+                if body[lo:lo + len(old)] != old:
+                    raise UnsupportedConstructError(
+                        f"unsupported Modelica construct in {model}: a package constant modified twice "
+                        f"along an extends chain at {file}, where the text the front end reads differs "
+                        f"from the library's")
+                body = body[:lo] + re.sub(rb"[^\n]", b" ", old) + body[lo + len(old):]
+            return body
+        return patch
+
+    return {f: patch_for(f, spans) for f, spans in edits.items()}
 
 
 # --- another package's extends of a modified base ----------------------------------------------
