@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackingbox.compiler.msl_harness import (Reference, compare, construct_of, deviation, load_reference, main,
-                                              table)
+from trackingbox.compiler.msl_harness import (Reference, compare, construct_of, default_reference, deviation,
+                                              load_reference, main, table)
 
 
 def test_deviation_is_relative_to_the_signal_range():
@@ -24,6 +24,34 @@ def test_deviation_is_relative_to_the_signal_range():
 def test_deviation_of_a_constant_signal_is_relative_to_its_magnitude():
     t = np.linspace(0.0, 1.0, 11)
     assert deviation(t, np.full(11, 50.0), t, np.full(11, 50.05), 1e-4) == pytest.approx(1e-3)
+
+
+def test_a_range_the_reference_does_not_resolve_counts_as_constant():
+    # a tank temperature constant in Modelica's meaning that the reference's solver (relative
+    # tolerance 1e-6) moved by 1e-4 K: a range of 3e-7 of its magnitude, below 10 x 1e-6
+    t = np.linspace(0.0, 100.0, 101)
+    ref = 323.15 + 1e-4 * t / 100.0
+    ours = np.full(101, 323.15 + 1.2e-3)
+    # judged against its magnitude: (1.2e-3 - 1e-4 at the end .. 1.2e-3 at the start) / 323.15
+    assert deviation(t, ref, t, ours, 1e-4, tolerance=1e-6) == pytest.approx(1.2e-3 / (323.15 + 1e-4), rel=1e-9)
+    # without the reference's tolerance the same drift is a range, and 1.2e-3 K is 12 of it
+    assert deviation(t, ref, t, ours, 1e-4) == pytest.approx(12.0, rel=1e-9)
+    # a range the reference resolves keeps it: a pressure of 1 bar moving by 50 Pa (5e-4 of it)
+    p = 1e5 + 50.0 * t / 100.0
+    assert deviation(t, p, t, p + 1.0, 1e-4, tolerance=1e-6) == pytest.approx(1.0 / 50.0, rel=1e-9)
+
+
+def test_an_emptying_tank_of_the_msl_reference_is_constant_and_the_filling_one_is_not():
+    if not (default_reference() / "Modelica" / "Fluid").is_dir():
+        pytest.skip(f"the MSL reference results are not at {default_reference()} (set TRACKINGBOX_MSL_REFERENCE)")
+    # AST_BatchPlant.Test.TwoTanks: tank1 (50 degC) only drains into tank2 (100 degC), so its
+    # temperature stays at 323.15 K while tank2's falls; the reference was made at tolerance 1e-6
+    ref = load_reference(default_reference(), "Modelica.Fluid.Examples.AST_BatchPlant.Test.TwoTanks")
+    assert ref is not None and ref.tolerance == pytest.approx(1e-6)
+    t1, t2 = ref.values["tank1.medium.T"], ref.values["tank2.medium.T"]
+    off = 1e-3  # a millikelvin everywhere
+    assert deviation(ref.time, t1, ref.time, t1 + off, 1e-4, ref.tolerance) == pytest.approx(off / t1.max())
+    assert deviation(ref.time, t2, ref.time, t2 + off, 1e-4, ref.tolerance) == pytest.approx(off / (t2.max() - t2.min()))
 
 
 def test_an_event_a_hair_later_is_not_a_deviation_but_a_missing_jump_is():

@@ -14,7 +14,8 @@ time limit:
 3. compare the reference's comparison signals (``<ref>/<path of the model>/comparisonSignals.txt``
    and ``<Name>.csv``, the Modelica Association's reference results) with the simulation: for each
    signal the largest deviation over the reference's time points, divided by the signal's range in
-   the reference (its largest magnitude for a constant signal). At a reference point the simulation is
+   the reference (its largest magnitude for a signal constant as far as the reference resolves: within
+   ten times its integration tolerance of its magnitude, :data:`RESOLVED_RANGE`). At a reference point the simulation is
    read at that time and a small window either side (1e-4 of the horizon), and the closest of the three
    counts, so that an event found a hair earlier or later is not a deviation of the whole jump.
 
@@ -145,9 +146,19 @@ def relative_tolerance(experiment: float | None, reference: float | None) -> flo
     return 1e-6
 
 
-def deviation(ref_t: np.ndarray, ref_y: np.ndarray, t: np.ndarray, y: np.ndarray, window: float) -> float:
+RESOLVED_RANGE = 10.0
+"""A reference signal whose range is below this many times its integration tolerance times its
+magnitude is constant as far as the reference can tell: a solver at relative tolerance ``tol`` drifts
+a constant by about that much (the Modelica Association's ``TwoTanks`` holds a tank that only empties
+at 323.15 K, and its reference moves it by 1.4e-4 K at ``tol`` 1e-6)."""
+
+
+def deviation(ref_t: np.ndarray, ref_y: np.ndarray, t: np.ndarray, y: np.ndarray, window: float,
+              tolerance: float | None = None) -> float:
     """Largest deviation of the trajectory (*t*, *y*) from the reference (*ref_t*, *ref_y*) over the
-    reference's points, divided by the reference's range (its largest magnitude when constant).
+    reference's points, divided by the reference's range, or by its largest magnitude when the
+    signal is constant: exactly, or (with the reference's relative integration *tolerance*) within
+    ``RESOLVED_RANGE * tolerance`` of its magnitude, a range the reference does not resolve.
 
     At each reference point the trajectory is read (linear interpolation) at that time and at
     ±*window*, and the closest of the three counts.
@@ -157,8 +168,13 @@ def deviation(ref_t: np.ndarray, ref_y: np.ndarray, t: np.ndarray, y: np.ndarray
     0.001
     """
     scale = float(np.max(ref_y) - np.min(ref_y)) if ref_y.size else 0.0
-    if not scale > 1e-12 * max(1.0, float(np.max(np.abs(ref_y))) if ref_y.size else 1.0):
-        scale = float(np.max(np.abs(ref_y))) if ref_y.size else 0.0
+    magnitude = float(np.max(np.abs(ref_y))) if ref_y.size else 0.0
+    if tolerance:
+        unresolved = RESOLVED_RANGE * tolerance * magnitude
+    else:
+        unresolved = 1e-12 * max(1.0, magnitude)
+    if not scale > unresolved:
+        scale = magnitude
     if not scale > 0:
         scale = 1.0
     order = np.argsort(t, kind="stable")
@@ -178,7 +194,7 @@ def compare(ref: Reference, time_: np.ndarray, values: dict[str, np.ndarray]) ->
         if s not in values:
             missing.append(s)
             continue
-        d = deviation(ref.time, ref.values[s], time_, values[s], WINDOW * max(horizon, 1e-12))
+        d = deviation(ref.time, ref.values[s], time_, values[s], WINDOW * max(horizon, 1e-12), ref.tolerance)
         if not np.isfinite(d):
             d = np.inf
         if d >= worst:
