@@ -46,6 +46,20 @@ its like from several components, was still compiling after 900 s, where a refus
 loops had taken seconds."""
 
 
+DERIVATIVE_OPTIONS = {
+    "max_num_dir": 1,
+    "der_options": {"enable_forward": False, "enable_reverse": False, "enable_fd": True, "fd_method": "central",
+                    "jacobian_options": {"enable_forward": False, "enable_reverse": False, "enable_fd": True}},
+}
+"""CasADi options of a traced function: its first derivatives (forward, used where the index reduction
+differentiates a call, and adjoint) are exact; its derivatives of higher order, which only CasADi's
+exported directional and adjoint derivatives of the model and the Jacobians of Newton solves inside the
+model reach, are central finite differences of the exact first ones, and several directions are one
+direction at a time. CasADi otherwise emits an exact copy per order and per number of directions:
+``Fluid.Examples.Explanatory.MeasuringTemperature`` gave 72 MB of C, 28 MB of it third-order forward
+copies of the IF97 functions (``fwd3_fwd1_fwd1_*``)."""
+
+
 def _walk_loops(node: Any, calls: set[str]) -> bool:
     """Whether *node* (a part of rumoca's JSON) holds a ``while`` loop; the functions it calls into *calls*."""
     found = False
@@ -202,7 +216,7 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
     own = {s.name() for s in inputs}
     params = [s for s in ca.symvar(out) if s.name() not in own]
     p = ca.veccat(*params) if params else ca.MX(0, 1)
-    f = ca.Function(f"tbx_fn{next(_NAMES)}", [*inputs, p], [out])
+    f = ca.Function(f"tbx_fn{next(_NAMES)}", [*inputs, p], [out], DERIVATIVE_OPTIONS)
     return f, layout, asserts, p
 
 
