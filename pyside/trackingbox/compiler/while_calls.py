@@ -46,18 +46,14 @@ its like from several components, was still compiling after 900 s, where a refus
 loops had taken seconds."""
 
 
-DERIVATIVE_OPTIONS = {
-    "max_num_dir": 1,
-    "der_options": {"enable_forward": False, "enable_reverse": False, "enable_fd": True, "fd_method": "central",
-                    "jacobian_options": {"enable_forward": False, "enable_reverse": False, "enable_fd": True}},
-}
-"""CasADi options of a traced function: its first derivatives (forward, used where the index reduction
-differentiates a call, and adjoint) are exact; its derivatives of higher order, which only CasADi's
-exported directional and adjoint derivatives of the model and the Jacobians of Newton solves inside the
-model reach, are central finite differences of the exact first ones, and several directions are one
-direction at a time. CasADi otherwise emits an exact copy per order and per number of directions:
-``Fluid.Examples.Explanatory.MeasuringTemperature`` gave 72 MB of C, 28 MB of it third-order forward
-copies of the IF97 functions (``fwd3_fwd1_fwd1_*``)."""
+DERIVATIVE_OPTIONS = {"max_num_dir": 1}
+"""CasADi options of a traced function: derivatives in several directions are taken one direction at a
+time (a loop over the one-direction derivative) instead of CasADi emitting one more copy of the function
+per number of directions: ``Fluid.Examples.Explanatory.MeasuringTemperature`` gave 72 MB of C, 34 MB of it
+copies such as ``fwd3_fwd1_fwd1_*`` (the Jacobian of a Newton solve, three directions, of the second
+derivatives of the IF97 functions). (Central differences for the derivatives of order two and more
+would have cut further, but CasADi 3.8.2 fails taking the adjoint of such a derivative, "Duplicate IO
+name: fwd_i0", which its FMU export does.)"""
 
 
 def _walk_loops(node: Any, calls: set[str]) -> bool:
