@@ -25,20 +25,35 @@ import numpy as np
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number
-from .flat_model import Value
+from .flat_model import Assertion, Value
 from .while_fold import _NAMES, _events, _restored
 
 log = logging.getLogger(__name__)
 
 _MARKED = "_while_line_"
 
-MAX_INLINED_SIZE = 3_000_000
-"""The largest :func:`inlined_size` of a function running a while loop that is traced for a call with
+MIN_TRACED_SIZE = 5_000
+"""A function whose :func:`inlined_size` reaches this is traced once per pattern of constant arguments,
+like a function running a while loop, instead of being inlined at each call."""
+
+MAX_TRACED_SIZE = 3_000_000
+"""The largest :func:`traced_size` of a function that is traced; a larger one is refused. (Before large
+functions were traced, this bounded the whole inlined size.) The largest :func:`inlined_size` of a function running a while loop that is traced for a call with
 symbolic arguments; a larger one is refused. Measured (MSL 4.0.0): ``dofpt3`` 61 946 (traced in under a
 second), ``IF97_Utilities.h_pT`` 2 369 308 (4 s); ``IF97_Utilities.rho_ph`` 74 018 804 took 130 s to
 trace on a loaded machine, and ``Fluid.Examples.Explanatory.MeasuringTemperature``, which calls it and
 its like from several components, was still compiling after 900 s, where a refusal at its ``while``
 loops had taken seconds."""
+
+
+DERIVATIVE_OPTIONS = {"max_num_dir": 1}
+"""CasADi options of a traced function: derivatives in several directions are taken one direction at a
+time (a loop over the one-direction derivative) instead of CasADi emitting one more copy of the function
+per number of directions: ``Fluid.Examples.Explanatory.MeasuringTemperature`` gave 72 MB of C, 34 MB of it
+copies such as ``fwd3_fwd1_fwd1_*`` (the Jacobian of a Newton solve, three directions, of the second
+derivatives of the IF97 functions). (Central differences for the derivatives of order two and more
+would have cut further, but CasADi 3.8.2 fails taking the adjoint of such a derivative, "Duplicate IO
+name: fwd_i0", which its FMU export does.)"""
 
 
 def _walk_loops(node: Any, calls: set[str]) -> bool:
@@ -135,6 +150,21 @@ def _constant(elems: list[Any]) -> bool:
     return all(isinstance(e, (bool, int, np.bool_, np.integer)) for e in elems)
 
 
+def _merged(asserts: list[Any]) -> list[Any]:
+    """One assert per message and level, holding where all of them hold: the small functions a traced one
+    inlines repeat their asserts at each call (``rho_ph`` recorded ``g1``'s four asserts 1 312 times each,
+    6 353 outputs in all, for 28 messages); a failure still names its message."""
+    groups: dict[tuple[str, str], list[Any]] = {}
+    for a in asserts:
+        groups.setdefault((a.message, a.level), []).append(a)
+    out = []
+    for group in groups.values():
+        first = group[0]
+        cond = first.condition if len(group) == 1 else ca.mmin(ca.vertcat(*[a.condition for a in group]))
+        out.append(Assertion(condition=cond, message=first.message, level=first.level, origin=first.origin))
+    return out
+
+
 def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tuple) -> Any:
     """(CasADi function, output layout, asserts, parameter symbols) of *fname* for the arguments'
     pattern *key*; None where it cannot be one."""
@@ -176,20 +206,37 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
             return None
         layout.append(got[0])
         values += [ca.MX(float(e)) if is_number(e) else e for e in got[1]]
+    asserts = _merged(asserts)
     values += [a.condition for a in asserts]
     out = ca.vertcat(*values) if values else ca.MX(0, 1)
     own = {s.name() for s in inputs}
     params = [s for s in ca.symvar(out) if s.name() not in own]
     p = ca.veccat(*params) if params else ca.MX(0, 1)
-    f = ca.Function(f"tbx_fn{next(_NAMES)}", [*inputs, p], [out])
+    f = ca.Function(f"tbx_fn{next(_NAMES)}", [*inputs, p], [out], DERIVATIVE_OPTIONS)
     return f, layout, asserts, p
+
+
+def _traced(tr: Any, fname: str) -> bool:
+    """Whether a call of *fname* with symbolic arguments is traced once (it runs a while loop, or it inlines
+    to :data:`MIN_TRACED_SIZE` nodes or more) rather than inlined."""
+    return _loops(tr, fname) or inlined_size(tr, fname) >= MIN_TRACED_SIZE
+
+
+def traced_size(tr: Any, fname: str) -> int:
+    """The size of *fname*'s own trace: its JSON nodes plus, per call site, the inlined size of a function
+    that is inlined there, or 1 for a call of a traced function (a call node: its body is traced apart)."""
+    fn = tr.functions.get(fname)
+    if fn is None or fn.get("external"):
+        return 1
+    own, names = _calls_in(fn)
+    return own + sum(1 if _traced(tr, c) else inlined_size(tr, c) for c in names if c in tr.functions)
 
 
 def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
     """The outputs of ``fname(args)`` as a call of its traced CasADi function (see the module's
-    docstring); None where the function is to be inlined as before (no ``while`` loop reached, every
-    argument a constant, or a trace that cannot be a function)."""
-    if not _loops(tr, fname):
+    docstring); None where the function is to be inlined as before (neither a ``while`` loop reached nor
+    a large body, every argument a constant, or a trace that cannot be a function)."""
+    if not _traced(tr, fname):
         return None
     flats = [_flat(a) for a in args]
     if any(f is None for f in flats) or all(is_number(e) for f in flats for e in f[1]):
@@ -199,11 +246,11 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
         return None  # the trace itself
     cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
     if key not in cache:
-        size = inlined_size(tr, fname)
-        if size > MAX_INLINED_SIZE:
-            raise tr.unsupported(f"call of function {fname!r}, which runs a while loop through the functions it "
-                                 f"calls and inlines to {size} nodes of their bodies (the embedded backend traces "
-                                 f"such a function up to {MAX_INLINED_SIZE})")
+        size = traced_size(tr, fname)
+        if size > MAX_TRACED_SIZE:
+            raise tr.unsupported(f"call of function {fname!r}, whose trace (its body with the small functions it "
+                                 f"calls inlined) counts {size} nodes (the embedded backend traces a function "
+                                 f"up to {MAX_TRACED_SIZE})")
         cache[key] = _trace(tr, fname, fn, args, key)
         log.debug("%s: %s %s", tr.model, fname, f"traced once as a CasADi function of {cache[key][0].n_nodes()} "
                   "nodes" if cache[key] is not None else "inlined at each call (its trace cannot be a function)")
