@@ -43,7 +43,14 @@ _PREFIXES = r"(?:(?:constant|parameter|input|output|final|discrete|flow|stream|i
 _MAX_DEPTH = 8
 
 
-def _declaration(index, cls: str, name: str, seen: set[str] | None = None):
+def _own(index, cls: str, codes: dict[str, str]) -> str:
+    """The comment-free own text of *cls* (annotations blanked), kept in *codes*."""
+    if cls not in codes:
+        codes[cls] = index.own_code(index.classes[cls], annotations=False)
+    return codes[cls]
+
+
+def _declaration(index, cls: str, name: str, codes: dict[str, str], seen: set[str] | None = None):
     """The declaration of the component *name* in class *cls* or its bases: (class, match) with the
     groups ``prefix``, ``type`` and ``after`` (the character after the name), or None."""
     seen = set() if seen is None else seen
@@ -53,24 +60,24 @@ def _declaration(index, cls: str, name: str, seen: set[str] | None = None):
     info = index.classes[cls]
     pattern = re.compile(rf"(?<![\w.])(?P<prefix>{_PREFIXES})(?P<type>[A-Za-z_][\w.]*)\s*(?:\[[^\];]*\]\s*)?"
                          rf"(?<=[\s\]]){re.escape(name)}\s*(?:\[[^\];]*\]\s*)?(?P<after>[(=;])")
-    for m in pattern.finditer(index.own_code(info, annotations=False)):
+    for m in pattern.finditer(_own(index, cls, codes)):
         if m.group("type") in KEYWORDS or m.group("type") in ("end", "import", "extends", "within"):
             continue
         return cls, m
     for base in index.bases(cls):
-        found = _declaration(index, base, name, seen)
+        found = _declaration(index, base, name, codes, seen)
         if found is not None:
             return found
     return None
 
 
-def _record_constant(index, scope: str, name: str):
+def _record_constant(index, scope: str, name: str, codes: dict[str, str]):
     """The record constant *name* as Modelica's lookup finds it from class *scope* (the class, its
     bases, then the enclosing classes up to an encapsulated one): (class, match), or None when the
     name is found as something else or not at all."""
     cur: str | None = scope
     while cur:
-        found = _declaration(index, cur, name)
+        found = _declaration(index, cur, name, codes)
         if found is not None:
             cls, m = found
             if "constant" not in m.group("prefix").split():
@@ -99,17 +106,18 @@ def _closing(code: str, open_at: int) -> int:
     return len(code)
 
 
-def field_value(index, scope: str, name: str, field: str, depth: int = 0) -> str | None:
+def field_value(index, scope: str, name: str, field: str, codes: dict[str, str] | None = None,
+                depth: int = 0) -> str | None:
     """The number literal that field *field* of the record constant *name* (looked up from class
     *scope*) has by its declaration (see the module), or None."""
     if depth > _MAX_DEPTH:
         return None
-    found = _record_constant(index, scope, name)
+    codes = {} if codes is None else codes
+    found = _record_constant(index, scope, name, codes)
     if found is None:
         return None
     cls, m = found
-    info = index.classes[cls]
-    code = index.own_code(info, annotations=False)
+    code = _own(index, cls, codes)
     if m.group("after") == "(":
         close = _skip_expr(code, m.end())
         if code[close:close + 1] != ")":
@@ -139,50 +147,62 @@ def field_value(index, scope: str, name: str, field: str, depth: int = 0) -> str
         owner = index.lookup(owner_name, cls)
         if owner is None or owner.rsplit(".", 1)[-1] != owner_name.rsplit(".", 1)[-1]:
             return None
-        return field_value(index, owner, last, field, depth + 1)
+        return field_value(index, owner, last, field, codes, depth + 1)
     return None
 
 
-def _modified_anywhere(index, used: list[str], name: str) -> bool:
-    """Whether a class of *used* gives an element *name* a value in a modification or names it as an
+def _modified_anywhere(codes, name: str) -> bool:
+    """Whether one of the class texts *codes* gives an element *name* a value in a modification or names it as an
     argument (``(name = ...`` or ``, name = ...``)."""
     pattern = re.compile(rf"[(,]\s*(?:(?:each|final)\s+)*{re.escape(name)}\s*=(?!=)")
-    return any(pattern.search(index.own_code(index.classes[c], annotations=False)) for c in used)
+    return any(pattern.search(code) for code in codes)
 
 
-def _with_nested(index, used: list[str]) -> list[str]:
-    """*used* and every class nested in one of them (a package's functions that a redeclaration
-    brings in are not among the classes a model's names reach)."""
+def _with_redeclared(index, used: list[str]) -> list[str]:
+    """*used* and the classes a redeclaration nested in one of them reaches (a package's redeclared
+    functions that a ``redeclare package`` brings in are not among the classes a model's names reach)."""
     out = dict.fromkeys(used)
     stack = list(used)
     while stack:
         for child in index.children.get(stack.pop(), {}).values():
-            if child not in out:
-                out[child] = None
-                stack.append(child)
+            if child in out or not index.classes[child].redeclared:
+                continue
+            for cls in index.used_classes(child):
+                if cls not in out:
+                    out[cls] = None
+                    stack.append(cls)
     return list(out)
+
+
+_CONSTANT = re.compile(r"\bconstant\s+[A-Za-z_][\w.]*\s*(?:\[[^\];]*\]\s*)?\s([A-Za-z_]\w*)")
 
 
 def replacements(index, model: str) -> dict[Path, dict[int, list[tuple[str, str]]]]:
     """file -> line -> [(reference, value)] for every field of a record constant that *model*'s classes
     read by simple name and whose value :func:`field_value` knows (see the module)."""
-    used = index.used_classes(model)
+    used = _with_redeclared(index, index.used_classes(model))
+    codes: dict[str, str] = {}
+    for cls in used:
+        _own(index, cls, codes)
+    constants = {m.group(1) for code in codes.values() for m in _CONSTANT.finditer(code)}
     out: dict[Path, dict[int, list[tuple[str, str]]]] = {}
     modified: dict[str, bool] = {}
-    for cls in _with_nested(index, used):
+    values: dict[tuple[str, str, str], str | None] = {}
+    for cls in used:
+        code = codes[cls]
         info = index.classes[cls]
-        code = index.own_code(info, annotations=False)
-        if "." not in code:
-            continue
         for m in _REF.finditer(code):
             name, field = m.group(1), m.group(2)
-            if name in KEYWORDS or index.lookup(name, cls) is not None:
-                continue  # a class (package) name, not a component
-            value = field_value(index, cls, name, field)
+            if name not in constants or name in KEYWORDS or index.lookup(name, cls) is not None:
+                continue  # no record constant of that name, or a class (package) name
+            key = (cls, name, field)
+            if key not in values:
+                values[key] = field_value(index, cls, name, field, codes)
+            value = values[key]
             if value is None:
                 continue
             if name not in modified:
-                modified[name] = _modified_anywhere(index, used, name)
+                modified[name] = _modified_anywhere([codes[c] for c in used], name)
             if modified[name]:
                 continue
             line = index.location(info, m.start())[1]
