@@ -9,7 +9,16 @@ the array of the elements' derivatives (MLS 3.7.4), so ``der(mediums.h)`` is the
 ``{der(mediums[k].h) for k in 1:size(mediums, 1)}``, which rumoca reads.
 :func:`component_array_der` writes it so where the component's declaration in the same file is a
 one-dimensional array (``T[n] a`` or ``T a[n]``, every declaration of that name in the file so);
-anything else is left as written. Lines are kept; byte offsets after an edit shift.
+anything else is left as written.
+
+The same ``der`` of an element of a component array indexed by a for-equation's variable
+(``for i in 1:n loop der(mediums[i].Xi) = zeros(Medium.nXi); end for;``, the same file, for
+``substanceDynamics = SteadyStateInitial``) is refused alike. A for-equation holding one equation
+``lhs = rhs`` stands for that equation for each value of the index (MLS 8.3.3), i.e. for the array
+equation ``{lhs for i in 1:n} = {rhs for i in 1:n}``; where the left-hand side is such a
+``der(a[i].b)``, in an initial equation section, and the right-hand side ``0`` or ``zeros(k)`` (the
+steady starts of ``Modelica.Fluid``), the loop is written ``{der(a[i].b) for i in 1:n} = zeros(n, k)``
+(:func:`_loop_as_array_equation`; other forms rumoca reads wrong, see there). Lines are kept; byte offsets after an edit shift.
 """
 from __future__ import annotations
 
@@ -19,6 +28,9 @@ from .source_scan import _code_mask
 
 _DER_FIELD = re.compile(rb"\bder\s*\(\s*([A-Za-z_]\w*)\.([A-Za-z_]\w*)\s*\)")
 _INDEX = b"k__tb"
+_LOOP_DER = re.compile(rb"\bfor\s+([A-Za-z_]\w*)\s+in\s+([^;]*?)\s+loop(\s+)(der\s*\(\s*[A-Za-z_]\w*\s*\[\s*\1\s*\]"
+                       rb"\s*\.\s*[A-Za-z_]\w*\s*\))(\s*)=(?!=)([^;]*);(\s*)end\s+for\s*;")
+"""A for-equation whose body is the one equation ``der(a[i].b) = rhs`` (comment-free text)."""
 
 
 def _one_dimensional(code: bytes, name: bytes) -> bool:
@@ -36,6 +48,35 @@ def _one_dimensional(code: bytes, name: bytes) -> bool:
             return False
         found = True
     return found
+
+
+_SECTION = re.compile(rb"\b(?:initial\s+equation|initial\s+algorithm|equation|algorithm|end\s+(?!(?:for|if|when|while)\b)[A-Za-z_]\w*\s*;)")
+
+
+def _loop_as_array_equation(code: bytes, data: bytes, m: re.Match[bytes]) -> bytes | None:
+    """The array equation standing for the for-equation *m* (see the module), or None to leave it:
+    only in an initial equation section, over ``1:E``, with a right-hand side ``0`` or ``zeros(...)``
+    (rumoca 0.10.2 reads an array comprehension on the right-hand side with the wrong shape, and
+    counts such equations in an equation section wrong: measured, ``tests/test_compiler_der_fields.py``)."""
+    index, rng = m.group(1), m.group(2)
+    lhs, rhs = m.group(4), m.group(6).strip()
+    if data[m.start():m.end()] != m.group(0):
+        return None  # (a comment or string inside: left as written)
+    sections = [s.group(0) for s in _SECTION.finditer(code, 0, m.start())]
+    if not sections or not re.fullmatch(rb"initial\s+equation", sections[-1]):
+        return None
+    upper = re.fullmatch(rb"1\s*:\s*([^:]+)", rng.strip())
+    if upper is None or re.search(rb"\b" + re.escape(index) + rb"\b", rhs):
+        return None
+    if re.fullmatch(rb"0(?:\.0*)?", rhs):
+        right = b"zeros(" + upper.group(1).strip() + b")"
+    else:
+        zeros = re.fullmatch(rb"zeros\s*\(([^()]*(?:\([^()]*\)[^()]*)*)\)", rhs)
+        if zeros is None:
+            return None
+        right = b"zeros(" + upper.group(1).strip() + b", " + zeros.group(1).strip() + b")"
+    new = b"{" + lhs + b" for " + index + b" in " + rng.strip() + b"} = " + right + b";"
+    return new + b"\n" * (m.group(0).count(b"\n") - new.count(b"\n"))
 
 
 def component_array_der(data: bytes) -> tuple[bytes, list[int]]:
@@ -57,8 +98,14 @@ def component_array_der(data: bytes) -> tuple[bytes, list[int]]:
                + name + b", 1)}")
         edits.append((m.start(), m.end() - m.start(), new))
         lines.append(data.count(b"\n", 0, m.start()) + 1)
+    for m in _LOOP_DER.finditer(code):
+        new = _loop_as_array_equation(code, data, m)
+        if new is not None:
+            edits.append((m.start(), m.end() - m.start(), new))
+            lines.append(data.count(b"\n", 0, m.start()) + 1)
     if not edits:
         return data, []
+    edits.sort()
     out = bytearray()
     pos = 0
     for at, drop, new in edits:
