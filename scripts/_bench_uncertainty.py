@@ -148,11 +148,12 @@ def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...
     return {"seed": seed, **intervals_doc(result, truth)}
 
 
-def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, gains: Any = None) -> Any:
+def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, gains: Any = None,
+             misfit: Any = None) -> Any:
     """The tracking CSV with its band columns recomputed by this checkout's
     :class:`~trackingbox.identify.bands.BandTracker` (causal: the same values a new run would write;
     *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate, and *gains* its
-    ``gains``; *fixed* None: both as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
+    ``gains``, *misfit* its ``misfit``; *fixed* None: all three as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
     ``{}``: none). *spec*: the loaded spec to use instead of *spec_path*'s."""
     import pandas as pd
 
@@ -167,8 +168,8 @@ def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, ga
     spec = load_spec(spec_path) if spec is None else spec
     note = ""
     if fixed is None:
-        fixed, note, gains = band_parts(spec)
-    bands = BandTracker(spec, base, fixed=fixed, note=note, gains=gains)
+        fixed, note, gains, misfit = band_parts(spec)
+    bands = BandTracker(spec, base, fixed=fixed, note=note, gains=gains, misfit=misfit)
     extra = pd.DataFrame(bands.rows(numbers.to_numpy(float)), columns=bands.columns, index=df.index)
     return pd.concat([df[base], extra], axis=1)
 

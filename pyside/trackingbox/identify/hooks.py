@@ -71,8 +71,8 @@ def band_tracker(spec: Any, columns: Any) -> Any:
     and no such parameter)."""
     if not getattr(spec, "pairs", None):
         return None
-    fixed, note, gains = band_parts(spec)
-    return BandTracker(spec, columns, fixed=fixed or None, note=note, gains=gains)
+    fixed, note, gains, misfit = band_parts(spec)
+    return BandTracker(spec, columns, fixed=fixed or None, note=note, gains=gains, misfit=misfit)
 
 
 def indistinct_candidates(spec: Any, *, warmup: float | None = None, progress: Any = None) -> dict[str, str]:
