@@ -541,7 +541,7 @@ def test_model_error_part_widens_the_band_by_what_the_untracked_tag_implies() ->
     """The lack-of-fit case: the plant's TI carries 0.4 K the twin lacks, so the loop settles 0.4 / GAIN = -20
     units from the truth; TO = 50 + C2·k reads C2·20 = 0.2 K above the twin, which implies the truth 20 above
     the tracked value. With TO's gain, the band holds the truth in most rows after 4 h (it did in under half
-    without); with the twin right (no missing effect) the band is as before in at least 99 % of the rows."""
+    without); with the twin right (no missing effect) the band is as before in at least 95 % of the rows."""
     n = 20000
     rng = np.random.default_rng(14)
     truth = np.full(n, P_TRUE)
@@ -558,11 +558,12 @@ def test_model_error_part_widens_the_band_by_what_the_untracked_tag_implies() ->
         same = np.isclose(a[sel, 0], b[sel, 0]) & np.isclose(a[sel, 1], b[sel, 1])
         widened = wide.describe()["k"]["model_error"]
         assert widened["closed_gains"] == {"TO": C2}
-        if missing == 0.0:
-            assert float(np.mean(same)) >= 0.99, float(np.mean(same))
+        if missing == 0.0:  # a 2 h mean beyond chance now and then (the test's false alarms): a little wider
+            assert float(np.mean(same)) >= 0.95, float(np.mean(same))
+            assert float(np.median(b[sel, 1] - b[sel, 0])) == pytest.approx(float(np.median(a[sel, 1] - a[sel, 0])))
         else:
             assert float(np.mean(inside)) >= 0.9, float(np.mean(inside))
-            # the upper side moved by about 20, the lower side not at all
+            # the upper side moved by about 20 (and the mean's own margin, 1.96 · 0.0013 / C2), the lower not at all
             assert np.median((b[sel, 1] - a[sel, 1])) == pytest.approx(20.0, rel=0.1)
             assert np.array_equal(a[sel, 0], b[sel, 0])
             assert widened["rows_widened"] > 0.95 * sel.sum()

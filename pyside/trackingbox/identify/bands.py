@@ -142,9 +142,9 @@ tracked value ``p`` (level :data:`LEVEL`), in seven parts:
    the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's
    motion and the loops' own-tag errors are the part no batch mean of tracked error shows (the first
    is the lag part's, over a day since: part 3).
-7. **model error**: where an untracked tag disagrees with the twin (flagged by the lack-of-fit test below),
-   the value of ``p`` it implies, the other loops keeping their tags (:mod:`.misfit`): the side toward it
-   reaches it (*misfit* of :class:`BandTracker`, the tags' closed-loop gains from the step tests).
+7. **model error**: where an untracked tag's mean error is beyond chance (the lack-of-fit test's first
+   condition, below), the value of ``p`` it implies, the other loops keeping their tags (:mod:`.misfit`):
+   the side toward it reaches it (*misfit* of :class:`BandTracker`, the tags' closed-loop gains).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -543,7 +543,7 @@ class BandTracker:
                                dtype=float).reshape(len(self.fit_tags), n)
         if self.misfit.size and not np.any(np.isfinite(self.misfit)):
             self.misfit = np.zeros((0, n))
-        self.fit_last: list[tuple[float, bool]] = []  # the last row's (mean error, flagged) per untracked tag
+        self.fit_last: list[tuple[float, bool, float]] = []  # the last row's (mean error, beyond chance, margin)
         self.misfit_rows = [0] * n  # rows the model-error part widened, per pair
 
     def _slow_fresh(self) -> dict[str, Any]:
@@ -616,7 +616,7 @@ class BandTracker:
                 st.auto += 1
             if st.seen * self.ts < NOISE_MIN or st.weight <= 0 or st.auto * self.ts < FIT_MEMORY:
                 known = False
-                self.fit_last.append((math.nan, False))
+                self.fit_last.append((math.nan, False, 0.0))
                 continue
             gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
             lrv = gam[0] + 2.0 * float(np.sum((taper * gam)[1:]))
@@ -624,7 +624,8 @@ class BandTracker:
             m = abs(st.ewma_fast / st.ewma_slow)
             # beyond the noise twice over: not a chance mean (z), and as large as the noise itself (effect)
             z = min(m / sd / self.fit_z, m / (FIT_EFFECT * math.sqrt(max(float(gam[0]), 1e-300))))
-            self.fit_last.append((st.ewma_fast / st.ewma_slow, z >= 1.0))
+            # the model-error part (7): the signed mean where it is beyond chance, with its own 95 % margin
+            self.fit_last.append((st.ewma_fast / st.ewma_slow, m >= sd * self.fit_z, self.z * sd))
             if z > worst:
                 worst, which = z, tag
         if not known or worst < 0:
@@ -792,8 +793,8 @@ class BandTracker:
         """The model-error part (7 of the module) per pair from the last row's lack-of-fit means."""
         if not self.misfit.size or len(self.fit_last) != len(self.fit_tags):
             return [(0.0, 0.0)] * len(self.pairs)
-        return implied_sides([m for m, _ in self.fit_last], [f for _, f in self.fit_last], self.misfit,
-                             [pr["hi"] - pr["lo"] for pr in self.pairs])
+        return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last], self.misfit,
+                             [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last])
 
     def rows(self, array: np.ndarray) -> list[list[float]]:
         """The band values of rows of numbers (modes as flags: non-zero = hold)."""
