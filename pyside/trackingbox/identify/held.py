@@ -36,9 +36,11 @@ effect: the outlet valve's shift is 0.00066 at the interval's ends, not the
 A held parameter without an interval adds nothing (the band takes it as exact
 and says so in ``result.json``); so does one the twin cannot change after
 initialisation, or every held parameter when the step tests fail (a warning
-names why). With one pair and no held interval no simulation runs and the band
-is what it was before; with several pairs the gain matrix is measured all the
-same, for the loops' interaction (part 5 of :mod:`.bands`, :func:`band_parts`).
+names why). With several pairs the gain matrix is measured all the same, for the
+loops' interaction (part 5 of :mod:`.bands`, :func:`band_parts`); where some output
+tag is not paired, the tracked parameters are stepped (one pair too) for their gains
+on it, the model-error part's (:mod:`.misfit`). With one pair, every output paired
+and no held interval no simulation runs.
 """
 from __future__ import annotations
 
