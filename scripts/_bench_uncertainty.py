@@ -19,6 +19,10 @@ Cases (``--cases``, default all):
   parameters, R1 and R2, which its temperature does determine; 50 seeds.
 * ``bands-hx``: ``pair`` and ``track`` on each ``hx`` case: the share of the rows after settling
   (the band present and ``hold_until + 5 T_lag`` passed) whose band contains the plant's 910.
+* ``bands-hx-drift``, ``bands-hx-heatloss``: ``bands-hx`` with the plant of the bench's hidden ``sensor-drift``
+  (TI-102 reads up to 1.5 K high) or ``heat-loss`` case (both tags off): the twin's structure wrong on purpose,
+  no target; each seed also records the same run's bands without the model-error part
+  (``without_model_error``; :mod:`trackingbox.identify.misfit`).
 * ``bands-evaporator``: the demo's pipeline (``scripts/demo --bench evaporator --until track``)
   on ``--evaporator-seeds`` seeds (default 3): the share of the rows after 12 h whose band for
   ``effect.Rf`` contains the plant's fouling trajectory (``truth.json``); and the same with the
@@ -148,11 +152,12 @@ def run_wall(seed: int, work: Path, fmus: dict[str, Path], known: tuple[str, ...
     return {"seed": seed, **intervals_doc(result, truth)}
 
 
-def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, gains: Any = None) -> Any:
+def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, gains: Any = None,
+             misfit: Any = None) -> Any:
     """The tracking CSV with its band columns recomputed by this checkout's
     :class:`~trackingbox.identify.bands.BandTracker` (causal: the same values a new run would write;
     *fixed*: its ``fixed`` argument, the parameters the twin holds at an estimate, and *gains* its
-    ``gains``; *fixed* None: both as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
+    ``gains``, *misfit* its ``misfit``; *fixed* None: all three as ``track`` computes them, :func:`trackingbox.identify.held.band_parts`;
     ``{}``: none). *spec*: the loaded spec to use instead of *spec_path*'s."""
     import pandas as pd
 
@@ -167,8 +172,8 @@ def rebanded(csv: Path, spec_path: Path, fixed: Any = None, spec: Any = None, ga
     spec = load_spec(spec_path) if spec is None else spec
     note = ""
     if fixed is None:
-        fixed, note, gains = band_parts(spec)
-    bands = BandTracker(spec, base, fixed=fixed, note=note, gains=gains)
+        fixed, note, gains, misfit = band_parts(spec)
+    bands = BandTracker(spec, base, fixed=fixed, note=note, gains=gains, misfit=misfit)
     extra = pd.DataFrame(bands.rows(numbers.to_numpy(float)), columns=bands.columns, index=df.index)
     return pd.concat([df[base], extra], axis=1)
 
@@ -197,22 +202,32 @@ def band_coverage(csv: Path | Any, parameter: str, truth: np.ndarray | float, af
             "rms_error": float(np.sqrt(np.mean((p - truth)[rows] ** 2))) if rows.any() else math.nan}
 
 
-def run_bands_hx(seed: int, work: Path, fmus: dict[str, Path]) -> dict[str, Any]:
+#: heat-exchanger band cases whose plant has an effect the twin lacks (the bench's hidden suite): no target, the
+#: coverage with the model-error part beside the same run's bands without it
+HX_HIDDEN = {"bands-hx-drift": "sensor-drift", "bands-hx-heatloss": "heat-loss"}
+
+
+def run_bands_hx(seed: int, work: Path, fmus: dict[str, Path], hidden: str | None = None) -> dict[str, Any]:
     from trackingbox.analysis.pair_stage import PairSettings, pair, spec_pairs
     from trackingbox.benches.base import build_case
     from trackingbox.spec import load_spec, write_pairs
     from trackingbox.tracking.runtime import track
 
-    case = build_case(hx_definition(False), work / f"bands-hx-{seed}", seed=seed, plant_fmu=fmus["hx-plant"],
-                      twin_fmu=fmus["hx-twin"])
+    key = next((k for k, v in HX_HIDDEN.items() if v == hidden), "bands-hx")
+    case = build_case(hx_definition(False), work / f"{key}-{seed}", seed=seed,
+                      plant_fmu=fmus[key if hidden else "hx-plant"], twin_fmu=fmus["hx-twin"], hidden=hidden)
     spec = load_spec(case.spec)
     result = pair(spec, PairSettings(workers=1))
     spec = write_pairs(case.spec, spec_pairs(spec, result))
     run = track(spec, out_dir=case.directory / "track")
     summary = json.loads((case.directory / "track" / "result.json").read_text())["bands"]["hx.kht"]
     after = spec.tracking.hold_until + 5.0 * summary["lag_time"]
-    return {"seed": seed, "pairs": [[p.variable, p.parameter] for p in spec.pairs],
-            **band_coverage(run.csv, "hx.kht", case.truth["hx.kht"], after), "after": after}
+    doc = {"seed": seed, "pairs": [[p.variable, p.parameter] for p in spec.pairs],
+           **band_coverage(run.csv, "hx.kht", case.truth["hx.kht"], after), "after": after}
+    if hidden:  # the same run's bands without the model-error part (nothing held on this bench)
+        doc["without_model_error"] = band_coverage(rebanded(run.csv, case.spec, fixed={}, gains=None, misfit=None),
+                                                   "hx.kht", case.truth["hx.kht"], after)
+    return doc
 
 
 def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = False) -> dict[str, Any]:
@@ -232,7 +247,16 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
 
     csv = out / "track" / "tracking.csv"
     t = pd.read_csv(csv, usecols=["time"])["time"].to_numpy(float)
-    source = rebanded(csv, out / "spec.toml") if rebands else csv
+    bare = None
+    if rebands:  # the bands as track computes them now, and the same without the model-error part
+        from trackingbox.identify.held import band_parts
+        from trackingbox.spec import load_spec as _load
+
+        fixed, _, gains, misfit = band_parts(_load(out / "spec.toml"))
+        source = rebanded(csv, out / "spec.toml", fixed=fixed, gains=gains, misfit=misfit)
+        bare = rebanded(csv, out / "spec.toml", fixed=fixed, gains=gains, misfit=None) if misfit else None
+    else:
+        source = csv
     doc = {"seed": seed, **band_coverage(source, "effect.Rf", truth_on(truth, "effect.Rf", t), 12 * 3600.0),
            "after": 12 * 3600.0, **({"rebanded": True} if rebands else {})}
     # every tracked parameter with a known truth: the bands as ``track`` computes them and, with several pairs,
@@ -257,7 +281,10 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
         doc["tracked"][pr.parameter] = {"variable": pr.variable,
                                         **band_coverage(frame, pr.parameter, value, 12 * 3600.0),
                                         **({"alone": band_coverage(alone, pr.parameter, value, 12 * 3600.0)}
-                                           if alone is not None else {})}
+                                           if alone is not None else {}),
+                                        **({"without_model_error": band_coverage(bare, pr.parameter, value,
+                                                                                 12 * 3600.0)}
+                                           if bare is not None else {})}
     return doc
 
 
@@ -276,6 +303,11 @@ def fmus_for(cases: list[str], work: Path, msl: Path) -> dict[str, Path]:
     if "hp" in cases:
         wanted += [("hp-plant", "TrackingBox.Benches.HeatProduction.Plant"),
                    ("hp-twin", "TrackingBox.Benches.HeatProduction.Hidden.QuadraticTwin")]
+    from trackingbox.benches.heat_exchanger import HIDDEN
+
+    wanted += [(key, HIDDEN[name].model) for key, name in HX_HIDDEN.items() if key in cases]
+    if any(c in HX_HIDDEN for c in cases) and "bands-hx" not in cases:
+        wanted += [("hx-twin", "TrackingBox.Benches.HeatExchanger.Twin")]
     for key, model in wanted:
         target = work / "fmus" / f"{key}.fmu"
         if not target.exists():
@@ -300,13 +332,20 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
             return [f"{case:<24} no runs"], False
         mean = float(np.mean(cov))
         met = mean >= BAND_TARGET
-        ok = met or case == "bands-evaporator-plain"
+        untargeted = case == "bands-evaporator-plain" or case in HX_HIDDEN
+        ok = met or untargeted
         lines.append(f"{case:<24} {len(cov)} runs: band contains the truth {100 * mean:.1f} % of the rows after "
                      f"settling (worst run {100 * min(cov):.1f} %, median half-width "
                      f"{np.median([d['median_half_width'] for d in docs]):.4g}, truth below the band "
                      f"{100 * float(np.mean([d['below'] for d in docs])):.1f} %)"
-                     + ("" if case == "bands-evaporator-plain" else f"  [target >= {100 * BAND_TARGET:.0f} %: "
+                     + ("" if untargeted else f"  [target >= {100 * BAND_TARGET:.0f} %: "
                         f"{'met' if met else 'MISSED'}]"))
+        without = [d["without_model_error"] for d in docs if "without_model_error" in d]
+        if without:
+            runs = ", ".join(f"{100 * w['covered']:.1f}" for w in without)
+            lines.append(f"{'':<24} the same runs without the model-error part: "
+                         f"{100 * float(np.mean([w['covered'] for w in without])):.1f} % (runs {runs} %), median "
+                         f"half-width {np.median([w['median_half_width'] for w in without]):.4g}")
         flags = [d for d in docs if math.isfinite(d.get("flagged", math.nan))]
         if flags:
             def share(key: str) -> str:
@@ -318,7 +357,9 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
                          f"{share('covered_flagged')} (per-run means)")
         for name in sorted({n for d in docs for n in d.get("tracked", {})}):
             per = [d["tracked"][name] for d in docs if name in d.get("tracked", {})]
-            for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r])):
+            for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r]),
+                                (" without the model-error part",
+                                 [r["without_model_error"] for r in per if "without_model_error" in r])):
                 c = [r["covered"] for r in rows if math.isfinite(r.get("covered", math.nan))]
                 if c:
                     lines.append(f"{'':<24} {name}{label}: contains the truth {100 * float(np.mean(c)):.1f} % "
@@ -399,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
                          "this checkout's band code (no demo rerun) and record the seeds again")
     args = ap.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
-    known = {"hx", "hx2", "hp", "wall", "wall2", "bands-hx", "bands-evaporator", "bands-evaporator-plain"}
+    known = {"hx", "hx2", "hp", "wall", "wall2", "bands-hx", "bands-evaporator", "bands-evaporator-plain", *HX_HIDDEN}
     if set(cases) - known:
         print(f"bench_uncertainty: unknown case(s) {sorted(set(cases) - known)}; known: {sorted(known)}",
               file=sys.stderr)
@@ -427,8 +468,8 @@ def main(argv: list[str] | None = None) -> int:
                     doc = run_hp(seed, work, fmus, args.hp_hours)
                 elif case in ("wall", "wall2"):
                     doc = run_wall(seed, work, fmus, ("C",) if case == "wall2" else ())
-                elif case == "bands-hx":
-                    doc = run_bands_hx(seed, work, fmus)
+                elif case == "bands-hx" or case in HX_HIDDEN:
+                    doc = run_bands_hx(seed, work, fmus, HX_HIDDEN.get(case))
                 else:
                     doc = run_bands_evaporator(seed, work, case.endswith("plain"), args.rebands)
             except Exception as exc:  # noqa: BLE001 - one seed's failure is a row of the table, not the end

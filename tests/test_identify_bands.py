@@ -509,3 +509,61 @@ def test_a_checkpoint_from_before_the_day_long_rate_is_refused() -> None:
         del s["rate"]
     with pytest.raises(CheckpointError, match="day-long rate"):
         BandTracker(_spec(), COLUMNS).load_state_dict(old)
+
+
+# --------------------------------------------------------------------------- model error (identify.misfit)
+
+
+def test_closed_gains_and_implied_values_on_a_linear_twin_worked_by_hand() -> None:
+    """Two loops on a linear twin, ``G_tt = [[2, 1], [1, 4]]``, one untracked tag ``u = θ1 + 2 θ2``. The plant
+    reads 1.4 more than the twin at the truth on pair 1's tag only. The loops settle at ``θ - θ* = G⁻¹ [1.4, 0]
+    = [4·1.4, -1.4] / 7 = [0.8, -0.2]``, and tag u is left with ``-(0.8 - 0.4) = -0.4``. With pair 2's loop
+    keeping its tag, moving θ1 by 1 moves θ2 by -1/4 and u by 1 - 2/4 = 0.5: u implies θ1 - 0.8, the truth."""
+    from trackingbox.identify.misfit import closed_gains, implied_sides
+
+    g = closed_gains(np.array([[2.0, 1.0], [1.0, 4.0]]), np.array([[1.0, 2.0]]))
+    assert g == pytest.approx(np.array([[0.5, 2.0 - 1.0 / 2.0]]))
+    sides = implied_sides([-0.4], [True], g, [10.0, 10.0])
+    assert sides[0] == pytest.approx((0.8, 0.0))            # θ1*: 0.8 below the tracked value
+    # for θ2 u reads -0.4 / 1.5 (0.267 below) where the truth is 0.2 above: a tag reads a pair's truth only when
+    # the error sits on that pair's own tag (identify.misfit)
+    assert sides[1] == pytest.approx((0.4 / 1.5, 0.0))
+    assert implied_sides([-0.4], [False], g, [10.0, 10.0]) == [(0.0, 0.0), (0.0, 0.0)]  # not flagged: nothing
+    assert implied_sides([-0.4], [True], g, [0.5, 0.5])[0] == (0.0, 0.0)   # beyond the bounds' range: not θ1's
+    # two tags disagreeing in sign widen both sides, each by its own reading
+    assert implied_sides([-0.4, 0.3], [True, True], np.array([[0.5], [0.1]]), [10.0]) == \
+        [pytest.approx((0.8, 3.0))]
+    with pytest.raises(ValueError, match="one column per pair"):
+        closed_gains(np.eye(2), np.ones((1, 3)))
+
+
+def test_model_error_part_widens_the_band_by_what_the_untracked_tag_implies() -> None:
+    """The lack-of-fit case: the plant's TI carries 0.4 K the twin lacks, so the loop settles 0.4 / GAIN = -20
+    units from the truth; TO = 50 + C2·k reads C2·20 = 0.2 K above the twin, which implies the truth 20 above
+    the tracked value. With TO's gain, the band holds the truth in most rows after 4 h (it did in under half
+    without); with the twin right (no missing effect) the band is as before in at least 95 % of the rows."""
+    n = 20000
+    rng = np.random.default_rng(14)
+    truth = np.full(n, P_TRUE)
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    t = np.arange(n) * TS
+    for missing in (0.0, 0.4):
+        rows = _closed_loop_two_tags(0.05 * rng.normal(size=n), 0.05 * rng.normal(size=n), truth, missing)
+        base = BandTracker(_spec(), columns)
+        wide = BandTracker(_spec(), columns, misfit={"TO": [C2]})
+        a = np.array([base.row(r) for r in rows])
+        b = np.array([wide.row(r) for r in rows])
+        sel = (t >= 4 * 3600.0) & np.isfinite(a[:, 0])
+        inside = ((b[:, 0] <= truth) & (truth <= b[:, 1]))[sel]
+        same = np.isclose(a[sel, 0], b[sel, 0]) & np.isclose(a[sel, 1], b[sel, 1])
+        widened = wide.describe()["k"]["model_error"]
+        assert widened["closed_gains"] == {"TO": C2}
+        if missing == 0.0:  # a 2 h mean beyond chance now and then (the test's false alarms): a little wider
+            assert float(np.mean(same)) >= 0.95, float(np.mean(same))
+            assert float(np.median(b[sel, 1] - b[sel, 0])) == pytest.approx(float(np.median(a[sel, 1] - a[sel, 0])))
+        else:
+            assert float(np.mean(inside)) >= 0.9, float(np.mean(inside))
+            # the upper side moved by about 20 (and the mean's own margin, 1.96 · 0.0013 / C2), the lower not at all
+            assert np.median((b[sel, 1] - a[sel, 1])) == pytest.approx(20.0, rel=0.1)
+            assert np.array_equal(a[sel, 0], b[sel, 0])
+            assert widened["rows_widened"] > 0.95 * sel.sum()

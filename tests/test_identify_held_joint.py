@@ -156,10 +156,12 @@ def test_each_pairs_own_gain_misses_the_truth_the_joint_shift_holds(spec: Path,
 
 
 def test_one_pair_measures_no_gain_matrix(spec: Path) -> None:
-    """With one pair the rule is the pair's own gain (the bands as before): no tracked parameter is stepped."""
+    """With one pair the rule is the pair's own gain (the bands as before): no gain matrix. The tracked ``a`` is
+    stepped all the same for the untracked Y2's gain, the model-error part's (``y2 = 0.8 a + b``: 0.8, and with
+    one loop the closed-loop gain is that gain)."""
     import dataclasses
 
-    from trackingbox.identify.held import measure, shifts
+    from trackingbox.identify.held import band_parts, measure, shifts
     from trackingbox.spec import load_spec
 
     loaded = load_spec(spec)
@@ -169,6 +171,9 @@ def test_one_pair_measures_no_gain_matrix(spec: Path) -> None:
     fixed, note = shifts(one, found)
     assert note == "" and list(fixed) == ["a"]
     assert (fixed["a"][0].at_lower, fixed["a"][0].at_upper) == pytest.approx((1.0, -1.0), rel=0.01)
+    assert found.others == ("Y2",) and found.other_gains == pytest.approx(np.array([[0.8]]), rel=0.01)
+    assert band_parts(one)[3] == {"Y2": [pytest.approx(0.8, rel=0.01)]}
+    assert band_parts(loaded)[3] is None  # both tags paired: nothing untracked
 
 
 def test_a_singular_gain_matrix_falls_back_to_each_pairs_gain_and_says_so(spec: Path) -> None:

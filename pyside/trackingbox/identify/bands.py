@@ -13,7 +13,7 @@ held over a sample) closed by its PI law (:func:`trackingbox.tracking.tuning.pai
   (1 at the start), with ``T_lag = Ts Σ d`` the loop's lag behind a ramp.
 
 :class:`BandTracker` then gives every CSV row a band ``[lo, hi]`` around the
-tracked value ``p`` (level :data:`LEVEL`), in six parts:
+tracked value ``p`` (level :data:`LEVEL`), in seven parts:
 
 1. **noise**: ``z σ_n`` with ``σ_n² = Σ_l γ(l) R_h(l)`` -- ``γ`` the
    autocovariance of the tag's fast error (tracked error minus its centred
@@ -142,13 +142,16 @@ tracked value ``p`` (level :data:`LEVEL`), in six parts:
    the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's
    motion and the loops' own-tag errors are the part no batch mean of tracked error shows (the first
    is the lag part's, over a day since: part 3).
+7. **model error**: where an untracked tag's mean error is beyond chance (the lack-of-fit test's first
+   condition, below), the value of ``p`` it implies, the other loops keeping their tags (:mod:`.misfit`):
+   the side toward it reaches it (*misfit* of :class:`BandTracker`, the tags' closed-loop gains).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
 twin's ``[fixed]`` values and the parameters no pair tracks, less those given a
-fixed part). It does not contain what the twin's structure gets wrong (an effect the
-twin lacks, absorbed by the parameter): no loop can see that from its own tag, which it drives to the
-measurement whatever the parameter has to absorb.
+fixed part). What the twin's structure gets wrong (an effect the twin lacks, absorbed by the
+parameter) no loop can see from its own tag, which it drives to the measurement whatever the parameter
+has to absorb; part 7 takes it from the tags no loop drives, as far as they show it.
 
 **Lack of fit: where the band is not to be trusted.** The other measured tags
 can see it. For every output tag no pair tracks, :class:`BandTracker` keeps the
@@ -165,10 +168,9 @@ The CSV's ``lack_of_fit`` column is ``max_tag min(|m| / (z s_m), |m| / (FIT_EFFE
 noise, and the bands do not cover that model error** (NaN until an hour of fast
 error and one :data:`FIT_MEMORY` are seen; no column without such tags).
 ``result.json``'s band summary names the tags and the share of rows flagged.
-It says *that* the twin is off, not by how much a parameter absorbs it: the
-untracked tags' offsets, read through the gains as a parameter shift, disagreed
-in sign from tag to tag on the evaporator (the effects the twin lacks act on them
-directly); finding the missing effect is diagnosis's work. ``FIT_EFFECT = 1`` was
+It says *that* the twin is off; part 7 reads each flagged tag's offset as a value of
+the parameter, which can disagree from tag to tag (an effect the twin lacks acting on
+a tag directly): the band takes them all; finding the missing effect is diagnosis's work. ``FIT_EFFECT = 1`` was
 chosen after one seed of the evaporator bench with and without the effects its
 twin lacks (untracked tags' 2 h mean errors at most 0.53 σ in 90 % of the rows
 without them, one at 2.6 σ in half of the rows with them).
@@ -190,6 +192,7 @@ from scipy.stats import norm
 from ..analysis.offsets import FLOOR_SPAN
 from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
+from .misfit import implied_sides
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -443,11 +446,14 @@ class BandTracker:
     gains
         ``G``: the tracked parameters' steady gains on the paired tags (tag of pair ``i`` per unit of the
         parameter of pair ``j``; part 5 of the module). None: each band from its own loop alone.
+    misfit
+        Untracked tag -> its closed-loop gain per pair (:func:`trackingbox.identify.misfit.closed_gains`, the
+        pairs' order): the model-error part (7). None, or a tag left out: no model-error part from it.
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
                  fixed: Mapping[str, Sequence[Fixed]] | None = None, note: str = "",
-                 gains: Any = None) -> None:
+                 gains: Any = None, misfit: Mapping[str, Sequence[float]] | None = None) -> None:
         self.fixed_note = str(note)  # before the pairs' loop below, which has its own ``note``
         n = len(getattr(spec, "pairs", ()))
         self.gains = None if gains is None else np.asarray(gains, dtype=float)
@@ -532,6 +538,13 @@ class BandTracker:
         self.fit_states = [self._fresh() for _ in self.fit_tags]
         self.fit_rows = [0, 0]  # rows with the statistic known, of them at or above 1
         self.fit_worst: dict[str, int] = {}
+        # the model-error part (7): each untracked tag's closed-loop gains, NaN where not measured
+        self.misfit = np.array([[float(v) for v in (misfit or {}).get(t, [math.nan] * n)] for t in self.fit_tags],
+                               dtype=float).reshape(len(self.fit_tags), n)
+        if self.misfit.size and not np.any(np.isfinite(self.misfit)):
+            self.misfit = np.zeros((0, n))
+        self.fit_last: list[tuple[float, bool, float]] = []  # the last row's (mean error, beyond chance, margin)
+        self.misfit_rows = [0] * n  # rows the model-error part widened, per pair
 
     def _slow_fresh(self) -> dict[str, Any]:
         n = len(self.pairs)
@@ -591,6 +604,7 @@ class BandTracker:
         worst, which = -1.0, ""
         known = bool(self.fit_tags)
         taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
+        self.fit_last = []
         for tag, (im, itr), st in zip(self.fit_tags, self.fit_cols, self.fit_states):
             meas, tracked = _num(values[im]), _num(values[itr])
             e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked)) else math.nan
@@ -602,6 +616,7 @@ class BandTracker:
                 st.auto += 1
             if st.seen * self.ts < NOISE_MIN or st.weight <= 0 or st.auto * self.ts < FIT_MEMORY:
                 known = False
+                self.fit_last.append((math.nan, False, 0.0))
                 continue
             gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
             lrv = gam[0] + 2.0 * float(np.sum((taper * gam)[1:]))
@@ -609,6 +624,8 @@ class BandTracker:
             m = abs(st.ewma_fast / st.ewma_slow)
             # beyond the noise twice over: not a chance mean (z), and as large as the noise itself (effect)
             z = min(m / sd / self.fit_z, m / (FIT_EFFECT * math.sqrt(max(float(gam[0]), 1e-300))))
+            # the model-error part (7): the signed mean where it is beyond chance, with its own 95 % margin
+            self.fit_last.append((st.ewma_fast / st.ewma_slow, m >= sd * self.fit_z, self.z * sd))
             if z > worst:
                 worst, which = z, tag
         if not known or worst < 0:
@@ -760,11 +777,24 @@ class BandTracker:
             errors.append(meas - tracked if faded and not hold else math.nan)
         self._slow_add(errors)
         slow = self._slow_var(parts)
+        fit = self._fit(values) if self.fit_tags else math.nan
+        sides = self._misfit_sides()
         for j, p in enumerate(ps):
-            out.extend(self._band(j, p, parts, slow))
+            lo, hi = self._band(j, p, parts, slow)
+            if sides[j] != (0.0, 0.0) and math.isfinite(lo):
+                self.misfit_rows[j] += 1
+                lo, hi = max(self.pairs[j]["lo"], lo - sides[j][0]), min(self.pairs[j]["hi"], hi + sides[j][1])
+            out.extend((lo, hi))
         if self.fit_tags:
-            out.append(self._fit(values))
+            out.append(fit)
         return out
+
+    def _misfit_sides(self) -> list[tuple[float, float]]:
+        """The model-error part (7 of the module) per pair from the last row's lack-of-fit means."""
+        if not self.misfit.size or len(self.fit_last) != len(self.fit_tags):
+            return [(0.0, 0.0)] * len(self.pairs)
+        return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last], self.misfit,
+                             [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last])
 
     def rows(self, array: np.ndarray) -> list[list[float]]:
         """The band values of rows of numbers (modes as flags: non-zero = hold)."""
@@ -785,7 +815,7 @@ class BandTracker:
     def state_dict(self) -> dict[str, Any]:
         return {"level": self.level, "pairs": [vars(st).copy() for st in self.states],
                 "fit": [vars(st).copy() for st in self.fit_states], "fit_rows": list(self.fit_rows),
-                "fit_worst": dict(self.fit_worst), "slow": {k: (list(map(list, v)) if k == "cov" else
+                "fit_worst": dict(self.fit_worst), "misfit_rows": list(self.misfit_rows), "slow": {k: (list(map(list, v)) if k == "cov" else
                                                                (list(v) if isinstance(v, list) else v))
                                                            for k, v in self.slow.items()}}
 
@@ -810,6 +840,7 @@ class BandTracker:
             self.fit_states = [load(s) for s in state["fit"]]
             self.fit_rows = [int(v) for v in state.get("fit_rows", [0, 0])]
             self.fit_worst = {str(k): int(v) for k, v in state.get("fit_worst", {}).items()}
+        self.misfit_rows = [int(v) for v in state.get("misfit_rows", [0] * len(self.pairs))]
 
     def describe(self) -> dict[str, Any]:
         """The bands' settings per parameter (for ``result.json``)."""
@@ -825,8 +856,9 @@ class BandTracker:
                 "z": self.fit_z, "rows": known, "rows_flagged": flagged,
                 "share_flagged": flagged / known if known else None,
                 "flagged_by": dict(sorted(self.fit_worst.items(), key=lambda kv: -kv[1])),
-                "meaning": "at 1 or more an untracked tag disagrees with the twin beyond its noise: the bands do "
-                           "not cover that model error"}
+                "meaning": "at 1 or more an untracked tag disagrees with the twin beyond its noise: " + (
+                    "each band reaches the value of its parameter such a tag implies (model_error)" if self.misfit.size
+                    else "the bands do not cover that model error")}
         for pr in self.pairs:
             m: LoopModel | None = pr["model"]
             out[pr["parameter"]] = {"variable": pr["variable"], "start": list(pr["start"]),
@@ -839,6 +871,11 @@ class BandTracker:
                                        if self.coupling is not None else {}),
                                     "taken_as_exact": [n for n in self.assumed
                                                        if n not in {h.name for h in pr["fixed"]}],
+                                    **({"model_error": {
+                                        "closed_gains": {t: float(g[self.pairs.index(pr)])
+                                                         for t, g in zip(self.fit_tags, self.misfit)},
+                                        "rows_widened": self.misfit_rows[self.pairs.index(pr)]}}
+                                       if self.misfit.size else {}),
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}
                                        if m is not None else {"note": pr["note"]})}
         return out

@@ -36,9 +36,11 @@ effect: the outlet valve's shift is 0.00066 at the interval's ends, not the
 A held parameter without an interval adds nothing (the band takes it as exact
 and says so in ``result.json``); so does one the twin cannot change after
 initialisation, or every held parameter when the step tests fail (a warning
-names why). With one pair and no held interval no simulation runs and the band
-is what it was before; with several pairs the gain matrix is measured all the
-same, for the loops' interaction (part 5 of :mod:`.bands`, :func:`band_parts`).
+names why). With several pairs the gain matrix is measured all the same, for the
+loops' interaction (part 5 of :mod:`.bands`, :func:`band_parts`); where some output
+tag is not paired, the tracked parameters are stepped (one pair too) for their gains
+on it, the model-error part's (:mod:`.misfit`). With one pair, every output paired
+and no held interval no simulation runs.
 """
 from __future__ import annotations
 
@@ -99,6 +101,10 @@ class Responses:
         The pairs' tags and parameters, pair by pair (the rows and columns of *gains*).
     gains
         ``G_tt``: steady change of tag ``i`` per unit of parameter ``j`` (None with one pair: not measured).
+    others, other_gains
+        The output tags no pair tracks and ``G_ut``, their steady change per unit of each tracked parameter
+        (rows *others*, columns *parameters*; None where not measured): the model-error part's
+        (:mod:`.misfit`).
     """
 
     held: dict[str, tuple[float, float, float]]
@@ -107,6 +113,8 @@ class Responses:
     tags: tuple[str, ...]
     parameters: tuple[str, ...]
     gains: np.ndarray | None
+    others: tuple[str, ...] = ()
+    other_gains: np.ndarray | None = None
 
 
 def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
@@ -115,19 +123,29 @@ def held_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str]:
     Empty when the twin holds nothing with an interval (no simulation either with one pair). The note says why held
     parameters with an interval were left out (taken as exact), or why the loops' interaction was not used.
     """
-    fixed, note, _ = band_parts(spec)
+    fixed, note, _, _ = band_parts(spec)
     return fixed, note
 
 
-def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | None]:
-    """What :class:`~.bands.BandTracker` takes from the twin: the fixed part (:func:`held_parts`), a note, and the
+def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | None, dict[str, list[float]] | None]:
+    """What :class:`~.bands.BandTracker` takes from the twin: the fixed part (:func:`held_parts`), a note, the
     loops' gain matrix ``G_tt`` (part 5 of :mod:`.bands`; None with one pair, or where it could not be measured
-    or inverted: the note says why). No simulation with one pair and nothing held."""
+    or inverted: the note says why), and the untracked tags' closed-loop gains (its *misfit*,
+    :func:`trackingbox.identify.misfit.closed_gains`; None where none were measured). No simulation without
+    held parameters, several pairs or an untracked output tag."""
     found, note = measure(spec)
     if found is None:
-        return {}, note, None
+        return {}, note, None, None
     fixed, note = shifts(spec, found)
-    return fixed, note, loop_gains(spec, found)
+    gains = loop_gains(spec, found)
+    misfit = None
+    if found.other_gains is not None and found.others:
+        from .misfit import closed_gains
+
+        if gains is not None or len(found.parameters) == 1:  # the loops' matrix, or one loop: none needed
+            closed = closed_gains(gains, found.other_gains)
+            misfit = {t: [float(v) for v in row] for t, row in zip(found.others, closed)}
+    return fixed, note, gains, misfit
 
 
 def loop_gains(spec: Any, found: Responses) -> np.ndarray | None:
@@ -137,19 +155,22 @@ def loop_gains(spec: Any, found: Responses) -> np.ndarray | None:
     return np.array(found.gains, dtype=float)
 
 
-def measure(spec: Any, *, joint: bool | None = None) -> tuple[Responses | None, str]:
+def measure(spec: Any, *, joint: bool | None = None, others: bool = True) -> tuple[Responses | None, str]:
     """The step tests of :func:`held_parts`: (responses, '') or (None, why none; '' when nothing is held).
 
-    *joint*: also measure the tracked parameters' gain matrix (default: with more than one pair).
+    *joint*: also measure the tracked parameters' gain matrix (default: with more than one pair); *others*: and
+    their gains on the output tags no pair tracks (the tracked parameters stepped even with one pair).
     """
     held = held_intervals(spec)
     pairs = list(getattr(spec, "pairs", None) or ())
     if joint is None:
         joint = len(pairs) > 1
-    if not pairs or not (held or joint):
+    paired = {p.variable for p in pairs}
+    untracked = tuple(t for t in getattr(spec, "outputs", {}) if t not in paired) if others else ()
+    if not pairs or not (held or joint or untracked):
         return None, ""
     try:
-        return _responses(spec, held, joint), ""
+        return _responses(spec, held, joint, untracked), ""
     except (TrackingError, ValueError, KeyError, OSError) as exc:  # e.g. the online mode's record, too short yet
         what = ", ".join([*sorted(held), *(["the tracked parameters"] if joint else [])])
         note = (f"the twin's response to {what} could not be measured ({exc}): "
@@ -229,9 +250,11 @@ def _singular(gains: np.ndarray, scale: tuple[np.ndarray, np.ndarray]) -> str:
     return ""
 
 
-def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bool) -> Responses:
+def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bool,
+               untracked: tuple[str, ...] = ()) -> Responses:
     """Settled change of each paired tag with each held parameter at its interval's (lower, upper) end, and
-    with *joint* the tracked parameters' gain matrix on their tags (each stepped by ``±STEP`` of its range)."""
+    with *joint* the tracked parameters' gain matrix on their tags (each stepped by ``±STEP`` of its range),
+    with *untracked* (output tags no pair tracks) their gains on those too."""
     from dataclasses import replace
 
     from ..analysis.rga import variable_ranges
@@ -245,32 +268,34 @@ def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bo
     names = [n for n in held if n not in refused]
     tags = list(dict.fromkeys(p.variable for p in spec.pairs))
     tracked = [p.parameter for p in spec.pairs]
-    if joint and (len(tags) != len(tracked) or len(set(tracked)) != len(tracked)):
-        joint = False  # two pairs on one tag or one parameter: no square matrix (the pairs' own gains)
-    if not names and not joint:
+    if len(tags) != len(tracked) or len(set(tracked)) != len(tracked):
+        joint, untracked = False, ()  # two pairs on one tag or one parameter: no square matrix (the pairs' own gains)
+    step_tracked = joint or bool(untracked)
+    if not names and not step_tracked:
         return Responses(held, {}, refused, tuple(tags), tuple(tracked), None)
+    every = tags + [t for t in untracked if t in spec.outputs]
     view = MeasurementView.from_spec(spec, "training" if "training" in spec.windows else "all")
     frame, scored = view.to_frame(), view.to_frame(scored=True)
     train = scored[view.in_window]
-    spans = variable_ranges(train[tags].to_numpy(dtype=float), trim=RANGE_TRIM) if len(train) else \
-        np.full(len(tags), np.nan)
+    spans = variable_ranges(train[every].to_numpy(dtype=float), trim=RANGE_TRIM) if len(train) else \
+        np.full(len(every), np.nan)
     op = operating_point(frame, spec.inputs, start=float(view.window[0]), duration=3600.0)
     values = {**{p.name: float(p.start) for p in spec.parameters}, **{k: float(v) for k, v in spec.fixed.items()}}
     freeze = dict(spec.pairing.freeze)
     steps: list[tuple[str, float]] = []
-    if joint:
+    if step_tracked:
         for name in tracked:
             q = spec.parameter(name)
             d = STEP * (q.max - q.min)
             steps += [(name, v) for v in dict.fromkeys(min(q.max, max(q.min, q.start + s * d)) for s in (1, -1))
                       if v != q.start]
     stepped = list(dict.fromkeys(n for n, _ in steps))
-    problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in tags},
+    problem = make_problem(spec.twin, outputs={t: spec.outputs[t] for t in every},
                            parameters=[(n, held[n][0], held[n][1], held[n][2]) for n in names]
                            + [(n, values[n], spec.parameter(n).min, spec.parameter(n).max) for n in stepped],
                            fixed={k: v for k, v in values.items() if k not in names and k not in stepped},
                            operating=op,
-                           ranges={t: float(r) for t, r in zip(tags, spans) if math.isfinite(r) and r > 0},
+                           ranges={t: float(r) for t, r in zip(every, spans) if math.isfinite(r) and r > 0},
                            freeze=freeze,
                            compensation=[(st.variable, st.correction, st.gain) for st in spec.states])
     interval = float(spec.sample_time)
@@ -294,15 +319,18 @@ def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bo
     for i, n in enumerate(names):
         lo, hi = change[2 * i], change[2 * i + 1]
         out[n] = ({t: float(lo[j]) for j, t in enumerate(tags)}, {t: float(hi[j]) for j, t in enumerate(tags)})
-    gains = None
-    if joint:
-        gains = np.full((len(tags), len(tracked)), math.nan)
+    every_gains = None
+    if step_tracked:
+        every_gains = np.full((len(every), len(tracked)), math.nan)
         k = 2 * len(names)
         for j, name in enumerate(tracked):
             at = [(v, change[k + i]) for i, (n, v) in enumerate(steps) if n == name]
             start = spec.parameter(name).start
             if len(at) == 2:  # the secant through both steps
-                gains[:, j] = (at[0][1] - at[1][1]) / (at[0][0] - at[1][0])
+                every_gains[:, j] = (at[0][1] - at[1][1]) / (at[0][0] - at[1][0])
             elif len(at) == 1:  # a start at a bound: the step against the unstepped run
-                gains[:, j] = at[0][1] / (at[0][0] - start)
-    return Responses(held, out, refused, tuple(tags), tuple(tracked), gains)
+                every_gains[:, j] = at[0][1] / (at[0][0] - start)
+    gains = every_gains[:len(tags)] if every_gains is not None and joint else None
+    rest = tuple(every[len(tags):])
+    return Responses(held, out, refused, tuple(tags), tuple(tracked), gains, rest,
+                     every_gains[len(tags):] if every_gains is not None and rest else None)

@@ -66,13 +66,13 @@ def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, 
 
 def band_tracker(spec: Any, columns: Any) -> Any:
     """The :class:`~trackingbox.identify.bands.BandTracker` of a tracking run (None without pairs), with the
-    fixed part of the parameters the twin holds at an estimate with an interval and, with several pairs, the
-    loops' gain matrix (:func:`~trackingbox.identify.held.band_parts`: step tests on the twin, none with one pair
-    and no such parameter)."""
+    fixed part of the parameters the twin holds at an estimate with an interval, with several pairs the
+    loops' gain matrix, and the untracked tags' closed-loop gains (:func:`~trackingbox.identify.held.band_parts`:
+    step tests on the twin, none with one pair, every output paired and no such parameter)."""
     if not getattr(spec, "pairs", None):
         return None
-    fixed, note, gains = band_parts(spec)
-    return BandTracker(spec, columns, fixed=fixed or None, note=note, gains=gains)
+    fixed, note, gains, misfit = band_parts(spec)
+    return BandTracker(spec, columns, fixed=fixed or None, note=note, gains=gains, misfit=misfit)
 
 
 def indistinct_candidates(spec: Any, *, warmup: float | None = None, progress: Any = None) -> dict[str, str]:

@@ -144,8 +144,9 @@ def band_paragraph() -> str:
             "time constant and PI settings; the noise's autocovariance from the tracked error's fast part), the "
             "start value's interval (the spec's `interval`, else the bounds) fading as the loop converges, and the "
             "loop's lag behind the parameter's own trend (and the time on hold). Empty until an hour of tracked "
-            "error has been seen. What the twin's structure gets wrong is not in them: the `lack_of_fit` column "
-            "says where the tags no pair tracks show it.")
+            "error has been seen. What the twin's structure gets wrong is in them only as far as the tags no pair "
+            "tracks show it: where the `lack_of_fit` column flags such a tag, the band reaches the value of the "
+            "parameter that tag implies.")
 
 
 def fit_paragraph(df: Any) -> str | None:
@@ -161,8 +162,9 @@ def fit_paragraph(df: Any) -> str | None:
     head = (f"Lack of fit: the tags no pair tracks disagree with the twin beyond their noise in {100 * share:.1f} % "
             f"of the rows where it is known (the CSV's `lack_of_fit` >= 1, largest {float(np.nanmax(f)):.3g}).")
     if flagged.any():
-        return head + (" **There the bands do not cover the twin's model error**: a tracked parameter may be "
-                       "absorbing an effect the twin lacks (find it with `diagnose`).")
+        return head + (" **There a tracked parameter may be absorbing an effect the twin lacks**: its band "
+                       "reaches the values the flagged tags imply (where their gains were measured), which cover "
+                       "that model error only as far as those tags show it (find the effect with `diagnose`).")
     return head + " The bands' noise and start terms are all there is to it."
 
 
