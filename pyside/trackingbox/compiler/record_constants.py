@@ -57,7 +57,6 @@ def _declaration(index, cls: str, name: str, codes: dict[str, str], seen: set[st
     if cls in seen or cls not in index.classes:
         return None
     seen.add(cls)
-    info = index.classes[cls]
     pattern = re.compile(rf"(?<![\w.])(?P<prefix>{_PREFIXES})(?P<type>[A-Za-z_][\w.]*)\s*(?:\[[^\];]*\]\s*)?"
                          rf"(?<=[\s\]]){re.escape(name)}\s*(?:\[[^\];]*\]\s*)?(?P<after>[(=;])")
     for m in pattern.finditer(_own(index, cls, codes)):
