@@ -411,6 +411,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                     "or passed to a function that returns or takes the record; its fields are variables of "
                     "their own)",
                     rf"\b{re.escape(name.rsplit('.', 1)[-1])}\b", span=self._span)
+            if any(v.startswith(name + "[") and "]." in v[len(name):] for v in self.vars):
+                raise self._record_array_whole(name)
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
@@ -437,6 +439,16 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         if subs:
             return arr.subscript(full, picks, repr(name))
         return full
+
+    def _record_array_whole(self, name: str) -> UnsupportedConstructError:
+        """An array of records used whole or sliced (Modelica.Fluid's pipes' ``statesFM[2:n+1] =
+        mediums[1:n].state``): its elements' fields are variables (``statesFM[1].p``) and no array
+        of record values is built. Named at the array's declaration (``Type[n] name`` or ``Type name[n]``)."""
+        short = re.escape(name.rsplit(".", 1)[-1])
+        return self.unsupported(
+            f"an array of records used whole or sliced (`{name}`, e.g. Modelica.Fluid's pipes' "
+            "statesFM, an array of Medium.ThermodynamicState; its elements' fields are variables of their own)",
+            rf"(?:\]|\b[A-Za-z_][\w.]*)[ \t]+{short}\b", span={})
 
     def _scalar_value(self, sv: ScalarVar) -> Value:
         if sv.kind in ("structural", "constant"):
