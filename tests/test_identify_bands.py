@@ -402,7 +402,7 @@ def test_slow_part_on_white_noise_and_on_an_analyser_error_wandering_at_the_loop
     correlation time (slower than the fast error's window, as fast as the loop): the band without the slow part
     holds the constant truth in about 71 % of the rows (seed 21), with it in more than 80 %, and it is wider by
     less than the realised spread asks (half-width / z at most the parameter's spread about the truth)."""
-    from trackingbox.identify import bands as bands_module
+    from trackingbox.identify import misfit
 
     n = 60000
     rng = np.random.default_rng(21)
@@ -476,7 +476,7 @@ def test_lag_part_rate_follows_the_truth_not_the_wander_an_own_tag_error_gives_t
     and is under half of it in under 2 % of the rows; taken over the loop's lag time (the rate before), it is
     under half of it in more than a fifth of the rows (33 % here; 25-37 % on seeds 31-33), where the band's
     lag part drops the truth's motion (what the evaporator's outletValve.KvMax missed, through the fouling's)."""
-    from trackingbox.identify import bands as bands_module
+    from trackingbox.identify import misfit
 
     n = 60000
     rng = np.random.default_rng(32)
@@ -604,7 +604,7 @@ def test_model_error_part_follows_a_growing_error_with_its_trend(monkeypatch: py
     the parameter per hour from the truth, and TO reads the offset C2 times. Its 2 h mean lags about 2 h (5 units,
     the band's half-width about 1.75): with the trend the band holds the truth in most rows from 8 h on; with the
     trend reading switched off (its weights NaN) in under half of them."""
-    from trackingbox.identify import bands as bands_module
+    from trackingbox.identify import misfit
 
     n = 9000
     t = np.arange(n) * TS
@@ -621,7 +621,26 @@ def test_model_error_part_follows_a_growing_error_with_its_trend(monkeypatch: py
         return float(np.mean(((out[:, 0] <= truth) & (truth <= out[:, 1]))[sel]))
 
     with_trend = inside()
-    monkeypatch.setattr(bands_module, "trend_weights", lambda *args: (math.nan, math.nan))
+    monkeypatch.setattr(misfit, "trend_weights", lambda *args: (math.nan, math.nan))
     without = inside()
     assert with_trend >= 0.9 and without < 0.5, (with_trend, without)
 
+
+
+def test_a_checkpoint_from_before_the_trend_reading_is_refused() -> None:
+    """An untracked tag's state with rows seen and no half-memory mean was written before the trend: resuming it
+    would put a fresh short mean beside a long one filled for hours (the reading assumes both over the same rows)."""
+    from trackingbox.errors import CheckpointError
+
+    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
+    rng = np.random.default_rng(3)
+    rows = _closed_loop_two_tags(0.05 * rng.normal(size=50), 0.05 * rng.normal(size=50), np.full(50, P_TRUE), 0.0)
+    bands = BandTracker(_spec(), columns, misfit={"TO": [C2]})
+    for r in rows:
+        bands.row(r)
+    state = bands.state_dict()
+    BandTracker(_spec(), columns, misfit={"TO": [C2]}).load_state_dict(state)  # its own: accepted
+    for s in state["fit"]:
+        s["rate"] = [0.0] * len(s["rate"])
+    with pytest.raises(CheckpointError, match="trend"):
+        BandTracker(_spec(), columns, misfit={"TO": [C2]}).load_state_dict(state)

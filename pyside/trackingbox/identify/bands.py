@@ -192,7 +192,7 @@ from scipy.stats import norm
 from ..analysis.offsets import FLOOR_SPAN
 from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
-from .misfit import implied_sides, trend_weights
+from .misfit import implied_sides, trend_reading
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -632,10 +632,8 @@ class BandTracker:
             z = min(m / sd / self.fit_z, m / (FIT_EFFECT * math.sqrt(max(float(gam[0]), 1e-300))))
             # the model-error part (7): the signed mean where it is beyond chance, with its own 95 % margin
             self.fit_last.append((st.ewma_fast / st.ewma_slow, m >= sd * self.fit_z, self.z * sd))
-            a, v = trend_weights(self.fit_lambda_short, lam, st.auto) if st.rate[0] > 0 else (math.nan, math.nan)
-            now = a * st.rate[1] / st.rate[0] + (1.0 - a) * self.fit_last[-1][0] if math.isfinite(a) else math.nan
-            s_now = math.sqrt(max(lrv, 1e-300) * v) if math.isfinite(v) else math.nan
-            trends.append((now, abs(now) >= s_now * self.fit_z, self.z * s_now))
+            trends.append(trend_reading(st.rate[:2], self.fit_last[-1][0], st.auto, (self.fit_lambda_short, lam),
+                                        max(lrv, 1e-300), self.fit_z, self.z))
             if z > worst:
                 worst, which = z, tag
         self.fit_last += trends
@@ -842,6 +840,8 @@ class BandTracker:
             raise CheckpointError("the checkpoint was written before the bands' slow part; run without --resume")
         if any("rate" not in s for s in state["pairs"]):
             raise CheckpointError("the checkpoint was written before the bands' day-long rate; run without --resume")
+        if any(s["auto"] > 0 and not s["rate"][0] for s in state.get("fit", ())):  # its short mean never filled
+            raise CheckpointError("the checkpoint was written before the model-error part's trend; run without --resume")
         self.states = [load(s) for s in state["pairs"]]
         sl = state["slow"]
         self.slow = {"acc": [float(v) for v in sl["acc"]], "count": int(sl["count"]),

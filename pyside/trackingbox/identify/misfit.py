@@ -136,3 +136,20 @@ def trend_weights(lam_short: float, lam_long: float, n: int) -> tuple[float, flo
     x = lam_short * lam_long
     cross = (1.0 - x ** n) / (1.0 - x) / (ws * wl)
     return a, a * a * ss / (ws * ws) + (1.0 - a) ** 2 * sl / (wl * wl) + 2.0 * a * (1.0 - a) * cross
+
+
+def trend_reading(short: Sequence[float], mean: float, n: int, lams: tuple[float, float], lrv: float,
+                  z_test: float, z: float) -> tuple[float, bool, float]:
+    """One tag's trend reading ``(m_now, beyond chance, margin)`` (module docstring): *short* the half-memory mean's
+    (weight, weighted value), *mean* the full memory's mean, *n* the rows in both, *lams* their forgetting factors,
+    *lrv* the error's long-run variance; beyond chance at ``|m_now| ≥ z_test s_now``, margin ``z s_now``.
+
+    >>> now, beyond, margin = trend_reading((0.75, 1.5), 1.0, 2, (0.25, 0.5), 4.0, 3.0, 2.0)  # 2.5 · 2 - 1.5 · 1
+    >>> round(now, 9), beyond, round(margin, 9)                                            # s_now 2
+    (3.5, False, 4.0)
+    """
+    a, v = trend_weights(lams[0], lams[1], n) if short[0] > 0 else (math.nan, math.nan)
+    if not (math.isfinite(a) and math.isfinite(mean)):
+        return math.nan, False, 0.0
+    now, s_now = a * short[1] / short[0] + (1.0 - a) * mean, math.sqrt(lrv * v)
+    return now, abs(now) >= z_test * s_now, z * s_now
