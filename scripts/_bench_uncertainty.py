@@ -285,6 +285,7 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
         alone = rebanded(csv, out / "spec.toml", fixed=held.shifts(spec, found, joint=False)[0] if found else {},
                          gains=None)
     frame = pd.read_csv(source) if isinstance(source, Path) else source
+    doc.update(valve_law(frame, truth, t))
     doc["tracked"] = {}
     for pr in spec.pairs:
         value = truth_on(truth, pr.parameter, t)
@@ -300,6 +301,24 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
                                                                                  12 * 3600.0)}
                                            if bare is not None else {})}
     return doc
+
+
+def valve_law(frame: Any, truth: dict[str, Any], t: np.ndarray) -> dict[str, Any]:
+    """The outlet valve's check (README, "Why the valve is off"): after 12 h, the median of the product flow
+    FI-6150's 2 h mean error as a share of the twin's flow, of ``outletValve.KvMax``'s error as a share of its
+    truth, and of what the valve's law puts it at (``p (1 + flow share)``) less the truth. {} where not tracked."""
+    k = truth.get("parameters", {}).get("outletValve.KvMax")
+    if k is None or "parameter:outletValve.KvMax" not in frame.columns or "measured:FI-6150" not in frame.columns:
+        return {}
+    import pandas as pd
+
+    twin = pd.to_numeric(frame["tracked:FI-6150"], errors="coerce")
+    share = ((pd.to_numeric(frame["measured:FI-6150"], errors="coerce") - twin) / twin).rolling(720, min_periods=300)
+    share = share.mean().to_numpy(float)
+    p = frame["parameter:outletValve.KvMax"].to_numpy(float)
+    rows = (t >= 12 * 3600.0) & np.isfinite(share) & np.isfinite(p)
+    return {"valve_law": {"flow_share": float(np.median(share[rows])), "kvmax_share": float(np.median(p[rows] / k - 1)),
+                          "law_minus_truth": float(np.median(p[rows] * (1 + share[rows]) - k))}} if rows.any() else {}
 
 
 # --------------------------------------------------------------------------- driver
@@ -369,6 +388,15 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
             lines.append(f"{'':<24} lack of fit flagged in {share('flagged')} of those rows; the band contains the "
                          f"truth in the unflagged rows {share('covered_clear')}, in the flagged ones "
                          f"{share('covered_flagged')} (per-run means)")
+        law = [d["valve_law"] for d in docs if "valve_law" in d]
+        if law:
+            def each(key: str, scale: float, fmt: str) -> str:
+                return ", ".join(format(scale * v[key], fmt) for v in law)
+
+            lines.append(f"{'':<24} valve's law (medians after 12 h): FI-6150 above the twin by "
+                         f"{each('flow_share', 100.0, '.2f')} %; KvMax off its truth by "
+                         f"{each('kvmax_share', 100.0, '.2f')} %; p (1 + flow share) - truth "
+                         f"{each('law_minus_truth', 1.0, '.4f')}")
         for name in sorted({n for d in docs for n in d.get("tracked", {})}):
             per = [d["tracked"][name] for d in docs if name in d.get("tracked", {})]
             for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r]),
