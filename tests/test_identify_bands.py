@@ -402,7 +402,7 @@ def test_slow_part_on_white_noise_and_on_an_analyser_error_wandering_at_the_loop
     correlation time (slower than the fast error's window, as fast as the loop): the band without the slow part
     holds the constant truth in about 71 % of the rows (seed 21), with it in more than 80 %, and it is wider by
     less than the realised spread asks (half-width / z at most the parameter's spread about the truth)."""
-    from trackingbox.identify import misfit
+    from trackingbox.identify import bands as bands_module
 
     n = 60000
     rng = np.random.default_rng(21)
@@ -476,7 +476,7 @@ def test_lag_part_rate_follows_the_truth_not_the_wander_an_own_tag_error_gives_t
     and is under half of it in under 2 % of the rows; taken over the loop's lag time (the rate before), it is
     under half of it in more than a fifth of the rows (33 % here; 25-37 % on seeds 31-33), where the band's
     lag part drops the truth's motion (what the evaporator's outletValve.KvMax missed, through the fouling's)."""
-    from trackingbox.identify import misfit
+    from trackingbox.identify import bands as bands_module
 
     n = 60000
     rng = np.random.default_rng(32)
