@@ -36,7 +36,8 @@ Cases (``--cases``, default all):
   loop's band alone (each pair's own gain for the fixed part, no interaction, as before the loops'
   interaction was modelled: part 5 of :mod:`trackingbox.identify.bands`). ``--rebands`` recomputes the bands of the runs
   on disk from their tracking CSV with this checkout's band code (the bands are causal functions of
-  the CSV's other columns) and records those seeds again, without rerunning the demo.
+  the CSV's other columns) and records those seeds again, without rerunning the demo (the ``bands-hx*``
+  cases likewise, without a new pair and track; seeds with no run on disk are skipped).
 
 Every seed's result is appended to ``OUT/<case>.jsonl`` as it finishes; a rerun with the same
 ``--out`` skips the seeds already there (an interrupted run keeps what it measured). The table
@@ -207,26 +208,39 @@ def band_coverage(csv: Path | Any, parameter: str, truth: np.ndarray | float, af
 HX_HIDDEN = {"bands-hx-drift": "sensor-drift", "bands-hx-heatloss": "heat-loss"}
 
 
-def run_bands_hx(seed: int, work: Path, fmus: dict[str, Path], hidden: str | None = None) -> dict[str, Any]:
+def run_bands_hx(seed: int, work: Path, fmus: dict[str, Path], hidden: str | None = None,
+                 rebands: bool = False) -> dict[str, Any]:
+    """One heat-exchanger band seed; *rebands*: the run on disk (its spec, CSV and truth) with its bands recomputed
+    by this checkout's code (as ``track`` computes them) instead of a new pair and track."""
     from trackingbox.analysis.pair_stage import PairSettings, pair, spec_pairs
     from trackingbox.benches.base import build_case
+    from trackingbox.identify.held import band_parts
     from trackingbox.spec import load_spec, write_pairs
     from trackingbox.tracking.runtime import track
 
     key = next((k for k, v in HX_HIDDEN.items() if v == hidden), "bands-hx")
-    case = build_case(hx_definition(False), work / f"{key}-{seed}", seed=seed,
-                      plant_fmu=fmus[key if hidden else "hx-plant"], twin_fmu=fmus["hx-twin"], hidden=hidden)
-    spec = load_spec(case.spec)
-    result = pair(spec, PairSettings(workers=1))
-    spec = write_pairs(case.spec, spec_pairs(spec, result))
-    run = track(spec, out_dir=case.directory / "track")
-    summary = json.loads((case.directory / "track" / "result.json").read_text())["bands"]["hx.kht"]
+    directory = work / f"{key}-{seed}"
+    if rebands:
+        spec_path, truth = directory / "spec.toml", json.loads((directory / "truth.json").read_text())
+        spec, csv = load_spec(spec_path), directory / "track" / "tracking.csv"
+        fixed, _, gains, misfit = band_parts(spec)
+        source: Any = rebanded(csv, spec_path, fixed=fixed, gains=gains, misfit=misfit)
+        truth_kht = float(truth["parameters"]["hx.kht"])
+    else:
+        case = build_case(hx_definition(False), directory, seed=seed,
+                          plant_fmu=fmus[key if hidden else "hx-plant"], twin_fmu=fmus["hx-twin"], hidden=hidden)
+        spec_path, truth_kht = case.spec, case.truth["hx.kht"]
+        spec = load_spec(case.spec)
+        result = pair(spec, PairSettings(workers=1))
+        spec = write_pairs(case.spec, spec_pairs(spec, result))
+        source = csv = track(spec, out_dir=directory / "track").csv
+    summary = json.loads((directory / "track" / "result.json").read_text())["bands"]["hx.kht"]
     after = spec.tracking.hold_until + 5.0 * summary["lag_time"]
     doc = {"seed": seed, "pairs": [[p.variable, p.parameter] for p in spec.pairs],
-           **band_coverage(run.csv, "hx.kht", case.truth["hx.kht"], after), "after": after}
+           **band_coverage(source, "hx.kht", truth_kht, after), "after": after, **({"rebanded": True} if rebands else {})}
     if hidden:  # the same run's bands without the model-error part (nothing held on this bench)
-        doc["without_model_error"] = band_coverage(rebanded(run.csv, case.spec, fixed={}, gains=None, misfit=None),
-                                                   "hx.kht", case.truth["hx.kht"], after)
+        doc["without_model_error"] = band_coverage(rebanded(csv, spec_path, fixed={}, gains=None, misfit=None),
+                                                   "hx.kht", truth_kht, after)
     return doc
 
 
@@ -271,6 +285,7 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
         alone = rebanded(csv, out / "spec.toml", fixed=held.shifts(spec, found, joint=False)[0] if found else {},
                          gains=None)
     frame = pd.read_csv(source) if isinstance(source, Path) else source
+    doc.update(valve_law(frame, truth, t))
     doc["tracked"] = {}
     for pr in spec.pairs:
         value = truth_on(truth, pr.parameter, t)
@@ -286,6 +301,24 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
                                                                                  12 * 3600.0)}
                                            if bare is not None else {})}
     return doc
+
+
+def valve_law(frame: Any, truth: dict[str, Any], t: np.ndarray) -> dict[str, Any]:
+    """The outlet valve's check (README, "Why the valve is off"): after 12 h, the median of the product flow
+    FI-6150's 2 h mean error as a share of the twin's flow, of ``outletValve.KvMax``'s error as a share of its
+    truth, and of what the valve's law puts it at (``p (1 + flow share)``) less the truth. {} where not tracked."""
+    k = truth.get("parameters", {}).get("outletValve.KvMax")
+    if k is None or "parameter:outletValve.KvMax" not in frame.columns or "measured:FI-6150" not in frame.columns:
+        return {}
+    import pandas as pd
+
+    twin = pd.to_numeric(frame["tracked:FI-6150"], errors="coerce")
+    share = ((pd.to_numeric(frame["measured:FI-6150"], errors="coerce") - twin) / twin).rolling(720, min_periods=300)
+    share = share.mean().to_numpy(float)
+    p = frame["parameter:outletValve.KvMax"].to_numpy(float)
+    rows = (t >= 12 * 3600.0) & np.isfinite(share) & np.isfinite(p)
+    return {"valve_law": {"flow_share": float(np.median(share[rows])), "kvmax_share": float(np.median(p[rows] / k - 1)),
+                          "law_minus_truth": float(np.median(p[rows] * (1 + share[rows]) - k))}} if rows.any() else {}
 
 
 # --------------------------------------------------------------------------- driver
@@ -355,6 +388,15 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
             lines.append(f"{'':<24} lack of fit flagged in {share('flagged')} of those rows; the band contains the "
                          f"truth in the unflagged rows {share('covered_clear')}, in the flagged ones "
                          f"{share('covered_flagged')} (per-run means)")
+        law = [d["valve_law"] for d in docs if "valve_law" in d]
+        if law:
+            def each(key: str, scale: float, fmt: str) -> str:
+                return ", ".join(format(scale * v[key], fmt) for v in law)
+
+            lines.append(f"{'':<24} valve's law (medians after 12 h): FI-6150 above the twin by "
+                         f"{each('flow_share', 100.0, '.2f')} %; KvMax off its truth by "
+                         f"{each('kvmax_share', 100.0, '.2f')} %; p (1 + flow share) - truth "
+                         f"{each('law_minus_truth', 1.0, '.4f')}")
         for name in sorted({n for d in docs for n in d.get("tracked", {})}):
             per = [d["tracked"][name] for d in docs if name in d.get("tracked", {})]
             for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r]),
@@ -436,8 +478,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--msl", type=Path, default=ROOT.parent / "shared" / "msl")
     ap.add_argument("--report-only", action="store_true", help="print the table of what OUT holds")
     ap.add_argument("--rebands", action="store_true",
-                    help="bands-evaporator*: recompute the bands of the runs on disk from their tracking CSV with "
-                         "this checkout's band code (no demo rerun) and record the seeds again")
+                    help="bands-*: recompute the bands of the runs on disk from their tracking CSV with this "
+                         "checkout's band code (no demo, pair or track rerun) and record the seeds again")
     args = ap.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     known = {"hx", "hx2", "hp", "wall", "wall2", "bands-hx", "bands-evaporator", "bands-evaporator-plain", *HX_HIDDEN}
@@ -455,9 +497,9 @@ def main(argv: list[str] | None = None) -> int:
         path = args.out / f"{case}.jsonl"
         have = done_seeds(path)
         for seed in range(args.first, args.first + counts.get(case, args.seeds)):
-            if seed in have and not (args.rebands and case.startswith("bands-evaporator")):
+            if seed in have and not (args.rebands and case.startswith("bands")):
                 continue
-            if args.rebands and case.startswith("bands-evaporator") and \
+            if args.rebands and case.startswith("bands") and \
                     not (work / f"{case}-{seed}" / "track" / "result.json").exists():
                 continue  # --rebands recomputes runs on disk, it starts none
             t0 = time.time()
@@ -469,7 +511,7 @@ def main(argv: list[str] | None = None) -> int:
                 elif case in ("wall", "wall2"):
                     doc = run_wall(seed, work, fmus, ("C",) if case == "wall2" else ())
                 elif case == "bands-hx" or case in HX_HIDDEN:
-                    doc = run_bands_hx(seed, work, fmus, HX_HIDDEN.get(case))
+                    doc = run_bands_hx(seed, work, fmus, HX_HIDDEN.get(case), args.rebands)
                 else:
                     doc = run_bands_evaporator(seed, work, case.endswith("plain"), args.rebands)
             except Exception as exc:  # noqa: BLE001 - one seed's failure is a row of the table, not the end

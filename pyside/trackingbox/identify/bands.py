@@ -142,9 +142,9 @@ tracked value ``p`` (level :data:`LEVEL`), in seven parts:
    the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's
    motion and the loops' own-tag errors are the part no batch mean of tracked error shows (the first
    is the lag part's, over a day since: part 3).
-7. **model error**: where an untracked tag's mean error is beyond chance (the lack-of-fit test's first
-   condition, below), the value of ``p`` it implies, the other loops keeping their tags (:mod:`.misfit`):
-   the side toward it reaches it (*misfit* of :class:`BandTracker`, the tags' closed-loop gains).
+7. **model error**: where an untracked tag's mean error, or its trend read at the newest row, is beyond chance
+   (the lack-of-fit test's first condition, below), the value of ``p`` it implies, the other loops keeping their
+   tags (:mod:`.misfit`): the side toward it reaches it (*misfit* of :class:`BandTracker`, the closed-loop gains).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -192,7 +192,7 @@ from scipy.stats import norm
 from ..analysis.offsets import FLOOR_SPAN
 from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
-from .misfit import implied_sides
+from .misfit import implied_sides, trend_reading
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -534,6 +534,7 @@ class BandTracker:
                          and c.split(":", 1)[1] not in paired and f"tracked:{c.split(':', 1)[1]}" in index]
         self.fit_cols = [(index[f"measured:{t}"], index[f"tracked:{t}"]) for t in self.fit_tags]
         self.fit_lambda = math.exp(-self.ts / FIT_MEMORY)
+        self.fit_lambda_short = math.exp(-self.ts / (0.5 * FIT_MEMORY))  # the trend's second mean (.misfit)
         self.fit_z = float(norm.ppf(1.0 - FIT_ALPHA / (2.0 * max(len(self.fit_tags), 1))))
         self.fit_states = [self._fresh() for _ in self.fit_tags]
         self.fit_rows = [0, 0]  # rows with the statistic known, of them at or above 1
@@ -543,7 +544,8 @@ class BandTracker:
                                dtype=float).reshape(len(self.fit_tags), n)
         if self.misfit.size and not np.any(np.isfinite(self.misfit)):
             self.misfit = np.zeros((0, n))
-        self.fit_last: list[tuple[float, bool, float]] = []  # the last row's (mean error, beyond chance, margin)
+        # the last row's (mean error, beyond chance, margin), then the same of each tag's trend reading
+        self.fit_last: list[tuple[float, bool, float]] = []
         self.misfit_rows = [0] * n  # rows the model-error part widened, per pair
 
     def _slow_fresh(self) -> dict[str, Any]:
@@ -604,7 +606,7 @@ class BandTracker:
         worst, which = -1.0, ""
         known = bool(self.fit_tags)
         taper = 1.0 - np.arange(NOISE_LAGS + 1) / (NOISE_LAGS + 1.0)
-        self.fit_last = []
+        self.fit_last, trends = [], []
         for tag, (im, itr), st in zip(self.fit_tags, self.fit_cols, self.fit_states):
             meas, tracked = _num(values[im]), _num(values[itr])
             e = meas - tracked if (math.isfinite(meas) and math.isfinite(tracked)) else math.nan
@@ -614,9 +616,13 @@ class BandTracker:
                 st.ewma_fast = lam * st.ewma_fast + (1.0 - lam) * e
                 st.ewma_slow = lam * st.ewma_slow + (1.0 - lam)
                 st.auto += 1
+                # an untracked tag's ``rate`` holds the trend's half-memory mean: its weight and value (.misfit)
+                ls = self.fit_lambda_short
+                st.rate[0], st.rate[1] = ls * st.rate[0] + (1.0 - ls), ls * st.rate[1] + (1.0 - ls) * e
             if st.seen * self.ts < NOISE_MIN or st.weight <= 0 or st.auto * self.ts < FIT_MEMORY:
                 known = False
                 self.fit_last.append((math.nan, False, 0.0))
+                trends.append((math.nan, False, 0.0))
                 continue
             gam = np.asarray(st.sums) / st.weight * (self.window / (self.window - 1.0))
             lrv = gam[0] + 2.0 * float(np.sum((taper * gam)[1:]))
@@ -626,8 +632,11 @@ class BandTracker:
             z = min(m / sd / self.fit_z, m / (FIT_EFFECT * math.sqrt(max(float(gam[0]), 1e-300))))
             # the model-error part (7): the signed mean where it is beyond chance, with its own 95 % margin
             self.fit_last.append((st.ewma_fast / st.ewma_slow, m >= sd * self.fit_z, self.z * sd))
+            trends.append(trend_reading(st.rate[:2], self.fit_last[-1][0], st.auto, (self.fit_lambda_short, lam),
+                                        max(lrv, 1e-300), self.fit_z, self.z))
             if z > worst:
                 worst, which = z, tag
+        self.fit_last += trends
         if not known or worst < 0:
             return math.nan
         stat = worst
@@ -791,9 +800,10 @@ class BandTracker:
 
     def _misfit_sides(self) -> list[tuple[float, float]]:
         """The model-error part (7 of the module) per pair from the last row's lack-of-fit means."""
-        if not self.misfit.size or len(self.fit_last) != len(self.fit_tags):
+        if not self.misfit.size or len(self.fit_last) != 2 * len(self.fit_tags):
             return [(0.0, 0.0)] * len(self.pairs)
-        return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last], self.misfit,
+        return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last],
+                             np.vstack([self.misfit, self.misfit]),
                              [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last])
 
     def rows(self, array: np.ndarray) -> list[list[float]]:
@@ -830,6 +840,8 @@ class BandTracker:
             raise CheckpointError("the checkpoint was written before the bands' slow part; run without --resume")
         if any("rate" not in s for s in state["pairs"]):
             raise CheckpointError("the checkpoint was written before the bands' day-long rate; run without --resume")
+        if any(s["auto"] > 0 and not s["rate"][0] for s in state.get("fit", ())):  # its short mean never filled
+            raise CheckpointError("the checkpoint was written before the model-error part's trend; run without --resume")
         self.states = [load(s) for s in state["pairs"]]
         sl = state["slow"]
         self.slow = {"acc": [float(v) for v in sl["acc"]], "count": int(sl["count"]),
