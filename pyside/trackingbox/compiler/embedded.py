@@ -27,7 +27,7 @@ from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
 from .library import index_for, locate, model_files, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
-from .source import ModelicaSource, class_names, experiment_settings
+from .source import Location, ModelicaSource, class_names, experiment_settings
 
 log = logging.getLogger(__name__)
 
@@ -320,6 +320,43 @@ def _frontend_gap(message: str, source: ModelicaSource, model: str,
     return None
 
 
+COMPONENT_SIZED_ARRAY = ("an array of components whose size is a parameter of another component "
+                         "(`FixedHeatFlow[pipe2.nNodes] heat2`)")
+"""The README's words for the construct :func:`_component_sized_array` names."""
+_SHORT_OF_EQUATIONS = re.compile(r"unbalanced model: \d+ equations, \d+ unknowns \(balance = -\d+")
+_SIZED_BY_COMPONENT = re.compile(r"(?<![\w.])[A-Za-z_][\w.]*\s*\[\s*(?P<comp>[A-Za-z_]\w*)\.[A-Za-z_]\w*\s*\]"
+                                 r"\s*(?P<name>[A-Za-z_]\w*)\s*[(;]")
+
+
+def _component_sized_array(message: str, source: ModelicaSource, model: str,
+                           libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
+    """rumoca 0.10.2 sizes the variables of an array of components whose size is a parameter of
+    another component (``FixedHeatFlow[pipe2.nNodes] heat2`` in ``BranchingDynamicPipes``) but
+    instantiates the class's equations once, so the model comes back "unbalanced", short by the
+    size minus one per equation of the class (a top-level ``parameter Integer N`` as the size is
+    read right). Named where the model's own class declares such an array of a component it
+    declares too; any other shortfall stays rumoca's message."""
+    if not _SHORT_OF_EQUATIONS.search(message):
+        return None
+    index = index_for(source, libraries)
+    info = index.classes.get(model)
+    if info is None:
+        return None
+    code = index.code(info)
+    for found in _SIZED_BY_COMPONENT.finditer(code):
+        comp = re.escape(found.group("comp"))
+        if not re.search(rf"(?<![\w.])[A-Za-z_][\w.]*\s+{comp}\s*[(;\[]", code):
+            continue  # a package's constant (``Medium.nX``), not a component's parameter
+        where = Location(*index.location(info, found.start()))
+        return UnsupportedConstructError(
+            f"unsupported Modelica construct in {model}: {COMPONENT_SIZED_ARRAY} at {where} "
+            f"(`{found.group('name')}`): the front end (rumoca {_frontend_version()}) instantiates the "
+            f"class's equations once for the whole array (rumoca: {message.splitlines()[0][:200]}); give "
+            "the size as a parameter of the model itself, use --backend openmodelica where omc is installed, "
+            "or rewrite the model")
+    return None
+
+
 _NESTED_REFERENCE = re.compile(r"reference to non-constant variable '(\w+)' from a lexically nested class")
 NESTED_EXTENDS = "`extends` of a class declared inside the extending class itself"
 """The README's words for the construct :func:`_nested_extends` names."""
@@ -527,7 +564,8 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
     except CompileError:
         raw = []
     diags = _diagnostics(raw)
-    nested = _nested_extends(message, source, model, libraries)
+    nested = _nested_extends(message, source, model, libraries) or _component_sized_array(
+        message, source, model, libraries)
     if nested is not None:
         raise nested
     if "resolve/parse failed" in first or not diags:

@@ -74,7 +74,8 @@ class ExpressionTranslation:
         if str(op).lower() in ("and", "or") and is_number(lhs) and bool(lhs) == (str(op).lower() == "or"):
             return bool(lhs)  # false and ..., true or ...: the other operand is not evaluated
         rhs = self.expr(body["rhs"], env)
-        if isinstance(lhs, Record) or isinstance(rhs, Record):
+        if (isinstance(lhs, Record) or isinstance(rhs, Record)
+                or records.is_record_array(lhs) or records.is_record_array(rhs)):
             if str(op) != "Sub":
                 raise self.unsupported(f"operator {op!r} on a record")
             try:  # an equation between records: one per field (the only record operation in the model)
@@ -84,8 +85,17 @@ class ExpressionTranslation:
         return binary(str(op), lhs, rhs, self)
 
     def _x_FieldAccess(self, body: Any, env: Any) -> Value:
-        """``f(x).p``: a field of a record value (the front end passes a record argument so)."""
+        """``f(x).p``: a field of a record value (the front end passes a record argument so);
+        ``mediums[1:n].state``: the field of each element of an array of components (.record_arrays)."""
+        paths = self.component_paths({"FieldAccess": body}, env)
+        if paths is not None:
+            return self.path_value(paths)
         base = self.expr(body["base"], env)
+        if records.is_record_array(base):  # the field of each element of an array of record values
+            try:
+                return records.field_of_each(base, str(body.get("field")), f"`{expression_text(body['base'])}`")
+            except records.RecordError as exc:
+                raise CompileError(f"{exc} in {self.model}") from None
         field = body.get("field")
         if not isinstance(base, Record):
             raise self.unsupported(f"field access `.{field}` on a value that is not a record")
@@ -117,7 +127,11 @@ class ExpressionTranslation:
         return arr.from_list(residuals)
 
     def _x_Index(self, body: Any, env: Any) -> Value:
-        """A subscripted expression, e.g. ``f(x)[2]`` or an array input ``A[i]`` inside a function."""
+        """A subscripted expression, e.g. ``f(x)[2]`` or an array input ``A[i]`` inside a function;
+        ``statesFM[2:n+1]``, elements of an array of records or components (.record_arrays)."""
+        paths = self.component_paths({"Index": body}, env)
+        if paths is not None:
+            return self.path_value(paths)
         base = self.expr(body["base"], env)
         subs = body.get("subscripts") or []
         return arr.subscript(base, [self._subscript(s, base, k, env, read=True) for k, s in enumerate(subs)],

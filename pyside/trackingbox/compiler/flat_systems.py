@@ -264,6 +264,36 @@ class SystemAssembly:
                      "for them): %s", self.model, ", ".join(kept))
         return [s for s in free if s.sym.name() in left]
 
+    def _without_consistency_conditions(self, residuals: list[tuple[ca.MX, str]],
+                                        assignments: list[tuple[ca.MX, ca.MX]],
+                                        unknowns: list[ScalarVar]) -> list[tuple[ca.MX, str]]:
+        """An overdetermined initialisation problem without the initial equations that the model's
+        equations already fix: those in which, once the derivatives and algebraic variables are
+        replaced by their causalised expressions, only parameters are left (not those with
+        ``fixed = false``, which are *unknowns*) (Modelica.Fluid's
+        ``mediums.p = ps_start`` for a pipe volume whose pressure a boundary at its port prescribes:
+        ``boundary.p = ps_start[1]``). Each becomes an error-level assert, checked when the FMU
+        leaves initialisation mode and after a parameter change: it holds where the parameters are
+        consistent (to 1e-9 of the sum of the magnitudes of the parameters in it, plus 1e-9), and
+        a run with inconsistent ones stops naming the equation instead of ignoring it."""
+        exprs = substituted([r for r, _ in residuals], assignments)
+        unknown = {s.sym.name() for s in unknowns}
+        kept = []
+        for (r, origin), e in zip(residuals, exprs):
+            used = ca.symvar(e)
+            if any(v.name() in unknown or self.scalars.get(v.name()) is None
+                   or self.scalars[v.name()].kind != "parameter" for v in used):
+                kept.append((r, origin))
+                continue
+            scale = 1.0 + sum((ca.fabs(v) for v in used), ca.MX(0.0))
+            self.asserts.append(Assertion(
+                condition=ca.if_else(ca.fabs(e) <= 1e-9 * scale, 1.0, 0.0), level="error", origin=origin,
+                message=f"{origin} is redundant (the model's equations already fix what "
+                        "it sets) and holds only for consistent parameters: they are not"))
+            log.info("%s: initial equation %s fixes no unknown; checked as a consistency condition on the "
+                     "parameters", self.model, origin)
+        return kept
+
     def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
                       calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
                       ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
@@ -325,6 +355,8 @@ class SystemAssembly:
                          "preferred as states: %s", self.model, "; ".join(o for _, o in used))
                 residuals = list(residuals) + used
         free = [s for s in states if s.fixed is not True]
+        if len(residuals) > len(free) + len(computed):
+            residuals = self._without_consistency_conditions(residuals, assignments, free + list(computed))
         if len(residuals) < len(free) + len(computed):
             free = self._free_kept_at_start(residuals, free, computed, assignments, mentioned)
         n_unknowns = len(free) + len(computed)

@@ -71,6 +71,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from . import records
 from .causalize import StructuralError, blt
+from .record_arrays import RecordArrays, element_paths
 from .events import EventSystem
 from .modifiers import modifier_check
 from .semantics import check_flat
@@ -133,12 +134,13 @@ def _when_targets(flat: dict[str, Any]) -> set[str]:
     return found
 
 
-class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly):
+class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly, RecordArrays):
     """Translate one rumoca flat model into an :class:`ExplicitModel`.
 
-    The translation is one object in four modules: variables, values and the whole translation
+    The translation is one object in five modules: variables, values and the whole translation
     here; expressions in :mod:`.flat_expressions`, functions and algorithms in
-    :mod:`.flat_statements`, the assembled systems in :mod:`.flat_systems`.
+    :mod:`.flat_statements`, the assembled systems in :mod:`.flat_systems`, arrays of records
+    and components used whole, sliced or through a field in :mod:`.record_arrays`.
     """
 
     def __init__(self, flat: dict[str, Any], source: ModelicaSource, model: str,
@@ -411,8 +413,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                     "or passed to a function that returns or takes the record; its fields are variables of "
                     "their own)",
                     rf"\b{re.escape(name.rsplit('.', 1)[-1])}\b", span=self._span)
-            if any(v.startswith(name + "[") and "]." in v[len(name):] for v in self.vars):
-                raise self._record_array_whole(name)
+            size = self.record_arrays().get(name)
+            if size is not None:  # an array of records or components used whole or sliced (.record_arrays)
+                return self.path_value(self._subscripted_paths(element_paths(name, size), subs, env, name))
             raise CompileError(f"unknown variable {name!r} referenced in {self.model}")
         scalars = self.vars[name]
         dims = self.dims[name]
@@ -439,16 +442,6 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         if subs:
             return arr.subscript(full, picks, repr(name))
         return full
-
-    def _record_array_whole(self, name: str) -> UnsupportedConstructError:
-        """An array of records used whole or sliced (Modelica.Fluid's pipes' ``statesFM[2:n+1] =
-        mediums[1:n].state``): its elements' fields are variables (``statesFM[1].p``) and no array
-        of record values is built. Named at the array's declaration (``Type[n] name`` or ``Type name[n]``)."""
-        short = re.escape(name.rsplit(".", 1)[-1])
-        return self.unsupported(
-            f"an array of records used whole or sliced (`{name}`, e.g. Modelica.Fluid's pipes' "
-            "statesFM, an array of Medium.ThermodynamicState; its elements' fields are variables of their own)",
-            rf"(?:\]|\b[A-Za-z_][\w.]*)[ \t]+{short}\b", span={})
 
     def _scalar_value(self, sv: ScalarVar) -> Value:
         if sv.kind in ("structural", "constant"):

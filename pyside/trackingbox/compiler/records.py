@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import numpy as np
+
 from . import arrays as arr
 
 Value = Any
@@ -53,16 +55,58 @@ def gather(name: str, keys: Iterable[str], get: Callable[[str], Value]) -> Recor
     return out
 
 
+def is_record_array(value: Value) -> bool:
+    """Whether *value* is an array of records (an object array of :class:`Record`, .record_arrays)."""
+    return isinstance(value, np.ndarray) and value.size > 0 and isinstance(value.flat[0], Record)
+
+
+def combine(size: tuple[int, ...], values: list[Value], what: str) -> np.ndarray:
+    """The array of *size* whose elements (in order) are *values*: records, or values of one size
+    (then the result's size is *size* followed by theirs)."""
+    if any(isinstance(v, Record) for v in values):
+        if not all(isinstance(v, Record) for v in values):
+            raise RecordError(f"elements of {what} that are not all records")
+        inner: tuple[int, ...] = ()
+    else:
+        sizes = {arr.shape(v) for v in values}
+        if len(sizes) > 1:
+            raise RecordError(f"elements of different sizes in {what}")
+        inner = sizes.pop() if sizes else ()
+    out = arr.new(size + inner)
+    for pos, v in zip(np.ndindex(*size), values):
+        out[pos] = v
+    return out
+
+
+def field_of_each(value: np.ndarray, field: str, what: str) -> np.ndarray:
+    """``a.f`` for an array of records *a*: the array of each element's field *f* (MLS 10.6.3)."""
+    missing = [r for r in value.ravel() if field not in r]
+    if missing:
+        raise RecordError(f"an element of {what} has no field {field!r} (fields: {', '.join(missing[0])})")
+    return combine(value.shape, [r[field] for r in value.ravel()], f"{what}.{field}")
+
+
 def difference(lhs: Value, rhs: Value, what: str) -> list[Value]:
     """The residuals of ``lhs = rhs`` between two records, one per scalar of each field of *lhs*
-    (by name, recursively); a field one side lacks is an error naming it."""
+    (by name, recursively); a field one side lacks is an error naming it. Between two arrays of
+    records of one size, element by element (MLS 10.6.3)."""
+    if is_record_array(lhs) or is_record_array(rhs):
+        if not (is_record_array(lhs) and is_record_array(rhs)):
+            raise RecordError(f"an equation between an array of records and a value that is not one in {what}")
+        if lhs.shape != rhs.shape:
+            raise RecordError(f"arrays of records of sizes {arr.size_text(lhs.shape)} and "
+                              f"{arr.size_text(rhs.shape)} equated in {what}")
+        out: list[Value] = []
+        for pos in np.ndindex(*lhs.shape):
+            out.extend(difference(lhs[pos], rhs[pos], f"{what}, element {list(i + 1 for i in pos)}"))
+        return out
     if not isinstance(lhs, Record) or not isinstance(rhs, Record):
         side = "right" if isinstance(lhs, Record) else "left"
         raise RecordError(f"an equation between a record and a value that is not one ({side} side) in {what}")
     missing = [f for f in lhs if f not in rhs] + [f for f in rhs if f not in lhs]
     if missing:
         raise RecordError(f"records with different fields ({', '.join(missing)}) equated in {what}")
-    out: list[Value] = []
+    out = []
     for field, a in lhs.items():
         b = rhs[field]
         if isinstance(a, Record) or isinstance(b, Record):
