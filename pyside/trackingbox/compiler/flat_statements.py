@@ -124,7 +124,7 @@ class StatementTranslation:
             raise self.unsupported(f"recursive function {fname!r}")
         try:
             env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
-            unset_fields = _record_field_locals(fn)
+            unset_fields = self._unset_fields(fname, fn)
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     value = self.expr(loc["default"], env)
@@ -155,6 +155,15 @@ class StatementTranslation:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _unset_fields(self, fname: str, fn: dict[str, Any]) -> frozenset[str]:
+        """:func:`_record_field_locals` of *fn*, once per function (it walks the whole body; an IF97
+        function is inlined thousands of times in a ``Modelica.Fluid`` example)."""
+        memo = self.__dict__.setdefault("_unset_fields_memo", {})
+        found = memo.get(fname)
+        if found is None or found[0] is not fn:
+            found = memo[fname] = (fn, frozenset(_record_field_locals(fn)))
+        return found[1]
 
     def _vectorized(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
         """A call with arrays for scalar inputs (MLS 12.4.6): the function applied element by element,
