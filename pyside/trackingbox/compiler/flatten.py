@@ -651,7 +651,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             if node is None:
                 params.append(sv)
                 continue
-            val = self._element(sv, node)
+            val = self._element(sv, node, once=True)  # (a binding: no event, asserts recorded once)
             if is_number(val) or (isinstance(val, ca.MX) and not ca.symvar(val)):
                 params.append(sv)
             else:

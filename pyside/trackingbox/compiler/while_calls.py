@@ -235,7 +235,7 @@ _NOT_THE_DEFINITION = ("name", "instance_id")
 """Fields of rumoca's function JSON that differ between two names of one definition."""
 
 
-def _same_as(tr: Any, fname: str, fn: dict[str, Any]) -> str:
+def same_as(tr: Any, fname: str, fn: dict[str, Any]) -> str:
     """The first function name under which the front end gave *fn*'s definition: rumoca 0.10.2 gives a
     function called through a package's short name (``density_ph`` in a medium's own functions) apart from
     the same function by its full name (``Modelica.Media.Water.WaterIF97_ph.density_ph``), and each was
@@ -260,7 +260,7 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
     flats = [_flat(a) for a in args]
     if any(f is None for f in flats) or all(is_number(e) for f in flats for e in f[1]):
         return None
-    key = (_same_as(tr, fname, fn),) + tuple(("c", tuple(f[1]), f[0]) if _constant(f[1]) else ("s", f[0]) for f in flats)
+    key = (same_as(tr, fname, fn),) + tuple(("c", tuple(f[1]), f[0]) if _constant(f[1]) else ("s", f[0]) for f in flats)
     if key in tr.__dict__.setdefault("_while_tracing", set()):
         return None  # the trace itself
     cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
