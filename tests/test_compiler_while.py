@@ -409,3 +409,62 @@ end RH;
     with pytest.raises(UnsupportedConstructError, match=r"call of function 'Modelica\.Media\.Water\.IF97_Utilities\."
                        r"[A-Za-z0-9_.]+', whose trace .* counts \d+ nodes"):
         compile_model(src, "RH", backend="embedded", output=tmp_path / "rh.fmu", libraries=[msl])
+
+
+def test_a_function_reached_by_two_names_is_traced_once_and_keeps_its_values(tmp_path):
+    """rumoca gives a function called by its short name inside its package (``f`` in ``g``; ``Medium.h``
+    through a package alias) apart from the same definition by its full name (``DD.f``, ``DD.M.Medium.h``):
+    one traced CasADi function serves both names (four functions in the C: f, g, h, viaH; six before),
+    and every call keeps its value (Newton's square root against math.sqrt)."""
+    src = tmp_path / "DD.mo"
+    src.write_text("""package DD
+  function f
+    input Real a;
+    output Real x;
+  protected
+    Integer i;
+  algorithm
+    x := max(a, 1);
+    i := 0;
+    while abs(x*x - a) > 1e-12*a and i < 60 loop
+      x := 0.5*(x + a/x);
+      i := i + 1;
+    end while;
+  end f;
+  function g
+    input Real a;
+    output Real y;
+  algorithm
+    y := f(a) + 1;
+  end g;
+  partial package PM
+    replaceable function h = f;
+    function viaH
+      input Real a;
+      output Real y;
+    algorithm
+      y := h(a) + 2;
+    end viaH;
+  end PM;
+  package M2
+    extends PM;
+  end M2;
+  model M
+    package Medium = M2;
+    Real a = 2 + time;
+    Real s = f(a);
+    Real t = g(a);
+    Real u = Medium.viaH(a);
+    Real v = Medium.h(a);
+  end M;
+end DD;
+""")
+    fmu = compile_model(src, "DD.M", backend="embedded", output=tmp_path / "dd.fmu").fmu
+    with zipfile.ZipFile(fmu) as zf:
+        c = "".join(zf.read(n).decode() for n in zf.namelist() if n.startswith("sources/") and n.endswith(".c"))
+    assert len(set(re.findall(r"\btbx_fn\d+\b", c))) == 4
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["a", "s", "t", "u", "v"])
+    for row in out:
+        root = math.sqrt(2 + float(row["time"]))
+        assert row["a"] == pytest.approx(2 + float(row["time"]), rel=1e-12)
+        assert (row["s"], row["t"], row["u"], row["v"]) == pytest.approx((root, root + 1, root + 2, root), rel=1e-10)

@@ -17,7 +17,8 @@ from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
 from .records import Record
-from .while_calls import called
+from .while_calls import called, same_as
+from .while_fold import _events
 from .while_loops import marked_while, while_statement
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
@@ -84,6 +85,23 @@ def _record_field_locals(fn: dict[str, Any]) -> set[str]:
     return fields & _assigned(fn.get("body") or [], set()) if fields else fields
 
 
+def _numeric(value: Value) -> bool:
+    """Whether *value* is a number or an array of numbers."""
+    if isinstance(value, np.ndarray):
+        return all(is_number(e) for e in value.flat)
+    return is_number(value)
+
+
+def _numeric_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> tuple | None:
+    """The key under which a call of *fn* with these number arguments is evaluated once, or None (an
+    argument that is not a number, an external or impure function)."""
+    if fn.get("external") or fn.get("pure") is False or not all(_numeric(a) for a in args):
+        return None
+    frozen = tuple((a.shape, tuple((type(e).__name__, e) for e in a.flat)) if isinstance(a, np.ndarray)
+                   else (type(a).__name__, a) for a in args)
+    return (same_as(tr, fname, fn), frozen)
+
+
 def _var_name(node: Any) -> str | None:
     """The name an expression node refers to when it is a plain variable reference, else None."""
     kind, body = kind_of(node)
@@ -107,6 +125,25 @@ class StatementTranslation:
 
     # ------------------------------------------------------------ functions
     def inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        """The outputs of ``fname(args)``. A call with numbers for every argument whose evaluation records no
+        assert and no event is evaluated once per definition and arguments (a Modelica function's outputs
+        depend on its inputs only, MLS 12.3): the IF97 start values of a model's media (``h_start`` from
+        ``p_start`` and ``T_start``) were evaluated again for every component and every use."""
+        key = _numeric_call_key(self, fname, fn, args)
+        if key is None:
+            return self._inline(fname, fn, args)
+        memo: dict[tuple, list[Value]] = self.__dict__.setdefault("_numeric_calls", {})
+        if key in memo:
+            return [v.copy() if isinstance(v, np.ndarray) else v for v in memo[key]]
+        n_asserts, before = len(self.asserts), _events(self)
+        outs = self._inline(fname, fn, args)
+        after = _events(self)
+        if (len(self.asserts) == n_asserts and after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys()
+                and all(_numeric(v) for v in outs)):
+            memo[key] = [v.copy() if isinstance(v, np.ndarray) else v for v in outs]
+        return outs
+
+    def _inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
         ext = fn.get("external")
         builtin = builtin_external_name(ext) if ext else None
         if builtin is not None:  # external "builtin": the language's own function (Modelica.Math.sin, ...)
@@ -124,7 +161,7 @@ class StatementTranslation:
             raise self.unsupported(f"recursive function {fname!r}")
         try:
             env = self._bind_inputs(fname, fn, args, f"call of {fname!r} in {self.model} lacks argument")
-            unset_fields = _record_field_locals(fn)
+            unset_fields = self._unset_fields(fname, fn)
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
                     value = self.expr(loc["default"], env)
@@ -155,6 +192,15 @@ class StatementTranslation:
             return outs
         finally:
             self._inline_depth -= 1
+
+    def _unset_fields(self, fname: str, fn: dict[str, Any]) -> frozenset[str]:
+        """:func:`_record_field_locals` of *fn*, once per function (it walks the whole body; an IF97
+        function is inlined thousands of times in a ``Modelica.Fluid`` example)."""
+        memo = self.__dict__.setdefault("_unset_fields_memo", {})
+        found = memo.get(fname)
+        if found is None or found[0] is not fn:
+            found = memo[fname] = (fn, frozenset(_record_field_locals(fn)))
+        return found[1]
 
     def _vectorized(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
         """A call with arrays for scalar inputs (MLS 12.4.6): the function applied element by element,

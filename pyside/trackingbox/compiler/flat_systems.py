@@ -164,7 +164,7 @@ class SystemAssembly:
         if node is None:
             return 0.0
         try:
-            return self.numeric(self._element(sv, node), f"start value of {sv.name!r}")
+            return self.numeric(self._element(sv, node, once=True), f"start value of {sv.name!r}")
         except CompileError:
             return 0.0
 

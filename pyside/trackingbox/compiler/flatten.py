@@ -308,9 +308,11 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         return tuple(out)
 
     # -------------------------------------------------------- value lookup
-    def _element(self, sv: ScalarVar, node: Any) -> Value:
-        """Evaluate an attribute node (start/binding) for one scalar of an array."""
-        val = self.expr(node)
+    def _element(self, sv: ScalarVar, node: Any, *, once: bool = False) -> Value:
+        """Evaluate an attribute node (start/binding) for one scalar of an array. With *once* (where only
+        the number is wanted: start values), the node is translated once for all the scalars of its
+        array (an IF97 ``h_start`` of a pipe's n segments was translated n times)."""
+        val = self._translated_once(node) if once else self.expr(node)
         if isinstance(val, np.ndarray):
             base = sv.name.split("[", 1)[0] if sv.index else sv.name
             expected = self.dims.get(base, ())
@@ -321,6 +323,13 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 )
             return val[tuple(i - 1 for i in sv.index)]
         return val
+
+    def _translated_once(self, node: Any) -> Value:
+        memo: dict[int, tuple[Any, Value]] = self.__dict__.setdefault("_once", {})
+        hit = memo.get(id(node))
+        if hit is None or hit[0] is not node:
+            hit = memo[id(node)] = (node, self.expr(node))
+        return hit[1]
 
     def structural_value(self, sv: ScalarVar) -> Any:
         if sv.value is not None:
@@ -380,7 +389,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._evaluating.add(sv.name)
         try:
             node = sv.binding_node if sv.binding_node is not None else sv.start_node
-            val = 0.0 if node is None else self.numeric(self._element(sv, node), f"value of {sv.name!r}")
+            val = 0.0 if node is None else self.numeric(self._element(sv, node, once=True), f"value of {sv.name!r}")
         finally:
             self._evaluating.discard(sv.name)
         sv.value = val
@@ -635,7 +644,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             if node is None:
                 params.append(sv)
                 continue
-            val = self._element(sv, node)
+            val = self._element(sv, node, once=True)  # (a binding: no event, asserts recorded once)
             if is_number(val) or (isinstance(val, ca.MX) and not ca.symvar(val)):
                 params.append(sv)
             else:
@@ -643,7 +652,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 calc_eqs.append((sv.sym - val, f"binding of parameter {sv.name}"))
         for sv in computed:  # the start value is the guess; the binding (if any) is an initial equation
             sv.value = 0.0 if sv.start_node is None else self.numeric(
-                self._element(sv, sv.start_node), f"start value of parameter {sv.name!r}")
+                self._element(sv, sv.start_node, once=True), f"start value of parameter {sv.name!r}")
         for sv in params:
             self.parameter_start(sv)
         return params, calculated, calc_eqs, computed, init_residuals
@@ -754,7 +763,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         for sv in guessed:
             node = sv.start_node
             try:
-                guess[sv.name] = 0.0 if node is None else self.numeric(self._element(sv, node), "start value")
+                guess[sv.name] = 0.0 if node is None else self.numeric(self._element(sv, node, once=True), "start value")
             except CompileError:
                 guess[sv.name] = 0.0
         assignments: list[tuple[ca.MX, ca.MX]] = []

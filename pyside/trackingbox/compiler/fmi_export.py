@@ -116,7 +116,7 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
 
     def attr(sv: ScalarVar, node, key: str):
         try:
-            return translator.numeric(translator._element(sv, node), f"{key} of {sv.name}")
+            return translator.numeric(translator._element(sv, node, once=True), f"{key} of {sv.name}")
         except CompileError:
             return None
 
@@ -138,7 +138,8 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
     for sv in em.states:
         start = 0.0
         if sv.start_node is not None:
-            start = translator.numeric(translator._element(sv, sv.start_node), f"start value of state {sv.name}")
+            start = translator.numeric(translator._element(sv, sv.start_node, once=True),
+                                      f"start value of state {sv.name}")
         causality = "output" if sv.output else "local"
         dae.add(sv.name, causality, "continuous", sv.sym, _opts(sv, attr, {"start": float(start), "initial": "exact"}))
     exposed: list[str] = []

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config
-from .source import Location, ModelicaSource, _code, strip_comments
+from .source import Location, ModelicaSource, _code, blanked, strip_comments
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,6 @@ _EXPERIMENT = re.compile(r"(?<![\w.])experiment\s*\(")
 _SHORT_BASE = re.compile(r"\s*=\s*(?:(?:input|output|flow|stream|discrete|parameter|constant)\s+)*"
                          r"(\.?[A-Za-z_][\w.]*)")
 _WORD = re.compile(r"[A-Za-z_]\w*")
-_BLANK = re.compile(r"[^\n]")
 
 BUILTIN_CLASSES = frozenset({
     "Real", "Integer", "Boolean", "String", "StateSelect", "AssertionLevel", "Connections", "ExternalObject",
@@ -684,9 +683,17 @@ class LibraryIndex:
         if not annotations:
             for m in _ANNOTATION.finditer(text):
                 spans.append((m.end(), _paren_end(text, m.end() - 1) - 1))
-        for s, e in sorted(spans):
-            text = text[:s] + _BLANK.sub(" ", text[s:e]) + text[e:]
-        return text
+        parts: list[str] = []
+        pos = 0
+        for s, e in sorted(spans):  # (one pass: a package of many nested classes was quadratic)
+            s = max(s, pos)
+            if e <= s:
+                continue
+            parts.append(text[pos:s])
+            parts.append(blanked(text[s:e]))
+            pos = e
+        parts.append(text[pos:])
+        return "".join(parts)
 
     def location(self, info: ClassInfo, offset: int) -> tuple[Path, int]:
         """File and line of the character *offset* of the text of class *info*."""

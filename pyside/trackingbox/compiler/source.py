@@ -61,11 +61,18 @@ def resolve_source(source: str | Path) -> ModelicaSource:
 _COMMENT_OR_STRING = re.compile(r'//[^\n]*|/\*.*?\*/|"(?:\\.|[^"\\])*"', re.S)
 
 
+def blanked(text: str) -> str:
+    """*text* with every character but newlines turned into a space (the same length, the same lines)."""
+    if "\n" not in text:
+        return " " * len(text)
+    return "\n".join(" " * len(part) for part in text.split("\n"))
+
+
 def strip_comments(text: str) -> str:
     """Blank out comments and string literals, keeping line structure."""
 
     def blank(match: re.Match[str]) -> str:
-        return re.sub(r"[^\n]", " ", match.group(0))
+        return blanked(match.group(0))
 
     return _COMMENT_OR_STRING.sub(blank, text)
 

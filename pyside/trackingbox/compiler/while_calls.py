@@ -16,6 +16,7 @@ CasADi function cannot carry: a record or String argument or result, or an event
 """
 from __future__ import annotations
 
+import json
 import logging
 from typing import Any
 
@@ -230,6 +231,26 @@ def traced_size(tr: Any, fname: str) -> int:
     return own + sum(1 if _traced(tr, c) else inlined_size(tr, c) for c in names if c in tr.functions)
 
 
+_NOT_THE_DEFINITION = ("name", "instance_id")
+"""Fields of rumoca's function JSON that differ between two names of one definition."""
+
+
+def same_as(tr: Any, fname: str, fn: dict[str, Any]) -> str:
+    """The first function name under which the front end gave *fn*'s definition: rumoca 0.10.2 gives a
+    function called through a package's short name (``density_ph`` in a medium's own functions) apart from
+    the same function by its full name (``Modelica.Media.Water.WaterIF97_ph.density_ph``), and each was
+    traced, with everything it calls, into the FMU's C. Definitions that are equal but for their name are
+    one function: their calls name the same functions and they compute the same (the translator reads a
+function's name only for its messages)."""
+    memo: dict[str, str] = tr.__dict__.setdefault("_while_same", {})
+    if fname not in memo:
+        text = json.dumps({k: v for k, v in fn.items() if k not in _NOT_THE_DEFINITION}, sort_keys=True, default=repr)
+        memo[fname] = tr.__dict__.setdefault("_while_bodies", {}).setdefault(text, fname)
+        if memo[fname] != fname:
+            log.debug("%s: %s is %s by its definition: traced once for both", tr.model, fname, memo[fname])
+    return memo[fname]
+
+
 def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value] | None:
     """The outputs of ``fname(args)`` as a call of its traced CasADi function (see the module's
     docstring); None where the function is to be inlined as before (neither a ``while`` loop reached nor
@@ -239,7 +260,7 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
     flats = [_flat(a) for a in args]
     if any(f is None for f in flats) or all(is_number(e) for f in flats for e in f[1]):
         return None
-    key = (fname,) + tuple(("c", tuple(f[1]), f[0]) if _constant(f[1]) else ("s", f[0]) for f in flats)
+    key = (same_as(tr, fname, fn),) + tuple(("c", tuple(f[1]), f[0]) if _constant(f[1]) else ("s", f[0]) for f in flats)
     if key in tr.__dict__.setdefault("_while_tracing", set()):
         return None  # the trace itself
     cache: dict[tuple, Any] = tr.__dict__.setdefault("_while_calls", {})
