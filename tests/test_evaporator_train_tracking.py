@@ -71,6 +71,7 @@ def train(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 
 @pytest.mark.compile
+@pytest.mark.long
 def test_every_effects_fouling_pairs_and_its_gains_have_the_physical_sign(train):
     """Fouling effect 1 (the product effect) lowers the product dry solids; fouling effect 2 needs a
     larger temperature difference, so its steam chest (effect 1's vapour) runs at a higher pressure."""
@@ -85,6 +86,7 @@ def test_every_effects_fouling_pairs_and_its_gains_have_the_physical_sign(train)
 
 
 @pytest.mark.compile
+@pytest.mark.long
 def test_tracked_fouling_moves_toward_the_plants_in_every_paired_effect(train):
     """The plant fouls from its start (truth.json): each tracked effect's resistance, clean (0) at
     the start, ends on the plant's side of it and closer to the plant's value than the clean start,
@@ -116,6 +118,7 @@ def test_tracked_fouling_moves_toward_the_plants_in_every_paired_effect(train):
 
 
 @pytest.mark.compile
+@pytest.mark.long
 def test_the_compiled_box_agrees_with_the_python_runtime(train):
     gen, compiled, val = train["gen"], train["compiled"], train["validate"]
     assert compiled.fmu.is_file()

@@ -118,6 +118,7 @@ def test_co_simulation_only_fmu_refuses_a_fixed_parameter_saying_what_to_do(refe
     assert "model exchange" in text and "--backend embedded" in text
 
 
+@pytest.mark.long
 def test_pair_and_track_on_a_fixed_parameter_match_the_tunable_twin(tmp_path_factory):
     """The same CasADi twin, ``k`` tunable and ``k`` declared fixed: the step tests' gains and the
     tracked trajectory agree (the fixed one re-initialises at each change and keeps the state)."""

@@ -53,6 +53,7 @@ def test_two_tanks_with_an_overflow_pipe_between_ports_above_their_levels_match_
     assert_matches_reference("Tanks.mo", "Modelica.Fluid.Examples.Tanks.TanksWithOverflow")
 
 
+@pytest.mark.long
 def test_a_tank_filled_through_a_falling_pipe_follows_the_closed_form_the_reference_misses(tmp_path):
     """``TankWithEmptyingPipe1``: 50 kg/s of water at T_in = 293.15 K falls through a pipe with
     height_ab = 1 m into a tank (valve closed) holding m0 = 0.2 m3 * 995.586 kg/m3 at T_in. As the MSL
