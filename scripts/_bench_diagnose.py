@@ -28,6 +28,7 @@ each of its phases, from ``diagnose --json``'s ``timings``; the whole document i
 
 On ``evaporator-train`` (``--effects N``, default 7) a two-effect case (``vent-and-loss``) counts as right
 when either effect it carries is named on its target (``HiddenCase.others``), wrong on any other name.
+Every finding of ``diagnose --json`` is scored: one wrong name makes the case wrong, whatever else was named.
 
 The exit code is 1 when one fails. Cases are written under ``--work`` and reused
 when their ``truth.json`` is there (delete the folder to rebuild).
@@ -137,7 +138,10 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
             if tag in val.get("nrmse_before", {}) and tag in val.get("nrmse_after", {}):
                 before.append(val["nrmse_before"][tag])
                 after.append(val["nrmse_after"][tag])
-    row.update(verdict=doc.get("verdict"), named=f"{top['effect']}@{top['target']}" if top else "-",
+    # every finding is scored (a second, wrong name makes the case wrong); the NRMSE and ΔBIC are the first's
+    names = [(f["effect"], f["target"]) for f in findings]
+    row.update(verdict=doc.get("verdict"), named=",".join(f"{e}@{t}" for e, t in names) or "-",
+               named_all=names,
                named_effect=top["effect"] if top else None, named_target=top["target"] if top else None,
                delta_bic=top.get("delta_bic") if top else None, before=_median(before), after=_median(after),
                fmu=(doc.get("patch") or {}).get("fmu"), timings=doc.get("timings") or {})
@@ -148,7 +152,28 @@ def _run_case(bench: str, case: str, scale: float, folder: Path, extra: list[str
 def _judged(row: dict) -> str:
     """How the suite scores what was named: ``right``, ``instrument``, ``wrong`` or ``nothing``.
 
-    ``right``: the hidden effect's entry on one of the targets the plant carries it on.
+    Every finding is scored (``row["named_all"]``; a row without it has the one name
+    ``named_effect@named_target``), each as ``_judged_name`` does; the case is ``wrong`` if any
+    name is wrong, else ``right`` if any is right, else ``instrument``. So a right first name
+    beside a wrong second one is wrong, as the wrong name alone would be.
+    """
+    if row.get("verdict") != "effect":
+        return "nothing"
+    names = row.get("named_all")
+    if names is None:
+        names = [(row.get("named_effect"), row.get("named_target"))]
+    scores = {_judged_name(row, effect, target) for effect, target in names}
+    for score in ("wrong", "right", "instrument"):
+        if score in scores:
+            return score
+    return "wrong"  # an "effect" verdict without a finding: nothing to hold it to
+
+
+def _judged_name(row: dict, effect: str | None, target: str | None) -> str:
+    """One name against the case's truth: ``right``, ``instrument`` or ``wrong``.
+
+    ``right``: the hidden effect's entry on one of the targets the plant carries it on (or, in a
+    two-effect case, the other effect on its target).
     ``instrument``: a case whose effect is one meter's error, named by another entry on that
     meter's tag (``sensor-bias@QI-6150`` for a ``ds-meter`` case): the right instrument, not the
     plant's form of its error (a constant offset for a gain error). It does not count as right
@@ -156,15 +181,13 @@ def _judged(row: dict) -> str:
     instrument at fault); the suite shows it apart. ``wrong``: any other name, and any name where
     nothing in the library was hidden.
     """
-    if row.get("verdict") != "effect":
-        return "nothing"
     if not row["expected_effect"]:
         return "wrong"
-    if row.get("named_effect") == row["expected_effect"] and row.get("named_target") in row["expected_targets"]:
+    if effect == row["expected_effect"] and target in row["expected_targets"]:
         return "right"
-    if (row.get("named_effect"), row.get("named_target")) in {tuple(o) for o in row.get("others", [])}:
+    if (effect, target) in {tuple(o) for o in row.get("others", [])}:
         return "right"
-    if row["instrument"] and row.get("named_target") == row["instrument"]:
+    if row["instrument"] and target == row["instrument"]:
         return "instrument"
     return "wrong"
 

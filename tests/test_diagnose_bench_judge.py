@@ -43,3 +43,31 @@ def test_the_evaporator_cases_record_where_the_plant_carries_their_effect():
     assert hidden["density-meter"].instrument == "QI-6150"
     assert hidden["vent-orifice"].targets == ("effect",) and hidden["vent-orifice"].instrument is None
     assert hidden["ncg-after-restart"].targets == ()
+
+
+def _rows(effect, targets, names, instrument=None, others=()):
+    return {"expected_effect": effect, "expected_targets": targets, "instrument": instrument,
+            "verdict": "effect", "others": list(others),
+            "named_all": [tuple(n.split("@")) for n in names],
+            "named_effect": names[0].split("@")[0], "named_target": names[0].split("@")[1]}
+
+
+def test_every_finding_is_scored_not_only_the_first():
+    # the right name first, a wrong one second: the wrong name counts
+    assert bench._judged(_rows("steam-vent", ["effect"], ["steam-vent@effect", "shell-heat-loss@effect"])) == "wrong"
+    # a wrong name first, the right one second: still wrong
+    assert bench._judged(_rows("steam-vent", ["effect"], ["shell-heat-loss@effect", "steam-vent@effect"])) == "wrong"
+    # a two-effect case with both its effects named on their targets: right
+    both = _rows("steam-vent", ["effect[1]"], ["steam-vent@effect[1]", "shell-heat-loss@effect[2]"],
+                 others=[("shell-heat-loss", "effect[2]")])
+    assert bench._judged(both) == "right"
+    # ... and with the second on the wrong element: wrong
+    off = _rows("steam-vent", ["effect[1]"], ["steam-vent@effect[1]", "shell-heat-loss@effect[1]"],
+                others=[("shell-heat-loss", "effect[2]")])
+    assert bench._judged(off) == "wrong"
+    # the right name beside another entry on the faulty meter: right; the meter's entry alone: instrument
+    meter = ["ds-meter@DS_product", "sensor-bias@QI-6150"]
+    assert bench._judged(_rows("ds-meter", ["DS_product"], meter, instrument="QI-6150")) == "right"
+    assert bench._judged(_rows("ds-meter", ["DS_product"], meter[1:], instrument="QI-6150")) == "instrument"
+    # where nothing in the library was hidden, any name is wrong
+    assert bench._judged(_rows(None, [], ["sensor-drift@PI-6152"])) == "wrong"

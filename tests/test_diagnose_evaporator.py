@@ -11,7 +11,8 @@ dR/dt = k*sigma((x - xOn)/0.005)*q/q_ref - R/tau (integrated here with scipy fro
 the simulated dry solids and heat flux); entrained liquor leaves the body's solids
 balance at the body's dry solids; a restricted vapour line raises the flash tank's
 pressure; a density-calibration error scales the level reading by 1/(1 + e); the
-dry-solids meter reads off by b + d*t. A second patch with every effect at zero
+dry-solids meter reads x*(1 + g) + d*t (a wrong liquor constant scales the
+reading; its fouling drifts it). A second patch with every effect at zero
 gives the unpatched twin's outputs.
 """
 from __future__ import annotations
@@ -42,7 +43,7 @@ FINDINGS = [
     Finding("entrainment", "effect", {"eps": 0.005}),
     Finding("vapour-line", "flash", {"r": 0.3}),
     Finding("level-density", "LT_flash", {"e": 0.08}),
-    Finding("ds-meter", "DS_product", {"b": 0.01, "d": 8e-9}),
+    Finding("ds-meter", "DS_product", {"g": 0.01, "d": 8e-9}),
 ]
 #: the same findings with every effect switched off by its parameters
 ZERO = [Finding(f.effect, f.target, {k: (0.6 if k == "xOn" else 3600.0 if k == "tau" else 0.0) for k in f.values})
@@ -144,8 +145,8 @@ def test_evaporator_patch_effects_act_as_explained(fmu_cache, ev_patches):
     np.testing.assert_allclose(df["flash.vapourCapacity_internal"], 0.7, rtol=1e-12)
     # level transmitter calibrated 8 % denser: reads dp/(1.08*1450*g)
     np.testing.assert_allclose(df["LT_flash.y"], df["LT_flash.dp"] / (1.08 * 1450.0 * 9.81), rtol=1e-9)
-    # dry-solids meter: b + d*t
-    np.testing.assert_allclose(df["DS_product.y"] - df["DS_product.port.x"], 0.01 + 8e-9 * t, atol=1e-12)
+    # dry-solids meter: x*(1 + g) + d*t, g = 0.01: the error follows the dry solids the meter sees
+    np.testing.assert_allclose(df["DS_product.y"], 1.01 * df["DS_product.port.x"] + 8e-9 * t, atol=1e-12)
 
     # against the unpatched twin: the vapour line's square-root law at 70 % of its capacity needs 1/0.7^2 of the
     # pressure drop to the 1 bar header for about the same flash vapour; the vent and the loss leave less heat
