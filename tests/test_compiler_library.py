@@ -174,3 +174,28 @@ def test_placing_a_refusal_reads_only_the_files_of_the_used_classes(tmp_path, mo
     with pytest.raises(UnsupportedConstructError, match=r"delay.*Plant.mo:7"):
         compile_model(tmp_path / "Lib", "Lib.Plant", backend="embedded", output=tmp_path / "p.fmu")
     assert "Plant.mo" in read and "Big.mo" not in read
+
+
+# ------------------------------------------------- the library's files are looked at once per compile
+def test_one_compile_looks_at_the_library_files_once_and_the_next_sees_a_change(tmp_path, monkeypatch):
+    """A compile asks for its library index several times (front end, checks, placing messages);
+    the files' sizes and modification times are read on the first request only (on the MSL each
+    look is 2500 stats: issue 35). A file changed between two compiles is still seen by the second."""
+    from trackingbox.compiler import library
+
+    write(tmp_path / "Lib", PLANT)
+    looks: list[Path] = []
+    original = library.index_tree
+
+    def spy(root, files=None):
+        looks.append(Path(root))
+        return original(root, files)
+
+    monkeypatch.setattr(library, "index_tree", spy)
+    assert _x_at_one(tmp_path, "first") == pytest.approx(np.exp(-2.0), rel=1e-5)
+    assert looks == [tmp_path / "Lib"]
+    plant = tmp_path / "Lib" / "Balancing" / "Plant.mo"
+    plant.write_text(plant.read_text().replace("constant Real k = 2;", "constant Real k = 3;"))
+    looks.clear()
+    assert _x_at_one(tmp_path, "second") == pytest.approx(np.exp(-3.0), rel=1e-5)  # der(x) = -3 x from x = 1
+    assert looks == [tmp_path / "Lib"]

@@ -23,26 +23,68 @@ progress=None)``), as the commands and the demo call them: :mod:`trackingbox.sta
 
     est = tb.stages.estimate.run(spec, tb.stages.EstimateSettings(workers=2))
 
-The names are bound here from the modules that define them. Three of them are
-also the names of a subpackage or module (``generate``, ``validate``,
-``diagnose``): each is bound after its module is loaded, so the function wins.
-Modules of the package import from the defining module, never from here.
+The names are imported from the modules that define them on first use (so that
+``import trackingbox.cli`` and a ``trackingbox compile`` run do not load the
+estimation, statistics and simulation stacks). Three of them are also the names
+of a subpackage or module (``generate``, ``validate``, ``diagnose``): the function
+wins, even after its module was imported. Modules of the package import from the
+defining module, never from here.
 """
 from __future__ import annotations
 
-from . import stages
-from .analysis.pair_stage import PairingResult, PairSettings, pair, spec_pairs
-from .data import MeasurementView
-from .diagnose.stage import DiagnoseSettings, DiagnosisResult, diagnose
-from .estimation import EstimationResult, estimate
-from .generate.generator import GenerateResult, compile_generated, generate
-from .spec import Spec, load_spec
-from .tracking.runtime import TrackingResult, track
-from .validate import ValidationResult, validate
+import importlib
+import sys
+import types
+from typing import Any
+
 from .version import __version__
+
+#: Public name -> the module defining it.
+_HOMES = {
+    "Spec": ".spec", "load_spec": ".spec", "estimate": ".estimation", "EstimationResult": ".estimation",
+    "pair": ".analysis.pair_stage", "PairSettings": ".analysis.pair_stage", "PairingResult": ".analysis.pair_stage",
+    "spec_pairs": ".analysis.pair_stage", "track": ".tracking.runtime", "TrackingResult": ".tracking.runtime",
+    "generate": ".generate.generator", "compile_generated": ".generate.generator",
+    "GenerateResult": ".generate.generator", "validate": ".validate", "ValidationResult": ".validate",
+    "MeasurementView": ".data", "diagnose": ".diagnose.stage", "DiagnoseSettings": ".diagnose.stage",
+    "DiagnosisResult": ".diagnose.stage",
+}
 
 __all__ = [
     "__version__", "Spec", "load_spec", "estimate", "EstimationResult", "pair", "PairSettings", "PairingResult",
     "spec_pairs", "track", "TrackingResult", "generate", "compile_generated", "GenerateResult", "validate",
     "ValidationResult", "MeasurementView", "diagnose", "DiagnoseSettings", "DiagnosisResult", "stages",
 ]
+
+
+def _load(name: str) -> Any:
+    return getattr(importlib.import_module(_HOMES[name], __name__), name)
+
+
+def __getattr__(name: str) -> Any:
+    if name == "stages":
+        return importlib.import_module(".stages", __name__)
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = _load(name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+def _function_wins(name: str) -> property:
+    """``trackingbox.<name>`` is the stage function, not the submodule of the same name that
+    importing ``trackingbox.<name>.x`` binds here (the import system's assignment is ignored)."""
+    return property(lambda _module: _load(name), lambda _module, _value: None)
+
+
+class _Package(types.ModuleType):
+    generate = _function_wins("generate")
+    validate = _function_wins("validate")
+    diagnose = _function_wins("diagnose")
+
+
+sys.modules[__name__].__class__ = _Package

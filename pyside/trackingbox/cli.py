@@ -2,61 +2,31 @@
 
 Each subcommand lives in ``trackingbox.commands.<name>`` and provides
 ``register(subparsers)`` (adds its parser and sets ``func``) and
-``run(args) -> int``. Errors that a user caused (:class:`TrackingError`) are
-printed as one line on stderr with a non-zero exit and no traceback.
+``run(args) -> int``. A run imports only the module of the command it runs
+(``trackingbox compile`` never loads pandas, SciPy's statistics or the FMU
+simulation stack); the others are listed from :data:`~.commands.SUMMARIES`.
+Errors that a user caused (:class:`TrackingError`) are printed as one line on
+stderr with a non-zero exit and no traceback.
 """
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import sys
+from types import ModuleType
 from typing import NoReturn
 
 from . import config
-from .commands import (
-    bench,
-    diagnose,
-    estimate,
-    identify,
-    generate,
-    inspect,
-    pair,
-    replay,
-    simulate,
-    track,
-    validate,
-    view,
-)
-from .commands import compile as compile_command
-from .commands import config as config_command
+from .commands import SUMMARIES
 from .config import ConfigError
 from .errors import TrackingError
 from .supervise import supervise
 from .version import __version__
 
-#: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = (
-    "compile",
-    "inspect",
-    "simulate",
-    "bench",
-    "pair",
-    "identify",
-    "estimate",
-    "track",
-    "replay",
-    "view",
-    "generate",
-    "validate",
-    "diagnose",
-    "config",
-)
-
-#: Subcommand name -> its module.
-MODULES = {"compile": compile_command, "inspect": inspect, "simulate": simulate, "bench": bench, "pair": pair,
-           "identify": identify, "estimate": estimate, "track": track, "replay": replay, "generate": generate,
-           "validate": validate, "view": view, "diagnose": diagnose, "config": config_command}
+#: Subcommands, in the order ``--help`` lists them; each lives in ``trackingbox.commands.<name>``.
+COMMANDS = tuple(SUMMARIES)
 
 EPILOG = """\
 examples:
@@ -86,7 +56,18 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_module(name: str) -> ModuleType:
+    """The module of the subcommand *name* (imported on first use: it imports its whole stage)."""
+    return importlib.import_module(f".commands.{name}", __package__)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``trackingbox`` parser; with *command*, only that subcommand's module is imported.
+
+    The other subcommands get a parser with their one-line help only (enough for
+    ``trackingbox --help`` and for naming the valid choices); without *command*, every
+    subcommand's module is imported and registered in full.
+    """
     parser = _Parser(
         prog="trackingbox",
         description="Turn a Modelica process model (FMU) into a tracking simulator.",
@@ -99,8 +80,17 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
-        MODULES[name].register(sub)
+        if command is None or name == command:
+            command_module(name).register(sub)
+        else:
+            sub.add_parser(name, help=SUMMARIES[name])
     return parser
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The subcommand *argv* names: its first word not an option (the top-level options take no value)."""
+    word = next((w for w in argv if not w.startswith("-")), None)
+    return word if word in SUMMARIES else None
 
 
 def _setup_logging(verbosity: int) -> None:
@@ -129,9 +119,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    words = sys.argv[1:] if argv is None else list(argv)
     try:
-        args = parser.parse_args(argv)
+        args = build_parser(_command_of(words) or "").parse_args(words)
+        if not hasattr(args, "func"):  # a command word _command_of did not see
+            args = build_parser(args.command).parse_args(words)
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

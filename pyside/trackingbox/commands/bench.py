@@ -10,6 +10,7 @@ from typing import Any
 from ..benches import BENCHES, make_bench
 from ..errors import TrackingError
 from ..io import check_output
+from . import SUMMARIES
 from ._args import number, parse_assignments
 
 EPILOG = """\
@@ -48,7 +49,7 @@ def register(subparsers: Any) -> None:
     """Add the ``bench`` subcommand."""
     p = subparsers.add_parser(
         "bench",
-        help="generate a bench case: plant and twin FMUs, noisy measurements, spec.toml",
+        help=SUMMARIES["bench"],
         description="Compile a bench's plant and twin from the shipped library, simulate the plant "
                     "through a seeded scenario, add sensor noise and write a ready-to-use case.",
         epilog=EPILOG,

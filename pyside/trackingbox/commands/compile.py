@@ -5,9 +5,8 @@ import argparse
 import json
 
 from ..compiler import BACKENDS, compile_model
-from ..compiler.omc_interface import ExpectedInterface
 from ..io import check_output, user_path
-from ..spec import load_spec
+from . import SUMMARIES
 
 EPILOG = """\
 examples:
@@ -23,7 +22,7 @@ backends:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "compile", help="compile a Modelica class into an FMU",
+        "compile", help=SUMMARIES["compile"],
         description="Compile a Modelica class into an FMU.", epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -48,7 +47,10 @@ def run(args: argparse.Namespace) -> int:
     if args.output is not None:
         check_output(args.output, "-o", inputs=[source])
     expected = None
-    if args.spec:
+    if args.spec:  # the spec reader imports the FMU stack (pandas, FMPy): only when asked for
+        from ..compiler.omc_interface import ExpectedInterface
+        from ..spec import load_spec
+
         expected = ExpectedInterface.from_spec(load_spec(args.spec, check_files=False))
     result = compile_model(args.source, args.model, backend=args.backend, output=args.output,
                            libraries=args.library, expected=expected, parameters=args.parameters)

@@ -6,6 +6,7 @@ import json
 from typing import Any
 
 from .. import config
+from . import SUMMARIES
 
 EPILOG = """\
 examples:
@@ -23,7 +24,7 @@ def register(subparsers: Any) -> None:
     """Add the ``config`` subcommand."""
     p = subparsers.add_parser(
         "config",
-        help="list the TRACKINGBOX_* settings: value, source (default/env), what each does",
+        help=SUMMARIES["config"],
         description="List trackingbox's settings read from the environment.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -12,6 +12,7 @@ from ..report.diagnose import write_diagnose_report
 from ..spec import check_against_fmu, load_spec
 from ..stages import diagnose as stage
 from ..stages.contract import settings_from_args
+from . import SUMMARIES
 from ._args import add_executor_arguments, add_library_option, number, with_libraries
 from ._progress import Progress
 
@@ -58,7 +59,7 @@ def register(subparsers: Any) -> None:
     """Add the ``diagnose`` subcommand."""
     p = subparsers.add_parser(
         "diagnose",
-        help="find where the twin and the measurements disagree and name the missing effect",
+        help=SUMMARIES["diagnose"],
         description="Discrepancy diagnosis: residuals, effect screening, fit, judgement on held-out data.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -22,6 +22,7 @@ from ..report import write_estimate_report
 from ..spec import check_against_fmu, load_spec
 from ..stages import estimate as stage
 from ..stages.contract import settings_from_args
+from . import SUMMARIES
 from ._args import add_executor_arguments, number
 from ._progress import Progress
 
@@ -65,7 +66,7 @@ def register(subparsers: Any) -> None:
     """Add the ``estimate`` subcommand."""
     p = subparsers.add_parser(
         "estimate",
-        help="estimate the spec's [[parameters]] from the measurements (training/validation windows)",
+        help=SUMMARIES["estimate"],
         description="Bounded gray-box estimation: differential evolution, then least-squares refinement.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -11,6 +11,7 @@ from ..io import check_output, output_dir
 from ..spec import load_spec
 from ..stages import generate as stage
 from ..stages.contract import settings_from_args
+from . import SUMMARIES
 
 EPILOG = """\
 examples:
@@ -42,7 +43,7 @@ def register(subparsers: Any) -> None:
     """Add the ``generate`` subcommand."""
     p = subparsers.add_parser(
         "generate",
-        help="generate the Modelica tracking box and tracked model (gen-trackingbox)",
+        help=SUMMARIES["generate"],
         description="Generate a Modelica package with a tracking box (one scaled PI parameter controller "
                     "per pair) and the twin augmented with it, from a spec with [source] and [[pairs]].",
         epilog=EPILOG,

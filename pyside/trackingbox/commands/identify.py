@@ -12,6 +12,7 @@ from ..io import check_output, output_dir
 from ..report.identify import write_identify_report
 from ..simulation.windows import DEFAULT_WARMUP
 from ..spec import check_against_fmu, load_spec
+from . import SUMMARIES
 from ._args import number
 from ._progress import Progress
 
@@ -40,8 +41,7 @@ def register(subparsers: Any) -> None:
     """Add the ``identify`` subcommand."""
     p = subparsers.add_parser(
         "identify",
-        help="what the data can determine of the spec's [[parameters]] (rank, undetermined combinations, "
-             "correlation)",
+        help=SUMMARIES["identify"],
         description="Identifiability of the spec's parameters from the twin's output sensitivities.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..fmu import read_info
+from . import SUMMARIES
 
 EPILOG = """\
 examples:
@@ -26,7 +27,7 @@ def register(subparsers: Any) -> None:
     """Add the ``inspect`` subcommand."""
     p = subparsers.add_parser(
         "inspect",
-        help="list an FMU's variables (causality, variability, start, bounds, unit)",
+        help=SUMMARIES["inspect"],
         description="Show an FMU's FMI version, interfaces and variables.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

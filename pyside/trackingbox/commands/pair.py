@@ -11,6 +11,7 @@ from ..report import Document, write_pair_report
 from ..spec import check_against_fmu, load_spec, write_pairs
 from ..stages import pair as stage
 from ..stages.contract import settings_from_args
+from . import SUMMARIES
 from ._args import add_executor_arguments, number, parse_assignments
 from ._progress import Progress
 
@@ -37,7 +38,7 @@ def register(subparsers: Any) -> None:
     """Add the ``pair`` subcommand."""
     p = subparsers.add_parser(
         "pair",
-        help="pair tracking variables with tracking parameters (step tests + RGA, or Sobol)",
+        help=SUMMARIES["pair"],
         description="Steady-state step tests on the twin with its controllers frozen, relative gain "
                     "array and assignment; optional Sobol sensitivity as a cross-check.",
         epilog=EPILOG,

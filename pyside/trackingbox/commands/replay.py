@@ -12,6 +12,7 @@ from typing import Any
 from ..errors import SpecError
 from ..online.opcua import read_users
 from ..online.replay import ReplaySettings, replay
+from . import SUMMARIES
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ def register(subparsers: Any) -> None:
     """Add the ``replay`` subcommand."""
     p = subparsers.add_parser(
         "replay",
-        help="serve a bench case's measurements over OPC UA (a simulated DCS for the online mode)",
+        help=SUMMARIES["replay"],
         description="Serve a case's measurements as OPC UA variables, in real time or faster.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

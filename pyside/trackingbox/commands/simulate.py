@@ -15,6 +15,7 @@ from ..errors import FMUError, TrackingError, did_you_mean
 from ..fmu import check_values, read_info
 from ..io import atomic_path, check_output
 from ..simulation.models import open_model
+from . import SUMMARIES
 from ._args import number, parse_assignments
 
 log = logging.getLogger(__name__)
@@ -43,7 +44,7 @@ def register(subparsers: Any) -> None:
     """Add the ``simulate`` subcommand."""
     p = subparsers.add_parser(
         "simulate",
-        help="simulate an FMU with an inputs table and parameter values, write the outputs to CSV",
+        help=SUMMARIES["simulate"],
         description="Simulate an FMU (model exchange with CVODE, or co-simulation) and write a result CSV.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

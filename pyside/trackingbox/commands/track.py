@@ -20,6 +20,7 @@ from ..spec import check_against_fmu, load_spec
 from ..stages import track as stage
 from ..stages.contract import settings_from_args
 from ..view.server import BackgroundView, ViewSettings
+from . import SUMMARIES
 from ._args import add_library_option, number, with_libraries
 from ._progress import Progress
 
@@ -56,7 +57,7 @@ def register(subparsers: Any) -> None:
     """Add the ``track`` subcommand."""
     p = subparsers.add_parser(
         "track",
-        help="run the tracking simulator (parameter controllers) over the measurements",
+        help=SUMMARIES["track"],
         description="Step the twin beside the plant data and adjust the paired parameters so the "
                     "twin follows the measurements.",
         epilog=EPILOG,

@@ -13,6 +13,7 @@ from ..report import write_validate_report
 from ..spec import load_spec
 from ..stages import validate as stage
 from ..stages.contract import settings_from_args
+from . import SUMMARIES
 from ._args import number
 
 EPILOG = """\
@@ -34,7 +35,7 @@ def register(subparsers: Any) -> None:
     """Add the ``validate`` subcommand."""
     p = subparsers.add_parser(
         "validate",
-        help="run the tracked FMU on the validation window; compare with the twin and the Python runtime",
+        help=SUMMARIES["validate"],
         description="Validate a tracked FMU made by `trackingbox generate --compile` on held-out data.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -8,6 +8,7 @@ from typing import Any
 
 from ..view.browser import Browser
 from ..view.server import BackgroundView, ViewSettings, run_view
+from . import SUMMARIES
 
 EPILOG = """\
 examples:
@@ -29,7 +30,7 @@ def register(subparsers: Any) -> None:
     """Add the ``view`` subcommand."""
     p = subparsers.add_parser(
         "view",
-        help="serve the live web view of a tracking run's output folder",
+        help=SUMMARIES["view"],
         description="Serve a web page that follows a tracking run as its output folder grows.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,

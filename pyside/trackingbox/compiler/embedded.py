@@ -24,7 +24,7 @@ from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
-from .library import index_for, locate, model_files, resolve_libraries
+from .library import index_for, locate, model_files, one_look, resolve_libraries
 from .rewrite import frontend_bytes
 from .semantics import check_source
 from .source import Location, ModelicaSource, class_names, experiment_settings
@@ -596,7 +596,14 @@ def compile_embedded(source: ModelicaSource, model: str, output: Path,
     """Compile with the embedded toolchain; returns (log, n_states, n_parameters).
 
     *parameters* ``"fixed"`` declares the parameters ``fixed`` in the FMU (:func:`.fmi_export.declare_fixed`).
+    The library files are looked at once for the whole compilation (:func:`.library.one_look`).
     """
+    with one_look():
+        return _compile_embedded(source, model, output, libraries, parameters)
+
+
+def _compile_embedded(source: ModelicaSource, model: str, output: Path,
+                      libraries: tuple[Path, ...], parameters: str) -> tuple[str, int, int]:
     t0 = time.perf_counter()
     libraries, missing = resolve_libraries(source, model, libraries)
     flat = flatten(source, model, libraries, missing)

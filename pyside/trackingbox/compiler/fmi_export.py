@@ -39,6 +39,7 @@ and runs on past a failed assert.
 """
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
 import re
@@ -70,9 +71,11 @@ def model_identifier(model: str) -> str:
 
 
 def _fmi_headers() -> Path:
-    import fmpy
-
-    path = Path(fmpy.__file__).parent / "c-code"
+    """FMPy's copy of the FMI 3 C headers, found without importing FMPy (its simulation stack)."""
+    found = importlib.util.find_spec("fmpy")
+    if found is None or found.origin is None:
+        raise CompileError("FMI 3 headers not found: the package fmpy is not installed")
+    path = Path(found.origin).parent / "c-code"
     if not (path / "fmi3Functions.h").exists():
         raise CompileError(f"FMI 3 headers not found in {path} (is fmpy installed?)")
     return path

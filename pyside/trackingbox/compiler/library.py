@@ -25,12 +25,15 @@ On the index:
 from __future__ import annotations
 
 import bisect
+import contextlib
+import contextvars
 import hashlib
 import logging
 import os
 import pickle
 import re
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -383,20 +386,46 @@ def line_of(file: Path, offset: int) -> int:
 
 
 _INDEXES: dict[tuple[Path, ...], LibraryIndex] = {}
+#: Inside :func:`one_look`: the root sets whose files were looked at (stat) once already.
+_LOOKED: contextvars.ContextVar[set[tuple[Path, ...]] | None] = contextvars.ContextVar("_LOOKED", default=None)
+
+
+@contextlib.contextmanager
+def one_look() -> Iterator[None]:
+    """Within: :func:`index_for` looks at a set of roots' files once, then takes them as unchanged.
+
+    One compilation asks for the same index several times; without this, each request
+    checks the size and modification time of every file (MSL: 2500 files). Outside, and
+    in the next ``one_look``, a changed file is seen again. Nested uses share the outer one.
+    """
+    if _LOOKED.get() is not None:
+        yield
+        return
+    token = _LOOKED.set(set())
+    try:
+        yield
+    finally:
+        _LOOKED.reset(token)
 
 
 def index_for(source, libraries: tuple[Path, ...] | list[Path] = ()) -> LibraryIndex:
     """The index of a :class:`~.source.ModelicaSource` and the libraries it is compiled with
-    (reused in this process while no file changed)."""
+    (reused in this process while no file changed; within :func:`one_look`, the files are
+    looked at on the first request only)."""
     roots = (source_root(source), *(Path(p) for p in libraries))
     roots = tuple(dict.fromkeys(roots))
+    looked = _LOOKED.get()
+    if looked is not None and roots in looked and roots in _INDEXES:
+        return _INDEXES[roots]
+    if looked is not None:
+        looked.add(roots)
     fresh = LibraryIndex.build(roots) if roots not in _INDEXES else None
     if fresh is None:
         old = _INDEXES[roots]
-        prints = [index_tree(r)[1] for r in roots]
-        if old.fingerprint == hashlib.sha256("|".join(prints).encode()).hexdigest():
+        trees = [index_tree(r) for r in roots]
+        if old.fingerprint == hashlib.sha256("|".join(t[1] for t in trees).encode()).hexdigest():
             return old
-        fresh = LibraryIndex.build(roots)
+        fresh = LibraryIndex.build(roots, trees)
     _INDEXES[roots] = fresh
     return fresh
 
@@ -419,13 +448,15 @@ class LibraryIndex:
     fingerprint: str = ""
 
     @classmethod
-    def build(cls, roots: tuple[Path, ...] | list[Path]) -> LibraryIndex:
+    def build(cls, roots: tuple[Path, ...] | list[Path],
+              trees: list[tuple[list[ClassInfo], str]] | None = None) -> LibraryIndex:
         """Index the package directories or ``.mo`` files *roots*; the first definition of a
-        full name wins (later ones are listed in ``duplicates``)."""
+        full name wins (later ones are listed in ``duplicates``). *trees*: the roots'
+        :func:`index_tree` results when the caller has them already."""
         idx = cls(tuple(Path(r) for r in roots))
         prints = []
-        for root in idx.roots:
-            classes, fingerprint = index_tree(root)
+        for k, root in enumerate(idx.roots):
+            classes, fingerprint = trees[k] if trees is not None else index_tree(root)
             prints.append(fingerprint)
             for c in classes:
                 if c.name in idx.classes:
