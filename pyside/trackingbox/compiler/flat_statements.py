@@ -18,7 +18,7 @@ from .flat_builtins import builtin_call, builtin_external_name, if_then, is_numb
 from .flat_text import literal_text
 from .records import Record
 from .while_calls import called, same_as
-from .while_fold import _events
+from .while_fold import event_state
 from .while_loops import marked_while, while_statement
 
 _RETURNED = "\0returned"  # in a function's environment: where a return statement was taken
@@ -135,9 +135,9 @@ class StatementTranslation:
         memo: dict[tuple, list[Value]] = self.__dict__.setdefault("_numeric_calls", {})
         if key in memo:
             return [v.copy() if isinstance(v, np.ndarray) else v for v in memo[key]]
-        n_asserts, before = len(self.asserts), _events(self)
+        n_asserts, before = len(self.asserts), event_state(self)
         outs = self._inline(fname, fn, args)
-        after = _events(self)
+        after = event_state(self)
         if (len(self.asserts) == n_asserts and after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys()
                 and all(_numeric(v) for v in outs)):
             memo[key] = [v.copy() if isinstance(v, np.ndarray) else v for v in outs]

@@ -27,7 +27,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number
 from .flat_model import Assertion, Value
-from .while_fold import _NAMES, _events, _restored
+from .while_fold import _NAMES, _restored, event_state
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +184,7 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
             sym_args.append(s[0])
     tracing: set = tr.__dict__.setdefault("_while_tracing", set())
     guards, tr._guards = tr._guards, []
-    n_asserts, events = len(tr.asserts), _events(tr)
+    n_asserts, events = len(tr.asserts), event_state(tr)
     tracing.add(key)
     try:
         outs = tr.inline(fname, fn, sym_args)

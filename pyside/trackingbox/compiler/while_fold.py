@@ -73,14 +73,14 @@ def _unpack(vec: ca.MX, offset: int, shape: tuple[int, ...]) -> Any:
 _EVENT_LISTS = ("conditions", "samples", "whens", "updates")
 
 
-def _events(tr: Any) -> tuple[Any, ...]:
+def event_state(tr: Any) -> tuple[Any, ...]:
     """What a traced pass must leave as it found: the event lists' lengths and the frozen relations."""
     return tuple(len(getattr(tr.events, name)) for name in _EVENT_LISTS) + (len(tr._discrete_defs), dict(tr._frozen))
 
 
 def _restored(tr: Any, saved: tuple[Any, ...]) -> bool:
-    """Whether a pass changed what :func:`_events` saved; what it added is taken out again."""
-    changed = _events(tr)[:-1] != saved[:-1] or tr._frozen.keys() != saved[-1].keys()
+    """Whether a pass changed what :func:`event_state` saved; what it added is taken out again."""
+    changed = event_state(tr)[:-1] != saved[:-1] or tr._frozen.keys() != saved[-1].keys()
     for name, n in zip(_EVENT_LISTS, saved):
         del getattr(tr.events, name)[n:]
     del tr._discrete_defs[saved[len(_EVENT_LISTS)]:]
@@ -109,7 +109,7 @@ def _trace(tr: Any, condition: Callable[[dict], Any], stmts: list[Any], fname: s
     traced = dict(env)
     for key, shape, off in layout:
         traced[key] = _unpack(x, off, shape)
-    n_asserts, events = len(tr.asserts), _events(tr)
+    n_asserts, events = len(tr.asserts), event_state(tr)
     body = dict(traced)
     try:
         active = logical_and(x[0], condition(traced))
@@ -145,7 +145,7 @@ def folded_while(tr: Any, condition: Callable[[dict], Any], stmts: list[Any], fn
     docstring), and the condition that it would still be running after them; None where the body
     cannot be traced as a function of its state (the caller unrolls it)."""
     probe = dict(env)
-    n_asserts, events = len(tr.asserts), _events(tr)
+    n_asserts, events = len(tr.asserts), event_state(tr)
     try:  # which variables the body assigns, from a pass on the values as they stand
         tr._statements(stmts, probe, fname)
     except (UnsupportedConstructError, CompileError, RuntimeError):
