@@ -372,3 +372,51 @@ end Clock;
     assert len(out) == 9
     assert np.allclose(out["y"], 2 * out["time"], rtol=1e-12)
     assert np.allclose(out["z"], np.sin(out["time"]) + 2 * out["time"], rtol=1e-12)
+
+
+def _misplaced_package(tmp_path: Path) -> Path:
+    root = tmp_path / "P"
+    root.mkdir()
+    (root / "package.mo").write_text("package P\n  package Base\n    model M\n      Real x(start=1, fixed=true);\n"
+                                     "    equation\n      der(x) = -x;\n    end M;\n  end Base;\n"
+                                     "  package Derived\n    extends Base;\n  end Derived;\n"
+                                     "  package Sub\n  end Sub;\nend P;\n")
+    return root
+
+
+def test_misplaced_class_is_refused_from_the_index_before_the_front_end(tmp_path, monkeypatch):
+    """`P.Sub.M` does not exist (M is in P.Base): the index says so, naming the package that lacks
+    it and where M is, without the front end parsing the library (which took about a minute on
+    the MSL for a misspelt example name)."""
+    import trackingbox.compiler.embedded as embedded
+
+    def never(*a, **k):
+        raise AssertionError("the front end ran for a class the index shows is absent")
+
+    monkeypatch.setattr(embedded, "run_frontend", never)
+    with pytest.raises(CompileError) as exc:
+        compile_model(_misplaced_package(tmp_path), "P.Sub.M", backend="embedded", output=tmp_path / "x.fmu")
+    msg = str(exc.value)
+    assert "P.Sub has no class 'M'" in msg and "did you mean 'P.Base.M'" in msg
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def test_class_inherited_into_a_package_is_left_to_the_front_end(tmp_path, monkeypatch):
+    """`P.Derived.M` is M reached through `extends Base` (MLS 5.6): it exists, so the index must not
+    refuse it; the front end is asked (rumoca 0.10.2 itself does not take an inherited class as the
+    model to compile, which is its answer to give, not the index's)."""
+    import trackingbox.compiler.embedded as embedded
+
+    asked = []
+    real = embedded.run_frontend
+
+    def spy(source, model, *a, **k):
+        asked.append(model)
+        return real(source, model, *a, **k)
+
+    monkeypatch.setattr(embedded, "run_frontend", spy)
+    try:
+        compile_model(_misplaced_package(tmp_path), "P.Derived.M", backend="embedded", output=tmp_path / "m.fmu")
+    except CompileError as exc:
+        assert "P.Derived has no class" not in str(exc)
+    assert asked and asked[0] == "P.Derived.M"

@@ -5,6 +5,7 @@ FMI 3.0 model-exchange FMUs. See :mod:`.flatten` for what Modelica it accepts.
 """
 from __future__ import annotations
 
+import difflib
 import importlib.metadata
 import logging
 import os
@@ -591,6 +592,44 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
     raise CompileError(f"cannot compile {model!r} from {source.entry}: {first}{detail}")
 
 
+def _refuse_absent(source: ModelicaSource, model: str, libraries: tuple[Path, ...]) -> None:
+    """Refuse a model name the library index shows is not there, before the front end parses
+    the whole library to say so (a misspelt MSL name took about a minute).
+
+    Only where the index is sure: the longest prefix of *model* that is a class, and every class
+    it extends (transitively), are short of no resolved base, so no inherited member can supply
+    the missing part. Otherwise the front end decides, as before."""
+    idx = index_for(source, libraries)
+    parts = model.split(".")
+    found = idx.top(parts[0])
+    if found is None:
+        return  # an unknown top-level package is the missing-library message's to name
+    for depth, part in enumerate(parts[1:], 1):
+        inner = idx.member(found, part)
+        if inner is None:
+            break
+        found = inner
+    else:
+        return
+    seen: set[str] = set()
+    todo = [found]
+    while todo:
+        cls = todo.pop()
+        if cls in seen:
+            continue
+        seen.add(cls)
+        info = idx.classes.get(cls)
+        bases = idx.bases(cls)
+        if info is None or info.short or info.class_extends or len(bases) < len(info.extends):
+            return  # something the index cannot follow: leave it to the front end
+        todo.extend(bases)
+    same = difflib.get_close_matches(model, idx.by_simple.get(parts[-1], ()), n=3, cutoff=0.0)
+    hint = (" (did you mean " + ", ".join(map(repr, same)) + "?)") if same else did_you_mean(model, idx.classes)
+    raise CompileError(f"class {model!r} not found in {source.entry}: {'.'.join(parts[:depth])} has no class "
+                       f"{parts[depth]!r}"
+                       f"{hint} (classes are named with their package, e.g. Pkg.Sub.Model)")
+
+
 def compile_embedded(source: ModelicaSource, model: str, output: Path,
                      libraries: tuple[Path, ...] = (), parameters: str = "tunable") -> tuple[str, int, int]:
     """Compile with the embedded toolchain; returns (log, n_states, n_parameters).
@@ -606,6 +645,7 @@ def _compile_embedded(source: ModelicaSource, model: str, output: Path,
                       libraries: tuple[Path, ...], parameters: str) -> tuple[str, int, int]:
     t0 = time.perf_counter()
     libraries, missing = resolve_libraries(source, model, libraries)
+    _refuse_absent(source, model, libraries)
     flat = flatten(source, model, libraries, missing)
     if flat.get("is_partial"):
         raise CompileError(f"{model!r} is a partial class and cannot be compiled")
