@@ -67,6 +67,10 @@ def test_pinned_only_when_the_bound_binds_beyond_noise():
     assert cd.pinned_at_bounds({"k": 0.0}, {"k": (0.0, 1.0)}, {"k": 100.0}) == []
     # inside its bounds: never pinned, whatever the evidence
     assert cd.pinned_at_bounds({"d": 0.0}, bounds, {"d": 100.0}) == []
+    # a bound of a parameter that cannot be 0 inside its range limits the form (a levelling at its largest is
+    # a step): pinned there whatever the evidence
+    assert cd.pinned_at_bounds({"c": 1e-3}, {"c": (0.0, 1e-3)}, {"c": ev1}) == ["c"]
+    assert cd.pinned_at_bounds({"tau": 900.0}, {"tau": (1.0, 900.0)}, {"tau": 0.0}) == ["tau"]
 
 
 def test_at_bound_sides():

@@ -83,9 +83,9 @@ def nrmse_of(residual: npt.ArrayLike, measured: npt.ArrayLike) -> float:
 # --------------------------------------------------------------------------- bounds
 
 
-#: Evidence (a likelihood-ratio statistic, :func:`bound_evidence`) beyond which a fitted effect
-#: parameter at one of its bounds is *pinned* there by the data: its unbounded estimate lies more than
-#: two standard errors beyond the bound. A bound inside the parameter's own noise is no sign of a wrong
+#: Evidence (a likelihood-ratio statistic, :func:`bound_evidence`) beyond which a fitted :func:`zero_able`
+#: effect parameter at one of its bounds is *pinned* there by the data: its unbounded estimate lies more
+#: than two standard errors beyond the bound. A bound inside the parameter's own noise is no sign of a wrong
 #: form: on the evaporator without hidden effect (``bench evaporator --hidden clean``, 24 h, seed 0) the
 #: product DS meter's noise alone, 784 exception-reported records over the day, leaves a trend of
 #: -4.3e-5 per hour in the null model's QI-6150 residual (its standard error from 385 records on a 12 h
@@ -111,16 +111,31 @@ def bound_evidence(at_bound: Mapping[str, npt.ArrayLike], freed: Mapping[str, np
     return delta_bic(at_bound, freed, 0)
 
 
+def zero_able(lo: float, hi: float) -> bool:
+    """0 lies inside ``(lo, hi)``: the parameter's "no effect" value is inside its range, and the entry with it
+    at 0 is its reduced form (a meter's drift, a signed bias or gain). Its bounds then limit a size, not a form.
+
+    >>> zero_able(-1e-8, 1e-8), zero_able(0.0, 1e-3), zero_able(1.0, 900.0)
+    (True, False, False)
+    """
+    return lo < 0.0 < hi
+
+
 def pinned_at_bounds(values: Mapping[str, float], bounds: Mapping[str, tuple[float, float]],
                      evidence: Mapping[str, float] | None = None) -> list[str]:
-    """The effect parameters pinned at a bound: within 0.1 % of its range of the bound, and held there by the
-    data (*evidence*: name -> :func:`bound_evidence`, above :data:`PIN_EVIDENCE`; a name without evidence counts
-    as held). A lower bound of 0 is the "no effect" value (a leak of 0): a null result, never a pin.
+    """The effect parameters pinned at a bound: within 0.1 % of its range of the bound, and, for a
+    :func:`zero_able` parameter, held there by the data (*evidence*: name -> :func:`bound_evidence`, above
+    :data:`PIN_EVIDENCE`; a name without evidence counts as held). A lower bound of 0 is the "no effect"
+    value (a leak of 0): a null result, never a pin. A bound of a parameter that cannot be 0 inside its
+    range is a limit of the entry's form (a drift's levelling ``c`` at its largest is a step, not a
+    drift) and pins it whatever the evidence, as before.
 
     >>> pinned_at_bounds({"g": 0.05, "d": -1e-8}, {"g": (-0.1, 0.1), "d": (-1e-8, 1e-8)})
     ['d']
     >>> pinned_at_bounds({"g": 0.05, "d": -1e-8}, {"g": (-0.1, 0.1), "d": (-1e-8, 1e-8)}, {"d": 1.2})
     []
+    >>> pinned_at_bounds({"c": 1e-3}, {"c": (0.0, 1e-3)}, {"c": 1.2})
+    ['c']
     >>> pinned_at_bounds({"k": 0.0}, {"k": (0.0, 1.0)})
     []
     """
@@ -129,10 +144,8 @@ def pinned_at_bounds(values: Mapping[str, float], bounds: Mapping[str, tuple[flo
         if name not in bounds:
             continue
         lo, hi = bounds[name]
-        tol = 1e-3 * (hi - lo)
-        if (v <= lo + tol and lo != 0.0) or v >= hi - tol:
-            if (evidence or {}).get(name, math.inf) > PIN_EVIDENCE:
-                out.append(name)
+        if at_bound(v, lo, hi) and (not zero_able(lo, hi) or (evidence or {}).get(name, math.inf) > PIN_EVIDENCE):
+            out.append(name)
     return out
 
 
@@ -317,7 +330,7 @@ def freed_evidence(where: WhereResult, residuals: tuple[Mapping[str, np.ndarray]
     window, tag -> ``(n,)`` sensitivity of the outputs to the parameter; *side*: ``+1`` at its upper
     bound, ``-1`` at its lower. Both fits refit the spec's candidates (and the varying ones) with
     :func:`joint`, the freed one with the parameter's column as an unbounded term. 0 when the free
-    move points back inside the bounds (the bound holds nothing back).
+    move points back inside the bounds (the bound holds nothing back), or the ratio falls.
     """
     tags = list(residuals[0])
     n = {t: len(residuals[0][t]) for t in tags}
@@ -328,4 +341,6 @@ def freed_evidence(where: WhereResult, residuals: tuple[Mapping[str, np.ndarray]
     beta, freed, _, _, _ = joint(where, residuals[0], residuals[1], col_t, col_v, x=x)
     if beta.size == 0 or not side * float(beta[0]) > 0.0:
         return 0.0
-    return bound_evidence(held, freed)
+    # the joint fit lowers the noise-weighted cost; the ratio over effective samples may still fall where it
+    # trades one tag against another (a coarse linearisation far beyond the bound): no evidence either
+    return max(bound_evidence(held, freed), 0.0)

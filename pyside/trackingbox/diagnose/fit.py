@@ -31,7 +31,8 @@ from ..simulation.models import close_models
 from ..simulation.windows import load_windows, problem_from_spec
 from ..spec import load_spec, write_starts
 from . import library
-from .candidates import PIN_EVIDENCE, Candidate, at_bound, freed_evidence, joint, pinned_at_bounds, score
+from .candidates import (PIN_EVIDENCE, Candidate, at_bound, freed_evidence, joint, pinned_at_bounds, score,
+                         zero_able)
 from .residuals import fit_windows, step_bounds, window_series
 
 if TYPE_CHECKING:
@@ -210,7 +211,8 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
     fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
     # each effect parameter at a bound: the patched twin once more per window, moved inside by LINEAR_STEP
-    sides = {s: side for s, v in fitted.items() if s in bounds and (side := at_bound(v, *bounds[s]))}
+    sides = {s: side for s, v in fitted.items()
+             if s in bounds and zero_able(*bounds[s]) and (side := at_bound(v, *bounds[s]))}
     try:
         series = [window_series(problem, w, x, pspec.inputs) for w in (training, validation)]
         where = patched_varying(where, problem, (training, validation), x, pspec.inputs, series)
@@ -467,7 +469,7 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
         # a clipped parameter is pinned only if the data hold it there beyond noise (PIN_EVIDENCE)
         for i, short in enumerate(shorts):
             side = at_bound(float(clipped[i]), float(lo[i]), float(hi[i]))
-            if side and clipped[i] != value[i]:
+            if side and clipped[i] != value[i] and zero_able(float(lo[i]), float(hi[i])):
                 evidence[short] = freed_evidence(where, (fixed[0], fixed[1]),
                                                  tuple({t: c[t][:, i] for t in tags} for c in cols), side)
     pinned = pinned_at_bounds(dict(zip(shorts, map(float, clipped))),
