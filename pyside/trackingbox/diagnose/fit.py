@@ -18,8 +18,8 @@ import hashlib
 import logging
 import math
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,7 +31,8 @@ from ..simulation.models import close_models
 from ..simulation.windows import load_windows, problem_from_spec
 from ..spec import load_spec, write_starts
 from . import library
-from .candidates import Candidate, joint, score
+from .candidates import (PIN_EVIDENCE, Candidate, at_bound, freed_evidence, joint, pinned_at_bounds, score,
+                         zero_able)
 from .residuals import fit_windows, step_bounds, window_series
 
 if TYPE_CHECKING:
@@ -208,8 +209,20 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     problem = problem_from_spec(pspec, warmup=budget.warmup)
     training, validation = load_windows(pspec, warmup=problem.warmup)
     x = np.array([est.parameters.get(n, s) for n, s in zip(problem.names, problem.start)])
+    fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
+    # each effect parameter at a bound: the patched twin once more per window, moved inside by LINEAR_STEP
+    sides = {s: side for s, v in fitted.items()
+             if s in bounds and zero_able(*bounds[s]) and (side := at_bound(v, *bounds[s]))}
     try:
         series = [window_series(problem, w, x, pspec.inputs) for w in (training, validation)]
+        where = patched_varying(where, problem, (training, validation), x, pspec.inputs, series)
+        inside = {}
+        for short, side in sides.items():
+            i = list(problem.names).index(full[short])
+            h = LINEAR_STEP * (bounds[short][1] - bounds[short][0])
+            xi = x.copy()
+            xi[i] -= side * h
+            inside[short] = (h, [window_series(problem, w, xi, pspec.inputs) for w in (training, validation)])
     finally:
         close_models()
     tags = [t for t in pspec.outputs if t in where.tags]
@@ -218,19 +231,60 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     fitted_x = np.array([float(est.parameters.get(n, xn)) for n, xn in zip(where.problem.names, where.x)]) \
         if where.x is not None else None
     after_t, after_v = level(where, after_t, after_v, fitted_x)
-    fitted = {s: float(est.parameters[f]) for s, f in full.items() if f in est.parameters}
-    pinned = []
-    for short, v in fitted.items():
-        if short in bounds:
-            lo, hi = bounds[short]
-            tol = 1e-3 * (hi - lo)
-            # a bound that is also the "no effect" value (a leak of 0) is not a pin but a null result
-            if (v <= lo + tol and lo != 0.0) or v >= hi - tol:
-                pinned.append(short)
+    # at a bound and held there by the data beyond noise (PIN_EVIDENCE): the move beyond the bound, linearised
+    evidence = {}
+    for short, (h, moved) in inside.items():
+        # d(output)/d(parameter): the inside point is side * h below it
+        column = tuple({t: (s.simulated[t] - m.simulated[t]) / (sides[short] * h) for t in tags}
+                       for s, m in zip(series, moved))
+        evidence[short] = freed_evidence(where, (after_t, after_v), column, sides[short], x=fitted_x)
+    pinned = pinned_at_bounds(fitted, bounds, evidence)
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     outcome = FitOutcome(patch, fmu, spec_path, est, full)
     return score(effect.id, target, getattr(effect, "kind", "process"), stage, where, k, after_t, after_v, fitted,
-                 pinned=pinned, fit=outcome)
+                 pinned=pinned, fit=outcome, reason=_bound_note(evidence, pinned))
+
+
+def _bound_note(evidence: Mapping[str, float], pinned: Sequence[str]) -> str:
+    """The candidate's remark on its parameters at a bound: the evidence that holds each there."""
+    if not evidence:
+        return ""
+    return "at a bound: " + ", ".join(
+        f"{k} ({'pinned' if k in pinned else 'within noise'}, evidence {v:.3g}; pinned above {PIN_EVIDENCE:g})"
+        for k, v in evidence.items())
+
+
+def patched_varying(where: WhereResult, problem: Any, windows: Sequence[Any], x: np.ndarray,
+                    inputs: Mapping[str, str], series: Sequence[Any]) -> WhereResult:
+    """*where* with its Jacobian's columns of the ``[diagnose] varying`` candidates taken from the patched twin at *x*.
+
+    The levelling lets a fouling move in time through its output sensitivity; an effect that changes
+    that sensitivity must be levelled with its own. A dry-solids meter reading ``(1 + g) x`` moves by
+    ``1 + g`` times the null twin's ``dx/dRf``: on the evaporator (24 h, seed 0; the null twin's QI-6150
+    sensitivity -45.7 per m2.K/W, training mean) with the ``density-meter`` case's g = 0.069 and the
+    fouling rising 5.6e-5 m2.K/W over the 12 h training window, the null's column leaves
+    ``g dx/dRf dRf`` = -1.8e-4 of dry solids as a falling trend in QI-6150 (-4e-9 1/s, 0.4 of the
+    ``ds-meter`` drift's bound) for that drift to take up. One run per window and varying candidate
+    (forward difference, as the null's Jacobian: :func:`trackingbox.diagnose.residuals.series_and_jacobian`);
+    *series*: the patched twin's runs at *x* on *windows*.
+    """
+    basis = getattr(where, "varying", None)
+    if basis is None or where.problem is None or not where.jacobian[0]:
+        return where
+    names = list(problem.names)
+    jac = [{t: np.array(j, dtype=float, copy=True) for t, j in w.items()} for w in where.jacobian]
+    for i in basis.index:
+        name = where.problem.names[i]
+        if name not in names:
+            continue
+        k = names.index(name)
+        points, h = jacobian_points(x, problem.lower, problem.upper, 1.0e-3)
+        for w, base, cols in zip(windows, series, jac):
+            moved = window_series(problem, w, points[k], inputs)
+            for t, c in cols.items():
+                if t in moved.simulated and c.shape[1] > i:
+                    c[:, i] = (moved.simulated[t] - base.simulated[t]) / h[k]
+    return replace(where, jacobian=(jac[0], jac[1]))
 
 
 def fit_job(spec: Any, where: WhereResult, effect: Any, screened: Candidate, work_dir: Path,
@@ -406,13 +460,20 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
     lo, hi = problem.lower[idx], problem.upper[idx]
     value = e0 + beta
     clipped = np.clip(value, lo, hi)
+    evidence: dict[str, float] = {}
     if np.any(clipped != value):
         # outside the bounds: fix the effect at the clipped value, refit the candidates alone
         moved = clipped - e0
         fixed = [{t: r[t] - cols[k][t] @ moved for t in tags} for k, r in enumerate(base)]
         _, after_t, after_v, _, step_c = joint(where, fixed[0], fixed[1])
-    pinned = [s for s, v, a, b in zip(shorts, clipped, lo, hi)
-              if (v <= a + 1e-3 * (b - a) and a != 0.0) or v >= b - 1e-3 * (b - a)]
+        # a clipped parameter is pinned only if the data hold it there beyond noise (PIN_EVIDENCE)
+        for i, short in enumerate(shorts):
+            side = at_bound(float(clipped[i]), float(lo[i]), float(hi[i]))
+            if side and clipped[i] != value[i] and zero_able(float(lo[i]), float(hi[i])):
+                evidence[short] = freed_evidence(where, (fixed[0], fixed[1]),
+                                                 tuple({t: c[t][:, i] for t in tags} for c in cols), side)
+    pinned = pinned_at_bounds(dict(zip(shorts, map(float, clipped))),
+                              {s: (float(a), float(b)) for s, a, b in zip(shorts, lo, hi)}, evidence)
     k = len(getattr(effect, "parameters", ()) or ()) or 1
     values = {s: float(v) for s, v in zip(shorts, clipped)}
     # where the joint fit moved the spec's candidates (from the polished null), inside their bounds: the
@@ -421,4 +482,4 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
         moved = np.clip(np.asarray(where.x, dtype=float) + step_c, where.problem.lower, where.problem.upper)
         values.update({n: float(v) for n, v in zip(cand_names, moved)})
     return score(effect.id, target, getattr(effect, "kind", "process"), "screen", where, k, after_t, after_v,
-                 values, pinned=pinned)
+                 values, pinned=pinned, reason=_bound_note(evidence, pinned))
