@@ -296,6 +296,22 @@ def test_assert_in_an_inlined_function(tmp_path):
     assert exc.value.time == 3.0
 
 
+def test_assert_conditions_are_outputs_of_the_model_function(ramp_fmu):
+    """The conditions are computed by the model's own evaluation (``_tbx_a<k>``, 1 where the assert
+    holds), not by a second function in the runtime; by hand at x = t: x < 2 and k > 0 hold up to
+    t = 1.5, x < 1 (the warning) only before t = 1."""
+    import zipfile
+
+    with zipfile.ZipFile(ramp_fmu) as zf:
+        runtime = zf.read("sources/tbx_runtime.c").decode()
+    assert "tbx_asserts" not in runtime and "_tbx_a1" not in runtime
+    with FMUModel(ramp_fmu) as model:
+        df = model.simulate(stop_time=1.5, output_interval=0.5, outputs=["_tbx_a1", "_tbx_a2", "_tbx_a3"])
+    assert list(df["_tbx_a1"]) == [1.0, 1.0, 1.0, 1.0]
+    assert list(df["_tbx_a2"]) == [1.0, 1.0, 1.0, 1.0]
+    assert list(df["_tbx_a3"]) == [1.0, 1.0, 0.0, 0.0]  # x = 1 at t = 1: x < 1 fails there
+
+
 @pytest.mark.parametrize("construct", ["initial", "terminal"])
 def test_initial_and_terminal_in_an_assert(tmp_path, construct):
     """initial() is true only during initialisation, terminal() never during a run: the assert fails
