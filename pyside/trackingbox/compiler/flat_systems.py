@@ -605,7 +605,6 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
     levels. The iteration is a fixed number of steps (one step function, folded), so that it is
     exported as C like the rest of the model."""
     z = ca.MX.sym(f"{name}_dz", n)
-    stalled = ca.MX.sym(f"{name}_stalled")  # 1 once a step found no length that lowers the residual
     q = ca.MX.sym(f"{name}_dq", values.numel() + n)
     p, z0 = q[:values.numel()], q[values.numel():]
     r = distance(z, p, z0)
@@ -627,11 +626,10 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
     # found no length that lowers it (a residual that is not finite, or a minimum of its norm that is
     # no root): the remaining steps would each try every length again (DAMPED_HALVINGS residuals of
     # the loop's functions, e.g. IF97 calls, per step) to move the iterate by 2**-23 of a step
-    done = ca.logic_or(stalled > 0.5, phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2)
-    inner = ca.Function(f"{name}_damped_move", [z, stalled, q],
-                        [ca.if_else(done, ca.vertcat(z, stalled), trial(0), True)])
-    zs = ca.MX.sym(f"{name}_dzs", n + 1)
-    step = ca.Function(f"{name}_damped_step", [zs, q], [inner(zs[:n], zs[n], q)])
+    done = phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2
+    move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 0), trial(0), True)])
+    zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once a step found no length that lowers
+    step = ca.Function(f"{name}_damped_step", [zs, q], [ca.if_else(zs[n] > 0.5, zs, move(zs[:n], q), True)])
     return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, start))[:n]
 
 
