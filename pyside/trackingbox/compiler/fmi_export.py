@@ -62,7 +62,7 @@ from ..errors import CompileError
 from .c_prune import drop_adjoint
 from .events import EventSystem
 from .flat_model import ExplicitModel, InitialSystem, ScalarVar
-from .fmi_runtime import add_build_source, add_runtime, value_references
+from .fmi_runtime import add_build_source, add_runtime, fmu_asserts, value_references
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +191,8 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
 
 
 def _assert_conditions(em: ExplicitModel, placeholders: list[ca.MX], ders: list[ca.MX]) -> list[ca.MX]:
-    """The asserts' conditions as outputs of the model function (``_tbx_a<k>``), so that one evaluation
+    """The asserts' conditions (:func:`.fmi_runtime.fmu_asserts`: one per message and level) as outputs
+    of the model function (``_tbx_a<k>``), so that one evaluation
     computes them with the equations, sharing what they share (a traced function's call gives both
     its values and its asserts), instead of a second function in the runtime evaluating them again.
     ``pre(v)`` of a *v* the FMU does not hold is *v*'s value (:func:`.fmi_runtime.value_references`
@@ -204,7 +205,7 @@ def _assert_conditions(em: ExplicitModel, placeholders: list[ca.MX], ders: list[
                                                   *em.calculated, *em.discrete)}
     if em.events is not None:
         held.update(name for name, _, _ in em.events.internal())
-    conds = [a.condition for a in em.asserts]
+    conds = [a.condition for a in fmu_asserts(em)]
     if placeholders:
         conds = ca.substitute(conds, placeholders, ders)
     held.update(d.name() for d in ders)

@@ -20,7 +20,7 @@ import casadi as ca
 
 from ..errors import CompileError
 from .events import MAX_EVENT_ITERATIONS
-from .flat_model import ExplicitModel
+from .flat_model import Assertion, ExplicitModel
 
 
 #: the largest residual of an initial equation accepted after the Newton solve
@@ -53,6 +53,23 @@ def value_references(xml: str) -> dict[str, int]:
     for var in (variables if variables is not None else []):
         refs[var.get("name", "")] = int(var.get("valueReference", "0"))
     return refs
+
+
+def fmu_asserts(em: ExplicitModel) -> list[Assertion]:
+    """The asserts the FMU checks: one per message and level, in the order of their first
+    appearance, holding where all of that message's hold (each traced call of an IF97 function
+    brings its own copies: ``MomentumBalanceFittings`` has 1 524 asserts, one output each of the
+    model function, for far fewer messages). A failure names the same message as before; a
+    warning logs once per violation of any of them."""
+    groups: dict[tuple[str, str], list[Assertion]] = {}
+    for a in em.asserts:
+        groups.setdefault((a.message, a.level), []).append(a)
+    out = []
+    for group in groups.values():
+        first = group[0]
+        cond = first.condition if len(group) == 1 else ca.mmin(ca.vertcat(*[a.condition for a in group]))
+        out.append(Assertion(condition=cond, message=first.message, level=first.level, origin=first.origin))
+    return out
 
 
 def _c_string(text: str) -> str:
@@ -572,13 +589,14 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
     gen.generate(str(tmpdir) + os.sep)
     by_name = {fn.name(): fn for fn in functions}
 
-    n_assert = len(em.asserts)
+    asserts = fmu_asserts(em)
+    n_assert = len(asserts)
     glue = [_COMMON]
     if em.asserts:
         glue.append(f"#define TBX_N_ASSERT {n_assert}\n")
         glue.append(_c_array("long", "tbx_a_vr", [str(refs[f"_tbx_a{k + 1}"]) for k in range(n_assert)]))
-        glue.append(_c_array("char*", "tbx_a_message", [_c_string(a.message) for a in em.asserts]))
-        glue.append(_c_array("int", "tbx_a_error", ["1" if a.level == "error" else "0" for a in em.asserts]))
+        glue.append(_c_array("char*", "tbx_a_message", [_c_string(a.message) for a in asserts]))
+        glue.append(_c_array("int", "tbx_a_error", ["1" if a.level == "error" else "0" for a in asserts]))
         glue.append(_ASSERTS)
     if em.initial is not None:
         init = em.initial
