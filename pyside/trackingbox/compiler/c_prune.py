@@ -11,8 +11,8 @@ IF97 water: 11.5 of ``MeasuringTemperature``'s 31.4 MB), which gcc then compiles
 ``fmi3GetAdjointDerivative`` then returns ``fmi3Error``; the model description says
 ``providesAdjointDerivatives="false"``) and removes every generated function ``casadi_f<N>`` that
 no remaining code names. A function is kept whenever its name appears anywhere outside its own
-definition in the code that stays (its ``#define`` to the prefixed symbol aside), so the model function and the forward derivative keep all they
-call.
+definition in the code that stays (its ``#define`` to the prefixed symbol aside), so the model
+function and the forward derivative keep all they call.
 """
 from __future__ import annotations
 

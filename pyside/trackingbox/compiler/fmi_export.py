@@ -192,11 +192,10 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
 
 def _assert_conditions(em: ExplicitModel, placeholders: list[ca.MX], ders: list[ca.MX]) -> list[ca.MX]:
     """The asserts' conditions (:func:`.fmi_runtime.fmu_asserts`: one per message and level) as outputs
-    of the model function (``_tbx_a<k>``), so that one evaluation
-    computes them with the equations, sharing what they share (a traced function's call gives both
-    its values and its asserts), instead of a second function in the runtime evaluating them again.
-    ``pre(v)`` of a *v* the FMU does not hold is *v*'s value (:func:`.fmi_runtime.value_references`
-    reads it so too)."""
+    of the model function (``_tbx_a<k>``), so that one evaluation computes them with the equations,
+    sharing what they share (a traced function's call gives both its values and its asserts), instead
+    of a second function in the runtime evaluating them again. ``pre(v)`` of a *v* the FMU does not
+    hold is *v*'s value (as the runtime's tables of value references read it)."""
     if not em.asserts:
         return []
     held = {sv.sym.name() for sv in (*em.parameters, *em.inputs, *em.states, *em.algebraics, *em.calculated)}
