@@ -296,6 +296,57 @@ def test_assert_in_an_inlined_function(tmp_path):
     assert exc.value.time == 3.0
 
 
+def test_assert_conditions_are_outputs_of_the_model_function(ramp_fmu):
+    """The conditions are computed by the model's own evaluation (``_tbx_a<k>``, 1 where the assert
+    holds), not by a second function in the runtime; by hand at x = t: x < 2 and k > 0 hold up to
+    t = 1.5, x < 1 (the warning) only before t = 1."""
+    import zipfile
+
+    with zipfile.ZipFile(ramp_fmu) as zf:
+        runtime = zf.read("sources/tbx_runtime.c").decode()
+    assert "tbx_asserts" not in runtime and "_tbx_a1" not in runtime
+    with FMUModel(ramp_fmu) as model:
+        df = model.simulate(stop_time=1.5, output_interval=0.5, outputs=["_tbx_a1", "_tbx_a2", "_tbx_a3"])
+    assert list(df["_tbx_a1"]) == [1.0, 1.0, 1.0, 1.0]
+    assert list(df["_tbx_a2"]) == [1.0, 1.0, 1.0, 1.0]
+    assert list(df["_tbx_a3"]) == [1.0, 1.0, 0.0, 0.0]  # x = 1 at t = 1: x < 1 fails there
+
+
+TWO_CALLS = """
+model TwoCalls
+  function checked "2u; asserts u < 3"
+    input Real u;
+    output Real y;
+  algorithm
+    assert(u < 3, "u too large in checked");
+    y := 2*u;
+  end checked;
+  output Real y1;
+  output Real y2;
+equation
+  y1 = checked(time);
+  y2 = checked(2*time);
+end TwoCalls;
+"""
+
+
+def test_asserts_with_one_message_are_one_condition_of_the_fmu(tmp_path):
+    """The two calls' asserts (one message) are one output, holding where both hold: by hand the second
+    call's u = 2t reaches 3 at t = 1.5, the first call's only at t = 3."""
+    import zipfile
+
+    fmu = build(tmp_path, "TwoCalls", TWO_CALLS)
+    with zipfile.ZipFile(fmu) as zf:
+        xml = zf.read("modelDescription.xml").decode()
+    assert 'name="_tbx_a1"' in xml and 'name="_tbx_a2"' not in xml
+    with FMUModel(fmu) as model:
+        df = model.simulate(stop_time=1.25, output_interval=0.25, outputs=["_tbx_a1", "y2"])
+        assert list(df["_tbx_a1"]) == [1.0] * 6 and np.allclose(df["y2"], 4 * df["time"])
+        with pytest.raises(AssertionFailed, match="u too large in checked") as exc:
+            model.simulate(stop_time=2, output_interval=0.25)
+    assert exc.value.time == 1.5
+
+
 @pytest.mark.parametrize("construct", ["initial", "terminal"])
 def test_initial_and_terminal_in_an_assert(tmp_path, construct):
     """initial() is true only during initialisation, terminal() never during a run: the assert fails

@@ -135,3 +135,48 @@ def test_a_regular_loop_keeps_newtons_solution(tmp_path):
         c = (1 + t) ** 2
         yy = (-1 + np.sqrt(1 + 4 * c * (2 + t))) / (2 * c)
         assert abs(y - yy) < 1e-9 and abs(x - (1 + t) * yy) < 1e-9
+
+
+class _Counted(ca.Callback):
+    """r(z) = z^2 + 1 (no root; |r|^2 is least at z = 0, where r = 1 and r' = 0), counting evaluations."""
+
+    def __init__(self) -> None:
+        ca.Callback.__init__(self)
+        self.calls = 0
+        self.construct("counted_r", {})
+
+    def get_n_in(self) -> int:
+        return 3  # z, p, z0 as a loop's scaled distance takes them
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def eval(self, args):
+        self.calls += 1
+        return [args[0] ** 2 + 1]
+
+    def has_jacobian(self) -> bool:
+        return True
+
+    def get_jacobian(self, name, inames, onames, opts):
+        z, p, z0, out = ca.MX.sym("z"), ca.MX.sym("p"), ca.MX.sym("z0"), ca.MX.sym("out")
+        return ca.Function(name, [z, p, z0, out], [2 * z, ca.MX(1, 1), ca.MX(1, 1)], inames, onames, opts)
+
+
+def test_the_damped_iteration_stops_at_a_step_no_length_improves(monkeypatch):
+    """From z = 0 of r = z^2 + 1 the Gauss-Newton step is 0, so no length of it lowers |r|^2 (1 - 1e-4 a
+    is below 1 for every length a): the first step tries all 24 lengths and ends the iteration, where
+    each of the 60 steps did the same before. So the whole iteration evaluates r as often as its first
+    step alone, and more than 23 times (the lengths 1/2**j, j = 0..22, tried; 2**-23 is taken untried).
+    The end is z = 0, as before."""
+    from trackingbox.compiler import flat_systems
+
+    def calls(iterations: int) -> int:
+        monkeypatch.setattr(flat_systems, "DAMPED_ITERATIONS", iterations)
+        counted = _Counted()
+        end = ca.Function("end", [], [flat_systems._damped_newton("t", counted, 1, ca.DM([0.0]), ca.DM([0.0]))])
+        assert float(end()["o0"]) == 0.0
+        return counted.calls
+
+    one = calls(1)
+    assert one >= 23 and calls(60) == one

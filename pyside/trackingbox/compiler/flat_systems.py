@@ -616,16 +616,21 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
 
     def trial(j: int) -> ca.MX:  # the first length from 1/2**j on that the residual accepts
         a = 0.5 ** j
-        if j == DAMPED_HALVINGS - 1:
-            return z + a * dz
+        if j == DAMPED_HALVINGS - 1:  # none accepted: the step is taken, and the iteration has stalled
+            return ca.vertcat(z + a * dz, 1)
         phi = ca.sumsqr(distance(z + a * dz, p, z0))
-        return ca.if_else(phi <= (1 - 1e-4 * a) * phi0, z + a * dz, trial(j + 1), True)
+        return ca.if_else(phi <= (1 - 1e-4 * a) * phi0, ca.vertcat(z + a * dz, 0), trial(j + 1), True)
 
     # only the branch taken is evaluated: a step needs as many residuals as lengths it tries, and
-    # none (not even the Jacobian) once the residual is far below the accepted one
+    # none (not even the Jacobian) once the residual is far below the accepted one, or once a step
+    # found no length that lowers it (a residual that is not finite, or a minimum of its norm that is
+    # no root): the remaining steps would each try every length again (DAMPED_HALVINGS residuals of
+    # the loop's functions, e.g. IF97 calls, per step) to move the iterate by 2**-23 of a step
     done = phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2
-    step = ca.Function(f"{name}_damped_step", [z, q], [ca.if_else(done, z, trial(0), True)])
-    return step.fold(DAMPED_ITERATIONS)(start, ca.vertcat(values, start))
+    move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 0), trial(0), True)])
+    zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once a step found no length that lowers
+    step = ca.Function(f"{name}_damped_step", [zs, q], [ca.if_else(zs[n] > 0.5, zs, move(zs[:n], q), True)])
+    return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, start))[:n]
 
 
 def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
@@ -678,7 +683,11 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     z2 = _damped_newton(name, distance, n, start, values)
     jac2 = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])(z2, values, start)
     y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, start - z2))
-    z2 = nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n]
+    # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:
+    # skipped, NaN, as it would end)
+    z2 = ca.if_else(ca.sumsqr(z2) + ca.sumsqr(y2) < ca.inf,
+                    nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n],
+                    ca.DM.nan(n, 1), True)
     solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
     # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
     # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs

@@ -9,13 +9,17 @@ headers that fmpy ships, then tidy the model description:
   get back their Modelica causality, ``local``;
 * CasADi's internal ``__assign__*`` helper variables are dropped;
 * units used by variables are declared in ``UnitDefinitions``;
+* the adjoint derivative, which CasADi always generates and nothing here calls, is left out of
+  the C (:mod:`.c_prune`; ``providesAdjointDerivatives="false"``);
 * the model's ``experiment`` annotation becomes ``DefaultExperiment``.
 
 Models with asserts or initial equations get a small runtime (only they: an
 FMU of a model without either is exactly what CasADi exports, with the
-``fmi3SetTime`` fix). The assert conditions and the initialisation solve are
-separate CasADi functions, generated as ``tbx_runtime.c`` (its own translation
-unit, :mod:`.fmi_runtime`) and called from patched FMI functions of the wrapper:
+``fmi3SetTime`` fix). The assert conditions are outputs of the model function
+(local variables ``_tbx_a<k>``: 1 where the assert holds, 0 where it fails),
+computed by the same evaluation as the equations; the initialisation solve is a
+separate CasADi function, generated as ``tbx_runtime.c`` (its own translation
+unit, :mod:`.fmi_runtime`). Patched FMI functions of the wrapper read or call them:
 
 * ``fmi3ExitInitializationMode`` solves the initial equations (Newton, from the
   current values of the unknowns as guesses and with the parameters as set)
@@ -55,9 +59,10 @@ import casadi as ca
 
 from .. import config
 from ..errors import CompileError
+from .c_prune import drop_adjoint
 from .events import EventSystem
 from .flat_model import ExplicitModel, InitialSystem, ScalarVar
-from .fmi_runtime import add_build_source, add_runtime, value_references
+from .fmi_runtime import add_build_source, add_runtime, fmu_asserts, value_references
 
 log = logging.getLogger(__name__)
 
@@ -173,9 +178,48 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
             dae.eq(sym, ca.substitute([z], placeholders, ders)[0] if placeholders else z)
             causality[name] = "local"
             exposed.append(name)
+    for k, cond in enumerate(_assert_conditions(em, placeholders, ders)):
+        name = f"_tbx_a{k + 1}"
+        sym = ca.MX.sym(name)
+        dae.add(name, "local", "continuous", sym, {"description": "assert condition (1 holds, 0 fails)"})
+        dae.eq(sym, cond)
+        causality[name] = "local"
+        exposed.append(name)
     if exposed:
         dae.set_all("y", exposed)
     return dae, exposed, causality
+
+
+def _assert_conditions(em: ExplicitModel, placeholders: list[ca.MX], ders: list[ca.MX]) -> list[ca.MX]:
+    """The asserts' conditions (:func:`.fmi_runtime.fmu_asserts`: one per message and level) as outputs
+    of the model function (``_tbx_a<k>``), so that one evaluation computes them with the equations,
+    sharing what they share (a traced function's call gives both its values and its asserts), instead
+    of a second function in the runtime evaluating them again. ``pre(v)`` of a *v* the FMU does not
+    hold is *v*'s value (as the runtime's tables of value references read it)."""
+    if not em.asserts:
+        return []
+    held = {sv.sym.name() for sv in (*em.parameters, *em.inputs, *em.states, *em.algebraics, *em.calculated)}
+    held.update(sv.sym.name() for sv in em.discrete)
+    by_name = {sv.sym.name(): sv.sym for sv in (*em.parameters, *em.inputs, *em.states, *em.algebraics,
+                                                  *em.calculated, *em.discrete)}
+    if em.events is not None:
+        held.update(name for name, _, _ in em.events.internal())
+    conds = [a.condition for a in fmu_asserts(em)]
+    if placeholders:
+        conds = ca.substitute(conds, placeholders, ders)
+    held.update(d.name() for d in ders)
+    held.add(em.time.name())
+    olds, news = [], []
+    for sym in ca.symvar(ca.vertcat(*conds)):
+        name = sym.name()
+        if name in held:
+            continue
+        if name.startswith("pre(") and name.endswith(")") and name[4:-1] in by_name:
+            olds.append(sym)
+            news.append(by_name[name[4:-1]])
+        else:
+            raise CompileError(f"an assert of {em.name} uses {name!r}, which the exported FMU does not have")
+    return ca.substitute(conds, olds, news) if olds else list(conds)
 
 
 #: Generated C above this many bytes is compiled with ``-O0`` instead of ``-O1``: gcc's ``-O1``
@@ -235,6 +279,7 @@ def export_fmu(
         for name in sources:
             if name.endswith("_wrap.c"):
                 _patch_set_time(tmpdir / name)
+        adjoint = not _drop_adjoint(tmpdir / f"{ident}.c", ident)
         extra_sources: list[str] = []
         if em.asserts or em.initial is not None or em.events is not None:
             wrapper = next(tmpdir / name for name in sources if name.endswith("_wrap.c"))
@@ -265,7 +310,8 @@ def export_fmu(
         md_path = tmpdir / "modelDescription.xml"
         md_path.write_text(
             _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
-                                    initial=em.initial, events=em.events, asserts=bool(em.asserts))
+                                    initial=em.initial, events=em.events, asserts=bool(em.asserts),
+                                    adjoint=adjoint)
         )
         if fixed_parameters:
             md_path.write_text(declare_fixed(md_path.read_text(), {sv.name for sv in em.parameters}))
@@ -293,6 +339,19 @@ def export_fmu(
 _SET_TIME = "  // Initialize time\n  m->t = time;\n"
 _SET_TIME_PATCHED = "  // Initialize time (trackingbox: a new time invalidates the cached evaluation)\n" \
                     "  if (m->t != time) m->up_to_date = 0;\n  m->t = time;\n"
+
+
+def _drop_adjoint(source: Path, ident: str) -> bool:
+    """Leave the adjoint derivative out of CasADi's C *source* (:func:`.c_prune.drop_adjoint`);
+    whether it was there."""
+    if not source.exists():
+        return False
+    text, dropped = drop_adjoint(source.read_text(), ident)
+    if dropped:
+        before = source.stat().st_size
+        source.write_text(text)
+        log.debug("adjoint derivative left out of %s: %d -> %d bytes", source.name, before, len(text))
+    return dropped
 
 
 def _patch_set_time(wrapper: Path) -> None:
@@ -329,10 +388,13 @@ def _tidy_model_description(
     initial: InitialSystem | None = None,
     events: EventSystem | None = None,
     asserts: bool = False,
+    adjoint: bool = True,
 ) -> str:
     root = ET.fromstring(xml)
     root.set("modelName", model)
     me = root.find("ModelExchange")
+    if not adjoint and me is not None:
+        me.set("providesAdjointDerivatives", "false")  # left out of the C (.c_prune)
     if asserts and me is not None:
         # the asserts are checked in fmi3CompletedIntegratorStep: an importer calls it only when asked
         # (FMI 3.0 needsCompletedIntegratorStep, default false; fmpy follows it)

@@ -1,10 +1,12 @@
 """The small C runtime added to the FMU that CasADi exports, for models with asserts, initial
 equations or events (:mod:`.fmi_export` says when and what the FMI functions then do).
 
-The assert conditions, the initialisation solve and one step of the event iteration are CasADi
-functions generated into ``tbx_runtime.c`` (its own translation unit, listed in
-``buildDescription.xml``); the wrapper's FMI functions are patched to call them: C templates for
-the asserts, the initialisation (a residual above :data:`INIT_TOLERANCE` fails it), the event
+The assert conditions are outputs of the model function itself (local variables ``_tbx_a<k>``, 1
+where the assert holds: :func:`.fmi_export.build_dae`), so the evaluation the solver asks for
+anyway gives them and the runtime only reads them. The initialisation solve and one step of the
+event iteration are CasADi functions generated into ``tbx_runtime.c`` (its own translation unit,
+listed in ``buildDescription.xml``); the wrapper's FMI functions are patched to call them: C
+templates for the asserts, the initialisation (a residual above :data:`INIT_TOLERANCE` fails it), the event
 iteration, ``fmi3UpdateDiscreteStates`` and ``fmi3GetEventIndicators``.
 """
 from __future__ import annotations
@@ -18,7 +20,7 @@ import casadi as ca
 
 from ..errors import CompileError
 from .events import MAX_EVENT_ITERATIONS
-from .flat_model import ExplicitModel
+from .flat_model import Assertion, ExplicitModel
 
 
 #: the largest residual of an initial equation accepted after the Newton solve
@@ -51,6 +53,23 @@ def value_references(xml: str) -> dict[str, int]:
     for var in (variables if variables is not None else []):
         refs[var.get("name", "")] = int(var.get("valueReference", "0"))
     return refs
+
+
+def fmu_asserts(em: ExplicitModel) -> list[Assertion]:
+    """The asserts the FMU checks: one per message and level, in the order of their first
+    appearance, holding where all of that message's hold (each traced call of an IF97 function
+    brings its own copies: ``MomentumBalanceFittings`` has 1 524 asserts, one output each of the
+    model function, for far fewer messages). A failure names the same message as before; a
+    warning logs once per violation of any of them."""
+    groups: dict[tuple[str, str], list[Assertion]] = {}
+    for a in em.asserts:
+        groups.setdefault((a.message, a.level), []).append(a)
+    out = []
+    for group in groups.values():
+        first = group[0]
+        cond = first.condition if len(group) == 1 else ca.mmin(ca.vertcat(*[a.condition for a in group]))
+        out.append(Assertion(condition=cond, message=first.message, level=first.level, origin=first.origin))
+    return out
 
 
 def _c_string(text: str) -> str:
@@ -123,18 +142,14 @@ static void tbx_log(casadi_fmi_memory* m, fmi3Status status, const char* categor
 
 _ASSERTS = """
 static int tbx_eval_asserts(casadi_fmi_memory* m, casadi_real* c) {
-  casadi_real win[TBX_A_NW + 1];
-  const casadi_real* arg[TBX_A_SZ_ARG + 1];
-  casadi_real* res[TBX_A_SZ_RES + 1];
-  size_t i;
+  /* the conditions are outputs of the model function (_tbx_a<k>): one evaluation gives them */
+  size_t k;
   if (!m->up_to_date) {
     if (evaluate(m)) return 1;
     m->up_to_date = 1;
   }
-  for (i = 0; i < TBX_A_NW; ++i) win[i] = tbx_value(m, tbx_a_vr[i]);
-  arg[0] = win;
-  res[0] = c;
-  return tbx_call_tbx_asserts(arg, res);
+  for (k = 0; k < TBX_N_ASSERT; ++k) c[k] = m->v[var_offset[tbx_a_vr[k]]];
+  return 0;
 }
 /* At the solver's trial points (derivative calls) a failing error-level assert is only noted
    (category assert-trial, status OK): the step may be rejected. If the solver then fails, the
@@ -488,22 +503,10 @@ _EVENT_INDICATORS = """FMI3_Export fmi3Status fmi3GetEventIndicators(fmi3Instanc
 """
 
 
-def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX], list[ca.MX]]:
-    """CasADi functions ``tbx_asserts(w) -> c`` and ``tbx_init(z0, wk) -> (z, r)``; their input symbols."""
+def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX]]:
+    """The CasADi function ``tbx_init(z0, wk) -> (z, r)`` (where the model has initial equations) and
+    its known symbols (the asserts' conditions are outputs of the model function: .fmi_export)."""
     functions: list[ca.Function] = []
-    assert_syms: list[ca.MX] = []
-    if em.asserts:
-        conds = [a.condition for a in em.asserts]
-        seen: dict[str, ca.MX] = {}
-        for c in conds:
-            for sym in ca.symvar(c):
-                seen.setdefault(sym.name(), sym)
-        assert_syms = [seen[n] for n in sorted(seen)]
-        w = ca.MX.sym("w", len(assert_syms))
-        body = ca.vertcat(*conds)
-        if assert_syms:
-            body = ca.substitute([body], assert_syms, [w[i] for i in range(len(assert_syms))])[0]
-        functions.append(ca.Function("tbx_asserts", [w], [body]))
     known_syms: list[ca.MX] = []
     if em.initial is not None:
         init = em.initial
@@ -523,7 +526,7 @@ def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX
                                    {"abstol": 1e-12, "max_iter": 100})
             zsol = newton(z0, wk)
         functions.append(ca.Function("tbx_init", [z0, wk], [zsol, residual(zsol, wk)]))
-    return functions, assert_syms, known_syms
+    return functions, known_syms
 
 
 def _event_function(em: ExplicitModel, quiet: ca.MX) -> tuple[ca.Function, ca.Function, list[ca.MX], int]:
@@ -573,7 +576,7 @@ def _event_function(em: ExplicitModel, quiet: ca.MX) -> tuple[ca.Function, ca.Fu
 
 def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, int]) -> str:
     """Generate ``tbx_runtime.c`` and patch the wrapper to call it; return the new source's name."""
-    functions, assert_syms, known_syms = _runtime_functions(em)
+    functions, known_syms = _runtime_functions(em)
     ev = em.events
     if ev is not None:
         quiet = ca.MX.sym("_tbx_quiet")
@@ -586,18 +589,14 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
     gen.generate(str(tmpdir) + os.sep)
     by_name = {fn.name(): fn for fn in functions}
 
-    n_assert = len(em.asserts)
+    asserts = fmu_asserts(em)
+    n_assert = len(asserts)
     glue = [_COMMON]
     if em.asserts:
-        fn = by_name["tbx_asserts"]
-        glue.append(f"#define TBX_N_ASSERT {n_assert}\n#define TBX_A_NW {len(assert_syms)}\n")
-        glue.append(_work_defines("TBX_A", fn))
-        glue.append("int tbx_asserts(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
-                    "int mem);\nint tbx_asserts_checkout(void);\nvoid tbx_asserts_release(int mem);\n")
-        glue.append(_c_array("long", "tbx_a_vr", _vrs(assert_syms, refs, em.name, "an assert")))
-        glue.append(_c_array("char*", "tbx_a_message", [_c_string(a.message) for a in em.asserts]))
-        glue.append(_c_array("int", "tbx_a_error", ["1" if a.level == "error" else "0" for a in em.asserts]))
-        glue.append(_CALL % {"fn": "tbx_asserts", "P": "TBX_A"})
+        glue.append(f"#define TBX_N_ASSERT {n_assert}\n")
+        glue.append(_c_array("long", "tbx_a_vr", [str(refs[f"_tbx_a{k + 1}"]) for k in range(n_assert)]))
+        glue.append(_c_array("char*", "tbx_a_message", [_c_string(a.message) for a in asserts]))
+        glue.append(_c_array("int", "tbx_a_error", ["1" if a.level == "error" else "0" for a in asserts]))
         glue.append(_ASSERTS)
     if em.initial is not None:
         init = em.initial
