@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .modification_parse import parse_modification
-from .record_constants import _declaration, _own
+from .record_constants import declaration, own_text
 
 log = logging.getLogger(__name__)
 
@@ -54,15 +54,15 @@ def _declared_integer(index, cls: str, param: str, codes: dict[str, str]) -> int
     to, where no class of that chain modifies an element of that name; else None."""
     chain = _ancestors(index, cls)
     modified = re.compile(rf"[(,]\s*(?:(?:each|final|redeclare)\s+)*{re.escape(param)}\s*(?:\(|=(?!=))")
-    if any(modified.search(_own(index, c, codes)) for c in chain):
+    if any(modified.search(own_text(index, c, codes)) for c in chain):
         return None
-    found = _declaration(index, cls, param, codes)
+    found = declaration(index, cls, param, codes)
     if found is None:
         return None
     owner, m = found
     if "parameter" not in m.group("prefix").split() or m.group("type") != "Integer":
         return None
-    code = _own(index, owner, codes)
+    code = own_text(index, owner, codes)
     pos = m.end() - 1
     if m.group("after") == "(":
         _, pos = parse_modification(code, pos)
@@ -77,11 +77,11 @@ def sizes(index, model: str) -> list[tuple[int, str, int]]:
     if info is None:
         return []
     codes: dict[str, str] = {}
-    code = _own(index, model, codes)
+    code = own_text(index, model, codes)
     out = []
     for hit in _SIZED.finditer(code):
         comp, param = hit.group("comp"), hit.group("param")
-        found = _declaration(index, model, comp, codes)
+        found = declaration(index, model, comp, codes)
         if found is None or found[0] != model:
             continue
         _, decl = found
