@@ -2,7 +2,8 @@
 in ``Modelica.Fluid.Examples.IncompressibleFluidNetwork``), which rumoca 0.10.2 reads with the class's
 equations once for the whole array, is given to the front end as its number where the declarations
 fix it (``compiler.component_sizes``). Expectations worked by hand: segment i of the pipe, fed by
-heater i, has der(x) = q*(1 + x/2), x(0) = 0, so x = 2*(exp(q*t/2) - 1)."""
+heater i, has der(x) = q*(1 + x/2), x(0) = 0, so x = 2*(exp(q*t/2) - 1). The modification
+``q = 3*p.w`` of the array of heaters gives heater k the value 3*p.w[k] (MLS 7.2.5)."""
 from __future__ import annotations
 
 import fmpy
@@ -20,6 +21,7 @@ LIB = """package S
   model Pipe
     parameter Integer n(min=1) = 3 "segments";
     Real x[n];
+    parameter Real w[n] = fill(1/n, n);
     Port ports[n];
   initial equation
     x = zeros(n);
@@ -56,6 +58,13 @@ LIB = """package S
   equation
     connect(h.port, p.ports);
   end Ext;
+  model Scaled "h[k].q = (3*p.w)[k] = 1"
+    Pipe p;
+    Heat[p.n] h(q = 3*
+      p.w);
+  equation
+    connect(h.port, p.ports);
+  end Scaled;
 end S;
 """
 
@@ -65,10 +74,12 @@ def _x(q, t):
 
 
 @pytest.mark.compile
-@pytest.mark.parametrize("model, n, q", [("S.Top", 3, [1, 2, 3]), ("S.Mod", 2, [1, 1])])
+@pytest.mark.parametrize("model, n, q", [("S.Top", 3, [1, 2, 3]), ("S.Mod", 2, [1, 1]),
+                                                ("S.Scaled", 3, [1, 1, 1])])
 def test_a_size_given_by_a_components_parameter_is_read_as_its_declared_value(tmp_path, model, n, q):
-    """Top: Pipe's declared n = 3; Mod: the declaration's own modification n = 2 (main: 'expression
-    shape mismatch' for Top, refused for Mod)."""
+    """Top: Pipe's declared n = 3; Mod: the declaration's own modification n = 2; Scaled: n = 3 and
+    the modification q = 3*p.w read element-wise (main: 'expression shape mismatch' for Top and
+    Scaled, refused for Mod)."""
     src = tmp_path / "S.mo"
     src.write_text(LIB)
     res = compile_model(src, model, backend="embedded", output=tmp_path / "s.fmu")
@@ -84,5 +95,5 @@ def test_a_size_a_base_class_modifies_stays_refused(tmp_path):
     src = tmp_path / "S.mo"
     src.write_text(LIB)
     with pytest.raises(UnsupportedConstructError, match=r"an array of components whose size is a parameter "
-                                                        r"of another component .* at .*S.mo:41"):
+                                                        r"of another component .* at .*S.mo:42"):
         compile_model(src, "S.Ext", backend="embedded", output=tmp_path / "e.fmu")

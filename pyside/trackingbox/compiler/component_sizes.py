@@ -35,6 +35,11 @@ log = logging.getLogger(__name__)
 _SIZED = re.compile(r"(?<![\w.])[A-Za-z_][\w.]*\s*\[\s*(?P<ref>(?P<comp>[A-Za-z_]\w*)\.(?P<param>[A-Za-z_]\w*))"
                     r"\s*\]\s*(?P<name>[A-Za-z_]\w*)\s*[(;]")
 _GIVEN = re.compile(r"(?:(?:each|final)\s+)*[A-Za-z_]\w*\s*=\s*(\d+)\s*(?=[,)])")
+_NUM = r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_SCALED = re.compile(rf"(?:final\s+)?(?P<name>[A-Za-z_]\w*)\s*=\s*(?:(?P<n1>{_NUM})\s*\*\s*(?P<a1>[A-Za-z_][\w.]*)"
+                     rf"|(?P<a2>[A-Za-z_][\w.]*)\s*\*\s*(?P<n2>{_NUM}))\s*(?=[,)])")
+"""``name = number*array`` or ``name = array*number`` (comment-free text)."""
+_INDEX = "k__tb"
 _INTEGER = re.compile(r"\s*=\s*(\d+)\s*(?:;|annotation\b|$)")
 
 
@@ -98,34 +103,68 @@ def sizes(index, model: str) -> list[tuple[int, str, int]]:
         else:
             value = _declared_integer(index, target, param, codes)
         if value is not None and len(str(value)) <= len(hit.group("ref")):
-            out.append((hit.start("ref"), hit.group("ref"), value))
+            out.append((hit.start("ref"), hit.group("ref"), value, _scaled(code, hit)))
     return out
 
 
+def _scaled(code: str, hit: re.Match) -> list[tuple[str, str, str]]:
+    """(element, number, array) of each element of the array's own modification given as
+    ``number*array`` or ``array*number``, without ``each``."""
+    if code[hit.end() - 1] != "(":
+        return []
+    found = []
+    for mod in parse_modification(code, hit.end() - 1)[0]:
+        if not mod.has_value or mod.subs or code.startswith("each", mod.offset):
+            continue
+        value = _SCALED.match(code, mod.offset)
+        if value and value.group("name") == mod.name:
+            number = value.group("n1") or value.group("n2")
+            found.append((mod.name, number, value.group("a1") or value.group("a2")))
+    return found
+
+
 def patches(index, model: str) -> dict[Path, Callable[[bytes], bytes]]:
-    """For the model's file: the edit writing each size :func:`sizes` finds as its number."""
+    """For the model's file: the edit writing each size :func:`sizes` finds as its number, and each
+    ``q = number*array`` of such an array's modification as ``q = {number*array[k] for k in 1:size}``
+    (rumoca 0.10.2 stops at "expression shape mismatch" on the product there; in Modelica the
+    element ``h[k].q`` takes ``(number*array)[k]``, MLS 7.2.5)."""
     found = sizes(index, model)
     if not found:
         return {}
     info = index.classes[model]
-    by_line: dict[int, list[tuple[str, int]]] = {}
-    for offset, ref, value in found:
-        by_line.setdefault(index.location(info, offset)[1], []).append((ref, value))
+    by_line: dict[int, list[tuple[str, int, list[tuple[str, str, str]]]]] = {}
+    for offset, ref, value, scaled in found:
+        by_line.setdefault(index.location(info, offset)[1], []).append((ref, value, scaled))
 
     def patch(body: bytes) -> bytes:
         lines = body.split(b"\n")
-        for line, refs in by_line.items():
+        for line, refs in sorted(by_line.items(), reverse=True):
             if line > len(lines):
                 continue
-            text = lines[line - 1]
-            for ref, value in refs:
+            for ref, value, scaled in refs:
                 pattern = re.compile(rb"\[\s*" + re.escape(ref.encode()) + rb"\s*\]")
-                if len(pattern.findall(text)) != 1:
+                if len(pattern.findall(lines[line - 1])) != 1:
                     continue  # the line is not as the index read it: left as written
-                text = pattern.sub(lambda m: m.group(0).replace(ref.encode(), str(value).encode().ljust(len(ref))),
-                                   text)
+                lines[line - 1] = pattern.sub(
+                    lambda m: m.group(0).replace(ref.encode(), str(value).encode().ljust(len(ref))), lines[line - 1])
                 log.debug("%s:%d: %s read by the front end as %d", info.file, line, ref, value)
-            lines[line - 1] = text
+                if scaled:
+                    lines[line - 1:] = _comprehensions(b"\n".join(lines[line - 1:]), value, scaled).split(b"\n")
         return b"\n".join(lines)
 
     return {info.file: patch}
+
+
+def _comprehensions(text: bytes, size: int, scaled: list[tuple[str, str, str]]) -> bytes:
+    """*text* (from the array's declaration on) with the first ``name = number*array`` of each of
+    *scaled* written as a comprehension over 1:*size*, its line breaks kept after it."""
+    for name, number, array in scaled:
+        n, a = re.escape(number.encode()), re.escape(array.encode())
+        found = re.compile(rb"(?<![\w.])" + re.escape(name.encode()) + rb"\s*=\s*(?:" + n + rb"\s*\*\s*" + a + rb"|"
+                           + a + rb"\s*\*\s*" + n + rb")(?![\w.\[])").search(text)
+        if found is None:
+            continue
+        new = (f"{name} = {{{number}*{array}[{_INDEX}] for {_INDEX} in 1:{size}}}".encode()
+               + b"\n" * found.group(0).count(b"\n"))
+        text = text[:found.start()] + new + text[found.end():]
+    return text
