@@ -414,3 +414,92 @@ def test_the_fluid_examples_on_water_are_read_by_the_checks_as_their_media_say()
     changed = [i + 1 for i, (a, b) in enumerate(zip(before.splitlines(), after.splitlines())) if a != b]
     assert changed == [129, 130]
     assert [ln.strip() for ln in after.splitlines()[128:130]] == [b"", b""]
+
+
+BRANCHES = """package V
+  partial package PW "a wall-friction-like base"
+    constant Boolean use_mu = true;
+    constant Real k = 1;
+    constant Real c = 5;
+    replaceable partial function f
+      input Real u;
+      output Real y;
+    end f;
+  end PW;
+  partial package PI "a base modifying a constant of its own base"
+    extends PW(k = 2);
+  end PI;
+  package AI "one branch: f(u) = 2*u + 5"
+    extends PI(final use_mu = false);
+    redeclare function extends f
+    algorithm
+      y := 2*u + c;
+    end f;
+  end AI;
+  package BI "the other, unmodified: f(u) = 3*u + 50"
+    extends PI;
+    redeclare function extends f
+    algorithm
+      y := 3*u + 10*c;
+    end f;
+  end BI;
+  model H
+    replaceable package M = PW;
+    Real y = M.f(1 + time);
+    Real t = if M.use_mu then 1 + 0*time else 2 + 0*time;
+    Real kk = M.k*(1 + 0*time);
+  end H;
+  model Two "the branches' flags read from outside only"
+    H a(redeclare package M = AI);
+    H b(redeclare package M = BI);
+  end Two;
+  partial package PW2 "a base whose function g reads the flag"
+    constant Boolean use_mu = true;
+    constant Real k = 1;
+    function g
+      input Real u;
+      output Real y;
+    algorithm
+      y := if use_mu then 100*u else 1000*u;
+    end g;
+  end PW2;
+  partial package PG "g inherited through a base modifying another constant"
+    extends PW2(k = 2);
+  end PG;
+  package AG
+    extends PG(final use_mu = false);
+  end AG;
+  package BG
+    extends PG;
+  end BG;
+  model HG
+    replaceable package M = PG;
+    Real y = M.g(1 + 0*time);
+  end HG;
+  model TwoG "AG.g(1) = 1000, BG.g(1) = 100"
+    HG a(redeclare package M = AG);
+    HG b(redeclare package M = BG);
+  end TwoG;
+end V;
+"""
+
+
+def test_two_taken_branches_compile_where_no_class_of_theirs_reads_a_modified_constant(tmp_path):
+    """Modelica.Fluid's wall frictions (LaminarAndQuadraticTurbulent and Detailed set use_mu ... of
+    PartialWallFriction, read by the flow models only, from outside): the branches' functions read
+    no constant a branch modifies, so rumoca's mixing changes no number and the refusal is narrowed
+    (package_overrides.family_reads_modified). Worked by hand: AI.f(u) = 2*u + 5, BI.f(u) = 3*u + 50
+    at u = 1 + t; use_mu false in AI, true in BI; k = 2 in both. TwoG, whose inherited g reads the
+    flag, stays refused."""
+    src = tmp_path / "V.mo"
+    src.write_text(BRANCHES)
+    res = compile_model(src, "V.Two", backend="embedded", output=tmp_path / "v.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5,
+                            output=["a.y", "b.y", "a.t", "b.t", "a.kk", "b.kk"])
+    u = 1 + out["time"]
+    assert np.allclose(out["a.y"], 2 * u + 5) and np.allclose(out["b.y"], 3 * u + 50)
+    assert np.allclose(out["a.t"], 2.0) and np.allclose(out["b.t"], 1.0)
+    assert np.allclose(out["a.kk"], 2.0) and np.allclose(out["b.kk"], 2.0)
+    with pytest.raises(UnsupportedConstructError, match=r"package AG extends PG with a modified constant at "
+                                                        r".*V.mo:52, and V.TwoG also uses PG itself"):
+        compile_model(src, "V.TwoG", backend="embedded", output=tmp_path / "g.fmu")

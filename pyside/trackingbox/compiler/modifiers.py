@@ -38,7 +38,7 @@ from pathlib import Path
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
 from .modification_parse import Mod, parse_modification  # noqa: F401 (tests read parse_modification from here)
-from .package_overrides import check_overridden_constants, one_branch_taken, only_in_extends
+from .package_overrides import check_overridden_constants, family_reads_modified, one_branch_taken, only_in_extends
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
@@ -258,7 +258,8 @@ class ModifierCheck:
                         break
                     if found == target:
                         if (c.kind == "package" and only_in_extends(self.body(c), name)
-                                and one_branch_taken(self, used, target)):
+                                and (one_branch_taken(self, used, target)
+                                     or not family_reads_modified(self, used, target))):
                             break  # another package's extends of the base (see .package_overrides)
                         return True
         return False

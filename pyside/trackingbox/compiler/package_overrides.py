@@ -319,3 +319,55 @@ def one_branch_taken(check: ModifierCheck, used: list[ClassInfo], base: str) -> 
                 taken.add(final)
     leaves = {t for t in taken if not any(t != o and t in _ancestors(check, o) for o in taken)}
     return len(leaves) <= 1
+
+
+# --- branches whose modified constants no class of theirs reads ---------------------------------
+#
+# What rumoca 0.10.2 mixes between two taken branches is what the classes of the base compute from
+# the constants the branches modify: a function the branches inherit from a base that modifies a
+# constant of its own base computes one branch's call with the other's value (``TwoI`` in
+# ``tests/test_compiler_package_constants.py``), while a constant read from outside through the
+# taken package (``WallFriction.use_mu`` in a flow model) comes out right (measured there). So where
+# no class of the family (the base, its bases, the used packages extending it, and every class nested
+# in them) reads an element that an extends clause of the family gives a value, besides its own
+# declaration, the branches compute alike in rumoca and in Modelica (Modelica.Fluid's wall frictions:
+# ``LaminarAndQuadraticTurbulent`` and ``Detailed`` set ``use_mu``, ``use_roughness`` ... of
+# ``PartialWallFriction``, read only by the flow models, from outside).
+
+def _nested(check: ModifierCheck, name: str) -> Iterator[str]:
+    yield name
+    for child in check.index.children.get(name, {}).values():
+        yield from _nested(check, child)
+
+
+def family_reads_modified(check: ModifierCheck, used: list[ClassInfo], base: str) -> bool:
+    """Whether a class of *base*'s family among *used* reads an element that an extends clause of
+    the family modifies (see above); True where a class cannot be read."""
+    classes = check.index.classes
+    family = set(_ancestors(check, base))
+    family |= {c.name for c in used if c.kind == "package" and base in _ancestors(check, c.name)}
+    names: set[str] = set()
+    for name in family:
+        if name in classes and classes[name].kind == "package":
+            for _, _, valued in _modifications(check, classes[name]):
+                names |= set(valued)
+    if not names:
+        return False
+    read = re.compile(r"(?<![\w.])(?:" + "|".join(map(re.escape, sorted(names))) + r")\b")
+    declared = re.compile(r"\b(?:constant|parameter)\s+[A-Za-z_][\w.]*\s*(?:\[[^\];]*\]\s*)?(?:"
+                          + "|".join(map(re.escape, sorted(names))) + r")\b")
+    for top in family:
+        for name in _nested(check, top):
+            info = classes.get(name)
+            if info is None:
+                return True
+            text = check.body(info)
+            for m in _EXTENDS.finditer(text):  # the family's own modifications of the elements
+                end = m.end()
+                while end < len(text) and text[end] != ")":
+                    end = _skip_expr(text, end + (text[end] == ","))
+                text = text[:m.end()] + " " * (end - m.end()) + text[end:]
+            text = declared.sub(lambda d: " " * len(d.group(0)), text)
+            if read.search(text):
+                return True
+    return False

@@ -43,14 +43,14 @@ _PREFIXES = r"(?:(?:constant|parameter|input|output|final|discrete|flow|stream|i
 _MAX_DEPTH = 8
 
 
-def _own(index, cls: str, codes: dict[str, str]) -> str:
+def own_text(index, cls: str, codes: dict[str, str]) -> str:
     """The comment-free own text of *cls* (annotations blanked), kept in *codes*."""
     if cls not in codes:
         codes[cls] = index.own_code(index.classes[cls], annotations=False)
     return codes[cls]
 
 
-def _declaration(index, cls: str, name: str, codes: dict[str, str], seen: set[str] | None = None):
+def declaration(index, cls: str, name: str, codes: dict[str, str], seen: set[str] | None = None):
     """The declaration of the component *name* in class *cls* or its bases: (class, match) with the
     groups ``prefix``, ``type`` and ``after`` (the character after the name), or None."""
     seen = set() if seen is None else seen
@@ -59,12 +59,12 @@ def _declaration(index, cls: str, name: str, codes: dict[str, str], seen: set[st
     seen.add(cls)
     pattern = re.compile(rf"(?<![\w.])(?P<prefix>{_PREFIXES})(?P<type>[A-Za-z_][\w.]*)\s*(?:\[[^\];]*\]\s*)?"
                          rf"(?<=[\s\]]){re.escape(name)}\s*(?:\[[^\];]*\]\s*)?(?P<after>[(=;])")
-    for m in pattern.finditer(_own(index, cls, codes)):
+    for m in pattern.finditer(own_text(index, cls, codes)):
         if m.group("type") in KEYWORDS or m.group("type") in ("end", "import", "extends", "within"):
             continue
         return cls, m
     for base in index.bases(cls):
-        found = _declaration(index, base, name, codes, seen)
+        found = declaration(index, base, name, codes, seen)
         if found is not None:
             return found
     return None
@@ -76,7 +76,7 @@ def _record_constant(index, scope: str, name: str, codes: dict[str, str]):
     name is found as something else or not at all."""
     cur: str | None = scope
     while cur:
-        found = _declaration(index, cur, name, codes)
+        found = declaration(index, cur, name, codes)
         if found is not None:
             cls, m = found
             if "constant" not in m.group("prefix").split():
@@ -116,7 +116,7 @@ def field_value(index, scope: str, name: str, field: str, codes: dict[str, str] 
     if found is None:
         return None
     cls, m = found
-    code = _own(index, cls, codes)
+    code = own_text(index, cls, codes)
     if m.group("after") == "(":
         close = _skip_expr(code, m.end())
         if code[close:close + 1] != ")":
@@ -182,7 +182,7 @@ def replacements(index, model: str) -> dict[Path, dict[int, list[tuple[str, str]
     used = _with_redeclared(index, index.used_classes(model))
     codes: dict[str, str] = {}
     for cls in used:
-        _own(index, cls, codes)
+        own_text(index, cls, codes)
     constants = {m.group(1) for code in codes.values() for m in _CONSTANT.finditer(code)}
     out: dict[Path, dict[int, list[tuple[str, str]]]] = {}
     modified: dict[str, bool] = {}
