@@ -65,3 +65,36 @@ def test_a_redundant_equation_with_a_variable_left_is_still_an_error(tmp_path):
                    .replace("y = p_start", "y = x + p_start"))
     with pytest.raises(CompileError, match="initialisation problem of F has 3 equations for 2 unknowns"):
         compile_model(src, "F", backend="embedded", output=tmp_path / "f.fmu")
+
+
+NO_SOLUTION = """model G "x^2 + p = 0 has no real root for p > 0: its smallest residual is p, at x = 0"
+  parameter Real p = 0.5;
+  Real x(start = 0.3);
+initial equation
+  x^2 + p = 0;
+equation
+  der(x) = -x;
+end G;
+"""
+
+
+def test_an_initial_equation_without_solution_stops_the_run_naming_its_residual(tmp_path):
+    src = tmp_path / "G.mo"
+    src.write_text(NO_SOLUTION)
+    fmu = compile_model(src, "G", backend="embedded", output=tmp_path / "g.fmu").fmu
+    logged: list[str] = []
+
+    def logger(*args):
+        logged.append(" ".join(a.decode() if isinstance(a, bytes) else str(a) for a in args))
+
+    with pytest.raises(Exception, match="fmi3ExitInitializationMode failed"):
+        fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.5, logger=logger)
+    failed = [m for m in logged if "initialisation failed" in m]
+    assert failed, logged
+    # the residual named is x^2 + p at the solve's end: at least p (0.5), and finite, or the unknown is named
+    import re
+    m = re.search(r"residual ([-+0-9.eE]+|nan|inf) of the", failed[0])
+    if m:
+        assert float(m.group(1)) >= 0.5 - 1e-9
+    else:
+        assert "their solve gives x = " in failed[0], failed[0]

@@ -211,16 +211,25 @@ static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
     tbx_log(m, fmi3Error, "init", "initialisation failed: the Newton solve of the initial equations failed");
     return fmi3Error;
   }
+  /* an unknown the solve left non-finite is named first (its residual may read 0), then the
+     equation with the largest residual (a NaN one before any finite one) */
   for (i = 0; i < TBX_I_NZ; ++i) {
-    if (!(fabs(r[i]) <= fabs(r[worst])) || !isfinite(z[i])) worst = i;
-  }
-  for (i = 0; i < TBX_I_NZ; ++i) {
-    if (!(fabs(r[i]) <= TBX_I_TOL) || !isfinite(z[i])) {
+    if (!isfinite(z[i])) {
       snprintf(text, sizeof text, "initialisation failed at t = %.17g s: the initial equations have no "
-               "solution near the start values (residual %g of the %s)", m->t, r[worst], tbx_i_origin[worst]);
+               "solution near the start values (their solve gives %s = %g)", m->t, tbx_i_name[i], z[i]);
       tbx_log(m, fmi3Error, "init", text);
       return fmi3Error;
     }
+  }
+  for (i = 0; i < TBX_I_NZ; ++i) {
+    if (isnan(r[worst])) break;
+    if (isnan(r[i]) || fabs(r[i]) > fabs(r[worst])) worst = i;
+  }
+  if (TBX_I_NZ > 0 && !(fabs(r[worst]) <= TBX_I_TOL)) {
+    snprintf(text, sizeof text, "initialisation failed at t = %.17g s: the initial equations have no "
+             "solution near the start values (residual %g of the %s)", m->t, r[worst], tbx_i_origin[worst]);
+    tbx_log(m, fmi3Error, "init", text);
+    return fmi3Error;
   }
   for (i = 0; i < TBX_I_NZ; ++i) m->v[var_offset[tbx_i_unknown_vr[i]]] = z[i];
   m->up_to_date = 0;
@@ -609,6 +618,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(_c_array("long", "tbx_i_unknown_vr", _vrs(init.unknowns, refs, em.name, "the initial equations")))
         glue.append(_c_array("long", "tbx_i_known_vr", _vrs(known_syms, refs, em.name, "the initial equations")))
         glue.append(_c_array("char*", "tbx_i_origin", [_c_string(o) for o in init.origins]))
+        glue.append(_c_array("char*", "tbx_i_name", [_c_string(u.name()) for u in init.unknowns]))
         glue.append(_CALL % {"fn": "tbx_init", "P": "TBX_I"})
         glue.append(_INIT)
 
