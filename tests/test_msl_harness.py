@@ -223,3 +223,20 @@ def test_the_harness_gives_cvode_the_steps_a_fast_oscillation_needs(tmp_path):
         fmpy.simulate_fmu(str(fmu), stop_time=0.5, output_interval=0.1, relative_tolerance=1e-6)
     time_, _, problem = simulate(fmu, None)  # finite values to the end (no reference: no signals back)
     assert problem == "" and time_[-1] == pytest.approx(0.5)
+
+
+@pytest.mark.compile
+def test_a_failed_simulation_says_what_the_fmu_logged(tmp_path):
+    """x^2 + p = 0 has no real root: the FMU stops in fmi3ExitInitializationMode and logs why; the
+    harness's simulation keeps that message (a sim-failed line used to say only which call failed)."""
+    from trackingbox.compiler import compile_model
+    from trackingbox.compiler.msl_harness import simulate
+
+    src = tmp_path / "G.mo"
+    src.write_text("model G\n  parameter Real p = 0.5;\n  Real x(start = 0.3);\ninitial equation\n  x^2 + p = 0;\n"
+                   "equation\n  der(x) = -x;\nend G;\n")
+    fmu = compile_model(src, "G", backend="embedded", output=tmp_path / "g.fmu").fmu
+    errors: list[str] = []
+    with pytest.raises(Exception, match="fmi3ExitInitializationMode"):
+        simulate(fmu, None, errors)
+    assert any("initialisation failed at t = 0 s" in e for e in errors), errors

@@ -250,10 +250,12 @@ def run_example(request: dict) -> dict:
         except (OSError, ValueError) as exc:
             return {**out, "outcome": "crashed", "message": f"reference unreadable: {exc}"}
         t1 = time.perf_counter()
+        errors: list[str] = []
         try:
-            sim = simulate(fmu, ref)
+            sim = simulate(fmu, ref, errors)
         except Exception as exc:  # noqa: BLE001 - fmpy raises plain exceptions for FMU failures
-            return {**out, "outcome": "sim-failed", "message": f"{type(exc).__name__}: {str(exc)[:1500]}",
+            said = f" (the FMU: {errors[-1][:1000]})" if errors else ""
+            return {**out, "outcome": "sim-failed", "message": f"{type(exc).__name__}: {str(exc)[:1500]}{said}",
                     "sim_s": round(time.perf_counter() - t1, 2)}
         out["sim_s"] = round(time.perf_counter() - t1, 2)
         time_, values, problems = sim
@@ -293,8 +295,21 @@ def _cvode_steps(steps: int):
         sundials.CVodeSolver = original
 
 
-def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np.ndarray], str]:
-    """Simulate *fmu* over its default experiment; (time, {signal: values}, problem or "")."""
+def fmu_errors(sink: list[str]):
+    """An fmpy logger keeping the FMU's own error-level messages (status 3 and above) in *sink*: a
+    failed call then says why (\"initialisation failed ...: their solve gives x = nan\"), not only
+    which FMI function failed."""
+    def logger(*args) -> None:
+        status, message = args[-3], args[-1]
+        if int(status) >= 3:
+            sink.append(message.decode(errors="replace") if isinstance(message, bytes) else str(message))
+    return logger
+
+
+def simulate(fmu: Path, ref: Reference | None, errors: list[str] | None = None
+             ) -> tuple[np.ndarray, dict[str, np.ndarray], str]:
+    """Simulate *fmu* over its default experiment; (time, {signal: values}, problem or "").
+    *errors*: receives the FMU's error-level log messages (:func:`fmu_errors`)."""
     import fmpy
 
     md = fmpy.read_model_description(str(fmu))
@@ -317,7 +332,8 @@ def simulate(fmu: Path, ref: Reference | None) -> tuple[np.ndarray, dict[str, np
     wanted = [s for s in (ref.signals if ref is not None else ()) if s in names]
     with _cvode_steps(CVODE_MAX_STEPS):
         result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, relative_tolerance=tol,
-                                   output_interval=interval, output=wanted or None, fmi_type="ModelExchange")
+                                   output_interval=interval, output=wanted or None, fmi_type="ModelExchange",
+                                   logger=fmu_errors(errors) if errors is not None else None)
     time_ = np.asarray(result["time"], dtype=float)
     values = {s: np.asarray(result[s], dtype=float) for s in (wanted or result.dtype.names[1:])}
     bad = [s for s, v in values.items() if not np.all(np.isfinite(v))]
