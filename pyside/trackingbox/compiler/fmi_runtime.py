@@ -20,7 +20,7 @@ import casadi as ca
 
 from ..errors import CompileError
 from .events import MAX_EVENT_ITERATIONS
-from .flat_model import Assertion, ExplicitModel
+from .flat_model import Assertion, ExplicitModel, merged_asserts
 
 
 #: the largest residual of an initial equation accepted after the Newton solve
@@ -56,20 +56,9 @@ def value_references(xml: str) -> dict[str, int]:
 
 
 def fmu_asserts(em: ExplicitModel) -> list[Assertion]:
-    """The asserts the FMU checks: one per message and level, in the order of their first
-    appearance, holding where all of that message's hold (each traced call of an IF97 function
-    brings its own copies: ``MomentumBalanceFittings`` has 1 524 asserts, one output each of the
-    model function, for far fewer messages). A failure names the same message as before; a
-    warning logs once per violation of any of them."""
-    groups: dict[tuple[str, str], list[Assertion]] = {}
-    for a in em.asserts:
-        groups.setdefault((a.message, a.level), []).append(a)
-    out = []
-    for group in groups.values():
-        first = group[0]
-        cond = first.condition if len(group) == 1 else ca.mmin(ca.vertcat(*[a.condition for a in group]))
-        out.append(Assertion(condition=cond, message=first.message, level=first.level, origin=first.origin))
-    return out
+    """The asserts the FMU checks: one per message and level (:func:`.flat_model.merged_asserts`); a
+    warning logs once per violation of any of that message's."""
+    return merged_asserts(em.asserts)
 
 
 def _c_string(text: str) -> str:

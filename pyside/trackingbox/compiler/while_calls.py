@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number
-from .flat_model import Assertion, Value
+from .flat_model import Value, merged_asserts
 from .while_fold import _NAMES, _restored, event_state
 
 log = logging.getLogger(__name__)
@@ -149,21 +149,6 @@ def _constant(elems: list[Any]) -> bool:
     return all(isinstance(e, (bool, int, np.bool_, np.integer)) for e in elems)
 
 
-def _merged(asserts: list[Any]) -> list[Any]:
-    """One assert per message and level, holding where all of them hold: the small functions a traced one
-    inlines repeat their asserts at each call (``rho_ph`` recorded ``g1``'s four asserts 1 312 times each,
-    6 353 outputs in all, for 28 messages); a failure still names its message."""
-    groups: dict[tuple[str, str], list[Any]] = {}
-    for a in asserts:
-        groups.setdefault((a.message, a.level), []).append(a)
-    out = []
-    for group in groups.values():
-        first = group[0]
-        cond = first.condition if len(group) == 1 else ca.mmin(ca.vertcat(*[a.condition for a in group]))
-        out.append(Assertion(condition=cond, message=first.message, level=first.level, origin=first.origin))
-    return out
-
-
 def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tuple) -> Any:
     """(CasADi function, output layout, asserts, parameter symbols) of *fname* for the arguments'
     pattern *key*; None where it cannot be one."""
@@ -205,7 +190,7 @@ def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tupl
             return None
         layout.append(got[0])
         values += [ca.MX(float(e)) if is_number(e) else e for e in got[1]]
-    asserts = _merged(asserts)
+    asserts = merged_asserts(asserts)
     values += [a.condition for a in asserts]
     out = ca.vertcat(*values) if values else ca.MX(0, 1)
     own = {s.name() for s in inputs}
