@@ -103,6 +103,7 @@ def test_pair_then_track_heat_production(fmu_cache, tmp_path, capsys):
 RHO = 985.0
 
 
+@pytest.mark.long
 @pytest.mark.slow
 @pytest.mark.compile
 def test_frozen_pairing_keeps_the_hydraulic_pairs(fmu_cache, tmp_path):
