@@ -63,6 +63,8 @@ class SystemAssembly:
                 disc.append((held if initial else r, origin))
                 if initial:
                     self._discrete_initial_raw.append((r, origin))
+                    if held is not r and id(r) in self._equation_spans:  # the same equation, pre(v) read as v
+                        self._equation_spans[id(held)] = (held, self._equation_spans[id(r)][1])
             else:
                 cont.append((held if initial else r, origin))
         return cont, disc
@@ -123,13 +125,14 @@ class SystemAssembly:
         for block in blocks:
             if len(block.unknowns) != 1:
                 loop = ", ".join(names[j] for j in block.unknowns[:8])
-                raise self.unsupported(f"algebraic loop among discrete variables ({loop})")
+                raise self.unsupported(f"algebraic loop among discrete variables ({loop})",
+                                       span=self._span_of([eqs[i][0] for i in block.equations]))
             r, origin = eqs[block.equations[0]]
             u = unknowns[block.unknowns[0]]
             sol = solve_scalar_linear(r, u)
             if sol is None:
                 raise self.unsupported(f"equation of discrete variable {u.name()} that is not explicit in it "
-                                       f"({origin})")
+                                       f"({origin})", span=self._span_of([r]))
             out.append((u, sol))
         return out
 
@@ -151,7 +154,7 @@ class SystemAssembly:
                 left = set(incidence[i]) - set(solved)
                 if len(left) != 1:  # another ready equation solved for the same variable
                     raise self.unsupported(f"initial equation of discrete variables that other initial "
-                                           f"equations determine ({eqs[i][1]})")
+                                           f"equations determine ({eqs[i][1]})", span=self._span_of([eqs[i][0]]))
                 (j,) = left
                 r = eqs[i][0]
                 if solved:
@@ -159,7 +162,7 @@ class SystemAssembly:
                 sol = solve_scalar_linear(r, unknowns[j])
                 if sol is None:
                     raise self.unsupported(f"initial equation of discrete variable {unknowns[j].name()} that is "
-                                           f"not explicit in it ({eqs[i][1]})")
+                                           f"not explicit in it ({eqs[i][1]})", span=self._span_of([eqs[i][0]]))
                 solved[j] = sol
                 pending.remove(i)
         return [(unknowns[j], sol) for j, sol in solved.items()]

@@ -672,6 +672,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                         raise CompileError(f"equation {origin} in {self.model} reduces to {r} = 0")
                     continue
                 residuals.append((r, origin))
+                if isinstance(eq.get("span"), dict):
+                    self._equation_spans[id(r)] = (r, eq["span"])
         # bound continuous variables (binding equations in declarations)
         for sv in self.scalars.values():
             if sv.kind in ("continuous", "discrete") and sv.binding_node is not None:
