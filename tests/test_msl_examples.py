@@ -88,3 +88,30 @@ def test_analog_resistor_heats_as_its_closed_form_says(tmp_path):
     out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.01, output=["resistor.R_actual"])
     v = 220 * np.sin(2 * np.pi * out["time"])
     assert np.allclose(out["resistor.R_actual"], 50 + np.sqrt(2500 + 0.002 * v ** 2), rtol=1e-10)
+
+
+def test_state_graph_first_example_alternates_its_two_steps_every_second(tmp_path):
+    """Modelica.StateGraph.Examples.FirstExample (no reference on disk): initialStep -> transition1
+    (timer, 1 s) -> step -> transition2 (timer, 1 s) -> initialStep. By hand: initialStep active on
+    [0, 1], step on (1, 2], initialStep on (2, 3], ...; each transition's t counts the time its step
+    has been active. The InitialStep's `active = true` reaches localActive only through
+    pre(newActive) = pre(localActive) (an initial equation of several discrete variables)."""
+    import fmpy
+    import numpy as np
+
+    from trackingbox.compiler import compile_model
+
+    _need_msl()
+    fmu = compile_model(MSL, "Modelica.StateGraph.Examples.FirstExample", backend="embedded",
+                        output=tmp_path / "f.fmu").fmu
+    out = fmpy.simulate_fmu(str(fmu), stop_time=5.0, output_interval=0.25, record_events=False,
+                            output=["initialStep.active", "step.active", "transition1.t", "transition2.t"])
+    t = out["time"]
+    in_step = np.ceil(t - 1e-6) % 2 == 0  # (1, 2], (3, 4]
+    in_step[0] = False
+    assert np.array_equal(out["step.active"].astype(bool), in_step)
+    assert np.array_equal(out["initialStep.active"].astype(bool), ~in_step)
+    since = t - np.floor(t - 1e-6)  # time since the last switch, 1 at the switching instants
+    since[0] = 0.0
+    assert np.allclose(out["transition1.t"], np.where(in_step, 0.0, since), atol=1e-6)
+    assert np.allclose(out["transition2.t"], np.where(in_step, since, 0.0), atol=1e-6)

@@ -20,6 +20,7 @@ from .source import class_extent, read_text, strip_comments
 from .flat_model import REAL, Assertion, InitialSystem, ScalarVar
 from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
+from .initial_discrete import InitialDiscreteError, solve_initial_discrete
 from .initial_pre import hold_at_initialisation, pre_initial_equations
 
 log = logging.getLogger(__name__)
@@ -52,12 +53,18 @@ class SystemAssembly:
                                                                   continuous | names)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
         cont, disc = [], []
+        if initial:  # as written, pre(v) kept: for the discrete initialisation problem (.initial_discrete)
+            self._discrete_initial_raw = []
         for r, origin in residuals:
             held = ca.substitute([r], [a for a, _ in pres], [b for _, b in pres])[0] if pres else r
             used = {sym.name() for sym in ca.symvar(held)}
             if used & names and not used & continuous and not (initial and used & set(self.der_placeholders)):
                 # at an event pre(v) is the value before the step; at initialisation it is v
                 disc.append((held if initial else r, origin))
+                if initial:
+                    self._discrete_initial_raw.append((r, origin))
+                    if held is not r and id(r) in self._equation_spans:  # the same equation, pre(v) read as v
+                        self._equation_spans[id(held)] = (held, self._equation_spans[id(r)][1])
             else:
                 cont.append((held if initial else r, origin))
         return cont, disc
@@ -73,8 +80,10 @@ class SystemAssembly:
         unknowns = [sv.sym for sv in discrete] + [w.sym for w in ev.whens]
         eqs = list(residuals) + [(w.sym - w.value, f"when condition {w.sym.name()}") for w in ev.whens]
         assigned = self._discrete_order(eqs, unknowns, "equations of discrete variables")
-        at_start = dict(self._discrete_order(initial, [sv.sym for sv in discrete], "initial equations of discrete "
-                                             "variables", partial=True)) if initial else {}
+        order = self._initial_discrete(initial, [sv.sym for sv in discrete]) if initial else []
+        if order is None:  # an initial equation of several discrete variables: all solved together
+            self._pre_at_start = self._joint_initial(discrete, residuals)
+        at_start = dict(order or [])
         t = self.time
         updates: list[tuple[ca.MX, ca.MX]] = [(c.sym, c.value) for c in ev.conditions]
         for smp in ev.samples:
@@ -97,14 +106,12 @@ class SystemAssembly:
         return ev
 
     def _discrete_order(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX], what: str,
-                        partial: bool = False) -> list[tuple[ca.MX, ca.MX]]:
+                        ) -> list[tuple[ca.MX, ca.MX]]:
         """Solve equations of discrete variables one at a time, each for its variable, in dependency
         order (a loop of discrete variables is refused, naming them)."""
         names = [u.name() for u in unknowns]
         position = {n: i for i, n in enumerate(names)}
         incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
-        if partial:  # initial equations of some discrete variables: each solved for the one it has
-            return self._initial_discrete(eqs, unknowns, incidence)
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
@@ -118,32 +125,36 @@ class SystemAssembly:
         for block in blocks:
             if len(block.unknowns) != 1:
                 loop = ", ".join(names[j] for j in block.unknowns[:8])
-                raise self.unsupported(f"algebraic loop among discrete variables ({loop})")
+                raise self.unsupported(f"algebraic loop among discrete variables ({loop})",
+                                       span=self._span_of([eqs[i][0] for i in block.equations]))
             r, origin = eqs[block.equations[0]]
             u = unknowns[block.unknowns[0]]
             sol = solve_scalar_linear(r, u)
             if sol is None:
                 raise self.unsupported(f"equation of discrete variable {u.name()} that is not explicit in it "
-                                       f"({origin})")
+                                       f"({origin})", span=self._span_of([r]))
             out.append((u, sol))
         return out
 
-    def _initial_discrete(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX],
-                          incidence: list[list[int]]) -> list[tuple[ca.MX, ca.MX]]:
-        """Initial equations of some discrete variables, each solved for the one variable of it not
-        solved yet (``pre(state) = initialState(seed)`` first, then ``r = random(pre(state))``), the
-        values already solved substituted into the later ones."""
+    def _initial_discrete(self, eqs: list[tuple[ca.MX, str]],
+                          unknowns: list[ca.MX]) -> list[tuple[ca.MX, ca.MX]] | None:
+        """Initial equations of some discrete variables (``pre(v)`` read as ``v``), each solved for the
+        one variable of it not solved yet (``pre(state) = initialState(seed)`` first, then
+        ``r = random(pre(state))``), the values already solved substituted into the later ones; None
+        where one names several unsolved variables (then :meth:`_joint_initial` solves them all)."""
+        position = {u.name(): i for i, u in enumerate(unknowns)}
+        incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position}) for r, _ in eqs]
         solved: dict[int, ca.MX] = {}
         pending = list(range(len(eqs)))
         while pending:
             ready = [i for i in pending if len(set(incidence[i]) - set(solved)) == 1]
             if not ready:
-                raise self.unsupported(f"initial equation of several discrete variables ({eqs[pending[0]][1]})")
+                return None
             for i in ready:
                 left = set(incidence[i]) - set(solved)
                 if len(left) != 1:  # another ready equation solved for the same variable
                     raise self.unsupported(f"initial equation of discrete variables that other initial "
-                                           f"equations determine ({eqs[i][1]})")
+                                           f"equations determine ({eqs[i][1]})", span=self._span_of([eqs[i][0]]))
                 (j,) = left
                 r = eqs[i][0]
                 if solved:
@@ -151,10 +162,36 @@ class SystemAssembly:
                 sol = solve_scalar_linear(r, unknowns[j])
                 if sol is None:
                     raise self.unsupported(f"initial equation of discrete variable {unknowns[j].name()} that is "
-                                           f"not explicit in it ({eqs[i][1]})")
+                                           f"not explicit in it ({eqs[i][1]})", span=self._span_of([eqs[i][0]]))
                 solved[j] = sol
                 pending.remove(i)
         return [(unknowns[j], sol) for j, sol in solved.items()]
+
+    def _joint_initial(self, discrete: list[ScalarVar],
+                       residuals: list[tuple[ca.MX, str]]) -> dict[str, tuple[ca.MX, ca.MX]]:
+        """The ``pre`` values held at initialisation from the discrete initialisation problem solved
+        as a whole (.initial_discrete); a part it cannot solve is refused, naming its equations."""
+        held = getattr(self, "_pre_at_start", {}) or {}
+        initial = list(self._discrete_initial_raw) + [(p - v, f"initial equation of {n}") for n, (p, v) in held.items()]
+        starts = {sv.name: self._start_of(sv) for sv in discrete}
+        try:
+            values = solve_initial_discrete(initial, residuals, [sv.sym for sv in discrete], dict(self._pre), starts,
+                                            self.events)
+        except InitialDiscreteError as exc:
+            raise self.unsupported(f"initial equations of discrete variables: {exc.what} "
+                                   f"({'; '.join(exc.origins[:6])})",
+                                   span=self._span_of([initial[i][0] for i in exc.initial])) from None
+        return {**held, **values}
+
+    def _span_of(self, residuals: list[ca.MX]) -> dict | None:
+        """The source span of the first of *residuals* whose equation's span is known (else None, and
+        no other expression's span is taken for it)."""
+        for r in residuals:
+            known = self._equation_spans.get(id(r))
+            if known is not None and known[0] is r:
+                return known[1]
+        self._span = None
+        return None
 
     def _start_of(self, sv: ScalarVar) -> float:
         """The start value of a variable (0 when it has none), with parameters at their start values."""

@@ -174,6 +174,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._when_targets: set[str] = set()
         self._uses_initial = False
         self._discrete_defs: list[tuple[ca.MX, str]] = []  # when-equations, discrete outputs of algorithms
+        self._equation_spans: dict[int, tuple[ca.MX, dict]] = {}  # id(residual) -> (it, its equation's span)
 
     # ------------------------------------------------------------------ errors
     def location(self, pattern: str | None = None, span: dict[str, Any] | None = None) -> list[Location]:
@@ -671,6 +672,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                         raise CompileError(f"equation {origin} in {self.model} reduces to {r} = 0")
                     continue
                 residuals.append((r, origin))
+                if isinstance(eq.get("span"), dict):
+                    self._equation_spans[id(r)] = (r, eq["span"])
         # bound continuous variables (binding equations in declarations)
         for sv in self.scalars.values():
             if sv.kind in ("continuous", "discrete") and sv.binding_node is not None:
@@ -698,6 +701,8 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                         raise CompileError(f"{origin} in {self.model} reduces to {r} = 0")
                     continue
                 init_residuals.append((r, origin))
+                if isinstance(eq.get("span"), dict):
+                    self._equation_spans[id(r)] = (r, eq["span"])
         for section in self.flat.get("initial_algorithms") or []:
             init_residuals.extend(self.algorithm_residuals(section, initial=True))
         extra = [n for n in self.der_placeholders if n not in state_names]
