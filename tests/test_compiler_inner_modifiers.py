@@ -65,3 +65,55 @@ def test_the_class_defaults_stay_where_the_class_has_other_instances(tmp_path):
     other.write_text(PACKAGE.replace("    Sub s;\n  end M;", "    Sub s;\n    Sys plain;\n  end M;"))
     assert "Sys plain;" in other.read_text()
     assert patches(index_for(resolve_source(other), ()), "K.M", {other}) == {}  # ... not where it has another use
+
+
+NAMED = """package L
+  type E = enumeration(Free, Fixed, Steady);
+  package Liquid
+    constant Boolean singleState = SINGLE;
+  end Liquid;
+  model Sys
+    parameter E other = E.Fixed;
+    parameter E dyn = other;
+  end Sys;
+  model Sub
+    outer Sys system;
+    parameter E dyn = system.dyn;
+    Real x(start = 2);
+  initial equation
+    if dyn <> E.Steady then
+      x = 2;
+    end if;
+  equation
+    if dyn == E.Steady then
+      x = 3;
+    elseif dyn == E.Free then
+      der(x) = 1 - x;
+    else
+      der(x) = 5 - x;
+    end if;
+  end Sub;
+  model M
+    replaceable package Medium = Liquid;
+    parameter E chosen = if Medium.singleState then E.Steady else E.Free;
+    inner Sys system(dyn = chosen);
+    Sub s;
+  end M;
+end L;
+"""
+
+
+@pytest.mark.parametrize("single, expected", [("true", lambda t: 3 + 0 * t), ("false", lambda t: 1 + np.exp(-t))],
+                         ids=["singleState", "two-states"])
+def test_an_inner_modification_naming_a_parameter_reaches_the_outer_conditions(tmp_path, single, expected):
+    """``system(massDynamics = systemMassDynamics)`` as Modelica.Fluid.Examples.IncompressibleFluidNetwork
+    has it, the model's parameter bound to ``if Medium.singleState then ...``: the outer component takes
+    the branch of that value, here one with another structure (rumoca 0.10.2 alone took Sys's default,
+    E.Fixed: der(x) = 5 - x). By hand: E.Steady gives x = 3; E.Free, der(x) = 1 - x from x(0) = 2,
+    gives x = 1 + exp(-t)."""
+    src = tmp_path / "L.mo"
+    src.write_text(NAMED.replace("SINGLE", single))
+    res = compile_model(src, "L.M", backend="embedded", output=tmp_path / "m.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=2.0, output_interval=0.25, relative_tolerance=1e-9,
+                            output=["s.x"])
+    assert np.allclose(out["s.x"], expected(out["time"]), rtol=1e-5, atol=1e-6)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
+from . import inner_defaults
 from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
@@ -442,6 +443,9 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
                        "stack_mb": config.get("frontend_stack_mb"),
                        "roots": [str(r) for r in tree.roots] if tree.roots else None}
             answer = tree.rename(_run_worker(request, req, res, source, model, timeout))
+            if answer["ok"] and tree.pruned:
+                answer = _with_inner_values(answer, source, model, libraries, index, Path(tmp), request, req, res,
+                                            timeout)
             if answer["ok"]:
                 if cache is not None:
                     cache.put(key, answer["flat"])
@@ -471,6 +475,25 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
             log.info("front end: %s failed on the files its lookup reaches (%s); again on the whole "
                      "libraries", model, answer["message"].splitlines()[0][:200])
         return answer
+
+
+def _with_inner_values(answer: dict, source: ModelicaSource, model: str, libraries: tuple[Path, ...], index,
+                       tmp: Path, request: dict, req: Path, res: Path, timeout: float) -> dict:
+    """*answer* flattened again with the values its flat model gives the inner modifications that name
+    other parameters (:mod:`.inner_defaults`: rumoca 0.10.2 reads an outer parameter from its class's
+    default); *answer* itself where there are none or the second flatten fails."""
+    reached = index.frontend_files(model) if model in index.classes else None
+    names = inner_defaults.pending(index, model, reached) if reached else set()
+    roots = {r.name.removesuffix(".mo") for r in index.roots}
+    values = inner_defaults.flat_values(answer["flat"], names, roots) if names else {}
+    if not values:
+        return answer
+    log.info("front end: %s again with the inner modifications %s", model,
+             ", ".join(f"{k} = {v}" for k, v in sorted(values.items())))
+    tree = build_tree(source, model, libraries, tmp / "inner", prune=True, index=index, inner_values=values)
+    request = {**request, "entry": str(tree.entry), "roots": [str(r) for r in tree.roots] if tree.roots else None}
+    again = tree.rename(_run_worker(request, req, res, source, model, timeout))
+    return again if again["ok"] else answer
 
 
 def _validate(source: ModelicaSource, model: str, validate: tuple[Path, ...], parse_error: bool, tmp: Path,

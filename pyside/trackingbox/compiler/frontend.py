@@ -44,7 +44,7 @@ from .source import ModelicaSource
 
 log = logging.getLogger(__name__)
 
-TREE_VERSION = 2
+TREE_VERSION = 3
 """Changes when what a tree holds changes (it is part of the flat cache's key)."""
 
 CACHE_LIMIT_MB = 512
@@ -110,7 +110,8 @@ class FrontendTree:
 
 
 def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], dest: Path,
-               prune: bool = True, index: LibraryIndex | None = None, computed: bool = False) -> FrontendTree:
+               prune: bool = True, index: LibraryIndex | None = None, computed: bool = False,
+               inner_values: dict[str, str] | None = None) -> FrontendTree:
     """Copy what the front end needs for *model* under *dest* (see the module docstring).
 
     With *prune*, the files the model can reach, from the source and the libraries, under
@@ -119,11 +120,13 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     (``dest/src/...`` relative to the source's root directory, entry its ``package.mo`` or file,
     the libraries as they are). With *computed* (a retry after rumoca counted an assert as an
     equation), parameters bound to a call of a function that asserts are computed at
-    initialisation (:func:`.rewrite.computed_parameter_bindings`).
+    initialisation (:func:`.rewrite.computed_parameter_bindings`). *inner_values*: the values of
+    inner modifications that name other parameters, read from a first flat model
+    (:func:`.inner_defaults.flat_values`).
     """
     index = index if index is not None else index_for(source, libraries)
     reached = index.frontend_files(model) if model in index.classes else None
-    inner = inner_defaults.patches(index, model, reached) if reached else {}  # rumoca's outer references
+    inner = inner_defaults.patches(index, model, reached, inner_values) if reached else {}  # outer references
     inner = _chained(inner, discrete_connects.patches(index, model) if reached else {})
     repeated = package_overrides.patches(ModifierCheck(index), model) if reached else {}  # (values rumoca loses)
     inner = _chained(inner, repeated)

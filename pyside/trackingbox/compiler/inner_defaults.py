@@ -18,6 +18,15 @@ top-level library package, e.g. an enumeration literal), the parameter is declar
 class's own text, and no file the model reaches declares another component of that class (other
 than ``inner``/``outer``) or extends it. Lines are kept; byte offsets after an edit in that one
 file move by the difference in length.
+
+A modification whose value is a name (``system(massDynamics = systemMassDynamics)`` in
+``Modelica.Fluid.Examples.IncompressibleFluidNetwork``, where the model's own parameter is bound to
+``if Medium.singleState then Dynamics.SteadyState else ...``) cannot be copied into the class. The front
+end evaluates that parameter's binding right, though: :func:`pending` names such modifications,
+:func:`flat_values` reads their values from a first flat model (following the binding chain to a
+literal), and the tree is built again with them (:func:`patches`' *values*). Before, every pipe of that
+example took ``der(ms) = mb_flows`` instead of its steady mass balance ``0 = mb_flows`` (System's default
+``massDynamics = energyDynamics``), and its warm-up ran 1-2 % slow.
 """
 from __future__ import annotations
 
@@ -64,6 +73,18 @@ def _literal_mods(mods: str, roots: set[str]) -> dict[str, str]:
         if re.fullmatch(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+", value) and value.split(".")[0] not in roots:
             continue  # a name the class's scope might resolve otherwise
         out[m.group(1)] = value
+    return out
+
+
+def _named_mods(mods: str, roots: set[str]) -> dict[str, str]:
+    """The ``name = other.name`` modifications of *mods* that :func:`_literal_mods` leaves out (a value
+    naming the model's own parameter or a constant the class's scope might resolve otherwise)."""
+    literal = _literal_mods(mods, roots)
+    out: dict[str, str] = {}
+    for part in _split_top(mods):
+        m = _MOD.fullmatch(part)
+        if m and m.group(1) not in literal and re.fullmatch(r"[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", m.group(2).strip()):
+            out[m.group(1)] = m.group(2).strip()
     return out
 
 
@@ -126,32 +147,80 @@ def _declaration(code: bytes, data: bytes, start: int, stop: int, param: str) ->
     return k, k + _binding_end(code, data, k, end)
 
 
-def patches(index, model: str, needed: set[Path]) -> dict[Path, Callable[[bytes], bytes]]:
-    """For the files of *needed* that hold the class of an ``inner`` component of *model*'s own text:
-    the edit making that component's literal modifications the class's defaults (see the module)."""
+def _inners(index, model: str, needed: set[Path]):
+    """(component, class, literal modifications, named modifications) of each ``inner`` component of
+    *model*'s own text whose class may be patched (no other use among *needed*)."""
     info = index.classes.get(model)
     if info is None:
-        return {}
+        return
     data = info.file.read_bytes()
     text = data.decode("utf-8", errors="replace")
     lo, hi = len(text[:info.start].encode()), len(text[:info.end].encode())
     code = _code_mask(data)[0]
     roots = {r.name.removesuffix(".mo") for r in index.roots}
-    edits: dict[Path, list[tuple[str, str, str]]] = {}
     for m in _INNER.finditer(code, lo, hi):
         close = _matching_paren(code, m.end() - 1)
         if close is None:
             continue
-        mods = _literal_mods(data[m.end():close].decode("utf-8", errors="replace"), roots)
+        mods = data[m.end():close].decode("utf-8", errors="replace")
         cls = _resolve(index, model, m.group(1).decode())
-        if not mods or cls is None:
+        if cls is None:
             continue
         other = _other_uses(needed, cls.rsplit(".", 1)[-1])
         if other is not None:
             log.debug("inner %s of %s: its class %s is used elsewhere (%s); defaults kept", m.group(2).decode(),
                       model, cls, other)
             continue
-        edits.setdefault(index.classes[cls].file, []).extend((cls, k, v) for k, v in mods.items())
+        yield m.group(2).decode(), cls, _literal_mods(mods, roots), _named_mods(mods, roots)
+
+
+def pending(index, model: str, needed: set[Path]) -> set[str]:
+    """Flat names (``system.massDynamics``) of the inner modifications whose values are names: their
+    values come from a first flat model (:func:`flat_values`)."""
+    return {f"{comp}.{param}" for comp, _, _, named in _inners(index, model, needed) for param in named}
+
+
+def flat_values(flat: dict, names: set[str], roots: set[str]) -> dict[str, str]:
+    """The values of *names* in the front end's *flat* model, as literals a class default may hold:
+    the binding chain (``system.massDynamics`` -> ``systemMassDynamics`` -> ...) followed to a number,
+    ``true``/``false`` or a name rooted at a package of *roots* (an enumeration literal); names whose chain
+    ends elsewhere (an expression, a variable without binding) are left out."""
+    variables = flat.get("variables", {})
+    out: dict[str, str] = {}
+    for name in sorted(names):
+        at, seen = name, set()
+        while at in variables and at not in seen:
+            seen.add(at)
+            binding = variables[at].get("binding")
+            ref = binding.get("VarRef") if isinstance(binding, dict) else None
+            lit = binding.get("Literal") if isinstance(binding, dict) else None
+            if ref is not None and not ref.get("subscripts"):
+                at = ref["name"]["name"]
+                continue
+            if lit is not None and len(lit.get("value", {})) == 1:
+                kind, value = next(iter(lit["value"].items()))
+                if kind == "Boolean":
+                    out[name] = "true" if value else "false"
+                elif kind in ("Integer", "Real") and not isinstance(value, bool):
+                    out[name] = repr(value)
+            break
+        else:
+            if at not in variables and at != name and at.split(".")[0] in roots:
+                out[name] = at
+    return out
+
+
+def patches(index, model: str, needed: set[Path], values: dict[str, str] | None = None
+            ) -> dict[Path, Callable[[bytes], bytes]]:
+    """For the files of *needed* that hold the class of an ``inner`` component of *model*'s own text:
+    the edit making that component's literal modifications the class's defaults (see the module).
+    *values*: literals for its named modifications (``{"system.massDynamics": "Modelica...SteadyState"}``,
+    :func:`flat_values`)."""
+    edits: dict[Path, list[tuple[str, str, str]]] = {}
+    for comp, cls, mods, named in _inners(index, model, needed):
+        mods = {**mods, **{p: values[f"{comp}.{p}"] for p in named if f"{comp}.{p}" in (values or {})}}
+        if mods:
+            edits.setdefault(index.classes[cls].file, []).extend((cls, k, v) for k, v in mods.items())
 
     def patch_for(items: list[tuple[str, str, str]]) -> Callable[[bytes], bytes]:
         def patch(body: bytes) -> bytes:
