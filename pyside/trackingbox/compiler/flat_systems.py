@@ -704,20 +704,20 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
 
 
 FLAT_NUDGE = 1e-3
-"""Relative move of an unknown whose column of the loop's Jacobian is zero at the guess (see _off_flat_columns)."""
+"""Relative move of an unknown whose column of the loop's Jacobian is zero at the guess (see _flat_kick)."""
 
 
-def _off_flat_columns(jacobian: ca.Function, start: ca.MX | ca.DM, values: ca.MX | ca.DM) -> ca.MX:
-    """*start*, with each unknown that no residual responds to there (its column of the Jacobian exactly
-    zero) moved by FLAT_NUDGE * (1 + |z|). At such a guess every Gauss-Newton step leaves that unknown
+def _flat_kick(jacobian: ca.Function, start: ca.MX | ca.DM, values: ca.MX | ca.DM) -> ca.MX:
+    """FLAT_NUDGE * (1 + |z|) for each unknown that no residual responds to at *start* (its column of the
+    Jacobian exactly zero), 0 for the others. At such a guess every Gauss-Newton step leaves that unknown
     where it is, and Newton's matrix is singular: a loss that goes as m_flow^2 or m_flow*|m_flow|
     (MSL ``Fluid.Fittings.AbruptAdaptor``'s total-pressure balance) from m_flow.start = 0, where the
-    loss's derivative vanishes although the loop has roots on both sides. Moved off the flat point (in the
-    positive direction: a flow's design direction), the damped steps reach a root on that side, and the
-    nearest solution's Newton ends there. A column that is not finite is left as it is."""
+    loss's derivative vanishes although the loop has roots on both sides. The damped steps start from
+    the guess moved off the flat point both ways (:func:`_or_nearest_solution` keeps the root nearer the
+    guess). A column that is not finite is left as it is."""
     jac = jacobian(start, values, start)
     flat = ca.sum1(jac * jac).T == 0
-    return start + ca.if_else(flat, FLAT_NUDGE * (1 + ca.fabs(start)), ca.DM.zeros(start.shape[0], 1))
+    return ca.if_else(flat, FLAT_NUDGE * (1 + ca.fabs(start)), ca.DM.zeros(start.shape[0], 1))
 
 
 def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
@@ -740,7 +740,7 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     if_else). It is first sought from where a damped Gauss-Newton iteration (_damped_newton) ends
     (from the guess, Newton's steps on the optimality conditions can swing across the root of a
     square-root flow law; from a guess where the loop's residuals do not respond to an unknown, from the
-    guess moved off that flat point by _off_flat_columns), then from the guess; a loop that neither solves leaves NaN, so that the
+    guess moved off that flat point both ways by _flat_kick, the end nearer the guess), then from the guess; a loop that neither solves leaves NaN, so that the
     importer's solver fails rather than going on with values that do not satisfy the equations."""
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
@@ -769,15 +769,24 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
     # through the iteration (which tripled the generated C of TanksWithOverflow)
     jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])
-    z2 = _damped_newton(name, distance, n, _off_flat_columns(jacobian, start, values), values, start)
-    jac2 = jacobian(z2, values, start)
-    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, start - z2))
+    first = ca.MX.sym(f"{name}_first", n)
+    end = _damped_newton(name, distance, n, first, p, z0)
+    jac2 = jacobian(end, p, z0)
+    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, z0 - end))
     # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:
     # skipped, NaN, as it would end)
-    z2 = ca.if_else(ca.sumsqr(z2) + ca.sumsqr(y2) < ca.inf,
-                    nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n],
-                    ca.DM.nan(n, 1), True)
+    end = ca.if_else(ca.sumsqr(end) + ca.sumsqr(y2) < ca.inf,
+                     nearest(ca.stop_diff(ca.vertcat(end, y2), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
+    damped = ca.Function(f"{name}_damped_solution", [first, p, z0], [end])
+    kick = _flat_kick(jacobian, start, values)
+    z2 = damped(start + kick, values, start)
     solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
+    # off a flat point, both ways: the root nearer the guess where both sides reach one
+    z3 = ca.if_else(ca.sumsqr(kick) > 0, damped(start - kick, values, start), ca.DM.nan(n, 1), True)
+    solves3 = ca.sumsqr(distance(z3, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z3))) ** 2
+    nearer3 = ca.logic_and(solves3, ca.logic_or(ca.logic_not(solves2), ca.sumsqr(z3 - start) < ca.sumsqr(z2 - start)))
+    z2 = ca.if_else(nearer3, z3, z2)
+    solves2 = ca.logic_or(solves2, solves3)
     # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
     # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs
     # most where it fails (100 steps with second derivatives)
