@@ -180,3 +180,31 @@ def test_the_damped_iteration_stops_at_a_step_no_length_improves(monkeypatch):
 
     one = calls(1)
     assert one >= 23 and calls(60) == one
+
+
+def test_a_loop_flat_at_its_guess_is_moved_off_the_flat_point():
+    """r = p - z^2 (3 for z > 0, else 4) from z = 0 (a loss that goes as a flow squared, from
+    m_flow.start = 0: MSL ``Fluid.Examples.Explanatory.MomentumBalanceFittings``): r' = 0 at the guess, so
+    Newton's matrix is singular and every Gauss-Newton step is zero there (NaN before). Of its roots
+    sqrt(p/3) and -sqrt(p/4) (hand-worked) the loop gives the one nearer the guess; a two-unknown loop
+    whose flow column alone is zero at the guess, the same."""
+    z, p = ca.MX.sym("z", 1), ca.MX.sym("p")
+    newton, sol = _solve(p - z ** 2 * ca.if_else(z > 0, 3, 4), z, p, [0.0], 1e4)
+    assert not np.all(np.isfinite(newton))
+    assert abs(sol[0] + np.sqrt(1e4 / 4)) < 1e-8
+    z2 = ca.MX.sym("z", 2)  # (flow, pressure): p2 = 1e5 + 3 m |m| and p2 = 1.2e5
+    _, sol2 = _solve(ca.vertcat(z2[1] - 1e5 - 3 * z2[0] * ca.fabs(z2[0]), z2[1] - p), z2, p, [0.0, 1e5], 1.2e5)
+    assert np.allclose(sol2, [np.sqrt(2e4 / 3), 1.2e5], rtol=1e-9, atol=0)
+
+
+def test_a_flow_loop_started_at_zero_flow_simulates(tmp_path):
+    """The same in an FMU, each output solved again from m.start = 0: 0.5 m^2 k = dp with a loss
+    coefficient k = -6 for m > 0 and -8 for m < 0 (a sudden expansion's total-pressure balance, MSL
+    ``Fittings``, inside a function: no event freezes the relation) and dp = -1e4 (1 + t): roots
+    sqrt(1e4 (1 + t) / 3) and -sqrt(1e4 (1 + t) / 4), the second nearer the guess (hand-worked)."""
+    src = tmp_path / "FlatStart.mo"
+    src.write_text("model FlatStart\n  Real m(start = 0);\n  Real s(start = 0, fixed = true);\nequation\n"
+                   "  der(s) = 1;\n  -1e4*(1 + time) = 0.5*m^2*noEvent(if m > 0 then -6 else -8);\nend FlatStart;\n")
+    res = compile_model(src, "FlatStart", backend="embedded", output=tmp_path / "f.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.25, output=["m"])
+    assert np.allclose(out["m"], -np.sqrt(1e4 * (1 + out["time"]) / 4), rtol=1e-9, atol=0)

@@ -435,6 +435,15 @@ class SystemAssembly:
         # solve block by block: an explicit assignment where a scalar block is linear in its unknown
         # (so e.g. a mass is found from a level before a temperature divides by it), Newton for loops
         guesses = [ca.MX.sym(f"guess({u.name()})") for u in unknowns]
+        full = self._whole_initial_solution(residuals, exprs, blocks, unknowns, guesses)
+        if full is not None:
+            for sym in ca.symvar(ca.vertcat(*full)):
+                if sym.name() not in position and not sym.name().startswith("guess("):
+                    knowns.setdefault(sym.name(), sym)
+            return InitialSystem(
+                unknowns=unknowns, knowns=[knowns[n] for n in sorted(knowns)], residual=list(exprs),
+                free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
+                origins=[o for _, o in residuals], guesses=guesses, solution=full)
         done_syms: list[ca.MX] = []
         done_vals: list[ca.MX] = []
         solution: dict[int, ca.MX] = {}
@@ -458,6 +467,66 @@ class SystemAssembly:
             free_states=[s.name for s in free], computed_parameters=[s.name for s in computed],
             origins=[o for _, o in residuals], guesses=guesses, solution=[solution[j] for j in range(len(unknowns))],
         )
+
+    def _whole_initial_solution(self, residuals: list[tuple[ca.MX, str]], exprs: list[ca.MX], blocks: Any,
+                                unknowns: list[ca.MX], guesses: list[ca.MX]) -> list[ca.MX] | None:
+        """The initial unknowns solved from the initial equations together with the model's own equations
+        (all algebraic variables unknowns, from their start values), as a Modelica tool sorts its
+        initialisation problem; None where the initial equations' blocks in the unknowns alone (the model's
+        causalised assignments substituted) need no Newton iteration in a free state whose start value is 0
+        (the default where it has none; the front end gives every variable one). From there: a vessel's mass and internal energy (the embedded path keeps the
+        differentiated variables as states) from 0 kg and 0 J, where its medium (p, h) has no solution,
+        although the initial equations fix p and h, from which the model's equations give the mass
+        explicitly (MSL ``Fluid.Examples.NonCircularPipes``' pipe volumes and ``PumpingSystem``'s tank)."""
+        model = getattr(self, "_model_system", None)
+        names = [u.name() for u in unknowns]
+        unstarted = {n for n in names if n in self.scalars and self._start_of(self.scalars[n]) == 0}
+        if model is None or not any(
+                (len(b.unknowns) > 1 or solve_scalar_linear(exprs[b.equations[0]], unknowns[b.unknowns[0]]) is None)
+                and any(names[j] in unstarted for j in b.unknowns) for b in blocks):
+            return None
+        m_res, m_unk = model
+        taken = set(names)
+        syms = list(unknowns) + [u for u in m_unk if u.name() not in taken]
+        eqs = [r for r, _ in residuals] + [r for r, _ in m_res]
+        position = {u.name(): i for i, u in enumerate(syms)}
+        if len(eqs) != len(syms) or len(position) != len(syms):
+            return None
+        try:
+            fblocks = blt([sorted({position[v.name()] for v in ca.symvar(e) if v.name() in position}) for e in eqs],
+                          len(syms))
+        except StructuralError:
+            return None
+        start = {n: self._start_of(self.scalars[n]) if n in self.scalars else 0.0 for n in position}
+        first: dict[str, Any] = {n: g for n, g in zip(names, guesses)}
+        done_syms: list[ca.MX] = []
+        done_vals: list[ca.MX] = []
+        for k, block in enumerate(fblocks):
+            res = [eqs[i] for i in block.equations]
+            if done_syms:
+                res = ca.substitute(res, done_syms, done_vals)
+            unk = [syms[j] for j in block.unknowns]
+            sol = solve_scalar_linear(res[0], unk[0]) if len(unk) == 1 else None
+            if sol is not None:
+                done_syms.append(unk[0])
+                done_vals.append(sol)
+                continue
+            tears, solved, residual = self._tear(res, unk, {u.name(): start[u.name()] for u in unk})
+            sols = self._torn_rootfinder(f"initw{k}", residual, tears, solved,
+                                         [ca.MX(first.get(t.name(), start[t.name()])) for t in tears])
+            block_syms, block_vals = list(tears), list(sols)
+            for var, expr in solved:
+                block_vals.append(ca.substitute([expr], block_syms, block_vals)[0])
+                block_syms.append(var)
+            done_syms += block_syms
+            done_vals += block_vals
+        value = dict(zip((s.name() for s in done_syms), done_vals))
+        solution = [value[n] for n in names]
+        if any(v.name() in position for v in ca.symvar(ca.vertcat(*solution))):
+            return None
+        log.info("%s: initialisation solved with the model's equations (a free state starting at 0 in a "
+                 "nonlinear block)", self.model)
+        return solution
 
     def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None
               ) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
@@ -632,11 +701,11 @@ DAMPED_HALVINGS = 24
 
 
 def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.DM,
-                   values: ca.MX | ca.DM) -> ca.MX:
+                   values: ca.MX | ca.DM, anchor: ca.MX | ca.DM | None = None) -> ca.MX:
     """A root of the scaled residual *distance(z, p, z0)* by Gauss-Newton steps of minimum norm,
     dz = -J'(J J' + mu I)^-1 r (defined whatever the rank of J), each shortened by halving until the
     residual's square falls by the Armijo fraction (the shortest length tried is taken otherwise),
-    from *start*. Newton's full steps swing across the root of a flow law that goes as the square
+    from *start*, the residual scaled at *anchor* (the guess; *start* where not given). Newton's full steps swing across the root of a flow law that goes as the square
     root of a pressure difference (from a flow q ~ sqrt(x), the full step lands at -x, and back):
     e.g. MSL ``Fluid.Examples.Tanks.TanksWithOverflow``'s overflow pipe between two ports above their
     levels. The iteration is a fixed number of steps (one step function, folded), so that it is
@@ -667,7 +736,25 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
     move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 0), trial(0), True)])
     zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once a step found no length that lowers
     step = ca.Function(f"{name}_damped_step", [zs, q], [ca.if_else(zs[n] > 0.5, zs, move(zs[:n], q), True)])
-    return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, start))[:n]
+    anchor = start if anchor is None else anchor
+    return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, anchor))[:n]
+
+
+FLAT_NUDGE = 1e-3
+"""Relative move of an unknown whose column of the loop's Jacobian is zero at the guess (see _flat_kick)."""
+
+
+def _flat_kick(jacobian: ca.Function, start: ca.MX | ca.DM, values: ca.MX | ca.DM) -> ca.MX:
+    """FLAT_NUDGE * (1 + |z|) for each unknown that no residual responds to at *start* (its column of the
+    Jacobian exactly zero), 0 for the others. At such a guess every Gauss-Newton step leaves that unknown
+    where it is, and Newton's matrix is singular: a loss that goes as m_flow^2 or m_flow*|m_flow|
+    (MSL ``Fluid.Fittings.AbruptAdaptor``'s total-pressure balance) from m_flow.start = 0, where the
+    loss's derivative vanishes although the loop has roots on both sides. The damped steps start from
+    the guess moved off the flat point both ways (:func:`_or_nearest_solution` keeps the root nearer the
+    guess). A column that is not finite is left as it is."""
+    jac = jacobian(start, values, start)
+    flat = ca.sum1(jac * jac).T == 0
+    return ca.if_else(flat, FLAT_NUDGE * (1 + ca.fabs(start)), ca.DM.zeros(start.shape[0], 1))
 
 
 def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
@@ -689,7 +776,8 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     passed 1e-6*(1 + |z|) with |z| ~ 1e5 Pa. Only the branch taken is evaluated (a short-circuit
     if_else). It is first sought from where a damped Gauss-Newton iteration (_damped_newton) ends
     (from the guess, Newton's steps on the optimality conditions can swing across the root of a
-    square-root flow law), then from the guess; a loop that neither solves leaves NaN, so that the
+    square-root flow law; from a guess where the loop's residuals do not respond to an unknown, from the
+    guess moved off that flat point both ways by _flat_kick, the end nearer the guess), then from the guess; a loop that neither solves leaves NaN, so that the
     importer's solver fails rather than going on with values that do not satisfy the equations."""
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
@@ -717,15 +805,25 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     # multipliers that fit it), a guess whose derivatives are stopped: the solution's derivatives are
     # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
     # through the iteration (which tripled the generated C of TanksWithOverflow)
-    z2 = _damped_newton(name, distance, n, start, values)
-    jac2 = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])(z2, values, start)
-    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, start - z2))
+    jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])
+    first = ca.MX.sym(f"{name}_first", n)
+    end = _damped_newton(name, distance, n, first, p, z0)
+    jac2 = jacobian(end, p, z0)
+    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, z0 - end))
     # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:
     # skipped, NaN, as it would end)
-    z2 = ca.if_else(ca.sumsqr(z2) + ca.sumsqr(y2) < ca.inf,
-                    nearest(ca.stop_diff(ca.vertcat(z2, y2), 1), ca.vertcat(values, start))[:n],
-                    ca.DM.nan(n, 1), True)
+    end = ca.if_else(ca.sumsqr(end) + ca.sumsqr(y2) < ca.inf,
+                     nearest(ca.stop_diff(ca.vertcat(end, y2), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
+    damped = ca.Function(f"{name}_damped_solution", [first, p, z0], [end])
+    kick = _flat_kick(jacobian, start, values)
+    z2 = damped(start + kick, values, start)
     solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
+    # off a flat point, both ways: the root nearer the guess where both sides reach one
+    z3 = ca.if_else(ca.sumsqr(kick) > 0, damped(start - kick, values, start), ca.DM.nan(n, 1), True)
+    solves3 = ca.sumsqr(distance(z3, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z3))) ** 2
+    nearer3 = ca.logic_and(solves3, ca.logic_or(ca.logic_not(solves2), ca.sumsqr(z3 - start) < ca.sumsqr(z2 - start)))
+    z2 = ca.if_else(nearer3, z3, z2)
+    solves2 = ca.logic_or(solves2, solves3)
     # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
     # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs
     # most where it fails (100 steps with second derivatives)

@@ -605,6 +605,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             residuals, states, algebraics, calculated, calc_eqs, unknowns)
         self._parameter_names = {sv.name for sv in params}
         assignments, loop_sizes, torn_sizes = self._solve_blocks(blocks, residuals, unknowns, algebraics + calculated)
+        self._model_system = (residuals, unknowns)  # (.flat_systems._whole_initial_solution)
         log.debug("%s: %d blocks, algebraic loops (equations, tearing variables): %s",
                   self.model, len(blocks), torn_sizes)
         events = self._event_system(discrete, discrete_residuals, discrete_initial)
