@@ -1,11 +1,17 @@
 """Shared fixtures: compile each Modelica class and build each small test FMU at most once per run.
 
+``scripts/test`` runs the suite in several worker processes (pytest-xdist); the bench FMUs
+(``fmu_cache``, ``train_fmu``) are then compiled once for all of them, into the run's common
+temporary folder under a file lock (:func:`built_once`), so a bench is still compiled once per run.
+
 The CasADi-made FMUs (``_fixtures_casadi.build_casadi_fmu``) are built in a child
 process inside a session temporary directory, never by changing the test
 process's working directory.
 """
 from __future__ import annotations
 
+import fcntl
+import os
 import shutil
 import threading
 from collections.abc import Callable
@@ -16,27 +22,51 @@ import pytest
 from trackingbox.compiler import compile_model, library_path, omc_available
 
 
+def run_folder(factory: pytest.TempPathFactory, name: str) -> Path:
+    """A folder every worker process of this run shares (the workers' common temporary parent under
+    pytest-xdist), or a fresh temporary folder when the suite runs in one process."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = factory.getbasetemp().parent / name
+        root.mkdir(exist_ok=True)
+        return root
+    return factory.mktemp(name)
+
+
+def built_once(root: Path, key: str, build: Callable[[Path], Path]) -> Path:
+    """``build(folder)`` run once per *key* across the run's processes and threads; its path after.
+
+    An exclusive ``flock`` on ``<key>.lock`` serialises the builders; ``<key>.done`` records the path
+    once the build has returned, so a build that raised is tried again by the next caller."""
+    done = root / f"{key}.done"
+    with open(root / f"{key}.lock", "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        if done.exists():
+            return Path(done.read_text())
+        out = build(root / key)
+        done.write_text(str(out))
+        return out
+
+
 class FMUCache:
     """Compile classes of the shipped library on first use; hand out the FMU path after."""
 
     def __init__(self, root: Path):
         self.root = root
-        self._lock = threading.Lock()
-        self._done: dict[str, Path] = {}
 
     def __call__(self, model: str) -> Path:
-        with self._lock:
-            if model not in self._done:
-                out = self.root / f"{model}.fmu"
-                compile_model(library_path(), model, backend="embedded", output=out)
-                self._done[model] = out
-            return self._done[model]
+        def build(folder: Path) -> Path:
+            folder.mkdir(exist_ok=True)
+            out = folder / f"{model}.fmu"
+            compile_model(library_path(), model, backend="embedded", output=out)
+            return out
+
+        return built_once(self.root, model, build)
 
 
 @pytest.fixture(scope="session")
 def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> FMUCache:
     """``fmu_cache("TrackingBox.Benches.HeatExchanger.Twin")`` → path of its FMU (embedded backend)."""
-    return FMUCache(tmp_path_factory.mktemp("fmus"))
+    return FMUCache(run_folder(tmp_path_factory, "fmus"))
 
 
 @pytest.fixture(scope="session")
@@ -92,18 +122,13 @@ def train_fmu(tmp_path_factory: pytest.TempPathFactory) -> Callable[..., Path]:
     compiled once per session (``benches.evaporator_train.compile_train``)."""
     from trackingbox.benches.evaporator_train import compile_train, train_models
 
-    root = tmp_path_factory.mktemp("train-fmus")
-    lock = threading.Lock()
-    built: dict[tuple[int, str], Path] = {}
+    root = run_folder(tmp_path_factory, "train-fmus")
 
     def get(n: int, plant: str | None = None, *, twin: bool = False) -> Path:
-        key = (n, "twin" if twin else (plant or "Plant"))
-        with lock:
-            if key not in built:
-                what = "twin" if twin else "plant"
-                folder = root / f"{n}-{len(built)}"
-                built[key] = compile_train(train_models(n, plant), what, folder / "build" / f"{what}.fmu")
-            return built[key]
+        what = "twin" if twin else "plant"
+        key = f"{n}-{'twin' if twin else (plant or 'Plant')}"
+        return built_once(root, key, lambda folder: compile_train(train_models(n, plant), what,
+                                                                   folder / "build" / f"{what}.fmu"))
 
     return get
 
