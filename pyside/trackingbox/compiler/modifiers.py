@@ -39,6 +39,7 @@ from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
 from .modification_parse import Mod, parse_modification  # noqa: F401 (tests read parse_modification from here)
 from .package_overrides import check_overridden_constants, family_reads_modified, one_branch_taken, only_in_extends
+from . import redeclare_components
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
@@ -187,6 +188,8 @@ class ModifierCheck:
                                  text):
                 if m.group(1) == "function" or short_class_handles(text, m.start()):
                     continue  # kept by rumoca / read through a short class (see .redeclare_short)
+                if redeclare_components.plan(self.index, c.name, text, m.start()) is not None:
+                    continue  # read as a modification of the components (see .redeclare_components)
                 raise UnsupportedConstructError(
                     f"unsupported Modelica construct in {model}: class redeclaration with a modification at "
                     f"{self._location(c, m.start())} (rumoca 0.10.2 drops the modification, and it sets more "
