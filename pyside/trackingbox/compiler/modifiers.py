@@ -12,7 +12,9 @@ drops or mixes up values (each found by flattening small models; see
 * **A class redeclaration with a modification**
   (``redeclare model M = Base(k = 5)``): the modification is dropped. Where it gives only
   literal values, :mod:`.redeclare_short` has rumoca read it through a short class, which it
-  keeps; a function redeclaration with a modification is kept as written.
+  keeps; where it stands in a component's modification and means the same as a modification of
+  the components the class types, :mod:`.redeclare_components` has rumoca read it so; a function
+  redeclaration with a modification is kept as written.
 * **A value given together with attributes, inside a nested modification.** In
   ``extends Base(k(max = 5) = 3)``, ``model D = C(k(min = 1) = 3)`` or
   ``A a(c(k(max = 5) = 3))`` the value 3 and the attributes are both dropped

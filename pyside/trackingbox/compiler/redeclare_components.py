@@ -36,6 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+from ..errors import UnsupportedConstructError
 from .modification_parse import _skip_expr, parse_modification
 from .redeclare_short import REDECLARATION, short_class_handles
 from .source_scan import _code_mask, _matching_paren
@@ -211,12 +212,12 @@ def patches(index, model: str) -> dict[Path, Callable[[bytes], bytes]]:
                 code, _, _ = _code_mask(body)
                 hits = [h for h in REDECLARATION.finditer(code) if h.group(2) == p.name.encode()
                         and body.count(b"\n", 0, h.start()) + 1 == line]
-                if len(hits) != 1:
-                    continue  # not as the index read it: left as written (and refused by .modifiers)
+                close_at = _matching_paren(code, hits[0].end() - 1) if len(hits) == 1 else None
+                if close_at is None:  # not as the index read it: the modification would be lost
+                    raise UnsupportedConstructError(
+                        f"unsupported Modelica construct in {model}: class redeclaration with a modification "
+                        f"at {file}:{line}, where the text the front end reads differs from the library's")
                 open_at = hits[0].end() - 1
-                close_at = _matching_paren(code, open_at)
-                if close_at is None:
-                    continue
                 more = b"".join(b", " + c.encode() + b"(" + p.modification.encode() + b")" for c in p.components[1:])
                 body = (body[:open_at] + b", " + p.components[0].encode() + body[open_at:close_at + 1] + more
                         + body[close_at + 1:])
