@@ -372,8 +372,8 @@ package Mods
     replaceable model M = Base;
     M m;
   end Holder;
-  model LostRedeclare "the redeclaration's k = kk must reach h.m.k (a literal is read through a short class)"
-    parameter Real kk = 5; Holder h(redeclare model M = Base(k = kk));
+  model LostRedeclare "through extends, k = kk must reach m.k (a literal is read through a short class; in a component's modification see test_compiler_redeclare_components)"
+    parameter Real kk = 5; extends Holder(redeclare model M = Base(k = kk));
   end LostRedeclare;
   package Medium
     constant Real cp = 4180;

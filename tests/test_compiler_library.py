@@ -112,7 +112,7 @@ DECOYS = {
         "  Real z = P.y;\nend Extended;\n"),
     "Rectangle.mo": (
         "within Lib;\nmodel Rectangle\n  model Base\n    parameter Real k = 1;\n  end Base;\n  model Holder\n"
-        "    replaceable model M = Base;\n    M m;\n  end Holder;\n  parameter Real kk = 5; Holder h(redeclare model M = Base(k = kk));\n"
+        "    replaceable model M = Base;\n    M m[2];\n  end Holder;\n  parameter Real kk = 5; Holder h(redeclare model M = Base(k = kk));\n"
         "end Rectangle;\n"),
 }
 

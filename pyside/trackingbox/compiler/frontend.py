@@ -36,7 +36,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError
-from . import component_sizes, discrete_connects, inner_defaults, package_overrides, record_constants
+from . import component_sizes, discrete_connects, inner_defaults, package_overrides, record_constants, redeclare_components
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .modifiers import ModifierCheck
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
@@ -132,6 +132,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     inner = _chained(inner, repeated)
     inner = _chained(inner, record_constants.patches(index, model) if reached else {})  # (fields rumoca misses)
     inner = _chained(inner, component_sizes.patches(index, model) if reached else {})  # (arrays rumoca mis-sizes)
+    inner = _chained(inner, redeclare_components.patches(index, model) if reached else {})  # (modifications lost)
     needed = reached if prune else None
     if needed is None:
         return _full_tree(source, libraries, dest, inner)

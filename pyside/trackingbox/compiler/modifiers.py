@@ -12,7 +12,9 @@ drops or mixes up values (each found by flattening small models; see
 * **A class redeclaration with a modification**
   (``redeclare model M = Base(k = 5)``): the modification is dropped. Where it gives only
   literal values, :mod:`.redeclare_short` has rumoca read it through a short class, which it
-  keeps; a function redeclaration with a modification is kept as written.
+  keeps; where it stands in a component's modification and means the same as a modification of
+  the components the class types, :mod:`.redeclare_components` has rumoca read it so; a function
+  redeclaration with a modification is kept as written.
 * **A value given together with attributes, inside a nested modification.** In
   ``extends Base(k(max = 5) = 3)``, ``model D = C(k(min = 1) = 3)`` or
   ``A a(c(k(max = 5) = 3))`` the value 3 and the attributes are both dropped
@@ -38,7 +40,8 @@ from pathlib import Path
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
 from .modification_parse import Mod, parse_modification  # noqa: F401 (tests read parse_modification from here)
-from .package_overrides import check_overridden_constants, family_reads_modified, one_branch_taken, only_in_extends
+from .package_overrides import check_overridden_constants, family_reads_modified, only_in_extends, taken_branches
+from . import redeclare_components
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
 
@@ -159,11 +162,12 @@ class ModifierCheck:
             for m in re.finditer(r"\bextends\s+([\w.]+)\s*\(", text):
                 mods, _ = parse_modification(text, m.end() - 1)
                 base = m.group(1).rsplit(".", 1)[-1]
-                if c.kind == "package" and any(x.has_value for x in mods) and self._used_directly(used, m.group(1), c):
+                use = self._use_of(used, m.group(1), c) if c.kind == "package" and any(
+                    x.has_value for x in mods) else None
+                if use is not None:
                     raise UnsupportedConstructError(
                         f"unsupported Modelica construct in {model}: package {c.simple} extends {base} with a "
-                        f"modified constant at {self._location(c, m.start())}, and {model} also uses {base} "
-                        f"itself: rumoca 0.10.2 would give {base}'s constant the modified value too"
+                        f"modified constant at {self._location(c, m.start())}, and {model} {use}"
                     )
                 for comp in mods:  # extends B(p(q ...)): p.q replaces what p's declarations say about q
                     for inner in comp.subs:
@@ -187,6 +191,8 @@ class ModifierCheck:
                                  text):
                 if m.group(1) == "function" or short_class_handles(text, m.start()):
                     continue  # kept by rumoca / read through a short class (see .redeclare_short)
+                if redeclare_components.plan(self.index, c.name, text, m.start()) is not None:
+                    continue  # read as a modification of the components (see .redeclare_components)
                 raise UnsupportedConstructError(
                     f"unsupported Modelica construct in {model}: class redeclaration with a modification at "
                     f"{self._location(c, m.start())} (rumoca 0.10.2 drops the modification, and it sets more "
@@ -233,15 +239,16 @@ class ModifierCheck:
                                  rf"|\bconstrainedby\s+{esc}(?![\w.])", text))
         return every > 0 and every == default
 
-    def _used_directly(self, used: list[ClassInfo], ext: str, extender: ClassInfo) -> bool:
-        """Whether the class that *extender* extends by the name *ext* is used by name in a used class
-        (a name there, or a prefix of one, resolves to exactly that class), besides that extends clause
-        and the class's own name in its own text (``package P ... end P;``)."""
+    def _use_of(self, used: list[ClassInfo], ext: str, extender: ClassInfo) -> str | None:
+        """How the class that *extender* extends by the name *ext* is used by name in a used class
+        (a name there, or a prefix of one, resolves to exactly that class), besides that extends
+        clause and the class's own name in its own text (``package P ... end P;``): the end of the
+        refusal's sentence, or None where it is not used so."""
         idx = self.index
         simple = ext.rsplit(".", 1)[-1]
         targets = [b for b in idx.bases(extender.name) if b.rsplit(".", 1)[-1] == simple]
         if not targets:
-            return False
+            return None
         target = targets[0]
         for c in used:
             for name in c.names:
@@ -256,10 +263,20 @@ class ModifierCheck:
                     found = idx.lookup(".".join(parts[:k]), c.name)
                     if found is None:
                         break
-                    if found == target:
-                        if (c.kind == "package" and only_in_extends(self.body(c), name)
-                                and (one_branch_taken(self, used, target)
-                                     or not family_reads_modified(self, used, target))):
+                    if found != target:
+                        continue
+                    if c.kind == "package" and only_in_extends(self.body(c), name):
+                        branches = taken_branches(self, used, target)
+                        if branches is not None and len(branches) <= 1:
                             break  # another package's extends of the base (see .package_overrides)
-                        return True
-        return False
+                        if not family_reads_modified(self, used, target):
+                            break
+                        if branches is not None:
+                            where = "; ".join(f"{b.rsplit('.', 1)[-1]} at {self._location(info, at)}"
+                                              for b, (info, at) in sorted(branches.items()))
+                            return (f"takes several packages extending {simple} with different values ({where}), "
+                                    f"whose classes read the modified constants: rumoca 0.10.2 computes one "
+                                    f"package's functions with another's constants")
+                    return (f"also uses {simple} itself: rumoca 0.10.2 would give {simple}'s constant the "
+                            "modified value too")
+        return None

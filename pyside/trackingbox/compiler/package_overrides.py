@@ -298,27 +298,34 @@ def _ancestors(check: ModifierCheck, name: str) -> set[str]:
 def one_branch_taken(check: ModifierCheck, used: list[ClassInfo], base: str) -> bool:
     """Whether the packages the classes of *used* take (see above) that extend *base* are one package
     and its own bases; False where a taken package cannot be resolved."""
-    taken: set[str] = set()
+    leaves = taken_branches(check, used, base)
+    return leaves is not None and len(leaves) <= 1
+
+
+def taken_branches(check: ModifierCheck, used: list[ClassInfo], base: str) -> dict[str, tuple[ClassInfo, int]] | None:
+    """The packages extending *base* that the classes of *used* take (see above), none a base of
+    another, each with the class and offset in its text of a place taking it (a short package
+    class ending at it, or the clause naming it); None where a taken package cannot be resolved."""
+    taken: dict[str, tuple[ClassInfo, int]] = {}
     texts = []
     for c in used:
-        texts.append((c, check.body(c)))  # (a redeclaration in a modification)
+        texts.append((c, c))  # (a redeclaration in a modification)
         for child in check.index.children.get(c.name, {}).values():
             k = check.index.classes.get(child)
             if k is None or not k.short or k.kind != "package":
                 continue
             text = check.body(k)  # (its own class: blanked in its parent's text)
             if c.kind != "package" or re.match(r"\s*(?:\w+\s+)*?(?:replaceable|redeclare)\b", text):
-                texts.append((c, text))  # a package a model declares, or a replaceable one anywhere
-    for c, text in texts:
-        for m in _TAKEN.finditer(text):
+                texts.append((c, k))  # a package a model declares, or a replaceable one anywhere
+    for c, where in texts:
+        for m in _TAKEN.finditer(check.body(where)):
             target = check.index.lookup(m.group(1) or m.group(2), c.name)
             final = _final(check, target) if target else None
             if final is None:
-                return False
+                return None
             if base in _ancestors(check, final) - {final}:
-                taken.add(final)
-    leaves = {t for t in taken if not any(t != o and t in _ancestors(check, o) for o in taken)}
-    return len(leaves) <= 1
+                taken.setdefault(final, (where, m.start()))
+    return {t: at for t, at in taken.items() if not any(t != o and t in _ancestors(check, o) for o in taken)}
 
 
 # --- branches whose modified constants no class of theirs reads ---------------------------------
