@@ -187,6 +187,7 @@ def warm_solution(name: str, rf: ca.Function, z: ca.MX, p: ca.MX, g: ca.MX, memo
     :func:`_or_nearest_solution` from the memory. Where those leave NaN, a Newton root outside the
     bounds is the solution rather than none. Only the branch taken is evaluated."""
     n = z.numel()
+    memory = ca.stop_diff(memory, 1)  # guesses: the model's derivatives (exported with it) do not depend on them
     accepted, fallback = _loop_tests(name, z, p, g, values)
     lo = ca.DM([b - BOUND_TOLERANCE * (1 + abs(b)) for b in lower])
     hi = ca.DM([b + BOUND_TOLERANCE * (1 + abs(b)) for b in upper])
@@ -196,7 +197,7 @@ def warm_solution(name: str, rf: ca.Function, z: ca.MX, p: ca.MX, g: ca.MX, memo
 
     jac, res = rf.get_function("jac_g_x")(memory, values)  # the rootfinder's own Jacobian function
     step = ca.solve(jac, res)
-    first = ca.if_else(ca.sumsqr(step) < ca.inf, memory - step, memory)
+    first = ca.stop_diff(ca.if_else(ca.sumsqr(step) < ca.inf, memory - step, memory), 1)
     warm = rf(first, values)
     cold = ca.if_else(ca.mmax(ca.fabs(memory - start)) > 0, rf(start, values), ca.DM.nan(n, 1), True)
     warm_root, cold_root, fell = accepted(warm, memory), accepted(cold, start), fallback(memory)
