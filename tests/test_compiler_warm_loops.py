@@ -23,9 +23,13 @@ pytestmark = pytest.mark.compile
 TWO_ROOTS = """model TwoRoots "y solves y^2 - s*y - 2*s^2 = 0: roots 2*s (y >= 0) and -s"
   Real s(start = 1, fixed = true);
   Real y(start = 1, min = 0);
+  discrete Real n(start = 0, fixed = true) "s's crossings of 2 (a when-clause beside the loop)";
 equation
   der(s) = 0.1*y;
   y^2 - s*y - 2*s^2 = 0;
+  when s > 2 then
+    n = pre(n) + 1;
+  end when;
 end TwoRoots;
 """
 
@@ -52,16 +56,19 @@ def _fmu(tmp_path, name: str, text: str) -> str:
 
 def test_a_loop_follows_its_root_along_the_trajectory(tmp_path):
     """TwoRoots to t = 10 (s = e^2 = 7.39, far past where the start value's Newton falls on y = -s):
-    y = 2 s and s = exp(0.2 t), and the same from scipy's solve_ivp on ds/dt = 0.1 * 2 s."""
+    y = 2 s and s = exp(0.2 t), and the same from scipy's solve_ivp on ds/dt = 0.1 * 2 s; the when-clause
+    fires once, at s = 2 (t = 5 ln 2)."""
     out = fmpy.simulate_fmu(_fmu(tmp_path, "TwoRoots", TWO_ROOTS), stop_time=10.0, output_interval=0.5,
-                            relative_tolerance=1e-8, output=["s", "y"])
+                            relative_tolerance=1e-8, output=["s", "y", "n"])
     t = out["time"]
+    away = np.abs(t - 5 * np.log(2)) > 1e-4  # (the event, found to the solver's tolerance, is recorded twice)
+    assert np.array_equal(out["n"][away], np.where(t[away] > 5 * np.log(2), 1.0, 0.0))
     assert t[-1] == pytest.approx(10.0)
     assert np.allclose(out["s"], np.exp(0.2 * t), rtol=1e-5, atol=0)
     assert np.allclose(out["y"], 2 * out["s"], rtol=1e-9, atol=0)
-    ref = solve_ivp(lambda _t, s: 0.1 * (s + np.sqrt(s * s + 8 * s * s)) / 2, (0, 10), [1.0], t_eval=t,
-                    rtol=1e-10, atol=1e-12)
-    assert np.allclose(out["s"], ref.y[0], rtol=1e-5, atol=0)
+    ref = solve_ivp(lambda _t, s: 0.1 * (s + np.sqrt(s * s + 8 * s * s)) / 2, (0, 10), [1.0], dense_output=True,
+                    rtol=1e-10, atol=1e-12)  # the root y >= 0 of y^2 - s y - 2 s^2 by the quadratic formula
+    assert np.allclose(out["s"], ref.sol(t)[0], rtol=1e-5, atol=0)
 
 
 def test_a_root_outside_the_bounds_falls_back_to_the_start_values(tmp_path):

@@ -88,7 +88,7 @@ class InitialSystem:
 @dataclass(frozen=True)
 class LoopMemory:
     """One tearing variable of one of the model's algebraic loops and the FMU variable ``sym``
-    (``_tbx_w<j>``) that keeps its last converged value, Newton's guess at the next evaluation
+    (``_tbx_m<j>``) that keeps its last converged value, Newton's guess at the next evaluation
     (``start``, its start value, until the loop has solved: .loop_solve.warm_solution)."""
 
     sym: ca.MX

@@ -608,7 +608,7 @@ class SystemAssembly:
                     warm: bool = False) -> list[ca.MX]:
         """The loop res(unk) = 0 solved by Newton from *guess*, with the fallbacks (.loop_solve); a loop of
         the model's equations (*warm*) from its last converged solution, kept by the FMU in variables
-        ``_tbx_w<j>`` (one per unknown, starting at *guess*: :attr:`ExplicitModel.loop_memory`)."""
+        ``_tbx_m<j>`` (one per unknown, starting at *guess*: :attr:`ExplicitModel.loop_memory`)."""
         others: dict[str, ca.MX] = {}
         unk_names = {u.name() for u in unk}
         for r in res:
@@ -641,7 +641,7 @@ class SystemAssembly:
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
         if warm:
             kept = self.__dict__.setdefault("_loop_memory", [])
-            memory = [LoopMemory(ca.MX.sym(f"_tbx_w{len(kept) + i + 1}"), float(guess[i]), u.name(), str(k))
+            memory = [LoopMemory(ca.MX.sym(f"_tbx_m{len(kept) + i + 1}"), float(guess[i]), u.name(), str(k))
                       for i, u in enumerate(unk)]
             kept.extend(memory)
             lower, upper = zip(*(self._bounds(u.name()) for u in unk))

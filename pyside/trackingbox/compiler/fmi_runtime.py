@@ -492,7 +492,7 @@ _UPDATE_DISCRETE = """FMI3_Export fmi3Status fmi3UpdateDiscreteStates(fmi3Instan
 
 _LOOPS = """
 /* The model's algebraic loops start Newton from their last converged solution (trackingbox.compiler.
-   loop_solve.warm_solution, the variables _tbx_w<j>): after each evaluation of the model, a loop whose
+   loop_solve.warm_solution, the variables _tbx_m<j>): after each evaluation of the model, a loop whose
    tearing variables all came out finite keeps them; leaving initialisation mode starts every loop
    from its start values again (as fmi3Reset does), so that the initialisation does not depend on
    what the importer evaluated before it. */
