@@ -13,7 +13,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from trackingbox.compiler import compile_model
-from trackingbox.compiler.loop_solve import NEWTON_TOLERANCE, warm_solution
+from trackingbox.compiler.loop_solve import warm_solution
 
 pytestmark = pytest.mark.compile
 
@@ -83,10 +83,8 @@ def test_a_root_outside_the_bounds_falls_back_to_the_start_values(tmp_path):
 
 
 def _solved(g, z, p, memory, start, value, lower, upper) -> float:
-    rf = ca.rootfinder("w", "fast_newton", {"x": z, "p": p, "g": g},  # as in the exported C: no error on failure
-                       {"abstol": NEWTON_TOLERANCE, "max_iter": 100, "error_on_fail": False})
     m, pv = ca.MX.sym("m"), ca.MX.sym("pv")
-    f = ca.Function("f", [m, pv], [warm_solution("t", rf, z, p, g, m, ca.DM([start]), pv, [lower], [upper])])
+    f = ca.Function("f", [m, pv], [warm_solution("t", z, p, g, m, ca.DM([start]), pv, [lower], [upper])])
     return float(f(memory, value))
 
 
@@ -105,3 +103,18 @@ def test_the_warm_start_prefers_a_root_inside_the_bounds(memory, start, expected
 def test_a_loop_without_a_root_stays_nan():
     z, p = ca.MX.sym("z"), ca.MX.sym("p")
     assert np.isnan(_solved(z ** 2 + p, z, p, 0.5, 0.5, 1.0, -np.inf, np.inf))
+
+
+def test_a_warm_guess_within_the_residual_tolerance_still_moves():
+    """1e-6 (z - p) = 0 from z = 1 at p = 1 + 1e-5: the guess's residual, 1e-11, is below the
+    rootfinders' 1e-10, so a Newton that tests the residual first would keep z = 1; the solution is p."""
+    z, p = ca.MX.sym("z"), ca.MX.sym("p")
+    assert _solved(1e-6 * (z - p), z, p, 1.0, 1.0, 1 + 1e-5, -np.inf, np.inf) == pytest.approx(1 + 1e-5, rel=1e-14)
+
+
+def test_a_warm_newton_in_pascal_stops_at_its_root():
+    """(z / 1e5)^3 - p = 0 near 2e5 Pa (a residual whose rounding stays above 1e-10): from a guess 1 % off,
+    the root (p)^(1/3) 1e5, hand-worked, to 1e-13."""
+    z, p = ca.MX.sym("z"), ca.MX.sym("p")
+    g = 1e5 * ((z / 1e5) ** 3 - p)
+    assert _solved(g, z, p, 2.02e5, 2.02e5, 8.0, 0.0, np.inf) == pytest.approx(2e5, rel=1e-13)

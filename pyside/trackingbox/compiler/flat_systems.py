@@ -645,7 +645,7 @@ class SystemAssembly:
                       for i, u in enumerate(unk)]
             kept.extend(memory)
             lower, upper = zip(*(self._bounds(u.name()) for u in unk))
-            sol = warm_solution(f"loop{k}", rf, z, p, g, ca.vertcat(*(m.sym for m in memory)), start, values,
+            sol = warm_solution(f"loop{k}", z, p, g, ca.vertcat(*(m.sym for m in memory)), start, values,
                                 list(lower), list(upper))
             return [sol[i] for i in range(len(unk))]
         sol = rf(start, values)

@@ -13,9 +13,10 @@ headers that fmpy ships, then tidy the model description:
   the C (:mod:`.c_prune`; ``providesAdjointDerivatives="false"``);
 * the model's ``experiment`` annotation becomes ``DefaultExperiment``.
 
-Models with asserts or initial equations get a small runtime (only they: an
-FMU of a model without either is exactly what CasADi exports, with the
-``fmi3SetTime`` fix). The assert conditions are outputs of the model function
+Models with asserts, initial equations, events or algebraic loops get a small runtime (only
+they: an FMU of a model without any is exactly what CasADi exports, with the
+``fmi3SetTime`` fix); a loop's last solution, Newton's next guess, is kept in local variables
+``_tbx_m<j>`` that the runtime writes after each evaluation (:mod:`.loop_solve`). The assert conditions are outputs of the model function
 (local variables ``_tbx_a<k>``: 1 where the assert holds, 0 where it fails),
 computed by the same evaluation as the equations; the initialisation solve is a
 separate CasADi function, generated as ``tbx_runtime.c`` (its own translation

@@ -174,18 +174,27 @@ BOUND_TOLERANCE = 1e-6
 (above max + ...): a root a rounding away from its bound (a flow of -1e-12 kg/s with min = 0) is inside."""
 
 
-def warm_solution(name: str, rf: ca.Function, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start: ca.DM,
+WARM_STEP = 1e-10
+"""The warm-started Newton stops at a step below WARM_STEP * (1 + |z|) in every unknown (see warm_solution)."""
+
+
+def warm_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start: ca.DM,
                   values: ca.MX | ca.DM, lower: list[float], upper: list[float]) -> ca.MX:
-    """The solution of the model's loop g(z, p) = 0 (rootfinder *rf*) warm-started: Newton from the
-    loop's last converged solution *memory* (which the FMU keeps: :mod:`.fmi_runtime`; at the first
-    evaluation after initialisation, the start values), after one full Newton step from it taken here
-    (so that a guess whose residual already meets Newton's tolerance is still moved: a state perturbed
-    by an importer's difference quotient moves the loop's solution, not only its residual); where that
-    is no root or a root outside the declared bounds [*lower*, *upper*] (a negative density, an
-    unphysical second root of a medium's equation of state: MSL ``Fluid.Examples.IncompressibleFluidNetwork``),
-    Newton from the *start* values (where they differ from the memory); then the fallbacks of
-    :func:`_or_nearest_solution` from the memory. Where those leave NaN, a Newton root outside the
-    bounds is the solution rather than none. Only the branch taken is evaluated."""
+    """The solution of the model's loop g(z, p) = 0 warm-started: Newton from the loop's last converged
+    solution *memory* (which the FMU keeps: :mod:`.fmi_runtime`; at the first evaluation after
+    initialisation, the start values); where that is no root or a root outside the declared bounds
+    [*lower*, *upper*] (a negative density, an unphysical second root of a medium's equation of state:
+    MSL ``Fluid.Examples.IncompressibleFluidNetwork``), Newton from the *start* values (where they
+    differ from the memory); then the fallbacks of :func:`_or_nearest_solution` from the memory. Where
+    those leave NaN, a Newton root outside the bounds is the solution rather than none. Only the branch
+    taken is evaluated.
+
+    This Newton runs in the unknowns scaled by 1 + |guess| and stops at a step below WARM_STEP there,
+    always after one step at least: the model's rootfinders stop at a residual below 1e-10 in the
+    equations' own units, which a loop of pressures in Pa never reaches (MSL
+    ``Fluid.Examples.Explanatory.MomentumBalanceFittings``: all 100 iterations at every evaluation),
+    and from a guess whose residual already meets it they would not move it at all (a state perturbed
+    by an importer's difference quotient would not move the loop's solution)."""
     n = z.numel()
     memory = ca.stop_diff(memory, 1)  # guesses: the model's derivatives (exported with it) do not depend on them
     accepted, fallback = _loop_tests(name, z, p, g, values)
@@ -195,11 +204,17 @@ def warm_solution(name: str, rf: ca.Function, z: ca.MX, p: ca.MX, g: ca.MX, memo
     def inside(sol: ca.MX) -> ca.MX:
         return ca.logic_and(ca.mmin(sol - lo) >= 0, ca.mmin(hi - sol) >= 0)
 
-    jac, res = rf.get_function("jac_g_x")(memory, values)  # the rootfinder's own Jacobian function
-    step = ca.solve(jac, res)
-    first = ca.stop_diff(ca.if_else(ca.sumsqr(step) < ca.inf, memory - step, memory), 1)
-    warm = rf(first, values)
-    cold = ca.if_else(ca.mmax(ca.fabs(memory - start)) > 0, rf(start, values), ca.DM.nan(n, 1), True)
+    x, scale = ca.MX.sym(f"{name}_x", n), ca.MX.sym(f"{name}_scale", n)
+    scaled = ca.rootfinder(f"{name}_warm", "fast_newton",
+                           {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
+                           {"abstol": 0, "abstolStep": WARM_STEP, "max_iter": 100, "error_on_fail": False})
+
+    def newton(guess: ca.MX | ca.DM) -> ca.MX:
+        s = 1 + ca.fabs(guess)
+        return s * scaled(guess / s, ca.vertcat(values, s))
+
+    warm = newton(memory)
+    cold = ca.if_else(ca.mmax(ca.fabs(memory - start)) > 0, newton(start), ca.DM.nan(n, 1), True)
     warm_root, cold_root, fell = accepted(warm, memory), accepted(cold, start), fallback(memory)
     last = ca.if_else(ca.sumsqr(fell) < ca.inf, fell, ca.if_else(
         warm_root, warm, ca.if_else(cold_root, cold, ca.DM.nan(n, 1), True), True), True)
