@@ -169,12 +169,12 @@ def test_the_damped_iteration_stops_at_a_step_no_length_improves(monkeypatch):
     each of the 60 steps did the same before. So the whole iteration evaluates r as often as its first
     step alone, and more than 23 times (the lengths 1/2**j, j = 0..22, tried; 2**-23 is taken untried).
     The end is z = 0, as before."""
-    from trackingbox.compiler import flat_systems
+    from trackingbox.compiler import loop_solve
 
     def calls(iterations: int) -> int:
-        monkeypatch.setattr(flat_systems, "DAMPED_ITERATIONS", iterations)
+        monkeypatch.setattr(loop_solve, "DAMPED_ITERATIONS", iterations)
         counted = _Counted()
-        end = ca.Function("end", [], [flat_systems._damped_newton("t", counted, 1, ca.DM([0.0]), ca.DM([0.0]))])
+        end = ca.Function("end", [], [loop_solve._damped_newton("t", counted, 1, ca.DM([0.0]), ca.DM([0.0]))])
         assert float(end()["o0"]) == 0.0
         return counted.calls
 

@@ -85,6 +85,18 @@ class InitialSystem:
     expressions in ``guesses`` and ``knowns``; empty: one Newton solve of all ``residual``."""
 
 
+@dataclass(frozen=True)
+class LoopMemory:
+    """One tearing variable of one of the model's algebraic loops and the FMU variable ``sym``
+    (``_tbx_m<j>``) that keeps its last converged value, Newton's guess at the next evaluation
+    (``start``, its start value, until the loop has solved: .loop_solve.warm_solution)."""
+
+    sym: ca.MX
+    start: float
+    tear: str
+    loop: str
+
+
 @dataclass
 class ExplicitModel:
     """The causalised model, ready for FMU export.
@@ -112,6 +124,7 @@ class ExplicitModel:
     initial: InitialSystem | None = None
     events: EventSystem | None = None
     discrete: list[ScalarVar] = field(default_factory=list)
+    loop_memory: list[LoopMemory] = field(default_factory=list)
 
 
 def kind_of(node: Any) -> tuple[str, Any]:

@@ -17,11 +17,14 @@ from .events import EventSystem
 from .index import IndexError_, max_matching, reduce_index
 from .library import locate
 from .source import class_extent, read_text, strip_comments
-from .flat_model import REAL, Assertion, InitialSystem, ScalarVar
+from .flat_model import REAL, Assertion, InitialSystem, LoopMemory, ScalarVar
 from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
 from .initial_discrete import InitialDiscreteError, solve_initial_discrete
 from .initial_pre import hold_at_initialisation, pre_initial_equations
+from .loop_solve import (  # noqa: F401  (the loops' numerics, re-exported where they were)
+    DAMPED_HALVINGS, DAMPED_ITERATIONS, LOOP_TOLERANCE, NEWTON_TOLERANCE, _damped_newton, _or_nearest_solution,
+    warm_solution)
 
 log = logging.getLogger(__name__)
 
@@ -599,9 +602,13 @@ class SystemAssembly:
         # explicitly solved unknowns, latest first, so each definition sees the earlier ones
         for var, expr in reversed(solved):
             inner = ca.substitute(inner, [var], [expr])
-        return self._rootfinder(k, inner, tears, guess)
+        return self._rootfinder(k, inner, tears, guess, warm=isinstance(k, int))
 
-    def _rootfinder(self, k: int | str, res: list[ca.MX], unk: list[ca.MX], guess: list[Any]) -> list[ca.MX]:
+    def _rootfinder(self, k: int | str, res: list[ca.MX], unk: list[ca.MX], guess: list[Any],
+                    warm: bool = False) -> list[ca.MX]:
+        """The loop res(unk) = 0 solved by Newton from *guess*, with the fallbacks (.loop_solve); a loop of
+        the model's equations (*warm*) from its last converged solution, kept by the FMU in variables
+        ``_tbx_m<j>`` (one per unknown, starting at *guess*: :attr:`ExplicitModel.loop_memory`)."""
         others: dict[str, ca.MX] = {}
         unk_names = {u.name() for u in unk}
         for r in res:
@@ -632,9 +639,32 @@ class SystemAssembly:
                 detail="; ".join(self._declared_at(n) for n in held)) from None
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
+        if warm:
+            kept = self.__dict__.setdefault("_loop_memory", [])
+            memory = [LoopMemory(ca.MX.sym(f"_tbx_m{len(kept) + i + 1}"), float(guess[i]), u.name(), str(k))
+                      for i, u in enumerate(unk)]
+            kept.extend(memory)
+            lower, upper = zip(*(self._bounds(u.name()) for u in unk))
+            sol = warm_solution(f"loop{k}", z, p, g, ca.vertcat(*(m.sym for m in memory)), start, values,
+                                list(lower), list(upper))
+            return [sol[i] for i in range(len(unk))]
         sol = rf(start, values)
         sol = _or_nearest_solution(f"loop{k}", z, p, g, sol, start, values)
         return [sol[i] for i in range(len(unk))]
+
+    def _bounds(self, name: str) -> tuple[float, float]:
+        """A variable's declared (min, max), evaluated with the parameters' start values (-inf, inf where
+        it declares none or they cannot be evaluated)."""
+        sv = self.scalars.get(name)
+        out = []
+        for key, default in (("min", -float("inf")), ("max", float("inf"))):
+            node = sv.attrs.get(key) if sv is not None else None
+            try:
+                value = default if node is None else self.numeric(self._element(sv, node, once=True), key)
+                out.append(float(value))
+            except CompileError:
+                out.append(default)
+        return out[0], out[1]
 
     def _declared_at(self, scalar: str) -> str:
         """``b.c.e (b declared at file:line)``: a flat variable and where the model's own class
@@ -686,146 +716,3 @@ class SystemAssembly:
                          + ", ".join(self._equation_at(e) for e in eqs))
         return "; ".join(parts)
 
-
-LOOP_TOLERANCE = 1e-6
-"""The largest residual (2-norm, relative to 1 + |z|) accepted from the nearest-solution fallback;
-above it the loop has no solution near the guess and gives NaN."""
-NEAREST_REGULARISATION = 1e-10
-"""epsilon of the regularised optimality conditions of the nearest solution (see _or_nearest_solution)."""
-NEWTON_TOLERANCE = 1e-10
-"""The loops' Newton tolerance (largest residual): the rootfinders' abstol."""
-DAMPED_ITERATIONS = 60
-"""Steps of the damped Gauss-Newton iteration, the last fallback of a loop (see _damped_newton)."""
-DAMPED_HALVINGS = 24
-"""Step lengths 1, 1/2, ... 1/2**(DAMPED_HALVINGS - 1) tried on each step of the damped iteration."""
-
-
-def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.DM,
-                   values: ca.MX | ca.DM, anchor: ca.MX | ca.DM | None = None) -> ca.MX:
-    """A root of the scaled residual *distance(z, p, z0)* by Gauss-Newton steps of minimum norm,
-    dz = -J'(J J' + mu I)^-1 r (defined whatever the rank of J), each shortened by halving until the
-    residual's square falls by the Armijo fraction (the shortest length tried is taken otherwise),
-    from *start*, the residual scaled at *anchor* (the guess; *start* where not given). Newton's full steps swing across the root of a flow law that goes as the square
-    root of a pressure difference (from a flow q ~ sqrt(x), the full step lands at -x, and back):
-    e.g. MSL ``Fluid.Examples.Tanks.TanksWithOverflow``'s overflow pipe between two ports above their
-    levels. The iteration is a fixed number of steps (one step function, folded), so that it is
-    exported as C like the rest of the model."""
-    z = ca.MX.sym(f"{name}_dz", n)
-    q = ca.MX.sym(f"{name}_dq", values.numel() + n)
-    p, z0 = q[:values.numel()], q[values.numel():]
-    r = distance(z, p, z0)
-    jac = ca.jacobian(r, z)
-    jjt = ca.mtimes(jac, jac.T)
-    mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
-    dz = -ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(r.numel()), r))
-    phi0 = ca.sumsqr(r)
-
-    def trial(j: int) -> ca.MX:  # the first length from 1/2**j on that the residual accepts
-        a = 0.5 ** j
-        if j == DAMPED_HALVINGS - 1:  # none accepted: the step is taken, and the iteration has stalled
-            return ca.vertcat(z + a * dz, 1)
-        phi = ca.sumsqr(distance(z + a * dz, p, z0))
-        return ca.if_else(phi <= (1 - 1e-4 * a) * phi0, ca.vertcat(z + a * dz, 0), trial(j + 1), True)
-
-    # only the branch taken is evaluated: a step needs as many residuals as lengths it tries, and
-    # none (not even the Jacobian) once the residual is far below the accepted one, or once a step
-    # found no length that lowers it (a residual that is not finite, or a minimum of its norm that is
-    # no root): the remaining steps would each try every length again (DAMPED_HALVINGS residuals of
-    # the loop's functions, e.g. IF97 calls, per step) to move the iterate by 2**-23 of a step
-    done = phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2
-    move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 0), trial(0), True)])
-    zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once a step found no length that lowers
-    step = ca.Function(f"{name}_damped_step", [zs, q], [ca.if_else(zs[n] > 0.5, zs, move(zs[:n], q), True)])
-    anchor = start if anchor is None else anchor
-    return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, anchor))[:n]
-
-
-FLAT_NUDGE = 1e-3
-"""Relative move of an unknown whose column of the loop's Jacobian is zero at the guess (see _flat_kick)."""
-
-
-def _flat_kick(jacobian: ca.Function, start: ca.MX | ca.DM, values: ca.MX | ca.DM) -> ca.MX:
-    """FLAT_NUDGE * (1 + |z|) for each unknown that no residual responds to at *start* (its column of the
-    Jacobian exactly zero), 0 for the others. At such a guess every Gauss-Newton step leaves that unknown
-    where it is, and Newton's matrix is singular: a loss that goes as m_flow^2 or m_flow*|m_flow|
-    (MSL ``Fluid.Fittings.AbruptAdaptor``'s total-pressure balance) from m_flow.start = 0, where the
-    loss's derivative vanishes although the loop has roots on both sides. The damped steps start from
-    the guess moved off the flat point both ways (:func:`_or_nearest_solution` keeps the root nearer the
-    guess). A column that is not finite is left as it is."""
-    jac = jacobian(start, values, start)
-    flat = ca.sum1(jac * jac).T == 0
-    return ca.if_else(flat, FLAT_NUDGE * (1 + ca.fabs(start)), ca.DM.zeros(start.shape[0], 1))
-
-
-def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, start: ca.MX | ca.DM,
-                         values: ca.MX | ca.DM) -> ca.MX:
-    """Newton's iterate *sol* of the loop g(z, p) = 0 where it and its residual are finite and it is
-    a root (Newton's tolerance met, or the test below); where not (a Jacobian singular at the solution,
-    e.g. two stuck friction elements in series, whose torque split no equation determines: MSL
-    ``Rotational.Examples.LossyGearDemo2``) the solution nearest the guess z0,
-    argmin |z - z0| subject to g(z) = 0, from its optimality conditions regularised so that their
-    Jacobian [[I + sum y_i H_i, J'], [J, -eps I]] is nonsingular whatever the rank of J:
-
-        z - z0 + J(z)' y = 0,   g(z) - eps y = 0.
-
-    For a linear g = A z - b this is z = z0 - A'(A A' + eps I)^-1 (A z0 - b), which tends to
-    z0 + pinv(A) (b - A z0) as eps -> 0. Each equation is first divided by the norm of its gradient at
-    the guess (1 where that is zero), so that eps is small against J J' and the accepted residual
-    (LOOP_TOLERANCE) is a distance in z whatever the units: with flows in kg/s over pressures in Pa
-    (gradients ~1e-6) eps = 1e-10 held the solution short of a root, and a residual of 0.08 kg/s
-    passed 1e-6*(1 + |z|) with |z| ~ 1e5 Pa. Only the branch taken is evaluated (a short-circuit
-    if_else). It is first sought from where a damped Gauss-Newton iteration (_damped_newton) ends
-    (from the guess, Newton's steps on the optimality conditions can swing across the root of a
-    square-root flow law; from a guess where the loop's residuals do not respond to an unknown, from the
-    guess moved off that flat point both ways by _flat_kick, the end nearer the guess), then from the guess; a loop that neither solves leaves NaN, so that the
-    importer's solver fails rather than going on with values that do not satisfy the equations."""
-    n = z.numel()
-    y = ca.MX.sym(f"{name}_y", n)
-    z0 = ca.MX.sym(f"{name}_z0", n)
-    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
-    scaled = g / ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
-    kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
-    nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
-                            {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
-                            {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
-    residual = ca.Function(f"{name}_residual", [z, p], [g])
-    distance = ca.Function(f"{name}_distance", [z, p, z0], [scaled])
-
-    # NaN or inf anywhere makes these comparisons false. Newton's iterate counts where it met its own
-    # tolerance or is a root by the fallback's test: after its 100 steps, an iterate swinging across
-    # the root of a square-root flow law is finite but no root (TanksWithOverflow's overflow pipe:
-    # 0.084 kg/s out of a port the equations close)
-    r_sol = residual(sol, values)
-    converged = ca.logic_or(ca.mmax(ca.fabs(r_sol)) <= NEWTON_TOLERANCE,
-                            ca.sumsqr(distance(sol, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(sol))) ** 2)
-    finite = ca.logic_and(ca.sumsqr(r_sol) + ca.sumsqr(sol) < ca.inf, converged)
-    z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
-    solves = ca.sumsqr(distance(z1, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z1))) ** 2
-    # the damped iteration only finds where to start the nearest solution's Newton again (with the
-    # multipliers that fit it), a guess whose derivatives are stopped: the solution's derivatives are
-    # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
-    # through the iteration (which tripled the generated C of TanksWithOverflow)
-    jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])
-    first = ca.MX.sym(f"{name}_first", n)
-    end = _damped_newton(name, distance, n, first, p, z0)
-    jac2 = jacobian(end, p, z0)
-    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, z0 - end))
-    # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:
-    # skipped, NaN, as it would end)
-    end = ca.if_else(ca.sumsqr(end) + ca.sumsqr(y2) < ca.inf,
-                     nearest(ca.stop_diff(ca.vertcat(end, y2), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
-    damped = ca.Function(f"{name}_damped_solution", [first, p, z0], [end])
-    kick = _flat_kick(jacobian, start, values)
-    z2 = damped(start + kick, values, start)
-    solves2 = ca.sumsqr(distance(z2, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z2))) ** 2
-    # off a flat point, both ways: the root nearer the guess where both sides reach one
-    z3 = ca.if_else(ca.sumsqr(kick) > 0, damped(start - kick, values, start), ca.DM.nan(n, 1), True)
-    solves3 = ca.sumsqr(distance(z3, values, start)) <= (LOOP_TOLERANCE * (1 + ca.norm_2(z3))) ** 2
-    nearer3 = ca.logic_and(solves3, ca.logic_or(ca.logic_not(solves2), ca.sumsqr(z3 - start) < ca.sumsqr(z2 - start)))
-    z2 = ca.if_else(nearer3, z3, z2)
-    solves2 = ca.logic_or(solves2, solves3)
-    # the damped start first: the damped steps (of minimum norm) end near the solution nearest the
-    # guess where the loop is mildly nonlinear, and the nearest solution's Newton from the guess costs
-    # most where it fails (100 steps with second derivatives)
-    fallback = ca.if_else(solves2, z2, ca.if_else(solves, z1, ca.DM.nan(n, 1), True), True)
-    return ca.if_else(finite, sol, fallback, True)

@@ -604,6 +604,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         blocks, residuals, states, algebraics, unknowns, optional_init = self._sorted_blocks(
             residuals, states, algebraics, calculated, calc_eqs, unknowns)
         self._parameter_names = {sv.name for sv in params}
+        self._loop_memory: list = []  # (.flat_systems._rootfinder)
         assignments, loop_sizes, torn_sizes = self._solve_blocks(blocks, residuals, unknowns, algebraics + calculated)
         self._model_system = (residuals, unknowns)  # (.flat_systems._whole_initial_solution)
         log.debug("%s: %d blocks, algebraic loops (equations, tearing variables): %s",
@@ -623,6 +624,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
             inputs=[sv for sv in self.scalars.values() if sv.kind == "input"],
             states=states, algebraics=algebraics, derivative=dict(self.der_placeholders),
             assignments=assignments, n_loops=len(loop_sizes), loop_sizes=loop_sizes, torn_sizes=torn_sizes,
+            loop_memory=list(self._loop_memory),
         )
 
     def _parameters(self) -> tuple[list[ScalarVar], list[ScalarVar], list[tuple[ca.MX, str]], list[ScalarVar],

@@ -13,9 +13,10 @@ headers that fmpy ships, then tidy the model description:
   the C (:mod:`.c_prune`; ``providesAdjointDerivatives="false"``);
 * the model's ``experiment`` annotation becomes ``DefaultExperiment``.
 
-Models with asserts or initial equations get a small runtime (only they: an
-FMU of a model without either is exactly what CasADi exports, with the
-``fmi3SetTime`` fix). The assert conditions are outputs of the model function
+Models with asserts, initial equations, events or algebraic loops get a small runtime (only
+they: an FMU of a model without any is exactly what CasADi exports, with the
+``fmi3SetTime`` fix); a loop's last solution, Newton's next guess, is kept in local variables
+``_tbx_m<j>`` that the runtime writes after each evaluation (:mod:`.loop_solve`). The assert conditions are outputs of the model function
 (local variables ``_tbx_a<k>``: 1 where the assert holds, 0 where it fails),
 computed by the same evaluation as the equations; the initialisation solve is a
 separate CasADi function, generated as ``tbx_runtime.c`` (its own translation
@@ -138,6 +139,9 @@ def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], 
             dae.add(sv.name, "parameter", "tunable", sv.sym, _opts(sv, attr, {"start": float(starts[sv.name])}))
         for name, sym, start in ev.internal():
             dae.add(name, "parameter", "tunable", sym, {"start": float(start)})
+    for mem in em.loop_memory:  # read like parameters; the runtime writes each loop's last solution
+        dae.add(mem.sym.name(), "parameter", "tunable", mem.sym,
+                {"start": mem.start, "description": f"last solution of {mem.tear} (loop {mem.loop})"})
     for sv in em.inputs:
         start = 0.0
         if sv.start_node is not None:
@@ -204,6 +208,7 @@ def _assert_conditions(em: ExplicitModel, placeholders: list[ca.MX], ders: list[
                                                   *em.calculated, *em.discrete)}
     if em.events is not None:
         held.update(name for name, _, _ in em.events.internal())
+    held.update(mem.sym.name() for mem in em.loop_memory)
     conds = [a.condition for a in fmu_asserts(em)]
     if placeholders:
         conds = ca.substitute(conds, placeholders, ders)
@@ -281,7 +286,7 @@ def export_fmu(
                 _patch_set_time(tmpdir / name)
         adjoint = not _drop_adjoint(tmpdir / f"{ident}.c", ident)
         extra_sources: list[str] = []
-        if em.asserts or em.initial is not None or em.events is not None:
+        if em.asserts or em.initial is not None or em.events is not None or em.loop_memory:
             wrapper = next(tmpdir / name for name in sources if name.endswith("_wrap.c"))
             refs = value_references((tmpdir / "modelDescription.xml").read_text())
             runtime = add_runtime(em, wrapper, tmpdir, refs)
@@ -311,7 +316,7 @@ def export_fmu(
         md_path.write_text(
             _tidy_model_description(md_path.read_text(), set(exposed), causality, em.name, experiment, description,
                                     initial=em.initial, events=em.events, asserts=bool(em.asserts),
-                                    adjoint=adjoint)
+                                    adjoint=adjoint, memory={mem.sym.name() for mem in em.loop_memory})
         )
         if fixed_parameters:
             md_path.write_text(declare_fixed(md_path.read_text(), {sv.name for sv in em.parameters}))
@@ -389,6 +394,7 @@ def _tidy_model_description(
     events: EventSystem | None = None,
     asserts: bool = False,
     adjoint: bool = True,
+    memory: set[str] | frozenset[str] = frozenset(),
 ) -> str:
     root = ET.fromstring(xml)
     root.set("modelName", model)
@@ -424,6 +430,10 @@ def _tidy_model_description(
             var.attrib.pop("start", None)
         elif initial is not None and name in initial.free_states:
             var.set("initial", "approx")  # the start value is a guess for the initial equations
+        if name in memory:  # a loop's last solution (.loop_solve): the runtime's, not the user's
+            var.set("causality", "local")
+            var.set("variability", "discrete")
+            var.set("initial", "exact")
         if var.get("unit"):
             units.add(var.get("unit", ""))
     for elem in list(structure):

@@ -490,6 +490,55 @@ _UPDATE_DISCRETE = """FMI3_Export fmi3Status fmi3UpdateDiscreteStates(fmi3Instan
 }
 """
 
+_LOOPS = """
+/* The model's algebraic loops start Newton from their last converged solution (trackingbox.compiler.
+   loop_solve.warm_solution, the variables _tbx_m<j>): after each evaluation of the model, a loop whose
+   tearing variables all came out finite keeps them; leaving initialisation mode starts every loop
+   from its start values again (as fmi3Reset does), so that the initialisation does not depend on
+   what the importer evaluated before it. */
+static void tbx_keep_loops(casadi_fmi_memory* m) {
+  size_t j, k, first = 0;
+  int finite;
+  while (first < TBX_W_N) {
+    finite = 1;
+    for (k = first; k < TBX_W_N && tbx_w_loop[k] == tbx_w_loop[first]; ++k) {
+      if (!isfinite(m->v[var_offset[tbx_w_tear_vr[k]]])) finite = 0;
+    }
+    if (finite) {
+      for (j = first; j < k; ++j) m->v[var_offset[tbx_w_vr[j]]] = m->v[var_offset[tbx_w_tear_vr[j]]];
+    }
+    first = k;
+  }
+}
+static void tbx_restart_loops(casadi_fmi_memory* m) {
+  size_t j;
+  for (j = 0; j < TBX_W_N; ++j) m->v[var_offset[tbx_w_vr[j]]] = start[var_offset[tbx_w_vr[j]]];
+  m->up_to_date = 0;
+}
+"""
+
+_EVALUATE_END = "  for (i = 0; i < N_ZERO; ++i) m->v[zero_vr[i]] = m->zero[i];\n  return flag;\n}\n"
+
+
+def _loop_runtime(em: ExplicitModel, refs: dict[str, int]) -> tuple[str, list[tuple[str, str]]]:
+    """(the C of the loops' memory, the wrapper's patches that call it after each evaluation), for the
+    loops whose tearing variables are all FMU variables (the others keep starting from their start
+    values); ("", []) where there are none."""
+    missing = {mem.loop for mem in em.loop_memory if mem.tear not in refs or mem.sym.name() not in refs}
+    kept = [mem for mem in em.loop_memory if mem.loop not in missing]
+    if not kept:
+        return "", []
+    loops = {loop: i for i, loop in enumerate(dict.fromkeys(mem.loop for mem in kept))}
+    glue = (f"#define TBX_W_N {len(kept)}\n"
+            + _c_array("long", "tbx_w_vr", [str(refs[mem.sym.name()]) for mem in kept])
+            + _c_array("long", "tbx_w_tear_vr", [str(refs[mem.tear]) for mem in kept])
+            + _c_array("int", "tbx_w_loop", [str(loops[mem.loop]) for mem in kept]) + _LOOPS)
+    patches = [("int evaluate(casadi_fmi_memory* m) {\n",
+                "static void tbx_keep_loops(casadi_fmi_memory* m);\nint evaluate(casadi_fmi_memory* m) {\n"),
+               (_EVALUATE_END, _EVALUATE_END.replace("  return flag;", "  if (!flag) tbx_keep_loops(m);\n  return flag;"))]
+    return glue, patches
+
+
 _EVENT_INDICATORS = """FMI3_Export fmi3Status fmi3GetEventIndicators(fmi3Instance instance,
     fmi3Float64 eventIndicators[],
     size_t nEventIndicators) {
@@ -611,6 +660,9 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(_CALL % {"fn": "tbx_init", "P": "TBX_I"})
         glue.append(_INIT)
 
+    loop_glue, loop_patches = _loop_runtime(em, refs)
+    glue.append(loop_glue)
+
     n_z = len(ev.indicators) if ev is not None else 0
     if ev is not None:
         fn = by_name["tbx_event"]
@@ -651,6 +703,8 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(_EVENTS)
 
     exit_body = ["  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n"]
+    if loop_glue:
+        exit_body.append("  tbx_restart_loops(m);\n")
     if ev is not None:
         exit_body.append("  if (tbx_initialize_events(m) != fmi3OK) return fmi3Error;\n")
     elif em.initial is not None:
@@ -691,6 +745,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
          "  (void)noSetFMUStatePriorToCurrentPoint;\n  if (enterEventMode) *enterEventMode = fmi3False;\n"
          "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + check),
     ]
+    patches += loop_patches
     if em.asserts:
         patches.append((
             "  return fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n",
