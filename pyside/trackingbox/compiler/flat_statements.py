@@ -102,6 +102,48 @@ def _numeric_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]
     return (same_as(tr, fname, fn), frozen)
 
 
+def _node_key(value: Any) -> Any:
+    """A hashable key standing for *value* in :func:`_symbolic_call_key`: a CasADi MX by its node (the
+    address CasADi hashes it by: the same node, not an equal expression built again), numbers and
+    strings with their type, arrays and records element by element; None for anything else."""
+    if isinstance(value, ca.MX):
+        return ("MX", hash(value))
+    if isinstance(value, (bool, int, float, str, np.bool_, np.integer, np.floating)):
+        return (type(value).__name__, value)
+    if isinstance(value, Record):
+        fields = tuple((k, _node_key(v)) for k, v in value.items())
+        return None if any(f[1] is None for f in fields) else ("Record", fields)
+    if isinstance(value, np.ndarray):
+        elems = tuple(_node_key(e) for e in value.flat)
+        return None if any(e is None for e in elems) else ("array", value.shape, elems)
+    return None
+
+
+def _symbolic_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> tuple | None:
+    """The key under which a call of *fn* with these arguments under the if-branch guards being inlined
+    is built once (:meth:`StatementTranslation._shared_call`), or None (an external or impure function,
+    an argument or guard :func:`_node_key` cannot stand for)."""
+    if fn.get("external") or fn.get("pure") is False:
+        return None
+    parts = tuple(_node_key(a) for a in args) + ("guards",) + tuple(_node_key(g) for g in tr._guards)
+    return None if any(p is None for p in parts) else (same_as(tr, fname, fn), parts)
+
+
+def _copied(value: Value) -> Value:
+    """*value* with its arrays and records copied (their elements, CasADi nodes or numbers, shared), so
+    that a caller assigning into one leaves the shared call's outputs as they were."""
+    if isinstance(value, Record):
+        return Record((k, _copied(v)) for k, v in value.items())
+    if isinstance(value, np.ndarray):
+        if value.dtype != object:
+            return value.copy()
+        out = np.empty(value.shape, dtype=object)
+        for idx in np.ndindex(*value.shape):
+            out[idx] = _copied(value[idx])
+        return out
+    return value
+
+
 def _var_name(node: Any) -> str | None:
     """The name an expression node refers to when it is a plain variable reference, else None."""
     kind, body = kind_of(node)
@@ -131,7 +173,7 @@ class StatementTranslation:
         ``p_start`` and ``T_start``) were evaluated again for every component and every use."""
         key = _numeric_call_key(self, fname, fn, args)
         if key is None:
-            return self._inline(fname, fn, args)
+            return self._shared_call(fname, fn, args)
         memo: dict[tuple, list[Value]] = self.__dict__.setdefault("_numeric_calls", {})
         if key in memo:
             return [v.copy() if isinstance(v, np.ndarray) else v for v in memo[key]]
@@ -141,6 +183,29 @@ class StatementTranslation:
         if (len(self.asserts) == n_asserts and after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys()
                 and all(_numeric(v) for v in outs)):
             memo[key] = [v.copy() if isinstance(v, np.ndarray) else v for v in outs]
+        return outs
+
+    def _shared_call(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        """The outputs of ``fname(args)`` for symbolic arguments: a call with the same arguments (the same
+        CasADi nodes, :func:`_symbolic_call_key`) under the same if-branch guards gives the outputs the first
+        one built, so that the expression graph holds the call once. The asserts that call recorded are
+        recorded again (as each inlined call records its own); a call that records an event is built at each
+        call. IF97's ``g2(p, T).gpi`` beside ``g2(p, T).gtau`` inlined ``g2`` once per field, and so on down
+        the calls it makes."""
+        key = _symbolic_call_key(self, fname, fn, args)
+        if key is None:
+            return self._inline(fname, fn, args)
+        memo: dict[tuple, tuple] = self.__dict__.setdefault("_symbolic_calls", {})
+        hit = memo.get(key)
+        if hit is not None:
+            self.asserts.extend(hit[1])
+            return [_copied(v) for v in hit[0]]
+        n_asserts, before = len(self.asserts), event_state(self)
+        outs = self._inline(fname, fn, args)
+        after = event_state(self)
+        if after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys():
+            # (the arguments and guards are kept with the entry: the key holds their nodes' addresses)
+            memo[key] = ([_copied(v) for v in outs], self.asserts[n_asserts:], args, list(self._guards))
         return outs
 
     def _inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
