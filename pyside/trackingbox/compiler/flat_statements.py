@@ -4,6 +4,7 @@ if-, for- and when-statements, ``return``, asserts, and an algorithm section as 
 """
 from __future__ import annotations
 
+import json
 import re
 from typing import Any
 
@@ -129,6 +130,35 @@ def _symbolic_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value
     return None if any(p is None for p in parts) else (same_as(tr, fname, fn), parts)
 
 
+def _ref_names(node: Any, out: set[str]) -> set[str]:
+    """The first parts of the names the expression *node* reads (``state`` for ``state.p``)."""
+    if isinstance(node, dict):
+        ref = node.get("VarRef")
+        if isinstance(ref, dict) and isinstance(ref.get("name"), dict) and isinstance(ref["name"].get("name"), str):
+            out.add(ref["name"]["name"].split(".", 1)[0])
+        for val in node.values():
+            _ref_names(val, out)
+    elif isinstance(node, list):
+        for item in node:
+            _ref_names(item, out)
+    return out
+
+
+def _call_read_key(tr: Any, node: Any, env: dict[str, Value]) -> tuple | None:
+    """The key of :meth:`StatementTranslation.read_call`: the call's text, the if-branch guards being
+    inlined, and each entry of *env* under a name the call reads (``state``, ``state.p``; a name not in
+    *env* is a constant of the function's package, the same everywhere), by :func:`_node_key`; None
+    where one of them has no such key."""
+    texts: dict[int, tuple] = tr.__dict__.setdefault("_call_texts", {})
+    got = texts.get(id(node))
+    if got is None or got[0] is not node:  # (the node is kept with its text: its id stays its own)
+        got = texts[id(node)] = (node, json.dumps(node, sort_keys=True, default=repr), _ref_names(node, set()))
+    names = got[2]
+    entries = tuple(sorted(k for k in env if isinstance(k, str) and k.split(".", 1)[0] in names))
+    parts = tuple(_node_key(env[k]) for k in entries) + tuple(_node_key(g) for g in tr._guards)
+    return None if any(p is None for p in parts) else (got[1], len(tr._guards), entries, parts)
+
+
 def _copied(value: Value) -> Value:
     """*value* with its arrays and records copied (their elements, CasADi nodes or numbers, shared), so
     that a caller assigning into one leaves the shared call's outputs as they were."""
@@ -207,6 +237,29 @@ class StatementTranslation:
             # (the arguments and guards are kept with the entry: the key holds their nodes' addresses)
             memo[key] = ([_copied(v) for v in outs], self.asserts[n_asserts:], args, list(self._guards))
         return outs
+
+    def read_call(self, node: Any, env: dict[str, Value] | None) -> Value:
+        """The value of the call *node* a field is read of in a function's body (``f(x).p``): rumoca
+        passes a record argument field by field, so ``g(f(x))`` reaches the translator as ``g(f(x).p,
+        f(x).h, ...)``, each ``f(x)`` a copy of the whole call with its own arguments (themselves field
+        reads of calls, and so on down). The call's value is kept per its text and the nodes the names it
+        reads stand for (:func:`_call_read_key`), so each copy after the first costs no walk of its
+        arguments: the walks multiplied by the number of fields at every level (``HeatingSystem``'s
+        IF97 calls). The asserts it recorded are recorded again; one that records an event is read anew."""
+        key = _call_read_key(self, node, env) if env is not None else None
+        if key is None:
+            return self.expr(node, env)
+        memo: dict[tuple, tuple] = self.__dict__.setdefault("_call_reads", {})
+        hit = memo.get(key)
+        if hit is not None:
+            self.asserts.extend(hit[1])
+            return _copied(hit[0])
+        n_asserts, before = len(self.asserts), event_state(self)
+        value = self.expr(node, env)
+        after = event_state(self)
+        if after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys():
+            memo[key] = (_copied(value), self.asserts[n_asserts:], [env[k] for k in key[2]], list(self._guards))
+        return value
 
     def _inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
         ext = fn.get("external")
