@@ -90,7 +90,8 @@ class ExpressionTranslation:
         paths = self.component_paths({"FieldAccess": body}, env)
         if paths is not None:
             return self.path_value(paths)
-        base = self.expr(body["base"], env)
+        is_call = kind_of(body["base"])[0] == "FunctionCall"
+        base = self.read_call(body["base"], env) if is_call else self.expr(body["base"], env)
         if records.is_record_array(base):  # the field of each element of an array of record values
             try:
                 return records.field_of_each(base, str(body.get("field")), f"`{expression_text(body['base'])}`")

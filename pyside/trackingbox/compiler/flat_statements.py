@@ -4,6 +4,7 @@ if-, for- and when-statements, ``return``, asserts, and an algorithm section as 
 """
 from __future__ import annotations
 
+import json
 import re
 from typing import Any
 
@@ -102,6 +103,77 @@ def _numeric_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]
     return (same_as(tr, fname, fn), frozen)
 
 
+def _node_key(value: Any) -> Any:
+    """A hashable key standing for *value* in :func:`_symbolic_call_key`: a CasADi MX by its node (the
+    address CasADi hashes it by: the same node, not an equal expression built again), numbers and
+    strings with their type, arrays and records element by element; None for anything else."""
+    if isinstance(value, ca.MX):
+        return ("MX", hash(value))
+    if isinstance(value, (bool, int, float, str, np.bool_, np.integer, np.floating)):
+        return (type(value).__name__, value)
+    if isinstance(value, Record):
+        fields = tuple((k, _node_key(v)) for k, v in value.items())
+        return None if any(f[1] is None for f in fields) else ("Record", fields)
+    if isinstance(value, np.ndarray):
+        elems = tuple(_node_key(e) for e in value.flat)
+        return None if any(e is None for e in elems) else ("array", value.shape, elems)
+    return None
+
+
+def _symbolic_call_key(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> tuple | None:
+    """The key under which a call of *fn* with these arguments under the if-branch guards being inlined
+    is built once (:meth:`StatementTranslation._shared_call`), or None (an external or impure function,
+    an argument or guard :func:`_node_key` cannot stand for)."""
+    if fn.get("external") or fn.get("pure") is False:
+        return None
+    parts = tuple(_node_key(a) for a in args) + ("guards",) + tuple(_node_key(g) for g in tr._guards)
+    return None if any(p is None for p in parts) else (same_as(tr, fname, fn), parts)
+
+
+def _ref_names(node: Any, out: set[str]) -> set[str]:
+    """The first parts of the names the expression *node* reads (``state`` for ``state.p``)."""
+    if isinstance(node, dict):
+        ref = node.get("VarRef")
+        if isinstance(ref, dict) and isinstance(ref.get("name"), dict) and isinstance(ref["name"].get("name"), str):
+            out.add(ref["name"]["name"].split(".", 1)[0])
+        for val in node.values():
+            _ref_names(val, out)
+    elif isinstance(node, list):
+        for item in node:
+            _ref_names(item, out)
+    return out
+
+
+def _call_read_key(tr: Any, node: Any, env: dict[str, Value]) -> tuple | None:
+    """The key of :meth:`StatementTranslation.read_call`: the call's text, the if-branch guards being
+    inlined, and each entry of *env* under a name the call reads (``state``, ``state.p``; a name not in
+    *env* is a constant of the function's package, the same everywhere), by :func:`_node_key`; None
+    where one of them has no such key."""
+    texts: dict[int, tuple] = tr.__dict__.setdefault("_call_texts", {})
+    got = texts.get(id(node))
+    if got is None or got[0] is not node:  # (the node is kept with its text: its id stays its own)
+        got = texts[id(node)] = (node, json.dumps(node, sort_keys=True, default=repr), _ref_names(node, set()))
+    names = got[2]
+    entries = tuple(sorted(k for k in env if isinstance(k, str) and k.split(".", 1)[0] in names))
+    parts = tuple(_node_key(env[k]) for k in entries) + tuple(_node_key(g) for g in tr._guards)
+    return None if any(p is None for p in parts) else (got[1], len(tr._guards), entries, parts)
+
+
+def _copied(value: Value) -> Value:
+    """*value* with its arrays and records copied (their elements, CasADi nodes or numbers, shared), so
+    that a caller assigning into one leaves the shared call's outputs as they were."""
+    if isinstance(value, Record):
+        return Record((k, _copied(v)) for k, v in value.items())
+    if isinstance(value, np.ndarray):
+        if value.dtype != object:
+            return value.copy()
+        out = np.empty(value.shape, dtype=object)
+        for idx in np.ndindex(*value.shape):
+            out[idx] = _copied(value[idx])
+        return out
+    return value
+
+
 def _var_name(node: Any) -> str | None:
     """The name an expression node refers to when it is a plain variable reference, else None."""
     kind, body = kind_of(node)
@@ -131,7 +203,7 @@ class StatementTranslation:
         ``p_start`` and ``T_start``) were evaluated again for every component and every use."""
         key = _numeric_call_key(self, fname, fn, args)
         if key is None:
-            return self._inline(fname, fn, args)
+            return self._shared_call(fname, fn, args)
         memo: dict[tuple, list[Value]] = self.__dict__.setdefault("_numeric_calls", {})
         if key in memo:
             return [v.copy() if isinstance(v, np.ndarray) else v for v in memo[key]]
@@ -142,6 +214,52 @@ class StatementTranslation:
                 and all(_numeric(v) for v in outs)):
             memo[key] = [v.copy() if isinstance(v, np.ndarray) else v for v in outs]
         return outs
+
+    def _shared_call(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
+        """The outputs of ``fname(args)`` for symbolic arguments: a call with the same arguments (the same
+        CasADi nodes, :func:`_symbolic_call_key`) under the same if-branch guards gives the outputs the first
+        one built, so that the expression graph holds the call once. The asserts that call recorded are
+        recorded again (as each inlined call records its own); a call that records an event is built at each
+        call. IF97's ``g2(p, T).gpi`` beside ``g2(p, T).gtau`` inlined ``g2`` once per field, and so on down
+        the calls it makes."""
+        key = _symbolic_call_key(self, fname, fn, args)
+        if key is None:
+            return self._inline(fname, fn, args)
+        memo: dict[tuple, tuple] = self.__dict__.setdefault("_symbolic_calls", {})
+        hit = memo.get(key)
+        if hit is not None:
+            self.asserts.extend(hit[1])
+            return [_copied(v) for v in hit[0]]
+        n_asserts, before = len(self.asserts), event_state(self)
+        outs = self._inline(fname, fn, args)
+        after = event_state(self)
+        if after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys():
+            # (the arguments and guards are kept with the entry: the key holds their nodes' addresses)
+            memo[key] = ([_copied(v) for v in outs], self.asserts[n_asserts:], args, list(self._guards))
+        return outs
+
+    def read_call(self, node: Any, env: dict[str, Value] | None) -> Value:
+        """The value of the call *node* a field is read of in a function's body (``f(x).p``): rumoca
+        passes a record argument field by field, so ``g(f(x))`` reaches the translator as ``g(f(x).p,
+        f(x).h, ...)``, each ``f(x)`` a copy of the whole call with its own arguments (themselves field
+        reads of calls, and so on down). The call's value is kept per its text and the nodes the names it
+        reads stand for (:func:`_call_read_key`), so each copy after the first costs no walk of its
+        arguments: the walks multiplied by the number of fields at every level (``HeatingSystem``'s
+        IF97 calls). The asserts it recorded are recorded again; one that records an event is read anew."""
+        key = _call_read_key(self, node, env) if env is not None else None
+        if key is None:
+            return self.expr(node, env)
+        memo: dict[tuple, tuple] = self.__dict__.setdefault("_call_reads", {})
+        hit = memo.get(key)
+        if hit is not None:
+            self.asserts.extend(hit[1])
+            return _copied(hit[0])
+        n_asserts, before = len(self.asserts), event_state(self)
+        value = self.expr(node, env)
+        after = event_state(self)
+        if after[:-1] == before[:-1] and after[-1].keys() == before[-1].keys():
+            memo[key] = (_copied(value), self.asserts[n_asserts:], [env[k] for k in key[2]], list(self._guards))
+        return value
 
     def _inline(self, fname: str, fn: dict[str, Any], args: list[Value]) -> list[Value]:
         ext = fn.get("external")
