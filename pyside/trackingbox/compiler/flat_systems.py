@@ -22,9 +22,7 @@ from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
 from .initial_discrete import InitialDiscreteError, solve_initial_discrete
 from .initial_pre import hold_at_initialisation, pre_initial_equations
-from .loop_solve import (  # noqa: F401  (the loops' numerics, re-exported where they were)
-    DAMPED_HALVINGS, DAMPED_ITERATIONS, LOOP_TOLERANCE, NEWTON_TOLERANCE, _damped_newton, _or_nearest_solution,
-    warm_solution)
+from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, warm_solution
 
 log = logging.getLogger(__name__)
 
