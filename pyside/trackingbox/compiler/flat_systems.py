@@ -595,6 +595,8 @@ class SystemAssembly:
     def _torn_rootfinder(self, k: int, residual: list[ca.MX], tears: list[ca.MX],
                          solved: list[tuple[ca.MX, ca.MX]], guess: list[float]) -> list[ca.MX]:
         """Rootfinder over the tearing variables only; the torn equations are inlined."""
+        if not tears and not residual:  # the tearing solved the whole block explicitly
+            return []
         inner = list(residual)
         # express the residuals in tearing variables and outer symbols: substitute the
         # explicitly solved unknowns, latest first, so each definition sees the earlier ones
