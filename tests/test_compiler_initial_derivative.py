@@ -95,10 +95,14 @@ end SteadyLoop;
 """
 
 
-def test_a_variable_given_by_an_algebraic_loop(tmp_path):
+@pytest.mark.parametrize("u_start", ["start = 1000", "no start value: solved with the model's equations"])
+def test_a_variable_given_by_an_algebraic_loop(tmp_path, u_start):
     # with u = U/m = c T + e T^2: der(u) = (der(U) - u der(m))/m = (w u(Tin) + Q - w u)/m = 0
-    # => u = u(Tin) + Q/w = 1690, T the positive root of e T^2 + c T - u, U = m u (steady thereafter)
-    out = _run(tmp_path, LOOP, "SteadyLoop", ["m", "U", "T"])
+    # => u = u(Tin) + Q/w = 1690, T the positive root of e T^2 + c T - u, U = m u (steady thereafter).
+    # Without a start value U starts at 0 in a nonlinear block: the initial equations are solved with the
+    # model's equations, from T's start value (.flat_systems._whole_initial_solution)
+    text = LOOP if u_start.startswith("start") else LOOP.replace("Real U(start = 1000);", "Real U;")
+    out = _run(tmp_path, text, "SteadyLoop", ["m", "U", "T"])
     u = 4 * 300 + 0.001 * 300**2 + 800 / 2
     t0 = (-4 + math.sqrt(16 + 4 * 0.001 * u)) / (2 * 0.001)
     m = 4 + 6 * np.exp(-0.5 * out["time"])
@@ -127,3 +131,24 @@ def test_a_variable_that_depends_on_an_input_is_refused_naming_the_equation(tmp_
                              r"u.* at .*WithInput\.mo:6"):
         compile_model(src, "WithInput", backend="embedded", output=tmp_path / "w.fmu")
     assert not (tmp_path / "w.fmu").exists()
+
+
+SECOND = """model Second
+  Real x(start = 0);
+  Real y;
+initial equation
+  der(y) = 0;
+equation
+  der(x) = -x + 1;
+  y = der(x);
+end Second;
+"""
+
+
+def test_a_variable_that_is_a_derivative_is_refused_naming_the_equation(tmp_path):
+    src = tmp_path / "Second.mo"
+    src.write_text(SECOND)
+    with pytest.raises(UnsupportedConstructError,
+                       match=r"der\(y\) in an initial equation, where y is not a state and y depends on der\(x\).* "
+                             r"at .*Second\.mo:5"):
+        compile_model(src, "Second", backend="embedded", output=tmp_path / "s.fmu")

@@ -608,7 +608,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._loop_memory: list = []  # (.flat_systems._rootfinder)
         assignments, loop_sizes, torn_sizes = self._solve_blocks(blocks, residuals, unknowns, algebraics + calculated)
         self._model_system = (residuals, unknowns)  # (.flat_systems._whole_initial_solution)
-        init_residuals = with_initial_derivatives(self, init_residuals, states, assignments)
+        init_residuals = with_initial_derivatives(self, init_residuals, states, (blocks, residuals, unknowns))
         log.debug("%s: %d blocks, algebraic loops (equations, tearing variables): %s",
                   self.model, len(blocks), torn_sizes)
         events = self._event_system(discrete, discrete_residuals, discrete_initial)

@@ -3,18 +3,22 @@
 The derivative of a variable is its time derivative as the model defines it (MLS 3.7.4), whether or not
 the variable is a state. Modelica.Fluid's vessels initialise a steady state with ``der(medium.T) = 0``
 (or ``der(medium.h) = 0``) while the embedded path keeps the balances' own variables, mass and internal
-energy, as states (MSL ``Fluid.Examples.HeatingSystem``'s tank): there ``medium.T`` is an algebraic
-variable, a function of the states (and perhaps of time), which the causalised model gives as an explicit
-expression or as the solution of an algebraic loop. Its derivative follows by the chain rule,
+energy, as states (MSL ``Fluid.Examples.HeatingSystem``'s pipes): there ``medium.T`` is an algebraic
+variable, which the model's sorted blocks (:mod:`.causalize`) give from the states (and perhaps time).
+Its derivative follows by differentiating those blocks, in the model's order: a block r(z, y) = 0 in its
+unknowns z, with y the states, time and earlier blocks' unknowns, gives
 
-    der(v) = dv/dx * der(x) + dv/dt,
+    dz/dt = -(dr/dz)^-1 (dr/dy dy/dt),
 
-a forward derivative (``jtimes``) of v's expression in the states x and time, along the states'
-derivatives (the model's own equations give them, :meth:`.flat_systems.SystemAssembly._initial_system`
-substitutes them) and 1 for time. Through an algebraic loop, the derivative is that of its rootfinder
-(the implicit function theorem). Discrete variables, held relations and parameters are constant between
-events: their derivatives are 0. A variable that depends on an input is refused (its derivative would need
-the input's, which the FMU is not given), naming the equation.
+dy/dt the states' derivative symbols (the model's equations give them), 1 for time, and the earlier
+blocks' results; for an explicit equation this is the chain rule, for an algebraic loop the implicit
+function theorem. The result is in the model's own symbols (states, their derivatives, algebraic
+variables): the initialisation problem substitutes their causalised values
+(:meth:`.flat_systems.SystemAssembly._initial_system`), or solves it together with the model's
+equations, from the variables' start values (``_whole_initial_solution``), never evaluating a loop's
+solution at states that are only a guess. Parameters and discrete variables are constant between
+events. A variable that depends on an input, or on a state's derivative, is refused naming the
+equation (its derivative would need the input's, which the FMU is not given, or a second derivative).
 
 Where index reduction (:mod:`.index`) made the variable a state after all, its derivative is the state's;
 where it made a dummy derivative ``der(v)`` an algebraic variable, that variable.
@@ -26,7 +30,6 @@ from typing import Any
 import casadi as ca
 
 from .flat_model import ScalarVar
-from .flat_systems import substituted
 
 
 class InitialDerivativeError(Exception):
@@ -39,11 +42,13 @@ class InitialDerivativeError(Exception):
 
 
 def derivative_values(pending: list[str], scalars: dict[str, ScalarVar], states: list[ScalarVar],
-                      derivative: dict[str, ca.MX], assignments: list[tuple[ca.MX, ca.MX]],
+                      derivative: dict[str, ca.MX], system: tuple[Any, list[tuple[ca.MX, str]], list[ca.MX]],
                       time: ca.MX) -> dict[str, ca.MX]:
     """{name: the value of der(name)} for each of *pending* (variables whose derivative an initial
-    equation takes, none of them a state when the equations were read), in the states, their derivative
-    symbols (*derivative*, by state name), time and constants; raises :class:`InitialDerivativeError`."""
+    equation takes, none of them a state when the equations were read), in the model's own symbols:
+    the states, their derivative symbols (*derivative*, by state name), the algebraic variables, time and
+    constants. *system*: the model's sorted blocks, equations and unknowns (:mod:`.causalize`). Raises
+    :class:`InitialDerivativeError`."""
     out: dict[str, ca.MX] = {}
     todo: list[str] = []
     for name in pending:
@@ -54,28 +59,62 @@ def derivative_values(pending: list[str], scalars: dict[str, ScalarVar], states:
             out[name] = dummy.sym
         else:
             todo.append(name)
-    if not todo:
-        return out
-    values = substituted([scalars[n].sym for n in todo], assignments)
-    state_names = {s.name for s in states}
-    inputs = {n for n, sv in scalars.items() if sv.kind == "input"}
-    for name, value in zip(todo, values):
-        used = {s.name() for s in ca.symvar(value)}
-        if used & inputs:
-            raise InitialDerivativeError(name, f"{name} depends on the input {sorted(used & inputs)[0]}, whose "
-                                         "derivative the FMU is not given")
-        unsolved = sorted(n for n in used if n not in state_names and n in scalars and scalars[n].kind == "continuous")
-        if unsolved:
-            raise InitialDerivativeError(name, f"{name} is not given by the model's equations as a function "
-                                         f"of the states (it depends on {', '.join(unsolved[:4])})")
-        seeds = [s.sym for s in states] + [time]
-        tangent = [derivative[s.name] for s in states] + [ca.MX(1.0)]
-        out[name] = ca.jtimes(value, ca.vertcat(*seeds), ca.vertcat(*tangent))
+    tangent: dict[str, ca.MX] = {s.name: derivative[s.name] for s in states}
+    tangent[time.name()] = ca.MX(1.0)
+    for name in todo:  # (a parameter or discrete variable: 0 between events)
+        out[name] = _tangent(name, tangent, scalars, derivative, system)
     return out
 
 
+def _tangent(name: str, tangent: dict[str, ca.MX], scalars: dict[str, ScalarVar], derivative: dict[str, ca.MX],
+             system: tuple[Any, list[tuple[ca.MX, str]], list[ca.MX]]) -> ca.MX:
+    """The time derivative of the unknown *name*, with those of the unknowns its block needs (added to
+    *tangent*, which starts with the states' and time's), block by block in the model's order: a block
+    r(z, y) = 0 in its unknowns z gives dz = -(dr/dz)^-1 (dr/dy dy), dy the derivatives of the states (their
+    symbols), of time (1) and of the unknowns of earlier blocks; parameters and discrete variables have
+    none (constant between events)."""
+    blocks, residuals, unknowns = system
+    block_of = {u.name(): k for k, b in enumerate(blocks) for u in (unknowns[j] for j in b.unknowns)}
+    inputs = {n for n, sv in scalars.items() if sv.kind == "input"}
+    state_ders = {d.name(): n for n, d in derivative.items()}
+    needed: set[int] = set()
+    stack = [block_of[name]] if name in block_of else []
+    while stack:
+        k = stack.pop()
+        if k in needed or all(unknowns[j].name() in tangent for j in blocks[k].unknowns):
+            continue
+        needed.add(k)
+        for i in blocks[k].equations:
+            for v in ca.symvar(residuals[i][0]):
+                if v.name() in block_of and block_of[v.name()] != k:
+                    stack.append(block_of[v.name()])
+    for k in sorted(needed):
+        res = ca.vertcat(*(residuals[i][0] for i in blocks[k].equations))
+        unk = [unknowns[j] for j in blocks[k].unknowns]
+        taken = {u.name() for u in unk}
+        for u in unk:
+            if u.name() in state_ders:
+                raise InitialDerivativeError(name, f"{name} depends on der({state_ders[u.name()]}), "
+                                             "whose derivative the model does not give")
+        ys = [v for v in ca.symvar(res) if v.name() not in taken]
+        held = sorted(v.name() for v in ys if v.name() in inputs)
+        if held:
+            raise InitialDerivativeError(name, f"{name} depends on the input {held[0]}, whose "
+                                         "derivative the FMU is not given")
+        ys = [v for v in ys if v.name() in tangent]
+        if not ys:
+            change = ca.MX.zeros(len(unk), 1)
+        else:
+            rate = ca.jtimes(res, ca.vertcat(*ys), ca.vertcat(*(tangent[v.name()] for v in ys)))
+            jac = ca.jacobian(res, ca.vertcat(*unk))
+            change = -rate / jac if len(unk) == 1 else -ca.solve(jac, rate)
+        for i, u in enumerate(unk):
+            tangent[u.name()] = change[i]
+    return tangent.get(name, ca.MX(0.0))
+
+
 def with_initial_derivatives(tr: Any, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
-                             assignments: list[tuple[ca.MX, ca.MX]]) -> list[tuple[ca.MX, str]]:
+                             system: tuple[Any, list[tuple[ca.MX, str]], list[ca.MX]]) -> list[tuple[ca.MX, str]]:
     """The initial *residuals* of translator *tr* with each ``der(v)`` of a variable that was no state
     (``tr._initial_ders``: name -> (its symbol, the span of the first equation using it)) replaced by its
     value (:func:`derivative_values`); one that has none is refused naming the equation."""
@@ -83,7 +122,7 @@ def with_initial_derivatives(tr: Any, residuals: list[tuple[ca.MX, str]], states
     if not pending:
         return residuals
     try:
-        values = derivative_values(list(pending), tr.scalars, states, tr.der_placeholders, assignments, tr.time)
+        values = derivative_values(list(pending), tr.scalars, states, tr.der_placeholders, system, tr.time)
     except InitialDerivativeError as exc:
         raise tr.unsupported(f"der({exc.name}) in an initial equation, where {exc.name} is not a state and "
                              f"{exc.why}", r"\bder\s*\(", span=pending[exc.name][1]) from None
