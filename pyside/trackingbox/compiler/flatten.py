@@ -84,6 +84,7 @@ from .flat_model import BOOLEAN, INTEGER, REAL, Assertion, ExplicitModel, Scalar
 from .flat_statements import StatementTranslation
 from .flat_systems import SystemAssembly
 from .flat_text import check_lost_der_equations, expression_text, origin_text
+from .initial_derivatives import with_initial_derivatives
 
 log = logging.getLogger(__name__)
 
@@ -607,6 +608,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._loop_memory: list = []  # (.flat_systems._rootfinder)
         assignments, loop_sizes, torn_sizes = self._solve_blocks(blocks, residuals, unknowns, algebraics + calculated)
         self._model_system = (residuals, unknowns)  # (.flat_systems._whole_initial_solution)
+        init_residuals = with_initial_derivatives(self, init_residuals, states, (blocks, residuals, unknowns))
         log.debug("%s: %d blocks, algebraic loops (equations, tearing variables): %s",
                   self.model, len(blocks), torn_sizes)
         events = self._event_system(discrete, discrete_residuals, discrete_initial)
@@ -695,9 +697,15 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
     def _initial_residuals(self, init_residuals: list[tuple[ca.MX, str]], state_names: set[str]) -> list[ScalarVar]:
         """Add the initial equations and initial algorithms to *init_residuals* (and ``v = start`` for
         an algebraic variable with ``fixed = true``); return the algebraic variables."""
+        # der(v) of a variable no equation of the model differentiates: its value is built once the
+        # model is causalised (.initial_derivatives); kept with the span of the first equation using it
+        self._initial_ders: dict[str, tuple[ca.MX, Any]] = {}
         for eq in self.flat.get("initial_equations") or []:
             origin = f"initial equation {self._where(eq.get('origin'))}"
             val = self.expr(eq["residual"])
+            span = eq.get("span") if isinstance(eq.get("span"), dict) else None
+            for name in [n for n in self.der_placeholders if n not in state_names]:
+                self._initial_ders.setdefault(name, (self.der_placeholders[name], span))
             for r in (val.ravel() if isinstance(val, np.ndarray) else [val]):
                 if is_number(r):
                     if abs(float(r)) > 0:
@@ -708,11 +716,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                     self._equation_spans[id(r)] = (r, eq["span"])
         for section in self.flat.get("initial_algorithms") or []:
             init_residuals.extend(self.algorithm_residuals(section, initial=True))
-        extra = [n for n in self.der_placeholders if n not in state_names]
-        if extra:
-            raise self.unsupported(
-                f"der({extra[0]}) in an initial equation, where {extra[0]} is not a state "
-                "(no equation of the model differentiates it)", r"\binitial\s+equation\b")
+        for name in [n for n in self.der_placeholders if n not in state_names]:  # (or an initial algorithm's)
+            span = self._initial_ders[name][1] if name in self._initial_ders else None
+            self._initial_ders[name] = (self.der_placeholders.pop(name), span)
         algebraics = [sv for sv in self.scalars.values() if sv.kind == "continuous" and sv.name not in state_names]
         for sv in algebraics:  # fixed = true on a variable that is not a state: an initial equation v = start
             if sv.fixed is True and sv.start_node is not None:
