@@ -43,21 +43,10 @@ _INDEX = "k__tb"
 _INTEGER = re.compile(r"\s*=\s*(\d+)\s*(?:;|annotation\b|$)")
 
 
-def _ancestors(index, cls: str) -> list[str]:
-    out: dict[str, None] = {}
-    todo = [cls]
-    while todo:
-        name = todo.pop()
-        if name not in out and name in index.classes:
-            out[name] = None
-            todo.extend(index.bases(name))
-    return list(out)
-
-
 def _declared_integer(index, cls: str, param: str, codes: dict[str, str]) -> int | None:
     """The integer literal the declaration of parameter *param* in class *cls* or its bases binds it
     to, where no class of that chain modifies an element of that name; else None."""
-    chain = _ancestors(index, cls)
+    chain = index.ancestors(cls)
     modified = re.compile(rf"[(,]\s*(?:(?:each|final|redeclare)\s+)*{re.escape(param)}\s*(?:\(|=(?!=))")
     if any(modified.search(own_text(index, c, codes)) for c in chain):
         return None

@@ -478,6 +478,17 @@ class LibraryIndex:
         """A top-level class (a library's root package, or a class of a single-file source)."""
         return name if name in self.children.get("", {}) else None
 
+    def ancestors(self, cls: str) -> list[str]:
+        """*cls* and every class it extends, directly or through its bases (each once, *cls* first)."""
+        out: dict[str, None] = {}
+        todo = [cls]
+        while todo:
+            name = todo.pop()
+            if name not in out and name in self.classes:
+                out[name] = None
+                todo.extend(self.bases(name))
+        return list(out)
+
     def bases(self, cls: str) -> tuple[str, ...]:
         """The classes *cls* extends (resolved), its short-class base included."""
         if cls in self._bases:

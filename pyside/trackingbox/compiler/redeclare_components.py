@@ -62,17 +62,6 @@ class Plan(NamedTuple):
     modification: str
 
 
-def _chain(index, cls: str) -> list[str]:
-    out: dict[str, None] = {}
-    todo = [cls]
-    while todo:
-        name = todo.pop()
-        if name not in out and name in index.classes:
-            out[name] = None
-            todo.extend(index.bases(name))
-    return list(out)
-
-
 def _nested(index, cls: str) -> list[str]:
     out = [cls]
     for child in index.children.get(cls, {}).values():
@@ -169,7 +158,7 @@ def plan(index, cls: str, text: str, at: int) -> Plan | None:
     owner = index.lookup(decl.group("type"), cls)
     if owner is None:
         return None
-    chain = _chain(index, owner)
+    chain = index.ancestors(owner)
     found = _uses(index, chain, m.group(2))
     if found is None or not found[0] or not found[1]:
         return None
