@@ -11,6 +11,8 @@ from typing import Any
 
 import casadi as ca
 
+from .repeat import repeated
+
 
 LOOP_TOLERANCE = 1e-6
 """The largest residual (2-norm, relative to 1 + |z|) accepted from the nearest-solution fallback;
@@ -29,12 +31,13 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
                    values: ca.MX | ca.DM, anchor: ca.MX | ca.DM | None = None) -> ca.MX:
     """A root of the scaled residual *distance(z, p, z0)* by Gauss-Newton steps of minimum norm,
     dz = -J'(J J' + mu I)^-1 r (defined whatever the rank of J), each shortened by halving until the
-    residual's square falls by the Armijo fraction (the shortest length tried is taken otherwise),
-    from *start*, the residual scaled at *anchor* (the guess; *start* where not given). Newton's full steps swing across the root of a flow law that goes as the square
-    root of a pressure difference (from a flow q ~ sqrt(x), the full step lands at -x, and back):
+    residual's square falls by the Armijo fraction (the shortest length tried is taken otherwise, and the
+    iteration stops), from *start*, *anchor* the third argument of *distance* in every step (the
+    loop's fallbacks pass the weights of its equations at the guess; *start* where not given). Newton's
+    full steps swing across the root of a flow law that goes as the square root of a pressure difference (from a flow q ~ sqrt(x), the full step lands at -x, and back):
     e.g. MSL ``Fluid.Examples.Tanks.TanksWithOverflow``'s overflow pipe between two ports above their
-    levels. The iteration is a fixed number of steps (one step function, folded), so that it is
-    exported as C like the rest of the model."""
+    levels. The iteration is a fixed number of steps (one step function, :func:`.repeat.repeated`: the
+    steps after it stopped are skipped in blocks), so that it is exported as C like the rest of the model."""
     z = ca.MX.sym(f"{name}_dz", n)
     q = ca.MX.sym(f"{name}_dq", values.numel() + n)
     p, z0 = q[:values.numel()], q[values.numel():]
@@ -57,12 +60,14 @@ def _damped_newton(name: str, distance: ca.Function, n: int, start: ca.MX | ca.D
     # found no length that lowers it (a residual that is not finite, or a minimum of its norm that is
     # no root): the remaining steps would each try every length again (DAMPED_HALVINGS residuals of
     # the loop's functions, e.g. IF97 calls, per step) to move the iterate by 2**-23 of a step
+    # (a step from there would not move it either: it stops the iteration as a stall does)
     done = phi0 <= (1e-3 * LOOP_TOLERANCE * (1 + ca.norm_2(z))) ** 2
-    move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 0), trial(0), True)])
-    zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once a step found no length that lowers
+    move = ca.Function(f"{name}_damped_move", [z, q], [ca.if_else(done, ca.vertcat(z, 1), trial(0), True)])
+    zs = ca.MX.sym(f"{name}_dzs", n + 1)  # the iterate, then 1 once it stopped (no length lowers, or done)
     step = ca.Function(f"{name}_damped_step", [zs, q], [ca.if_else(zs[n] > 0.5, zs, move(zs[:n], q), True)])
     anchor = start if anchor is None else anchor
-    return step.fold(DAMPED_ITERATIONS)(ca.vertcat(start, 0), ca.vertcat(values, anchor))[:n]
+    steps = repeated(step, DAMPED_ITERATIONS, lambda s: s[n] > 0.5, f"{name}_damped")
+    return steps(ca.vertcat(start, 0), ca.vertcat(values, anchor))[:n]
 
 
 FLAT_NUDGE = 1e-3
@@ -116,7 +121,8 @@ def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) 
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
     rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
-    scaled = g / ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
+    weight = ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
+    scaled = g / weight
     kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
     nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
                             {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
@@ -139,8 +145,13 @@ def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) 
     # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
     # through the iteration (which tripled the generated C of TanksWithOverflow)
     jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])
+    # the damped steps take the weights as numbers (computed once, from the guess): the Jacobian of
+    # `distance` in z is also differentiated in z0 (zero directions, evaluated all the same), which are
+    # second derivatives of the loop's functions, each step (MSL MomentumBalanceFittings: 45% of its time)
+    w = ca.MX.sym(f"{name}_w", n)
+    divided = ca.Function(f"{name}_divided", [z, p, w], [g / w])
     first = ca.MX.sym(f"{name}_first", n)
-    end = _damped_newton(name, distance, n, first, p, z0)
+    end = _damped_newton(name, divided, n, first, p, ca.Function(f"{name}_weights", [p, z0], [weight])(p, z0))
     jac2 = jacobian(end, p, z0)
     y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, z0 - end))
     # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:

@@ -14,8 +14,8 @@ once, on fresh symbols for the variables it assigns, into a function ``step`` of
   by CasADi's short-circuit ``if_else`` (a conditional call: once the loop has ended, a pass costs
   a copy, not a body).
 
-``step`` is applied :data:`.while_loops.MAX_PASSES` times by ``Function.fold`` (one call node per
-pass in the graph, the body once in the generated C), which gives the environment where the loop
+``step`` is applied :data:`.while_loops.MAX_PASSES` times (:func:`.repeat.repeated`: the body once in the
+generated C, and the passes after the loop ended skipped in blocks), which gives the environment where the loop
 ended, ``e_j`` for the first *j* with ``c_j`` false, the same as the unrolled loop. Variables the
 body only reads (the function's inputs, the model's symbols) are the function's parameters.
 
@@ -38,6 +38,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number, logical_and
 from .flat_model import Assertion
+from .repeat import repeated
 
 if TYPE_CHECKING:  # pragma: no cover
     from .flat_model import Value
@@ -195,7 +196,9 @@ def _apply(tr: Any, condition: Callable[[dict], Any], env: dict[str, Value], t: 
     start = [1.0]
     for key, shape, _ in t.layout:
         start += [_mx(e) for e in _elements(env[key])[1]] if key in env else [0.0] * (int(np.prod(shape)) if shape else 1)
-    final = step.fold(passes)(ca.vertcat(*[_mx(v) for v in start], ca.DM.ones(len(t.asserts))), p)
+    # (a pass from a = 0 returns its state: the passes after the loop ended are skipped in blocks)
+    final = repeated(step, passes, lambda s: s[0] == 0, t.x.name())(
+        ca.vertcat(*[_mx(v) for v in start], ca.DM.ones(len(t.asserts))), p)
     result = dict(env)
     for key, shape, off in t.layout:
         result[key] = _unpack(final, off, shape)
