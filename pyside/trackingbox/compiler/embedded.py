@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError, UnsupportedConstructError, did_you_mean
-from . import inner_defaults
+from . import function_locals, inner_defaults
 from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
@@ -446,9 +446,12 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
             if answer["ok"] and tree.pruned:
                 answer = _with_inner_values(answer, source, model, libraries, index, Path(tmp), request, req, res,
                                             timeout)
+            if not answer["ok"] and answer.get("kind") == "rumoca":
+                answer = _with_undefined_locals(answer, source, model, libraries, index, Path(tmp), request, req,
+                                                res, timeout, prune)
             if answer["ok"]:
                 if cache is not None:
-                    cache.put(key, answer["flat"])
+                    cache.put(key, answer["flat"])  # (a retry's under the first tree's key: it is its reading)
                 return answer
             if (tree.pruned and answer.get("kind") == "rumoca"
                     and _ASSERT_COUNTED.search(answer["message"] or "")):
@@ -477,8 +480,37 @@ def run_frontend(source: ModelicaSource, model: str, libraries: tuple[Path, ...]
         return answer
 
 
+UNDEFINED_RETRIES = 12
+"""Most functions given undefined bindings for their partly assigned locals, one retry each."""
+
+
+def _with_undefined_locals(answer: dict, source: ModelicaSource, model: str, libraries: tuple[Path, ...], index,
+                           tmp: Path, request: dict, req: Path, res: Path, timeout: float, prune: bool) -> dict:
+    """*answer*, a refusal by rumoca of a function local that an if-statement assigns on some branches
+    only, flattened again with that function's such locals bound to "undefined" (:mod:`.function_locals`),
+    and so on for each function refused next; the last refusal where a function cannot be so read."""
+    done: set[str] = set()
+    while len(done) < UNDEFINED_RETRIES:
+        hit = function_locals.REFUSAL.search(answer.get("message") or "")
+        function = function_locals.function_named(index, hit.group(1)) if hit else None
+        if function is None or function in done or not function_locals.bindings(index, function):
+            return answer
+        done.add(function)
+        log.info("front end: %s refused %s's local %s (assigned on some branches only); again with its such "
+                 "locals undefined where unassigned", model, function, hit.group(2))
+        tree = build_tree(source, model, libraries, tmp / f"undefined{len(done)}", prune=prune, index=index,
+                          undefined=frozenset(done))
+        again = {**request, "entry": str(tree.entry), "roots": [str(r) for r in tree.roots] if tree.roots else None}
+        answer = tree.rename(_run_worker(again, req, res, source, model, timeout))
+        if answer["ok"] and tree.pruned:
+            answer = _with_inner_values(answer, source, model, libraries, index, tmp, again, req, res, timeout,
+                                        frozenset(done))
+    return answer
+
+
 def _with_inner_values(answer: dict, source: ModelicaSource, model: str, libraries: tuple[Path, ...], index,
-                       tmp: Path, request: dict, req: Path, res: Path, timeout: float) -> dict:
+                       tmp: Path, request: dict, req: Path, res: Path, timeout: float,
+                       undefined: frozenset[str] = frozenset()) -> dict:
     """*answer* flattened again with the values its flat model gives the inner modifications that name
     other parameters (:mod:`.inner_defaults`: rumoca 0.10.2 reads an outer parameter from its class's
     default); *answer* itself where there are none or the second flatten fails."""
@@ -490,7 +522,8 @@ def _with_inner_values(answer: dict, source: ModelicaSource, model: str, librari
         return answer
     log.info("front end: %s again with the inner modifications %s", model,
              ", ".join(f"{k} = {v}" for k, v in sorted(values.items())))
-    tree = build_tree(source, model, libraries, tmp / "inner", prune=True, index=index, inner_values=values)
+    tree = build_tree(source, model, libraries, tmp / "inner", prune=True, index=index, inner_values=values,
+                      undefined=undefined)
     request = {**request, "entry": str(tree.entry), "roots": [str(r) for r in tree.roots] if tree.roots else None}
     again = tree.rename(_run_worker(request, req, res, source, model, timeout))
     return again if again["ok"] else answer

@@ -59,6 +59,43 @@ def _declared_dims(loc: dict[str, Any]) -> list[Any]:
 UNDEFINED_FIELD = float("nan")
 
 
+def _is_zero_literal(node: Any) -> bool:
+    kind, body = kind_of(node)
+    return kind == "Literal" and isinstance(body, dict) and kind_of(body.get("value"))[0] == "Real" \
+        and kind_of(body.get("value"))[1] == 0.0
+
+
+def _undefined_marker(node: Any) -> bool:
+    """Whether *node* is ``0.0/0.0`` or ``integer(0.0/0.0)``, the binding :mod:`.function_locals` gives a
+    function local that stands for "undefined" (MLS 12.4.4)."""
+    kind, body = kind_of(node)
+    if kind == "BuiltinCall" and isinstance(body, dict) and str(body.get("function")).lower() == "integer":
+        args = body.get("args") or []
+        return len(args) == 1 and _undefined_marker(args[0])
+    return kind == "Binary" and isinstance(body, dict) and str(body.get("op")).lower() == "div" \
+        and _is_zero_literal(body.get("lhs")) and _is_zero_literal(body.get("rhs"))
+
+
+_NAN_LITERAL = {"Literal": {"value": {"Real": float("nan")}}}
+
+
+def undefined_binding(node: Any) -> tuple[bool, Any]:
+    """(whether the binding *node* of a function local holds the undefined marker, *node* with each
+    marker replaced by a NaN literal: a record constructor's arguments each undefined)."""
+    if _undefined_marker(node):
+        return True, _NAN_LITERAL
+    if isinstance(node, dict):
+        found, out = False, {}
+        for key, val in node.items():
+            hit, out[key] = undefined_binding(val)
+            found = found or hit
+        return (True, out) if found else (False, node)
+    if isinstance(node, list):
+        pairs = [undefined_binding(v) for v in node]
+        return (True, [v for _, v in pairs]) if any(h for h, _ in pairs) else (False, node)
+    return False, node
+
+
 def _assigned(node: Any, out: set[str]) -> set[str]:
     """The first names of the targets of the assignments in the statements *node*, nested ones too."""
     if isinstance(node, dict):
@@ -282,7 +319,7 @@ class StatementTranslation:
             unset_fields = self._unset_fields(fname, fn)
             for loc in (fn.get("outputs") or []) + (fn.get("locals") or []):
                 if loc.get("default") is not None:
-                    value = self.expr(loc["default"], env)
+                    value = self.expr(undefined_binding(loc["default"])[1], env)
                     if isinstance(value, Record):
                         records.store(loc["name"], value, env)
                     else:

@@ -500,6 +500,9 @@ class SystemAssembly:
             return None
         start = {n: self._start_of(self.scalars[n]) if n in self.scalars else 0.0 for n in position}
         first: dict[str, Any] = {n: g for n, g in zip(names, guesses)}
+        # Newton's guesses are start values: those of the variables the model prefers as states (a
+        # medium's p and T: what its modeller starts) before, e.g., a density at its type's start 1
+        preferred = {n for n, select in self._state_select().items() if select in ("Always", "Prefer")}
         done_syms: list[ca.MX] = []
         done_vals: list[ca.MX] = []
         for k, block in enumerate(fblocks):
@@ -512,7 +515,7 @@ class SystemAssembly:
                 done_syms.append(unk[0])
                 done_vals.append(sol)
                 continue
-            tears, solved, residual = self._tear(res, unk, {u.name(): start[u.name()] for u in unk})
+            tears, solved, residual = self._tear(res, unk, {u.name(): start[u.name()] for u in unk}, preferred)
             sols = self._torn_rootfinder(f"initw{k}", residual, tears, solved,
                                          [ca.MX(first.get(t.name(), start[t.name()])) for t in tears])
             block_syms, block_vals = list(tears), list(sols)
@@ -529,7 +532,8 @@ class SystemAssembly:
                  "nonlinear block)", self.model)
         return solution
 
-    def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None
+    def _tear(self, res: list[ca.MX], unk: list[ca.MX], guess: dict[str, float] | None = None,
+              preferred: set[str] | frozenset[str] = frozenset()
               ) -> tuple[list[ca.MX], list[tuple[ca.MX, ca.MX]], list[ca.MX]]:
         """Greedy tearing of an algebraic loop.
 
@@ -538,7 +542,8 @@ class SystemAssembly:
         time by surprise); when none is left, make a tearing variable of an
         unknown with a start value (Newton's first guess; one without may be a
         divisor, e.g. a resistance with no start) that appears in the most
-        remaining equations, else of the unknown that appears in the most. Returns the tearing
+        remaining equations (among those, one named in *preferred* first), else of the unknown that
+        appears in the most. Returns the tearing
         variables, the explicit assignments in order, and the residual
         equations (as many as tearing variables) that the rootfinder solves.
         """
@@ -571,7 +576,7 @@ class SystemAssembly:
             counts = {v: sum(1 for e in remaining if v in eq_vars[e]) for v in unknown}
             # a variable with a start value (a guess for Newton) before one without, then the most used
             informed = {v: bool(guess) and abs((guess or {}).get(names[v], 0.0)) > 0 for v in unknown}
-            tear = max(unknown, key=lambda v: (informed[v], counts[v], -v))
+            tear = max(unknown, key=lambda v: (informed[v], names[v] in preferred, counts[v], -v))
             tears.append(tear)
             known.add(tear)
         if len(remaining) != len(tears):  # pragma: no cover - counting argument guarantees equality

@@ -780,6 +780,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 guess[sv.name] = 0.0 if node is None else self.numeric(self._element(sv, node, once=True), "start value")
             except CompileError:
                 guess[sv.name] = 0.0
+        # a variable the model prefers as a state (a medium's p and T) is torn before one with a
+        # type's start value (a density's 1): its start value is the modeller's guess (.flat_systems._tear)
+        preferred = {n for n, select in self._state_select().items() if select in ("Always", "Prefer")}
         assignments: list[tuple[ca.MX, ca.MX]] = []
         loop_sizes: list[int] = []
         torn_sizes: list[tuple[int, int]] = []
@@ -791,7 +794,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 if sol is not None:
                     assignments.append((unk[0], sol))
                     continue
-            tears, solved, residual = self._tear(res, unk, guess)
+            tears, solved, residual = self._tear(res, unk, guess, preferred)
             loop_sizes.append(len(tears))
             torn_sizes.append((len(unk), len(tears)))
             if not tears:  # every equation solved explicitly in turn (cannot happen for an SCC, kept safe)

@@ -36,7 +36,8 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError
-from . import component_sizes, discrete_connects, inner_defaults, package_overrides, record_constants, redeclare_components
+from . import (component_sizes, discrete_connects, function_locals, inner_defaults, package_overrides,
+               record_constants, redeclare_components)
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .modifiers import ModifierCheck
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
@@ -111,7 +112,7 @@ class FrontendTree:
 
 def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], dest: Path,
                prune: bool = True, index: LibraryIndex | None = None, computed: bool = False,
-               inner_values: dict[str, str] | None = None) -> FrontendTree:
+               inner_values: dict[str, str] | None = None, undefined: frozenset[str] = frozenset()) -> FrontendTree:
     """Copy what the front end needs for *model* under *dest* (see the module docstring).
 
     With *prune*, the files the model can reach, from the source and the libraries, under
@@ -122,7 +123,8 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     equation), parameters bound to a call of a function that asserts are computed at
     initialisation (:func:`.rewrite.computed_parameter_bindings`). *inner_values*: the values of
     inner modifications that name other parameters, read from a first flat model
-    (:func:`.inner_defaults.flat_values`).
+    (:func:`.inner_defaults.flat_values`). *undefined*: functions whose locals assigned on some
+    branches only get an undefined binding (:mod:`.function_locals`; a retry after rumoca refused one).
     """
     index = index if index is not None else index_for(source, libraries)
     reached = index.frontend_files(model) if model in index.classes else None
@@ -133,6 +135,7 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     inner = _chained(inner, record_constants.patches(index, model) if reached else {})  # (fields rumoca misses)
     inner = _chained(inner, component_sizes.patches(index, model) if reached else {})  # (arrays rumoca mis-sizes)
     inner = _chained(inner, redeclare_components.patches(index, model) if reached else {})  # (modifications lost)
+    inner = _chained(inner, function_locals.patches(index, undefined) if undefined else {})  # (locals rumoca refuses)
     needed = reached if prune else None
     if needed is None:
         return _full_tree(source, libraries, dest, inner)
