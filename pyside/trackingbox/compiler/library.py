@@ -470,6 +470,7 @@ class LibraryIndex:
             idx.by_simple.setdefault(simple, []).append(name)
         idx._members: dict[tuple[str, str], str | None] = {}
         idx._bases: dict[str, tuple[str, ...]] = {}
+        idx._importing: dict[Path, list[str]] | None = None
         idx.fingerprint = hashlib.sha256("|".join(prints).encode()).hexdigest()
         return idx
 
@@ -568,6 +569,24 @@ class LibraryIndex:
             cur = nxt
         return cur
 
+    def lookup_path(self, dotted: str, scope: str) -> list[str]:
+        """Every class the lookup of *dotted* from class *scope* passes through, the class found
+        last (``Medium.h_pTX`` with ``package Medium = MoistAir``: ``Medium``, then ``MoistAir.h_pTX``;
+        the packages on the way are used too: their constants and redeclared classes stand in
+        for the inherited ones the found class names)."""
+        if dotted.startswith("."):
+            found = self.lookup_global(dotted)
+            return [found] if found is not None else []
+        parts = dotted.split(".")
+        cur = self._lookup_first(parts[0], scope, None)
+        path = []
+        while cur is not None:
+            path.append(cur)
+            if len(path) == len(parts):
+                break
+            cur = self.member(cur, parts[len(path)])
+        return path
+
     def _lookup_first(self, name: str, scope: str, local: str | None) -> str | None:
         if local is not None:
             own = self.children.get(local, {}).get(name)
@@ -609,9 +628,7 @@ class LibraryIndex:
             info = self.classes[cls]
             targets = list(self.bases(cls))
             for name in info.names:
-                target = self.lookup(name, cls)
-                if target is not None:
-                    targets.append(target)
+                targets.extend(self.lookup_path(name, cls))
             # the enclosing packages: their constants and imports are in scope (a name such as `k`
             # in Heat.Capacity may be the constant Heat.k, whose binding uses other classes)
             parent = info.parent
@@ -653,8 +670,19 @@ class LibraryIndex:
                 name = name.rsplit(".", 1)[0] if "." in name else ""
 
         take(model)
+        importing = self._importing_classes()
+        files_seen: set[Path] = set()
         while queue:
             info = self.classes[queue.pop()]
+            if info.file not in files_seen:
+                # the front end resolves the imports of every class in a file it reads, used or not
+                # (MoistAir.dynamicViscosity's `import Modelica.Math.Polynomials`): take their targets
+                files_seen.add(info.file)
+                for other in importing.get(info.file, ()):
+                    for _, target, _ in self.classes[other].imports:
+                        found = self.lookup_global(target)
+                        if found is not None:
+                            take(found)
             new: list[str] = []
             for dotted in (*info.names, *info.extends, *(t for _, t, _ in info.imports)):
                 for part in dotted.split("."):
@@ -672,6 +700,16 @@ class LibraryIndex:
                     if not parent or parent in taken:
                         take(name)
         return {self.classes[n].file for n in taken}
+
+    def _importing_classes(self) -> dict[Path, list[str]]:
+        """The classes with an ``import`` clause, by file."""
+        if self._importing is None:
+            out: dict[Path, list[str]] = {}
+            for name, info in self.classes.items():
+                if info.imports:
+                    out.setdefault(info.file, []).append(name)
+            self._importing = out
+        return self._importing
 
     def unresolved_top(self, model: str) -> dict[str, str]:  # noqa: C901
         """First parts of names used in the classes of *model* that look like library packages
