@@ -470,7 +470,9 @@ class LibraryIndex:
             idx.by_simple.setdefault(simple, []).append(name)
         idx._members: dict[tuple[str, str], str | None] = {}
         idx._bases: dict[str, tuple[str, ...]] = {}
-        idx._importing: dict[Path, list[str]] | None = None
+        idx._importing: dict[Path, list[str]] = {}  # the classes with an import clause, by file
+        for name in (n for n, c in idx.classes.items() if c.imports):
+            idx._importing.setdefault(idx.classes[name].file, []).append(name)
         idx.fingerprint = hashlib.sha256("|".join(prints).encode()).hexdigest()
         return idx
 
@@ -570,21 +572,15 @@ class LibraryIndex:
         return cur
 
     def lookup_path(self, dotted: str, scope: str) -> list[str]:
-        """Every class the lookup of *dotted* from class *scope* passes through, the class found
-        last (``Medium.h_pTX`` with ``package Medium = MoistAir``: ``Medium``, then ``MoistAir.h_pTX``;
-        the packages on the way are used too: their constants and redeclared classes stand in
-        for the inherited ones the found class names)."""
+        """Each class the lookup of *dotted* from *scope* passes through (``Medium.h`` with ``package Medium =
+        MoistAir``: ``Medium``, then ``PartialMedium.h``, whose names MoistAir's classes stand in for)."""
         if dotted.startswith("."):
-            found = self.lookup_global(dotted)
-            return [found] if found is not None else []
-        parts = dotted.split(".")
+            return [c for c in (self.lookup_global(dotted),) if c is not None]
+        parts, path = dotted.split("."), []
         cur = self._lookup_first(parts[0], scope, None)
-        path = []
         while cur is not None:
             path.append(cur)
-            if len(path) == len(parts):
-                break
-            cur = self.member(cur, parts[len(path)])
+            cur = self.member(cur, parts[len(path)]) if len(path) < len(parts) else None
         return path
 
     def _lookup_first(self, name: str, scope: str, local: str | None) -> str | None:
@@ -670,19 +666,14 @@ class LibraryIndex:
                 name = name.rsplit(".", 1)[0] if "." in name else ""
 
         take(model)
-        importing = self._importing_classes()
         files_seen: set[Path] = set()
         while queue:
             info = self.classes[queue.pop()]
-            if info.file not in files_seen:
-                # the front end resolves the imports of every class in a file it reads, used or not
-                # (MoistAir.dynamicViscosity's `import Modelica.Math.Polynomials`): take their targets
-                files_seen.add(info.file)
-                for other in importing.get(info.file, ()):
-                    for _, target, _ in self.classes[other].imports:
-                        found = self.lookup_global(target)
-                        if found is not None:
-                            take(found)
+            if info.file not in files_seen:  # the front end resolves the imports of every class of a file it
+                files_seen.add(info.file)  # reads, used or not (MoistAir.dynamicViscosity's Math.Polynomials)
+                for target in (t for c in self._importing.get(info.file, ()) for _, t, _ in self.classes[c].imports):
+                    if (found := self.lookup_global(target)) is not None:
+                        take(found)
             new: list[str] = []
             for dotted in (*info.names, *info.extends, *(t for _, t, _ in info.imports)):
                 for part in dotted.split("."):
@@ -700,16 +691,6 @@ class LibraryIndex:
                     if not parent or parent in taken:
                         take(name)
         return {self.classes[n].file for n in taken}
-
-    def _importing_classes(self) -> dict[Path, list[str]]:
-        """The classes with an ``import`` clause, by file."""
-        if self._importing is None:
-            out: dict[Path, list[str]] = {}
-            for name, info in self.classes.items():
-                if info.imports:
-                    out.setdefault(info.file, []).append(name)
-            self._importing = out
-        return self._importing
 
     def unresolved_top(self, model: str) -> dict[str, str]:  # noqa: C901
         """First parts of names used in the classes of *model* that look like library packages
