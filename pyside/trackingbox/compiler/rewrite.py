@@ -37,7 +37,6 @@ from pathlib import Path
 from .external_locals import external_locals_as_inputs
 from .if_asserts import call_equations, if_asserts_outside
 from .constant_not import constant_not_as_if
-from .fill_arrays import fill_arrays_as_comprehensions
 from .der_fields import component_array_der
 from .redeclare_short import short_class_redeclarations
 from .while_source import while_loops_as_for
@@ -434,8 +433,7 @@ def _frontend_bytes_cached(file: Path, mtime_ns: int, size: int, tuple_names: fr
                           (while_loops_as_for, "while statements read as bounded for loops (.while_source)"),
                           (component_array_der, "der of a field of an array of components read element by "
                                                 "element (.der_fields)"),
-                          (constant_not_as_if, "not in Boolean constants read as if-expressions (.constant_not)"),
-                          (fill_arrays_as_comprehensions, "fill of an array read as a comprehension (.fill_arrays)")):
+                          (constant_not_as_if, "not in Boolean constants read as if-expressions (.constant_not)")):
         body, lines = rewrite(body)
         if lines:
             log.debug("%s: %s at lines %s", file, what, ", ".join(map(str, lines)))
