@@ -7,6 +7,7 @@ using it (``Modelica.Media.IdealGases.Common.FluidData``). Expectations worked b
 declarations below (MLS 4.4.4, 5.3, 7.2, 13.2)."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import fmpy
@@ -137,3 +138,23 @@ def test_a_modified_package_handed_to_a_component_keeps_its_values(lib, tmp_path
     assert np.allclose(out["comp.w"], 3.0 * u)  # Moist.h: c2*u with the modification's c2 = 3
     assert np.allclose(out["comp.y"], 2.0 * (287.0 * u + K_MAIR) + 1.0)  # Base.g: Moist.f + 1
     assert np.allclose(out["z"], 3.0)
+
+
+FILL = """model FillArray "as a Modelica.Fluid source's ports.C_outflow = fill(C, nPorts)"
+  Real c[1] = {time};
+  Real s[2] = fill(time, 2) "a scalar: read";
+  Real cc[2, 1] = fill(c, 2);
+end FillArray;
+"""
+
+
+@pytest.mark.compile
+def test_fill_of_an_array_is_refused_naming_itself_and_its_line(tmp_path):
+    from trackingbox.compiler.embedded import FILL_OF_ARRAY
+
+    src = tmp_path / "FillArray.mo"
+    src.write_text(FILL)
+    with pytest.raises(UnsupportedConstructError, match=rf"{re.escape(FILL_OF_ARRAY)} at .*FillArray.mo:4"):
+        compile_model(src, "FillArray", backend="embedded", output=tmp_path / "f.fmu")
+    assert not (tmp_path / "f.fmu").exists()
+    assert FILL_OF_ARRAY in (Path(__file__).parents[1] / "README.md").read_text()
