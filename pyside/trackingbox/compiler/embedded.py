@@ -359,6 +359,39 @@ def _component_sized_array(message: str, source: ModelicaSource, model: str,
     return None
 
 
+FILL_OF_ARRAY = "`fill` of an array (`fill(C, nPorts)`)"
+"""The README's words for the construct :func:`_fill_of_array` names."""
+_FILL = re.compile(r"(?<![\w.])fill\s*\(\s*(?P<name>[A-Za-z_]\w*)\s*(?P<sub>\[[^\[\]]*\])?\s*,")
+
+
+def _fill_of_array(message: str, source: ModelicaSource, model: str,
+                   libraries: tuple[Path, ...] = ()) -> UnsupportedConstructError | None:
+    """rumoca 0.10.2 refuses ``fill(c, n)`` of an array ``c`` ("expression shape mismatch": ``Real
+    c[1] = {time}; Real cc[2, 1] = fill(c, 2);``), as every ``Modelica.Fluid`` source writes
+    ``ports.C_outflow = fill(C, nPorts)``, which stops ``RoomCO2``'s trace substance. Named where a
+    class the model uses fills a slice (``X[1:n]``) or a name it or a base declares with dimensions."""
+    if "expression shape mismatch" not in message:
+        return None
+    index = index_for(source, libraries)
+    for name in index.used_classes(model):
+        info = index.classes[name]
+        code = index.own_code(info, annotations=False)
+        for found in _FILL.finditer(code):
+            sub, var = found.group("sub"), re.escape(found.group("name"))
+            array = sub is not None and ":" in sub
+            if sub is None:
+                declared = rf"(?<![\w.])[A-Za-z_][\w.]*\s+{var}\s*\["
+                array = any(re.search(declared, index.own_code(index.classes[c], annotations=False))
+                            for c in index.ancestors(name))
+            if array:
+                where = Location(*index.location(info, found.start()))
+                return UnsupportedConstructError(
+                    f"unsupported Modelica construct in {model}: {FILL_OF_ARRAY} at {where}: the front end "
+                    f"(rumoca {_frontend_version()}) does not support it (rumoca: {message.splitlines()[0][:200]}); "
+                    "use --backend openmodelica where omc is installed, or rewrite the model")
+    return None
+
+
 _NESTED_REFERENCE = re.compile(r"reference to non-constant variable '(\w+)' from a lexically nested class")
 NESTED_EXTENDS = "`extends` of a class declared inside the extending class itself"
 """The README's words for the construct :func:`_nested_extends` names."""
@@ -621,8 +654,8 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
     except CompileError:
         raw = []
     diags = _diagnostics(raw)
-    nested = _nested_extends(message, source, model, libraries) or _component_sized_array(
-        message, source, model, libraries)
+    nested = (_nested_extends(message, source, model, libraries)
+              or _component_sized_array(message, source, model, libraries))
     if nested is not None:
         raise nested
     if "resolve/parse failed" in first or not diags:
@@ -636,7 +669,8 @@ def flatten(source: ModelicaSource, model: str, libraries: tuple[Path, ...] = ()
                                f"{_own_position(first, source, model, libraries)}")
     construct = (_mentioned_construct(message, source, model, libraries)
                  or _frontend_limit(message, diags, source, model, libraries)
-                 or _frontend_gap(message, source, model, libraries))
+                 or _frontend_gap(message, source, model, libraries)
+                 or _fill_of_array(message, source, model, libraries))
     if construct is not None:
         raise construct
     detail = ("\n  " + "\n  ".join(diags)) if diags else ""

@@ -36,8 +36,8 @@ from pathlib import Path
 
 from .. import config
 from ..errors import CompileError
-from . import (component_sizes, discrete_connects, function_locals, inner_defaults, package_overrides,
-               record_constants, redeclare_components)
+from . import (component_sizes, discrete_connects, function_locals, inner_defaults, package_copies,
+               package_overrides, record_constants, redeclare_components)
 from .library import LibraryIndex, cache_dir, index_for, source_root
 from .modifiers import ModifierCheck
 from .rewrite import asserting_function_names, frontend_bytes, tuple_function_names
@@ -142,6 +142,12 @@ def build_tree(source: ModelicaSource, model: str, libraries: tuple[Path, ...], 
     lib_dir, src_dir = dest / "lib", dest / "src"
     tuple_names = tuple_function_names(sorted(needed))
     asserting = asserting_function_names(sorted(needed)) if computed else frozenset()
+
+    def read(f: Path, patched=dict(inner)) -> bytes:  # a file as the front end reads it
+        data = frontend_bytes(f, tuple_names, asserting)
+        data = f.read_bytes() if data is None else data
+        return patched[f](data) if f in patched else data
+    inner = _chained(inner, package_copies.patches(index, model, read))  # (modified packages' functions lost)
     digest = hashlib.sha256()
     originals: dict[Path, Path] = {}
     renames: list[tuple[str, str]] = []

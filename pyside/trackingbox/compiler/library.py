@@ -470,6 +470,9 @@ class LibraryIndex:
             idx.by_simple.setdefault(simple, []).append(name)
         idx._members: dict[tuple[str, str], str | None] = {}
         idx._bases: dict[str, tuple[str, ...]] = {}
+        idx._importing: dict[Path, list[str]] = {}  # the classes with an import clause, by file
+        for name in (n for n, c in idx.classes.items() if c.imports):
+            idx._importing.setdefault(idx.classes[name].file, []).append(name)
         idx.fingerprint = hashlib.sha256("|".join(prints).encode()).hexdigest()
         return idx
 
@@ -568,6 +571,18 @@ class LibraryIndex:
             cur = nxt
         return cur
 
+    def lookup_path(self, dotted: str, scope: str) -> list[str]:
+        """Each class the lookup of *dotted* from *scope* passes through (``Medium.h`` with ``package Medium =
+        MoistAir``: ``Medium``, then ``PartialMedium.h``, whose names MoistAir's classes stand in for)."""
+        if dotted.startswith("."):
+            return [c for c in (self.lookup_global(dotted),) if c is not None]
+        parts, path = dotted.split("."), []
+        cur = self._lookup_first(parts[0], scope, None)
+        while cur is not None:
+            path.append(cur)
+            cur = self.member(cur, parts[len(path)]) if len(path) < len(parts) else None
+        return path
+
     def _lookup_first(self, name: str, scope: str, local: str | None) -> str | None:
         if local is not None:
             own = self.children.get(local, {}).get(name)
@@ -609,9 +624,7 @@ class LibraryIndex:
             info = self.classes[cls]
             targets = list(self.bases(cls))
             for name in info.names:
-                target = self.lookup(name, cls)
-                if target is not None:
-                    targets.append(target)
+                targets.extend(self.lookup_path(name, cls))
             # the enclosing packages: their constants and imports are in scope (a name such as `k`
             # in Heat.Capacity may be the constant Heat.k, whose binding uses other classes)
             parent = info.parent
@@ -653,8 +666,14 @@ class LibraryIndex:
                 name = name.rsplit(".", 1)[0] if "." in name else ""
 
         take(model)
+        files_seen: set[Path] = set()
         while queue:
             info = self.classes[queue.pop()]
+            if info.file not in files_seen:  # the front end resolves the imports of every class of a file it
+                files_seen.add(info.file)  # reads, used or not (MoistAir.dynamicViscosity's Math.Polynomials)
+                for target in (t for c in self._importing.get(info.file, ()) for _, t, _ in self.classes[c].imports):
+                    if (found := self.lookup_global(target)) is not None:
+                        take(found)
             new: list[str] = []
             for dotted in (*info.names, *info.extends, *(t for _, t, _ in info.imports)):
                 for part in dotted.split("."):

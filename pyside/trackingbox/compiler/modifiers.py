@@ -40,7 +40,8 @@ from pathlib import Path
 from ..errors import UnsupportedConstructError
 from .library import ClassInfo, LibraryIndex
 from .modification_parse import Mod, parse_modification  # noqa: F401 (tests read parse_modification from here)
-from .package_overrides import check_overridden_constants, family_reads_modified, only_in_extends, taken_branches
+from .package_overrides import (check_overridden_constants, family_reads_modified, only_in_extends, only_in_imports,
+                                taken_branches)
 from . import redeclare_components
 from .redeclare_short import short_class_handles
 from .source import Location, ModelicaSource
@@ -257,6 +258,8 @@ class ModifierCheck:
                 if c.name == target and name == c.simple:  # its own header and `end` name no use
                     continue
                 if self._only_as_replaceable_default(c, name, idx.classes.get(target)):
+                    continue
+                if only_in_imports(self.body(c), name):  # an import is no use; a name using it is
                     continue
                 parts = name.split(".")
                 for k in range(1, len(parts) + 1):

@@ -269,6 +269,16 @@ def only_in_extends(text: str, name: str) -> bool:
     return every > 0 and every == extended
 
 
+def only_in_imports(text: str, name: str) -> bool:
+    """Whether *name* stands in *text* (a class's comment-free own text) only as what an ``import``
+    clause imports (``import A.B;``, ``import C = A.B;``, ``import A.B.*``): an import alone uses
+    nothing (MLS 13.2.1); a name that uses it is a name of its own in the class's text."""
+    esc = re.escape(name)
+    every = len(re.findall(rf"(?<![\w.]){esc}(?![\w])", text))
+    imported = len(re.findall(rf"\bimport\s+(?:[A-Za-z_]\w*\s*=\s*)?\.?{esc}(?![\w])", text))
+    return every > 0 and every == imported
+
+
 def _final(check: ModifierCheck, name: str) -> str | None:
     """The class a short class chain ``package A = B`` ends at (None where it cannot be followed)."""
     classes = check.index.classes
