@@ -572,7 +572,10 @@ def _runtime_functions(em: ExplicitModel) -> tuple[list[ca.Function], list[ca.MX
             newton = ca.rootfinder("tbx_init_newton", "fast_newton", {"x": z, "p": wk, "g": g},
                                    {"abstol": 1e-12, "max_iter": 100})
             zsol = newton(z0, wk)
-        functions.append(ca.Function("tbx_init", [z0, wk], [zsol, residual(zsol, wk)]))
+        # dense outputs: the generated C writes only an output's structural nonzeros, and tbx_initialize
+        # reads every element (a residual that is structurally zero, x - x.start with x solved as
+        # x.start, was otherwise read from the uninitialised stack: "residual 1 of the start value")
+        functions.append(ca.Function("tbx_init", [z0, wk], [ca.densify(zsol), ca.densify(residual(zsol, wk))]))
     return functions, known_syms
 
 
