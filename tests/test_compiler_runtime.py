@@ -460,3 +460,41 @@ def test_fixed_start_of_an_algebraic_variable_is_an_initial_equation(tmp_path):
     assert np.allclose(df["level"], 0.9 * np.exp(-500 * df["time"] / 2000), rtol=1e-6)
     assert np.allclose(df["T"], 300.0, rtol=1e-8)
     assert np.allclose(df["m"], 2000 * df["level"], rtol=1e-9)
+
+
+FIXED_START = """
+model Decay
+  Real x;
+  Real v(start = 0, fixed = true) "not the state: its start value is an initial equation";
+equation
+  v = 2*x;
+  der(x) = -x;
+end Decay;
+"""
+
+
+def test_the_initial_solve_writes_every_element_of_its_outputs(tmp_path):
+    """The initial equation 2 x = v.start = 0, solved as x = 0, has a residual that is structurally zero; the
+    generated C writes only an output's structural nonzeros, and the runtime reads every element (before,
+    an uninitialised residual on the stack failed the MSL's OpAmps.Integrator with 'residual 1 of the start
+    value of integrator.v'). Called with outputs filled with NaN, tbx_init gives the state x = 0 and the residual 0."""
+    import ctypes
+    import zipfile
+
+    fmu = build(tmp_path, "Decay", FIXED_START)
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(tmp_path / "x")
+    lib = ctypes.CDLL(str(next((tmp_path / "x" / "binaries").glob("*/*.so"))))
+    sizes = [ctypes.c_longlong() for _ in range(4)]
+    assert lib.tbx_init_work(*(ctypes.byref(s) for s in sizes)) == 0
+    n_arg, n_res, n_iw, n_w = (max(s.value, 1) for s in sizes)
+    z0, wk = (ctypes.c_double * 2)(0.5, 0.0), (ctypes.c_double * 1)(0.0)
+    z, r = (ctypes.c_double * 1)(math.nan), (ctypes.c_double * 1)(math.nan)
+    arg = (ctypes.POINTER(ctypes.c_double) * n_arg)(ctypes.cast(z0, ctypes.POINTER(ctypes.c_double)),
+                                                    ctypes.cast(wk, ctypes.POINTER(ctypes.c_double)))
+    res = (ctypes.POINTER(ctypes.c_double) * n_res)(ctypes.cast(z, ctypes.POINTER(ctypes.c_double)),
+                                                    ctypes.cast(r, ctypes.POINTER(ctypes.c_double)))
+    iw, w = (ctypes.c_longlong * n_iw)(), (ctypes.c_double * n_w)()
+    assert lib.tbx_init(arg, res, iw, w, 0) == 0
+    assert z[0] == 0.0
+    assert r[0] == 0.0
