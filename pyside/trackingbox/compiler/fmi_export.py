@@ -401,9 +401,10 @@ def _tidy_model_description(
     me = root.find("ModelExchange")
     if not adjoint and me is not None:
         me.set("providesAdjointDerivatives", "false")  # left out of the C (.c_prune)
-    if asserts and me is not None:
-        # the asserts are checked in fmi3CompletedIntegratorStep: an importer calls it only when asked
-        # (FMI 3.0 needsCompletedIntegratorStep, default false; fmpy follows it)
+    if (asserts or memory) and me is not None:
+        # the asserts are checked, and the loops' last solutions kept (.fmi_runtime), in
+        # fmi3CompletedIntegratorStep: an importer calls it only when asked (FMI 3.0
+        # needsCompletedIntegratorStep, default false; fmpy follows it)
         me.set("needsCompletedIntegratorStep", "true")
     if description:
         root.set("description", description)

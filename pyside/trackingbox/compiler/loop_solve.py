@@ -113,6 +113,13 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     return ca.if_else(accepted(sol, start), sol, fallback(start), True)
 
 
+def _weights(g: ca.MX, z: ca.MX, z0: ca.MX) -> ca.MX:
+    """The norm of the gradient of each equation of the loop's residual g(z, p) at *z0* (1 where that is
+    zero or not finite): g divided by them is a distance in z whatever the equations' units."""
+    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))
+    return ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)
+
+
 def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) -> tuple[Any, Any]:
     """(accepted(sol, guess): whether Newton's iterate *sol* from *guess* is a root (see
     :func:`_or_nearest_solution`), fallback(guess): the loop's solution by the fallbacks from *guess*,
@@ -120,8 +127,7 @@ def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) 
     n = z.numel()
     y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
-    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
-    weight = ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
+    weight = _weights(g, z, z0)  # in (p, z0)
     scaled = g / weight
     kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
     nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
@@ -231,3 +237,117 @@ def warm_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start:
         warm_root, warm, ca.if_else(cold_root, cold, ca.DM.nan(n, 1), True), True), True)
     after = ca.if_else(ca.logic_and(cold_root, inside(cold)), cold, last, True)
     return ca.if_else(ca.logic_and(warm_root, inside(warm)), warm, after, True)
+
+
+BRANCH_STEP = 1e-3
+"""Newton from the end of the damped steps (see branch_solution) stays on the branch where it moves
+each unknown z by at most BRANCH_STEP * (1 + |z|); further it has crossed to another root."""
+SETTLED = 1e-8
+"""A point is a root for the branch logic (see branch_solution) where its residual is at most
+NEWTON_TOLERANCE, or where two more Newton steps from it each move every unknown z by at most
+SETTLED * (1 + |z|): near a fold, a point past the end of the branch has a residual below any
+tolerance relative to the unknowns, and Newton cycles there instead of settling (at a corner of a
+limiter, the first step on the steep side is tiny, the second, on the flat side, is not)."""
+SEARCH_STEPS = 40
+"""Steps of the search for another root where the branch has ended (see _other_root), each twice the last."""
+
+
+def _other_root(name: str, residual: ca.Function, newton: Any, settled: Any, n: int, start: ca.MX,
+                values: ca.MX) -> ca.MX:
+    """A root of the loop reached from *start* (where no Newton settles: past the end of a branch) along
+    the curve on which the residual keeps its direction, g(z) = (1 - t) g(start) (Branin's global Newton
+    method: dz/ds = -sign(det J) J^-1 g, which turns at the folds where the branch ends and goes on to the
+    next branch), both ways, by steps of 1e-4, 2e-4, ... times (1 + |z|) in the largest unknown, with
+    Newton tried from each point; the root reached in fewer steps (NaN where neither way reaches one)."""
+    z, q = ca.MX.sym(f"{name}_sz", n), ca.MX.sym(f"{name}_sq", values.numel() + 1)
+    p, way = q[:values.numel()], q[values.numel()]
+    jac = ca.jacobian(residual(z, p), z)
+    d = -ca.sign(ca.det(jac)) * ca.solve(jac, residual(z, p))
+    d = d / (ca.mmax(ca.fabs(d) / (1 + ca.fabs(z))) + 1e-300)
+    state = ca.MX.sym(f"{name}_ss", 2 * n + 3)  # z, root, step length, found, steps taken
+    at, h, found, steps = state[:n], state[2 * n], state[2 * n + 1], state[2 * n + 2]
+    move = ca.Function(f"{name}_search_dir", [z, q], [d])
+    nxt = at + way * h * (1 + ca.fabs(at)) * move(at, q)
+    root = newton(nxt, p)
+    took = ca.vertcat(nxt, root, 2 * h, settled(root, p), steps + 1)
+    step = ca.Function(f"{name}_search_step", [state, q], [ca.if_else(found > 0.5, state, took, True)])
+    run = step.fold(SEARCH_STEPS)
+    ends = [run(ca.vertcat(start, start, 1e-4, 0, 0), ca.vertcat(values, w)) for w in (1, -1)]
+    first = ca.logic_and(ends[0][2 * n + 1] > 0.5, ca.logic_or(ends[1][2 * n + 1] < 0.5,
+                                                                ends[0][2 * n + 2] <= ends[1][2 * n + 2]))
+    return ca.if_else(first, ends[0][n:2 * n], ca.if_else(ends[1][2 * n + 1] > 0.5, ends[1][n:2 * n],
+                                                           ca.DM.nan(n, 1), True), True)
+
+
+def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start: ca.DM, values: ca.MX | ca.DM,
+                    lower: list[float], upper: list[float], held: ca.MX) -> tuple[ca.MX, ca.MX]:
+    """(the solution of the model's loop g(z, p) = 0, its event indicator): the loop follows the root it
+    is on (its branch) between events, and changes to another root only at an event.
+
+    Where *held* (the loop's relation "on its branch", held between events: .events) is true, the
+    solution continues the branch of the last solution *memory*: damped Gauss-Newton steps from it
+    (the residual's norm falls at each step, so that they do not cross to a far root as Newton's full
+    steps do; :func:`_damped_newton`), then Newton from where they end, which must settle within
+    BRANCH_STEP of it. Past a fold of the loop's characteristic, where the branch ends (MSL
+    ``Electrical.Analog.Examples.OpAmps.Multivibrator``: the op-amp's output held at one supply by the
+    positive feedback until the capacitor's voltage crosses the trigger's threshold, then only the other
+    supply is a root), the damped steps end at the residual's smallest norm near it, which moves on
+    continuously: the integrator's steps neither jump nor chatter at the fold (a jump there without an
+    event is a switch that an implicit integrator's corrector cannot converge across: it undoes itself).
+    Where *held* is false (at an event, and at initialisation) the solution is :func:`warm_solution`'s,
+    or where that does not settle, :func:`_other_root`'s from the memory.
+
+    The indicator is LOOP_TOLERANCE * (1 + |z|) where the solution is a settled root inside the declared
+    bounds, minus that where not: it changes sign where the branch ends, the integrator stops there, and
+    the event iteration takes the loop's root anew and then holds the relation true again. The FMU keeps
+    a loop's solution only where its indicator is positive (:mod:`.fmi_runtime`), never a point past the
+    end of a branch."""
+    n = z.numel()
+    memory = ca.stop_diff(memory, 1)
+    z0 = ca.MX.sym(f"{name}_z0", n)
+    # the damped steps divide the equations by their weights at the memory, taken as numbers (see _loop_tests)
+    w = ca.MX.sym(f"{name}_bw", n)
+    divided = ca.Function(f"{name}_branch_divided", [z, p, w], [g / w])
+    weights = ca.Function(f"{name}_branch_weights", [p, z0], [_weights(g, z, z0)])(values, memory)
+    residual = ca.Function(f"{name}_branch_residual", [z, p], [g])
+    jac = ca.jacobian(g, z)
+    jjt = ca.mtimes(jac, jac.T)  # the step of minimum norm: defined whatever the rank of J
+    mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
+    step = ca.Function(f"{name}_branch_newton_step", [z, p],
+                       [ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g))])
+    x, scale = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n)
+    scaled = ca.rootfinder(f"{name}_branch_newton", "fast_newton",
+                           {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
+                           {"abstol": 0, "abstolStep": WARM_STEP, "max_iter": 100, "error_on_fail": False})
+    lo = ca.DM([b - BOUND_TOLERANCE * (1 + abs(b)) for b in lower])
+    hi = ca.DM([b + BOUND_TOLERANCE * (1 + abs(b)) for b in upper])
+
+    def newton(guess: ca.MX, values_: ca.MX) -> ca.MX:
+        s = 1 + ca.fabs(guess)
+        return s * scaled(guess / s, ca.vertcat(values_, s))
+
+    def settled(sol: ca.MX, values_: ca.MX) -> ca.MX:
+        dz = step(sol, values_)
+        dz2 = step(sol - dz, values_)
+        move = ca.fmax(ca.mmax(ca.fabs(dz) / (1 + ca.fabs(sol))), ca.mmax(ca.fabs(dz2) / (1 + ca.fabs(sol))))
+        zero = ca.mmax(ca.fabs(residual(sol, values_))) <= NEWTON_TOLERANCE
+        inside = ca.logic_and(ca.mmin(sol - lo) >= 0, ca.mmin(hi - sol) >= 0)
+        finite = ca.sumsqr(sol) + ca.sumsqr(dz) + ca.sumsqr(dz2) < ca.inf  # (mmax and mmin pass over NaN)
+        return ca.logic_and(ca.logic_and(ca.logic_or(zero, move <= SETTLED), inside), finite)
+
+    end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
+    polished = newton(end, values)
+    near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
+    polish = ca.logic_and(near, settled(polished, values))
+    on = ca.logic_or(polish, settled(end, values))  # (a singular loop's Newton gives NaN from its root)
+    follow = ca.if_else(polish, polished, end, True)
+    warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
+    jumped = newton(warm, values)
+    landed, was = settled(jumped, values), settled(warm, values)
+    other = _other_root(f"{name}_branch", residual, newton, settled, n, memory, values)
+    found = ca.sumsqr(other) < ca.inf
+    jump = ca.if_else(landed, jumped, ca.if_else(was, warm, ca.if_else(found, other, warm, True), True), True)
+    sol = ca.if_else(held > 0.5, follow, jump, True)
+    root = ca.if_else(held > 0.5, on, ca.logic_or(ca.logic_or(landed, was), found), True)
+    tol = LOOP_TOLERANCE * (1 + ca.norm_inf(ca.if_else(ca.sumsqr(sol) < ca.inf, sol, ca.DM.zeros(n, 1))))
+    return sol, ca.if_else(root, tol, -tol)
