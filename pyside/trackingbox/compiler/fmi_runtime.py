@@ -534,6 +534,15 @@ static void tbx_restart_loops(casadi_fmi_memory* m) {
 }
 """
 
+def _update_discrete(loops: bool) -> str:
+    """fmi3UpdateDiscreteStates; with the model's loops, which keep their solution after the event iteration."""
+    if not loops:
+        return _UPDATE_DISCRETE
+    return _UPDATE_DISCRETE.replace("  m->continuous_states_changed = 0;\n  return status;\n",
+                                    "  m->continuous_states_changed = 0;\n  if (status == fmi3OK) tbx_commit_loops(m);\n"
+                                    "  return status;\n")
+
+
 def _loop_runtime(em: ExplicitModel, refs: dict[str, int]) -> str:
     """The C of the loops' memory (tbx_commit_loops, tbx_restart_loops: the callers are add_runtime's),
     for the loops whose tearing variables are all FMU variables (the others keep starting from their
@@ -734,9 +743,6 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         enter_ct = ("  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n  int changed = 0;\n"
                     "  if (tbx_samples_on(m) && tbx_event_iteration(m, 1, &changed) != fmi3OK) return fmi3Error;\n"
                     + commit + ("  return tbx_check_asserts(m);\n" if em.asserts else "  return fmi3OK;\n"))
-    update_discrete = _UPDATE_DISCRETE if not commit else _UPDATE_DISCRETE.replace(
-        "  m->continuous_states_changed = 0;\n  return status;\n",
-        "  m->continuous_states_changed = 0;\n  if (status == fmi3OK) tbx_commit_loops(m);\n  return status;\n")
 
     text = wrapper.read_text()
     patches = [
@@ -774,7 +780,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         patches.append(("  if (nEventIndicators) *nEventIndicators = N_ZERO;\n",
                         "  if (nEventIndicators) *nEventIndicators = TBX_NZ;\n"))
         for func, replacement in (("fmi3GetEventIndicators", _EVENT_INDICATORS),
-                                  ("fmi3UpdateDiscreteStates", update_discrete)):
+                                  ("fmi3UpdateDiscreteStates", _update_discrete(bool(commit)))):
             found = re.search(rf"FMI3_Export fmi3Status {func}\(.*?\n}}\n", text, re.S)
             if found is None:
                 raise CompileError(f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): {func} "
