@@ -279,6 +279,17 @@ def _other_root(name: str, residual: ca.Function, newton: Any, settled: Any, n: 
                                                            ca.DM.nan(n, 1), True), True)
 
 
+_SWITCHING = {ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_FMIN, ca.OP_FMAX}
+
+
+def switches(g: ca.MX, z: ca.MX) -> bool:
+    """Whether the loop's residual g(z) has a relation (or min/max) left in it, as a piecewise (limiting)
+    characteristic written with noEvent has: its branches can end at a fold (:func:`branch_solution`).
+    The relations outside noEvent are held between events (.events): a loop of those has none left."""
+    fn = ca.Function("switches", [z], [g], {"allow_free": True})
+    return any(fn.instruction_id(k) in _SWITCHING for k in range(fn.n_instructions()))
+
+
 def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start: ca.DM, values: ca.MX | ca.DM,
                     lower: list[float], upper: list[float], held: ca.MX) -> tuple[ca.MX, ca.MX]:
     """(the solution of the model's loop g(z, p) = 0, its event indicator): the loop follows the root it
@@ -306,15 +317,16 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     memory = ca.stop_diff(memory, 1)
     z0 = ca.MX.sym(f"{name}_z0", n)
     # the damped steps divide the equations by their weights at the memory, taken as numbers (see _loop_tests)
-    w = ca.MX.sym(f"{name}_bw", n)
-    divided = ca.Function(f"{name}_branch_divided", [z, p, w], [g / w])
+    wt = ca.MX.sym(f"{name}_bwt", n)
+    divided = ca.Function(f"{name}_branch_divided", [z, p, wt], [g / wt])
     weights = ca.Function(f"{name}_branch_weights", [p, z0], [_weights(g, z, z0)])(values, memory)
     residual = ca.Function(f"{name}_branch_residual", [z, p], [g])
     jac = ca.jacobian(g, z)
     jjt = ca.mtimes(jac, jac.T)  # the step of minimum norm: defined whatever the rank of J
     mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
-    step = ca.Function(f"{name}_branch_newton_step", [z, p],
-                       [ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g))])
+    exact = ca.solve(jac, g)  # Newton's step; where J is singular (NaN), the step of minimum norm
+    step = ca.Function(f"{name}_branch_newton_step", [z, p], [ca.if_else(
+        ca.sumsqr(exact) < ca.inf, exact, ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g)), True)])
     x, scale = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n)
     scaled = ca.rootfinder(f"{name}_branch_newton", "fast_newton",
                            {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
@@ -326,28 +338,41 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
         s = 1 + ca.fabs(guess)
         return s * scaled(guess / s, ca.vertcat(values_, s))
 
-    def settled(sol: ca.MX, values_: ca.MX) -> ca.MX:
-        dz = step(sol, values_)
-        dz2 = step(sol - dz, values_)
-        move = ca.fmax(ca.mmax(ca.fabs(dz) / (1 + ca.fabs(sol))), ca.mmax(ca.fabs(dz2) / (1 + ca.fabs(sol))))
-        zero = ca.mmax(ca.fabs(residual(sol, values_))) <= NEWTON_TOLERANCE
-        inside = ca.logic_and(ca.mmin(sol - lo) >= 0, ca.mmin(hi - sol) >= 0)
-        finite = ca.sumsqr(sol) + ca.sumsqr(dz) + ca.sumsqr(dz2) < ca.inf  # (mmax and mmin pass over NaN)
-        return ca.logic_and(ca.logic_and(ca.logic_or(zero, move <= SETTLED), inside), finite)
+    w = ca.MX.sym(f"{name}_bw", n)
 
+    def steps_settle(at: ca.MX) -> ca.MX:  # two Newton steps from *at*, both within SETTLED
+        dz = step(at, p)
+        dz2 = step(at - dz, p)
+        move = ca.fmax(ca.mmax(ca.fabs(dz) / (1 + ca.fabs(at))), ca.mmax(ca.fabs(dz2) / (1 + ca.fabs(at))))
+        return ca.logic_and(move <= SETTLED, ca.sumsqr(dz) + ca.sumsqr(dz2) < ca.inf)
+
+    zero = ca.mmax(ca.fabs(residual(w, p))) <= NEWTON_TOLERANCE  # (only where not: the steps' Jacobians)
+    inside = ca.logic_and(ca.mmin(w - lo) >= 0, ca.mmin(hi - w) >= 0)
+    settles = ca.Function(f"{name}_branch_settled", [w, p], [ca.logic_and(ca.logic_and(
+        ca.if_else(zero, 1, steps_settle(w), True), inside), ca.sumsqr(w) < ca.inf)])  # (mmax, mmin pass over NaN)
+
+    def settled(sol: ca.MX, values_: ca.MX) -> ca.MX:
+        return settles(sol, values_)
+
+    # first Newton from the memory, taken where it settles within BRANCH_STEP of it (the root has moved
+    # little since the last accepted point: the cost of the warm start's Newton); else the damped steps
+    fast = newton(memory, values)
+    quick = ca.logic_and(ca.mmax(ca.fabs(fast - memory) / (1 + ca.fabs(memory))) <= BRANCH_STEP, settled(fast, values))
     end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
-    polished = newton(end, values)
+    polished = ca.if_else(ca.mmax(ca.fabs(residual(end, values))) <= NEWTON_TOLERANCE, end, newton(end, values), True)
     near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
     polish = ca.logic_and(near, settled(polished, values))
-    on = ca.logic_or(polish, settled(end, values))  # (a singular loop's Newton gives NaN from its root)
-    follow = ca.if_else(polish, polished, end, True)
+    damped_on = ca.logic_or(polish, settled(end, values))  # (a singular loop's Newton gives NaN from its root)
+    # (one conditional for the solution and its flag: each conditional evaluates what its branch uses)
+    follow = ca.if_else(quick, ca.vertcat(fast, 1), ca.vertcat(ca.if_else(polish, polished, end), damped_on), True)
     warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
     jumped = newton(warm, values)
     landed, was = settled(jumped, values), settled(warm, values)
     other = _other_root(f"{name}_branch", residual, newton, settled, n, memory, values)
     found = ca.sumsqr(other) < ca.inf
-    jump = ca.if_else(landed, jumped, ca.if_else(was, warm, ca.if_else(found, other, warm, True), True), True)
-    sol = ca.if_else(held > 0.5, follow, jump, True)
-    root = ca.if_else(held > 0.5, on, ca.logic_or(ca.logic_or(landed, was), found), True)
+    jump = ca.if_else(landed, ca.vertcat(jumped, 1), ca.if_else(was, ca.vertcat(warm, 1), ca.vertcat(
+        ca.if_else(found, other, warm), found), True), True)
+    both = ca.if_else(held > 0.5, follow, jump, True)
+    sol, root = both[:n], both[n] > 0.5
     tol = LOOP_TOLERANCE * (1 + ca.norm_inf(ca.if_else(ca.sumsqr(sol) < ca.inf, sol, ca.DM.zeros(n, 1))))
     return sol, ca.if_else(root, tol, -tol)
