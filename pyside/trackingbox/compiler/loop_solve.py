@@ -354,17 +354,13 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     def settled(sol: ca.MX, values_: ca.MX) -> ca.MX:
         return settles(sol, values_)
 
-    # first Newton from the memory, taken where it settles within BRANCH_STEP of it (the root has moved
-    # little since the last accepted point: the cost of the warm start's Newton); else the damped steps
-    fast = newton(memory, values)
-    quick = ca.logic_and(ca.mmax(ca.fabs(fast - memory) / (1 + ca.fabs(memory))) <= BRANCH_STEP, settled(fast, values))
     end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
     polished = ca.if_else(ca.mmax(ca.fabs(residual(end, values))) <= NEWTON_TOLERANCE, end, newton(end, values), True)
     near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
     polish = ca.logic_and(near, settled(polished, values))
     damped_on = ca.logic_or(polish, settled(end, values))  # (a singular loop's Newton gives NaN from its root)
-    # (one conditional for the solution and its flag: each conditional evaluates what its branch uses)
-    follow = ca.if_else(quick, ca.vertcat(fast, 1), ca.vertcat(ca.if_else(polish, polished, end), damped_on), True)
+    # (one conditional for the solution and its flag below: each conditional evaluates what its branch uses)
+    follow = ca.vertcat(ca.if_else(polish, polished, end), damped_on)
     warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
     jumped = newton(warm, values)
     landed, was = settled(jumped, values), settled(warm, values)
