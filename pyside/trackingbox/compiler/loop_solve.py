@@ -120,6 +120,24 @@ def _weights(g: ca.MX, z: ca.MX, z0: ca.MX) -> ca.MX:
     return ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)
 
 
+def _nearest_root(name: str, g: ca.MX, z: ca.MX, p: ca.MX, n: int) -> ca.Function:
+    """(guess, p, z0) -> the root of the loop g(z, p) = 0 nearest *z0*, by Newton on the regularised
+    optimality conditions of :func:`_or_nearest_solution` from *guess* (with the multipliers that fit it);
+    NaN from a guess that is not finite. The guess's derivatives are stopped (it only tells Newton where
+    to start): the root's are the nearest solution's."""
+    y, z0, first = ca.MX.sym(f"{name}_ny", n), ca.MX.sym(f"{name}_nz0", n), ca.MX.sym(f"{name}_nfirst", n)
+    scaled = g / _weights(g, z, z0)
+    jac = ca.jacobian(scaled, z)
+    kkt = ca.vertcat(z - z0 + ca.mtimes(jac.T, y), scaled - NEAREST_REGULARISATION * y)
+    nearest = ca.rootfinder(f"{name}_nearest", "fast_newton", {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
+                            {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
+    jac1 = ca.Function(f"{name}_nearest_jacobian", [z, p, z0], [jac])(first, p, z0)
+    y1 = ca.solve(ca.mtimes(jac1, jac1.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac1, z0 - first))
+    root = ca.if_else(ca.sumsqr(first) + ca.sumsqr(y1) < ca.inf,
+                      nearest(ca.stop_diff(ca.vertcat(first, y1), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
+    return ca.Function(f"{name}_nearest_root", [first, p, z0], [root])
+
+
 def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) -> tuple[Any, Any]:
     """(accepted(sol, guess): whether Newton's iterate *sol* from *guess* is a root (see
     :func:`_or_nearest_solution`), fallback(guess): the loop's solution by the fallbacks from *guess*,
@@ -355,12 +373,18 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
         return settles(sol, values_)
 
     end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
-    polished = ca.if_else(ca.mmax(ca.fabs(residual(end, values))) <= NEWTON_TOLERANCE, end, newton(end, values), True)
+    # the end polished by Newton on the nearest solution's optimality conditions (the root nearest the
+    # memory, from the end): not Newton's own steps, which, where the loop's Jacobian is singular at its
+    # roots (MSL ``Rotational.Examples.LossyGearDemo2``'s stuck gear, whose torque split no equation
+    # determines), leave a root that moves along the singular direction with where the damped steps
+    # stopped, i.e. at random with the inputs (and the end itself, where its residual was below
+    # NEWTON_TOLERANCE, did the same): a friction element's indicator then changed sign from one
+    # evaluation to the next and the event iteration chattered; the root nearest the memory is one
+    polished = _nearest_root(f"{name}_branch", g, z, p, n)(end, values, memory)
     near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
     polish = ca.logic_and(near, settled(polished, values))
-    damped_on = ca.logic_or(polish, settled(end, values))  # (a singular loop's Newton gives NaN from its root)
-    # (one conditional for the solution and its flag below: each conditional evaluates what its branch uses)
-    follow = ca.vertcat(ca.if_else(polish, polished, end), damped_on)
+    # (one conditional for the solution and its flag: each conditional evaluates what its branch uses)
+    follow = ca.if_else(polish, ca.vertcat(polished, 1), ca.vertcat(end, settled(end, values)), True)
     warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
     jumped = newton(warm, values)
     landed, was = settled(jumped, values), settled(warm, values)
