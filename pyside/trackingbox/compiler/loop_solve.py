@@ -373,14 +373,19 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
         return settles(sol, values_)
 
     end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
-    # the end polished by Newton on the nearest solution's optimality conditions (the root nearest the
-    # memory, from the end): not Newton's own steps, which, where the loop's Jacobian is singular at its
-    # roots (MSL ``Rotational.Examples.LossyGearDemo2``'s stuck gear, whose torque split no equation
-    # determines), leave a root that moves along the singular direction with where the damped steps
-    # stopped, i.e. at random with the inputs (and the end itself, where its residual was below
-    # NEWTON_TOLERANCE, did the same): a friction element's indicator then changed sign from one
-    # evaluation to the next and the event iteration chattered; the root nearest the memory is one
-    polished = _nearest_root(f"{name}_branch", g, z, p, n)(end, values, memory)
+    # the end polished to the root nearest the memory (Newton on the nearest solution's optimality
+    # conditions, from the end), where that settles near the end; Newton from the end (or the end, where its
+    # residual is below NEWTON_TOLERANCE) where not. The end itself is a root only to the steps'
+    # tolerance, and where they stop varies with the inputs, and so does where Newton's own steps from it
+    # end along a direction that the residual hardly sees: the loop's solution moved at random from one
+    # evaluation to the next (MSL ``Rotational.Examples.LossyGearDemo2``'s stuck gear, whose torque split
+    # is nearly undetermined: a friction element's indicator changed sign at random and the event
+    # iteration chattered); the root nearest the memory is one.
+    nearest = _nearest_root(f"{name}_branch", g, z, p, n)(end, values, memory)
+    nearest_on = ca.logic_and(ca.mmax(ca.fabs(nearest - end) / (1 + ca.fabs(end))) <= BRANCH_STEP,
+                              settled(nearest, values))
+    polished = ca.if_else(nearest_on, nearest, ca.if_else(
+        ca.mmax(ca.fabs(residual(end, values))) <= NEWTON_TOLERANCE, end, newton(end, values), True), True)
     near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
     polish = ca.logic_and(near, settled(polished, values))
     # (one conditional for the solution and its flag: each conditional evaluates what its branch uses)
