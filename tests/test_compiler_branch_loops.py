@@ -193,3 +193,38 @@ def test_the_msl_amplifier_with_the_detailed_op_amp_amplifies_by_minus_two_and_c
         source = -np.sign(vin[clipped]) * VS
         expected = (source / 75 + vin[clipped] / 3e4) / (1 / 75 + 1 / 1e4 + 1 / 3e4)
         assert np.max(np.abs(vout[clipped] - expected)) < 1e-3
+
+
+def test_the_pieces_of_a_loop_are_its_relations_outcomes():
+    """The piece a point is on: one outcome per relation left in the residual (a min or max as whether
+    its first argument is the smaller), here read off by hand at two points."""
+    import casadi as ca
+
+    from trackingbox.compiler.loop_solve import _pieces
+
+    z, p = ca.MX.sym("z", 2), ca.MX.sym("p", 1)
+    g = ca.vertcat(ca.if_else(z[0] < p, z[0], 2 * z[0]) - z[1], ca.fmin(z[1], 3) + z[0] - p)
+    pieces = _pieces("t", g, z, p)
+    assert sorted(np.ravel(pieces([1, 5], 2)).tolist()) == [1, 1]  # 1 < 2; min(5, 3): 3 <= 5
+    assert sorted(np.ravel(pieces([3, 2], 2)).tolist()) == [0, 0]  # 3 >= 2; min(2, 3): not 3 <= 2
+
+
+def test_a_loop_on_one_piece_takes_newtons_root_from_a_memory_far_from_it():
+    """Between events, with the memory a whole output interval behind (it is kept at accepted points
+    only), a loop whose relations are the same at the memory and at Newton's root from it (the piece of a
+    current limiter is unchanged) takes that root: i = v/R on the linear piece, and the branch's indicator
+    stays positive."""
+    import casadi as ca
+
+    from trackingbox.compiler.loop_solve import branch_solution
+
+    z, p = ca.MX.sym("z", 1), ca.MX.sym("p", 1)
+    v, r, imax = p[0], 2.0, 10.0
+    g = z[0] - ca.if_else(v / r < imax, v / r, imax)  # i = min(v/R, Imax), its relation in v only
+    memory, held = ca.MX.sym("m", 1), ca.MX.sym("h")
+    sol, indicator = branch_solution("t", z, p, g, memory, ca.DM([0.0]), p, [-math.inf], [math.inf], held)
+    f = ca.Function("f", [p, memory, held], [sol, indicator])
+    for volts, remembered in ((7.0, 1.0), (30.0, 9.0), (1.0, 10.0)):
+        i, ind = (float(x) for x in f(volts, remembered, 1))
+        assert i == pytest.approx(min(volts / r, imax), rel=1e-12)
+        assert ind > 0
