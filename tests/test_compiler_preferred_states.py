@@ -44,6 +44,17 @@ package PrefState
     m2 = V*rho0*(1 + (p2 - p0)/K);
     p2 = p_out;
   end Downstream;
+  model Warmed "a liquid warmed at constant power: its internal energy is differentiated, its
+    absolute temperature preferred (not offered: the internal energy counts from 273.15 K)"
+    parameter Real m = 10;
+    parameter Real cp = 4184;
+    parameter Real P = 41.84;
+    Real U;
+    Real T(unit = "K", stateSelect = StateSelect.prefer, start = 293.15, fixed = true);
+  equation
+    der(U) = P;
+    U = m*cp*(T - 273.15);
+  end Warmed;
 end PrefState;
 """
 
@@ -84,3 +95,11 @@ def test_without_a_preference_the_differentiated_mass_stays_the_state(src, tmp_p
     states, out = run(src, tmp_path, "Mass", ["p"])
     assert states == ["der(m)"]
     assert np.max(np.abs(out["p"] - pressure(out["time"]))) < 0.1 * 1e5  # right, if less exact
+
+
+def test_an_absolute_temperature_is_not_made_the_state(src, tmp_path):
+    """A state T in kelvin is resolved to the relative tolerance of 293 K (0.3 mK at 1e-6), coarser
+    than the mK a Fluid tank's temperature varies by; its internal energy stays the state."""
+    states, out = run(src, tmp_path, "Warmed", ["T"])
+    assert states == ["der(U)"]
+    assert np.allclose(out["T"], 293.15 + 41.84 / (10 * 4184) * out["time"], rtol=0, atol=1e-9)

@@ -27,6 +27,18 @@ from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, warm_solution
 log = logging.getLogger(__name__)
 
 
+def _unit(sv: ScalarVar) -> str | None:
+    """The ``unit`` of *sv*, where it is a string literal."""
+    node = sv.attrs.get("unit") if sv.attrs else None
+    if isinstance(node, str):
+        return node
+    if isinstance(node, dict):
+        lit = node.get("Literal")
+        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
+            return str(lit["value"]["String"])
+    return None
+
+
 def substituted(exprs: list[ca.MX], assignments: list[tuple[ca.MX, ca.MX]]) -> list[ca.MX]:
     """*exprs* with the assigned variables replaced by their values, a value itself in terms of the
     variables assigned before it: the same as substituting one assignment at a time, latest first, but
@@ -390,13 +402,19 @@ class SystemAssembly:
         variables to the states are differentiated and the states chosen by ``stateSelect``
         (:meth:`_reduce_index` with them offered). It matters: the pressure of a liquid read from its
         mass varies 2e9 times the mass's relative error (water's bulk modulus), so a solver's error
-        of 1e-6 on the mass moves the pressure by kPa. Returns (residuals, states, algebraics,
+        of 1e-6 on the mass moves the pressure by kPa. Absolute temperatures (unit K) are not offered:
+        under a relative tolerance a state T is resolved to 1e-6 of 293 K, 0.3 mK, while the
+        internal energy it is read from otherwise counts from the medium's reference state (20 K
+        above it for a liquid near 273 K), and a tank's temperature varies by mK
+        (``ControlledTanks``: 0.109 of tank2.medium.T's range off its reference with T as the
+        state, 0.007 with U). Returns (residuals, states, algebraics,
         unknowns, blocks, optional initial equations), or None: no such variable, or no choice of
         states with one of them (the system is left as it was)."""
         preference = self._state_select()
         calc = {sv.name for sv in calculated}
         wanted = [sv for sv in algebraics if sv.name not in calc and sv.type == REAL
-                  and STATE_SELECT.get(preference.get(sv.name, "Default"), 2) <= 1]
+                  and STATE_SELECT.get(preference.get(sv.name, "Default"), 2) <= 1
+                  and _unit(sv) != "K"]
         if not wanted:
             return None
         strongest = min(STATE_SELECT[preference[sv.name]] for sv in wanted)
