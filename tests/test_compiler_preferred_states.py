@@ -1,7 +1,9 @@
 """States chosen by ``stateSelect`` where the model differentiates other variables (issue 35,
 Modelica.Fluid.Examples.NonCircularPipes): a Fluid volume writes its balances for its mass and
 internal energy, ``der(m)`` and ``der(U)``, and its medium prefers p and h as states. A tool
-following ``stateSelect = prefer`` differentiates the equations tying them and integrates p and h;
+following ``stateSelect = prefer`` differentiates the equations tying them and integrates p and h
+(the embedded compiler does so for a component that prefers its pressure, and not for absolute
+temperatures);
 integrating m and U instead, a liquid's pressure, read from its mass through its bulk modulus, errs
 by kPa at a relative tolerance of 1e-6. The expectations are closed forms worked by hand."""
 from __future__ import annotations
@@ -25,7 +27,7 @@ package PrefState
     parameter Real c = 1e-6 "valve conductance (kg/s/Pa)";
     parameter Real p_out = 1e6;
     Real m;
-    Real p(stateSelect = StateSelect.prefer, start = 1e6, fixed = true);
+    Real p(unit = "Pa", stateSelect = StateSelect.prefer, start = 1e6, fixed = true);
   equation
     der(m) = q - c*(p - p_out);
     m = V*rho0*(1 + (p - p0)/K);
@@ -38,7 +40,7 @@ package PrefState
     extends Liquid;
     Real m2;
     Real w2 "outflow of the second volume";
-    Real p2(stateSelect = StateSelect.prefer, start = 1e6);
+    Real p2(unit = "Pa", stateSelect = StateSelect.prefer, start = 1e6);
   equation
     der(m2) = c*(p - p_out) - w2;
     m2 = V*rho0*(1 + (p2 - p0)/K);
@@ -55,6 +57,14 @@ package PrefState
     der(U) = P;
     U = m*cp*(T - 273.15);
   end Warmed;
+  model Tank "a tank filled at q: its mass is differentiated, its level preferred; no pressure is"
+    parameter Real q = 10;
+    Real m(start = 0, fixed = true);
+    Real level(unit = "m", stateSelect = StateSelect.prefer);
+  equation
+    der(m) = q;
+    m = 1000*2*level;
+  end Tank;
 end PrefState;
 """
 
@@ -103,3 +113,11 @@ def test_an_absolute_temperature_is_not_made_the_state(src, tmp_path):
     states, out = run(src, tmp_path, "Warmed", ["T"])
     assert states == ["der(U)"]
     assert np.allclose(out["T"], 293.15 + 41.84 / (10 * 4184) * out["time"], rtol=0, atol=1e-9)
+
+
+def test_a_level_without_a_preferred_pressure_stays_read_from_the_mass(src, tmp_path):
+    """Offered are the preferred variables of a component that prefers its pressure (where the mass
+    as the state is ill-conditioned); a level is as exact read from the mass, which stays the state."""
+    states, out = run(src, tmp_path, "Tank", ["level"])
+    assert states == ["der(m)"]
+    assert np.allclose(out["level"], 10 * out["time"] / 2000, rtol=1e-12, atol=1e-15)

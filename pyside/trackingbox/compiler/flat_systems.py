@@ -27,6 +27,11 @@ from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, warm_solution
 log = logging.getLogger(__name__)
 
 
+def _owner(name: str) -> str:
+    """The component a scalar belongs to: ``pipe.mediums[2]`` of ``pipe.mediums[2].p``."""
+    return name.rsplit(".", 1)[0] if "." in name else ""
+
+
 def _unit(sv: ScalarVar) -> str | None:
     """The ``unit`` of *sv*, where it is a string literal."""
     node = sv.attrs.get("unit") if sv.attrs else None
@@ -402,7 +407,12 @@ class SystemAssembly:
         variables to the states are differentiated and the states chosen by ``stateSelect``
         (:meth:`_reduce_index` with them offered). It matters: the pressure of a liquid read from its
         mass varies 2e9 times the mass's relative error (water's bulk modulus), so a solver's error
-        of 1e-6 on the mass moves the pressure by kPa. Absolute temperatures (unit K) are not offered:
+        of 1e-6 on the mass moves the pressure by kPa. Offered are the preferred variables of a
+        component (a medium) that prefers its pressure (unit Pa) as a state, the case where it
+        matters: a level read from a mass is as exact as the mass, and the choice of states changes
+        a result within its tolerance (``TanksWithOverflow``: 2.6e-3 of upperTank.medium.h's range
+        off its reference with the levels as states, 8.6e-4 with U; 1.5e-3 both at rtol 1e-8).
+        Absolute temperatures (unit K) are not offered:
         under a relative tolerance a state T is resolved to 1e-6 of 293 K, 0.3 mK, while the
         internal energy it is read from otherwise counts from the medium's reference state (20 K
         above it for a liquid near 273 K), and a tank's temperature varies by mK
@@ -415,6 +425,8 @@ class SystemAssembly:
         wanted = [sv for sv in algebraics if sv.name not in calc and sv.type == REAL
                   and STATE_SELECT.get(preference.get(sv.name, "Default"), 2) <= 1
                   and _unit(sv) != "K"]
+        owners = {_owner(sv.name) for sv in wanted if _unit(sv) == "Pa"}
+        wanted = [sv for sv in wanted if _owner(sv.name) in owners]
         if not wanted:
             return None
         strongest = min(STATE_SELECT[preference[sv.name]] for sv in wanted)
