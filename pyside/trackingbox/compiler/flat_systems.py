@@ -14,7 +14,7 @@ import casadi as ca
 from ..errors import CompileError
 from .causalize import StructuralError, blt
 from .events import Condition, EventSystem
-from .index import IndexError_, max_matching, reduce_index
+from .index import STATE_SELECT, IndexError_, max_matching, reduce_index
 from .library import locate
 from .source import class_extent, read_text, strip_comments
 from .flat_model import REAL, Assertion, InitialSystem, LoopMemory, ScalarVar
@@ -25,6 +25,23 @@ from .initial_pre import hold_at_initialisation, pre_initial_equations
 from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, branch_solution, switches, warm_solution
 
 log = logging.getLogger(__name__)
+
+
+def _owner(name: str) -> str:
+    """The component a scalar belongs to: ``pipe.mediums[2]`` of ``pipe.mediums[2].p``."""
+    return name.rsplit(".", 1)[0] if "." in name else ""
+
+
+def _unit(sv: ScalarVar) -> str | None:
+    """The ``unit`` of *sv*, where it is a string literal."""
+    node = sv.attrs.get("unit") if sv.attrs else None
+    if isinstance(node, str):
+        return node
+    if isinstance(node, dict):
+        lit = node.get("Literal")
+        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
+            return str(lit["value"]["String"])
+    return None
 
 
 def substituted(exprs: list[ca.MX], assignments: list[tuple[ca.MX, ca.MX]]) -> list[ca.MX]:
@@ -333,22 +350,31 @@ class SystemAssembly:
         return kept
 
     def _reduce_index(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar], algebraics: list[ScalarVar],
-                      calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]]
+                      calculated: list[ScalarVar], calc_eqs: list[tuple[ca.MX, str]],
+                      extra: list[ScalarVar] | None = None
                       ) -> tuple[list[tuple[ca.MX, str]], list[ScalarVar], list[tuple[ca.MX, str]]] | None:
         """Index reduction (.index) of the continuous equations; None when it cannot help. Returns the
         equations (the parameters' bindings, then the original and differentiated ones), the states
         chosen, and the initial equations v = start of former states with fixed = true, which hold
-        where they are needed (a position prescribed elsewhere makes its own start redundant)."""
+        where they are needed (a position prescribed elsewhere makes its own start redundant).
+        *extra*: algebraic variables offered as states as well (:meth:`_preferred_states`): each gets
+        a derivative symbol, and the equations that tie it to the states are differentiated."""
         calc_names = {sv.name for sv in calculated}
         eqs = [(r, o) for r, o in residuals if not any(o == c for _, c in calc_eqs)]
         preference = self._state_select()
+        extra = extra or []
+        extra_names = {sv.name for sv in extra}
+        derivative = {s.name: self.der_placeholders[s.name] for s in states}
+        derivative.update({sv.name: ca.MX.sym(f"der({sv.name})") for sv in extra})
         try:
-            red = reduce_index(eqs, {s.name: s.sym for s in states}, {s.name: self.der_placeholders[s.name]
-                                                                      for s in states},
-                               {a.name: a.sym for a in algebraics if a.name not in calc_names}, self.time,
-                               {sv.name for sv in self.scalars.values() if sv.kind == "input"}, preference)
+            red = reduce_index(eqs, {s.name: s.sym for s in states + extra}, derivative,
+                               {a.name: a.sym for a in algebraics if a.name not in calc_names | extra_names},
+                               self.time, {sv.name for sv in self.scalars.values() if sv.kind == "input"},
+                               preference)
         except IndexError_ as exc:
             log.info("%s: index reduction not possible: %s", self.model, exc)
+            return None
+        if extra and not extra_names & set(red.states):
             return None
         chosen = set(red.states)
         for name, sym in red.created:  # derivatives that are algebraic unknowns (dummy derivatives)
@@ -370,6 +396,60 @@ class SystemAssembly:
         log.info("%s: index reduction differentiated %d equations; states %s", self.model,
                  len(red.differentiated), ", ".join(red.states))
         return list(calc_eqs) + red.residuals, new_states, optional
+
+    def _preferred_states(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
+                          algebraics: list[ScalarVar], calculated: list[ScalarVar],
+                          calc_eqs: list[tuple[ca.MX, str]]) -> tuple[Any, ...] | None:
+        """A solvable (index-1) system whose states are not the variables the model prefers as states:
+        ``stateSelect = always`` or ``prefer`` on an algebraic variable while a state has a weaker
+        preference (a Modelica.Fluid volume integrates its mass and energy, ``der(m)``, ``der(U)``,
+        and its medium prefers p and h). As Modelica tools do, the equations that tie the preferred
+        variables to the states are differentiated and the states chosen by ``stateSelect``
+        (:meth:`_reduce_index` with them offered). It matters: the pressure of a liquid read from its
+        mass varies 2e9 times the mass's relative error (water's bulk modulus), so a solver's error
+        of 1e-6 on the mass moves the pressure by kPa. Offered are the preferred variables of a
+        component (a medium) that prefers its pressure (unit Pa) as a state, the case where it
+        matters: a level read from a mass is as exact as the mass, and the choice of states changes
+        a result within its tolerance (``TanksWithOverflow``: 2.6e-3 of upperTank.medium.h's range
+        off its reference with the levels as states, 8.6e-4 with U; 1.5e-3 both at rtol 1e-8).
+        Absolute temperatures (unit K) are not offered:
+        under a relative tolerance a state T is resolved to 1e-6 of 293 K, 0.3 mK, while the
+        internal energy it is read from otherwise counts from the medium's reference state (20 K
+        above it for a liquid near 273 K), and a tank's temperature varies by mK
+        (``ControlledTanks``: 0.109 of tank2.medium.T's range off its reference with T as the
+        state, 0.007 with U). Returns (residuals, states, algebraics,
+        unknowns, blocks, optional initial equations), or None: no such variable, or no choice of
+        states with one of them (the system is left as it was)."""
+        preference = self._state_select()
+        calc = {sv.name for sv in calculated}
+        wanted = [sv for sv in algebraics if sv.name not in calc and sv.type == REAL
+                  and STATE_SELECT.get(preference.get(sv.name, "Default"), 2) <= 1
+                  and _unit(sv) != "K"]
+        owners = {_owner(sv.name) for sv in wanted if _unit(sv) == "Pa"}
+        wanted = [sv for sv in wanted if _owner(sv.name) in owners]
+        if not wanted:
+            return None
+        strongest = min(STATE_SELECT[preference[sv.name]] for sv in wanted)
+        if not any(STATE_SELECT.get(preference.get(s.name, "Default"), 2) > strongest for s in states):
+            return None
+        scalars_before, der_before = set(self.scalars), self.der_placeholders
+        reduced = self._reduce_index(residuals, states, algebraics, calculated, calc_eqs, extra=wanted)
+        if reduced is not None:
+            residuals, states, optional = reduced
+            state_names = {s.name for s in states}
+            algebraics = [sv for sv in self.scalars.values() if sv.kind == "continuous" and sv.name not in state_names]
+            unknowns = self._unknowns(states, algebraics, calculated)
+            position = {u.name(): i for i, u in enumerate(unknowns)}
+            incidence = [sorted({position[s.name()] for s in ca.symvar(r) if s.name() in position})
+                         for r, _origin in residuals]
+            try:
+                return residuals, states, algebraics, unknowns, blt(incidence, len(unknowns)), optional
+            except StructuralError:
+                log.info("%s: the states the model prefers leave the system singular; kept", self.model)
+        for name in set(self.scalars) - scalars_before:
+            del self.scalars[name]
+        self.der_placeholders = der_before
+        return None
 
     def _initial_system(self, residuals: list[tuple[ca.MX, str]], states: list[ScalarVar],
                         computed: list[ScalarVar], assignments: list[tuple[ca.MX, ca.MX]],

@@ -604,6 +604,9 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                                                                 initial=True)
         blocks, residuals, states, algebraics, unknowns, optional_init = self._sorted_blocks(
             residuals, states, algebraics, calculated, calc_eqs, unknowns)
+        # a variable with fixed = true that became a state (.flat_systems._preferred_states) starts at its start
+        started = {f"start value of {s.name} (fixed = true)" for s in states if s.fixed is True}
+        init_residuals = [(r, o) for r, o in init_residuals if o not in started]
         self._parameter_names = {sv.name for sv in params}
         self._loop_memory: list = []  # (.flat_systems._rootfinder)
         assignments, loop_sizes, torn_sizes = self._solve_blocks(blocks, residuals, unknowns, algebraics + calculated)
@@ -749,7 +752,12 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         try:
             blocks = blt(incidence, len(unknowns))
         except StructuralError as exc:
-            # a DAE of higher index: differentiate the constraints and choose the states (.index)
+            # a DAE of higher index: differentiate the constraints and choose the states (.index), those
+            # the model prefers if they can be
+            preferred = self._preferred_states(residuals, states, algebraics, calculated, calc_eqs)
+            if preferred is not None:
+                residuals, states, algebraics, unknowns, blocks, optional_init = preferred
+                return blocks, residuals, states, algebraics, unknowns, optional_init
             reduced = self._reduce_index(residuals, states, algebraics, calculated, calc_eqs)
             if reduced is None:
                 raise CompileError(self._structural_message(exc, residuals, [u.name() for u in unknowns])) from None
@@ -765,6 +773,10 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
                 blocks = blt(incidence, len(unknowns))
             except StructuralError as exc2:
                 raise CompileError(self._structural_message(exc2, residuals, [u.name() for u in unknowns])) from None
+            return blocks, residuals, states, algebraics, unknowns, optional_init
+        preferred = self._preferred_states(residuals, states, algebraics, calculated, calc_eqs)
+        if preferred is not None:
+            residuals, states, algebraics, unknowns, blocks, optional_init = preferred
         return blocks, residuals, states, algebraics, unknowns, optional_init
 
     def _solve_blocks(self, blocks: Any, residuals: list[tuple[ca.MX, str]], unknowns: list[ca.MX],
