@@ -357,6 +357,16 @@ ONE_MEDIUM = """package Med
   model Replaced "the other branch's default, redeclared to W"
     HD d(redeclare package M = Water.W);
   end Replaced;
+  package Lin "a medium of the PSM branch whose constant calls the other branch's function through the
+    library's short class Water.Standard (Modelica.Media.CompressibleLiquids.LinearWater_pT's constants
+    from Modelica.Media.Water.StandardWater)"
+    extends PSM;
+    constant Real c0 = Water.Standard.f(1);
+  end Lin;
+  model AliasCall "Lin taken as the medium; W reached only through the call in Lin's constant"
+    H a(redeclare package M = Lin);
+    Real c = Lin.c0*(1 + 0*time);
+  end AliasCall;
 end Med;
 """
 
@@ -376,6 +386,19 @@ def test_a_sibling_extension_is_no_use_when_the_model_takes_one_branch_as_its_me
     out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "z", "zt"])
     assert np.allclose(out["a.y"], 232.0)
     assert np.allclose(out["z"], 211.0) and np.allclose(out["zt"], 1.0)  # CPLW.f(1) = 1 + 1*10 + 2*100
+
+
+def test_a_library_short_class_reached_by_a_call_in_a_constant_is_no_second_medium(tmp_path):
+    """``package Standard = W`` in the package Water is a name for W, not a medium the model takes: Lin
+    (the PSM branch) is the only medium, and W's function reached through that name in Lin's constant
+    computes with W's constants. Worked by hand (f(u) = (if singleState then 1 else 2)*u + 10*ThermoStates
+    + 100*cp): Lin.f(1) = 1 + 10 + 200 = 211 (PSM's singleState, ThermoStates), Lin.c0 = W.f(1) =
+    2 + 30 + 200 = 232 (W's); a value mixed between the two branches would show in either."""
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    res = compile_model(src, "Med.AliasCall", backend="embedded", output=tmp_path / "a.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "a.t", "c"])
+    assert np.allclose(out["a.y"], 211.0) and np.allclose(out["a.t"], 1.0) and np.allclose(out["c"], 232.0)
 
 
 def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
