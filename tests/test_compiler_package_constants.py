@@ -529,3 +529,44 @@ def test_two_taken_branches_compile_where_no_class_of_theirs_reads_a_modified_co
                                                         r".*V.mo:52, and V.TwoG takes several packages extending PG with different values "
                                                         r"\(AG at .*V.mo:62; BG at .*V.mo:63\)"):
         compile_model(src, "V.TwoG", backend="embedded", output=tmp_path / "g.fmu")
+
+
+@pytest.mark.long
+def test_heating_systems_medium_has_its_constants_from_if97(tmp_path):
+    """Modelica.Fluid.Examples.HeatingSystem's medium, ``LinearWater_pT_Ambient``, takes its reference
+    density, cp, expansion and compressibility from ``Modelica.Media.Water.StandardWater`` (IF97) at
+    101325 Pa and 298.15 K: no longer refused as a second medium (the library's short class), and the
+    values are StandardWater's own, against the ``iapws`` package's IF97: the density from (p, T) by
+    region 1's basic equation; cp, beta and kappa by ``WaterIF97_ph``'s ``cp_ph``, ``beta_ph`` and
+    ``kappa_ph`` (its ``ph_explicit``), i.e. region 1 at the backward equation's temperature T(p, h(p, T))
+    = 298.17295 K (beta 8.6e-4 above its value at 298.15 K: the backward equation's 25 mK). Then the
+    linear density law of ``PartialLinearFluid`` on them. (150-216 s on a loaded 2-core machine, most of
+    it evaluating the IF97 constants: marked long.)"""
+    pytest.importorskip("iapws", reason="the iapws package (a test dependency) is not installed")
+    from _fixtures_msl import need_msl
+    from iapws.iapws97 import _Backward1_T_Ph, _Region1
+
+    need_msl("Media", "CompressibleLiquids.mo")
+    msl = need_msl().parent
+    src = tmp_path / "LW.mo"
+    src.write_text("""model LW
+  package Medium = Modelica.Media.CompressibleLiquids.LinearWater_pT_Ambient;
+  Real p = 2e5 + 8e5*time;
+  Real T = 300 + 40*time;
+  Real d = Medium.density(Medium.setState_pTX(p, T, Medium.reference_X));
+  Real d0 = Medium.reference_d*(1 + 0*time);
+  Real cp = Medium.cp_const*(1 + 0*time);
+  Real beta = Medium.beta_const*(1 + 0*time);
+  Real kappa = Medium.kappa_const*(1 + 0*time);
+end LW;
+""")
+    fmu = compile_model(src, "LW", backend="embedded", output=tmp_path / "lw.fmu", libraries=[msl]).fmu
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["p", "T", "d", "d0", "cp",
+                                                                                   "beta", "kappa"])
+    at_t = _Region1(298.15, 0.101325)  # (MPa, kJ/kg)
+    at_h = _Region1(_Backward1_T_Ph(0.101325, at_t["h"]), 0.101325)
+    rho0, cp, beta, kappa = 1 / at_t["v"], at_h["cp"] * 1e3, at_h["alfav"], at_h["kt"] * 1e-6
+    assert np.allclose(out["d0"], rho0, rtol=1e-9) and np.allclose(out["cp"], cp, rtol=1e-9)
+    assert np.allclose(out["beta"], beta, rtol=1e-6) and np.allclose(out["kappa"], kappa, rtol=1e-6)
+    want = (1 + (out["p"] - 101325) * kappa - (out["T"] - 298.15) * beta) * rho0
+    assert np.allclose(out["d"], want, rtol=1e-9)
