@@ -142,7 +142,7 @@ def switched_if(tr: Any, chain: list[tuple[Any, list[Any]]], env: dict[str, Valu
     except _NotSwitched as exc:
         log.debug("%s: an if-statement in %s merged, not switched: %s", tr.model, fname, exc)
         return False
-    kept = {k: v[0][1] for k, v in values.items() if all(len(b[1]) == 1 and is_number(b[1][0]) for b in v)
+    kept = {k: v[0][1] for k, v in values.items() if all(b[0] == () and is_number(b[1][0]) for b in v)
             and len({(type(b[1][0]), b[1][0]) for b in v}) == 1}  # the same number on every path
     switched = [k for k in keys if k not in kept]
     n_slots = sum(len(a) for a in asserts)
