@@ -357,6 +357,16 @@ ONE_MEDIUM = """package Med
   model Replaced "the other branch's default, redeclared to W"
     HD d(redeclare package M = Water.W);
   end Replaced;
+  package Lin "a medium of the PSM branch whose constant calls the other branch's function through the
+    library's short class Water.Standard (Modelica.Media.CompressibleLiquids.LinearWater_pT's constants
+    from Modelica.Media.Water.StandardWater)"
+    extends PSM;
+    constant Real c0 = Water.Standard.f(1);
+  end Lin;
+  model AliasCall "Lin taken as the medium; W reached only through the call in Lin's constant"
+    H a(redeclare package M = Lin);
+    Real c = Lin.c0*(1 + 0*time);
+  end AliasCall;
 end Med;
 """
 
@@ -376,6 +386,19 @@ def test_a_sibling_extension_is_no_use_when_the_model_takes_one_branch_as_its_me
     out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "z", "zt"])
     assert np.allclose(out["a.y"], 232.0)
     assert np.allclose(out["z"], 211.0) and np.allclose(out["zt"], 1.0)  # CPLW.f(1) = 1 + 1*10 + 2*100
+
+
+def test_a_library_short_class_reached_by_a_call_in_a_constant_is_no_second_medium(tmp_path):
+    """``package Standard = W`` in the package Water is a name for W, not a medium the model takes: Lin
+    (the PSM branch) is the only medium, and W's function reached through that name in Lin's constant
+    computes with W's constants. Worked by hand (f(u) = (if singleState then 1 else 2)*u + 10*ThermoStates
+    + 100*cp): Lin.f(1) = 1 + 10 + 200 = 211 (PSM's singleState, ThermoStates), Lin.c0 = W.f(1) =
+    2 + 30 + 200 = 232 (W's); a value mixed between the two branches would show in either."""
+    src = tmp_path / "Med.mo"
+    src.write_text(ONE_MEDIUM)
+    res = compile_model(src, "Med.AliasCall", backend="embedded", output=tmp_path / "a.fmu")
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=1.0, output_interval=0.5, output=["a.y", "a.t", "c"])
+    assert np.allclose(out["a.y"], 211.0) and np.allclose(out["a.t"], 1.0) and np.allclose(out["c"], 232.0)
 
 
 def test_a_default_of_the_other_branch_keeps_the_refusal(tmp_path):
@@ -506,3 +529,44 @@ def test_two_taken_branches_compile_where_no_class_of_theirs_reads_a_modified_co
                                                         r".*V.mo:52, and V.TwoG takes several packages extending PG with different values "
                                                         r"\(AG at .*V.mo:62; BG at .*V.mo:63\)"):
         compile_model(src, "V.TwoG", backend="embedded", output=tmp_path / "g.fmu")
+
+
+@pytest.mark.long
+def test_heating_systems_medium_has_its_constants_from_if97(tmp_path):
+    """Modelica.Fluid.Examples.HeatingSystem's medium, ``LinearWater_pT_Ambient``, takes its reference
+    density, cp, expansion and compressibility from ``Modelica.Media.Water.StandardWater`` (IF97) at
+    101325 Pa and 298.15 K: no longer refused as a second medium (the library's short class), and the
+    values are StandardWater's own, against the ``iapws`` package's IF97: the density from (p, T) by
+    region 1's basic equation; cp, beta and kappa by ``WaterIF97_ph``'s ``cp_ph``, ``beta_ph`` and
+    ``kappa_ph`` (its ``ph_explicit``), i.e. region 1 at the backward equation's temperature T(p, h(p, T))
+    = 298.17295 K (beta 8.6e-4 above its value at 298.15 K: the backward equation's 25 mK). Then the
+    linear density law of ``PartialLinearFluid`` on them. (150-216 s on a loaded 2-core machine, most of
+    it evaluating the IF97 constants: marked long.)"""
+    pytest.importorskip("iapws", reason="the iapws package (a test dependency) is not installed")
+    from _fixtures_msl import need_msl
+    from iapws.iapws97 import _Backward1_T_Ph, _Region1
+
+    need_msl("Media", "CompressibleLiquids.mo")
+    msl = need_msl().parent
+    src = tmp_path / "LW.mo"
+    src.write_text("""model LW
+  package Medium = Modelica.Media.CompressibleLiquids.LinearWater_pT_Ambient;
+  Real p = 2e5 + 8e5*time;
+  Real T = 300 + 40*time;
+  Real d = Medium.density(Medium.setState_pTX(p, T, Medium.reference_X));
+  Real d0 = Medium.reference_d*(1 + 0*time);
+  Real cp = Medium.cp_const*(1 + 0*time);
+  Real beta = Medium.beta_const*(1 + 0*time);
+  Real kappa = Medium.kappa_const*(1 + 0*time);
+end LW;
+""")
+    fmu = compile_model(src, "LW", backend="embedded", output=tmp_path / "lw.fmu", libraries=[msl]).fmu
+    out = fmpy.simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.25, output=["p", "T", "d", "d0", "cp",
+                                                                                   "beta", "kappa"])
+    at_t = _Region1(298.15, 0.101325)  # (MPa, kJ/kg)
+    at_h = _Region1(_Backward1_T_Ph(0.101325, at_t["h"]), 0.101325)
+    rho0, cp, beta, kappa = 1 / at_t["v"], at_h["cp"] * 1e3, at_h["alfav"], at_h["kt"] * 1e-6
+    assert np.allclose(out["d0"], rho0, rtol=1e-9) and np.allclose(out["cp"], cp, rtol=1e-9)
+    assert np.allclose(out["beta"], beta, rtol=1e-6) and np.allclose(out["kappa"], kappa, rtol=1e-6)
+    want = (1 + (out["p"] - 101325) * kappa - (out["T"] - 298.15) * beta) * rho0
+    assert np.allclose(out["d"], want, rtol=1e-9)

@@ -17,6 +17,7 @@ from . import lapack, random_ext, records
 from .flat_model import STRING, Assertion, Value, kind_of
 from .flat_builtins import builtin_call, builtin_external_name, if_then, is_number, logical_not
 from .flat_text import literal_text
+from .if_switch import switched_if
 from .records import Record
 from .while_calls import called, same_as
 from .while_fold import event_state
@@ -599,11 +600,12 @@ class StatementTranslation:
         return ".".join(names)
 
     def _if_statement(self, body: Any, env: dict[str, Value], fname: str, conds: list[Value] | None = None) -> None:
-        """An if-statement (or, given *conds*, the branches of a when-statement with their firings)."""
+        """An if-statement (or, given *conds*, the branches of a when-statement with their firings): in a
+        function, one whose branches reach a while loop as a switch (:func:`.if_switch.switched_if`), else
+        every branch run on a copy of *env* and the copies merged."""
         blocks = body.get("cond_blocks") or body.get("branches") or []
         else_block = body.get("else_block") or body.get("else_branch") or []
-        conds_and_envs = []
-        prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
+        chain: list[tuple[Any, list[Any]]] = []  # (condition, statements) that may be taken; None: the else
         for k, blk in enumerate(blocks):
             if isinstance(blk, dict):
                 cond_node, stmts = blk.get("cond"), blk.get("stmts", blk.get("body", []))
@@ -612,19 +614,22 @@ class StatementTranslation:
             cond = conds[k] if conds is not None else self.expr(cond_node, env)
             if is_number(cond):
                 if bool(cond):
-                    branch_env = dict(env)
-                    self._guarded(_branch_guard(None, prior), stmts, branch_env, fname)
-                    conds_and_envs.append((True, branch_env))
+                    chain.append((None, stmts))
                     break
                 continue
+            chain.append((cond, stmts))
+        else:
+            chain.append((None, else_block or []))
+        if conds is None and not _is_algorithm(fname) and switched_if(self, chain, env, fname):
+            return
+        conds_and_envs = []
+        prior: list[Any] = []  # symbolic conditions of the branches before (for asserts in branches)
+        for cond, stmts in chain:
             branch_env = dict(env)
             self._guarded(_branch_guard(cond, prior), stmts, branch_env, fname)
-            prior.append(cond)
-            conds_and_envs.append((cond, branch_env))
-        else:
-            final_env = dict(env)
-            self._guarded(_branch_guard(None, prior), else_block or [], final_env, fname)
-            conds_and_envs.append((True, final_env))
+            if cond is not None:
+                prior.append(cond)
+            conds_and_envs.append((True if cond is None else cond, branch_env))
         # merge from the last branch backwards
         merged = conds_and_envs[-1][1]
         for cond, branch_env in reversed(conds_and_envs[:-1]):

@@ -312,6 +312,23 @@ def one_branch_taken(check: ModifierCheck, used: list[ClassInfo], base: str) -> 
     return leaves is not None and len(leaves) <= 1
 
 
+def _library_alias(check: ModifierCheck, c: ClassInfo) -> bool:
+    """Whether *c* is a short package class of a package, neither replaceable nor a redeclaration
+    (``package StandardWater = WaterIF97_ph`` in ``Modelica.Media.Water``): a name for the package it
+    ends at, which a model reaches only by name (``Modelica.Media.Water.StandardWater.density(state)``
+    in ``Modelica.Media.CompressibleLiquids.Common.LinearWater_pT``'s constants), not a package the
+    model takes as a medium; through it, as through the full name, rumoca 0.10.2 reads that package's
+    own functions and constants (``DirectOther`` in ``tests/test_compiler_package_constants.py``). Its
+    own text, ``package StandardWater = WaterIF97_ph``, is no take (a model's short package class or
+    a replaceable one is)."""
+    if not c.short or c.kind != "package" or c.redeclared:
+        return False
+    parent = check.index.classes.get(c.name.rsplit(".", 1)[0]) if "." in c.name else None
+    if parent is None or parent.kind != "package":
+        return False
+    return re.match(r"\s*(?:\w+\s+)*?(?:replaceable|redeclare)\b", check.body(c)) is None
+
+
 def taken_branches(check: ModifierCheck, used: list[ClassInfo], base: str) -> dict[str, tuple[ClassInfo, int]] | None:
     """The packages extending *base* that the classes of *used* take (see above), none a base of
     another, each with the class and offset in its text of a place taking it (a short package
@@ -319,13 +336,13 @@ def taken_branches(check: ModifierCheck, used: list[ClassInfo], base: str) -> di
     taken: dict[str, tuple[ClassInfo, int]] = {}
     texts = []
     for c in used:
-        texts.append((c, c))  # (a redeclaration in a modification)
+        if not _library_alias(check, c):
+            texts.append((c, c))  # (a redeclaration in a modification)
         for child in check.index.children.get(c.name, {}).values():
             k = check.index.classes.get(child)
             if k is None or not k.short or k.kind != "package":
                 continue
-            text = check.body(k)  # (its own class: blanked in its parent's text)
-            if c.kind != "package" or re.match(r"\s*(?:\w+\s+)*?(?:replaceable|redeclare)\b", text):
+            if not _library_alias(check, k):
                 texts.append((c, k))  # a package a model declares, or a replaceable one anywhere
     for c, where in texts:
         for m in _TAKEN.finditer(check.body(where)):
