@@ -389,16 +389,18 @@ def construct_of(record: dict) -> str:
 
 
 # ------------------------------------------------------------------------------------ the runner
-def run_isolated(request: dict, timeout: float) -> dict:
-    """Run one example in a fresh worker process with a time limit; never raises for the model's sake."""
+def run_isolated(request: dict, timeout: float, cpu_limit: float | None = None) -> dict:
+    """Run one example in a fresh worker process with a time limit (wall s, and CPU s where given);
+    never raises for the model's sake."""
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="tbx-msl-req-") as tmp:
         req = Path(tmp) / "request.json"
         req.write_text(json.dumps(request))
         cmd = [sys.executable, "-m", "trackingbox.compiler.msl_harness", "--one", str(req)]
-        result = run_worker(cmd, timeout)
+        result = run_worker(cmd, timeout, cpu_limit)
     if result is None:
-        result = {"outcome": "timeout", "message": f"no result after {timeout:g} s"}
+        limit = f"{cpu_limit:g} CPU s or " if cpu_limit is not None else ""
+        result = {"outcome": "timeout", "message": f"no result after {limit}{timeout:g} s"}
     result["model"] = request["model"]
     result["package"] = request["package"]
     result["seconds"] = round(time.perf_counter() - t0, 2)
@@ -515,7 +517,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=Path("msl-out/results.jsonl"),
                    help="JSON-lines results file, written as examples finish (default: %(default)s)")
     p.add_argument("-j", "--jobs", type=int, default=1, help="parallel worker processes (default: 1)")
-    p.add_argument("--timeout", type=float, default=600.0, help="seconds per example (default: 600)")
+    p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per example (default: 600)")
+    p.add_argument("--cpu-timeout", type=float, default=None, metavar="S",
+                   help="CPU seconds per example, compile and simulation, its processes together (the limit a "
+                        "loaded machine does not move; --timeout stays the wall limit)")
     p.add_argument("--resume", action="store_true", help="skip examples already in --out")
     p.add_argument("--table", type=Path, default=None, metavar="RESULTS",
                    help="only print the tables of an existing results file and exit")
@@ -566,15 +571,16 @@ def main(argv: list[str] | None = None) -> int:
     if not args.resume:
         args.out.write_text("", encoding="utf-8")
     todo = [r for r in todo_all if r["model"] not in done]
-    log.info("%d examples (%d already done), %d jobs, %g s per example -> %s",
-             len(todo_all), len(todo_all) - len(todo), args.jobs, args.timeout, args.out)
+    log.info("%d examples (%d already done), %d jobs, %g s%s per example -> %s",
+             len(todo_all), len(todo_all) - len(todo), args.jobs, args.timeout,
+             f" ({args.cpu_timeout:g} CPU s)" if args.cpu_timeout is not None else "", args.out)
     lock = threading.Lock()
     t0 = time.perf_counter()
     signal.signal(signal.SIGTERM, interrupt)
     pool = ThreadPoolExecutor(max(1, args.jobs))
     try:
         with open(args.out, "a", encoding="utf-8") as fh:
-            futures = {pool.submit(run_isolated, r, args.timeout): r for r in todo}
+            futures = {pool.submit(run_isolated, r, args.timeout, args.cpu_timeout): r for r in todo}
             for k, fut in enumerate(as_completed(futures), 1):
                 res = fut.result()
                 with lock:
