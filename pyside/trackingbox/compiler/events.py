@@ -42,7 +42,8 @@ usual machinery of model-exchange FMUs:
   states at the event and the discrete values before it (the MSL's ``TriggeredTrapezoid`` starts
   its ramp from ``pre(y)``). At initialisation it is ``y``'s start value until the initial
   equations are solved, then ``y``. It is not compared for the end of the iteration (``y`` is no
-  discrete variable: only those settle it); between events it is left as it was.
+  discrete variable: only those settle it); between events it is left as it was (the front end
+  refuses ``pre(y)`` of a continuous ``y`` outside a when-clause, so nothing reads it there).
 
 :class:`EventSystem` is that structure for :mod:`.fmi_export`; it is built by
 :class:`.flatten.FlatTranslator`.
