@@ -37,6 +37,13 @@ usual machinery of model-exchange FMUs:
   step before).
   Between events ``pre(v) == v``: the FMU holds each ``pre(v)`` as a hidden variable, equal to
   ``v`` outside the event iteration.
+* ``pre(y)`` of a continuous-time ``y`` (allowed in a when-clause, MLS 3.7.5) is ``y``'s left limit:
+  a hidden variable too, set to ``y`` at each step of the event iteration, the first from the
+  states at the event and the discrete values before it (the MSL's ``TriggeredTrapezoid`` starts
+  its ramp from ``pre(y)``). At initialisation it is ``y``'s start value until the initial
+  equations are solved, then ``y``. It is not compared for the end of the iteration (``y`` is no
+  discrete variable: only those settle it); between events it is left as it was (the front end
+  refuses ``pre(y)`` of a continuous ``y`` outside a when-clause, so nothing reads it there).
 
 :class:`EventSystem` is that structure for :mod:`.fmi_export`; it is built by
 :class:`.flatten.FlatTranslator`.
@@ -105,6 +112,7 @@ class EventSystem:
     updates: list[tuple[ca.MX, ca.MX]] = field(default_factory=list)
     pre: dict[str, ca.MX] = field(default_factory=dict)
     reinits: list[tuple[ca.MX, ca.MX]] = field(default_factory=list)
+    pre_continuous: list[tuple[ca.MX, ca.MX, float]] = field(default_factory=list)
 
     @property
     def indicators(self) -> list[ca.MX]:
@@ -112,12 +120,14 @@ class EventSystem:
 
     def pres(self) -> list[tuple[ca.MX, ca.MX, float]]:
         """``(pre symbol, symbol of v, start)`` for every ``pre(v)`` of a discrete variable or a when
-        condition: held by the FMU, set to ``v`` at each step of the event iteration."""
+        condition, then (the last :attr:`pre_continuous`) of a continuous-time variable: held by the
+        FMU, set to ``v`` at each step of the event iteration (the first of an event: ``v`` at the
+        event, from the states and the discrete values before it, its left limit)."""
         starts = {name: start for name, _, start in self.discrete}
         syms = {name: sym for name, sym, _ in self.discrete}
         out = [(p, syms[name], starts[name]) for name, p in self.pre.items() if name in syms]
         out += [(w.pre, w.sym, 0.0) for w in self.whens]
-        return out
+        return out + list(self.pre_continuous)
 
     def internal(self) -> list[tuple[str, ca.MX, float]]:
         """The hidden discrete variables (name, symbol, start): conditions, samples, when conditions,

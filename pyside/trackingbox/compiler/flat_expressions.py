@@ -339,18 +339,31 @@ class ExpressionTranslation:
             self._pre[sv.name] = ca.MX.sym(f"pre({sv.name})")
         return self._pre[sv.name]
 
+    def pre_continuous_sym(self, sv: ScalarVar) -> ca.MX:
+        """The symbol of ``pre(y)`` for a continuous-time *y* (in a when-clause: MLS 3.7.5): its left
+        limit, held by the FMU (.events: set to y at each step of the event iteration)."""
+        if sv.name not in self._pre_continuous:
+            self._pre_continuous[sv.name] = ca.MX.sym(f"pre({sv.name})")
+        return self._pre_continuous[sv.name]
+
     def _pre_value(self, node: Any) -> Value:
         """``pre(v)``: the value of *v* before the current event-iteration step; for a continuous-time
-        variable its value at the event (its left limit)."""
+        variable its value before the event (its left limit), then before each step."""
         value = self.expr(node, None)
 
         def one(x: Value) -> Value:
             if is_number(x) or not isinstance(x, ca.MX):
                 return x
-            syms = [s for s in ca.symvar(x) if (sv := self.scalars.get(s.name())) is not None and sv.kind == "discrete"]
-            if not syms:
-                return x
-            return ca.substitute([x], syms, [self.pre_sym(self.scalars[s.name()]) for s in syms])[0]
+            olds, news = [], []
+            for s in ca.symvar(x):
+                sv = self.scalars.get(s.name())
+                if sv is not None and sv.kind == "discrete":
+                    olds.append(s)
+                    news.append(self.pre_sym(sv))
+                elif sv is not None and sv.kind == "continuous":
+                    olds.append(s)
+                    news.append(self.pre_continuous_sym(sv))
+            return ca.substitute([x], olds, news)[0] if olds else x
 
         return arr.map1(one, value)
 

@@ -116,11 +116,14 @@ class SystemAssembly:
             updates.append((sym, expr))
         ev.updates = hold_at_initialisation(updates, getattr(self, "_pre_at_start", {}), ev.initial)
         pres = [(self._pre[n], self.scalars[n].sym) for n in self._pre]
+        pres += [(p, self.scalars[n].sym) for n, p in self._pre_continuous.items()]
         if pres:  # between events (where indicators are evaluated) pre(v) is v
             for cond in ev.conditions:
                 cond.indicators = ca.substitute(cond.indicators, [a for a, _ in pres], [b for _, b in pres])
         ev.discrete = [(sv.name, sv.sym, self._start_of(sv)) for sv in discrete]
         ev.pre = dict(self._pre)
+        ev.pre_continuous = [(p, self.scalars[n].sym, self._start_of(self.scalars[n]))
+                             for n, p in self._pre_continuous.items()]
         return ev
 
     def _discrete_order(self, eqs: list[tuple[ca.MX, str]], unknowns: list[ca.MX], what: str,

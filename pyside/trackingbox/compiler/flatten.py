@@ -172,6 +172,7 @@ class FlatTranslator(ExpressionTranslation, StatementTranslation, SystemAssembly
         self._freeze = True
         self._frozen: dict[str, ca.MX] = {}
         self._pre: dict[str, ca.MX] = {}
+        self._pre_continuous: dict[str, ca.MX] = {}  # pre(y) of a continuous-time y: its left limit
         self._when_targets: set[str] = set()
         self._uses_initial = False
         self._discrete_defs: list[tuple[ca.MX, str]] = []  # when-equations, discrete outputs of algorithms

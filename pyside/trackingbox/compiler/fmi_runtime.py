@@ -338,6 +338,14 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
   int flipped[TBX_E_NC + 1];
   size_t k, j;
   for (it = 0; it < TBX_E_MAXIT; ++it) {
+    if (TBX_E_NPC > 0 && !m->up_to_date) {  /* pre(y) of a continuous y: y now (the first step: its left limit) */
+      if (evaluate(m)) {
+        snprintf(text, sizeof text, "event iteration at t = %.17g s: the model could not be evaluated", m->t);
+        tbx_log(m, fmi3Error, "event", text);
+        return fmi3Error;
+      }
+      m->up_to_date = 1;
+    }
     for (k = 0; k < TBX_E_NP; ++k) m->v[var_offset[tbx_e_pre_vr[k]]] = m->v[var_offset[tbx_e_pre_of_vr[k]]];
     m->up_to_date = 0;
     for (k = 0; k < TBX_E_NC; ++k) flipped[k] = 0;
@@ -386,7 +394,7 @@ static fmi3Status tbx_event_iteration(casadi_fmi_memory* m, int quiet, int* stat
         *states_changed = 1;
       }
     }
-    for (k = 0; k < TBX_E_NP; ++k) {
+    for (k = 0; k + TBX_E_NPC < TBX_E_NP; ++k) {  /* the discrete ones: a continuous y settles nothing */
       if (m->v[var_offset[tbx_e_pre_vr[k]]] != m->v[var_offset[tbx_e_pre_of_vr[k]]]) changed = 1;
     }
     m->up_to_date = 0;
@@ -704,7 +712,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
                                                           "the event iteration")))
         glue.append(_c_array("long", "tbx_e_reinit_vr", _vrs([x for x, _ in ev.reinits], refs, em.name, "reinit")))
         pres = ev.pres()
-        glue.append(f"#define TBX_E_NP {len(pres)}\n")
+        glue.append(f"#define TBX_E_NP {len(pres)}\n#define TBX_E_NPC {len(ev.pre_continuous)}\n")
         glue.append(_c_array("long", "tbx_e_pre_vr", _vrs([p for p, _, _ in pres], refs, em.name, "pre()")))
         glue.append(_c_array("long", "tbx_e_pre_of_vr", _vrs([v for _, v, _ in pres], refs, em.name, "pre()")))
         glue.append(_c_array("long", "tbx_e_sample_vr", _vrs([smp.sym for smp in ev.samples], refs, em.name,
