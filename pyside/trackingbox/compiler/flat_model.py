@@ -36,6 +36,17 @@ class ScalarVar:
     evaluate: bool = False  # a Real parameter with annotation(Evaluate = true) (its own or a final binding's)
 
 
+def string_attr(node) -> str | None:
+    """A variable attribute's value where it is a string literal (``unit``, ``displayUnit``), else None."""
+    if isinstance(node, str):
+        return node
+    if isinstance(node, dict):
+        lit = node.get("Literal")
+        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
+            return str(lit["value"]["String"])
+    return None
+
+
 @dataclass(frozen=True)
 class Assertion:
     """One ``assert(condition, message, level)`` of the model or of an inlined function."""

@@ -17,7 +17,7 @@ from .events import EventSystem
 from .index import STATE_SELECT, IndexError_, max_matching, reduce_index
 from .library import locate
 from .source import class_extent, read_text, strip_comments
-from .flat_model import REAL, Assertion, InitialSystem, LoopMemory, ScalarVar
+from .flat_model import REAL, Assertion, InitialSystem, LoopMemory, ScalarVar, string_attr
 from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
 from .initial_discrete import InitialDiscreteError, solve_initial_discrete
@@ -34,14 +34,7 @@ def _owner(name: str) -> str:
 
 def _unit(sv: ScalarVar) -> str | None:
     """The ``unit`` of *sv*, where it is a string literal."""
-    node = sv.attrs.get("unit") if sv.attrs else None
-    if isinstance(node, str):
-        return node
-    if isinstance(node, dict):
-        lit = node.get("Literal")
-        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
-            return str(lit["value"]["String"])
-    return None
+    return string_attr(sv.attrs.get("unit")) if sv.attrs else None
 
 
 def substituted(exprs: list[ca.MX], assignments: list[tuple[ca.MX, ca.MX]]) -> list[ca.MX]:

@@ -62,7 +62,7 @@ from .. import config
 from ..errors import CompileError
 from .c_prune import drop_adjoint
 from .events import EventSystem
-from .flat_model import ExplicitModel, InitialSystem, ScalarVar
+from .flat_model import ExplicitModel, InitialSystem, ScalarVar, string_attr
 from .fmi_runtime import add_build_source, add_runtime, fmu_asserts, value_references
 
 log = logging.getLogger(__name__)
@@ -95,7 +95,7 @@ def _opts(sv: ScalarVar, translate_attr, extra: dict | None = None) -> dict:
             val = translate_attr(sv, node, key)
             if val is not None:
                 opts[key] = val
-    unit = _string_attr(sv.attrs.get("unit"))
+    unit = string_attr(sv.attrs.get("unit"))
     if unit:
         opts["unit"] = unit
     if sv.description:
@@ -103,18 +103,6 @@ def _opts(sv: ScalarVar, translate_attr, extra: dict | None = None) -> dict:
     if extra:
         opts.update(extra)
     return opts
-
-
-def _string_attr(node) -> str | None:
-    if node is None:
-        return None
-    if isinstance(node, str):
-        return node
-    if isinstance(node, dict):
-        lit = node.get("Literal")
-        if lit and isinstance(lit.get("value"), dict) and "String" in lit["value"]:
-            return str(lit["value"]["String"])
-    return None
 
 
 def build_dae(em: ExplicitModel, translator) -> tuple[ca.DaeBuilder, list[str], dict[str, str]]:
