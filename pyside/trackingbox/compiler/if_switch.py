@@ -35,7 +35,7 @@ from ..errors import CompileError, UnsupportedConstructError
 from . import arrays as arr
 from .flat_builtins import is_number
 from .flat_model import Value, merged_asserts
-from .while_calls import DERIVATIVE_OPTIONS, _flat, _loops, _walk_loops
+from .while_calls import DERIVATIVE_OPTIONS, _flat, _loops, _walk_loops, unflatten
 from .while_fold import _NAMES, _restored, event_state
 
 log = logging.getLogger(__name__)
@@ -166,16 +166,7 @@ def switched_if(tr: Any, chain: list[tuple[Any, list[Any]]], env: dict[str, Valu
         if k in kept:
             env[k] = kept[k][0]
             continue
-        shape = values[k][0][0]
-        if not shape:
-            env[k] = res[at]
-            at += 1
-            continue
-        v = arr.new(shape)
-        for idx in np.ndindex(*shape):
-            v[idx] = res[at]
-            at += 1
-        env[k] = v
+        env[k], at = unflatten(res, at, values[k][0][0])
     for branch_asserts in asserts:
         for a in branch_asserts:
             tr._record_assert(res[at], a.message, a.level, a.origin)

@@ -149,6 +149,18 @@ def _constant(elems: list[Any]) -> bool:
     return all(isinstance(e, (bool, int, np.bool_, np.integer)) for e in elems)
 
 
+def unflatten(res: ca.MX, at: int, shape: tuple[int, ...]) -> tuple[Value, int]:
+    """The value of *shape* (a scalar where it is empty) read from the flat vector *res* from element *at* on,
+    in the order ``np.ndindex`` gives; and where the next value starts."""
+    if not shape:
+        return res[at], at + 1
+    v = arr.new(shape)
+    for idx in np.ndindex(*shape):
+        v[idx] = res[at]
+        at += 1
+    return v, at
+
+
 def _trace(tr: Any, fname: str, fn: dict[str, Any], args: list[Value], key: tuple) -> Any:
     """(CasADi function, output layout, asserts, parameter symbols) of *fname* for the arguments'
     pattern *key*; None where it cannot be one."""
@@ -268,14 +280,7 @@ def called(tr: Any, fname: str, fn: dict[str, Any], args: list[Value]) -> list[V
     outs: list[Value] = []
     at = 0
     for shape in layout:
-        if not shape:
-            outs.append(res[at])
-            at += 1
-            continue
-        v = arr.new(shape)
-        for idx in np.ndindex(*shape):
-            v[idx] = res[at]
-            at += 1
+        v, at = unflatten(res, at, shape)
         outs.append(v)
     for a in asserts:
         tr._record_assert(res[at], a.message, a.level, a.origin)
