@@ -29,7 +29,7 @@ def main() -> int:
     ap.add_argument("--reference", type=Path, default=None, help="reference results root (default: ../shared/msl-reference)")
     ap.add_argument("--limit", type=float, default=float("inf"), help="stop after this many CPU seconds")
     args = ap.parse_args()
-    if not args.fmu.is_file():
+    if not args.fmu.exists():
         print(f"error: no FMU at {args.fmu}", file=sys.stderr)
         return 2
     import fmpy

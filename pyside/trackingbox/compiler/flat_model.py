@@ -106,6 +106,9 @@ class LoopMemory:
     start: float
     tear: str
     loop: str
+    indicator: str = ""
+    """The FMU variable of the loop's event indicator (.loop_solve.branch_solution): the runtime keeps
+    the solution only where it is not negative."""
 
 
 @dataclass

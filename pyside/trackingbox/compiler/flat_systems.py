@@ -13,7 +13,7 @@ import casadi as ca
 
 from ..errors import CompileError
 from .causalize import StructuralError, blt
-from .events import EventSystem
+from .events import Condition, EventSystem
 from .index import STATE_SELECT, IndexError_, max_matching, reduce_index
 from .library import locate
 from .source import class_extent, read_text, strip_comments
@@ -22,7 +22,7 @@ from .flat_builtins import solve_scalar_linear
 from .flat_text import origin_text
 from .initial_discrete import InitialDiscreteError, solve_initial_discrete
 from .initial_pre import hold_at_initialisation, pre_initial_equations
-from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, warm_solution
+from .loop_solve import NEWTON_TOLERANCE, _or_nearest_solution, branch_solution, switches, warm_solution
 
 log = logging.getLogger(__name__)
 
@@ -721,13 +721,25 @@ class SystemAssembly:
         start = ca.vertcat(*guess) if guess and isinstance(guess[0], ca.MX) else ca.DM(guess)
         values = ca.vertcat(*other_syms) if other_syms else ca.DM.zeros(0, 1)
         if warm:
+            # the loop's relation "on its branch", held between events, and its indicator (.loop_solve.
+            # branch_solution): an event where the branch ends; its value at an event is the indicator's
+            # (the FMU variable _tbx_z<i>, which fmi_export names in the order of the indicators)
+            # (only a loop with a relation left in it: one of smooth equations keeps Newton from its memory)
+            ev, branches = self.events, switches(g, z)
+            held = ca.MX.sym(f"_tbx_c{len(ev.conditions) + 1}")
+            z_name = f"_tbx_z{len(ev.indicators) + 1}" if branches else ""
             kept = self.__dict__.setdefault("_loop_memory", [])
-            memory = [LoopMemory(ca.MX.sym(f"_tbx_m{len(kept) + i + 1}"), float(guess[i]), u.name(), str(k))
+            memory = [LoopMemory(ca.MX.sym(f"_tbx_m{len(kept) + i + 1}"), float(guess[i]), u.name(), str(k), z_name)
                       for i, u in enumerate(unk)]
             kept.extend(memory)
             lower, upper = zip(*(self._bounds(u.name()) for u in unk))
-            sol = warm_solution(f"loop{k}", z, p, g, ca.vertcat(*(m.sym for m in memory)), start, values,
-                                list(lower), list(upper))
+            mem = ca.vertcat(*(m.sym for m in memory))
+            if not branches:
+                sol = warm_solution(f"loop{k}", z, p, g, mem, start, values, list(lower), list(upper))
+                return [sol[i] for i in range(len(unk))]
+            sol, indicator = branch_solution(f"loop{k}", z, p, g, mem, start, values, list(lower), list(upper), held)
+            ev.conditions.append(Condition(held, "rel", ca.MX.sym(z_name) > 0, [indicator],
+                                           f"algebraic loop {k} on its branch"))
             return [sol[i] for i in range(len(unk))]
         sol = rf(start, values)
         sol = _or_nearest_solution(f"loop{k}", z, p, g, sol, start, values)

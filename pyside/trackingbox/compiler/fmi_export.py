@@ -332,6 +332,19 @@ def export_fmu(
 _SET_TIME = "  // Initialize time\n  m->t = time;\n"
 _SET_TIME_PATCHED = "  // Initialize time (trackingbox: a new time invalidates the cached evaluation)\n" \
                     "  if (m->t != time) m->up_to_date = 0;\n  m->t = time;\n"
+# fmi3SetFloat64 (and fmi3SetContinuousStates, which calls it): only a value that differs, bit for bit,
+# from the one held invalidates the cached evaluation. fmpy's CVODE sets the states twice at each output
+# point to the same values (its root function's call at the output point, then the step's end), and each
+# set made the next read evaluate the model again: two evaluations per output point where one gives all
+_SET_FLOAT64 = ("  // Not evaluated\n  m->up_to_date = 0;\n  // Position in values vector\n  val_ind = 0;\n",
+                "    for (j = 0; j < var_sz; ++j) m->v[var_off + j] = values[val_ind++];\n")
+_SET_FLOAT64_PATCHED = (
+    "  // Position in values vector\n  val_ind = 0;\n",
+    "    for (j = 0; j < var_sz; ++j, ++val_ind) {\n"
+    "      // trackingbox: a value that changes (bit for bit) invalidates the cached evaluation\n"
+    "      if (memcmp(&m->v[var_off + j], &values[val_ind], sizeof(fmi3Float64)) != 0) m->up_to_date = 0;\n"
+    "      m->v[var_off + j] = values[val_ind];\n"
+    "    }\n")
 
 
 def _drop_adjoint(source: Path, ident: str) -> bool:
@@ -348,13 +361,19 @@ def _drop_adjoint(source: Path, ident: str) -> bool:
 
 
 def _patch_set_time(wrapper: Path) -> None:
+    """fmi3SetTime and fmi3SetFloat64 of CasADi's wrapper invalidate the cached evaluation only where
+    the time or a value changes (see _SET_TIME_PATCHED, _SET_FLOAT64_PATCHED)."""
     text = wrapper.read_text()
-    if text.count(_SET_TIME) != 1:
-        raise CompileError(
-            f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): fmi3SetTime not found "
-            "as expected; the embedded path is pinned to casadi 3.8.2"
-        )
-    wrapper.write_text(text.replace(_SET_TIME, _SET_TIME_PATCHED))
+    patches = [(_SET_TIME, _SET_TIME_PATCHED, "fmi3SetTime")]
+    patches += [(a, b, "fmi3SetFloat64") for a, b in zip(_SET_FLOAT64, _SET_FLOAT64_PATCHED)]
+    for old, new, where in patches:
+        if text.count(old) != 1:
+            raise CompileError(
+                f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): {where} not found "
+                "as expected; the embedded path is pinned to casadi 3.8.2"
+            )
+        text = text.replace(old, new)
+    wrapper.write_text("#include <string.h>\n" + text)
 
 
 def declare_fixed(xml: str, names: set[str]) -> str:
@@ -389,9 +408,10 @@ def _tidy_model_description(
     me = root.find("ModelExchange")
     if not adjoint and me is not None:
         me.set("providesAdjointDerivatives", "false")  # left out of the C (.c_prune)
-    if asserts and me is not None:
-        # the asserts are checked in fmi3CompletedIntegratorStep: an importer calls it only when asked
-        # (FMI 3.0 needsCompletedIntegratorStep, default false; fmpy follows it)
+    if (asserts or memory) and me is not None:
+        # the asserts are checked, and the loops' last solutions kept (.fmi_runtime), in
+        # fmi3CompletedIntegratorStep: an importer calls it only when asked (FMI 3.0
+        # needsCompletedIntegratorStep, default false; fmpy follows it)
         me.set("needsCompletedIntegratorStep", "true")
     if description:
         root.set("description", description)

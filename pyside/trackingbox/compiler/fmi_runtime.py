@@ -237,6 +237,9 @@ static int tbx_event_step(casadi_fmi_memory* m, int quiet, int given, casadi_rea
   if (!m->up_to_date) {
     if (evaluate(m)) return 1;
     m->up_to_date = 1;
+#ifdef TBX_W_N
+    tbx_keep_loops(m);  /* the loops' roots of this pass are the next pass's guesses */
+#endif
   }
   for (i = 0; i < TBX_E_NW; ++i) win[i] = tbx_value(m, tbx_e_vr[i]);
   arg[0] = win;
@@ -500,10 +503,16 @@ _UPDATE_DISCRETE = """FMI3_Export fmi3Status fmi3UpdateDiscreteStates(fmi3Instan
 
 _LOOPS = """
 /* The model's algebraic loops start Newton from their last converged solution (trackingbox.compiler.
-   loop_solve.warm_solution, the variables _tbx_m<j>): after each evaluation of the model, a loop whose
-   tearing variables all came out finite keeps them; leaving initialisation mode starts every loop
-   from its start values again (as fmi3Reset does), so that the initialisation does not depend on
-   what the importer evaluated before it. */
+   loop_solve.warm_solution, the variables _tbx_m<j>), kept at the points the importer accepts: the end of
+   initialisation, each completed integrator step, the end of an event iteration and the return to
+   continuous time (tbx_commit_loops), and after each evaluation of the event iteration; a loop whose
+   tearing variables all came out finite there, and whose indicator is not negative (a root on its
+   branch, not the point past a fold where the branch ended: loop_solve.branch_solution), keeps them. Not after every evaluation: the solver's trial points (a step it rejects, a difference quotient)
+   would move the memory, so that the derivatives at a state depended on the points tried before it
+   (MSL Electrical.Analog.Examples.OpAmps.Multivibrator: a trial step past the Schmitt trigger's
+   threshold flipped the op-amp early, and CVODE's error test then failed). Leaving initialisation mode
+   starts every loop from its start values again (as fmi3Reset does), so that the initialisation does
+   not depend on what the importer evaluated before it. */
 static void tbx_keep_loops(casadi_fmi_memory* m) {
   size_t j, k, first = 0;
   int finite;
@@ -511,12 +520,20 @@ static void tbx_keep_loops(casadi_fmi_memory* m) {
     finite = 1;
     for (k = first; k < TBX_W_N && tbx_w_loop[k] == tbx_w_loop[first]; ++k) {
       if (!isfinite(m->v[var_offset[tbx_w_tear_vr[k]]])) finite = 0;
+      if (tbx_w_ind_vr[k] >= 0 && !(m->v[var_offset[tbx_w_ind_vr[k]]] > 0)) finite = 0;
     }
     if (finite) {
       for (j = first; j < k; ++j) m->v[var_offset[tbx_w_vr[j]]] = m->v[var_offset[tbx_w_tear_vr[j]]];
     }
     first = k;
   }
+}
+static void tbx_commit_loops(casadi_fmi_memory* m) {
+  if (!m->up_to_date) {
+    if (evaluate(m)) return;
+    m->up_to_date = 1;
+  }
+  tbx_keep_loops(m);
 }
 static void tbx_restart_loops(casadi_fmi_memory* m) {
   size_t j;
@@ -525,26 +542,30 @@ static void tbx_restart_loops(casadi_fmi_memory* m) {
 }
 """
 
-_EVALUATE_END = "  for (i = 0; i < N_ZERO; ++i) m->v[zero_vr[i]] = m->zero[i];\n  return flag;\n}\n"
+def _update_discrete(loops: bool) -> str:
+    """fmi3UpdateDiscreteStates; with the model's loops, which keep their solution after the event iteration."""
+    if not loops:
+        return _UPDATE_DISCRETE
+    return _UPDATE_DISCRETE.replace("  m->continuous_states_changed = 0;\n  return status;\n",
+                                    "  m->continuous_states_changed = 0;\n  if (status == fmi3OK) tbx_commit_loops(m);\n"
+                                    "  return status;\n")
 
 
-def _loop_runtime(em: ExplicitModel, refs: dict[str, int]) -> tuple[str, list[tuple[str, str]]]:
-    """(the C of the loops' memory, the wrapper's patches that call it after each evaluation), for the
-    loops whose tearing variables are all FMU variables (the others keep starting from their start
-    values); ("", []) where there are none."""
+def _loop_runtime(em: ExplicitModel, refs: dict[str, int]) -> str:
+    """The C of the loops' memory (tbx_commit_loops, tbx_restart_loops: the callers are add_runtime's),
+    for the loops whose tearing variables are all FMU variables (the others keep starting from their
+    start values); "" where there are none."""
     missing = {mem.loop for mem in em.loop_memory if mem.tear not in refs or mem.sym.name() not in refs}
     kept = [mem for mem in em.loop_memory if mem.loop not in missing]
     if not kept:
-        return "", []
+        return ""
     loops = {loop: i for i, loop in enumerate(dict.fromkeys(mem.loop for mem in kept))}
     glue = (f"#define TBX_W_N {len(kept)}\n"
             + _c_array("long", "tbx_w_vr", [str(refs[mem.sym.name()]) for mem in kept])
             + _c_array("long", "tbx_w_tear_vr", [str(refs[mem.tear]) for mem in kept])
+            + _c_array("long", "tbx_w_ind_vr", [str(refs.get(mem.indicator, -1)) for mem in kept])
             + _c_array("int", "tbx_w_loop", [str(loops[mem.loop]) for mem in kept]) + _LOOPS)
-    patches = [("int evaluate(casadi_fmi_memory* m) {\n",
-                "static void tbx_keep_loops(casadi_fmi_memory* m);\nint evaluate(casadi_fmi_memory* m) {\n"),
-               (_EVALUATE_END, _EVALUATE_END.replace("  return flag;", "  if (!flag) tbx_keep_loops(m);\n  return flag;"))]
-    return glue, patches
+    return glue
 
 
 _EVENT_INDICATORS = """FMI3_Export fmi3Status fmi3GetEventIndicators(fmi3Instance instance,
@@ -671,7 +692,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         glue.append(_CALL % {"fn": "tbx_init", "P": "TBX_I"})
         glue.append(_INIT)
 
-    loop_glue, loop_patches = _loop_runtime(em, refs)
+    loop_glue = _loop_runtime(em, refs)
     glue.append(loop_glue)
 
     n_z = len(ev.indicators) if ev is not None else 0
@@ -720,14 +741,16 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         exit_body.append("  if (tbx_initialize_events(m) != fmi3OK) return fmi3Error;\n")
     elif em.initial is not None:
         exit_body.append("  if (tbx_initialize(m) != fmi3OK) return fmi3Error;\n")
+    commit = "  tbx_commit_loops((casadi_fmi_memory*)instance);\n" if loop_glue else ""
+    exit_body.append(commit)
     exit_body.append("  return tbx_check_asserts(m);\n" if em.asserts else "  (void)m;\n  return fmi3OK;\n")
     check = "  return tbx_check_asserts((casadi_fmi_memory*)instance);\n" if em.asserts else \
             "  (void)instance;\n  return fmi3OK;\n"
-    enter_ct = check
+    enter_ct = commit + check
     if ev is not None and ev.samples:  # a sample() instant is over: its conditions fall (no when fires)
         enter_ct = ("  casadi_fmi_memory* m = (casadi_fmi_memory*)instance;\n  int changed = 0;\n"
                     "  if (tbx_samples_on(m) && tbx_event_iteration(m, 1, &changed) != fmi3OK) return fmi3Error;\n"
-                    + ("  return tbx_check_asserts(m);\n" if em.asserts else "  return fmi3OK;\n"))
+                    + commit + ("  return tbx_check_asserts(m);\n" if em.asserts else "  return fmi3OK;\n"))
 
     text = wrapper.read_text()
     patches = [
@@ -754,9 +777,8 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
          "FMI3_Export fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {\n" + enter_ct + "}\n"),
         ("  // We should not need this as there are no internal iterations\n  return fmi3OK;\n",
          "  (void)noSetFMUStatePriorToCurrentPoint;\n  if (enterEventMode) *enterEventMode = fmi3False;\n"
-         "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + check),
+         "  if (terminateSimulation) *terminateSimulation = fmi3False;\n" + commit + check),
     ]
-    patches += loop_patches
     if em.asserts:
         patches.append((
             "  return fmi3GetFloat64(instance, xdot_vr, N_X, derivatives, N_X);\n",
@@ -766,7 +788,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         patches.append(("  if (nEventIndicators) *nEventIndicators = N_ZERO;\n",
                         "  if (nEventIndicators) *nEventIndicators = TBX_NZ;\n"))
         for func, replacement in (("fmi3GetEventIndicators", _EVENT_INDICATORS),
-                                  ("fmi3UpdateDiscreteStates", _UPDATE_DISCRETE)):
+                                  ("fmi3UpdateDiscreteStates", _update_discrete(bool(commit)))):
             found = re.search(rf"FMI3_Export fmi3Status {func}\(.*?\n}}\n", text, re.S)
             if found is None:
                 raise CompileError(f"unexpected CasADi FMU wrapper {wrapper.name} (casadi {ca.__version__}): {func} "

@@ -113,20 +113,44 @@ def _or_nearest_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, sol: ca.MX, st
     return ca.if_else(accepted(sol, start), sol, fallback(start), True)
 
 
+def _weights(g: ca.MX, z: ca.MX, z0: ca.MX) -> ca.MX:
+    """The norm of the gradient of each equation of the loop's residual g(z, p) at *z0* (1 where that is
+    zero or not finite): g divided by them is a distance in z whatever the equations' units."""
+    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))
+    return ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)
+
+
+def _nearest(name: str, z: ca.MX, p: ca.MX, z0: ca.MX, scaled: ca.MX) -> tuple[Any, ca.Function, ca.Function]:
+    """The nearest solution of the loop whose residual, scaled as by :func:`_weights` at *z0*, is *scaled*
+    (see :func:`_or_nearest_solution`): (its rootfinder, in (z, y) with parameters (p, z0); the scaled
+    residual's Jacobian (z, p, z0); (guess, p, z0) -> the root nearest *z0* by that rootfinder from
+    *guess* with the multipliers that fit it, NaN from a guess that is not finite). The guess's
+    derivatives are stopped (it only tells Newton where to start): the root's are the nearest solution's."""
+    n = z.numel()
+    y, first = ca.MX.sym(f"{name}_y", n), ca.MX.sym(f"{name}_first", n)
+    jac = ca.jacobian(scaled, z)
+    kkt = ca.vertcat(z - z0 + ca.mtimes(jac.T, y), scaled - NEAREST_REGULARISATION * y)
+    nearest = ca.rootfinder(f"{name}_nearest", "fast_newton", {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
+                            {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
+    jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [jac])
+    jac1 = jacobian(first, p, z0)
+    y1 = ca.solve(ca.mtimes(jac1, jac1.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac1, z0 - first))
+    # (from a guess that is not finite, e.g. the end of damped steps from where the residual is NaN, its
+    # Newton cannot start: skipped, NaN, as it would end)
+    root = ca.if_else(ca.sumsqr(first) + ca.sumsqr(y1) < ca.inf,
+                      nearest(ca.stop_diff(ca.vertcat(first, y1), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
+    return nearest, jacobian, ca.Function(f"{name}_nearest_root", [first, p, z0], [root])
+
+
 def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) -> tuple[Any, Any]:
     """(accepted(sol, guess): whether Newton's iterate *sol* from *guess* is a root (see
     :func:`_or_nearest_solution`), fallback(guess): the loop's solution by the fallbacks from *guess*,
     NaN where none solves). The loop's functions are made once, for both and for every guess."""
     n = z.numel()
-    y = ca.MX.sym(f"{name}_y", n)
     z0 = ca.MX.sym(f"{name}_z0", n)
-    rows = ca.sqrt(ca.sum2(ca.substitute(ca.jacobian(g, z), z, z0) ** 2))  # each equation's gradient at z0
-    weight = ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)  # in (p, z0); 1 where 0 or not finite
+    weight = _weights(g, z, z0)  # in (p, z0)
     scaled = g / weight
-    kkt = ca.vertcat(z - z0 + ca.mtimes(ca.jacobian(scaled, z).T, y), scaled - NEAREST_REGULARISATION * y)
-    nearest = ca.rootfinder(f"{name}_nearest", "fast_newton",
-                            {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
-                            {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
+    nearest, jacobian, nearest_root = _nearest(name, z, p, z0, scaled)
     residual = ca.Function(f"{name}_residual", [z, p], [g])
     distance = ca.Function(f"{name}_distance", [z, p, z0], [scaled])
 
@@ -140,25 +164,16 @@ def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) 
                                 <= (LOOP_TOLERANCE * (1 + ca.norm_2(sol))) ** 2)
         return ca.logic_and(ca.sumsqr(r_sol) + ca.sumsqr(sol) < ca.inf, converged)
 
-    # the damped iteration only finds where to start the nearest solution's Newton again (with the
-    # multipliers that fit it), a guess whose derivatives are stopped: the solution's derivatives are
-    # the nearest solution's, and the model's derivatives (exported with it) do not differentiate
-    # through the iteration (which tripled the generated C of TanksWithOverflow)
-    jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [ca.jacobian(scaled, z)])
-    # the damped steps take the weights as numbers (computed once, from the guess): the Jacobian of
+    # the damped iteration only finds where to start the nearest solution's Newton again (_nearest), a
+    # guess whose derivatives are stopped: the model's derivatives (exported with it) do not differentiate
+    # through the iteration (which tripled the generated C of TanksWithOverflow). The damped steps take the weights as numbers (computed once, from the guess): the Jacobian of
     # `distance` in z is also differentiated in z0 (zero directions, evaluated all the same), which are
     # second derivatives of the loop's functions, each step (MSL MomentumBalanceFittings: 45% of its time)
     w = ca.MX.sym(f"{name}_w", n)
     divided = ca.Function(f"{name}_divided", [z, p, w], [g / w])
-    first = ca.MX.sym(f"{name}_first", n)
+    first = ca.MX.sym(f"{name}_start", n)
     end = _damped_newton(name, divided, n, first, p, ca.Function(f"{name}_weights", [p, z0], [weight])(p, z0))
-    jac2 = jacobian(end, p, z0)
-    y2 = ca.solve(ca.mtimes(jac2, jac2.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac2, z0 - end))
-    # (from an end that is not finite, e.g. a residual that is NaN at the guess, its Newton cannot start:
-    # skipped, NaN, as it would end)
-    end = ca.if_else(ca.sumsqr(end) + ca.sumsqr(y2) < ca.inf,
-                     nearest(ca.stop_diff(ca.vertcat(end, y2), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
-    damped = ca.Function(f"{name}_damped_solution", [first, p, z0], [end])
+    damped = ca.Function(f"{name}_damped_solution", [first, p, z0], [nearest_root(end, p, z0)])
 
     def fallback(start: ca.MX | ca.DM) -> ca.MX:
         z1 = nearest(ca.vertcat(start, ca.DM.zeros(n, 1)), ca.vertcat(values, start))[:n]
@@ -231,3 +246,175 @@ def warm_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start:
         warm_root, warm, ca.if_else(cold_root, cold, ca.DM.nan(n, 1), True), True), True)
     after = ca.if_else(ca.logic_and(cold_root, inside(cold)), cold, last, True)
     return ca.if_else(ca.logic_and(warm_root, inside(warm)), warm, after, True)
+
+
+BRANCH_STEP = 1e-3
+"""Newton from the end of the damped steps (see branch_solution) stays on the branch where it moves
+each unknown z by at most BRANCH_STEP * (1 + |z|); further it has crossed to another root."""
+SETTLED = 1e-8
+"""A point is a root for the branch logic (see branch_solution) where its residual is at most
+NEWTON_TOLERANCE, or where two more Newton steps from it each move every unknown z by at most
+SETTLED * (1 + |z|): near a fold, a point past the end of the branch has a residual below any
+tolerance relative to the unknowns, and Newton cycles there instead of settling (at a corner of a
+limiter, the first step on the steep side is tiny, the second, on the flat side, is not)."""
+SEARCH_STEPS = 40
+"""Steps of the search for another root where the branch has ended (see _other_root), each twice the last."""
+
+
+def _other_root(name: str, residual: ca.Function, newton: Any, settled: Any, n: int, start: ca.MX,
+                values: ca.MX) -> ca.MX:
+    """A root of the loop reached from *start* (where no Newton settles: past the end of a branch) along
+    the curve on which the residual keeps its direction, g(z) = (1 - t) g(start) (Branin's global Newton
+    method: dz/ds = -sign(det J) J^-1 g, which turns at the folds where the branch ends and goes on to the
+    next branch), both ways, by steps of 1e-4, 2e-4, ... times (1 + |z|) in the largest unknown, with
+    Newton tried from each point; the root reached in fewer steps (NaN where neither way reaches one)."""
+    z, q = ca.MX.sym(f"{name}_sz", n), ca.MX.sym(f"{name}_sq", values.numel() + 1)
+    p, way = q[:values.numel()], q[values.numel()]
+    jac = ca.jacobian(residual(z, p), z)
+    d = -ca.sign(ca.det(jac)) * ca.solve(jac, residual(z, p))
+    d = d / (ca.mmax(ca.fabs(d) / (1 + ca.fabs(z))) + 1e-300)
+    state = ca.MX.sym(f"{name}_ss", 2 * n + 3)  # z, root, step length, found, steps taken
+    at, h, found, steps = state[:n], state[2 * n], state[2 * n + 1], state[2 * n + 2]
+    move = ca.Function(f"{name}_search_dir", [z, q], [d])
+    nxt = at + way * h * (1 + ca.fabs(at)) * move(at, q)
+    root = newton(nxt, p)
+    took = ca.vertcat(nxt, root, 2 * h, settled(root, p), steps + 1)
+    step = ca.Function(f"{name}_search_step", [state, q], [ca.if_else(found > 0.5, state, took, True)])
+    run = step.fold(SEARCH_STEPS)
+    ends = [run(ca.vertcat(start, start, 1e-4, 0, 0), ca.vertcat(values, w)) for w in (1, -1)]
+    first = ca.logic_and(ends[0][2 * n + 1] > 0.5, ca.logic_or(ends[1][2 * n + 1] < 0.5,
+                                                                ends[0][2 * n + 2] <= ends[1][2 * n + 2]))
+    return ca.if_else(first, ends[0][n:2 * n], ca.if_else(ends[1][2 * n + 1] > 0.5, ends[1][n:2 * n],
+                                                           ca.DM.nan(n, 1), True), True)
+
+
+_SWITCHING = {ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_FMIN, ca.OP_FMAX}
+
+
+def switches(g: ca.MX, z: ca.MX) -> bool:
+    """Whether the loop's residual g(z) has a relation (or min/max) left in it, as a piecewise (limiting)
+    characteristic written with noEvent has: its branches can end at a fold (:func:`branch_solution`).
+    The relations outside noEvent are held between events (.events): a loop of those has none left."""
+    fn = ca.Function("switches", [z], [g], {"allow_free": True})
+    return any(fn.instruction_id(k) in _SWITCHING for k in range(fn.n_instructions()))
+
+
+def _pieces(name: str, g: ca.MX, z: ca.MX, p: ca.MX) -> ca.Function:
+    """(z, p) -> the outcome (0 or 1) of each relation left in the loop's residual g(z, p) (for a min or
+    max, whether its first argument is the smaller): the piece of a piecewise characteristic that z is on."""
+    fn = ca.Function(f"{name}_relations", [z, p], [g])
+    out = []
+    for k in range(fn.n_instructions()):
+        op = fn.instruction_id(k)
+        if op in (ca.OP_FMIN, ca.OP_FMAX):
+            node = fn.instruction_MX(k)
+            out.append(node.dep(0) <= node.dep(1))
+        elif op in _SWITCHING:
+            out.append(fn.instruction_MX(k))
+    return ca.Function(f"{name}_pieces", [z, p], [ca.vertcat(*out) if out else ca.DM.zeros(0, 1)])
+
+
+def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, start: ca.DM, values: ca.MX | ca.DM,
+                    lower: list[float], upper: list[float], held: ca.MX) -> tuple[ca.MX, ca.MX]:
+    """(the solution of the model's loop g(z, p) = 0, its event indicator): the loop follows the root it
+    is on (its branch) between events, and changes to another root only at an event.
+
+    Where *held* (the loop's relation "on its branch", held between events: .events) is true, the
+    solution continues the branch of the last solution *memory*: damped Gauss-Newton steps from it
+    (the residual's norm falls at each step, so that they do not cross to a far root as Newton's full
+    steps do; :func:`_damped_newton`), then Newton from where they end, which must settle within
+    BRANCH_STEP of it. Past a fold of the loop's characteristic, where the branch ends (MSL
+    ``Electrical.Analog.Examples.OpAmps.Multivibrator``: the op-amp's output held at one supply by the
+    positive feedback until the capacitor's voltage crosses the trigger's threshold, then only the other
+    supply is a root), the damped steps end at the residual's smallest norm near it, which moves on
+    continuously: the integrator's steps neither jump nor chatter at the fold (a jump there without an
+    event is a switch that an implicit integrator's corrector cannot converge across: it undoes itself).
+    Where *held* is false (at an event, and at initialisation) the solution is :func:`warm_solution`'s,
+    or where that does not settle, :func:`_other_root`'s from the memory.
+
+    The indicator is LOOP_TOLERANCE * (1 + |z|) where the solution is a settled root inside the declared
+    bounds, minus that where not: it changes sign where the branch ends, the integrator stops there, and
+    the event iteration takes the loop's root anew and then holds the relation true again. The FMU keeps
+    a loop's solution only where its indicator is positive (:mod:`.fmi_runtime`), never a point past the
+    end of a branch."""
+    n = z.numel()
+    memory = ca.stop_diff(memory, 1)
+    z0 = ca.MX.sym(f"{name}_z0", n)
+    # the damped steps divide the equations by their weights at the memory, taken as numbers (see _loop_tests)
+    wt = ca.MX.sym(f"{name}_bwt", n)
+    divided = ca.Function(f"{name}_branch_divided", [z, p, wt], [g / wt])
+    weights = ca.Function(f"{name}_branch_weights", [p, z0], [_weights(g, z, z0)])(values, memory)
+    residual = ca.Function(f"{name}_branch_residual", [z, p], [g])
+    jac = ca.jacobian(g, z)
+    jjt = ca.mtimes(jac, jac.T)  # the step of minimum norm: defined whatever the rank of J
+    mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
+    exact = ca.solve(jac, g)  # Newton's step; where J is singular (NaN), the step of minimum norm
+    step = ca.Function(f"{name}_branch_newton_step", [z, p], [ca.if_else(
+        ca.sumsqr(exact) < ca.inf, exact, ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g)), True)])
+    x, scale = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n)
+    scaled = ca.rootfinder(f"{name}_branch_newton", "fast_newton",
+                           {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
+                           {"abstol": 0, "abstolStep": WARM_STEP, "max_iter": 100, "error_on_fail": False})
+    lo = ca.DM([b - BOUND_TOLERANCE * (1 + abs(b)) for b in lower])
+    hi = ca.DM([b + BOUND_TOLERANCE * (1 + abs(b)) for b in upper])
+
+    def newton(guess: ca.MX, values_: ca.MX) -> ca.MX:
+        s = 1 + ca.fabs(guess)
+        return s * scaled(guess / s, ca.vertcat(values_, s))
+
+    w = ca.MX.sym(f"{name}_bw", n)
+
+    def steps_settle(at: ca.MX) -> ca.MX:  # two Newton steps from *at*, both within SETTLED
+        dz = step(at, p)
+        dz2 = step(at - dz, p)
+        move = ca.fmax(ca.mmax(ca.fabs(dz) / (1 + ca.fabs(at))), ca.mmax(ca.fabs(dz2) / (1 + ca.fabs(at))))
+        return ca.logic_and(move <= SETTLED, ca.sumsqr(dz) + ca.sumsqr(dz2) < ca.inf)
+
+    zero = ca.mmax(ca.fabs(residual(w, p))) <= NEWTON_TOLERANCE  # (only where not: the steps' Jacobians)
+    inside = ca.logic_and(ca.mmin(w - lo) >= 0, ca.mmin(hi - w) >= 0)
+    settles = ca.Function(f"{name}_branch_settled", [w, p], [ca.logic_and(ca.logic_and(
+        ca.if_else(zero, 1, steps_settle(w), True), inside), ca.sumsqr(w) < ca.inf)])  # (mmax, mmin pass over NaN)
+
+    def settled(sol: ca.MX, values_: ca.MX) -> ca.MX:
+        return settles(sol, values_)
+
+    # first Newton from the memory, taken where it settles within BRANCH_STEP of it with every relation of
+    # the residual as at the memory (the same piece of the characteristic: no fold crossed on the way);
+    # else the damped steps. Most evaluations between events are of that kind (MSL
+    # ``Electrical.Analog.Examples.SimpleTriacCircuit`` at its tolerance 1e-12: the damped steps and the
+    # nearest root at every evaluation made its simulation 20 times slower)
+    pieces = _pieces(f"{name}_branch", g, z, p)
+    fast = newton(memory, values)
+    quick = ca.logic_and(settled(fast, values), ca.mmax(ca.fabs(pieces(fast, values) - pieces(memory, values))) == 0)
+    end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
+    # the end polished to the root nearest the memory (Newton on the nearest solution's optimality
+    # conditions, from the end), where that settles near the end; Newton from the end (or the end, where its
+    # residual is below NEWTON_TOLERANCE) where not. The end itself is a root only to the steps'
+    # tolerance, and where they stop varies with the inputs, and so does where Newton's own steps from it
+    # end along a direction that the residual hardly sees: the loop's solution moved at random from one
+    # evaluation to the next (MSL ``Rotational.Examples.LossyGearDemo2``'s stuck gear, whose torque split
+    # is nearly undetermined: a friction element's indicator changed sign at random and the event
+    # iteration chattered); the root nearest the memory is one.
+    nearest = _nearest(f"{name}_branch", z, p, z0, g / _weights(g, z, z0))[2](end, values, memory)
+    nearest_on = ca.logic_and(ca.mmax(ca.fabs(nearest - end) / (1 + ca.fabs(end))) <= BRANCH_STEP,
+                              settled(nearest, values))
+    polished = ca.if_else(nearest_on, nearest, ca.if_else(
+        ca.mmax(ca.fabs(residual(end, values))) <= NEWTON_TOLERANCE, end, newton(end, values), True), True)
+    near = ca.mmax(ca.fabs(polished - end) / (1 + ca.fabs(end))) <= BRANCH_STEP
+    polish = ca.logic_and(near, settled(polished, values))
+    # (one conditional for the solution and its flag: each conditional evaluates what its branch uses)
+    # (Newton's root, evaluated once: a short-circuit branch evaluates again all it uses)
+    slow = ca.if_else(quick, ca.DM.zeros(n + 1, 1), ca.if_else(
+        polish, ca.vertcat(polished, 1), ca.vertcat(end, settled(end, values)), True), True)
+    follow = ca.if_else(quick, ca.vertcat(fast, 1), slow)
+    warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
+    jumped = newton(warm, values)
+    landed, was = settled(jumped, values), settled(warm, values)
+    other = _other_root(f"{name}_branch", residual, newton, settled, n, memory, values)
+    found = ca.sumsqr(other) < ca.inf
+    jump = ca.if_else(landed, ca.vertcat(jumped, 1), ca.if_else(was, ca.vertcat(warm, 1), ca.vertcat(
+        ca.if_else(found, other, warm), found), True), True)
+    both = ca.if_else(held > 0.5, follow, jump, True)
+    sol, root = both[:n], both[n] > 0.5
+    tol = LOOP_TOLERANCE * (1 + ca.norm_inf(ca.if_else(ca.sumsqr(sol) < ca.inf, sol, ca.DM.zeros(n, 1))))
+    return sol, ca.if_else(root, tol, -tol)
