@@ -212,19 +212,62 @@ def test_the_pieces_of_a_loop_are_its_relations_outcomes():
 def test_a_loop_on_one_piece_takes_newtons_root_from_a_memory_far_from_it():
     """Between events, with the memory a whole output interval behind (it is kept at accepted points
     only), a loop whose relations are the same at the memory and at Newton's root from it (the piece of a
-    current limiter is unchanged) takes that root: i = v/R on the linear piece, and the branch's indicator
-    stays positive."""
+    current limiter is unchanged) takes that root: i = v/R on the linear piece, Imax on the limited one,
+    and the branch's indicator stays positive."""
     import casadi as ca
 
     from trackingbox.compiler.loop_solve import branch_solution
 
     z, p = ca.MX.sym("z", 1), ca.MX.sym("p", 1)
     v, r, imax = p[0], 2.0, 10.0
-    g = z[0] - ca.if_else(v / r < imax, v / r, imax)  # i = min(v/R, Imax), its relation in v only
+    g = ca.if_else(z[0] < imax, r * z[0] - v, z[0] - imax)  # i = min(v/R, Imax), its relation in i
     memory, held = ca.MX.sym("m", 1), ca.MX.sym("h")
     sol, indicator = branch_solution("t", z, p, g, memory, ca.DM([0.0]), p, [-math.inf], [math.inf], held)
     f = ca.Function("f", [p, memory, held], [sol, indicator])
-    for volts, remembered in ((7.0, 1.0), (30.0, 9.0), (1.0, 10.0)):
+    for volts, remembered in ((7.0, 1.0), (30.0, 11.0), (1.0, 0.2)):  # memory and root on one piece
         i, ind = (float(x) for x in f(volts, remembered, 1))
         assert i == pytest.approx(min(volts / r, imax), rel=1e-12)
         assert ind > 0
+
+
+def test_only_a_relation_of_the_unknowns_makes_branches():
+    """A relation (or min/max) whose arguments are the loop's other inputs only (a parameter, a state,
+    time) has one outcome in each solve, and the residual is smooth in the unknowns there: no branch, no
+    event indicator (the heat-production twin's medium range fmax(0, T - 273.15) took the native
+    stepper with two indicators); one of an unknown, or of an unknown and an input, makes branches."""
+    import casadi as ca
+
+    from trackingbox.compiler.loop_solve import switches
+
+    z, p = ca.MX.sym("z", 2), ca.MX.sym("p", 2)
+    smooth = ca.vertcat(z[0] - z[1] ** 3 - ca.fmax(p[0], 0), z[1] - ca.if_else(p[1] < 1, p[0], 2 * p[0]) + z[0])
+    assert not switches(smooth, z)
+    assert switches(smooth + ca.vertcat(ca.fmin(z[1], 3), 0), z)
+    assert switches(smooth + ca.vertcat(0, ca.if_else(z[0] < p[1], 1, 0)), z)
+
+
+STATE_LIMITED = """model StateLimited "an algebraic loop whose only relation is of a state"
+  Real x(start = -1, fixed = true);
+  Real a(start = 0.5);
+  Real b;
+equation
+  der(x) = 1;
+  b = 1 - a;
+  a = b^3 + noEvent(max(x, 0));
+end StateLimited;
+"""
+
+
+def test_a_loop_with_a_relation_of_a_state_only_has_no_event_indicator(tmp_path):
+    """The loop a = (1 - a)^3 + max(x, 0), x = t - 1, compiled: no event indicator (the FMU keeps a
+    native stepper), and a at every output is the root scipy's brentq finds (a - (1 - a)^3 increases
+    strictly: one root), within 1e-8, on both sides of the kink at t = 1."""
+    from scipy.optimize import brentq
+
+    src = tmp_path / "StateLimited.mo"
+    src.write_text(STATE_LIMITED)
+    fmu = str(compile_model(src, "StateLimited", backend="embedded", output=tmp_path / "s.fmu").fmu)
+    assert read_model_description(fmu).numberOfEventIndicators == 0
+    out = fmpy.simulate_fmu(fmu, stop_time=2.0, output_interval=0.05, relative_tolerance=1e-8, output=["a"])
+    expected = [brentq(lambda a, s=max(t - 1, 0.0): a - (1 - a) ** 3 - s, -10, 10, xtol=1e-14) for t in out["time"]]
+    assert np.max(np.abs(out["a"] - np.array(expected))) < 1e-8

@@ -120,26 +120,32 @@ def _weights(g: ca.MX, z: ca.MX, z0: ca.MX) -> ca.MX:
     return ca.if_else(ca.logic_and(rows > 0, rows < ca.inf), rows, 1)
 
 
-def _nearest(name: str, z: ca.MX, p: ca.MX, z0: ca.MX, scaled: ca.MX) -> tuple[Any, ca.Function, ca.Function]:
+def _nearest(name: str, z: ca.MX, p: ca.MX, z0: ca.MX, scaled: ca.MX) -> tuple[Any, ca.Function, Any]:
     """The nearest solution of the loop whose residual, scaled as by :func:`_weights` at *z0*, is *scaled*
     (see :func:`_or_nearest_solution`): (its rootfinder, in (z, y) with parameters (p, z0); the scaled
-    residual's Jacobian (z, p, z0); (guess, p, z0) -> the root nearest *z0* by that rootfinder from
-    *guess* with the multipliers that fit it, NaN from a guess that is not finite). The guess's
-    derivatives are stopped (it only tells Newton where to start): the root's are the nearest solution's."""
+    residual's Jacobian (z, p, z0); root(guess, p, z0): the expression of the root nearest *z0* by that
+    rootfinder from *guess* with the multipliers that fit it, NaN from a guess that is not finite). The
+    guess's derivatives are stopped (it only tells Newton where to start): the root's are the nearest
+    solution's. The root is an expression in its caller's function, not a function of its own: the
+    model's derivatives through a call of one took a derivative function of it besides (LossyGearDemo1's
+    C: 0.97 MB against 0.60 MB inline)."""
     n = z.numel()
-    y, first = ca.MX.sym(f"{name}_y", n), ca.MX.sym(f"{name}_first", n)
+    y = ca.MX.sym(f"{name}_y", n)
     jac = ca.jacobian(scaled, z)
     kkt = ca.vertcat(z - z0 + ca.mtimes(jac.T, y), scaled - NEAREST_REGULARISATION * y)
     nearest = ca.rootfinder(f"{name}_nearest", "fast_newton", {"x": ca.vertcat(z, y), "p": ca.vertcat(p, z0), "g": kkt},
                             {"abstol": 1e-10, "max_iter": 100, "error_on_fail": False})
     jacobian = ca.Function(f"{name}_jacobian", [z, p, z0], [jac])
-    jac1 = jacobian(first, p, z0)
-    y1 = ca.solve(ca.mtimes(jac1, jac1.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac1, z0 - first))
-    # (from a guess that is not finite, e.g. the end of damped steps from where the residual is NaN, its
-    # Newton cannot start: skipped, NaN, as it would end)
-    root = ca.if_else(ca.sumsqr(first) + ca.sumsqr(y1) < ca.inf,
-                      nearest(ca.stop_diff(ca.vertcat(first, y1), 1), ca.vertcat(p, z0))[:n], ca.DM.nan(n, 1), True)
-    return nearest, jacobian, ca.Function(f"{name}_nearest_root", [first, p, z0], [root])
+
+    def root(first: ca.MX, values: ca.MX, anchor: ca.MX) -> ca.MX:
+        jac1 = jacobian(first, values, anchor)
+        y1 = ca.solve(ca.mtimes(jac1, jac1.T) + NEAREST_REGULARISATION * ca.MX.eye(n), ca.mtimes(jac1, anchor - first))
+        # (from a guess that is not finite, e.g. the end of damped steps from where the residual is NaN, its
+        # Newton cannot start: skipped, NaN, as it would end)
+        return ca.if_else(ca.sumsqr(first) + ca.sumsqr(y1) < ca.inf, nearest(
+            ca.stop_diff(ca.vertcat(first, y1), 1), ca.vertcat(values, anchor))[:n], ca.DM.nan(n, 1), True)
+
+    return nearest, jacobian, root
 
 
 def _loop_tests(name: str, z: ca.MX, p: ca.MX, g: ca.MX, values: ca.MX | ca.DM) -> tuple[Any, Any]:
@@ -261,17 +267,17 @@ SEARCH_STEPS = 40
 """Steps of the search for another root where the branch has ended (see _other_root), each twice the last."""
 
 
-def _other_root(name: str, residual: ca.Function, newton: Any, settled: Any, n: int, start: ca.MX,
+def _other_root(name: str, direction: ca.Function, newton: Any, settled: Any, n: int, start: ca.MX,
                 values: ca.MX) -> ca.MX:
     """A root of the loop reached from *start* (where no Newton settles: past the end of a branch) along
     the curve on which the residual keeps its direction, g(z) = (1 - t) g(start) (Branin's global Newton
     method: dz/ds = -sign(det J) J^-1 g, which turns at the folds where the branch ends and goes on to the
     next branch), both ways, by steps of 1e-4, 2e-4, ... times (1 + |z|) in the largest unknown, with
-    Newton tried from each point; the root reached in fewer steps (NaN where neither way reaches one)."""
+    Newton tried from each point; the root reached in fewer steps (NaN where neither way reaches one).
+    *direction*(z, p) is -sign(det J) J^-1 g (:func:`branch_solution`'s, of the rows scaled)."""
     z, q = ca.MX.sym(f"{name}_sz", n), ca.MX.sym(f"{name}_sq", values.numel() + 1)
     p, way = q[:values.numel()], q[values.numel()]
-    jac = ca.jacobian(residual(z, p), z)
-    d = -ca.sign(ca.det(jac)) * ca.solve(jac, residual(z, p))
+    d = direction(z, p)
     d = d / (ca.mmax(ca.fabs(d) / (1 + ca.fabs(z))) + 1e-300)
     state = ca.MX.sym(f"{name}_ss", 2 * n + 3)  # z, root, step length, found, steps taken
     at, h, found, steps = state[:n], state[2 * n], state[2 * n + 1], state[2 * n + 2]
@@ -291,26 +297,31 @@ def _other_root(name: str, residual: ca.Function, newton: Any, settled: Any, n: 
 _SWITCHING = {ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_FMIN, ca.OP_FMAX}
 
 
-def switches(g: ca.MX, z: ca.MX) -> bool:
-    """Whether the loop's residual g(z) has a relation (or min/max) left in it, as a piecewise (limiting)
-    characteristic written with noEvent has: its branches can end at a fold (:func:`branch_solution`).
-    The relations outside noEvent are held between events (.events): a loop of those has none left."""
+def _relations(g: ca.MX, z: ca.MX) -> list[ca.MX]:
+    """The relations (and min/max) left in the loop's residual g(z) whose arguments depend on the
+    unknowns z, as nodes of g. One of only the loop's other inputs (parameters, states, time: the
+    heat-production twin's fmax(0, T - 273.15) of a medium's validity range, LossyGearDemo1's friction
+    direction) has one outcome for each of the loop's solves, in which g is then smooth in z: it makes
+    no fold and no branch of the loop (the integrator sees it as any other non-smooth input)."""
     fn = ca.Function("switches", [z], [g], {"allow_free": True})
-    return any(fn.instruction_id(k) in _SWITCHING for k in range(fn.n_instructions()))
+    return [fn.instruction_MX(k) for k in range(fn.n_instructions())
+            if fn.instruction_id(k) in _SWITCHING and ca.depends_on(fn.instruction_MX(k), z)]
+
+
+def switches(g: ca.MX, z: ca.MX) -> bool:
+    """Whether the loop's residual g(z) has a relation (or min/max) of its unknowns left in it
+    (:func:`_relations`), as a piecewise (limiting) characteristic written with noEvent has: its
+    branches can end at a fold (:func:`branch_solution`). The relations outside noEvent are held
+    between events (.events): a loop of those has none left."""
+    return bool(_relations(g, z))
 
 
 def _pieces(name: str, g: ca.MX, z: ca.MX, p: ca.MX) -> ca.Function:
-    """(z, p) -> the outcome (0 or 1) of each relation left in the loop's residual g(z, p) (for a min or
-    max, whether its first argument is the smaller): the piece of a piecewise characteristic that z is on."""
-    fn = ca.Function(f"{name}_relations", [z, p], [g])
-    out = []
-    for k in range(fn.n_instructions()):
-        op = fn.instruction_id(k)
-        if op in (ca.OP_FMIN, ca.OP_FMAX):
-            node = fn.instruction_MX(k)
-            out.append(node.dep(0) <= node.dep(1))
-        elif op in _SWITCHING:
-            out.append(fn.instruction_MX(k))
+    """(z, p) -> the outcome (0 or 1) of each relation of the unknowns left in the loop's residual g(z, p)
+    (:func:`_relations`; for a min or max, whether its first argument is the smaller): the piece of a
+    piecewise characteristic that z is on."""
+    out = [node.dep(0) <= node.dep(1) if node.is_op(ca.OP_FMIN) or node.is_op(ca.OP_FMAX) else node
+           for node in _relations(g, z)]
     return ca.Function(f"{name}_pieces", [z, p], [ca.vertcat(*out) if out else ca.DM.zeros(0, 1)])
 
 
@@ -345,22 +356,31 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     divided = ca.Function(f"{name}_branch_divided", [z, p, wt], [g / wt])
     weights = ca.Function(f"{name}_branch_weights", [p, z0], [_weights(g, z, z0)])(values, memory)
     residual = ca.Function(f"{name}_branch_residual", [z, p], [g])
+    # Newton's steps with each equation divided by the norm of its gradient at the point (the same step,
+    # but a linear solve that the equations' units do not spoil: MSL MomentumBalanceFittings' adaptors
+    # to a diameter of 1e60 have rows of 1e119 beside rows of 1e-2, where the solve gave NaN, no root
+    # settled, the loop's indicator stayed negative from the initialisation on and every evaluation
+    # searched for another root)
     jac = ca.jacobian(g, z)
+    rows = _weights(g, z, z)
+    jac, g_rows = ca.mtimes(ca.diag(1 / rows), jac), g / rows
     jjt = ca.mtimes(jac, jac.T)  # the step of minimum norm: defined whatever the rank of J
     mu = NEAREST_REGULARISATION * (1 + ca.trace(jjt) / max(n, 1))
-    exact = ca.solve(jac, g)  # Newton's step; where J is singular (NaN), the step of minimum norm
+    exact = ca.solve(jac, g_rows)  # Newton's step; where J is singular (NaN), the step of minimum norm
     step = ca.Function(f"{name}_branch_newton_step", [z, p], [ca.if_else(
-        ca.sumsqr(exact) < ca.inf, exact, ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g)), True)])
-    x, scale = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n)
+        ca.sumsqr(exact) < ca.inf, exact, ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g_rows)), True)])
+    direction = ca.Function(f"{name}_branch_direction", [z, p], [-ca.sign(ca.det(jac)) * exact])
+    row_weights = ca.Function(f"{name}_branch_rows", [z, p], [rows])
+    x, scale, wr = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n), ca.MX.sym(f"{name}_brows", n)
     scaled = ca.rootfinder(f"{name}_branch_newton", "fast_newton",
-                           {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
+                           {"x": x, "p": ca.vertcat(p, scale, wr), "g": ca.substitute(g, z, scale * x) / wr},
                            {"abstol": 0, "abstolStep": WARM_STEP, "max_iter": 100, "error_on_fail": False})
     lo = ca.DM([b - BOUND_TOLERANCE * (1 + abs(b)) for b in lower])
     hi = ca.DM([b + BOUND_TOLERANCE * (1 + abs(b)) for b in upper])
 
     def newton(guess: ca.MX, values_: ca.MX) -> ca.MX:
-        s = 1 + ca.fabs(guess)
-        return s * scaled(guess / s, ca.vertcat(values_, s))
+        s = 1 + ca.fabs(guess)  # (the rows' weights at the guess are numbers: no second derivatives)
+        return s * scaled(guess / s, ca.vertcat(values_, s, ca.stop_diff(row_weights(guess, values_), 1)))
 
     w = ca.MX.sym(f"{name}_bw", n)
 
@@ -385,7 +405,9 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     # nearest root at every evaluation made its simulation 20 times slower)
     pieces = _pieces(f"{name}_branch", g, z, p)
     fast = newton(memory, values)
-    quick = ca.logic_and(settled(fast, values), ca.mmax(ca.fabs(pieces(fast, values) - pieces(memory, values))) == 0)
+    quick = settled(fast, values)
+    if pieces.numel_out(0):  # (a loop with no relation of its unknowns has one piece)
+        quick = ca.logic_and(quick, ca.mmax(ca.fabs(pieces(fast, values) - pieces(memory, values))) == 0)
     end = ca.stop_diff(_damped_newton(f"{name}_branch", divided, n, memory, values, weights), 1)
     # the end polished to the root nearest the memory (Newton on the nearest solution's optimality
     # conditions, from the end), where that settles near the end; Newton from the end (or the end, where its
@@ -410,7 +432,7 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     warm = warm_solution(name, z, p, g, memory, start, values, lower, upper)
     jumped = newton(warm, values)
     landed, was = settled(jumped, values), settled(warm, values)
-    other = _other_root(f"{name}_branch", residual, newton, settled, n, memory, values)
+    other = _other_root(f"{name}_branch", direction, newton, settled, n, memory, values)
     found = ca.sumsqr(other) < ca.inf
     jump = ca.if_else(landed, ca.vertcat(jumped, 1), ca.if_else(was, ca.vertcat(warm, 1), ca.vertcat(
         ca.if_else(found, other, warm), found), True), True)
