@@ -356,11 +356,14 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     divided = ca.Function(f"{name}_branch_divided", [z, p, wt], [g / wt])
     weights = ca.Function(f"{name}_branch_weights", [p, z0], [_weights(g, z, z0)])(values, memory)
     residual = ca.Function(f"{name}_branch_residual", [z, p], [g])
-    # Newton's steps with each equation divided by the norm of its gradient at the point (the same step,
-    # but a linear solve that the equations' units do not spoil: MSL MomentumBalanceFittings' adaptors
-    # to a diameter of 1e60 have rows of 1e119 beside rows of 1e-2, where the solve gave NaN, no root
-    # settled, the loop's indicator stayed negative from the initialisation on and every evaluation
-    # searched for another root)
+    # the steps of the settled test and of the search with each equation divided by the norm of its
+    # gradient at the point (the same step, but a linear solve that the equations' units do not spoil:
+    # MSL MomentumBalanceFittings' adaptors to a diameter of 1e60 have rows of 1e119 beside rows of 1e-2,
+    # where the solve gave NaN, no root settled, the loop's indicator stayed negative from the
+    # initialisation on and every evaluation searched for another root). Not the rootfinder's: its
+    # equations divided so (numbers at the guess) moved AmplifierWithOpAmpDetailed's roots by rounding
+    # enough that CVODE failed at 2e-8 (the harness's tolerance), and the damped steps' fallback finds
+    # MomentumBalanceFittings' root where its Newton gives NaN
     jac = ca.jacobian(g, z)
     rows = _weights(g, z, z)
     jac, g_rows = ca.mtimes(ca.diag(1 / rows), jac), g / rows
@@ -370,17 +373,16 @@ def branch_solution(name: str, z: ca.MX, p: ca.MX, g: ca.MX, memory: ca.MX, star
     step = ca.Function(f"{name}_branch_newton_step", [z, p], [ca.if_else(
         ca.sumsqr(exact) < ca.inf, exact, ca.mtimes(jac.T, ca.solve(jjt + mu * ca.MX.eye(g.numel()), g_rows)), True)])
     direction = ca.Function(f"{name}_branch_direction", [z, p], [-ca.sign(ca.det(jac)) * exact])
-    row_weights = ca.Function(f"{name}_branch_rows", [z, p], [rows])
-    x, scale, wr = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n), ca.MX.sym(f"{name}_brows", n)
+    x, scale = ca.MX.sym(f"{name}_bx", n), ca.MX.sym(f"{name}_bscale", n)
     scaled = ca.rootfinder(f"{name}_branch_newton", "fast_newton",
-                           {"x": x, "p": ca.vertcat(p, scale, wr), "g": ca.substitute(g, z, scale * x) / wr},
+                           {"x": x, "p": ca.vertcat(p, scale), "g": ca.substitute(g, z, scale * x)},
                            {"abstol": 0, "abstolStep": WARM_STEP, "max_iter": 100, "error_on_fail": False})
     lo = ca.DM([b - BOUND_TOLERANCE * (1 + abs(b)) for b in lower])
     hi = ca.DM([b + BOUND_TOLERANCE * (1 + abs(b)) for b in upper])
 
     def newton(guess: ca.MX, values_: ca.MX) -> ca.MX:
-        s = 1 + ca.fabs(guess)  # (the rows' weights at the guess are numbers: no second derivatives)
-        return s * scaled(guess / s, ca.vertcat(values_, s, ca.stop_diff(row_weights(guess, values_), 1)))
+        s = 1 + ca.fabs(guess)
+        return s * scaled(guess / s, ca.vertcat(values_, s))
 
     w = ca.MX.sym(f"{name}_bw", n)
 
