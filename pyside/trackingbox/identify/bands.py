@@ -449,7 +449,7 @@ class BandTracker:
         parameter of pair ``j``; part 5 of the module). None: each band from its own loop alone.
     misfit
         Untracked tag -> its closed-loop gain per pair (:func:`trackingbox.identify.misfit.closed_gains`, the
-        pairs' order), or rows: those, then a held parameter's per row (:func:`~.misfit.misfit_rows`): the
+        pairs' order), or rows: those, then a held parameter's per row (:func:`~.misfit.held_gains`): the
         model-error part (7). None, or a tag left out: no model-error part from it.
     """
 
@@ -543,7 +543,7 @@ class BandTracker:
         self.fit_worst: dict[str, int] = {}
         # the model-error part (7): each untracked tag's closed-loop gains, NaN where not measured
         # and the held parameters' rows (.misfit's held_gains), each with its tag
-        self.misfit, self.misfit_held, self.misfit_windows, self.misfit_where = misfit_rows(misfit, self.fit_tags, n)
+        self.misfit, self.misfit_held, self.misfit_where = misfit_rows(misfit, self.fit_tags, n)
         # the last row's (mean error, beyond chance, margin), then the same of each tag's trend reading
         self.fit_last: list[tuple[float, bool, float]] = []
         self.misfit_rows = [0] * n  # rows the model-error part widened, per pair
@@ -802,7 +802,7 @@ class BandTracker:
         """The model-error part (7 of the module) per pair from the last row's lack-of-fit means."""
         if not self.misfit.size or len(self.fit_last) != 2 * len(self.fit_tags):
             return [(0.0, 0.0)] * len(self.pairs)
-        return tracker_sides(self.fit_last, self.misfit, self.misfit_held, self.misfit_windows, self.misfit_where,
+        return tracker_sides(self.fit_last, self.misfit, self.misfit_held, self.misfit_where,
                              [pr["hi"] - pr["lo"] for pr in self.pairs])
 
     def rows(self, array: np.ndarray) -> list[list[float]]:

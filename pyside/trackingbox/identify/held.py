@@ -153,10 +153,9 @@ def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | Non
 
 def held_rows(spec: Any, found: Responses, gains: np.ndarray | None) -> dict[str, list[list[float]]]:
     """Per untracked tag, one row per held parameter (its interval's secant): the tag's gain per unit of each
-    tracked parameter along that held parameter's direction (:func:`trackingbox.identify.misfit.held_gains`) with the
-    moves of the tracked value that keep the held value within the spec's bounds (``misfit.held_windows``).
+    tracked parameter along that held parameter's direction (:func:`trackingbox.identify.misfit.held_gains`).
     With one pair its own gain is the loop's (as :func:`shifts`); none without held parameters."""
-    from .misfit import held_gains, held_windows
+    from .misfit import held_gains
 
     names = [n for n in found.dy if found.held[n][2] > found.held[n][1]]
     if not names or found.other_gains is None:
@@ -167,17 +166,11 @@ def held_rows(spec: Any, found: Responses, gains: np.ndarray | None) -> dict[str
     def secant(tags: tuple[str, ...]) -> np.ndarray:
         return np.array([[found.dy[n][1][t] - found.dy[n][0][t] for n in names] for t in tags]) / span
 
-    g_tq = secant(found.tags)
-    rows = held_gains(loops, g_tq, secant(found.others), found.other_gains)
-    shift = -np.linalg.solve(loops, g_tq)  # (pairs, held): the truths' shift per unit of each held value
-    bounds = {p.name: (p.min, p.max) for p in getattr(spec, "parameters", ())}
-    windows = [held_windows(shift[:, k], found.held[n][0], bounds.get(n, (-math.inf, math.inf)))
-               for k, n in enumerate(names)]
+    rows = held_gains(loops, secant(found.tags), secant(found.others), found.other_gains)
     for n, q in zip(names, rows):
         log.info("bands: held %s read by the untracked tags, gain per unit of %s: %s", n, ", ".join(found.parameters),
                  "; ".join(f"{t} {np.array2string(r, precision=4)}" for t, r in zip(found.others, q)))
-    return {t: [[[float(rows[k, i, j]), *map(float, windows[k][j])] for j in range(len(found.parameters))]
-                for k in range(len(names))] for i, t in enumerate(found.others)}
+    return {t: [[float(v) for v in rows[k, i]] for k in range(len(names))] for i, t in enumerate(found.others)}
 
 
 def loop_gains(spec: Any, found: Responses) -> np.ndarray | None:

@@ -58,10 +58,7 @@ tags agree, ``G_tt (θ - θ*) = -G_tq δ``, so the truths lie ``s δ`` from the 
 (:func:`held_gains`), tested, carried and bounded as the tag's own. The held parameter's step tests give ``G_tq``
 and ``G_uq`` (the secant through its interval's ends). It is the direction the fixed part steps along, with the
 size the data put on it rather than the estimate's interval: where tracking sees an untracked tag's error that
-a held value's error explains, the band reaches the tracked value that explanation puts the truth at. A reading
-that puts the held value beyond the bounds the spec gives it (an untracked ``[[parameters]]`` entry's; a ``[fixed]``
-value has none) is not that held parameter's and is left out, as a tracked value beyond its bounds is
-(:func:`held_windows`).
+a held value's error explains, the band reaches the tracked value that explanation puts the truth at.
 """
 from __future__ import annotations
 
@@ -122,67 +119,43 @@ def held_gains(loops: Any, held_tracked: Any, held_others: Any, others: Any) -> 
     return np.where(np.isfinite(out), out, math.nan)
 
 
-def held_windows(shift: Any, value: float, bounds: tuple[float, float]) -> np.ndarray:
-    """Per pair, the (lowest, highest) move of the tracked value a held parameter's reading may imply: its truths'
-    shift per unit *shift* (``s_j``) times the moves that keep the held value *value* within its *bounds* (the
-    spec's; ±inf where it gives none). A reading beyond is not that held parameter's (module docstring).
-
-    >>> held_windows([2.0, -0.5], 1.0, (0.0, 4.0)).tolist()      # δ in [-1, 3]
-    [[-2.0, 6.0], [-1.5, 0.5]]
-    """
-    s = np.asarray(shift, dtype=float)
-    a, b = float(bounds[0]) - value, float(bounds[1]) - value
-    with np.errstate(invalid="ignore"):
-        ends = np.stack([s * a, s * b], axis=-1)
-    ends = np.where(np.isnan(ends), 0.0, ends)   # no shift (s = 0) times an unbounded move: no move
-    return np.sort(ends, axis=-1)
-
-
-def misfit_rows(misfit: Any, tags: Sequence[str], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+def misfit_rows(misfit: Any, tags: Sequence[str], n: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """:class:`~.bands.BandTracker`'s *misfit* as (the tags' own closed gains, tags x pairs; the held parameters'
-    rows, :func:`held_gains`; their windows, :func:`held_windows`; the tag of each of those rows). A tag's value is
-    its closed gains per pair, or a list of rows: its own first, then one per held parameter, each a (gain, lowest,
-    highest) per pair. NaN where not measured; no rows when nothing is."""
-    own, extra, windows, where = [], [], [], []
+    rows, :func:`held_gains`; the tag of each of those rows). A tag's value is its closed gains per pair, or a list
+    of rows: its own first, then one per held parameter. NaN where not measured; no rows when nothing is."""
+    own, extra, where = [], [], []
     for i, t in enumerate(tags):
         value = (misfit or {}).get(t, [math.nan] * n)
         rows = [list(r) for r in value] if len(value) and np.ndim(value[0]) else [list(value)]
         own.append([float(v) for v in rows[0]])
-        for r in rows[1:]:
-            cells = np.array(r, dtype=float).reshape(n, 3)
-            extra.append(cells[:, 0])
-            windows.append(cells[:, 1:])
+        extra += [[float(v) for v in r] for r in rows[1:]]
         where += [i] * (len(rows) - 1)
     mine = np.array(own, dtype=float).reshape(len(tags), n)
     held = np.array(extra, dtype=float).reshape(len(extra), n)
     if not np.any(np.isfinite(mine)) and not np.any(np.isfinite(held)):
-        return np.zeros((0, n)), np.zeros((0, n)), np.zeros((0, n, 2)), []
-    return mine, held, np.array(windows, dtype=float).reshape(len(extra), n, 2), where
+        return np.zeros((0, n)), np.zeros((0, n)), []
+    return mine, held, where
 
 
-def tracker_sides(last: Sequence[tuple[float, bool, float]], own: np.ndarray, held: np.ndarray, windows: np.ndarray,
-                  where: Sequence[int], spans: Sequence[float]) -> list[tuple[float, float]]:
+def tracker_sides(last: Sequence[tuple[float, bool, float]], own: np.ndarray, held: np.ndarray, where: Sequence[int],
+                  spans: Sequence[float]) -> list[tuple[float, float]]:
     """:func:`implied_sides` of :class:`~.bands.BandTracker`'s last readings (*last*: each tag's mean, then each
-    tag's trend, as (value, beyond chance, margin)) through the tags' own rows and the held parameters' rows (each
-    within its *windows*)."""
+    tag's trend, as (value, beyond chance, margin)) through the tags' own rows and the held parameters' rows."""
     t = len(own)
     pick = [*range(t), *where]
     pick += [t + i for i in pick]
     g = np.vstack([own, held]) if len(held) else own
-    free = np.stack([np.full(own.shape, -math.inf), np.full(own.shape, math.inf)], axis=-1)
-    w = np.concatenate([free, windows]) if len(held) else free
     return implied_sides([last[i][0] for i in pick], [last[i][1] for i in pick], np.vstack([g, g]), spans,
-                         [last[i][2] for i in pick], np.concatenate([w, w]))
+                         [last[i][2] for i in pick])
 
 
-def implied_sides(means: Sequence[float], flagged: Sequence[bool], closed: Any, spans: Sequence[float],
-                  margins: Sequence[float] | None = None, windows: Any = None) -> list[tuple[float, float]]:
+def implied_sides(means: Sequence[float], flagged: Sequence[bool], closed: Any,
+                  spans: Sequence[float], margins: Sequence[float] | None = None) -> list[tuple[float, float]]:
     """Per pair, the model-error part's (below, above) extent about the tracked value (module docstring).
 
     *means*: each untracked tag's mean error (measured - tracked); *flagged*: whether the lack-of-fit test flags
     it; *closed*: :func:`closed_gains` (rows the tags, in the same order); *spans*: each pair's bounds' range;
-    *margins*: each mean's own uncertainty (its 95 % half-width), carried through the gain beyond the value;
-    *windows*: per row and pair the (lowest, highest) value a reading may imply (a held parameter's, :func:`held_windows`).
+    *margins*: each mean's own uncertainty (its 95 % half-width), carried through the gain beyond the value.
 
     >>> implied_sides([0.75, -1.0, 5.0], [True, True, False], np.array([[0.25], [0.5], [1.0]]), [10.0])
     [(2.0, 3.0)]
@@ -191,16 +164,13 @@ def implied_sides(means: Sequence[float], flagged: Sequence[bool], closed: Any, 
     out = []
     for j, span in enumerate(spans):
         below = above = 0.0
-        for k, (m, flag, row, margin) in enumerate(zip(means, flagged, g,
-                                                       margins if margins is not None else [0.0] * len(g))):
+        for m, flag, row, margin in zip(means, flagged, g, margins if margins is not None else [0.0] * len(g)):
             gain = float(row[j])
             if not (flag and math.isfinite(m) and math.isfinite(gain) and gain != 0.0):
                 continue
             d = m / gain
             if abs(d) > span:
                 continue  # no value within the bounds explains it: not this parameter's
-            if windows is not None and not (windows[k][j][0] <= d <= windows[k][j][1]):
-                continue  # a held value beyond its bounds: not that held parameter's
             d += math.copysign(margin / abs(gain), d)
             below, above = max(below, -d), max(above, d)
         out.append((below, above))
