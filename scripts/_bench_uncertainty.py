@@ -261,7 +261,7 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
 
     csv = out / "track" / "tracking.csv"
     t = pd.read_csv(csv, usecols=["time"])["time"].to_numpy(float)
-    bare = unheld = None
+    bare = None
     if rebands:  # the bands as track computes them now, and the same without the model-error part
         from trackingbox.identify.held import band_parts
         from trackingbox.spec import load_spec as _load
@@ -269,8 +269,6 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
         fixed, _, gains, misfit = band_parts(_load(out / "spec.toml"))
         source = rebanded(csv, out / "spec.toml", fixed=fixed, gains=gains, misfit=misfit)
         bare = rebanded(csv, out / "spec.toml", fixed=fixed, gains=gains, misfit=None) if misfit else None
-        own = {t: v[0] for t, v in misfit.items() if len(v) and np.ndim(v[0])} if misfit else {}
-        unheld = rebanded(csv, out / "spec.toml", fixed=fixed, gains=gains, misfit={**misfit, **own}) if own else None
     else:
         source = csv
     doc = {"seed": seed, **band_coverage(source, "effect.Rf", truth_on(truth, "effect.Rf", t), 12 * 3600.0),
@@ -301,10 +299,7 @@ def run_bands_evaporator(seed: int, work: Path, plain: bool, rebands: bool = Fal
                                            if alone is not None else {}),
                                         **({"without_model_error": band_coverage(bare, pr.parameter, value,
                                                                                  12 * 3600.0)}
-                                           if bare is not None else {}),
-                                        **({"without_held_readings": band_coverage(unheld, pr.parameter, value,
-                                                                                   12 * 3600.0)}
-                                           if unheld is not None else {})}
+                                           if bare is not None else {})}
     return doc
 
 
@@ -406,9 +401,7 @@ def summarise(case: str, docs: list[dict[str, Any]]) -> tuple[list[str], bool]:
             per = [d["tracked"][name] for d in docs if name in d.get("tracked", {})]
             for label, rows in (("", per), (" each loop alone", [r["alone"] for r in per if "alone" in r]),
                                 (" without the model-error part",
-                                 [r["without_model_error"] for r in per if "without_model_error" in r]),
-                                (" without the held readings",
-                                 [r["without_held_readings"] for r in per if "without_held_readings" in r])):
+                                 [r["without_model_error"] for r in per if "without_model_error" in r])):
                 c = [r["covered"] for r in rows if math.isfinite(r.get("covered", math.nan))]
                 if c:
                     lines.append(f"{'':<24} {name}{label}: contains the truth {100 * float(np.mean(c)):.1f} % "

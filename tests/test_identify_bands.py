@@ -644,34 +644,3 @@ def test_a_checkpoint_from_before_the_trend_reading_is_refused() -> None:
         s["rate"] = [0.0] * len(s["rate"])
     with pytest.raises(CheckpointError, match="trend"):
         BandTracker(_spec(), columns, misfit={"TO": [C2]}).load_state_dict(state)
-
-
-def test_model_error_part_reads_an_untracked_error_as_a_held_estimate_off() -> None:
-    """A held parameter ``q`` the twin holds 1 unit below the plant's (``δ = 1``) moves TI by 0.4 K and TO by
-    -0.5 K per unit (TO = 50 + C2·k - 0.5 q). The loop absorbs TI's 0.4 K: it settles 0.4 / GAIN = -20 units from the
-    truth, and TO is left with -0.5 + C2·20 = -0.3 K. Read as ``k`` alone TO puts the truth 0.3 / C2 = 30 units
-    *below* the tracked value (wrong side). Read along ``q``'s direction: the loop shifts ``k`` by
-    ``s = -0.4 / GAIN = 20`` per unit of ``q`` and TO then moves by ``ĝ = -0.5 + C2·20 = -0.3`` per unit, so TO's
-    -0.3 K is ``δ = 1``, and the truth lies ``s δ = 20`` above ``k``: the band holds it."""
-    from trackingbox.identify.misfit import held_gains
-
-    s, g_hat = -0.4 / GAIN, -0.5 + C2 * (-0.4 / GAIN)
-    row = held_gains(np.array([[GAIN]]), np.array([[0.4]]), np.array([[-0.5]]), np.array([[C2]]))
-    assert row.shape == (1, 1, 1) and row[0, 0, 0] == pytest.approx(g_hat / s)   # -0.015 K per unit of k
-    n = 20000
-    rng = np.random.default_rng(15)
-    truth = np.full(n, P_TRUE)
-    rows = _closed_loop_two_tags(0.05 * rng.normal(size=n), 0.05 * rng.normal(size=n) - 0.5, truth, 0.4)
-    columns = [*COLUMNS, "measured:TO", "tracked:TO", "untracked:TO"]
-    sel = (np.arange(n) * TS) >= 4 * 3600.0
-
-    def inside(misfit: dict[str, object]) -> tuple[float, BandTracker]:
-        bands = BandTracker(_spec(), columns, misfit=misfit)
-        out = np.array([bands.row(r) for r in rows])
-        return float(np.mean(((out[:, 0] <= truth) & (truth <= out[:, 1]))[sel])), bands
-
-    alone, _ = inside({"TO": [C2]})
-    both, bands = inside({"TO": [[C2], [float(row[0, 0, 0])]]})
-    assert alone < 0.5 and both >= 0.9, (alone, both)
-    described = bands.describe()["k"]["model_error"]
-    assert described["closed_gains"] == {"TO": C2} and described["held_readings"] == 1

@@ -144,8 +144,7 @@ tracked value ``p`` (level :data:`LEVEL`), in seven parts:
    is the lag part's, over a day since: part 3).
 7. **model error**: where an untracked tag's mean error, or its trend read at the newest row, is beyond chance
    (the lack-of-fit test's first condition, below), the value of ``p`` it implies, the other loops keeping their
-   tags (:mod:`.misfit`): the side toward it reaches it (*misfit* of :class:`BandTracker`, the closed-loop gains);
-   and the value it implies were a held parameter's estimate off instead (rows after a tag's own in *misfit*).
+   tags (:mod:`.misfit`): the side toward it reaches it (*misfit* of :class:`BandTracker`, the closed-loop gains).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -193,7 +192,7 @@ from scipy.stats import norm
 from ..analysis.offsets import FLOOR_SPAN
 from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
-from .misfit import misfit_rows, tracker_sides, trend_reading
+from .misfit import implied_sides, trend_reading
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -449,8 +448,7 @@ class BandTracker:
         parameter of pair ``j``; part 5 of the module). None: each band from its own loop alone.
     misfit
         Untracked tag -> its closed-loop gain per pair (:func:`trackingbox.identify.misfit.closed_gains`, the
-        pairs' order), or rows: those, then a held parameter's per row (:func:`~.misfit.held_gains`): the
-        model-error part (7). None, or a tag left out: no model-error part from it.
+        pairs' order): the model-error part (7). None, or a tag left out: no model-error part from it.
     """
 
     def __init__(self, spec: Any, columns: Sequence[str], level: float = LEVEL,
@@ -542,8 +540,10 @@ class BandTracker:
         self.fit_rows = [0, 0]  # rows with the statistic known, of them at or above 1
         self.fit_worst: dict[str, int] = {}
         # the model-error part (7): each untracked tag's closed-loop gains, NaN where not measured
-        # and the held parameters' rows (.misfit's held_gains), each with its tag
-        self.misfit, self.misfit_held, self.misfit_where = misfit_rows(misfit, self.fit_tags, n)
+        self.misfit = np.array([[float(v) for v in (misfit or {}).get(t, [math.nan] * n)] for t in self.fit_tags],
+                               dtype=float).reshape(len(self.fit_tags), n)
+        if self.misfit.size and not np.any(np.isfinite(self.misfit)):
+            self.misfit = np.zeros((0, n))
         # the last row's (mean error, beyond chance, margin), then the same of each tag's trend reading
         self.fit_last: list[tuple[float, bool, float]] = []
         self.misfit_rows = [0] * n  # rows the model-error part widened, per pair
@@ -802,8 +802,9 @@ class BandTracker:
         """The model-error part (7 of the module) per pair from the last row's lack-of-fit means."""
         if not self.misfit.size or len(self.fit_last) != 2 * len(self.fit_tags):
             return [(0.0, 0.0)] * len(self.pairs)
-        return tracker_sides(self.fit_last, self.misfit, self.misfit_held, self.misfit_where,
-                             [pr["hi"] - pr["lo"] for pr in self.pairs])
+        return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last],
+                             np.vstack([self.misfit, self.misfit]),
+                             [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last])
 
     def rows(self, array: np.ndarray) -> list[list[float]]:
         """The band values of rows of numbers (modes as flags: non-zero = hold)."""
@@ -885,7 +886,6 @@ class BandTracker:
                                     **({"model_error": {
                                         "closed_gains": {t: float(g[self.pairs.index(pr)])
                                                          for t, g in zip(self.fit_tags, self.misfit)},
-                                        "held_readings": len(self.misfit_where),
                                         "rows_widened": self.misfit_rows[self.pairs.index(pr)]}}
                                        if self.misfit.size else {}),
                                     **({"lag_time": m.lag_time, "noise_gain": math.sqrt(float(m.acf[0]))}

@@ -94,8 +94,7 @@ class Responses:
     held
         Name -> (estimate, lower, upper) of every held parameter with an interval.
     dy
-        Held parameter -> (tag -> settled change at its interval's lower end, the same at its upper end), on the
-        paired tags and the untracked ones stepped for *others*.
+        Held parameter -> (tag -> settled change at its interval's lower end, the same at its upper end).
     refused
         Held parameters the twin cannot change after initialisation (taken as exact).
     tags, parameters
@@ -145,32 +144,8 @@ def band_parts(spec: Any) -> tuple[dict[str, list[Fixed]], str, np.ndarray | Non
 
         if gains is not None or len(found.parameters) == 1:  # the loops' matrix, or one loop: none needed
             closed = closed_gains(gains, found.other_gains)
-            extra = held_rows(spec, found, gains)
-            misfit = {t: [[float(v) for v in row], *extra.get(t, [])] if extra else [float(v) for v in row]
-                      for t, row in zip(found.others, closed)}
+            misfit = {t: [float(v) for v in row] for t, row in zip(found.others, closed)}
     return fixed, note, gains, misfit
-
-
-def held_rows(spec: Any, found: Responses, gains: np.ndarray | None) -> dict[str, list[list[float]]]:
-    """Per untracked tag, one row per held parameter (its interval's secant): the tag's gain per unit of each
-    tracked parameter along that held parameter's direction (:func:`trackingbox.identify.misfit.held_gains`).
-    With one pair its own gain is the loop's (as :func:`shifts`); none without held parameters."""
-    from .misfit import held_gains
-
-    names = [n for n in found.dy if found.held[n][2] > found.held[n][1]]
-    if not names or found.other_gains is None:
-        return {}
-    loops = gains if gains is not None else np.array([[float(spec.pairs[0].gain)]])
-    span = np.array([found.held[n][2] - found.held[n][1] for n in names])
-
-    def secant(tags: tuple[str, ...]) -> np.ndarray:
-        return np.array([[found.dy[n][1][t] - found.dy[n][0][t] for n in names] for t in tags]) / span
-
-    rows = held_gains(loops, secant(found.tags), secant(found.others), found.other_gains)
-    for n, q in zip(names, rows):
-        log.info("bands: held %s read by the untracked tags, gain per unit of %s: %s", n, ", ".join(found.parameters),
-                 "; ".join(f"{t} {np.array2string(r, precision=4)}" for t, r in zip(found.others, q)))
-    return {t: [[float(v) for v in rows[k, i]] for k in range(len(names))] for i, t in enumerate(found.others)}
 
 
 def loop_gains(spec: Any, found: Responses) -> np.ndarray | None:
@@ -343,7 +318,7 @@ def _responses(spec: Any, held: dict[str, tuple[float, float, float]], joint: bo
     out: dict[str, tuple[dict[str, float], dict[str, float]]] = {}
     for i, n in enumerate(names):
         lo, hi = change[2 * i], change[2 * i + 1]
-        out[n] = ({t: float(lo[j]) for j, t in enumerate(every)}, {t: float(hi[j]) for j, t in enumerate(every)})
+        out[n] = ({t: float(lo[j]) for j, t in enumerate(tags)}, {t: float(hi[j]) for j, t in enumerate(tags)})
     every_gains = None
     if step_tracked:
         every_gains = np.full((len(every), len(tracked)), math.nan)

@@ -48,17 +48,6 @@ tells: README) leaves the twin's product flow FI-6150 0.3-1 % below the plant's;
 at the measured opening with a ``KvMax`` smaller by the same share. FI-6150's error shows it, but with ZI-6150 let go the twin's level loop keeps
 its flow whatever ``KvMax`` is (``g̃`` about 4e-4 per unit): nothing in the twin's response to its tracked
 parameters ties that error to ``KvMax``.
-
-**A held value read the same way.** A parameter the twin holds at an estimate (the fixed part's, :mod:`.held`) may
-be off too: were the held ``q`` off by ``δ`` (the plant at ``q + δ``), the loops would settle where the paired
-tags agree, ``G_tt (θ - θ*) = -G_tq δ``, so the truths lie ``s δ`` from the tracked values with
-``s = -G_tt⁻¹ G_tq`` (the fixed part's ``-G⁻¹ Δy`` per unit), and an untracked tag ``u`` is left with
-``e_u = (G_uq + G_ut s) δ = ĝ_uq δ``. Tag ``u`` then implies ``δ = m_u / ĝ_uq`` and the truth of ``p_j`` at
-``p_j + s_j m_u / ĝ_uq``: a reading of tag ``u`` with the gain ``ĝ_uq / s_j`` per unit of ``p_j``
-(:func:`held_gains`), tested, carried and bounded as the tag's own. The held parameter's step tests give ``G_tq``
-and ``G_uq`` (the secant through its interval's ends). It is the direction the fixed part steps along, with the
-size the data put on it rather than the estimate's interval: where tracking sees an untracked tag's error that
-a held value's error explains, the band reaches the tracked value that explanation puts the truth at.
 """
 from __future__ import annotations
 
@@ -95,58 +84,6 @@ def closed_gains(gains: Any, others: Any) -> np.ndarray:
         follow = np.linalg.solve(g_tt[np.ix_(k, k)], g_tt[k, j]) if k else np.zeros(0)
         out[:, j] = g_ut[:, j] - g_ut[:, k] @ follow
     return out
-
-
-def held_gains(loops: Any, held_tracked: Any, held_others: Any, others: Any) -> np.ndarray:
-    """``[q, u, j]``: the gain ``ĝ_uq / s_jq`` of untracked tag ``u`` per unit of tracked parameter ``j`` along held
-    parameter ``q``'s direction (module docstring); NaN where ``q`` does not move ``p_j``.
-
-    *loops*: ``G_tt`` (one pair: its gain, 1 x 1); *held_tracked*: ``G_tq``, the paired tags' change per unit of
-    each held parameter (rows the pairs, a column per held parameter); *held_others*: ``G_uq`` (rows the untracked
-    tags); *others*: ``G_ut`` (rows the untracked tags, a column per pair).
-
-    >>> held_gains(np.array([[2.0]]), np.array([[1.0]]), np.array([[3.0]]), np.array([[4.0]]))  # s = -0.5, ĝ = 1
-    array([[[-2.]]])
-    """
-    g_tt = np.atleast_2d(np.asarray(loops, dtype=float))
-    g_tq = np.asarray(held_tracked, dtype=float).reshape(g_tt.shape[0], -1)
-    g_uq = np.asarray(held_others, dtype=float).reshape(-1, g_tq.shape[1])
-    g_ut = np.asarray(others, dtype=float).reshape(g_uq.shape[0], g_tt.shape[0])
-    s = -np.linalg.solve(g_tt, g_tq)                       # (pairs, held): the truths' shift per unit of q
-    closed = g_uq + g_ut @ s                               # (tags, held): ĝ_uq
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = closed.T[:, :, None] / s.T[:, None, :]
-    return np.where(np.isfinite(out), out, math.nan)
-
-
-def misfit_rows(misfit: Any, tags: Sequence[str], n: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """:class:`~.bands.BandTracker`'s *misfit* as (the tags' own closed gains, tags x pairs; the held parameters'
-    rows, :func:`held_gains`; the tag of each of those rows). A tag's value is its closed gains per pair, or a list
-    of rows: its own first, then one per held parameter. NaN where not measured; no rows when nothing is."""
-    own, extra, where = [], [], []
-    for i, t in enumerate(tags):
-        value = (misfit or {}).get(t, [math.nan] * n)
-        rows = [list(r) for r in value] if len(value) and np.ndim(value[0]) else [list(value)]
-        own.append([float(v) for v in rows[0]])
-        extra += [[float(v) for v in r] for r in rows[1:]]
-        where += [i] * (len(rows) - 1)
-    mine = np.array(own, dtype=float).reshape(len(tags), n)
-    held = np.array(extra, dtype=float).reshape(len(extra), n)
-    if not np.any(np.isfinite(mine)) and not np.any(np.isfinite(held)):
-        return np.zeros((0, n)), np.zeros((0, n)), []
-    return mine, held, where
-
-
-def tracker_sides(last: Sequence[tuple[float, bool, float]], own: np.ndarray, held: np.ndarray, where: Sequence[int],
-                  spans: Sequence[float]) -> list[tuple[float, float]]:
-    """:func:`implied_sides` of :class:`~.bands.BandTracker`'s last readings (*last*: each tag's mean, then each
-    tag's trend, as (value, beyond chance, margin)) through the tags' own rows and the held parameters' rows."""
-    t = len(own)
-    pick = [*range(t), *where]
-    pick += [t + i for i in pick]
-    g = np.vstack([own, held]) if len(held) else own
-    return implied_sides([last[i][0] for i in pick], [last[i][1] for i in pick], np.vstack([g, g]), spans,
-                         [last[i][2] for i in pick])
 
 
 def implied_sides(means: Sequence[float], flagged: Sequence[bool], closed: Any,
