@@ -5,6 +5,7 @@ on a tank temperature, and the reference is the one that leaves the balance ther
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -46,9 +47,11 @@ def test_the_balance_follows_the_reference_where_it_resolves_and_not_on_the_sign
 @pytest.mark.long
 @pytest.mark.parametrize("model", [check.THREE, check.CONTROLLED])
 def test_the_compiled_tanks_follow_the_energy_balance_of_their_levels(model, tmp_path):
-    """Compiled (80-90 s each) and simulated at rtol 1e-10, every tank temperature keeps to the balance of the
+    """Compiled (40-90 s each) and simulated at rtol 1e-10, every tank temperature keeps to the balance of the
     same run's levels within 1e-5 of its range; as the harness simulates it (rtol 1e-6) the levels match the
-    reference within 1e-4 of their range and the temperatures stay within 1e-3 of the tight run's."""
+    reference within 1e-4 of their range and the temperatures within 2e-3 of the tight run's (CVODE's own error
+    at 1e-6: 1.04e-3 on ControlledTanks' tank 1 as it runs empty at t = 220 s, measured), a fraction of the
+    reference's 6-8e-3."""
     need_msl("Fluid", "Examples", "Tanks.mo")
     from trackingbox.compiler import compile_model
 
@@ -59,9 +62,9 @@ def test_the_compiled_tanks_follow_the_energy_balance_of_their_levels(model, tmp
         assert dev < 1e-5, key
     th, vh = check.simulated(fmu, ref, None)
     levels = [s for s in ref.signals if s.endswith(".level")]
-    worst, where, missing = compare(ref, th, {s: vh[s] for s in levels})
+    worst, where, missing = compare(replace(ref, signals=tuple(levels)), th, vh)
     assert not missing and worst < 1e-4, where
     for s in ref.signals:
         if s.endswith("medium.T"):
             gap = np.max(np.abs(np.interp(ref.time, th, vh[s]) - np.interp(ref.time, t, values[s])))
-            assert gap < 1e-3 * scale[s], s
+            assert gap < 2e-3 * scale[s], s
