@@ -65,6 +65,27 @@ def test_an_event_a_hair_later_is_not_a_deviation_but_a_missing_jump_is():
     assert deviation(ref_t, ref_y, our_t, never, 1e-4) == pytest.approx(1.0)
 
 
+def test_a_ramp_an_event_starts_a_hair_later_is_not_a_deviation_but_a_wrong_slope_or_a_late_event_is():
+    """PumpingSystem's pump speed: a trapezoid rising at 400 rpm/s to 1200 rpm from an on/off controller's
+    switch, which ours finds 4.6 ms after the reference (a pressure crossing its threshold at 7 Pa/s): read at
+    the reference's points alone, 1.8 rpm (1.5e-3 of the range) along the ramp; within the window (0.2 s,
+    1e-4 of the 2000 s horizon) the same trajectory, a hair later, is no deviation."""
+    def trapezoid(t, start, rate=400.0):
+        return np.clip((t - start) * rate, 0.0, 1200.0)
+    ref_t = np.round(np.arange(0.0, 2000.0001, 0.2), 10)
+    ref_y = trapezoid(ref_t, 1905.11886)
+    our_t = np.sort(np.r_[ref_t, 1905.11886 + 0.0046, 1905.11886 + 0.0046 + 3.0])
+    window = 1e-4 * 2000.0
+    assert deviation(ref_t, ref_y, our_t, trapezoid(our_t, 1905.11886 + 0.0046), 0.0) == pytest.approx(
+        0.0046 * 400 / 1200, rel=1e-6)
+    assert deviation(ref_t, ref_y, our_t, trapezoid(our_t, 1905.11886 + 0.0046), window) == 0.0
+    # the switch 0.5 s late: 0.3 s of it beyond the window, 120 rpm
+    assert deviation(ref_t, ref_y, our_t, trapezoid(our_t, 1905.61886), window) == pytest.approx(0.1, rel=1e-6)
+    # a ramp 10 % too slow: at its end (3 s in) 1/11 of it is 0.27 s, beyond the window
+    slow = trapezoid(our_t, 1905.11886, rate=400.0 / 1.1)
+    assert deviation(ref_t, ref_y, our_t, slow, window) > 1e-2
+
+
 def test_compare_names_the_worst_signal_and_the_missing_ones():
     t = np.linspace(0, 1, 5)
     ref = Reference(("a", "b", "c"), t, {"a": t, "b": 2 * t, "c": t}, Path("x.csv"))
