@@ -75,8 +75,9 @@ def refuse_failed_homotopy_start(source: ModelicaSource, model: str, libraries: 
     fmu.unlink(missing_ok=True)
     raise UnsupportedConstructError(
         f"unsupported Modelica construct in {model}: homotopy(actual, simplified) at "
-        f"{', '.join(str(c) for c in calls)}{' ...' if len(calls) >= 4 else ''}, whose simplified form the "
-        f"initialisation needs: rumoca 0.10.2 keeps only the actual argument, and from the start values "
-        f"the actual initial equations are not solved (the FMU, at its default parameters: {failed}). "
+        f"{', '.join(str(c) for c in calls)}{' ...' if len(calls) >= 4 else ''}: rumoca 0.10.2 keeps only the "
+        f"actual argument (Modelica tools start the initialisation from the simplified one), and from the "
+        f"start values the actual initial equations are not solved (the FMU, at its default parameters: "
+        f"{failed}). "
         "The embedded backend cannot compile it; use --backend openmodelica where omc is installed, or "
         "give start values near the initial solution")
