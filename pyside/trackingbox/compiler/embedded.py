@@ -25,6 +25,7 @@ from . import function_locals, inner_defaults
 from .expandable import drop_absent_members
 from .fmi_export import export_fmu
 from .flatten import FlatTranslator
+from .init_check import refuse_failed_homotopy_start
 from .frontend import FlatCache, FrontendTree, build_tree, may_be_pruned
 from .library import index_for, locate, model_files, one_look, resolve_libraries
 from .rewrite import frontend_bytes
@@ -753,6 +754,8 @@ def _compile_embedded(source: ModelicaSource, model: str, output: Path,
     t2 = time.perf_counter()
     settings = experiment_settings(source, model)
     build_log = export_fmu(em, translator, output, experiment=settings, fixed_parameters=parameters == "fixed")
+    if em.initial is not None:  # homotopy(): rumoca keeps only its actual argument (.init_check)
+        refuse_failed_homotopy_start(source, model, libraries, output)
     t3 = time.perf_counter()
     computed = set(em.initial.computed_parameters) if em.initial is not None else set()
     tunable = sum(1 for p in em.parameters if p.name not in computed)  # fixed = false ones are calculated
