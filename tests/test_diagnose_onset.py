@@ -45,8 +45,10 @@ def test_onset_points_from_the_targets_variable(monkeypatch):
     monkeypatch.setattr(ft, "simulate_window", fake_run)
     effect = NS(parameters=[NS(name="k", onset_of=""), NS(name="xOn", onset_of="x"), NS(name="tau", onset_of="")])
     x = problem.start.copy()
-    points = ft.onset_starts(effect, "effect", problem, NS(lead=5), x, {"k": "scale_k", "xOn": "scale_xOn"})
-    assert "effect.x" in asked.values() and asked["QI-6150"] == "DI_product"
+    variables = ["effect.x", "effect.xs", "flash.x", "DI_product"]
+    points = ft.onset_starts(effect, "effect", problem, NS(lead=5), x, {"k": "scale_k", "xOn": "scale_xOn"},
+                             variables)
+    assert set(asked.values()) == {"effect.x", "DI_product"} and asked["QI-6150"] == "DI_product"
     quart = np.quantile(series[5:], [0.25, 0.5, 0.75])
     assert [p[2] for p in points] == pytest.approx(quart)
     for p in points:
@@ -54,7 +56,26 @@ def test_onset_points_from_the_targets_variable(monkeypatch):
     # an entry without an onset costs no run
     asked.clear()
     assert ft.onset_starts(NS(parameters=[NS(name="k", onset_of="")]), "effect", problem, NS(lead=5), x,
-                           {"k": "scale_k"}) == [] and not asked
+                           {"k": "scale_k"}, variables) == [] and not asked
+
+
+def test_an_array_target_pools_its_elements(monkeypatch):
+    problem = Problem(twin=Path("twin.fmu"), names=("scale_xOn",), start=np.array([0.5]), lower=np.array([0.4]),
+                      upper=np.array([0.85]), fixed={}, outputs={}, sample_time=10.0, warmup=0.0)
+    runs = {"effect[1].x": np.linspace(0.55, 0.60, 50), "effect[2].x": np.linspace(0.70, 0.80, 50)}
+    by_key = {}
+
+    def fake_run(p, window, x):
+        by_key.update(p.outputs)
+        return {k: runs[v] for k, v in p.outputs.items()}
+
+    monkeypatch.setattr(ft, "simulate_window", fake_run)
+    effect = NS(parameters=[NS(name="xOn", onset_of="x")])
+    points = ft.onset_starts(effect, "effect", problem, NS(lead=0), problem.start, {"xOn": "scale_xOn"},
+                             ["effect[1].x", "effect[2].x", "effect[1].xs", "effects[1].x"])
+    assert sorted(by_key.values()) == ["effect[1].x", "effect[2].x"]
+    quart = np.quantile(np.concatenate(list(runs.values())), [0.25, 0.5, 0.75])
+    assert [p[0] for p in points] == pytest.approx(quart)
 
 
 def test_entries_declare_their_onsets(tmp_path):

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import TrackingError
 from ..estimation import estimate, jacobian_points
+from ..fmu import read_info
 from ..simulation.models import close_models
 from ..simulation.windows import load_windows, problem_from_spec, simulate_window
 from ..spec import load_spec, write_starts
@@ -421,7 +422,7 @@ def quartile_starts(values: Any, lo: float, hi: float, start: float) -> list[flo
 
 
 def onset_starts(effect: Any, target: str, problem: Any, window: Any, x: np.ndarray,
-                 full: Mapping[str, str]) -> list[np.ndarray]:
+                 full: Mapping[str, str], variables: Sequence[str] | None = None) -> list[np.ndarray]:
     """Further points *x* for the linearised screen of an entry with an onset (``onset_of``): each onset
     parameter at the quartiles of its variable on *target* over the patched twin's run at *x* on *window*.
 
@@ -429,20 +430,28 @@ def onset_starts(effect: Any, target: str, problem: Any, window: Any, x: np.ndar
     constant growth: the same column as the tracked fouling's rise, which the null model's varying fouling
     already carries, and a zero column in the onset itself. Its form is only seen, and its onset only
     identified, where the variable crosses the onset; the quartiles of the twin's own variable are where it
-    does. One run of the patched twin with that variable as an extra output.
+    does. One run of the patched twin with that variable as an extra output (*variables*: the twin's
+    variable names; None: read from its FMU).
     """
     names = list(problem.names)
-    onsets = {p.name: f"{target}.{p.onset_of}" for p in getattr(effect, "parameters", ()) or ()
+    onsets = {p.name: p.onset_of for p in getattr(effect, "parameters", ()) or ()
               if getattr(p, "onset_of", "") and full.get(p.name) in names}
     if not onsets:
         return []
-    extra = {f"__onset_{k}": v for k, v in onsets.items()}
+    known = {v.name for v in read_info(problem.twin).variables} if variables is None else set(variables)
+    # an array target (the train's effect[k]) pools its elements' variable
+    extra = {f"__onset_{short}_{j}": v for short, var in onsets.items()
+             for j, v in enumerate(n for n in sorted(known) if re.fullmatch(
+                 re.escape(target) + r"(\[\d+\])?\." + re.escape(var), n))}
+    if not extra:
+        return []
     run = simulate_window(replace(problem, outputs={**problem.outputs, **extra}), window, x)
     points = []
-    for short, key in zip(onsets, extra):
+    for short in onsets:
         i = names.index(full[short])
-        for q in quartile_starts(run[key][window.lead:], float(problem.lower[i]), float(problem.upper[i]),
-                                 float(x[i])):
+        pooled = [run[k][window.lead:] for k in extra if k.startswith(f"__onset_{short}_")]
+        for q in quartile_starts(np.concatenate(pooled) if pooled else [], float(problem.lower[i]),
+                                 float(problem.upper[i]), float(x[i])):
             xq = np.array(x, dtype=float, copy=True)
             xq[i] = q
             points.append(xq)
