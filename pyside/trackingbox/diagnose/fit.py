@@ -27,8 +27,9 @@ import numpy as np
 
 from ..errors import TrackingError
 from ..estimation import estimate, jacobian_points
+from ..fmu import read_info
 from ..simulation.models import close_models
-from ..simulation.windows import load_windows, problem_from_spec
+from ..simulation.windows import load_windows, problem_from_spec, simulate_window
 from ..spec import load_spec, write_starts
 from . import library
 from .candidates import (PIN_EVIDENCE, Candidate, at_bound, freed_evidence, joint, pinned_at_bounds, score,
@@ -398,6 +399,65 @@ def _compile_key(spec: Any, structure: Any) -> str:
 LINEAR_STEP = 1.0e-2
 
 
+def quartile_starts(values: Any, lo: float, hi: float, start: float) -> list[float]:
+    """Linearisation points of an onset parameter besides its *start*: the quartiles of the variable it is a
+    threshold of (*values*, finite ones), inside ``[lo, hi]``, each at least 1 % of the range from the start
+    and from each other.
+
+    >>> quartile_starts([0.70, 0.78, 0.80, 0.82, 0.90], 0.4, 0.85, 0.5)
+    [0.78, 0.8, 0.82]
+    >>> quartile_starts([0.3, 0.3, 0.3], 0.4, 0.85, 0.5)
+    [0.4]
+    """
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    out: list[float] = []
+    if not v.size:
+        return out
+    for q in np.quantile(v, (0.25, 0.5, 0.75)):
+        q = float(min(max(q, lo), hi))
+        if all(abs(q - o) > 0.01 * (hi - lo) for o in (start, *out)):
+            out.append(q)
+    return out
+
+
+def onset_starts(effect: Any, target: str, problem: Any, window: Any, x: np.ndarray,
+                 full: Mapping[str, str], variables: Sequence[str] | None = None) -> list[np.ndarray]:
+    """Further points *x* for the linearised screen of an entry with an onset (``onset_of``): each onset
+    parameter at the quartiles of its variable on *target* over the patched twin's run at *x* on *window*.
+
+    A threshold law (scale above a dry-solids onset) linearised at an onset the variable never crosses is a
+    constant growth: the same column as the tracked fouling's rise, which the null model's varying fouling
+    already carries, and a zero column in the onset itself. Its form is only seen, and its onset only
+    identified, where the variable crosses the onset; the quartiles of the twin's own variable are where it
+    does. One run of the patched twin with that variable as an extra output (*variables*: the twin's
+    variable names; None: read from its FMU).
+    """
+    names = list(problem.names)
+    onsets = {p.name: p.onset_of for p in getattr(effect, "parameters", ()) or ()
+              if getattr(p, "onset_of", "") and full.get(p.name) in names}
+    if not onsets:
+        return []
+    known = {v.name for v in read_info(problem.twin).variables} if variables is None else set(variables)
+    # an array target (the train's effect[k]) pools its elements' variable
+    extra = {f"__onset_{short}_{j}": v for short, var in onsets.items()
+             for j, v in enumerate(n for n in sorted(known) if re.fullmatch(
+                 re.escape(target) + r"(\[\d+\])?\." + re.escape(var), n))}
+    if not extra:
+        return []
+    run = simulate_window(replace(problem, outputs={**problem.outputs, **extra}), window, x)
+    points = []
+    for short in onsets:
+        i = names.index(full[short])
+        pooled = [run[k][window.lead:] for k in extra if k.startswith(f"__onset_{short}_")]
+        for q in quartile_starts(np.concatenate(pooled) if pooled else [], float(problem.lower[i]),
+                                 float(problem.upper[i]), float(x[i])):
+            xq = np.array(x, dtype=float, copy=True)
+            xq[i] = q
+            points.append(xq)
+    return points
+
+
 def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: Path, *,
                     step: float = LINEAR_STEP) -> Candidate:
     """Screen a ``compile`` entry cheaply: its patched twin linearised in the effect's parameters.
@@ -411,7 +471,9 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
     transform's columns do. A value outside its bounds is clipped there and the
     candidates refitted with the effect fixed. The candidate is scored like any
     screening (``stage = "screen"``, ``fit = None``); the best ones are then fitted
-    properly (:func:`fit_candidate`).
+    properly (:func:`fit_candidate`). An entry with an onset parameter (``onset_of``)
+    is linearised at its start and at each point of :func:`onset_starts`; the best
+    ΔBIC is kept.
 
     Parameters
     ----------
@@ -430,6 +492,19 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
     windows = load_windows(pspec, warmup=problem.warmup)
     names = list(problem.names)
     x0 = np.array([where.null.parameters.get(n, s) for n, s in zip(names, problem.start)], dtype=float)
+    try:
+        points = [x0, *onset_starts(effect, target, problem, windows[0], x0, prepared.full)]
+        found = [_linearised(where, effect, target, prepared, problem, windows, x, step) for x in points]
+    finally:
+        close_models()
+    return max(found, key=lambda c: c.delta_bic if math.isfinite(c.delta_bic) else -math.inf)
+
+
+def _linearised(where: WhereResult, effect: Any, target: str, prepared: Prepared, problem: Any,
+                windows: Sequence[Any], x0: np.ndarray, step: float) -> Candidate:
+    """:func:`screen_compiled` at one point *x0* of the patched twin's parameters (runs; no close)."""
+    pspec = prepared.spec
+    names = list(problem.names)
     shorts = [s for s in prepared.full if prepared.full[s] in names]
     idx = [names.index(prepared.full[s]) for s in shorts]
     # the polishing step of the null model (residuals.polish) applies to the patched twin as well
@@ -439,22 +514,19 @@ def screen_compiled(spec: Any, where: WhereResult, effect: Any, target: str, wor
     delta0 = (np.asarray(where.x, dtype=float) - raw) if where.x is not None and raw.size else np.zeros(0)
     tags = [t for t in pspec.outputs if t in where.tags]
     base, cols = [], []
-    try:
-        points, h = jacobian_points(x0[idx], problem.lower[idx], problem.upper[idx], step)
-        for w, jac in zip(windows, where.jacobian):
-            b = window_series(problem, w, x0, pspec.inputs)
-            shift = {t: (jac[t] @ delta0 if t in jac and delta0.size else 0.0) for t in tags}
-            base.append({t: b.measured[t] - b.simulated[t] - shift[t] for t in tags})
-            per_tag: dict[str, list[np.ndarray]] = {t: [] for t in tags}
-            for point, hj in zip(points, h):
-                x = x0.copy()
-                x[idx] = point
-                s = window_series(problem, w, x, pspec.inputs)
-                for t in tags:
-                    per_tag[t].append((s.simulated[t] - b.simulated[t]) / hj)
-            cols.append({t: np.column_stack(c) for t, c in per_tag.items()})
-    finally:
-        close_models()
+    points, h = jacobian_points(x0[idx], problem.lower[idx], problem.upper[idx], step)
+    for w, jac in zip(windows, where.jacobian):
+        b = window_series(problem, w, x0, pspec.inputs)
+        shift = {t: (jac[t] @ delta0 if t in jac and delta0.size else 0.0) for t in tags}
+        base.append({t: b.measured[t] - b.simulated[t] - shift[t] for t in tags})
+        per_tag: dict[str, list[np.ndarray]] = {t: [] for t in tags}
+        for point, hj in zip(points, h):
+            x = x0.copy()
+            x[idx] = point
+            s = window_series(problem, w, x, pspec.inputs)
+            for t in tags:
+                per_tag[t].append((s.simulated[t] - b.simulated[t]) / hj)
+        cols.append({t: np.column_stack(c) for t, c in per_tag.items()})
     beta, after_t, after_v, _, step_c = joint(where, base[0], base[1], cols[0], cols[1])
     e0 = x0[idx]
     lo, hi = problem.lower[idx], problem.upper[idx]

@@ -76,7 +76,7 @@ _ID = re.compile(r"^[a-z][a-z0-9]*(?:-[a-z0-9]+)*$")
 _IDENT = re.compile(r"^[A-Za-z_]\w*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*$")
 _ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters", "sources")
-_PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges")
+_PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges", "onset_of")
 
 
 # --------------------------------------------------------------------------- entries
@@ -97,6 +97,9 @@ class EffectParameter:
     ranges : mapping
         Bounds per unit of the tag's variable (``"K" = [-2.0, 2.0]``), overriding
         ``min``/``max`` for a tag of that unit.
+    onset_of : str
+        A threshold of the target's variable of this name (``x``): the linearised screen starts the
+        parameter at that variable's quartiles too (:func:`trackingbox.diagnose.fit.onset_starts`).
     """
 
     name: str
@@ -106,6 +109,7 @@ class EffectParameter:
     min: float
     max: float
     ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    onset_of: str = ""
 
     def resolved(self, variable_unit: str = "") -> tuple[str, float, float, float]:
         """(unit, start, min, max) for a target whose variable has unit *variable_unit*."""
@@ -215,6 +219,10 @@ def _read_parameter(table: Any, i: int, where: str, problems: list[str]) -> Effe
                                 f"got {pair!r}")
                 continue
             ranges[u] = (float(pair[0]), float(pair[1]))
+    onset = table.get("onset_of", "")
+    if not isinstance(onset, str) or (onset and not _DOTTED.match(onset)):
+        problems.append(f"{label}: field 'onset_of' must name a variable of the target, got {onset!r}")
+        onset = ""
     if name is None or None in values or not isinstance(unit, str) or not isinstance(description, str):
         return None
     start, lo, hi = values
@@ -224,7 +232,7 @@ def _read_parameter(table: Any, i: int, where: str, problems: list[str]) -> Effe
     elif not lo <= start <= hi:
         problems.append(f"{label}: field 'start' ({start!r}) is outside [min, max] = [{lo!r}, {hi!r}]")
     return EffectParameter(name=name, description=description, unit=unit, start=start, min=lo, max=hi,
-                           ranges=ranges)
+                           ranges=ranges, onset_of=onset)
 
 
 def read_effect(folder: str | Path) -> Effect:
