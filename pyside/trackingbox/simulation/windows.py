@@ -269,6 +269,9 @@ def carried_states(problem: Problem, window: WindowData, x: npt.ArrayLike, histo
     t0 = run_start(problem, window)
     earlier = [w for w in history if w is not window and float(w.time[0]) < t0 <= float(w.time[-1])]
     if not earlier:
+        if any(float(w.time[0]) < t0 for w in history if w is not window):  # a gap in the data between
+            log.info("%s window: no other run covers its start at t = %g s; %s start at their start values",
+                     window.name, t0, ", ".join(problem.carry))
         return {}
     before = min(earlier, key=lambda w: float(w.time[0]))
     if _key(problem, before, x) not in _RUNS:
