@@ -99,7 +99,7 @@ def test_the_levelling_uses_the_patched_twins_sensitivity_to_the_varying_candida
     t = np.arange(0.0, 3600.0, 10.0)
     u = 0.77 + 0.01 * np.sin(t / 600.0)
 
-    def series(problem, window, x, inputs):
+    def series(problem, window, x, inputs, history=()):
         rf, g = float(x[0]), float(x[1])
         return rs.WindowResiduals(window, t, {"Q": u}, {"Q": (1.0 + g) * (-45.0 * rf + u), "P": 3.0 * rf + 0 * t}, {})
 

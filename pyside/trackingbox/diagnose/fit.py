@@ -215,7 +215,9 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
     sides = {s: side for s, v in fitted.items()
              if s in bounds and zero_able(*bounds[s]) and (side := at_bound(v, *bounds[s]))}
     try:
-        series = [window_series(problem, w, x, pspec.inputs) for w in (training, validation)]
+        # a carried state (a scale) starts the validation run where the training run had it
+        both = (training, validation)
+        series = [window_series(problem, w, x, pspec.inputs, both) for w in both]
         where = patched_varying(where, problem, (training, validation), x, pspec.inputs, series)
         inside = {}
         for short, side in sides.items():
@@ -223,7 +225,7 @@ def fit_candidate(spec: Any, where: WhereResult, effect: Any, target: str, work_
             h = LINEAR_STEP * (bounds[short][1] - bounds[short][0])
             xi = x.copy()
             xi[i] -= side * h
-            inside[short] = (h, [window_series(problem, w, xi, pspec.inputs) for w in (training, validation)])
+            inside[short] = (h, [window_series(problem, w, xi, pspec.inputs, both) for w in both])
     finally:
         close_models()
     tags = [t for t in pspec.outputs if t in where.tags]
@@ -281,7 +283,7 @@ def patched_varying(where: WhereResult, problem: Any, windows: Sequence[Any], x:
         k = names.index(name)
         points, h = jacobian_points(x, problem.lower, problem.upper, 1.0e-3)
         for w, base, cols in zip(windows, series, jac):
-            moved = window_series(problem, w, points[k], inputs)
+            moved = window_series(problem, w, points[k], inputs, tuple(windows))
             for t, c in cols.items():
                 if t in moved.simulated and c.shape[1] > i:
                     c[:, i] = (moved.simulated[t] - base.simulated[t]) / h[k]
@@ -516,14 +518,14 @@ def _linearised(where: WhereResult, effect: Any, target: str, prepared: Prepared
     base, cols = [], []
     points, h = jacobian_points(x0[idx], problem.lower[idx], problem.upper[idx], step)
     for w, jac in zip(windows, where.jacobian):
-        b = window_series(problem, w, x0, pspec.inputs)
+        b = window_series(problem, w, x0, pspec.inputs, tuple(windows))
         shift = {t: (jac[t] @ delta0 if t in jac and delta0.size else 0.0) for t in tags}
         base.append({t: b.measured[t] - b.simulated[t] - shift[t] for t in tags})
         per_tag: dict[str, list[np.ndarray]] = {t: [] for t in tags}
         for point, hj in zip(points, h):
             x = x0.copy()
             x[idx] = point
-            s = window_series(problem, w, x, pspec.inputs)
+            s = window_series(problem, w, x, pspec.inputs, tuple(windows))
             for t in tags:
                 per_tag[t].append((s.simulated[t] - b.simulated[t]) / hj)
         cols.append({t: np.column_stack(c) for t, c in per_tag.items()})

@@ -44,13 +44,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 import jinja2
 
 from ..compiler import compile_model, library_path
-from ..compiler.source import (
-    _class_range,
-    _file_of,
-    read_text,
-    resolve_source,
-    strip_comments,
-)
+from ..compiler.source import _class_range, _file_of, read_text, resolve_source, strip_comments
 from ..errors import SpecError, did_you_mean
 from ..fmu import read_info
 from ..generate import filters
@@ -75,7 +69,8 @@ UNIT_OF_VARIABLE = "{unit}"
 _ID = re.compile(r"^[a-z][a-z0-9]*(?:-[a-z0-9]+)*$")
 _IDENT = re.compile(r"^[A-Za-z_]\w*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*$")
-_ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters", "sources")
+_ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters", "sources",
+               "carried")
 _PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges", "onset_of")
 
 
@@ -150,6 +145,10 @@ class Effect:
         Where the entry was read from.
     sources : str
         Where its form and bounds come from (notes, literature), for the reader.
+    carried : tuple of str
+        States the template declares (``<prefix>_<name>``) that hold the plant's history (a scale grown
+        over hours): carried from the run over the history into a later window's run, never settled at
+        a steady start (``[data] carry`` of the patched spec, :func:`trackingbox.simulation.windows.carried_states`).
     """
 
     id: str
@@ -163,6 +162,7 @@ class Effect:
     template: str
     folder: Path
     sources: str = ""
+    carried: tuple[str, ...] = ()
 
     def parameter(self, name: str) -> EffectParameter:
         """The parameter *name*; SpecError with did-you-mean when unknown."""
@@ -291,6 +291,9 @@ def read_effect(folder: str | Path) -> Effect:
     coefficient = raw.get("coefficient")
     if coefficient is not None and (not isinstance(coefficient, str) or not _IDENT.match(coefficient)):
         problems.append(f"{where}: field 'coefficient' must be a parameter name, got {coefficient!r}")
+    if not isinstance(carried := raw.get("carried", []), list) or not all(
+            isinstance(c, str) and _IDENT.match(c) for c in carried):
+        problems.append(f"{where}: field 'carried' must list names of states the template declares, got {carried!r}")
     if screen in ("coefficient-ramp", "levelling-ramp") and coefficient is None:
         problems.append(f"{where}: field 'coefficient' is required with screen = {screen!r}")
     if screen in ("levelling-drift", "levelling-ramp") and len(raw.get("parameters") or []) != 2:
@@ -318,7 +321,7 @@ def read_effect(folder: str | Path) -> Effect:
         raise SpecError("bad effect entry: " + "; ".join(problems))
     return Effect(id=eid, explanation=explanation.strip(), kind=kind, classes=tuple(classes), hook=hook,
                   screen=screen, coefficient=coefficient, parameters=tuple(params), template=template,
-                  folder=folder.resolve(), sources=sources.strip())
+                  folder=folder.resolve(), sources=sources.strip(), carried=tuple(carried))
 
 
 def load_effects(folders: Iterable[str | Path] = ()) -> dict[str, Effect]:
@@ -595,6 +598,7 @@ class Patch:
     parameters: tuple[PatchParameter, ...]
     findings: tuple[Finding, ...]
     library: Path
+    carry: tuple[str, ...] = ()   # the effects' carried states, full names (Effect.carried)
 
     @property
     def file_name(self) -> str:
@@ -688,8 +692,7 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
         raise SpecError(f"a patch extends the twin's Modelica class, but {spec.path} has no [source] table")
     if not findings:
         raise SpecError("render_patch needs at least one finding")
-    if effects is None:
-        effects = load_effects(getattr(getattr(spec, "diagnose", None), "effects", ()))
+    effects = effects if effects is not None else load_effects(getattr(getattr(spec, "diagnose", None), "effects", ()))
     twin = spec.source.model
     model = name or f"{twin.rsplit('.', 1)[-1]}Diagnosed"
     if not _IDENT.match(model):
@@ -808,7 +811,9 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
     source = "\n".join(lines)
     diff = _diff(source, model)
     return Patch(model=model, twin=twin, source=source, diff=diff, outputs=outputs, parameters=tuple(parameters),
-                 findings=tuple(ordered), library=Path(spec.source.path))
+                 findings=tuple(ordered), library=Path(spec.source.path),
+                 carry=tuple(f"{prefix_for(f.effect, f.target)}_{name}" for f in ordered
+                             for name in effects[f.effect].carried))
 
 
 def _diff(source: str, model: str) -> str:
@@ -881,7 +886,8 @@ def patched_spec(spec: Any, patch: Patch, out_dir: str | Path, fmu: str | Path) 
     extra = tuple(ParameterSpec(p.name, p.start, p.min, p.max) for p in patch.parameters if p.name not in names)
     new = replace(spec, path=out / "spec.toml", twin=Path(fmu).resolve(), outputs=outputs,
                   source=SourceSpec(path=mo, model=patch.model),
-                  parameters=tuple(spec.parameters) + extra)
+                  parameters=tuple(spec.parameters) + extra,
+                  data=replace(spec.data, carry=tuple(dict.fromkeys((*spec.data.carry, *patch.carry)))))
     findings = "; ".join(f"{f.effect} on {f.target}" for f in patch.findings)
     target = write_spec(new, out / "spec.toml",
                         header=f"spec for {patch.model} ({findings}), written by trackingbox diagnose\n"

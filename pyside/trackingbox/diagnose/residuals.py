@@ -498,9 +498,10 @@ class WhereResult:
 
 
 def window_series(problem: Problem, window: WindowData, x: npt.ArrayLike,
-                  input_tags: Mapping[str, str]) -> WindowResiduals:
-    """Simulate *window* at parameters *x* and cut off the lead-in."""
-    sim = simulate_window(problem, window, x)
+                  input_tags: Mapping[str, str], history: tuple[WindowData, ...] = ()) -> WindowResiduals:
+    """Simulate *window* at parameters *x* and cut off the lead-in (*history*: the windows whose runs a
+    carried state comes from, :func:`trackingbox.simulation.windows.carried_states`)."""
+    sim = simulate_window(problem, window, x, history=history)
     keep = slice(window.lead, None)
     by_fmu = {fmu: tag for tag, fmu in input_tags.items()}
     return WindowResiduals(

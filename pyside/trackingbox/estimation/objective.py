@@ -67,11 +67,14 @@ class Objective:
         The estimation problem.
     window
         The window whose measurements the simulation is compared with.
+    history
+        The windows a carried state comes from (``problem.carry``, :func:`.windows.carried_states`).
     """
 
-    def __init__(self, problem: Problem, window: WindowData) -> None:
+    def __init__(self, problem: Problem, window: WindowData, history: tuple[WindowData, ...] = ()) -> None:
         self.problem = problem
         self.window = window
+        self.history = tuple(history)
         tags = list(problem.outputs)
         self._valid = {tag: np.isfinite(window.measured[tag]) for tag in tags}
         self._scale = {tag: scale(window.measured[tag][self._valid[tag]]) for tag in tags}
@@ -83,7 +86,7 @@ class Objective:
 
     def nrmse(self, x: npt.ArrayLike) -> dict[str, float]:
         """NRMSE per output tag at *x* (raises SimulationError if the twin fails)."""
-        sim = simulate_window(self.problem, self.window, x)
+        sim = simulate_window(self.problem, self.window, x, history=getattr(self, "history", ()))
         out = {}
         for tag, y in sim.items():
             ok = self._valid[tag]
@@ -106,7 +109,7 @@ class Objective:
         of its weight (the sum of squares becomes the weighted mean of NRMSE**2).
         """
         try:
-            sim = simulate_window(self.problem, self.window, x)
+            sim = simulate_window(self.problem, self.window, x, history=getattr(self, "history", ()))
         except (TrackingError, ArithmeticError) as exc:
             log.warning("simulation failed at %s: %s", fmt_values(self.problem.names, x), exc)
             return np.full(self._size, FAILED_COST / math.sqrt(max(self._size, 1)))

@@ -479,7 +479,7 @@ def _run(spec: Any, problem: Problem, journal: Journal, *, t_start: float, ckpt:
                         "it); its runs start from %s", name, problem.warmup, used,
                         "the FMU's own initial state" if problem.initial == "model" else "the steady state")
     train = Objective(problem, training)
-    valid = Objective(problem, validation)
+    valid = Objective(problem, validation, (training, validation))
     history: list[float] = []
     evaluations = 0
     refinement: dict[str, Any] = {}
@@ -605,14 +605,14 @@ def fit_series(spec: Any, parameter_sets: Mapping[str, Mapping[str, float]], *,
     try:
         windows = load_windows(spec, warmup=problem.warmup)
         for window in windows:
-            out[window.name] = _series(problem, window, parameter_sets)
+            out[window.name] = _series(problem, window, parameter_sets, windows)
     finally:
         close_models()
     return out
 
 
-def _series(problem: Problem, window: WindowData,
-            parameter_sets: Mapping[str, Mapping[str, float]]) -> pd.DataFrame:
+def _series(problem: Problem, window: WindowData, parameter_sets: Mapping[str, Mapping[str, float]],
+            history: tuple[WindowData, ...] = ()) -> pd.DataFrame:
     """Measured and simulated series of one window (lead-in left out)."""
     keep = slice(window.lead, None)
     frame: dict[str, np.ndarray] = {"time": window.time[keep]}
@@ -620,7 +620,7 @@ def _series(problem: Problem, window: WindowData,
         frame[tag] = window.measured[tag][keep]
     for label, values in parameter_sets.items():
         x = np.array([float(values.get(n, s)) for n, s in zip(problem.names, problem.start)])
-        sim = simulate_window(problem, window, x)
+        sim = simulate_window(problem, window, x, history=history)
         for tag, y in sim.items():
             frame[f"{tag}:{label}"] = y[keep]
     return pd.DataFrame(frame)

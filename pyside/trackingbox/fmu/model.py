@@ -342,6 +342,7 @@ class FMUModel:
         input_rule: str = "linear",
         initial: str = "model",
         note: Callable[[float], None] | None = None,
+        hold: Sequence[str] = (),
     ) -> pd.DataFrame:
         """Simulate from *start_time* to *stop_time* and sample every *output_interval*.
 
@@ -350,7 +351,8 @@ class FMUModel:
         see every input sample). *input_rule* as for :meth:`stepper`.
         *initial* ``"model"``: the FMU's own initial state at *start_time*;
         ``"steady"``: its steady state there, with the inputs at their first
-        values (:meth:`~trackingbox.fmu.steppers.ModelExchangeStepper.settle`).
+        values (:meth:`~trackingbox.fmu.steppers.ModelExchangeStepper.settle`), the
+        states named in *hold* kept at their start values (which *parameters* may set).
         *note*, if given, is called with each communication point before the
         step towards it (e.g. to name the phase of the run for the watchdog).
 
@@ -384,7 +386,7 @@ class FMUModel:
         points = grid
         stepper = self.stepper(start_time=start_time, parameters=parameters, inputs=inputs, input_rule=input_rule)
         if initial == "steady":
-            stepper.settle()
+            stepper.settle(hold=tuple(hold))
         elif initial != "model":
             raise FMUError(f"initial state must be 'model' or 'steady', not {initial!r}")
         input_times = stepper.input_times

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ..errors import FMUError
+
 Vector = npt.NDArray[np.float64]
 
 #: the integrator's tolerances on the (scaled) states
@@ -137,3 +139,30 @@ def no_steady_state(states: Sequence[str], drift: Vector, limit: float, lost: tu
     return (f"{named(worst)} still changes by {drift[worst]:.3g} times its size per hour ({how}); an integrating "
             f"state (a level whose flows do not balance) has none: set [data] initial = \"model\" to start from "
             f"the FMU's own initial state")
+
+
+def free_states(names: Sequence[str], hold: Sequence[str], model: str) -> npt.NDArray[np.bool_]:
+    """Which of the states *names* a steady start settles: all but those in *hold*, which keep their values.
+
+    A slow state of hours to days (a scale that grows above a dry-solids onset and washes off over a day)
+    is no part of the steady state the process reaches in minutes: its value is the plant's history, not
+    an equilibrium (:attr:`trackingbox.simulation.windows.Problem.carry`).
+
+    >>> free_states(["T", "R"], ["R"], "m.fmu").tolist()
+    [True, False]
+    """
+    unknown = sorted(set(hold) - set(names))
+    if unknown:
+        raise FMUError(f"{model}: no continuous state {', '.join(unknown)} to hold in its steady state")
+    return np.array([s not in set(hold) for s in names], dtype=bool)
+
+
+def spread(full: Vector, free: npt.NDArray[np.bool_], values: Vector) -> Vector:
+    """*full* with *values* at the positions *free*.
+
+    >>> spread(np.array([1.0, 2.0, 3.0]), np.array([True, False, True]), np.array([7.0, 9.0])).tolist()
+    [7.0, 2.0, 9.0]
+    """
+    out = np.array(full, dtype=float, copy=True)
+    out[free] = values
+    return out

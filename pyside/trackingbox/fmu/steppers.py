@@ -26,7 +26,7 @@ from ..errors import DataError, FMUError, SimulationError, unknown_name
 from .adapters import FMIAdapter
 from .calls import fmu_calls, simulation_failure
 from .info import REAL_TYPES, change_refusal
-from .steady import no_steady_state, settle_by_integration
+from .steady import free_states, no_steady_state, settle_by_integration, spread
 
 if TYPE_CHECKING:
     from .model import FMUModel
@@ -428,7 +428,7 @@ class Stepper(abc.ABC):
         """
         return self._getter(tuple(names))
 
-    def settle(self) -> None:
+    def settle(self, hold: Sequence[str] = ()) -> None:
         """Start from the model's steady state (model exchange only: :meth:`ModelExchangeStepper.settle`)."""
         self._check_open()
         raise FMUError(f"{self.model.path.name} runs as co-simulation: its states cannot be set, so it cannot "
@@ -813,7 +813,7 @@ class ModelExchangeStepper(Stepper):
     #: (the scale: its magnitude, at least its nominal value)
     STEADY_DRIFT = 1e-6
 
-    def settle(self) -> None:
+    def settle(self, hold: Sequence[str] = ()) -> None:
         """Replace the continuous states by the model's steady state at :attr:`time`.
 
         Solves ``der(x) = 0`` with the parameters and inputs as they are now (the
@@ -823,7 +823,7 @@ class ModelExchangeStepper(Stepper):
         far from its steady state), by integrating the model's own settling from
         there (:func:`~trackingbox.fmu.steady.settle_by_integration`). Then an event
         iteration and a solver restart, as after :meth:`set_continuous_states`.
-        The FMU's time never moves.
+        The FMU's time never moves; the states in *hold* keep their values (:func:`.steady.free_states`).
 
         Raises
         ------
@@ -842,18 +842,20 @@ class ModelExchangeStepper(Stepper):
         name = self.model.path.name
         dx = np.zeros(n)
         pdx = dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        free = free_states(self.state_names, hold, name)
         with fmu_calls(f"finding the steady state of {name} at t = {self.time:g} s failed", self.model.log_messages):
             fmu.getContinuousStates(self._px, n)
-            x0 = self._x[:n].copy()
+            full0 = self._x[:n].copy()
             nominal = np.ones(n)
             fmu.getNominalsOfContinuousStates(nominal.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
-            scale = np.maximum(np.abs(x0), np.where(np.isfinite(nominal) & (nominal > 0), nominal, 1.0))
+            scale = np.maximum(np.abs(full0), np.where(np.isfinite(nominal) & (nominal > 0), nominal, 1.0))[free]
+            x0 = full0[free]
 
             def rate(z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-                self._x[:n] = z * scale
+                self._x[:n] = spread(full0, free, z * scale)
                 fmu.setContinuousStates(self._px, n)
                 self._fmi.get_derivatives(pdx, n)
-                return dx / scale
+                return dx[free] / scale
 
             lost: tuple[int, ...] = ()
             with np.errstate(all="ignore"):
@@ -867,13 +869,13 @@ class ModelExchangeStepper(Stepper):
                     drift = np.abs(rate(z)) * 3600.0
                     how = f"Powell's hybrid method: {how}; the model's own settling: {run.message or 'settled'}"
                     lost = run.nonfinite
-            why = no_steady_state(self.state_names, np.where(np.isfinite(z), drift, np.inf), self.STEADY_DRIFT,
-                                  lost, how)
+            why = no_steady_state([s for s, f in zip(self.state_names, free) if f],
+                                  np.where(np.isfinite(z), drift, np.inf), self.STEADY_DRIFT, lost, how)
             if why:
-                self._x[:n] = x0
+                self._x[:n] = full0
                 fmu.setContinuousStates(self._px, n)
                 raise SimulationError(f"{name} has no steady state at t = {self.time:g} s with its inputs there: {why}")
-            self._x[:n] = z * scale
+            self._x[:n] = spread(full0, free, z * scale)
             fmu.setContinuousStates(self._px, n)
             if self._nz:
                 self._event_iteration()

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -125,6 +126,9 @@ class Problem:
     warmup: float
     initial: str = "model"
     inputs: str = "linear"
+    #: Slow states carried through the history (:func:`carried_states`): a run over a window whose start
+    #: an earlier window's run covers starts them at their values there; a steady start holds them.
+    carry: tuple[str, ...] = ()
 
 
 def window_setup(problem: Problem, window: WindowData, x: npt.ArrayLike
@@ -181,7 +185,7 @@ def _phase(problem: Problem, window: WindowData, t0: float) -> Any:
 
 
 def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
-                    tolerance: float = 1e-6) -> dict[str, np.ndarray]:
+                    tolerance: float = 1e-6, history: tuple[WindowData, ...] = ()) -> dict[str, np.ndarray]:
     """Simulate the twin over *window* with parameter vector *x*.
 
     Runs from the window's first grid point (its warm-up through the measured
@@ -189,9 +193,15 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
     there, ``problem.initial``); returns output tag -> simulated values on the
     window's grid (lead-in included). While the run is in the warm-up the
     watchdog's error line says so. *tolerance*: the solver's relative tolerance
-    (tighter for finite differences that must resolve small changes).
+    (tighter for finite differences that must resolve small changes). The
+    ``problem.carry`` states start at their values in the run over a window of
+    *history* that covers this run's start (:func:`carried_states`), else at
+    their own start values; a steady start holds them there.
     """
     parameters, offset, grid, inputs = window_setup(problem, window, x)
+    if problem.carry:
+        parameters.update(carried_states(problem, window, x, history, tolerance))
+        problem = replace(problem, outputs={**problem.outputs, **{_CARRY + s: s for s in problem.carry}})
     t0 = run_start(problem, window)
     stop = t0 + offset + float(grid[-1])
     model = cached_model(problem.twin, tolerance)
@@ -203,10 +213,11 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
             output_interval=problem.sample_time,
             inputs=inputs,
             parameters=parameters,
-            outputs=list(problem.outputs.values()),
+            outputs=list(dict.fromkeys(problem.outputs.values())),
             input_rule=problem.inputs,
             initial=problem.initial,
             note=_phase(problem, window, t0) if t0 < window.start else None,
+            hold=problem.carry,
         )
     finally:
         note_phase()
@@ -217,7 +228,56 @@ def simulate_window(problem: Problem, window: WindowData, x: npt.ArrayLike,
         if not np.all(np.isfinite(y)):
             raise SimulationError(f"twin {problem.twin.name} gave non-finite values of {name!r}")
         out[tag] = np.interp(t0 + offset + grid, t, y)
+    if problem.carry:
+        _remember(problem, window, x, t0 + offset + grid, {s: out.pop(_CARRY + s) for s in problem.carry})
     return out
+
+
+# --------------------------------------------------------------------------- carried states
+
+_CARRY = "__carry_"
+#: The carried states' trajectories of the last runs: (twin, window, its first grid time, x) -> (time, values).
+_RUNS: dict[tuple[str, str, float, bytes], tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+_RUNS_KEPT = 32
+
+
+def _key(problem: Problem, window: WindowData, x: npt.ArrayLike) -> tuple[str, str, float, bytes]:
+    return (str(problem.twin), window.name, float(window.time[0]), np.asarray(x, dtype=float).tobytes())
+
+
+def _remember(problem: Problem, window: WindowData, x: npt.ArrayLike, time: np.ndarray,
+              values: dict[str, np.ndarray]) -> None:
+    _RUNS[_key(problem, window, x)] = (np.asarray(time, dtype=float), values)
+    while len(_RUNS) > _RUNS_KEPT:
+        _RUNS.pop(next(iter(_RUNS)))
+
+
+def carried_states(problem: Problem, window: WindowData, x: npt.ArrayLike, history: tuple[WindowData, ...],
+                   tolerance: float = 1e-6) -> dict[str, float]:
+    """The ``problem.carry`` states' values at the start of a run over *window*, from the history before it.
+
+    A slow state (a scale that grows over hours above a dry-solids onset, a deposit) is the plant's
+    history: a run that starts inside the record must start it where the same twin, at the same *x*,
+    had it at that time, not at its start value (the entry's clean surface) nor at a steady state (a
+    scale with a wash-off time of a day is far from one). Taken from the run over the window of
+    *history* whose run covers this run's start (the training window's run for a validation run that
+    begins inside it), made here unless a run of it at *x* was just made; a state a restart or a wash
+    removes in that history is removed by the effect's own law in that run (the scale decays below its
+    onset). A run no other run covers (the first window; a gap in the data between the windows) starts
+    the states at their own start values (empty result).
+    """
+    t0 = run_start(problem, window)
+    earlier = [w for w in history if w is not window and float(w.time[0]) < t0 <= float(w.time[-1])]
+    if not earlier:
+        if any(float(w.time[0]) < t0 for w in history if w is not window):  # a gap in the data between
+            log.info("%s window: no other run covers its start at t = %g s; %s start at their start values",
+                     window.name, t0, ", ".join(problem.carry))
+        return {}
+    before = min(earlier, key=lambda w: float(w.time[0]))
+    if _key(problem, before, x) not in _RUNS:
+        simulate_window(problem, before, x, tolerance, tuple(w for w in history if w is not window))
+    time, values = _RUNS[_key(problem, before, x)]
+    return {s: float(np.interp(t0, time, v)) for s, v in values.items()}
 
 
 def simulate_window_sensitivities(problem: Problem, window: WindowData, x: npt.ArrayLike
@@ -512,6 +572,7 @@ def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
     for tag, name in spec.outputs.items():
         if name not in variables:
             problems.append(unknown_name(f"output (for tag {tag!r})", name, list(variables), where))
+    carry = carried_names(info, tuple(getattr(_get(spec, "data"), "carry", ()) or ()), problems, where)
     if problems:
         raise SpecError("; ".join(problems))
     dt = float(spec.sample_time)
@@ -532,4 +593,20 @@ def problem_from_spec(spec: Spec, *, warmup: float | None = None) -> Problem:
         warmup=w,
         initial=str(_get(data, "initial", "model") or "model"),
         inputs=str(_get(data, "inputs", "linear") or "linear"),
+        carry=carry,
     )
+
+
+def carried_names(info: Any, carry: tuple[str, ...], problems: list[str], where: str) -> tuple[str, ...]:
+    """The twin's continuous states the spec's ``[data] carry`` names: each name a state, or an array of
+    states (``R`` for ``R[1]``, ``R[2]``, ...); a name that is neither is a problem."""
+    md = getattr(info, "model_description", None)
+    states = [d.variable.derivative.name for d in (md.derivatives if md is not None else ())
+              if d.variable.derivative is not None]
+    out: list[str] = []
+    for name in carry:
+        found = [s for s in states if s == name or re.fullmatch(re.escape(name) + r"\[\d+\]", s)]
+        if not found:
+            problems.append(unknown_name("state to carry ([data] carry)", name, states, where))
+        out += found
+    return tuple(out)

@@ -163,6 +163,9 @@ class DataRules:
     #: Where a run without measured history starts (a window at the first sample, tracking, validation):
     #: ``"model"`` (the FMU's own initial state) or ``"steady"`` (its steady state with the inputs there).
     initial: str = "model"
+    #: Slow states of the twin carried through the measured history (``[data] carry``, the diagnosis's
+    #: effect states such as a scale): :attr:`trackingbox.simulation.windows.Problem.carry`.
+    carry: tuple[str, ...] = ()
 
     def heartbeat_of(self, tag: str) -> float | None:
         """The heartbeat (s) of *tag*, or None when the tag is not exception-reported."""

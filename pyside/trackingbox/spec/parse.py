@@ -433,11 +433,11 @@ def _parse_windows(raw: Mapping[str, Any], problems: Problems) -> dict[str, tupl
 
 def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
     """``[data]``: the stoppage rule, the longest gap, the heartbeats."""
-    # data rules ------------------------------------------------------------
     data = DataRules()
     dtable = _table(raw, "data", problems)
     if dtable is not None:
-        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat", "inputs", "initial"), (), "[data]", problems)
+        _check_keys(dtable, ("stoppage", "max_gap", "heartbeat", "inputs", "initial", "carry"), (), "[data]",
+                    problems)
         stoppage = None
         stable = _table(dtable, "stoppage", problems)
         if stable is not None:
@@ -468,8 +468,10 @@ def _parse_data(raw: Mapping[str, Any], problems: Problems) -> DataRules:
                              f"{did_you_mean(value, allowed)}")
                 value = None
             chosen[key] = value or allowed[0]
-        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat, **chosen)
-
+        if not isinstance(carry := dtable.get("carry", []), list) or not all(isinstance(c, str) for c in carry):
+            problems.add(f"[data] carry must be a list of the twin's state names, got {carry!r}")
+        data = DataRules(stoppage=stoppage, max_gap=max_gap, heartbeat=heartbeat,
+                         carry=tuple(carry) if isinstance(carry, list) else (), **chosen)
     return data
 
 

@@ -75,8 +75,10 @@ def spec_to_dict(spec: Spec) -> dict[str, Any]:
     if spec.windows:
         doc["windows"] = {k: [float(a), float(b)] for k, (a, b) in spec.windows.items()}
     if (spec.data.stoppage is not None or spec.data.max_gap is not None or spec.data.heartbeat
-            or spec.data.inputs != "linear" or spec.data.initial != "model"):
+            or spec.data.inputs != "linear" or spec.data.initial != "model" or spec.data.carry):
         data: dict[str, Any] = {}
+        if spec.data.carry:
+            data["carry"] = list(spec.data.carry)
         if spec.data.inputs != "linear":
             data["inputs"] = spec.data.inputs
         if spec.data.initial != "model":
