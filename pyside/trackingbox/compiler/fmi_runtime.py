@@ -183,29 +183,74 @@ static fmi3Status tbx_check_asserts(casadi_fmi_memory* m) {
 }
 """
 
+INIT_RETRIES = 16
+"""Retries of an initial solve that leaves unknowns non-finite: their guesses moved from the start value
+z0 to z0 + s max(1, |z0|), s = 1, -1, 10, -10, ... 1e7, -1e7 (see ``tbx_initialize``)."""
+
 _INIT = """
-static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
-  casadi_real z0[TBX_I_NZ + 1], wk[TBX_I_NK + 1], z[TBX_I_NZ + 1], r[TBX_I_NZ + 1];
+static int tbx_init_call(const casadi_real* z0, const casadi_real* wk, casadi_real* z, casadi_real* r) {
   const casadi_real* arg[TBX_I_SZ_ARG + 1];
   casadi_real* res[TBX_I_SZ_RES + 1];
-  char text[1400];
-  size_t i, worst = 0;
-  for (i = 0; i < TBX_I_NZ; ++i) z0[i] = m->v[var_offset[tbx_i_unknown_vr[i]]];
-  for (i = 0; i < TBX_I_NK; ++i) wk[i] = tbx_value(m, tbx_i_known_vr[i]);
   arg[0] = z0;
   arg[1] = wk;
   res[0] = z;
   res[1] = r;
-  if (tbx_call_tbx_init(arg, res)) {
+  return tbx_call_tbx_init(arg, res);
+}
+/* 1 where every unknown is finite and every residual within the tolerance */
+static int tbx_init_solved(const casadi_real* z, const casadi_real* r) {
+  size_t i;
+  for (i = 0; i < TBX_I_NZ; ++i)
+    if (!isfinite(z[i]) || !(fabs(r[i]) <= TBX_I_TOL)) return 0;
+  return 1;
+}
+/* A solve that leaves unknowns non-finite from their start values (a start outside a function's
+   domain: MSL's IF97 at h = 0 J/kg and 1 atm, below its region 1, where MSL asserts and our trace gives
+   NaN) is retried with those unknowns' guesses moved (TBX_I_RETRIES steps), the others' kept; the first
+   solve that converges is taken, with a warning naming the guess. 1 if one did. */
+static int tbx_init_retry(casadi_fmi_memory* m, const casadi_real* z0, const casadi_real* wk, casadi_real* z,
+                          casadi_real* r) {
+  casadi_real zs[TBX_I_NZ + 1], zt[TBX_I_NZ + 1], rt[TBX_I_NZ + 1], step = 1;
+  char text[1400];
+  size_t i, first = TBX_I_NZ;
+  int k;
+  for (i = 0; i < TBX_I_NZ; ++i)
+    if (!isfinite(z[i]) && first == TBX_I_NZ) first = i;
+  if (first == TBX_I_NZ) return 0;
+  for (k = 0; k < TBX_I_RETRIES; ++k) {
+    casadi_real s = (k % 2 ? -step : step);
+    for (i = 0; i < TBX_I_NZ; ++i) zs[i] = isfinite(z[i]) ? z0[i] : z0[i] + s*fmax(1.0, fabs(z0[i]));
+    if (k % 2) step *= 10;
+    if (tbx_init_call(zs, wk, zt, rt) || !tbx_init_solved(zt, rt)) continue;
+    snprintf(text, sizeof text, "initialisation at t = %.17g s: from the start values the solve gives %s = %g; "
+             "solved from the guess %s = %g instead", m->t, tbx_i_name[first], z[first], tbx_i_name[first],
+             zs[first]);
+    tbx_log(m, fmi3Warning, "init", text);
+    for (i = 0; i < TBX_I_NZ; ++i) {
+      z[i] = zt[i];
+      r[i] = rt[i];
+    }
+    return 1;
+  }
+  return 0;
+}
+static fmi3Status tbx_initialize(casadi_fmi_memory* m) {
+  casadi_real z0[TBX_I_NZ + 1], wk[TBX_I_NK + 1], z[TBX_I_NZ + 1], r[TBX_I_NZ + 1];
+  char text[1400];
+  size_t i, worst = 0;
+  for (i = 0; i < TBX_I_NZ; ++i) z0[i] = m->v[var_offset[tbx_i_unknown_vr[i]]];
+  for (i = 0; i < TBX_I_NK; ++i) wk[i] = tbx_value(m, tbx_i_known_vr[i]);
+  if (tbx_init_call(z0, wk, z, r)) {
     tbx_log(m, fmi3Error, "init", "initialisation failed: the Newton solve of the initial equations failed");
     return fmi3Error;
   }
   /* an unknown the solve left non-finite is named first (its residual may read 0), then the
      equation with the largest residual (a NaN one before any finite one) */
   for (i = 0; i < TBX_I_NZ; ++i) {
-    if (!isfinite(z[i])) {
+    if (!isfinite(z[i]) && !tbx_init_retry(m, z0, wk, z, r)) {
       snprintf(text, sizeof text, "initialisation failed at t = %.17g s: the initial equations have no "
-               "solution near the start values (their solve gives %s = %g)", m->t, tbx_i_name[i], z[i]);
+               "solution near the start values (their solve gives %s = %g from its start value %g, and "
+               "from none of %d guesses moved from it)", m->t, tbx_i_name[i], z[i], z0[i], TBX_I_RETRIES);
       tbx_log(m, fmi3Error, "init", text);
       return fmi3Error;
     }
@@ -681,7 +726,7 @@ def add_runtime(em: ExplicitModel, wrapper: Path, tmpdir: Path, refs: dict[str, 
         init = em.initial
         fn = by_name["tbx_init"]
         glue.append(f"#define TBX_I_NZ {len(init.unknowns)}\n#define TBX_I_NK {len(known_syms)}\n"
-                    f"#define TBX_I_TOL {INIT_TOLERANCE!r}\n")
+                    f"#define TBX_I_TOL {INIT_TOLERANCE!r}\n#define TBX_I_RETRIES {INIT_RETRIES}\n")
         glue.append(_work_defines("TBX_I", fn))
         glue.append("int tbx_init(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, "
                     "int mem);\nint tbx_init_checkout(void);\nvoid tbx_init_release(int mem);\n")
