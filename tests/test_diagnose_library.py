@@ -97,6 +97,9 @@ GOOD = """\
     (GOOD.replace('id = "{id}"', 'id = "other-name"'), "'id'"),
     (GOOD.replace('hook = "use_leak"', 'hook = "use_leak"\nscreen = "levelling-ramp"\ncoefficient = "kht"'),
      "needs exactly two [[parameters]]"),
+    (GOOD.replace("max = 1.0", 'max = 1.0\nper = "A"'), "'per_range'"),
+    (GOOD.replace("max = 1.0", 'max = 1.0\nper = "A"\nper_range = [0.5, 1.0, 0.0]'), "'per_range'"),
+    (GOOD.replace("max = 1.0", 'max = 1.0\nper = "A.b"\nper_range = [0.0, 0.0, 1.0]'), "'per'"),
 ])
 def test_bad_entry_names_file_and_field(tmp_path, text, field):
     folder = _entry(tmp_path, "my-effect", text.replace("{id}", "my-effect"))

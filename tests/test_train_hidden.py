@@ -194,6 +194,51 @@ def test_each_effect_of_the_train_is_a_target(vent_case):
                                     library.Finding("steam-vent", "effect[3]")])
 
 
+def test_shell_loss_bounds_scale_with_each_effects_area(vent_case, tmp_path):
+    """shell-heat-loss's UA bound is per m2 of the target effect's A (per_range of the entry), A read from the
+    twin FMU after its initialisation (A = ADesign[k] has no start value); a flash tank keeps the absolute
+    bounds; a per-variable the target lacks is a SpecError naming the entry, the parameter and the target."""
+    from trackingbox.diagnose import library
+    from trackingbox.errors import SpecError
+    from trackingbox.fmu import FMUModel
+    from trackingbox.spec import load_spec
+
+    spec = load_spec(vent_case.spec)
+    entry = library.load_effects()["shell-heat-loss"]
+    ua = entry.parameter("UA")
+    start, lo, hi = ua.per_range
+    with FMUModel(spec.twin) as m:
+        st = m.stepper(start_time=0.0)
+        areas = list(st.get([f"effect[{k}].A" for k in range(1, N + 1)]))
+        design = st.get([f"QDesign[{k}]" for k in range(1, N + 1)] + [f"UDesign[{k}]" for k in range(1, N + 1)]
+                        + ["dTDesign"])
+    # the design sizing A = Q/(U*dT) (PartialTrain), independently of the FMU's effect[k].A
+    np.testing.assert_allclose(areas, design[:N] / (design[N:2 * N] * design[-1]), rtol=1e-9)
+    assert len(set(areas)) == N and min(areas) > 10.0
+    for k in range(1, N + 1):
+        (p,) = library.render_patch(spec, [library.Finding("shell-heat-loss", f"effect[{k}]")]).parameters
+        assert (p.min, p.max) == pytest.approx((lo * areas[k - 1], hi * areas[k - 1]), rel=1e-12)
+        assert p.start == pytest.approx(start * areas[k - 1], rel=1e-12)
+    (p,) = library.render_patch(spec, [library.Finding("shell-heat-loss", "effect")]).parameters
+    assert p.max == pytest.approx(hi * max(areas), rel=1e-12)
+    (p,) = library.render_patch(spec, [library.Finding("shell-heat-loss", "flash")]).parameters
+    assert (p.min, p.max) == (ua.min, ua.max)
+    with pytest.raises(SpecError, match=r"value 1000000.0 of 'UA' is outside its bounds"):
+        library.render_patch(spec, [library.Finding("shell-heat-loss", "effect[2]", {"UA": 1e6})])
+    # an entry whose per-variable the effects lack
+    folder = tmp_path / "shell-heat-loss"
+    folder.mkdir()
+    toml = (entry.folder / "effect.toml").read_text().replace('= "A" }', '= "Asurf" }')
+    (folder / "effect.toml").write_text(toml)
+    (folder / "patch.mo.jinja").write_text((entry.folder / "patch.mo.jinja").read_text())
+    bad = library.read_effect(folder)
+    assert bad.parameter("UA").per == {"TrackingBox.Evaporation.Effect": "Asurf"}
+    with pytest.raises(SpecError, match=r"effect 'shell-heat-loss', parameter 'UA'.*'Asurf'.*"
+                                        r"target 'effect\[2\]' has no 'Asurf'"):
+        library.render_patch(spec, [library.Finding("shell-heat-loss", "effect[2]")],
+                             effects={"shell-heat-loss": bad})
+
+
 @pytest.mark.compile
 def test_a_patch_on_one_effect_acts_on_that_effect_only(vent_case, tmp_path):
     """steam-vent@effect[1] and shell-heat-loss@effect[2] compiled into the 3-effect twin: the template's laws

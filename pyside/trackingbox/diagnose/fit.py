@@ -108,7 +108,8 @@ def _short(full: str, effect: Any) -> str:
 
 
 def warm_values(effect: Any, screened: Candidate | None,
-                bounds: Mapping[str, tuple[float, float]] | None = None) -> dict[str, float]:
+                bounds: Mapping[str, tuple[float, float]] | None = None,
+                starts: Mapping[str, float] | None = None) -> dict[str, float]:
     """Start values of the effect's parameters: its starts, or the screening's estimate where it is the same quantity.
 
     A one-parameter ``bias`` entry starts at the screened bias, a one-parameter
@@ -116,7 +117,8 @@ def warm_values(effect: Any, screened: Candidate | None,
     ``coefficient-ramp`` entry at the screened rate (per second), a multi-parameter entry
     at the screened values of its parameters' names; the value is clipped to the
     parameter's bounds (*bounds*: short name -> (min, max) as the patch resolved them for
-    the target's unit; else the entry's own).
+    the target's unit; else the entry's own); *starts*: the starts as the patch resolved them (per unit of
+    the target's size, ``per``), else the entry's own.
 
     >>> from types import SimpleNamespace as NS
     >>> e = NS(screen="bias", parameters=[NS(name="b", start=0.0, min=-2.0, max=2.0)])
@@ -126,7 +128,7 @@ def warm_values(effect: Any, screened: Candidate | None,
     {'b': 2.0}
     """
     params = list(getattr(effect, "parameters", ()) or ())
-    values = {p.name: float(p.start) for p in params}
+    values = {p.name: float((starts or {}).get(p.name, p.start)) for p in params}
     key = {"bias": "bias", "lag": "tau", "drift": "rate", "coefficient-ramp": "rate"}.get(
         getattr(effect, "screen", ""))
     if screened is not None and key and len(params) == 1 and (key in screened.values
@@ -345,9 +347,9 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     """
     folder = Path(work_dir) / _safe(f"{effect.id}-{target}")
     folder.mkdir(parents=True, exist_ok=True)
-    patch = render(spec, effect, target, warm_values(effect, screened))
-    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in patch.parameters}
-    start = warm_values(effect, screened, bounds)
+    first = render(spec, effect, target, {})
+    bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in first.parameters}
+    start = warm_values(effect, screened, bounds, {_short(p.name, effect): float(p.start) for p in first.parameters})
     if screened is not None and getattr(effect, "screen", "") == "compile":
         # a linearised screening (screen_compiled) measured the entry's own parameters
         for short, v in screened.values.items():
@@ -356,7 +358,7 @@ def prepare(spec: Any, where: WhereResult, effect: Any, target: str, work_dir: P
     patch = render(spec, effect, target, start)
     fmu = folder / f"{patch.model.rsplit('.', 1)[-1]}.fmu"
     marker = folder / ".compiled"
-    key = _compile_key(spec, render(spec, effect, target, warm_values(effect, None)))
+    key = _compile_key(spec, first)
     if not (fmu.is_file() and marker.is_file() and marker.read_text() == key):
         fmu = Path(library.compile_patch(patch, folder, libraries=_source_libraries(spec)).fmu)
         marker.write_text(key)

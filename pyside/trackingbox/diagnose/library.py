@@ -52,6 +52,7 @@ from ..generate.filters import modelica_string
 from ..io import write_text_atomic
 from ..spec import ParameterSpec, SourceSpec, load_spec, write_spec
 from ..version import __version__
+from . import elements, sizes
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +72,7 @@ _IDENT = re.compile(r"^[A-Za-z_]\w*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*$")
 _ENTRY_KEYS = ("id", "explanation", "kind", "classes", "hook", "screen", "coefficient", "parameters", "sources",
                "carried")
-_PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges", "onset_of")
+_PARAMETER_KEYS = ("name", "description", "unit", "start", "min", "max", "ranges", "onset_of", "per", "per_range")
 
 
 # --------------------------------------------------------------------------- entries
@@ -95,6 +96,9 @@ class EffectParameter:
     onset_of : str
         A threshold of the target's variable of this name (``x``): the linearised screen starts the
         parameter at that variable's quartiles too (:func:`trackingbox.diagnose.fit.onset_starts`).
+    per, per_range : str or mapping, tuple
+        Process entries: (start, min, max) per unit of the target's parameter *per* (``"A"``, or a table
+        class = parameter), replacing the absolute ones on those targets (:mod:`.sizes`).
     """
 
     name: str
@@ -105,6 +109,8 @@ class EffectParameter:
     max: float
     ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     onset_of: str = ""
+    per: str | Mapping[str, str] = ""
+    per_range: tuple[float, float, float] | None = None
 
     def resolved(self, variable_unit: str = "") -> tuple[str, float, float, float]:
         """(unit, start, min, max) for a target whose variable has unit *variable_unit*."""
@@ -223,6 +229,7 @@ def _read_parameter(table: Any, i: int, where: str, problems: list[str]) -> Effe
     if not isinstance(onset, str) or (onset and not _DOTTED.match(onset)):
         problems.append(f"{label}: field 'onset_of' must name a variable of the target, got {onset!r}")
         onset = ""
+    per, per_range = sizes.read_per(table, label, problems)
     if name is None or None in values or not isinstance(unit, str) or not isinstance(description, str):
         return None
     start, lo, hi = values
@@ -232,7 +239,7 @@ def _read_parameter(table: Any, i: int, where: str, problems: list[str]) -> Effe
     elif not lo <= start <= hi:
         problems.append(f"{label}: field 'start' ({start!r}) is outside [min, max] = [{lo!r}, {hi!r}]")
     return EffectParameter(name=name, description=description, unit=unit, start=start, min=lo, max=hi,
-                           ranges=ranges, onset_of=onset)
+                           ranges=ranges, onset_of=onset, per=per, per_range=per_range)
 
 
 def read_effect(folder: str | Path) -> Effect:
@@ -493,56 +500,6 @@ def _fmu_names(path: str, mtime_ns: int) -> tuple[str, ...]:
     return tuple(v.name for v in read_info(path).variables)
 
 
-def _hook_default(index: _ClassIndex, cls: str, hook: str, element: str) -> str | None:
-    """What element *element* of class *cls* uses without its *hook* (``if not hook then x_internal = EXPR``):
-    a number as written, or the element's own parameter (``effect[2].dBPR``); None when neither."""
-    pat = re.compile(rf"\bif\s+not\s+{re.escape(hook)}\s+then\s+\w+\s*=\s*([^;]+?)\s*;")
-    for base in index.bases(cls):
-        found = index.body(base)
-        m = pat.search(found[1]) if found is not None else None
-        if m is not None:
-            expr = m.group(1)
-            if re.fullmatch(r"[-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?", expr):
-                return expr
-            if re.fullmatch(r"[A-Za-z_]\w*", expr):
-                return f"{element}.{expr}"
-            return None
-    return None
-
-
-def _hooked_inputs(index: _ClassIndex, cls: str, hook: str) -> list[str]:
-    """The connectors of class *cls* (and its bases) declared conditional on the Boolean *hook*."""
-    pat = re.compile(rf"\b([A-Za-z_]\w*)\s*(?:\([^;]*?\))?\s*if\s+{re.escape(hook)}\b")
-    out: list[str] = []
-    for base in index.bases(cls):
-        found = index.body(base)
-        if found is not None:
-            out += [m.group(1) for m in pat.finditer(found[1]) if m.group(1) not in out]
-    return out
-
-
-def _element_fill(spec: Any, index: _ClassIndex, cls: str, hook: str, array_name: str, dims: str, i: int,
-                  prefix: str, where: str) -> tuple[list[str], list[str]]:
-    """Protected declarations and equations of a finding on element *i* of the component array *array_name*:
-    the hook is on every element (an array takes one modifier), so the other elements' hooked inputs get
-    what they use without it (0 for an added flow, their own parameter for a replaced one)."""
-    n = _array_size(spec, array_name, dims)
-    off = f"{prefix}_off"
-    default = _hook_default(index, cls, hook, f"{array_name}[k]")
-    if default is None:
-        raise SpecError(f"{where}: cannot tell what the other elements of {array_name!r} use without the hook "
-                        f"{hook!r} (no 'if not {hook} then ... = <number or parameter>' in {cls})")
-    declarations = [f"  TrackingBox.Interfaces.RealOutput {off}[{dims}] "
-                    f"{modelica_string(f'What the elements of {array_name} but {i} use without {hook}')};"]
-    equations = [f"  for k in 1:{dims} loop\n    {off}[k] = {default};\n  end for;"]
-    for connector in _hooked_inputs(index, cls, hook):
-        for lo, hi in ((1, i - 1), (i + 1, n)):
-            if lo <= hi:
-                equations.append(f"  for k in {lo}:{hi} loop\n    connect({off}[k], {array_name}[k].{connector});\n"
-                                 f"  end for;")
-    return declarations, equations
-
-
 # --------------------------------------------------------------------------- patches
 
 @dataclass(frozen=True)
@@ -664,6 +621,23 @@ def _split_rendered(text: str, where: str) -> dict[str, list[str]]:
     return parts
 
 
+def _parameter(spec: Any, effect: Effect, p: EffectParameter, f: Finding, variable_unit: str, bases: list[str],
+               sized: list[str], prefix: str, where: str) -> tuple[dict[str, Any], PatchParameter]:
+    """Parameter *p* of *effect* on the finding's target: its template values and its patch parameter, the
+    bounds per unit of the target's size (``per``, read for the components *sized*) where the entry says."""
+    unit, start, lo, hi = p.resolved(variable_unit)
+    var = sizes.per_variable(p.per, bases) if effect.kind != "sensor" else ""
+    if p.per_range is not None and var:
+        start, lo, hi = sizes.scaled(effect.id, p.name, f.target, var, spec.twin, sized, p.per_range)
+    value = float(f.values.get(p.name, start))
+    if not math.isfinite(value) or not lo <= value <= hi:
+        raise SpecError(f"{where}: value {value!r} of {p.name!r} is outside its bounds [{lo!r}, {hi!r}]")
+    full = f"{prefix}_{p.name}"
+    return ({"name": full, "value": value, "unit": unit, "min": lo, "max": hi, "description": p.description},
+            PatchParameter(name=full, unit=unit, start=value, min=lo, max=hi, description=p.description,
+                           effect=effect.id, target=f.target))
+
+
 def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None, *,
                  effects: Mapping[str, Effect] | None = None) -> Patch:
     """Render ``<Twin>Diagnosed``: the twin of *spec* extended with *findings*.
@@ -759,19 +733,17 @@ def render_patch(spec: Any, findings: Sequence[Finding], name: str | None = None
             context["dims"] = (dims or "") if element is None else ""
         element_fill: tuple[list[str], list[str]] = ([], [])
         if effect.kind != "sensor" and element is not None and effect.hook and dims is not None:
-            element_fill = _element_fill(spec, index, cls, effect.hook, array_name, dims, int(element.group(2)),
+            element_fill = elements.element_fill(_array_size(spec, array_name, dims), index, cls, effect.hook,
+                                                 array_name, dims, int(element.group(2)),
                                          context["prefix"], where)
         params: dict[str, dict[str, Any]] = {}
+        sized = [f.target]
+        if effect.kind != "sensor" and dims is not None and element is None:  # a whole array: every element
+            sized = [f"{array_name}[{k}]" for k in range(1, _array_size(spec, array_name, dims) + 1)] or sized
         for p in effect.parameters:
-            unit, start, lo, hi = p.resolved(variable_unit)
-            value = float(f.values.get(p.name, start))
-            if not math.isfinite(value) or not lo <= value <= hi:
-                raise SpecError(f"{where}: value {value!r} of {p.name!r} is outside its bounds [{lo!r}, {hi!r}]")
-            full = f"{context['prefix']}_{p.name}"
-            params[p.name] = {"name": full, "value": value, "unit": unit, "min": lo, "max": hi,
-                              "description": p.description}
-            parameters.append(PatchParameter(name=full, unit=unit, start=value, min=lo, max=hi,
-                                             description=p.description, effect=effect.id, target=f.target))
+            params[p.name], patch_parameter = _parameter(spec, effect, p, f, variable_unit,
+                                                         context.get("bases", []), sized, context["prefix"], where)
+            parameters.append(patch_parameter)
         context["params"] = params
         try:
             rendered = env.from_string(effect.template).render(**context)

@@ -483,13 +483,15 @@ def _patch(spec: Any, effect: Any, named: Candidate, settings: DiagnoseSettings,
         bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in outcome.patch.parameters}
         values = {s: min(max(named.values.get(s, v), bounds.get(s, (-math.inf, math.inf))[0]),
                          bounds.get(s, (-math.inf, math.inf))[1])
-                  for s, v in warm_values(effect, None).items()}
+                  for s, v in warm_values(effect, None, None, {_short(p.name, effect): p.start
+                                                                for p in outcome.patch.parameters}).items()}
         patch = render(spec, effect, named.target, values)
         fmu = outcome.fmu
     else:
-        first = render(spec, effect, named.target, warm_values(effect, None))
+        first = render(spec, effect, named.target, {})
         bounds = {_short(p.name, effect): (float(p.min), float(p.max)) for p in first.parameters}
-        patch = render(spec, effect, named.target, warm_values(effect, named, bounds))
+        patch = render(spec, effect, named.target, warm_values(effect, named, bounds,
+                                                               {_short(p.name, effect): p.start for p in first.parameters}))
         fmu = None
         if settings.compile or settings.out_dir:
             assert work is not None
