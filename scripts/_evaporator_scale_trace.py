@@ -16,7 +16,7 @@ and prints the scales at the hours given.
 
 Example::
 
-    .venv/bin/python scripts/evaporator_scale_trace.py out/bench-diagnose/evaporator/burkeite-scale-x1-s0
+    scripts/evaporator_scale_trace out/bench-diagnose/evaporator/burkeite-scale-x1-s0
 """
 from __future__ import annotations
 

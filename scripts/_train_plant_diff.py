@@ -9,7 +9,7 @@ largest difference (effect - clean) after ``--skip`` seconds. Compare with each 
 
 Example::
 
-    .venv/bin/python scripts/train_plant_diff.py CASE_DIR CLEAN_DIR --stop 28000 \\
+    scripts/train_plant_diff CASE_DIR CLEAN_DIR --stop 28000 \\
         --outputs "PI_steamChest[1],ZI_body[2]"
 """
 from __future__ import annotations
