@@ -71,3 +71,13 @@ def test_every_finding_is_scored_not_only_the_first():
     assert bench._judged(_rows("ds-meter", ["DS_product"], meter[1:], instrument="QI-6150")) == "instrument"
     # where nothing in the library was hidden, any name is wrong
     assert bench._judged(_rows(None, [], ["sensor-drift@PI-6152"])) == "wrong"
+
+
+def test_the_fall_the_noise_leaves_reachable_is_one_minus_noise_over_rms():
+    # a residual of RMS 1.0 of which 0.8 is noise: removing every model error leaves 0.8, a 20 % fall
+    assert abs(bench._reachable_fall({"noise": 0.8, "validation": {"rms": 1.0}}) - 0.2) < 1e-12
+    # noise estimated above the residual: nothing to remove
+    assert bench._reachable_fall({"noise": 1.2, "validation": {"rms": 1.0}}) == 0.0
+    # a tag diagnose did not describe, or without a validation RMS: not known
+    assert bench._reachable_fall(None) is None
+    assert bench._reachable_fall({"noise": 0.1, "validation": {}}) is None
