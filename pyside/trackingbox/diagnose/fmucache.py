@@ -11,15 +11,17 @@ is kept under :func:`trackingbox.compiler.library.cache_dir` ``/patches``, keyed
   not change the FMU) and the twin's Modelica source (``[source]``: every ``.mo`` file of its
   folder), as the work folder's own marker (:func:`trackingbox.diagnose.fit._compile_key`);
 * every ``.mo`` file of the shipped TrackingBox library and of the spec's ``[source] libraries``;
-* the compiler: trackingbox's version, the source of its ``trackingbox.compiler`` package, and
-  the C compiler named by ``$CC`` and ``$CFLAGS``.
+* the compiler: trackingbox's version, the source of its ``trackingbox.compiler`` package, the
+  versions of rumoca, CasADi and FMPy (its C headers), and the C compiler named by ``$CC`` and ``$CFLAGS``.
 
 A file that changes changes the key, so an edited hook, template, twin or compiler is compiled
 afresh, never handed an old FMU. ``TRACKINGBOX_PATCH_CACHE=0`` turns the cache off.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.metadata
 import logging
 import os
 import shutil
@@ -78,8 +80,20 @@ def key(local: str, libraries: Iterable[Path] = ()) -> str:
     for lib in libraries:
         h.update(tree_hash(Path(lib), "*.mo").encode())
     h.update(tree_hash(Path(__file__).resolve().parent.parent / "compiler", "*.py").encode())
-    h.update(f"\0{os.environ.get('CC', '')}\0{os.environ.get('CFLAGS', '')}".encode())
+    h.update(f"\0{os.environ.get('CC', '')}\0{os.environ.get('CFLAGS', '')}\0{_tools()}".encode())
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def _tools() -> str:
+    """Versions of the packages the embedded compile runs through (front end, export, C headers)."""
+    out = []
+    for name in ("rumoca", "casadi", "fmpy"):
+        try:
+            out.append(f"{name}={importlib.metadata.version(name)}")
+        except importlib.metadata.PackageNotFoundError:
+            out.append(f"{name}=-")
+    return ",".join(out)
 
 
 def _entry(k: str) -> Path:
