@@ -122,6 +122,9 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("frontend_cache", "bool", True,
             "keep flattened models on disk under the cache folder, keyed by the content of every file "
             "the model reaches (false: flatten every time)"),
+    Setting("patch_cache", "bool", True,
+            "keep the FMUs of diagnose's patched twins under the cache folder, keyed by the content of the patch, "
+            "the twin's source, the libraries and the compiler (false: compile every patch in every diagnosis)"),
     Setting("cache_dir", "path", "",
             "folder of trackingbox's caches (empty: $XDG_CACHE_HOME/trackingbox or ~/.cache/trackingbox)"),
     Setting("msl", "path", "",

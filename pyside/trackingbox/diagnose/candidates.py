@@ -238,6 +238,25 @@ class Candidate:
                 **({"reason": self.reason} if self.reason else {})}
 
 
+def training_score(where: WhereResult, k: int, training_after: Mapping[str, np.ndarray],
+                   ) -> tuple[float, list[str], list[str]]:
+    """ΔBIC of a candidate from its training residuals alone, its affected tags and the tags it moves
+    materially (:func:`score`: the validation window does not enter the ΔBIC)."""
+    before_t = {t: where.training.residual(t) for t in training_after}
+    tags, material = [], []
+    for t, r1 in training_after.items():
+        d = np.asarray(r1) - before_t[t]
+        d = d[np.isfinite(d)]
+        move = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
+        if move > 0.01 * where.noise[t]:
+            tags.append(t)
+        if move > MATERIAL_MOVE * where.noise[t]:
+            material.append(t)
+    if not tags:
+        tags = list(training_after)
+    return delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k), tags, material
+
+
 def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k: int,
           training_after: Mapping[str, np.ndarray], validation_after: Mapping[str, np.ndarray],
           values: Mapping[str, float], *, pinned: Sequence[str] = (), fit: Any = None,
@@ -254,22 +273,10 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
     the near-zero changes of the rest would measure how many tags the plant has,
     not how much of the gap the effect closes.
     """
-    tr, va = where.training, where.validation
-    before_t = {t: tr.residual(t) for t in training_after}
-    tags, material = [], []
-    for t, r1 in training_after.items():
-        d = np.asarray(r1) - before_t[t]
-        d = d[np.isfinite(d)]
-        move = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
-        if move > 0.01 * where.noise[t]:
-            tags.append(t)
-        if move > MATERIAL_MOVE * where.noise[t]:
-            material.append(t)
+    va = where.validation
+    dbic, tags, material = training_score(where, k, training_after)
     moved = tuple(material)
-    if not tags:
-        tags = list(training_after)
     material = material or tags
-    dbic = delta_bic({t: before_t[t] for t in tags}, {t: training_after[t] for t in tags}, k)
     nb, na, gains, ng, white, per_tag = {}, {}, [], 0.0, {}, {}
     for t in tags:
         r0 = va.residual(t)
@@ -288,7 +295,7 @@ def score(effect: str, target: str, kind: str, stage: str, where: WhereResult, k
                      tuple(t for t in moved if t in per_tag))
 
 
-def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
+def joint(where: WhereResult, r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray] | None,
           extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
           jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]] | None = None, *,
           x: npt.ArrayLike | None = None,

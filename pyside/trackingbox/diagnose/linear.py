@@ -124,7 +124,7 @@ class WindowFit:
     varying_valid: np.ndarray
 
 
-def fit_windows(r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray],
+def fit_windows(r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarray] | None,
                 jac: tuple[Mapping[str, np.ndarray], Mapping[str, np.ndarray]], noise: Mapping[str, float], *,
                 bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
                 extra_train: Mapping[str, np.ndarray] | None = None, extra_val: Mapping[str, np.ndarray] | None = None,
@@ -137,14 +137,14 @@ def fit_windows(r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarra
     (:func:`step_bounds`). On validation ``J delta + T beta`` is subtracted with the
     training's coefficients, then the varying candidates' level and increments are fitted
     there (the twin tracks them on any window); *x*: the candidates' values (for the
-    validation level's bounds).
+    validation level's bounds). *r_val* None: the training window alone (``after_valid`` empty).
     """
     j_train, j_val = jac
     tags = list(r_train)
     p = next(iter(j_train.values())).shape[1] if j_train else 0
     m = next(iter(extra_train.values())).shape[1] if extra_train else 0
     n_t = {t: len(r_train[t]) for t in tags}
-    n_v = {t: len(r_val[t]) for t in tags}
+    n_v = {t: len(r_val[t]) for t in tags} if r_val is not None else {}
 
     def cols(j: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray] | None, tag: str, n: int) -> np.ndarray:
         a = j[tag] if tag in j else np.zeros((n, p))
@@ -165,9 +165,14 @@ def fit_windows(r_train: Mapping[str, np.ndarray], r_val: Mapping[str, np.ndarra
     if coef.size == 0:
         coef = np.zeros(p + m + q)
     after_t = {t: np.asarray(r_train[t]) - ct[t] @ coef for t in tags}
-    after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, n_v[t]) @ coef[:p + m] for t in tags}
     u_valid = np.zeros(0)
-    if q:
+    if r_val is None:  # the training window alone (its cost and residuals; nothing on validation)
+        after_v: dict[str, np.ndarray] = {}
+        q_valid = 0
+    else:
+        after_v = {t: np.asarray(r_val[t]) - cols(j_val, extra_val, t, n_v[t]) @ coef[:p + m] for t in tags}
+        q_valid = q
+    if q_valid:
         vv = varying.columns(j_val, "valid", tags, n_v)
         x_val = None if x is None else np.asarray(x, dtype=float) + coef[:p]
         u_valid = joint_lstsq(after_v, vv, noise, varying.bounds("valid", x_val))

@@ -30,6 +30,7 @@ from contextlib import contextmanager
 from multiprocessing.util import Finalize
 from typing import Any
 
+from ..data.view import keep_tables
 from ..analysis.executor import exit_with_parent, make_executor, stop_executor
 from ..simulation.models import close_models, forget_models
 
@@ -42,6 +43,8 @@ def _init_worker(parent: int) -> None:
     """A fresh worker owns no FMU yet; it closes the ones it opens when it exits, and ends with *parent*."""
     forget_models()
     exit_with_parent(parent)
+    # the diagnosis's measurement file, read once per worker (its jobs lay it on windows again and again)
+    keep_tables()
     # run by the worker's own exit (a forkserver child leaves through os._exit, past atexit)
     Finalize(None, close_models, exitpriority=10)
 

@@ -596,19 +596,25 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
         jobs.extend((effect, target) for target in found if f"{eid}@{target}" not in exclude)
     # the expensive jobs (a ramp's search, a compiled patch) start on the workers of an active
     # parallel.pool first; the cheap sensor transforms run here meanwhile; results keep the jobs' order
+    # (the longest first, job_cost: a long job started last would leave the other workers idle at the end;
+    # the cheap ones here all run before the first result is waited for)
     heavy = ("coefficient-ramp", "levelling-ramp")
     pending: dict[int, Callable[[], Candidate]] = {}
-    for i, (effect, target) in enumerate(jobs):
+    for i in sorted(range(len(jobs)), key=lambda i: -job_cost(jobs[i][0])):
+        effect, target = jobs[i]
         how = getattr(effect, "screen", "compile")
         if how in heavy or (how not in SENSOR_SCREENS and compiled_in is not None):
             pending[i] = submit(screen_job, (effect, target, spec, where, compiled_in))
+    here: dict[int, Candidate] = {}
     for i, (effect, target) in enumerate(jobs):
         if i in pending:
-            cand = pending[i]()
-        elif (getattr(effect, "screen", "compile") not in SENSOR_SCREENS and fit_compiled is not None):
-            cand = _guarded(effect, target, lambda e, t: fit_compiled(e, t))
+            continue
+        if getattr(effect, "screen", "compile") not in SENSOR_SCREENS and fit_compiled is not None:
+            here[i] = _guarded(effect, target, lambda e, t: fit_compiled(e, t))
         else:
-            cand = screen_job(effect, target, spec, where, None)
+            here[i] = screen_job(effect, target, spec, where, None)
+    for i, (effect, target) in enumerate(jobs):
+        cand = here[i] if i in here else pending[i]()
         log.info("screened %s on %s: delta BIC %.4g, validation gain %.3g", cand.effect, cand.target,
                  cand.delta_bic, cand.validation_gain)
         out.append(cand)
@@ -625,6 +631,33 @@ def screen(effects: Mapping[str, Any], spec: Any, where: WhereResult, *,
 
 #: Screens that transform the null model's output (cheap; no run of the twin).
 SENSOR_SCREENS = ("bias", "drift", "lag", "levelling-drift")
+
+
+def job_cost(effect: Any) -> float:
+    """About how many runs of the twin screening *effect* on one target costs (the order jobs start in).
+
+    A ``compile`` entry: its compile (about two runs) and ``1 + k`` runs per window for ``k``
+    parameters, each again at three quartiles of an onset's variable (:func:`trackingbox.diagnose.fit.onset_starts`);
+    a ramp: its search's runs; a sensor transform: none.
+
+    >>> from types import SimpleNamespace as NS
+    >>> job_cost(NS(screen="compile", parameters=[NS(onset_of="")]))
+    6.0
+    >>> job_cost(NS(screen="compile", parameters=[NS(onset_of=""), NS(onset_of="x"), NS(onset_of="")]))
+    34.0
+    >>> job_cost(NS(screen="bias", parameters=[]))
+    0.0
+    """
+    how = getattr(effect, "screen", "compile")
+    if how in SENSOR_SCREENS:
+        return 0.0
+    if how == "coefficient-ramp":
+        return 14.0
+    if how == "levelling-ramp":
+        return 12.0
+    params = list(getattr(effect, "parameters", ()) or ())
+    onsets = sum(1 for p in params if getattr(p, "onset_of", ""))
+    return 2.0 + 2.0 * (1 + (len(params) or 1)) * (1 + 3 * onsets)
 
 
 def _guarded(effect: Any, target: str, how: Callable[[Any, str], Candidate]) -> Candidate:

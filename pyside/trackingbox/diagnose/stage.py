@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from ..analysis.executor import make_executor
+from ..data.view import kept_tables
 from ..errors import SpecError, did_you_mean
 from . import library
 from .candidates import Candidate
@@ -310,6 +311,13 @@ def diagnose(spec: Any, settings: DiagnoseSettings = DiagnoseSettings(), *, prog
                             progress=progress, null=null)
         finally:
             cluster.shutdown()
+    # the measurement file is laid on windows by every candidate's spec: parsed once
+    with kept_tables():
+        return _diagnosed(spec, settings, progress, null)
+
+
+def _diagnosed(spec: Any, settings: DiagnoseSettings, progress: Progress | None, null: Any) -> DiagnosisResult:
+    """:func:`diagnose` once its cluster is up."""
     t0 = time.perf_counter()
     clock = _Clock()
     clock.start("null")
