@@ -10,6 +10,7 @@ knows it prints the share of the rows after settling whose band holds the plant'
 as tracked (the CSV), and both recomputations. A run tracked with the code of the second reproduces its CSV.
 
     scripts/reband_apply WORK/evaporator/default-x1-s0
+    scripts/reband_apply OUT/cases/bands-evaporator-plain-0     (a demo's folder: its one run)
 """
 from __future__ import annotations
 
@@ -32,11 +33,20 @@ def main(argv: list[str] | None = None) -> int:
     from trackingbox.spec import load_spec
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("case", type=Path, help="a case folder of scripts/bench_apply (with truth.json and apply/)")
+    ap.add_argument("case", type=Path, help="a case folder of scripts/bench_apply (with truth.json and apply/), or a "
+                                            "demo's --out folder (spec.toml, truth.json, track/tracking.csv)")
+    ap.add_argument("--settle", type=float, default=12 * 3600.0,
+                    help="s from which a demo folder's rows count (default 12 h, the evaporator's)")
     args = ap.parse_args(argv)
     truth = json.loads((args.case / "truth.json").read_text())
-    doc = json.loads((args.case / "apply" / "apply.json").read_text())
-    runs = [("unpatched", doc.get("before"))] + [(f"round {r['round']}", r.get("retrack")) for r in doc.get("rounds", [])]
+    if (args.case / "apply" / "apply.json").is_file():
+        doc = json.loads((args.case / "apply" / "apply.json").read_text())
+        runs = [("unpatched", doc.get("before"))] + [(f"round {r['round']}", r.get("retrack"))
+                                                     for r in doc.get("rounds", [])]
+    else:  # a demo's folder (scripts/bench_uncertainty's evaporator cases): its one run, scored after --settle
+        names = [p.parameter for p in load_spec(args.case / "spec.toml").pairs]
+        runs = [("tracked", {"spec": str(args.case / "spec.toml"), "csv": str(args.case / "track" / "tracking.csv"),
+                             "errors": {n: {"settle": args.settle} for n in names}})]
     original = bands_mod.BandTracker.__init__
 
     def not_carried(self, *a, **k):  # noqa: ANN001, ANN002, ANN003 - the tracker's own arguments
