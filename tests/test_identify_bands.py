@@ -520,7 +520,7 @@ def test_closed_gains_and_implied_values_on_a_linear_twin_worked_by_hand() -> No
     reads 1.4 more than the twin at the truth on pair 1's tag only. The loops settle at ``θ - θ* = G⁻¹ [1.4, 0]
     = [4·1.4, -1.4] / 7 = [0.8, -0.2]``, and tag u is left with ``-(0.8 - 0.4) = -0.4``. With pair 2's loop
     keeping its tag, moving θ1 by 1 moves θ2 by -1/4 and u by 1 - 2/4 = 0.5: u implies θ1 - 0.8, the truth."""
-    from trackingbox.identify.misfit import closed_gains, implied_sides
+    from trackingbox.identify.misfit import closed_gains, follows, implied_sides
 
     g = closed_gains(np.array([[2.0, 1.0], [1.0, 4.0]]), np.array([[1.0, 2.0]]))
     assert g == pytest.approx(np.array([[0.5, 2.0 - 1.0 / 2.0]]))
@@ -529,6 +529,18 @@ def test_closed_gains_and_implied_values_on_a_linear_twin_worked_by_hand() -> No
     # for θ2 u reads -0.4 / 1.5 (0.267 below) where the truth is 0.2 above: a tag reads a pair's truth only when
     # the error sits on that pair's own tag (identify.misfit)
     assert sides[1] == pytest.approx((0.4 / 1.5, 0.0))
+    # θ1's reading carried: θ2 follows θ1 by -1/4 while pair 2 keeps its tag, so u's reading of θ1 (0.8 below) puts
+    # θ2's truth 0.2 above its tracked value, where it is; θ2's reading (0.267 below) carried to θ1 by -1/2 is 0.133
+    # above, and θ1's own side below stays 0.8
+    v = follows(np.array([[2.0, 1.0], [1.0, 4.0]]))
+    assert v == pytest.approx(np.array([[1.0, -0.5], [-0.25, 1.0]]))
+    carried = implied_sides([-0.4], [True], g, [10.0, 10.0], carry=v)
+    assert carried[0] == pytest.approx((0.8, 0.4 / 1.5 / 2.0))
+    assert carried[1] == pytest.approx((0.4 / 1.5, 0.2))
+    # a carried value beyond the other pair's range is left out (θ2's range 0.1: θ1's reading puts it 0.2 off)
+    assert implied_sides([-0.4], [True], g, [10.0, 0.1], carry=v)[1] == (0.0, 0.0)
+    # the identity carries nothing: each pair its own readings, as without it
+    assert implied_sides([-0.4], [True], g, [10.0, 10.0], carry=np.eye(2)) == sides
     assert implied_sides([-0.4], [False], g, [10.0, 10.0]) == [(0.0, 0.0), (0.0, 0.0)]  # not flagged: nothing
     assert implied_sides([-0.4], [True], g, [0.5, 0.5])[0] == (0.0, 0.0)   # beyond the bounds' range: not θ1's
     # two tags disagreeing in sign widen both sides, each by its own reading

@@ -108,9 +108,8 @@ tracked value ``p`` (level :data:`LEVEL`), in seven parts:
    means 2.3-2.9e-4 with it, 0.9e-4 without), with mostly 2-20 times the fast error's spectral level
    at periods of 9-45 h (one of 15 estimates below 1; rms 0.0046-0.0055 against 0.0020). The noise
    part takes the fast error's level (30 lags of the error less its 30 min mean) to hold at the
-   loops' periods; a parameter the noise reaches only through the loops' slow path, as the valve's,
-   is fed by exactly the periods where that fails, and a 72 h record does not pin down a spectrum
-   at them.
+   loops' periods; a parameter the noise reaches only through the loops' slow path, as the valve's, is fed
+   by exactly the periods where that fails, and a 72 h record does not pin down a spectrum at them.
 6. **slow**: the paired tags' errors at the loops' own time scale, beyond what their fast error's
    level puts there. The rows' tracked errors (every paired tag, auto rows only, from the row where
    each pair's start has faded below :data:`SLOW_START` of itself) are averaged over batches of ``N``
@@ -139,12 +138,12 @@ tracked value ``p`` (level :data:`LEVEL`), in seven parts:
    evaporator's twin-structure plant (``scripts/bench_uncertainty --cases bands-evaporator-plain
    --evaporator-seeds 3 --rebands``, all three lags 3.0 h) ``KvMax``'s band held the truth in 84.9, 85.2
    and 97.1 % of the rows after 12 h (72.0, 72.1, 83.5 % without it), its median half-width 0.0160 (0.0115);
-   the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's
-   motion and the loops' own-tag errors are the part no batch mean of tracked error shows (the first
-   is the lag part's, over a day since: part 3).
+   the misses are from 24 h on (seeds 0-1: 97-100 % in 12-24 h, 77 % in 24-48 h), where the fouling's motion and
+   the loops' own-tag errors are the part no batch mean of tracked error shows (the first is the lag part's: 3).
 7. **model error**: where an untracked tag's mean error, or its trend read at the newest row, is beyond chance
    (the lack-of-fit test's first condition, below), the value of ``p`` it implies, the other loops keeping their
-   tags (:mod:`.misfit`): the side toward it reaches it (*misfit* of :class:`BandTracker`, the closed-loop gains).
+   tags (:mod:`.misfit`): the side toward it reaches it (*misfit* of :class:`BandTracker`, the closed-loop gains);
+   with several pairs, also what each other pair's reading puts on this one (``V = follows(G)``, :mod:`.misfit`).
 
 The band is clipped to the parameter's bounds. ``result.json``'s band summary
 names, per tracked parameter, what it takes as exact (``taken_as_exact``: the
@@ -192,7 +191,7 @@ from scipy.stats import norm
 from ..analysis.offsets import FLOOR_SPAN
 from ..errors import CheckpointError
 from ..tracking.tuning import pair_settings
-from .misfit import implied_sides, trend_reading
+from .misfit import follows, implied_sides, trend_reading
 
 #: Confidence level of the bands.
 LEVEL = 0.95
@@ -463,6 +462,7 @@ class BandTracker:
         #: the loops' interaction (part 5 of the module): ``M = G⁻¹ diag(G)``, pairs in the spec's order; None: none
         self.coupling = None if self.gains is None else np.linalg.solve(self.gains, np.diag(np.diag(self.gains)))
         self.coupling_rows = [] if self.coupling is None else [[float(m) for m in row] for row in self.coupling]
+        self.carry = None if self.gains is None else follows(self.gains)  # part 7's readings carried (.misfit)
         self.ts = float(spec.sample_time)
         self.z = float(norm.ppf(0.5 + level / 2.0))
         self.level = float(level)
@@ -804,7 +804,7 @@ class BandTracker:
             return [(0.0, 0.0)] * len(self.pairs)
         return implied_sides([f[0] for f in self.fit_last], [f[1] for f in self.fit_last],
                              np.vstack([self.misfit, self.misfit]),
-                             [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last])
+                             [pr["hi"] - pr["lo"] for pr in self.pairs], [f[2] for f in self.fit_last], self.carry)
 
     def rows(self, array: np.ndarray) -> list[list[float]]:
         """The band values of rows of numbers (modes as flags: non-zero = hold)."""

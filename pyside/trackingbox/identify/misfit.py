@@ -28,6 +28,20 @@ more than their range) is not about ``p_j`` and is left out. The band's upper si
 lag part is). Where the twin is right the means are chance, and the part is zero but in the test's false
 alarms (the heat exchanger's 50 seeds: median half-width 9.50 -> 9.54).
 
+**What one tag says about the other pairs.** A reading of pair ``k`` (the structure's error on ``k``'s own tag)
+puts ``θ - θ*`` along the direction in which ``p_k`` moves while the other loops keep their tags, so it puts every
+other pair's truth off as well: ``p_j`` follows ``p_k`` by ``V[j, k]`` (:func:`follows`, ``V[k, k] = 1``; the column
+of ``M`` of :mod:`.bands`' part 5 divided by its diagonal entry), and the reading ``Δ_uk`` puts ``θ*_j`` at
+``p_j + V[j, k] Δ_uk``. Each pair's band takes the readings of every pair carried so (*carry* of
+:func:`implied_sides`; a carried value beyond ``j``'s range is left out, as one of its own), as part 5 carries
+the other pairs' start, lag and hold parts. Why: on the evaporator's own plant after ``diagnose --apply`` named
+the steam vent (``scripts/bench_apply --bench evaporator --cases default --seed 0``), ``pair`` put the fouling on
+the product DS analyser QI-6150, which the plant's meter reads 0.002-0.0027 high (bias and drift the twin lacks):
+the fouling sat 1.4-5.2e-5 m2K/W below its truth (6 h means after 12 h), its own band reached the truth through
+this part (99.9 % of the rows), and ``outletValve.KvMax``, which follows the fouling 564 to one through
+ZI-6150, sat 0.022-0.041 below its truth, two thirds of it carried from the fouling's miss, while its band
+carried none of the fouling's model-error part (13.8 % of the rows held the truth).
+
 **The trend.** The 2 h mean lags an error that grows: on the heat exchanger with TI-102 drifting 1.5 K over
 hours (``hidden = sensor-drift``, the loop on TI-102, TI-202 clean) the implied value followed the truth 2-10
 units behind, and the band held it in 44-78 % of the rows after settling, seeds 0-5. So each tag's error also
@@ -86,32 +100,57 @@ def closed_gains(gains: Any, others: Any) -> np.ndarray:
     return out
 
 
+def follows(gains: Any) -> np.ndarray:
+    """``V[j, k]``: how far tracked parameter ``j`` moves per unit of pair ``k``'s parameter while the other loops
+    keep their own tags (``V[k, k] = 1``; module docstring). *gains*: ``G_tt`` as :func:`closed_gains` takes it.
+
+    >>> follows(np.array([[2.0, 1.0], [1.0, 4.0]]))
+    array([[ 1.  , -0.5 ],
+           [-0.25,  1.  ]])
+    """
+    g_tt = np.asarray(gains, dtype=float)
+    n = g_tt.shape[0]
+    out = np.eye(n)
+    for j in range(n):
+        k = [i for i in range(n) if i != j]
+        if k:
+            out[k, j] = -np.linalg.solve(g_tt[np.ix_(k, k)], g_tt[k, j])
+    return out
+
+
 def implied_sides(means: Sequence[float], flagged: Sequence[bool], closed: Any,
-                  spans: Sequence[float], margins: Sequence[float] | None = None) -> list[tuple[float, float]]:
+                  spans: Sequence[float], margins: Sequence[float] | None = None,
+                  carry: Any = None) -> list[tuple[float, float]]:
     """Per pair, the model-error part's (below, above) extent about the tracked value (module docstring).
 
     *means*: each untracked tag's mean error (measured - tracked); *flagged*: whether the lack-of-fit test flags
     it; *closed*: :func:`closed_gains` (rows the tags, in the same order); *spans*: each pair's bounds' range;
-    *margins*: each mean's own uncertainty (its 95 % half-width), carried through the gain beyond the value.
+    *margins*: each mean's own uncertainty (its 95 % half-width), carried through the gain beyond the value;
+    *carry*: :func:`follows` (None: each pair its own readings alone).
 
     >>> implied_sides([0.75, -1.0, 5.0], [True, True, False], np.array([[0.25], [0.5], [1.0]]), [10.0])
     [(2.0, 3.0)]
     """
     g = np.atleast_2d(np.asarray(closed, dtype=float))
-    out = []
-    for j, span in enumerate(spans):
-        below = above = 0.0
-        for m, flag, row, margin in zip(means, flagged, g, margins if margins is not None else [0.0] * len(g)):
-            gain = float(row[j])
+    n = len(spans)
+    v = np.eye(n) if carry is None else np.asarray(carry, dtype=float)
+    below, above = [0.0] * n, [0.0] * n
+    for m, flag, row, margin in zip(means, flagged, g, margins if margins is not None else [0.0] * len(g)):
+        for k in range(n):
+            gain = float(row[k])
             if not (flag and math.isfinite(m) and math.isfinite(gain) and gain != 0.0):
                 continue
             d = m / gain
-            if abs(d) > span:
+            if abs(d) > spans[k]:
                 continue  # no value within the bounds explains it: not this parameter's
-            d += math.copysign(margin / abs(gain), d)
-            below, above = max(below, -d), max(above, d)
-        out.append((below, above))
-    return out
+            for j in range(n):
+                c = float(v[j, k])
+                if c == 0.0 or not math.isfinite(c) or abs(c * d) > spans[j]:
+                    continue  # the reading puts p_j beyond its bounds' range: not about it
+                dj = c * d if c != 1.0 else d
+                dj += math.copysign(abs(c) * margin / abs(gain), dj)
+                below[j], above[j] = max(below[j], -dj), max(above[j], dj)
+    return list(zip(below, above))
 
 
 def trend_weights(lam_short: float, lam_long: float, n: int) -> tuple[float, float]:
