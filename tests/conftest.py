@@ -16,6 +16,7 @@ import shutil
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -105,6 +106,16 @@ def tank_fmu(tmp_path_factory: pytest.TempPathFactory) -> Callable[[float], Path
             return built[leak]
 
     return get
+
+
+@pytest.fixture(scope="session")
+def hx_heat_loss_case(fmu_cache: FMUCache, tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """``bench heat-exchanger --hidden heat-loss`` over 4 h, seed 0 (its twin from :func:`fmu_cache`), written
+    once per session: the diagnose tests' compiled-entry case (read only)."""
+    from trackingbox.benches import make_bench
+
+    return make_bench("heat-exchanger", tmp_path_factory.mktemp("hx-heat-loss") / "case", seed=0, hours=4.0,
+                      twin_fmu=fmu_cache("TrackingBox.Benches.HeatExchanger.Twin"), hidden="heat-loss")
 
 
 @pytest.fixture(scope="session")

@@ -12,7 +12,6 @@ import pytest
 
 from trackingbox.spec import load_spec
 
-HX = "TrackingBox.Benches.HeatExchanger"
 
 
 def test_kept_fmu_comes_back_byte_for_byte_and_only_under_its_key(tmp_path, monkeypatch) -> None:
@@ -78,17 +77,9 @@ def _read_again_after_a_change(csv) -> None:
     assert read_measurements(csv, ["a", "b"]).loc[0, "a"] == 7.0
 
 
-@pytest.fixture(scope="module")
-def heat_loss_case(fmu_cache, tmp_path_factory):
-    from trackingbox.benches import make_bench
-
-    return make_bench("heat-exchanger", tmp_path_factory.mktemp("dg-cache") / "case", seed=0, hours=4.0,
-                      twin_fmu=fmu_cache(f"{HX}.Twin"), hidden="heat-loss")
-
-
 @pytest.mark.compile
 @pytest.mark.slow
-def test_screen_from_a_kept_fmu_equals_the_screen_from_a_fresh_compile(heat_loss_case, tmp_path, monkeypatch):
+def test_screen_from_a_kept_fmu_equals_the_screen_from_a_fresh_compile(hx_heat_loss_case, tmp_path, monkeypatch):
     """Heat loss hidden on the heat-exchanger bench: the second work folder takes the FMU from the cache
     (no compile) and screens the candidate to the same numbers as the first, which compiled it."""
     from trackingbox.diagnose import library
@@ -96,7 +87,7 @@ def test_screen_from_a_kept_fmu_equals_the_screen_from_a_fresh_compile(heat_loss
     from trackingbox.diagnose.residuals import where
 
     monkeypatch.setenv("TRACKINGBOX_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec(heat_loss_case.directory / "spec.toml")
+    spec = load_spec(hx_heat_loss_case.directory / "spec.toml")
     found = where(spec, estimate_options={"maxiter": 0, "refine_grid": 60.0})
     effect = library.load_effects(())["heat-loss"]
     compiled = screen_compiled(spec, found, effect, "hx", tmp_path / "first")

@@ -16,7 +16,6 @@ from trackingbox.estimation import Objective, estimate, load_windows, problem_fr
 from trackingbox.spec import load_spec
 
 TRUE_KHT = 1250.0
-HX = "TrackingBox.Benches.HeatExchanger"
 
 
 def test_refinement_on_a_coarse_grid_finds_the_plant_value_and_reports_the_full_grid(
@@ -38,23 +37,15 @@ def test_refinement_on_a_coarse_grid_finds_the_plant_value_and_reports_the_full_
     assert same.parameters == full.parameters
 
 
-@pytest.fixture(scope="module")
-def heat_loss_case(fmu_cache, tmp_path_factory):
-    from trackingbox.benches import make_bench
-
-    return make_bench("heat-exchanger", tmp_path_factory.mktemp("dg-speed") / "case", seed=0, hours=4.0,
-                      twin_fmu=fmu_cache(f"{HX}.Twin"), hidden="heat-loss")
-
-
 @pytest.mark.compile
 @pytest.mark.slow
-def test_linearised_screen_of_a_compiled_entry_agrees_with_its_full_fit(heat_loss_case, tmp_path):
+def test_linearised_screen_of_a_compiled_entry_agrees_with_its_full_fit(hx_heat_loss_case, tmp_path):
     """Heat loss hidden on the heat-exchanger bench: the one-compile linear screen and the estimation agree."""
     from trackingbox.diagnose import library
     from trackingbox.diagnose.fit import FitBudget, fit_candidate, screen_compiled
     from trackingbox.diagnose.residuals import where
 
-    spec = load_spec(heat_loss_case.directory / "spec.toml")
+    spec = load_spec(hx_heat_loss_case.directory / "spec.toml")
     found = where(spec, estimate_options={"maxiter": 0, "refine_grid": 60.0})
     effect = library.load_effects(())["heat-loss"]
     screened = screen_compiled(spec, found, effect, "hx", tmp_path)
