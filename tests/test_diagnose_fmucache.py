@@ -47,6 +47,24 @@ def test_cache_key_follows_every_library_file(tmp_path) -> None:
     assert fmucache.key("local", [lib]) == key
 
 
+def test_cache_key_follows_the_c_compiler_upgraded_in_place(tmp_path, monkeypatch) -> None:
+    # the same $CC path answering with another version (an upgraded gcc) must not hand back the old FMU
+    from trackingbox.diagnose import fmucache
+
+    cc = tmp_path / "mycc"
+    cc.write_text("#!/bin/sh\necho 'mycc (Test) 12.2.0'\n")
+    cc.chmod(0o755)
+    monkeypatch.setenv("CC", str(cc))
+    key = fmucache.key("local")
+    assert fmucache.c_compiler(str(cc)).endswith("=mycc (Test) 12.2.0")
+    assert fmucache.key("local") == key
+    cc.write_text("#!/bin/sh\necho 'mycc (Test) 13.10.1'\n")
+    assert fmucache.c_compiler(str(cc)).endswith("=mycc (Test) 13.10.1")
+    assert fmucache.key("local") != key
+    monkeypatch.setenv("CC", str(tmp_path / "absent-cc"))
+    assert fmucache.c_compiler(str(tmp_path / "absent-cc")).endswith("=-")
+
+
 def test_measurement_table_is_read_again_when_the_file_changes(tmp_path) -> None:
     from trackingbox.data import view
     from trackingbox.data.view import kept_tables

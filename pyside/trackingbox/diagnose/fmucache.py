@@ -12,7 +12,8 @@ is kept under :func:`trackingbox.compiler.library.cache_dir` ``/patches``, keyed
   folder), as the work folder's own marker (:func:`trackingbox.diagnose.fit._compile_key`);
 * every ``.mo`` file of the shipped TrackingBox library and of the spec's ``[source] libraries``;
 * the compiler: trackingbox's version, the source of its ``trackingbox.compiler`` package, the
-  versions of rumoca, CasADi and FMPy (its C headers), and the C compiler named by ``$CC`` and ``$CFLAGS``.
+  versions of rumoca, CasADi and FMPy (its C headers), and the C compiler named by ``$CC`` (default
+  ``gcc``) with what its ``--version`` prints, and ``$CFLAGS``: a compiler upgraded in place is a new key.
 
 A file that changes changes the key, so an edited hook, template, twin or compiler is compiled
 afresh, never handed an old FMU. ``TRACKINGBOX_PATCH_CACHE=0`` turns the cache off.
@@ -25,6 +26,7 @@ import importlib.metadata
 import logging
 import os
 import shutil
+import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -81,7 +83,34 @@ def key(local: str, libraries: Iterable[Path] = ()) -> str:
         h.update(tree_hash(Path(lib), "*.mo").encode())
     h.update(tree_hash(Path(__file__).resolve().parent.parent / "compiler", "*.py").encode())
     h.update(f"\0{os.environ.get('CC', '')}\0{os.environ.get('CFLAGS', '')}\0{_tools()}".encode())
+    h.update(f"\0{c_compiler(os.environ.get('CC') or 'gcc')}".encode())
     return h.hexdigest()
+
+
+def c_compiler(cc: str) -> str:
+    """Which C compiler *cc* is: its resolved path and the first line its ``--version`` prints.
+
+    Asked once per process and file (its path, size and modification time), so an upgraded
+    compiler gives another answer; ``-`` where there is none or it does not answer.
+    """
+    exe = shutil.which(cc)
+    if exe is None:
+        return f"{cc}=-"
+    try:
+        st = os.stat(exe)
+    except OSError:
+        return f"{cc}=-"
+    return _version_of(os.path.realpath(exe), st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=8)
+def _version_of(exe: str, size: int, mtime: int) -> str:
+    try:
+        out = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=60, check=False).stdout
+    except (OSError, subprocess.SubprocessError):
+        out = ""
+    first = out.strip().splitlines()[0] if out.strip() else "-"
+    return f"{exe}={first}"
 
 
 @functools.lru_cache(maxsize=1)
