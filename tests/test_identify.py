@@ -244,6 +244,36 @@ def test_estimate_of_a_linear_twin_is_least_squares_with_its_interval(linear_fmu
         assert iv.covers(beta[j]) and iv.method in ("linearised", "profile")
         assert abs((iv.upper - iv.lower) / 2 / textbook - 1.0) < 0.3, (iv, textbook)
         assert iv.covers(2.0 if name == "a" else 0.7)
+    # the data are the twin's structure plus white noise: nothing beyond the noise (the intervals' condition)
+    assert unc.lack_of_fit is not None and unc.lack_of_fit.checked and not unc.lack_of_fit.found
+    assert unc.to_json()["lack_of_fit"]["tags"] == {}
+
+
+def test_estimate_says_when_the_twin_misses_what_the_data_show(linear_fmu: Path, tmp_path: Path) -> None:
+    """A step of three noise sigmas the linear twin cannot make: worked by hand, the least-squares fit
+    leaves Y's residual RMS near 1.8 sigmas on training (half the step either side of it) and a mean
+    near 1.5 on validation, both beyond the residual test's limits (1.5 and 1); the estimate says so."""
+    import shutil
+
+    from trackingbox.spec import load_spec
+    from trackingbox.stages import estimate
+
+    rng = np.random.default_rng(6)
+    t = np.arange(0.0, 30000.0 + 5.0, 10.0)
+    u1 = 1.0 + 0.5 * np.sin(t / 900.0)
+    u2 = np.cos(t / 1300.0) + 0.2 * np.sin(t / 170.0)
+    y = 2.0 * u1 + 0.7 * u2 + 0.15 * (t >= 10000.0) + 0.05 * rng.normal(size=t.size)
+    pd.DataFrame({"time": t, "U1": u1, "U2": u2, "Y": y}).to_csv(tmp_path / "data.csv", index=False)
+    shutil.copy(linear_fmu, tmp_path / "lin.fmu")
+    (tmp_path / "spec.toml").write_text(LINEAR_SPEC)
+    result = estimate.run(load_spec(tmp_path / "spec.toml"), estimate.EstimateSettings(maxiter=0, warmup=0.0))
+    misfit = result.uncertainty.lack_of_fit
+    assert misfit.checked and [m.tag for m in misfit.tags] == ["Y"]
+    (y_fit,) = misfit.tags
+    assert y_fit.noise == pytest.approx(0.05, rel=0.2)
+    assert max(y_fit.rms) > 1.5 and max(abs(o) for o in y_fit.offset) > 1.0
+    assert "Y" in misfit.message() and "trackingbox diagnose" in misfit.message(), misfit.message()
+    assert result.uncertainty.to_json()["lack_of_fit"]["tags"]["Y"]["noise"] == pytest.approx(y_fit.noise)
 
 
 # --------------------------------------------------------------------------- the command

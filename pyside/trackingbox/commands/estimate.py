@@ -139,7 +139,7 @@ def _run(args: argparse.Namespace, spec: Any, checkpoint: Any, progress: Any) ->
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
     else:
-        _print_table(result)
+        _print_table(result, spec.path)
         if args.write:
             print(f"wrote start values to {spec.path}")
         if args.report:
@@ -156,7 +156,7 @@ def _intervals(result: Any) -> dict[str, tuple[float, float]]:
             if iv.determined and iv.lower is not None and iv.lower <= iv.estimate <= iv.upper}
 
 
-def _print_table(result: Any) -> None:
+def _print_table(result: Any, spec_path: Any = "SPEC") -> None:
     unc = result.uncertainty
     width = max(len("parameter"), *(len(n) for n in result.parameters))
     level = f"{100 * unc.level:g} % interval" if unc is not None else ""
@@ -173,6 +173,8 @@ def _print_table(result: Any) -> None:
     if unc is not None:
         for f in unc.findings:
             print(f"note: {f.message}")
+        if unc.lack_of_fit is not None and unc.lack_of_fit.message():
+            print(f"note: {unc.lack_of_fit.message(spec_path)}")
         for iv in unc.parameters + unc.combinations:
             if iv.determined and iv.note:
                 print(f"note: {iv.name}: {iv.note}")

@@ -7,7 +7,9 @@ the start values and one point inside the bounds (two sensitivity runs, or
 structure from a direction that only happens to look like one) and logs a
 warning per parameter group the data cannot tell apart, before the global
 search spends its budget. :func:`after_estimate` adds the intervals
-(:func:`~trackingbox.identify.intervals.uncertainty`) and that check to the
+(:func:`~trackingbox.identify.intervals.uncertainty`), whether the twin fits the data within their
+noise at the estimate (:func:`~trackingbox.identify.lackfit.lack_of_fit`: the intervals' condition)
+and that check to the
 :class:`~trackingbox.estimation.EstimationResult` (the estimate stage calls
 both). :func:`indistinct_candidates` is pairing's check, :func:`band_tracker`
 the tracking loop's bands (with their fixed part, :mod:`.held`).
@@ -25,6 +27,7 @@ from .analysis import identify, leave_out
 from .bands import BandTracker
 from .held import band_parts
 from .intervals import uncertainty
+from .lackfit import lack_of_fit
 
 log = logging.getLogger(__name__)
 
@@ -57,10 +60,15 @@ def after_estimate(spec: Any, result: Any, before: Any, *, level: float | None, 
         extra["identifiability"] = before.to_json()
     if level is not None:
         try:
-            extra["uncertainty"] = uncertainty(spec, result.parameters, level=level, method=_method(jacobian),
-                                               warmup=warmup, progress=progress)
+            unc = uncertainty(spec, result.parameters, level=level, method=_method(jacobian), warmup=warmup,
+                              progress=progress)
         except TrackingError as exc:
             log.warning("estimate: no confidence intervals: %s", exc)
+        else:
+            misfit = lack_of_fit(spec, result, warmup=warmup)
+            if misfit.found:
+                log.warning("estimate: %s", misfit.message(getattr(spec, "path", "SPEC")))
+            extra["uncertainty"] = replace(unc, lack_of_fit=misfit)
     return replace(result, **extra) if extra else result
 
 

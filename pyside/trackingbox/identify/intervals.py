@@ -78,6 +78,7 @@ from . import structure as st
 from .analysis import Combination, Finding, finding_text, name_findings
 from .model import FD_TOLERANCE, Evaluation, TwinWindow, safe, window_for
 from .inputs import PAIRS, InputBias, input_bias
+from .lackfit import LackOfFit
 from .noise import effective_samples, lag1, long_run_covariance
 
 log = logging.getLogger(__name__)
@@ -226,6 +227,9 @@ class Uncertainty:
         ``("exact" | "fd", why not exact)``.
     runs
         Twin runs made.
+    lack_of_fit
+        The tags the twin disagrees with beyond their noise at the estimate (:mod:`.lackfit`): the
+        intervals assume there are none. None where not checked.
     """
 
     level: float
@@ -241,6 +245,7 @@ class Uncertainty:
     runs: int = 0
     inputs: InputBias | None = None
     inputs_note: str = ""
+    lack_of_fit: LackOfFit | None = None
 
     def interval(self, name: str) -> Interval:
         for iv in self.parameters + self.combinations:
@@ -263,6 +268,7 @@ class Uncertainty:
             "runs": self.runs,
             "inputs_noise": ({**self.inputs.to_json(), "names": list(self.names)} if self.inputs is not None
                              else {"note": self.inputs_note}),
+            "lack_of_fit": self.lack_of_fit.to_json() if self.lack_of_fit is not None else None,
             "method": ("linearised from the cost's curvature with the residuals' own noise and autocorrelation "
                        "(sandwich with an equal-weighted cosine long-run covariance, Student t on its terms); profile likelihood "
                        f"where the adjusted deviance at an end of the linearised interval is off its prediction "

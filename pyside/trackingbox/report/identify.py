@@ -116,6 +116,10 @@ def uncertainty_section(doc: Document, uncertainty: Any, bounds: Mapping[str, tu
         f"quadratic prediction by more than {100 * NONLINEARITY_TOLERANCE:g} %. Residuals per tag: "
         + "; ".join(f"`{t}` RMS {n.rms:.3g}, lag-1 autocorrelation {n.lag1:.2f}, {n.effective_samples:.0f} effective "
                     f"of {n.samples} samples" for t, n in uncertainty.noise.items()) + ".")
+    misfit = getattr(uncertainty, "lack_of_fit", None)
+    if misfit is not None:
+        doc.paragraph(misfit.message() or "Fit at the estimate: every tag's residual lies within its noise (diagnose's "
+                      "test on the training and validation windows), the condition the intervals rest on.")
     fig = interval_figure(uncertainty, bounds, truth)
     files.append(plots.save(fig, out / "intervals.png"))
     doc.image(files[-1], "confidence intervals")
